@@ -1,0 +1,52 @@
+"""The replicated mesh container: one volume cell type, meshio (VTK) node ordering."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+# meshio cell type -> (topological dimension, facet cell type)
+CELL_INFO = {
+    "triangle": (2, "line"),
+    "triangle6": (2, "line3"),
+    "quad": (2, "line"),
+    "tetra": (3, "triangle"),
+    "tetra10": (3, "triangle6"),
+    "hexahedron": (3, "quad"),
+}
+
+
+@dataclass
+class Mesh:
+    """A mesh with a single volume cell type.
+
+    points: (npoints, gdim) float64, gdim equals the cell's topological dimension.
+    cells: (ncells, nodes_per_cell) int64 node ids in meshio/VTK order.
+    cell_groups: name -> volume cell indices (from the file's physical groups).
+    facet_groups: name -> (nfacets, nodes_per_facet) node ids (lower-dimensional groups).
+    node_groups: name -> node ids (point groups).
+    """
+
+    points: np.ndarray
+    cell_type: str
+    cells: np.ndarray
+    cell_groups: dict[str, np.ndarray] = field(default_factory=dict)
+    facet_groups: dict[str, np.ndarray] = field(default_factory=dict)
+    node_groups: dict[str, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def dim(self) -> int:
+        return CELL_INFO[self.cell_type][0]
+
+    @property
+    def facet_type(self) -> str:
+        return CELL_INFO[self.cell_type][1]
+
+    @property
+    def num_points(self) -> int:
+        return self.points.shape[0]
+
+    @property
+    def num_cells(self) -> int:
+        return self.cells.shape[0]
