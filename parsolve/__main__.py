@@ -1,0 +1,5 @@
+import sys
+
+from parsolve.cli import main
+
+sys.exit(main())

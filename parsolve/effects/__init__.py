@@ -1,0 +1,1 @@
+"""Effects: each contributes operators, forces or relations, and nothing else."""

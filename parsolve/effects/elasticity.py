@@ -1,0 +1,55 @@
+"""Linear elasticity: stiffness of the cells, and stresses from a displacement field."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from parsolve.errors import InputError
+from parsolve.fem import kernels
+from parsolve.fem.materials.elastic import Elastic
+from parsolve.mesh.mesh import Mesh
+
+MODELS = {"elastic": Elastic}
+
+
+class Elasticity:
+    """Materials per cell (later entries of the scene override earlier ones on shared cells)."""
+
+    def __init__(self, mesh: Mesh, hypothesis: str, thickness: float, materials: list, regions,
+                 source: str):
+        self.mesh, self.hypothesis = mesh, hypothesis
+        self.thickness = thickness if mesh.dim == 2 else 1.0
+        self.ncomp = mesh.dim
+        self.models = []
+        self.cell_model = np.full(mesh.num_cells, -1, dtype=np.int64)
+        for spec in materials:
+            region = regions(spec.region, spec.key + ".region")
+            if region.cells.size == 0:
+                raise InputError(f"region {spec.region!r} contains no cell", source, spec.key + ".region")
+            self.cell_model[region.cells] = len(self.models)
+            self.models.append(MODELS[spec.model](hypothesis=hypothesis, **spec.params))
+        missing = np.flatnonzero(self.cell_model < 0)
+        if missing.size:
+            raise InputError(f"{missing.size} cells have no material (e.g. cell {missing[0]})",
+                             source, "materials")
+        self.C = np.stack([m.C for m in self.models])
+
+    def geometry(self, cells: np.ndarray) -> kernels.CellGeometry:
+        coords = self.mesh.points[self.mesh.cells[cells]]
+        return kernels.CellGeometry(coords, self.mesh.cell_type, thickness=self.thickness)
+
+    def stiffness(self, cells: np.ndarray) -> np.ndarray:
+        """Element stiffness matrices of the given cells, node-major DOFs."""
+        geo = self.geometry(cells)
+        C = self.C[self.cell_model[cells]][:, None]
+        return kernels.stiffness(geo.strain_operator(), geo.wdet, C)
+
+    def cell_stress(self, cells: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Mean stress over each cell (Voigt), from the full displacement array u (npoints, ncomp)."""
+        geo = self.geometry(cells)
+        B = geo.strain_operator()
+        ue = u[self.mesh.cells[cells]].reshape(len(cells), -1)
+        eps = kernels.strains(B, ue)
+        sig = np.matmul(self.C[self.cell_model[cells]][:, None], eps[..., None])[..., 0]
+        w = geo.wdet / geo.wdet.sum(axis=1, keepdims=True)
+        return (sig * w[:, :, None]).sum(axis=1)

@@ -1,0 +1,65 @@
+"""Load patterns: named force vectors (tractions, resultant-normalised tractions, body and
+nodal forces), each part following its evolution. A pattern named as the dual of a relation is
+that relation's reaction direction and is not applied as a known load."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from parsolve.errors import InputError
+from parsolve.fem import kernels
+from parsolve.mesh.mesh import Mesh
+
+
+@dataclass
+class LoadPattern:
+    name: str
+    parts: list = field(default_factory=list)   # (vector, evolution)
+
+    def vector(self) -> np.ndarray:
+        """The pattern at unit intensity (evolutions ignored): a relation's dual direction."""
+        return np.sum([v for v, _ in self.parts], axis=0)
+
+    def at(self, t: float) -> np.ndarray:
+        return np.sum([v * evol(t) for v, evol in self.parts], axis=0)
+
+
+def _scatter(ndof: int, dofs: np.ndarray, values: np.ndarray) -> np.ndarray:
+    return np.bincount(dofs.ravel(), weights=values.ravel(), minlength=ndof)
+
+
+def part_vector(mesh: Mesh, spec, region, thickness: float, source: str) -> np.ndarray:
+    """Global force vector (input DOF numbering) of one load entry."""
+    ncomp = mesh.dim
+    ndof = mesh.num_points * ncomp
+    vec = np.asarray(spec.vector)
+    if spec.kind == "nodal":
+        dofs = kernels.cell_dofs(region.nodes[:, None], ncomp)
+        return _scatter(ndof, dofs, np.tile(vec, (len(region.nodes), 1)))
+    if spec.kind == "body":
+        if region.cells.size == 0:
+            raise InputError(f"region {spec.region!r} contains no cell", source, spec.key + ".region")
+        cells = mesh.cells[region.cells]
+        fe = kernels.body_load(mesh.points[cells], mesh.cell_type, vec, thickness)
+        return _scatter(ndof, kernels.cell_dofs(cells, ncomp), fe)
+    if region.facets.size == 0:
+        raise InputError(f"region {spec.region!r} contains no boundary facet", source,
+                         spec.key + ".region")
+    coords = mesh.points[region.facets]
+    if spec.kind == "total_force":
+        vec = vec / kernels.facet_measure(coords, mesh.facet_type, thickness)
+    fe = kernels.facet_load(coords, mesh.facet_type, vec, thickness)
+    return _scatter(ndof, kernels.cell_dofs(region.facets, ncomp), fe)
+
+
+def load_patterns(mesh: Mesh, specs: list, regions, evolutions: dict, thickness: float,
+                  source: str) -> dict[str, LoadPattern]:
+    patterns: dict[str, LoadPattern] = {}
+    for spec in specs:
+        region = regions(spec.region, spec.key + ".region")
+        vec = part_vector(mesh, spec, region, thickness if mesh.dim == 2 else 1.0, source)
+        patterns.setdefault(spec.pattern, LoadPattern(spec.pattern)).parts.append(
+            (vec, evolutions[spec.evolution]))
+    return patterns

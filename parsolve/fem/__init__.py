@@ -1,0 +1,1 @@
+"""Finite-element building blocks: reference elements, quadrature, geometry, assembly kernels."""

@@ -1,0 +1,1 @@
+"""Linear algebra: the distributed saddle-point layout (numpy) and its PETSc operator."""

@@ -1,0 +1,360 @@
+"""Structured mesh generators (rectangle, box, quarter plate with a hole) and P2 upgrade.
+
+All meshes are built with vectorised index arithmetic on a structured (i, j[, k]) grid,
+with positively oriented cells (positive Jacobian) in meshio/VTK node ordering.
+Generated meshes carry facet groups for their boundary sides (see each generator).
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+from parsolve.errors import InputError
+from parsolve.mesh.mesh import Mesh
+from parsolve.mesh.topology import facets_from_nodes
+
+def _check_counts(**counts: int) -> None:
+    # ValueError for bad arguments: the caller (scene -> model) adds source and key
+    for name, n in counts.items():
+        if not isinstance(n, (int, float, np.integer)) or int(n) != n or n < 1:
+            raise ValueError(f"{name} must be a positive integer, got {n!r}")
+
+
+def _check_lengths(origin: Sequence[float], **lengths: float) -> None:
+    for name, v in lengths.items():
+        if not v > 0:  # also catches nan
+            raise ValueError(f"{name} must be positive, got {v!r}")
+    if len(origin) != len(lengths):
+        raise ValueError(f"origin must have {len(lengths)} coordinates, got {list(origin)}")
+
+
+def _check_cell(cell: str, allowed: tuple[str, ...]) -> None:
+    if cell not in allowed:
+        raise ValueError(f"unsupported cell {cell!r} (expected one of {', '.join(allowed)})")
+
+
+def _grid_quads(nx: int, ny: int) -> np.ndarray:
+    """Counter-clockwise quads of a (nx+1) x (ny+1) node grid numbered i + j*(nx+1)."""
+    i, j = np.meshgrid(np.arange(nx), np.arange(ny), indexing="xy")  # cell index i + j*nx
+    n0 = (i + j * (nx + 1)).ravel()
+    return np.stack([n0, n0 + 1, n0 + nx + 2, n0 + nx + 1], axis=1).astype(np.int64)
+
+
+def _quads_to_triangles(quads: np.ndarray) -> np.ndarray:
+    # (0,1,2) and (0,2,3) keep the quad's counter-clockwise orientation
+    tri = np.stack([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]], axis=1)
+    return tri.reshape(-1, 3)
+
+
+def _side_groups(mesh: Mesh, masks: dict[str, np.ndarray]) -> None:
+    for name, mask in masks.items():
+        mesh.facet_groups[name] = facets_from_nodes(mesh, mask)[0]
+
+
+def _nodes_from_facets(mesh: Mesh) -> Mesh:
+    # after the P2 upgrade so that side node groups include the midside nodes
+    for name, facets in mesh.facet_groups.items():
+        mesh.node_groups[name] = np.unique(facets)
+    return mesh
+
+
+def _finish_2d(points, quads, cell, masks) -> Mesh:
+    """Build a 2D mesh from grid quads, split/upgrade as requested, add side groups."""
+    if cell == "quad":
+        mesh = Mesh(points, "quad", quads)
+    else:
+        mesh = Mesh(points, "triangle", _quads_to_triangles(quads))
+    _side_groups(mesh, masks)
+    if cell == "triangle6":
+        mesh = make_quadratic(mesh)
+    return _nodes_from_facets(mesh)
+
+
+# --------------------------------------------------------------------------------------
+# rectangle
+# --------------------------------------------------------------------------------------
+
+
+def rectangle(
+    lx: float,
+    ly: float,
+    nx: int,
+    ny: int,
+    cell: str = "quad",
+    origin: Sequence[float] = (0.0, 0.0),
+) -> Mesh:
+    """Structured mesh of [ox, ox+lx] x [oy, oy+ly] with nx x ny quads (or 2 triangles each).
+
+    cell: "quad", "triangle" or "triangle6". Facet and node groups: "left", "right",
+    "bottom", "top".
+    """
+    _check_cell(cell, ("quad", "triangle", "triangle6"))
+    _check_counts(nx=nx, ny=ny)
+    _check_lengths(origin, lx=lx, ly=ly)
+    nx, ny = int(nx), int(ny)
+    x = origin[0] + np.linspace(0.0, lx, nx + 1)
+    y = origin[1] + np.linspace(0.0, ly, ny + 1)
+    xx, yy = np.meshgrid(x, y, indexing="xy")  # node index i + j*(nx+1)
+    points = np.column_stack([xx.ravel(), yy.ravel()])
+    i, j = (a.ravel() for a in np.meshgrid(np.arange(nx + 1), np.arange(ny + 1), indexing="xy"))
+    masks = {"left": i == 0, "right": i == nx, "bottom": j == 0, "top": j == ny}
+    return _finish_2d(points, _grid_quads(nx, ny), cell, masks)
+
+
+# --------------------------------------------------------------------------------------
+# box
+# --------------------------------------------------------------------------------------
+
+# VTK hexahedron corner offsets (dx, dy, dz)
+_HEX_OFFSETS = [
+    (0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0),
+    (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1),
+]  # fmt: skip
+
+
+def _kuhn_tets() -> np.ndarray:
+    """Local hex nodes of the 6 Kuhn (Freudenthal) tets, each positively oriented.
+
+    Every tet is the path 000 -> e_a -> e_a+e_b -> 111 for a permutation (a, b, c) of
+    the axes. All hexes are split identically, so each hex face is cut along the
+    diagonal through its lowest and highest corners in both neighbours: conforming.
+    """
+    index = {off: n for n, off in enumerate(_HEX_OFFSETS)}
+    tets = []
+    for perm in itertools.permutations(range(3)):
+        corner = np.zeros(3, dtype=int)
+        path = [index[tuple(corner)]]
+        for axis in perm:
+            corner[axis] = 1
+            path.append(index[tuple(corner)])
+        v = np.array([_HEX_OFFSETS[n] for n in path], dtype=float)
+        if np.linalg.det(v[1:] - v[0]) < 0:  # odd permutation: swap two nodes
+            path[1], path[2] = path[2], path[1]
+        tets.append(path)
+    return np.array(tets, dtype=np.int64)
+
+
+_KUHN = _kuhn_tets()
+
+
+def _grid_indices(nx: int, ny: int, nz: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(k, j, i) of the entries of an nx x ny x nz grid numbered i + j*nx + k*nx*ny."""
+    grids = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
+    return tuple(g.ravel() for g in grids)
+
+
+def box(
+    lx: float,
+    ly: float,
+    lz: float,
+    nx: int,
+    ny: int,
+    nz: int,
+    cell: str = "hexahedron",
+    origin: Sequence[float] = (0.0, 0.0, 0.0),
+) -> Mesh:
+    """Structured mesh of a box with nx x ny x nz hexahedra (or 6 conforming tets each).
+
+    cell: "hexahedron", "tetra" or "tetra10". Facet and node groups: "xmin", "xmax",
+    "ymin", "ymax", "zmin", "zmax".
+    """
+    _check_cell(cell, ("hexahedron", "tetra", "tetra10"))
+    _check_counts(nx=nx, ny=ny, nz=nz)
+    _check_lengths(origin, lx=lx, ly=ly, lz=lz)
+    nx, ny, nz = int(nx), int(ny), int(nz)
+    axes = [
+        o + np.linspace(0.0, length, n + 1)
+        for o, length, n in zip(origin, (lx, ly, lz), (nx, ny, nz))
+    ]
+    # node index i + j*(nx+1) + k*(nx+1)*(ny+1): 'ij' indexing on (z, y, x) gives x fastest
+    zz, yy, xx = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
+    points = np.column_stack([xx.ravel(), yy.ravel(), zz.ravel()])
+    k, j, i = _grid_indices(nx, ny, nz)
+    sx, sy = nx + 1, (nx + 1) * (ny + 1)
+    n0 = i + j * sx + k * sy
+    offs = np.array([dx + dy * sx + dz * sy for dx, dy, dz in _HEX_OFFSETS], dtype=np.int64)
+    hexes = n0[:, None] + offs[None, :]
+    if cell == "hexahedron":
+        mesh = Mesh(points, "hexahedron", hexes)
+    else:
+        mesh = Mesh(points, "tetra", hexes[:, _KUHN].reshape(-1, 4))
+    pk, pj, pi = _grid_indices(nx + 1, ny + 1, nz + 1)
+    masks = {
+        "xmin": pi == 0, "xmax": pi == nx,
+        "ymin": pj == 0, "ymax": pj == ny,
+        "zmin": pk == 0, "zmax": pk == nz,
+    }  # fmt: skip
+    _side_groups(mesh, masks)
+    if cell == "tetra10":
+        mesh = make_quadratic(mesh)
+    return _nodes_from_facets(mesh)
+
+
+# --------------------------------------------------------------------------------------
+# quarter plate with a hole
+# --------------------------------------------------------------------------------------
+
+
+def _graded(n: int, grading: float) -> np.ndarray:
+    """n+1 parameters in [0, 1] with geometric sizes, last/first element size = grading."""
+    if grading <= 0:
+        raise ValueError(f"grading must be positive, got {grading!r}")
+    if n == 1 or np.isclose(grading, 1.0):
+        return np.linspace(0.0, 1.0, n + 1)
+    q = grading ** (1.0 / (n - 1))  # ratio between neighbouring elements
+    t = (q ** np.arange(n + 1) - 1.0) / (q**n - 1.0)
+    t[-1] = 1.0
+    return t
+
+
+def plate_with_hole(
+    width: float,
+    height: float,
+    radius: float,
+    n_radial: int,
+    n_angular: int,
+    cell: str = "quad",
+    grading: float = 4.0,
+) -> Mesh:
+    """Quarter plate [0, width] x [0, height] minus the disc of ``radius`` at the origin.
+
+    Two structured patches meet along the line from the hole point at 45 degrees to the
+    corner (width, height): the lower one maps the arc [0, 45] degrees onto the right
+    edge, the upper one the arc [45, 90] degrees onto the top edge, with straight
+    "radial" lines between. ``n_angular`` elements along the whole arc (split between
+    the patches), ``n_radial`` from hole to outer edge. ``grading`` is the ratio between
+    the outermost and the innermost radial element size (geometric progression; 1 means
+    uniform), so elements are refined toward the hole.
+
+    cell: "quad", "triangle" or "triangle6" (midside nodes on the hole lie on the circle).
+    Facet and node groups: "hole", "left" (x = 0), "bottom" (y = 0), "right" (x = width),
+    "top" (y = height).
+    """
+    _check_cell(cell, ("quad", "triangle", "triangle6"))
+    _check_counts(n_radial=n_radial, n_angular=n_angular)
+    n_radial, n_angular = int(n_radial), int(n_angular)
+    if n_angular < 2:
+        raise ValueError("n_angular must be at least 2 (one element per patch)")
+    if not 0 < radius < min(width, height):
+        raise ValueError("radius must be positive and smaller than width and height")
+
+    na = n_angular // 2  # lower patch (right edge)
+    nb = n_angular - na  # upper patch (top edge)
+    jj = np.arange(n_angular + 1)
+    lower = jj <= na
+    s = np.where(lower, jj / na, (jj - na) / nb)  # patch parameter along the arc
+    theta = np.where(lower, s, 1.0 + s) * (np.pi / 4)
+    inner = radius * np.column_stack([np.cos(theta), np.sin(theta)])
+    outer = np.where(
+        lower[:, None],
+        np.column_stack([np.full_like(s, width), s * height]),
+        np.column_stack([(1.0 - s) * width, np.full_like(s, height)]),
+    )
+    # symmetry lines exactly on the axes (cos(pi/2) is not exactly 0)
+    inner[0, 1] = 0.0
+    inner[-1, 0] = 0.0
+
+    t = _graded(n_radial, grading)
+    # node index k + j*(n_radial+1): k radial (fastest), j angular; (radial, angular) is
+    # a right-handed frame, so the grid quads are counter-clockwise.
+    pts = inner[:, None, :] + t[None, :, None] * (outer - inner)[:, None, :]
+    points = pts.reshape(-1, 2)
+    k, j = (a.ravel() for a in np.meshgrid(np.arange(n_radial + 1), jj, indexing="xy"))
+    masks = {
+        "hole": k == 0,
+        "bottom": j == 0,
+        "left": j == n_angular,
+        "right": (k == n_radial) & lower[j],
+        "top": (k == n_radial) & (j >= na),
+    }
+    mesh = _finish_2d(points, _grid_quads(n_radial, n_angular), cell, masks)
+    if cell == "triangle6":
+        _project_midnodes_to_circle(mesh, masks["hole"], radius)
+    return mesh
+
+
+def _project_midnodes_to_circle(mesh: Mesh, hole: np.ndarray, radius: float) -> None:
+    """Move the midside nodes of edges joining two hole nodes onto the circle."""
+    hole_full = np.zeros(mesh.num_points, dtype=bool)
+    hole_full[: hole.size] = hole
+    for a, b, m in ((0, 1, 3), (1, 2, 4), (2, 0, 5)):
+        on = hole_full[mesh.cells[:, a]] & hole_full[mesh.cells[:, b]]
+        mid = np.unique(mesh.cells[on, m])
+        p = mesh.points[mid]
+        mesh.points[mid] = radius * p / np.linalg.norm(p, axis=1)[:, None]
+
+
+# --------------------------------------------------------------------------------------
+# quadratic upgrade
+# --------------------------------------------------------------------------------------
+
+# local vertex pairs of the midside nodes, in meshio/VTK order
+_EDGES = {
+    "triangle": [(0, 1), (1, 2), (2, 0)],
+    "tetra": [(0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3)],
+}
+
+
+def make_quadratic(mesh: Mesh) -> Mesh:
+    """Upgrade triangle -> triangle6 or tetra -> tetra10 by adding unique edge midpoints.
+
+    New nodes are appended after the existing ones (numbered by sorted edge). Groups are
+    carried over; facet groups become line3 / triangle6 facets.
+    """
+    if mesh.cell_type not in _EDGES:
+        raise InputError(f"cannot make {mesh.cell_type} cells quadratic (triangle or tetra only)")
+    npts = mesh.num_points
+    cells = mesh.cells.astype(np.int64)
+    edges = np.stack([cells[:, list(e)] for e in _EDGES[mesh.cell_type]], axis=1)  # (nc, ne, 2)
+    lo, hi = edges.min(axis=2), edges.max(axis=2)
+    # single int64 key per undirected edge: fine up to ~3e9 points
+    keys, inv = np.unique(lo * npts + hi, return_inverse=True)
+    inv = inv.reshape(lo.shape)
+    a, b = keys // npts, keys % npts
+    points = np.vstack([mesh.points, 0.5 * (mesh.points[a] + mesh.points[b])])
+    new_cells = np.hstack([cells, npts + inv])
+
+    def mid(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        k = np.minimum(u, v) * npts + np.maximum(u, v)
+        pos = np.searchsorted(keys, k)
+        pos = np.minimum(pos, keys.size - 1)
+        if np.any(keys[pos] != k):
+            raise InputError("a facet group contains an edge that is not a mesh edge")
+        return npts + pos
+
+    facet_groups = {}
+    for name, f in mesh.facet_groups.items():
+        f = np.asarray(f, dtype=np.int64)
+        nv = 2 if mesh.cell_type == "triangle" else 3
+        f = f[:, :nv]
+        if nv == 2:
+            facet_groups[name] = np.column_stack([f, mid(f[:, 0], f[:, 1])])
+        else:
+            facet_groups[name] = np.column_stack(
+                [f, mid(f[:, 0], f[:, 1]), mid(f[:, 1], f[:, 2]), mid(f[:, 2], f[:, 0])]
+            )
+    return Mesh(
+        points,
+        mesh.cell_type + ("6" if mesh.cell_type == "triangle" else "10"),
+        new_cells,
+        cell_groups={k: v.copy() for k, v in mesh.cell_groups.items()},
+        facet_groups=facet_groups,
+        node_groups={k: v.copy() for k, v in mesh.node_groups.items()},
+    )
+
+
+# facet and node groups every generator creates (scene validation of group names)
+GENERATOR_GROUPS: dict[str, tuple[str, ...]] = {
+    "rectangle": ("left", "right", "bottom", "top"),
+    "box": ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax"),
+    "plate_with_hole": ("hole", "left", "bottom", "right", "top"),
+}
+
+GENERATORS: dict[str, Callable[..., Mesh]] = {
+    "rectangle": rectangle,
+    "box": box,
+    "plate_with_hole": plate_with_hole,
+}

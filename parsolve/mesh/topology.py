@@ -1,0 +1,308 @@
+"""Facet topology of a single-cell-type mesh: local facets, boundary facets, orientation.
+
+Conventions (meshio/VTK node ordering, see ``mesh.CELL_INFO``):
+
+* ``FACETS[cell_type]`` lists, for each local facet, the local node indices in the node
+  order of the facet cell type (line: v0, v1; line3: v0, v1, mid; triangle; triangle6:
+  v0, v1, v2, m01, m12, m20; quad), oriented so that the right-hand-rule normal points
+  out of a positively oriented cell. In 2D the outward normal of the facet (a, b) is
+  (dy, -dx); in 3D it is (b - a) x (c - a).
+* A cell is positively oriented when its Jacobian determinant is positive
+  (counter-clockwise polygons in 2D).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from parsolve.errors import InputError
+from parsolve.mesh.mesh import CELL_INFO, Mesh
+
+FACETS: dict[str, list[tuple[int, ...]]] = {
+    "triangle": [(0, 1), (1, 2), (2, 0)],
+    "triangle6": [(0, 1, 3), (1, 2, 4), (2, 0, 5)],
+    "quad": [(0, 1), (1, 2), (2, 3), (3, 0)],
+    "tetra": [(0, 2, 1), (0, 1, 3), (1, 2, 3), (0, 3, 2)],
+    "tetra10": [
+        (0, 2, 1, 6, 5, 4),
+        (0, 1, 3, 4, 8, 7),
+        (1, 2, 3, 5, 9, 8),
+        (0, 3, 2, 7, 9, 6),
+    ],
+    "hexahedron": [
+        (0, 3, 2, 1),  # z = 0
+        (4, 5, 6, 7),  # z = 1
+        (0, 1, 5, 4),  # y = 0
+        (1, 2, 6, 5),  # x = 1
+        (2, 3, 7, 6),  # y = 1
+        (3, 0, 4, 7),  # x = 0
+    ],
+}
+
+# Number of corner (vertex) nodes of each facet/cell type; corners always come first in
+# meshio ordering, so the corners alone identify a facet.
+NUM_VERTICES: dict[str, int] = {
+    "line": 2,
+    "line3": 2,
+    "triangle": 3,
+    "triangle6": 3,
+    "quad": 4,
+    "tetra": 4,
+    "tetra10": 4,
+    "hexahedron": 8,
+}
+
+# Node permutation that reverses a cell's orientation (keeps meshio ordering valid).
+FLIP: dict[str, list[int]] = {
+    "triangle": [0, 2, 1],
+    "triangle6": [0, 2, 1, 5, 4, 3],
+    "quad": [0, 3, 2, 1],
+    "tetra": [0, 2, 1, 3],
+    "tetra10": [0, 2, 1, 3, 6, 5, 4, 7, 9, 8],
+    "hexahedron": [0, 3, 2, 1, 4, 7, 6, 5],
+}
+
+
+# --------------------------------------------------------------------------------------
+# Boundary facets
+# --------------------------------------------------------------------------------------
+
+
+def _row_groups(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Group identical rows of an integer array: (group id of each row, group counts).
+
+    Rows are packed into one int64 when the ids are small enough, else lexsorted;
+    both are much faster than ``np.unique(axis=0)``.
+    """
+    n = keys.shape[0]
+    if n == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    base = int(keys.max()) + 1
+    if base ** keys.shape[1] < 2**62:
+        # pack each row into one int64 when it fits: a 1D sort is several times faster
+        packed = np.zeros(n, dtype=np.int64)
+        for col in keys.T:
+            packed = packed * base + col
+        order = np.argsort(packed, kind="stable")
+        sp = packed[order]
+        new = np.empty(n, dtype=bool)
+        new[0] = True
+        np.not_equal(sp[1:], sp[:-1], out=new[1:])
+    else:
+        order = np.lexsort(keys.T[::-1])
+        sk = keys[order]
+        new = np.empty(n, dtype=bool)
+        new[0] = True
+        np.any(sk[1:] != sk[:-1], axis=1, out=new[1:])
+    gid_sorted = np.cumsum(new) - 1
+    inv = np.empty(n, dtype=np.int64)
+    inv[order] = gid_sorted
+    return inv, np.bincount(gid_sorted)
+
+
+def _all_facets(cells: np.ndarray, cell_type: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every local facet of every cell, facet-major: (nodes, owner cell, local index)."""
+    local = FACETS[cell_type]
+    ncells = cells.shape[0]
+    nodes = np.concatenate([cells[:, list(f)] for f in local], axis=0)
+    owner = np.tile(np.arange(ncells, dtype=np.int64), len(local))
+    lidx = np.repeat(np.arange(len(local), dtype=np.int64), ncells)
+    return nodes, owner, lidx
+
+
+def _sorted_vertex_keys(facet_nodes: np.ndarray, facet_type: str) -> np.ndarray:
+    """Corner node ids of each facet in increasing order (identifies the facet)."""
+    nv = NUM_VERTICES[facet_type]
+    if nv == 2:  # min/max is much faster than a row sort for edges
+        a, b = facet_nodes[:, 0], facet_nodes[:, 1]
+        return np.column_stack([np.minimum(a, b), np.maximum(a, b)])
+    return np.sort(facet_nodes[:, :nv], axis=1)
+
+
+def _sort_by_owner(nodes, owner, lidx):
+    # deterministic output: ordered by (owner cell, local facet)
+    order = np.lexsort((lidx, owner))
+    return nodes[order], owner[order], lidx[order]
+
+
+def _single_facets(nodes, owner, lidx, facet_type):
+    """Keep the facets whose vertex set appears exactly once in ``nodes``."""
+    inv, counts = _row_groups(_sorted_vertex_keys(nodes, facet_type))
+    keep = counts[inv] == 1
+    return _sort_by_owner(nodes[keep], owner[keep], lidx[keep])
+
+
+def boundary_facets(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Facets that belong to exactly one cell.
+
+    Returns (facet_nodes (nf, nodes_per_facet), owner cell (nf,), local facet index
+    (nf,)), with facet nodes in the outward orientation of ``FACETS``.
+    """
+    nodes, owner, lidx = _all_facets(mesh.cells, mesh.cell_type)
+    return _single_facets(nodes, owner, lidx, mesh.facet_type)
+
+
+def facets_from_nodes(
+    mesh: Mesh, node_mask: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Boundary facets all of whose nodes are selected by ``node_mask`` (bool over points).
+
+    Same return triple as :func:`boundary_facets`.
+    """
+    node_mask = np.asarray(node_mask, dtype=bool)
+    if node_mask.shape != (mesh.num_points,):
+        raise ValueError(f"node_mask must have shape ({mesh.num_points},)")
+    # An interior facet with all its nodes selected is seen from both its cells, so it
+    # also appears twice among the candidates: counting within the candidates is enough
+    # (and much cheaper than the full boundary when few nodes are selected).
+    cells = mesh.cells
+    parts = []
+    for li, f in enumerate(FACETS[mesh.cell_type]):
+        owner = np.flatnonzero(node_mask[cells[:, list(f)]].all(axis=1))
+        parts.append((cells[owner][:, list(f)], owner, np.full(owner.size, li, dtype=np.int64)))
+    nodes, owner, lidx = (np.concatenate(p) for p in zip(*parts))
+    return _single_facets(nodes, owner, lidx, mesh.facet_type)
+
+
+def match_facets(
+    mesh: Mesh, facet_nodes: np.ndarray, source: str | None = None, key: str | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Find the owning boundary cell of given facets (any node order).
+
+    ``facet_nodes`` is (n, k) with the facet's corner nodes in its first columns (meshio
+    ordering of a linear or quadratic facet). Returns (owner cell, local facet index,
+    facet nodes in the outward orientation of ``FACETS``). Raises InputError when a
+    facet is not a boundary facet of the mesh.
+    """
+    facet_nodes = np.asarray(facet_nodes, dtype=np.int64)
+    nv = NUM_VERTICES[mesh.facet_type]
+    if facet_nodes.ndim != 2 or facet_nodes.shape[1] < nv:
+        raise InputError(
+            f"facets must have at least {nv} nodes ({mesh.facet_type} facets)", source, key
+        )
+    bnodes, bowner, blidx = boundary_facets(mesh)
+    nb = bnodes.shape[0]
+    keys = np.concatenate(
+        [
+            _sorted_vertex_keys(bnodes, mesh.facet_type),
+            _sorted_vertex_keys(facet_nodes, mesh.facet_type),
+        ]
+    )
+    inv, counts = _row_groups(keys)
+    pos = np.full(counts.shape[0], -1, dtype=np.int64)
+    pos[inv[:nb]] = np.arange(nb)
+    found = pos[inv[nb:]]
+    if np.any(found < 0):
+        bad = facet_nodes[np.argmax(found < 0), :nv].tolist()
+        raise InputError(
+            f"{np.count_nonzero(found < 0)} facet(s) are not boundary facets of the mesh "
+            f"(first: nodes {bad})",
+            source,
+            key,
+        )
+    return bowner[found], blidx[found], bnodes[found]
+
+
+# --------------------------------------------------------------------------------------
+# Geometry: Jacobians, signed measures, orientation
+# --------------------------------------------------------------------------------------
+
+
+def _gauss01(n: int) -> tuple[np.ndarray, np.ndarray]:
+    x, w = np.polynomial.legendre.leggauss(n)
+    return 0.5 * (x + 1.0), 0.5 * w
+
+
+def quadrature(cell_type: str, n: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """Reference points (nq, dim) and weights (nq,) with ``n`` Gauss points per direction.
+
+    Reference cells: simplices with vertices at 0 and the unit vectors, quad/hex on
+    [-1, 1]^d. Simplices use the collapsed (Duffy) product rule, exact for degree 2n-2
+    or more, which is all that geometry checks need.
+    """
+    dim = CELL_INFO[cell_type][0]
+    u, wu = _gauss01(n)
+    if cell_type in ("quad", "hexahedron"):
+        x, w = np.polynomial.legendre.leggauss(n)
+        grids = np.meshgrid(*([x] * dim), indexing="ij")
+        wgrids = np.meshgrid(*([w] * dim), indexing="ij")
+        pts = np.stack([g.ravel() for g in grids], axis=1)
+        return pts, np.prod([g.ravel() for g in wgrids], axis=0)
+    if dim == 2:
+        a, b = (g.ravel() for g in np.meshgrid(u, u, indexing="ij"))
+        wa, wb = (g.ravel() for g in np.meshgrid(wu, wu, indexing="ij"))
+        return np.stack([a, b * (1 - a)], axis=1), wa * wb * (1 - a)
+    a, b, c = (g.ravel() for g in np.meshgrid(u, u, u, indexing="ij"))
+    wa, wb, wc = (g.ravel() for g in np.meshgrid(wu, wu, wu, indexing="ij"))
+    pts = np.stack([a, b * (1 - a), c * (1 - a) * (1 - b)], axis=1)
+    return pts, wa * wb * wc * (1 - a) ** 2 * (1 - b)
+
+
+# edges of the quadratic simplices, in the order of their midside nodes
+_P2_EDGES = {
+    "triangle6": [(0, 1), (1, 2), (2, 0)],
+    "tetra10": [(0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3)],
+}
+
+
+def shape_gradients(cell_type: str, xi: np.ndarray) -> np.ndarray:
+    """Reference gradients of the geometric shape functions: (nq, nodes, dim)."""
+    xi = np.atleast_2d(np.asarray(xi, dtype=float))
+    nq, dim = xi.shape
+    if cell_type in ("quad", "hexahedron"):
+        # corners of [-1, 1]^d in VTK order
+        if dim == 2:
+            sgn = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], dtype=float)
+        else:
+            base = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], dtype=float)
+            sgn = np.vstack(
+                [np.column_stack([base, -np.ones(4)]), np.column_stack([base, np.ones(4)])]
+            )
+        fac = 1.0 + xi[:, None, :] * sgn[None, :, :]  # (nq, nn, dim)
+        grads = np.empty_like(fac)
+        for d in range(dim):
+            others = np.prod(np.delete(fac, d, axis=2), axis=2)
+            grads[:, :, d] = sgn[None, :, d] * others
+        return grads / 2.0**dim
+    # simplices: barycentric coordinates and their (constant) gradients
+    lam = np.column_stack([1.0 - xi.sum(axis=1), xi])  # (nq, dim+1)
+    dlam = np.vstack([-np.ones(dim), np.eye(dim)])  # (dim+1, dim)
+    if cell_type in ("triangle", "tetra"):
+        return np.broadcast_to(dlam, (nq, dim + 1, dim)).copy()
+    verts = (4.0 * lam - 1.0)[:, :, None] * dlam[None, :, :]
+    mids = [
+        4.0 * (lam[:, a, None] * dlam[None, b] + lam[:, b, None] * dlam[None, a])
+        for a, b in _P2_EDGES[cell_type]
+    ]
+    return np.concatenate([verts, np.stack(mids, axis=1)], axis=1)
+
+
+def jacobian_dets(
+    points: np.ndarray, cell_type: str, cells: np.ndarray, xi: np.ndarray | None = None
+) -> np.ndarray:
+    """Jacobian determinants (ncells, nq) at reference points (default: quadrature points)."""
+    if xi is None:
+        xi = quadrature(cell_type)[0]
+    g = shape_gradients(cell_type, xi)
+    jac = np.einsum("cia,qib->cqab", points[cells], g, optimize=True)
+    return np.linalg.det(jac)
+
+
+def cell_measures(mesh: Mesh) -> np.ndarray:
+    """Signed area/volume of every cell (exact for the supported geometries)."""
+    xi, w = quadrature(mesh.cell_type)
+    return jacobian_dets(mesh.points, mesh.cell_type, mesh.cells, xi) @ w
+
+
+def orient_cells(
+    points: np.ndarray, cell_type: str, cells: np.ndarray
+) -> tuple[np.ndarray, int]:
+    """Reorder the nodes of negatively oriented cells; returns (cells, number flipped)."""
+    xi, w = quadrature(cell_type, 2)
+    vol = jacobian_dets(points, cell_type, cells, xi) @ w
+    neg = vol < 0
+    n = int(np.count_nonzero(neg))
+    if n:
+        cells = cells.copy()
+        cells[neg] = cells[neg][:, FLIP[cell_type]]
+    return cells, n

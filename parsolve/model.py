@@ -1,0 +1,72 @@
+"""Scene + mesh → the effects the scene lists (materials, loads, relations). All input errors
+that need the mesh are raised here, before any solve; ``parsolve check`` stops after this."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from parsolve.effects.constraints import build_relations
+from parsolve.effects.elasticity import Elasticity
+from parsolve.effects.loads import LoadPattern, load_patterns
+from parsolve.errors import InputError
+from parsolve.mesh.generators import GENERATORS, make_quadratic
+from parsolve.mesh.mesh import Mesh
+from parsolve.mesh.reader import read_mesh
+from parsolve.mesh.regions import RegionResolver
+from parsolve.relations import Relation
+from parsolve.scene import Scene
+
+
+@dataclass
+class Model:
+    scene: Scene
+    mesh: Mesh
+    elasticity: Elasticity
+    patterns: dict[str, LoadPattern]
+    relations: list[Relation]
+
+    @property
+    def ncomp(self) -> int:
+        return self.mesh.dim
+
+    def external_load(self, t: float) -> np.ndarray:
+        """Known loads at t (input DOF numbering); patterns used as duals are not applied."""
+        duals = {r.meta.get("dual") for r in self.relations}
+        f = np.zeros(self.mesh.num_points * self.ncomp)
+        for name, pattern in self.patterns.items():
+            if name not in duals:
+                f += pattern.at(t)
+        return f
+
+
+def build_mesh(scene: Scene) -> Mesh:
+    spec = scene.mesh
+    if spec.file is not None:
+        mesh = read_mesh(str(spec.file))
+    else:
+        try:
+            mesh = GENERATORS[spec.generator](**spec.params)
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"invalid generator parameters: {exc}", scene.source, "mesh") from None
+    if spec.order == 2 and mesh.cell_type in ("triangle", "tetra"):
+        mesh = make_quadratic(mesh)
+    elif spec.order == 2 and mesh.cell_type not in ("triangle6", "tetra10"):
+        raise InputError(f"order = 2 needs a simplex mesh, not {mesh.cell_type}", scene.source, "mesh.order")
+    if mesh.dim != scene.dim:
+        raise InputError(f"a {mesh.dim}D mesh ({mesh.cell_type}) cannot carry hypothesis "
+                         f"{scene.hypothesis!r}", scene.source, "model.hypothesis")
+    return mesh
+
+
+def build_model(scene: Scene) -> Model:
+    mesh = build_mesh(scene)
+    regions = RegionResolver(mesh, scene.regions, scene.source)
+    elasticity = Elasticity(mesh, scene.hypothesis, scene.thickness, scene.materials, regions,
+                            scene.source)
+    patterns = load_patterns(mesh, scene.loads, regions, scene.evolutions, scene.thickness,
+                             scene.source)
+    relations = build_relations(scene.relations, regions, scene.evolutions, patterns, mesh.dim,
+                                scene.source, scene.solver.eliminate)
+    return Model(scene, mesh, elasticity, patterns, relations)

@@ -1,0 +1,168 @@
+"""The relation: the one abstraction behind Dirichlet conditions, control, contact and solubility.
+
+A relation of ``m`` rows couples the primal unknowns ``q`` (all DOFs, numbered
+``node * ncomp + component`` in the input mesh's node order) through
+
+    primal part   A q  (sense)  b(t)        sense is "=", ">=" or "<="
+    dual part     the reaction force  D λ  added to the external forces: K q = F + D λ
+
+Sign convention (the paper's): an *associated* relation has ``D = -Aᵀ``, so the assembled
+operator ``[[K, -D], [A, 0]] = [[K, Aᵀ], [A, 0]]`` is symmetric and, for a Dirichlet condition,
+λ is minus the reaction force. A *non-associated* relation carries its own ``D`` (for control,
+a load pattern): λ is then the intensity of that load.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from parsolve.evolution import RAMP, Evolution
+
+SENSES = ("=", ">=", "<=")
+
+
+@dataclass
+class Relation:
+    """``m`` rows of ``A q (sense) b(t)`` with reaction ``D λ``; ``dual is None`` means associated.
+
+    A is given as COO triplets (row, dof, coefficient); ``dual`` likewise as (dof, row, value).
+    ``values`` are the row values at the reference level, scaled by ``evolution(t)``.
+    """
+
+    name: str
+    nrows: int
+    a_rows: np.ndarray
+    a_dofs: np.ndarray
+    a_vals: np.ndarray
+    values: np.ndarray
+    evolution: Evolution = RAMP
+    sense: str = "="
+    dual: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    eliminate: bool | None = None  # None: let the solver decide (single-DOF rows are eliminated)
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.sense not in SENSES:
+            raise ValueError(f"relation {self.name}: sense must be one of {SENSES}")
+        self.a_rows = np.asarray(self.a_rows, dtype=np.int64)
+        self.a_dofs = np.asarray(self.a_dofs, dtype=np.int64)
+        self.a_vals = np.asarray(self.a_vals, dtype=float)
+        self.values = np.broadcast_to(np.asarray(self.values, dtype=float), (self.nrows,)).copy()
+
+    @property
+    def associated(self) -> bool:
+        return self.dual is None
+
+    def rhs(self, t: float) -> np.ndarray:
+        """b(t), one value per row."""
+        return self.values * self.evolution(t)
+
+    def single_dof(self) -> bool:
+        """True when every row constrains one DOF alone (a Dirichlet-like relation)."""
+        counts = np.bincount(self.a_rows, minlength=self.nrows)
+        return bool(np.all(counts == 1)) and bool(np.all(self.a_vals != 0.0))
+
+    def eliminable(self) -> bool:
+        """Can be eliminated instead of multiplied: associated, equality, single-DOF rows."""
+        return self.associated and self.sense == "=" and self.single_dof() and self.eliminate is not False
+
+    def dual_coo(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """D as (dof, row, value); for an associated relation D = -Aᵀ."""
+        if self.dual is None:
+            return self.a_dofs, self.a_rows, -self.a_vals
+        return self.dual
+
+    def primal(self, q: np.ndarray) -> np.ndarray:
+        """A q for a full primal vector q (input numbering)."""
+        return np.bincount(self.a_rows, weights=self.a_vals * q[self.a_dofs], minlength=self.nrows)
+
+
+# ---------------------------------------------------------------- builders
+
+
+def dirichlet(name: str, nodes: np.ndarray, components: list[int], ncomp: int,
+              value: float | np.ndarray = 0.0, evolution: Evolution = RAMP) -> Relation:
+    """u_c(node) = value for every node and listed component (one row each)."""
+    nodes = np.asarray(nodes, dtype=np.int64)
+    comps = np.asarray(components, dtype=np.int64)
+    dofs = (nodes[:, None] * ncomp + comps[None, :]).ravel()
+    vals = np.broadcast_to(np.asarray(value, dtype=float), (len(nodes), len(comps))).ravel() \
+        if np.ndim(value) else np.full(dofs.size, float(value))
+    m = dofs.size
+    return Relation(name, m, np.arange(m), dofs, np.ones(m), vals, evolution)
+
+
+def equal(name: str, nodes: np.ndarray, component: int, ncomp: int) -> Relation:
+    """u_c is the same at every node: u_c(n_k) - u_c(n_0) = 0 for k >= 1."""
+    nodes = np.asarray(nodes, dtype=np.int64)
+    m = len(nodes) - 1
+    rows = np.repeat(np.arange(m), 2)
+    dofs = np.stack([nodes[1:] * ncomp + component, np.full(m, nodes[0] * ncomp + component)], 1).ravel()
+    coefs = np.tile([1.0, -1.0], m)
+    return Relation(name, m, rows, dofs, coefs, np.zeros(m), RAMP)
+
+
+def combination(name: str, terms: list[tuple[np.ndarray, int, float, bool]], ncomp: int,
+                value: float = 0.0, evolution: Evolution = RAMP, sense: str = "=",
+                dual: np.ndarray | None = None) -> Relation:
+    """One row: sum over terms of coefficient × (mean or sum of u_c over the term's nodes) = value.
+
+    ``terms``: (nodes, component, coefficient, mean). ``dual``: a full primal vector D (one column)
+    for a non-associated relation, or None.
+    """
+    dofs, coefs = [], []
+    for nodes, comp, coef, mean in terms:
+        nodes = np.asarray(nodes, dtype=np.int64)
+        dofs.append(nodes * ncomp + comp)
+        coefs.append(np.full(len(nodes), coef / len(nodes) if mean else coef))
+    dofs_all, coefs_all = np.concatenate(dofs), np.concatenate(coefs)
+    # a node listed in two terms is one coefficient: sum duplicates
+    udofs, inv = np.unique(dofs_all, return_inverse=True)
+    ucoefs = np.bincount(inv, weights=coefs_all)
+    keep = ucoefs != 0.0
+    udofs, ucoefs = udofs[keep], ucoefs[keep]
+    dual_coo = None
+    if dual is not None:
+        nz = np.flatnonzero(dual)
+        dual_coo = (nz, np.zeros(nz.size, dtype=np.int64), dual[nz])
+    return Relation(name, 1, np.zeros(udofs.size), udofs, ucoefs, np.array([value]), evolution,
+                    sense, dual_coo)
+
+
+def with_dual(relation: Relation, vector: np.ndarray) -> Relation:
+    """The same primal part with every row's reaction along one given vector (non-associated)."""
+    nz = np.flatnonzero(vector)
+    dofs = np.tile(nz, relation.nrows)
+    rows = np.repeat(np.arange(relation.nrows), nz.size)
+    relation.dual = (dofs, rows, np.tile(vector[nz], relation.nrows))
+    return relation
+
+
+def duplicate_rows(relations: list[Relation]) -> list[tuple[str, str, int]]:
+    """Single-DOF equality rows that constrain the same DOF twice: (name, name, dof) triples.
+
+    Two such rows make the saddle system singular; they are reported by name before any solve.
+    """
+    names, dofs = [], []
+    for rel in relations:
+        if rel.sense != "=":
+            continue
+        counts = np.bincount(rel.a_rows, minlength=rel.nrows)
+        single = np.flatnonzero(counts == 1)
+        mask = np.isin(rel.a_rows, single)
+        dofs.append(rel.a_dofs[mask])
+        names.append(np.full(mask.sum(), len(names)))
+    if not dofs:
+        return []
+    d, n = np.concatenate(dofs), np.concatenate(names)
+    order = np.lexsort((n, d))
+    d, n = d[order], n[order]
+    dup = np.flatnonzero(d[1:] == d[:-1])
+    rel_names = [r.name for r in relations if r.sense == "="]
+    return [(rel_names[n[i]], rel_names[n[i + 1]], int(d[i])) for i in dup]
+
+
+RelationBuilder = Callable[..., Relation]

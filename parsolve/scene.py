@@ -1,0 +1,450 @@
+"""Scene files (TOML) → a validated, typed scene. Every input error is raised here.
+
+Errors name the file and the dotted key (``scene.toml: relations[2].component: ...``). The
+scene is parsed identically on every rank, so an error is raised on all ranks together.
+"""
+
+from __future__ import annotations
+
+import inspect
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from parsolve.errors import InputError
+from parsolve.evolution import CONSTANT, RAMP, Evolution
+
+HYPOTHESES = ("plane_stress", "plane_strain", "3d")
+COMPONENTS = {"x": 0, "y": 1, "z": 2, "ux": 0, "uy": 1, "uz": 2}
+RELATION_TYPES = ("dirichlet", "equal", "mean", "linear")
+PRESETS = ("direct", "iterative")
+MATERIAL_MODELS = {"elastic": ("E", "nu")}
+
+
+class Table:
+    """A TOML table with its dotted path: typed reads, and unknown keys reported at the end."""
+
+    def __init__(self, data: dict, path: str, source: str):
+        if not isinstance(data, dict):
+            raise InputError(f"expected a table, got {type(data).__name__}", source, path)
+        self.data, self.path, self.source, self.used = data, path, source, set()
+
+    def key(self, name: str) -> str:
+        return f"{self.path}.{name}" if self.path else name
+
+    def error(self, name: str, message: str) -> InputError:
+        return InputError(message, self.source, self.key(name))
+
+    def has(self, name: str) -> bool:
+        return name in self.data
+
+    def get(self, name: str, kind: type | tuple, default: Any = ..., choices=None) -> Any:
+        self.used.add(name)
+        if name not in self.data:
+            if default is ...:
+                raise self.error(name, "missing required key")
+            return default
+        value = self.data[name]
+        kinds = kind if isinstance(kind, tuple) else (kind,)
+        if float in kinds and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        if isinstance(value, bool) and bool not in kinds or not isinstance(value, kinds):
+            names = " or ".join(k.__name__ for k in kinds)
+            raise self.error(name, f"expected {names}, got {type(value).__name__} {value!r}")
+        if choices is not None and value not in choices:
+            raise self.error(name, f"must be one of {', '.join(map(str, choices))}; got {value!r}")
+        return value
+
+    def floats(self, name: str, length: int | None = None, default: Any = ...) -> list[float] | None:
+        value = self.get(name, list, default)
+        if value is None or value is default and default is not ...:
+            return value
+        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+            raise self.error(name, f"expected a list of numbers, got {value!r}")
+        if length is not None and len(value) != length:
+            raise self.error(name, f"expected {length} numbers, got {len(value)}")
+        return [float(v) for v in value]
+
+    def table(self, name: str, default: Any = ...) -> "Table | None":
+        value = self.get(name, dict, default)
+        return value if value is None else Table(value, self.key(name), self.source)
+
+    def tables(self, name: str) -> list["Table"]:
+        value = self.get(name, list, [])
+        return [Table(v, f"{self.key(name)}[{i}]", self.source) for i, v in enumerate(value)]
+
+    def done(self) -> None:
+        unknown = sorted(set(self.data) - self.used)
+        if unknown:
+            raise self.error(unknown[0], "unknown key")
+
+
+@dataclass
+class MeshSpec:
+    file: Path | None
+    generator: str | None
+    params: dict
+    order: int
+
+
+@dataclass
+class RegionSpec:
+    name: str
+    kind: str          # "expr", "box", "point", "group"
+    value: Any
+    key: str
+
+
+@dataclass
+class MaterialSpec:
+    region: str
+    model: str
+    params: dict
+    key: str
+
+
+@dataclass
+class LoadSpec:
+    pattern: str
+    region: str
+    kind: str          # "traction", "total_force", "body", "nodal"
+    vector: list[float]
+    evolution: str
+    key: str
+
+
+@dataclass
+class TermSpec:
+    region: str
+    component: int
+    coefficient: float
+    mean: bool
+
+
+@dataclass
+class RelationSpec:
+    name: str
+    type: str
+    region: str | None
+    components: list[int]
+    value: float
+    evolution: str
+    terms: list[TermSpec]
+    dual: str | None
+    sense: str
+    eliminate: bool | None
+    key: str
+
+
+@dataclass
+class SolverSpec:
+    preset: str
+    prefix: str
+    options: dict[str, str]
+    eliminate: bool
+
+
+@dataclass
+class Scene:
+    source: str
+    text: str
+    title: str
+    mesh: MeshSpec
+    hypothesis: str
+    thickness: float
+    regions: dict[str, RegionSpec]
+    materials: list[MaterialSpec]
+    evolutions: dict[str, Evolution]
+    loads: list[LoadSpec]
+    relations: list[RelationSpec]
+    times: list[float]
+    solver: SolverSpec
+    output: str | None
+    effects: list[str] = field(default_factory=list)
+
+    @property
+    def dim(self) -> int:
+        return 3 if self.hypothesis == "3d" else 2
+
+
+# ---------------------------------------------------------------- parsing
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Read and validate a scene file (everything but what needs the mesh: see ``model``)."""
+    path = Path(path)
+    source = str(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise InputError(f"cannot read scene file ({exc.strerror})", source) from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"invalid TOML: {exc}", source) from None
+    return parse_scene(data, source, text, path.parent)
+
+
+def parse_scene(data: dict, source: str, text: str = "", base: Path = Path(".")) -> Scene:
+    top = Table(data, "", source)
+    title = top.get("title", str, "")
+    mesh = _mesh(top.table("mesh"), base)
+    model = top.table("model")
+    hypothesis = model.get("hypothesis", str, choices=HYPOTHESES)
+    thickness = model.get("thickness", float, 1.0)
+    if thickness <= 0:
+        raise model.error("thickness", "must be positive")
+    model.done()
+    regions = _regions(top.table("regions", {}))
+    evolutions = _evolutions(top.table("evolutions", {}))
+    materials = [_material(t) for t in top.tables("materials")]
+    if not materials:
+        raise InputError("at least one [[materials]] entry is required", source, "materials")
+    dim = 3 if hypothesis == "3d" else 2
+    loads = [_load(t, dim) for t in top.tables("loads")]
+    relations = [_relation(t, dim) for t in top.tables("relations")]
+    times = _steps(top.table("steps", {}))
+    solver = _solver(top.table("solver", {}))
+    out = top.table("output", {})
+    output = out.get("file", str, None)
+    out.done()
+    top.done()
+    scene = Scene(source, text, title, mesh, hypothesis, thickness, regions, materials,
+                  evolutions, loads, relations, times, solver, output)
+    _cross_check(scene)
+    scene.effects = _effects(scene)
+    return scene
+
+
+def _mesh(t: Table, base: Path) -> MeshSpec:
+    from parsolve.mesh.generators import GENERATORS
+
+    order = t.get("order", int, 1, choices=(1, 2))
+    if t.has("file") == t.has("generator"):
+        raise t.error("file", "give exactly one of 'file' or 'generator'")
+    if t.has("file"):
+        file = base / t.get("file", str)
+        t.done()
+        return MeshSpec(file, None, {}, order)
+    gen = t.get("generator", str, choices=tuple(GENERATORS))
+    signature = inspect.signature(GENERATORS[gen])
+    params = {}
+    for name, par in signature.parameters.items():
+        if par.default is inspect.Parameter.empty:
+            params[name] = t.get(name, (int, float, str, list))
+        elif t.has(name):
+            params[name] = t.get(name, (int, float, str, list))
+    t.done()
+    return MeshSpec(None, gen, params, order)
+
+
+def _regions(t: Table) -> dict[str, RegionSpec]:
+    regions = {}
+    for name in list(t.data):
+        value = t.get(name, (str, dict))
+        key = t.key(name)
+        if isinstance(value, str):
+            regions[name] = RegionSpec(name, "expr", value, key)
+            continue
+        sub = Table(value, key, t.source)
+        kinds = [k for k in ("expr", "box", "point", "group") if sub.has(k)]
+        if len(kinds) != 1:
+            raise InputError("give exactly one of expr, box, point, group", t.source, key)
+        kind = kinds[0]
+        if kind == "box":
+            raw = sub.get("box", list)
+            if len(raw) != 2 or not all(isinstance(v, list) for v in raw):
+                raise sub.error("box", "expected [[xmin, ymin(, zmin)], [xmax, ymax(, zmax)]]")
+            regions[name] = RegionSpec(name, kind, [[float(x) for x in raw[0]], [float(x) for x in raw[1]]], key)
+        elif kind == "point":
+            regions[name] = RegionSpec(name, kind, sub.floats("point"), key)
+        else:
+            regions[name] = RegionSpec(name, kind, sub.get(kind, str), key)
+        sub.done()
+    return regions
+
+
+def _evolutions(t: Table) -> dict[str, Evolution]:
+    evols = {"ramp": RAMP, "constant": CONSTANT}
+    for name in list(t.data):
+        sub = t.table(name)
+        times, values = sub.floats("times"), sub.floats("values")
+        if len(times) != len(values) or len(times) < 1:
+            raise sub.error("values", "times and values must have the same, non-zero length")
+        if any(b <= a for a, b in zip(times, times[1:])):
+            raise sub.error("times", "must be strictly increasing")
+        sub.done()
+        evols[name] = Evolution(name, tuple(times), tuple(values))
+    return evols
+
+
+def _material(t: Table) -> MaterialSpec:
+    region = t.get("region", str, "all")
+    model = t.get("model", str, "elastic", choices=tuple(MATERIAL_MODELS))
+    params = {p: t.get(p, float) for p in MATERIAL_MODELS[model]}
+    if params.get("E", 1.0) <= 0:
+        raise t.error("E", "must be positive")
+    if not -1.0 < params.get("nu", 0.0) < 0.5:
+        raise t.error("nu", "must lie in (-1, 0.5)")
+    t.done()
+    return MaterialSpec(region, model, params, t.path)
+
+
+def _component(t: Table, name: str, dim: int) -> int:
+    comp = t.get(name, str)
+    if comp not in COMPONENTS or COMPONENTS[comp] >= dim:
+        allowed = [c for c, i in COMPONENTS.items() if i < dim and len(c) == 1]
+        raise t.error(name, f"unknown component {comp!r} for a {dim}D model (use {', '.join(allowed)})")
+    return COMPONENTS[comp]
+
+
+def _load(t: Table, dim: int) -> LoadSpec:
+    pattern = t.get("name", str, "loads")
+    kinds = [k for k in ("traction", "total_force", "body", "nodal") if t.has(k)]
+    if len(kinds) != 1:
+        raise t.error("traction", "give exactly one of traction, total_force, body, nodal")
+    vector = t.floats(kinds[0], dim)
+    region = t.get("region", str, "all" if kinds[0] == "body" else ...)
+    evolution = t.get("evolution", str, "ramp")
+    t.done()
+    return LoadSpec(pattern, region, kinds[0], vector, evolution, t.path)
+
+
+def _relation(t: Table, dim: int) -> RelationSpec:
+    name = t.get("name", str)
+    rtype = t.get("type", str, choices=RELATION_TYPES)
+    region, comps, terms = None, [], []
+    if rtype == "dirichlet":
+        region = t.get("region", str)
+        raw = t.get("components", list, None)
+        if raw is None:
+            comps = [_component(t, "component", dim)]
+        else:
+            sub = Table({f"components[{i}]": c for i, c in enumerate(raw)}, t.path, t.source)
+            comps = [_component(sub, k, dim) for k in sub.data]
+            if len(set(comps)) != len(comps):
+                raise t.error("components", "a component is listed twice")
+    elif rtype in ("equal", "mean"):
+        region = t.get("region", str)
+        comps = [_component(t, "component", dim)]
+        terms = [TermSpec(region, comps[0], 1.0, True)]
+        minus = t.table("minus", None)
+        if minus is not None:
+            if rtype == "equal":
+                raise t.error("minus", "only a 'mean' relation takes 'minus'")
+            terms.append(TermSpec(minus.get("region", str), _component(minus, "component", dim), -1.0, True))
+            minus.done()
+    else:
+        for sub in t.tables("terms"):
+            terms.append(TermSpec(sub.get("region", str), _component(sub, "component", dim),
+                                  sub.get("coefficient", float, 1.0), sub.get("mean", bool, False)))
+            sub.done()
+        if not terms:
+            raise t.error("terms", "a linear relation needs at least one term")
+    value = t.get("value", float, 0.0)
+    evolution = t.get("evolution", str, "ramp")
+    dual = t.get("dual", str, None)
+    sense = t.get("sense", str, "=", choices=("=",))
+    eliminate = t.get("eliminate", bool, None)
+    if rtype == "equal" and t.has("value"):
+        raise t.error("value", "an 'equal' relation has no value")
+    t.done()
+    return RelationSpec(name, rtype, region, comps, value, evolution, terms, dual, sense,
+                        eliminate, t.path)
+
+
+def _steps(t: Table) -> list[float]:
+    if t.has("times"):
+        times = t.floats("times")
+        if not times or any(b <= a for a, b in zip([0.0] + times, times)):
+            raise t.error("times", "must be positive and strictly increasing")
+        t.done()
+        return times
+    count = t.get("count", int, 1)
+    end = t.get("end", float, 1.0)
+    if count < 1:
+        raise t.error("count", "must be at least 1")
+    if end <= 0:
+        raise t.error("end", "must be positive")
+    t.done()
+    return [end * (i + 1) / count for i in range(count)]
+
+
+def _flatten(t: Table, prefix: str = "") -> dict[str, str]:
+    """Nested PETSc settings to option keys: {ksp: {type: "cg"}} → {"ksp_type": "cg"}."""
+    flat = {}
+    for name in list(t.data):
+        value = t.get(name, (str, int, float, bool, dict))
+        key = f"{prefix}{name}"
+        if isinstance(value, dict):
+            flat.update(_flatten(Table(value, t.key(name), t.source), key + "_"))
+        elif isinstance(value, bool):
+            flat[key] = "true" if value else "false"
+        else:
+            flat[key] = str(value)
+    return flat
+
+
+def _solver(t: Table) -> SolverSpec:
+    preset = t.get("preset", str, "direct", choices=PRESETS)
+    prefix = t.get("prefix", str, "parsolve_")
+    if not prefix or not prefix.endswith("_") or not prefix.replace("_", "").isalnum():
+        raise t.error("prefix", "must be non-empty, alphanumeric and end with '_'")
+    eliminate = t.get("eliminate", bool, True)
+    options = _flatten(t.table("petsc", {}))
+    t.done()
+    return SolverSpec(preset, prefix, options, eliminate)
+
+
+def _cross_check(scene: Scene) -> None:
+    """References between sections: regions, evolutions, load patterns, relation names."""
+    src = scene.source
+    known = set(scene.regions) | {"all"}
+
+    def region(name: str | None, key: str) -> None:
+        # file groups are only known once the mesh is read: checked again in model building
+        if name is not None and name not in known and scene.mesh.file is None:
+            if not _generator_group(scene, name):
+                raise InputError(f"unknown region {name!r}", src, key)
+
+    for m in scene.materials:
+        region(m.region, m.key + ".region")
+    patterns = {l.pattern for l in scene.loads}
+    for l in scene.loads:
+        region(l.region, l.key + ".region")
+        if l.evolution not in scene.evolutions:
+            raise InputError(f"unknown evolution {l.evolution!r}", src, l.key + ".evolution")
+    names = set()
+    for r in scene.relations:
+        if r.name in names:
+            raise InputError(f"duplicate relation name {r.name!r}", src, r.key + ".name")
+        names.add(r.name)
+        region(r.region, r.key + ".region")
+        for i, term in enumerate(r.terms):
+            region(term.region, f"{r.key}.terms[{i}].region")
+        if r.evolution not in scene.evolutions:
+            raise InputError(f"unknown evolution {r.evolution!r}", src, r.key + ".evolution")
+        if r.dual is not None and r.dual not in patterns:
+            raise InputError(f"dual names no load pattern: {r.dual!r} (patterns: "
+                             f"{', '.join(sorted(patterns)) or 'none'})", src, r.key + ".dual")
+
+
+def _generator_group(scene: Scene, name: str) -> bool:
+    """Groups that generators always create (e.g. 'left', 'hole')."""
+    groups = {"rectangle": ("left", "right", "bottom", "top"),
+              "box": ("left", "right", "bottom", "top", "front", "back"),
+              "plate_with_hole": ("left", "right", "bottom", "top", "hole")}
+    return name in groups.get(scene.mesh.generator, ())
+
+
+def _effects(scene: Scene) -> list[str]:
+    """The effects the scene calls for; only these are built and iterated."""
+    effects = ["elasticity"]
+    if scene.loads:
+        effects.append("loads")
+    if scene.relations:
+        effects.append("relations")
+    if any(r.dual for r in scene.relations):
+        effects.append("control")
+    return effects

@@ -1,0 +1,1 @@
+"""Solvers: linear presets and PETSc options handling, static step loop."""

@@ -1,0 +1,108 @@
+"""Linear solver presets for the saddle operator.
+
+``direct``: MUMPS LU (LDLᵀ when every relation is associated, the operator being symmetric)
+with the QAMD ordering (PORD, the fallback here, is catastrophic with a dense control column)
+and null-pivot detection, so a singular system is an error instead of inf or NaN.
+``iterative``: FGMRES around a Schur fieldsplit (q block: CG + GAMG; Schur: selfp, GMRES +
+Jacobi); without multipliers, CG + GAMG on the stiffness alone.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from parsolve.errors import SolverError
+from parsolve.solvers import options as opt
+
+
+def preset_options(preset: str, symmetric: bool, has_multipliers: bool) -> dict[str, str]:
+    if preset == "direct":
+        return {
+            "ksp_type": "preonly",
+            "pc_type": "cholesky" if symmetric else "lu",
+            "pc_factor_mat_solver_type": "mumps",
+            "mat_mumps_icntl_7": "6",     # QAMD ordering
+            "mat_mumps_icntl_24": "1",    # detect null pivots
+            "mat_mumps_icntl_14": "50",   # workspace margin for delayed pivots
+            "ksp_error_if_not_converged": "true",
+        }
+    if not has_multipliers:
+        return {"ksp_type": "cg", "pc_type": "gamg", "ksp_rtol": "1e-10",
+                "ksp_error_if_not_converged": "true"}
+    return {
+        "ksp_type": "fgmres",
+        "ksp_rtol": "1e-10",
+        "ksp_max_it": "500",
+        "ksp_gmres_restart": "100",
+        "pc_type": "fieldsplit",
+        "pc_fieldsplit_type": "schur",
+        "pc_fieldsplit_schur_fact_type": "full",
+        "pc_fieldsplit_schur_precondition": "selfp",
+        "fieldsplit_q_ksp_type": "cg",
+        "fieldsplit_q_ksp_rtol": "1e-4",
+        "fieldsplit_q_pc_type": "gamg",
+        "fieldsplit_lambda_ksp_type": "gmres",
+        "fieldsplit_lambda_ksp_rtol": "1e-4",
+        "fieldsplit_lambda_pc_type": "jacobi",
+        "ksp_error_if_not_converged": "true",
+    }
+
+
+class LinearSolver:
+    """A KSP on the saddle operator, configured once from the layered options."""
+
+    def __init__(self, comm: MPI.Comm, prefix: str, settings: dict[str, str],
+                 is_q: PETSc.IS, is_l: PETSc.IS, near_null: PETSc.NullSpace | None = None):
+        self.comm, self.prefix, self.settings = comm, prefix, settings
+        self.ksp = PETSc.KSP().create(comm)
+        self.ksp.setOptionsPrefix(prefix)
+        self.is_q, self.is_l = is_q, is_l
+        self.near_null = near_null
+        self.configured = False
+
+    def set_operator(self, mat: PETSc.Mat) -> None:
+        self.ksp.setOperators(mat)
+        if not self.configured:
+            with opt.inserted(self.prefix, self.settings):
+                if self.settings.get("pc_type") == "fieldsplit":
+                    pc = self.ksp.getPC()
+                    pc.setType("fieldsplit")
+                    pc.setFieldSplitIS(("q", self.is_q), ("lambda", self.is_l))
+                self.ksp.setFromOptions()
+                self.ksp.setUp()
+            self.configured = True
+
+    def solve(self, rhs: PETSc.Vec, x: PETSc.Vec) -> int:
+        """Solve; raise SolverError on failure (non-convergence, null pivots, non-finite)."""
+        try:
+            with opt.inserted(self.prefix, self.settings):
+                self.ksp.solve(rhs, x)
+        except PETSc.Error as exc:
+            raise SolverError(f"linear solve failed: {self._reason(exc)}") from None
+        self._check_factor()
+        if not np.isfinite(x.norm()):
+            raise SolverError("linear solve produced non-finite values (singular system?)")
+        if self.ksp.getConvergedReason() < 0:
+            raise SolverError(f"linear solver diverged (reason {self.ksp.getConvergedReason()})")
+        return self.ksp.getIterationNumber()
+
+    def _check_factor(self) -> None:
+        pc = self.ksp.getPC()
+        if pc.getType() not in ("lu", "cholesky"):
+            return
+        F = pc.getFactorMatrix()
+        if F.getType() == "mumps" and F.getMumpsInfog(28) > 0:
+            raise SolverError(f"singular system: MUMPS found {F.getMumpsInfog(28)} null pivot(s) "
+                              "(a body not held, or redundant relations)")
+
+    def _reason(self, exc: PETSc.Error) -> str:
+        pc = self.ksp.getPC()
+        try:
+            if pc.getType() in ("lu", "cholesky") and pc.getFactorMatrix().getType() == "mumps":
+                info = pc.getFactorMatrix().getMumpsInfog(1)
+                return f"MUMPS error INFOG(1)={info}"
+        except PETSc.Error:
+            pass
+        return f"PETSc error {exc.ierr}"

@@ -1,0 +1,671 @@
+#!/usr/bin/env python3
+"""Peer benchmarks for parsolve: DOLFINx 0.5 (Debian) and scikit-fem (PyPI) on the same meshes.
+
+Problem (shared with parsolve's benchmarks): 2D linear elasticity, E=1, nu=0.3, plane strain by
+default (plane stress on request), on the unit square [0,1]^2 split into n x n quads; the triangle
+mesh splits every quad along its (0,0)-(1,1) diagonal (DOLFINx's "right" diagonal). Points are
+numbered x-fastest, cells are in meshio/VTK order (`unit_square`), the same arrays go to both peers.
+P1 vector ("triangle") and Q1 vector ("quad") elements: 2*(n+1)^2 DOFs.
+
+Solve problem (DOLFINx only): u = 0 on x=0 (clamped left), traction t = TRACTION on x=1, zero
+body force. MUMPS LU (preonly) and CG + GAMG with the rigid-body near-nullspace.
+
+The two peers live in different environments, so this file is both a module and a script:
+
+    # DOLFINx: Debian's python (or /work/main/.venv/bin/python, which sees system site-packages)
+    /usr/bin/python3 scripts/bench_peers.py dolfinx --n 100 200 --cell triangle quad --json d.json
+    /usr/bin/python3 scripts/bench_peers.py dolfinx --n 200 --solve mumps gamg --no-assembly
+    OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 \
+        mpirun -n 2 /usr/bin/python3 scripts/bench_peers.py dolfinx --n 200 --json d2.json
+    # scikit-fem: the bench venv made by scripts/bench_env.sh
+    /work/bench-venv/bin/python scripts/bench_peers.py skfem --n 100 200 --cell triangle quad --json s.json
+    # sanity: same Frobenius norm from both peers (n=8), DOLFINx on 1 and 2 ranks, repeatable norms
+    python scripts/bench_peers.py check
+
+From a parsolve benchmark, `run_peer("dolfinx", [100, 200], ...)` runs the right interpreter (under
+mpirun if nranks > 1) as a subprocess and returns the parsed JSON.
+
+Timings: time.perf_counter, wall clock, with an MPI barrier on both sides under MPI (so a time is
+the slowest rank's). Each figure is the best of `repeats` (default 3 below 200k DOFs, 2 below 600k,
+else 1; DOLFINx reassembly always >= 3).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+E_MOD = 1.0
+NU = 0.3
+TRACTION = (0.0, -1.0)
+CELLS = ("triangle", "quad")
+SOLVE_METHODS = ("mumps", "gamg")
+GAMG_RTOL = 1e-8
+
+HERE = Path(__file__).resolve().parent
+DEFAULT_BENCH_VENV = Path(os.environ.get("BENCH_VENV", "/work/bench-venv"))
+DEBIAN_PYTHON = "/usr/bin/python3"
+
+
+# --------------------------------------------------------------------------------------------------
+# shared problem definition
+
+
+def unit_square(n: int, cell: str) -> tuple[np.ndarray, np.ndarray]:
+    """Structured mesh of [0,1]^2, n x n quads: (points (N,2) float64, cells (M,k) int64, VTK order).
+
+    Node (i, j) -> id j*(n+1) + i at (i/n, j/n). Quads: (v00, v10, v11, v01), counter-clockwise.
+    Triangles: each quad -> (v00, v10, v11), (v00, v11, v01), both counter-clockwise.
+    """
+    if cell not in CELLS:
+        raise ValueError(f"cell must be one of {CELLS}, got {cell!r}")
+    s = np.linspace(0.0, 1.0, n + 1)
+    xx, yy = np.meshgrid(s, s, indexing="xy")  # xx[j, i] = s[i]: x fastest
+    points = np.column_stack([xx.ravel(), yy.ravel()])
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="xy")
+    v00 = (j * (n + 1) + i).ravel().astype(np.int64)
+    v10 = v00 + 1
+    v01 = v00 + (n + 1)
+    v11 = v01 + 1
+    if cell == "quad":
+        cells = np.column_stack([v00, v10, v11, v01])
+    else:
+        t1 = np.column_stack([v00, v10, v11])
+        t2 = np.column_stack([v00, v11, v01])
+        cells = np.empty((2 * n * n, 3), dtype=np.int64)
+        cells[0::2] = t1
+        cells[1::2] = t2
+    return points, cells
+
+
+def num_dofs(n: int) -> int:
+    """P1/Q1 vector DOFs on the n x n unit square."""
+    return 2 * (n + 1) ** 2
+
+
+def lame(E: float = E_MOD, nu: float = NU, plane: str = "strain") -> tuple[float, float]:
+    """(lambda, mu); plane stress uses lambda* = 2 mu lambda / (lambda + 2 mu)."""
+    mu = E / (2.0 * (1.0 + nu))
+    lmbda = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
+    if plane == "stress":
+        lmbda = 2.0 * mu * lmbda / (lmbda + 2.0 * mu)
+    elif plane != "strain":
+        raise ValueError(f"plane must be 'strain' or 'stress', got {plane!r}")
+    return lmbda, mu
+
+
+def default_repeats(dofs: int) -> int:
+    if dofs < 200_000:
+        return 3
+    if dofs < 600_000:
+        return 2
+    return 1
+
+
+# --------------------------------------------------------------------------------------------------
+# DOLFINx 0.5
+
+
+_JIT_STATE: dict = {"params": None, "compiled": set(), "tmp": None}
+
+
+def _comm(comm=None):
+    if comm is None:
+        from mpi4py import MPI
+
+        comm = MPI.COMM_WORLD
+    return comm
+
+
+def _timer(comm):
+    """Call with a function: barrier, run, barrier; returns (result, seconds)."""
+
+    def run(fn, *args, **kwargs):
+        comm.Barrier()
+        t0 = time.perf_counter()
+        out = fn(*args, **kwargs)
+        comm.Barrier()
+        return out, time.perf_counter() - t0
+
+    return run
+
+
+def _jit_params(comm, jit_cache: str | None):
+    """JIT parameters: jit_cache=None -> a fresh temporary cache for this process (so the first
+    compilation of each form in the process is cold); 'default' -> DOLFINx's ~/.cache/fenics;
+    anything else -> that directory."""
+    if jit_cache == "default":
+        return {}
+    if jit_cache is not None:
+        return {"cache_dir": jit_cache}
+    if _JIT_STATE["params"] is None:
+        path = tempfile.mkdtemp(prefix="bench_peers_jit_") if comm.rank == 0 else None
+        path = comm.bcast(path, root=0)
+        _JIT_STATE["tmp"] = path
+        _JIT_STATE["params"] = {"cache_dir": path}
+        if comm.rank == 0:
+            import atexit
+
+            atexit.register(shutil.rmtree, path, True)
+    return _JIT_STATE["params"]
+
+
+def _dolfinx_mesh(n: int, cell: str, comm):
+    """The `unit_square` arrays, given on rank 0 and distributed by DOLFINx (partition + reorder)."""
+    import ufl
+    from dolfinx import mesh as dmesh
+    from dolfinx.cpp.io import perm_vtk
+
+    ufl_cell, ctype, k = {
+        "triangle": ("triangle", dmesh.CellType.triangle, 3),
+        "quad": ("quadrilateral", dmesh.CellType.quadrilateral, 4),
+    }[cell]
+    domain = ufl.Mesh(ufl.VectorElement("Lagrange", ufl_cell, 1))
+    if comm.rank == 0:
+        points, cells = unit_square(n, cell)
+        cells = np.ascontiguousarray(cells[:, perm_vtk(ctype, k)])  # VTK -> DOLFINx ordering
+    else:
+        points = np.zeros((0, 2), dtype=np.float64)
+        cells = np.zeros((0, k), dtype=np.int64)
+    return dmesh.create_mesh(comm, cells, points, domain)
+
+
+def _dolfinx_forms(msh, plane: str):
+    import ufl
+    from dolfinx import fem
+
+    V = fem.VectorFunctionSpace(msh, ("Lagrange", 1))
+    lmbda, mu = lame(E_MOD, NU, plane)
+    u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
+
+    def eps(w):
+        return ufl.sym(ufl.grad(w))
+
+    def sigma(w):
+        return 2.0 * mu * eps(w) + lmbda * ufl.tr(eps(w)) * ufl.Identity(2)
+
+    a = ufl.inner(sigma(u), eps(v)) * ufl.dx
+    return V, a, v
+
+
+def _dolfinx_dofs(V) -> int:
+    return V.dofmap.index_map.size_global * V.dofmap.index_map_bs
+
+
+def dolfinx_assembly(n: int, cell: str = "triangle", plane: str = "strain",
+                     repeats: int | None = None, comm=None, jit_cache: str | None = None) -> dict:
+    """Stiffness assembly with DOLFINx: dict(dofs, t_form, t_first, t_reassembly, ...).
+
+    t_form: dolfinx.fem.form(a) (UFL -> FFCx -> C -> cffi; 'jit' says cold or cached);
+    t_first: create_matrix (sparsity) + assemble_matrix + A.assemble(), best of `repeats`, each on
+    a new matrix (t_create / t_assemble_first split it); t_reassembly: A.zeroEntries() +
+    assemble_matrix into the same matrix + A.assemble(). No boundary conditions. fro: the Frobenius
+    norm, also checked to be the same after every (re)assembly.
+    """
+    from dolfinx import fem
+    import dolfinx.fem.petsc as fpetsc
+    from petsc4py import PETSc
+
+    comm = _comm(comm)
+    timed = _timer(comm)
+    dofs = num_dofs(n)
+    repeats = repeats or default_repeats(dofs)
+
+    msh, t_mesh = timed(_dolfinx_mesh, n, cell, comm)
+    (V, a_ufl, _), t_space = timed(_dolfinx_forms, msh, plane)
+    jit_params = _jit_params(comm, jit_cache)
+    key = ("a", cell, plane, jit_params.get("cache_dir", "default"))
+    jit = "cached" if key in _JIT_STATE["compiled"] else ("cold" if jit_cache is None else "unknown")
+    a, t_form = timed(fem.form, a_ufl, jit_params=jit_params)
+    _JIT_STATE["compiled"].add(key)
+    assert _dolfinx_dofs(V) == dofs, (_dolfinx_dofs(V), dofs)
+
+    def first():
+        A = fpetsc.create_matrix(a)
+        t0 = time.perf_counter()
+        fpetsc.assemble_matrix(A, a)
+        A.assemble()
+        return A, time.perf_counter() - t0
+
+    def reassemble(A):
+        A.zeroEntries()
+        fpetsc.assemble_matrix(A, a)
+        A.assemble()
+
+    norms = []
+    best = None
+    for _ in range(repeats):
+        (A, t_asm), t = timed(first)
+        norms.append(A.norm(PETSc.NormType.FROBENIUS))
+        if best is None or t < best[0]:
+            best = (t, t - t_asm)
+        if _ < repeats - 1:
+            A.destroy()
+    t_first, t_create = best
+    t_re = []
+    for _ in range(max(repeats, 3)):
+        _, t = timed(reassemble, A)
+        t_re.append(t)
+        norms.append(A.norm(PETSc.NormType.FROBENIUS))
+    info = A.getInfo()
+    nnz = comm.allreduce(A.getInfo(PETSc.Mat.InfoType.LOCAL)["nz_used"]) if comm.size > 1 else info["nz_used"]
+    A.destroy()
+    fro = norms[0]
+    spread = max(abs(x - fro) for x in norms) / fro
+    t_reassembly = min(t_re)
+    return dict(peer="dolfinx", cell=cell, n=n, plane=plane, nranks=comm.size, dofs=dofs,
+                ncells=msh.topology.index_map(2).size_global, nnz=int(nnz), repeats=repeats,
+                t_mesh=t_mesh, t_space=t_space, t_form=t_form, jit=jit,
+                t_create=t_create, t_assemble_first=t_first - t_create, t_first=t_first,
+                t_reassembly=t_reassembly, rate_first=dofs / t_first,
+                rate_reassembly=dofs / t_reassembly, fro=fro, fro_rel_spread=spread)
+
+
+def dolfinx_solve(n: int, method: str = "mumps", cell: str = "triangle", plane: str = "strain",
+                  comm=None, jit_cache: str | None = None, rtol: float = GAMG_RTOL) -> dict:
+    """Clamped-left / traction-right solve with DOLFINx: dict(dofs, t_solve, iterations, ...).
+
+    method 'mumps': KSP preonly + PC lu + MUMPS; 'gamg': CG + GAMG (near-nullspace = 2D rigid body
+    modes from MatNullSpaceCreateRigidBody on the DOF coordinates), stopping on the true residual
+    ||b - A u|| <= rtol ||b|| (unpreconditioned norm), zero initial guess; options in 'options'.
+    t_setup = KSPSetUp (factorisation / AMG hierarchy), t_solve = KSPSetUp + KSPSolve. Also returns
+    the true relative residual ||b - A u|| / ||b||, ||u||_2 and u_y at (1, 1) for cross-checks.
+    """
+    import ufl
+    from dolfinx import fem, mesh as dmesh
+    import dolfinx.fem.petsc as fpetsc
+    from petsc4py import PETSc
+
+    if method not in SOLVE_METHODS:
+        raise ValueError(f"method must be one of {SOLVE_METHODS}, got {method!r}")
+    comm = _comm(comm)
+    timed = _timer(comm)
+    dofs = num_dofs(n)
+
+    msh, t_mesh = timed(_dolfinx_mesh, n, cell, comm)
+    V, a_ufl, v = _dolfinx_forms(msh, plane)
+    fdim = msh.topology.dim - 1
+    left = dmesh.locate_entities_boundary(msh, fdim, lambda x: np.isclose(x[0], 0.0))
+    right = dmesh.locate_entities_boundary(msh, fdim, lambda x: np.isclose(x[0], 1.0))
+    tags = dmesh.meshtags(msh, fdim, right, np.full(len(right), 1, dtype=np.int32))
+    ds = ufl.Measure("ds", domain=msh, subdomain_data=tags)
+    t_vec = fem.Constant(msh, np.array(TRACTION, dtype=PETSc.ScalarType))
+    L_ufl = ufl.inner(t_vec, v) * ds(1)
+    bc = fem.dirichletbc(np.zeros(2, dtype=PETSc.ScalarType),
+                         fem.locate_dofs_topological(V, fdim, left), V)
+
+    jit_params = _jit_params(comm, jit_cache)
+    (a, L), t_form = timed(lambda: (fem.form(a_ufl, jit_params=jit_params),
+                                    fem.form(L_ufl, jit_params=jit_params)))
+
+    def assemble_system():
+        A = fpetsc.assemble_matrix(a, bcs=[bc])
+        A.assemble()
+        b = fpetsc.assemble_vector(L)
+        fpetsc.apply_lifting(b, [a], bcs=[[bc]])
+        b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        fpetsc.set_bc(b, [bc])
+        return A, b
+
+    (A, b), t_assemble = timed(assemble_system)
+
+    prefix = f"bench_{method}_{n}_"
+    opts = PETSc.Options()
+    if method == "mumps":
+        popts = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}
+    else:
+        popts = {"ksp_type": "cg", "ksp_norm_type": "unpreconditioned", "ksp_rtol": rtol,
+                 "ksp_atol": 1e-50, "ksp_max_it": 1000,
+                 "pc_type": "gamg", "pc_gamg_type": "agg", "pc_gamg_agg_nsmooths": 1,
+                 "mg_levels_ksp_type": "chebyshev", "mg_levels_pc_type": "jacobi",
+                 "mg_levels_esteig_ksp_type": "cg"}
+        # near-nullspace: rigid body modes from the owned DOF coordinates (block size 2)
+        nown = V.dofmap.index_map.size_local
+        xy = np.ascontiguousarray(V.tabulate_dof_coordinates()[:nown, :2]).ravel()
+        coords = PETSc.Vec().createWithArray(xy, bsize=2, comm=comm)
+        ns = PETSc.NullSpace().createRigidBody(coords)
+        A.setNearNullSpace(ns)
+    for k, val in popts.items():
+        opts[prefix + k] = val
+
+    ksp = PETSc.KSP().create(comm)
+    ksp.setOptionsPrefix(prefix)
+    ksp.setOperators(A)
+    ksp.setFromOptions()
+    x = A.createVecRight()
+    _, t_setup = timed(ksp.setUp)
+    _, t_only = timed(ksp.solve, b, x)
+    its = ksp.getIterationNumber()
+    reason = ksp.getConvergedReason()
+    r = b.duplicate()
+    A.mult(x, r)
+    r.aypx(-1.0, b)  # r = b - A x
+    relres = r.norm() / b.norm()
+
+    # u_y at the corner (1, 1)
+    uh = fem.Function(V)
+    uh.x.array[: x.getLocalSize()] = x.getArray()
+    uh.x.scatter_forward()
+    xdof = V.tabulate_dof_coordinates()
+    hit = np.flatnonzero(np.isclose(xdof[:, 0], 1.0) & np.isclose(xdof[:, 1], 1.0))
+    corner = uh.x.array[2 * hit[0] + 1] if len(hit) else None
+    corner = [c for c in comm.allgather(corner) if c is not None][0]
+
+    for k in popts:
+        opts.delValue(prefix + k)
+    out = dict(peer="dolfinx", cell=cell, n=n, plane=plane, nranks=comm.size, dofs=dofs,
+               method=method, options=popts, t_mesh=t_mesh, t_form=t_form, t_assemble=t_assemble,
+               t_setup=t_setup, t_solve=t_setup + t_only, t_solve_only=t_only,
+               iterations=its, converged_reason=int(reason), relres=float(relres),
+               unorm=float(x.norm()), uy_corner=float(corner))
+    ksp.destroy()
+    A.destroy()
+    return out
+
+
+def dolfinx_versions() -> dict:
+    import dolfinx
+    import petsc4py
+    from petsc4py import PETSc
+
+    return {"dolfinx": dolfinx.__version__, "petsc4py": petsc4py.__version__,
+            "petsc": ".".join(map(str, PETSc.Sys.getVersion())), "numpy": np.__version__,
+            "python": sys.version.split()[0]}
+
+
+# --------------------------------------------------------------------------------------------------
+# scikit-fem
+
+
+def skfem_assembly(n: int, cell: str = "triangle", plane: str = "strain",
+                   repeats: int | None = None) -> dict:
+    """Stiffness assembly with scikit-fem: dict(dofs, t_basis, t_first, t_second, ...).
+
+    t_mesh: MeshTri/MeshQuad from `unit_square`; t_basis: Basis(mesh, ElementVector(P1 or Q1))
+    (precomputes basis values and quadrature, default intorder); t_first / t_second: the first and
+    second asm(linear_elasticity(lambda, mu), basis) on that basis (scipy CSR, duplicates summed);
+    best of `repeats`, each on a fresh Basis. t_reassembly is t_second (an alias, for tables).
+    """
+    import scipy.sparse.linalg as spla
+    from skfem import Basis, ElementQuad1, ElementTriP1, ElementVector, MeshQuad, MeshTri, asm
+    from skfem.models.elasticity import linear_elasticity
+
+    dofs = num_dofs(n)
+    repeats = repeats or default_repeats(dofs)
+    lmbda, mu = lame(E_MOD, NU, plane)
+    form = linear_elasticity(lmbda, mu)
+
+    t0 = time.perf_counter()
+    points, cells = unit_square(n, cell)
+    if cell == "quad":
+        mesh = MeshQuad(points.T.copy(), cells.T.copy())
+        elem = ElementVector(ElementQuad1())
+    else:
+        mesh = MeshTri(points.T.copy(), cells.T.copy())
+        elem = ElementVector(ElementTriP1())
+    t_mesh = time.perf_counter() - t0
+
+    best = {"t_basis": np.inf, "t_first": np.inf, "t_second": np.inf}
+    norms = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        basis = Basis(mesh, elem)
+        t1 = time.perf_counter()
+        K = asm(form, basis)
+        t2 = time.perf_counter()
+        norms.append(spla.norm(K))
+        del K
+        t3 = time.perf_counter()
+        K = asm(form, basis)
+        t4 = time.perf_counter()
+        norms.append(spla.norm(K))
+        for k, t in (("t_basis", t1 - t0), ("t_first", t2 - t1), ("t_second", t4 - t3)):
+            best[k] = min(best[k], t)
+        nnz = K.nnz
+        del K, basis
+    assert basis_dofs_ok(mesh, elem, dofs)
+    fro = norms[0]
+    return dict(peer="skfem", cell=cell, n=n, plane=plane, nranks=1, dofs=dofs,
+                ncells=int(mesh.t.shape[1]), nnz=int(nnz), repeats=repeats, t_mesh=t_mesh,
+                t_basis=best["t_basis"], t_first=best["t_first"], t_second=best["t_second"],
+                t_reassembly=best["t_second"], rate_first=dofs / best["t_first"],
+                rate_reassembly=dofs / best["t_second"], fro=float(fro),
+                fro_rel_spread=float(max(abs(x - fro) for x in norms) / fro))
+
+
+def basis_dofs_ok(mesh, elem, dofs: int) -> bool:
+    from skfem import Basis
+
+    return Basis(mesh, elem, intorder=1).N == dofs
+
+
+def skfem_versions() -> dict:
+    import scipy
+    import skfem
+
+    return {"skfem": getattr(skfem, "__version__", "?"), "scipy": scipy.__version__,
+            "numpy": np.__version__, "python": sys.version.split()[0]}
+
+
+# --------------------------------------------------------------------------------------------------
+# subprocess driver (for parsolve benchmarks, which run in parsolve's own venv)
+
+
+def peer_python(peer: str) -> str:
+    """Interpreter that has the peer: DOLFINx -> this one if it imports dolfinx, else Debian's;
+    scikit-fem -> $BENCH_VENV/bin/python (default /work/bench-venv)."""
+    if peer == "dolfinx":
+        try:
+            import dolfinx  # noqa: F401
+
+            return sys.executable
+        except ImportError:
+            return DEBIAN_PYTHON
+    if peer == "skfem":
+        return str(DEFAULT_BENCH_VENV / "bin" / "python")
+    raise ValueError(peer)
+
+
+def run_peer(peer: str, ns, cells=("triangle",), nranks: int = 1, solve=(), assembly: bool = True,
+             plane: str = "strain", repeats: int | None = None, python: str | None = None,
+             timeout: float | None = 900.0, echo: bool = False) -> dict:
+    """Run this script for `peer` in a subprocess (under mpirun -n nranks if > 1); return its JSON."""
+    python = python or peer_python(peer)
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "out.json"
+        cmd = [python, str(Path(__file__).resolve()), peer, "--n", *map(str, ns),
+               "--cell", *cells, "--plane", plane, "--json", str(out)]
+        if repeats:
+            cmd += ["--repeats", str(repeats)]
+        if solve:
+            cmd += ["--solve", *solve]
+        if not assembly:
+            cmd += ["--no-assembly"]
+        env = dict(os.environ)
+        env.setdefault("OMP_NUM_THREADS", "1")
+        if nranks > 1:
+            cmd = ["mpirun", "-n", str(nranks), *cmd]
+            env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
+                       OMPI_MCA_rmaps_base_oversubscribe="1")
+        proc = subprocess.run(cmd, env=env, timeout=timeout, text=True,
+                              stdout=None if echo else subprocess.PIPE,
+                              stderr=None if echo else subprocess.STDOUT)
+        if proc.returncode != 0:
+            raise RuntimeError(f"{' '.join(cmd)} failed ({proc.returncode}):\n{proc.stdout}")
+        return json.loads(out.read_text())
+
+
+# --------------------------------------------------------------------------------------------------
+# output
+
+
+def _fmt_rate(x: float) -> str:
+    return f"{x / 1e6:.2f}M" if x >= 1e6 else f"{x / 1e3:.0f}k"
+
+
+def assembly_table(rows: list[dict]) -> str:
+    head = (f"{'peer':8s} {'np':>2s} {'cell':8s} {'n':>5s} {'dofs':>9s} {'t_form':>7s} {'jit':>6s} "
+            f"{'t_first':>8s} {'(create)':>8s} {'t_reasm':>8s} {'DOF/s 1st':>10s} {'DOF/s re':>10s} "
+            f"{'fro':>12s}")
+    lines = [head, "-" * len(head)]
+    for r in rows:
+        t_form = r.get("t_form", r.get("t_basis", float("nan")))
+        jit = r.get("jit", "basis")
+        lines.append(f"{r['peer']:8s} {r['nranks']:2d} {r['cell']:8s} {r['n']:5d} {r['dofs']:9d} "
+                     f"{t_form:7.3f} {jit:>6s} {r['t_first']:8.4f} "
+                     f"{'' if 't_create' not in r else format(r['t_create'], '8.4f'):>8s} "
+                     f"{r['t_reassembly']:8.4f} "
+                     f"{_fmt_rate(r['rate_first']):>10s} {_fmt_rate(r['rate_reassembly']):>10s} "
+                     f"{r['fro']:12.6f}")
+    return "\n".join(lines)
+
+
+def solve_table(rows: list[dict]) -> str:
+    head = (f"{'peer':8s} {'np':>2s} {'cell':8s} {'n':>5s} {'dofs':>9s} {'method':6s} "
+            f"{'t_asm':>7s} {'t_setup':>8s} {'t_solve':>8s} {'its':>4s} {'relres':>9s} "
+            f"{'uy(1,1)':>12s}")
+    lines = [head, "-" * len(head)]
+    for r in rows:
+        lines.append(f"{r['peer']:8s} {r['nranks']:2d} {r['cell']:8s} {r['n']:5d} {r['dofs']:9d} "
+                     f"{r['method']:6s} {r['t_assemble']:7.3f} {r['t_setup']:8.3f} "
+                     f"{r['t_solve']:8.3f} {r['iterations']:4d} {r['relres']:9.2e} "
+                     f"{r['uy_corner']:12.6f}")
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------------------------------
+# CLI
+
+
+def _progress(table, rows) -> None:
+    """Print the newest row (with the header before the first).
+
+    Assembly columns: t_form = DOLFINx fem.form (JIT; 'cold' = compiled in this process, 'cached'
+    = already compiled) or scikit-fem Basis(); (create) = DOLFINx create_matrix, part of t_first;
+    t_reasm = DOLFINx re-assembly into the same matrix or scikit-fem's second asm()."""
+    lines = table(rows[-1:]).splitlines()
+    print("\n".join(lines if len(rows) == 1 else lines[-1:]), flush=True)
+
+
+def _main_dolfinx(args) -> dict:
+    import logging
+
+    from mpi4py import MPI
+
+    # FFCx's JIT runs cffi/setuptools, which sets the root logger to INFO at every compilation
+    # ("INFO:root:running build_ext ..."): drop root INFO records instead.
+    logging.getLogger().addFilter(lambda rec: rec.levelno >= logging.WARNING)
+
+    comm = MPI.COMM_WORLD
+    root = comm.rank == 0
+    out = {"peer": "dolfinx", "nranks": comm.size, "versions": dolfinx_versions(),
+           "E": E_MOD, "nu": NU, "plane": args.plane, "traction": TRACTION,
+           "assembly": [], "solve": []}
+    for cell in args.cell:
+        for n in args.n:
+            if args.assembly:
+                r = dolfinx_assembly(n, cell, args.plane, args.repeats, comm, args.jit_cache)
+                out["assembly"].append(r)
+                if root:
+                    _progress(assembly_table, out["assembly"])
+            for method in args.solve:
+                r = dolfinx_solve(n, method, cell, args.plane, comm, args.jit_cache)
+                out["solve"].append(r)
+                if root:
+                    _progress(solve_table, out["solve"])
+    if root and args.assembly and args.solve:
+        print("\n" + assembly_table(out["assembly"]) + "\n\n" + solve_table(out["solve"]))
+    return out
+
+
+def _main_skfem(args) -> dict:
+    if args.solve:
+        raise SystemExit("skfem: only assembly is benchmarked")
+    out = {"peer": "skfem", "nranks": 1, "versions": skfem_versions(), "E": E_MOD, "nu": NU,
+           "plane": args.plane, "assembly": [], "solve": []}
+    for cell in args.cell:
+        for n in args.n:
+            r = skfem_assembly(n, cell, args.plane, args.repeats)
+            out["assembly"].append(r)
+            _progress(assembly_table, out["assembly"])
+    return out
+
+
+def _main_check(args) -> int:
+    """Same Frobenius norm from DOLFINx (1 and 2 ranks) and scikit-fem; repeatable norms; MUMPS
+    and GAMG agree."""
+    ok = True
+    n = args.n[0] if args.n else 8
+    runs = {
+        "dolfinx np=1": run_peer("dolfinx", [n], CELLS, solve=SOLVE_METHODS, plane=args.plane),
+        "dolfinx np=2": run_peer("dolfinx", [n], CELLS, nranks=2, solve=SOLVE_METHODS,
+                                 plane=args.plane),
+        "skfem": run_peer("skfem", [n], CELLS, plane=args.plane),
+    }
+    for cell in CELLS:
+        fros = {k: [r for r in v["assembly"] if r["cell"] == cell][0] for k, v in runs.items()}
+        ref = fros["dolfinx np=1"]["fro"]
+        for k, r in fros.items():
+            rel = abs(r["fro"] - ref) / ref
+            good = rel < 1e-12 and r["fro_rel_spread"] < 1e-14
+            ok &= good
+            print(f"[check] n={n} {cell:8s} {k:13s} fro={r['fro']:.15f} rel.diff={rel:.1e} "
+                  f"spread over (re)assemblies={r['fro_rel_spread']:.1e} {'OK' if good else 'FAIL'}")
+        sol = [r for k in ("dolfinx np=1", "dolfinx np=2") for r in runs[k]["solve"]
+               if r["cell"] == cell]
+        uref = sol[0]["uy_corner"]
+        for r in sol:
+            rel = abs(r["uy_corner"] - uref) / abs(uref)
+            good = rel < 1e-6 and r["relres"] < 1e-7
+            ok &= good
+            print(f"[check] n={n} {cell:8s} dolfinx np={r['nranks']} {r['method']:5s} "
+                  f"uy(1,1)={r['uy_corner']:.10f} rel.diff={rel:.1e} relres={r['relres']:.1e} "
+                  f"its={r['iterations']} {'OK' if good else 'FAIL'}")
+    print("[check]", "PASSED" if ok else "FAILED")
+    return 0 if ok else 1
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("peer", choices=["dolfinx", "skfem", "check"])
+    p.add_argument("--n", type=int, nargs="+", default=None, help="quads per side")
+    p.add_argument("--cell", nargs="+", choices=CELLS, default=["triangle"])
+    p.add_argument("--plane", choices=["strain", "stress"], default="strain")
+    p.add_argument("--repeats", type=int, default=None, help="default: by size (3/2/1)")
+    p.add_argument("--solve", nargs="*", choices=SOLVE_METHODS, default=[],
+                   help="dolfinx: also time these solves")
+    p.add_argument("--no-assembly", dest="assembly", action="store_false",
+                   help="dolfinx: only the solves")
+    p.add_argument("--jit-cache", default=None,
+                   help="dolfinx JIT cache dir; default a fresh temp dir per process (cold JIT "
+                        "for the first form per cell), 'default' = ~/.cache/fenics")
+    p.add_argument("--json", default=None, help="write results here (rank 0)")
+    args = p.parse_args(argv)
+    if args.peer == "check":
+        return _main_check(args)
+    if not args.n:
+        p.error("--n is required")
+    busy = os.getloadavg()[0]
+    if busy > 0.5 and (args.peer != "dolfinx" or _comm().rank == 0):
+        print(f"[bench_peers] warning: load average {busy:.1f} before starting: other processes "
+              "are using the CPUs, timings will be inflated", file=sys.stderr, flush=True)
+    out = _main_dolfinx(args) if args.peer == "dolfinx" else _main_skfem(args)
+    out["loadavg_before"] = busy
+    out["loadavg_after"] = os.getloadavg()[0]
+    out["cpus"] = os.cpu_count()
+    if args.json and (args.peer != "dolfinx" or _comm().rank == 0):
+        Path(args.json).write_text(json.dumps(out, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
