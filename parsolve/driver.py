@@ -127,7 +127,11 @@ def _outputs(comm: MPI.Comm, system: SaddleSystem, q: np.ndarray, multipliers: d
         stress = np.zeros((mesh.num_cells, sig.shape[1]))
         for idx, val in parts:
             stress[idx] = val
+    sums, weights = model.elasticity.nodal_stress_sums(owned, u)
+    sums = comm.allreduce(sums)
+    weights = comm.allreduce(weights)
+    nodal = sums / np.maximum(weights, 1e-300)[:, None]
     rel_out = {}
     for r in model.relations:
         rel_out[r.name] = {"multiplier": multipliers[r.name], "primal": r.primal(q)}
-    return {"displacement": u}, {"stress": stress}, rel_out
+    return {"displacement": u, "stress": nodal}, {"stress": stress}, rel_out

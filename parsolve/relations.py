@@ -89,8 +89,7 @@ def dirichlet(name: str, nodes: np.ndarray, components: list[int], ncomp: int,
     nodes = np.asarray(nodes, dtype=np.int64)
     comps = np.asarray(components, dtype=np.int64)
     dofs = (nodes[:, None] * ncomp + comps[None, :]).ravel()
-    vals = np.broadcast_to(np.asarray(value, dtype=float), (len(nodes), len(comps))).ravel() \
-        if np.ndim(value) else np.full(dofs.size, float(value))
+    vals = np.broadcast_to(np.asarray(value, dtype=float), (len(nodes), len(comps))).ravel()
     m = dofs.size
     return Relation(name, m, np.arange(m), dofs, np.ones(m), vals, evolution)
 

@@ -128,7 +128,7 @@ class RelationSpec:
     type: str
     region: str | None
     components: list[int]
-    value: float
+    value: float | str   # a string is an expression of x, y, z (Dirichlet only)
     evolution: str
     terms: list[TermSpec]
     dual: str | None
@@ -342,7 +342,7 @@ def _relation(t: Table, dim: int) -> RelationSpec:
             sub.done()
         if not terms:
             raise t.error("terms", "a linear relation needs at least one term")
-    value = t.get("value", float, 0.0)
+    value = t.get("value", (float, str) if rtype == "dirichlet" else float, 0.0)
     evolution = t.get("evolution", str, "ramp")
     dual = t.get("dual", str, None)
     sense = t.get("sense", str, "=", choices=("=",))
@@ -432,10 +432,9 @@ def _cross_check(scene: Scene) -> None:
 
 def _generator_group(scene: Scene, name: str) -> bool:
     """Groups that generators always create (e.g. 'left', 'hole')."""
-    groups = {"rectangle": ("left", "right", "bottom", "top"),
-              "box": ("left", "right", "bottom", "top", "front", "back"),
-              "plate_with_hole": ("left", "right", "bottom", "top", "hole")}
-    return name in groups.get(scene.mesh.generator, ())
+    from parsolve.mesh.generators import GENERATOR_GROUPS
+
+    return name in GENERATOR_GROUPS.get(scene.mesh.generator, ())
 
 
 def _effects(scene: Scene) -> list[str]:

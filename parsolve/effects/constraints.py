@@ -7,6 +7,7 @@ import numpy as np
 
 from parsolve import relations as rel
 from parsolve.errors import InputError
+from parsolve.mesh import selectors
 
 
 def build_relations(specs: list, regions, evolutions: dict, patterns: dict, ncomp: int,
@@ -33,7 +34,12 @@ def _one(spec, regions, evolutions, ncomp: int, source: str) -> rel.Relation:
     evol = evolutions[spec.evolution]
     if spec.type == "dirichlet":
         nodes = regions(spec.region, spec.key + ".region").nodes
-        return rel.dirichlet(spec.name, nodes, spec.components, ncomp, spec.value, evol)
+        value = spec.value
+        if isinstance(value, str):  # an expression of the coordinates, per node
+            per_node = selectors.evaluate_value(value, regions.mesh.points[nodes], source,
+                                                spec.key + ".value")
+            value = np.repeat(per_node[:, None], len(spec.components), axis=1)
+        return rel.dirichlet(spec.name, nodes, spec.components, ncomp, value, evol)
     if spec.type == "equal":
         nodes = regions(spec.region, spec.key + ".region").nodes
         if len(nodes) < 2:

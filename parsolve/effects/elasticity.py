@@ -6,6 +6,7 @@ import numpy as np
 
 from parsolve.errors import InputError
 from parsolve.fem import kernels
+from parsolve.fem.elements import element
 from parsolve.fem.materials.elastic import Elastic
 from parsolve.mesh.mesh import Mesh
 
@@ -34,9 +35,11 @@ class Elasticity:
                              source, "materials")
         self.C = np.stack([m.C for m in self.models])
 
-    def geometry(self, cells: np.ndarray) -> kernels.CellGeometry:
+    def geometry(self, cells: np.ndarray, at_nodes: bool = False) -> kernels.CellGeometry:
         coords = self.mesh.points[self.mesh.cells[cells]]
-        return kernels.CellGeometry(coords, self.mesh.cell_type, thickness=self.thickness)
+        points = element(self.mesh.cell_type).nodes if at_nodes else None
+        return kernels.CellGeometry(coords, self.mesh.cell_type, thickness=self.thickness,
+                                    points=points)
 
     def stiffness(self, cells: np.ndarray) -> np.ndarray:
         """Element stiffness matrices of the given cells, node-major DOFs."""
@@ -53,3 +56,23 @@ class Elasticity:
         sig = np.matmul(self.C[self.cell_model[cells]][:, None], eps[..., None])[..., 0]
         w = geo.wdet / geo.wdet.sum(axis=1, keepdims=True)
         return (sig * w[:, :, None]).sum(axis=1)
+
+    def nodal_stress_sums(self, cells: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Stress evaluated at each cell's nodes, summed per node with cell-volume weights.
+
+        Returns (weighted sums (npoints, nvoigt), weights (npoints,)); the caller adds the
+        ranks' sums and divides (a volume-weighted nodal average, as post-processors do).
+        """
+        mesh = self.mesh
+        geo = self.geometry(cells, at_nodes=True)
+        ue = u[mesh.cells[cells]].reshape(len(cells), -1)
+        eps = kernels.strains(geo.strain_operator(), ue)               # (nc, nen, nv)
+        sig = np.matmul(self.C[self.cell_model[cells]][:, None], eps[..., None])[..., 0]
+        vol = self.geometry(cells).wdet.sum(axis=1)
+        nodes = mesh.cells[cells].ravel()
+        nv = sig.shape[2]
+        sums = np.stack([np.bincount(nodes, weights=(sig[..., k] * vol[:, None]).ravel(),
+                                     minlength=mesh.num_points) for k in range(nv)], axis=1)
+        weights = np.bincount(nodes, weights=np.repeat(vol, mesh.cells.shape[1]),
+                              minlength=mesh.num_points)
+        return sums, weights

@@ -12,10 +12,11 @@ class CellGeometry:
     """Shape-function gradients and quadrature weights of a stack of cells."""
 
     def __init__(self, coords: np.ndarray, cell_type: str, degree: int | None = None,
-                 thickness: float = 1.0):
+                 thickness: float = 1.0, points: np.ndarray | None = None):
+        """``points``: evaluate at these reference points (unit weights) instead of quadrature."""
         ref = element(cell_type)
         deg = default_degree(cell_type, "stiffness") if degree is None else degree
-        xi, w = quadrature(cell_type, deg)
+        xi, w = quadrature(cell_type, deg) if points is None else (points, np.ones(len(points)))
         self.N = ref.shape(xi)                              # (nq, nen)
         self.dNdx, det = physical_gradients(coords, ref.grad_shape(xi))
         self.wdet = np.abs(det) * w[None, :] * thickness    # (nc, nq)

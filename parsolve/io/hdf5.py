@@ -35,8 +35,8 @@ class ResultWriter:
             dtype = np.int64 if name == "iterations" else float
             f.create_dataset(f"steps/{name}", (0,), maxshape=(None,), dtype=dtype)
         for name, (nrows, unilateral) in relations.items():
-            f.create_dataset(f"relations/{name}/multiplier", (0, nrows), maxshape=(None, nrows))
-            f.create_dataset(f"relations/{name}/primal", (0, nrows), maxshape=(None, nrows))
+            f.create_dataset(f"relations/{name}/multiplier", (0, nrows), maxshape=(None, nrows), dtype=float)
+            f.create_dataset(f"relations/{name}/primal", (0, nrows), maxshape=(None, nrows), dtype=float)
             if unilateral:
                 f.create_dataset(f"relations/{name}/active", (0, nrows), maxshape=(None, nrows),
                                  dtype=np.int8)

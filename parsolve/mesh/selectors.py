@@ -156,12 +156,13 @@ def _describe(node: ast.AST) -> str:
     return names.get(kind, f"syntax '{kind}'")
 
 
-def evaluate(
+def _evaluate(
     expr: str,
     points: np.ndarray,
     tol: float,
     source: str | None = None,
     key: str | None = None,
+    want: str = "bool",
 ) -> np.ndarray:
     """Evaluate a coordinate condition at ``points`` (npoints, gdim): bool mask (npoints,).
 
@@ -189,9 +190,25 @@ def evaluate(
         raise fail(e.args[0]) from None
     except RecursionError:
         raise fail("too deeply nested") from None
-    if kind != "bool":
-        raise fail("not a condition (use a comparison such as 'x == 0')")
-    return np.broadcast_to(val, (points.shape[0],)).copy()
+    if kind != want:
+        raise fail("not a condition (use a comparison such as 'x == 0')" if want == "bool"
+                   else "a condition is used where a number is expected")
+    return np.broadcast_to(val, (points.shape[0],)).astype(bool if want == "bool" else float)
+
+
+def evaluate(expr: str, points: np.ndarray, tol: float, source: str | None = None,
+             key: str | None = None) -> np.ndarray:
+    """Evaluate a coordinate condition at ``points`` (npoints, gdim): bool mask (npoints,).
+
+    Raises InputError (with ``source``/``key``) for anything outside the language.
+    """
+    return _evaluate(expr, points, tol, source, key, "bool")
+
+
+def evaluate_value(expr: str, points: np.ndarray, source: str | None = None,
+                   key: str | None = None) -> np.ndarray:
+    """Evaluate a numeric expression of the coordinates (e.g. ``"1e-3 * x"``) at ``points``."""
+    return _evaluate(expr, points, 0.0, source, key, "num")
 
 
 def _as_point(p, gdim: int, what: str, source: str | None, key: str | None) -> np.ndarray:

@@ -1,0 +1,17 @@
+#!/usr/bin/env bash
+# The test suite: installs what it needs, then runs pytest on 1 rank (everything) and on 2 and
+# 3 ranks (every test that can run in parallel). Fails when any test fails on any rank.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/setup.sh
+PY=.venv/bin/python
+export PYTHONDONTWRITEBYTECODE=1
+echo "== pytest, 1 rank"
+$PY -m pytest -q tests "$@"
+for n in 2 3; do
+  echo "== pytest, $n ranks (tests marked serial are skipped)"
+  # rank 0 reports; the other ranks run the same tests quietly. A hang is a failure too.
+  timeout 1500 bash scripts/mpirun.sh -n "$n" bash -c '
+    if [ "${OMPI_COMM_WORLD_RANK:-0}" = 0 ]; then exec '"$PY"' -m pytest -q -p no:cacheprovider tests "$@";
+    else exec '"$PY"' -m pytest -q -p no:cacheprovider tests "$@" > /dev/null; fi' _ "$@"
+done

@@ -1,0 +1,80 @@
+"""Shared fixtures. Every test runs unchanged on 1, 2 or 3 MPI ranks unless marked ``serial``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+ROOT = Path(__file__).resolve().parents[1]
+CONFIGS = ROOT / "configs"
+
+
+def pytest_collection_modifyitems(config, items):
+    if MPI.COMM_WORLD.size > 1:
+        skip = pytest.mark.skip(reason="serial test (runs on 1 rank only)")
+        for item in items:
+            if "serial" in item.keywords:
+                item.add_marker(skip)
+
+
+@pytest.fixture
+def comm() -> MPI.Comm:
+    return MPI.COMM_WORLD
+
+
+@pytest.fixture
+def shared_tmp(tmp_path) -> Path:
+    """A temporary directory that is the same on every rank (rank 0's)."""
+    return Path(MPI.COMM_WORLD.bcast(str(tmp_path), root=0))
+
+
+def read_results(path: Path) -> dict:
+    """Every dataset of a result file as numpy arrays, plus the root attributes under 'attrs'."""
+    out = {}
+    with h5py.File(path, "r") as f:
+        out["attrs"] = dict(f.attrs)
+        f.visititems(lambda name, obj: out.__setitem__(name, obj[()])
+                     if isinstance(obj, h5py.Dataset) else None)
+    return out
+
+
+def run_scene(scene, out: Path, comm=MPI.COMM_WORLD, options: dict | None = None,
+              export: str | None = None) -> dict:
+    """Run a scene (path, or TOML text written beside ``out``) and read its results on every rank."""
+    from parsolve.driver import run
+    from parsolve.model import build_model
+    from parsolve.scene import load_scene
+
+    if not isinstance(scene, Path):
+        src = out.with_suffix(".toml")
+        if comm.rank == 0:
+            src.write_text(scene)
+        comm.Barrier()
+        scene = src
+    model = build_model(load_scene(scene))
+    run(comm, model, str(out), options or {}, export, log=lambda *a: None)
+    comm.Barrier()
+    return read_results(out)
+
+
+@pytest.fixture
+def run(shared_tmp):
+    """run(scene, name='result', comm=..., options=...) -> results dict (see run_scene)."""
+    counter = iter(range(1000))
+
+    def _run(scene, name: str | None = None, comm=MPI.COMM_WORLD, **kw):
+        name = name or f"result{next(counter)}"
+        if comm is MPI.COMM_SELF:
+            name += f"_self{MPI.COMM_WORLD.rank}"
+        return run_scene(scene, shared_tmp / f"{name}.h5", comm, **kw)
+
+    return _run
+
+
+def rel_err(a, b) -> float:
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    return float(np.abs(a - b).max() / max(np.abs(b).max(), 1e-300))

@@ -1,0 +1,79 @@
+"""Every shipped scene runs and gives its known number (analytic or classical)."""
+
+import numpy as np
+import pytest
+
+from conftest import CONFIGS, rel_err
+from parsolve.scene import load_scene
+
+
+def kirsch_scf(res) -> float:
+    pts = res["mesh/points"]
+    top = np.argmin(np.hypot(pts[:, 0], pts[:, 1] - 1.0))
+    return float(res["fields/stress"][-1][top, 0])
+
+
+def tip_deflection(res, length=10.0) -> float:
+    pts = res["mesh/points"]
+    return float(-res["fields/displacement"][-1][np.isclose(pts[:, 0], length), 2].mean())
+
+
+TIMOSHENKO = 1000.0 / (3 * 210e3 / 12) + 10.0 / (5 / 6 * 210e3 / 2.6)
+
+
+def test_every_config_is_tested():
+    shipped = sorted(p.name for p in CONFIGS.glob("*.toml"))
+    assert shipped == sorted(TESTED), "add a test for each shipped scene"
+    for name in shipped:
+        load_scene(CONFIGS / name)  # valid
+
+
+def test_controlled_bar(run):
+    res = run(CONFIGS / "controlled_bar.toml", name="controlled_bar")
+    delta = res["relations/control/primal"][:, 0]
+    force = res["relations/control/multiplier"][:, 0]
+    np.testing.assert_allclose(delta, 1e-4 * np.arange(1, 11) / 10, rtol=1e-12)
+    np.testing.assert_allclose(force, 1e9 * 0.1 * delta / 1.0, rtol=1e-10)  # E H δ / L
+    u = res["fields/displacement"][-1]
+    np.testing.assert_allclose(u[:, 0], 1e-4 * res["mesh/points"][:, 0], atol=1e-15)
+    # the reaction of the clamped edge balances the controlled end force
+    np.testing.assert_allclose(res["relations/left_x/multiplier"][-1].sum(), force[-1], rtol=1e-10)
+
+
+def test_kirsch(run):
+    res = run(CONFIGS / "kirsch.toml", name="kirsch")
+    scf = kirsch_scf(res)
+    assert abs(scf - 3.0) < 0.03, scf      # Kirsch's 3 for an infinite plate
+    assert abs(scf - 3.0257) < 1e-3, scf   # this mesh's value (regression)
+
+
+def test_kirsch_p2_beats_p1(run):
+    """ux at (a, 0) on the same coarse mesh: P2 error far below P1's."""
+    text = (CONFIGS / "kirsch.toml").read_text().replace("n_radial = 48", "n_radial = 24") \
+        .replace("n_angular = 64", "n_angular = 32")
+    reference = 1.43873963e-5  # P2 on 192 × 256 (converged to 1e-8 relative)
+
+    def ux_side(res):
+        pts = res["mesh/points"]
+        return res["fields/displacement"][-1][np.argmin(np.hypot(pts[:, 0] - 1, pts[:, 1])), 0]
+
+    p2 = rel_err(ux_side(run(text, name="kirsch_p2")), reference)
+    p1 = rel_err(ux_side(run(text.replace('cell = "triangle6"', 'cell = "triangle"'), name="kirsch_p1")),
+                 reference)
+    assert p2 < 5e-4 and p1 > 1e-2, (p1, p2)
+
+
+def test_cantilever(run):
+    res = run(CONFIGS / "cantilever_3d.toml", name="cantilever")
+    assert rel_err(tip_deflection(res), TIMOSHENKO) < 0.012
+
+
+def test_cantilever_p2_beats_p1(run):
+    text = (CONFIGS / "cantilever_3d.toml").read_text().replace("nx = 40", "nx = 20") \
+        .replace("ny = 4", "ny = 2").replace("nz = 4", "nz = 2")
+    p2 = rel_err(tip_deflection(run(text, name="cant_p2")), TIMOSHENKO)
+    p1 = rel_err(tip_deflection(run(text.replace('"tetra10"', '"tetra"'), name="cant_p1")), TIMOSHENKO)
+    assert p2 < 0.015 and p1 > 0.3, (p1, p2)   # P1 tetrahedra lock in bending
+
+
+TESTED = ["controlled_bar.toml", "kirsch.toml", "cantilever_3d.toml"]
