@@ -89,7 +89,7 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
             t2 = time.perf_counter()
             iterations = solver.solve(rhs, x)
             solve_time = time.perf_counter() - t2
-            residual = _residual(mat, x, rhs)
+            residual = solver.residual
             x_full = system.gather(x.array)
             q, multipliers = system.unpack(x_full, t)
             fields, cell_fields, rel_out = _outputs(comm, system, q, multipliers)
@@ -105,14 +105,6 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
     finally:
         writer.close(status)
     return status
-
-
-def _residual(mat: PETSc.Mat, x: PETSc.Vec, rhs: PETSc.Vec) -> float:
-    r = rhs.duplicate()
-    mat.mult(x, r)
-    r.axpy(-1.0, rhs)
-    nb = rhs.norm()
-    return r.norm() / nb if nb > 0 else r.norm()
 
 
 def _outputs(comm: MPI.Comm, system: SaddleSystem, q: np.ndarray, multipliers: dict):

@@ -546,6 +546,31 @@ def solve_table(rows: list[dict]) -> str:
 # CLI
 
 
+def _cpu_share(fn, comm, *args):
+    """Run fn(*args) and add 'cpu_share': this process's CPU time / wall time over the call (the
+    lowest over ranks). Well below 1 means other processes took CPU time from the benchmark (the
+    machine has as many cores as ranks): such timings are inflated."""
+    def cpu():  # this process + its finished children (the JIT's C compiler)
+        t = os.times()
+        return t.user + t.system + t.children_user + t.children_system
+
+    w0, c0 = time.perf_counter(), cpu()
+    r = fn(*args)
+    share = (cpu() - c0) / (time.perf_counter() - w0)
+    r["cpu_share"] = comm.allreduce(share, op=_mpi_min()) if comm is not None else share
+    if r["cpu_share"] < 0.9 and (comm is None or comm.rank == 0):
+        print(f"[bench_peers] warning: cpu_share {r['cpu_share']:.2f} for n={r['n']} "
+              f"{r['cell']}: other processes are competing for the CPUs", file=sys.stderr,
+              flush=True)
+    return r
+
+
+def _mpi_min():
+    from mpi4py import MPI
+
+    return MPI.MIN
+
+
 def _progress(table, rows) -> None:
     """Print the newest row (with the header before the first).
 
@@ -573,12 +598,14 @@ def _main_dolfinx(args) -> dict:
     for cell in args.cell:
         for n in args.n:
             if args.assembly:
-                r = dolfinx_assembly(n, cell, args.plane, args.repeats, comm, args.jit_cache)
+                r = _cpu_share(dolfinx_assembly, comm, n, cell, args.plane, args.repeats, comm,
+                               args.jit_cache)
                 out["assembly"].append(r)
                 if root:
                     _progress(assembly_table, out["assembly"])
             for method in args.solve:
-                r = dolfinx_solve(n, method, cell, args.plane, comm, args.jit_cache)
+                r = _cpu_share(dolfinx_solve, comm, n, method, cell, args.plane, comm,
+                               args.jit_cache)
                 out["solve"].append(r)
                 if root:
                     _progress(solve_table, out["solve"])
@@ -594,7 +621,7 @@ def _main_skfem(args) -> dict:
            "plane": args.plane, "assembly": [], "solve": []}
     for cell in args.cell:
         for n in args.n:
-            r = skfem_assembly(n, cell, args.plane, args.repeats)
+            r = _cpu_share(skfem_assembly, None, n, cell, args.plane, args.repeats)
             out["assembly"].append(r)
             _progress(assembly_table, out["assembly"])
     return out

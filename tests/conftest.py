@@ -78,3 +78,30 @@ def run(shared_tmp):
 def rel_err(a, b) -> float:
     a, b = np.asarray(a, float), np.asarray(b, float)
     return float(np.abs(a - b).max() / max(np.abs(b).max(), 1e-300))
+
+
+def solve_in_process(text: str, comm=MPI.COMM_WORLD, t: float = 1.0, options: dict | None = None):
+    """Build and solve a scene's first system in memory: (system, solver, mat, rhs, x)."""
+    from parsolve.driver import make_solver
+    from parsolve.model import build_model
+    from parsolve.scene import parse_scene
+    from parsolve.solvers.system import SaddleSystem
+    import tomllib
+
+    model = build_model(parse_scene(tomllib.loads(text), "test.toml", text))
+    system = SaddleSystem(comm, model)
+    mat = system.assemble()
+    solver = make_solver(comm, system, options or {})
+    if getattr(system.op, "mat_nearnull", None) is not None:
+        mat.setNearNullSpace(system.op.mat_nearnull)
+    solver.set_operator(mat)
+    x, rhs = mat.createVecs()
+    rhs.array[:] = system.rhs(t)[0]
+    solver.solve(rhs, x)
+    return system, solver, mat, rhs, x
+
+
+def dense(mat, comm=MPI.COMM_WORLD) -> np.ndarray:
+    """The whole matrix on every rank (small systems only)."""
+    rows = mat.convert("dense").getDenseArray().copy()
+    return np.concatenate(comm.allgather(rows), axis=0)

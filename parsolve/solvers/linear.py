@@ -24,7 +24,8 @@ def preset_options(preset: str, symmetric: bool, has_multipliers: bool) -> dict[
             "pc_type": "cholesky" if symmetric else "lu",
             "pc_factor_mat_solver_type": "mumps",
             "mat_mumps_icntl_7": "6",     # QAMD ordering
-            "mat_mumps_icntl_24": "1",    # detect null pivots
+            "mat_mumps_icntl_24": "1",    # detect null pivots...
+            "mat_mumps_cntl_3": "1e-12",  # ...below 1e-12 ||A|| (relations are scaled to K)
             "mat_mumps_icntl_14": "50",   # workspace margin for delayed pivots
             "ksp_error_if_not_converged": "true",
         }
@@ -86,7 +87,19 @@ class LinearSolver:
             raise SolverError("linear solve produced non-finite values (singular system?)")
         if self.ksp.getConvergedReason() < 0:
             raise SolverError(f"linear solver diverged (reason {self.ksp.getConvergedReason()})")
+        residual = true_residual(self.ksp.getOperators()[0], x, rhs)
+        if residual > self.residual_limit:
+            raise SolverError(f"linear solve inaccurate: true relative residual {residual:.1e} "
+                              f"(limit {self.residual_limit:.0e}); the system is singular or "
+                              "nearly so (a body not held, or dependent relations)")
+        self.residual = residual
         return self.ksp.getIterationNumber()
+
+    @property
+    def residual_limit(self) -> float:
+        """A direct solve must be exact to round-off; a Krylov one to its tolerance."""
+        rtol = self.ksp.getTolerances()[0]
+        return 1e-8 if self.ksp.getType() == "preonly" else max(1e-8, 100 * rtol)
 
     def _check_factor(self) -> None:
         pc = self.ksp.getPC()
@@ -103,6 +116,20 @@ class LinearSolver:
             if pc.getType() in ("lu", "cholesky") and pc.getFactorMatrix().getType() == "mumps":
                 info = pc.getFactorMatrix().getMumpsInfog(1)
                 return f"MUMPS error INFOG(1)={info}"
+            if pc.getType() == "fieldsplit":
+                return (f"PETSc error {exc.ierr} in the fieldsplit preconditioner; the iterative "
+                        "preset needs the stiffness block invertible once single-DOF conditions "
+                        "are eliminated: use preset = \"direct\" for a body held only by "
+                        "multiplied relations (or solver.eliminate = false)")
         except PETSc.Error:
             pass
         return f"PETSc error {exc.ierr}"
+
+
+def true_residual(mat: PETSc.Mat, x: PETSc.Vec, rhs: PETSc.Vec) -> float:
+    """||b - A x|| / ||b|| (or ||A x|| when b = 0)."""
+    r = rhs.duplicate()
+    mat.mult(x, r)
+    r.axpy(-1.0, rhs)
+    nb = rhs.norm()
+    return r.norm() / nb if nb > 0 else r.norm()

@@ -1,0 +1,134 @@
+"""The distributed saddle system of a small non-associated scene, gathered and solved densely."""
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from conftest import dense, solve_in_process
+
+SCENE = """
+[mesh]
+generator = "rectangle"
+lx = 1.0
+ly = 0.2
+nx = 10
+ny = 3
+cell = "{cell}"
+[model]
+hypothesis = "plane_stress"
+[regions]
+corner = {{ point = [0.0, 0.0] }}
+mid = "x == 0.5"
+[[materials]]
+E = 1e3
+nu = 0.25
+[[loads]]
+name = "pull"
+region = "right"
+total_force = [1.0, 0.0]
+[[loads]]
+name = "weight"
+body = [0.0, -0.3]
+[[relations]]
+name = "left_x"
+type = "dirichlet"
+region = "left"
+components = ["x"]
+[[relations]]
+name = "corner_y"
+type = "dirichlet"
+region = "corner"
+components = ["y"]
+[[relations]]
+name = "top_flat"
+type = "equal"
+region = "top"
+component = "y"
+[[relations]]
+name = "opening"
+type = "linear"
+terms = [{{ region = "right", component = "x", mean = true }},
+         {{ region = "mid", component = "x", coefficient = -1.0, mean = true }}]
+value = 1e-3
+dual = "pull"
+[solver]
+preset = "{preset}"
+eliminate = {eliminate}
+"""
+
+
+@pytest.mark.parametrize("preset, eliminate", [("direct", "true"), ("direct", "false"),
+                                               ("iterative", "true")])
+def test_matches_dense_numpy_solve(preset, eliminate):
+    comm = MPI.COMM_WORLD
+    system, solver, mat, rhs, x = solve_in_process(
+        SCENE.format(cell="quad", preset=preset, eliminate=eliminate))
+    M = dense(mat)
+    b = np.concatenate(comm.allgather(rhs.array.copy()))
+    xs = np.concatenate(comm.allgather(x.array.copy()))
+    xd = np.linalg.solve(M, b)
+    assert np.abs(xs - xd).max() <= 1e-10 * np.abs(xd).max()
+    assert not np.allclose(M, M.T)  # the control relation makes it unsymmetric
+
+
+def test_operator_blocks_are_what_the_relations_say():
+    """In input numbering: K symmetric with rigid modes in its kernel, A and -D as defined."""
+    comm = MPI.COMM_WORLD
+    system, solver, mat, rhs, x = solve_in_process(SCENE.format(cell="triangle", preset="direct",
+                                                                eliminate="false"))
+    M = dense(mat)
+    iq, il = system.saddle_of_input, system.saddle_of_mult
+    K = M[np.ix_(iq, iq)]
+    assert np.abs(K - K.T).max() <= 1e-12 * np.abs(K).max()
+    pts = system.model.mesh.points
+    rigid = np.column_stack([np.tile([1.0, 0.0], len(pts)), np.tile([0.0, 1.0], len(pts)),
+                             np.column_stack([-pts[:, 1], pts[:, 0]]).ravel()])
+    assert np.abs(K @ rigid).max() <= 1e-11 * np.abs(K).max()
+    blk = system.block
+    for k, rel in enumerate(system.multiplied):
+        rows = il[blk.first_row[k]:blk.first_row[k + 1]]
+        A = np.zeros((rel.nrows, len(iq)))
+        np.add.at(A, (rel.a_rows, rel.a_dofs), rel.a_vals)
+        scale = blk.row_scale[blk.first_row[k]:blk.first_row[k + 1]]
+        np.testing.assert_allclose(M[np.ix_(rows, iq)], A * scale[:, None], rtol=0, atol=1e-12 * scale.max())
+        D = np.zeros((len(iq), rel.nrows))
+        dofs, drows, dvals = rel.dual_coo()
+        np.add.at(D, (dofs, drows), dvals)
+        cs = blk.col_scale[blk.first_row[k]:blk.first_row[k + 1]]
+        np.testing.assert_allclose(M[np.ix_(iq, rows)], -D * cs[None, :], rtol=0, atol=1e-12 * cs.max())
+
+
+def test_operator_does_not_depend_on_rank_count():
+    """The same matrix, in input numbering, on this communicator and on one rank alone."""
+    text = SCENE.format(cell="quad", preset="direct", eliminate="false")
+    par = solve_in_process(text, MPI.COMM_WORLD)
+    ser = solve_in_process(text, MPI.COMM_SELF)
+
+    def in_input_order(system, mat, comm):
+        M = dense(mat, comm)
+        order = np.concatenate([system.saddle_of_input, system.saddle_of_mult])
+        return M[np.ix_(order, order)]
+
+    Mp = in_input_order(par[0], par[2], MPI.COMM_WORLD)
+    Ms = in_input_order(ser[0], ser[2], MPI.COMM_SELF)
+    assert np.abs(Mp - Ms).max() <= 1e-13 * np.abs(Ms).max()
+
+
+def test_singular_system_is_an_error_not_garbage():
+    """mean ux(right) - 2 mean ux(mid) vanishes for any uniform stretch, which the pull produces:
+    the saddle system is singular. MUMPS must say so (null pivot), never return garbage."""
+    from parsolve.errors import SolverError
+
+    text = SCENE.format(cell="quad", preset="direct", eliminate="true").replace(
+        "coefficient = -1.0, mean = true", "coefficient = -2.0, mean = true")
+    with pytest.raises(SolverError, match="singular"):
+        solve_in_process(text)
+
+
+def test_iterative_preset_explains_a_singular_stiffness_block():
+    """Without elimination the stiffness block is singular (Dirichlet rows are multipliers):
+    the Schur fieldsplit cannot work, and the error says what to do."""
+    from parsolve.errors import SolverError
+
+    with pytest.raises(SolverError, match="preset = .direct"):
+        solve_in_process(SCENE.format(cell="quad", preset="iterative", eliminate="false"))
