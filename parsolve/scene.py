@@ -6,6 +6,7 @@ scene is parsed identically on every rank, so an error is raised on all ranks to
 
 from __future__ import annotations
 
+import difflib
 import inspect
 import tomllib
 from dataclasses import dataclass, field
@@ -43,11 +44,14 @@ class Table:
         self.used.add(name)
         if name not in self.data:
             if default is ...:
+                close = difflib.get_close_matches(name, set(self.data) - self.used, n=1)
+                if close:  # a misspelt key: point at it rather than at the missing one
+                    raise self.error(close[0], f"unknown key (did you mean {name!r}?)")
                 raise self.error(name, "missing required key")
             return default
         value = self.data[name]
         kinds = kind if isinstance(kind, tuple) else (kind,)
-        if float in kinds and isinstance(value, int) and not isinstance(value, bool):
+        if float in kinds and int not in kinds and isinstance(value, int) and not isinstance(value, bool):
             value = float(value)
         if isinstance(value, bool) and bool not in kinds or not isinstance(value, kinds):
             names = " or ".join(k.__name__ for k in kinds)
@@ -77,7 +81,10 @@ class Table:
     def done(self) -> None:
         unknown = sorted(set(self.data) - self.used)
         if unknown:
-            raise self.error(unknown[0], "unknown key")
+            close = difflib.get_close_matches(unknown[0], self.used, n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else \
+                f" (known: {', '.join(sorted(self.used))})"
+            raise self.error(unknown[0], "unknown key" + hint)
 
 
 @dataclass

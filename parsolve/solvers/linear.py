@@ -72,7 +72,11 @@ class LinearSolver:
                     pc.setType("fieldsplit")
                     pc.setFieldSplitIS(("q", self.is_q), ("lambda", self.is_l))
                 self.ksp.setFromOptions()
-                self.ksp.setUp()
+                try:
+                    self.ksp.setUp()
+                except PETSc.Error as exc:
+                    raise SolverError(f"solver set-up failed ({self._reason(exc)}); check the "
+                                      "PETSc options of the scene and the command line") from None
             self.configured = True
 
     def solve(self, rhs: PETSc.Vec, x: PETSc.Vec) -> int:

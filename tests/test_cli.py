@@ -1,0 +1,162 @@
+"""The command line: exit statuses, one-line errors naming file and key, result files."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from conftest import CONFIGS, ROOT
+
+pytestmark = pytest.mark.serial  # runs subprocesses; mpirun runs are in test_cli_parallel
+
+GOOD = (CONFIGS / "controlled_bar.toml").read_text()
+
+
+def parsolve(*args, cwd=None, mpi: int | None = None):
+    cmd = [sys.executable, "-m", "parsolve", *map(str, args)]
+    if mpi:
+        cmd = ["bash", str(ROOT / "scripts" / "mpirun.sh"), "-n", str(mpi)] + cmd
+    return subprocess.run(cmd, capture_output=True, text=True, cwd=cwd, timeout=300)
+
+
+BAD = {
+    "missing mesh file": (GOOD.replace('generator = "rectangle"\nlx = 1.0\nly = 0.1\nnx = 29\nny = 3\ncell = "quad"',
+                                       'file = "nowhere.msh"'), "nowhere.msh", "mesh.file"),
+    "unknown region": (GOOD.replace('region = "right"\ncomponent = "x"', 'region = "rigth"\ncomponent = "x"'),
+                       "scene.toml", "relations[2].region"),
+    "misspelt key": (GOOD.replace("hypothesis =", "hypothesys ="), "scene.toml", "model.hypothesys"),
+    "wrong type": (GOOD.replace("nu = 0.0", 'nu = "zero"'), "scene.toml", "materials[0].nu"),
+    "missing component": (GOOD.replace('components = ["y"]', 'components = ["z"]'), "scene.toml",
+                          "relations[1].components[0]"),
+    "dual names no pattern": (GOOD.replace('dual = "pull"', 'dual = "push"'), "scene.toml",
+                              "relations[2].dual"),
+    "bad selector": (GOOD.replace("[regions]", '[regions]\nodd = "__import__(1)"\n'), "scene.toml", "regions.odd"),
+    "not TOML": ("[mesh\n", "scene.toml", ""),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+@pytest.mark.parametrize("command", ["check", "run"])
+def test_bad_input(case, command, tmp_path):
+    text, source, key = BAD[case]
+    if case == "bad selector":  # make the bad region used
+        text = text.replace('region = "corner"', 'region = "odd"')
+    (tmp_path / "scene.toml").write_text(text)
+    out = tmp_path / "out.h5"
+    args = [command, "scene.toml"] + (["-o", out] if command == "run" else [])
+    proc = parsolve(*args, cwd=tmp_path)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert source in lines[0] and key in lines[0], lines[0]
+    assert not out.exists() and not list(tmp_path.glob("*.h5"))
+
+
+def test_check_good_scene():
+    proc = parsolve("check", CONFIGS / "kirsch.toml")
+    assert proc.returncode == 0 and "ok" in proc.stdout
+
+
+def test_run_result_file_layout(tmp_path):
+    out = tmp_path / "bar.h5"
+    proc = parsolve("run", CONFIGS / "controlled_bar.toml", "-o", out)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.count("step ") == 10  # one progress line per step
+    with h5py.File(out) as f:
+        assert f.attrs["status"] == "complete" and f.attrs["nprocs"] == 1
+        assert f.attrs["scene"] == GOOD
+        for key in ("parsolve_version", "petsc_version"):
+            assert f.attrs[key]
+        npts, ncells = f["mesh/points"].shape[0], f["mesh/cells/quad"].shape[0]
+        assert f["mesh/points"].shape == (120, 2) and f["mesh/cells/quad"].shape == (87, 4)
+        for name in ("time", "iterations", "residual"):
+            assert f[f"steps/{name}"].shape == (10,)
+        np.testing.assert_allclose(f["steps/time"][()], np.arange(1, 11) / 10)
+        assert f["fields/displacement"].shape == (10, npts, 2)
+        assert f["cell_fields/stress"].shape == (10, ncells, 3)
+        assert f["relations/control/multiplier"].shape == (10, 1)
+        assert f["relations/left_x/primal"].shape == (10, 4)
+        for phase in ("assembly", "solve", "total"):
+            assert f[f"timings/{phase}"].shape == (10,)
+    xdmf = out.with_suffix(".xdmf").read_text()
+    import xml.etree.ElementTree as ET
+
+    grids = ET.fromstring(xdmf).findall(".//Grid[@GridType='Uniform']")
+    assert len(grids) == 10 and "bar.h5:/fields/displacement" in xdmf
+
+
+def test_petsc_options_from_command_line_win(tmp_path):
+    """-ksp_view goes to the solver (under its prefix); a scene option is overridden."""
+    scene = tmp_path / "s.toml"
+    scene.write_text(GOOD + '\n[solver.petsc]\nmat_mumps_icntl_7 = 0\n')
+    proc = parsolve("run", scene, "-o", tmp_path / "o.h5", "-ksp_view", "-mat_mumps_icntl_7", "6")
+    assert proc.returncode == 0, proc.stderr
+    assert "INFOG(7) (ordering option effectively used after analysis): 6" in proc.stdout
+    proc = parsolve("run", scene, "-o", tmp_path / "o.h5", "-ksp_view")
+    assert "INFOG(7) (ordering option effectively used after analysis): 0" in proc.stdout
+
+
+def test_solver_failure_exit_3_keeps_file(tmp_path):
+    scene = tmp_path / "s.toml"
+    scene.write_text(GOOD + '''
+[[relations]]
+name = "left_mean"
+type = "mean"
+region = "left"
+component = "x"
+''')
+    out = tmp_path / "o.h5"
+    proc = parsolve("run", scene, "-o", out)
+    assert proc.returncode == 3, proc.stderr
+    assert "singular" in proc.stderr and "Traceback" not in proc.stderr
+    with h5py.File(out) as f:
+        assert f.attrs["status"].startswith("failed") and f["steps/time"].shape == (0,)
+
+
+def test_export_system_reproduces_the_solve(tmp_path):
+    """DIR/system.dat and DIR/fields.dat: a bare petsc4py MUMPS solve gives the same answer."""
+    out = tmp_path / "bar.h5"
+    proc = parsolve("run", CONFIGS / "controlled_bar.toml", "-o", out, "--export-system", tmp_path / "sys")
+    assert proc.returncode == 0, proc.stderr
+    code = f"""
+from petsc4py import PETSc
+v = PETSc.Viewer().createBinary('{tmp_path / "sys" / "system.dat"}', 'r')
+A = PETSc.Mat().load(v); b = PETSc.Vec().load(v)
+w = PETSc.Viewer().createBinary('{tmp_path / "sys" / "fields.dat"}', 'r')
+isq = PETSc.IS().load(w); isl = PETSc.IS().load(w)
+ksp = PETSc.KSP().create(); ksp.setOperators(A); ksp.setType('preonly')
+pc = ksp.getPC(); pc.setType('lu'); pc.setFactorSolverType('mumps')
+x = b.duplicate(); ksp.solve(b, x)
+print(x.getValues(isl.getIndices())[0], isq.getSize(), isl.getSize())
+"""
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    lam_scaled, nq, nl = res.stdout.split()
+    assert int(nq) == 240 and int(nl) == 1
+    with h5py.File(out) as f:
+        lam = f["relations/control/multiplier"][0, 0]
+    assert abs(lam - 1000.0) < 1e-8  # E H δ / L at the first step
+    assert float(lam_scaled) != 0.0
+
+
+@pytest.mark.parametrize("nranks", [2, 3])
+def test_mpirun_results_match_one_rank(nranks, tmp_path):
+    """Under mpirun the result file keeps the input mesh order and matches 1 rank to round-off."""
+    scene = tmp_path / "k.toml"
+    scene.write_text((CONFIGS / "kirsch.toml").read_text().replace("n_radial = 48", "n_radial = 12")
+                     .replace("n_angular = 64", "n_angular = 16"))
+    one, many = tmp_path / "one.h5", tmp_path / "many.h5"
+    assert parsolve("run", scene, "-o", one).returncode == 0
+    proc = parsolve("run", scene, "-o", many, mpi=nranks)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.count("step 1/1") == 1  # progress printed by rank 0 only
+    with h5py.File(one) as a, h5py.File(many) as b:
+        assert b.attrs["nprocs"] == nranks and b.attrs["status"] == "complete"
+        np.testing.assert_array_equal(a["mesh/points"][()], b["mesh/points"][()])
+        np.testing.assert_array_equal(a["mesh/cells/triangle6"][()], b["mesh/cells/triangle6"][()])
+        for key in ("fields/displacement", "fields/stress", "cell_fields/stress",
+                    "relations/symmetry_x/multiplier"):
+            x, y = a[key][()], b[key][()]
+            assert np.abs(x - y).max() <= 1e-10 * np.abs(x).max(), key
