@@ -1,5 +1,6 @@
 """The command line: exit statuses, one-line errors naming file and key, result files."""
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -19,7 +20,9 @@ def parsolve(*args, cwd=None, mpi: int | None = None):
     cmd = [sys.executable, "-m", "parsolve", *map(str, args)]
     if mpi:
         cmd = ["bash", str(ROOT / "scripts" / "mpirun.sh"), "-n", str(mpi)] + cmd
-    return subprocess.run(cmd, capture_output=True, text=True, cwd=cwd, timeout=300)
+    # this pytest process is itself an MPI singleton: keep its MPI variables from the child
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "OPAL_"))}
+    return subprocess.run(cmd, capture_output=True, text=True, cwd=cwd, timeout=300, env=env)
 
 
 BAD = {
