@@ -229,35 +229,32 @@ def dolfinx_assembly(n: int, cell: str = "triangle", plane: str = "strain",
     _JIT_STATE["compiled"].add(key)
     assert _dolfinx_dofs(V) == dofs, (_dolfinx_dofs(V), dofs)
 
-    def first():
-        A = fpetsc.create_matrix(a)
-        t0 = time.perf_counter()
+    def assemble(A):
         fpetsc.assemble_matrix(A, a)
         A.assemble()
-        return A, time.perf_counter() - t0
 
     def reassemble(A):
         A.zeroEntries()
-        fpetsc.assemble_matrix(A, a)
-        A.assemble()
+        assemble(A)
 
     norms = []
     best = None
-    for _ in range(repeats):
-        (A, t_asm), t = timed(first)
+    for i in range(repeats):
+        A, t_create = timed(fpetsc.create_matrix, a)
+        _, t_asm = timed(assemble, A)
         norms.append(A.norm(PETSc.NormType.FROBENIUS))
-        if best is None or t < best[0]:
-            best = (t, t - t_asm)
-        if _ < repeats - 1:
+        if best is None or t_create + t_asm < sum(best):
+            best = (t_create, t_asm)
+        if i < repeats - 1:
             A.destroy()
-    t_first, t_create = best
+    t_create, t_asm = best
+    t_first = t_create + t_asm
     t_re = []
     for _ in range(max(repeats, 3)):
         _, t = timed(reassemble, A)
         t_re.append(t)
         norms.append(A.norm(PETSc.NormType.FROBENIUS))
-    info = A.getInfo()
-    nnz = comm.allreduce(A.getInfo(PETSc.Mat.InfoType.LOCAL)["nz_used"]) if comm.size > 1 else info["nz_used"]
+    nnz = A.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"]
     A.destroy()
     fro = norms[0]
     spread = max(abs(x - fro) for x in norms) / fro
@@ -265,7 +262,7 @@ def dolfinx_assembly(n: int, cell: str = "triangle", plane: str = "strain",
     return dict(peer="dolfinx", cell=cell, n=n, plane=plane, nranks=comm.size, dofs=dofs,
                 ncells=msh.topology.index_map(2).size_global, nnz=int(nnz), repeats=repeats,
                 t_mesh=t_mesh, t_space=t_space, t_form=t_form, jit=jit,
-                t_create=t_create, t_assemble_first=t_first - t_create, t_first=t_first,
+                t_create=t_create, t_assemble_first=t_asm, t_first=t_first,
                 t_reassembly=t_reassembly, rate_first=dofs / t_first,
                 rate_reassembly=dofs / t_reassembly, fro=fro, fro_rel_spread=spread)
 
@@ -476,14 +473,14 @@ def peer_python(peer: str) -> str:
 
 
 def run_peer(peer: str, ns, cells=("triangle",), nranks: int = 1, solve=(), assembly: bool = True,
-             plane: str = "strain", repeats: int | None = None, python: str | None = None,
-             timeout: float | None = 900.0, echo: bool = False) -> dict:
+             plane: str = "strain", repeats: int | None = None, retries: int = 2,
+             python: str | None = None, timeout: float | None = 900.0, echo: bool = False) -> dict:
     """Run this script for `peer` in a subprocess (under mpirun -n nranks if > 1); return its JSON."""
     python = python or peer_python(peer)
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "out.json"
         cmd = [python, str(Path(__file__).resolve()), peer, "--n", *map(str, ns),
-               "--cell", *cells, "--plane", plane, "--json", str(out)]
+               "--cell", *cells, "--plane", plane, "--retries", str(retries), "--json", str(out)]
         if repeats:
             cmd += ["--repeats", str(repeats)]
         if solve:
@@ -546,23 +543,40 @@ def solve_table(rows: list[dict]) -> str:
 # CLI
 
 
-def _cpu_share(fn, comm, *args):
+def _cpu_share(fn, comm, *args, retries: int = 0, wait: float = 5.0):
     """Run fn(*args) and add 'cpu_share': this process's CPU time / wall time over the call (the
     lowest over ranks). Well below 1 means other processes took CPU time from the benchmark (the
-    machine has as many cores as ranks): such timings are inflated."""
+    machine has 2 cores, as many as the ranks used): such timings are inflated. Below 0.9 the
+    measurement is redone, after `wait` seconds, up to `retries` times; the result with the
+    highest cpu_share is kept ('attempts' counts the runs), with the first run's t_form/jit (only
+    the first can be a cold JIT)."""
     def cpu():  # this process + its finished children (the JIT's C compiler)
         t = os.times()
         return t.user + t.system + t.children_user + t.children_system
 
-    w0, c0 = time.perf_counter(), cpu()
-    r = fn(*args)
-    share = (cpu() - c0) / (time.perf_counter() - w0)
-    r["cpu_share"] = comm.allreduce(share, op=_mpi_min()) if comm is not None else share
-    if r["cpu_share"] < 0.9 and (comm is None or comm.rank == 0):
-        print(f"[bench_peers] warning: cpu_share {r['cpu_share']:.2f} for n={r['n']} "
-              f"{r['cell']}: other processes are competing for the CPUs", file=sys.stderr,
-              flush=True)
-    return r
+    best = None
+    first = None
+    for attempt in range(retries + 1):
+        w0, c0 = time.perf_counter(), cpu()
+        r = fn(*args)
+        share = (cpu() - c0) / (time.perf_counter() - w0)
+        r["cpu_share"] = comm.allreduce(share, op=_mpi_min()) if comm is not None else share
+        first = first or r
+        if best is None or r["cpu_share"] > best["cpu_share"]:
+            best = r
+        if r["cpu_share"] >= 0.9:
+            break
+        if comm is None or comm.rank == 0:
+            print(f"[bench_peers] warning: cpu_share {r['cpu_share']:.2f} for n={r['n']} "
+                  f"{r['cell']}: other processes are competing for the CPUs"
+                  + (", retrying" if attempt < retries else ""), file=sys.stderr, flush=True)
+        if attempt < retries:
+            time.sleep(wait)
+    for k in ("t_form", "jit"):
+        if k in first:
+            best[k] = first[k]
+    best["attempts"] = attempt + 1
+    return best
 
 
 def _mpi_min():
@@ -599,13 +613,13 @@ def _main_dolfinx(args) -> dict:
         for n in args.n:
             if args.assembly:
                 r = _cpu_share(dolfinx_assembly, comm, n, cell, args.plane, args.repeats, comm,
-                               args.jit_cache)
+                               args.jit_cache, retries=args.retries)
                 out["assembly"].append(r)
                 if root:
                     _progress(assembly_table, out["assembly"])
             for method in args.solve:
                 r = _cpu_share(dolfinx_solve, comm, n, method, cell, args.plane, comm,
-                               args.jit_cache)
+                               args.jit_cache, retries=args.retries)
                 out["solve"].append(r)
                 if root:
                     _progress(solve_table, out["solve"])
@@ -621,7 +635,8 @@ def _main_skfem(args) -> dict:
            "plane": args.plane, "assembly": [], "solve": []}
     for cell in args.cell:
         for n in args.n:
-            r = _cpu_share(skfem_assembly, None, n, cell, args.plane, args.repeats)
+            r = _cpu_share(skfem_assembly, None, n, cell, args.plane, args.repeats,
+                           retries=args.retries)
             out["assembly"].append(r)
             _progress(assembly_table, out["assembly"])
     return out
@@ -675,6 +690,8 @@ def main(argv=None) -> int:
     p.add_argument("--jit-cache", default=None,
                    help="dolfinx JIT cache dir; default a fresh temp dir per process (cold JIT "
                         "for the first form per cell), 'default' = ~/.cache/fenics")
+    p.add_argument("--retries", type=int, default=2,
+                   help="redo a measurement whose cpu_share < 0.9 (CPUs busy) up to this often")
     p.add_argument("--json", default=None, help="write results here (rank 0)")
     args = p.parse_args(argv)
     if args.peer == "check":

@@ -6,6 +6,7 @@ import numpy as np
 
 from parsolve.errors import InputError
 from parsolve.fem import kernels
+from parsolve.fem.element_matrices import ElementMatrices
 from parsolve.fem.elements import element
 from parsolve.fem.materials.elastic import Elastic
 from parsolve.mesh.mesh import Mesh
@@ -41,11 +42,14 @@ class Elasticity:
         return kernels.CellGeometry(coords, self.mesh.cell_type, thickness=self.thickness,
                                     points=points)
 
-    def stiffness(self, cells: np.ndarray) -> np.ndarray:
-        """Element stiffness matrices of the given cells, node-major DOFs."""
-        geo = self.geometry(cells)
-        C = self.C[self.cell_model[cells]][:, None]
-        return kernels.stiffness(geo.strain_operator(), geo.wdet, C)
+    def stiffness(self, cells: np.ndarray) -> ElementMatrices:
+        """Element stiffness of the given cells, factored (geometry × constant Hooke tensor)."""
+        coords = self.mesh.points[self.mesh.cells[cells]]
+        G, wdet = kernels.gradients_cell_last(coords, self.mesh.cell_type, thickness=self.thickness)
+        self._work = kernels.geometric_part(G, wdet, out=getattr(self, "_work", None))
+        tensors = np.stack([kernels.voigt_to_tensor(C, self.mesh.dim) for C in self.C])
+        return ElementMatrices(geometric=self._work, tensors=tensors,
+                               cell_material=self.cell_model[cells])
 
     def cell_stress(self, cells: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Mean stress over each cell (Voigt), from the full displacement array u (npoints, ncomp)."""

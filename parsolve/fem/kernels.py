@@ -92,3 +92,76 @@ def facet_measure(coords: np.ndarray, facet_type: str, thickness: float = 1.0) -
 def cell_dofs(cells: np.ndarray, ncomp: int) -> np.ndarray:
     """Element DOF numbers (nc, nen*ncomp), node-major, from node numbers."""
     return (cells[:, :, None] * ncomp + np.arange(ncomp)).reshape(len(cells), -1)
+
+
+# ---------------------------------------------------------------- cell-last stiffness (hot path)
+#
+# Assembly speed is set by memory traffic, and numpy is only fast on long vectors: these
+# kernels keep the cell index last, so every operation runs over all cells at once and the
+# output comes in the (i, j, a, b, cell) layout that the CSR scatter map is built for.
+
+
+def gradients_cell_last(coords: np.ndarray, cell_type: str, degree: int | None = None,
+                        thickness: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Physical shape gradients G (dim, nq, nen, nc) and weights w|J| (nq, nc)."""
+    ref = element(cell_type)
+    xi, w = quadrature(cell_type, default_degree(cell_type, "stiffness") if degree is None else degree)
+    dN = ref.grad_shape(xi)                                   # (nq, nen, d)
+    nc, nen, d = coords.shape
+    nq = len(w)
+    X = coords.transpose(2, 0, 1).reshape(d * nc, nen)        # rows (i, c)
+    J = (X @ dN.transpose(1, 0, 2).reshape(nen, nq * d)).reshape(d, nc, nq, d)
+    J = np.ascontiguousarray(J.transpose(0, 3, 2, 1))         # J[i, j, q, c] = dx_i/dxi_j
+    det, inv = _det_inv_cell_last(J)
+    G = np.empty((d, nq, nen, nc))
+    for q in range(nq):  # dN/dx_k = sum_j dN/dxi_j dxi_j/dx_k
+        G[:, q] = np.tensordot(dN[q], inv[:, :, q], axes=([1], [0])).transpose(1, 0, 2)
+    return G, np.abs(det) * (w[:, None] * thickness)
+
+
+def _det_inv_cell_last(J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Determinant and inverse of J[i, j, ...] for 2×2 and 3×3, elementwise."""
+    if J.shape[0] == 2:
+        det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
+        inv = np.array([[J[1, 1], -J[0, 1]], [-J[1, 0], J[0, 0]]]) / det
+        return det, inv
+    cof = np.empty_like(J)
+    for i in range(3):
+        for j in range(3):
+            i1, i2, j1, j2 = (i + 1) % 3, (i + 2) % 3, (j + 1) % 3, (j + 2) % 3
+            cof[i, j] = J[i1, j1] * J[i2, j2] - J[i1, j2] * J[i2, j1]
+    det = (J[0] * cof[0]).sum(axis=0)
+    return det, cof.transpose(1, 0, *range(2, J.ndim)) / det
+
+
+def voigt_to_tensor(C: np.ndarray, dim: int) -> np.ndarray:
+    """Voigt matrix (engineering shear) → M[(k, l), (i, j)] with K_ai,bj = Σ G_ak M G_bl."""
+    pairs = [(0, 0), (1, 1), (0, 1)] if dim == 2 else \
+        [(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)]
+    index = {}
+    for v, (i, k) in enumerate(pairs):
+        index[(i, k)] = index[(k, i)] = v
+    M = np.empty((dim, dim, dim, dim))  # [k, l, i, j] = C[(i,k), (j,l)]
+    for i in range(dim):
+        for k in range(dim):
+            for j in range(dim):
+                for l in range(dim):
+                    M[k, l, i, j] = C[index[(i, k)], index[(j, l)]]
+    return M.reshape(dim * dim, dim * dim)
+
+
+def geometric_part(G: np.ndarray, wdet: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """P[(k, l), a, b, c] = Σ_q w|J| G[k, q, a, c] G[l, q, b, c], (d², nen, nen, nc)."""
+    d, nq, nen, nc = G.shape
+    Gw = G * wdet[None, :, None, :]
+    if out is None or out.shape != (d * d, nen, nen, nc):
+        out = np.empty((d * d, nen, nen, nc))
+    tmp = np.empty((nen, nen, nc)) if nq > 1 else None
+    for k in range(d):
+        for l in range(d):
+            target = out[k * d + l]
+            np.multiply(Gw[k, 0][:, None, :], G[l, 0][None, :, :], out=target)
+            for q in range(1, nq):
+                np.multiply(Gw[k, q][:, None, :], G[l, q][None, :, :], out=tmp)
+                target += tmp
+    return out

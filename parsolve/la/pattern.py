@@ -1,8 +1,10 @@
 """Sparsity pattern of a rank's stiffness rows, built once, and the map that re-assembles into it.
 
-The pattern is built at node level (one entry per node pair: ncomp² fewer keys to sort), then
-expanded to DOFs. ``positions`` gives, for every element matrix entry, its slot in the rank's CSR
-value array, so a re-assembly is one ``np.bincount`` of the element matrices into that array.
+The pattern is built at node level (one key per node pair: ncomp² fewer keys to sort), then
+expanded to DOFs. Element values come cell-last, ``(ncomp², nen, nen, ncells)``, and ``pair_slot`` maps each
+(row node, column node, cell) to its node pair: a re-assembly sums element blocks into node
+pairs with ``np.bincount`` (one per component pair), then places the blocks in the CSR value
+array through ``block_positions``.
 """
 
 from __future__ import annotations
@@ -13,56 +15,70 @@ import numpy as np
 
 
 @dataclass
-class RowPattern:
-    """CSR of the owned primal rows (node-major DOFs), with room for extra entries per row."""
+class NodePattern:
+    """Node-level CSR of the owned rows [lo, hi) for a set of cells."""
 
-    row_nnz_k: np.ndarray   # (nrows,) stiffness entries of each owned DOF row
-    cols_k: np.ndarray      # stiffness column of each entry, in CSR order (new DOF numbering)
-    positions: np.ndarray   # (ncells, nen*ncomp, nen*ncomp) slot of each element entry (flattened order)
-    row_start_k: np.ndarray  # (nrows,) start of each row's stiffness entries in the K-only CSR
+    lo: int
+    nown: int
+    ncomp: int
+    nb: np.ndarray          # (nown,) neighbour nodes of each owned node
+    ucol: np.ndarray        # neighbour node numbers, row by row (sorted within a row)
+    pair_slot: np.ndarray   # (nen, nen, ncells) node pair of each element block; nnzb if row owned elsewhere
+    diag_rank: np.ndarray   # (nown,) place of node i in its own row
+
+    @property
+    def nnzb(self) -> int:
+        return int(self.ucol.size)
+
+    def row_nnz(self) -> np.ndarray:
+        """Stiffness entries of each owned DOF row (node-major DOFs)."""
+        return np.repeat(self.nb * self.ncomp, self.ncomp)
+
+    def columns(self) -> np.ndarray:
+        """Column DOFs of the stiffness entries in CSR order (rows of node i, component a)."""
+        nc = self.ncomp
+        col_dofs = (self.ucol[:, None] * nc + np.arange(nc)).ravel()        # per node row
+        bptr = np.concatenate([[0], np.cumsum(self.nb)])
+        node_seg = np.repeat(np.arange(self.nown), self.nb * nc)
+        local = np.arange(col_dofs.size) - nc * bptr[node_seg]
+        cols = np.empty(col_dofs.size * nc, dtype=np.int64)
+        for a in range(nc):  # each component row of a node repeats the node's column list
+            cols[nc * nc * bptr[node_seg] + a * nc * self.nb[node_seg] + local] = col_dofs
+        return cols
+
+    def block_positions(self, row_start: np.ndarray) -> np.ndarray:
+        """(ncomp, ncomp, nnzb) slot of entry (i, j) of each node-pair block in a CSR whose owned
+        DOF row r starts at row_start[r] with its stiffness entries first."""
+        nc = self.ncomp
+        bptr = np.concatenate([[0], np.cumsum(self.nb)])
+        row = np.repeat(np.arange(self.nown), self.nb)
+        rank = np.arange(self.nnzb) - bptr[row]
+        starts = row_start.reshape(-1, nc)[row].T                            # (nc, nnzb)
+        return starts[:, None, :] + nc * rank[None, None, :] + np.arange(nc)[None, :, None]
+
+    def diagonal_positions(self, row_start: np.ndarray) -> np.ndarray:
+        """Slot of each owned DOF row's diagonal entry."""
+        nc = self.ncomp
+        rows = np.arange(self.nown * nc)
+        return row_start[rows] + nc * self.diag_rank[rows // nc] + rows % nc
 
 
-def stiffness_pattern(cells: np.ndarray, node_lo: int, node_hi: int, ncomp: int,
-                      nnodes: int) -> RowPattern:
-    """Pattern of rows [node_lo, node_hi) for the given cells (new node numbers).
-
-    Entries of element rows owned by another rank get position -1 (they are ignored).
-    """
-    nen = cells.shape[1]
-    r = np.repeat(cells, nen, axis=1).ravel()
-    c = np.tile(cells, (1, nen)).ravel()
-    own = (r >= node_lo) & (r < node_hi)
-    key = (r[own] - node_lo).astype(np.int64) * nnodes + c[own]
+def node_pattern(cells: np.ndarray, lo: int, hi: int, ncomp: int, nnodes: int) -> NodePattern:
+    """Pattern of node rows [lo, hi) for cells given as (ncells, nen) new node numbers."""
+    ct = np.ascontiguousarray(cells.T)                                      # (nen, ncells)
+    nen, ncells = ct.shape
+    rows = np.broadcast_to(ct[:, None, :], (nen, nen, ncells))
+    cols = np.broadcast_to(ct[None, :, :], (nen, nen, ncells))
+    own_row = (ct >= lo) & (ct < hi)                                        # (nen, ncells)
+    own = np.broadcast_to(own_row[:, None, :], rows.shape)
+    key = (rows[own] - lo).astype(np.int64) * nnodes + cols[own]
     ukey, inv = np.unique(key, return_inverse=True)
-    urow, ucol = ukey // nnodes, ukey % nnodes
-    nown = node_hi - node_lo
-    nb = np.bincount(urow, minlength=nown)                 # neighbours of each owned node
+    urow = ukey // nnodes
+    nown = hi - lo
+    nb = np.bincount(urow, minlength=nown)
     bptr = np.concatenate([[0], np.cumsum(nb)])
-    rank_in_row = np.arange(ukey.size) - bptr[urow]        # place of the neighbour in its row
-    # DOF rows: node i, component a has nb[i]*ncomp entries; node block start = ncomp² bptr[i]
-    row_nnz = np.repeat(nb * ncomp, ncomp)
-    row_start = np.concatenate([[0], np.cumsum(row_nnz)])[:-1]
-    # columns in CSR order: for each node row, for each component row, neighbours × components
-    cols_node = ucol.reshape(-1)
-    col_block = (cols_node[:, None] * ncomp + np.arange(ncomp)[None, :]).ravel()  # per node row
-    # repeat the node row's column list once per component row
-    seg = np.repeat(np.arange(nown), nb * ncomp)
-    starts_in_block = np.concatenate([[0], np.cumsum(nb * ncomp)])[:-1]
-    local = np.arange(col_block.size) - starts_in_block[seg]
-    cols = np.empty(int(row_nnz.sum()), dtype=np.int64)
-    for a in range(ncomp):
-        dst = ncomp * ncomp * bptr[seg] + a * (nb[seg] * ncomp) + local
-        cols[dst] = col_block
-    # slot of each element entry (e, i, a, j, b): rows are (node i, comp a), cols (node j, comp b)
-    slot_node = np.full(r.size, -1, dtype=np.int64)
-    slot_node[own] = inv
-    slot_node = slot_node.reshape(-1, nen, nen)
-    node_i = np.where(slot_node >= 0, urow[np.maximum(slot_node, 0)], 0)
-    pos_node = ncomp * ncomp * bptr[node_i] + ncomp * rank_in_row[np.maximum(slot_node, 0)]
-    a = np.arange(ncomp)[None, None, :, None, None]
-    b = np.arange(ncomp)[None, None, None, None, :]
-    pos = (pos_node[:, :, None, :, None] + a * (nb[node_i][:, :, None, :, None] * ncomp) + b)
-    pos = np.where(slot_node[:, :, None, :, None] >= 0, pos, -1)
-    dtype = np.int32 if cols.size < 2**31 - 1 else np.int64
-    return RowPattern(row_nnz, cols, pos.reshape(len(cells), nen * ncomp, nen * ncomp).astype(dtype),
-                      row_start)
+    pair_slot = np.full((nen, nen, ncells), ukey.size, dtype=np.intp)  # bincount's own type
+    pair_slot[own] = inv
+    diag = np.searchsorted(ukey, np.arange(nown, dtype=np.int64) * nnodes + lo + np.arange(nown))
+    return NodePattern(lo, nown, ncomp, nb, ukey % nnodes, pair_slot,
+                       (np.minimum(diag, ukey.size - 1) - bptr[:-1]).astype(np.int64))

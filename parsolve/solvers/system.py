@@ -17,7 +17,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from parsolve.la.layout import make_layout
-from parsolve.la.pattern import stiffness_pattern
+from parsolve.la.pattern import node_pattern
 from parsolve.la.petsc import SaddleOperator
 from parsolve.la.saddle import stack_relations
 from parsolve.mesh.partition import partition
@@ -49,7 +49,7 @@ class SaddleSystem:
         self.local_cells = self.part.local_cells(rank, mesh.cells)
         new_cells = self.part.new_of_old[mesh.cells[self.local_cells]]
         lo, hi = self.part.node_ranges[rank], self.part.node_ranges[rank + 1]
-        pattern = stiffness_pattern(new_cells, lo, hi, ncomp, mesh.num_points)
+        self.pattern = pattern = node_pattern(new_cells, lo, hi, ncomp, mesh.num_points)
         self.block = stack_relations(self.multiplied, lay)
         self.op = SaddleOperator(comm, lay, pattern, self.block)
         ndof = mesh.num_points * ncomp
@@ -77,7 +77,7 @@ class SaddleSystem:
         n = self.op.nrows
         own = (sad >= self.offset) & (sad < self.offset + n)
         self.elim_own = own
-        self.op.elim_rows = sad[own].astype(PETSc.IntType)
+        self.op.set_eliminated(sad)
 
     def elim_values(self, t: float) -> np.ndarray:
         """Prescribed values of the eliminated DOFs at t (A q = b with one coefficient per row)."""
@@ -91,12 +91,12 @@ class SaddleSystem:
     def assemble(self) -> PETSc.Mat:
         t0 = time.perf_counter()
         ke = self.model.elasticity.stiffness(self.local_cells)
-        self.op.set_stiffness(ke)
+        self.op.set_stiffness(ke.reduce(self.pattern.pair_slot, self.pattern.nnzb))
         if self.block.row_scale is None:
             self.kscale = self.op.diagonal_scale()
             self.block.set_scales(self.kscale)
-            self.op.elim_diag = self.kscale
         self.op.relation_values()
+        self.op.eliminate(self.kscale)
         mat = self.op.petsc_matrix()
         self.assembled = True
         self.timings["assembly"] = time.perf_counter() - t0
@@ -114,7 +114,7 @@ class SaddleSystem:
         x_e = np.zeros(self.layout.size)
         if self.eliminated:
             x_e[self.saddle_of_input[self.elim_dofs]] = self.elim_values(t)
-            b -= self.op.matvec(x_e)
+            b -= self.op.lifting(x_e)
             b[self.op.elim_rows - self.offset] = self.kscale * x_e[self.op.elim_rows]
         return b, x_e
 
@@ -137,7 +137,7 @@ class SaddleSystem:
     def _eliminated_multipliers(self, x_full: np.ndarray, t: float) -> dict[str, np.ndarray]:
         """λ = (F - row of [K, -D] x) / a on each eliminated row (the row before zeroing)."""
         f_full = self.model.external_load(t)
-        row_vals = self.op.matvec(x_full)
+        row_vals = self.op.eliminated_rows(x_full)
         sad = self.saddle_of_input[self.elim_dofs]
         lam = np.zeros(self.elim_dofs.size)
         own = self.elim_own
