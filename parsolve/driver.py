@@ -62,6 +62,11 @@ def export_system(comm, directory: str, mat: PETSc.Mat, rhs: PETSc.Vec, system: 
     viewer.destroy()
 
 
+def needs_newton(model: Model) -> bool:
+    """Only a nonlinear material or a unilateral relation calls for iterations."""
+    return model.elasticity.nonlinear or any(r.sense != "=" for r in model.relations)
+
+
 def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
         export_dir: str | None = None, log=print) -> str:
     """Solve every load step and write the result file; returns the final status."""
@@ -72,33 +77,14 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
                           ".".join(map(str, PETSc.Sys.getVersion())), relations_meta)
     status = "complete"
     try:
-        t0 = time.perf_counter()
-        mat = system.assemble()
-        solver = make_solver(comm, system, cli_options)
-        if getattr(system.op, "mat_nearnull", None) is not None:
-            mat.setNearNullSpace(system.op.mat_nearnull)
-        solver.set_operator(mat)
-        assembly_time = time.perf_counter() - t0
-        x, rhs = mat.createVecs()
-        for step, t in enumerate(scene.times):
-            t1 = time.perf_counter()
-            b, _ = system.rhs(t)
-            rhs.array[:] = b
-            if export_dir is not None and step == 0:
-                export_system(comm, export_dir, mat, rhs, system)
-            t2 = time.perf_counter()
-            iterations = solver.solve(rhs, x)
-            solve_time = time.perf_counter() - t2
-            residual = solver.residual
-            x_full = system.gather(x.array)
-            q, multipliers = system.unpack(x_full, t)
-            fields, cell_fields, rel_out = _outputs(comm, system, q, multipliers)
-            timings = {"assembly": assembly_time if step == 0 else 0.0, "solve": solve_time,
-                       "total": time.perf_counter() - t1 + (assembly_time if step == 0 else 0.0)}
-            writer.write_step(t, 1, residual, fields, cell_fields, rel_out, timings)
-            if comm.rank == 0:
-                log(f"step {step + 1}/{len(scene.times)}  t={t:.6g}  iterations=1 "
-                    f"(linear its {iterations})  residual={residual:.2e}  {timings['total']:.3f} s")
+        if scene.nonlinear.method == "arc_length":
+            from parsolve.solvers.arc_length import run_arc_length
+
+            run_arc_length(comm, system, cli_options, writer, log)
+        elif needs_newton(model):
+            _run_newton(comm, system, cli_options, writer, log)
+        else:
+            _run_linear(comm, system, cli_options, writer, export_dir, log)
     except SolverError as exc:
         status = f"failed: {exc}"
         raise
@@ -107,23 +93,152 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
     return status
 
 
-def _outputs(comm: MPI.Comm, system: SaddleSystem, q: np.ndarray, multipliers: dict):
+def _progress(log, comm, step: int, total, t: float, iterations: int, residual: float,
+              seconds: float, extra: str = "") -> None:
+    if comm.rank == 0:
+        log(f"step {step}/{total}  t={t:.6g}  iterations={iterations}  residual={residual:.2e}  "
+            f"{seconds:.3f} s{extra}")
+
+
+def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log) -> None:
+    """Assemble and factorize once; one back-substitution per step."""
+    scene = system.model.scene
+    t0 = time.perf_counter()
+    mat = system.assemble()
+    solver = make_solver(comm, system, cli_options)
+    if getattr(system.op, "mat_nearnull", None) is not None:
+        mat.setNearNullSpace(system.op.mat_nearnull)
+    solver.set_operator(mat)
+    assembly_time = time.perf_counter() - t0
+    x, rhs = mat.createVecs()
+    for step, t in enumerate(scene.times):
+        t1 = time.perf_counter()
+        rhs.array[:] = system.rhs(t)[0]
+        if export_dir is not None and step == 0:
+            export_system(comm, export_dir, mat, rhs, system)
+        t2 = time.perf_counter()
+        linear_its = solver.solve(rhs, x)
+        solve_time = time.perf_counter() - t2
+        q, multipliers = system.unpack(system.gather(x.array), t)
+        fields, cell_fields, rel_out = _outputs(comm, system, q, multipliers)
+        first = assembly_time if step == 0 else 0.0
+        timings = {"assembly": first, "solve": solve_time,
+                   "total": time.perf_counter() - t1 + first}
+        writer.write_step(t, 1, solver.residual, fields, cell_fields, rel_out, timings)
+        _progress(log, comm, step + 1, len(scene.times), t, 1, solver.residual, timings["total"],
+                  f"  (linear its {linear_its})")
+
+
+def _run_newton(comm, system: SaddleSystem, cli_options, writer, log) -> None:
+    """Newton + active set at every step; the steps follow the scene or the automatic rule."""
+    from parsolve.solvers.newton import NewtonSolver
+
+    scene = system.model.scene
+    system.assemble()
+    solver = make_solver(comm, system, cli_options)
+    newton = NewtonSolver(comm, system, solver, scene.nonlinear)
+    schedule = StepSchedule(scene)
+    for step, t in enumerate(schedule):
+        t1 = time.perf_counter()
+        q_old = newton.q.copy()
+        result = newton.step(t)
+        seconds = time.perf_counter() - t1
+        multipliers = newton.multipliers(t, result.f_int)
+        fields, cell_fields, rel_out = _outputs(comm, system, newton.q, multipliers, newton)
+        writer.write_step(t, result.iterations, result.residual, fields, cell_fields, rel_out,
+                          {"assembly": system.timings.get("assembly", 0.0), "solve": seconds,
+                           "total": seconds})
+        schedule.feedback(_max_strain_increment(comm, system, newton.q - q_old))
+        _progress(log, comm, step + 1, schedule.total, t, result.iterations, result.residual, seconds)
+
+
+class StepSchedule:
+    """The scene's load parameters, or automatic steps that keep the largest strain increment
+    near a target (Cast3M's AUTOMATIQUE): the next step is scaled by target / achieved,
+    within [1/2, 2]."""
+
+    def __init__(self, scene):
+        self.spec = scene.steps
+        self.times = list(scene.times)
+
+    @property
+    def total(self):
+        return "?" if self.spec.automatic else len(self.times)
+
+    def __iter__(self):
+        if not self.spec.automatic:
+            yield from self.times
+            return
+        t, dt, count = 0.0, self.times[0], 0
+        while t < self.spec.end * (1 - 1e-12) and count < self.spec.max_steps:
+            t = min(t + dt, self.spec.end)
+            self._achieved = None
+            yield t
+            count += 1
+            if self._achieved:
+                dt *= min(2.0, max(0.5, self.spec.strain_increment / self._achieved))
+
+    def feedback(self, max_strain_increment: float) -> None:
+        self._achieved = max_strain_increment
+
+
+def _max_strain_increment(comm, system: SaddleSystem, dq: np.ndarray) -> float:
+    mesh = system.model.mesh
+    owned = system.part.owned_cells(comm.rank, mesh.cells)
+    if owned.size == 0:
+        return comm.allreduce(0.0, op=MPI.MAX)
+    geo = system.model.elasticity.geometry(owned)
+    from parsolve.fem.kernels import strains
+
+    eps = strains(geo.strain_operator(), dq.reshape(mesh.num_points, -1)[mesh.cells[owned]]
+                  .reshape(len(owned), -1))
+    return comm.allreduce(float(np.abs(eps).max()), op=MPI.MAX)
+
+
+def _gather_cells(comm, owned: np.ndarray, values: np.ndarray, ncells: int):
+    """Per-cell values of every rank's reported cells, in mesh order, on rank 0."""
+    parts = comm.gather((owned, values), root=0)
+    if comm.rank != 0:
+        return None
+    out = np.zeros((ncells,) + values.shape[1:])
+    for idx, val in parts:
+        out[idx] = val
+    return out
+
+
+def _outputs(comm: MPI.Comm, system: SaddleSystem, q: np.ndarray, multipliers: dict,
+             newton=None):
     model = system.model
     mesh = model.mesh
     u = q.reshape(mesh.num_points, model.ncomp)
-    owned = system.part.owned_cells(comm.rank)
-    sig = model.elasticity.cell_stress(owned, u)
-    parts = comm.gather((owned, sig), root=0)
-    stress = None
-    if comm.rank == 0:
-        stress = np.zeros((mesh.num_cells, sig.shape[1]))
-        for idx, val in parts:
-            stress[idx] = val
-    sums, weights = model.elasticity.nodal_stress_sums(owned, u)
+    owned = system.part.owned_cells(comm.rank, mesh.cells)
+    cell_fields = {}
+    if newton is None:
+        sig = model.elasticity.cell_stress(owned, u)
+        sums, weights = model.elasticity.nodal_stress_sums(owned, u)
+    else:  # stresses and history from the material state at the quadrature points
+        pos = np.searchsorted(system.local_cells, owned)
+        wq = model.elasticity.geometry(owned).wdet
+        sig = (newton.stress_qp[pos] * wq[:, :, None]).sum(axis=1) / wq.sum(axis=1)[:, None]
+        vol = wq.sum(axis=1)
+        nodes = mesh.cells[owned].ravel()
+        nen = mesh.cells.shape[1]
+        sums = np.stack([np.bincount(nodes, weights=np.repeat(sig[:, k] * vol, nen),
+                                     minlength=mesh.num_points) for k in range(sig.shape[1])], 1)
+        weights = np.bincount(nodes, weights=np.repeat(vol, nen), minlength=mesh.num_points)
+        internal = model.elasticity.internal_variables(system.local_cells, newton.states)
+        for name, value in internal.items():
+            cell_fields[name] = _gather_cells(comm, owned, value[pos], mesh.num_cells)
+    cell_fields["stress"] = _gather_cells(comm, owned, sig, mesh.num_cells)
     sums = comm.allreduce(sums)
     weights = comm.allreduce(weights)
     nodal = sums / np.maximum(weights, 1e-300)[:, None]
     rel_out = {}
+    active = newton.active.active if newton is not None else None
     for r in model.relations:
         rel_out[r.name] = {"multiplier": multipliers[r.name], "primal": r.primal(q)}
-    return {"displacement": u, "stress": nodal}, {"stress": stress}, rel_out
+        if r.sense != "=":
+            k = system.multiplied.index(r)
+            first = system.block.first_row[k]
+            rel_out[r.name]["active"] = active[first:first + r.nrows].astype(np.int8)
+    return {"displacement": u, "stress": nodal}, cell_fields, rel_out

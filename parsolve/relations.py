@@ -42,6 +42,7 @@ class Relation:
     sense: str = "="
     dual: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
     eliminate: bool | None = None  # None: let the solver decide (single-DOF rows are eliminated)
+    maximum: bool = False          # unilateral rows of which only the extreme one is enforced
     meta: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -68,6 +69,11 @@ class Relation:
     def eliminable(self) -> bool:
         """Can be eliminated instead of multiplied: associated, equality, single-DOF rows."""
         return self.associated and self.sense == "=" and self.single_dof() and self.eliminate is not False
+
+    @property
+    def sign(self) -> int:
+        """+1 for "<=", -1 for ">=", 0 for "=": s (A q - b) <= 0 is the admissible side."""
+        return {"=": 0, "<=": 1, ">=": -1}[self.sense]
 
     def dual_coo(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """D as (dof, row, value); for an associated relation D = -Aᵀ."""
@@ -129,6 +135,21 @@ def combination(name: str, terms: list[tuple[np.ndarray, int, float, bool]], nco
         dual_coo = (nz, np.zeros(nz.size, dtype=np.int64), dual[nz])
     return Relation(name, 1, np.zeros(udofs.size), udofs, ucoefs, np.array([value]), evolution,
                     sense, dual_coo)
+
+
+def rows(name: str, row_dofs: np.ndarray, row_coefs: np.ndarray, value: float = 0.0,
+         evolution: Evolution = RAMP, sense: str = "=") -> Relation:
+    """One row per line of (row_dofs, row_coefs) (m, k): Σ coef · u[dof] (sense) value."""
+    m, k = row_dofs.shape
+    r = np.repeat(np.arange(m), k)
+    dofs, coefs = row_dofs.ravel(), row_coefs.ravel()
+    # merge repeated DOFs of a row (a node shared by several cells of a region)
+    key = r * (dofs.max() + 1 if dofs.size else 1) + dofs
+    _, first, inv = np.unique(key, return_index=True, return_inverse=True)
+    ucoef = np.bincount(inv, weights=coefs)
+    urow, udof = r[first], dofs[first]
+    keep = ucoef != 0.0
+    return Relation(name, m, urow[keep], udof[keep], ucoef[keep], np.full(m, value), evolution, sense)
 
 
 def with_dual(relation: Relation, vector: np.ndarray) -> Relation:

@@ -7,6 +7,7 @@ import numpy as np
 
 from parsolve import relations as rel
 from parsolve.errors import InputError
+from parsolve.fem import kernels
 from parsolve.mesh import selectors
 
 
@@ -15,6 +16,7 @@ def build_relations(specs: list, regions, evolutions: dict, patterns: dict, ncom
     out = []
     for spec in specs:
         r = _one(spec, regions, evolutions, ncomp, source)
+        r.sense, r.maximum = spec.sense, spec.maximum
         if spec.dual is not None:
             rel.with_dual(r, patterns[spec.dual].vector())
         r.eliminate = spec.eliminate if spec.eliminate is not None else (eliminate and None)
@@ -45,6 +47,8 @@ def _one(spec, regions, evolutions, ncomp: int, source: str) -> rel.Relation:
         if len(nodes) < 2:
             raise InputError(f"region {spec.region!r} has fewer than 2 nodes", source, spec.key + ".region")
         return rel.equal(spec.name, nodes, spec.components[0], ncomp)
+    if spec.type == "strain":
+        return _strain(spec, regions, evol, source)
     terms = []
     for i, term in enumerate(spec.terms):
         key = f"{spec.key}.terms[{i}].region" if spec.type == "linear" else spec.key + ".region"
@@ -53,4 +57,34 @@ def _one(spec, regions, evolutions, ncomp: int, source: str) -> rel.Relation:
     r = rel.combination(spec.name, terms, ncomp, spec.value, evol)
     if r.a_dofs.size == 0:
         raise InputError("the relation's terms cancel out: it constrains nothing", source, spec.key)
+    return r
+
+
+def strain_rows(mesh, cells: np.ndarray, direction: np.ndarray, thickness: float = 1.0):
+    """Per cell: DOFs (nc, nen·d) and coefficients of the mean of n·ε·n over the cell, and the
+    cell volumes."""
+    geo = kernels.CellGeometry(mesh.points[mesh.cells[cells]], mesh.cell_type, thickness=thickness)
+    B = geo.strain_operator()                                   # (nc, nq, nv, ndof)
+    n = np.asarray(direction, dtype=float)
+    if mesh.dim == 2:
+        nv = np.array([n[0] ** 2, n[1] ** 2, n[0] * n[1]])
+    else:
+        nv = np.array([n[0] ** 2, n[1] ** 2, n[2] ** 2, n[1] * n[2], n[0] * n[2], n[0] * n[1]])
+    vol = geo.wdet.sum(axis=1)
+    coefs = np.einsum("cqvd,v,cq->cd", B, nv, geo.wdet) / vol[:, None]
+    return kernels.cell_dofs(mesh.cells[cells], mesh.dim), coefs, vol
+
+
+def _strain(spec, regions, evol, source: str) -> rel.Relation:
+    """Strain n·ε·n of a region: its mean (one row), or one row per cell (per_cell)."""
+    region = regions(spec.region, spec.key + ".region")
+    if region.cells.size == 0:
+        raise InputError(f"region {spec.region!r} contains no cell (a strain needs cells)",
+                         source, spec.key + ".region")
+    dofs, coefs, vol = strain_rows(regions.mesh, region.cells, spec.direction)
+    if not spec.per_cell:
+        coefs = (coefs * (vol / vol.sum())[:, None]).reshape(1, -1)
+        dofs = dofs.reshape(1, -1)
+    r = rel.rows(spec.name, dofs, coefs, spec.value, evol, spec.sense)
+    r.meta["cells"] = region.cells
     return r

@@ -9,9 +9,11 @@ from parsolve.fem import kernels
 from parsolve.fem.element_matrices import ElementMatrices
 from parsolve.fem.elements import element
 from parsolve.fem.materials.elastic import Elastic
+from parsolve.fem.materials.mazars import Mazars
+from parsolve.fem.materials.von_mises import VonMises
 from parsolve.mesh.mesh import Mesh
 
-MODELS = {"elastic": Elastic}
+MODELS = {"elastic": Elastic, "mazars": Mazars, "von_mises": VonMises}
 
 
 class Elasticity:
@@ -29,12 +31,16 @@ class Elasticity:
             if region.cells.size == 0:
                 raise InputError(f"region {spec.region!r} contains no cell", source, spec.key + ".region")
             self.cell_model[region.cells] = len(self.models)
-            self.models.append(MODELS[spec.model](hypothesis=hypothesis, **spec.params))
+            try:
+                self.models.append(MODELS[spec.model](hypothesis=hypothesis, **spec.params))
+            except ValueError as exc:  # e.g. von Mises in plane stress
+                raise InputError(str(exc), source, spec.key + ".model") from None
         missing = np.flatnonzero(self.cell_model < 0)
         if missing.size:
             raise InputError(f"{missing.size} cells have no material (e.g. cell {missing[0]})",
                              source, "materials")
         self.C = np.stack([m.C for m in self.models])
+        self.nonlinear = any(not isinstance(m, Elastic) for m in self.models)
 
     def geometry(self, cells: np.ndarray, at_nodes: bool = False) -> kernels.CellGeometry:
         coords = self.mesh.points[self.mesh.cells[cells]]
@@ -80,3 +86,50 @@ class Elasticity:
         weights = np.bincount(nodes, weights=np.repeat(vol, mesh.cells.shape[1]),
                               minlength=mesh.num_points)
         return sums, weights
+
+    # ------------------------------------------------------------ nonlinear materials
+
+    def init_state(self, cells: np.ndarray) -> list[dict]:
+        """History of every quadrature point of the given cells, per material model."""
+        nq = self.geometry(cells[:1]).nq if cells.size else 1
+        return [m.init_state(int((self.cell_model[cells] == k).sum()) * nq)
+                for k, m in enumerate(self.models)]
+
+    def evaluate(self, cells: np.ndarray, u: np.ndarray, states: list[dict], secant: bool = False):
+        """Internal forces (nc, ndof), tangent ElementMatrices, trial states and the stress at
+        the quadrature points (nc, nq, nv), at the displacement u (npoints, ncomp)."""
+        geo = self.geometry(cells)
+        B = geo.strain_operator()
+        nc, nq, nv, ndof = B.shape
+        eps = kernels.strains(B, u[self.mesh.cells[cells]].reshape(nc, -1))
+        sig = np.empty_like(eps)
+        tangent = np.empty((nc, nq, nv, nv))
+        trial = []
+        for k, model in enumerate(self.models):
+            idx = np.flatnonzero(self.cell_model[cells] == k)
+            s, c, st = model.update(eps[idx].reshape(-1, nv), states[k])
+            if secant and "D" in st:  # damage: the secant (1 - D) C stays positive definite
+                c = (1.0 - st["D"])[:, None, None] * model.C[None]
+            sig[idx] = s.reshape(len(idx), nq, nv)
+            tangent[idx] = c.reshape(len(idx), nq, nv, nv)
+            trial.append(st)
+        fe = kernels.internal_forces(B, geo.wdet, sig)
+        ke = kernels.stiffness(B, geo.wdet, tangent)           # (nc, ndof, ndof) node-major
+        d, nen = self.ncomp, ndof // self.ncomp
+        values = ke.reshape(nc, nen, d, nen, d).transpose(2, 4, 1, 3, 0).reshape(d * d, nen, nen, nc)
+        return fe, ElementMatrices(values=np.ascontiguousarray(values)), trial, sig
+
+    def internal_variables(self, cells: np.ndarray, states: list[dict]) -> dict[str, np.ndarray]:
+        """Cell means of the scalar history variables worth plotting (damage, plastic strain)."""
+        nq = self.geometry(cells[:1]).nq if cells.size else 1
+        out = {}
+        for name, key in (("damage", "D"), ("plastic_strain", "p")):
+            if not any(key in st for st in states):
+                continue
+            field = np.zeros(len(cells))
+            for k, st in enumerate(states):
+                if key in st:
+                    idx = np.flatnonzero(self.cell_model[cells] == k)
+                    field[idx] = st[key].reshape(len(idx), nq).mean(axis=1)
+            out[name] = field
+        return out

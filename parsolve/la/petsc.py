@@ -73,21 +73,24 @@ class SaddleOperator:
         self.rowptr = rowptr.astype(PETSc.IntType)
         self.cols = cols.astype(PETSc.IntType)
         self.data = np.zeros(nnz)
-        self.l_diag_vals = np.zeros(nlo)
+        self.active = np.ones(layout.nl, dtype=bool)  # global multiplier rows enforced
+        self._l0, self._l1 = l0, l1
         self.mat: PETSc.Mat | None = None
         self._entry_row = np.repeat(np.arange(self.nrows), np.diff(rowptr))
         self.set_eliminated(np.zeros(0, dtype=np.int64))
 
     # ------------------------------------------------------------------ values
 
-    def relation_values(self) -> None:
-        """Write the scaled -D and A values into the CSR value array."""
-        b = self.block
-        dv = -b.d_vals[self._d_sel] * b.col_scale[b.d_cols[self._d_sel]]
-        av = b.a_vals[self._a_sel] * b.row_scale[b.a_rows[self._a_sel]]
+    def relation_values(self, diag: float = 1.0) -> None:
+        """Write the scaled -D and A values into the CSR value array. An inactive row keeps its
+        pattern: A row and D column zero, ``diag`` on its diagonal, so its λ solves to 0."""
+        b, on = self.block, self.active.astype(float)
+        d_cols, a_rows = b.d_cols[self._d_sel], b.a_rows[self._a_sel]
+        dv = -b.d_vals[self._d_sel] * b.col_scale[d_cols] * on[d_cols]
+        av = b.a_vals[self._a_sel] * b.row_scale[a_rows] * on[a_rows]
         self.data[self.d_final] = np.bincount(self._d_inv, weights=dv, minlength=self.d_final.size)
         self.data[self.a_final] = np.bincount(self._a_inv, weights=av, minlength=self.a_final.size)
-        self.data[self.l_diag] = self.l_diag_vals
+        self.data[self.l_diag] = diag * (1.0 - on[self._l0:self._l1])
 
     def set_stiffness(self, blocks: np.ndarray) -> None:
         """Place node-pair blocks (ncomp², npairs) into the stiffness slots.

@@ -30,8 +30,10 @@ class Partition:
         """Cells that touch a node owned by ``rank``: the ones it needs to assemble its rows."""
         return np.flatnonzero((self.node_part[cells] == rank).any(axis=1))
 
-    def owned_cells(self, rank: int) -> np.ndarray:
-        return np.flatnonzero(self.cell_part == rank)
+    def owned_cells(self, rank: int, cells: np.ndarray) -> np.ndarray:
+        """Cells this rank reports: those whose lowest node owner is ``rank`` (a subset of its
+        local cells, so it holds their history variables)."""
+        return np.flatnonzero(self.node_part[cells].min(axis=1) == rank)
 
 
 def bisect(centroids: np.ndarray, nparts: int) -> np.ndarray:

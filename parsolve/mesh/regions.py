@@ -66,8 +66,8 @@ class RegionResolver:
             else:
                 return self._group(spec.value, spec.key, name)
             region = self._from_mask(name, mask, cmask)
-            if region.nodes.size == 0:
-                raise InputError(f"region {name!r} selects no node", self.source, spec.key)
+            if region.nodes.size == 0 and region.cells.size == 0:
+                raise InputError(f"region {name!r} selects no node and no cell", self.source, spec.key)
             return region
         return self._group(name, key, name)
 

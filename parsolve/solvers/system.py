@@ -88,56 +88,108 @@ class SaddleSystem:
 
     # ------------------------------------------------------------ assembly
 
-    def assemble(self) -> PETSc.Mat:
+    def assemble(self, elements=None) -> PETSc.Mat:
+        """Assemble [[K, -D], [A, 0]]; K from ``elements`` (ElementMatrices of the local cells,
+        e.g. a tangent) or the elastic stiffness."""
         t0 = time.perf_counter()
-        ke = self.model.elasticity.stiffness(self.local_cells)
+        ke = self.model.elasticity.stiffness(self.local_cells) if elements is None else elements
         self.op.set_stiffness(ke.reduce(self.pattern.pair_slot, self.pattern.nnzb))
         if self.block.row_scale is None:
             self.kscale = self.op.diagonal_scale()
             self.block.set_scales(self.kscale)
-        self.op.relation_values()
+        self.op.relation_values(self.kscale)
         self.op.eliminate(self.kscale)
         mat = self.op.petsc_matrix()
         self.assembled = True
         self.timings["assembly"] = time.perf_counter() - t0
         return mat
 
-    def rhs(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """(owned right-hand side with lifting, full saddle vector of prescribed values)."""
-        n = self.op.nrows
-        f_full = self.model.external_load(t)
-        b = np.zeros(n)
+    def to_owned(self, full: np.ndarray) -> np.ndarray:
+        """A full primal vector (input numbering) → this rank's rows (multiplier rows zero)."""
+        out = np.zeros(self.op.nrows)
         own = self.owned_input_dofs
-        b[self.saddle_of_input[own] - self.offset] = f_full[own]
+        out[self.saddle_of_input[own] - self.offset] = full[own]
+        return out
+
+    def rhs(self, t: float, f_int: np.ndarray | None = None,
+            q: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(owned right-hand side with lifting, full saddle vector of prescribed values).
+
+        Linear: K q - D λ = F, A q = b. Newton (``f_int`` and ``q`` given, unknowns the
+        increment Δq and the total λ): K Δq - D λ = F - f_int, A Δq = b - A q.
+        """
+        f_full = self.model.external_load(t)
+        if f_int is not None:
+            f_full = f_full - f_int
+        b = self.to_owned(f_full)
         q0, q1, l0, l1 = self.layout.owned(self.comm.rank)
-        b[q1 - q0:] = self.block.rhs(t)[l0:l1]
+        target = self.block.rhs(t)
+        if q is not None and self.block.nrows:
+            target = target - self.primal_values(q) * self.block.row_scale
+        b[q1 - q0:] = (target * self.op.active)[l0:l1]
         x_e = np.zeros(self.layout.size)
         if self.eliminated:
-            x_e[self.saddle_of_input[self.elim_dofs]] = self.elim_values(t)
+            values = self.elim_values(t)
+            if q is not None:
+                values = values - q[self.elim_dofs]
+            x_e[self.saddle_of_input[self.elim_dofs]] = values
             b -= self.op.lifting(x_e)
             b[self.op.elim_rows - self.offset] = self.kscale * x_e[self.op.elim_rows]
         return b, x_e
+
+    def primal_values(self, q: np.ndarray) -> np.ndarray:
+        """A q of every multiplied row (unscaled), q a full primal vector (input numbering)."""
+        return np.concatenate([r.primal(q) for r in self.multiplied]) if self.multiplied \
+            else np.zeros(0)
+
+    def reactions(self, lam: np.ndarray) -> np.ndarray:
+        """Owned rows of D λ (unscaled λ of all multiplied rows)."""
+        blk = self.block
+        q0, q1, _, _ = self.layout.owned(self.comm.rank)
+        own = (blk.d_rows >= q0) & (blk.d_rows < q1)
+        out = np.zeros(self.op.nrows)
+        out[:q1 - q0] = np.bincount(blk.d_rows[own] - q0, weights=blk.d_vals[own] * lam[blk.d_cols[own]],
+                                    minlength=q1 - q0)
+        return out
+
+    def free_rows(self) -> np.ndarray:
+        """Mask of this rank's primal rows that are not eliminated."""
+        q0, q1, _, _ = self.layout.owned(self.comm.rank)
+        mask = np.zeros(self.op.nrows, dtype=bool)
+        mask[:q1 - q0] = True
+        mask[self.op.elim_rows - self.offset] = False
+        return mask
 
     # ------------------------------------------------------------ back to fields
 
     def gather(self, x_owned: np.ndarray) -> np.ndarray:
         return np.concatenate(self.comm.allgather(x_owned))
 
-    def unpack(self, x_full: np.ndarray, t: float) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    def multipliers(self, x_full: np.ndarray) -> np.ndarray:
+        """Unscaled λ of every multiplied row from a full saddle vector."""
+        return x_full[self.saddle_of_mult] * self.block.col_scale if self.block.nrows else np.zeros(0)
+
+    def unpack(self, x_full: np.ndarray, t: float, f_int: np.ndarray | None = None
+               ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """Primal vector (input numbering) and unscaled multipliers of every relation."""
         q = x_full[self.saddle_of_input]
-        lam = x_full[self.saddle_of_mult] * self.block.col_scale if self.block.nrows else np.zeros(0)
+        lam = self.multipliers(x_full)
         out = {}
         for k, r in enumerate(self.multiplied):
             out[r.name] = lam[self.block.first_row[k]:self.block.first_row[k + 1]]
         if self.eliminated:
-            out.update(self._eliminated_multipliers(x_full, t))
+            out.update(self._eliminated_multipliers(x_full, t, f_int))
         return q, out
 
-    def _eliminated_multipliers(self, x_full: np.ndarray, t: float) -> dict[str, np.ndarray]:
-        """λ = (F - row of [K, -D] x) / a on each eliminated row (the row before zeroing)."""
+    def _eliminated_multipliers(self, x_full: np.ndarray, t: float,
+                                f_int: np.ndarray | None) -> dict[str, np.ndarray]:
+        """λ = (F - row of [K, -D] x) / a on each eliminated row (the row before zeroing); with
+        ``f_int`` (nonlinear) the stiffness part of the row is f_int instead of K q."""
         f_full = self.model.external_load(t)
-        row_vals = self.op.eliminated_rows(x_full)
+        if f_int is None:
+            row_vals = self.op.eliminated_rows(x_full)
+        else:  # x_full holds λ; the primal part of the row is the internal force
+            row_vals = self.to_owned(f_int) - self.reactions(self.multipliers(x_full))
         sad = self.saddle_of_input[self.elim_dofs]
         lam = np.zeros(self.elim_dofs.size)
         own = self.elim_own

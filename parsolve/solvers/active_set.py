@@ -1,0 +1,84 @@
+"""The active set of unilateral relations: which rows are enforced as equalities.
+
+Written once for every unilateral use (control by a maximum, contact, friction, solubility).
+A row of sign s (+1 for "<=", -1 for ">=") is admissible when s (A q - b) <= 0. An inactive
+row that is violated becomes active; an active row whose multiplier has the wrong sign
+(s λ < 0: the relation would pull instead of push) becomes inactive. Rows of a *maximum*
+relation work as a group: exactly one, the one with the largest s (A q - b), is enforced (the
+paper's "maximum of several controlled quantities"). A set that comes back after having been
+left is cycling: the update then changes one row at a time (the most violated), and gives up
+after a bounded number of changes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from parsolve.errors import SolverError
+from parsolve.relations import Relation
+
+
+class ActiveSet:
+    def __init__(self, relations: list[Relation], max_changes: int = 30):
+        sizes = [r.nrows for r in relations]
+        self.sign = np.concatenate([np.full(r.nrows, r.sign) for r in relations]) \
+            if relations else np.zeros(0, dtype=np.int64)
+        first = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        self.groups = [np.arange(first[k], first[k + 1]) for k, r in enumerate(relations) if r.maximum]
+        grouped = np.zeros(self.sign.size, dtype=bool)
+        for g in self.groups:
+            grouped[g] = True
+        self.free = (self.sign != 0) & ~grouped   # rows decided one by one
+        self.active = self.sign == 0              # equalities are always enforced
+        for g in self.groups:
+            self.active[g[0]] = True               # a maximum is always enforced somewhere
+        self.max_changes = max_changes
+        self.changes = 0
+        self.seen: set[bytes] = set()
+
+    @property
+    def unilateral(self) -> bool:
+        return bool(np.any(self.sign != 0))
+
+    def start_step(self) -> None:
+        self.changes = 0
+        self.seen = {self.active.tobytes()}
+
+    def update(self, gap: np.ndarray, lam: np.ndarray, tol_gap: float, tol_lam: float) -> bool:
+        """Update from the current A q - b (gap) and multipliers; True when the set changed."""
+        s = self.sign
+        new = self.active.copy()
+        violated = self.free & ~self.active & (s * gap > tol_gap)
+        wrong_sign = self.free & self.active & (s * lam < -tol_lam)
+        new[violated] = True
+        new[wrong_sign] = False
+        for g in self.groups:
+            value = s[g] * gap[g]
+            current = g[self.active[g]][0]
+            best = g[np.flatnonzero(value >= value.max() - tol_gap)[0]]  # ties: lowest row,
+            # whatever the round-off (and so the number of ranks)
+            if value.max() > s[current] * gap[current] + tol_gap:
+                new[g] = False
+                new[best] = True
+        if np.array_equal(new, self.active):
+            return False
+        if new.tobytes() in self.seen:  # cycling: change only the worst row
+            new = self._one_change(gap, lam, violated, wrong_sign)
+        self.changes += 1
+        if self.changes > self.max_changes:
+            raise SolverError(f"active set did not settle after {self.max_changes} changes "
+                              f"({int(self.active.sum())} active rows)")
+        self.active = new
+        self.seen.add(new.tobytes())
+        return True
+
+    def _one_change(self, gap, lam, violated, wrong_sign) -> np.ndarray:
+        s = self.sign
+        new = self.active.copy()
+        score = np.where(violated, s * gap, -np.inf)
+        score_l = np.where(wrong_sign, -s * lam, -np.inf)
+        if score.max() >= score_l.max() and np.isfinite(score.max()):
+            new[int(np.argmax(score))] = True
+        elif np.isfinite(score_l.max()):
+            new[int(np.argmax(score_l))] = False
+        return new

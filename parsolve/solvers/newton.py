@@ -1,0 +1,116 @@
+"""Newton iterations on the full saddle system, with the active set of unilateral relations.
+
+Unknowns per iteration: the increment Δq and the total multipliers λ,
+
+    [ K_t  -D ] [Δq]   [F + 0 - f_int(q)]
+    [ A     0 ] [λ ] = [b(t) - A q      ]      (inactive rows: λ = 0)
+
+so that a load intensity driven by a non-associated relation is an unknown like any other.
+The step has converged when the force residual F + D λ - f_int is small against the forces in
+play, the last increment is small, and the active set did not change.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from mpi4py import MPI
+
+from parsolve.errors import SolverError
+from parsolve.fem.kernels import cell_dofs
+from parsolve.scene import NonlinearSpec
+from parsolve.solvers.active_set import ActiveSet
+from parsolve.solvers.linear import LinearSolver
+from parsolve.solvers.system import SaddleSystem
+
+
+@dataclass
+class StepResult:
+    iterations: int
+    residual: float
+    f_int: np.ndarray
+
+
+class NewtonSolver:
+    """Carries the converged state (q, λ, material history) from step to step."""
+
+    def __init__(self, comm: MPI.Comm, system: SaddleSystem, linear: LinearSolver,
+                 spec: NonlinearSpec):
+        self.comm, self.system, self.linear, self.spec = comm, system, linear, spec
+        model = system.model
+        self.mech = model.elasticity
+        self.cells = system.local_cells
+        self.states = self.mech.init_state(self.cells)
+        self.active = ActiveSet(system.multiplied, spec.max_active_set_changes)
+        self.ndof = model.mesh.num_points * model.ncomp
+        self.q = np.zeros(self.ndof)
+        self.lam = np.zeros(system.layout.nl)
+        self.x_full = np.zeros(system.layout.size)
+        self.stress_qp = None
+        self._dofs = cell_dofs(model.mesh.cells[self.cells], model.ncomp).ravel()
+        self._mat = None
+
+    def _evaluate(self, q: np.ndarray):
+        u = q.reshape(-1, self.system.model.ncomp)
+        fe, kmat, trial, sig = self.mech.evaluate(self.cells, u, self.states,
+                                                   secant=self.spec.matrix == "secant")
+        f_int = np.bincount(self._dofs, weights=fe.ravel(), minlength=self.ndof)
+        return f_int, kmat, trial, sig
+
+    def _norm(self, v: np.ndarray) -> float:
+        return float(np.sqrt(self.comm.allreduce(float(v @ v))))
+
+    def step(self, t: float) -> StepResult:
+        system, spec = self.system, self.spec
+        free = system.free_rows()
+        self.active.start_step()
+        changed, dq_norm = True, np.inf
+        for it in range(spec.max_iterations + 1):
+            f_int, kmat, trial, sig = self._evaluate(self.q)
+            f_ext = system.to_owned(system.model.external_load(t)) + system.reactions(self.lam)
+            r = (f_ext - system.to_owned(f_int))[free]
+            ref = max(self._norm(f_ext[free]), self._norm(system.to_owned(f_int)[free]), 1e-300)
+            residual = self._norm(r) / ref
+            small_step = dq_norm <= spec.stol * max(float(np.abs(self.q).max()), 1e-300)
+            if it > 0 and not changed and (residual <= spec.rtol or small_step and residual < 1e-6):
+                self.states, self.stress_qp = trial, sig
+                return StepResult(it, residual, f_int)
+            if it == spec.max_iterations:
+                break
+            system.op.active = self.active.active
+            mat = system.assemble(kmat)
+            if self._mat is None:
+                self.linear.set_operator(mat)
+                self._mat = mat
+            x, rhs = self._vectors(mat)
+            rhs.array[:] = system.rhs(t, f_int=f_int, q=self.q)[0]
+            self.linear.solve(rhs, x)
+            x_full = system.gather(x.array)
+            dq = x_full[system.saddle_of_input]
+            dq_norm = float(np.abs(dq).max())
+            self.q = self.q + dq
+            self.lam = system.multipliers(x_full)
+            self.x_full = x_full
+            changed = self._update_active(t) if self.active.unilateral else False
+        raise SolverError(f"no convergence at t = {t:.6g} after {spec.max_iterations} iterations "
+                          f"(relative residual {residual:.1e})")
+
+    def _vectors(self, mat):
+        if not hasattr(self, "_xr"):
+            self._xr = mat.createVecs()
+        return self._xr
+
+    def _update_active(self, t: float) -> bool:
+        system = self.system
+        gap = system.primal_values(self.q) - np.concatenate([r.rhs(t) for r in system.multiplied])
+        scale_gap = max(float(np.abs(gap).max()), float(np.abs(system.primal_values(self.q)).max()),
+                        1e-300)
+        scale_lam = max(float(np.abs(self.lam).max()), 1e-300)
+        return self.active.update(gap, self.lam, 1e-9 * scale_gap, 1e-9 * scale_lam)
+
+    def multipliers(self, t: float, f_int: np.ndarray) -> dict[str, np.ndarray]:
+        """λ of every relation by name (eliminated ones recovered from their rows)."""
+        x = self.x_full.copy()
+        x[self.system.saddle_of_input] = self.q
+        return self.system.unpack(x, t, f_int=f_int)[1]
