@@ -26,6 +26,7 @@ class Model:
     elasticity: Elasticity
     patterns: dict[str, LoadPattern]
     relations: list[Relation]
+    reference_patterns: tuple[str, ...] = ()  # applied by a solver (arc-length), not as loads
 
     @property
     def ncomp(self) -> int:
@@ -33,7 +34,7 @@ class Model:
 
     def external_load(self, t: float) -> np.ndarray:
         """Known loads at t (input DOF numbering); patterns used as duals are not applied."""
-        duals = {r.meta.get("dual") for r in self.relations}
+        duals = {r.meta.get("dual") for r in self.relations} | set(self.reference_patterns)
         f = np.zeros(self.mesh.num_points * self.ncomp)
         for name, pattern in self.patterns.items():
             if name not in duals:
@@ -69,4 +70,5 @@ def build_model(scene: Scene) -> Model:
                              scene.source)
     relations = build_relations(scene.relations, regions, scene.evolutions, patterns, mesh.dim,
                                 scene.source, scene.solver.eliminate)
-    return Model(scene, mesh, elasticity, patterns, relations)
+    reference = (scene.nonlinear.arc_pattern,) if scene.nonlinear.method == "arc_length" else ()
+    return Model(scene, mesh, elasticity, patterns, relations, reference)

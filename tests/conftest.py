@@ -56,8 +56,10 @@ def run_scene(scene, out: Path, comm=MPI.COMM_WORLD, options: dict | None = None
         comm.Barrier()
         scene = src
     model = build_model(load_scene(scene))
-    run(comm, model, str(out), options or {}, export, log=lambda *a: None)
-    comm.Barrier()
+    try:
+        run(comm, model, str(out), options or {}, export, log=lambda *a: None)
+    finally:
+        comm.Barrier()  # rank 0 has closed the file, whatever happened
     return read_results(out)
 
 
@@ -70,7 +72,8 @@ def run(shared_tmp):
         name = name or f"result{next(counter)}"
         if comm is MPI.COMM_SELF:
             name += f"_self{MPI.COMM_WORLD.rank}"
-        return run_scene(scene, shared_tmp / f"{name}.h5", comm, **kw)
+        _run.last = shared_tmp / f"{name}.h5"
+        return run_scene(scene, _run.last, comm, **kw)
 
     return _run
 

@@ -76,4 +76,5 @@ def test_cantilever_p2_beats_p1(run):
     assert p2 < 0.015 and p1 > 0.3, (p1, p2)   # P1 tetrahedra lock in bending
 
 
-TESTED = ["controlled_bar.toml", "kirsch.toml", "cantilever_3d.toml"]
+TESTED = ["controlled_bar.toml", "kirsch.toml", "cantilever_3d.toml",
+          "localization_bar.toml", "plate_hole_control.toml", "two_controls.toml"]  # control: tests/solvers/test_control.py

@@ -65,9 +65,12 @@ class NewtonSolver:
         system, spec = self.system, self.spec
         free = system.free_rows()
         self.active.start_step()
-        changed, dq_norm = True, np.inf
+        changed, dq_norm, predictions = True, np.inf, 0
         for it in range(spec.max_iterations + 1):
             f_int, kmat, trial, sig = self._evaluate(self.q)
+            if it == 0 and self.active.groups:
+                self._predict_maximum_rows(t, kmat)
+                predictions = 1
             f_ext = system.to_owned(system.model.external_load(t)) + system.reactions(self.lam)
             r = (f_ext - system.to_owned(f_int))[free]
             ref = max(self._norm(f_ext[free]), self._norm(system.to_owned(f_int)[free]), 1e-300)
@@ -75,7 +78,7 @@ class NewtonSolver:
             small_step = dq_norm <= spec.stol * max(float(np.abs(self.q).max()), 1e-300)
             if it > 0 and not changed and (residual <= spec.rtol or small_step and residual < 1e-6):
                 self.states, self.stress_qp = trial, sig
-                return StepResult(it, residual, f_int)
+                return StepResult(it + predictions, residual, f_int)
             if it == spec.max_iterations:
                 break
             system.op.active = self.active.active
@@ -95,6 +98,42 @@ class NewtonSolver:
             changed = self._update_active(t) if self.active.unilateral else False
         raise SolverError(f"no convergence at t = {t:.6g} after {spec.max_iterations} iterations "
                           f"(relative residual {residual:.1e})")
+
+    def _predict_maximum_rows(self, t: float, kmat) -> None:
+        """For each maximum relation, enforce the row that reaches its value first under the
+        relation's own control load: one solve with the tangent and a unit control load, rates
+        r = A δq, then the smallest (b - A q) / r over rows with r > 0."""
+        system = self.system
+        active = self.active.active.copy()
+        for g in self.active.groups:
+            active[g] = False
+        system.op.active = active
+        mat = system.assemble(kmat)
+        if self._mat is None:
+            self.linear.set_operator(mat)
+            self._mat = mat
+        blk = system.block
+        f = np.zeros(self.ndof)
+        for g in self.active.groups:  # the control load of each group at unit intensity
+            first = int(np.searchsorted(blk.first_row, g[0], side="right") - 1)
+            dofs, rows, vals = system.multiplied[first].dual_coo()
+            np.add.at(f, dofs[rows == 0], vals[rows == 0])
+        x, rhs = self._vectors(mat)
+        rhs.array[:] = system.rhs_from(f, np.zeros(blk.nrows), np.zeros(system.elim_dofs.size))[0]
+        self.linear.solve(rhs, x)
+        dq = system.gather(x.array)[system.saddle_of_input]
+        rates = system.primal_values(dq)
+        gap = np.concatenate([r.rhs(t) for r in system.multiplied]) - system.primal_values(self.q)
+        for g in self.active.groups:
+            s = self.active.sign[g]
+            r, room = s * rates[g], s * gap[g]
+            tol = 1e-9 * max(float(np.abs(r).max()), 1e-300)
+            reach = np.where(r > tol, room / np.where(r > tol, r, 1.0), np.inf)
+            if np.isfinite(reach).any():
+                best = g[np.flatnonzero(reach <= reach.min() + 1e-9 * abs(reach.min()))[0]]
+                self.active.active[g] = False
+                self.active.active[best] = True
+        self.active.start_step()
 
     def _vectors(self, mat):
         if not hasattr(self, "_xr"):

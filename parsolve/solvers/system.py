@@ -121,18 +121,24 @@ class SaddleSystem:
         f_full = self.model.external_load(t)
         if f_int is not None:
             f_full = f_full - f_int
-        b = self.to_owned(f_full)
-        q0, q1, l0, l1 = self.layout.owned(self.comm.rank)
         target = self.block.rhs(t)
         if q is not None and self.block.nrows:
             target = target - self.primal_values(q) * self.block.row_scale
+        values = self.elim_values(t)
+        if q is not None and self.eliminated:
+            values = values - q[self.elim_dofs]
+        return self.rhs_from(f_full, target, values)
+
+    def rhs_from(self, f_full: np.ndarray, target: np.ndarray, elim_values: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+        """Right-hand side from a force vector (input numbering), scaled relation values of
+        every multiplied row, and values of the eliminated DOFs."""
+        b = self.to_owned(f_full)
+        q0, q1, l0, l1 = self.layout.owned(self.comm.rank)
         b[q1 - q0:] = (target * self.op.active)[l0:l1]
         x_e = np.zeros(self.layout.size)
         if self.eliminated:
-            values = self.elim_values(t)
-            if q is not None:
-                values = values - q[self.elim_dofs]
-            x_e[self.saddle_of_input[self.elim_dofs]] = values
+            x_e[self.saddle_of_input[self.elim_dofs]] = elim_values
             b -= self.op.lifting(x_e)
             b[self.op.elim_rows - self.offset] = self.kscale * x_e[self.op.elim_rows]
         return b, x_e

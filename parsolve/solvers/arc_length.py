@@ -1,0 +1,126 @@
+"""Baseline: Crisfield's cylindrical arc-length method with bordering (two back-substitutions
+per iteration), on the same saddle system (associated relations kept) and the same matrix
+choice as Newton, so the comparison with non-associated control is like for like.
+
+Unknowns: q and the load factor μ of a reference load pattern P:  f_int(q) = F + μ P, with
+the constraint ||q - q_n||² = Δl² on each step. The saved "time" of a step is μ.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from parsolve.errors import SolverError
+from parsolve.solvers.newton import NewtonSolver
+
+
+class ArcLength(NewtonSolver):
+    """Reuses the Newton machinery (state, evaluation, operator); only the step differs."""
+
+    def __init__(self, comm, system, linear, spec):
+        super().__init__(comm, system, linear, spec)
+        self.P = system.model.patterns[spec.arc_pattern].vector()
+        self.mu = 0.0
+        self.prev = None  # previous step's increment (q, μ), to keep going forward
+
+    def _solve(self, f_full: np.ndarray, target: np.ndarray, elim: np.ndarray, mat):
+        x, rhs = self._vectors(mat)
+        rhs.array[:] = self.system.rhs_from(f_full, target, elim)[0]
+        self.linear.solve(rhs, x)
+        x_full = self.system.gather(x.array)
+        return x_full[self.system.saddle_of_input], self.system.multipliers(x_full)
+
+    def step(self, t: float, cuts: int = 8):
+        """One arc step; on failure the arc is halved and retried from the last converged
+        state (standard step cutting, up to ``cuts`` times). Returns (iterations summed over
+        the tries, residual, f_int)."""
+        saved = (self.q.copy(), self.mu, self.lam.copy())
+        dl, spent = self.spec.arc_length, 0
+        for _ in range(cuts + 1):
+            try:
+                its, residual, f_int = self._step(t, dl)
+                return spent + its, residual, f_int
+            except SolverError as exc:
+                spent += getattr(exc, "iterations", self.spec.max_iterations)
+                self.q, self.mu, self.lam = saved[0].copy(), saved[1], saved[2].copy()
+                dl *= 0.5
+                last = exc
+        raise last
+
+    def _step(self, t: float, dl: float):
+        system, spec = self.system, self.spec
+        q0, mu0 = self.q.copy(), self.mu
+        blk = system.block
+        zero_t = np.zeros(blk.nrows)
+        zero_e = np.zeros(system.elim_dofs.size)
+        free = system.free_rows()
+        for it in range(spec.max_iterations + 1):
+            f_int, kmat, trial, sig = self._evaluate(self.q)
+            f_ext = system.to_owned(system.model.external_load(t) + self.mu * self.P) \
+                + system.reactions(self.lam)
+            r = (f_ext - system.to_owned(f_int))[free]
+            ref = max(self._norm(f_ext[free]), self._norm(system.to_owned(f_int)[free]), 1e-300)
+            residual = self._norm(r) / ref
+            if it > 0 and residual <= spec.rtol:
+                self.states, self.stress_qp = trial, sig
+                self.prev = (self.q - q0, self.mu - mu0)
+                return it, residual, f_int
+            if it == spec.max_iterations:
+                break
+            mat = system.assemble(kmat)
+            if self._mat is None:
+                self.linear.set_operator(mat)
+                self._mat = mat
+            # bordering: the response to the residual and to the reference load
+            target_r = (np.concatenate([x.rhs(t) for x in system.multiplied]) if system.multiplied
+                        else zero_t) - system.primal_values(self.q)
+            elim_r = system.elim_values(t) - self.q[system.elim_dofs] if system.eliminated else zero_e
+            f_r = system.model.external_load(t) + self.mu * self.P - f_int
+            dq_r, lam_r = self._solve(f_r, target_r * blk.row_scale if blk.nrows else zero_t, elim_r, mat)
+            dq_p, lam_p = self._solve(self.P, zero_t, zero_e, mat)
+            try:
+                dmu = self._root(self.q - q0 + dq_r, dq_p, dl, it == 0)
+            except SolverError as exc:
+                exc.iterations = it + 1
+                raise
+            self.q = self.q + dq_r + dmu * dq_p
+            self.mu += dmu
+            self.lam = lam_r + dmu * lam_p
+        raise SolverError(f"arc-length: no convergence at step (load factor {self.mu:.6g}) after "
+                          f"{spec.max_iterations} iterations (relative residual {residual:.1e})")
+
+    def _root(self, a: np.ndarray, b: np.ndarray, dl: float, predictor: bool) -> float:
+        """dμ with ||a + dμ b|| = dl, the root that keeps going forward (Crisfield)."""
+        if predictor:
+            dmu = dl / max(float(np.linalg.norm(b)), 1e-300)
+            if self.prev is not None and float(self.prev[0] @ b) < 0:
+                dmu = -dmu  # past a limit point the load decreases
+            return dmu
+        A, B, C = b @ b, 2 * a @ b, a @ a - dl * dl
+        disc = B * B - 4 * A * C
+        if disc < 0:
+            raise SolverError("arc-length: no intersection with the arc (complex roots)")
+        roots = [(-B + s * np.sqrt(disc)) / (2 * A) for s in (1.0, -1.0)]
+        ref = self.prev[0] if self.prev is not None else b
+        return max(roots, key=lambda m: float((a + m * b) @ ref))
+
+
+def run_arc_length(comm, system, cli_options, writer, log) -> None:
+    from parsolve.driver import _outputs, _progress, make_solver
+
+    scene = system.model.scene
+    system.assemble()
+    solver = ArcLength(comm, system, make_solver(comm, system, cli_options), scene.nonlinear)
+    nsteps = len(scene.times)
+    for step in range(nsteps):
+        t1 = time.perf_counter()
+        iterations, residual, f_int = solver.step(scene.times[step])
+        seconds = time.perf_counter() - t1
+        multipliers = solver.multipliers(scene.times[step], f_int)
+        fields, cell_fields, rel_out = _outputs(comm, system, solver.q, multipliers, solver)
+        writer.write_step(solver.mu, iterations, residual, fields, cell_fields, rel_out,
+                          {"assembly": 0.0, "solve": seconds, "total": seconds})
+        _progress(log, comm, step + 1, nsteps, solver.mu, iterations, residual, seconds,
+                  "  (t = load factor)")

@@ -1,0 +1,136 @@
+"""Control ("pilotage") through non-associated relations, against closed forms and baselines."""
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from conftest import CONFIGS, rel_err
+from parsolve.errors import InputError, SolverError
+
+BAR = (CONFIGS / "localization_bar.toml").read_text()
+E, H, L, N = 1e9, 0.1, 1.0, 29
+
+
+def closed_form(eps_d: np.ndarray):
+    """1D localization bar: the damaged column at strain ε_d sets the stress, the rest unloads
+    elastically. Mazars with At = 1 in uniaxial tension (ν = 0): D = 1 - exp(-Bt (κ - εd0))."""
+    kappa = np.maximum.accumulate(np.maximum(eps_d, 1e-4))
+    sigma = E * eps_d * np.exp(-1e4 * (kappa - 1e-4))
+    force = sigma * H
+    delta = eps_d * L / N + sigma / E * L * (N - 1) / N
+    return delta, force
+
+
+def end_delta(res):
+    pts = res["mesh/points"]
+    return res["fields/displacement"][:, np.isclose(pts[:, 0], L), 0].mean(axis=1)
+
+
+def without_control(text: str) -> str:
+    i = text.index('[[relations]]\nname = "max_strain"')
+    return text[:i] + text[text.index("[steps]"):]
+
+
+def test_localization_bar_closed_form(run):
+    res = run(CONFIGS / "localization_bar.toml", name="bar")
+    assert res["attrs"]["status"] == "complete"
+    eps_d = 5e-5 * np.arange(1, 25)
+    delta, force = closed_form(eps_d)
+    assert np.all(np.diff(delta)[2:10] < 0)  # the snap-back
+    lam = res["relations/max_strain/multiplier"]
+    active = res["relations/max_strain/active"]
+    assert np.all(active.sum(axis=1) == 1)  # exactly one enforced row per step
+    np.testing.assert_allclose(lam.sum(axis=1), force, rtol=1e-6)
+    np.testing.assert_allclose(end_delta(res), delta, rtol=1e-6)
+    # past the peak, the enforced row is an element of the damaged column
+    middle = np.abs(res["mesh/points"][res["mesh/cells/quad"]].mean(axis=1)[:, 0] - 14.5 / 29) < 1e-9
+    assert np.all(middle[np.argmax(active[3:], axis=1)])
+    np.testing.assert_allclose(res["cell_fields/damage"][-1][middle],
+                               1 - np.exp(-1e4 * (1.2e-3 - 1e-4)), rtol=1e-6)
+
+
+def test_load_control_stops_at_the_peak(run):
+    text = without_control(BAR).replace("total_force = [1.0, 0.0]", "total_force = [1.2e4, 0.0]")
+    with pytest.raises(SolverError):
+        run(text, name="bar_load")
+    from conftest import read_results
+
+    res = read_results(run.last)
+    assert res["attrs"]["status"].startswith("failed")
+    force = 1.2e4 * res["steps/time"]
+    assert len(force) == 20 and force.max() <= 1e4 + 1e-6  # every step below the peak kept
+    np.testing.assert_allclose(end_delta(res), force / (E * H), rtol=1e-9)  # elastic until then
+
+
+def test_displacement_control_stops_at_the_snap_back(run):
+    text = without_control(BAR).replace('[[loads]]\nname = "pull"\nregion = "right"\n'
+                                        'total_force = [1.0, 0.0]\n', "")
+    text = text.replace("[regions]\n", "[regions]\nend = { point = [1.0, 0.0] }\n") + """
+[[relations]]
+name = "end_displacement"
+type = "dirichlet"
+region = "end"
+components = ["x"]
+value = 2.4e-4
+"""
+    with pytest.raises(SolverError):
+        run(text, name="bar_disp")
+    from conftest import read_results
+
+    res = read_results(run.last)
+    delta = end_delta(res)
+    assert len(delta) == 10 and delta.max() <= 1e-4 + 1e-12  # the peak displacement, no further
+
+
+def test_plate_with_hole_passes_the_peak(run):
+    res = run(CONFIGS / "plate_hole_control.toml", name="plate")
+    assert res["attrs"]["status"] == "complete"
+    force = res["relations/max_strain/multiplier"].sum(axis=1)
+    peak = int(np.argmax(force))
+    assert 0 < peak < len(force) - 5 and force[-1] < 0.95 * force[peak]
+    assert res["cell_fields/damage"][-1].max() > 0.99
+    assert np.all(res["steps/residual"] < 1e-8)
+
+
+def test_two_controls_against_compliance(run):
+    """λ solves C λ = targets, C the 2 × 2 compliance of the two patterns (independent runs)."""
+    text = (CONFIGS / "two_controls.toml").read_text()
+    res = run(CONFIGS / "two_controls.toml", name="two")
+    i = text.index('[[relations]]\nname = "stretch"')
+    base = text[:i] + text[text.index("[evolutions.up_down]"):]
+    C = np.zeros((2, 2))
+    for j, pattern in enumerate(("axial", "transverse")):
+        other = "transverse" if pattern == "axial" else "axial"
+        unit = base.replace(f'name = "{other}"', f'name = "{other}"\nevolution = "zero"') + \
+            '\n[evolutions.zero]\ntimes = [0.0]\nvalues = [0.0]\n'
+        r = run(unit.replace("count = 4", "times = [1.0]"), name=f"unit_{pattern}")
+        pts = r["mesh/points"]
+        right = np.isclose(pts[:, 0], 2.0)
+        C[:, j] = r["fields/displacement"][-1][right].mean(axis=0)
+    t = res["steps/time"]
+    targets = np.column_stack([1e-4 * t, 2e-3 * np.interp(t, [0, 0.5, 1], [0, 1, 0.5])])
+    lam = np.column_stack([res["relations/stretch/multiplier"][:, 0],
+                           res["relations/deflection/multiplier"][:, 0]])
+    np.testing.assert_allclose(lam, np.linalg.solve(C, targets.T).T, rtol=1e-9)
+
+
+BAD = {
+    "maximum over a zone without cells": (
+        BAR.replace('region = "all"\ncomponent = "xx"', 'region = "corner"\ncomponent = "xx"'),
+        "relations[3].region"),
+    "maximum over an empty zone": (
+        BAR.replace('middle = "x > 14/29 and x < 15/29"', 'middle = "x > 14/29 and x < 15/29"\n'
+                    'nowhere = "x > 5"').replace('region = "all"\ncomponent = "xx"',
+                                                 'region = "nowhere"\ncomponent = "xx"'),
+        "regions.nowhere"),
+    "non-positive step": (BAR.replace("count = 24", "count = 0"), "steps.count"),
+    "equality maximum": (BAR.replace('sense = "<="', 'sense = "="'), "relations[3].maximum"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_bad_control_input(case, run):
+    text, key = BAD[case]
+    with pytest.raises(InputError) as err:
+        run(text, name="bad")
+    assert key in str(err.value)
