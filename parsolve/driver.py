@@ -138,48 +138,68 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log) -> None:
     solver = make_solver(comm, system, cli_options)
     newton = NewtonSolver(comm, system, solver, scene.nonlinear)
     schedule = StepSchedule(scene)
-    for step, t in enumerate(schedule):
+    step = 0
+    while (t := schedule.next()) is not None:
         t1 = time.perf_counter()
-        q_old = newton.q.copy()
-        result = newton.step(t)
+        snap = newton.snapshot()
+        try:
+            result = newton.step(t)
+        except SolverError as exc:
+            newton.restore(snap)
+            if not schedule.cut(exc):
+                raise
+            if comm.rank == 0:
+                log(f"step at t={t:.6g} failed ({exc}); retrying with half the step")
+            continue
+        step += 1
         seconds = time.perf_counter() - t1
         multipliers = newton.multipliers(t, result.f_int)
         fields, cell_fields, rel_out = _outputs(comm, system, newton.q, multipliers, newton)
         writer.write_step(t, result.iterations, result.residual, fields, cell_fields, rel_out,
                           {"assembly": system.timings.get("assembly", 0.0), "solve": seconds,
                            "total": seconds})
-        schedule.feedback(_max_strain_increment(comm, system, newton.q - q_old))
-        _progress(log, comm, step + 1, schedule.total, t, result.iterations, result.residual, seconds)
+        schedule.done(t, _max_strain_increment(comm, system, newton.q - snap[0]))
+        _progress(log, comm, step, schedule.total, t, result.iterations, result.residual, seconds)
 
 
 class StepSchedule:
     """The scene's load parameters, or automatic steps that keep the largest strain increment
-    near a target (Cast3M's AUTOMATIQUE): the next step is scaled by target / achieved,
-    within [1/2, 2]."""
+    near a target (Cast3M's AUTOMATIQUE): the next step is scaled by target / achieved, within
+    [1/2, 2], and a failed step is retried with half its size (up to 6 times in a row)."""
+
+    MAX_CUTS = 6
 
     def __init__(self, scene):
         self.spec = scene.steps
         self.times = list(scene.times)
+        self.t, self.dt, self.count, self.cuts = 0.0, self.times[0], 0, 0
 
     @property
     def total(self):
         return "?" if self.spec.automatic else len(self.times)
 
-    def __iter__(self):
+    def next(self) -> float | None:
         if not self.spec.automatic:
-            yield from self.times
-            return
-        t, dt, count = 0.0, self.times[0], 0
-        while t < self.spec.end * (1 - 1e-12) and count < self.spec.max_steps:
-            t = min(t + dt, self.spec.end)
-            self._achieved = None
-            yield t
-            count += 1
-            if self._achieved:
-                dt *= min(2.0, max(0.5, self.spec.strain_increment / self._achieved))
+            return self.times[self.count] if self.count < len(self.times) else None
+        if self.t >= self.spec.end * (1 - 1e-12) or self.count >= self.spec.max_steps:
+            return None
+        return min(self.t + self.dt, self.spec.end)
 
-    def feedback(self, max_strain_increment: float) -> None:
-        self._achieved = max_strain_increment
+    def done(self, t: float, max_strain_increment: float) -> None:
+        self.count += 1
+        self.cuts = 0
+        if self.spec.automatic:
+            self.t = t
+            if max_strain_increment > 0:
+                self.dt *= min(2.0, max(0.5, self.spec.strain_increment / max_strain_increment))
+
+    def cut(self, exc: Exception) -> bool:
+        """Halve the step after a failure; False when fixed steps or too many cuts."""
+        if not self.spec.automatic or self.cuts >= self.MAX_CUTS:
+            return False
+        self.cuts += 1
+        self.dt *= 0.5
+        return True
 
 
 def _max_strain_increment(comm, system: SaddleSystem, dq: np.ndarray) -> float:

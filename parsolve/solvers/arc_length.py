@@ -61,7 +61,8 @@ class ArcLength(NewtonSolver):
             f_ext = system.to_owned(system.model.external_load(t) + self.mu * self.P) \
                 + system.reactions(self.lam)
             r = (f_ext - system.to_owned(f_int))[free]
-            ref = max(self._norm(f_ext[free]), self._norm(system.to_owned(f_int)[free]), 1e-300)
+            # the forces in play, reactions of eliminated DOFs included
+            ref = max(self._norm(f_ext[free]), self._norm(system.to_owned(f_int)), 1e-300)
             residual = self._norm(r) / ref
             if it > 0 and residual <= spec.rtol:
                 self.states, self.stress_qp = trial, sig

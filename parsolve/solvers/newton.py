@@ -51,6 +51,16 @@ class NewtonSolver:
         self._dofs = cell_dofs(model.mesh.cells[self.cells], model.ncomp).ravel()
         self._mat = None
 
+    def snapshot(self) -> tuple:
+        """The converged state, to come back to when a trial step fails."""
+        return (self.q.copy(), self.lam.copy(), self.x_full.copy(), self.states,
+                self.active.active.copy(), self.stress_qp)
+
+    def restore(self, snap: tuple) -> None:
+        self.q, self.lam, self.x_full, self.states, active, self.stress_qp = \
+            (snap[0].copy(), snap[1].copy(), snap[2].copy(), snap[3], snap[4].copy(), snap[5])
+        self.active.active = active
+
     def _evaluate(self, q: np.ndarray):
         u = q.reshape(-1, self.system.model.ncomp)
         fe, kmat, trial, sig = self.mech.evaluate(self.cells, u, self.states,
@@ -73,7 +83,8 @@ class NewtonSolver:
                 predictions = 1
             f_ext = system.to_owned(system.model.external_load(t)) + system.reactions(self.lam)
             r = (f_ext - system.to_owned(f_int))[free]
-            ref = max(self._norm(f_ext[free]), self._norm(system.to_owned(f_int)[free]), 1e-300)
+            # the forces in play, reactions of eliminated DOFs included
+            ref = max(self._norm(f_ext[free]), self._norm(system.to_owned(f_int)), 1e-300)
             residual = self._norm(r) / ref
             small_step = dq_norm <= spec.stol * max(float(np.abs(self.q).max()), 1e-300)
             if it > 0 and not changed and (residual <= spec.rtol or small_step and residual < 1e-6):

@@ -134,3 +134,69 @@ def test_bad_control_input(case, run):
     with pytest.raises(InputError) as err:
         run(text, name="bad")
     assert key in str(err.value)
+
+
+VON_MISES = """
+[mesh]
+generator = "box"
+lx = 1.0
+ly = 0.2
+nz = 2
+lz = 0.2
+nx = 5
+ny = 2
+cell = "hexahedron"
+[model]
+hypothesis = "3d"
+[[materials]]
+model = "von_mises"
+E = 200e3
+nu = 0.3
+sigma_y = 250.0
+H = 2e3
+[[relations]]
+name = "sym_x"
+type = "dirichlet"
+region = "xmin"
+components = ["x"]
+[[relations]]
+name = "sym_y"
+type = "dirichlet"
+region = "ymin"
+components = ["y"]
+[[relations]]
+name = "sym_z"
+type = "dirichlet"
+region = "zmin"
+components = ["z"]
+[[relations]]
+name = "pull"
+type = "dirichlet"
+region = "xmax"
+components = ["x"]
+value = 4e-3
+[steps]
+count = 8
+"""
+
+
+def test_von_mises_bar_follows_the_bilinear_curve(run):
+    """Uniaxial tension with free contraction: σ = E ε, then σ_y + E H/(E + H) (ε - σ_y/E);
+    the consistent tangent converges in two iterations once plastic."""
+    res = run(VON_MISES, name="vm")
+    eps = 4e-3 * res["steps/time"]
+    Et = 200e3 * 2e3 / (200e3 + 2e3)
+    sigma = np.where(eps < 250 / 200e3, 200e3 * eps, 250 + Et * (eps - 250 / 200e3))
+    force = res["relations/sym_x/multiplier"].sum(axis=1)  # λ = minus the reaction (at x = 0: -F)
+    np.testing.assert_allclose(force, sigma * 0.2 * 0.2, rtol=1e-8)
+    assert res["steps/iterations"].max() <= 3
+    np.testing.assert_allclose(res["cell_fields/stress"][-1][:, 0], sigma[-1], rtol=1e-8)
+
+
+def test_automatic_steps_keep_the_strain_increment_near_the_target(run):
+    text = (CONFIGS / "plate_hole_control.toml").read_text().replace(
+        "count = 30", "count = 30\nautomatic = { strain_increment = 8e-5, max_steps = 60 }")
+    res = run(text, name="plate_auto")
+    t = res["steps/time"]
+    assert res["attrs"]["status"] == "complete" and t[-1] == pytest.approx(1.0)
+    assert len(t) < 30  # larger steps than the fixed 4e-5 per step where it is safe
