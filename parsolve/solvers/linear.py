@@ -95,7 +95,8 @@ class LinearSolver:
         if residual > self.residual_limit:
             raise SolverError(f"linear solve inaccurate: true relative residual {residual:.1e} "
                               f"(limit {self.residual_limit:.0e}); the system is singular or "
-                              "nearly so (a body not held, or dependent relations)")
+                              "nearly so (a body not held, dependent relations, or a tangent "
+                              "that lost its stiffness)")
         self.residual = residual
         return self.ksp.getIterationNumber()
 

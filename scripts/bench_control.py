@@ -1,0 +1,209 @@
+"""Benchmark: non-associated control against the classical schemes (issue: control).
+
+On the localization bar (severe snap-back) and the plate with a hole (softening past a peak):
+  control       parsolve's non-associated maximum-strain control (the shipped scenes)
+  arc_length    Crisfield's cylindrical arc-length, bordering, with step cutting, same
+                matrix choice (secant / tangent) as the control run
+  load          load control (the control pattern ramped to 1.2 × the peak load)
+  displacement  displacement control of the loaded edge
+For each: steps completed, global iterations (total and per step), time, and where it stopped.
+Writes bench_results/control.json, scripts/results/bench_control.md and
+scripts/results/bench_control.png (load-displacement curves; needs matplotlib:
+apt-get install python3-matplotlib).
+
+    .venv/bin/python scripts/bench_control.py
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+from mpi4py import MPI
+
+from parsolve.driver import run
+from parsolve.errors import SolverError
+from parsolve.model import build_model
+from parsolve.scene import load_scene
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "bench_results"
+CASES = {
+    "localization_bar": dict(scene="localization_bar.toml", edge=1.0, pattern="pull",
+                             control="max_strain", arc=6e-5, arc_steps=60, peak_factor=1.2,
+                             disp_end=2.4e-4, point=(1.0, 0.0)),
+    "plate_with_hole": dict(scene="plate_hole_control.toml", edge=4.0, pattern="tension",
+                            control="max_strain", arc=1.5e-4, arc_steps=40, peak_factor=1.2,
+                            disp_end=4e-4, point=(4.0, 0.0)),
+}
+
+
+def strip_control(text: str, name: str) -> str:
+    i = text.index(f'[[relations]]\nname = "{name}"')
+    j = text.index("[[relations]]", i + 1) if "[[relations]]" in text[i + 1:] else text.index("[steps]")
+    return text[:i] + text[j:]
+
+
+def variants(case: dict, peak: float) -> dict[str, str]:
+    text = (ROOT / "configs" / case["scene"]).read_text()
+    base = strip_control(text, case["control"])
+    nl = "[nonlinear]\n"
+    arc = base.replace(nl, nl + f'method = "arc_length"\narc_length = {{ pattern = "{case["pattern"]}", '
+                           f'length = {case["arc"]} }}\n')
+    arc = arc.replace("count = 24", f"count = {case['arc_steps']}").replace(
+        "count = 30", f"count = {case['arc_steps']}")
+    load = base.replace("total_force = [1.0, 0.0]", f"total_force = [{case['peak_factor'] * peak}, 0.0]")
+    disp = base.replace(f'[[loads]]\nname = "{case["pattern"]}"\nregion = "right"\ntotal_force = [1.0, 0.0]\n', "")
+    x, y = case["point"]
+    if "[regions]" not in disp:
+        disp = disp.replace("[[materials]]", "[regions]\n\n[[materials]]", 1)
+    disp = disp.replace("[regions]\n", f"[regions]\nbench_end = {{ point = [{x}, {y}] }}\n")
+    disp += f"""
+[[relations]]
+name = "end_rigid"
+type = "equal"
+region = "right"
+component = "x"
+
+[[relations]]
+name = "end_displacement"
+type = "dirichlet"
+region = "bench_end"
+components = ["x"]
+value = {case['disp_end']}
+"""
+    if "right_rigid" in disp:  # the bar already ties its right end
+        disp = strip_control(disp, "end_rigid")
+    return {"control": text, "arc_length": arc, "load": load, "displacement": disp}
+
+
+def curve(path: Path, case: dict, method: str):
+    with h5py.File(path) as f:
+        pts = f["mesh/points"][()]
+        u = f["fields/displacement"][()]
+        delta = u[:, np.isclose(pts[:, 0], case["edge"]), 0].mean(axis=1) if len(u) else np.zeros(0)
+        t = f["steps/time"][()]
+        if method == "control":
+            force = f[f"relations/{case['control']}/multiplier"][()].sum(axis=1)
+        elif method == "arc_length":
+            force = t
+        elif method == "load":
+            force = t * case["peak_factor"] * case["peak"]
+        else:
+            force = f["relations/end_displacement/multiplier"][()].sum(axis=1) \
+                + (f["relations/end_rigid/multiplier"][()].sum(axis=1) * 0 if "relations/end_rigid" in f else 0)
+            force = -_edge_reaction(f, case)
+        return delta, force, f["steps/iterations"][()], f.attrs["status"]
+
+
+def _edge_reaction(f, case) -> np.ndarray:
+    """Load carried by the controlled edge: minus the reaction of the left support."""
+    for name in ("left_x", "symmetry_x"):
+        if f"relations/{name}" in f:
+            return -f[f"relations/{name}/multiplier"][()].sum(axis=1)
+    raise KeyError("no support relation")
+
+
+def with_matrix(text: str, matrix: str) -> str:
+    lines = [ln for ln in text.splitlines() if not ln.startswith("matrix =")
+             and not ln.startswith("max_iterations =")]
+    text = "\n".join(lines) + "\n"
+    return text.replace("[nonlinear]\n", f'[nonlinear]\nmatrix = "{matrix}"\nmax_iterations = 100\n')
+
+
+def run_case(name: str, case: dict) -> list[dict]:
+    """Every method with both matrices (consistent tangent, secant), so each baseline is shown
+    at its best."""
+    rows = []
+    text = (ROOT / "configs" / case["scene"]).read_text()
+    shipped = "secant" if 'matrix = "secant"' in text else "tangent"
+    path = OUT / f"control_{name}_control_{shipped}.h5"
+    first = _run(text, path)
+    d, F, its, status = curve(path, case, "control")
+    case["peak"] = float(F.max())
+    for matrix in ("tangent", "secant"):
+        for method, scene in variants(case, case["peak"]).items():
+            path = OUT / f"control_{name}_{method}_{matrix}.h5"
+            seconds = _run(with_matrix(scene, matrix), path)
+            d, F, its, status = curve(path, case, method)
+            rows.append(_row(name, method, seconds, d, F, its, status) | {"matrix": matrix})
+    return rows
+
+
+def _run(text: str, path: Path) -> float:
+    src = path.with_suffix(".toml")
+    src.write_text(text)
+    model = build_model(load_scene(src))
+    t0 = time.perf_counter()
+    try:
+        run(MPI.COMM_WORLD, model, str(path), {}, log=lambda *a: None)
+    except SolverError:
+        pass
+    return time.perf_counter() - t0
+
+
+def _row(case, method, seconds, d, F, its, status) -> dict:
+    peak = int(np.argmax(F)) if len(F) else -1
+    past_peak = bool(len(F) and peak < len(F) - 1 and F[-1] < 0.99 * F[peak])
+    snap_back = bool(len(d) > 1 and np.any(np.diff(d[peak:]) < -1e-12)) if peak >= 0 else False
+    return dict(case=case, method=method, status=str(status), steps=int(len(F)),
+                iterations=int(its.sum()), per_step=float(its.mean()) if len(its) else 0.0,
+                seconds=seconds, peak_load=float(F.max()) if len(F) else 0.0,
+                past_peak=past_peak, snap_back_traced=snap_back,
+                last_delta=float(d[-1]) if len(d) else 0.0, last_load=float(F[-1]) if len(F) else 0.0,
+                curve=[d.tolist(), F.tolist()])
+
+
+def table(rows: list[dict]) -> str:
+    head = ("| case | method | matrix | status | steps | global iterations | per step | time (s) | "
+            "peak load | past the peak | snap-back traced |\n|---|---|---|---|---|---|---|---|---|---|---|\n")
+    lines = [f"| {r['case']} | {r['method']} | {r['matrix']} | {r['status'][:60]} | {r['steps']} | {r['iterations']} | "
+             f"{r['per_step']:.2f} | {r['seconds']:.2f} | {r['peak_load']:.4g} | "
+             f"{'yes' if r['past_peak'] else 'no'} | {'yes' if r['snap_back_traced'] else 'no'} |"
+             for r in rows]
+    return head + "\n".join(lines) + "\n"
+
+
+def picture(rows: list[dict], path: Path) -> None:
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        print("matplotlib missing (apt-get install python3-matplotlib): no picture")
+        return
+    cases = sorted({r["case"] for r in rows})
+    fig, axes = plt.subplots(1, len(cases), figsize=(6 * len(cases), 4.5))
+    for ax, case in zip(np.atleast_1d(axes), cases):
+        for r in rows:
+            if r["case"] == case and r["curve"][0]:
+                style = "-o" if r["method"] == "control" else "--x"
+                ax.plot(r["curve"][0], r["curve"][1], style, ms=3,
+                        label=f"{r['method']}, {r['matrix']} ({r['status'].split(':')[0]})")
+        ax.set_title(case)
+        ax.set_xlabel("end displacement")
+        ax.set_ylabel("load")
+        ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def main() -> None:
+    OUT.mkdir(exist_ok=True)
+    rows = []
+    for name, case in CASES.items():
+        rows += run_case(name, dict(case))
+    text = table(rows)
+    print(text)
+    (OUT / "control.json").write_text(json.dumps(rows, indent=1))
+    results = ROOT / "scripts" / "results"
+    results.mkdir(exist_ok=True)
+    (results / "bench_control.md").write_text("# Control benchmark\n\n" + text)
+    picture(rows, results / "bench_control.png")
+
+
+if __name__ == "__main__":
+    main()
