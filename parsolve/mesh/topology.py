@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from parsolve.errors import InputError
+from parsolve.fem.elements import element, quadrature
 from parsolve.mesh.mesh import CELL_INFO, Mesh
 
 FACETS: dict[str, list[tuple[int, ...]]] = {
@@ -208,89 +209,20 @@ def match_facets(
 # --------------------------------------------------------------------------------------
 
 
-def _gauss01(n: int) -> tuple[np.ndarray, np.ndarray]:
-    x, w = np.polynomial.legendre.leggauss(n)
-    return 0.5 * (x + 1.0), 0.5 * w
-
-
-def quadrature(cell_type: str, n: int = 3) -> tuple[np.ndarray, np.ndarray]:
-    """Reference points (nq, dim) and weights (nq,) with ``n`` Gauss points per direction.
-
-    Reference cells: simplices with vertices at 0 and the unit vectors, quad/hex on
-    [-1, 1]^d. Simplices use the collapsed (Duffy) product rule, exact for degree 2n-2
-    or more, which is all that geometry checks need.
-    """
-    dim = CELL_INFO[cell_type][0]
-    u, wu = _gauss01(n)
-    if cell_type in ("quad", "hexahedron"):
-        x, w = np.polynomial.legendre.leggauss(n)
-        grids = np.meshgrid(*([x] * dim), indexing="ij")
-        wgrids = np.meshgrid(*([w] * dim), indexing="ij")
-        pts = np.stack([g.ravel() for g in grids], axis=1)
-        return pts, np.prod([g.ravel() for g in wgrids], axis=0)
-    if dim == 2:
-        a, b = (g.ravel() for g in np.meshgrid(u, u, indexing="ij"))
-        wa, wb = (g.ravel() for g in np.meshgrid(wu, wu, indexing="ij"))
-        return np.stack([a, b * (1 - a)], axis=1), wa * wb * (1 - a)
-    a, b, c = (g.ravel() for g in np.meshgrid(u, u, u, indexing="ij"))
-    wa, wb, wc = (g.ravel() for g in np.meshgrid(wu, wu, wu, indexing="ij"))
-    pts = np.stack([a, b * (1 - a), c * (1 - a) * (1 - b)], axis=1)
-    return pts, wa * wb * wc * (1 - a) ** 2 * (1 - b)
-
-
-# edges of the quadratic simplices, in the order of their midside nodes
-_P2_EDGES = {
-    "triangle6": [(0, 1), (1, 2), (2, 0)],
-    "tetra10": [(0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3)],
-}
-
-
-def shape_gradients(cell_type: str, xi: np.ndarray) -> np.ndarray:
-    """Reference gradients of the geometric shape functions: (nq, nodes, dim)."""
-    xi = np.atleast_2d(np.asarray(xi, dtype=float))
-    nq, dim = xi.shape
-    if cell_type in ("quad", "hexahedron"):
-        # corners of [-1, 1]^d in VTK order
-        if dim == 2:
-            sgn = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], dtype=float)
-        else:
-            base = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], dtype=float)
-            sgn = np.vstack(
-                [np.column_stack([base, -np.ones(4)]), np.column_stack([base, np.ones(4)])]
-            )
-        fac = 1.0 + xi[:, None, :] * sgn[None, :, :]  # (nq, nn, dim)
-        grads = np.empty_like(fac)
-        for d in range(dim):
-            others = np.prod(np.delete(fac, d, axis=2), axis=2)
-            grads[:, :, d] = sgn[None, :, d] * others
-        return grads / 2.0**dim
-    # simplices: barycentric coordinates and their (constant) gradients
-    lam = np.column_stack([1.0 - xi.sum(axis=1), xi])  # (nq, dim+1)
-    dlam = np.vstack([-np.ones(dim), np.eye(dim)])  # (dim+1, dim)
-    if cell_type in ("triangle", "tetra"):
-        return np.broadcast_to(dlam, (nq, dim + 1, dim)).copy()
-    verts = (4.0 * lam - 1.0)[:, :, None] * dlam[None, :, :]
-    mids = [
-        4.0 * (lam[:, a, None] * dlam[None, b] + lam[:, b, None] * dlam[None, a])
-        for a, b in _P2_EDGES[cell_type]
-    ]
-    return np.concatenate([verts, np.stack(mids, axis=1)], axis=1)
-
-
 def jacobian_dets(
     points: np.ndarray, cell_type: str, cells: np.ndarray, xi: np.ndarray | None = None
 ) -> np.ndarray:
     """Jacobian determinants (ncells, nq) at reference points (default: quadrature points)."""
     if xi is None:
-        xi = quadrature(cell_type)[0]
-    g = shape_gradients(cell_type, xi)
+        xi = quadrature(cell_type, 4)[0]
+    g = element(cell_type).grad_shape(xi)
     jac = np.einsum("cia,qib->cqab", points[cells], g, optimize=True)
     return np.linalg.det(jac)
 
 
 def cell_measures(mesh: Mesh) -> np.ndarray:
     """Signed area/volume of every cell (exact for the supported geometries)."""
-    xi, w = quadrature(mesh.cell_type)
+    xi, w = quadrature(mesh.cell_type, 4)  # exact for the geometries generated here
     return jacobian_dets(mesh.points, mesh.cell_type, mesh.cells, xi) @ w
 
 
@@ -298,7 +230,7 @@ def orient_cells(
     points: np.ndarray, cell_type: str, cells: np.ndarray
 ) -> tuple[np.ndarray, int]:
     """Reorder the nodes of negatively oriented cells; returns (cells, number flipped)."""
-    xi, w = quadrature(cell_type, 2)
+    xi, w = quadrature(cell_type, 3)
     vol = jacobian_dets(points, cell_type, cells, xi) @ w
     neg = vol < 0
     n = int(np.count_nonzero(neg))
