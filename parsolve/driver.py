@@ -211,7 +211,7 @@ def _max_strain_increment(comm, system: SaddleSystem, dq: np.ndarray) -> float:
     from parsolve.fem.kernels import strains
 
     eps = strains(geo.strain_operator(), dq.reshape(mesh.num_points, -1)[mesh.cells[owned]]
-                  .reshape(len(owned), -1))
+                  .reshape(len(owned), mesh.cells.shape[1] * mesh.dim))
     return comm.allreduce(float(np.abs(eps).max()), op=MPI.MAX)
 
 

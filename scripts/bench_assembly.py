@@ -170,9 +170,62 @@ def child_env() -> dict:
     return env
 
 
+# contention control (the machine has 2 cores and may be shared): set by main()
+CONTENTION = {"wait": 60.0, "retries": 1, "min_cpu": 0.85, "budget": 150.0}
+
+
+def cpu_idle(seconds: float = 1.0) -> float:
+    """Fraction of all CPUs idle over the next `seconds` (/proc/stat; 1.0 if unavailable)."""
+    def stat():
+        v = list(map(int, Path("/proc/stat").read_text().split("\n")[0].split()[1:]))
+        return sum(v), v[3] + v[4]
+    try:
+        a = stat()
+        time.sleep(seconds)
+        b = stat()
+        return (b[1] - a[1]) / max(1, b[0] - a[0])
+    except OSError:
+        return 1.0
+
+
+def wait_idle(max_wait: float, idle: float = 0.9, streak: int = 2) -> float:
+    """Wait (at most max_wait s) until the CPUs were idle (> idle) `streak` seconds in a row."""
+    t0, ok = time.time(), 0
+    max_wait = min(max_wait, max(CONTENTION["budget"], 1.0))  # total waiting is bounded
+    while time.time() - t0 < max_wait and ok < streak:
+        ok = ok + 1 if cpu_idle(0.5) > idle else 0
+    waited = time.time() - t0
+    CONTENTION["budget"] -= max(0.0, waited - 1.0)
+    return waited
+
+
 def run_worker(script: str, nranks: int, worker_args: list[str], timeout: float = 600.0,
                retry_import: bool = True) -> dict:
-    """Run `script --worker ...` under mpirun in a fresh process; return its JSON (or an error)."""
+    """Run `script --worker ...` under mpirun in a fresh process; return its JSON (or an error).
+
+    Waits for idle CPUs first; a result whose 'cpu_share' (CPU/wall, min over ranks) is below
+    CONTENTION['min_cpu'] is redone up to CONTENTION['retries'] times, keeping the least
+    disturbed one ('attempts' counts the runs)."""
+    best = None
+    for attempt in range(CONTENTION["retries"] + 1):
+        waited = wait_idle(CONTENTION["wait"])
+        r = _run_worker_once(script, nranks, worker_args, timeout, retry_import)
+        if "error" in r:
+            return r if best is None else best
+        r["waited_s"] = waited
+        r["attempts"] = attempt + 1
+        if best is None or r.get("cpu_share", 1.0) > best.get("cpu_share", 1.0):
+            best = r
+        best["attempts"] = attempt + 1
+        if r.get("cpu_share", 1.0) >= CONTENTION["min_cpu"] or CONTENTION["budget"] <= 0:
+            break
+        print(f"[bench] cpu_share {r.get('cpu_share', 1.0):.2f} < {CONTENTION['min_cpu']}: "
+              "CPUs shared with another process"
+              + (", measuring again" if attempt < CONTENTION["retries"] else ""), flush=True)
+    return best
+
+
+def _run_worker_once(script, nranks, worker_args, timeout, retry_import) -> dict:
     with tempfile.TemporaryDirectory(dir=RESULTS) as tmp:
         out = Path(tmp) / "w.json"
         cmd = mpirun(nranks, [str(SCRIPTS / script), "--worker", *worker_args, "--json", str(out)])
@@ -193,6 +246,14 @@ def run_worker(script: str, nranks: int, worker_args: list[str], timeout: float 
                 continue
             return {"error": f"exit {proc.returncode}: {proc.stdout[-1500:]}"}
     return {"error": "unreachable"}
+
+
+def peer_kwargs(bp, **kw) -> dict:
+    """Keyword arguments that this version of bench_peers.run_peer accepts."""
+    import inspect
+
+    params = inspect.signature(bp.run_peer).parameters
+    return {k: v for k, v in kw.items() if k in params}
 
 
 def load_bench_peers():
@@ -244,12 +305,21 @@ def machine_info() -> dict:
     return info
 
 
-def wait_quiet(limit: float = 0.6, max_wait: float = 120.0) -> float:
-    """Wait (up to max_wait s) for the 1-min load average to drop below limit; return it."""
-    t0 = time.time()
-    while os.getloadavg()[0] > limit and time.time() - t0 < max_wait:
-        time.sleep(5)
-    return os.getloadavg()[0]
+def git_status() -> str:
+    """`git status --short` of parsolve/ (the benchmarked code is the working tree)."""
+    try:
+        return subprocess.run(["git", "status", "--short", "parsolve"], cwd=ROOT, text=True,
+                              capture_output=True, timeout=30).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return "?"
+
+
+def machine_line(info: dict, elapsed: float) -> str:
+    dirty = info.get("git_status", "")
+    return (f"Machine: {info.get('cpu', '?')}, {info.get('cpus')} cores, {info.get('mem_gib')} GiB; "
+            f"CPUs {100 * info.get('idle_at_start', 1):.0f}% idle at start, load average "
+            f"{info.get('loadavg_end', 0):.2f} at end; run {info.get('date')}, {elapsed:.0f} s; "
+            f"parsolve working tree {'with uncommitted changes (' + str(len(dirty.splitlines())) + ' files, being edited concurrently)' if dirty else 'clean'}.")
 
 
 # ------------------------------------------------------------------------------------------------
@@ -394,7 +464,9 @@ def run_peers(ns, cells, ranks, peers_from: Path | None) -> tuple[dict, list[str
             print(f"[bench] peer {peer} np={nr} ...", flush=True)
             t0 = time.perf_counter()
             try:
-                data = bp.run_peer(peer, ns, cells, nranks=nr, retries=1, timeout=900)
+                data = bp.run_peer(peer, ns, cells, nranks=nr,
+                                   **peer_kwargs(bp, retries=1, timeout=900,
+                                                 wait_quiet=CONTENTION["wait"]))
             except Exception as exc:
                 notes.append(f"{peer} np={nr} failed, column skipped: {str(exc)[-600:]}")
                 print(f"[bench] {notes[-1]}", flush=True)
@@ -479,8 +551,12 @@ def main(argv=None) -> int:
                    help="reuse assembly_peer_*.json from this directory instead of running peers")
     p.add_argument("--profile", type=int, default=None, metavar="N",
                    help="only: cProfile one first assembly + re-assembly at N (triangle, 1 rank)")
-    p.add_argument("--wait", type=float, default=120.0,
-                   help="first wait up to this many seconds for the load average to drop below 0.6")
+    p.add_argument("--wait", type=float, default=60.0,
+                   help="before each measurement wait up to this many seconds for idle CPUs")
+    p.add_argument("--wait-budget", type=float, default=150.0,
+                   help="total seconds of such waiting (and of re-measuring) allowed")
+    p.add_argument("--retries", type=int, default=1,
+                   help="redo a measurement whose CPU share is < 0.85 this many times")
     p.add_argument("--no-auto-profile", action="store_true",
                    help="do not profile at the largest N when a target is missed")
     args = p.parse_args(argv)
@@ -498,11 +574,10 @@ def main(argv=None) -> int:
         return 0 if "error" not in res else 1
 
     t_start = time.perf_counter()
+    CONTENTION.update(wait=args.wait, retries=args.retries, budget=args.wait_budget)
     info = machine_info()
-    info["loadavg_start_after_wait"] = wait_quiet(max_wait=args.wait)
-    if info["loadavg_start_after_wait"] > 0.6:
-        print(f"[bench] warning: load average {info['loadavg_start_after_wait']:.2f}: "
-              "other processes use the CPUs, timings will be inflated", flush=True)
+    info["idle_at_start"] = cpu_idle(1.0)
+    info["git_status"] = git_status()
     rows = run_parsolve(args.n, args.cell, args.ranks, args.repeats)
     peers, notes = ({}, ["peers not run (--no-peers)"]) if args.no_peers else \
         run_peers(args.n, args.cell, args.ranks, args.peers_from)
@@ -572,9 +647,7 @@ def markdown(head, body, summary, notes, info, elapsed, prof, args) -> str:
         "×peer = parsolve rate / peer rate. cpu = CPU/wall of parsolve's phases (min over ranks; "
         "< 0.9 means the CPUs were shared).",
         "",
-        f"Machine: {info.get('cpu', '?')}, {info.get('cpus')} cores, {info.get('mem_gib')} GiB; "
-        f"load average {info.get('loadavg_start_after_wait', 0):.2f} at start, "
-        f"{info.get('loadavg_end', 0):.2f} at end; run {info.get('date')}, {elapsed:.0f} s.",
+        machine_line(info, elapsed),
         "",
         md_table(head, body),
         "",

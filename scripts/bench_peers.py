@@ -51,7 +51,6 @@ CELLS = ("triangle", "quad")
 SOLVE_METHODS = ("mumps", "gamg")
 GAMG_RTOL = 1e-8
 
-HERE = Path(__file__).resolve().parent
 DEFAULT_BENCH_VENV = Path(os.environ.get("BENCH_VENV", "/work/bench-venv"))
 DEBIAN_PYTHON = "/usr/bin/python3"
 
@@ -491,13 +490,15 @@ def peer_python(peer: str) -> str:
 
 def run_peer(peer: str, ns, cells=("triangle",), nranks: int = 1, solve=(), assembly: bool = True,
              plane: str = "strain", repeats: int | None = None, retries: int = 2,
-             python: str | None = None, timeout: float | None = 900.0, echo: bool = False) -> dict:
+             wait_quiet: float = 0.0, python: str | None = None, timeout: float | None = 900.0,
+             echo: bool = False) -> dict:
     """Run this script for `peer` in a subprocess (under mpirun -n nranks if > 1); return its JSON."""
     python = python or peer_python(peer)
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "out.json"
         cmd = [python, str(Path(__file__).resolve()), peer, "--n", *map(str, ns),
-               "--cell", *cells, "--plane", plane, "--retries", str(retries), "--json", str(out)]
+               "--cell", *cells, "--plane", plane, "--retries", str(retries),
+               "--wait-quiet", str(wait_quiet), "--json", str(out)]
         if repeats:
             cmd += ["--repeats", str(repeats)]
         if solve:
@@ -560,17 +561,55 @@ def solve_table(rows: list[dict]) -> str:
 # CLI
 
 
-def _cpu_share(fn, comm, *args, retries: int = 0, wait: float = 5.0):
+def _cpu_idle(seconds: float = 1.0) -> float:
+    """Fraction of all CPUs idle over the next `seconds` (from /proc/stat; 1.0 if unavailable)."""
+    def stat():
+        with open("/proc/stat") as f:
+            v = [int(x) for x in f.readline().split()[1:]]
+        return sum(v), v[3] + v[4]
+
+    try:
+        a = stat()
+        time.sleep(seconds)
+        b = stat()
+    except OSError:
+        return 1.0
+    return (b[1] - a[1]) / max(1, b[0] - a[0])
+
+
+def wait_quiet(comm=None, max_wait: float = 0.0, idle: float = 0.93, streak: int = 3) -> float:
+    """Wait (at most max_wait s) until the CPUs have been idle (> `idle`) `streak` seconds running:
+    rank 0 watches /proc/stat while the other ranks sleep in a non-busy Ibarrier loop (a busy MPI
+    wait would look like load). Returns the seconds waited (the same on all ranks)."""
+    if max_wait <= 0:
+        return 0.0
+    t0 = time.perf_counter()
+    if comm is None or comm.rank == 0:
+        ok = 0
+        while ok < streak and time.perf_counter() - t0 < max_wait:
+            ok = ok + 1 if _cpu_idle(1.0) > idle else 0
+    if comm is not None and comm.size > 1:
+        req = comm.Ibarrier()
+        while not req.Test():
+            time.sleep(0.05)
+        return comm.bcast(time.perf_counter() - t0, root=0)
+    return time.perf_counter() - t0
+
+
+def _cpu_share(fn, comm, *args, retries: int = 0, wait: float = 5.0, max_wait: float = 0.0):
     """Run fn(*args) and add 'cpu_share': CPU time / wall time of the timed sections (assembly,
     solve; not mesh or JIT), the lowest over ranks. Well below 1 means other processes took CPU
     time from the benchmark (the machine has 2 cores, as many as the ranks used): such timings are
-    inflated. Below 0.9 the measurement is redone, after `wait` seconds, up to `retries` times;
+    inflated. Below 0.9 the measurement is redone, after `wait` seconds (or, with max_wait > 0,
+    after `wait_quiet`, which also runs before the first attempt), up to `retries` times;
     the result with the highest cpu_share is kept ('attempts' counts the runs), with the first
     run's t_form/jit (only the first can be a cold JIT). Sections shorter than the 10 ms CPU clock
     make cpu_share coarse: it is taken as 1 when the timed sections total < 0.1 s."""
     best = None
     first = None
+    waited = 0.0
     for attempt in range(retries + 1):
+        waited += wait_quiet(comm, max_wait)
         _CPU.update(wall=0.0, cpu=0.0)
         r = fn(*args)
         share = _CPU["cpu"] / _CPU["wall"] if _CPU["wall"] >= 0.1 else 1.0
@@ -584,12 +623,13 @@ def _cpu_share(fn, comm, *args, retries: int = 0, wait: float = 5.0):
             print(f"[bench_peers] warning: cpu_share {r['cpu_share']:.2f} for n={r['n']} "
                   f"{r['cell']}: other processes are competing for the CPUs"
                   + (", retrying" if attempt < retries else ""), file=sys.stderr, flush=True)
-        if attempt < retries:
+        if attempt < retries and max_wait <= 0:
             time.sleep(wait)
     for k in ("t_form", "jit"):
         if k in first:
             best[k] = first[k]
     best["attempts"] = attempt + 1
+    best["waited_quiet"] = waited
     return best
 
 
@@ -627,13 +667,15 @@ def _main_dolfinx(args) -> dict:
         for n in args.n:
             if args.assembly:
                 r = _cpu_share(dolfinx_assembly, comm, n, cell, args.plane, args.repeats, comm,
-                               args.jit_cache, retries=args.retries)
+                               args.jit_cache, retries=args.retries,
+                               max_wait=args.wait_quiet)
                 out["assembly"].append(r)
                 if root:
                     _progress(assembly_table, out["assembly"])
             for method in args.solve:
                 r = _cpu_share(dolfinx_solve, comm, n, method, cell, args.plane, comm,
-                               args.jit_cache, retries=args.retries)
+                               args.jit_cache, retries=args.retries,
+                               max_wait=args.wait_quiet)
                 out["solve"].append(r)
                 if root:
                     _progress(solve_table, out["solve"])
@@ -650,7 +692,7 @@ def _main_skfem(args) -> dict:
     for cell in args.cell:
         for n in args.n:
             r = _cpu_share(skfem_assembly, None, n, cell, args.plane, args.repeats,
-                           retries=args.retries)
+                           retries=args.retries, max_wait=args.wait_quiet)
             out["assembly"].append(r)
             _progress(assembly_table, out["assembly"])
     return out
@@ -706,6 +748,9 @@ def main(argv=None) -> int:
                         "for the first form per cell), 'default' = ~/.cache/fenics")
     p.add_argument("--retries", type=int, default=2,
                    help="redo a measurement whose cpu_share < 0.9 (CPUs busy) up to this often")
+    p.add_argument("--wait-quiet", type=float, default=0.0, metavar="SECONDS",
+                   help="before each measurement wait (at most this long) for the CPUs to be idle "
+                        "(other jobs on the machine); 0 = don't")
     p.add_argument("--json", default=None, help="write results here (rank 0)")
     args = p.parse_args(argv)
     if args.peer == "check":

@@ -52,7 +52,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_assembly import (COMMITTED, RESULTS, ROOT, SCRIPTS, Phase, build,  # noqa: E402
                             child_env, default_repeats, fmt, load_bench_peers, machine_info,
                             md_table, mpirun, num_dofs, run_worker, scene_text, text_table,
-                            wait_quiet)
+                            CONTENTION, cpu_idle, git_status, machine_line, peer_kwargs)
 
 sys.path.pop(0)
 
@@ -197,6 +197,7 @@ def worker(args) -> None:
         out["parsolve"] = _best([_parsolve_solve(comm, text, opts) for _ in range(repeats)])
     else:
         raise ValueError(kind)
+    out["cpu_share"] = min(v["cpu_share"] for v in out.values() if isinstance(v, dict))
     if comm.rank == 0:
         Path(args.json).write_text(json.dumps(out, indent=1))
 
@@ -315,7 +316,9 @@ def run_peers(ns, cell, ranks, peers_from: Path | None) -> tuple[dict, list[str]
             t0 = time.perf_counter()
             try:
                 data = bp.run_peer("dolfinx", ns, [cell], nranks=nr, solve=("mumps", "gamg"),
-                                   assembly=False, retries=1, timeout=900)
+                                   assembly=False,
+                                   **peer_kwargs(bp, retries=1, timeout=900,
+                                                 wait_quiet=CONTENTION["wait"]))
             except Exception as exc:
                 notes.append(f"dolfinx np={nr} failed, columns skipped: {str(exc)[-600:]}")
                 print(f"[bench] {notes[-1]}", flush=True)
@@ -461,8 +464,12 @@ def main(argv=None) -> int:
     p.add_argument("--no-peers", action="store_true")
     p.add_argument("--peers-from", type=Path, default=None,
                    help="reuse solve_peer_dolfinx_*.json from this directory")
-    p.add_argument("--wait", type=float, default=120.0,
-                   help="first wait up to this many seconds for the load average to drop below 0.6")
+    p.add_argument("--wait", type=float, default=60.0,
+                   help="before each measurement wait up to this many seconds for idle CPUs")
+    p.add_argument("--wait-budget", type=float, default=150.0,
+                   help="total seconds of such waiting (and of re-measuring) allowed")
+    p.add_argument("--retries", type=int, default=1,
+                   help="redo a measurement whose CPU share is < 0.85 this many times")
     args = p.parse_args(argv)
     if args.worker:
         worker(args)
@@ -472,11 +479,10 @@ def main(argv=None) -> int:
     cell = args.cell[0]
     iterative_ranks = args.ranks if args.iterative_ranks is None else args.iterative_ranks
     t_start = time.perf_counter()
+    CONTENTION.update(wait=args.wait, retries=args.retries, budget=args.wait_budget)
     info = machine_info()
-    info["loadavg_start_after_wait"] = wait_quiet(max_wait=args.wait)
-    if info["loadavg_start_after_wait"] > 0.6:
-        print(f"[bench] warning: load average {info['loadavg_start_after_wait']:.2f}: "
-              "other processes use the CPUs, timings will be inflated", flush=True)
+    info["idle_at_start"] = cpu_idle(1.0)
+    info["git_status"] = git_status()
     rows = run_ab(args.n, cell, args.ranks, args.repeats, iterative_ranks)
     control = run_control(args.control_n, cell, 1, args.control_timeout) if args.control_n else []
     peers, notes = ({}, ["DOLFINx not run (--no-peers)"]) if args.no_peers else \
@@ -515,9 +521,7 @@ def markdown(ta, tb, tc, summary, notes, info, elapsed, cell) -> str:
         "repeats (<200k / <600k / larger DOFs), each size in a fresh process "
         "(`scripts/mpirun.sh -n np`), one thread per rank.",
         "",
-        f"Machine: {info.get('cpu', '?')}, {info.get('cpus')} cores, {info.get('mem_gib')} GiB; "
-        f"load average {info.get('loadavg_start_after_wait', 0):.2f} at start, "
-        f"{info.get('loadavg_end', 0):.2f} at end; run {info.get('date')}, {elapsed:.0f} s.",
+        machine_line(info, elapsed),
         "",
         "## (a) Overhead of parsolve's solve phase",
         "",

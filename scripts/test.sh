@@ -11,7 +11,9 @@ $PY -m pytest -q tests "$@"
 for n in 2 3; do
   echo "== pytest, $n ranks (tests marked serial are skipped)"
   # rank 0 reports; the other ranks run the same tests quietly. A hang is a failure too.
-  timeout 1500 bash scripts/mpirun.sh -n "$n" bash -c '
-    if [ "${OMPI_COMM_WORLD_RANK:-0}" = 0 ]; then exec '"$PY"' -m pytest -q -p no:cacheprovider tests "$@";
-    else exec '"$PY"' -m pytest -q -p no:cacheprovider tests "$@" > /dev/null; fi' _ "$@"
+  # A failing test aborts the job (tests/conftest.py); a hang dumps tracebacks, then times out.
+  timeout 1200 bash scripts/mpirun.sh -n "$n" bash -c '
+    opts="-q -p no:cacheprovider -o faulthandler_timeout=300"
+    if [ "${OMPI_COMM_WORLD_RANK:-0}" = 0 ]; then exec '"$PY"' -m pytest $opts tests "$@";
+    else exec '"$PY"' -m pytest $opts tests "$@" > /dev/null; fi' _ "$@"
 done

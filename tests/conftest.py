@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import h5py
@@ -19,6 +20,18 @@ def pytest_collection_modifyitems(config, items):
         for item in items:
             if "serial" in item.keywords:
                 item.add_marker(skip)
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    """Under mpirun a failure on one rank would leave the others waiting in a collective call:
+    report it and abort the whole job (mpi4py's rule) instead of hanging."""
+    outcome = yield
+    report = outcome.get_result()
+    if report.failed and MPI.COMM_WORLD.size > 1:
+        sys.stderr.write(f"\n[rank {MPI.COMM_WORLD.rank}] {item.nodeid} FAILED\n{report.longreprtext}\n")
+        sys.stderr.flush()
+        MPI.COMM_WORLD.Abort(1)
 
 
 @pytest.fixture

@@ -61,7 +61,7 @@ class Elasticity:
         """Mean stress over each cell (Voigt), from the full displacement array u (npoints, ncomp)."""
         geo = self.geometry(cells)
         B = geo.strain_operator()
-        ue = u[self.mesh.cells[cells]].reshape(len(cells), -1)
+        ue = u[self.mesh.cells[cells]].reshape(len(cells), u.shape[1] * self.mesh.cells.shape[1])
         eps = kernels.strains(B, ue)
         sig = np.matmul(self.C[self.cell_model[cells]][:, None], eps[..., None])[..., 0]
         w = geo.wdet / geo.wdet.sum(axis=1, keepdims=True)
@@ -75,7 +75,7 @@ class Elasticity:
         """
         mesh = self.mesh
         geo = self.geometry(cells, at_nodes=True)
-        ue = u[mesh.cells[cells]].reshape(len(cells), -1)
+        ue = u[mesh.cells[cells]].reshape(len(cells), u.shape[1] * mesh.cells.shape[1])
         eps = kernels.strains(geo.strain_operator(), ue)               # (nc, nen, nv)
         sig = np.matmul(self.C[self.cell_model[cells]][:, None], eps[..., None])[..., 0]
         vol = self.geometry(cells).wdet.sum(axis=1)
@@ -101,7 +101,7 @@ class Elasticity:
         geo = self.geometry(cells)
         B = geo.strain_operator()
         nc, nq, nv, ndof = B.shape
-        eps = kernels.strains(B, u[self.mesh.cells[cells]].reshape(nc, -1))
+        eps = kernels.strains(B, u[self.mesh.cells[cells]].reshape(nc, ndof))
         sig = np.empty_like(eps)
         tangent = np.empty((nc, nq, nv, nv))
         trial = []

@@ -67,7 +67,7 @@ def body_load(coords: np.ndarray, cell_type: str, force: np.ndarray, thickness: 
     N = ref.shape(xi)
     _, det = physical_gradients(coords, ref.grad_shape(xi))
     wn = (np.abs(det) * w * thickness) @ N                 # (nc, nen): ∫ N_a
-    return (wn[:, :, None] * force[None, None, :]).reshape(len(coords), -1)
+    return (wn[:, :, None] * force[None, None, :]).reshape(len(coords), wn.shape[1] * len(force))
 
 
 def facet_load(coords: np.ndarray, facet_type: str, traction: np.ndarray,
@@ -78,7 +78,7 @@ def facet_load(coords: np.ndarray, facet_type: str, traction: np.ndarray,
     N = ref.shape(xi)
     ds, _ = facet_measure_and_normal(coords, ref.grad_shape(xi))
     wn = (ds * w * thickness) @ N
-    return (wn[:, :, None] * traction[None, None, :]).reshape(len(coords), -1)
+    return (wn[:, :, None] * traction[None, None, :]).reshape(len(coords), wn.shape[1] * len(traction))
 
 
 def facet_measure(coords: np.ndarray, facet_type: str, thickness: float = 1.0) -> float:
@@ -91,7 +91,7 @@ def facet_measure(coords: np.ndarray, facet_type: str, thickness: float = 1.0) -
 
 def cell_dofs(cells: np.ndarray, ncomp: int) -> np.ndarray:
     """Element DOF numbers (nc, nen*ncomp), node-major, from node numbers."""
-    return (cells[:, :, None] * ncomp + np.arange(ncomp)).reshape(len(cells), -1)
+    return (cells[:, :, None] * ncomp + np.arange(ncomp)).reshape(len(cells), cells.shape[1] * ncomp)
 
 
 # ---------------------------------------------------------------- cell-last stiffness (hot path)
