@@ -132,3 +132,15 @@ def test_iterative_preset_explains_a_singular_stiffness_block():
 
     with pytest.raises(SolverError, match="preset = .direct"):
         solve_in_process(SCENE.format(cell="quad", preset="iterative", eliminate="false"))
+
+
+def test_elimination_and_multipliers_agree(run):
+    """Single-DOF conditions eliminated or multiplied: same displacements, same reactions."""
+    text = SCENE.format(cell="triangle", preset="direct", eliminate="{eliminate}")
+    a = run(text.replace("{eliminate}", "true"), name="elim")
+    b = run(text.replace("{eliminate}", "false"), name="mult")
+    u = a["fields/displacement"]
+    assert np.abs(u - b["fields/displacement"]).max() <= 1e-10 * np.abs(u).max()
+    for name in ("left_x", "corner_y", "top_flat", "opening"):
+        x, y = a[f"relations/{name}/multiplier"], b[f"relations/{name}/multiplier"]
+        assert np.abs(x - y).max() <= 1e-9 * max(np.abs(y).max(), 1e-300), name
