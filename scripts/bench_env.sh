@@ -53,7 +53,7 @@ else
     say "$BENCH_VENV/bin/pip install 'scikit-fem' 'numpy<2'"
     "$BENCH_VENV/bin/pip" install -q 'scikit-fem' 'numpy<2'
 fi
-say "bench-venv: $("$BENCH_VENV/bin/python" -c 'import skfem, scipy, numpy; print("scikit-fem", skfem.__version__, "scipy", scipy.__version__, "numpy", numpy.__version__)')"
+say "bench-venv: $("$BENCH_VENV/bin/python" -c 'import skfem, scipy, numpy; print("scikit-fem", skfem.__version__, "scipy", scipy.__version__, "(" + scipy.__file__.rsplit("/", 2)[0] + ")", "numpy", numpy.__version__)')"
 say "done. Run e.g.:"
 say "  $PY scripts/bench_peers.py dolfinx --n 64 128 --cell triangle quad --json dolfinx.json"
 say "  $BENCH_VENV/bin/python scripts/bench_peers.py skfem --n 64 128 --cell triangle quad --json skfem.json"

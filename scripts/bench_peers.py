@@ -173,6 +173,28 @@ def _jit_params(comm, jit_cache: str | None):
     return _JIT_STATE["params"]
 
 
+def _form(ufl_form, jit_params):
+    """dolfinx.fem.form without the compiler chatter: FFCx's JIT runs cffi/setuptools, which sets
+    the root logger to INFO at every compilation ("INFO:root:running build_ext ..."); root INFO
+    records are dropped during the call and the root level is restored after it."""
+    import logging
+
+    from dolfinx import fem
+
+    root = logging.getLogger()
+    level = root.level
+
+    def drop(rec):
+        return rec.levelno >= logging.WARNING
+
+    root.addFilter(drop)
+    try:
+        return fem.form(ufl_form, jit_params=jit_params)
+    finally:
+        root.removeFilter(drop)
+        root.setLevel(level)
+
+
 def _dolfinx_mesh(n: int, cell: str, comm):
     """The `unit_square` arrays, given on rank 0 and distributed by DOLFINx (partition + reorder)."""
     import ufl
@@ -225,7 +247,6 @@ def dolfinx_assembly(n: int, cell: str = "triangle", plane: str = "strain",
     assemble_matrix into the same matrix + A.assemble(). No boundary conditions. fro: the Frobenius
     norm, also checked to be the same after every (re)assembly.
     """
-    from dolfinx import fem
     import dolfinx.fem.petsc as fpetsc
     from petsc4py import PETSc
 
@@ -239,7 +260,7 @@ def dolfinx_assembly(n: int, cell: str = "triangle", plane: str = "strain",
     jit_params = _jit_params(comm, jit_cache)
     key = ("a", cell, plane, jit_params.get("cache_dir", "default"))
     jit = "cached" if key in _JIT_STATE["compiled"] else ("cold" if jit_cache is None else "unknown")
-    a, t_form = timed(fem.form, a_ufl, jit_params=jit_params, _count=False)
+    a, t_form = timed(_form, a_ufl, jit_params, _count=False)
     _JIT_STATE["compiled"].add(key)
     assert _dolfinx_dofs(V) == dofs, (_dolfinx_dofs(V), dofs)
 
@@ -315,8 +336,8 @@ def dolfinx_solve(n: int, method: str = "mumps", cell: str = "triangle", plane: 
                          fem.locate_dofs_topological(V, fdim, left), V)
 
     jit_params = _jit_params(comm, jit_cache)
-    (a, L), t_form = timed(lambda: (fem.form(a_ufl, jit_params=jit_params),
-                                    fem.form(L_ufl, jit_params=jit_params)), _count=False)
+    (a, L), t_form = timed(lambda: (_form(a_ufl, jit_params), _form(L_ufl, jit_params)),
+                           _count=False)
 
     def assemble_system():
         A = fpetsc.assemble_matrix(a, bcs=[bc])
@@ -650,13 +671,7 @@ def _progress(table, rows) -> None:
 
 
 def _main_dolfinx(args) -> dict:
-    import logging
-
     from mpi4py import MPI
-
-    # FFCx's JIT runs cffi/setuptools, which sets the root logger to INFO at every compilation
-    # ("INFO:root:running build_ext ..."): drop root INFO records instead.
-    logging.getLogger().addFilter(lambda rec: rec.levelno >= logging.WARNING)
 
     comm = MPI.COMM_WORLD
     root = comm.rank == 0

@@ -31,6 +31,7 @@ def preset_options(preset: str, symmetric: bool, has_multipliers: bool) -> dict[
         }
     if not has_multipliers:
         return {"ksp_type": "cg", "pc_type": "gamg", "ksp_rtol": "1e-10",
+                "ksp_norm_type": "unpreconditioned",  # rtol on the true residual
                 "ksp_error_if_not_converged": "true"}
     return {
         "ksp_type": "fgmres",
