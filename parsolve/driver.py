@@ -36,14 +36,11 @@ def make_solver(comm: MPI.Comm, system: SaddleSystem, cli_options: dict[str, str
     settings = opt.merge(preset_options(scene.solver.preset, symmetric, has_mult),
                          scene.solver.options, cli_options)
     is_q, is_l = system.op.index_sets()
-    solver = LinearSolver(comm, scene.solver.prefix, settings, is_q, is_l)
-    if scene.solver.preset == "iterative":
-        modes = rigid_body_modes(comm, system)
-        if has_mult:
-            is_q.compose("nearnullspace", modes)
-        else:
-            system.op.mat_nearnull = modes
-    return solver
+    modes = rigid_body_modes(comm, system) if scene.solver.preset == "iterative" else None
+    if modes is not None and has_mult:  # fieldsplit hands it to the q block's matrix
+        is_q.compose("nearnullspace", modes)
+    return LinearSolver(comm, scene.solver.prefix, settings, is_q, is_l,
+                        near_null=None if has_mult else modes)
 
 
 def export_system(comm, directory: str, mat: PETSc.Mat, rhs: PETSc.Vec, system: SaddleSystem) -> None:
@@ -106,8 +103,6 @@ def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log
     t0 = time.perf_counter()
     mat = system.assemble()
     solver = make_solver(comm, system, cli_options)
-    if getattr(system.op, "mat_nearnull", None) is not None:
-        mat.setNearNullSpace(system.op.mat_nearnull)
     solver.set_operator(mat)
     assembly_time = time.perf_counter() - t0
     x, rhs = mat.createVecs()

@@ -108,8 +108,6 @@ def solve_in_process(text: str, comm=MPI.COMM_WORLD, t: float = 1.0, options: di
     system = SaddleSystem(comm, model)
     mat = system.assemble()
     solver = make_solver(comm, system, options or {})
-    if getattr(system.op, "mat_nearnull", None) is not None:
-        mat.setNearNullSpace(system.op.mat_nearnull)
     solver.set_operator(mat)
     x, rhs = mat.createVecs()
     rhs.array[:] = system.rhs(t)[0]

@@ -65,6 +65,8 @@ class LinearSolver:
         self.configured = False
 
     def set_operator(self, mat: PETSc.Mat) -> None:
+        if self.near_null is not None:  # rigid-body modes for GAMG on the stiffness alone
+            mat.setNearNullSpace(self.near_null)
         self.ksp.setOperators(mat)
         if not self.configured:
             with opt.inserted(self.prefix, self.settings):
