@@ -34,18 +34,6 @@ class NodePattern:
         """Stiffness entries of each owned DOF row (node-major DOFs)."""
         return np.repeat(self.nb * self.ncomp, self.ncomp)
 
-    def columns(self) -> np.ndarray:
-        """Column DOFs of the stiffness entries in CSR order (rows of node i, component a)."""
-        nc = self.ncomp
-        col_dofs = (self.ucol[:, None] * nc + np.arange(nc)).ravel()        # per node row
-        bptr = np.concatenate([[0], np.cumsum(self.nb)])
-        node_seg = np.repeat(np.arange(self.nown), self.nb * nc)
-        local = np.arange(col_dofs.size) - nc * bptr[node_seg]
-        cols = np.empty(col_dofs.size * nc, dtype=np.int64)
-        for a in range(nc):  # each component row of a node repeats the node's column list
-            cols[nc * nc * bptr[node_seg] + a * nc * self.nb[node_seg] + local] = col_dofs
-        return cols
-
     def block_positions(self, row_start: np.ndarray) -> np.ndarray:
         """(ncomp, ncomp, nnzb) slot of entry (i, j) of each node-pair block in a CSR whose owned
         DOF row r starts at row_start[r] with its stiffness entries first."""

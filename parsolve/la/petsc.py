@@ -52,13 +52,13 @@ class SaddleOperator:
         rowptr = np.concatenate([[0], np.cumsum(np.concatenate([k_nnz + nd_row, na_row]))])
         nnz = int(rowptr[-1])
         cols = np.empty(nnz, dtype=np.int64)
-        # stiffness entries first in each primal row, in the pattern's order
-        k_row = np.repeat(np.arange(nqo), k_nnz)
-        k_start = np.concatenate([[0], np.cumsum(k_nnz)])[:-1]
-        cols[rowptr[k_row] + np.arange(k_row.size) - k_start[k_row]] = layout.q_index(
-            pattern.columns())
+        # stiffness entries first in each primal row: node-pair blocks; a node's DOFs are
+        # consecutive in the saddle numbering
+        nc = layout.ncomp
         self.block_pos = pattern.block_positions(rowptr[:nqo])
         self.diag_pos = pattern.diagonal_positions(rowptr[:nqo])
+        self._pair_col = layout.q_index(pattern.ucol * nc)
+        cols[self.block_pos] = self._pair_col[None, None, :] + np.arange(nc)[None, :, None]
         # -D entries after the stiffness of each row
         d_start = np.concatenate([[0], np.cumsum(nd_row)])[:-1]
         self.d_final = rowptr[d_r] + k_nnz[d_r] + (np.arange(d_r.size) - d_start[d_r])
@@ -76,7 +76,6 @@ class SaddleOperator:
         self.active = np.ones(layout.nl, dtype=bool)  # global multiplier rows enforced
         self._l0, self._l1 = l0, l1
         self.mat: PETSc.Mat | None = None
-        self._entry_row = np.repeat(np.arange(self.nrows), np.diff(rowptr))
         self.set_eliminated(np.zeros(0, dtype=np.int64))
 
     # ------------------------------------------------------------------ values
@@ -126,14 +125,23 @@ class SaddleOperator:
     def set_eliminated(self, rows: np.ndarray) -> None:
         """Saddle indices (global) of the DOFs to eliminate: their rows and columns are zeroed and
         their diagonal set by ``eliminate``, in the value array itself (no PETSc pass)."""
-        is_elim = np.zeros(self.size, dtype=bool)
+        is_elim = np.zeros(self.size + 1, dtype=bool)
         is_elim[rows] = True
-        own_row = is_elim[self.offset + self._entry_row]
-        own_col = is_elim[self.cols]
-        self._row_entries = np.flatnonzero(own_row)
-        self._col_entries = np.flatnonzero(own_col)
-        self._diag_entries = np.flatnonzero(own_row & (self.cols == self.offset + self._entry_row))
-        self.elim_rows = np.unique(self.offset + self._entry_row[self._row_entries])
+        local = np.unique(rows[(rows >= self.offset) & (rows < self.offset + self.nrows)]) - self.offset
+        self.elim_rows = local + self.offset
+        # entries of the eliminated rows: whole CSR rows
+        lengths = np.diff(self.rowptr)[local]
+        starts = np.repeat(self.rowptr[local].astype(np.int64) - np.cumsum(lengths) + lengths, lengths)
+        self._row_entries = starts + np.arange(lengths.sum())
+        self._row_of_row_entries = np.repeat(local, lengths)
+        # entries in eliminated columns: only in node-pair blocks whose column node has an
+        # eliminated DOF, and in relation rows
+        nc = self.layout.ncomp
+        node_elim = is_elim[self._pair_col[:, None] + np.arange(nc)].any(axis=1)
+        cand = np.concatenate([self.block_pos[:, :, node_elim].ravel(), self.a_final])
+        self._col_entries = np.sort(cand[is_elim[self.cols[cand]]])
+        self._row_of_col_entries = np.searchsorted(self.rowptr, self._col_entries, side="right") - 1
+        self._diag_entries = self.diag_pos[local]
 
     def eliminate(self, diag: float) -> None:
         """Keep the eliminated rows and columns for lifting and reactions, then zero them."""
@@ -146,13 +154,13 @@ class SaddleOperator:
     def lifting(self, x: np.ndarray) -> np.ndarray:
         """Owned rows of (eliminated columns, before zeroing) × x, x a full saddle vector."""
         e = self._col_entries
-        return np.bincount(self._entry_row[e], weights=self._col_vals * x[self.cols[e]],
+        return np.bincount(self._row_of_col_entries, weights=self._col_vals * x[self.cols[e]],
                            minlength=self.nrows)
 
     def eliminated_rows(self, x: np.ndarray) -> np.ndarray:
         """Owned rows of (matrix before elimination) × x: valid on the eliminated rows."""
         e = self._row_entries
-        return np.bincount(self._entry_row[e], weights=self._row_vals * x[self.cols[e]],
+        return np.bincount(self._row_of_row_entries, weights=self._row_vals * x[self.cols[e]],
                            minlength=self.nrows)
 
     def index_sets(self) -> tuple[PETSc.IS, PETSc.IS]:
