@@ -101,9 +101,10 @@ def test_missing_and_broken_files(tmp_path, capsys):
         lambda: box(1.0, 1.0, 2.0, 2, 1, 2, cell="hexahedron"),
     ],
 )
-def test_vtu_roundtrip(tmp_path, make):
+@pytest.mark.parametrize("suffix", [".vtu", ".xdmf"])
+def test_vtu_and_xdmf_roundtrip(tmp_path, make, suffix):
     src = make()
-    path = str(tmp_path / "mesh.vtu")
+    path = str(tmp_path / f"mesh{suffix}")
     meshio.write(path, meshio.Mesh(src.points, [(src.cell_type, src.cells)]))
     m = read_mesh(path)
     assert m.cell_type == src.cell_type
