@@ -13,7 +13,7 @@ for n in 2 3; do
   # rank 0 reports; the other ranks run the same tests quietly. A hang is a failure too.
   # A failing test aborts the job (tests/conftest.py); a hang dumps tracebacks, then times out.
   timeout 1200 bash scripts/mpirun.sh -n "$n" bash -c '
-    opts="-q -p no:cacheprovider -o faulthandler_timeout=300"
+    opts="-q --color=no -p no:cacheprovider -o faulthandler_timeout=300"
     if [ "${OMPI_COMM_WORLD_RANK:-0}" = 0 ]; then exec '"$PY"' -m pytest $opts tests "$@";
     else exec '"$PY"' -m pytest $opts tests "$@" > /dev/null; fi' _ "$@"
 done
