@@ -1,7 +1,6 @@
 """Every shipped scene runs and gives its known number (analytic or classical)."""
 
 import numpy as np
-import pytest
 
 from conftest import CONFIGS, rel_err
 from parsolve.scene import load_scene

@@ -17,7 +17,7 @@ import numpy as np
 
 from parsolve.errors import InputError
 from parsolve.fem.elements import element, quadrature
-from parsolve.mesh.mesh import CELL_INFO, Mesh
+from parsolve.mesh.mesh import Mesh
 
 FACETS: dict[str, list[tuple[int, ...]]] = {
     "triangle": [(0, 1), (1, 2), (2, 0)],

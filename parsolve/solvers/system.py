@@ -66,7 +66,7 @@ class SaddleSystem:
     # ------------------------------------------------------------ elimination
 
     def _elimination_setup(self) -> None:
-        dofs, coefs, owners = [], [], []
+        dofs, coefs = [], []
         for r in self.eliminated:
             order = np.argsort(r.a_rows)
             dofs.append(r.a_dofs[order])

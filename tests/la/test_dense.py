@@ -73,7 +73,6 @@ def test_matches_dense_numpy_solve(preset, eliminate):
 
 def test_operator_blocks_are_what_the_relations_say():
     """In input numbering: K symmetric with rigid modes in its kernel, A and -D as defined."""
-    comm = MPI.COMM_WORLD
     system, solver, mat, rhs, x = solve_in_process(SCENE.format(cell="triangle", preset="direct",
                                                                 eliminate="false"))
     M = dense(mat)

@@ -2,9 +2,8 @@
 
 import numpy as np
 import pytest
-from mpi4py import MPI
 
-from conftest import CONFIGS, rel_err
+from conftest import CONFIGS
 from parsolve.errors import InputError, SolverError
 
 BAR = (CONFIGS / "localization_bar.toml").read_text()
