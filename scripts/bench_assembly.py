@@ -188,7 +188,7 @@ def cpu_idle(seconds: float = 1.0) -> float:
         return 1.0
 
 
-def wait_idle(max_wait: float, idle: float = 0.9, streak: int = 2) -> float:
+def wait_idle(max_wait: float, idle: float = 0.9, streak: int = 1) -> float:
     """Wait (at most max_wait s) until the CPUs were idle (> idle) `streak` seconds in a row."""
     t0, ok = time.time(), 0
     max_wait = min(max_wait, max(CONTENTION["budget"], 1.0))  # total waiting is bounded
