@@ -21,7 +21,7 @@ asm() (serial only). Ratios are rate ratios parsolve/peer (= t_peer / t_parsolve
 1-rank rows; the 2-rank rows show the ratio to serial scikit-fem for information only).
 
 Usage (from the repository root):
-    .venv/bin/python scripts/bench_assembly.py                      # everything (~8 min)
+    .venv/bin/python scripts/bench_assembly.py                      # everything (~9 min)
     .venv/bin/python scripts/bench_assembly.py --n 70 141 --ranks 1 --no-peers
     .venv/bin/python scripts/bench_assembly.py --peers-from bench_results   # reuse peer JSON
     .venv/bin/python scripts/bench_assembly.py --profile 707        # cProfile of one first assembly
@@ -532,7 +532,7 @@ def summarize(verdict: dict) -> list[str]:
         status = "MET at every size" if not miss else f"MISSED at {len(miss)}/{len(v)} rows"
         lines.append(f"- {label}: {status}; worst {worst[1]:.2f} ({worst[0]['cell']}, "
                      f"np={worst[0]['nranks']}, N={worst[0]['n']})"
-                     + (f"; >= 500k DOFs: " + ", ".join(f"{r['cell'][:3]}/np{r['nranks']}/N{r['n']}"
+                     + ("; >= 500k DOFs: " + ", ".join(f"{r['cell'][:3]}/np{r['nranks']}/N{r['n']}"
                                                         f" {x:.2f}" for r, x in big) if big else ""))
     return lines
 
@@ -609,12 +609,31 @@ def main(argv=None) -> int:
     out = {"machine": info, "elapsed_s": elapsed, "parsolve": rows,
            "peers": [dict(r) for r in peers.values()], "notes": notes, "summary": summary,
            "profile": prof}
-    (RESULTS / "assembly.json").write_text(json.dumps(out, indent=1))
     md = markdown(head, body, summary, notes, info, elapsed, prof, args)
-    (RESULTS / "assembly.md").write_text(md)
-    (COMMITTED / "bench_assembly.md").write_text(md)
-    print(f"[bench] wrote {RESULTS / 'assembly.json'}, {COMMITTED / 'bench_assembly.md'}")
+    write_outputs("assembly", out, md, full_run(args, p))
     return 0
+
+
+def full_run(args, parser) -> bool:
+    """A run with the default sizes, cells and ranks, peers included: only such a run replaces
+    the committed scripts/results/*.md and bench_results/<name>.json (others go to *_partial)."""
+    keys = ("n", "cell", "ranks", "control_n", "repeats")
+    same = all(getattr(args, k) == parser.get_default(k) for k in keys if hasattr(args, k))
+    return same and not args.no_peers
+
+
+def write_outputs(name: str, out: dict, md: str, full: bool) -> None:
+    stem = name if full else f"{name}_partial"
+    (RESULTS / f"{stem}.json").write_text(json.dumps(out, indent=1))
+    (RESULTS / f"{stem}.md").write_text(md)
+    written = [RESULTS / f"{stem}.json", RESULTS / f"{stem}.md"]
+    if full:
+        (COMMITTED / f"bench_{name}.md").write_text(md)
+        written.append(COMMITTED / f"bench_{name}.md")
+    else:
+        print(f"[bench] partial run (non-default sizes/cells/ranks or --no-peers): "
+              f"scripts/results/bench_{name}.md left as it was")
+    print("[bench] wrote " + ", ".join(str(w.relative_to(ROOT)) for w in written))
 
 
 def run_profile(n: int, cell: str) -> dict:
