@@ -76,7 +76,10 @@ class SaddleOperator:
         self.active = np.ones(layout.nl, dtype=bool)  # global multiplier rows enforced
         self._l0, self._l1 = l0, l1
         self.mat: PETSc.Mat | None = None
-        self.set_eliminated(np.zeros(0, dtype=np.int64))
+        # nothing eliminated until the system says so (set_eliminated); no pass over the CSR here
+        empty = np.zeros(0, dtype=np.int64)
+        self.elim_rows = self._row_entries = self._row_of_row_entries = empty
+        self._col_entries = self._row_of_col_entries = self._diag_entries = empty
 
     # ------------------------------------------------------------------ values
 
