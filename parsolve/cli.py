@@ -12,7 +12,7 @@ import argparse
 import sys
 from pathlib import Path
 
-USAGE = "parsolve {run,check} SCENE [-o OUT.h5] [--export-system DIR] [PETSc options]"
+USAGE = "parsolve {run,check,study,batch,post} SCENE [-o OUT.h5] [--export-system DIR] [PETSc options]"
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -43,8 +43,16 @@ def _abort_on_error(comm) -> None:
         sys.excepthook = hook
 
 
+# Commands that live in their own subpackage: ``parsolve.<name>.cli.main(argv) -> int``.
+SUBCOMMANDS = ("study", "batch", "post")
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
+    if argv and argv[0] in SUBCOMMANDS:
+        import importlib
+
+        return importlib.import_module(f"parsolve.{argv[0]}.cli").main(argv[1:])
     args, petsc_args = _parser().parse_known_args(argv)
     import petsc4py
 

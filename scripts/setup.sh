@@ -5,7 +5,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 PACKAGES="python3-petsc4py python3-mpi4py python3-numpy python3-h5py-mpi python3-venv \
-python3-pytest python3-yaml openmpi-bin libopenblas0-serial"
+python3-pytest python3-yaml python3-matplotlib openmpi-bin libopenblas0-serial"
 PETSC_DIR_DEB=/usr/lib/petscdir/petsc3.18/x86_64-linux-gnu-real
 
 missing=""
@@ -31,6 +31,11 @@ echo "${petsc_dir:-$PETSC_DIR_DEB}/lib/python3/dist-packages" > "$site/petsc.pth
 # --no-deps: declaring h5py/numpy would pull wheels that shadow Debian's MPI builds.
 if ! .venv/bin/python -c "import meshio" 2>/dev/null; then
   .venv/bin/pip install -q --disable-pip-version-check "meshio>=5,<6"
+fi
+# VTK's XDMF reader (the one ParaView uses) checks the files parsolve writes; --no-deps keeps
+# pip from replacing Debian's numpy / matplotlib.
+if ! .venv/bin/python -c "import vtk" 2>/dev/null; then
+  .venv/bin/pip install -q --disable-pip-version-check --no-deps "vtk>=9.2"
 fi
 if ! .venv/bin/python -c "import parsolve, sys; sys.exit(0 if parsolve.__file__.startswith('$PWD') else 1)" 2>/dev/null \
    || [ ! -x .venv/bin/parsolve ]; then
