@@ -362,11 +362,18 @@ def jacobians(coords: np.ndarray, dN: np.ndarray) -> np.ndarray:
     """J (ncells, nq, gdim, dim), J[c,q,i,j] = sum_a coords[c,a,i] dN[q,a,j].
 
     coords: (ncells, num_nodes, gdim); dN: (nq, num_nodes, dim).
+
+    Elementwise products summed node by node in a fixed order, never BLAS: a BLAS kernel's
+    summation order depends on the batch (its size, its alignment), so the same cell evaluated
+    in two ranks' batches would differ in the last bits, and a material branch test on the
+    result (yield, damage threshold) could go two ways. Here each cell's value is one fixed
+    sequence of IEEE operations whatever the batch it sits in.
     """
     coords = np.asarray(coords, dtype=np.float64)
-    # tensordot is one BLAS gemm over (ncells*gdim) x (nq*dim): faster than einsum here.
-    J = np.tensordot(coords, dN, axes=([1], [1]))  # (ncells, gdim, nq, dim)
-    return np.ascontiguousarray(J.transpose(0, 2, 1, 3))
+    J = np.zeros((coords.shape[0], dN.shape[0], coords.shape[2], dN.shape[2]))
+    for a in range(coords.shape[1]):
+        J += coords[:, None, a, :, None] * dN[None, :, a, None, :]
+    return J
 
 
 def _det_inv(J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -416,8 +423,11 @@ def physical_gradients(coords: np.ndarray, dN: np.ndarray) -> tuple[np.ndarray, 
     if J.shape[2] != J.shape[3]:
         raise ValueError(f"physical_gradients needs square Jacobians, got {J.shape[2:]}")
     detJ, Jinv = _det_inv(J)
-    # Batched matmul (nq, nn, dim) @ (ncells, nq, dim, dim) is ~10x faster than einsum here.
-    return np.matmul(dN[None], Jinv), detJ
+    # dN J^{-1} summed over j in a fixed order (batch-independent, see ``jacobians``)
+    dNdx = np.zeros(J.shape[:2] + dN.shape[1:])
+    for j in range(dN.shape[2]):
+        dNdx += dN[None, :, :, j, None] * Jinv[:, :, None, j, :]
+    return dNdx, detJ
 
 
 def facet_measure_and_normal(coords: np.ndarray, dN: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -51,8 +51,15 @@ def stiffness(B: np.ndarray, wdet: np.ndarray, C: np.ndarray) -> np.ndarray:
 
 
 def strains(B: np.ndarray, ue: np.ndarray) -> np.ndarray:
-    """ε at quadrature points (nc, nq, nvoigt) from element DOF values ue (nc, ndof)."""
-    return np.matmul(B, ue[:, None, :, None])[..., 0]
+    """ε at quadrature points (nc, nq, nvoigt) from element DOF values ue (nc, ndof).
+
+    Summed DOF by DOF in a fixed order, not by a BLAS matmul, so that a cell's strain has the
+    same bits whatever the batch of cells it is evaluated in (material branches depend on it).
+    """
+    eps = np.zeros(B.shape[:3])
+    for k in range(B.shape[3]):
+        eps += B[..., k] * ue[:, None, None, k]
+    return eps
 
 
 def internal_forces(B: np.ndarray, wdet: np.ndarray, sigma: np.ndarray) -> np.ndarray:

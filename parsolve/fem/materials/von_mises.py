@@ -27,6 +27,8 @@ import numpy as np
 from .base import Material, elastic_matrix, lame
 
 _SQRT32 = np.sqrt(1.5)
+#: Relative yield tolerance: plastic only when q exceeds the radius by more than round-off.
+YIELD_TOL = 1e-10
 # Deviatoric projector in Voigt, mapping engineering strains to (plain) stresses / (2 mu).
 _IDEV = np.zeros((6, 6))
 _IDEV[:3, :3] = -1.0 / 3.0
@@ -84,8 +86,11 @@ class VonMises(Material):
         # |s| with tensor components: each off-diagonal term counts twice
         norm = np.sqrt((s[:, :3] ** 2).sum(axis=1) + 2.0 * (s[:, 3:] ** 2).sum(axis=1))
         q = _SQRT32 * norm
-        f = q - (self.sigma_y + H * p_old)
-        plastic = f > 0.0
+        radius = self.sigma_y + H * p_old
+        f = q - radius
+        # A point returned onto the surface at the last step sits at f = 0 up to round-off;
+        # the tolerance keeps it elastic whatever that round-off (and so the partition) is.
+        plastic = f > YIELD_TOL * radius
 
         dp = np.where(plastic, f, 0.0) / (3.0 * mu + H)
         n = np.zeros((nq, 6))
