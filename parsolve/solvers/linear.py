@@ -9,6 +9,8 @@ Jacobi); without multipliers, CG + GAMG on the stiffness alone.
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
@@ -52,8 +54,27 @@ def preset_options(preset: str, symmetric: bool, has_multipliers: bool) -> dict[
     }
 
 
+REASONS = {getattr(PETSc.KSP.ConvergedReason, name): name.lower().replace("_", " ")
+           for name in dir(PETSc.KSP.ConvergedReason) if name.isupper()}
+
+#: An operator is symmetric when |a_ij - a_ji| <= SYMMETRY_TOL ||A||_inf for every entry:
+#: round-off between ranks passes, a non-symmetric tangent or relation does not.
+SYMMETRY_TOL = 1e-11
+
+
+def reason_in_words(reason: int) -> str:
+    """PETSc's KSPConvergedReason as words ("diverged its", "diverged indefinite pc", ...)."""
+    return REASONS.get(reason, f"reason {reason}")
+
+
 class LinearSolver:
-    """A KSP on the saddle operator, configured once from the layered options."""
+    """A KSP on the saddle operator, configured once from the layered options.
+
+    Every time the operator's values change (its PETSc state), a Cholesky factorization is
+    allowed only if the operator is numerically symmetric: a non-symmetric one switches the
+    factorization to LU (and says so in ``notes``), since MUMPS' Cholesky reads one triangle
+    and would factor another matrix. Factorization (PCSetUp) and solve are timed apart.
+    """
 
     def __init__(self, comm: MPI.Comm, prefix: str, settings: dict[str, str],
                  is_q: PETSc.IS, is_l: PETSc.IS, near_null: PETSc.NullSpace | None = None):
@@ -63,6 +84,9 @@ class LinearSolver:
         self.is_q, self.is_l = is_q, is_l
         self.near_null = near_null
         self.configured = False
+        self._state = None
+        self.notes: list[str] = []
+        self.timings = {"factorization": 0.0, "solve": 0.0}
 
     def set_operator(self, mat: PETSc.Mat) -> None:
         if self.near_null is not None:  # rigid-body modes for GAMG on the stiffness alone
@@ -75,25 +99,50 @@ class LinearSolver:
                     pc.setType("fieldsplit")
                     pc.setFieldSplitIS(("q", self.is_q), ("lambda", self.is_l))
                 self.ksp.setFromOptions()
-                try:
-                    self.ksp.setUp()
-                except PETSc.Error as exc:
-                    raise SolverError(f"solver set-up failed ({self._reason(exc)}); check the "
-                                      "PETSc options of the scene and the command line") from None
             self.configured = True
+
+    def _prepare(self) -> None:
+        """Check symmetry and factorize when the operator changed since the last solve."""
+        mat = self.ksp.getOperators()[0]
+        state = mat.stateGet()
+        if state == self._state:
+            return
+        pc = self.ksp.getPC()
+        if pc.getType() == "cholesky" and not self.symmetric(mat):
+            pc.setType("lu")
+            self.notes.append("the operator is not symmetric: LU instead of Cholesky")
+        t0 = time.perf_counter()
+        try:
+            with opt.inserted(self.prefix, self.settings):
+                self.ksp.setUp()
+        except PETSc.Error as exc:
+            raise SolverError(f"solver set-up failed ({self._reason(exc)}); check the "
+                              "PETSc options of the scene and the command line") from None
+        self.timings["factorization"] += time.perf_counter() - t0
+        self._state = mat.stateGet()
+
+    @staticmethod
+    def symmetric(mat: PETSc.Mat) -> bool:
+        return bool(mat.isSymmetric(SYMMETRY_TOL * max(mat.norm(PETSc.NormType.INFINITY), 1e-300)))
 
     def solve(self, rhs: PETSc.Vec, x: PETSc.Vec) -> int:
         """Solve; raise SolverError on failure (non-convergence, null pivots, non-finite)."""
+        self._prepare()
+        t0 = time.perf_counter()
         try:
             with opt.inserted(self.prefix, self.settings):
                 self.ksp.solve(rhs, x)
         except PETSc.Error as exc:
             raise SolverError(f"linear solve failed: {self._reason(exc)}") from None
+        finally:
+            self.timings["solve"] += time.perf_counter() - t0
         self._check_factor()
         if not np.isfinite(x.norm()):
             raise SolverError("linear solve produced non-finite values (singular system?)")
-        if self.ksp.getConvergedReason() < 0:
-            raise SolverError(f"linear solver diverged (reason {self.ksp.getConvergedReason()})")
+        reason = self.ksp.getConvergedReason()
+        if reason < 0:
+            raise SolverError(f"linear solver diverged: {reason_in_words(reason)} after "
+                              f"{self.ksp.getIterationNumber()} iterations")
         residual = true_residual(self.ksp.getOperators()[0], x, rhs)
         if residual > self.residual_limit:
             raise SolverError(f"linear solve inaccurate: true relative residual {residual:.1e} "
@@ -102,6 +151,19 @@ class LinearSolver:
                               "that lost its stiffness)")
         self.residual = residual
         return self.ksp.getIterationNumber()
+
+    def take_timings(self) -> dict[str, float]:
+        """Factorization and solve seconds since the last call."""
+        out, self.timings = self.timings, {"factorization": 0.0, "solve": 0.0}
+        return out
+
+    def negative_pivots(self) -> int | None:
+        """Negative pivots of the last LDLᵀ factorization (MUMPS INFOG(12)), else None."""
+        pc = self.ksp.getPC()
+        if pc.getType() != "cholesky":
+            return None
+        F = pc.getFactorMatrix()
+        return int(F.getMumpsInfog(12)) if F.getType() == "mumps" else None
 
     @property
     def residual_limit(self) -> float:
@@ -124,8 +186,11 @@ class LinearSolver:
             if pc.getType() in ("lu", "cholesky") and pc.getFactorMatrix().getType() == "mumps":
                 info = pc.getFactorMatrix().getMumpsInfog(1)
                 return f"MUMPS error INFOG(1)={info}"
+            reason = self.ksp.getConvergedReason()
+            if reason < 0:
+                return reason_in_words(reason)
             if pc.getType() == "fieldsplit":
-                return (f"PETSc error {exc.ierr} in the fieldsplit preconditioner; the iterative "
+                return ("the fieldsplit preconditioner failed to set up; the iterative "
                         "preset needs the stiffness block invertible once single-DOF conditions "
                         "are eliminated: use preset = \"direct\" for a body held only by "
                         "multiplied relations (or solver.eliminate = false)")
