@@ -18,6 +18,10 @@ from parsolve.errors import SolverError
 from parsolve.relations import Relation
 
 
+#: Relative tolerance within which rows of a maximum group are tied (see ``ActiveSet.pick``).
+GROUP_TOL = 1e-7
+
+
 class ActiveSet:
     def __init__(self, relations: list[Relation], max_changes: int = 30):
         sizes = [r.nrows for r in relations]
@@ -44,8 +48,11 @@ class ActiveSet:
         self.changes = 0
         self.seen = {self.active.tobytes()}
 
-    def update(self, gap: np.ndarray, lam: np.ndarray, tol_gap: float, tol_lam: float) -> bool:
-        """Update from the current A q - b (gap) and multipliers; True when the set changed."""
+    def update(self, gap: np.ndarray, lam: np.ndarray, tol_gap: float, tol_lam: float,
+               scale: float | None = None) -> bool:
+        """Update from the current A q - b (gap) and multipliers; True when the set changed.
+        ``scale``: the size of the rows' values (A q, b), for the ties of maximum groups."""
+        scale = tol_gap / 1e-9 if scale is None else scale
         s = self.sign
         new = self.active.copy()
         violated = self.free & ~self.active & (s * gap > tol_gap)
@@ -55,11 +62,9 @@ class ActiveSet:
         for g in self.groups:
             value = s[g] * gap[g]
             current = g[self.active[g]][0]
-            best = g[np.flatnonzero(value >= value.max() - tol_gap)[0]]  # ties: lowest row,
-            # whatever the round-off (and so the number of ranks)
-            if value.max() > s[current] * gap[current] + tol_gap:
-                new[g] = False
-                new[best] = True
+            best = self.pick(g, value, current, True, GROUP_TOL * scale)
+            new[g] = False
+            new[best] = True
         if np.array_equal(new, self.active):
             return False
         if new.tobytes() in self.seen:  # cycling: change only the worst row
@@ -71,6 +76,17 @@ class ActiveSet:
         self.active = new
         self.seen.add(new.tobytes())
         return True
+
+    @staticmethod
+    def pick(group: np.ndarray, score: np.ndarray, current: int, largest: bool, tol: float) -> int:
+        """The row of a maximum group to enforce: the best score, ties broken by a rule that
+        round-off cannot change. Rows whose score is within ``tol`` of the best are tied (tied rows of a symmetric problem differ by the solution's round-off, which
+        grows with the tangent's conditioning past a peak and changes with the partition);
+        among them the current row stays enforced, otherwise the lowest row is taken."""
+        score = score if largest else -score
+        finite = np.isfinite(score)
+        tied = group[finite & (score >= score[finite].max() - tol)]
+        return int(current) if current in tied else int(tied.min())
 
     def _one_change(self, gap, lam, violated, wrong_sign) -> np.ndarray:
         s = self.sign

@@ -20,7 +20,7 @@ from mpi4py import MPI
 from parsolve.errors import SolverError
 from parsolve.fem.kernels import cell_dofs
 from parsolve.scene import NonlinearSpec
-from parsolve.solvers.active_set import ActiveSet
+from parsolve.solvers.active_set import GROUP_TOL, ActiveSet
 from parsolve.solvers.linear import LinearSolver
 from parsolve.solvers.system import SaddleSystem
 
@@ -141,7 +141,9 @@ class NewtonSolver:
             tol = 1e-9 * max(float(np.abs(r).max()), 1e-300)
             reach = np.where(r > tol, room / np.where(r > tol, r, 1.0), np.inf)
             if np.isfinite(reach).any():
-                best = g[np.flatnonzero(reach <= reach.min() + 1e-9 * abs(reach.min()))[0]]
+                current = g[self.active.active[g]][0]
+                tol = GROUP_TOL * float(np.abs(reach[np.isfinite(reach)]).min())
+                best = self.active.pick(g, reach, current, False, tol)
                 self.active.active[g] = False
                 self.active.active[best] = True
         self.active.start_step()
@@ -157,7 +159,7 @@ class NewtonSolver:
         scale_gap = max(float(np.abs(gap).max()), float(np.abs(system.primal_values(self.q)).max()),
                         1e-300)
         scale_lam = max(float(np.abs(self.lam).max()), 1e-300)
-        return self.active.update(gap, self.lam, 1e-9 * scale_gap, 1e-9 * scale_lam)
+        return self.active.update(gap, self.lam, 1e-9 * scale_gap, 1e-9 * scale_lam, scale_gap)
 
     def multipliers(self, t: float, f_int: np.ndarray) -> dict[str, np.ndarray]:
         """λ of every relation by name (eliminated ones recovered from their rows)."""
