@@ -3,7 +3,9 @@
 Written once for every unilateral use (control by a maximum, contact, friction, solubility).
 A row of sign s (+1 for "<=", -1 for ">=") is admissible when s (A q - b) <= 0. An inactive
 row that is violated becomes active; an active row whose multiplier has the wrong sign
-(s λ < 0: the relation would pull instead of push) becomes inactive. Rows of a *maximum*
+(s o λ < 0: the relation would pull instead of push) becomes inactive. The orientation o is +1
+for associated rows (D = -Aᵀ: a positive s λ pushes back); a non-associated row's dual may
+point either way, so o = -sign(A K⁻¹ D) from the row's own response. Rows of a *maximum*
 relation work as a group: exactly one, the one with the largest s (A q - b), is enforced (the
 paper's "maximum of several controlled quantities"). A set that comes back after having been
 left is cycling: the update then changes one row at a time (the most violated), and gives up
@@ -36,6 +38,9 @@ class ActiveSet:
         self.active = self.sign == 0              # equalities are always enforced
         for g in self.groups:
             self.active[g[0]] = True               # a maximum is always enforced somewhere
+        # +1 where a positive s·λ pushes the row back to its admissible side (associated rows);
+        # non-associated rows get theirs from their own response (NewtonSolver.orient)
+        self.orient = np.ones(self.sign.size)
         self.max_changes = max_changes
         self.changes = 0
         self.seen: set[bytes] = set()
@@ -56,7 +61,7 @@ class ActiveSet:
         s = self.sign
         new = self.active.copy()
         violated = self.free & ~self.active & (s * gap > tol_gap)
-        wrong_sign = self.free & self.active & (s * lam < -tol_lam)
+        wrong_sign = self.free & self.active & (s * self.orient * lam < -tol_lam)
         new[violated] = True
         new[wrong_sign] = False
         for g in self.groups:
@@ -92,7 +97,7 @@ class ActiveSet:
         s = self.sign
         new = self.active.copy()
         score = np.where(violated, s * gap, -np.inf)
-        score_l = np.where(wrong_sign, -s * lam, -np.inf)
+        score_l = np.where(wrong_sign, -s * self.orient * lam, -np.inf)
         if score.max() >= score_l.max() and np.isfinite(score.max()):
             new[int(np.argmax(score))] = True
         elif np.isfinite(score_l.max()):

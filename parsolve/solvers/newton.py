@@ -50,6 +50,7 @@ class NewtonSolver:
         self.stress_qp = None
         self._dofs = cell_dofs(model.mesh.cells[self.cells], model.ncomp).ravel()
         self._mat = None
+        self._oriented = False
 
     def snapshot(self) -> tuple:
         """The converged state, to come back to when a trial step fails."""
@@ -78,6 +79,9 @@ class NewtonSolver:
         changed, dq_norm, predictions = True, np.inf, 0
         for it in range(spec.max_iterations + 1):
             f_int, kmat, trial, sig = self._evaluate(self.q)
+            if it == 0 and not self._oriented:
+                self._orient(kmat)
+                self._oriented = True
             if it == 0 and self.active.groups:
                 self._predict_maximum_rows(t, kmat)
                 predictions = 1
@@ -110,29 +114,65 @@ class NewtonSolver:
         raise SolverError(f"no convergence at t = {t:.6g} after {spec.max_iterations} iterations "
                           f"(relative residual {residual:.1e})")
 
-    def _predict_maximum_rows(self, t: float, kmat) -> None:
-        """For each maximum relation, enforce the row that reaches its value first under the
-        relation's own control load: one solve with the tangent and a unit control load, rates
-        r = A δq, then the smallest (b - A q) / r over rows with r > 0."""
+    def _unit_response(self, kmat, released: np.ndarray, f: np.ndarray) -> np.ndarray:
+        """δq = K⁻¹ f with the tangent, the rows ``released`` switched off and the other
+        active rows enforced at zero (homogeneous): how the structure answers a unit load."""
         system = self.system
         active = self.active.active.copy()
-        for g in self.active.groups:
-            active[g] = False
+        active[released] = False
         system.op.active = active
         mat = system.assemble(kmat)
         if self._mat is None:
             self.linear.set_operator(mat)
             self._mat = mat
+        x, rhs = self._vectors(mat)
+        rhs.array[:] = system.rhs_from(f, np.zeros(system.block.nrows),
+                                       np.zeros(system.elim_dofs.size))[0]
+        self.linear.solve(rhs, x)
+        return system.gather(x.array)[system.saddle_of_input]
+
+    def _dual_column(self, k: int, row: int | None = None) -> np.ndarray:
+        """Column of D of relation k (its first row when every row shares one vector)."""
+        dofs, rows, vals = self.system.multiplied[k].dual_coo()
+        f = np.zeros(self.ndof)
+        sel = rows == (0 if row is None else row)
+        np.add.at(f, dofs[sel], vals[sel])
+        return f
+
+    def _orient(self, kmat) -> None:
+        """o = -sign(A K⁻¹ D) of every free unilateral non-associated row, from the first
+        tangent: the reaction must push the row back whichever way its dual points. A relation
+        whose rows share one dual vector (a load pattern) costs one solve; rows with their own
+        local duals take the sign of -A_k·D_k."""
+        system, blk = self.system, self.system.block
+        for k, r in enumerate(system.multiplied):
+            if r.sense == "=" or r.associated or r.maximum:
+                continue
+            rows = np.arange(blk.first_row[k], blk.first_row[k + 1])
+            if r.meta.get("dual"):
+                rate = r.primal(self._unit_response(kmat, rows, self._dual_column(k)))
+            else:
+                dofs, drows, vals = r.dual_coo()
+                d = np.zeros((r.nrows, self.ndof))
+                np.add.at(d, (drows, dofs), vals)
+                rate = np.bincount(r.a_rows, weights=r.a_vals * d[r.a_rows, r.a_dofs],
+                                   minlength=r.nrows)
+            if np.any(np.abs(rate) <= 1e-12 * max(float(np.abs(rate).max()), 1e-300)):
+                raise SolverError(f"relation {r.name!r}: its dual does not move its primal value "
+                                  "(A K⁻¹ D = 0), so the sense of its reaction is undefined")
+            self.active.orient[rows] = -np.sign(rate)
+
+    def _predict_maximum_rows(self, t: float, kmat) -> None:
+        """For each maximum relation, enforce the row that reaches its value first under the
+        relation's own control load: one solve with the tangent and a unit control load, rates
+        r = A δq, then the smallest (b - A q) / r over rows with r > 0."""
+        system = self.system
         blk = system.block
+        groups = np.concatenate(self.active.groups)
         f = np.zeros(self.ndof)
         for g in self.active.groups:  # the control load of each group at unit intensity
-            first = int(np.searchsorted(blk.first_row, g[0], side="right") - 1)
-            dofs, rows, vals = system.multiplied[first].dual_coo()
-            np.add.at(f, dofs[rows == 0], vals[rows == 0])
-        x, rhs = self._vectors(mat)
-        rhs.array[:] = system.rhs_from(f, np.zeros(blk.nrows), np.zeros(system.elim_dofs.size))[0]
-        self.linear.solve(rhs, x)
-        dq = system.gather(x.array)[system.saddle_of_input]
+            f += self._dual_column(int(np.searchsorted(blk.first_row, g[0], side="right") - 1))
+        dq = self._unit_response(kmat, groups, f)
         rates = system.primal_values(dq)
         gap = np.concatenate([r.rhs(t) for r in system.multiplied]) - system.primal_values(self.q)
         for g in self.active.groups:
