@@ -1,82 +1,42 @@
-"""Runs a model: the effects it lists, nothing more. A linear scene (the only kind so far)
-assembles once, factorizes once and back-substitutes at every load step."""
+"""Runs a model: the effects it lists, nothing more. A linear scene assembles once,
+factorizes once and back-substitutes at every step (a transient linear scene refactorizes only
+when the time step changes); unilateral relations, switched relations or a nonlinear effect
+call for Newton with the active set; arc-length is a baseline for control."""
 
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import numpy as np
 from mpi4py import MPI
-from petsc4py import PETSc
 
+from parsolve.effects.compose import Rate
 from parsolve.errors import SolverError
 from parsolve.io.hdf5 import ResultWriter
 from parsolve.model import Model
-from parsolve.solvers import options as opt
-from parsolve.solvers.linear import LinearSolver, preset_options
+from parsolve.outputs import Balance, progress, step_outputs
+from parsolve.solvers.arc_length import run_arc_length
+from parsolve.solvers.newton import NewtonSolver
+from parsolve.solvers.setup import export_system, make_solver
 from parsolve.solvers.system import SaddleSystem
-
-
-def rigid_body_modes(comm: MPI.Comm, system: SaddleSystem) -> PETSc.NullSpace:
-    """Near-null space of the primal block (for GAMG), on the owned nodes in new numbering."""
-    part, mesh = system.part, system.model.mesh
-    lo, hi = part.node_ranges[comm.rank], part.node_ranges[comm.rank + 1]
-    old_of_new = np.argsort(part.new_of_old)
-    coords = mesh.points[old_of_new[lo:hi]]
-    vec = PETSc.Vec().createWithArray(coords.ravel().copy(), size=(coords.size, None),
-                                      bsize=mesh.dim, comm=comm)
-    return PETSc.NullSpace().createRigidBody(vec)
-
-
-def make_solver(comm: MPI.Comm, system: SaddleSystem, cli_options: dict[str, str]) -> LinearSolver:
-    scene = system.model.scene
-    symmetric = all(r.associated for r in system.multiplied)
-    has_mult = system.layout.nl > 0
-    settings = opt.merge(preset_options(scene.solver.preset, symmetric, has_mult),
-                         scene.solver.options, cli_options)
-    is_q, is_l = system.op.index_sets()
-    modes = rigid_body_modes(comm, system) if scene.solver.preset == "iterative" else None
-    if modes is not None and has_mult:  # fieldsplit hands it to the q block's matrix
-        is_q.compose("nearnullspace", modes)
-    return LinearSolver(comm, scene.solver.prefix, settings, is_q, is_l,
-                        near_null=None if has_mult else modes)
-
-
-def export_system(comm, directory: str, mat: PETSc.Mat, rhs: PETSc.Vec, system: SaddleSystem) -> None:
-    """DIR/system.dat (operator then right-hand side) and DIR/fields.dat (IS q, IS lambda)."""
-    path = Path(directory)
-    if comm.rank == 0:
-        path.mkdir(parents=True, exist_ok=True)
-    comm.Barrier()
-    viewer = PETSc.Viewer().createBinary(str(path / "system.dat"), "w", comm=comm)
-    mat.view(viewer)
-    rhs.view(viewer)
-    viewer.destroy()
-    viewer = PETSc.Viewer().createBinary(str(path / "fields.dat"), "w", comm=comm)
-    for iset in system.op.index_sets():
-        iset.view(viewer)
-    viewer.destroy()
+from parsolve.version import petsc_version
 
 
 def needs_newton(model: Model) -> bool:
-    """Only a nonlinear material or a unilateral relation calls for iterations."""
-    return model.elasticity.nonlinear or any(r.sense != "=" for r in model.relations)
+    """Only a nonlinear effect or a unilateral relation calls for iterations."""
+    return model.nonlinear or any(r.sense != "=" for r in model.relations)
 
 
 def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
         export_dir: str | None = None, log=print) -> str:
-    """Solve every load step and write the result file; returns the final status."""
+    """Solve every step and write the result file; returns the final status."""
     scene = model.scene
     system = SaddleSystem(comm, model)
     relations_meta = {r.name: (r.nrows, r.sense != "=") for r in model.relations}
-    writer = ResultWriter(comm, out, model.mesh, scene.text,
-                          ".".join(map(str, PETSc.Sys.getVersion())), relations_meta)
+    writer = ResultWriter(comm, out, model.mesh, scene.text, petsc_version(), relations_meta)
     status = "complete"
     try:
         if scene.nonlinear.method == "arc_length":
-            from parsolve.solvers.arc_length import run_arc_length
-
             run_arc_length(comm, system, cli_options, writer, log)
         elif needs_newton(model):
             _run_newton(comm, system, cli_options, writer, log)
@@ -85,95 +45,163 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
     except SolverError as exc:
         status = f"failed: {exc}"
         raise
+    except BaseException as exc:  # interrupted, disk full, a bug: never "complete"
+        status = f"interrupted: {exc}" if type(exc).__name__ == "Interrupted" else \
+            f"failed: {type(exc).__name__}: {exc}"
+        raise
     finally:
         writer.close(status)
     return status
 
 
-def _progress(log, comm, step: int, total, t: float, iterations: int, residual: float,
-              seconds: float, extra: str = "") -> None:
-    if comm.rank == 0:
-        log(f"step {step}/{total}  t={t:.6g}  iterations={iterations}  residual={residual:.2e}  "
-            f"{seconds:.3f} s{extra}")
-
-
 def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log) -> None:
-    """Assemble and factorize once; one back-substitution per step."""
-    scene = system.model.scene
-    t0 = time.perf_counter()
-    mat = system.assemble()
+    """Assemble and factorize once (again when a transient step size changes); one
+    back-substitution per step."""
+    model = system.model
+    scene = model.scene
     solver = make_solver(comm, system, cli_options)
-    solver.set_operator(mat)
-    assembly_time = time.perf_counter() - t0
-    x, rhs = mat.createVecs()
+    mat, vecs = None, None
+    q_prev, t_prev = np.zeros(system.composition.ndof), 0.0
+    balance = Balance(comm, system) if model.transient else None
+    stiffness_blocks = None
     for step, t in enumerate(scene.times):
         t1 = time.perf_counter()
-        rhs.array[:] = system.rhs(t)[0]
+        assembly = 0.0
+        f_known = model.external_load(t)
+        if model.transient:
+            theta = scene.time.theta
+            dt = t - t_prev
+            if system.rate is None or not np.isclose(dt, system.rate.dt, rtol=1e-12, atol=0):
+                system.rate, mat = Rate(dt, theta, q_prev, np.zeros(0)), None
+            if theta != 1.0:
+                f_known = theta * f_known + (1 - theta) * model.external_load(t_prev)
+                if stiffness_blocks is None:
+                    stiffness_blocks = [b for e in model.effects
+                                        for b in e.stiffness_blocks(system.local_cells)]
+                f_known = f_known - (1 - theta) * system.composition.product(stiffness_blocks, q_prev)
+            f_rhs = f_known + system.composition.product(
+                system.composition.mass_parts(), q_prev) / dt
+        else:
+            f_rhs = f_known
+        if mat is None:
+            t0 = time.perf_counter()
+            mat = system.assemble()
+            solver.set_operator(mat)
+            vecs = vecs or mat.createVecs()
+            assembly = time.perf_counter() - t0
+        x, rhs = vecs
+        rhs.array[:] = system.rhs_from(f_rhs, system.block.rhs(t), system.elim_values(t))[0]
         if export_dir is not None and step == 0:
             export_system(comm, export_dir, mat, rhs, system)
-        t2 = time.perf_counter()
         linear_its = solver.solve(rhs, x)
-        solve_time = time.perf_counter() - t2
-        q, multipliers = system.unpack(system.gather(x.array), t)
-        fields, cell_fields, rel_out = _outputs(comm, system, q, multipliers)
-        first = assembly_time if step == 0 else 0.0
-        timings = {"assembly": first, "solve": solve_time,
-                   "total": time.perf_counter() - t1 + first}
-        writer.write_step(t, 1, solver.residual, fields, cell_fields, rel_out, timings)
-        _progress(log, comm, step + 1, len(scene.times), t, 1, solver.residual, timings["total"],
-                  f"  (linear its {linear_its})")
+        t2 = time.perf_counter()
+        q, multipliers = system.unpack(system.gather(x.array), t, f_ext=f_rhs)
+        fields, cell_fields, rel_out = step_outputs(comm, system, q, multipliers)
+        extra = balance.step(q, t - t_prev, f_known, multipliers) if balance else {}
+        timings = {"assembly": assembly, **solver.take_timings()}
+        timings["output"] = time.perf_counter() - t2
+        timings["total"] = time.perf_counter() - t1
+        writer.write_step(t, 1, solver.residual, fields, cell_fields, rel_out, timings, extra=extra)
+        progress(log, comm, step + 1, len(scene.times), t, 1, solver.residual, timings["total"],
+                 f"  (linear its {linear_its})")
+        q_prev, t_prev = q, t
 
 
 def _run_newton(comm, system: SaddleSystem, cli_options, writer, log) -> None:
-    """Newton + active set at every step; the steps follow the scene or the automatic rule."""
-    from parsolve.solvers.newton import NewtonSolver
-
-    scene = system.model.scene
+    """Newton + active set at every step; the steps follow the scene or the automatic rule.
+    A step that fails is cut in two and retried (bounded), fixed steps as automatic ones; the
+    log and /steps/cuts say so."""
+    model = system.model
+    scene = model.scene
+    t0 = time.perf_counter()
     system.assemble()
     solver = make_solver(comm, system, cli_options)
     newton = NewtonSolver(comm, system, solver, scene.nonlinear)
     schedule = StepSchedule(scene)
-    step = 0
+    balance = Balance(comm, system) if model.transient else None
+    watch = BranchWatch()
+    step, setup = 0, time.perf_counter() - t0
     while (t := schedule.next()) is not None:
         t1 = time.perf_counter()
         snap = newton.snapshot()
+        t_prev = newton.t_prev
         try:
             result = newton.step(t)
         except SolverError as exc:
             newton.restore(snap)
-            if not schedule.cut(exc):
+            if not schedule.cut(t):
                 raise
             if comm.rank == 0:
-                log(f"step at t={t:.6g} failed ({exc}); retrying with half the step")
+                log(f"step to t={t:.6g} failed ({exc}); retrying with half the step")
             continue
         step += 1
         seconds = time.perf_counter() - t1
+        t2 = time.perf_counter()
         multipliers = newton.multipliers(t, result.f_int)
-        fields, cell_fields, rel_out = _outputs(comm, system, newton.q, multipliers, newton)
+        fields, cell_fields, rel_out = step_outputs(comm, system, newton.q, multipliers, newton)
+        extra = balance.step(newton.q, t - t_prev, newton.f_ext, multipliers) if balance else {}
+        warning = watch.check(newton.q - snap[0], solver.negative_pivots())
+        extra.update({"steps/cuts": schedule.cuts, "steps/branch_warning": int(warning is not None)})
+        timings = solver.take_timings()
+        timings["assembly"] = system.timings.get("assembly", 0.0) + (setup if step == 1 else 0.0)
+        timings["output"] = time.perf_counter() - t2
+        timings["total"] = time.perf_counter() - t1 + (setup if step == 1 else 0.0)
         writer.write_step(t, result.iterations, result.residual, fields, cell_fields, rel_out,
-                          {"assembly": system.timings.get("assembly", 0.0), "solve": seconds,
-                           "total": seconds})
+                          timings, extra=extra)
+        cut_note = f"  (after {schedule.cuts} cut{'s' * (schedule.cuts > 1)})" if schedule.cuts else ""
         schedule.done(t, _max_strain_increment(comm, system, newton.q - snap[0]))
-        _progress(log, comm, step, schedule.total, t, result.iterations, result.residual, seconds)
+        progress(log, comm, step, schedule.total, t, result.iterations, result.residual, seconds,
+                 cut_note)
+        if warning and comm.rank == 0:
+            log(f"warning: step {step}: {warning}")
+            writer.note(f"step {step}: {warning}")
+
+
+class BranchWatch:
+    """Warns when a softening run may have jumped to another equilibrium branch: the number of
+    negative pivots of an LDLᵀ factorization changed, or the step's increment is over ten
+    times the previous one's (which one a secant iteration lands on depends on round-off)."""
+
+    def __init__(self):
+        self.pivots, self.previous = None, None
+
+    def check(self, dq: np.ndarray, pivots: int | None) -> str | None:
+        warning = None
+        if pivots is not None and self.pivots is not None and pivots != self.pivots:
+            warning = (f"the tangent's negative pivots went from {self.pivots} to {pivots}: "
+                       "a limit point or a bifurcation was crossed")
+        size = float(np.linalg.norm(dq))
+        if self.previous is not None and self.previous > 0 and size > 10 * self.previous:
+            warning = (f"the increment is {size / self.previous:.0f}× the previous one: the run may "
+                       "have jumped to another equilibrium branch (smaller steps, or the tangent "
+                       "matrix, tell)")
+        self.pivots, self.previous = pivots, size
+        return warning
 
 
 class StepSchedule:
-    """The scene's load parameters, or automatic steps that keep the largest strain increment
-    near a target (Cast3M's AUTOMATIQUE): the next step is scaled by target / achieved, within
-    [1/2, 2], and a failed step is retried with half its size (up to 6 times in a row)."""
+    """The scene's steps, or automatic steps that keep the largest strain increment near a
+    target (Cast3M's AUTOMATIQUE): the next step is scaled by target / achieved, within
+    [1/2, 2]. A failed step is retried with half its size, up to MAX_CUTS times in a row; with
+    fixed steps the intermediate points are computed (and saved) on the way to the scene's."""
 
-    MAX_CUTS = 6
+    MAX_CUTS = 6         # in a row
+    MAX_STEP_CUTS = 24   # on the way to one of the scene's fixed steps
 
     def __init__(self, scene):
         self.spec = scene.steps
         self.times = list(scene.times)
         self.t, self.dt, self.count, self.cuts = 0.0, self.times[0], 0, 0
+        self.pending: float | None = None  # a cut fixed step: the intermediate time
+        self.step_cuts = 0
 
     @property
     def total(self):
         return "?" if self.spec.automatic else len(self.times)
 
     def next(self) -> float | None:
+        if self.pending is not None:
+            return self.pending
         if not self.spec.automatic:
             return self.times[self.count] if self.count < len(self.times) else None
         if self.t >= self.spec.end * (1 - 1e-12) or self.count >= self.spec.max_steps:
@@ -181,79 +209,44 @@ class StepSchedule:
         return min(self.t + self.dt, self.spec.end)
 
     def done(self, t: float, max_strain_increment: float) -> None:
-        self.count += 1
         self.cuts = 0
-        if self.spec.automatic:
-            self.t = t
-            if max_strain_increment > 0:
-                self.dt *= min(2.0, max(0.5, self.spec.strain_increment / max_strain_increment))
+        if not self.spec.automatic:
+            if self.pending is not None and t < self.times[self.count]:
+                self.t, self.pending = t, None  # the scene's step is still ahead
+                return
+            self.pending = None
+            self.count += 1
+            self.t, self.step_cuts = t, 0
+            return
+        self.count += 1
+        self.t = t
+        if max_strain_increment > 0:
+            self.dt *= min(2.0, max(0.5, self.spec.strain_increment / max_strain_increment))
 
-    def cut(self, exc: Exception) -> bool:
-        """Halve the step after a failure; False when fixed steps or too many cuts."""
-        if not self.spec.automatic or self.cuts >= self.MAX_CUTS:
+    def cut(self, t: float) -> bool:
+        """Halve the step that failed at t; False after too many cuts."""
+        if self.cuts >= self.MAX_CUTS or self.step_cuts >= self.MAX_STEP_CUTS:
             return False
         self.cuts += 1
-        self.dt *= 0.5
+        self.step_cuts += 1
+        if self.spec.automatic:
+            self.dt *= 0.5
+        else:
+            self.pending = self.t + 0.5 * (t - self.t)
         return True
 
 
 def _max_strain_increment(comm, system: SaddleSystem, dq: np.ndarray) -> float:
+    mech = system.model.elasticity
+    if mech is None:
+        return comm.allreduce(0.0, op=MPI.MAX)
     mesh = system.model.mesh
     owned = system.part.owned_cells(comm.rank, mesh.cells)
     if owned.size == 0:
         return comm.allreduce(0.0, op=MPI.MAX)
-    geo = system.model.elasticity.geometry(owned)
     from parsolve.fem.kernels import strains
 
-    eps = strains(geo.strain_operator(), dq.reshape(mesh.num_points, -1)[mesh.cells[owned]]
-                  .reshape(len(owned), mesh.cells.shape[1] * mesh.dim))
+    u = system.composition.values(dq)["u"]
+    eps = strains(mech.geometry(owned).strain_operator(),
+                  u[mesh.cells[owned]].reshape(len(owned), -1))
     return comm.allreduce(float(np.abs(eps).max()), op=MPI.MAX)
-
-
-def _gather_cells(comm, owned: np.ndarray, values: np.ndarray, ncells: int):
-    """Per-cell values of every rank's reported cells, in mesh order, on rank 0."""
-    parts = comm.gather((owned, values), root=0)
-    if comm.rank != 0:
-        return None
-    out = np.zeros((ncells,) + values.shape[1:])
-    for idx, val in parts:
-        out[idx] = val
-    return out
-
-
-def _outputs(comm: MPI.Comm, system: SaddleSystem, q: np.ndarray, multipliers: dict,
-             newton=None):
-    model = system.model
-    mesh = model.mesh
-    u = q.reshape(mesh.num_points, model.ncomp)
-    owned = system.part.owned_cells(comm.rank, mesh.cells)
-    cell_fields = {}
-    if newton is None:
-        sig = model.elasticity.cell_stress(owned, u)
-        sums, weights = model.elasticity.nodal_stress_sums(owned, u)
-    else:  # stresses and history from the material state at the quadrature points
-        pos = np.searchsorted(system.local_cells, owned)
-        wq = model.elasticity.geometry(owned).wdet
-        sig = (newton.stress_qp[pos] * wq[:, :, None]).sum(axis=1) / wq.sum(axis=1)[:, None]
-        vol = wq.sum(axis=1)
-        nodes = mesh.cells[owned].ravel()
-        nen = mesh.cells.shape[1]
-        sums = np.stack([np.bincount(nodes, weights=np.repeat(sig[:, k] * vol, nen),
-                                     minlength=mesh.num_points) for k in range(sig.shape[1])], 1)
-        weights = np.bincount(nodes, weights=np.repeat(vol, nen), minlength=mesh.num_points)
-        internal = model.elasticity.internal_variables(system.local_cells, newton.states)
-        for name, value in internal.items():
-            cell_fields[name] = _gather_cells(comm, owned, value[pos], mesh.num_cells)
-    cell_fields["stress"] = _gather_cells(comm, owned, sig, mesh.num_cells)
-    sums = comm.allreduce(sums)
-    weights = comm.allreduce(weights)
-    nodal = sums / np.maximum(weights, 1e-300)[:, None]
-    rel_out = {}
-    active = newton.active.active if newton is not None else None
-    for r in model.relations:
-        rel_out[r.name] = {"multiplier": multipliers[r.name], "primal": r.primal(q)}
-        if r.sense != "=":
-            k = system.multiplied.index(r)
-            first = system.block.first_row[k]
-            rel_out[r.name]["active"] = active[first:first + r.nrows].astype(np.int8)
-    return {"displacement": u, "stress": nodal}, cell_fields, rel_out

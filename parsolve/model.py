@@ -1,5 +1,6 @@
-"""Scene + mesh → the effects the scene lists (materials, loads, relations). All input errors
-that need the mesh are raised here, before any solve; ``parsolve check`` stops after this."""
+"""Scene + mesh → the effects the scene lists (their fields, materials), loads and relations.
+All input errors that need the mesh are raised here, before any solve; ``parsolve check``
+stops after this."""
 
 from __future__ import annotations
 
@@ -7,10 +8,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from parsolve.effects.base import Effect
 from parsolve.effects.constraints import build_relations
 from parsolve.effects.elasticity import Elasticity
 from parsolve.effects.loads import LoadPattern, load_patterns
+from parsolve.effects.registry import EFFECTS
 from parsolve.errors import InputError
+from parsolve.fields import FieldSet
 from parsolve.mesh.generators import GENERATORS, make_quadratic
 from parsolve.mesh.mesh import Mesh
 from parsolve.mesh.reader import read_mesh
@@ -23,14 +27,36 @@ from parsolve.scene import Scene
 class Model:
     scene: Scene
     mesh: Mesh
-    elasticity: Elasticity
+    fields: FieldSet
+    effects: list[Effect]
     patterns: dict[str, LoadPattern]
     relations: list[Relation]
     reference_patterns: tuple[str, ...] = ()  # applied by a solver (arc-length), not as loads
 
     @property
     def ncomp(self) -> int:
-        return self.mesh.dim
+        """DOFs per node (all fields)."""
+        return self.fields.ncomp
+
+    @property
+    def elasticity(self) -> Elasticity | None:
+        return next((e for e in self.effects if isinstance(e, Elasticity)), None)
+
+    @property
+    def nonlinear(self) -> bool:
+        return any(not e.linear for e in self.effects)
+
+    @property
+    def transient(self) -> bool:
+        return self.scene.time is not None
+
+    def symmetric(self, secant: bool = False) -> bool:
+        """Every effect's tangent is symmetric (Mazars' only with the secant matrix)."""
+        return all(e.symmetric or secant and getattr(e, "symmetric_secant", False)
+                   for e in self.effects)
+
+    def effect(self, name: str) -> Effect | None:
+        return next((e for e in self.effects if e.name == name), None)
 
     def external_load(self, t: float) -> np.ndarray:
         """Known loads at t (input DOF numbering); patterns used as duals are not applied."""
@@ -61,14 +87,45 @@ def build_mesh(scene: Scene) -> Mesh:
     return mesh
 
 
+@dataclass
+class BuildContext:
+    scene: Scene
+    mesh: Mesh
+    regions: RegionResolver
+    fields: FieldSet | None = None
+
+
+def build_effects(scene: Scene, mesh: Mesh, regions: RegionResolver) -> tuple[list[Effect], FieldSet]:
+    """The effects the scene lists, in registry order: the physics first (they declare the
+    fields), then the couplings that need the fields (solubility)."""
+    effects: list[Effect] = []
+    if scene.materials:
+        effects.append(Elasticity(mesh, scene.hypothesis, scene.thickness, scene.materials,
+                                  regions, scene.source))
+    ctx = BuildContext(scene, mesh, regions)
+    for coupling in (False, True):
+        if coupling:
+            ctx.fields = FieldSet([f for e in effects for f in e.fields()])
+        for name, entry in EFFECTS.items():
+            if entry.coupling == coupling:
+                effects += [entry.build(spec, ctx) for spec in scene.effect_specs.get(name, [])]
+    return effects, ctx.fields
+
+
 def build_model(scene: Scene) -> Model:
     mesh = build_mesh(scene)
     regions = RegionResolver(mesh, scene.regions, scene.source)
-    elasticity = Elasticity(mesh, scene.hypothesis, scene.thickness, scene.materials, regions,
-                            scene.source)
+    effects, fields = build_effects(scene, mesh, regions)
     patterns = load_patterns(mesh, scene.loads, regions, scene.evolutions, scene.thickness,
-                             scene.source)
-    relations = build_relations(scene.relations, regions, scene.evolutions, patterns, mesh.dim,
+                             scene.source, fields)
+    relations = build_relations(scene.relations, regions, scene.evolutions, patterns, fields,
                                 scene.source, scene.solver.eliminate)
+    names = {r.name for r in relations}
+    for e in effects:
+        for r in e.relations():
+            if r.name in names:
+                raise InputError(f"relation name {r.name!r} is taken by the {e.name} effect",
+                                 scene.source, "relations")
+            relations.append(r)
     reference = (scene.nonlinear.arc_pattern,) if scene.nonlinear.method == "arc_length" else ()
-    return Model(scene, mesh, elasticity, patterns, relations, reference)
+    return Model(scene, mesh, fields, effects, patterns, relations, reference)

@@ -43,6 +43,8 @@ class Relation:
     dual: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
     eliminate: bool | None = None  # None: let the solver decide (single-DOF rows are eliminated)
     maximum: bool = False          # unilateral rows of which only the extreme one is enforced
+    groups: np.ndarray | None = None  # per row: rows with one id form a group of which exactly
+    #                                   one row, the extreme one, is enforced (contiguous rows)
     meta: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:

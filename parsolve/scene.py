@@ -125,6 +125,7 @@ class LoadSpec:
     vector: list[float]
     evolution: str
     key: str
+    field: str = "u"
 
 
 @dataclass
@@ -133,6 +134,7 @@ class TermSpec:
     component: int
     coefficient: float
     mean: bool
+    field: str = "u"
 
 
 @dataclass
@@ -151,6 +153,7 @@ class RelationSpec:
     direction: list[float] | None = None   # strain: unit vector n of n·ε·n
     per_cell: bool = False                 # strain: one row per cell of the region
     maximum: bool = False                  # unilateral rows of which the largest is enforced
+    field: str = "u"                       # the field the relation constrains
 
 
 @dataclass
@@ -172,6 +175,15 @@ class StepSpec:
     strain_increment: float = 0.0   # target largest strain increment per step
     max_steps: int = 0
     end: float = 0.0
+
+
+@dataclass
+class TimeSpec:
+    """A transient run: the steps' t are times; θ-scheme (1: backward Euler) and the kind of
+    capacity matrix (lumped keeps concentrations monotone when relations switch)."""
+
+    theta: float = 1.0
+    mass: str = "lumped"
 
 
 @dataclass
@@ -201,10 +213,23 @@ class Scene:
     nonlinear: NonlinearSpec | None = None
     steps: StepSpec | None = None
     effects: list[str] = field(default_factory=list)
+    effect_specs: dict[str, list] = field(default_factory=dict)   # registry name -> specs
+    time: TimeSpec | None = None                                  # None: quasi-static
+    dimension: int = 2                                            # without a hypothesis
 
     @property
     def dim(self) -> int:
+        if self.hypothesis is None:
+            return self.dimension
         return 3 if self.hypothesis == "3d" else 2
+
+    @property
+    def fields(self) -> dict[str, int]:
+        """Field name -> number of components, as the effects will declare them."""
+        out = {"u": self.dim} if self.materials else {}
+        for spec in self.effect_specs.get("diffusion", []):
+            out[spec.field] = 1
+        return out
 
 
 # ---------------------------------------------------------------- parsing
@@ -230,19 +255,29 @@ def parse_scene(data: dict, source: str, text: str = "", base: Path = Path("."))
     title = top.get("title", str, "")
     mesh = _mesh(top.table("mesh"), base)
     model = top.table("model")
-    hypothesis = model.get("hypothesis", str, choices=HYPOTHESES)
+    materials = [_material(t) for t in top.tables("materials")]
+    hypothesis = model.get("hypothesis", str, ... if materials else None, choices=HYPOTHESES)
+    dimension = model.get("dimension", int, 3 if hypothesis == "3d" else 2, choices=(2, 3))
     thickness = model.get("thickness", float, 1.0)
     if thickness <= 0:
         raise model.error("thickness", "must be positive")
     model.done()
     regions = _regions(top.table("regions", {}))
     evolutions = _evolutions(top.table("evolutions", {}))
-    materials = [_material(t) for t in top.tables("materials")]
-    if not materials:
-        raise InputError("at least one [[materials]] entry is required", source, "materials")
-    dim = 3 if hypothesis == "3d" else 2
-    loads = [_load(t, dim) for t in top.tables("loads")]
-    relations = [_relation(t, dim) for t in top.tables("relations")]
+    dim = dimension if hypothesis is None else 3 if hypothesis == "3d" else 2
+    effect_specs = _effect_specs(top, dim)
+    if not materials and not effect_specs:
+        raise InputError("nothing to simulate: give [[materials]] (elasticity) or a physics "
+                         "section (" + ", ".join(f"[{e}]" for e in _registry()) + ")", source,
+                         "materials")
+    fields = ({"u": dim} if materials else {}) | \
+        {s.field: 1 for s in effect_specs.get("diffusion", [])}
+    loads = [_load(t, dim, fields) for t in top.tables("loads")]
+    relations = [_relation(t, dim, fields) for t in top.tables("relations")]
+    time_spec = _time(top.table("time", None))
+    if time_spec is not None and not top.has("steps"):
+        raise InputError("a transient scene needs its time steps ([steps] times or count/end)",
+                         source, "steps")
     steps = _steps(top.table("steps", {}))
     solver = _solver(top.table("solver", {}))
     nonlinear = _nonlinear(top.table("nonlinear", {}))
@@ -251,7 +286,8 @@ def parse_scene(data: dict, source: str, text: str = "", base: Path = Path("."))
     out.done()
     top.done()
     scene = Scene(source, text, title, mesh, hypothesis, thickness, regions, materials,
-                  evolutions, loads, relations, steps.times, solver, output, nonlinear, steps)
+                  evolutions, loads, relations, steps.times, solver, output, nonlinear, steps,
+                  effect_specs=effect_specs, time=time_spec, dimension=dim)
     _cross_check(scene)
     scene.effects = _effects(scene)
     return scene
@@ -336,6 +372,27 @@ def _material(t: Table) -> MaterialSpec:
     return MaterialSpec(region, model, params, t.path)
 
 
+def _field(t: Table, fields: dict[str, int]) -> str:
+    """The field a relation, term or load addresses: 'field', else the mechanical one, else
+    the only one."""
+    if t.has("field") or "u" not in fields and len(fields) != 1:
+        name = t.get("field", str)
+        if name not in fields:
+            raise t.error("field", f"unknown field {name!r} (fields: {', '.join(fields)})")
+        return name
+    return "u" if "u" in fields else next(iter(fields))
+
+
+def _field_component(t: Table, name: str, dim: int, field: str, fields: dict[str, int]) -> int:
+    """Component index within a field; a scalar field has one, unnamed (or "value")."""
+    if fields[field] == 1:
+        if t.has(name) and t.get(name, str) not in ("", "value", field):
+            raise t.error(name, f"field {field!r} is scalar: it has no component {t.data[name]!r}")
+        t.used.add(name)
+        return 0
+    return _component(t, name, dim)
+
+
 def _component(t: Table, name: str, dim: int) -> int:
     comp = t.get(name, str)
     if comp not in COMPONENTS or COMPONENTS[comp] >= dim:
@@ -344,49 +401,73 @@ def _component(t: Table, name: str, dim: int) -> int:
     return COMPONENTS[comp]
 
 
-def _load(t: Table, dim: int) -> LoadSpec:
+# a scalar field's loads under their own names: a boundary flux (into the domain, per unit
+# area), a volume source, a total flux spread uniformly over a boundary
+SCALAR_LOADS = {"flux": "traction", "source": "body", "total_flux": "total_force", "nodal": "nodal"}
+
+
+def _load(t: Table, dim: int, fields: dict[str, int]) -> LoadSpec:
     pattern = t.get("name", str, "loads")
-    kinds = [k for k in ("traction", "total_force", "body", "nodal") if t.has(k)]
+    field = _field(t, fields)
+    ncomp = fields[field]
+    names = tuple(SCALAR_LOADS) if ncomp == 1 and field != "u" else \
+        ("traction", "total_force", "body", "nodal")
+    kinds = [k for k in names if t.has(k)]
     if len(kinds) != 1:
-        raise t.error("traction", "give exactly one of traction, total_force, body, nodal")
-    vector = t.floats(kinds[0], dim)
-    region = t.get("region", str, "all" if kinds[0] == "body" else ...)
+        raise t.error(names[0], f"give exactly one of {', '.join(names)}")
+    if ncomp == 1 and isinstance(t.data[kinds[0]], (int, float)) and not isinstance(t.data[kinds[0]], bool):
+        vector = [t.get(kinds[0], float)]
+    else:
+        vector = t.floats(kinds[0], ncomp)
+    kind = SCALAR_LOADS[kinds[0]] if names[0] == "flux" else kinds[0]
+    region = t.get("region", str, "all" if kind == "body" else ...)
     evolution = t.get("evolution", str, "ramp")
     t.done()
-    return LoadSpec(pattern, region, kinds[0], vector, evolution, t.path)
+    return LoadSpec(pattern, region, kind, vector, evolution, t.path, field)
 
 
-def _relation(t: Table, dim: int) -> RelationSpec:
+def _relation(t: Table, dim: int, fields: dict[str, int]) -> RelationSpec:
     name = t.get("name", str)
     rtype = t.get("type", str, choices=RELATION_TYPES)
+    field = _field(t, fields)
     region, comps, terms, direction = None, [], [], None
     if rtype == "dirichlet":
         region = t.get("region", str)
         raw = t.get("components", list, None)
-        if raw is None:
+        if fields[field] == 1 and raw is None:
+            comps = [_field_component(t, "component", dim, field, fields)]
+        elif raw is None:
             comps = [_component(t, "component", dim)]
         else:
             sub = Table({f"components[{i}]": c for i, c in enumerate(raw)}, t.path, t.source)
-            comps = [_component(sub, k, dim) for k in sub.data]
+            comps = [_field_component(sub, k, dim, field, fields) for k in sub.data]
             if len(set(comps)) != len(comps):
                 raise t.error("components", "a component is listed twice")
     elif rtype in ("equal", "mean"):
         region = t.get("region", str)
-        comps = [_component(t, "component", dim)]
-        terms = [TermSpec(region, comps[0], 1.0, True)]
+        comps = [_field_component(t, "component", dim, field, fields)]
+        terms = [TermSpec(region, comps[0], 1.0, True, field)]
         minus = t.table("minus", None)
         if minus is not None:
             if rtype == "equal":
                 raise t.error("minus", "only a 'mean' relation takes 'minus'")
-            terms.append(TermSpec(minus.get("region", str), _component(minus, "component", dim), -1.0, True))
+            mfield = _field(minus, fields) if minus.has("field") else field
+            terms.append(TermSpec(minus.get("region", str),
+                                  _field_component(minus, "component", dim, mfield, fields),
+                                  -1.0, True, mfield))
             minus.done()
     elif rtype == "strain":
+        if field != "u":
+            raise t.error("type", "a strain relation constrains the displacement field")
         region = t.get("region", str)
         direction = _strain_direction(t, dim)
     else:
         for sub in t.tables("terms"):
-            terms.append(TermSpec(sub.get("region", str), _component(sub, "component", dim),
-                                  sub.get("coefficient", float, 1.0), sub.get("mean", bool, False)))
+            tfield = _field(sub, fields) if sub.has("field") else field
+            terms.append(TermSpec(sub.get("region", str),
+                                  _field_component(sub, "component", dim, tfield, fields),
+                                  sub.get("coefficient", float, 1.0), sub.get("mean", bool, False),
+                                  tfield))
             sub.done()
         if not terms:
             raise t.error("terms", "a linear relation needs at least one term")
@@ -405,7 +486,7 @@ def _relation(t: Table, dim: int) -> RelationSpec:
         raise t.error("maximum", "a maximum control needs several rows (per_cell = true)")
     t.done()
     return RelationSpec(name, rtype, region, comps, value, evolution, terms, dual, sense,
-                        eliminate, t.path, direction, per_cell, maximum)
+                        eliminate, t.path, direction, per_cell, maximum, field)
 
 
 def _strain_direction(t: Table, dim: int) -> list[float]:
@@ -430,6 +511,41 @@ def _strain_direction(t: Table, dim: int) -> list[float]:
     # shear: n·ε·n with n at 45° in the (i, j) plane is ε_ij + (ε_ii + ε_jj)/2; plain ε_ij is
     # asked through a pair direction instead: keep it simple and refuse
     raise t.error("component", "shear components are controlled through 'direction'")
+
+
+def _registry() -> dict:
+    from parsolve.effects.registry import EFFECTS
+
+    return EFFECTS
+
+
+def _effect_specs(top: Table, dim: int) -> dict[str, list]:
+    """The physics sections the scene lists, each read by its effect's own schema."""
+    specs = {}
+    for name, entry in _registry().items():
+        if not top.has(entry.section):
+            continue
+        tables = top.tables(entry.section) if entry.array else [top.table(entry.section)]
+        specs[name] = [entry.parse(t, dim) for t in tables]
+    names = [s.field for s in specs.get("diffusion", [])]
+    dup = sorted({n for n in names if names.count(n) > 1} | ({"u"} & set(names)))
+    if dup:
+        raise InputError(f"field {dup[0]!r} is declared twice", top.source, "diffusion")
+    return specs
+
+
+def _time(t: Table | None) -> TimeSpec | None:
+    if t is None:
+        return None
+    scheme = t.get("scheme", str, "backward_euler", choices=("backward_euler", "theta"))
+    theta = t.get("theta", float, 1.0 if scheme == "backward_euler" else 0.5)
+    if scheme == "backward_euler" and theta != 1.0:
+        raise t.error("theta", "backward Euler is θ = 1; use scheme = \"theta\"")
+    if not 0.5 <= theta <= 1.0:
+        raise t.error("theta", "must lie in [0.5, 1] (unconditionally stable schemes)")
+    mass = t.get("mass", str, "lumped", choices=("lumped", "consistent"))
+    t.done()
+    return TimeSpec(theta, mass)
 
 
 def _steps(t: Table) -> StepSpec:
@@ -521,6 +637,14 @@ def _cross_check(scene: Scene) -> None:
 
     for m in scene.materials:
         region(m.region, m.key + ".region")
+    for spec in scene.effect_specs.get("diffusion", []):
+        for m in spec.materials:
+            region(m.region, m.key + ".region")
+    for spec in scene.effect_specs.get("solubility", []):
+        if spec.evolution not in scene.evolutions:
+            raise InputError(f"unknown evolution {spec.evolution!r}", src, spec.key + ".evolution")
+        for name, _, key in spec.saturation:
+            region(name, key.rsplit(".", 1)[0] + ".region")
     patterns = {l.pattern for l in scene.loads}
     if scene.nonlinear.method == "arc_length" and scene.nonlinear.arc_pattern not in patterns:
         raise InputError(f"names no load pattern: {scene.nonlinear.arc_pattern!r}", src,
@@ -553,7 +677,10 @@ def _generator_group(scene: Scene, name: str) -> bool:
 
 def _effects(scene: Scene) -> list[str]:
     """The effects the scene calls for; only these are built and iterated."""
-    effects = ["elasticity"]
+    effects = ["elasticity"] if scene.materials else []
+    effects += list(scene.effect_specs)
+    if scene.time is not None:
+        effects.append("transient")
     if scene.loads:
         effects.append("loads")
     if scene.relations:

@@ -1,9 +1,12 @@
-"""Linear elasticity: stiffness of the cells, and stresses from a displacement field."""
+"""Elasticity (small strains, linear or nonlinear materials): the displacement field "u",
+the stiffness or tangent of the cells, internal forces, and stresses and history variables as
+outputs."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from parsolve.effects.base import Effect
 from parsolve.errors import InputError
 from parsolve.fem import kernels
 from parsolve.fem.element_matrices import ElementMatrices
@@ -11,13 +14,16 @@ from parsolve.fem.elements import element
 from parsolve.fem.materials.elastic import Elastic
 from parsolve.fem.materials.mazars import Mazars
 from parsolve.fem.materials.von_mises import VonMises
+from parsolve.fields import VECTOR_COMPONENTS, Field
 from parsolve.mesh.mesh import Mesh
 
 MODELS = {"elastic": Elastic, "mazars": Mazars, "von_mises": VonMises}
 
 
-class Elasticity:
+class Elasticity(Effect):
     """Materials per cell (later entries of the scene override earlier ones on shared cells)."""
+
+    name = "elasticity"
 
     def __init__(self, mesh: Mesh, hypothesis: str, thickness: float, materials: list, regions,
                  source: str):
@@ -41,6 +47,48 @@ class Elasticity:
                              source, "materials")
         self.C = np.stack([m.C for m in self.models])
         self.nonlinear = any(not isinstance(m, Elastic) for m in self.models)
+        self.linear = not self.nonlinear
+        # Mazars' consistent tangent is not symmetric (its secant (1 - D) C is)
+        self.symmetric_secant = True
+        self.symmetric = not any(isinstance(m, Mazars) for m in self.models)
+
+    def fields(self) -> list[Field]:
+        return [Field("u", VECTOR_COMPONENTS[:self.mesh.dim], "displacement", self.name)]
+
+    def stiffness_blocks(self, cells: np.ndarray):
+        return [("u", "u", self.stiffness(cells))]
+
+    def init_state(self, cells: np.ndarray):
+        return self.init_state_qp(cells)
+
+    def evaluate(self, cells, values, state, secant: bool):
+        """Internal forces, tangent, trial state and stresses at the quadrature points."""
+        fe, tangent, trial, sig = self.evaluate_u(cells, values["u"], state, secant)
+        nen = self.mesh.cells.shape[1]
+        return {"u": fe.reshape(len(cells), nen, self.ncomp)}, [("u", "u", tangent)], trial, sig
+
+    def outputs(self, owned, values, extra, local_cells):
+        """Nodal stress (volume-weighted average) and cell stress; with a nonlinear run
+        (``extra`` = (stress at the quadrature points of the local cells, states)), the
+        stress and history variables of the material state."""
+        u = values["u"]
+        if extra is None:
+            sig = self.cell_stress(owned, u)
+            return {"stress": self.nodal_stress_sums(owned, u)}, {"stress": sig}
+        stress_qp, states = extra
+        pos = np.searchsorted(local_cells, owned)
+        wq = self.geometry(owned).wdet
+        sig = (stress_qp[pos] * wq[:, :, None]).sum(axis=1) / wq.sum(axis=1)[:, None]
+        vol = wq.sum(axis=1)
+        nodes = self.mesh.cells[owned].ravel()
+        nen, npts = self.mesh.cells.shape[1], self.mesh.num_points
+        sums = np.stack([np.bincount(nodes, weights=np.repeat(sig[:, k] * vol, nen), minlength=npts)
+                         for k in range(sig.shape[1])], 1)
+        weights = np.bincount(nodes, weights=np.repeat(vol, nen), minlength=npts)
+        cells = {name: value[pos] for name, value in
+                 self.internal_variables(local_cells, states).items()}
+        cells["stress"] = sig
+        return {"stress": (sums, weights)}, cells
 
     def geometry(self, cells: np.ndarray, at_nodes: bool = False) -> kernels.CellGeometry:
         coords = self.mesh.points[self.mesh.cells[cells]]
@@ -89,13 +137,13 @@ class Elasticity:
 
     # ------------------------------------------------------------ nonlinear materials
 
-    def init_state(self, cells: np.ndarray) -> list[dict]:
+    def init_state_qp(self, cells: np.ndarray) -> list[dict]:
         """History of every quadrature point of the given cells, per material model."""
         nq = self.geometry(cells[:1]).nq if cells.size else 1
         return [m.init_state(int((self.cell_model[cells] == k).sum()) * nq)
                 for k, m in enumerate(self.models)]
 
-    def evaluate(self, cells: np.ndarray, u: np.ndarray, states: list[dict], secant: bool = False):
+    def evaluate_u(self, cells: np.ndarray, u: np.ndarray, states: list[dict], secant: bool = False):
         """Internal forces (nc, ndof), tangent ElementMatrices, trial states and the stress at
         the quadrature points (nc, nq, nv), at the displacement u (npoints, ncomp)."""
         geo = self.geometry(cells)

@@ -30,20 +30,25 @@ def _scatter(ndof: int, dofs: np.ndarray, values: np.ndarray) -> np.ndarray:
     return np.bincount(dofs.ravel(), weights=values.ravel(), minlength=ndof)
 
 
-def part_vector(mesh: Mesh, spec, region, thickness: float, source: str) -> np.ndarray:
-    """Global force vector (input DOF numbering) of one load entry."""
-    ncomp = mesh.dim
-    ndof = mesh.num_points * ncomp
+def _field_dofs(fields, field: str, nodes: np.ndarray) -> np.ndarray:
+    """(n, nen·ncomp) DOFs of a field at (n, nen) nodes, node-major."""
+    nodes = np.asarray(nodes)
+    return fields.dofs(field, nodes.ravel()).reshape(nodes.shape[0], -1)
+
+
+def part_vector(mesh: Mesh, spec, region, thickness: float, source: str, fields) -> np.ndarray:
+    """Global force vector (input DOF numbering) of one load entry, on its field."""
+    ndof = mesh.num_points * fields.ncomp
     vec = np.asarray(spec.vector)
     if spec.kind == "nodal":
-        dofs = kernels.cell_dofs(region.nodes[:, None], ncomp)
+        dofs = _field_dofs(fields, spec.field, region.nodes[:, None])
         return _scatter(ndof, dofs, np.tile(vec, (len(region.nodes), 1)))
     if spec.kind == "body":
         if region.cells.size == 0:
             raise InputError(f"region {spec.region!r} contains no cell", source, spec.key + ".region")
         cells = mesh.cells[region.cells]
         fe = kernels.body_load(mesh.points[cells], mesh.cell_type, vec, thickness)
-        return _scatter(ndof, kernels.cell_dofs(cells, ncomp), fe)
+        return _scatter(ndof, _field_dofs(fields, spec.field, cells), fe)
     if region.facets.size == 0:
         raise InputError(f"region {spec.region!r} contains no boundary facet", source,
                          spec.key + ".region")
@@ -51,15 +56,15 @@ def part_vector(mesh: Mesh, spec, region, thickness: float, source: str) -> np.n
     if spec.kind == "total_force":
         vec = vec / kernels.facet_measure(coords, mesh.facet_type, thickness)
     fe = kernels.facet_load(coords, mesh.facet_type, vec, thickness)
-    return _scatter(ndof, kernels.cell_dofs(region.facets, ncomp), fe)
+    return _scatter(ndof, _field_dofs(fields, spec.field, region.facets), fe)
 
 
 def load_patterns(mesh: Mesh, specs: list, regions, evolutions: dict, thickness: float,
-                  source: str) -> dict[str, LoadPattern]:
+                  source: str, fields) -> dict[str, LoadPattern]:
     patterns: dict[str, LoadPattern] = {}
     for spec in specs:
         region = regions(spec.region, spec.key + ".region")
-        vec = part_vector(mesh, spec, region, thickness if mesh.dim == 2 else 1.0, source)
+        vec = part_vector(mesh, spec, region, thickness if mesh.dim == 2 else 1.0, source, fields)
         patterns.setdefault(spec.pattern, LoadPattern(spec.pattern)).parts.append(
             (vec, evolutions[spec.evolution]))
     return patterns

@@ -40,3 +40,41 @@ class ElementMatrices:
 def _bincount_rows(slots: np.ndarray, values: np.ndarray, npairs: int) -> np.ndarray:
     """Row-wise bincount, dropping the dump slot ``npairs`` (rows owned by another rank)."""
     return np.stack([np.bincount(slots, weights=v, minlength=npairs + 1)[:npairs] for v in values])
+
+
+def full_values(m: ElementMatrices) -> np.ndarray:
+    """The element matrices (d², nen, nen, nc) whatever their form."""
+    if m.values is not None:
+        return m.values
+    M = m.tensors[m.cell_material]                      # (nc, d², d²)
+    return np.einsum("ckm,kabc->mabc", M, m.geometric)
+
+
+def apply(m: ElementMatrices, ue: np.ndarray) -> np.ndarray:
+    """Element products K_e u_e: ue (nc, nen, dj) → (nc, nen, di), d² = di·dj."""
+    V = full_values(m)
+    nc, nen, dj = ue.shape
+    di = V.shape[0] // dj
+    return np.einsum("ijabc,cbj->cai", V.reshape(di, dj, nen, nen, nc), ue)
+
+
+@dataclass
+class BlockMatrices:
+    """Element matrices of several effects, each on its own (row, column) components of the
+    node DOFs, scaled: reduced into the full (ncomp², npairs) node-pair blocks."""
+
+    ncomp: int
+    parts: list  # (row components, column components, ElementMatrices, factor)
+
+    def reduce(self, pair_slot: np.ndarray, npairs: int) -> np.ndarray:
+        nc = self.ncomp
+        if len(self.parts) == 1:
+            ci, cj, m, fac = self.parts[0]
+            if len(ci) == len(cj) == nc and np.all(ci == np.arange(nc)) \
+                    and np.all(cj == np.arange(nc)) and fac == 1.0:
+                return m.reduce(pair_slot, npairs)
+        out = np.zeros((nc * nc, npairs))
+        for ci, cj, m, fac in self.parts:
+            idx = (np.asarray(ci)[:, None] * nc + np.asarray(cj)[None, :]).ravel()
+            out[idx] += fac * m.reduce(pair_slot, npairs)
+        return out

@@ -52,7 +52,7 @@ class ResultWriter:
         ds[-1] = value
 
     def write_step(self, t: float, iterations: int, residual: float, fields: dict, cell_fields: dict,
-                   relations: dict, timings: dict) -> None:
+                   relations: dict, timings: dict, extra: dict | None = None) -> None:
         """fields: name -> (npoints, ncomp); relations: name -> dict(multiplier, primal[, active])."""
         self.times.append(t)
         if self.comm.rank != 0:
@@ -71,10 +71,18 @@ class ResultWriter:
                 self._append(f"relations/{name}/{key}", value)
         for name, value in timings.items():
             self._append(f"timings/{name}", float(value))
+        for path, value in (extra or {}).items():  # per-step scalars: /balance, /steps/cuts
+            self._append(path, value)
         self.file.flush()
         write_xdmf(self.path.with_suffix(".xdmf"), self.path.name, self.mesh.cell_type,
                    self.mesh.num_points, self.mesh.num_cells, self.mesh.cells.shape[1], self.mesh.dim,
                    self.times, self.fields, self.cell_fields)
+
+    def note(self, text: str) -> None:
+        """A warning kept in the file (root attribute ``warnings``, one line each)."""
+        if self.file is not None:
+            previous = self.file.attrs.get("warnings", "")
+            self.file.attrs["warnings"] = (previous + "\n" if previous else "") + text
 
     def close(self, status: str) -> None:
         if self.file is not None:

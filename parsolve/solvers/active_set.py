@@ -30,14 +30,24 @@ class ActiveSet:
         self.sign = np.concatenate([np.full(r.nrows, r.sign) for r in relations]) \
             if relations else np.zeros(0, dtype=np.int64)
         first = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        # groups: contiguous runs of rows; a whole maximum relation is one group
+        group = np.full(self.sign.size, -1, dtype=np.int64)
+        count = 0
+        for k, r in enumerate(relations):
+            ids = np.zeros(r.nrows, dtype=np.int64) if r.maximum else r.groups
+            if ids is not None:
+                group[first[k]:first[k + 1]] = count + np.asarray(ids, dtype=np.int64)
+                count += int(np.max(ids)) + 1 if r.nrows else 0
+        self.group = group
+        grouped = group >= 0
+        self.group_rows = np.flatnonzero(grouped)
+        starts = np.flatnonzero(np.diff(np.concatenate([[-1], group[grouped]])) != 0)
+        self.group_starts = starts                       # into group_rows
+        # the control groups (a maximum relation), for the per-step predictor
         self.groups = [np.arange(first[k], first[k + 1]) for k, r in enumerate(relations) if r.maximum]
-        grouped = np.zeros(self.sign.size, dtype=bool)
-        for g in self.groups:
-            grouped[g] = True
         self.free = (self.sign != 0) & ~grouped   # rows decided one by one
         self.active = self.sign == 0              # equalities are always enforced
-        for g in self.groups:
-            self.active[g[0]] = True               # a maximum is always enforced somewhere
+        self.active[self.group_rows[starts]] = True  # a group is always enforced somewhere
         # +1 where a positive s·λ pushes the row back to its admissible side (associated rows);
         # non-associated rows get theirs from their own response (NewtonSolver.orient)
         self.orient = np.ones(self.sign.size)
@@ -64,12 +74,10 @@ class ActiveSet:
         wrong_sign = self.free & self.active & (s * self.orient * lam < -tol_lam)
         new[violated] = True
         new[wrong_sign] = False
-        for g in self.groups:
-            value = s[g] * gap[g]
-            current = g[self.active[g]][0]
-            best = self.pick(g, value, current, True, GROUP_TOL * scale)
-            new[g] = False
-            new[best] = True
+        if self.group_rows.size:
+            rows = self.group_rows
+            best = self.pick_groups(s[rows] * gap[rows], self.active[rows], GROUP_TOL * scale)
+            new[rows] = best
         if np.array_equal(new, self.active):
             return False
         if new.tobytes() in self.seen:  # cycling: change only the worst row
@@ -92,6 +100,19 @@ class ActiveSet:
         finite = np.isfinite(score)
         tied = group[finite & (score >= score[finite].max() - tol)]
         return int(current) if current in tied else int(tied.min())
+
+    def pick_groups(self, score: np.ndarray, active: np.ndarray, tol: float) -> np.ndarray:
+        """``pick`` for every group at once (score and active over ``group_rows``): the new
+        active mask of those rows."""
+        starts = self.group_starts
+        n = score.size
+        sizes = np.diff(np.concatenate([starts, [n]]))
+        top = np.repeat(np.maximum.reduceat(score, starts), sizes)
+        tied = score >= top - tol
+        keep = np.repeat(np.logical_or.reduceat(active & tied, starts), sizes)
+        index = np.where(tied, np.arange(n), n)
+        lowest = np.repeat(np.minimum.reduceat(index, starts), sizes)
+        return np.where(keep, active & tied, np.arange(n) == lowest)
 
     def _one_change(self, gap, lam, violated, wrong_sign) -> np.ndarray:
         s = self.sign

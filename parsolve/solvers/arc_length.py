@@ -57,7 +57,7 @@ class ArcLength(NewtonSolver):
         zero_e = np.zeros(system.elim_dofs.size)
         free = system.free_rows()
         for it in range(spec.max_iterations + 1):
-            f_int, kmat, trial, sig = self._evaluate(self.q)
+            f_int, kmat, trial, extras = self._evaluate(self.q)
             f_ext = system.to_owned(system.model.external_load(t) + self.mu * self.P) \
                 + system.reactions(self.lam)
             r = (f_ext - system.to_owned(f_int))[free]
@@ -65,7 +65,7 @@ class ArcLength(NewtonSolver):
             ref = max(self._norm(f_ext[free]), self._norm(system.to_owned(f_int)), 1e-300)
             residual = self._norm(r) / ref
             if it > 0 and residual <= spec.rtol:
-                self.states, self.stress_qp = trial, sig
+                self.states, self.extras = trial, extras
                 self.prev = (self.q - q0, self.mu - mu0)
                 return it, residual, f_int
             if it == spec.max_iterations:
@@ -77,7 +77,7 @@ class ArcLength(NewtonSolver):
             # bordering: the response to the residual and to the reference load
             target_r = (np.concatenate([x.rhs(t) for x in system.multiplied]) if system.multiplied
                         else zero_t) - system.primal_values(self.q)
-            elim_r = system.elim_values(t) - self.q[system.elim_dofs] if system.eliminated else zero_e
+            elim_r = system.elim_values(t) - self.q[system.elim_dofs] if system.elim_dofs.size else zero_e
             f_r = system.model.external_load(t) + self.mu * self.P - f_int
             dq_r, lam_r = self._solve(f_r, target_r * blk.row_scale if blk.nrows else zero_t, elim_r, mat)
             dq_p, lam_p = self._solve(self.P, zero_t, zero_e, mat)

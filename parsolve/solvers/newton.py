@@ -17,8 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 from mpi4py import MPI
 
+from parsolve.effects.compose import Rate
 from parsolve.errors import SolverError
-from parsolve.fem.kernels import cell_dofs
 from parsolve.scene import NonlinearSpec
 from parsolve.solvers.active_set import GROUP_TOL, ActiveSet
 from parsolve.solvers.linear import LinearSolver
@@ -39,35 +39,52 @@ class NewtonSolver:
                  spec: NonlinearSpec):
         self.comm, self.system, self.linear, self.spec = comm, system, linear, spec
         model = system.model
-        self.mech = model.elasticity
         self.cells = system.local_cells
-        self.states = self.mech.init_state(self.cells)
+        self.states = system.composition.init_states()
         self.active = ActiveSet(system.multiplied, spec.max_active_set_changes)
         self.ndof = model.mesh.num_points * model.ncomp
         self.q = np.zeros(self.ndof)
         self.lam = np.zeros(system.layout.nl)
         self.x_full = np.zeros(system.layout.size)
-        self.stress_qp = None
-        self._dofs = cell_dofs(model.mesh.cells[self.cells], model.ncomp).ravel()
+        self.extras = [None] * len(model.effects)   # e.g. stresses at the quadrature points
+        self.time = model.scene.time                # transient: θ-scheme from t_prev to t
+        self.t_prev = 0.0
+        self.f_pure = np.zeros(self.ndof)           # f_int at the last converged state
+        self.residual_history: list[float] = []
         self._mat = None
         self._oriented = False
 
     def snapshot(self) -> tuple:
         """The converged state, to come back to when a trial step fails."""
         return (self.q.copy(), self.lam.copy(), self.x_full.copy(), self.states,
-                self.active.active.copy(), self.stress_qp)
+                self.active.active.copy(), self.extras, self.t_prev, self.f_pure)
 
     def restore(self, snap: tuple) -> None:
-        self.q, self.lam, self.x_full, self.states, active, self.stress_qp = \
-            (snap[0].copy(), snap[1].copy(), snap[2].copy(), snap[3], snap[4].copy(), snap[5])
-        self.active.active = active
+        (self.q, self.lam, self.x_full, self.states, active, self.extras, self.t_prev,
+         self.f_pure) = (snap[0].copy(), snap[1].copy(), snap[2].copy(), *snap[3:])
+        self.active.active = active.copy()
 
     def _evaluate(self, q: np.ndarray):
-        u = q.reshape(-1, self.system.model.ncomp)
-        fe, kmat, trial, sig = self.mech.evaluate(self.cells, u, self.states,
-                                                   secant=self.spec.matrix == "secant")
-        f_int = np.bincount(self._dofs, weights=fe.ravel(), minlength=self.ndof)
-        return f_int, kmat, trial, sig
+        """(f_int with the rate terms, tangent, trial states, extras); keeps f_int alone."""
+        total, pure, blocks, trial, extras = self.system.composition.evaluate(
+            q, self.states, self.spec.matrix == "secant", self.system.rate)
+        self._f_trial = pure
+        return total, blocks, trial, extras
+
+    def external(self, t: float) -> np.ndarray:
+        """The known loads the step balances: F(t), or θ F(t) + (1 - θ) F(t_n) in a transient
+        step."""
+        f = self.system.model.external_load(t)
+        if self.time is None or self.time.theta == 1.0:
+            return f
+        return self.time.theta * f + (1.0 - self.time.theta) * \
+            self.system.model.external_load(self.t_prev)
+
+    def _start_rate(self, t: float) -> None:
+        if self.time is not None:
+            if not t > self.t_prev:
+                raise SolverError(f"time step to t = {t:.6g} is not positive")
+            self.system.rate = Rate(t - self.t_prev, self.time.theta, self.q.copy(), self.f_pure)
 
     def _norm(self, v: np.ndarray) -> float:
         return float(np.sqrt(self.comm.allreduce(float(v @ v))))
@@ -76,23 +93,29 @@ class NewtonSolver:
         system, spec = self.system, self.spec
         free = system.free_rows()
         self.active.start_step()
+        self._start_rate(t)
+        f_known = self.external(t)
         changed, dq_norm, predictions = True, np.inf, 0
+        self.residual_history = []
         for it in range(spec.max_iterations + 1):
-            f_int, kmat, trial, sig = self._evaluate(self.q)
+            f_int, kmat, trial, extras = self._evaluate(self.q)
             if it == 0 and not self._oriented:
                 self._orient(kmat)
                 self._oriented = True
             if it == 0 and self.active.groups:
                 self._predict_maximum_rows(t, kmat)
                 predictions = 1
-            f_ext = system.to_owned(system.model.external_load(t)) + system.reactions(self.lam)
+            f_ext = system.to_owned(f_known) + system.reactions(self.lam)
             r = (f_ext - system.to_owned(f_int))[free]
             # the forces in play, reactions of eliminated DOFs included
             ref = max(self._norm(f_ext[free]), self._norm(system.to_owned(f_int)), 1e-300)
             residual = self._norm(r) / ref
+            self.residual_history.append(residual)
             small_step = dq_norm <= spec.stol * max(float(np.abs(self.q).max()), 1e-300)
             if it > 0 and not changed and (residual <= spec.rtol or small_step and residual < 1e-6):
-                self.states, self.stress_qp = trial, sig
+                self.states, self.extras = trial, extras
+                self.t_prev, self.f_pure = t, self._f_trial
+                self.f_ext = f_known
                 return StepResult(it + predictions, residual, f_int)
             if it == spec.max_iterations:
                 break
@@ -102,7 +125,7 @@ class NewtonSolver:
                 self.linear.set_operator(mat)
                 self._mat = mat
             x, rhs = self._vectors(mat)
-            rhs.array[:] = system.rhs(t, f_int=f_int, q=self.q)[0]
+            rhs.array[:] = system.rhs(t, f_int=f_int, q=self.q, f_ext=f_known)[0]
             self.linear.solve(rhs, x)
             x_full = system.gather(x.array)
             dq = x_full[system.saddle_of_input]
@@ -111,8 +134,11 @@ class NewtonSolver:
             self.lam = system.multipliers(x_full)
             self.x_full = x_full
             changed = self._update_active(t) if self.active.unilateral else False
-        raise SolverError(f"no convergence at t = {t:.6g} after {spec.max_iterations} iterations "
-                          f"(relative residual {residual:.1e})")
+        history = ", ".join(f"{r:.1e}" for r in self.residual_history[-6:])
+        trend = "diverged" if len(self.residual_history) > 2 and \
+            self.residual_history[-1] > self.residual_history[1] else "did not converge"
+        raise SolverError(f"Newton {trend} at t = {t:.6g} after {spec.max_iterations} iterations "
+                          f"(relative residuals ..., {history})")
 
     def _unit_response(self, kmat, released: np.ndarray, f: np.ndarray) -> np.ndarray:
         """δq = K⁻¹ f with the tangent, the rows ``released`` switched off and the other
@@ -205,4 +231,4 @@ class NewtonSolver:
         """λ of every relation by name (eliminated ones recovered from their rows)."""
         x = self.x_full.copy()
         x[self.system.saddle_of_input] = self.q
-        return self.system.unpack(x, t, f_int=f_int)[1]
+        return self.system.unpack(x, t, f_int=f_int, f_ext=getattr(self, "f_ext", None))[1]

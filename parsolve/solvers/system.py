@@ -16,6 +16,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from parsolve.effects.compose import Composition, Rate
 from parsolve.la.layout import make_layout
 from parsolve.la.pattern import node_pattern
 from parsolve.la.petsc import SaddleOperator
@@ -47,6 +48,9 @@ class SaddleSystem:
         nmult = sum(r.nrows for r in self.multiplied)
         self.layout = lay = make_layout(self.part, ncomp, nmult)
         self.local_cells = self.part.local_cells(rank, mesh.cells)
+        lumped = model.scene.time is None or model.scene.time.mass == "lumped"
+        self.composition = Composition(model, self.local_cells, lumped)
+        self.rate: Rate | None = None  # the rate terms of a transient step (set by the stepper)
         new_cells = self.part.new_of_old[mesh.cells[self.local_cells]]
         lo, hi = self.part.node_ranges[rank], self.part.node_ranges[rank + 1]
         self.pattern = pattern = node_pattern(new_cells, lo, hi, ncomp, mesh.num_points)
@@ -65,12 +69,29 @@ class SaddleSystem:
 
     # ------------------------------------------------------------ elimination
 
+    def unused_dofs(self) -> np.ndarray:
+        """DOFs of the points no cell uses (Gmsh writes such points): held at zero, out of
+        the system's way, instead of making it singular."""
+        mesh = self.model.mesh
+        used = np.zeros(mesh.num_points, dtype=bool)
+        used[mesh.cells.ravel()] = True
+        nodes = np.flatnonzero(~used)
+        return (nodes[:, None] * self.model.ncomp + np.arange(self.model.ncomp)).ravel()
+
     def _elimination_setup(self) -> None:
         dofs, coefs = [], []
         for r in self.eliminated:
             order = np.argsort(r.a_rows)
             dofs.append(r.a_dofs[order])
             coefs.append(r.a_vals[order])
+        self.n_unused = 0
+        unused = self.unused_dofs()
+        if unused.size:
+            taken = np.concatenate(dofs) if dofs else np.zeros(0, dtype=np.int64)
+            unused = np.setdiff1d(unused, taken)
+            self.n_unused = unused.size
+            dofs.append(unused)
+            coefs.append(np.ones(unused.size))
         self.elim_dofs = np.concatenate(dofs) if dofs else np.zeros(0, dtype=np.int64)
         self.elim_coefs = np.concatenate(coefs) if coefs else np.zeros(0)
         sad = self.saddle_of_input[self.elim_dofs]
@@ -81,10 +102,11 @@ class SaddleSystem:
 
     def elim_values(self, t: float) -> np.ndarray:
         """Prescribed values of the eliminated DOFs at t (A q = b with one coefficient per row)."""
-        if not self.eliminated:
+        if self.elim_dofs.size == 0:
             return np.zeros(0)
         # each row holds one entry and dofs were sorted by row: values line up with rhs rows
-        return np.concatenate([r.rhs(t) for r in self.eliminated]) / self.elim_coefs
+        values = [r.rhs(t) for r in self.eliminated] + [np.zeros(self.n_unused)]
+        return np.concatenate(values) / self.elim_coefs
 
     # ------------------------------------------------------------ assembly
 
@@ -92,7 +114,7 @@ class SaddleSystem:
         """Assemble [[K, -D], [A, 0]]; K from ``elements`` (ElementMatrices of the local cells,
         e.g. a tangent) or the elastic stiffness."""
         t0 = time.perf_counter()
-        ke = self.model.elasticity.stiffness(self.local_cells) if elements is None else elements
+        ke = self.composition.stiffness(self.rate) if elements is None else elements
         self.op.set_stiffness(ke.reduce(self.pattern.pair_slot, self.pattern.nnzb))
         if self.block.row_scale is None:
             self.kscale = self.op.diagonal_scale()
@@ -111,21 +133,21 @@ class SaddleSystem:
         out[self.saddle_of_input[own] - self.offset] = full[own]
         return out
 
-    def rhs(self, t: float, f_int: np.ndarray | None = None,
-            q: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def rhs(self, t: float, f_int: np.ndarray | None = None, q: np.ndarray | None = None,
+            f_ext: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(owned right-hand side with lifting, full saddle vector of prescribed values).
 
         Linear: K q - D λ = F, A q = b. Newton (``f_int`` and ``q`` given, unknowns the
         increment Δq and the total λ): K Δq - D λ = F - f_int, A Δq = b - A q.
         """
-        f_full = self.model.external_load(t)
+        f_full = self.model.external_load(t) if f_ext is None else f_ext
         if f_int is not None:
             f_full = f_full - f_int
         target = self.block.rhs(t)
         if q is not None and self.block.nrows:
             target = target - self.primal_values(q) * self.block.row_scale
         values = self.elim_values(t)
-        if q is not None and self.eliminated:
+        if q is not None and self.elim_dofs.size:
             values = values - q[self.elim_dofs]
         return self.rhs_from(f_full, target, values)
 
@@ -137,7 +159,7 @@ class SaddleSystem:
         q0, q1, l0, l1 = self.layout.owned(self.comm.rank)
         b[q1 - q0:] = (target * self.op.active)[l0:l1]
         x_e = np.zeros(self.layout.size)
-        if self.eliminated:
+        if self.elim_dofs.size:
             x_e[self.saddle_of_input[self.elim_dofs]] = elim_values
             b -= self.op.lifting(x_e)
             b[self.op.elim_rows - self.offset] = self.kscale * x_e[self.op.elim_rows]
@@ -175,8 +197,8 @@ class SaddleSystem:
         """Unscaled λ of every multiplied row from a full saddle vector."""
         return x_full[self.saddle_of_mult] * self.block.col_scale if self.block.nrows else np.zeros(0)
 
-    def unpack(self, x_full: np.ndarray, t: float, f_int: np.ndarray | None = None
-               ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    def unpack(self, x_full: np.ndarray, t: float, f_int: np.ndarray | None = None,
+               f_ext: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """Primal vector (input numbering) and unscaled multipliers of every relation."""
         q = x_full[self.saddle_of_input]
         lam = self.multipliers(x_full)
@@ -184,14 +206,14 @@ class SaddleSystem:
         for k, r in enumerate(self.multiplied):
             out[r.name] = lam[self.block.first_row[k]:self.block.first_row[k + 1]]
         if self.eliminated:
-            out.update(self._eliminated_multipliers(x_full, t, f_int))
+            out.update(self._eliminated_multipliers(x_full, t, f_int, f_ext))
         return q, out
 
-    def _eliminated_multipliers(self, x_full: np.ndarray, t: float,
-                                f_int: np.ndarray | None) -> dict[str, np.ndarray]:
+    def _eliminated_multipliers(self, x_full: np.ndarray, t: float, f_int: np.ndarray | None,
+                                f_ext: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """λ = (F - row of [K, -D] x) / a on each eliminated row (the row before zeroing); with
         ``f_int`` (nonlinear) the stiffness part of the row is f_int instead of K q."""
-        f_full = self.model.external_load(t)
+        f_full = self.model.external_load(t) if f_ext is None else f_ext
         if f_int is None:
             row_vals = self.op.eliminated_rows(x_full)
         else:  # x_full holds λ; the primal part of the row is the internal force

@@ -1,0 +1,61 @@
+"""What an effect is: the fields it declares, the operators, forces, relations and outputs it
+contributes, and its nature (linear, symmetric, transient). The driver composes the effects a
+scene lists and nothing else (see ``compose``); adding an effect is a class and a registry
+line (``registry``), nothing in the core.
+
+Element matrices come per (row field, column field) pair as ``ElementMatrices`` over the local
+cells, cell-last, with the field's components (d² rows for a d-component field pair).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from parsolve.fem.element_matrices import ElementMatrices, apply
+from parsolve.fields import Field
+
+Blocks = list[tuple[str, str, ElementMatrices]]
+
+
+class Effect:
+    name = ""
+    linear = True        # its internal forces are K q: no Newton loop needed for it
+    symmetric = True     # its tangent is symmetric (with associated relations: Cholesky)
+
+    def fields(self) -> list[Field]:
+        return []
+
+    def stiffness_blocks(self, cells: np.ndarray) -> Blocks:
+        """Linear operator blocks (a linear effect's K; a nonlinear one's initial tangent)."""
+        return []
+
+    def mass_blocks(self, cells: np.ndarray, lumped: bool) -> Blocks:
+        """Capacity blocks of a transient run (empty: the effect has no rate term)."""
+        return []
+
+    def init_state(self, cells: np.ndarray):
+        return None
+
+    def evaluate(self, cells: np.ndarray, values: dict[str, np.ndarray], state, secant: bool):
+        """Internal forces per field {field: (nc, nen, ncomp)}, tangent blocks, trial state and
+        extras (e.g. stresses at quadrature points) at the node values ``values``
+        {field: (npoints, ncomp)}. A linear effect: K q and K."""
+        blocks = self.stiffness_blocks(cells)
+        forces = {}
+        for fi, fj, m in blocks:
+            fe = apply(m, values[fj][self.cells_nodes(cells)])
+            forces[fi] = forces[fi] + fe if fi in forces else fe
+        return forces, blocks, state, None
+
+    def cells_nodes(self, cells: np.ndarray) -> np.ndarray:
+        return self.mesh.cells[cells]
+
+    def relations(self) -> list:
+        """Relations the effect itself contributes (e.g. solubility's switched ones)."""
+        return []
+
+    def outputs(self, owned: np.ndarray, values: dict[str, np.ndarray], extra,
+                local_cells: np.ndarray) -> tuple[dict, dict]:
+        """({name: (nodal sums (npoints, k), weights (npoints,))}, {name: (owned, nc, k) cell
+        values}) of this rank's owned cells; the driver adds the ranks' sums and divides."""
+        return {}, {}

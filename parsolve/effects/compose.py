@@ -1,0 +1,104 @@
+"""The effects of a model composed on one rank's local cells: the operator blocks they fill,
+the internal forces they return, their states, and the rate terms of a transient step.
+
+A transient step from t_n to t = t_n + Δt (θ-scheme; θ = 1 is backward Euler) solves
+
+    M (q - q_n) / Δt + θ f_int(q) + (1 - θ) f_int(q_n) = θ F(t) + (1 - θ) F(t_n) + D λ,
+    A q = b(t),
+
+whose tangent is M / Δt + θ K. The reaction D λ acts at t: λ is whatever it takes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from parsolve.fem.element_matrices import BlockMatrices, apply
+
+
+@dataclass
+class Rate:
+    """The rate terms of one transient step."""
+
+    dt: float
+    theta: float
+    q_prev: np.ndarray        # full primal vector at t_n (input numbering)
+    f_int_prev: np.ndarray    # f_int(q_n)
+
+
+class Composition:
+    def __init__(self, model, cells: np.ndarray, lumped: bool = True):
+        self.model, self.cells, self.lumped = model, cells, lumped
+        self.fields = model.fields
+        self.nodes = model.mesh.cells[cells]                 # (nc, nen)
+        self.npoints = model.mesh.num_points
+        self._mass = None
+
+    @property
+    def ndof(self) -> int:
+        return self.npoints * self.fields.ncomp
+
+    def values(self, q: np.ndarray) -> dict[str, np.ndarray]:
+        """Node values of every field from a full primal vector: {field: (npoints, ncomp)}."""
+        nodal = q.reshape(self.npoints, self.fields.ncomp)
+        return {f.name: nodal[:, self.fields.columns(f.name)] for f in self.fields}
+
+    def _parts(self, blocks, factor: float) -> list:
+        return [(self.fields.columns(fi), self.fields.columns(fj), m, factor) for fi, fj, m in blocks]
+
+    def _scatter(self, forces: dict[str, np.ndarray], out: np.ndarray, factor: float = 1.0) -> None:
+        """Add element forces {field: (nc, nen, ncomp)} into a full vector."""
+        for name, fe in forces.items():
+            dofs = self.fields.dofs(name, self.nodes.ravel())
+            out += factor * np.bincount(dofs.ravel(), weights=fe.reshape(-1), minlength=out.size)
+
+    def mass_parts(self) -> list:
+        if self._mass is None:
+            self._mass = [p for e in self.model.effects for p in e.mass_blocks(self.cells, self.lumped)]
+        return self._mass
+
+    def stiffness(self, rate: Rate | None = None) -> BlockMatrices:
+        """θ K + M / Δt of the linear effects (K alone without a rate)."""
+        theta = 1.0 if rate is None else rate.theta
+        parts = []
+        for e in self.model.effects:
+            parts += self._parts(e.stiffness_blocks(self.cells), theta)
+        if rate is not None:
+            parts += self._parts(self.mass_parts(), 1.0 / rate.dt)
+        return BlockMatrices(self.fields.ncomp, parts)
+
+    def product(self, blocks, q: np.ndarray) -> np.ndarray:
+        """Σ K_e q_e of the given blocks as a full vector (rows of this rank's cells)."""
+        vals = self.values(q)
+        out = np.zeros(self.ndof)
+        forces = {}
+        for fi, fj, m in blocks:
+            fe = apply(m, vals[fj][self.nodes])
+            forces[fi] = forces[fi] + fe if fi in forces else fe
+        self._scatter(forces, out)
+        return out
+
+    def init_states(self) -> list:
+        return [e.init_state(self.cells) for e in self.model.effects]
+
+    def evaluate(self, q: np.ndarray, states: list, secant: bool, rate: Rate | None = None):
+        """(f_int with the rate terms, f_int alone, tangent BlockMatrices, trial states, extras),
+        forces as full vectors (rows of this rank's cells)."""
+        vals = self.values(q)
+        f_int = np.zeros(self.ndof)
+        parts, trial, extras = [], [], []
+        theta = 1.0 if rate is None else rate.theta
+        for e, st in zip(self.model.effects, states):
+            forces, blocks, new, extra = e.evaluate(self.cells, vals, st, secant)
+            self._scatter(forces, f_int)
+            parts += self._parts(blocks, theta)
+            trial.append(new)
+            extras.append(extra)
+        total = f_int
+        if rate is not None:
+            total = theta * f_int + (1.0 - theta) * rate.f_int_prev \
+                + self.product(self.mass_parts(), q - rate.q_prev) / rate.dt
+            parts += self._parts(self.mass_parts(), 1.0 / rate.dt)
+        return total, f_int, BlockMatrices(self.fields.ncomp, parts), trial, extras

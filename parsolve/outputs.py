@@ -1,0 +1,130 @@
+"""What a finished step writes: every field by its output name, each effect's own outputs
+(stresses, fluxes, history variables), every relation's multiplier, primal value, active rows
+and resultant, and for transient runs the balance of each conserved field.
+
+Per-cell values are gathered on rank 0 in mesh order; nodal averages are sums over the ranks'
+owned cells divided by the summed weights."""
+
+from __future__ import annotations
+
+import numpy as np
+from mpi4py import MPI
+
+
+def _gather_cells(comm, owned: np.ndarray, values: np.ndarray, ncells: int):
+    """Per-cell values of every rank's reported cells, in mesh order, on rank 0."""
+    parts = comm.gather((owned, values), root=0)
+    if comm.rank != 0:
+        return None
+    out = np.zeros((ncells,) + values.shape[1:])
+    for idx, val in parts:
+        out[idx] = val
+    return out
+
+
+def resultant(relation, lam: np.ndarray, fields, points: np.ndarray) -> np.ndarray:
+    """Sum of the reactions D λ per node DOF column (every field's components), then, for a
+    model with a displacement field, their moment about the origin (z in 2D; x, y, z in 3D)."""
+    dofs, rows, vals = relation.dual_coo()
+    force = vals * lam[rows]
+    ncomp = fields.ncomp
+    out = np.bincount(dofs % ncomp, weights=force, minlength=ncomp)
+    if "u" not in fields:
+        return out
+    cols = fields.columns("u")
+    node, col = np.divmod(dofs, ncomp)
+    dim = cols.size
+    f = np.zeros((force.size, 3))
+    x = np.zeros((force.size, 3))
+    on_u = np.isin(col, cols)
+    f[on_u, col[on_u] - cols[0]] = force[on_u]
+    x[:, :dim] = points[node]
+    moment = np.cross(x, f).sum(axis=0)
+    return np.concatenate([out, moment[2:] if dim == 2 else moment])
+
+
+def step_outputs(comm: MPI.Comm, system, q: np.ndarray, multipliers: dict, newton=None):
+    """(fields, cell fields, relations) of a step; ``newton`` carries the material states."""
+    model = system.model
+    mesh = model.mesh
+    owned = system.part.owned_cells(comm.rank, mesh.cells)
+    values = system.composition.values(q)
+    fields = {f.output: values[f.name] for f in model.fields}
+    cell_fields = {}
+    for k, effect in enumerate(model.effects):
+        extra = None
+        if newton is not None and newton.extras[k] is not None:
+            extra = (newton.extras[k], newton.states[k])
+        nodal, cells = effect.outputs(owned, values, extra, system.local_cells)
+        for name, (sums, weights) in nodal.items():
+            sums, weights = comm.allreduce(sums), comm.allreduce(weights)
+            fields[name] = sums / np.maximum(weights, 1e-300)[:, None]
+        for name, value in cells.items():
+            cell_fields[name] = _gather_cells(comm, owned, value, mesh.num_cells)
+    rel_out = {}
+    active = newton.active.active if newton is not None else None
+    for r in model.relations:
+        lam = multipliers[r.name]
+        rel_out[r.name] = {"multiplier": lam, "primal": r.primal(q),
+                           "resultant": resultant(r, lam, model.fields, mesh.points)}
+        if r.sense != "=":
+            k = system.multiplied.index(r)
+            first = system.block.first_row[k]
+            rel_out[r.name]["active"] = active[first:first + r.nrows].astype(np.int8)
+    for effect in model.effects:  # per-node states (solubility)
+        if hasattr(effect, "state") and active is not None:
+            r = next(x for x in model.relations if x.name == "solubility")
+            k = system.multiplied.index(r)
+            first = system.block.first_row[k]
+            fields["solubility_state"] = effect.state(active[first:first + r.nrows])[:, None]
+    return fields, cell_fields, rel_out
+
+
+class Balance:
+    """Conservation of every field that has a capacity (transient runs): storage ∫ c, and the
+    supply since the start from the known loads (sources, boundary fluxes) and from the
+    relations' reactions; error = storage − initial storage − supplied, per field and in all."""
+
+    def __init__(self, comm, system):
+        self.comm, self.system = comm, system
+        fields = system.model.fields
+        self.names = sorted({fi for fi, _, _ in system.composition.mass_parts()})
+        col = system.owned_input_dofs % fields.ncomp
+        self.owned = {n: system.owned_input_dofs[np.isin(col, fields.columns(n))] for n in self.names}
+        self.all = {n: np.isin(np.arange(system.composition.ndof) % fields.ncomp, fields.columns(n))
+                    for n in self.names}
+        self.initial = None
+        self.supplied = {n: 0.0 for n in self.names}
+
+    def storage(self, q: np.ndarray) -> dict[str, float]:
+        m = self.system.composition.product(self.system.composition.mass_parts(), q)
+        return {n: self.comm.allreduce(float(m[self.owned[n]].sum())) for n in self.names}
+
+    def step(self, q: np.ndarray, dt: float, f_known: np.ndarray, multipliers: dict) -> dict:
+        """Datasets of one step: /balance/<field>/{storage, supplied, error}."""
+        model = self.system.model
+        if self.initial is None:
+            self.initial = self.storage(np.zeros_like(q))
+        stored = self.storage(q)
+        out = {}
+        for n in self.names:
+            supply = float(f_known[self.all[n]].sum())
+            for r in model.relations:
+                dofs, rows, vals = r.dual_coo()
+                on = self.all[n][dofs]
+                supply += float((vals[on] * multipliers[r.name][rows[on]]).sum())
+            self.supplied[n] += dt * supply
+            out[f"balance/{n}/storage"] = stored[n]
+            out[f"balance/{n}/supplied"] = self.supplied[n]
+            out[f"balance/{n}/error"] = stored[n] - self.initial[n] - self.supplied[n]
+        total = sum(stored.values())
+        out["balance/total/storage"] = total
+        out["balance/total/error"] = total - sum(self.initial.values()) - sum(self.supplied.values())
+        return out
+
+
+def progress(log, comm, step: int, total, t: float, iterations: int, residual: float,
+             seconds: float, extra: str = "") -> None:
+    if comm.rank == 0:
+        log(f"step {step}/{total}  t={t:.6g}  iterations={iterations}  residual={residual:.2e}  "
+            f"{seconds:.3f} s{extra}")

@@ -1,0 +1,82 @@
+"""The linear solver of a system: preset options layered with the scene's and the command
+line's, the near-null space for algebraic multigrid, and the export of the assembled system."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from parsolve.solvers import options as opt
+from parsolve.solvers.linear import LinearSolver, preset_options
+from parsolve.solvers.system import SaddleSystem
+
+
+def rigid_body_modes(comm: MPI.Comm, system: SaddleSystem) -> PETSc.NullSpace | None:
+    """Near-null space of the primal block (for GAMG), on the owned nodes in new numbering:
+    rigid-body modes of a displacement-only model, constants of a scalar field."""
+    part, mesh, model = system.part, system.model.mesh, system.model
+    lo, hi = part.node_ranges[comm.rank], part.node_ranges[comm.rank + 1]
+    if model.fields.names() != ["u"]:
+        return None if model.ncomp > 1 else PETSc.NullSpace().create(constant=True, comm=comm)
+    old_of_new = np.argsort(part.new_of_old)
+    coords = mesh.points[old_of_new[lo:hi]]
+    vec = PETSc.Vec().createWithArray(coords.ravel().copy(), size=(coords.size, None),
+                                      bsize=mesh.dim, comm=comm)
+    return PETSc.NullSpace().createRigidBody(vec)
+
+
+def make_solver(comm: MPI.Comm, system: SaddleSystem, cli_options: dict[str, str]) -> LinearSolver:
+    """Cholesky is chosen when every multiplied relation is associated and every effect's
+    tangent symmetric; the solver still checks each operator (LinearSolver)."""
+    scene = system.model.scene
+    secant = scene.nonlinear.matrix == "secant"
+    symmetric = all(r.associated for r in system.multiplied) and system.model.symmetric(secant)
+    has_mult = system.layout.nl > 0
+    settings = opt.merge(preset_options(scene.solver.preset, symmetric, has_mult),
+                         scene.solver.options, cli_options)
+    is_q, is_l = system.op.index_sets()
+    modes = rigid_body_modes(comm, system) if scene.solver.preset == "iterative" else None
+    if modes is not None and has_mult:  # fieldsplit hands it to the q block's matrix
+        is_q.compose("nearnullspace", modes)
+    return LinearSolver(comm, scene.solver.prefix, settings, is_q, is_l,
+                        near_null=None if has_mult else modes)
+
+
+def export_system(comm, directory: str, mat: PETSc.Mat, rhs: PETSc.Vec, system: SaddleSystem) -> None:
+    """DIR/system.dat: operator, right-hand side, then the scaling s of the unknowns (1 on q,
+    the relation scale on λ: the result file's λ is s · x on the λ rows); DIR/fields.dat: the
+    index sets of q and λ, then one per field, in the order of /fields."""
+    path = Path(directory)
+    if comm.rank == 0:
+        path.mkdir(parents=True, exist_ok=True)
+    comm.Barrier()
+    scale = rhs.duplicate()
+    scale.set(1.0)
+    q0, q1, l0, l1 = system.layout.owned(comm.rank)
+    if system.block.nrows:
+        scale.array[q1 - q0:] = system.block.col_scale[l0:l1]
+    viewer = PETSc.Viewer().createBinary(str(path / "system.dat"), "w", comm=comm)
+    for obj in (mat, rhs, scale):
+        obj.view(viewer)
+    viewer.destroy()
+    viewer = PETSc.Viewer().createBinary(str(path / "fields.dat"), "w", comm=comm)
+    for iset in list(system.op.index_sets()) + list(field_index_sets(comm, system).values()):
+        iset.view(viewer)
+    viewer.destroy()
+
+
+def field_index_sets(comm, system: SaddleSystem) -> dict[str, PETSc.IS]:
+    """One index set per field (its DOFs among this rank's rows), named after the field."""
+    q0, q1, _, _ = system.layout.owned(comm.rank)
+    start = int(system.layout.offsets[comm.rank])
+    nodes_local = np.arange(q0, q1, system.model.ncomp) - q0
+    out = {}
+    for f in system.model.fields:
+        idx = (nodes_local[:, None] + system.model.fields.columns(f.name)[None, :]).ravel() + start
+        iset = PETSc.IS().createGeneral(idx.astype(PETSc.IntType), comm=comm)
+        iset.setName(f.name)
+        out[f.name] = iset
+    return out
