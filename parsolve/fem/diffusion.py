@@ -1,0 +1,187 @@
+"""Vectorised kernels of a scalar diffusion field (heat, Darcy head, concentration).
+
+Weak form of  c ∂h/∂t − div(k ∇h) = f  in Ω,  −(−k ∇h)·n = q  on Γ_q (q: flux *into* Ω):
+
+    ∫ c N_a N_b ḣ_b + ∫ ∇N_a · k ∇N_b h_b = ∫ f N_a + ∫_Γq q N_a
+
+so the conductivity matrix is ``K_ab = ∫ ∇N_aᵀ k ∇N_b``, the capacity (mass) matrix
+``M_ab = ∫ c N_a N_b``, the source vector ``∫ f N_a`` and the boundary flux vector
+``∫ q N_a``; the flux is ``−k ∇h``. Every kernel works on a stack of cells at once; element
+matrices come cell-last, shape (1, nen, nen, nc), the ``ElementMatrices(values=...)`` layout
+of a field with one component (d² = 1).
+
+Lumping: row sums for linear cells (triangle, quad, tetra, hexahedron): positive weights
+that add up to the cell's capacity. For quadratic cells (triangle6, tetra10) the row sums of
+the vertices are zero (triangle6) or negative (tetra10), so the diagonal is *scaled* instead
+(Hinton-Rock-Zienkiewicz): m_a = M_aa · (Σ_b ∫ c N_b) / Σ_b M_bb, positive and summing to the
+capacity. With HRZ the consistent source ∫ f N_a is no longer proportional to the lumped
+weights (it vanishes at the triangle6 vertices), so a uniform source does not keep a uniform
+field uniform: use ``source_vector(..., lumped=True)`` (f · m_a) together with a lumped mass.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from parsolve.fem.element_matrices import ElementMatrices
+from parsolve.fem.elements import default_degree, element, facet_measure_and_normal, \
+    physical_gradients, polynomial_order, quadrature
+from parsolve.fem.kernels import CellGeometry, geometric_part, gradients_cell_last
+
+
+def conductivity_tensor(k, nc: int, dim: int) -> np.ndarray:
+    """Per-cell conductivity tensors (nc, dim, dim) from a scalar, a per-cell scalar (nc,),
+    one tensor (dim, dim) or per-cell tensors (nc, dim, dim)."""
+    k = np.asarray(k, dtype=float)
+    if k.ndim == 0:
+        return np.broadcast_to(k * np.eye(dim), (nc, dim, dim))
+    if k.shape == (nc,):
+        return k[:, None, None] * np.eye(dim)[None]
+    if k.shape == (dim, dim):
+        return np.broadcast_to(k, (nc, dim, dim))
+    if k.shape == (nc, dim, dim):
+        return k
+    raise ValueError(f"conductivity must be a scalar, ({nc},), ({dim}, {dim}) or "
+                     f"({nc}, {dim}, {dim}); got shape {k.shape}")
+
+
+def _per_cell(value, nc: int, name: str) -> np.ndarray:
+    v = np.asarray(value, dtype=float)
+    if v.ndim == 0:
+        return np.full(nc, float(v))
+    if v.shape == (nc,):
+        return v
+    raise ValueError(f"{name} must be a scalar or one value per cell ({nc},); got shape {v.shape}")
+
+
+def conductivity(coords: np.ndarray, cell_type: str, k, thickness: float = 1.0) -> ElementMatrices:
+    """Conductivity matrices K_ab = ∫ ∇N_a · k ∇N_b, full values (1, nen, nen, nc)."""
+    G, wdet = gradients_cell_last(coords, cell_type, thickness=thickness)
+    d = G.shape[0]
+    P = geometric_part(G, wdet)                               # (d², nen, nen, nc), [k*d+l]
+    kt = conductivity_tensor(k, coords.shape[0], d)           # (nc, d, d)
+    # K_ab = Σ_kl G_ka k_kl G_lb: contract P's (k, l) rows with the per-cell tensor
+    values = np.einsum("mc,mabc->abc", kt.reshape(-1, d * d).T, P)
+    return ElementMatrices(values=values[None])
+
+
+def conductivity_factored(coords: np.ndarray, cell_type: str, tensors: np.ndarray,
+                          cell_material: np.ndarray, thickness: float = 1.0) -> ElementMatrices:
+    """Conductivity as ``ElementMatrices`` in factored form: geometry P (d², nen, nen, nc) and one
+    constant tensor per region. ``tensors`` (nmat, d, d) is stored as (nmat, d², 1) so that
+    ``reduce`` returns one row (a scalar field's single component pair)."""
+    G, wdet = gradients_cell_last(coords, cell_type, thickness=thickness)
+    d = G.shape[0]
+    t = np.asarray(tensors, dtype=float).reshape(-1, d * d, 1)
+    return ElementMatrices(geometric=geometric_part(G, wdet), tensors=t,
+                           cell_material=np.asarray(cell_material))
+
+
+def _mass_rule(cell_type: str, thickness: float, coords: np.ndarray):
+    ref = element(cell_type)
+    xi, w = quadrature(cell_type, default_degree(cell_type, "mass"))
+    N = ref.shape(xi)                                         # (nq, nen)
+    _, det = physical_gradients(coords, ref.grad_shape(xi))
+    return N, np.abs(det) * w[None, :] * thickness            # (nc, nq)
+
+
+def mass(coords: np.ndarray, cell_type: str, capacity=1.0, thickness: float = 1.0) -> np.ndarray:
+    """Consistent capacity matrices M_ab = ∫ c N_a N_b, (1, nen, nen, nc); c per cell."""
+    N, wdet = _mass_rule(cell_type, thickness, coords)
+    c = _per_cell(capacity, coords.shape[0], "capacity")
+    # Σ_q N_qa N_qb (c w|J|)_cq as one gemm over (nen², nq) x (nq, nc)
+    NN = (N[:, :, None] * N[:, None, :]).reshape(len(N), -1)  # (nq, nen²)
+    nen = N.shape[1]
+    return (NN.T @ (wdet * c[:, None]).T).reshape(1, nen, nen, -1)
+
+
+def lumped_mass(coords: np.ndarray, cell_type: str, capacity=1.0, thickness: float = 1.0) -> np.ndarray:
+    """Lumped capacity per cell node (nen, nc): row sums (linear cells) or HRZ (quadratic)."""
+    M = mass(coords, cell_type, capacity, thickness)[0]       # (nen, nen, nc)
+    if polynomial_order(cell_type) == 1:
+        return M.sum(axis=1)
+    diag = np.einsum("aac->ac", M)
+    return diag * (M.sum(axis=(0, 1)) / diag.sum(axis=0))[None, :]
+
+
+def lumped_as_matrices(lumped: np.ndarray) -> np.ndarray:
+    """Lumped weights (nen, nc) as diagonal element matrices (1, nen, nen, nc)."""
+    nen, nc = lumped.shape
+    out = np.zeros((1, nen, nen, nc))
+    out[0, np.arange(nen), np.arange(nen)] = lumped
+    return out
+
+
+def source_vector(coords: np.ndarray, cell_type: str, f, thickness: float = 1.0,
+                  lumped: bool = False) -> np.ndarray:
+    """Element source vectors (nc, nen) of ∫ f N_a.
+
+    ``f``: a scalar, one value per cell (nc,), or node values (nc, nen) interpolated at the
+    quadrature points. ``lumped``: f_a · m_a with the lumped weights instead (what keeps a
+    uniform field uniform with HRZ lumping; identical to the consistent vector on linear cells
+    for a per-cell constant f).
+    """
+    nc = coords.shape[0]
+    f = np.asarray(f, dtype=float)
+    if lumped:
+        m = lumped_mass(coords, cell_type, 1.0, thickness).T   # (nc, nen)
+        return m * (f if f.ndim == 2 else _per_cell(f, nc, "source")[:, None])
+    N, wdet = _mass_rule(cell_type, thickness, coords)
+    if f.ndim == 2:
+        if f.shape != (nc, N.shape[1]):
+            raise ValueError(f"node values of the source must be ({nc}, {N.shape[1]}), got {f.shape}")
+        fq = f @ N.T                                          # (nc, nq)
+    else:
+        fq = _per_cell(f, nc, "source")[:, None]
+    return (fq * wdet) @ N
+
+
+def facet_flux_vector(coords: np.ndarray, facet_type: str, q, thickness: float = 1.0) -> np.ndarray:
+    """Facet vectors (nf, nfn) of ∫_Γ q N_a, q the flux *into* the domain per unit area.
+
+    ``q``: a scalar, one value per facet (nf,) or node values (nf, nfn).
+    """
+    ref = element(facet_type)
+    xi, w = quadrature(facet_type, default_degree(facet_type, "mass"))
+    N = ref.shape(xi)
+    ds, _ = facet_measure_and_normal(coords, ref.grad_shape(xi))
+    wds = ds * w[None, :] * thickness                          # (nf, nq)
+    q = np.asarray(q, dtype=float)
+    nf = coords.shape[0]
+    qq = q @ N.T if q.ndim == 2 else _per_cell(q, nf, "boundary flux")[:, None]
+    return (qq * wds) @ N
+
+
+def _flux_at(geo: CellGeometry, kt: np.ndarray, he: np.ndarray) -> np.ndarray:
+    grad = np.einsum("cqad,ca->cqd", geo.dNdx, he)             # (nc, nq, d)
+    return -np.einsum("cij,cqj->cqi", kt, grad)
+
+
+def cell_flux(coords: np.ndarray, cell_type: str, k, he: np.ndarray) -> np.ndarray:
+    """Mean flux −k ∇h over each cell (nc, d), from element node values he (nc, nen)."""
+    geo = CellGeometry(coords, cell_type, degree=default_degree(cell_type, "mass"))
+    kt = conductivity_tensor(k, coords.shape[0], geo.dNdx.shape[-1])
+    w = geo.wdet / geo.wdet.sum(axis=1, keepdims=True)
+    return (_flux_at(geo, kt, he) * w[:, :, None]).sum(axis=1)
+
+
+def nodal_flux_sums(points: np.ndarray, cells: np.ndarray, cell_type: str, k,
+                    h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Flux −k ∇h evaluated at each cell's nodes, summed per node with cell-volume weights.
+
+    ``cells`` (nc, nen) node numbers of the cells to use (e.g. the owned ones), ``h`` the field
+    on all points. Returns (sums (npoints, d), weights (npoints,)): the caller adds the ranks'
+    sums and divides, as ``Elasticity.nodal_stress_sums``.
+    """
+    coords = points[cells]
+    nc, nen = cells.shape
+    geo = CellGeometry(coords, cell_type, points=element(cell_type).nodes)
+    kt = conductivity_tensor(k, nc, geo.dNdx.shape[-1])
+    flux = _flux_at(geo, kt, h[cells])                         # (nc, nen, d)
+    vol = CellGeometry(coords, cell_type).wdet.sum(axis=1)
+    nodes = cells.ravel()
+    npts = len(points)
+    sums = np.stack([np.bincount(nodes, weights=(flux[..., i] * vol[:, None]).ravel(), minlength=npts)
+                     for i in range(flux.shape[2])], axis=1)
+    weights = np.bincount(nodes, weights=np.repeat(vol, nen), minlength=npts)
+    return sums, weights
