@@ -240,3 +240,29 @@ def well_mixed(m0: float, c_sat: float, times: np.ndarray, rate: Callable[[float
     m_{n+1} = m_n + Δt S(t_{n+1}), c_s = min(m, c_sat), c_g = max(0, m − c_sat)."""
     m = m0 + np.concatenate([[0.0], np.cumsum(np.diff(times) * np.array([rate(t) for t in times[1:]]))])
     return {"m": m, "c_s": np.minimum(m, c_sat), "c_g": np.maximum(m - c_sat, 0.0)}
+
+
+# The shipped 1D scene "a saturated zone grows, then shrinks": [0, 1], closed at x = 0, drained
+# at x = 1 (c_s = 0), source 4 per unit volume and time on x < 1/4 while t <= 1/2, then none.
+# The zone appears at t ≈ 0.3, reaches x ≈ 0.16 at t = 1/2 and is gone by t ≈ 1.3.
+GROW_SHRINK = {"length": 1.0, "D_s": 0.1, "c_sat": 1.0, "source": 4.0, "source_until": 0.5,
+               "source_region": 0.25, "t_end": 2.0, "steps": 100}
+
+
+def grow_shrink_source(t: float, x: np.ndarray) -> np.ndarray:
+    """The scene's source at time t (step end) and abscissae x (element midpoints)."""
+    p = GROW_SHRINK
+    on = t <= p["source_until"] + 1e-12
+    return np.where((np.asarray(x) < p["source_region"]) & on, p["source"], 0.0)
+
+
+def grow_shrink_problem(n: int, grid: str = "cell", D_g: float = 0.0) -> Problem1D:
+    """The shipped scene on n cells / intervals (n a multiple of 4 aligns the source edge)."""
+    p = GROW_SHRINK
+    return Problem1D(length=p["length"], n=n, D_s=p["D_s"], D_g=D_g, c_sat=p["c_sat"],
+                     source=grow_shrink_source, left=("flux", 0.0), right=("dirichlet", 0.0),
+                     grid=grid)
+
+
+def grow_shrink_times() -> np.ndarray:
+    return np.linspace(0.0, GROW_SHRINK["t_end"], GROW_SHRINK["steps"] + 1)
