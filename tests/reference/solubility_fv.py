@@ -215,9 +215,11 @@ def _newton(p, g, As, Ag, csat, rhs, m, fixed, dt) -> tuple[np.ndarray, int]:
         F[fixed] = 0.0
         # F is piecewise linear: once the phases of the new iterate are those its linear solve
         # assumed, it solves the system exactly (up to round-off, checked)
+        scale = np.abs(g.V * m).max() + np.abs(rhs).max() \
+            + dt * (np.abs(As[1]).max() * np.abs(cs).max() + np.abs(Ag[1]).max() * np.abs(cg).max())
+        if np.abs(F).max() <= 0.1 * p.tol * scale:   # also ends a tie m ≈ c_sat flipping
+            return m, it
         if previous is not None and np.array_equal(below, previous):
-            scale = np.abs(g.V * m).max() + np.abs(rhs).max() \
-                + dt * (np.abs(As[1]).max() * np.abs(cs).max() + np.abs(Ag[1]).max() * np.abs(cg).max())
             if np.abs(F).max() > p.tol * scale:
                 raise RuntimeError(f"residual {np.abs(F).max():.3e} above round-off")
             return m, it
