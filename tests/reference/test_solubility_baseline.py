@@ -1,6 +1,6 @@
 """The classical baseline (scripts/baselines/solubility_ssn.py: persistent c_s, c_g and a
 semi-smooth Newton on min(c_g, c_sat − c_s) = 0, PETSc LU on one rank) against exact and
-independent answers. Each rank runs the same serial computation (PETSc.COMM_SELF)."""
+independent answers. Serial: one rank, PETSc.COMM_SELF."""
 
 import importlib.util
 from functools import lru_cache
@@ -10,8 +10,11 @@ import numpy as np
 import pytest
 
 from parsolve.mesh.generators import rectangle
-from tests.reference.solubility_fv import GROW_SHRINK, Problem1D, grow_shrink_problem, \
-    grow_shrink_source, grow_shrink_times, run, well_mixed
+from tests.reference.solubility_fv import GROW_SHRINK, Problem1D, fine_grow_shrink, \
+    grow_shrink_problem, grow_shrink_source, grow_shrink_times, run, well_mixed
+
+# Serial numerics (numpy, PETSc.COMM_SELF): running them on every rank would add nothing.
+pytestmark = pytest.mark.serial
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -107,7 +110,7 @@ def test_against_fine_reference(cell):
     mesh = strip(n, cell)
     times = grow_shrink_times()
     r = baseline().run_baseline(mesh, scene_params(), times)
-    fine = run(grow_shrink_problem(1280, "cell"), times)
+    fine = fine_grow_shrink()
     weights = r["lumped"] / 0.05
     for key, tol in (("c_s", 5e-4), ("c_g", 5e-3)):
         # the fine cell-centred values, with the wall values (closed left: the first cell's,

@@ -2,13 +2,14 @@
 well-mixed exactness, mass balance to round-off, growth then shrinkage of the saturated zone,
 and convergence under refinement."""
 
-from functools import lru_cache
-
 import numpy as np
 import pytest
 
-from tests.reference.solubility_fv import Problem1D, grow_shrink_problem, grow_shrink_times, \
-    run, tridiag_solve, well_mixed
+from tests.reference.solubility_fv import Problem1D, fine_grow_shrink, grow_shrink_problem, \
+    grow_shrink_times, run, tridiag_solve, well_mixed
+
+# Serial numerics (numpy, PETSc.COMM_SELF): running them on every rank would add nothing.
+pytestmark = pytest.mark.serial
 
 
 def test_tridiag_solve():
@@ -55,11 +56,6 @@ def test_grow_shrink_balance(grid, D_g):
     assert abs(r["mass"][-1] - 0.5 - r["boundary_in"].sum()) < 1e-13
 
 
-@lru_cache(maxsize=1)
-def fine_solution() -> dict:
-    return run(grow_shrink_problem(1280, "cell"), grow_shrink_times())
-
-
 def _restrict(fine: dict, coarse: dict, grid: str, key: str) -> np.ndarray:
     if grid == "cell":  # mean of the fine cells inside each coarse cell
         n = len(coarse["x"])
@@ -73,7 +69,7 @@ def test_grow_shrink_converges(grid):
     error) against a 1280-cell solution fall as the grid is refined 20 → 160: mean rate ≈ 1.8
     for c_s; for c_g ≈ 1.8 (cell) and ≈ 1.1 (vertex: nodal c_g across the moving front)."""
     times = grow_shrink_times()
-    fine = fine_solution()
+    fine = fine_grow_shrink()
     errors = []
     for n in (20, 40, 80, 160):
         r = run(grow_shrink_problem(n, grid), times)
