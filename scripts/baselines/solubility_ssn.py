@@ -253,3 +253,29 @@ def _system(disc, jac, dt, sat, fixed, kappa, mass, eq):
     rhs[0::2] = np.where(sat, eq, mass)
     rhs[1::2] = np.where(sat, mass, eq)
     return vals, rhs
+
+
+def _grow_shrink_params() -> dict:
+    """The shipped 1D scene (tests/reference/solubility_fv.py GROW_SHRINK) as baseline params."""
+    return {"D_s": 0.1, "c_sat": 1.0, "dirichlet": {"right": 0.0},
+            "source": lambda t, xc: np.where((xc[:, 0] < 0.25) & (t <= 0.5 + 1e-12), 4.0, 0.0)}
+
+
+def main() -> None:
+    """Table: the grow-shrink scene on Q1 strips under refinement (one rank)."""
+    from parsolve.mesh.generators import rectangle
+
+    times = np.linspace(0.0, 2.0, 101)
+    print("| elements | nodes | LU solves | max / step | mean / step | time (s) | "
+          "max balance error | max saturated nodes |")
+    print("|---|---|---|---|---|---|---|---|")
+    for nx in (40, 80, 160, 320, 640):
+        mesh = rectangle(1.0, 0.05, nx, 1, cell="quad")
+        r = run_baseline(mesh, _grow_shrink_params(), times)
+        its = r["iterations"][1:]
+        print(f"| {nx} | {mesh.num_points} | {its.sum()} | {its.max()} | {its.mean():.2f} | "
+              f"{r['time']:.2f} | {r['balance_error'].max():.1e} | {r['saturated'].sum(axis=1).max()} |")
+
+
+if __name__ == "__main__":
+    main()
