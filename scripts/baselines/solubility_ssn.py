@@ -25,7 +25,6 @@ inflow (the reaction).
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 
 import numpy as np
 from petsc4py import PETSc

@@ -31,7 +31,7 @@ is a volume source of the total (which phase receives it does not matter at equi
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
@@ -53,7 +53,6 @@ class Problem1D:
     grid: str = "cell"
     tol: float = 1e-13
     max_iter: int = 100
-    extra: dict = field(default_factory=dict)
 
 
 def tridiag_solve(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray) -> np.ndarray:
