@@ -25,7 +25,7 @@ import numpy as np
 
 from parsolve.fem.element_matrices import ElementMatrices
 from parsolve.fem.elements import default_degree, element, facet_measure_and_normal, \
-    physical_gradients, polynomial_order, quadrature
+    jacobians, polynomial_order, quadrature
 from parsolve.fem.kernels import CellGeometry, geometric_part, gradients_cell_last
 
 
@@ -56,13 +56,22 @@ def _per_cell(value, nc: int, name: str) -> np.ndarray:
 
 def conductivity(coords: np.ndarray, cell_type: str, k, thickness: float = 1.0) -> ElementMatrices:
     """Conductivity matrices K_ab = ∫ ∇N_a · k ∇N_b, full values (1, nen, nen, nc)."""
-    G, wdet = gradients_cell_last(coords, cell_type, thickness=thickness)
-    d = G.shape[0]
-    P = geometric_part(G, wdet)                               # (d², nen, nen, nc), [k*d+l]
-    kt = conductivity_tensor(k, coords.shape[0], d)           # (nc, d, d)
-    # K_ab = Σ_kl G_ka k_kl G_lb: contract P's (k, l) rows with the per-cell tensor
-    values = np.einsum("mc,mabc->abc", kt.reshape(-1, d * d).T, P)
-    return ElementMatrices(values=values[None])
+    G, wdet = gradients_cell_last(coords, cell_type, thickness=thickness)  # (d, nq, nen, nc)
+    d, nq, nen, nc = G.shape
+    k = np.asarray(k, dtype=float)
+    iso = k.ndim == 0 or k.shape == (nc,)
+    kt = None if iso else conductivity_tensor(k, nc, d).transpose(1, 2, 0)  # (d, d, nc)
+    # Σ_q Σ_i (w G_i)_a (k G)_i,b: d·nq products of (nen, nen, nc), cell index last (numpy is
+    # fast on long vectors); an isotropic k multiplies the weights, a tensor mixes the G_l
+    out = np.zeros((nen, nen, nc))
+    tmp = np.empty((nen, nen, nc))
+    for q in range(nq):
+        w = wdet[q] * k if iso else wdet[q]
+        for i in range(d):
+            kg = G[i, q] if iso else np.einsum("lc,lbc->bc", kt[i], G[:, q])
+            np.multiply((G[i, q] * w)[:, None, :], kg[None, :, :], out=tmp)
+            out += tmp
+    return ElementMatrices(values=out[None])
 
 
 def conductivity_factored(coords: np.ndarray, cell_type: str, tensors: np.ndarray,
@@ -81,7 +90,13 @@ def _mass_rule(cell_type: str, thickness: float, coords: np.ndarray):
     ref = element(cell_type)
     xi, w = quadrature(cell_type, default_degree(cell_type, "mass"))
     N = ref.shape(xi)                                         # (nq, nen)
-    _, det = physical_gradients(coords, ref.grad_shape(xi))
+    J = jacobians(coords, ref.grad_shape(xi))                 # (nc, nq, d, d): only |J| needed
+    if J.shape[-1] == 2:
+        det = J[..., 0, 0] * J[..., 1, 1] - J[..., 0, 1] * J[..., 1, 0]
+    else:
+        det = (J[..., 0, 0] * (J[..., 1, 1] * J[..., 2, 2] - J[..., 1, 2] * J[..., 2, 1])
+               - J[..., 0, 1] * (J[..., 1, 0] * J[..., 2, 2] - J[..., 1, 2] * J[..., 2, 0])
+               + J[..., 0, 2] * (J[..., 1, 0] * J[..., 2, 1] - J[..., 1, 1] * J[..., 2, 0]))
     return N, np.abs(det) * w[None, :] * thickness            # (nc, nq)
 
 
@@ -96,12 +111,14 @@ def mass(coords: np.ndarray, cell_type: str, capacity=1.0, thickness: float = 1.
 
 
 def lumped_mass(coords: np.ndarray, cell_type: str, capacity=1.0, thickness: float = 1.0) -> np.ndarray:
-    """Lumped capacity per cell node (nen, nc): row sums (linear cells) or HRZ (quadratic)."""
-    M = mass(coords, cell_type, capacity, thickness)[0]       # (nen, nen, nc)
+    """Lumped capacity per cell node (nen, nc): row sums ∫ c N_a (linear cells) or HRZ
+    (quadratic: the consistent diagonal ∫ c N_a², scaled to the cell's capacity ∫ c)."""
+    N, wdet = _mass_rule(cell_type, thickness, coords)
+    cw = wdet * _per_cell(capacity, coords.shape[0], "capacity")[:, None]   # (nc, nq)
     if polynomial_order(cell_type) == 1:
-        return M.sum(axis=1)
-    diag = np.einsum("aac->ac", M)
-    return diag * (M.sum(axis=(0, 1)) / diag.sum(axis=0))[None, :]
+        return (cw @ N).T
+    diag = cw @ (N * N)                                                     # (nc, nen)
+    return (diag * (cw.sum(axis=1) / diag.sum(axis=1))[:, None]).T
 
 
 def lumped_as_matrices(lumped: np.ndarray) -> np.ndarray:
