@@ -17,7 +17,7 @@ import numpy as np
 class ElementMatrices:
     values: np.ndarray | None = None          # full: (d², nen, nen, nc)
     geometric: np.ndarray | None = None       # factored: P (d², nen, nen, nc)
-    tensors: np.ndarray | None = None         # factored: M (nmat, d², d²)
+    tensors: np.ndarray | None = None         # factored: M (nmat, d², ncomp²)
     cell_material: np.ndarray | None = None   # factored: (nc,) index into tensors
 
     def reduce(self, pair_slot: np.ndarray, npairs: int) -> np.ndarray:
@@ -29,7 +29,7 @@ class ElementMatrices:
         nmat = len(self.tensors)
         if nmat == 1:
             return self.tensors[0].T @ _bincount_rows(slots, P, npairs)
-        out = np.zeros((P.shape[0], npairs))
+        out = np.zeros((self.tensors.shape[2], npairs))
         nen2 = P.shape[1] // len(self.cell_material)
         for m in range(nmat):  # weights zero outside the material keep one pass per material
             mask = np.tile(self.cell_material == m, nen2).astype(float)

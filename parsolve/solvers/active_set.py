@@ -22,6 +22,8 @@ from parsolve.relations import Relation
 
 #: Relative tolerance within which rows of a maximum group are tied (see ``ActiveSet.pick``).
 GROUP_TOL = 1e-7
+#: The same for groups of a few local rows (solubility's two states of a node).
+LOCAL_TIE = 1e-12
 
 
 class ActiveSet:
@@ -32,11 +34,15 @@ class ActiveSet:
         first = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         # groups: contiguous runs of rows; a whole maximum relation is one group
         group = np.full(self.sign.size, -1, dtype=np.int64)
+        # ties: wide for a control group (its rows differ by a solve's round-off, amplified past
+        # a peak), round-off wide for local groups (solubility: a node exactly at saturation)
+        self.tie = np.zeros(self.sign.size)
         count = 0
         for k, r in enumerate(relations):
             ids = np.zeros(r.nrows, dtype=np.int64) if r.maximum else r.groups
             if ids is not None:
                 group[first[k]:first[k + 1]] = count + np.asarray(ids, dtype=np.int64)
+                self.tie[first[k]:first[k + 1]] = GROUP_TOL if r.maximum else LOCAL_TIE
                 count += int(np.max(ids)) + 1 if r.nrows else 0
         self.group = group
         grouped = group >= 0
@@ -76,7 +82,7 @@ class ActiveSet:
         new[wrong_sign] = False
         if self.group_rows.size:
             rows = self.group_rows
-            best = self.pick_groups(s[rows] * gap[rows], self.active[rows], GROUP_TOL * scale)
+            best = self.pick_groups(s[rows] * gap[rows], self.active[rows], self.tie[rows] * scale)
             new[rows] = best
         if np.array_equal(new, self.active):
             return False
@@ -101,7 +107,7 @@ class ActiveSet:
         tied = group[finite & (score >= score[finite].max() - tol)]
         return int(current) if current in tied else int(tied.min())
 
-    def pick_groups(self, score: np.ndarray, active: np.ndarray, tol: float) -> np.ndarray:
+    def pick_groups(self, score: np.ndarray, active: np.ndarray, tol) -> np.ndarray:
         """``pick`` for every group at once (score and active over ``group_rows``): the new
         active mask of those rows."""
         starts = self.group_starts

@@ -172,8 +172,8 @@ class NewtonSolver:
         local duals take the sign of -A_k·D_k."""
         system, blk = self.system, self.system.block
         for k, r in enumerate(system.multiplied):
-            if r.sense == "=" or r.associated or r.maximum:
-                continue
+            if r.sense == "=" or r.associated or r.maximum or r.groups is not None:
+                continue  # a group's enforced row is chosen by value, whatever its sign
             rows = np.arange(blk.first_row[k], blk.first_row[k + 1])
             if r.meta.get("dual"):
                 rate = r.primal(self._unit_response(kmat, rows, self._dual_column(k)))
