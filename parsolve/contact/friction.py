@@ -28,7 +28,8 @@ DIRECTION_MODES = ("displacement", "reaction")
 
 def _vec(a: np.ndarray, n: int) -> np.ndarray:
     """Tangential quantities as (n, dim-1): a 2D scalar per node becomes a column."""
-    return np.asarray(a, dtype=float).reshape(n, -1)
+    a = np.asarray(a, dtype=float)
+    return a.reshape(n, 1) if a.ndim <= 1 else a
 
 
 def reactions(lam_n: np.ndarray, lam_t: np.ndarray | None, mu: float | np.ndarray,
@@ -88,7 +89,7 @@ def slip_direction(previous: np.ndarray, mode: str, slip_increment: np.ndarray |
         raise ValueError(f"slip direction mode must be one of {DIRECTION_MODES}, got {mode!r}")
     previous = np.asarray(previous, dtype=float)
     n = previous.shape[0]
-    previous = previous.reshape(n, -1)
+    previous = _vec(previous, n)
     if mode == "displacement":
         return _unit(_vec(slip_increment, n), previous, tol)
     return _unit(-_vec(rt, n), previous, tol)
@@ -126,7 +127,7 @@ def friction_update(
     """
     state = np.asarray(state, dtype=np.int8)
     n = state.size
-    direction = np.asarray(direction, dtype=float).reshape(n, -1)
+    direction = _vec(direction, n)
     rn = np.asarray(rn, dtype=float)
     rt = _vec(rt, n)
     du = _vec(slip_increment, n)
@@ -152,7 +153,7 @@ def friction_update(
 
     # directions matter only where the node slides before and after
     both = (state == SLIP) & (new_state == SLIP)
-    turned = np.einsum("mj,mj->m", new_dir[both], direction[both])
-    angle = np.arccos(np.clip(turned, -1.0, 1.0))
+    # chord length of unit vectors = 2 sin(angle/2): well conditioned for small angles
+    angle = np.linalg.norm(new_dir[both] - direction[both], axis=1)
     changed = bool(np.any(new_state != state) or np.any(angle > tol_angle))
     return new_state, new_dir, changed

@@ -163,9 +163,9 @@ def wedge_stick_slip(lam: float, g: float, beta: float, kappa: float = -1e-3) ->
     e2 = np.array([-cb, sb])
 
     def face(n):
-        # traction on the block: sigma . (-n); pressure = -n . t, friction along (-n_y, n_x)
+        # traction on the block: t = sigma . (-n); pressure n . t, friction along (-n_y, n_x)
         t = -stress @ n
-        return float(-(n @ t)), float(np.array([-n[1], n[0]]) @ t)
+        return float(n @ t), float(np.array([-n[1], n[0]]) @ t)
 
     return WedgeStickSlip(beta, kappa, g * cb / (lam * sb), n1, n2, e2,
                           np.array([-n2[1], n2[0]]), stress, face(n1), face(n2))

@@ -111,7 +111,8 @@ def _repeat(pairing: Pairing, times: int) -> Pairing:
 
 def slip_vectors(pairing: Pairing, direction: np.ndarray) -> np.ndarray:
     """Physical slip vectors sum_j s_j t_j (n, dim) of directions s (n, dim-1) or (n,) in 2D."""
-    s = np.asarray(direction, dtype=float).reshape(len(pairing), -1)
+    s = np.asarray(direction, dtype=float)
+    s = s.reshape(len(pairing), 1) if s.ndim <= 1 else s
     return np.einsum("mj,mjx->mx", s, pairing.tangents)
 
 
