@@ -140,40 +140,79 @@ def _clip_reference(facet_type: str, xi: np.ndarray) -> np.ndarray:
     return np.clip(xi, -1.0, 2.0)
 
 
+def _evaluate(el, xi: np.ndarray, coords: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """x(xi) (m, dim) and dx/dxi (m, dim, d) of facets coords (m, k, dim)."""
+    xm = np.matmul(el.shape(xi)[:, None, :], coords)[:, 0]
+    jac = np.matmul(coords.transpose(0, 2, 1), el.grad_shape(xi))
+    return xm, jac
+
+
+def _solve_small(h: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """h^-1 g for stacks of 1x1 or 2x2 matrices (closed form: numpy's batched solve is slow
+    on tiny matrices)."""
+    if h.shape[1] == 1:
+        return g / h[:, 0, :]
+    det = h[:, 0, 0] * h[:, 1, 1] - h[:, 0, 1] * h[:, 1, 0]
+    s0 = (h[:, 1, 1] * g[:, 0] - h[:, 0, 1] * g[:, 1]) / det
+    s1 = (h[:, 0, 0] * g[:, 1] - h[:, 1, 0] * g[:, 0]) / det
+    return np.column_stack([s0, s1])
+
+
+def _far_outside(facet_type: str, xi: np.ndarray) -> np.ndarray:
+    if facet_type in ("line", "line3", "quad"):
+        return np.abs(xi).max(axis=1) > 1.5
+    return (xi.min(axis=1) < -0.5) | (xi.sum(axis=1) > 1.5)
+
+
 def project_on_facets(
-    x: np.ndarray, coords: np.ndarray, facet_type: str, iterations: int = 30, tol: float = 1e-13
+    x: np.ndarray, coords: np.ndarray, facet_type: str, iterations: int = 30, tol: float = 1e-12
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Closest point of x (m, dim) on the facets with node coordinates coords (m, k, dim).
 
     Newton on f(xi) = |x(xi) - x|^2 / 2 with the full Hessian J^T J + sum (x(xi) - x) d2x,
     vectorised over the m pairs; exact in one step for straight segments and flat triangles.
+    Only the pairs still moving are iterated; pairs whose iterate stays far outside the
+    reference facet (they cannot be paired) are dropped after 2 iterations.
     Returns (xi (m, d), x(xi) (m, dim), dx/dxi (m, dim, d)).
     """
     el = element(facet_type)
-    d = el.dim
     m = x.shape[0]
+    # work relative to each facet's first node: residuals of the size of the facet, not of
+    # the coordinates, so xi converges to round-off whatever the mesh's offset and size
+    origin = coords[:, 0, :]
+    coords = coords - origin[:, None, :]
+    x = x - origin
     xi = np.tile(el.nodes.mean(axis=0), (m, 1))  # start from the facet's centre
     h2 = _second_derivatives(facet_type)
-    d2x = np.einsum("mkx,kab->mxab", coords, h2)  # constant per facet
-    for _ in range(iterations):
-        xm = np.einsum("mk,mkx->mx", el.shape(xi), coords)
-        jac = np.einsum("mka,mkx->mxa", el.grad_shape(xi), coords)
-        r = xm - x
-        grad = np.einsum("mxa,mx->ma", jac, r)
-        hess = np.einsum("mxa,mxb->mab", jac, jac) + np.einsum("mx,mxab->mab", r, d2x)
+    k, d = h2.shape[0], h2.shape[1]
+    curved = bool(np.any(h2 != 0.0))  # straight segments and flat triangles: no curvature term
+    if curved:  # d2x/dxi2 (m, dim, d*d), constant per facet
+        d2x = np.matmul(coords.transpose(0, 2, 1), h2.reshape(k, d * d))
+    active = np.arange(m)
+    for it in range(iterations):
+        xa, ca = xi[active], coords[active]
+        xm, jac = _evaluate(el, xa, ca)
+        r = xm - x[active]
+        grad = np.matmul(r[:, None, :], jac)[:, 0]
+        jtj = np.matmul(jac.transpose(0, 2, 1), jac)
+        hess = jtj.copy()
+        if curved:
+            hess += np.matmul(r[:, None, :], d2x[active]).reshape(-1, d, d)
         # a far point on a strongly curved facet can make the Hessian indefinite: fall back
         # to Gauss-Newton (J^T J is always positive) there
-        det = np.linalg.det(hess) if d == 2 else hess[:, 0, 0]
-        bad = det <= 1e-12 * np.einsum("mxa,mxa->m", jac, jac) ** d
-        if np.any(bad):
-            hess[bad] = np.einsum("mxa,mxb->mab", jac[bad], jac[bad])
-        step = np.linalg.solve(hess, grad[:, :, None])[:, :, 0]
-        xi = _clip_reference(facet_type, xi - step)
-        if np.all(np.linalg.norm(step, axis=1) <= tol):
+        det = hess[:, 0, 0] if d == 1 else hess[:, 0, 0] * hess[:, 1, 1] - hess[:, 0, 1] ** 2
+        bad = det <= 1e-12 * np.trace(jtj, axis1=1, axis2=2) ** d
+        hess[bad] = jtj[bad]
+        new = _clip_reference(facet_type, xa - _solve_small(hess, grad))
+        xi[active] = new
+        moving = np.linalg.norm(new - xa, axis=1) > tol
+        if it >= 1:  # after a first (nearly exact) step, far-outside pairs are hopeless
+            moving &= ~_far_outside(facet_type, new)
+        active = active[moving]
+        if active.size == 0:
             break
-    xm = np.einsum("mk,mkx->mx", el.shape(xi), coords)
-    jac = np.einsum("mka,mkx->mxa", el.grad_shape(xi), coords)
-    return xi, xm, jac
+    xm, jac = _evaluate(el, xi, coords)
+    return xi, xm + origin, jac
 
 
 # ----------------------------------------------------------------------------- candidates
@@ -234,7 +273,7 @@ def pair_nodes(
     master_facets: np.ndarray,
     facet_type: str,
     search_radius: float | None = None,
-    tol: float = 1e-8,
+    tol: float = 1e-2,
     slave_points: np.ndarray | None = None,
 ) -> Pairing:
     """Closest-point projection of every slave node on the master surface.

@@ -94,6 +94,11 @@ def test_outside_nodes_are_unpaired():
     assert np.all(p.facet[~inside] == -1) and np.all(np.isinf(p.gap[~inside]))
     # a node beyond the search radius is unpaired too
     far = pair_nodes(pts, slaves, facets, "line", search_radius=0.005)
+    # 1 % of a facet beyond the master's end: paired with the end vertex (default tol 1e-2)
+    pts_end = np.vstack([pts, [[1.0 + 0.001, 0.01]]])  # xi = 1.008
+    end = pair_nodes(pts_end, [len(pts)], facets, "line")
+    assert end.paired.all() and np.allclose(end.point, [[1.0, 0.0]]) and end.gap[0] == 0.01
+    assert not pair_nodes(pts_end, [len(pts)], facets, "line", tol=1e-3).paired.any()
     assert not far.paired.any()
 
 
@@ -280,7 +285,7 @@ def test_convex_corner_dead_zone_needs_a_tolerance():
     _, _, facets = match_facets(master, master.facet_groups["outer"])
     rr = 1.005
     pts = np.vstack([master.points, [[0.0, rr]]])  # the vertex at angle pi/2
-    strict = pair_nodes(pts, [master.num_points], facets, "line")
+    strict = pair_nodes(pts, [master.num_points], facets, "line", tol=1e-8)
     assert not strict.paired.any()
     loose = pair_nodes(pts, [master.num_points], facets, "line", tol=0.05)
     assert loose.paired.all()
