@@ -307,7 +307,7 @@ def pair_nodes(
     radius = float(extent if search_radius is None else search_radius)
     lo, hi = _facet_boxes(coords, radius)
     sid, fid = candidate_pairs(xs, lo, hi)
-    xi, xm, jac = project_on_facets(xs[sid], coords[fid], facet_type)
+    xi, xm, jac = _project_in_chunks(xs, coords, sid, fid, facet_type)
     inside = inside_reference(facet_type, xi, tol)
     # within the tolerance, the projection is pulled back onto the facet (its edge or vertex):
     # a node facing a convex corner of the master pairs with the corner
@@ -340,6 +340,16 @@ def pair_nodes(
     out.tangents[s] = tangents
     out.gap[s] = np.einsum("mx,mx->m", normal, xs[s] - xm[best])
     return out
+
+
+CHUNK = 1 << 15  # candidate pairs per vectorised projection: bounded memory, cache-friendly
+
+
+def _project_in_chunks(xs, coords, sid, fid, facet_type):
+    """project_on_facets over the candidate pairs, CHUNK pairs at a time."""
+    parts = [project_on_facets(xs[sid[i:i + CHUNK]], coords[fid[i:i + CHUNK]], facet_type)
+             for i in range(0, max(sid.size, 1), CHUNK)]
+    return tuple(np.concatenate(p) for p in zip(*parts))
 
 
 def empty_pairing(slave_nodes: np.ndarray, dim: int, k: int) -> Pairing:
