@@ -21,9 +21,22 @@ from __future__ import annotations
 
 import numpy as np
 
+from parsolve.errors import InputError
+
 OPEN, STICK, SLIP = 0, 1, 2
 STATE_NAMES = {OPEN: "open", STICK: "stick", SLIP: "slip"}
 DIRECTION_MODES = ("displacement", "reaction")
+
+
+def check_mu(mu: float, source: str | None = None, key: str | None = None) -> float:
+    """The friction coefficient as a float; InputError unless finite and >= 0."""
+    try:
+        value = float(mu)
+    except (TypeError, ValueError):
+        raise InputError(f"friction coefficient must be a number, got {mu!r}", source, key) from None
+    if not np.isfinite(value) or value < 0.0:
+        raise InputError(f"friction coefficient must be >= 0, got {mu!r}", source, key)
+    return value
 
 
 def _vec(a: np.ndarray, n: int) -> np.ndarray:

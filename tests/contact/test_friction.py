@@ -90,3 +90,13 @@ def test_update_3d_direction_follows_the_increment():
     rt = np.array([[-0.2, -0.2], [0.0, -0.3]])
     new, d3, changed = friction_update(state, direction, closed, rn, rt, du, mu, "reaction")
     assert np.allclose(d3, [[np.sqrt(0.5), np.sqrt(0.5)], [0.0, 1.0]]) and changed
+
+
+def test_check_mu():
+    from parsolve.contact.friction import check_mu
+    from parsolve.errors import InputError
+    assert check_mu(0) == 0.0 and check_mu("0.3") == 0.3
+    for bad in (-0.1, float("nan"), "x", None):
+        with pytest.raises(InputError) as e:
+            check_mu(bad, "scene.toml", "friction.mu")
+        assert "scene.toml: friction.mu:" in str(e.value)
