@@ -1,0 +1,172 @@
+"""Coulomb friction logic as pure functions on per-node arrays.
+
+Sign conventions (parsolve's relations, ``K q = F + D lambda``, associated ``D = -A^T``):
+
+* normal row ``Dn . q >= -g0`` with dual ``D = -(Dn - mu Dt.s)``: the force on the slave node is
+  ``-lambda_n (n - mu s_vec) = Rn n - mu Rn s_vec`` with the contact pressure (force)
+  ``Rn = -lambda_n >= 0`` (a ">=" row's multiplier is <= 0 when active). The paper writes the
+  same thing as ``lambda_n Dn`` and ``-mu lambda_n Dt`` with its lambda_n = Rn.
+* tangential rows ``Dt_j . q = (value)``, associated: force on the slave ``-lambda_t_j t_j``.
+* so the friction force on the slave in the tangent basis is
+  ``Rt = -lambda_t - mu Rn s`` (the term ``-mu Rn s`` only when the normal dual carries the
+  friction); the paper's "(lambda_t - mu lambda_n) Dt" with its signs.
+* ``s`` is the slip direction of the slave relative to the master, in the tangent basis
+  (2D: +-1; 3D: a unit 2-vector); friction opposes it: in slip ``Rt = -mu Rn s``.
+* Coulomb cone: ``mu Rn - |Rt| >= 0``.
+
+States (int8, the values saved per node): OPEN = 0 (lift-off), STICK = 1, SLIP = 2.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from parsolve.errors import InputError
+
+OPEN, STICK, SLIP = 0, 1, 2
+STATE_NAMES = {OPEN: "open", STICK: "stick", SLIP: "slip"}
+DIRECTION_MODES = ("displacement", "reaction")
+
+
+def check_mu(mu: float, source: str | None = None, key: str | None = None) -> float:
+    """The friction coefficient as a float; InputError unless finite and >= 0."""
+    try:
+        value = float(mu)
+    except (TypeError, ValueError):
+        raise InputError(f"friction coefficient must be a number, got {mu!r}", source, key) from None
+    if not np.isfinite(value) or value < 0.0:
+        raise InputError(f"friction coefficient must be >= 0, got {mu!r}", source, key)
+    return value
+
+
+def _vec(a: np.ndarray, n: int) -> np.ndarray:
+    """Tangential quantities as (n, dim-1): a 2D scalar per node becomes a column."""
+    a = np.asarray(a, dtype=float)
+    return a.reshape(n, 1) if a.ndim <= 1 else a
+
+
+def reactions(lam_n: np.ndarray, lam_t: np.ndarray | None, mu: float | np.ndarray,
+              direction: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """Normal force Rn (n,) and friction force Rt (n, dim-1) on the slave nodes from multipliers.
+
+    lam_n (n,): multipliers of the normal rows; lam_t (n, dim-1) or None: multipliers of the
+    tangential rows expressed in the tangent basis (for one row along s, pass ``lam * s``);
+    direction (n, dim-1) or None: the slip direction carried by the normal dual (None: the
+    normal rows are frictionless/associated).
+    """
+    lam_n = np.asarray(lam_n, dtype=float)
+    n = lam_n.size
+    rn = -lam_n
+    rt = np.zeros((n, 1)) if lam_t is None else -_vec(lam_t, n)
+    if direction is not None:
+        mu = np.broadcast_to(np.asarray(mu, dtype=float), (n,))
+        rt = rt - (mu * rn)[:, None] * _vec(direction, n)
+    return rn, rt
+
+
+def cone_margin(rn: np.ndarray, rt: np.ndarray, mu: float | np.ndarray) -> np.ndarray:
+    """mu Rn - |Rt| (n,): >= 0 inside the Coulomb cone."""
+    rn = np.asarray(rn, dtype=float)
+    return np.asarray(mu, dtype=float) * rn - np.linalg.norm(_vec(rt, rn.size), axis=1)
+
+
+def contact_states(gap: np.ndarray, rn: np.ndarray, slip_increment: np.ndarray,
+                   tol_gap: float = 0.0, tol_slip: float = 0.0) -> np.ndarray:
+    """OPEN where the gap is open (> tol_gap) or the node carries no compression (Rn <= 0),
+    else SLIP where the tangential slip increment exceeds tol_slip, else STICK. int8 (n,)."""
+    gap = np.asarray(gap, dtype=float)
+    n = gap.size
+    closed = (gap <= tol_gap) & (np.asarray(rn) > 0.0)
+    moving = np.linalg.norm(_vec(slip_increment, n), axis=1) > tol_slip
+    return np.where(closed, np.where(moving, SLIP, STICK), OPEN).astype(np.int8)
+
+
+def _unit(v: np.ndarray, previous: np.ndarray, tol: float) -> np.ndarray:
+    norm = np.linalg.norm(v, axis=1)
+    ok = norm > tol
+    out = previous.copy()
+    out[ok] = v[ok] / norm[ok, None]
+    return out
+
+
+def slip_direction(previous: np.ndarray, mode: str, slip_increment: np.ndarray | None = None,
+                   rt: np.ndarray | None = None, tol: float = 0.0) -> np.ndarray:
+    """Updated unit slip direction (n, dim-1) in the tangent basis.
+
+    mode "displacement": along the tangential displacement increment (slave minus master);
+    mode "reaction": opposite to the friction force, -Rt/|Rt| (friction opposes the slip).
+    Where the chosen vector is not above tol, the previous direction is kept. In 2D the
+    direction is the sense +-1 (a (n, 1) column).
+    """
+    if mode not in DIRECTION_MODES:
+        raise ValueError(f"slip direction mode must be one of {DIRECTION_MODES}, got {mode!r}")
+    previous = np.asarray(previous, dtype=float)
+    n = previous.shape[0]
+    previous = _vec(previous, n)
+    if mode == "displacement":
+        return _unit(_vec(slip_increment, n), previous, tol)
+    return _unit(-_vec(rt, n), previous, tol)
+
+
+def friction_update(
+    state: np.ndarray,
+    direction: np.ndarray,
+    closed: np.ndarray,
+    rn: np.ndarray,
+    rt: np.ndarray,
+    slip_increment: np.ndarray,
+    mu: float | np.ndarray,
+    mode: str = "displacement",
+    tol_force: float = 1e-12,
+    tol_slip: float = 1e-14,
+    tol_angle: float = 1e-10,
+) -> tuple[np.ndarray, np.ndarray, bool]:
+    """One friction active-set update between global iterations.
+
+    state (n,) int8 and direction (n, dim-1) of the iteration just solved; closed (n,) bool:
+    the normal row is active; rn, rt: forces (see :func:`reactions`); slip_increment
+    (n, dim-1): tangential displacement since the start of the step (slave minus master).
+
+    * open -> OPEN; newly closed -> STICK.
+    * STICK with |Rt| > mu Rn (1 + tol): SLIP, direction -Rt/|Rt| (the stick reaction is the
+      only information in stick, whatever the mode).
+    * SLIP moving against its direction (slip_increment . s < -tol_slip): STICK (2D: the sense
+      was wrong; the next stick solve gives the right one).
+    * SLIP otherwise: the direction is updated (``mode``, see :func:`slip_direction`); in 2D
+      it cannot change this way (the slip is along +-s).
+
+    tol_force scales with max(Rn). Returns (state, direction, changed): changed when a state
+    changed or a direction turned by more than tol_angle (radians).
+    """
+    state = np.asarray(state, dtype=np.int8)
+    n = state.size
+    direction = _vec(direction, n)
+    rn = np.asarray(rn, dtype=float)
+    rt = _vec(rt, n)
+    du = _vec(slip_increment, n)
+    closed = np.asarray(closed, dtype=bool)
+    mu = np.broadcast_to(np.asarray(mu, dtype=float), (n,))
+    scale = max(float(np.max(np.abs(rn))) if n else 0.0, 1e-300)
+
+    new_state = np.where(closed, state, OPEN).astype(np.int8)
+    new_state[closed & (state == OPEN)] = STICK
+    new_dir = direction.copy()
+
+    stick = closed & (state == STICK)
+    over = stick & (np.linalg.norm(rt, axis=1) - mu * rn > tol_force * scale)
+    new_state[over] = SLIP
+    new_dir[over] = slip_direction(direction[over], "reaction", rt=rt[over])
+
+    slip = closed & (state == SLIP)
+    back = slip & (np.einsum("mj,mj->m", du, direction) < -tol_slip)
+    new_state[back] = STICK
+    keep = slip & ~back
+    if direction.shape[1] > 1 and np.any(keep):
+        new_dir[keep] = slip_direction(direction[keep], mode, du[keep], rt[keep], tol_slip)
+
+    # directions matter only where the node slides before and after
+    both = (state == SLIP) & (new_state == SLIP)
+    # chord length of unit vectors = 2 sin(angle/2): well conditioned for small angles
+    angle = np.linalg.norm(new_dir[both] - direction[both], axis=1)
+    changed = bool(np.any(new_state != state) or np.any(angle > tol_angle))
+    return new_state, new_dir, changed
