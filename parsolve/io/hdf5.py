@@ -14,9 +14,12 @@ Guarantees, and the rules a reader follows:
   per-step dataset first, ``/steps/time`` last, then flushes. ``n = len(/steps/time)`` is the
   number of finished steps; a reader takes ``[:n]`` of the other per-step datasets (after a crash
   in the middle of a step they may hold one unfinished row more; a normal close trims it).
-* **Disk full.** Any OSError while writing raises :class:`parsolve.errors.OutputError` naming
-  the path; nothing more is written to the file, the finished steps stay readable, and
-  ``close`` records ``status = "failed: ..."``.
+* **Disk full.** Any OSError while writing raises :class:`parsolve.errors.OutputError` (on every
+  rank) naming the path; nothing more is written to the file and the finished steps stay
+  readable. The status attribute is *not* rewritten then (on a full disk that needs new space
+  and HDF5 could no longer close the file): it stays "running"; the exit status 4 and the
+  message say what happened. The file has no chunk cache, so a step's data reaches the disk
+  inside ``write_step``, where the error is caught, and not later when a dataset is closed.
 * ``status`` is "running" during the run; ``close(status)`` writes the caller's status, except
   that a result with no finished step is never "complete".
 * Chunks hold one step of a field (fields are written and read a step at a time), so a file is
@@ -76,7 +79,9 @@ class ResultWriter:
         # Unlink, never truncate: a reader of the previous result keeps its copy.
         for old in (self.path, self.path.with_suffix(".xdmf"), sidecar_path(self.path)):
             old.unlink(missing_ok=True)
-        f = self.file = h5py.File(self.path, "w", libver="latest")
+        # No chunk cache: a step's data reaches the file inside write_step (where a full disk is
+        # an OSError we handle), never later when HDF5 evicts or closes a dataset.
+        f = self.file = h5py.File(self.path, "w", libver="latest", rdcc_nbytes=0)
         f.attrs.update(parsolve_version=__version__, petsc_version=petsc_version,
                        nprocs=self.comm.size, status="running", scene=scene_text)
         f["mesh/points"] = self.mesh.points
@@ -112,7 +117,7 @@ class ResultWriter:
                     self._append(name, value)
             self._append("steps/time", rows["steps/time"])  # last: the step now counts
             self.file.flush()
-        except OSError as exc:
+        except (OSError, RuntimeError) as exc:  # h5py reports some write errors as RuntimeError
             return self._fail(exc, f"writing step {len(self.times) + 1} to")
         self.times.append(t)
         if self._xdmf is not None:
@@ -173,7 +178,9 @@ class ResultWriter:
     def _fail(self, exc: OSError, doing: str, path: Path | None = None) -> None:
         """Stop writing for good (OutputError follows); the finished steps stay readable."""
         path = path or self.path
-        reason = exc.strerror or str(exc)
+        reason = getattr(exc, "strerror", None) or str(exc)
+        if "errno = 28" in reason or "No space left" in reason:
+            reason = "No space left on device"
         self.error = (f"{doing} {path} failed: {reason}; the {len(self.times)} finished step(s) "
                       f"stay readable")
 
@@ -188,17 +195,18 @@ class ResultWriter:
         if self.file is None:
             return
         f, self.file = self.file, None
-        try:
-            if self.error is None:
-                self._trim(f)
-            f.attrs["status"] = status
-            f.flush()
-        except (OSError, RuntimeError):
-            pass  # disk full: the status stays "running"; the finished steps are on disk
-        try:
-            f.close()
-        except (OSError, RuntimeError):
-            pass
+        if self.error is not None:
+            # After a failed write nothing more goes in: writing the status would need new space
+            # and, on a full disk, leaves HDF5 unable to close the file (tested: it stays
+            # "running"; the exit status and the message say what happened).
+            try:
+                f.close()
+            except (OSError, RuntimeError):
+                pass
+            return
+        self._trim(f)
+        f.attrs["status"] = status
+        f.close()
 
     def _trim(self, f: h5py.File) -> None:
         """Cut rows of an unfinished step (an exception between datasets)."""
