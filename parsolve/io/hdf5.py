@@ -192,6 +192,11 @@ class ResultWriter:
         elif status == "complete" and not self.times:
             status = "failed: no step finished"
         self.status = status
+        if self._xdmf is not None:
+            try:
+                self._xdmf.close()
+            except (OSError, RuntimeError):
+                pass  # the views already flushed stay; the XDMF names no other
         if self.file is None:
             return
         f, self.file = self.file, None
