@@ -66,6 +66,7 @@ class ResultWriter:
         self.error: str | None = None      # set once writing failed: nothing more is written
         self.output_seconds = 0.0          # time spent in the last write_step
         self._layout: dict[str, tuple] = {}  # per-step dataset -> (row shape, dtype)
+        self._known: dict[str, tuple] = {}   # those created with the file
         self._xdmf = XdmfWriter(self.path, mesh) if xdmf else None
         if comm.rank == 0:
             try:
@@ -86,6 +87,17 @@ class ResultWriter:
                        nprocs=self.comm.size, status="running", scene=scene_text)
         f["mesh/points"] = self.mesh.points
         f[f"mesh/cells/{self.mesh.cell_type}"] = self.mesh.cells
+        # What is known now exists even if no step finishes (a failure before the first step)
+        known = {"steps/time": ((), np.float64), "steps/iterations": ((), np.int64),
+                 "steps/residual": ((), np.float64)}
+        for name, (nrows, unilateral) in self.relations.items():
+            known[f"relations/{name}/multiplier"] = ((nrows,), np.float64)
+            known[f"relations/{name}/primal"] = ((nrows,), np.float64)
+            if unilateral:
+                known[f"relations/{name}/active"] = ((nrows,), np.int8)
+        for name, (shape, dtype) in known.items():
+            _create(f, name, shape, dtype)
+            self._known[name] = (shape, dtype)
         f.flush()
 
     # ------------------------------------------------------------------ steps
@@ -142,30 +154,28 @@ class ResultWriter:
                 rows[f"relations/{name}/{key}"] = np.asarray(value)
         for name, value in timings.items():
             rows[f"timings/{name}"] = np.float64(value)
-        if self._layout:
-            new = set(rows) - set(self._layout) - {"steps/time"}
-            if new:  # SWMR cannot add datasets once the first step is written
-                raise ValueError(f"datasets {sorted(new)} were not in the first step")
-            for name in set(self._layout) - set(rows) - {"steps/time"}:
-                if not name.startswith("timings/"):
-                    raise ValueError(f"dataset {name} is missing from step {len(self.times) + 1}")
-                rows[name] = np.float64(0.0)  # a phase that did not run this step took no time
+        expected = self._layout or self._known
+        missing = set(expected) - set(rows) - {"steps/time"}
+        if any(not name.startswith("timings/") for name in missing):
+            raise ValueError(f"datasets {sorted(missing)} are missing from step {len(self.times) + 1}")
+        for name in missing:
+            rows[name] = np.float64(0.0)  # a phase that did not run this step took no time
+        if self._layout and set(rows) - set(self._layout):
+            # SWMR cannot add datasets once the first step is written
+            raise ValueError(f"datasets {sorted(set(rows) - set(self._layout))} were not in the "
+                             "first step")
         rows["steps/time"] = np.float64(t)
         return rows
 
     def _create_all(self, rows: dict) -> None:
-        """Every per-step dataset (empty), then SWMR: from here on readers may open the file."""
+        """Every other per-step dataset (empty), then SWMR: from here on readers may open it."""
         f = self.file
-        for name, (nrows, unilateral) in self.relations.items():  # even if a step has no rows
-            rows.setdefault(f"relations/{name}/multiplier", np.zeros(nrows))
-            rows.setdefault(f"relations/{name}/primal", np.zeros(nrows))
-            if unilateral:
-                rows.setdefault(f"relations/{name}/active", np.zeros(nrows, np.int8))
+        self._layout.update(self._known)
         for name, value in rows.items():
-            value = np.asarray(value)
-            dtype = np.int8 if name.endswith("/active") else value.dtype
-            _create(f, name, value.shape, dtype)
-            self._layout[name] = (value.shape, dtype)
+            if name not in self._known:
+                value = np.asarray(value)
+                _create(f, name, value.shape, value.dtype)
+                self._layout[name] = (value.shape, value.dtype)
         f.swmr_mode = True
 
     def _append(self, name: str, value) -> None:
