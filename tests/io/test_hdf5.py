@@ -127,7 +127,7 @@ def test_concurrent_reader_sees_growing_consistent_steps(tmp_path):
                 np.testing.assert_array_equal(disp, np.broadcast_to(times[:, None, None], disp.shape))
                 stress = f["cell_fields/stress"][:n]
                 np.testing.assert_array_equal(stress, np.broadcast_to(times[:, None, None], stress.shape))
-            if n == 6 or proc.poll() is not None and n == 6:
+            if n == 6 or proc.poll() is not None:
                 break
             time.sleep(0.05)
         f.close()
