@@ -135,7 +135,7 @@ class ResultWriter:
         if self._xdmf is not None:
             try:
                 self._xdmf.append(len(self.times) - 1, t, self.fields, self.cell_fields)
-            except OSError as exc:
+            except (OSError, RuntimeError) as exc:
                 return self._fail(exc, "writing", self._xdmf.path)
         self.output_seconds = time.perf_counter() - start
 
