@@ -6,9 +6,10 @@ Guarantees, and the rules a reader follows:
   ``.xdmf.h5``) are unlinked before the new file is created: a reader holding the old file open
   keeps a valid copy, and the new file has its final name from the start.
 * **Readable during the run** with plain h5py, in HDF5's single-writer/multiple-reader mode
-  (SWMR): every dataset is created at the first step, then the file switches to SWMR. A reader
-  opens it with ``h5py.File(path, "r", swmr=True)`` and calls ``refresh()`` on a dataset to see
-  new steps. (A plain ``h5py.File(path, "r")`` works once the run has closed the file; after a
+  (SWMR): ``/mesh``, ``/steps`` and ``/relations`` are created with the file, the other
+  datasets at the first step, then the file switches to SWMR (a reader can open it from the
+  end of the first step on). A reader opens it with ``h5py.File(path, "r", swmr=True)`` and
+  calls ``refresh()`` on each dataset it reads to see new steps, ``/steps/time`` first. (A plain ``h5py.File(path, "r")`` works once the run has closed the file; after a
   hard kill, -9 or a node failure, only ``swmr=True`` opens it — or run ``recover(path)``.)
 * **A step counts only once all its datasets are written.** Each step resizes and writes every
   per-step dataset first, ``/steps/time`` last, then flushes. ``n = len(/steps/time)`` is the
@@ -50,9 +51,11 @@ def _create(f: h5py.File, name: str, row_shape: tuple, dtype) -> None:
 
 
 class ResultWriter:
-    """Appends one saved step at a time; only rank 0 touches the file.
+    """Appends one saved step at a time; only rank 0 touches the file, but ``write_step`` and
+    the constructor are collective (every rank raises the same OutputError).
 
-    ``hook`` (tests only) is called with each dataset name just before it is written.
+    ``output_seconds``: the time the last ``write_step`` took (for ``/timings/output``).
+    ``status``: after ``close``, the status recorded (or that would have been, after a failure).
     """
 
     def __init__(self, comm, path: str | Path, mesh, scene_text: str, petsc_version: str,
