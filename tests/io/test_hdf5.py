@@ -270,3 +270,34 @@ def test_full_tmpfs(tmp_path):
             np.testing.assert_array_equal(point_data["displacement"][:, :2], times[-1])
     finally:
         subprocess.run(["umount", str(mnt)], check=True)
+
+
+def test_exception_between_datasets_is_trimmed_at_close(tmp_path, monkeypatch):
+    """Ctrl-C raised in the middle of a step (the signal handler's exception): close cuts the
+    unfinished rows, so every per-step dataset has exactly the finished steps."""
+    import meshio
+
+    out = tmp_path / "r.h5"
+    w = writer(out)
+    step(w, 1.0)
+    step(w, 2.0)
+    original = ResultWriter._append
+
+    def interrupted(self, name, value):
+        if name == "cell_fields/stress":
+            raise KeyboardInterrupt
+        original(self, name, value)
+
+    monkeypatch.setattr(ResultWriter, "_append", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        step(w, 3.0)
+    w.close("interrupted: SIGINT")
+    with h5py.File(out, "r") as f:
+        assert f.attrs["status"] == "interrupted: SIGINT"
+        lengths = {}
+        f.visititems(lambda n, o: lengths.__setitem__(n, o.shape[0])
+                     if isinstance(o, h5py.Dataset) and not n.startswith("mesh") else None)
+        assert set(lengths.values()) == {2}, lengths
+        np.testing.assert_array_equal(f["fields/displacement"][:, 0, 0], [1.0, 2.0])
+    with meshio.xdmf.TimeSeriesReader(out.with_suffix(".xdmf")) as r:
+        assert r.num_steps == 2
