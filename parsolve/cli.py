@@ -9,7 +9,9 @@ whole MPI job instead of leaving the other ranks hanging.
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
+from contextlib import contextmanager
 from pathlib import Path
 
 USAGE = "parsolve {run,check,study,batch,post} SCENE [-o OUT.h5] [--export-system DIR] [PETSc options]"
@@ -47,6 +49,23 @@ def _abort_on_error(comm) -> None:
 SUBCOMMANDS = ("study", "batch", "post")
 
 
+@contextmanager
+def _signals_interrupt():
+    """SIGINT / SIGTERM raise Interrupted at once (the result file is closed with the status
+    "interrupted: ..." and its finished steps); the previous handlers come back afterwards."""
+    from parsolve.errors import Interrupted
+
+    def handler(signum, frame):
+        raise Interrupted(signum, signal.Signals(signum).name)
+
+    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv and argv[0] in SUBCOMMANDS:
@@ -59,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
     petsc4py.init([sys.argv[0]] + petsc_args)
     from mpi4py import MPI
 
-    from parsolve.errors import InputError, SolverError
+    from parsolve.errors import InputError, Interrupted, OutputError, SolverError
     from parsolve.solvers.options import parse_cli
 
     comm = MPI.COMM_WORLD
@@ -88,9 +107,17 @@ def main(argv: list[str] | None = None) -> int:
         from parsolve.driver import run
 
         out = args.output or scene.output or (Path(args.scene).stem + ".h5")
-        run(comm, model, out, cli_options, args.export_system, log=say)
+        with _signals_interrupt():
+            run(comm, model, out, cli_options, args.export_system, log=say)
         say(f"results: {out}")
         return 0
+    except Interrupted as exc:
+        say(f"parsolve: interrupted by {exc.name}; the finished steps are in the result file",
+            sys.stderr)
+        return exc.exit_status
+    except OutputError as exc:
+        say(f"parsolve: cannot write the results: {exc}", sys.stderr)
+        return 4
     except InputError as exc:
         say(f"parsolve: {exc.oneline()}", sys.stderr)
         return 2

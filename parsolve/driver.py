@@ -11,7 +11,7 @@ import numpy as np
 from mpi4py import MPI
 
 from parsolve.effects.compose import Rate
-from parsolve.errors import SolverError
+from parsolve.errors import Interrupted, SolverError
 from parsolve.io.hdf5 import ResultWriter
 from parsolve.model import Model
 from parsolve.outputs import Balance, progress, step_outputs
@@ -45,9 +45,11 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
     except SolverError as exc:
         status = f"failed: {exc}"
         raise
-    except BaseException as exc:  # interrupted, disk full, a bug: never "complete"
-        status = f"interrupted: {exc}" if type(exc).__name__ == "Interrupted" else \
-            f"failed: {type(exc).__name__}: {exc}"
+    except Interrupted as exc:
+        status = str(exc)  # "interrupted: SIGINT"
+        raise
+    except BaseException as exc:  # disk full, a bug: never "complete"
+        status = f"failed: {type(exc).__name__}: {exc}"
         raise
     finally:
         writer.close(status)

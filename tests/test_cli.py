@@ -87,7 +87,8 @@ def test_run_result_file_layout(tmp_path):
     import xml.etree.ElementTree as ET
 
     grids = ET.fromstring(xdmf).findall(".//Grid[@GridType='Uniform']")
-    assert len(grids) == 10 and "bar.h5:/fields/displacement" in xdmf
+    assert len(grids) == 10 and "bar.h5:/mesh/points" in xdmf \
+        and "bar.xdmf.h5:/fields/displacement/9" in xdmf
 
 
 def test_petsc_options_from_command_line_win(tmp_path):

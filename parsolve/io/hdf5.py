@@ -1,91 +1,276 @@
-"""The result file (DESIGN §5), written step by step by rank 0 so that a run that stops early
-leaves every finished step readable."""
+"""The result file (DESIGN §5), written step by step by rank 0.
+
+Guarantees, and the rules a reader follows:
+
+* **Replacing a result never destroys it in place.** The old names (``.h5``, ``.xdmf``,
+  ``.xdmf.h5``) are unlinked before the new file is created: a reader holding the old file open
+  keeps a valid copy, and the new file has its final name from the start.
+* **Readable during the run** with plain h5py, in HDF5's single-writer/multiple-reader mode
+  (SWMR): ``/mesh``, ``/steps`` and ``/relations`` are created with the file, the other
+  datasets at the first step, then the file switches to SWMR (a reader can open it from the
+  end of the first step on). A reader opens it with ``h5py.File(path, "r", swmr=True)`` and
+  calls ``refresh()`` on each dataset it reads to see new steps, ``/steps/time`` first. (A plain ``h5py.File(path, "r")`` works once the run has closed the file; after a
+  hard kill, -9 or a node failure, only ``swmr=True`` opens it — or run ``recover(path)``.)
+* **A step counts only once all its datasets are written.** Each step resizes and writes every
+  per-step dataset first, ``/steps/time`` last, then flushes. ``n = len(/steps/time)`` is the
+  number of finished steps; a reader takes ``[:n]`` of the other per-step datasets (after a crash
+  in the middle of a step they may hold one unfinished row more; a normal close trims it).
+* **Disk full.** Any OSError while writing raises :class:`parsolve.errors.OutputError` (on every
+  rank) naming the path; nothing more is written to the file and the finished steps stay
+  readable. The status attribute is *not* rewritten then (on a full disk that needs new space
+  and HDF5 could no longer close the file): it stays "running"; the exit status 4 and the
+  message say what happened. The file has no chunk cache, so a step's data reaches the disk
+  inside ``write_step``, where the error is caught, and not later when a dataset is closed.
+* ``status`` is "running" during the run; ``close(status)`` writes the caller's status, except
+  that a result with no finished step is never "complete".
+* Chunks hold one step of a field (fields are written and read a step at a time), so a file is
+  its data plus a few kilobytes of metadata.
+"""
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import h5py
 import numpy as np
 
 from parsolve import __version__
-from parsolve.io.xdmf import write_xdmf
+from parsolve.errors import OutputError
+from parsolve.io.xdmf import XdmfWriter, sidecar_path
+
+STEP_CHUNK = 64  # rows per chunk of the one-number-per-step datasets (/steps/*, /timings/*)
+
+
+def _create(f: h5py.File, name: str, row_shape: tuple, dtype) -> None:
+    """An empty per-step dataset (0, *row_shape), growable along the steps."""
+    rows = STEP_CHUNK if not row_shape else 1
+    chunks = (rows,) + tuple(max(int(s), 1) for s in row_shape)
+    maxshape = (None,) + tuple(max(int(s), 1) for s in row_shape)
+    f.create_dataset(name, (0,) + tuple(row_shape), maxshape=maxshape, chunks=chunks, dtype=dtype)
 
 
 class ResultWriter:
-    """Appends one saved step at a time; only rank 0 touches the file."""
+    """Appends one saved step at a time; only rank 0 touches the file, but ``write_step`` and
+    the constructor are collective (every rank raises the same OutputError).
+
+    ``output_seconds``: the time the last ``write_step`` took (for ``/timings/output``).
+    ``status``: after ``close``, the status recorded (or that would have been, after a failure).
+    """
 
     def __init__(self, comm, path: str | Path, mesh, scene_text: str, petsc_version: str,
-                 relations: dict[str, tuple[int, bool]]):
+                 relations: dict[str, tuple[int, bool]], xdmf: bool = True):
         self.comm, self.path, self.mesh = comm, Path(path), mesh
         self.relations = relations  # name -> (nrows, unilateral)
         self.times: list[float] = []
         self.fields: dict[str, int] = {}
         self.cell_fields: dict[str, int] = {}
         self.file = None
-        if comm.rank != 0:
-            return
+        self.error: str | None = None      # set once writing failed: nothing more is written
+        self.output_seconds = 0.0          # time spent in the last write_step
+        self._layout: dict[str, tuple] = {}  # per-step dataset -> (row shape, dtype)
+        self._known: dict[str, tuple] = {}   # those created with the file
+        self._xdmf = XdmfWriter(self.path, mesh) if xdmf else None
+        if comm.rank == 0:
+            try:
+                self._open(scene_text, petsc_version)
+            except OSError as exc:
+                self._fail(exc, "creating")
+        self._raise_if_failed()
+
+    def _open(self, scene_text: str, petsc_version: str) -> None:
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        f = self.file = h5py.File(self.path, "w", driver=None)
+        # Unlink, never truncate: a reader of the previous result keeps its copy.
+        for old in (self.path, self.path.with_suffix(".xdmf"), sidecar_path(self.path)):
+            old.unlink(missing_ok=True)
+        # No chunk cache: a step's data reaches the file inside write_step (where a full disk is
+        # an OSError we handle), never later when HDF5 evicts or closes a dataset.
+        f = self.file = h5py.File(self.path, "w", libver="latest", rdcc_nbytes=0)
         f.attrs.update(parsolve_version=__version__, petsc_version=petsc_version,
-                       nprocs=comm.size, status="running", scene=scene_text)
-        f["mesh/points"] = mesh.points
-        f[f"mesh/cells/{mesh.cell_type}"] = mesh.cells
-        for name in ("time", "iterations", "residual"):
-            dtype = np.int64 if name == "iterations" else float
-            f.create_dataset(f"steps/{name}", (0,), maxshape=(None,), dtype=dtype)
-        for name, (nrows, unilateral) in relations.items():
-            f.create_dataset(f"relations/{name}/multiplier", (0, nrows), maxshape=(None, nrows), dtype=float)
-            f.create_dataset(f"relations/{name}/primal", (0, nrows), maxshape=(None, nrows), dtype=float)
+                       nprocs=self.comm.size, status="running", scene=scene_text)
+        f["mesh/points"] = self.mesh.points
+        f[f"mesh/cells/{self.mesh.cell_type}"] = self.mesh.cells
+        # What is known now exists even if no step finishes (a failure before the first step)
+        known = {"steps/time": ((), np.float64), "steps/iterations": ((), np.int64),
+                 "steps/residual": ((), np.float64)}
+        for name, (nrows, unilateral) in self.relations.items():
+            known[f"relations/{name}/multiplier"] = ((nrows,), np.float64)
+            known[f"relations/{name}/primal"] = ((nrows,), np.float64)
             if unilateral:
-                f.create_dataset(f"relations/{name}/active", (0, nrows), maxshape=(None, nrows),
-                                 dtype=np.int8)
+                known[f"relations/{name}/active"] = ((nrows,), np.int8)
+        for name, (shape, dtype) in known.items():
+            _create(f, name, shape, dtype)
+            self._known[name] = (shape, dtype)
         f.flush()
 
-    def _append(self, path: str, value) -> None:
-        f = self.file
-        value = np.asarray(value)
-        if path not in f:
-            f.create_dataset(path, (0,) + value.shape, maxshape=(None,) + value.shape, dtype=value.dtype)
-        ds = f[path]
-        ds.resize(ds.shape[0] + 1, axis=0)
-        ds[-1] = value
-
+    # ------------------------------------------------------------------ steps
     def write_step(self, t: float, iterations: int, residual: float, fields: dict, cell_fields: dict,
                    relations: dict, timings: dict, extra: dict | None = None) -> None:
-        """fields: name -> (npoints, ncomp); relations: name -> dict(multiplier, primal[, active])."""
+        """fields: name -> (npoints, ncomp); relations: name -> dict(multiplier, primal[, active]);
+        extra: other per-step values by dataset path (/balance/..., /steps/cuts).
+
+        Raises OutputError (rank 0) if the file cannot be written; the finished steps stay."""
+        if self.comm.rank == 0 and self.error is None:
+            self._write_step(t, iterations, residual, fields, cell_fields, relations, timings,
+                             extra or {})
+        elif self.comm.rank != 0:
+            self.times.append(t)
+        self._raise_if_failed()
+
+    def _raise_if_failed(self) -> None:
+        """Collective: every rank raises the same OutputError once rank 0 failed."""
+        self.error = self.comm.bcast(self.error, root=0)
+        if self.error is not None:
+            raise OutputError(self.error)
+
+    def _write_step(self, t, iterations, residual, fields, cell_fields, relations, timings,
+                    extra) -> None:
+        start = time.perf_counter()
+        rows = self._rows(t, iterations, residual, fields, cell_fields, relations, timings, extra)
+        try:
+            if not self._layout:
+                self._create_all(rows)
+            for name, value in rows.items():
+                if name != "steps/time":
+                    self._append(name, value)
+            self._append("steps/time", rows["steps/time"])  # last: the step now counts
+            self.file.flush()
+        except (OSError, RuntimeError) as exc:  # h5py reports some write errors as RuntimeError
+            return self._fail(exc, f"writing step {len(self.times) + 1} to")
         self.times.append(t)
-        if self.comm.rank != 0:
-            return
-        for name, value in (("time", t), ("iterations", iterations), ("residual", residual)):
-            self._append(f"steps/{name}", value)
+        if self._xdmf is not None:
+            try:
+                self._xdmf.append(len(self.times) - 1, t, self.fields, self.cell_fields)
+            except (OSError, RuntimeError) as exc:
+                return self._fail(exc, "writing", self._xdmf.path)
+        self.output_seconds = time.perf_counter() - start
+
+    def _rows(self, t, iterations, residual, fields, cell_fields, relations, timings,
+              extra=None) -> dict:
+        """Every per-step dataset's row for this step, by dataset name."""
+        rows = {"steps/iterations": np.int64(iterations), "steps/residual": np.float64(residual)}
+        rows.update({name: np.asarray(value) for name, value in (extra or {}).items()})
         for group, data, registry in (("fields", fields, self.fields),
                                       ("cell_fields", cell_fields, self.cell_fields)):
             for name, value in data.items():
                 value = np.asarray(value, dtype=float)
                 value = value[:, None] if value.ndim == 1 else value
                 registry[name] = value.shape[1]
-                self._append(f"{group}/{name}", value)
+                rows[f"{group}/{name}"] = value
         for name, data in relations.items():
             for key, value in data.items():
-                self._append(f"relations/{name}/{key}", value)
+                rows[f"relations/{name}/{key}"] = np.asarray(value)
         for name, value in timings.items():
-            self._append(f"timings/{name}", float(value))
-        for path, value in (extra or {}).items():  # per-step scalars: /balance, /steps/cuts
-            self._append(path, value)
-        self.file.flush()
-        write_xdmf(self.path.with_suffix(".xdmf"), self.path.name, self.mesh.cell_type,
-                   self.mesh.num_points, self.mesh.num_cells, self.mesh.cells.shape[1], self.mesh.dim,
-                   self.times, self.fields, self.cell_fields)
+            rows[f"timings/{name}"] = np.float64(value)
+        expected = self._layout or self._known
+        missing = set(expected) - set(rows) - {"steps/time"}
+        if any(not name.startswith("timings/") for name in missing):
+            raise ValueError(f"datasets {sorted(missing)} are missing from step {len(self.times) + 1}")
+        for name in missing:
+            rows[name] = np.float64(0.0)  # a phase that did not run this step took no time
+        if self._layout and set(rows) - set(self._layout):
+            # SWMR cannot add datasets once the first step is written
+            raise ValueError(f"datasets {sorted(set(rows) - set(self._layout))} were not in the "
+                             "first step")
+        rows["steps/time"] = np.float64(t)
+        return rows
+
+    def _create_all(self, rows: dict) -> None:
+        """Every other per-step dataset (empty), then SWMR: from here on readers may open it."""
+        f = self.file
+        self._layout.update(self._known)
+        for name, value in rows.items():
+            if name not in self._known:
+                value = np.asarray(value)
+                _create(f, name, value.shape, value.dtype)
+                self._layout[name] = (value.shape, value.dtype)
+        f.swmr_mode = True
+
+    def _append(self, name: str, value) -> None:
+        ds = self.file[name]
+        n = ds.shape[0]
+        ds.resize(n + 1, axis=0)
+        ds[n] = value
+
+    # ------------------------------------------------------------------ faults
+    def _fail(self, exc: OSError, doing: str, path: Path | None = None) -> None:
+        """Stop writing for good (OutputError follows); the finished steps stay readable."""
+        path = path or self.path
+        reason = getattr(exc, "strerror", None) or str(exc)
+        if "errno = 28" in reason or "No space left" in reason:
+            reason = "No space left on device"
+        self.error = (f"{doing} {path} failed: {reason}; the {len(self.times)} finished step(s) "
+                      f"stay readable")
 
     def note(self, text: str) -> None:
-        """A warning kept in the file (root attribute ``warnings``, one line each)."""
-        if self.file is not None:
-            previous = self.file.attrs.get("warnings", "")
-            self.file.attrs["warnings"] = (previous + "\n" if previous else "") + text
+        """A warning kept in the file (root attribute ``warnings``, one line each, written at
+        close: attributes do not change under SWMR)."""
+        self.notes = getattr(self, "notes", []) + [text]
 
     def close(self, status: str) -> None:
-        if self.file is not None:
-            self.file.attrs["status"] = status
-            self.file.close()
-            self.file = None
+        """Record ``status`` and close. A failed write wins over the caller's status, and a result
+        with no finished step is never "complete"."""
+        if self.error is not None:
+            status = f"failed: {self.error}"
+        elif status == "complete" and not self.times:
+            status = "failed: no step finished"
+        self.status = status
+        if self._xdmf is not None:
+            try:
+                self._xdmf.close()
+            except (OSError, RuntimeError):
+                pass  # the views already flushed stay; the XDMF names no other
+        if self.file is None:
+            return
+        f, self.file = self.file, None
+        if self.error is not None:
+            # After a failed write nothing more goes in: writing the status would need new space
+            # and, on a full disk, leaves HDF5 unable to close the file (tested: it stays
+            # "running"; the exit status and the message say what happened).
+            try:
+                f.close()
+            except (OSError, RuntimeError):
+                pass
+            return
+        self._trim(f)
+        f.attrs["status"] = status
+        if getattr(self, "notes", None):
+            f.attrs["warnings"] = "\n".join(self.notes)
+        f.close()
+
+    def _trim(self, f: h5py.File) -> None:
+        """Cut rows of an unfinished step (an exception between datasets)."""
+        n = len(self.times)
+        for name in self._layout:
+            if f[name].shape[0] > n:
+                f[name].resize(n, axis=0)
+
+
+def open_result(path: str | Path) -> h5py.File:
+    """Open a result for reading, during the run, after it, or after a hard kill."""
+    return h5py.File(path, "r", swmr=True)
+
+
+def recover(path: str | Path) -> int:
+    """Make a result left by a hard kill (SIGKILL, node failure) readable by any HDF5 reader:
+    copy its finished steps into a clean file and rename it over the old one. Returns the
+    number of finished steps."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".recover")
+    with h5py.File(path, "r", swmr=True) as src, h5py.File(tmp, "w") as dst:
+        n = len(src["steps/time"])
+        dst.attrs.update(src.attrs)
+        if dst.attrs["status"] == "running":
+            dst.attrs["status"] = "failed: the run was killed (recovered)"
+
+        def copy(name, obj):
+            if not isinstance(obj, h5py.Dataset):
+                return
+            per_step = name.split("/")[0] in ("steps", "fields", "cell_fields", "timings",
+                                              "relations", "balance")
+            data = obj[:n] if per_step else obj[()]
+            dst.create_dataset(name, data=data, maxshape=(None,) + data.shape[1:] if per_step
+                               else None, chunks=obj.chunks)
+        src.visititems(copy)
+    tmp.replace(path)
+    return n
