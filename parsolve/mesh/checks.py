@@ -171,7 +171,8 @@ def duplicate_points(mesh: Mesh, relative: float = 1e-10) -> np.ndarray:
     g = group[order]
     start = np.r_[True, g[1:] != g[:-1]]
     first = order[np.maximum.accumulate(np.where(start, np.arange(order.size), 0))]
-    return used[np.column_stack([first[~start], order[~start]])]
+    pairs = used[np.column_stack([first[~start], order[~start]])]
+    return pairs[np.lexsort(pairs.T[::-1])]
 
 
 def duplicate_warning(mesh: Mesh) -> list[str]:

@@ -44,9 +44,12 @@ def cell_counts(generator: str, params: dict, order: int = 1) -> tuple[int, int,
         cell = cell or "hexahedron"
         if cell == "hexahedron":
             return points, hexes, 3
-        # 6 tetrahedra per hexahedron; P2 adds a node per edge: 7 edges per hexahedron
+        # 6 tetrahedra per hexahedron; P2 adds a node per edge: grid edges, face diagonals
+        # and one body diagonal per hexahedron
         quadratic = cell == "tetra10" or order == 2
-        return points + (7 * hexes if quadratic else 0), 6 * hexes, 3
+        edges = (nx * (ny + 1) * (nz + 1) + (nx + 1) * ny * (nz + 1) + (nx + 1) * (ny + 1) * nz
+                 + nx * ny * (nz + 1) + nx * (ny + 1) * nz + (nx + 1) * ny * nz + hexes)
+        return points + (edges if quadratic else 0), 6 * hexes, 3
     if generator == "rectangle":
         nx, ny = n.get("nx", 1), n.get("ny", 1)
     else:
