@@ -164,7 +164,9 @@ def validate(comm, prefix: str, preset: dict[str, str], scene: dict[str, str],
         for i, (key, value, origin) in enumerate(items):
             c = probe(comm, prefix, merge(preset, {k: v for k, v, _ in items[:i + 1]}))
             if c:
-                raise error(key, value, origin, _REASONS.get(c, f"rejected (PETSc error {c})"))
+                what = "missing value" if value == "" and c in (62, 63, 86) else \
+                    _REASONS.get(c, f"rejected (PETSc error {c})")
+                raise error(key, value, origin, what)
         raise InputError(f"PETSc rejects the solver options (error {code})", source, "solver.petsc")
     final = {k: o for k, _, o in items}  # the layer each final value comes from
     for key, value in merged.items():
