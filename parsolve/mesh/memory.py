@@ -125,7 +125,7 @@ def check_fits(points: int, dim: int, preset: str, source: str | None, key: str 
         verdict = _COMM.allreduce(verdict, op=_max_op())  # the worst machine decides for all
     ratio, need, have = verdict
     if ratio > 1.0:
-        ranks = f" on {local} rank(s) of {nranks}" if nranks > 1 else ""
+        ranks = f" ({local} of {nranks} ranks on one machine)" if nranks > 1 else ""
         raise InputError(f"too large for this machine: {what} ({_count(dofs)} DOFs) needs "
                          f"about {gib(need)}{ranks}, this machine has {gib(have)} available",
                          source, key)

@@ -164,3 +164,46 @@ def test_memory_estimate_per_rank():
     # 3D direct: measured 18.6 KB per DOF at 27 783 DOFs, growing like DOFs^(1/3)
     assert memory.estimate_bytes(8 * 27783, 3, "direct") == pytest.approx(
         92e6 + 8 * 27783 * (200 + 2 * 18.6e3))
+
+
+def _scene_with_file(path) -> str:
+    return f"""[mesh]
+file = "{path}"
+[model]
+hypothesis = "plane_stress"
+[[materials]]
+E = 1.0
+nu = 0.3
+"""
+
+
+def test_file_with_an_inverted_cell_is_refused(shared_tmp):
+    """The reader turns clockwise cells round; one flipped cell among good ones then overlaps
+    its neighbour, which the facet check sees."""
+    import tomllib
+
+    import meshio
+    from mpi4py import MPI
+
+    from parsolve.model import build_mesh
+    from parsolve.scene import parse_scene
+
+    pts = np.array([[0, 0], [1, 0], [1, 1], [0, 1], [0.5, 0.5]], float)
+    good = np.array([[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]])
+    bad_pts = pts.copy()
+    bad_pts[4] = [0.5, -0.5]  # centre pulled below the bottom edge: cell 0 inverted
+    path = shared_tmp / "inverted.vtu"
+    nan_path = shared_tmp / "nan.vtu"
+    if MPI.COMM_WORLD.rank == 0:
+        meshio.write(path, meshio.Mesh(bad_pts, [("triangle", good)]))
+        nan_pts = pts.copy()
+        nan_pts[2, 0] = np.nan
+        meshio.write(nan_path, meshio.Mesh(nan_pts, [("triangle", good)]))
+    MPI.COMM_WORLD.Barrier()
+    text = _scene_with_file(path)
+    with pytest.raises(InputError, match="overlap a neighbour") as info:
+        build_mesh(parse_scene(tomllib.loads(text), "s.toml", text))
+    assert info.value.source == str(path) and info.value.key == "mesh.file"
+    text = _scene_with_file(nan_path)
+    with pytest.raises(InputError, match=r"non-finite coordinates \(NaN or inf\): points 2"):
+        build_mesh(parse_scene(tomllib.loads(text), "s.toml", text))
