@@ -145,6 +145,16 @@ def _same(a: Path, b: Path) -> bool:
         return False
 
 
+def _check_all_regions(model) -> None:
+    """Regions no effect uses are evaluated too: their selectors must be valid and finite."""
+    from parsolve.mesh.regions import RegionResolver
+
+    scene = model.scene
+    resolver = RegionResolver(model.mesh, scene.regions, scene.source)
+    for name, spec in scene.regions.items():
+        resolver(name, spec.key)
+
+
 def _validate_options(comm, model, cli_options: dict[str, str]) -> None:
     from parsolve.solvers import options as opt
     from parsolve.solvers.linear import preset_options
@@ -204,6 +214,7 @@ def main(argv: list[str] | None = None) -> int:
             check_output(out, source, key, inputs, args.export_system)
         with memory.agreed_over(comm):
             model = build_model(scene)
+        _check_all_regions(model)
         _validate_options(comm, model, cli_options)
         for warning in model.mesh.warnings:
             say(f"parsolve: warning: {warning}", sys.stderr)
