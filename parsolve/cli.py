@@ -1,35 +1,84 @@
 """Command line: ``parsolve run SCENE [-o OUT.h5] [--export-system DIR] [PETSc options]`` and
-``parsolve check SCENE``.
+``parsolve check SCENE [PETSc options]``.
 
 Exit status: 0 success, 2 invalid input (one line naming the file and key), 3 the solver
 failed (finished steps kept in the result file). Any other exception on any rank aborts the
 whole MPI job instead of leaving the other ranks hanging.
+
+Checks, in order, identically on every rank and before any output file is opened: the
+arguments, the scene, the output paths, the mesh (size, shape), the model, the PETSc options.
 """
 
 from __future__ import annotations
 
 import argparse
+import difflib
+import os
 import signal
 import sys
 from contextlib import contextmanager
 from pathlib import Path
 
 USAGE = "parsolve {run,check,study,batch,post} SCENE [-o OUT.h5] [--export-system DIR] [PETSc options]"
+LONG_FLAGS = ("--output", "--export-system", "--help")
+VALUED = ("-o", "--output", "--export-system")  # flags of ours that take the next word
+
+
+class UsageError(Exception):
+    """A bad command line: exit status 2, one line."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str):  # one line, no usage block
+        raise UsageError(message)
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="parsolve", usage=USAGE,
-                                description="Parallel finite elements with (non-)associated relations.")
-    sub = p.add_subparsers(dest="command", required=True)
-    run = sub.add_parser("run", help="run a scene")
+    p = _Parser(prog="parsolve", usage=USAGE, allow_abbrev=False,
+                description="Parallel finite elements with (non-)associated relations.")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    run = sub.add_parser("run", help="run a scene", allow_abbrev=False)
     run.add_argument("scene")
     run.add_argument("-o", "--output", help="result file (HDF5); default: the scene's [output] "
                                             "file, else SCENE.h5 in the current directory")
     run.add_argument("--export-system", metavar="DIR",
                      help="write the first assembled system (PETSc binary) to DIR")
-    check = sub.add_parser("check", help="validate a scene (mesh, regions, relations) without solving")
+    check = sub.add_parser("check", help="validate a scene (mesh, regions, relations, PETSc "
+                                         "options) without solving", allow_abbrev=False)
     check.add_argument("scene")
     return p
+
+
+def split_args(argv: list[str]) -> tuple[list[str], list[str]]:
+    """(parsolve's words, PETSc's words). PETSc options are single-dash words other than
+    exactly ``-o`` and ``-h`` (so ``-options_left``, ``-on_error_abort``, ``-options_file F``
+    reach PETSc intact), each with its value when the next word is not an option. A
+    double-dash word must be one of ours: ``--outptu`` is an error with a suggestion."""
+    from parsolve.solvers.options import _is_option
+
+    ours, petsc = [], []
+    i = 0
+    while i < len(argv):
+        word = argv[i]
+        i += 1
+        if word.startswith("--") and word != "--":
+            flag = word.split("=", 1)[0]
+            if flag not in LONG_FLAGS:
+                close = difflib.get_close_matches(flag, LONG_FLAGS, n=1)
+                hint = f" (did you mean {close[0]}?)" if close else \
+                    f" (known: {', '.join(LONG_FLAGS)}; PETSc options take one dash)"
+                raise UsageError(f"unknown option {flag}{hint}")
+        if word in ("-o", "-h") or word.startswith("--") or not _is_option(word):
+            ours.append(word)
+            if word in VALUED and i < len(argv):
+                ours.append(argv[i])
+                i += 1
+            continue
+        petsc.append(word)
+        if i < len(argv) and not _is_option(argv[i]):
+            petsc.append(argv[i])
+            i += 1
+    return ours, petsc
 
 
 def _abort_on_error(comm) -> None:
@@ -66,20 +115,96 @@ def _signals_interrupt():
             signal.signal(s, h)
 
 
+def output_path(args, scene) -> tuple[str, str, str]:
+    """(path, source, key) of the result file: -o, else [output] file, else SCENE.h5."""
+    if args.output:
+        return args.output, "command line", "-o"
+    if scene.output:
+        return scene.output, scene.source, "output.file"
+    return Path(args.scene).stem + ".h5", scene.source, "output.file"
+
+
+def check_output(path: str, source: str, key: str, inputs: list[Path],
+                 export_dir: str | None = None) -> None:
+    """The result file (and the XDMF beside it) must be a writable file that is no input."""
+    from parsolve.errors import InputError
+
+    def fail(message: str, src: str = source, k: str = key) -> InputError:
+        return InputError(message, src, k)
+
+    out = Path(path)
+    targets = [out, out.with_suffix(".xdmf"), out.with_suffix(".xdmf.h5")]
+    for target in targets:
+        for inp in inputs:
+            if _same(target, inp):
+                raise fail(f"{target} would overwrite the input file {inp}")
+    if out.is_dir():
+        raise fail(f"{out} is a folder, not a result file")
+    parent = out.parent if str(out.parent) else Path(".")
+    if parent.exists() and not parent.is_dir():
+        raise fail(f"cannot write {out}: {parent} is a file, not a folder")
+    if not parent.exists():
+        raise fail(f"cannot write {out}: folder {parent} does not exist")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise fail(f"cannot write {out}: folder {parent} is read-only")
+    for target in targets:
+        if target.exists() and (target.is_dir() or not os.access(target, os.W_OK)):
+            raise fail(f"cannot write {target}: it is a folder or read-only")
+    if export_dir is not None:
+        d = Path(export_dir)
+        if d.exists() and not d.is_dir():
+            raise fail(f"--export-system {d} is a file, not a folder", "command line",
+                       "--export-system")
+
+
+def _same(a: Path, b: Path) -> bool:
+    try:
+        return a.resolve() == b.resolve() or (a.exists() and b.exists() and a.samefile(b))
+    except OSError:
+        return False
+
+
+def _check_all_regions(model) -> None:
+    """Regions no effect uses are evaluated too: their selectors must be valid and finite."""
+    from parsolve.mesh.regions import RegionResolver
+
+    scene = model.scene
+    resolver = RegionResolver(model.mesh, scene.regions, scene.source)
+    for name, spec in scene.regions.items():
+        resolver(name, spec.key)
+
+
+def _validate_options(comm, model, cli_options: dict[str, str]) -> None:
+    from parsolve.solvers import options as opt
+    from parsolve.solvers.linear import preset_options
+
+    scene = model.scene
+    multiplied = [r for r in model.relations if not r.eliminable()]
+    preset = preset_options(scene.solver.preset, all(r.associated for r in multiplied),
+                            bool(multiplied))
+    opt.validate(comm, scene.solver.prefix, preset, scene.solver.options, cli_options,
+                 scene.source)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv and argv[0] in SUBCOMMANDS:
         import importlib
 
         return importlib.import_module(f"parsolve.{argv[0]}.cli").main(argv[1:])
-    args, petsc_args = _parser().parse_known_args(argv)
+    usage_error, petsc_args = None, []
+    try:
+        ours, petsc_args = split_args(argv)
+        args = _parser().parse_args(ours)
+    except UsageError as exc:
+        usage_error = exc
     import petsc4py
 
     petsc4py.init([sys.argv[0]] + petsc_args)
     from mpi4py import MPI
 
     from parsolve.errors import InputError, Interrupted, OutputError, SolverError
-    from parsolve.solvers.options import parse_cli
+    from parsolve.solvers.options import parse_cli, unused_options
 
     comm = MPI.COMM_WORLD
     _abort_on_error(comm)
@@ -88,17 +213,30 @@ def main(argv: list[str] | None = None) -> int:
         if comm.rank == 0:
             print(message, file=stream, flush=True)
 
+    if usage_error is not None:
+        say(f"parsolve: {usage_error}", sys.stderr)
+        return 2
     try:
-        cli_options = parse_cli(petsc_args) if args.command == "run" else {}
+        cli_options = parse_cli(petsc_args)
     except ValueError as exc:
         say(f"parsolve: {exc}", sys.stderr)
         return 2
     try:
+        from parsolve.mesh import memory
         from parsolve.model import build_model
         from parsolve.scene import load_scene
 
         scene = load_scene(args.scene)
-        model = build_model(scene)
+        if args.command == "run":
+            out, source, key = output_path(args, scene)
+            inputs = [Path(args.scene)] + ([scene.mesh.file] if scene.mesh.file else [])
+            check_output(out, source, key, inputs, args.export_system)
+        with memory.agreed_over(comm):
+            model = build_model(scene)
+        _check_all_regions(model)
+        _validate_options(comm, model, cli_options)
+        for warning in model.mesh.warnings:
+            say(f"parsolve: warning: {warning}", sys.stderr)
         if args.command == "check":
             say(f"{args.scene}: ok ({model.mesh.num_points} nodes, {model.mesh.num_cells} "
                 f"{model.mesh.cell_type} cells, {len(model.relations)} relations, "
@@ -106,9 +244,11 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         from parsolve.driver import run
 
-        out = args.output or scene.output or (Path(args.scene).stem + ".h5")
         with _signals_interrupt():
             run(comm, model, out, cli_options, args.export_system, log=say)
+        for name in unused_options(scene.solver.prefix, {**scene.solver.options, **cli_options}):
+            say(f"parsolve: warning: PETSc option {name} was not used by any solver object",
+                sys.stderr)
         say(f"results: {out}")
         return 0
     except Interrupted as exc:

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import difflib
 import inspect
+import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,6 +29,29 @@ MATERIAL_MODELS = {
     "von_mises": (("E", "nu", "sigma_y", "H"), {}),
 }
 NONLINEAR_MODELS = ("mazars", "von_mises")
+# Numbers beyond these magnitudes are not physical in any system of units, and their products
+# (stiffness = E × lengths^d, forces × lengths) overflow or underflow double precision.
+MAX_MAGNITUDE = 1e50
+MIN_MAGNITUDE = 1e-50
+MAX_STEPS = 1_000_000
+# Relation and load-pattern names become HDF5 group names: plain identifiers only.
+NAME_PATTERN = re.compile(r"[A-Za-z_][A-Za-z0-9_\-]{0,63}")
+
+
+def check_number(value: float, source: str, key: str) -> float:
+    """A finite number of sane magnitude (0 allowed), or an InputError naming the key."""
+    v = float(value)
+    if math.isnan(v):
+        raise InputError("not a number (nan)", source, key)
+    if math.isinf(v):
+        raise InputError(f"must be finite, got {v}", source, key)
+    if abs(v) > MAX_MAGNITUDE:
+        raise InputError(f"{v:g} is absurdly large (|value| must not exceed {MAX_MAGNITUDE:g}; "
+                         "products of such numbers overflow)", source, key)
+    if v != 0.0 and abs(v) < MIN_MAGNITUDE:
+        raise InputError(f"{v:g} is absurdly small (|value| must be 0 or at least "
+                         f"{MIN_MAGNITUDE:g})", source, key)
+    return v
 
 
 class Table:
@@ -62,6 +87,8 @@ class Table:
         if isinstance(value, bool) and bool not in kinds or not isinstance(value, kinds):
             names = " or ".join(k.__name__ for k in kinds)
             raise self.error(name, f"expected {names}, got {type(value).__name__} {value!r}")
+        if isinstance(value, float):  # every float the scene reads passes here
+            check_number(value, self.source, self.key(name))
         if choices is not None and value not in choices:
             raise self.error(name, f"must be one of {', '.join(map(str, choices))}; got {value!r}")
         return value
@@ -74,7 +101,7 @@ class Table:
             raise self.error(name, f"expected a list of numbers, got {value!r}")
         if length is not None and len(value) != length:
             raise self.error(name, f"expected {length} numbers, got {len(value)}")
-        return [float(v) for v in value]
+        return [check_number(v, self.source, f"{self.key(name)}[{i}]") for i, v in enumerate(value)]
 
     def table(self, name: str, default: Any = ...) -> "Table | None":
         value = self.get(name, dict, default)
@@ -239,15 +266,30 @@ def load_scene(path: str | Path) -> Scene:
     """Read and validate a scene file (everything but what needs the mesh: see ``model``)."""
     path = Path(path)
     source = str(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise InputError(f"cannot read scene file ({exc.strerror})", source) from None
+    text = read_text(path, source)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"invalid TOML: {exc}", source) from None
     return parse_scene(data, source, text, path.parent)
+
+
+def read_text(path: Path, source: str) -> str:
+    """The scene's text: a readable file of UTF-8 text, or an InputError saying what it is."""
+    if path.is_dir():
+        raise InputError("is a folder, not a scene file", source)
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise InputError(f"cannot read scene file ({exc.strerror or exc})", source) from None
+    if b"\0" in raw:
+        raise InputError("is a binary file, not a TOML scene (it contains NUL bytes)", source)
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw[:exc.start].count(b"\n") + 1
+        raise InputError(f"is not UTF-8 text (byte 0x{raw[exc.start]:02x} on line {line}); "
+                         "save it as UTF-8", source) from None
 
 
 def parse_scene(data: dict, source: str, text: str = "", base: Path = Path(".")) -> Scene:
@@ -307,10 +349,9 @@ def _mesh(t: Table, base: Path) -> MeshSpec:
     signature = inspect.signature(GENERATORS[gen])
     params = {}
     for name, par in signature.parameters.items():
-        if par.default is inspect.Parameter.empty:
-            params[name] = t.get(name, (int, float, str, list))
-        elif t.has(name):
-            params[name] = t.get(name, (int, float, str, list))
+        if par.default is inspect.Parameter.empty or t.has(name):
+            value = t.get(name, (int, float, str, list))
+            params[name] = t.floats(name) if isinstance(value, list) else value
     t.done()
     return MeshSpec(None, gen, params, order)
 
@@ -332,7 +373,8 @@ def _regions(t: Table) -> dict[str, RegionSpec]:
             raw = sub.get("box", list)
             if len(raw) != 2 or not all(isinstance(v, list) for v in raw):
                 raise sub.error("box", "expected [[xmin, ymin(, zmin)], [xmax, ymax(, zmax)]]")
-            regions[name] = RegionSpec(name, kind, [[float(x) for x in raw[0]], [float(x) for x in raw[1]]], key)
+            corners = Table({f"box[{i}]": c for i, c in enumerate(raw)}, key, t.source)
+            regions[name] = RegionSpec(name, kind, [corners.floats("box[0]"), corners.floats("box[1]")], key)
         elif kind == "point":
             regions[name] = RegionSpec(name, kind, sub.floats("point"), key)
         else:
@@ -361,9 +403,12 @@ def _material(t: Table) -> MaterialSpec:
     required, optional = MATERIAL_MODELS[model]
     params = {p: t.get(p, float) for p in required}
     params.update({p: t.get(p, float, default) for p, default in optional.items()})
-    for p in ("eps_d0", "sigma_y"):
+    for p in ("eps_d0", "sigma_y", "beta"):
         if p in params and params[p] <= 0:
             raise t.error(p, "must be positive")
+    for p in ("Bt", "Bc", "H"):
+        if p in params and params[p] < 0:
+            raise t.error(p, "must not be negative")
     if params.get("E", 1.0) <= 0:
         raise t.error("E", "must be positive")
     if not -1.0 < params.get("nu", 0.0) < 0.5:
@@ -401,13 +446,22 @@ def _component(t: Table, name: str, dim: int) -> int:
     return COMPONENTS[comp]
 
 
+def _name(t: Table, default: Any = ...) -> str:
+    """A relation or load-pattern name: it becomes an HDF5 group name."""
+    name = t.get("name", str, default)
+    if not NAME_PATTERN.fullmatch(name):
+        raise t.error("name", f"{name!r} is not a plain name (a letter or '_', then letters, "
+                              "digits, '_' or '-'; at most 64 characters)")
+    return name
+
+
 # a scalar field's loads under their own names: a boundary flux (into the domain, per unit
 # area), a volume source, a total flux spread uniformly over a boundary
 SCALAR_LOADS = {"flux": "traction", "source": "body", "total_flux": "total_force", "nodal": "nodal"}
 
 
 def _load(t: Table, dim: int, fields: dict[str, int]) -> LoadSpec:
-    pattern = t.get("name", str, "loads")
+    pattern = _name(t, "loads")
     field = _field(t, fields)
     ncomp = fields[field]
     names = tuple(SCALAR_LOADS) if ncomp == 1 and field != "u" else \
@@ -427,7 +481,7 @@ def _load(t: Table, dim: int, fields: dict[str, int]) -> LoadSpec:
 
 
 def _relation(t: Table, dim: int, fields: dict[str, int]) -> RelationSpec:
-    name = t.get("name", str)
+    name = _name(t)
     rtype = t.get("type", str, choices=RELATION_TYPES)
     field = _field(t, fields)
     region, comps, terms, direction = None, [], [], None
@@ -551,6 +605,8 @@ def _time(t: Table | None) -> TimeSpec | None:
 def _steps(t: Table) -> StepSpec:
     if t.has("times"):
         times = t.floats("times")
+        if len(times) > MAX_STEPS:
+            raise t.error("times", f"{len(times)} steps is absurd (at most {MAX_STEPS})")
         if not times or any(b <= a for a, b in zip([0.0] + times, times)):
             raise t.error("times", "must be positive and strictly increasing")
         t.done()
@@ -559,6 +615,8 @@ def _steps(t: Table) -> StepSpec:
     end = t.get("end", float, 1.0)
     if count < 1:
         raise t.error("count", "must be at least 1 (a non-positive step is not a step)")
+    if count > MAX_STEPS:
+        raise t.error("count", f"{count} steps is absurd (at most {MAX_STEPS})")
     if end <= 0:
         raise t.error("end", "must be positive")
     auto = t.table("automatic", None)
@@ -569,8 +627,8 @@ def _steps(t: Table) -> StepSpec:
         if spec.strain_increment <= 0:
             raise auto.error("strain_increment", "must be positive")
         spec.max_steps = auto.get("max_steps", int, 10 * count)
-        if spec.max_steps < 1:
-            raise auto.error("max_steps", "must be at least 1")
+        if not 1 <= spec.max_steps <= MAX_STEPS:
+            raise auto.error("max_steps", f"must lie between 1 and {MAX_STEPS}")
         spec.end = end
         auto.done()
     t.done()
@@ -583,10 +641,13 @@ def _nonlinear(t: Table) -> NonlinearSpec:
                          t.get("stol", float, 1e-10), t.get("max_active_set_changes", int, 30),
                          None, None)
     spec.matrix = t.get("matrix", str, "tangent", choices=("tangent", "secant"))
-    if spec.max_iterations < 1:
-        raise t.error("max_iterations", "must be at least 1")
-    if spec.rtol <= 0:
-        raise t.error("rtol", "must be positive")
+    if not 1 <= spec.max_iterations <= 100_000:
+        raise t.error("max_iterations", "must lie between 1 and 100000")
+    for name in ("rtol", "stol"):
+        if not 0 < getattr(spec, name) < 1:
+            raise t.error(name, "must lie in (0, 1)")
+    if not 0 <= spec.max_active_set_changes <= 100_000:
+        raise t.error("max_active_set_changes", "must lie between 0 and 100000")
     if method == "arc_length":
         arc = t.table("arc_length")
         spec.arc_pattern = arc.get("pattern", str)

@@ -37,6 +37,36 @@ BAD = {
                               "relations[2].dual"),
     "bad selector": (GOOD.replace("[regions]", '[regions]\nodd = "__import__(1)"\n'), "scene.toml", "regions.odd"),
     "not TOML": ("[mesh\n", "scene.toml", ""),
+    # issue 6 §2: numbers
+    "nan E": (GOOD.replace("E = 1e9", "E = nan"), "scene.toml", "materials[0].E"),
+    "inf thickness": (GOOD.replace("thickness = 1.0", "thickness = inf"), "scene.toml", "model.thickness"),
+    "negative E": (GOOD.replace("E = 1e9", "E = -1e9"), "scene.toml", "materials[0].E"),
+    "nu 0.5": (GOOD.replace("nu = 0.0", "nu = 0.5"), "scene.toml", "materials[0].nu"),
+    "1e308 length": (GOOD.replace("lx = 1.0", "lx = 1e308"), "scene.toml", "mesh.lx"),
+    "nan traction": (GOOD.replace("total_force = [1.0, 0.0]", "total_force = [1.0, nan]"),
+                     "scene.toml", "loads[0].total_force[1]"),
+    "inf end": (GOOD.replace("count = 10", "count = 10\nend = inf"), "scene.toml", "steps.end"),
+    "nan value": (GOOD.replace("value = 1e-4", "value = nan"), "scene.toml", "relations[2].value"),
+    "sqrt(-1-x) value": (GOOD.replace('components = ["x"]', 'components = ["x"]\nvalue = "sqrt(-1-x)"'),
+                         "scene.toml", "relations[0].value"),
+    "1/(x-x) selector": (GOOD.replace("[regions]", '[regions]\nodd = "1/(x-x) > 0"\n'),
+                         "scene.toml", "regions.odd"),
+    "power tower": (GOOD.replace('value = 1e-4', 'value = 1e-4').replace("[regions]", '[regions]\nodd = "x < 10**10**10"\n'),
+                    "scene.toml", "regions.odd"),
+    "huge step count": (GOOD.replace("count = 10", "count = 1000000000000"), "scene.toml", "steps.count"),
+    # names
+    "slash in name": (GOOD.replace('name = "control"', 'name = "a/b"'), "scene.toml", "relations[2].name"),
+    "dot-dot name": (GOOD.replace('name = "pull"', 'name = ".."').replace('dual = "pull"', 'dual = ".."'),
+                     "scene.toml", "loads[0].name"),
+    "empty name": (GOOD.replace('name = "left_x"', 'name = ""'), "scene.toml", "relations[0].name"),
+    # sizes
+    "too large": (GOOD.replace("nx = 29\nny = 3", "nx = 20000\nny = 20000"), "scene.toml", "mesh.generator"),
+    "bad generator count": (GOOD.replace("nx = 29", "nx = 2.5"), "scene.toml", "mesh.nx"),
+    # PETSc options in the scene
+    "unknown pc type": (GOOD + '\n[solver.petsc]\npc_type = "nosuch"\n', "scene.toml", "solver.petsc.pc_type"),
+    "bad rtol": (GOOD + '\n[solver.petsc]\nksp_rtol = "abc"\n', "scene.toml", "solver.petsc.ksp_rtol"),
+    # output paths (from the scene)
+    "output is the scene": (GOOD + '\n[output]\nfile = "scene.toml"\n', "scene.toml", "output.file"),
 }
 
 
@@ -44,17 +74,121 @@ BAD = {
 @pytest.mark.parametrize("command", ["check", "run"])
 def test_bad_input(case, command, tmp_path):
     text, source, key = BAD[case]
-    if case == "bad selector":  # make the bad region used
+    if case == "output is the scene" and command == "check":
+        pytest.skip("check writes nothing")
+    if case == "bad selector":  # make the bad region used (the others are checked unused)
         text = text.replace('region = "corner"', 'region = "odd"')
     (tmp_path / "scene.toml").write_text(text)
+    before = (tmp_path / "scene.toml").read_bytes()
     out = tmp_path / "out.h5"
-    args = [command, "scene.toml"] + (["-o", out] if command == "run" else [])
+    own_output = case == "output is the scene"
+    args = [command, "scene.toml"] + (["-o", out] if command == "run" and not own_output else [])
     proc = parsolve(*args, cwd=tmp_path)
     assert proc.returncode == 2, proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
     assert source in lines[0] and key in lines[0], lines[0]
-    assert not out.exists() and not list(tmp_path.glob("*.h5"))
+    assert not out.exists() and not list(tmp_path.glob("*.h5")) and not list(tmp_path.glob("*.xdmf"))
+    assert (tmp_path / "scene.toml").read_bytes() == before
+
+
+BAD_COMMAND_LINE = {  # arguments -> (exit 2) words in the one line
+    "unknown PETSc type": (["-pc_type", "nosuch"], ["command line", "-pc_type", "unknown type"]),
+    "unknown KSP type": (["-ksp_type", "foo"], ["command line", "-ksp_type", "unknown type"]),
+    "missing value": (["-ksp_rtol"], ["command line", "-ksp_rtol", "missing value"]),
+    "bad number": (["-ksp_rtol", "abc"], ["command line", "-ksp_rtol", "abc"]),
+    "misspelt long flag": (["--outptu", "x.h5"], ["--outptu", "did you mean --output?"]),
+    "prefix of a long flag": (["--out", "x.h5"], ["--out", "did you mean --output?"]),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_COMMAND_LINE))
+@pytest.mark.parametrize("command", ["check", "run"])
+def test_bad_command_line(case, command, tmp_path):
+    (tmp_path / "scene.toml").write_text(GOOD)
+    extra, words = BAD_COMMAND_LINE[case]
+    proc = parsolve(command, "scene.toml", *extra, cwd=tmp_path)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert all(w in lines[0] for w in words), lines[0]
+    assert not list(tmp_path.glob("*.h5"))
+
+
+@pytest.mark.parametrize("what", ["folder", "binary", "latin-1"])
+@pytest.mark.parametrize("command", ["check", "run"])
+def test_scene_file_that_is_not_text(what, command, tmp_path):
+    scene = tmp_path / "scene.toml"
+    if what == "folder":
+        scene.mkdir()
+    elif what == "binary":
+        scene.write_bytes(b"\x7fELF\x02\x01\x00\x00")
+    else:
+        scene.write_bytes(b'title = "barre contr\xf4l\xe9e"\n')
+    proc = parsolve(command, "scene.toml", cwd=tmp_path)
+    assert proc.returncode == 2, proc.stderr
+    line, = proc.stderr.strip().splitlines()
+    assert line.startswith("parsolve: scene.toml: ") and "Traceback" not in proc.stderr
+    assert {"folder": "folder", "binary": "binary", "latin-1": "not UTF-8"}[what] in line
+
+
+def test_output_paths(tmp_path):
+    """Never an input; a folder, a parent that is a file, a missing folder: exit 2, the path."""
+    (tmp_path / "scene.toml").write_text(GOOD)
+    (tmp_path / "afile").write_text("x")
+    (tmp_path / "adir").mkdir()
+    for out, words in [("scene.toml", "overwrite the input"), ("scene.xdmf", "would overwrite"),
+                       ("adir", "is a folder"), ("afile/r.h5", "is a file, not a folder"),
+                       ("nowhere/r.h5", "does not exist")]:
+        if out == "scene.xdmf":  # the XDMF beside the result would replace an input
+            (tmp_path / "scene.toml").rename(tmp_path / "scene.xdmf")
+            (tmp_path / "scene.xdmf").rename(tmp_path / "scene.toml")
+            continue
+        proc = parsolve("run", "scene.toml", "-o", out, cwd=tmp_path)
+        assert proc.returncode == 2, (out, proc.stderr)
+        line, = proc.stderr.strip().splitlines()
+        assert "command line: -o:" in line and out.split("/")[0] in line and words in line, line
+    assert (tmp_path / "scene.toml").read_text() == GOOD and (tmp_path / "afile").read_text() == "x"
+
+
+def test_petsc_options_starting_with_o_reach_petsc(tmp_path):
+    """-options_left and -on_error_abort are PETSc's, not '-o ptions_left'; -o is only -o."""
+    out = tmp_path / "r.h5"
+    proc = parsolve("run", CONFIGS / "controlled_bar.toml", "-o", out, "-options_left",
+                    "-on_error_abort", "-ksp_rtol", "1e-3")
+    assert proc.returncode == 0, proc.stderr
+    assert out.exists() and not (tmp_path / "ptions_left").exists()
+    # parsolve's report of the options no solver object used (preonly reads no tolerance)
+    assert "parsolve: warning: PETSc option -parsolve_ksp_rtol was not used" in proc.stderr
+    assert "options_left was not used" not in proc.stderr
+
+
+def test_unused_mesh_points_are_a_warning(tmp_path):
+    """A Gmsh-like file with a point no cell uses: check and run say so, on one line each."""
+    import meshio
+
+    pts = np.array([[0, 0], [1, 0], [1, 1], [0, 1], [5, 5]], float)
+    meshio.write(tmp_path / "m.vtu", meshio.Mesh(pts, [("quad", np.array([[0, 1, 2, 3]]))]))
+    (tmp_path / "scene.toml").write_text('''
+[mesh]
+file = "m.vtu"
+[model]
+hypothesis = "plane_stress"
+[regions]
+left = "x == 0"
+[[materials]]
+E = 1.0
+nu = 0.3
+[[relations]]
+name = "clamp"
+type = "dirichlet"
+region = "left"
+components = ["x", "y"]
+''')
+    proc = parsolve("check", "scene.toml", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr.strip() == ("parsolve: warning: m.vtu: mesh.file: 1 point(s) are used by no "
+                                   "cell (points 4): they are left out of the system")
 
 
 def test_check_good_scene():

@@ -26,6 +26,7 @@ class Mesh:
     cell_groups: name -> volume cell indices (from the file's physical groups).
     facet_groups: name -> (nfacets, nodes_per_facet) node ids (lower-dimensional groups).
     node_groups: name -> node ids (point groups).
+    warnings: messages about the mesh that are not errors (see ``mesh.checks``).
     """
 
     points: np.ndarray
@@ -34,6 +35,15 @@ class Mesh:
     cell_groups: dict[str, np.ndarray] = field(default_factory=dict)
     facet_groups: dict[str, np.ndarray] = field(default_factory=dict)
     node_groups: dict[str, np.ndarray] = field(default_factory=dict)
+    # what is legitimate but worth saying (unused points, duplicate points): the command line
+    # prints each as "parsolve: warning: ..." on rank 0
+    warnings: list[str] = field(default_factory=list)
+
+    def unused_points(self) -> np.ndarray:
+        """Ids of the points used by no cell (to be kept out of the linear system)."""
+        used = np.zeros(self.num_points, dtype=bool)
+        used[self.cells.ravel()] = True
+        return np.flatnonzero(~used)
 
     @property
     def dim(self) -> int:

@@ -32,7 +32,22 @@ class _Evaluator:
 
     def __init__(self, points: np.ndarray, tol: float):
         self.tol = float(tol)
+        self.points = points
         self.names = {name: points[:, d] for d, name in enumerate(_COORDS[: points.shape[1]])}
+
+    def finite(self, value, node: ast.AST):
+        """Every number an expression computes must be finite where it is evaluated:
+        sqrt(-1 - x), 1/(x - x) or 10**10**10 are errors, not NaN in the results."""
+        bad = ~np.isfinite(value)
+        if np.any(bad):
+            what = ast.unparse(node) if hasattr(ast, "unparse") else "a sub-expression"
+            if np.ndim(value) == 0:
+                raise _Reject(f"{what} is {float(value)} (not finite)")
+            first = int(np.argmax(bad))
+            where = ", ".join(f"{c:g}" for c in self.points[first])
+            raise _Reject(f"{what} is not finite at {int(bad.sum())} of {bad.size} points "
+                          f"(e.g. {float(value[first])} at ({where}))")
+        return value
 
     def num(self, node: ast.AST):
         kind, val = self.visit(node)
@@ -60,7 +75,10 @@ class _Evaluator:
         if isinstance(node.value, bool):
             return "bool", np.bool_(node.value)
         if isinstance(node.value, (int, float)):
-            return "num", np.float64(node.value)  # floats: huge powers overflow, never hang
+            try:  # floats: huge powers overflow, never hang
+                return "num", self.finite(np.float64(node.value), node)
+            except OverflowError:
+                raise _Reject(f"number {node.value:.3g} is too large") from None
         raise _Reject(f"constant {node.value!r} is not allowed (numbers only)")
 
     def visit_Name(self, node: ast.Name):
@@ -95,7 +113,8 @@ class _Evaluator:
             f = np.logical_and if op is ast.BitAnd else np.logical_or
             return "bool", f(self.cond(node.left), self.cond(node.right))
         if op in self._ARITH:
-            return "num", self._ARITH[op](self.num(node.left), self.num(node.right))
+            value = self._ARITH[op](self.num(node.left), self.num(node.right))
+            return "num", self.finite(value, node)
         raise _Reject(f"operator {op.__name__} is not allowed")
 
     def visit_BoolOp(self, node: ast.BoolOp):
@@ -139,7 +158,7 @@ class _Evaluator:
             raise _Reject(f"{node.func.id}() takes exactly one argument")
         if isinstance(node.args[0], ast.Starred):
             raise _Reject("starred arguments are not allowed")
-        return "num", _FUNCTIONS[node.func.id](self.num(node.args[0]))
+        return "num", self.finite(_FUNCTIONS[node.func.id](self.num(node.args[0])), node)
 
 
 def _describe(node: ast.AST) -> str:
@@ -171,7 +190,8 @@ def _evaluate(
     points = np.asarray(points, dtype=float)
 
     def fail(reason: str) -> InputError:
-        return InputError(f"invalid selector {expr!r}: {reason}", source=source, key=key)
+        what = "selector" if want == "bool" else "expression"
+        return InputError(f"invalid {what} {expr!r}: {reason}", source=source, key=key)
 
     if not isinstance(expr, str):
         raise fail("expected a string expression")
@@ -184,7 +204,7 @@ def _evaluate(
     except (ValueError, RecursionError, MemoryError):
         raise fail("cannot be parsed") from None
     try:
-        with np.errstate(all="ignore"):  # sqrt(-1) -> nan -> False, no warnings
+        with np.errstate(all="ignore"):  # non-finite values are reported, never warned about
             kind, val = _Evaluator(points, tol).visit(tree)
     except _Reject as e:
         raise fail(e.args[0]) from None

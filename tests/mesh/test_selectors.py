@@ -45,7 +45,7 @@ def test_logic_and_arithmetic():
     assert sel("sin(pi*x) == 0 and cos(pi*y) == -1") == [6, 8]
     assert sel("-x / 2 == -0.25") == [1, 4, 7]
     assert sel("True") == list(range(9))
-    assert sel("sqrt(x - 1) == 0") == [2, 5, 8]  # nan elsewhere: not selected, no warning
+    assert sel("sqrt(abs(x - 1)) == 0") == [2, 5, 8]
 
 
 def test_z_only_in_3d():
@@ -82,8 +82,32 @@ def test_rejects_unsafe_or_invalid(expr, reason):
     assert str(info.value).startswith("scene.yaml: regions.left.where: invalid selector")
 
 
-def test_huge_power_does_not_hang():
-    assert sel("10**10**10 > x") == list(range(9))  # floats overflow to inf
+@pytest.mark.parametrize("expr, reason", [
+    ("10**10**10 > x", r"10 \*\* 10 \*\* 10 is inf"),          # power tower: no hang, no inf
+    ("sqrt(x - 1) == 0", r"sqrt\(x - 1\) is not finite at 6 of 9 points \(e.g. nan at \(0, 0\)\)"),
+    ("1/(x-x) > 0", r"1 / \(x - x\) is not finite at 9 of 9 points"),
+    ("x < 1e400", "is inf"),
+    ("x < 10**400", r"10 \*\* 400 is inf"),
+])
+def test_non_finite_values_are_errors(expr, reason):
+    """Every number a selector computes must be finite at every point, without numpy warnings."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(InputError, match=reason) as info:
+            evaluate(expr, P2, TOL, source="s.toml", key="regions.r")
+    assert info.value.key == "regions.r"
+
+
+def test_value_expressions_must_be_finite():
+    from parsolve.mesh.selectors import evaluate_value
+
+    np.testing.assert_allclose(evaluate_value("1e-3 * x + y", P2), 1e-3 * P2[:, 0] + P2[:, 1],
+                               rtol=0, atol=0)
+    with pytest.raises(InputError, match=r"sqrt\(-1 - x\) is not finite at 9 of 9") as info:
+        evaluate_value("sqrt(-1-x)", P2, "s.toml", "relations[0].value")
+    assert info.value.oneline().startswith("s.toml: relations[0].value: invalid expression")
 
 
 def test_box_near_closest():

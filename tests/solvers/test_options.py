@@ -1,0 +1,65 @@
+"""PETSc options validation: unknown types, missing values, bad numbers, in the scene or on
+the command line, found before anything is solved; options no object used. Any rank count."""
+
+import pytest
+from mpi4py import MPI
+
+from parsolve.errors import InputError
+from parsolve.solvers import options as opt
+from parsolve.solvers.linear import preset_options
+
+PRESETS = [("direct", True, True), ("direct", False, True), ("iterative", True, True),
+           ("iterative", True, False)]
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_presets_and_good_options_pass(preset):
+    opt.validate(MPI.COMM_WORLD, "parsolve_", preset_options(*preset),
+                 {"ksp_monitor": "", "mat_mumps_icntl_14": "80"}, {"ksp_view": ""}, "s.toml")
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+@pytest.mark.parametrize("scene, cli, source, key, words", [
+    ({"pc_type": "nosuch"}, {}, "s.toml", "solver.petsc.pc_type", "unknown type ('nosuch')"),
+    ({}, {"ksp_type": "foo"}, "command line", "-ksp_type", "unknown type ('foo')"),
+    ({}, {"ksp_rtol": ""}, "command line", "-ksp_rtol", "missing value"),
+    ({"ksp_rtol": "abc"}, {}, "s.toml", "solver.petsc.ksp_rtol", "not a valid number ('abc')"),
+    ({"ksp_max_it": "1.5"}, {}, "s.toml", "solver.petsc.ksp_max_it", "not a valid integer"),
+    ({"ksp_rtol": "1e-6"}, {"ksp_rtol": "nan"}, "command line", "-ksp_rtol", "must be finite"),
+    ({"pc_type": "nosuch"}, {"ksp_type": "foo"}, "s.toml", "solver.petsc.pc_type", "unknown type"),
+])
+def test_bad_options_name_option_and_origin(preset, scene, cli, source, key, words):
+    with pytest.raises(InputError) as info:
+        opt.validate(MPI.COMM_WORLD, "parsolve_", preset_options(*preset), scene, cli, "s.toml")
+    assert (info.value.source, info.value.key) == (source, key)
+    assert words in info.value.message
+
+
+def test_a_good_command_line_value_overrides_a_bad_scene_one():
+    opt.validate(MPI.COMM_WORLD, "parsolve_", preset_options("direct", True, True),
+                 {"pc_type": "nosuch"}, {"pc_type": "lu"}, "s.toml")
+
+
+def test_missing_value_of_a_type_found_by_petsc():
+    """-pc_type with no value is not a flag: PETSc refuses a type 'true', so it was missing."""
+    with pytest.raises(InputError, match="missing value") as info:
+        opt.validate(MPI.COMM_WORLD, "parsolve_", preset_options("iterative", True, False),
+                     {}, {"pc_type": ""}, "s.toml")
+    assert info.value.key == "-pc_type"
+
+
+def test_unused_options():
+    """What -options_left would report: options no object read while they were inserted."""
+    from petsc4py import PETSc
+
+    comm = MPI.COMM_WORLD
+    settings = {"ksp_type": "cg", "ksp_rtol": "1e-6", "nosuch_option": "1"}
+    ksp = PETSc.KSP().create(comm)
+    ksp.setOptionsPrefix("unusedtest_")
+    with opt.inserted("unusedtest_", settings):
+        ksp.setFromOptions()
+    ksp.destroy()
+    assert opt.unused_options("unusedtest_", settings) == ["-unusedtest_nosuch_option"]
+    # the validation's probe does not count as a use
+    opt.probe(comm, "unusedtest2_", {"nosuch": "1", "ksp_type": "gmres"})
+    assert opt.unused_options("unusedtest2_", {"ksp_type": "gmres"}) == ["-unusedtest2_ksp_type"]
