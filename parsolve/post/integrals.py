@@ -14,7 +14,7 @@ def l2_norm(points: np.ndarray, cells: np.ndarray, cell_type: str, values: np.nd
     """sqrt(∫ |f|² dΩ) per step for nodal values (nsteps, npoints, ncomp), exact for the
     element's polynomial (quadrature of degree 2 × order)."""
     geo = kernels.CellGeometry(points[cells], cell_type, degree=2 * polynomial_order(cell_type))
-    fq = np.einsum("qa,sacn->scqn", geo.N, values[:, cells, :])       # (nsteps, nc, nq, ncomp)
+    fq = np.einsum("qa,scan->scqn", geo.N, values[:, cells, :])       # (nsteps, nc, nq, ncomp)
     return np.sqrt(np.einsum("scqn,cq->s", fq * fq, geo.wdet))
 
 

@@ -59,7 +59,7 @@ class Result:
         if path not in self.file or not isinstance(self.file[path], h5py.Dataset):
             group = path.rsplit("/", 2)[0] if path.startswith("/relations") else path.rsplit("/", 1)[0]
             known = ", ".join(self.names(group)) or "none"
-            raise InputError(f"no {path} in the file (known under {group}: {known})", self.path, key)
+            raise InputError(f"no /{path} in the file (known under /{group}: {known})", self.path, key)
         return self.file[path][()]
 
     def component(self, ncomp: int, comp: str, key: str) -> int:
