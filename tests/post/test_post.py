@@ -1,6 +1,7 @@
 """parsolve post: interpolation, curves, summary, derived fields, bad input (known numbers)."""
 
 import csv
+import re
 
 import h5py
 import numpy as np
@@ -185,7 +186,9 @@ def test_summary(run, capsys):
     assert "status complete, 10 steps" in text
     assert "control: 1 rows, multiplier [10000]" in text
     assert "left_x: 4 rows" in text and "Σλ 10000" in text
-    assert "fields/displacement: max |value| x 0.0001 (node 119)" in text
+    # |ux| = 1e-4 on the whole right edge (nodes 29, 59, 89, 119): any of them, by round-off
+    node = re.search(r"fields/displacement: max \|value\| x 0\.0001 \(node (\d+)\)", text)
+    assert node and int(node.group(1)) in (29, 59, 89, 119), text
 
 
 @pytest.mark.parametrize("args, message", [
