@@ -44,7 +44,7 @@ def write(root: Path, runs: list[dict]) -> list[dict]:
                                               "seconds", "result"])
     writer.writeheader()
     writer.writerows(rows)
-    tmp = root / (MANIFEST + ".tmp")
+    tmp = root / f"{MANIFEST}.{os.getpid()}.tmp"  # the SLURM collect job may write too
     tmp.write_text(text.getvalue())
     os.replace(tmp, root / MANIFEST)
     return rows
