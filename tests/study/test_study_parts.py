@@ -121,3 +121,33 @@ def test_expressions():
     for bad in ("x + 1", "__import__('os')", "(1).real", "[1]"):
         with pytest.raises(ValueError):
             evaluate_expression(bad)
+
+
+def test_refinement_by_mesh_files(tmp_path):
+    import meshio
+
+    from parsolve.mesh.generators import rectangle
+
+    for n in (2, 4):
+        m = rectangle(lx=1.0, ly=1.0, nx=n, ny=n, cell="triangle")
+        meshio.write(tmp_path / f"m{n}.vtu", meshio.Mesh(m.points, [("triangle", m.cells)]))
+    scene = (CONFIGS / "controlled_bar.toml").read_text()
+    (tmp_path / "scene.toml").write_text(scene.replace(
+        'generator = "rectangle"\nlx = 1.0\nly = 0.1\nnx = 29\nny = 3\ncell = "quad"', 'file = "m2.vtu"')
+        .replace('region = "right"', 'region = "rightside"').replace('region = "left"', 'region = "leftside"')
+        + '\n[regions]\nrightside = "x == 1"\nleftside = "x == 0"\ncorner = { point = [0.0, 0.0] }\n')
+    (tmp_path / "scene.toml").write_text((tmp_path / "scene.toml").read_text().replace(
+        "[regions]\ncorner = { point = [0.0, 0.0] }\n", "", 1))
+    (tmp_path / "study.toml").write_text("""
+scene = "scene.toml"
+[refine]
+files = ["m2.vtu", "m4.vtu"]
+[[quantities]]
+name = "force"
+spec = "relation:control:multiplier"
+reference = 1e4
+""")
+    settings = expand(load_study(tmp_path / "study.toml"))
+    assert [s.label for s in settings] == ["m2.vtu", "m4.vtu"]
+    assert settings[1].changes == {"mesh.file": str(tmp_path / "m4.vtu")}
+    assert f'file = "{tmp_path / "m4.vtu"}"' in settings[1].scene_text
