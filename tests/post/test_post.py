@@ -9,6 +9,7 @@ import pytest
 from mpi4py import MPI
 
 from conftest import CONFIGS
+from parsolve.errors import InputError
 from parsolve.post.cli import main
 from parsolve.post.derive import full_tensor, principal, von_mises
 from parsolve.post.result import Result
@@ -81,6 +82,11 @@ def test_relation_series_and_energy(run):
         # strain energy ½ F δ of the bar
         delta = series(res, "relation:control:primal")
         np.testing.assert_allclose(series(res, "energy"), 0.5 * force * delta, rtol=1e-10)
+        # ux = δ x / L: its largest value over the left edge is 0, over everything δ
+        np.testing.assert_allclose(series(res, "max:field:displacement:x@left"), 0.0, atol=1e-18)
+        np.testing.assert_allclose(series(res, "max:field:displacement:x"), delta, rtol=1e-10)
+        with pytest.raises(InputError, match="unknown region 'lft'"):
+            series(res, "max:field:displacement:x@lft")
 
 
 def test_von_mises_and_principal_of_known_tensors():
