@@ -43,7 +43,7 @@ def analyse(study: Study, rows: list[Measured], dim: int, target: float | None) 
                 value, p = richardson([rows[i].values[q.name] for i in idx],
                                       [rows[i].dofs for i in idx], dim)
                 refs[q.name] = value
-                notes[q.name] = (f"Richardson extrapolation of {fam} ({len(idx)} levels"
+                notes[q.name] = (f"Richardson extrapolation of {fam} (its {min(3, len(idx))} finest levels"
                                  + (f", observed order {p:.2f} in h ∝ DOFs^(-1/{dim}))" if p else
                                     ", not asymptotic: finest value)"))
         else:

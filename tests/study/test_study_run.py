@@ -73,7 +73,7 @@ def test_study_observed_orders_match_theory(tmp_path, capsys):
           for fam in ("P1", "P2")}
     assert 1.7 < ux["P1"][-1] < 2.3 and ux["P2"][-1] > 2.7, ux
     md = (out / "study.md").read_text()
-    assert "Richardson extrapolation of P2 (4 levels, observed order" in md
+    assert "Richardson extrapolation of P2 (its 3 finest levels, observed order" in md
     # the answer is the cheapest row under the target (compute seconds are noisy: recompute it)
     ok = [r for r in table if float(r["error(energy)"]) <= 0.05]
     best = min(ok, key=lambda r: float(r["compute s"]))
