@@ -79,7 +79,9 @@ def measure(study: Study, setting: Setting, outcome) -> Measured:
     from parsolve.post.spec import series
 
     m = Measured(setting, outcome.status, wall=outcome.seconds, result=outcome.result)
-    m.peak_mb, m.peak_total_mb = peak_memory(Path(outcome.folder) / "stdout.txt")
+    from parsolve.batch.runner import STDOUT
+
+    m.peak_mb, m.peak_total_mb = peak_memory(Path(outcome.folder) / STDOUT)
     if not m.ok:
         return m
     with Result(outcome.result) as res:
