@@ -1,0 +1,47 @@
+"""The local executor: ``parallel`` runs at a time, each a subprocess (under ``mpirun -n k``
+when it has k > 1 ranks). Ctrl-C (or SIGTERM) stops every running child's process group, waits
+for it, records the runs as interrupted and re-raises."""
+
+from __future__ import annotations
+
+import signal
+import time
+from pathlib import Path
+from typing import Callable
+
+from parsolve.batch import runner
+
+
+def execute(folders: list[Path], parallel: int, log: Callable[[str], None]) -> None:
+    """Run the prepared ``folders``; their outcomes are written into them."""
+    pending = list(folders)
+    running: dict[Path, tuple] = {}
+    total, done = len(folders), 0
+    old = signal.signal(signal.SIGTERM, _raise_interrupt)
+    try:
+        while pending or running:
+            while pending and len(running) < max(1, parallel):
+                folder = pending.pop(0)
+                running[folder] = (runner.start(folder), time.perf_counter())
+            for folder, (proc, t0) in list(running.items()):
+                code = proc.poll()
+                if code is None:
+                    continue
+                runner.finish(folder, runner._exit_status(code), time.perf_counter() - t0)
+                del running[folder]
+                done += 1
+                log(f"[{done}/{total}] {folder.name}: {runner.status_of(folder)[0]}")
+            time.sleep(0.02)
+    except KeyboardInterrupt:
+        log(f"batch: interrupted, stopping {len(running)} running run(s)")
+        for folder, (proc, t0) in running.items():
+            code = runner.stop(proc)
+            runner.finish(folder, runner._exit_status(code) if code != 0 else 130,
+                          time.perf_counter() - t0)
+        raise
+    finally:
+        signal.signal(signal.SIGTERM, old)
+
+
+def _raise_interrupt(signum, frame):
+    raise KeyboardInterrupt

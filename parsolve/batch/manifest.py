@@ -1,0 +1,59 @@
+"""``ROOT/manifest.csv``: every run of a batch with its parameters, status, exit code, seconds
+and result path; ``ROOT/runs.json``: the runs themselves, so that a later ``--collect`` (the
+SLURM post-processing job) can rebuild the manifest without the job file."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+from pathlib import Path
+
+from parsolve.batch.runner import RESULT, status_of
+
+MANIFEST, RUNS = "manifest.csv", "runs.json"
+
+
+def save_runs(root: Path, runs: list[dict]) -> None:
+    (root / RUNS).write_text(json.dumps(runs, indent=1, default=str))
+
+
+def load_runs(root: Path) -> list[dict]:
+    return json.loads((root / RUNS).read_text())
+
+
+def write(root: Path, runs: list[dict]) -> list[dict]:
+    """Read every run's status from its folder and (re)write the manifest; returns its rows."""
+    keys: list[str] = []
+    for run in runs:
+        keys += [k for k in run.get("params", {}) if k not in keys]
+    rows = []
+    for run in runs:
+        folder = root / run["name"]
+        status, code, seconds = status_of(folder)
+        row = {"name": run["name"]}
+        row.update({k: _cell(run.get("params", {}).get(k, "")) for k in keys})
+        row.update({"ranks": run.get("ranks", 1), "status": status,
+                    "exit_code": "" if code is None else code,
+                    "seconds": "" if seconds is None else seconds,
+                    "result": str(folder / RESULT)})
+        rows.append(row)
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=["name", *keys, "ranks", "status", "exit_code",
+                                              "seconds", "result"])
+    writer.writeheader()
+    writer.writerows(rows)
+    tmp = root / f"{MANIFEST}.{os.getpid()}.tmp"  # the SLURM collect job may write too
+    tmp.write_text(text.getvalue())
+    os.replace(tmp, root / MANIFEST)
+    return rows
+
+
+def _cell(value) -> str:
+    return value if isinstance(value, str) else json.dumps(value)
+
+
+def read(root: Path) -> list[dict]:
+    with open(root / MANIFEST, newline="") as f:
+        return list(csv.DictReader(f))

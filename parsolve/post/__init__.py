@@ -1,0 +1,1 @@
+"""Post-processing of result files: curves, derived fields, summaries (``parsolve post``)."""

@@ -1,0 +1,87 @@
+"""``parsolve post RESULT.h5 [RESULT2.h5 ...] [--summary] [--x SPEC --y SPEC [--csv F] [--png F]]
+[--derive OUT.h5]``. Exit 2 with one line naming the file and the spec on bad input."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from parsolve.errors import InputError
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="parsolve post", description="Curves, derived fields and "
+                                "summaries of result files. SPEC: see parsolve/post/spec.py.")
+    p.add_argument("results", nargs="+", help="result files (HDF5)")
+    p.add_argument("--summary", action="store_true", help="steps, status, extremes, relations")
+    p.add_argument("--x", metavar="SPEC", help="abscissa, e.g. time or relation:control:primal")
+    p.add_argument("--y", metavar="SPEC", help="ordinate, e.g. relation:control:multiplier")
+    p.add_argument("--csv", metavar="FILE", help="write the curves (default: print them)")
+    p.add_argument("--png", metavar="FILE", help="plot the curves, one line per file")
+    p.add_argument("--derive", metavar="OUT.h5", help="copy of RESULT.h5 with strain, von Mises, "
+                   "principal stresses, nodal stress per material region (+ XDMF)")
+    return p
+
+
+def _curves(args) -> list:
+    from parsolve.post.result import Result
+    from parsolve.post.spec import parse, evaluate
+
+    xs, ys = parse(args.x, "--x"), parse(args.y, "--y")
+    curves = []
+    for path in args.results:
+        with Result(path) as res:
+            curves.append((res.stem, evaluate(res, xs), evaluate(res, ys)))
+    return curves
+
+
+def run(args) -> None:
+    from parsolve.post.result import Result
+
+    if not (args.summary or args.x or args.y or args.derive):
+        raise InputError("nothing to do: give --summary, --x/--y or --derive", args.results[0])
+    if bool(args.x) != bool(args.y):
+        raise InputError("--x and --y go together", args.results[0], "--x" if args.x else "--y")
+    if args.summary:
+        from parsolve.post.summary import summary
+
+        for path in args.results:
+            with Result(path) as res:
+                print(summary(res))
+    if args.x:
+        from parsolve.post.curves import write_csv, write_png
+
+        curves = _curves(args)
+        if args.csv:
+            write_csv(args.csv, args.x, args.y, curves)
+        if args.png:
+            write_png(args.png, args.x, args.y, curves)
+        if not (args.csv or args.png):
+            for label, x, y in curves:
+                for a, b in zip(x, y):
+                    print(f"{label}\t{a:.10g}\t{b:.10g}")
+    if args.derive:
+        from parsolve.post.derive import derive
+
+        if len(args.results) != 1:
+            raise InputError("--derive takes one result file", args.results[1], "--derive")
+        src = args.results[0]
+        if Path(args.derive).resolve() == Path(src).resolve():
+            raise InputError("--derive writes a copy: the input is never overwritten", src, "--derive")
+        Result(src).close()  # a missing or invalid input is reported before anything is written
+        names = derive(src, args.derive)
+        print(f"{args.derive}: " + ", ".join(f"/{g}/{n}" for g, ns in names.items() for n in ns)
+              + f"; {Path(args.derive).with_suffix('.xdmf')}")
+
+
+def main(argv: list[str]) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        run(args)
+    except InputError as exc:
+        print(f"parsolve post: {exc.oneline()}", file=sys.stderr)
+        return 2
+    except BrokenPipeError:  # | head
+        return 0
+    return 0

@@ -1,0 +1,71 @@
+"""``parsolve study STUDY.toml [--out DIR] [--executor local|slurm] [--parallel N]
+[--target ERR] [--reduced] [--save PREFIX]``.
+
+Writes DIR/study.md, DIR/study.csv and DIR/study.png (and PREFIX.md/.csv/.png with --save),
+prints the table's answer. Exit 2 on bad input (one line naming the file and the key), 3 when
+a run failed (the table still lists it)."""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import sys
+import tomllib
+from pathlib import Path
+
+from parsolve.errors import EXIT_INPUT, EXIT_SOLVER, InputError
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="parsolve study", description="Accuracy against cost.")
+    p.add_argument("study", help="study file (TOML)")
+    p.add_argument("--out", help="folder of the runs and the report (default: STUDY_runs)")
+    p.add_argument("--executor", choices=("local", "slurm"), help="default: the study's, else local")
+    p.add_argument("--parallel", type=int, help="runs at a time (local executor)")
+    p.add_argument("--target", type=float, help="requested error of the first quantity")
+    p.add_argument("--reduced", action="store_true", help="apply the study's [reduced] table (CI)")
+    p.add_argument("--save", metavar="PREFIX", help="also write PREFIX.md, PREFIX.csv, PREFIX.png")
+    return p
+
+
+def run(args) -> int:
+    from parsolve.scene import parse_scene
+    from parsolve.study import report
+    from parsolve.study.config import load_study
+    from parsolve.study.execute import check_quantities, run_grid
+    from parsolve.study.grid import expand
+
+    study = load_study(args.study, reduced=args.reduced)
+    settings = expand(study)
+    check_quantities(study, settings)
+    dim = parse_scene(tomllib.loads(settings[0].scene_text), str(study.scene)).dim
+    root = Path(args.out or Path(args.study).stem + "_runs")
+    rows = run_grid(study, settings, root, args.executor or study.executor,
+                    args.parallel or study.parallel)
+    target = args.target if args.target is not None else study.target
+    a = report.analyse(study, rows, dim, target)
+    head, body = report.table(study, rows, a)
+    text = report.markdown(study, rows, a, head, body, target)
+    root.mkdir(parents=True, exist_ok=True)
+    (root / "study.md").write_text(text)
+    report.write_csv(root / "study.csv", head, body)
+    report.picture(root / "study.png", study, rows, a, target)
+    if args.save:
+        Path(args.save).parent.mkdir(parents=True, exist_ok=True)
+        for ext in ("md", "csv", "png"):
+            shutil.copyfile(root / f"study.{ext}", f"{args.save}.{ext}")
+    print(text)
+    failed = [r.setting.name for r in rows if not r.ok]
+    if failed:
+        print(f"parsolve study: {len(failed)} run(s) failed: {', '.join(failed)}", file=sys.stderr)
+        return EXIT_SOLVER
+    return 0
+
+
+def main(argv: list[str]) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        return run(args)
+    except InputError as exc:
+        print(f"parsolve study: {exc.oneline()}", file=sys.stderr)
+        return EXIT_INPUT

@@ -1,0 +1,114 @@
+"""Run a study's grid through the batch API and measure every run: DOFs, quantities, time per
+phase, peak memory.
+
+Peak memory: every run gets PETSc's ``-memory_view``, which prints at exit the maximum
+resident set size of each rank over the run (getrusage); it is read back from the run's
+stdout, so it works the same on the local and the SLURM executor.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+from parsolve.errors import InputError
+from parsolve.study.config import Study
+from parsolve.study.grid import Setting
+
+_MEMORY = re.compile(r"Maximum \(over computational time\) process memory:\s+total\s+(\S+)\s+max\s+(\S+)")
+
+
+@dataclass
+class Measured:
+    setting: Setting
+    status: str
+    dofs: int | None = None
+    values: dict[str, float] = field(default_factory=dict)
+    phases: dict[str, float] = field(default_factory=dict)   # /timings/<phase> summed over steps
+    wall: float | None = None                                 # seconds of the run's process
+    peak_mb: float | None = None                              # largest rank
+    peak_total_mb: float | None = None                        # sum over ranks
+    result: Path | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "complete"
+
+    def cost(self, kind: str) -> float | None:
+        return self.wall if kind == "wall" else self.phases.get("total")
+
+
+def peak_memory(stdout: Path) -> tuple[float | None, float | None]:
+    """(max over ranks, total) peak RSS in MB from PETSc's -memory_view output."""
+    try:
+        found = _MEMORY.search(stdout.read_text(errors="replace"))
+    except OSError:
+        return None, None
+    if not found:
+        return None, None
+    total, most = (float(v) / 2 ** 20 for v in found.groups())
+    return most, total
+
+
+def check_quantities(study: Study, settings: list[Setting]) -> None:
+    """Specs parse, and relations they name exist in every effective scene (before running)."""
+    import tomllib
+
+    from parsolve.post.spec import parse
+
+    for q in study.quantities:
+        try:
+            spec = parse(q.spec)
+        except InputError as exc:
+            raise InputError(exc.message, study.source, q.key + ".spec") from None
+        if spec.kind != "relation":
+            continue
+        for s in settings:
+            names = [r.get("name") for r in tomllib.loads(s.scene_text).get("relations", [])]
+            if spec.name not in names:
+                raise InputError(f"no relation {spec.name!r} in the scene of {s.family} "
+                                 f"(known: {', '.join(map(str, names))})", study.source, q.key + ".spec")
+
+
+def measure(study: Study, setting: Setting, outcome) -> Measured:
+    """Read one run's result; a quantity the result cannot give is an InputError naming the
+    study file and the quantity's key."""
+    from parsolve.post.result import Result
+    from parsolve.post.spec import series
+
+    m = Measured(setting, outcome.status, wall=outcome.seconds, result=outcome.result)
+    from parsolve.batch.runner import STDOUT
+
+    m.peak_mb, m.peak_total_mb = peak_memory(Path(outcome.folder) / STDOUT)
+    if not m.ok:
+        return m
+    with Result(outcome.result) as res:
+        u = res.file["fields/displacement"]
+        m.dofs = int(u.shape[1] * u.shape[2])
+        m.phases = {n: float(res.file[f"timings/{n}"][()].sum()) for n in res.names("timings")}
+        for q in study.quantities:
+            try:
+                m.values[q.name] = float(series(res, q.spec)[-1])
+            except InputError as exc:
+                raise InputError(f"{exc.message} (in {outcome.result})", study.source,
+                                 q.key + ".spec") from None
+    return m
+
+
+def run_grid(study: Study, settings: list[Setting], root: Path, executor: str, parallel: int,
+             log: Callable[[str], None] = print) -> list[Measured]:
+    """Run the coarsest setting first (a quantity naming a missing field stops the study
+    there), then the rest. Runs already complete with the same scene, ranks and arguments are
+    kept (the batch API's resume): a study interrupted or extended runs only what is new."""
+    from parsolve.batch.api import Run, execute
+
+    args = tuple(study.args) + ("-memory_view",)
+    runs = [Run(s.name, s.scene_text, study.ranks, args, params=s.changes) for s in settings]
+    kw = dict(executor=executor, parallel=parallel, resources=study.resources, resume=True, log=log)
+    first = execute(runs[:1], root, **kw)[0]
+    if first.ok:
+        measure(study, settings[0], first)
+    outcomes = execute(runs, root, **kw)
+    return [measure(study, s, o) for s, o in zip(settings, outcomes)]
