@@ -23,7 +23,7 @@ import h5py
 import numpy as np
 
 from parsolve.fem import kernels
-from parsolve.io.xdmf import write_xdmf
+from parsolve.io.xdmf import XdmfWriter
 from parsolve.post.result import Result
 
 
@@ -130,7 +130,10 @@ def derive(src: str, out: str, key: str = "--derive") -> dict[str, list[str]]:
                 f[f"{group}/{name}"] = value
         all_fields = {n: f[f"fields/{n}"].shape[2] for n in f["fields"]}
         all_cells = {n: f[f"cell_fields/{n}"].shape[2] for n in f.get("cell_fields", {})}
-    mesh = model.mesh
-    write_xdmf(Path(out).with_suffix(".xdmf"), Path(out).name, mesh.cell_type, mesh.num_points,
-               mesh.num_cells, mesh.cells.shape[1], mesh.dim, times, all_fields, all_cells)
+    xdmf = XdmfWriter(Path(out), model.mesh)
+    try:
+        for step, t in enumerate(times):
+            xdmf.append(step, t, all_fields, all_cells)
+    finally:
+        xdmf.close()
     return {"fields": sorted(fields), "cell_fields": sorted(cell_fields)}
