@@ -121,7 +121,7 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log) -> None:
     newton = NewtonSolver(comm, system, solver, scene.nonlinear)
     schedule = StepSchedule(scene)
     balance = Balance(comm, system) if model.transient else None
-    watch = BranchWatch()
+    watch = BranchWatch(model.nonlinear)
     step, setup = 0, time.perf_counter() - t0
     while (t := schedule.next()) is not None:
         t1 = time.perf_counter()
@@ -142,7 +142,10 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log) -> None:
         multipliers = newton.multipliers(t, result.f_int)
         fields, cell_fields, rel_out = step_outputs(comm, system, newton.q, multipliers, newton)
         extra = balance.step(newton.q, t - t_prev, newton.f_ext, multipliers) if balance else {}
-        warning = watch.check(newton.q - snap[0], solver.negative_pivots())
+        pivots = solver.negative_pivots()  # the saddle's: one per enforced multiplier row
+        if pivots is not None:
+            pivots -= int(newton.active.active.sum())
+        warning = watch.check(newton.q - snap[0], pivots)
         extra.update({"steps/cuts": schedule.cuts, "steps/branch_warning": int(warning is not None)})
         timings = solver.take_timings()
         timings["assembly"] = system.timings.get("assembly", 0.0) + (setup if step == 1 else 0.0)
@@ -164,7 +167,8 @@ class BranchWatch:
     negative pivots of an LDLᵀ factorization changed, or the step's increment is over ten
     times the previous one's (which one a secant iteration lands on depends on round-off)."""
 
-    def __init__(self):
+    def __init__(self, nonlinear: bool):
+        self.nonlinear = nonlinear  # a linear scene's increments may legitimately jump
         self.pivots, self.previous = None, None
 
     def check(self, dq: np.ndarray, pivots: int | None) -> str | None:
@@ -173,7 +177,8 @@ class BranchWatch:
             warning = (f"the tangent's negative pivots went from {self.pivots} to {pivots}: "
                        "a limit point or a bifurcation was crossed")
         size = float(np.linalg.norm(dq))
-        if self.previous is not None and self.previous > 0 and size > 10 * self.previous:
+        if self.nonlinear and self.previous is not None and self.previous > 0 \
+                and size > 10 * self.previous:
             warning = (f"the increment is {size / self.previous:.0f}× the previous one: the run may "
                        "have jumped to another equilibrium branch (smaller steps, or the tangent "
                        "matrix, tell)")

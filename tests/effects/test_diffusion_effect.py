@@ -1,0 +1,140 @@
+"""Diffusion as an effect: a scalar field with its own relations, loads and outputs, and no
+displacement, stress or elasticity cost."""
+
+import tomllib
+
+import numpy as np
+import pytest
+
+from conftest import CONFIGS
+from parsolve.errors import InputError
+
+POISSON = """
+[mesh]
+generator = "rectangle"
+lx = 2.0
+ly = 0.2
+nx = {nx}
+ny = 2
+cell = "{cell}"
+[model]
+dimension = 2
+[[diffusion]]
+field = "h"
+[[diffusion.materials]]
+conductivity = 0.5
+[[loads]]
+name = "rain"
+field = "h"
+source = 3.0
+[[relations]]
+name = "ends"
+type = "dirichlet"
+region = "{ends}"
+value = 0.0
+"""
+
+
+@pytest.mark.parametrize("cell", ["quad", "triangle", "triangle6"])
+def test_steady_source_between_two_drains(cell, run):
+    """-k h'' = s, h(0) = h(L) = 0: h = s x (L - x) / (2k), exact at the nodes (P2: everywhere);
+    each end takes half the source, the flux -k h' = s (x - L/2)."""
+    text = POISSON.format(nx=16, cell=cell, ends="ends").replace(
+        "[model]", '[regions]\nends = "x == 0 or x == 2"\n[model]')
+    res = run(text, name=f"poisson_{cell}")
+    x = res["mesh/points"][:, 0]
+    h = res["fields/h"][-1][:, 0]
+    np.testing.assert_allclose(h, 3.0 * x * (2.0 - x) / 1.0, atol=1e-12)
+    assert "fields/displacement" not in res and "cell_fields/stress" not in res
+    np.testing.assert_allclose(res["relations/ends/multiplier"][-1].sum(), 3.0 * 2.0 * 0.2,
+                               rtol=1e-12)  # λ = minus the reaction: what the drains take
+    if cell == "quad":  # the Q1 flux of a nodally exact 1D field: exact at the cell centres
+        cx = res["mesh/points"][res[f"mesh/cells/{cell}"]].mean(axis=1)[:, 0]
+        np.testing.assert_allclose(res["cell_fields/h_flux"][-1][:, 0], 3.0 * (cx - 1.0),
+                                   atol=1e-10)
+
+
+def test_seepage_overflow_and_well_floor(run):
+    """Both bounds become active: h0 = clip(q L / k, -0.5, 1), h linear; the multipliers are
+    the spilled (overflow) and the missing (well floor) flow."""
+    res = run(CONFIGS / "seepage_overflow.toml", name="seepage")
+    t = res["steps/time"]
+    q = np.interp(t, [0.0, 2.0, 4.0], [0.0, 3.0, -3.0])
+    h0 = np.clip(q * 1.0 / 2.0, -0.5, 1.0)
+    x = res["mesh/points"][:, 0]
+    np.testing.assert_allclose(res["fields/h"][..., 0], h0[:, None] * (1.0 - x)[None, :], atol=1e-12)
+    spill = res["relations/overflow/multiplier"].sum(axis=1)
+    floor = res["relations/well_floor/multiplier"].sum(axis=1)
+    np.testing.assert_allclose(spill, np.where(h0 >= 1.0, (q - 2.0) * 0.1, 0.0), atol=1e-12)
+    np.testing.assert_allclose(floor, np.where(h0 <= -0.5, (q + 1.0) * 0.1, 0.0), atol=1e-12)
+    assert res["relations/overflow/active"].any() and res["relations/well_floor/active"].any()
+    assert not (res["relations/overflow/active"] & res["relations/well_floor/active"]).any()
+    # the flux through the drain closes the balance: inflow = drained + spilled
+    drained = res["relations/drain/multiplier"].sum(axis=1)
+    np.testing.assert_allclose(q * 0.1, drained + spill + floor, atol=1e-12)
+
+
+def test_transient_decay_of_a_mode(run):
+    """Backward Euler with lumped capacity on a Q1 strip: h(x, 0) = sin(pi x) would decay by
+    (1 + dt λ)^-n; here the mode is excited by a source over the first step only, then
+    decays freely between two drains: the ratio of successive steps is 1 / (1 + dt λ_h)."""
+    text = POISSON.format(nx=20, cell="quad", ends="ends").replace(
+        "[model]", '[regions]\nends = "x == 0 or x == 2"\n[model]').replace(
+        "source = 3.0", 'source = 3.0\nevolution = "pulse"') + """
+[evolutions.pulse]
+times = [0.0, 0.1, 0.1001]
+values = [1.0, 1.0, 0.0]
+[time]
+mass = "lumped"
+[steps]
+count = 12
+end = 1.2
+"""
+    res = run(text, name="decay")
+    h = res["fields/h"][..., 0]
+    mid = np.argmin(np.abs(res["mesh/points"][:, 0] - 1.0) + res["mesh/points"][:, 1])
+    ratios = h[2:, mid] / h[1:-1, mid]
+    # after a few steps the slowest mode dominates: constant ratio
+    assert np.ptp(ratios[-4:]) < 1e-3 * ratios[-1]
+    assert 0 < ratios[-1] < 1
+    err = np.abs(res["balance/total/error"]).max()
+    assert err <= 1e-13 * np.abs(res["balance/total/storage"]).max()
+
+
+BAD = {
+    "negative conductivity": (("conductivity = 0.5", "conductivity = -1.0"),
+                              "diffusion[0].materials[0].conductivity"),
+    "relation on a missing field": (('name = "ends"\ntype = "dirichlet"',
+                                     'name = "ends"\nfield = "c"\ntype = "dirichlet"'),
+                                    "relations[0].field"),
+    "component of a scalar field": (('region = "left"', 'region = "left"\ncomponent = "x"'),
+                                    "relations[0].component"),
+    "transient without steps": (("[[loads]]", "[time]\nmass = \"lumped\"\n[[loads]]"), "steps"),
+    "unknown mass matrix": (("[[loads]]", "[time]\nmass = \"diagonal\"\n[steps]\ncount = 2\n[[loads]]"),
+                            "time.mass"),
+    "negative capacity": (("conductivity = 0.5", "conductivity = 0.5\ncapacity = -2.0"),
+                          "diffusion[0].materials[0].capacity"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_bad_diffusion_input(case):
+    from parsolve.scene import parse_scene
+
+    (old, new), key = BAD[case]
+    text = POISSON.format(nx=4, cell="quad", ends="left")
+    assert old in text
+    text = text.replace(old, new, 1)
+    with pytest.raises(InputError) as err:
+        parse_scene(tomllib.loads(text), "scene.toml", text)
+    assert err.value.key == key, err.value.oneline()
+
+
+def test_bad_saturation():
+    from parsolve.scene import parse_scene
+
+    text = (CONFIGS / "solubility_well_mixed.toml").read_text().replace(
+        "saturation = 1.0", "saturation = -1.0")
+    with pytest.raises(InputError) as err:
+        parse_scene(tomllib.loads(text), "scene.toml", text)
+    assert err.value.key == "solubility.saturation"
