@@ -219,6 +219,7 @@ class SolverSpec:
     prefix: str
     options: dict[str, str]
     eliminate: bool
+    split: str = "primal"   # fieldsplit blocks: "primal" (q, lambda) or "fields" (one per field)
 
 
 @dataclass
@@ -680,9 +681,10 @@ def _solver(t: Table) -> SolverSpec:
     if not prefix or not prefix.endswith("_") or not prefix.replace("_", "").isalnum():
         raise t.error("prefix", "must be non-empty, alphanumeric and end with '_'")
     eliminate = t.get("eliminate", bool, True)
+    split = t.get("split", str, "primal", choices=("primal", "fields"))
     options = _flatten(t.table("petsc", {}))
     t.done()
-    return SolverSpec(preset, prefix, options, eliminate)
+    return SolverSpec(preset, prefix, options, eliminate, split)
 
 
 def _cross_check(scene: Scene) -> None:

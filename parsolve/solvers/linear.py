@@ -77,11 +77,14 @@ class LinearSolver:
     """
 
     def __init__(self, comm: MPI.Comm, prefix: str, settings: dict[str, str],
-                 is_q: PETSc.IS, is_l: PETSc.IS, near_null: PETSc.NullSpace | None = None):
+                 is_q: PETSc.IS, is_l: PETSc.IS, near_null: PETSc.NullSpace | None = None,
+                 splits: list[tuple[str, PETSc.IS]] | None = None):
+        """``splits``: the fieldsplit blocks, named (default: "q" and "lambda")."""
         self.comm, self.prefix, self.settings = comm, prefix, settings
         self.ksp = PETSc.KSP().create(comm)
         self.ksp.setOptionsPrefix(prefix)
         self.is_q, self.is_l = is_q, is_l
+        self.splits = splits or [("q", is_q), ("lambda", is_l)]
         self.near_null = near_null
         self.configured = False
         self._state = None
@@ -97,7 +100,7 @@ class LinearSolver:
                 if self.settings.get("pc_type") == "fieldsplit":
                     pc = self.ksp.getPC()
                     pc.setType("fieldsplit")
-                    pc.setFieldSplitIS(("q", self.is_q), ("lambda", self.is_l))
+                    pc.setFieldSplitIS(*self.splits)
                 self.ksp.setFromOptions()
             self.configured = True
 

@@ -41,8 +41,18 @@ def make_solver(comm: MPI.Comm, system: SaddleSystem, cli_options: dict[str, str
     modes = rigid_body_modes(comm, system) if scene.solver.preset == "iterative" else None
     if modes is not None and has_mult:  # fieldsplit hands it to the q block's matrix
         is_q.compose("nearnullspace", modes)
+    splits = None
+    if scene.solver.split == "fields":  # one block per field (options -fieldsplit_<field>_...)
+        splits = list(field_index_sets(comm, system).items())
+        splits += [("lambda", is_l)] if has_mult else []
+        if settings.get("pc_type") != "fieldsplit":
+            settings = opt.merge(settings, {"pc_type": "fieldsplit"}, cli_options)
+        if settings.get("pc_fieldsplit_type") == "schur" and len(splits) != 2:
+            settings = {k: v for k, v in settings.items()
+                        if not k.startswith("pc_fieldsplit_schur")}
+            settings["pc_fieldsplit_type"] = "multiplicative"
     return LinearSolver(comm, scene.solver.prefix, settings, is_q, is_l,
-                        near_null=None if has_mult else modes)
+                        near_null=None if has_mult else modes, splits=splits)
 
 
 def export_system(comm, directory: str, mat: PETSc.Mat, rhs: PETSc.Vec, system: SaddleSystem) -> None:
