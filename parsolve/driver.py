@@ -10,6 +10,7 @@ import time
 import numpy as np
 from mpi4py import MPI
 
+from parsolve.diagnostics import unsupported
 from parsolve.effects.compose import Rate
 from parsolve.errors import Interrupted, SolverError
 from parsolve.io.hdf5 import ResultWriter
@@ -43,8 +44,12 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
         else:
             _run_linear(comm, system, cli_options, writer, export_dir, log)
     except SolverError as exc:
+        if "singular" in str(exc) or "inaccurate" in str(exc):
+            hints = unsupported(model)
+            if hints:
+                exc = SolverError(f"{exc}; likely cause: {'; '.join(hints)}")
         status = f"failed: {exc}"
-        raise
+        raise exc from None
     except Interrupted as exc:
         status = str(exc)  # "interrupted: SIGINT"
         raise

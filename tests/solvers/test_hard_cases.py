@@ -184,3 +184,43 @@ def test_dense_control_column_does_not_inflate_the_factor():
     dense_col = factor_entries('body = [1.0, 0.0]')
     sparse_col = factor_entries('region = "right"\ntraction = [1.0, 0.0]')
     assert dense_col < 1.1 * sparse_col, (dense_col, sparse_col)
+
+
+def test_a_body_not_held_is_named(run):
+    """A singular system says which body no relation holds."""
+    import pytest as _pytest
+
+    from parsolve.errors import SolverError
+
+    text = """
+[mesh]
+generator = "rectangle"
+lx = 1.0
+ly = 1.0
+nx = 4
+ny = 4
+cell = "quad"
+[model]
+dimension = 2
+[[diffusion]]
+field = "h"
+[[diffusion.materials]]
+conductivity = 1.0
+[[loads]]
+name = "s"
+field = "h"
+source = 1.0
+"""
+    with _pytest.raises(SolverError) as err:
+        run(text, name="floating")
+    assert "no relation holds field 'h' on the body" in str(err.value)
+
+
+def test_bodies_are_the_connected_cells():
+    import numpy as np
+
+    from parsolve.diagnostics import bodies
+
+    cells = np.array([[0, 1, 2], [2, 3, 4], [5, 6, 7], [8, 7, 9]])
+    label = bodies(cells, 11)
+    assert list(label) == [0, 0, 0, 0, 0, 5, 5, 5, 5, 5, 10]
