@@ -266,25 +266,30 @@ class Scene:
 def load_scene(path: str | Path) -> Scene:
     """Read and validate a scene file (everything but what needs the mesh: see ``model``)."""
     path = Path(path)
+    data, text = read_toml(path)
+    return parse_scene(data, str(path), text, path.parent)
+
+
+def read_toml(path: Path, what: str = "scene") -> tuple[dict, str]:
+    """(data, text) of a TOML file (a scene, a study, a job file), or an InputError."""
     source = str(path)
-    text = read_text(path, source)
+    text = read_text(path, source, what)
     try:
-        data = tomllib.loads(text)
+        return tomllib.loads(text), text
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"invalid TOML: {exc}", source) from None
-    return parse_scene(data, source, text, path.parent)
 
 
-def read_text(path: Path, source: str) -> str:
-    """The scene's text: a readable file of UTF-8 text, or an InputError saying what it is."""
+def read_text(path: Path, source: str, what: str = "scene") -> str:
+    """The file's text: a readable file of UTF-8 text, or an InputError saying what it is."""
     if path.is_dir():
-        raise InputError("is a folder, not a scene file", source)
+        raise InputError(f"is a folder, not a {what} file", source)
     try:
         raw = path.read_bytes()
     except OSError as exc:
-        raise InputError(f"cannot read scene file ({exc.strerror or exc})", source) from None
+        raise InputError(f"cannot read {what} file ({exc.strerror or exc})", source) from None
     if b"\0" in raw:
-        raise InputError("is a binary file, not a TOML scene (it contains NUL bytes)", source)
+        raise InputError(f"is a binary file, not a TOML {what} (it contains NUL bytes)", source)
     try:
         return raw.decode("utf-8")
     except UnicodeDecodeError as exc:

@@ -38,7 +38,7 @@ from parsolve.batch.api import Run
 from parsolve.batch.scene_edit import effective_scene, read_scene, split_path
 from parsolve.batch.slurm import RESOURCES
 from parsolve.errors import InputError
-from parsolve.scene import Table
+from parsolve.scene import Table, read_toml
 
 SPECIAL = ("ranks", "args", "name")  # keys of a run that are not scene paths
 EXECUTORS = ("local", "slurm")
@@ -58,12 +58,7 @@ class Jobs:
 def load_jobs(path: str | Path, validate: bool = True) -> Jobs:
     path = Path(path)
     source = str(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except OSError as exc:
-        raise InputError(f"cannot read job file ({exc.strerror})", source) from None
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"invalid TOML: {exc}", source) from None
+    data = read_toml(path, "job")[0]
     top = Table(data, "", source)
     scene = path.parent / top.get("scene", str)
     root = path.parent / top.get("output", str, path.stem)

@@ -35,12 +35,11 @@
 from __future__ import annotations
 
 import itertools
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from parsolve.errors import InputError
-from parsolve.scene import Table
+from parsolve.scene import Table, read_toml
 from parsolve.study.expression import evaluate_expression
 
 ERRORS = ("relative", "absolute", "energy_norm")
@@ -84,12 +83,7 @@ class Study:
 def load_study(path: str | Path, reduced: bool = False) -> Study:
     path = Path(path)
     source = str(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except OSError as exc:
-        raise InputError(f"cannot read study file ({exc.strerror})", source) from None
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"invalid TOML: {exc}", source) from None
+    data = read_toml(path, "study")[0]
     top = Table(data, "", source)
     changes = top.get("reduced", dict, {})
     if reduced:
