@@ -18,6 +18,7 @@ import time
 from pathlib import Path
 
 SCENE, RESULT, SPEC, OUTCOME = "scene.toml", "result.h5", "spec.json", "outcome.json"
+PID = "pid"
 STDOUT, STDERR = "stdout.txt", "stderr.txt"
 
 # What scripts/mpirun.sh sets: root may run mpirun, more ranks than cores.
@@ -58,7 +59,7 @@ def read_json(path: Path) -> dict | None:
 def prepare(folder: Path, scene_text: str, ranks: int, args, params: dict) -> None:
     """Write the run's inputs and remove what a previous attempt left."""
     folder.mkdir(parents=True, exist_ok=True)
-    for name in (RESULT, OUTCOME, STDOUT, STDERR):
+    for name in (RESULT, OUTCOME, STDOUT, STDERR, PID):
         (folder / name).unlink(missing_ok=True)
     (folder / SCENE).write_text(scene_text)
     write_json(folder / SPEC, {"ranks": ranks, "args": list(map(str, args)), "params": params})
@@ -71,9 +72,11 @@ def start(folder: Path) -> subprocess.Popen:
     out = open(folder / STDOUT, "w")
     err = open(folder / STDERR, "w")
     try:
-        return subprocess.Popen(command(spec["ranks"], spec["args"]), cwd=folder, env=environment(),
+        proc = subprocess.Popen(command(spec["ranks"], spec["args"]), cwd=folder, env=environment(),
                                 stdout=out, stderr=err, stdin=subprocess.DEVNULL,
                                 start_new_session=True)
+        (folder / PID).write_text(f"{proc.pid}\n")  # the process group to signal, for whoever needs to
+        return proc
     finally:
         out.close()
         err.close()
