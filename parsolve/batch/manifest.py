@@ -51,7 +51,7 @@ def write(root: Path, runs: list[dict]) -> list[dict]:
 
 
 def _cell(value) -> str:
-    return value if isinstance(value, str) else json.dumps(value)
+    return value if isinstance(value, str) else json.dumps(value, default=str)
 
 
 def read(root: Path) -> list[dict]:

@@ -49,6 +49,8 @@ def execute(root: Path, names: list[str], resources: dict, log: Callable[[str], 
             sys.executable, "-m", "parsolve.batch.task", str(root), str(tasks), "$SLURM_ARRAY_TASK_ID"]))
         spec = f"0-{len(group) - 1}" + (f"%{throttle}" if throttle else "")
         arrays.append(_sbatch([f"--array={spec}", str(script)]))
+        for i, n in enumerate(group):  # lets a later call see that the run is under way
+            (root / n / runner.SLURM_JOB).write_text(f"{arrays[-1]}_{i}\n")
         log(f"batch: submitted job array {arrays[-1]} ({len(group)} runs on {ranks} rank(s), "
             f"--array={spec})")
     collect = folder / f"collect-{stamp}.sh"
@@ -101,14 +103,19 @@ def _wait(root: Path, names: list[str], job_ids: list[str], poll: float,
           log: Callable[[str], None]) -> None:
     left = list(names)
     total = len(names)
-    while True:
-        ended = [n for n in left if (root / n / runner.OUTCOME).exists()]
-        for n in ended:
-            left.remove(n)
-            log(f"[{total - len(left)}/{total}] {n}: {runner.status_of(root / n)[0]}")
-        if not listed(job_ids):
-            break
-        time.sleep(poll)
+    try:
+        while True:
+            ended = [n for n in left if (root / n / runner.OUTCOME).exists()]
+            for n in ended:
+                left.remove(n)
+                log(f"[{total - len(left)}/{total}] {n}: {runner.status_of(root / n)[0]}")
+            if not listed(job_ids):
+                break
+            time.sleep(poll)
+    except KeyboardInterrupt:
+        log(f"batch: stopped waiting; the jobs keep running (scancel {' '.join(job_ids)} stops "
+            f"them; the post-processing job {job_ids[-1]} refreshes the manifest)")
+        raise
     for n in left:  # the task died before recording (scancel, time limit, node failure)
         if not (root / n / runner.OUTCOME).exists():
             log(f"batch: {n}: its SLURM task ended without recording an outcome")

@@ -113,6 +113,14 @@ def test_ctrl_c_stops_children(tmp_path):
     time.sleep(1.0)
     pids = [int(p.read_text()) for p in root.glob("*/pid")]
     assert len(pids) == 2
+    # meanwhile another batch on the same root leaves the running runs alone
+    from parsolve.batch.jobs import load_jobs
+
+    running = [r for r in load_jobs(path).runs if (root / r.name / "pid").exists()]
+    lines = []
+    out = execute(running, root, log=lines.append)
+    assert "0 to run (local), 2 still running elsewhere" in lines[0], lines
+    assert [o.status for o in out] == ["running elsewhere"] * 2
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
