@@ -115,16 +115,15 @@ def run_here(folder: Path) -> int:
     try:
         code = proc.wait()
     except KeyboardInterrupt:
-        code = stop(proc)
-        code = code if code > 0 else 128 - code if code < 0 else 143
+        code = stop(proc)  # parsolve's 143, or -9 after SIGKILL (recorded as 137)
     finally:
         for s, h in old.items():
             signal.signal(s, h)
-    finish(folder, _exit_status(code), time.perf_counter() - t0)
+    finish(folder, exit_status(code), time.perf_counter() - t0)
     return code
 
 
-def _exit_status(code: int) -> int:
+def exit_status(code: int) -> int:
     return 128 - code if code < 0 else code  # killed by signal n → 128 + n, as a shell says
 
 
