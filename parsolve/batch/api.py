@@ -55,9 +55,11 @@ def execute(runs: list[Run], root: Path, executor: str = "local", parallel: int 
     specs = [{"name": r.name, "ranks": r.ranks, "args": list(map(str, r.args)), "params": r.params}
              for r in runs]
     manifest.save_runs(root, specs)
-    todo = [r for r in runs if not (resume and is_done(root / r.name, r))]
-    log(f"batch: {len(runs)} runs in {root}, {len(runs) - len(todo)} already complete, "
-        f"{len(todo)} to run ({executor})")
+    busy = {r.name for r in runs if runner.active(root / r.name)}
+    todo = [r for r in runs if r.name not in busy and not (resume and is_done(root / r.name, r))]
+    log(f"batch: {len(runs)} runs in {root}, {len(runs) - len(todo) - len(busy)} already complete, "
+        f"{len(todo)} to run ({executor})" + (f", {len(busy)} still running elsewhere (left alone)"
+                                              if busy else ""))
     for r in todo:
         runner.prepare(root / r.name, r.scene_text, r.ranks, r.args, r.params)
     submitted: set[str] = set()
@@ -73,7 +75,8 @@ def execute(runs: list[Run], root: Path, executor: str = "local", parallel: int 
             submitted = set() if wait else {r.name for r in todo}
     finally:
         manifest.write(root, specs)
-    return [_outcome(root, r.name, "submitted" if r.name in submitted else None) for r in runs]
+    return [_outcome(root, r.name, "submitted" if r.name in submitted else
+                     "running elsewhere" if r.name in busy else None) for r in runs]
 
 
 def is_done(folder: Path, run: Run) -> bool:

@@ -72,7 +72,8 @@ def main(argv: list[str]) -> int:
         counts[o.status.split(":")[0]] = counts.get(o.status.split(":")[0], 0) + 1
     print(f"{root / manifest.MANIFEST}: {len(outcomes)} runs: "
           + ", ".join(f"{n} {s}" for s, n in sorted(counts.items())))
-    return 0 if all(o.status in ("complete", "submitted") for o in outcomes) else EXIT_SOLVER
+    ok = ("complete", "submitted", "running elsewhere")
+    return 0 if all(o.status in ok for o in outcomes) else EXIT_SOLVER
 
 
 def _list(runs, root: Path) -> None:

@@ -173,12 +173,14 @@ def _runs(points: list[dict], base: dict, scene: Path, folder: Path, ranks: int,
           args: tuple[str, ...], source: str) -> list[Run]:
     runs, names = [], set()
     labels = _labels(_varied(points))
+    order = list(dict.fromkeys(k for p in points for k in p if k not in SPECIAL)) + ["ranks"]
     for point in points:
         changes = {k: v for k, (v, _) in point.items() if k not in SPECIAL}
         params = {k: v for k, (v, _) in point.items() if k not in ("args", "name")}
         r = point.get("ranks", (ranks, ""))
         if "ranks" in labels:  # varied somewhere: name and list it for every run
             params["ranks"] = r[0]
+        params = {k: params[k] for k in order if k in params}
         if not isinstance(r[0], int) or isinstance(r[0], bool) or r[0] < 1:
             raise InputError(f"ranks must be a positive integer, got {r[0]!r}", source, r[1])
         try:

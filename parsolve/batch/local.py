@@ -5,6 +5,7 @@ for it, records the runs as interrupted and re-raises."""
 from __future__ import annotations
 
 import signal
+import threading
 import time
 from pathlib import Path
 from typing import Callable
@@ -17,7 +18,10 @@ def execute(folders: list[Path], parallel: int, log: Callable[[str], None]) -> N
     pending = list(folders)
     running: dict[Path, tuple] = {}
     total, done = len(folders), 0
-    old = signal.signal(signal.SIGTERM, _raise_interrupt)
+    # SIGTERM (a job scheduler stopping the batch) stops the runs as Ctrl-C does; only the
+    # main thread may install handlers
+    main = threading.current_thread() is threading.main_thread()
+    old = signal.signal(signal.SIGTERM, _raise_interrupt) if main else None
     try:
         while pending or running:
             while pending and len(running) < max(1, parallel):
@@ -27,7 +31,7 @@ def execute(folders: list[Path], parallel: int, log: Callable[[str], None]) -> N
                 code = proc.poll()
                 if code is None:
                     continue
-                runner.finish(folder, runner._exit_status(code), time.perf_counter() - t0)
+                runner.finish(folder, runner.exit_status(code), time.perf_counter() - t0)
                 del running[folder]
                 done += 1
                 log(f"[{done}/{total}] {folder.name}: {runner.status_of(folder)[0]}")
@@ -36,11 +40,11 @@ def execute(folders: list[Path], parallel: int, log: Callable[[str], None]) -> N
         log(f"batch: interrupted, stopping {len(running)} running run(s)")
         for folder, (proc, t0) in running.items():
             code = runner.stop(proc)
-            runner.finish(folder, runner._exit_status(code) if code != 0 else 130,
-                          time.perf_counter() - t0)
+            runner.finish(folder, runner.exit_status(code), time.perf_counter() - t0)
         raise
     finally:
-        signal.signal(signal.SIGTERM, old)
+        if main:
+            signal.signal(signal.SIGTERM, old)
 
 
 def _raise_interrupt(signum, frame):

@@ -27,7 +27,7 @@ def write(root: Path, runs: list[dict]) -> list[dict]:
     """Read every run's status from its folder and (re)write the manifest; returns its rows."""
     keys: list[str] = []
     for run in runs:
-        keys += [k for k in run.get("params", {}) if k not in keys]
+        keys += [k for k in run.get("params", {}) if k not in keys and k != "ranks"]
     rows = []
     for run in runs:
         folder = root / run["name"]
@@ -51,7 +51,7 @@ def write(root: Path, runs: list[dict]) -> list[dict]:
 
 
 def _cell(value) -> str:
-    return value if isinstance(value, str) else json.dumps(value)
+    return value if isinstance(value, str) else json.dumps(value, default=str)
 
 
 def read(root: Path) -> list[dict]:

@@ -18,6 +18,7 @@ import time
 from pathlib import Path
 
 SCENE, RESULT, SPEC, OUTCOME = "scene.toml", "result.h5", "spec.json", "outcome.json"
+PID, SLURM_JOB = "pid", "slurm_job"
 STDOUT, STDERR = "stdout.txt", "stderr.txt"
 
 # What scripts/mpirun.sh sets: root may run mpirun, more ranks than cores.
@@ -58,7 +59,7 @@ def read_json(path: Path) -> dict | None:
 def prepare(folder: Path, scene_text: str, ranks: int, args, params: dict) -> None:
     """Write the run's inputs and remove what a previous attempt left."""
     folder.mkdir(parents=True, exist_ok=True)
-    for name in (RESULT, OUTCOME, STDOUT, STDERR):
+    for name in (RESULT, OUTCOME, STDOUT, STDERR, PID, SLURM_JOB):
         (folder / name).unlink(missing_ok=True)
     (folder / SCENE).write_text(scene_text)
     write_json(folder / SPEC, {"ranks": ranks, "args": list(map(str, args)), "params": params})
@@ -71,9 +72,11 @@ def start(folder: Path) -> subprocess.Popen:
     out = open(folder / STDOUT, "w")
     err = open(folder / STDERR, "w")
     try:
-        return subprocess.Popen(command(spec["ranks"], spec["args"]), cwd=folder, env=environment(),
+        proc = subprocess.Popen(command(spec["ranks"], spec["args"]), cwd=folder, env=environment(),
                                 stdout=out, stderr=err, stdin=subprocess.DEVNULL,
                                 start_new_session=True)
+        (folder / PID).write_text(f"{proc.pid}\n")  # the process group to signal, for whoever needs to
+        return proc
     finally:
         out.close()
         err.close()
@@ -112,17 +115,38 @@ def run_here(folder: Path) -> int:
     try:
         code = proc.wait()
     except KeyboardInterrupt:
-        code = stop(proc)
-        code = code if code > 0 else 128 - code if code < 0 else 143
+        code = stop(proc)  # parsolve's 143, or -9 after SIGKILL (recorded as 137)
     finally:
         for s, h in old.items():
             signal.signal(s, h)
-    finish(folder, _exit_status(code), time.perf_counter() - t0)
+    finish(folder, exit_status(code), time.perf_counter() - t0)
     return code
 
 
-def _exit_status(code: int) -> int:
+def exit_status(code: int) -> int:
     return 128 - code if code < 0 else code  # killed by signal n → 128 + n, as a shell says
+
+
+def active(folder: Path) -> bool:
+    """Whether another batch is still running this run: no outcome yet, and its process group
+    alive on this machine, or its SLURM task still listed."""
+    if (folder / OUTCOME).exists() or not (folder / SPEC).exists():
+        return False
+    try:
+        os.killpg(int((folder / PID).read_text()), 0)
+        return True
+    except (OSError, ValueError):
+        pass
+    try:
+        job = (folder / SLURM_JOB).read_text().strip()
+    except OSError:
+        return False
+    from parsolve.batch.slurm import listed
+
+    try:
+        return listed([job])
+    except (OSError, subprocess.SubprocessError):
+        return False
 
 
 def result_status(path: Path) -> str | None:

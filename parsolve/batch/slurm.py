@@ -24,35 +24,46 @@ RESOURCES = {"partition": str, "time": str, "cpus_per_task": int, "mem": str, "t
 
 
 def execute(root: Path, names: list[str], resources: dict, log: Callable[[str], None],
-            wait: bool = True) -> tuple[str, str]:
-    """Submit the runs ``names`` (folders prepared under ``root``); returns the array and the
-    post-processing job ids. Waits until every run has ended when ``wait``."""
+            wait: bool = True) -> tuple[list[str], str]:
+    """Submit the runs ``names`` (folders prepared under ``root``): one job array per number of
+    ranks (each task asks for as many CPUs as its run has ranks, unless ``cpus_per_task`` says
+    otherwise) and the post-processing job after all of them. Returns the array ids and the
+    post-processing job id; waits until every run has ended when ``wait``."""
     unknown = set(resources) - set(RESOURCES)
     if unknown:
         raise ValueError(f"unknown SLURM resource(s): {', '.join(sorted(unknown))}")
     folder = root / "slurm"
     folder.mkdir(exist_ok=True)
     stamp = time.strftime("%Y%m%d-%H%M%S") + f"-{time.time_ns() % 10**6:06d}"
-    tasks = folder / f"tasks-{stamp}.txt"
-    tasks.write_text("".join(f"{n}\n" for n in names))
-    ranks = max(runner.read_json(root / n / runner.SPEC)["ranks"] for n in names)
-    array = folder / f"array-{stamp}.sh"
-    array.write_text(_script(resources, ranks, folder / "%A_%a.out", [
-        sys.executable, "-m", "parsolve.batch.task", str(root), str(tasks), "$SLURM_ARRAY_TASK_ID"]))
+    groups: dict[int, list[str]] = {}
+    for n in names:
+        groups.setdefault(runner.read_json(root / n / runner.SPEC)["ranks"], []).append(n)
+    throttle = resources.get("throttle")
+    arrays = []
+    for ranks, group in sorted(groups.items()):
+        tag = f"{stamp}-n{ranks}"
+        tasks = folder / f"tasks-{tag}.txt"
+        tasks.write_text("".join(f"{n}\n" for n in group))
+        script = folder / f"array-{tag}.sh"
+        script.write_text(_script(resources, ranks, folder / "%A_%a.out", [
+            sys.executable, "-m", "parsolve.batch.task", str(root), str(tasks), "$SLURM_ARRAY_TASK_ID"]))
+        spec = f"0-{len(group) - 1}" + (f"%{throttle}" if throttle else "")
+        arrays.append(_sbatch([f"--array={spec}", str(script)]))
+        for i, n in enumerate(group):  # lets a later call see that the run is under way
+            (root / n / runner.SLURM_JOB).write_text(f"{arrays[-1]}_{i}\n")
+        log(f"batch: submitted job array {arrays[-1]} ({len(group)} runs on {ranks} rank(s), "
+            f"--array={spec})")
     collect = folder / f"collect-{stamp}.sh"
     collect.write_text(_script({k: v for k, v in resources.items() if k in ("partition", "account", "qos")},
                                1, folder / "collect-%j.out",
                                [sys.executable, "-m", "parsolve.batch.collect", str(root)],
                                name=resources.get("job_name", "parsolve-batch") + "-collect"))
-    throttle = resources.get("throttle")
-    spec = f"0-{len(names) - 1}" + (f"%{throttle}" if throttle else "")
-    array_id = _sbatch([f"--array={spec}", str(array)])
-    collect_id = _sbatch([f"--dependency=afterok:{array_id}", "--kill-on-invalid-dep=yes", str(collect)])
-    log(f"batch: submitted job array {array_id} ({len(names)} tasks, --array={spec}), "
-        f"post-processing job {collect_id} (afterok:{array_id})")
+    after = "afterok:" + ":".join(arrays)
+    collect_id = _sbatch([f"--dependency={after}", "--kill-on-invalid-dep=yes", str(collect)])
+    log(f"batch: submitted post-processing job {collect_id} (--dependency={after})")
     if wait:
-        _wait(root, names, [array_id, collect_id], float(resources.get("poll", 1.0)), log)
-    return array_id, collect_id
+        _wait(root, names, arrays + [collect_id], float(resources.get("poll", 1.0)), log)
+    return arrays, collect_id
 
 
 def _script(resources: dict, ranks: int, output: Path, cmd: list[str], name: str | None = None) -> str:
@@ -92,14 +103,19 @@ def _wait(root: Path, names: list[str], job_ids: list[str], poll: float,
           log: Callable[[str], None]) -> None:
     left = list(names)
     total = len(names)
-    while True:
-        ended = [n for n in left if (root / n / runner.OUTCOME).exists()]
-        for n in ended:
-            left.remove(n)
-            log(f"[{total - len(left)}/{total}] {n}: {runner.status_of(root / n)[0]}")
-        if not listed(job_ids):
-            break
-        time.sleep(poll)
+    try:
+        while True:
+            ended = [n for n in left if (root / n / runner.OUTCOME).exists()]
+            for n in ended:
+                left.remove(n)
+                log(f"[{total - len(left)}/{total}] {n}: {runner.status_of(root / n)[0]}")
+            if not listed(job_ids):
+                break
+            time.sleep(poll)
+    except KeyboardInterrupt:
+        log(f"batch: stopped waiting; the jobs keep running (scancel {' '.join(job_ids)} stops "
+            f"them; the post-processing job {job_ids[-1]} refreshes the manifest)")
+        raise
     for n in left:  # the task died before recording (scancel, time limit, node failure)
         if not (root / n / runner.OUTCOME).exists():
             log(f"batch: {n}: its SLURM task ended without recording an outcome")
