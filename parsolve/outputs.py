@@ -71,12 +71,9 @@ def step_outputs(comm: MPI.Comm, system, q: np.ndarray, multipliers: dict, newto
             k = system.multiplied.index(r)
             first = system.block.first_row[k]
             rel_out[r.name]["active"] = active[first:first + r.nrows].astype(np.int8)
-    for effect in model.effects:  # per-node states (solubility)
-        if hasattr(effect, "state") and active is not None:
-            r = next(x for x in model.relations if x.name == "solubility")
-            k = system.multiplied.index(r)
-            first = system.block.first_row[k]
-            fields["solubility_state"] = effect.state(active[first:first + r.nrows])[:, None]
+    states = {name: out["active"] for name, out in rel_out.items() if "active" in out}
+    for effect in model.effects:  # per-node states of switched relations (solubility)
+        fields.update(effect.state_outputs(states))
     return fields, cell_fields, rel_out
 
 

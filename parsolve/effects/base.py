@@ -59,3 +59,8 @@ class Effect:
         """({name: (nodal sums (npoints, k), weights (npoints,))}, {name: (owned, nc, k) cell
         values}) of this rank's owned cells; the driver adds the ranks' sums and divides."""
         return {}, {}
+
+    def state_outputs(self, active: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """Per-node states from the active rows of the relations, by relation name:
+        {field name: (npoints, 1)}."""
+        return {}

@@ -114,10 +114,9 @@ class Solubility(Effect):
         rel.meta = {"type": "solubility", "key": self.spec.key, "dual": None, "nodes": nodes}
         return [rel]
 
-    def state(self, active: np.ndarray) -> np.ndarray:
-        """Per node: 0 dissolved, 1 saturated (nodes without c_sat: -1), from the relation's
-        active rows."""
+    def state_outputs(self, active: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """/fields/solubility_state per node: 0 dissolved, 1 saturated (no c_sat: -1)."""
         out = np.full(self.mesh.num_points, -1, dtype=np.int8)
         nodes = np.flatnonzero(np.isfinite(self.c_sat))
-        out[nodes] = active.reshape(-1, 2)[:, 1].astype(np.int8)
-        return out
+        out[nodes] = active["solubility"].reshape(-1, 2)[:, 1]
+        return {"solubility_state": out[:, None]}
