@@ -25,8 +25,12 @@ def _gather_cells(comm, owned: np.ndarray, values: np.ndarray, ncells: int):
 def resultant(relation, lam: np.ndarray, fields, points: np.ndarray) -> np.ndarray:
     """Sum of the reactions D λ per node DOF column (every field's components), then, for a
     model with a displacement field, their moment about the origin (z in 2D; x, y, z in 3D)."""
-    dofs, rows, vals = relation.dual_coo()
-    force = vals * lam[rows]
+    if relation.shared_dual is not None:  # Σ_rows λ_row v = (Σ λ) v: no copy per row
+        dofs, vals = relation.shared_dual
+        force = vals * lam.sum()
+    else:
+        dofs, rows, vals = relation.dual_coo()
+        force = vals * lam[rows]
     ncomp = fields.ncomp
     out = np.bincount(dofs % ncomp, weights=force, minlength=ncomp)
     if "u" not in fields:
@@ -69,7 +73,7 @@ def step_outputs(comm: MPI.Comm, system, q: np.ndarray, multipliers: dict, newto
                            "resultant": resultant(r, lam, model.fields, mesh.points)}
         if r.sense != "=":
             k = system.multiplied.index(r)
-            first = system.block.first_row[k]
+            first = system.block.row_first[k]
             rel_out[r.name]["active"] = active[first:first + r.nrows].astype(np.int8)
     states = {name: out["active"] for name, out in rel_out.items() if "active" in out}
     for effect in model.effects:  # per-node states of switched relations (solubility)
@@ -107,6 +111,11 @@ class Balance:
         for n in self.names:
             supply = float(f_known[self.all[n]].sum())
             for r in model.relations:
+                if r.shared_dual is not None:
+                    dofs, vals = r.shared_dual
+                    on = self.all[n][dofs]
+                    supply += float(vals[on].sum() * multipliers[r.name].sum())
+                    continue
                 dofs, rows, vals = r.dual_coo()
                 on = self.all[n][dofs]
                 supply += float((vals[on] * multipliers[r.name][rows[on]]).sum())

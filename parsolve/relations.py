@@ -43,6 +43,8 @@ class Relation:
     dual: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
     eliminate: bool | None = None  # None: let the solver decide (single-DOF rows are eliminated)
     maximum: bool = False          # unilateral rows of which only the extreme one is enforced
+    shared_dual: tuple[np.ndarray, np.ndarray] | None = None  # every row's reaction along one
+    #                                   vector (dofs, values): a load pattern, stored once
     groups: np.ndarray | None = None  # per row: rows with one id form a group of which exactly
     #                                   one row, the extreme one, is enforced (contiguous rows)
     meta: dict = field(default_factory=dict)
@@ -57,7 +59,13 @@ class Relation:
 
     @property
     def associated(self) -> bool:
-        return self.dual is None
+        return self.dual is None and self.shared_dual is None
+
+    @property
+    def collapsed(self) -> bool:
+        """A maximum group whose rows share one dual vector: one multiplier (one control
+        column) whatever its number of rows, carrying the enforced row's coefficients."""
+        return self.maximum and self.shared_dual is not None
 
     def rhs(self, t: float) -> np.ndarray:
         """b(t), one value per row."""
@@ -79,6 +87,10 @@ class Relation:
 
     def dual_coo(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """D as (dof, row, value); for an associated relation D = -Aᵀ."""
+        if self.shared_dual is not None:
+            dofs, vals = self.shared_dual
+            return (np.tile(dofs, self.nrows), np.repeat(np.arange(self.nrows), dofs.size),
+                    np.tile(vals, self.nrows))
         if self.dual is None:
             return self.a_dofs, self.a_rows, -self.a_vals
         return self.dual
@@ -157,9 +169,7 @@ def rows(name: str, row_dofs: np.ndarray, row_coefs: np.ndarray, value: float = 
 def with_dual(relation: Relation, vector: np.ndarray) -> Relation:
     """The same primal part with every row's reaction along one given vector (non-associated)."""
     nz = np.flatnonzero(vector)
-    dofs = np.tile(nz, relation.nrows)
-    rows = np.repeat(np.arange(relation.nrows), nz.size)
-    relation.dual = (dofs, rows, np.tile(vector[nz], relation.nrows))
+    relation.shared_dual = (nz, vector[nz])
     return relation
 
 

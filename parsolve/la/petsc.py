@@ -89,7 +89,7 @@ class SaddleOperator:
         b, on = self.block, self.active.astype(float)
         d_cols, a_rows = b.d_cols[self._d_sel], b.a_rows[self._a_sel]
         dv = -b.d_vals[self._d_sel] * b.col_scale[d_cols] * on[d_cols]
-        av = b.a_vals[self._a_sel] * b.row_scale[a_rows] * on[a_rows]
+        av = b.a_vals[self._a_sel] * b.row_scale[a_rows] * on[a_rows] * b.a_on[self._a_sel]
         self.data[self.d_final] = np.bincount(self._d_inv, weights=dv, minlength=self.d_final.size)
         self.data[self.a_final] = np.bincount(self._a_inv, weights=av, minlength=self.a_final.size)
         self.data[self.l_diag] = diag * (1.0 - on[self._l0:self._l1])

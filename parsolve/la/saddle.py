@@ -19,7 +19,12 @@ from parsolve.relations import Relation
 
 @dataclass
 class RelationBlock:
-    """All multiplied (not eliminated) relations stacked into global multiplier rows."""
+    """All multiplied (not eliminated) relations stacked into global multiplier rows.
+
+    A relation's rows ("relation rows", what the active set decides) map to multiplier rows
+    one to one, except for a collapsed maximum group (``Relation.collapsed``): all its rows
+    share one multiplier row and one dual column, which carries the coefficients of the
+    enforced row (``selected``); the other rows' A entries are kept in the pattern at zero."""
 
     relations: list[Relation]
     first_row: np.ndarray     # (nrel + 1,) first global multiplier row of each relation
@@ -29,17 +34,41 @@ class RelationBlock:
     d_rows: np.ndarray        # new primal DOF of each D entry
     d_cols: np.ndarray        # global multiplier row of each D entry
     d_vals: np.ndarray        # unscaled, D itself (the matrix holds -D)
+    row_first: np.ndarray = None   # (nrel + 1,) first relation row of each relation
+    mult_of_row: np.ndarray = None  # multiplier row of each relation row
+    rep_row: np.ndarray = None     # relation row each multiplier row enforces now
+    a_relrow: np.ndarray = None    # relation row of each A entry
     row_scale: np.ndarray = None
     col_scale: np.ndarray = None
 
     @property
     def nrows(self) -> int:
+        """Multiplier rows."""
         return int(self.first_row[-1])
+
+    @property
+    def a_on(self) -> np.ndarray:
+        """A entries of the rows enforced now (all but a collapsed group's other rows)."""
+        return self.rep_row[self.a_rows] == self.a_relrow
 
     def rhs(self, t: float) -> np.ndarray:
         """Scaled b(t) of every multiplier row."""
         b = np.concatenate([r.rhs(t) for r in self.relations]) if self.relations else np.zeros(0)
-        return b * self.row_scale
+        return b[self.rep_row] * self.row_scale
+
+    def select(self, active_rows: np.ndarray) -> np.ndarray:
+        """The enforced relation rows → which row each collapsed group carries, and the mask of
+        multiplier rows enforced."""
+        on = np.zeros(self.nrows, dtype=bool)
+        np.logical_or.at(on, self.mult_of_row, active_rows)
+        rows = np.flatnonzero(active_rows)
+        self.rep_row[self.mult_of_row[rows]] = rows
+        return on
+
+    def row_values(self, per_mult: np.ndarray) -> np.ndarray:
+        """Per relation row: a multiplier row's value on the row it enforces, 0 on the others."""
+        out = per_mult[self.mult_of_row]
+        return np.where(self.rep_row[self.mult_of_row] == np.arange(out.size), out, 0.0)
 
     def set_scales(self, kscale: float) -> None:
         """Scale each row of A and column of D to the size of the stiffness diagonal."""
@@ -61,13 +90,22 @@ class RelationBlock:
 def stack_relations(relations: list[Relation], layout: Layout) -> RelationBlock:
     """Concatenate relations into global multiplier rows, in new DOF numbering."""
     sizes = [r.nrows for r in relations]
-    first = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-    ar, ac, av, dr, dc, dv = [], [], [], [], [], []
+    mult_sizes = [1 if r.collapsed else r.nrows for r in relations]
+    row_first = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    first = np.concatenate([[0], np.cumsum(mult_sizes)]).astype(np.int64)
+    ar, ac, av, dr, dc, dv, arel, mult = [], [], [], [], [], [], [], []
     for k, rel in enumerate(relations):
-        ar.append(rel.a_rows + first[k])
+        local = np.zeros(rel.nrows, dtype=np.int64) if rel.collapsed else np.arange(rel.nrows)
+        mult.append(local + first[k])
+        ar.append(local[rel.a_rows] + first[k])
+        arel.append(rel.a_rows + row_first[k])
         ac.append(layout.new_dof(rel.a_dofs))
         av.append(rel.a_vals)
-        dofs, rows, vals = rel.dual_coo()
+        if rel.collapsed:  # one copy of the shared vector
+            dofs, vals = rel.shared_dual
+            rows = np.zeros(dofs.size, dtype=np.int64)
+        else:
+            dofs, rows, vals = rel.dual_coo()
         dr.append(layout.new_dof(dofs))
         dc.append(np.asarray(rows, dtype=np.int64) + first[k])
         dv.append(np.asarray(vals, dtype=float))
@@ -75,5 +113,9 @@ def stack_relations(relations: list[Relation], layout: Layout) -> RelationBlock:
     def cat(parts, dtype):
         return np.concatenate(parts).astype(dtype) if parts else np.zeros(0, dtype)
 
+    mult_of_row = cat(mult, np.int64)
+    rep_row = np.zeros(int(first[-1]), dtype=np.int64)
+    rep_row[mult_of_row[::-1]] = np.arange(mult_of_row.size)[::-1]  # first row of each
     return RelationBlock(relations, first, cat(ar, np.int64), cat(ac, np.int64), cat(av, float),
-                         cat(dr, np.int64), cat(dc, np.int64), cat(dv, float))
+                         cat(dr, np.int64), cat(dc, np.int64), cat(dv, float), row_first,
+                         mult_of_row, rep_row, cat(arel, np.int64))

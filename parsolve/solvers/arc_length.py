@@ -75,8 +75,7 @@ class ArcLength(NewtonSolver):
                 self.linear.set_operator(mat)
                 self._mat = mat
             # bordering: the response to the residual and to the reference load
-            target_r = (np.concatenate([x.rhs(t) for x in system.multiplied]) if system.multiplied
-                        else zero_t) - system.primal_values(self.q)
+            target_r = system.gap(t, self.q)
             elim_r = system.elim_values(t) - self.q[system.elim_dofs] if system.elim_dofs.size else zero_e
             f_r = system.model.external_load(t) + self.mu * self.P - f_int
             dq_r, lam_r = self._solve(f_r, target_r * blk.row_scale if blk.nrows else zero_t, elim_r, mat)

@@ -118,6 +118,9 @@ class LinearSolver:
         try:
             with opt.inserted(self.prefix, self.settings):
                 self.ksp.setUp()
+                # KSPSetUp does not set the PC up again once it has solved: PCSetUp does,
+                # when the operator's values changed (the factorization, timed here)
+                self.ksp.getPC().setUp()
         except PETSc.Error as exc:
             raise SolverError(f"solver set-up failed ({self._reason(exc)}); check the "
                               "PETSc options of the scene and the command line") from None

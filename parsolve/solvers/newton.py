@@ -119,7 +119,7 @@ class NewtonSolver:
                 return StepResult(it + predictions, residual, f_int)
             if it == spec.max_iterations:
                 break
-            system.op.active = self.active.active
+            system.set_active(self.active.active)
             mat = system.assemble(kmat)
             if self._mat is None:
                 self.linear.set_operator(mat)
@@ -146,7 +146,7 @@ class NewtonSolver:
         system = self.system
         active = self.active.active.copy()
         active[released] = False
-        system.op.active = active
+        system.set_active(active)
         mat = system.assemble(kmat)
         if self._mat is None:
             self.linear.set_operator(mat)
@@ -159,8 +159,12 @@ class NewtonSolver:
 
     def _dual_column(self, k: int, row: int | None = None) -> np.ndarray:
         """Column of D of relation k (its first row when every row shares one vector)."""
-        dofs, rows, vals = self.system.multiplied[k].dual_coo()
+        rel = self.system.multiplied[k]
         f = np.zeros(self.ndof)
+        if rel.shared_dual is not None:
+            np.add.at(f, *rel.shared_dual)
+            return f
+        dofs, rows, vals = rel.dual_coo()
         sel = rows == (0 if row is None else row)
         np.add.at(f, dofs[sel], vals[sel])
         return f
@@ -174,7 +178,7 @@ class NewtonSolver:
         for k, r in enumerate(system.multiplied):
             if r.sense == "=" or r.associated or r.maximum or r.groups is not None:
                 continue  # a group's enforced row is chosen by value, whatever its sign
-            rows = np.arange(blk.first_row[k], blk.first_row[k + 1])
+            rows = np.arange(blk.row_first[k], blk.row_first[k + 1])
             if r.meta.get("dual"):
                 rate = r.primal(self._unit_response(kmat, rows, self._dual_column(k)))
             else:
@@ -197,7 +201,7 @@ class NewtonSolver:
         groups = np.concatenate(self.active.groups)
         f = np.zeros(self.ndof)
         for g in self.active.groups:  # the control load of each group at unit intensity
-            f += self._dual_column(int(np.searchsorted(blk.first_row, g[0], side="right") - 1))
+            f += self._dual_column(int(np.searchsorted(blk.row_first, g[0], side="right") - 1))
         dq = self._unit_response(kmat, groups, f)
         rates = system.primal_values(dq)
         gap = np.concatenate([r.rhs(t) for r in system.multiplied]) - system.primal_values(self.q)
@@ -225,7 +229,8 @@ class NewtonSolver:
         scale_gap = max(float(np.abs(gap).max()), float(np.abs(system.primal_values(self.q)).max()),
                         1e-300)
         scale_lam = max(float(np.abs(self.lam).max()), 1e-300)
-        return self.active.update(gap, self.lam, 1e-9 * scale_gap, 1e-9 * scale_lam, scale_gap)
+        lam = self.system.block.row_values(self.lam) if self.lam.size else self.lam
+        return self.active.update(gap, lam, 1e-9 * scale_gap, 1e-9 * scale_lam, scale_gap)
 
     def multipliers(self, t: float, f_int: np.ndarray) -> dict[str, np.ndarray]:
         """λ of every relation by name (eliminated ones recovered from their rows)."""

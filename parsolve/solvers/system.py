@@ -45,7 +45,7 @@ class SaddleSystem:
         self.part = partition(mesh, comm.size)
         self.eliminated = [r for r in model.relations if r.eliminable()]
         self.multiplied = [r for r in model.relations if not r.eliminable()]
-        nmult = sum(r.nrows for r in self.multiplied)
+        nmult = sum(1 if r.collapsed else r.nrows for r in self.multiplied)
         self.layout = lay = make_layout(self.part, ncomp, nmult)
         self.local_cells = self.part.local_cells(rank, mesh.cells)
         lumped = model.scene.time is None or model.scene.time.mass == "lumped"
@@ -145,7 +145,7 @@ class SaddleSystem:
             f_full = f_full - f_int
         target = self.block.rhs(t)
         if q is not None and self.block.nrows:
-            target = target - self.primal_values(q) * self.block.row_scale
+            target = target - self.primal_values(q)[self.block.rep_row] * self.block.row_scale
         values = self.elim_values(t)
         if q is not None and self.elim_dofs.size:
             values = values - q[self.elim_dofs]
@@ -164,6 +164,17 @@ class SaddleSystem:
             b -= self.op.lifting(x_e)
             b[self.op.elim_rows - self.offset] = self.kscale * x_e[self.op.elim_rows]
         return b, x_e
+
+    def set_active(self, active_rows: np.ndarray) -> None:
+        """Enforce these relation rows (a collapsed group carries its enforced row)."""
+        self.op.active = self.block.select(active_rows)
+
+    def gap(self, t: float, q: np.ndarray) -> np.ndarray:
+        """b(t) - A q of every multiplier row, unscaled."""
+        if not self.multiplied:
+            return np.zeros(0)
+        b = np.concatenate([r.rhs(t) for r in self.multiplied])
+        return (b - self.primal_values(q))[self.block.rep_row]
 
     def primal_values(self, q: np.ndarray) -> np.ndarray:
         """A q of every multiplied row (unscaled), q a full primal vector (input numbering)."""
@@ -203,8 +214,9 @@ class SaddleSystem:
         q = x_full[self.saddle_of_input]
         lam = self.multipliers(x_full)
         out = {}
+        per_row = self.block.row_values(lam) if self.block.nrows else lam
         for k, r in enumerate(self.multiplied):
-            out[r.name] = lam[self.block.first_row[k]:self.block.first_row[k + 1]]
+            out[r.name] = per_row[self.block.row_first[k]:self.block.row_first[k + 1]]
         if self.eliminated:
             out.update(self._eliminated_multipliers(x_full, t, f_int, f_ext))
         return q, out
