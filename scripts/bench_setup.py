@@ -17,7 +17,8 @@ Section *mumps* (1 and 2 ranks): the saddle system of a clamped 2D / 3D block un
 traction, factorised by MUMPS (the direct preset's options: Cholesky when symmetric, LU with a
 non-associated relation) with each ordering: analysis + factorisation time (ksp.setUp, slowest
 rank), RINFOG(3) (flops of the elimination), INFOG(29) (entries in the factors) and INFOG(7)
-(ordering MUMPS actually used). Cases: "none" (clamp eliminated: K alone), "side" (a `mean`
+(ordering MUMPS actually used: 0 AMD, 2 AMF, 3 SCOTCH, 4 PORD, 5 METIS, 6 QAMD; a library
+missing from MUMPS's build falls back to another). Cases: "none" (clamp eliminated: K alone), "side" (a `mean`
 relation on the right side whose dual is a traction over that side, controlled_bar.toml's
 relation) and "body" (the same relation with a body force over the whole domain as dual: a
 dense column and row).
@@ -55,6 +56,8 @@ SIZES_3D = [20, 40, 60, 79]                  # 3(N+1)³ DOFs: 28k, 207k, 681k, 1
 QUICK_2D, QUICK_3D = [70, 223], [20]
 ORDERINGS = {                                 # name -> MUMPS options
     "AMD": {"mat_mumps_icntl_7": "0"},
+    "AMF": {"mat_mumps_icntl_7": "2"},
+    "PORD": {"mat_mumps_icntl_7": "4"},
     "SCOTCH": {"mat_mumps_icntl_7": "3"},
     "METIS": {"mat_mumps_icntl_7": "5"},
     "QAMD": {"mat_mumps_icntl_7": "6"},

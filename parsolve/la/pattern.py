@@ -35,21 +35,24 @@ class NodePattern:
         """Stiffness entries of each owned DOF row (node-major DOFs)."""
         return np.repeat(self.nb * self.ncomp, self.ncomp)
 
-    def block_positions(self, row_start: np.ndarray) -> np.ndarray:
+    def block_positions(self, row_start: np.ndarray, dtype: type | None = None) -> np.ndarray:
         """(ncomp, ncomp, nnzb) slot of entry (i, j) of each node-pair block in a CSR whose owned
-        DOF row r starts at row_start[r] with its stiffness entries first."""
+        DOF row r starts at row_start[r] with its stiffness entries first.
+
+        dtype: of the result (default: row_start's, at least int64); np.int32 halves the memory
+        of a map kept for every re-assembly when the CSR has fewer than 2³¹ entries."""
         # entry (i, j) of pair p in node row n: row_start[n nc + i] + nc (p - bptr[n]) + j; the
         # per-row part is repeated once per component, the rest is a ramp: no (nc, nnzb) gather
         nc = self.ncomp
         bptr = np.concatenate([[0], np.cumsum(self.nb)])
         first = row_start.reshape(-1, nc) - nc * bptr[:-1, None]                # (nown, nc)
         ramp = nc * np.arange(self.nnzb, dtype=np.int64)
-        out = np.empty((nc, nc, self.nnzb), dtype=np.result_type(row_start, np.int64))
+        out = np.empty((nc, nc, self.nnzb), dtype=dtype or np.result_type(row_start, np.int64))
         for i in range(nc):
             start = np.repeat(first[:, i], self.nb)
             start += ramp
             for j in range(nc):
-                np.add(start, j, out=out[i, j])
+                np.add(start, j, out=out[i, j], casting="unsafe")
         return out
 
     def diagonal_positions(self, row_start: np.ndarray) -> np.ndarray:

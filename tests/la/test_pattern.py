@@ -106,6 +106,9 @@ def test_pattern_matches_reference(cell, nparts, shuffle):
         got = new.block_positions(row_start)
         np.testing.assert_array_equal(got, reference_block_positions(new, row_start))
         assert got.dtype == np.int64
+        small = new.block_positions(row_start.astype(np.int32), dtype=np.int32)
+        assert small.dtype == np.int32
+        np.testing.assert_array_equal(small, got)
 
 
 def test_rows_without_cells_and_repeated_nodes():
