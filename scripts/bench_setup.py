@@ -26,6 +26,7 @@ dense column and row).
 Usage (from the repository root):
     .venv/bin/python scripts/bench_setup.py                 # everything
     .venv/bin/python scripts/bench_setup.py --sections pattern first --quick
+    .venv/bin/python scripts/bench_setup.py --report      # table again from bench_results/setup.json
 Writes bench_results/setup.json and scripts/results/bench_setup.md.
 """
 
@@ -332,7 +333,7 @@ def pattern_table(rows: list[dict]) -> str:
     head = ("| cell | DOFs | node pairs | node_pattern old s | new s | ×faster | block_positions "
             "old s | new s | ×faster |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|\n")
     body = "".join(
-        f"| {r['cell']} | {r['dofs']:,} | {r['nnzb']:,} | {fmt(r['pattern_old'])} | "
+        f"| {r['cell']} | {r['dofs']:,} | {format(r['nnzb'], ',') if 'nnzb' in r else '–'} | {fmt(r['pattern_old'])} | "
         f"{fmt(r['pattern_new'])} | {ratio(r['pattern_old'], r['pattern_new'])} | "
         f"{fmt(r['blockpos_old'])} | {fmt(r['blockpos_new'])} | "
         f"{ratio(r['blockpos_old'], r['blockpos_new'])} |\n" for r in rows)
@@ -387,6 +388,10 @@ def main() -> None:
                    choices=["pattern", "first", "mumps"])
     p.add_argument("--quick", action="store_true", help="small sizes only (a smoke test)")
     p.add_argument("--no-peers", action="store_true")
+    p.add_argument("--peers-from", default=None, metavar="JSON",
+                   help="DOLFINx rows from `bench_peers.py dolfinx --json` instead of running it")
+    p.add_argument("--report", action="store_true",
+                   help="only rewrite the table from bench_results/setup.json")
     p.add_argument("--mumps-2d", type=int, default=300, help="quads per side of the 2D MUMPS case")
     p.add_argument("--mumps-3d", type=int, default=20, help="hexes per side of the 3D MUMPS case")
     p.add_argument("--child", nargs="+", default=None, help=argparse.SUPPRESS)
@@ -407,39 +412,51 @@ def main() -> None:
 
     s2, s3 = (QUICK_2D, QUICK_3D) if a.quick else (SIZES_2D, SIZES_3D)
     cases = [(c, n, 2) for c in ("triangle", "quad") for n in s2] + [("hexahedron", n, 3) for n in s3]
-    results: dict[str, list] = {"pattern": [], "first": [], "mumps": []}
+    saved = RESULTS / "setup.json"
+    RESULTS.mkdir(exist_ok=True)
+    # sections not run now keep their last results; every row is saved as soon as it is measured
+    results = json.loads(saved.read_text()) if saved.exists() else {}
+    for section in ("pattern", "first", "mumps"):
+        if (section in a.sections and not a.report) or section not in results:
+            results[section] = []
+    results.setdefault("peers", [])
+
+    def save():
+        saved.write_text(json.dumps(results, indent=1))
+
     t_start = time.time()
     for section in ("pattern", "first"):
-        if section not in a.sections:
+        if section not in a.sections or a.report:
             continue
         for cell, n, dim in cases:
             row = spawn([section, cell, str(n), str(repeats_for(dofs_of(dim, n)))])
             if row:
                 results[section].append(row)
+                save()
                 print(f"[{section}] {cell} {n}: " + ", ".join(
                     f"{k}={v:.3f}" for k, v in row.items() if isinstance(v, float)), flush=True)
-    peers = {}
-    if "first" in a.sections and not a.no_peers:
+    if a.peers_from:
+        peer_rows = json.loads(Path(a.peers_from).read_text())["assembly"]
+        results["peers"] = [dict(r, key=[r["cell"], r["n"]]) for r in peer_rows if r["nranks"] == 1]
+    elif "first" in a.sections and not a.no_peers and not a.report:
         peers = run_dolfinx({c: [n for n in s2] for c in ("triangle", "quad")})
-    if "mumps" in a.sections:
+        results["peers"] = [dict(v, key=list(k)) for k, v in peers.items()]
+    save()
+    if "mumps" in a.sections and not a.report:
         sizes = {2: 60 if a.quick else a.mumps_2d, 3: 8 if a.quick else a.mumps_3d}
         for dim in (2, 3):
             for control in ("none", "side", "body"):
                 for nranks in (1, 2):
                     rows = spawn(["mumps", str(dim), str(sizes[dim]), control], nranks=nranks)
                     results["mumps"].extend(rows or [])
-    RESULTS.mkdir(exist_ok=True)
-    saved = RESULTS / "setup.json"
-    earlier = json.loads(saved.read_text()) if saved.exists() else {}
-    for section in results:  # sections not run now keep their last results (and their peers)
-        if section not in a.sections:
-            results[section] = earlier.get(section, [])
-    if "first" not in a.sections or a.no_peers:
-        peers = {tuple(p["key"]): p for p in earlier.get("peers", [])}
-    saved.write_text(json.dumps(
-        dict(results, peers=[dict(v, key=list(k)) for k, v in peers.items()]), indent=1))
+                    save()
+    write_report(results, time.time() - t_start)
+
+
+def write_report(results: dict, seconds: float) -> None:
+    peers = {tuple(p["key"]): p for p in results.get("peers", [])}
     text = ["# parsolve set-up benchmark", "", __doc__.split("\n\n", 1)[1].split("Usage")[0].strip(),
-            "", machine() + f" {time.time() - t_start:.0f} s.", ""]
+            "", machine() + f" {seconds:.0f} s.", ""]
     if results["pattern"]:
         text += ["## Node-pair pattern (1 rank, old = previous builder, same process)", "",
                  pattern_table(results["pattern"])]
