@@ -388,6 +388,9 @@ def main() -> None:
                    choices=["pattern", "first", "mumps"])
     p.add_argument("--quick", action="store_true", help="small sizes only (a smoke test)")
     p.add_argument("--no-peers", action="store_true")
+    p.add_argument("--n2d", type=int, nargs="+", default=None, help="2D sizes (quads per side)")
+    p.add_argument("--n3d", type=int, nargs="+", default=None, help="3D sizes (hexes per side)")
+    p.add_argument("--repeats", type=int, default=None, help="default: 3/2/1 by size")
     p.add_argument("--peers-from", default=None, metavar="JSON",
                    help="DOLFINx rows from `bench_peers.py dolfinx --json` instead of running it")
     p.add_argument("--report", action="store_true",
@@ -411,6 +414,7 @@ def main() -> None:
         return
 
     s2, s3 = (QUICK_2D, QUICK_3D) if a.quick else (SIZES_2D, SIZES_3D)
+    s2, s3 = a.n2d or s2, a.n3d or s3
     cases = [(c, n, 2) for c in ("triangle", "quad") for n in s2] + [("hexahedron", n, 3) for n in s3]
     saved = RESULTS / "setup.json"
     RESULTS.mkdir(exist_ok=True)
@@ -429,7 +433,8 @@ def main() -> None:
         if section not in a.sections or a.report:
             continue
         for cell, n, dim in cases:
-            row = spawn([section, cell, str(n), str(repeats_for(dofs_of(dim, n)))])
+            repeats = a.repeats or repeats_for(dofs_of(dim, n))
+            row = spawn([section, cell, str(n), str(repeats)])
             if row:
                 results[section].append(row)
                 save()
@@ -456,7 +461,7 @@ def main() -> None:
 def write_report(results: dict, seconds: float) -> None:
     peers = {tuple(p["key"]): p for p in results.get("peers", [])}
     text = ["# parsolve set-up benchmark", "", __doc__.split("\n\n", 1)[1].split("Usage")[0].strip(),
-            "", machine() + f" {seconds:.0f} s.", ""]
+            "", machine() + f" {seconds:.0f} s.", "", *results.get("notes", [])]
     if results["pattern"]:
         text += ["## Node-pair pattern (1 rank, old = previous builder, same process)", "",
                  pattern_table(results["pattern"])]
