@@ -51,11 +51,11 @@ class SaddleOperator:
         na_row = np.bincount(a_r, minlength=nlo) + 1
         rowptr = np.concatenate([[0], np.cumsum(np.concatenate([k_nnz + nd_row, na_row]))])
         nnz = int(rowptr[-1])
-        cols = np.empty(nnz, dtype=np.int64)
+        cols = np.empty(nnz, dtype=PETSc.IntType)
         # stiffness entries first in each primal row: node-pair blocks; a node's DOFs are
         # consecutive in the saddle numbering
         nc = layout.ncomp
-        self.block_pos = pattern.block_positions(rowptr[:nqo])
+        self.block_pos = pattern.block_positions(rowptr[:nqo], dtype=PETSc.IntType)
         self.diag_pos = pattern.diagonal_positions(rowptr[:nqo])
         self._pair_col = layout.q_index(pattern.ucol * nc)
         cols[self.block_pos] = self._pair_col[None, None, :] + np.arange(nc)[None, :, None]
@@ -71,7 +71,7 @@ class SaddleOperator:
         cols[self.l_diag] = layout.l_index(np.arange(l0, l1))
         self.offset = int(layout.offsets[comm.rank])
         self.rowptr = rowptr.astype(PETSc.IntType)
-        self.cols = cols.astype(PETSc.IntType)
+        self.cols = cols
         self.data = np.zeros(nnz)
         self.active = np.ones(layout.nl, dtype=bool)  # global multiplier rows enforced
         self._l0, self._l1 = l0, l1

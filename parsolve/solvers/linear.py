@@ -19,13 +19,23 @@ from parsolve.errors import SolverError
 from parsolve.solvers import options as opt
 
 
-def preset_options(preset: str, symmetric: bool, has_multipliers: bool) -> dict[str, str]:
+#: A relation row or column longer than this makes the system "dense" for MUMPS' ordering.
+DENSE_ENTRIES = 20_000
+
+
+def preset_options(preset: str, symmetric: bool, has_multipliers: bool,
+                   dense: bool = False) -> dict[str, str]:
+    """``dense``: some relation row or column has over DENSE_ENTRIES entries."""
     if preset == "direct":
         return {
             "ksp_type": "preonly",
             "pc_type": "cholesky" if symmetric else "lu",
             "pc_factor_mat_solver_type": "mumps",
-            "mat_mumps_icntl_7": "6",     # QAMD ordering
+            # QAMD: PORD (the only other ordering of Debian's MUMPS: no METIS, no SCOTCH) needs
+            # 0.5-0.6x QAMD's flops without long relation rows, but its analysis is ~9x slower
+            # with a dense one (scripts/results/bench_setup.md): QAMD is the safe default.
+            # -mat_mumps_icntl_7 4 selects PORD for scenes known to have no dense relation.
+            "mat_mumps_icntl_7": "6",
             "mat_mumps_icntl_24": "1",    # detect null pivots...
             "mat_mumps_cntl_3": "1e-12",  # ...below 1e-12 ||A|| (relations are scaled to K)
             "mat_mumps_icntl_14": "50",   # workspace margin for delayed pivots
