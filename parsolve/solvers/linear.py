@@ -19,13 +19,7 @@ from parsolve.errors import SolverError
 from parsolve.solvers import options as opt
 
 
-#: A relation row or column longer than this makes the system "dense" for MUMPS' ordering.
-DENSE_ENTRIES = 20_000
-
-
-def preset_options(preset: str, symmetric: bool, has_multipliers: bool,
-                   dense: bool = False) -> dict[str, str]:
-    """``dense``: some relation row or column has over DENSE_ENTRIES entries."""
+def preset_options(preset: str, symmetric: bool, has_multipliers: bool) -> dict[str, str]:
     if preset == "direct":
         return {
             "ksp_type": "preonly",

@@ -10,7 +10,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from parsolve.solvers import options as opt
-from parsolve.solvers.linear import DENSE_ENTRIES, LinearSolver, preset_options
+from parsolve.solvers.linear import LinearSolver, preset_options
 from parsolve.solvers.system import SaddleSystem
 
 
@@ -35,10 +35,7 @@ def make_solver(comm: MPI.Comm, system: SaddleSystem, cli_options: dict[str, str
     secant = scene.nonlinear.matrix == "secant"
     symmetric = all(r.associated for r in system.multiplied) and system.model.symmetric(secant)
     has_mult = system.layout.nl > 0
-    blk = system.block
-    longest = max([0] + [int(np.bincount(ix).max()) for ix in (blk.a_rows, blk.d_cols) if ix.size])
-    settings = opt.merge(preset_options(scene.solver.preset, symmetric, has_mult,
-                                        longest > DENSE_ENTRIES),
+    settings = opt.merge(preset_options(scene.solver.preset, symmetric, has_mult),
                          scene.solver.options, cli_options)
     is_q, is_l = system.op.index_sets()
     modes = rigid_body_modes(comm, system) if scene.solver.preset == "iterative" else None
