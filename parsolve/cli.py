@@ -49,13 +49,23 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+def _is_option(word: str) -> bool:
+    """A dash word that is not a negative number. (Here, not in solvers.options: importing
+    petsc4py.PETSc before petsc4py.init(args) would make PETSc ignore the command line.)"""
+    if not word.startswith("-"):
+        return False
+    try:
+        float(word)
+        return False
+    except ValueError:
+        return True
+
+
 def split_args(argv: list[str]) -> tuple[list[str], list[str]]:
     """(parsolve's words, PETSc's words). PETSc options are single-dash words other than
     exactly ``-o`` and ``-h`` (so ``-options_left``, ``-on_error_abort``, ``-options_file F``
     reach PETSc intact), each with its value when the next word is not an option. A
     double-dash word must be one of ours: ``--outptu`` is an error with a suggestion."""
-    from parsolve.solvers.options import _is_option
-
     ours, petsc = [], []
     i = 0
     while i < len(argv):

@@ -297,3 +297,13 @@ def test_mpirun_results_match_one_rank(nranks, tmp_path):
                     "relations/symmetry_x/multiplier"):
             x, y = a[key][()], b[key][()]
             assert np.abs(x - y).max() <= 1e-10 * np.abs(x).max(), key
+
+
+def test_global_petsc_options_reach_petsc(tmp_path):
+    """-log_view and -memory_view are read at PETSc's initialisation: nothing may initialise
+    PETSc before the command line is handed to it."""
+    scene = tmp_path / "bar.toml"
+    scene.write_text(GOOD)
+    proc = parsolve("run", scene, "-o", tmp_path / "bar.h5", "-log_view", "-memory_view", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert "Event" in proc.stdout and "Summary of Memory Usage in PETSc" in proc.stdout
