@@ -17,3 +17,8 @@ for n in 2 3; do
     if [ "${OMPI_COMM_WORLD_RANK:-0}" = 0 ]; then exec '"$PY"' -m pytest $opts tests "$@";
     else exec '"$PY"' -m pytest $opts tests "$@" > /dev/null; fi' _ "$@"
 done
+echo "== pytest, 4 ranks (oversubscribed): partition independence"
+timeout 1200 bash scripts/mpirun.sh -n 4 bash -c '
+  opts="-q --color=no -p no:cacheprovider -o faulthandler_timeout=300"
+  if [ "${OMPI_COMM_WORLD_RANK:-0}" = 0 ]; then exec '"$PY"' -m pytest $opts tests/solvers/test_rank_independence.py "$@";
+  else exec '"$PY"' -m pytest $opts tests/solvers/test_rank_independence.py "$@" > /dev/null; fi' _ "$@"
