@@ -215,7 +215,7 @@ def test_run_result_file_layout(tmp_path):
         assert f["cell_fields/stress"].shape == (10, ncells, 3)
         assert f["relations/control/multiplier"].shape == (10, 1)
         assert f["relations/left_x/primal"].shape == (10, 4)
-        for phase in ("assembly", "solve", "total"):
+        for phase in ("assembly", "factorization", "solve", "output", "total"):
             assert f[f"timings/{phase}"].shape == (10,)
     xdmf = out.with_suffix(".xdmf").read_text()
     import xml.etree.ElementTree as ET
@@ -261,21 +261,23 @@ def test_export_system_reproduces_the_solve(tmp_path):
     code = f"""
 from petsc4py import PETSc
 v = PETSc.Viewer().createBinary('{tmp_path / "sys" / "system.dat"}', 'r')
-A = PETSc.Mat().load(v); b = PETSc.Vec().load(v)
+A = PETSc.Mat().load(v); b = PETSc.Vec().load(v); s = PETSc.Vec().load(v)
 w = PETSc.Viewer().createBinary('{tmp_path / "sys" / "fields.dat"}', 'r')
 isq = PETSc.IS().load(w); isl = PETSc.IS().load(w)
 ksp = PETSc.KSP().create(); ksp.setOperators(A); ksp.setType('preonly')
 pc = ksp.getPC(); pc.setType('lu'); pc.setFactorSolverType('mumps')
 x = b.duplicate(); ksp.solve(b, x)
-print(x.getValues(isl.getIndices())[0], isq.getSize(), isl.getSize())
+i = isl.getIndices()
+print(x.getValues(i)[0], (x.getValues(i) * s.getValues(i))[0], isq.getSize(), isl.getSize())
 """
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
-    lam_scaled, nq, nl = res.stdout.split()
+    lam_scaled, lam_bare, nq, nl = res.stdout.split()
     assert int(nq) == 240 and int(nl) == 1
     with h5py.File(out) as f:
         lam = f["relations/control/multiplier"][0, 0]
     assert abs(lam - 1000.0) < 1e-8  # E H δ / L at the first step
-    assert float(lam_scaled) != 0.0
+    assert float(lam_scaled) != lam      # the relation is scaled to the stiffness...
+    assert abs(float(lam_bare) - lam) < 1e-8 * lam  # ...and s · x is the file's λ
 
 
 @pytest.mark.parametrize("nranks", [2, 3])

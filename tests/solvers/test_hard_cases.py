@@ -224,3 +224,20 @@ def test_bodies_are_the_connected_cells():
     cells = np.array([[0, 1, 2], [2, 3, 4], [5, 6, 7], [8, 7, 9]])
     label = bodies(cells, 11)
     assert list(label) == [0, 0, 0, 0, 0, 5, 5, 5, 5, 5, 10]
+
+
+def test_branch_watch():
+    """The warning of a possible change of equilibrium branch: negative pivots of the tangent
+    that change, or an increment over ten times the previous one (nonlinear runs only)."""
+    import numpy as np
+
+    from parsolve.driver import BranchWatch
+
+    watch = BranchWatch(nonlinear=True)
+    assert watch.check(np.ones(4), 0) is None
+    assert watch.check(2 * np.ones(4), 0) is None
+    assert "negative pivots went from 0 to 1" in watch.check(2 * np.ones(4), 1)
+    assert "25× the previous" in watch.check(50 * np.ones(4), 1)
+    linear = BranchWatch(nonlinear=False)
+    linear.check(np.ones(4), None)
+    assert linear.check(1e6 * np.ones(4), None) is None
