@@ -102,31 +102,42 @@ class Balance:
         return {n: self.comm.allreduce(float(m[self.owned[n]].sum())) for n in self.names}
 
     def step(self, q: np.ndarray, dt: float, f_known: np.ndarray, multipliers: dict) -> dict:
-        """Datasets of one step: /balance/<field>/{storage, supplied, error}."""
-        model = self.system.model
+        """Datasets of one step: /balance/<field>/{storage, sources, reactions, supplied,
+        error} (sources and reactions: what came in since the start through the known loads
+        and through the relations' reactions — boundary fluxes, phase exchange)."""
         if self.initial is None:
             self.initial = self.storage(np.zeros_like(q))
+            self.sources = {n: 0.0 for n in self.names}
+            self.reacted = {n: 0.0 for n in self.names}
         stored = self.storage(q)
         out = {}
         for n in self.names:
-            supply = float(f_known[self.all[n]].sum())
-            for r in model.relations:
-                if r.shared_dual is not None:
-                    dofs, vals = r.shared_dual
-                    on = self.all[n][dofs]
-                    supply += float(vals[on].sum() * multipliers[r.name].sum())
-                    continue
-                dofs, rows, vals = r.dual_coo()
-                on = self.all[n][dofs]
-                supply += float((vals[on] * multipliers[r.name][rows[on]]).sum())
-            self.supplied[n] += dt * supply
+            self.sources[n] += dt * float(f_known[self.all[n]].sum())
+            self.reacted[n] += dt * self._reactions(n, multipliers)
+            self.supplied[n] = self.sources[n] + self.reacted[n]
             out[f"balance/{n}/storage"] = stored[n]
+            out[f"balance/{n}/sources"] = self.sources[n]
+            out[f"balance/{n}/reactions"] = self.reacted[n]
             out[f"balance/{n}/supplied"] = self.supplied[n]
             out[f"balance/{n}/error"] = stored[n] - self.initial[n] - self.supplied[n]
         total = sum(stored.values())
         out["balance/total/storage"] = total
         out["balance/total/error"] = total - sum(self.initial.values()) - sum(self.supplied.values())
         return out
+
+    def _reactions(self, name: str, multipliers: dict) -> float:
+        """Σ of the reactions D λ of every relation on a field's equations."""
+        total = 0.0
+        for r in self.system.model.relations:
+            if r.shared_dual is not None:
+                dofs, vals = r.shared_dual
+                on = self.all[name][dofs]
+                total += float(vals[on].sum() * multipliers[r.name].sum())
+                continue
+            dofs, rows, vals = r.dual_coo()
+            on = self.all[name][dofs]
+            total += float((vals[on] * multipliers[r.name][rows[on]]).sum())
+        return total
 
 
 def progress(log, comm, step: int, total, t: float, iterations: int, residual: float,
