@@ -110,7 +110,7 @@ def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log
         timings["total"] = time.perf_counter() - t1
         writer.write_step(t, 1, solver.residual, fields, cell_fields, rel_out, timings, extra=extra)
         progress(log, comm, step + 1, len(scene.times), t, 1, solver.residual, timings["total"],
-                 f"  (linear its {linear_its})")
+                 f"  (linear its {linear_its})" + reported(scene, rel_out))
         q_prev, t_prev = q, t
 
 
@@ -161,10 +161,17 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log) -> None:
         cut_note = f"  (after {schedule.cuts} cut{'s' * (schedule.cuts > 1)})" if schedule.cuts else ""
         schedule.done(t, _max_strain_increment(comm, system, newton.q - snap[0]))
         progress(log, comm, step, schedule.total, t, result.iterations, result.residual, seconds,
-                 cut_note)
+                 cut_note + reported(scene, rel_out))
         if warning and comm.rank == 0:
             log(f"warning: step {step}: {warning}")
             writer.note(f"step {step}: {warning}")
+
+
+def reported(scene, rel_out: dict) -> str:
+    """The resultants of the relations the scene marks ``report = true``, for the log."""
+    names = [r.name for r in scene.relations if r.report]
+    return "".join(f"\n    {n}: resultant " + " ".join(f"{v:.6g}" for v in rel_out[n]["resultant"])
+                   for n in names)
 
 
 class BranchWatch:

@@ -181,6 +181,7 @@ class RelationSpec:
     per_cell: bool = False                 # strain: one row per cell of the region
     maximum: bool = False                  # unilateral rows of which the largest is enforced
     field: str = "u"                       # the field the relation constrains
+    report: bool = False                   # print its resultant with each step's progress line
 
 
 @dataclass
@@ -538,6 +539,7 @@ def _relation(t: Table, dim: int, fields: dict[str, int]) -> RelationSpec:
     eliminate = t.get("eliminate", bool, None)
     per_cell = t.get("per_cell", bool, False) if rtype == "strain" else False
     maximum = t.get("maximum", bool, False)
+    report = t.get("report", bool, False)
     if rtype == "equal" and t.has("value"):
         raise t.error("value", "an 'equal' relation has no value")
     if maximum and sense == "=":
@@ -546,7 +548,7 @@ def _relation(t: Table, dim: int, fields: dict[str, int]) -> RelationSpec:
         raise t.error("maximum", "a maximum control needs several rows (per_cell = true)")
     t.done()
     return RelationSpec(name, rtype, region, comps, value, evolution, terms, dual, sense,
-                        eliminate, t.path, direction, per_cell, maximum, field)
+                        eliminate, t.path, direction, per_cell, maximum, field, report)
 
 
 def _strain_direction(t: Table, dim: int) -> list[float]:

@@ -309,3 +309,12 @@ def test_global_petsc_options_reach_petsc(tmp_path):
     proc = parsolve("run", scene, "-o", tmp_path / "bar.h5", "-log_view", "-memory_view", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert "Event" in proc.stdout and "Summary of Memory Usage in PETSc" in proc.stdout
+
+
+def test_marked_relations_report_their_resultant(tmp_path):
+    """`report = true`: the resultant (Σ of the reactions per component, then the moment) is
+    printed with each step's progress line; the controlled bar's end force E·H·δ/L = 1e4 N."""
+    proc = parsolve("run", CONFIGS / "controlled_bar.toml", "-o", tmp_path / "bar.h5")
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    assert lines[-2].strip() == "control: resultant 10000 0 -500"  # moment: -F · H/2
