@@ -34,7 +34,10 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
     scene = model.scene
     system = SaddleSystem(comm, model)
     relations_meta = {r.name: (r.nrows, r.sense != "=") for r in model.relations}
-    writer = ResultWriter(comm, out, model.mesh, scene.text, petsc_version(), relations_meta)
+    unknowns = {"unknowns": " ".join(f.output for f in model.fields),
+                "dofs": model.mesh.num_points * model.ncomp}
+    writer = ResultWriter(comm, out, model.mesh, scene.text, petsc_version(), relations_meta,
+                          attrs=unknowns)
     status = "complete"
     try:
         if scene.nonlinear.method == "arc_length":
@@ -111,6 +114,7 @@ def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log
         writer.write_step(t, 1, solver.residual, fields, cell_fields, rel_out, timings, extra=extra)
         progress(log, comm, step + 1, len(scene.times), t, 1, solver.residual, timings["total"],
                  f"  (linear its {linear_its})" + reported(scene, rel_out))
+        _pass_notes(comm, solver, writer, log)
         q_prev, t_prev = q, t
 
 
@@ -165,6 +169,17 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log) -> None:
         if warning and comm.rank == 0:
             log(f"warning: step {step}: {warning}")
             writer.note(f"step {step}: {warning}")
+        _pass_notes(comm, solver, writer, log)
+
+
+def _pass_notes(comm, solver, writer, log) -> None:
+    """What the linear solver changed on its own (LU for a non-symmetric operator, more MUMPS
+    workspace): in the log and in the file's warnings."""
+    for note in solver.notes:
+        if comm.rank == 0:
+            log(f"note: {note}")
+        writer.note(note)
+    solver.notes.clear()
 
 
 def reported(scene, rel_out: dict) -> str:

@@ -59,7 +59,9 @@ class ResultWriter:
     """
 
     def __init__(self, comm, path: str | Path, mesh, scene_text: str, petsc_version: str,
-                 relations: dict[str, tuple[int, bool]], xdmf: bool = True):
+                 relations: dict[str, tuple[int, bool]], xdmf: bool = True,
+                 attrs: dict | None = None):
+        """``attrs``: more root attributes (e.g. the unknown fields and their DOFs)."""
         self.comm, self.path, self.mesh = comm, Path(path), mesh
         self.relations = relations  # name -> (nrows, unilateral)
         self.times: list[float] = []
@@ -71,6 +73,7 @@ class ResultWriter:
         self._layout: dict[str, tuple] = {}  # per-step dataset -> (row shape, dtype)
         self._known: dict[str, tuple] = {}   # those created with the file
         self._xdmf = XdmfWriter(self.path, mesh) if xdmf else None
+        self.attrs = attrs or {}
         if comm.rank == 0:
             try:
                 self._open(scene_text, petsc_version)
@@ -87,7 +90,7 @@ class ResultWriter:
         # an OSError we handle), never later when HDF5 evicts or closes a dataset.
         f = self.file = h5py.File(self.path, "w", libver="latest", rdcc_nbytes=0)
         f.attrs.update(parsolve_version=__version__, petsc_version=petsc_version,
-                       nprocs=self.comm.size, status="running", scene=scene_text)
+                       nprocs=self.comm.size, status="running", scene=scene_text, **self.attrs)
         f["mesh/points"] = self.mesh.points
         f[f"mesh/cells/{self.mesh.cell_type}"] = self.mesh.cells
         # What is known now exists even if no step finishes (a failure before the first step)

@@ -66,6 +66,11 @@ REASONS = {getattr(PETSc.KSP.ConvergedReason, name): name.lower().replace("_", "
 SYMMETRY_TOL = 1e-11
 
 
+#: MUMPS errors that more workspace cures (INFOG(1) = -8, -9: integer / real work array too
+#: small, -11, -12, -13, -14, -15, -17, -19, -20: the same in other arrays or phases).
+WORKSPACE_ERRORS = (-8, -9, -11, -12, -13, -14, -15, -17, -19, -20)
+
+
 def reason_in_words(reason: int) -> str:
     """PETSc's KSPConvergedReason as words ("diverged its", "diverged indefinite pc", ...)."""
     return REASONS.get(reason, f"reason {reason}")
@@ -100,16 +105,30 @@ class LinearSolver:
             mat.setNearNullSpace(self.near_null)
         self.ksp.setOperators(mat)
         if not self.configured:
-            with opt.inserted(self.prefix, self.settings):
-                if self.settings.get("pc_type") == "fieldsplit":
-                    pc = self.ksp.getPC()
-                    pc.setType("fieldsplit")
-                    pc.setFieldSplitIS(*self.splits)
-                self.ksp.setFromOptions()
-            self.configured = True
+            self._configure()
+
+    def _configure(self) -> None:
+        with opt.inserted(self.prefix, self.settings):
+            if self.settings.get("pc_type") == "fieldsplit":
+                pc = self.ksp.getPC()
+                pc.setType("fieldsplit")
+                pc.setFieldSplitIS(*self.splits)
+            self.ksp.setFromOptions()
+        self.configured = True
+
+    def _restart(self, mat: PETSc.Mat) -> None:
+        """Forget a failed set-up, so that the next one really factorizes again."""
+        pc_type = self.ksp.getPC().getType()
+        self.ksp.reset()
+        self.ksp.setOperators(mat)
+        self._configure()
+        if pc_type in ("lu", "cholesky"):  # keep an LU chosen by the symmetry check
+            self.ksp.getPC().setType(pc_type)
 
     def _prepare(self) -> None:
-        """Check symmetry and factorize when the operator changed since the last solve."""
+        """Check symmetry and factorize when the operator changed since the last solve. A
+        factorization that runs out of MUMPS workspace (delayed pivots of a saddle point
+        system) is redone with twice the margin, up to three times."""
         mat = self.ksp.getOperators()[0]
         state = mat.stateGet()
         if state == self._state:
@@ -119,17 +138,33 @@ class LinearSolver:
             pc.setType("lu")
             self.notes.append("the operator is not symmetric: LU instead of Cholesky")
         t0 = time.perf_counter()
-        try:
-            with opt.inserted(self.prefix, self.settings):
-                self.ksp.setUp()
-                # KSPSetUp does not set the PC up again once it has solved: PCSetUp does,
-                # when the operator's values changed (the factorization, timed here)
-                self.ksp.getPC().setUp()
-        except PETSc.Error as exc:
-            raise SolverError(f"solver set-up failed ({self._reason(exc)}); check the "
-                              "PETSc options of the scene and the command line") from None
+        for attempt in range(4):
+            try:
+                with opt.inserted(self.prefix, self.settings):
+                    self.ksp.setUp()
+                    # KSPSetUp does not set the PC up again once it has solved: PCSetUp does,
+                    # when the operator's values changed (the factorization, timed here)
+                    self.ksp.getPC().setUp()
+                break
+            except PETSc.Error as exc:
+                info = self._mumps_info()
+                reason = self._reason(exc)
+                self._restart(mat)
+                if info not in WORKSPACE_ERRORS or attempt == 3:
+                    raise SolverError(f"solver set-up failed ({reason}); check the PETSc "
+                                      "options of the scene and the command line") from None
+                margin = 2 * int(self.settings.get("mat_mumps_icntl_14", "50")) + 50
+                self.settings = {**self.settings, "mat_mumps_icntl_14": str(margin)}
+                self.notes.append(f"MUMPS workspace too small: margin raised to {margin} %")
         self.timings["factorization"] += time.perf_counter() - t0
         self._state = mat.stateGet()
+
+    def _mumps_info(self) -> int:
+        try:
+            F = self.ksp.getPC().getFactorMatrix()
+            return int(F.getMumpsInfog(1)) if F.getType() == "mumps" else 0
+        except PETSc.Error:
+            return 0
 
     @staticmethod
     def symmetric(mat: PETSc.Mat) -> bool:

@@ -85,8 +85,11 @@ def measure(study: Study, setting: Setting, outcome) -> Measured:
     if not m.ok:
         return m
     with Result(outcome.result) as res:
-        u = res.file["fields/displacement"]
-        m.dofs = int(u.shape[1] * u.shape[2])
+        if "dofs" in res.file.attrs:  # the unknowns of every field
+            m.dofs = int(res.file.attrs["dofs"])
+        else:
+            u = res.file["fields/displacement"]
+            m.dofs = int(u.shape[1] * u.shape[2])
         m.phases = {n: float(res.file[f"timings/{n}"][()].sum()) for n in res.names("timings")}
         for q in study.quantities:
             try:

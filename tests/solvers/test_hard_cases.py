@@ -241,3 +241,17 @@ def test_branch_watch():
     linear = BranchWatch(nonlinear=False)
     linear.check(np.ones(4), None)
     assert linear.check(1e6 * np.ones(4), None) is None
+
+
+def test_mumps_workspace_is_raised_when_too_small(run):
+    """The solubility strip at 320 cells delays enough pivots to overflow MUMPS' workspace
+    (here with no margin at all; the default 50 % overflows too): INFOG(1) = -9, the
+    factorization is redone with a larger margin, the run completes and the file says so."""
+    from conftest import CONFIGS
+
+    text = (CONFIGS / "solubility_grow_shrink.toml").read_text().replace("nx = 80", "nx = 320") \
+        .replace("count = 100", "count = 10").replace("end = 2.0", "end = 0.2") \
+        .replace("[time]", "[solver.petsc]\nmat_mumps_icntl_14 = 0   # no margin for delayed pivots\n[time]")
+    res = run(text, name="workspace")
+    assert res["attrs"]["status"] == "complete"
+    assert "MUMPS workspace too small: margin raised" in res["attrs"].get("warnings", "")

@@ -23,7 +23,7 @@ def run_reduced(tmp_path, name):
 
 def test_every_shipped_study_is_tested_and_valid():
     assert sorted(p.stem for p in STUDIES.glob("*.toml")) == sorted(["kirsch", "cantilever_3d",
-                                                                   "controlled_bar"])
+                                                                   "controlled_bar", "solubility"])
     for path in STUDIES.glob("*.toml"):
         assert len(load_study(path, reduced=True).levels) < len(load_study(path).levels)
 
@@ -59,3 +59,14 @@ def test_controlled_bar_reduced(tmp_path):
     assert max(v for (f, _), v in err.items() if f.startswith("direct")) < 1e-12
     assert max(v for (f, _), v in err.items() if f == "iterative rtol 1e-10") < 1e-8
     assert max(v for (f, _), v in err.items() if f == "iterative rtol 1e-6") < 1e-5
+
+
+@pytest.mark.serial
+def test_solubility_reduced(tmp_path):
+    """Backward Euler is first order in time: halving the time step halves the gas's error
+    (the mesh barely matters here: the finest time step's family is the reference)."""
+    table = run_reduced(tmp_path, "solubility")
+    error = {r["family"]: float(r["error(gas)"]) for r in table if r["level"] == "x2"}
+    assert 1.7 < error["dt = 0.02"] / error["dt = 0.01"] < 2.3
+    gas = [float(r["gas"]) for r in table]
+    assert all(0.8 < g < 0.9 for g in gas)  # the gas at the closed end at t = 0.5
