@@ -108,12 +108,15 @@ class Elasticity(Effect):
     def cell_stress(self, cells: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Mean stress over each cell (Voigt), from the full displacement array u (npoints, ncomp)."""
         geo = self.geometry(cells)
-        B = geo.strain_operator()
-        ue = u[self.mesh.cells[cells]].reshape(len(cells), u.shape[1] * self.mesh.cells.shape[1])
-        eps = kernels.strains(B, ue)
-        sig = np.matmul(self.C[self.cell_model[cells]][:, None], eps[..., None])[..., 0]
+        eps = kernels.voigt_strain(geo.dNdx, u[self.mesh.cells[cells]])
         w = geo.wdet / geo.wdet.sum(axis=1, keepdims=True)
-        return (sig * w[:, :, None]).sum(axis=1)
+        # σ is linear in ε: the cell mean of σ is C times the cell mean of ε
+        return self._hooke(cells, (eps * w[:, :, None]).sum(axis=1))
+
+    def _hooke(self, cells: np.ndarray, eps: np.ndarray) -> np.ndarray:
+        """σ = C ε with each cell's own Hooke matrix; eps (nc, ..., nv)."""
+        C = self.C[self.cell_model[cells]]
+        return np.einsum("cvw,c...w->c...v", C, eps)
 
     def nodal_stress_sums(self, cells: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Stress evaluated at each cell's nodes, summed per node with cell-volume weights.
@@ -123,9 +126,7 @@ class Elasticity(Effect):
         """
         mesh = self.mesh
         geo = self.geometry(cells, at_nodes=True)
-        ue = u[mesh.cells[cells]].reshape(len(cells), u.shape[1] * mesh.cells.shape[1])
-        eps = kernels.strains(geo.strain_operator(), ue)               # (nc, nen, nv)
-        sig = np.matmul(self.C[self.cell_model[cells]][:, None], eps[..., None])[..., 0]
+        sig = self._hooke(cells, kernels.voigt_strain(geo.dNdx, u[mesh.cells[cells]]))  # (nc, nen, nv)
         vol = self.geometry(cells).wdet.sum(axis=1)
         nodes = mesh.cells[cells].ravel()
         nv = sig.shape[2]

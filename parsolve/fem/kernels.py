@@ -62,6 +62,19 @@ def strains(B: np.ndarray, ue: np.ndarray) -> np.ndarray:
     return eps
 
 
+def voigt_strain(dNdx: np.ndarray, ue: np.ndarray) -> np.ndarray:
+    """ε (nc, nq, nvoigt), engineering shear, straight from the shape gradients dNdx
+    (nc, nq, nen, d) and the element displacements ue (nc, nen, d): the displacement gradient
+    without the strain operator B (nv × nen·d numbers per point) that ``strains`` needs."""
+    g = np.zeros(dNdx.shape[:2] + (ue.shape[2], dNdx.shape[3]))   # ∂u_i/∂x_j
+    for a in range(ue.shape[1]):  # node by node: elementwise, in a fixed order
+        g += ue[:, None, a, :, None] * dNdx[:, :, a, None, :]
+    if g.shape[-1] == 2:
+        return np.stack([g[..., 0, 0], g[..., 1, 1], g[..., 0, 1] + g[..., 1, 0]], axis=-1)
+    return np.stack([g[..., 0, 0], g[..., 1, 1], g[..., 2, 2], g[..., 1, 2] + g[..., 2, 1],
+                     g[..., 0, 2] + g[..., 2, 0], g[..., 0, 1] + g[..., 1, 0]], axis=-1)
+
+
 def internal_forces(B: np.ndarray, wdet: np.ndarray, sigma: np.ndarray) -> np.ndarray:
     """fe = Σ_q w |J| Bᵀ σ, (nc, ndof)."""
     return np.einsum("cqvd,cqv->cd", B, sigma * wdet[:, :, None])
