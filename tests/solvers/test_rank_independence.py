@@ -87,7 +87,8 @@ def test_shipped_scene_does_not_depend_on_the_partition(name, shared_tmp):
     world = run_scene(CONFIGS / name, shared_tmp / "world.h5")
     alone = run_scene(CONFIGS / name, shared_tmp / f"alone{comm.rank}.h5", comm=MPI.COMM_SELF)
     assert world["attrs"]["status"] == alone["attrs"]["status"] == "complete"
-    keys = [k for k in alone if k not in ("attrs", "steps/residual")  # round-off
+    keys = [k for k in alone if k not in ("attrs", "steps/residual")  # round-off:
+            and not (k.startswith("balance") and k.endswith("error"))  # residual, balance error
             and not k.startswith("timings")]                          # clocks
     # a multiplier that is zero in exact arithmetic is compared with the others' size
     family = {}
