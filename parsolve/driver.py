@@ -71,8 +71,8 @@ def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log
     scene = model.scene
     solver = make_solver(comm, system, cli_options)
     mat, vecs = None, None
-    q_prev, t_prev = np.zeros(system.composition.ndof), 0.0
-    balance = Balance(comm, system) if model.transient else None
+    q_prev, t_prev = model.initial_q(), 0.0
+    balance = Balance(comm, system, q_prev) if model.transient else None
     stiffness_blocks = None
     for step, t in enumerate(scene.times):
         t1 = time.perf_counter()
@@ -129,7 +129,7 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log) -> None:
     solver = make_solver(comm, system, cli_options)
     newton = NewtonSolver(comm, system, solver, scene.nonlinear)
     schedule = StepSchedule(scene)
-    balance = Balance(comm, system) if model.transient else None
+    balance = Balance(comm, system, newton.q) if model.transient else None
     watch = BranchWatch(model.nonlinear)
     step, setup = 0, time.perf_counter() - t0
     while (t := schedule.next()) is not None:

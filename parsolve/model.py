@@ -57,6 +57,14 @@ class Model:
         return all(e.symmetric or secant and getattr(e, "symmetric_secant", False)
                    for e in self.effects)
 
+    def initial_q(self) -> np.ndarray:
+        """The primal vector at t = 0 (input numbering): the effects' initial values, else 0."""
+        q = np.zeros((self.mesh.num_points, self.ncomp))
+        for e in self.effects:
+            for name, values in e.initial().items():
+                q[:, self.fields.columns(name)] = values
+        return q.ravel()
+
     def effect(self, name: str) -> Effect | None:
         return next((e for e in self.effects if e.name == name), None)
 

@@ -86,8 +86,8 @@ class Balance:
     supply since the start from the known loads (sources, boundary fluxes) and from the
     relations' reactions; error = storage − initial storage − supplied, per field and in all."""
 
-    def __init__(self, comm, system):
-        self.comm, self.system = comm, system
+    def __init__(self, comm, system, q0: np.ndarray):
+        self.comm, self.system, self.q0 = comm, system, q0
         fields = system.model.fields
         self.names = sorted({fi for fi, _, _ in system.composition.mass_parts()})
         col = system.owned_input_dofs % fields.ncomp
@@ -106,7 +106,7 @@ class Balance:
         error} (sources and reactions: what came in since the start through the known loads
         and through the relations' reactions — boundary fluxes, phase exchange)."""
         if self.initial is None:
-            self.initial = self.storage(np.zeros_like(q))
+            self.initial = self.storage(self.q0)
             self.sources = {n: 0.0 for n in self.names}
             self.reacted = {n: 0.0 for n in self.names}
         stored = self.storage(q)

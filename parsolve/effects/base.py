@@ -33,6 +33,10 @@ class Effect:
         """Capacity blocks of a transient run (empty: the effect has no rate term)."""
         return []
 
+    def initial(self) -> dict[str, np.ndarray]:
+        """Initial values of its fields {field: (npoints, ncomp)} (absent: zero)."""
+        return {}
+
     def init_state(self, cells: np.ndarray):
         return None
 

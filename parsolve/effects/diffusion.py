@@ -7,6 +7,7 @@ Scene schema (one table per scalar field)::
 
     [[diffusion]]
     field = "h"                      # the field's name (relations, loads, /fields/h)
+    initial = 0.0                    # transient runs: the field at t = 0 (or an expression)
     [[diffusion.materials]]          # later entries override earlier ones on shared cells
     region = "all"
     conductivity = 1.0               # or a tensor [[kxx, kxy], [kxy, kyy]]; 0: immobile
@@ -24,6 +25,7 @@ from parsolve.errors import InputError
 from parsolve.fem import diffusion as kern
 from parsolve.fem.element_matrices import ElementMatrices
 from parsolve.fields import Field
+from parsolve.mesh import selectors
 
 
 @dataclass
@@ -39,6 +41,7 @@ class DiffusionSpec:
     field: str
     materials: list[DiffusionMaterial]
     key: str
+    initial: float | str = 0.0   # the field at t = 0: a number or an expression of x, y, z
 
 
 def parse(t, dim: int) -> DiffusionSpec:
@@ -46,6 +49,7 @@ def parse(t, dim: int) -> DiffusionSpec:
     field = t.get("field", str, "h")
     if not field.isidentifier():
         raise t.error("field", f"a field name is an identifier, not {field!r}")
+    initial = t.get("initial", (float, str), 0.0)
     materials = []
     for sub in t.tables("materials"):
         region = sub.get("region", str, "all")
@@ -59,7 +63,7 @@ def parse(t, dim: int) -> DiffusionSpec:
     if not materials:
         raise t.error("materials", "a diffusion field needs at least one [[diffusion.materials]]")
     t.done()
-    return DiffusionSpec(field, materials, t.path)
+    return DiffusionSpec(field, materials, t.path, initial)
 
 
 def _tensor(sub, raw, dim: int) -> np.ndarray:
@@ -92,6 +96,10 @@ class Diffusion(Effect):
             raise InputError(f"{missing.size} cells have no diffusion material (e.g. cell "
                              f"{missing[0]})", source, spec.key + ".materials")
         self.tensors = np.stack([m.conductivity for m in spec.materials])
+        self.start = spec.initial
+        if isinstance(spec.initial, str):  # checked finite on every node here, before a solve
+            self.start = selectors.evaluate_value(spec.initial, mesh.points, source,
+                                                  spec.key + ".initial")
         self.capacity = np.array([m.capacity for m in spec.materials])
 
     @property
@@ -100,6 +108,10 @@ class Diffusion(Effect):
 
     def fields(self) -> list[Field]:
         return [Field(self.field, ("",), self.field, self.name)]
+
+    def initial(self) -> dict[str, np.ndarray]:
+        return {self.field: np.broadcast_to(np.asarray(self.start, dtype=float),
+                                            (self.mesh.num_points,))[:, None]}
 
     def _coords(self, cells: np.ndarray) -> np.ndarray:
         return self.mesh.points[self.mesh.cells[cells]]

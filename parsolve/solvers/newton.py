@@ -43,13 +43,15 @@ class NewtonSolver:
         self.states = system.composition.init_states()
         self.active = ActiveSet(system.multiplied, spec.max_active_set_changes)
         self.ndof = model.mesh.num_points * model.ncomp
-        self.q = np.zeros(self.ndof)
+        self.q = model.initial_q()
         self.lam = np.zeros(system.layout.nl)
         self.x_full = np.zeros(system.layout.size)
         self.extras = [None] * len(model.effects)   # e.g. stresses at the quadrature points
         self.time = model.scene.time                # transient: θ-scheme from t_prev to t
         self.t_prev = 0.0
         self.f_pure = np.zeros(self.ndof)           # f_int at the last converged state
+        if self.time is not None and self.time.theta != 1.0:  # θ-scheme: f_int(q_0)
+            self.f_pure = system.composition.evaluate(self.q, self.states, False)[1]
         self.residual_history: list[float] = []
         self._mat = None
         self._oriented = False

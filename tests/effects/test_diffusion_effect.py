@@ -138,3 +138,36 @@ def test_bad_saturation():
     with pytest.raises(InputError) as err:
         parse_scene(tomllib.loads(text), "scene.toml", text)
     assert err.value.key == "solubility.saturation"
+
+
+def test_initial_field_relaxes_to_its_mean(run):
+    """A closed strip starting from h = x (an expression) relaxes to its mean 1 (over [0, 2]):
+    the storage never changes (no source, no boundary), for backward Euler and Crank-Nicolson
+    (which needs f_int of the initial field)."""
+    # Crank-Nicolson is not L-stable: its shortest modes decay slowly at this step (|factor|
+    # ≈ 0.92 per step), hence the looser uniformity check
+    for scheme, atol in (('scheme = "backward_euler"', 1e-9), ('scheme = "theta"\ntheta = 0.5', 5e-3)):
+        text = POISSON.format(nx=10, cell="quad", ends="left").replace(
+            'field = "h"\n[[diffusion.materials]]', 'field = "h"\ninitial = "x"\n[[diffusion.materials]]'
+        ).replace('source = 3.0', 'source = 0.0').split("[[relations]]")[0] + f"""
+[time]
+{scheme}
+[steps]
+count = 40
+end = 40.0
+"""
+        res = run(text, name="relax")
+        storage = res["balance/total/storage"]
+        np.testing.assert_allclose(storage, 2.0 * 0.2 * 1.0, rtol=1e-12)  # ∫ x over [0, 2] × 0.2
+        np.testing.assert_allclose(res["fields/h"][-1][:, 0], 1.0, atol=atol)
+
+
+def test_initial_expression_must_be_finite():
+    from parsolve.model import build_model
+    from parsolve.scene import parse_scene
+
+    text = POISSON.format(nx=4, cell="quad", ends="left").replace(
+        'field = "h"\n[[diffusion.materials]]', 'field = "h"\ninitial = "sqrt(-1 - x)"\n[[diffusion.materials]]')
+    with pytest.raises(InputError) as err:
+        build_model(parse_scene(tomllib.loads(text), "scene.toml", text))
+    assert err.value.key == "diffusion[0].initial"
