@@ -15,7 +15,7 @@ from parsolve.effects.compose import Rate
 from parsolve.errors import Interrupted, SolverError
 from parsolve.io.hdf5 import ResultWriter
 from parsolve.model import Model
-from parsolve.outputs import Balance, progress, step_outputs
+from parsolve.outputs import Balance, progress, resultant_labels, step_outputs
 from parsolve.solvers.arc_length import run_arc_length
 from parsolve.solvers.newton import NewtonSolver
 from parsolve.solvers.setup import export_system, make_solver
@@ -35,7 +35,8 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
     system = SaddleSystem(comm, model)
     relations_meta = {r.name: (r.nrows, r.sense != "=") for r in model.relations}
     unknowns = {"unknowns": " ".join(f.output for f in model.fields),
-                "dofs": model.mesh.num_points * model.ncomp}
+                "dofs": model.mesh.num_points * model.ncomp,
+                "resultant_components": " ".join(resultant_labels(model.fields, model.mesh.dim))}
     writer = ResultWriter(comm, out, model.mesh, scene.text, petsc_version(), relations_meta,
                           attrs=unknowns)
     status = "complete"
@@ -77,22 +78,21 @@ def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log
     for step, t in enumerate(scene.times):
         t1 = time.perf_counter()
         assembly = 0.0
-        f_known = model.external_load(t)
+        f_known = model.external_load(t)  # the loads the step balances (θ-weighted)
+        f_rhs = f_known
         if model.transient:
             theta = scene.time.theta
             dt = t - t_prev
             if system.rate is None or not np.isclose(dt, system.rate.dt, rtol=1e-12, atol=0):
                 system.rate, mat = Rate(dt, theta, q_prev, np.zeros(0)), None
+            f_rhs = f_known = _theta_loads(system, theta, t, t_prev, f_known)
             if theta != 1.0:
-                f_known = theta * f_known + (1 - theta) * model.external_load(t_prev)
                 if stiffness_blocks is None:
                     stiffness_blocks = [b for e in model.effects
                                         for b in e.stiffness_blocks(system.local_cells)]
-                f_known = f_known - (1 - theta) * system.composition.product(stiffness_blocks, q_prev)
-            f_rhs = f_known + system.composition.product(
-                system.composition.mass_parts(), q_prev) / dt
-        else:
-            f_rhs = f_known
+                w = system.composition.theta_dofs(theta)
+                f_rhs = f_rhs - (1 - w) * system.composition.product(stiffness_blocks, q_prev)
+            f_rhs = f_rhs + system.composition.product(system.composition.mass_parts(), q_prev) / dt
         if mat is None:
             t0 = time.perf_counter()
             mat = system.assemble()
@@ -116,6 +116,14 @@ def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log
                  f"  (linear its {linear_its})" + reported(scene, rel_out))
         _pass_notes(comm, solver, writer, log)
         q_prev, t_prev = q, t
+
+
+def _theta_loads(system, theta: float, t: float, t_prev: float, f: np.ndarray) -> np.ndarray:
+    """θ F(t) + (1 - θ) F(t_n) on the equations of fields with a capacity, F(t) elsewhere."""
+    if theta == 1.0:
+        return f
+    w = system.composition.theta_dofs(theta)
+    return w * f + (1 - w) * system.model.external_load(t_prev)
 
 
 def _run_newton(comm, system: SaddleSystem, cli_options, writer, log) -> None:
@@ -163,7 +171,9 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log) -> None:
         writer.write_step(t, result.iterations, result.residual, fields, cell_fields, rel_out,
                           timings, extra=extra)
         cut_note = f"  (after {schedule.cuts} cut{'s' * (schedule.cuts > 1)})" if schedule.cuts else ""
-        schedule.done(t, _max_strain_increment(comm, system, newton.q - snap[0]))
+        # (the largest strain increment sizes automatic steps only; every rank takes this branch)
+        schedule.done(t, _max_strain_increment(comm, system, newton.q - snap[0])
+                      if schedule.spec.automatic else 0.0)
         progress(log, comm, step, schedule.total, t, result.iterations, result.residual, seconds,
                  cut_note + reported(scene, rel_out))
         if warning and comm.rank == 0:
@@ -228,10 +238,12 @@ class StepSchedule:
         self.t, self.dt, self.count, self.cuts = 0.0, self.times[0], 0, 0
         self.pending: float | None = None  # a cut fixed step: the intermediate time
         self.step_cuts = 0
+        self.extra = 0  # intermediate steps saved so far
 
     @property
     def total(self):
-        return "?" if self.spec.automatic else len(self.times)
+        """Steps to save, as known now (the scene's, plus the intermediate ones of cuts)."""
+        return "?" if self.spec.automatic else len(self.times) + self.extra
 
     def next(self) -> float | None:
         if self.pending is not None:
@@ -247,6 +259,7 @@ class StepSchedule:
         if not self.spec.automatic:
             if self.pending is not None and t < self.times[self.count]:
                 self.t, self.pending = t, None  # the scene's step is still ahead
+                self.extra += 1
                 return
             self.pending = None
             self.count += 1

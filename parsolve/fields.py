@@ -21,7 +21,6 @@ class Field:
     name: str                      # name in the scene (relations, loads): "u", "h", "c_s"
     components: tuple[str, ...]    # ("x", "y") for a 2D vector, ("",) for a scalar
     output: str                    # name of /fields/<output> in the result file
-    owner: str                     # the effect that declared it
 
     @property
     def ncomp(self) -> int:

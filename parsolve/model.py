@@ -65,9 +65,6 @@ class Model:
                 q[:, self.fields.columns(name)] = values
         return q.ravel()
 
-    def effect(self, name: str) -> Effect | None:
-        return next((e for e in self.effects if e.name == name), None)
-
     def external_load(self, t: float) -> np.ndarray:
         """Known loads at t (input DOF numbering); patterns used as duals are not applied."""
         duals = {r.meta.get("dual") for r in self.relations} | set(self.reference_patterns)
@@ -136,7 +133,25 @@ def build_effects(scene: Scene, mesh: Mesh, regions: RegionResolver) -> tuple[li
         for name, entry in EFFECTS.items():
             if entry.coupling == coupling:
                 effects += [entry.build(spec, ctx) for spec in scene.effect_specs.get(name, [])]
+    _check_output_names(effects, scene.source)
     return effects, ctx.fields
+
+
+def _check_output_names(effects: list[Effect], source: str) -> None:
+    """Every field and every effect output has its own name in the result file."""
+    taken: dict[str, str] = {}
+    for e in effects:
+        names = [f.output for f in e.fields()] + e.output_names()
+        spec = getattr(e, "spec", None)
+        key = spec.key + ".field" if hasattr(spec, "field") else e.name
+        for name in names:
+            if name in taken:
+                raise InputError(f"{name!r} would be written twice in the result file "
+                                 f"(it is already the {taken[name]}'s): rename the field",
+                                 source, key)
+            taken[name] = f"{e.name} effect"
+
+
 def _points_after_order(mesh: Mesh, order: int) -> int:
     """Nodes once ``order = 2`` adds the midside ones (about 1.5 per triangle, 1.2 per tetra)."""
     extra = {"triangle": 1.5, "tetra": 1.2}.get(mesh.cell_type, 0.0) if order == 2 else 0.0

@@ -47,6 +47,17 @@ def resultant(relation, lam: np.ndarray, fields, points: np.ndarray) -> np.ndarr
     return np.concatenate([out, moment[2:] if dim == 2 else moment])
 
 
+def resultant_labels(fields, dim: int) -> list[str]:
+    """Names of the columns of /relations/<name>/resultant: the node DOF columns (x, y, z of
+    the displacement; a scalar field by its name), then the moments."""
+    labels = []
+    for f in fields:
+        labels += list(f.components) if f.name == "u" else [f.name] * f.ncomp
+    if "u" in fields:
+        labels += ["mz"] if dim == 2 else ["mx", "my", "mz"]
+    return labels
+
+
 def step_outputs(comm: MPI.Comm, system, q: np.ndarray, multipliers: dict, newton=None):
     """(fields, cell fields, relations) of a step; ``newton`` carries the material states."""
     model = system.model
@@ -60,9 +71,9 @@ def step_outputs(comm: MPI.Comm, system, q: np.ndarray, multipliers: dict, newto
         if newton is not None and newton.extras[k] is not None:
             extra = (newton.extras[k], newton.states[k])
         nodal, cells = effect.outputs(owned, values, extra, system.local_cells)
-        for name, (sums, weights) in nodal.items():
-            sums, weights = comm.allreduce(sums), comm.allreduce(weights)
-            fields[name] = sums / np.maximum(weights, 1e-300)[:, None]
+        for name, (sums, weights) in nodal.items():  # only rank 0 writes: reduce there
+            sums, weights = comm.reduce(sums, root=0), comm.reduce(weights, root=0)
+            fields[name] = sums / np.maximum(weights, 1e-300)[:, None] if comm.rank == 0 else None
         for name, value in cells.items():
             cell_fields[name] = _gather_cells(comm, owned, value, mesh.num_cells)
     rel_out = {}
@@ -92,8 +103,8 @@ class Balance:
         self.names = sorted({fi for fi, _, _ in system.composition.mass_parts()})
         col = system.owned_input_dofs % fields.ncomp
         self.owned = {n: system.owned_input_dofs[np.isin(col, fields.columns(n))] for n in self.names}
-        self.all = {n: np.isin(np.arange(system.composition.ndof) % fields.ncomp, fields.columns(n))
-                    for n in self.names}
+        self.ncomp = fields.ncomp
+        self.cols = {n: fields.columns(n) for n in self.names}
         self.initial = None
         self.supplied = {n: 0.0 for n in self.names}
 
@@ -112,7 +123,7 @@ class Balance:
         stored = self.storage(q)
         out = {}
         for n in self.names:
-            self.sources[n] += dt * float(f_known[self.all[n]].sum())
+            self.sources[n] += dt * float(f_known.reshape(-1, self.ncomp)[:, self.cols[n]].sum())
             self.reacted[n] += dt * self._reactions(n, multipliers)
             self.supplied[n] = self.sources[n] + self.reacted[n]
             out[f"balance/{n}/storage"] = stored[n]
@@ -131,11 +142,11 @@ class Balance:
         for r in self.system.model.relations:
             if r.shared_dual is not None:
                 dofs, vals = r.shared_dual
-                on = self.all[name][dofs]
+                on = np.isin(dofs % self.ncomp, self.cols[name])
                 total += float(vals[on].sum() * multipliers[r.name].sum())
                 continue
             dofs, rows, vals = r.dual_coo()
-            on = self.all[name][dofs]
+            on = np.isin(dofs % self.ncomp, self.cols[name])
             total += float((vals[on] * multipliers[r.name][rows[on]]).sum())
         return total
 

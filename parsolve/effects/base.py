@@ -33,6 +33,10 @@ class Effect:
         """Capacity blocks of a transient run (empty: the effect has no rate term)."""
         return []
 
+    def output_names(self) -> list[str]:
+        """The /fields and /cell_fields names its outputs take (besides its fields')."""
+        return []
+
     def initial(self) -> dict[str, np.ndarray]:
         """Initial values of its fields {field: (npoints, ncomp)} (absent: zero)."""
         return {}

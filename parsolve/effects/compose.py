@@ -6,7 +6,9 @@ A transient step from t_n to t = t_n + Δt (θ-scheme; θ = 1 is backward Euler)
     M (q - q_n) / Δt + θ f_int(q) + (1 - θ) f_int(q_n) = θ F(t) + (1 - θ) F(t_n) + D λ,
     A q = b(t),
 
-whose tangent is M / Δt + θ K. The reaction D λ acts at t: λ is whatever it takes.
+whose tangent is M / Δt + θ K. The reaction D λ acts at t: λ is whatever it takes. θ weighs
+only the equations of fields that have a capacity; the others (displacements next to a
+transient field) are in equilibrium at t (their θ is 1).
 """
 
 from __future__ import annotations
@@ -45,8 +47,22 @@ class Composition:
         nodal = q.reshape(self.npoints, self.fields.ncomp)
         return {f.name: nodal[:, self.fields.columns(f.name)] for f in self.fields}
 
-    def _parts(self, blocks, factor: float) -> list:
-        return [(self.fields.columns(fi), self.fields.columns(fj), m, factor) for fi, fj, m in blocks]
+    def _parts(self, blocks, factor) -> list:
+        """``factor``: a number, or a dict of the row field's factor."""
+        return [(self.fields.columns(fi), self.fields.columns(fj), m,
+                 factor[fi] if isinstance(factor, dict) else factor) for fi, fj, m in blocks]
+
+    def theta_of(self, theta: float) -> dict[str, float]:
+        """θ of each field's equations: θ where the field has a capacity, 1 elsewhere."""
+        rate = {fi for fi, _, _ in self.mass_parts()}
+        return {f.name: theta if f.name in rate else 1.0 for f in self.fields}
+
+    def theta_dofs(self, theta: float) -> np.ndarray:
+        """The same per DOF (input numbering)."""
+        cols = np.ones(self.fields.ncomp)
+        for name, w in self.theta_of(theta).items():
+            cols[self.fields.columns(name)] = w
+        return np.tile(cols, self.npoints)
 
     def _scatter(self, forces: dict[str, np.ndarray], out: np.ndarray, factor: float = 1.0) -> None:
         """Add element forces {field: (nc, nen, ncomp)} into a full vector."""
@@ -61,7 +77,7 @@ class Composition:
 
     def stiffness(self, rate: Rate | None = None) -> BlockMatrices:
         """θ K + M / Δt of the linear effects (K alone without a rate)."""
-        theta = 1.0 if rate is None else rate.theta
+        theta = 1.0 if rate is None else self.theta_of(rate.theta)
         parts = []
         for e in self.model.effects:
             parts += self._parts(e.stiffness_blocks(self.cells), theta)
@@ -89,7 +105,7 @@ class Composition:
         vals = self.values(q)
         f_int = np.zeros(self.ndof)
         parts, trial, extras = [], [], []
-        theta = 1.0 if rate is None else rate.theta
+        theta = 1.0 if rate is None else self.theta_of(rate.theta)
         for e, st in zip(self.model.effects, states):
             forces, blocks, new, extra = e.evaluate(self.cells, vals, st, secant)
             self._scatter(forces, f_int)
@@ -98,7 +114,8 @@ class Composition:
             extras.append(extra)
         total = f_int
         if rate is not None:
-            total = theta * f_int + (1.0 - theta) * rate.f_int_prev \
+            w = self.theta_dofs(rate.theta)
+            total = w * f_int + (1.0 - w) * rate.f_int_prev \
                 + self.product(self.mass_parts(), q - rate.q_prev) / rate.dt
             parts += self._parts(self.mass_parts(), 1.0 / rate.dt)
         return total, f_int, BlockMatrices(self.fields.ncomp, parts), trial, extras

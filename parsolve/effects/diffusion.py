@@ -107,7 +107,10 @@ class Diffusion(Effect):
         return self.spec.field
 
     def fields(self) -> list[Field]:
-        return [Field(self.field, ("",), self.field, self.name)]
+        return [Field(self.field, ("",), self.field)]
+
+    def output_names(self) -> list[str]:
+        return [f"{self.field}_flux"]
 
     def initial(self) -> dict[str, np.ndarray]:
         return {self.field: np.broadcast_to(np.asarray(self.start, dtype=float),

@@ -53,7 +53,10 @@ class Elasticity(Effect):
         self.symmetric = not any(isinstance(m, Mazars) for m in self.models)
 
     def fields(self) -> list[Field]:
-        return [Field("u", VECTOR_COMPONENTS[:self.mesh.dim], "displacement", self.name)]
+        return [Field("u", VECTOR_COMPONENTS[:self.mesh.dim], "displacement")]
+
+    def output_names(self) -> list[str]:
+        return ["stress", "damage", "plastic_strain"]
 
     def stiffness_blocks(self, cells: np.ndarray):
         return [("u", "u", self.stiffness(cells))]

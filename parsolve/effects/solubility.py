@@ -114,6 +114,9 @@ class Solubility(Effect):
         rel.meta = {"type": "solubility", "key": self.spec.key, "dual": None, "nodes": nodes}
         return [rel]
 
+    def output_names(self) -> list[str]:
+        return ["solubility_state"]
+
     def state_outputs(self, active: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         """/fields/solubility_state per node: 0 dissolved, 1 saturated (no c_sat: -1)."""
         out = np.full(self.mesh.num_points, -1, dtype=np.int8)

@@ -156,7 +156,9 @@ class ResultWriter:
         for group, data, registry in (("fields", fields, self.fields),
                                       ("cell_fields", cell_fields, self.cell_fields)):
             for name, value in data.items():
-                value = np.asarray(value, dtype=float)
+                value = np.asarray(value)
+                if value.dtype.kind not in "iu":  # states (int8) keep their type
+                    value = value.astype(float)
                 value = value[:, None] if value.ndim == 1 else value
                 registry[name] = value.shape[1]
                 rows[f"{group}/{name}"] = value

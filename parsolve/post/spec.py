@@ -95,7 +95,11 @@ def _relation(res: Result, spec: Spec) -> np.ndarray:
     values = res.dataset(f"relations/{spec.name}/{spec.what}", spec.text)
     if spec.what != "resultant":
         return _rows(res, spec, values)
-    comps = RESULTANT[:values.shape[1]] if values.shape[1] != 3 or res.dim == 3 else ("x", "y", "mz")
+    labels = res.file.attrs.get("resultant_components")
+    if labels is not None:  # written by the run: x, y[, z], scalar fields by name, moments
+        comps = tuple(str(labels).split())
+    else:
+        comps = RESULTANT[:values.shape[1]] if values.shape[1] != 3 or res.dim == 3 else ("x", "y", "mz")
     if spec.sel not in comps:
         raise InputError(f"no resultant component {spec.sel!r} (known: {', '.join(comps)})",
                          res.path, spec.text)

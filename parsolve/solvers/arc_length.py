@@ -108,7 +108,8 @@ class ArcLength(NewtonSolver):
 
 
 def run_arc_length(comm, system, cli_options, writer, log) -> None:
-    from parsolve.driver import _outputs, _progress, make_solver
+    from parsolve.outputs import progress, step_outputs
+    from parsolve.solvers.setup import make_solver
 
     scene = system.model.scene
     system.assemble()
@@ -119,8 +120,8 @@ def run_arc_length(comm, system, cli_options, writer, log) -> None:
         iterations, residual, f_int = solver.step(scene.times[step])
         seconds = time.perf_counter() - t1
         multipliers = solver.multipliers(scene.times[step], f_int)
-        fields, cell_fields, rel_out = _outputs(comm, system, solver.q, multipliers, solver)
+        fields, cell_fields, rel_out = step_outputs(comm, system, solver.q, multipliers, solver)
         writer.write_step(solver.mu, iterations, residual, fields, cell_fields, rel_out,
                           {"assembly": 0.0, "solve": seconds, "total": seconds})
-        _progress(log, comm, step + 1, nsteps, solver.mu, iterations, residual, seconds,
+        progress(log, comm, step + 1, nsteps, solver.mu, iterations, residual, seconds,
                   "  (t = load factor)")

@@ -32,6 +32,19 @@ class StepResult:
     f_int: np.ndarray
 
 
+def _row_dots(r, ndof: int) -> np.ndarray:
+    """A_k · D_k of every row of a relation (sparse: entries matched by (row, dof) key)."""
+    dofs, drows, vals = r.dual_coo()
+    keys, inv = np.unique(np.asarray(drows, dtype=np.int64) * ndof + dofs, return_inverse=True)
+    d = np.bincount(inv, weights=vals)
+    ka = r.a_rows * ndof + r.a_dofs
+    if keys.size == 0:
+        return np.zeros(r.nrows)
+    pos = np.minimum(np.searchsorted(keys, ka), keys.size - 1)
+    hit = keys[pos] == ka
+    return np.bincount(r.a_rows[hit], weights=r.a_vals[hit] * d[pos[hit]], minlength=r.nrows)
+
+
 class NewtonSolver:
     """Carries the converged state (q, λ, material history) from step to step."""
 
@@ -79,8 +92,8 @@ class NewtonSolver:
         f = self.system.model.external_load(t)
         if self.time is None or self.time.theta == 1.0:
             return f
-        return self.time.theta * f + (1.0 - self.time.theta) * \
-            self.system.model.external_load(self.t_prev)
+        w = self.system.composition.theta_dofs(self.time.theta)
+        return w * f + (1.0 - w) * self.system.model.external_load(self.t_prev)
 
     def _start_rate(self, t: float) -> None:
         if self.time is not None:
@@ -184,11 +197,7 @@ class NewtonSolver:
             if r.meta.get("dual"):
                 rate = r.primal(self._unit_response(kmat, rows, self._dual_column(k)))
             else:
-                dofs, drows, vals = r.dual_coo()
-                d = np.zeros((r.nrows, self.ndof))
-                np.add.at(d, (drows, dofs), vals)
-                rate = np.bincount(r.a_rows, weights=r.a_vals * d[r.a_rows, r.a_dofs],
-                                   minlength=r.nrows)
+                rate = _row_dots(r, self.ndof)
             if np.any(np.abs(rate) <= 1e-12 * max(float(np.abs(rate).max()), 1e-300)):
                 raise SolverError(f"relation {r.name!r}: its dual does not move its primal value "
                                   "(A K⁻¹ D = 0), so the sense of its reaction is undefined")

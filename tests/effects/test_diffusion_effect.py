@@ -116,6 +116,27 @@ BAD = {
                           "diffusion[0].materials[0].capacity"),
 }
 
+OUTPUT_CLASHES = {  # a field named like another output would overwrite it in the result file
+    "stress": 'field = "stress"',
+    "displacement": 'field = "displacement"',
+}
+
+
+@pytest.mark.parametrize("name", sorted(OUTPUT_CLASHES))
+def test_field_names_cannot_overwrite_outputs(name):
+    from parsolve.model import build_model
+    from parsolve.scene import parse_scene
+
+    text = COUPLED + f"""
+[[diffusion]]
+{OUTPUT_CLASHES[name]}
+[[diffusion.materials]]
+conductivity = 1.0
+"""
+    with pytest.raises(InputError) as err:
+        build_model(parse_scene(tomllib.loads(text), "scene.toml", text))
+    assert err.value.key == "diffusion[0].field" and "written twice" in err.value.message
+
 
 @pytest.mark.parametrize("case", sorted(BAD))
 def test_bad_diffusion_input(case):
@@ -171,3 +192,59 @@ def test_initial_expression_must_be_finite():
     with pytest.raises(InputError) as err:
         build_model(parse_scene(tomllib.loads(text), "scene.toml", text))
     assert err.value.key == "diffusion[0].initial"
+
+
+COUPLED = """
+[mesh]
+generator = "rectangle"
+lx = 1.0
+ly = 0.2
+nx = 8
+ny = 2
+cell = "quad"
+[model]
+hypothesis = "plane_stress"
+[regions]
+corner = { point = [0.0, 0.0] }
+[[materials]]
+E = 100.0
+nu = 0.25
+[[loads]]
+name = "pull"
+region = "right"
+traction = [1.0, 0.0]
+evolution = "constant"
+[[relations]]
+name = "clamp"
+type = "dirichlet"
+region = "left"
+components = ["x"]
+[[relations]]
+name = "corner"
+type = "dirichlet"
+region = "corner"
+components = ["y"]
+[steps]
+times = [1.0, 2.0]
+"""
+
+
+@pytest.mark.parametrize("theta", [1.0, 0.5])
+def test_displacements_stay_static_next_to_a_transient_field(theta, run):
+    """θ weighs only fields with a capacity: the displacements of a transient scene are in
+    equilibrium at every step, whatever θ (a θ-weighted elasticity would give 2× then 0)."""
+    static = run(COUPLED, name="static")
+    scheme = 'scheme = "theta"\ntheta = 0.5' if theta == 0.5 else 'scheme = "backward_euler"'
+    transient = COUPLED + f"""
+[[diffusion]]
+field = "h"
+initial = "x"
+[[diffusion.materials]]
+conductivity = 1.0
+[time]
+{scheme}
+"""
+    res = run(transient, name="coupled")
+    np.testing.assert_allclose(res["fields/displacement"], static["fields/displacement"],
+                               rtol=1e-10, atol=1e-14)
+    np.testing.assert_allclose(res["balance/total/storage"], 0.5 * 0.2, rtol=1e-12)  # ∫ x

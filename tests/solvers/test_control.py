@@ -217,3 +217,56 @@ def test_fixed_steps_are_cut_and_retried(run):
     assert scene_steps.sum() == 30
     np.testing.assert_allclose(cut["relations/max_strain/multiplier"][scene_steps].sum(axis=1),
                                full["relations/max_strain/multiplier"].sum(axis=1), rtol=1e-3)
+
+
+ARC_BAR = """
+[mesh]
+generator = "rectangle"
+lx = 1.0
+ly = 0.1
+nx = 10
+ny = 2
+cell = "quad"
+[model]
+hypothesis = "plane_stress"
+[regions]
+corner = { point = [0.0, 0.0] }
+[[materials]]
+E = 1e3
+nu = 0.0
+[[loads]]
+name = "pull"
+region = "right"
+total_force = [1.0, 0.0]
+[[relations]]
+name = "clamp"
+type = "dirichlet"
+region = "left"
+components = ["x"]
+[[relations]]
+name = "corner"
+type = "dirichlet"
+region = "corner"
+components = ["y"]
+[nonlinear]
+method = "arc_length"
+arc_length = { pattern = "pull", length = 1e-3 }
+[steps]
+count = 3
+"""
+
+
+def test_arc_length_on_an_elastic_bar(run):
+    """The arc-length baseline on a linear bar: equal load-factor increments (||Δq|| = Δl),
+    the end displacement μ L / (E A), the clamp's reaction balancing μ."""
+    res = run(ARC_BAR, name="arc")
+    assert res["attrs"]["status"] == "complete"
+    mu = res["steps/time"]
+    np.testing.assert_allclose(np.diff(np.concatenate([[0.0], mu])), mu[0], rtol=1e-10)
+    u = res["fields/displacement"][..., 0]
+    assert np.all(mu > 0)
+    np.testing.assert_allclose(u.max(axis=1), mu * 1.0 / (1e3 * 0.1), rtol=1e-10)
+    np.testing.assert_allclose(res["relations/clamp/multiplier"].sum(axis=1), mu, rtol=1e-10)
+    step = np.diff(np.concatenate([np.zeros((1,) + res["fields/displacement"].shape[1:]),
+                                   res["fields/displacement"]]), axis=0)
+    np.testing.assert_allclose(np.linalg.norm(step.reshape(3, -1), axis=1), 1e-3, rtol=1e-10)
