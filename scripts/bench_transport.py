@@ -281,26 +281,38 @@ def _f(x, fmt=".3f") -> str:
 
 
 STEADY_HEAD = (
-    "| cell | np | n | DOFs | parsolve set-up s | asm s | re-asm s | DOLFINx first s | DOLFINx re s "
-    "| re-asm ×DOLFINx | direct: fact+solve s | DOLFINx | iterative: solve s | its | DOLFINx s | DOLFINx its "
-    "| max h (parsolve / DOLFINx) |\n"
-    "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
+    "| cell | np | n | DOFs | parsolve model s | system + asm s | re-asm s | DOLFINx first s "
+    "| DOLFINx re s | ×DOLFINx first | ×DOLFINx re | direct: fact + solve s | DOLFINx s "
+    "| iterative: setup + solve s | its | DOLFINx s | DOLFINx its | max h (parsolve / DOLFINx) |\n"
+    "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
 
 
 def steady_line(p: dict, d: dict | None) -> str:
+    """×DOLFINx: parsolve's rate over DOLFINx's (DOLFINx time / parsolve time; ≥ 1: as fast)."""
     if "failed" in p:
         return f"| {p['cell']} | {p['nranks']} | {p['n']} | | parsolve FAILED: {p['failed']} |"
     dok = d is not None and "failed" not in d
     di, it = p["direct"], p["iterative"]
-    ratio = d["t_re"] / p["t_re"] if dok else None
-    return (f"| {p['cell']} | {p['nranks']} | {p['n']} | {p['dofs']} | {p['t_setup']:.3f} | {p['t_asm']:.3f} | "
-            f"{p['t_re']:.3f} | {_f(d['t_first'] if dok else None)} | {_f(d['t_re'] if dok else None)} | "
-            f"{_f(ratio, '.2f')} | {di['factorization'] + di['solve']:.3f} | "
-            f"{_f(d['direct']['factorization'] + d['direct']['solve'] if dok else None)} | "
+    first = p["t_system"] + p["t_asm"]
+    dd = d if dok else {}
+    get = lambda *keys: _dig(dd, keys)  # noqa: E731
+    return (f"| {p['cell']} | {p['nranks']} | {p['n']} | {p['dofs']} | {p['t_model']:.3f} | "
+            f"{first:.3f} | {p['t_re']:.3f} | {_f(get('t_first'))} | {_f(get('t_re'))} | "
+            f"{_f(get('t_first') and get('t_first') / first, '.2f')} | "
+            f"{_f(get('t_re') and get('t_re') / p['t_re'], '.2f')} | "
+            f"{di['factorization'] + di['solve']:.3f} | "
+            f"{_f(get('direct', 'factorization') and get('direct', 'factorization') + get('direct', 'solve'))} | "
             f"{it['factorization'] + it['solve']:.3f} | {it['its']} | "
-            f"{_f(d['iterative']['factorization'] + d['iterative']['solve'] if dok else None)} | "
-            f"{d['iterative']['its'] if dok else '–'} | "
-            f"{di['hmax']:.6f} / {_f(d['direct']['hmax'] if dok else None, '.6f')} |")
+            f"{_f(get('iterative', 'factorization') and get('iterative', 'factorization') + get('iterative', 'solve'))} | "
+            f"{_f(get('iterative', 'its'), 'd')} | {di['hmax']:.6f} / {_f(get('direct', 'hmax'), '.6f')} |")
+
+
+def _dig(d: dict, keys) -> float | None:
+    for k in keys:
+        if not isinstance(d, dict) or k not in d:
+            return None
+        d = d[k]
+    return d
 
 
 def solubility_table() -> str:
@@ -320,7 +332,84 @@ def solubility_table() -> str:
     return f"From bench_solubility ({data['machine']}):\n\n" + head + "\n".join(lines) + "\n"
 
 
+def findings(rows: list[tuple[dict, dict | None]]) -> str:
+    """Plain statements computed from the rows."""
+    ok = [(p, d) for p, d in rows if "failed" not in p]
+    both = [(p, d) for p, d in ok if d is not None and "failed" not in d]
+    out = []
+    if both:
+        re_r = [(d["t_re"] / p["t_re"], p) for p, d in both]
+        first_r = [(d["t_first"] / (p["t_system"] + p["t_asm"]), p) for p, d in both]
+        big = [(r, p) for r, p in re_r if p["dofs"] >= 250_000]
+        worst = min(re_r, key=lambda rp: rp[0])
+        out.append(
+            f"- **Re-assembly vs DOLFINx** (target: at least DOLFINx's rate, ×DOLFINx re ≥ 1): "
+            f"{sum(r >= 1 for r, _ in re_r)} of {len(re_r)} rows meet it; range "
+            f"{min(r for r, _ in re_r):.2f}–{max(r for r, _ in re_r):.2f}, worst {worst[0]:.2f} "
+            f"({worst[1]['cell']}, np={worst[1]['nranks']}, n={worst[1]['n']})"
+            + (f"; at ≥ 250k DOFs {min(r for r, _ in big):.2f}–{max(r for r, _ in big):.2f}." if big else "."))
+        out.append(f"- **First assembly** (parsolve SaddleSystem + assemble vs DOLFINx create_matrix + "
+                   f"assemble_matrix; parsolve's scene/mesh/model building and DOLFINx's mesh "
+                   f"distribution and JIT excluded): ×DOLFINx {min(r for r, _ in first_r):.2f}–"
+                   f"{max(r for r, _ in first_r):.2f}.")
+        dr = [(d["direct"]["factorization"] + d["direct"]["solve"])
+              / (p["direct"]["factorization"] + p["direct"]["solve"]) for p, d in both]
+        ir = [(d["iterative"]["factorization"] + d["iterative"]["solve"])
+              / (p["iterative"]["factorization"] + p["iterative"]["solve"]) for p, d in both]
+        out.append(f"- **Solves vs DOLFINx** (same PETSc underneath; DOLFINx time / parsolve time): "
+                   f"MUMPS {min(dr):.2f}–{max(dr):.2f}, CG + GAMG {min(ir):.2f}–{max(ir):.2f}.")
+        dh = max(abs(p["direct"]["hmax"] - d["direct"]["hmax"]) for p, d in both)
+        out.append(f"- **Same answer**: max h differs from DOLFINx's by at most {dh:.1e} "
+                   f"(max h ≈ {both[-1][0]['direct']['hmax']:.4f}).")
+    for cell in CELLS:
+        for nr in RANKS:
+            seq = sorted((p for p, _ in ok if p["cell"] == cell and p["nranks"] == nr), key=lambda p: p["n"])
+            if seq:
+                out.append(f"- **CG + GAMG iterations**, {cell}, {nr} rank{'s' * (nr > 1)}: "
+                           + ", ".join(f"{p['iterative']['its']} (n={p['n']})" for p in seq)
+                           + (f"; DOLFINx " + ", ".join(str(d["iterative"]["its"]) for p, d in both
+                                                        if p["cell"] == cell and p["nranks"] == nr)
+                              if both else "") + ".")
+    two = {(p["cell"], p["n"]): p for p, _ in ok if p["nranks"] == 2}
+    sp = [(p, two[(p["cell"], p["n"])]) for p, _ in ok if p["nranks"] == 1 and (p["cell"], p["n"]) in two]
+    if sp:
+        big = max(sp, key=lambda ab: ab[0]["n"])
+        a, b = big
+        out.append(f"- **2 ranks vs 1** at n={a['n']} ({a['cell']}): re-assembly "
+                   f"{a['t_re'] / b['t_re']:.2f}×, MUMPS {(a['direct']['factorization'] + a['direct']['solve']) / (b['direct']['factorization'] + b['direct']['solve']):.2f}×, "
+                   f"CG + GAMG {(a['iterative']['factorization'] + a['iterative']['solve']) / (b['iterative']['factorization'] + b['iterative']['solve']):.2f}× "
+                   "faster (speed-up; the machine is shared, see the load).")
+    return "\n".join(out) + "\n"
+
+
+INTRO = """# Transport benchmark: steady Poisson / Darcy against DOLFINx 0.5, transient solubility
+
+−∇·∇h = 1 on the unit square, h = 0 on its sides, P1 triangles and Q1 quads from parsolve's
+rectangle generator; the same point and cell arrays go to DOLFINx 0.5 (Debian), run in the same
+script, one size after the other, each code in its own process under `scripts/mpirun.sh`.
+parsolve: *model* = scene → model (mesh generation, regions, effects); *system + asm* =
+`SaddleSystem` (partition, numbering, pattern) + first `assemble()`; *re-asm* = a second
+`assemble()` (best of 2); solves from the driver's /timings (preset `direct`: MUMPS LU;
+`iterative`: CG + GAMG, rtol 1e-10 on the true residual) and the Krylov iterations from its log.
+DOLFINx: *first* = `create_matrix` + `assemble_matrix` with the BC (JIT excluded), *re* =
+`zeroEntries` + `assemble_matrix` (best of 3); the same two solvers on its matrix. Times: the
+slowest rank's. ×DOLFINx = DOLFINx time / parsolve time (≥ 1: parsolve at least as fast).
+"""
+
+
+def report(rows, machine: str) -> str:
+    table = STEADY_HEAD + "\n" + "\n".join(steady_line(p, d) for p, d in rows) + "\n"
+    return (f"{INTRO}\nMachine: {machine}\n\n## Steady Poisson\n\n{table}\n### Findings\n\n"
+            f"{findings(rows)}\n## Transient solubility under refinement (grow-shrink strip)\n\n"
+            f"{solubility_table()}")
+
+
 def main() -> None:
+    if "--report" in sys.argv[1:]:  # rewrite the markdown from the saved rows
+        data = json.loads((RESULTS / "bench_transport.json").read_text())
+        rows = [(r["parsolve"], r["dolfinx"]) for r in data["rows"]]
+        (RESULTS / "bench_transport.md").write_text(report(rows, data["machine"]))
+        return
     OUT.mkdir(parents=True, exist_ok=True)
     (OUT / "jit").mkdir(exist_ok=True)
     RESULTS.mkdir(exist_ok=True)
@@ -329,26 +418,25 @@ def main() -> None:
     peer = dolfinx_available()
     print(STEADY_HEAD, flush=True)
     rows = []
-    for cell in CELLS:
-        for nr in RANKS:
-            for n in SIZES:
+    for n in SIZES:  # smallest sizes first everywhere: a cut-short run still has a trend
+        for cell in CELLS:
+            for nr in RANKS:
                 p = launch("parsolve", n, cell, nr)
                 d = launch("dolfinx", n, cell, nr) if peer else None
                 rows.append((p, d))
                 print(steady_line(p, d), flush=True)
+                (OUT / "partial.json").write_text(json.dumps([dict(parsolve=a, dolfinx=b) for a, b in rows]))
+    rows.sort(key=lambda pd: (pd[0]["cell"], pd[0]["nranks"], pd[0]["n"]))
     load1, seconds = os.getloadavg(), time.perf_counter() - t0
     machine = (f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores; load average "
                f"(1/5/15 min) {load0[0]:.2f}/{load0[1]:.2f}/{load0[2]:.2f} at start, "
                f"{load1[0]:.2f}/{load1[1]:.2f}/{load1[2]:.2f} at end; run "
                f"{time.strftime('%Y-%m-%d %H:%M:%S', time.gmtime())} UTC, {seconds:.0f} s; "
                f"DOLFINx {'0.5 (Debian)' if peer else 'not installed'}")
-    table = STEADY_HEAD + "\n" + "\n".join(steady_line(p, d) for p, d in rows) + "\n"
-    sol = solubility_table()
-    print(f"\n{machine}\n\n{sol}")
+    print(f"\n{machine}\n\n{findings(rows)}\n{solubility_table()}")
     (RESULTS / "bench_transport.json").write_text(json.dumps(
         dict(machine=machine, rows=[dict(parsolve=p, dolfinx=d) for p, d in rows]), indent=1))
-    (RESULTS / "bench_transport.table.md").write_text(
-        f"{machine}\n\n## Steady Poisson\n\n{table}\n## Transient solubility (strip)\n\n{sol}")
+    (RESULTS / "bench_transport.md").write_text(report(rows, machine))
 
 
 if __name__ == "__main__":
@@ -357,6 +445,7 @@ if __name__ == "__main__":
     ap.add_argument("--n", type=int)
     ap.add_argument("--cell")
     ap.add_argument("--json")
+    ap.add_argument("--report", action="store_true", help="rewrite the markdown from the saved JSON")
     a = ap.parse_args()
     if a.mode == "parsolve":
         parsolve_worker(a.n, a.cell, a.json)
