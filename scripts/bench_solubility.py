@@ -365,6 +365,29 @@ def findings(rows: list[dict]) -> str:
                "plus a Python parameter dict per problem.")
     if failed:
         out.append(f"- **Failed runs:** {len(failed)} (see the table).")
+    over = [r for r in ours if r["balance"] > 1e-12]
+    if over:
+        out.append("- **Balance above the issue's 1e-12:** " + ", ".join(
+            f"{r['family']} {r['size']} ({r['method']}: {r['balance']:.1e})" for r in over)
+            + ". The error grows steadily over the steps (largest at the last step, in steps "
+            "of one linear solve, relative residual ~1e-12): consistent with the round-off of "
+            "the linear solves accumulating (not investigated further); the baseline stays "
+            "below 1e-12 on the same meshes.")
+    out.append("\n**Verdict.** " + (
+        "The paper's claim of *fewer iterations* is not borne out: parsolve's switched "
+        "non-associated relations are solved by the core's active-set Newton, which on this "
+        "problem is the same primal-dual active-set (semi-smooth Newton) iteration as the "
+        "classical complementarity formulation: the same active set at every iteration, hence "
+        "the same count at every step, growing alike under refinement. "
+        if same_steps == total_steps else
+        "Iteration counts differ between the formulations in "
+        f"{total_steps - same_steps} of {total_steps} steps (see the table). ")
+        + "The claim of *simpler input* holds: a scene table instead of a purpose-written solver. "
+        "In time, the general machinery (saddle system with relation rows, MUMPS, an HDF5 "
+        "step record) costs more than the dedicated 2n × 2n semi-smooth Newton: 3–6× in "
+        "compute on the strip at every size; in 2D the gap closes with size (the baseline's "
+        "PETSc native LU scales worse than MUMPS), near parity at 9.4k nodes. The 2-rank runs "
+        "are slower than 1 rank at these sizes on this shared 2-core machine.")
     return "\n".join(out) + "\n"
 
 
