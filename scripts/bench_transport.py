@@ -22,7 +22,7 @@ Transient solubility: read from scripts/results/bench_solubility.json (run
 scripts/bench_solubility.py first): time per step and active-set iterations per step on the
 refined strip.
 
-    .venv/bin/python scripts/bench_transport.py      → table on stdout,
+    .venv/bin/python scripts/bench_transport.py [--sizes 125 250]   → table on stdout,
         scripts/results/bench_transport.md and .json; scratch in bench_results/transport/
 """
 
@@ -267,11 +267,11 @@ def dolfinx_available() -> bool:
     return subprocess.run([DEBIAN_PY, "-c", "import dolfinx"], capture_output=True).returncode == 0
 
 
-def write_meshes() -> None:
+def write_meshes(sizes: tuple[int, ...]) -> None:
     from parsolve.mesh.generators import rectangle
 
     for cell in CELLS:
-        for n in SIZES:
+        for n in sizes:
             mesh = rectangle(1.0, 1.0, n, n, cell=cell)
             np.savez(OUT / f"mesh_{cell}_{n}.npz", points=mesh.points, cells=mesh.cells)
 
@@ -394,6 +394,11 @@ parsolve: *model* = scene → model (mesh generation, regions, effects); *system
 DOLFINx: *first* = `create_matrix` + `assemble_matrix` with the BC (JIT excluded), *re* =
 `zeroEntries` + `assemble_matrix` (best of 3); the same two solvers on its matrix. Times: the
 slowest rank's. ×DOLFINx = DOLFINx time / parsolve time (≥ 1: parsolve at least as fast).
+Direct solves are not the same factorization: parsolve's preset factors the symmetric operator
+by MUMPS Cholesky (LDLᵀ, QAMD ordering), DOLFINx here by MUMPS LU (default ordering), so about
+half the work; CG + GAMG has the same options on both sides (parsolve's iterative preset).
+The machine is shared: a single row can be hit by other jobs (see the load); compare ratios
+along a column rather than one row.
 """
 
 
@@ -404,21 +409,26 @@ def report(rows, machine: str) -> str:
             f"{solubility_table()}")
 
 
-def main() -> None:
+def main(sizes: tuple[int, ...] = SIZES) -> None:
     if "--report" in sys.argv[1:]:  # rewrite the markdown from the saved rows
-        data = json.loads((RESULTS / "bench_transport.json").read_text())
-        rows = [(r["parsolve"], r["dolfinx"]) for r in data["rows"]]
+        if "--partial" in sys.argv[1:]:  # a run cut short: the rows saved so far
+            data = dict(rows=json.loads((OUT / "partial.json").read_text()),
+                        machine=sys.argv[sys.argv.index("--partial") + 1])
+        else:
+            data = json.loads((RESULTS / "bench_transport.json").read_text())
+        rows = sorted(((r["parsolve"], r["dolfinx"]) for r in data["rows"]),
+                      key=lambda pd: (pd[0]["cell"], pd[0]["nranks"], pd[0]["n"]))
         (RESULTS / "bench_transport.md").write_text(report(rows, data["machine"]))
         return
     OUT.mkdir(parents=True, exist_ok=True)
     (OUT / "jit").mkdir(exist_ok=True)
     RESULTS.mkdir(exist_ok=True)
     load0, t0 = os.getloadavg(), time.perf_counter()
-    write_meshes()
+    write_meshes(sizes)
     peer = dolfinx_available()
     print(STEADY_HEAD, flush=True)
     rows = []
-    for n in SIZES:  # smallest sizes first everywhere: a cut-short run still has a trend
+    for n in sizes:  # smallest sizes first everywhere: a cut-short run still has a trend
         for cell in CELLS:
             for nr in RANKS:
                 p = launch("parsolve", n, cell, nr)
@@ -443,13 +453,16 @@ if __name__ == "__main__":
     ap = argparse.ArgumentParser()
     ap.add_argument("mode", nargs="?", default="main", choices=("main", "parsolve", "dolfinx"))
     ap.add_argument("--n", type=int)
+    ap.add_argument("--sizes", type=int, nargs="+", default=list(SIZES),
+                    help="n of the n × n meshes (default: %(default)s; ~19 min at load ~7)")
     ap.add_argument("--cell")
     ap.add_argument("--json")
     ap.add_argument("--report", action="store_true", help="rewrite the markdown from the saved JSON")
+    ap.add_argument("--partial", help="with --report: from the partial rows; the machine line")
     a = ap.parse_args()
     if a.mode == "parsolve":
         parsolve_worker(a.n, a.cell, a.json)
     elif a.mode == "dolfinx":
         dolfinx_worker(a.n, a.cell, a.json)
     else:
-        sys.exit(main())
+        sys.exit(main(tuple(a.sizes)))
