@@ -173,6 +173,58 @@ def with_dual(relation: Relation, vector: np.ndarray) -> Relation:
     return relation
 
 
+def keep_rows(relation: Relation, keep: np.ndarray) -> Relation:
+    """The relation restricted to the rows ``keep`` (a mask), renumbered."""
+    new = np.cumsum(keep) - 1
+    on = keep[relation.a_rows]
+    dual = relation.dual
+    if dual is not None:
+        dofs, rows, vals = dual
+        d_on = keep[rows]
+        dual = (dofs[d_on], new[rows[d_on]], vals[d_on])
+    out = Relation(relation.name, int(keep.sum()), new[relation.a_rows[on]], relation.a_dofs[on],
+                   relation.a_vals[on], relation.values[keep], relation.evolution,
+                   relation.sense, dual, relation.eliminate, relation.maximum,
+                   shared_dual=relation.shared_dual,
+                   groups=None if relation.groups is None else relation.groups[keep])
+    out.meta = relation.meta
+    return out
+
+
+def drop_repeated_rows(relations: list[Relation]) -> list[Relation]:
+    """A DOF fixed twice to the same value (two Dirichlet conditions meeting at a corner, with
+    the same value and evolution) keeps the first relation's row only; the later relation
+    loses it (its reaction is reported by the first). Different values stay an error
+    (``duplicate_rows``)."""
+    evolutions: list = []
+    dof, rel, row, value, evol = [], [], [], [], []
+    for k, r in enumerate(relations):
+        if r.sense != "=" or not r.associated:
+            continue
+        counts = np.bincount(r.a_rows, minlength=r.nrows)
+        at = counts[r.a_rows] == 1
+        if r.evolution not in evolutions:
+            evolutions.append(r.evolution)
+        dof.append(r.a_dofs[at])
+        row.append(r.a_rows[at])
+        rel.append(np.full(at.sum(), k))
+        value.append(r.values[r.a_rows[at]] / r.a_vals[at])
+        evol.append(np.full(at.sum(), evolutions.index(r.evolution)))
+    if not dof:
+        return relations
+    dof, rel, row, value, evol = (np.concatenate(x) for x in (dof, rel, row, value, evol))
+    order = np.lexsort((rel, dof))
+    dof, rel, row, value, evol = (x[order] for x in (dof, rel, row, value, evol))
+    same = (dof[1:] == dof[:-1]) & (value[1:] == value[:-1]) & (evol[1:] == evol[:-1]) \
+        & (rel[1:] != rel[:-1])
+    out = list(relations)
+    for k in np.unique(rel[1:][same]):  # a loop over relations, not rows
+        keep = np.ones(out[k].nrows, dtype=bool)
+        keep[row[1:][same & (rel[1:] == k)]] = False
+        out[k] = keep_rows(out[k], keep)
+    return out
+
+
 def duplicate_rows(relations: list[Relation]) -> list[tuple[str, str, int]]:
     """Single-DOF equality rows that constrain the same DOF twice: (name, name, dof) triples.
 

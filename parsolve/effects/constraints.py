@@ -24,6 +24,7 @@ def build_relations(specs: list, regions, evolutions: dict, patterns: dict, fiel
         r.eliminate = spec.eliminate if spec.eliminate is not None else (eliminate and None)
         r.meta = {"type": spec.type, "key": spec.key, "dual": spec.dual}
         out.append(r)
+    out = rel.drop_repeated_rows(out)
     dups = rel.duplicate_rows(out)
     if dups:
         a, b, dof = dups[0]

@@ -65,3 +65,49 @@ def test_ramp_evolution_scales_applied_loads():
     text = SCENE.format(cell="quad")
     model = build_model(parse_scene(tomllib.loads(text), "s.toml", text))
     np.testing.assert_allclose(model.external_load(0.25), 0.25 * model.external_load(1.0))
+
+
+def test_two_conditions_meeting_at_a_corner(run):
+    """u_x = 0 on the left edge and on the bottom edge fix the corner twice with the same value:
+    the corner's row stays with the first relation and the run goes on; different values at
+    the corner are an input error."""
+    import pytest as _pytest
+
+    from parsolve.errors import InputError
+
+    text = """
+[mesh]
+generator = "rectangle"
+lx = 1.0
+ly = 1.0
+nx = 4
+ny = 4
+cell = "quad"
+[model]
+hypothesis = "plane_stress"
+[[materials]]
+E = 100.0
+nu = 0.3
+[[loads]]
+name = "pull"
+region = "right"
+traction = [1.0, 0.0]
+[[relations]]
+name = "left"
+type = "dirichlet"
+region = "left"
+components = ["x", "y"]
+[[relations]]
+name = "bottom"
+type = "dirichlet"
+region = "bottom"
+components = ["y"]
+value = {value}
+"""
+    res = run(text.format(value=0.0), name="corner")
+    assert res["relations/left/multiplier"].shape[1] == 10   # 5 nodes × 2
+    assert res["relations/bottom/multiplier"].shape[1] == 4  # the corner stays with "left"
+    # λ = minus the reaction: the left edge holds the unit pull
+    np.testing.assert_allclose(res["relations/left/multiplier"][-1][0::2].sum(), 1.0, rtol=1e-10)
+    with _pytest.raises(InputError):
+        run(text.format(value='"1e-3 * x"'), name="corner_bad")

@@ -117,12 +117,15 @@ def test_body_held_only_by_relations():
 
 
 def test_redundant_relation_names_both():
+    """The same DOFs fixed to two different values (the same value is merged: see
+    tests/effects/test_loads.py)."""
     text = BAR.format(E=1.0, preset="direct", eliminate="true") + """
 [[relations]]
 name = "again"
 type = "dirichlet"
 region = "left"
 components = ["x"]
+value = 1e-3
 """
     with pytest.raises(InputError, match="'left' and 'again'"):
         solution(text)
