@@ -77,6 +77,15 @@ def step_outputs(comm: MPI.Comm, system, q: np.ndarray, multipliers: dict, newto
             k = system.multiplied.index(r)
             first = system.block.first_row[k]
             fields["solubility_state"] = effect.state(active[first:first + r.nrows])[:, None]
+    if active is not None:  # contact: per-node reactions, gaps, slips, states; resultants
+        views = {r.name: active[system.block.first_row[k]:system.block.first_row[k + 1]]
+                 for k, r in enumerate(system.multiplied)}
+        for effect in model.effects:
+            if hasattr(effect, "step_outputs"):
+                nodal, per_relation = effect.step_outputs(q, multipliers, views)
+                fields.update(nodal)
+                for name, values in per_relation.items():
+                    rel_out[name].update(values)
     return fields, cell_fields, rel_out
 
 

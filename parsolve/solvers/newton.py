@@ -53,6 +53,13 @@ class NewtonSolver:
         self.residual_history: list[float] = []
         self._mat = None
         self._oriented = False
+        # effects whose relations change between iterations (contact with friction): their
+        # begin_step / refresh / end_step hooks, and where each relation's D and A entries
+        # sit in the stacked block (values are copied there in place: same sparsity)
+        self.hooks = [e for e in model.effects if hasattr(e, "refresh")]
+        sizes = [(len(r.dual_coo()[2]), r.a_vals.size) for r in system.multiplied]
+        self._d_seg = np.concatenate([[0], np.cumsum([d for d, _ in sizes])]).astype(np.int64)
+        self._a_seg = np.concatenate([[0], np.cumsum([a for _, a in sizes])]).astype(np.int64)
 
     def snapshot(self) -> tuple:
         """The converged state, to come back to when a trial step fails."""
@@ -92,6 +99,8 @@ class NewtonSolver:
     def step(self, t: float) -> StepResult:
         system, spec = self.system, self.spec
         free = system.free_rows()
+        if self.hooks:
+            self._begin_hooks()
         self.active.start_step()
         self._start_rate(t)
         f_known = self.external(t)
@@ -114,6 +123,8 @@ class NewtonSolver:
             small_step = dq_norm <= spec.stol * max(float(np.abs(self.q).max()), 1e-300)
             if it > 0 and not changed and (residual <= spec.rtol or small_step and residual < 1e-6):
                 self.states, self.extras = trial, extras
+                for e in self.hooks:
+                    e.end_step()
                 self.t_prev, self.f_pure = t, self._f_trial
                 self.f_ext = f_known
                 return StepResult(it + predictions, residual, f_int)
@@ -134,11 +145,47 @@ class NewtonSolver:
             self.lam = system.multipliers(x_full)
             self.x_full = x_full
             changed = self._update_active(t) if self.active.unilateral else False
+            if self.hooks:
+                changed = self._refresh_hooks() or changed
         history = ", ".join(f"{r:.1e}" for r in self.residual_history[-6:])
         trend = "diverged" if len(self.residual_history) > 2 and \
             self.residual_history[-1] > self.residual_history[1] else "did not converge"
         raise SolverError(f"Newton {trend} at t = {t:.6g} after {spec.max_iterations} iterations "
                           f"(relative residuals ..., {history})")
+
+    # ------------------------------------------------------------ switched relations
+
+    def _views(self, x: np.ndarray) -> dict[str, np.ndarray]:
+        """Per multiplied relation, its rows of x (writable views)."""
+        first = self.system.block.first_row
+        return {r.name: x[first[k]:first[k + 1]] for k, r in enumerate(self.system.multiplied)}
+
+    def _begin_hooks(self) -> None:
+        changed = False
+        for e in self.hooks:
+            changed = e.begin_step(self.q, self._views(self.active.active)) or changed
+        if changed:
+            self._sync_relations()
+
+    def _refresh_hooks(self) -> bool:
+        """The effects' updates between iterations (e.g. friction states and slip senses);
+        their relation values are copied into the system, whose pattern does not change."""
+        lam, active = self._views(self.lam), self._views(self.active.active)
+        changed = False
+        for e in self.hooks:
+            changed = e.refresh(self.q, lam, active) or changed
+        if changed:
+            self._sync_relations()
+        return changed
+
+    def _sync_relations(self) -> None:
+        """Copy the current A and D values of the relations marked ``meta["refresh"]`` into
+        the stacked block (unscaled; the scales of the first assembly stay)."""
+        blk = self.system.block
+        for k, r in enumerate(self.system.multiplied):
+            if r.meta.get("refresh"):
+                blk.d_vals[self._d_seg[k]:self._d_seg[k + 1]] = r.dual_coo()[2]
+                blk.a_vals[self._a_seg[k]:self._a_seg[k + 1]] = r.a_vals
 
     def _unit_response(self, kmat, released: np.ndarray, f: np.ndarray) -> np.ndarray:
         """δq = K⁻¹ f with the tangent, the rows ``released`` switched off and the other
@@ -178,11 +225,7 @@ class NewtonSolver:
             if r.meta.get("dual"):
                 rate = r.primal(self._unit_response(kmat, rows, self._dual_column(k)))
             else:
-                dofs, drows, vals = r.dual_coo()
-                d = np.zeros((r.nrows, self.ndof))
-                np.add.at(d, (drows, dofs), vals)
-                rate = np.bincount(r.a_rows, weights=r.a_vals * d[r.a_rows, r.a_dofs],
-                                   minlength=r.nrows)
+                rate = _row_dot(r)
             if np.any(np.abs(rate) <= 1e-12 * max(float(np.abs(rate).max()), 1e-300)):
                 raise SolverError(f"relation {r.name!r}: its dual does not move its primal value "
                                   "(A K⁻¹ D = 0), so the sense of its reaction is undefined")
@@ -232,3 +275,16 @@ class NewtonSolver:
         x = self.x_full.copy()
         x[self.system.saddle_of_input] = self.q
         return self.system.unpack(x, t, f_int=f_int, f_ext=getattr(self, "f_ext", None))[1]
+
+
+def _row_dot(r) -> np.ndarray:
+    """A_k · D_k of every row k of a relation (sparse: matching (row, dof) entries)."""
+    dofs, drows, vals = r.dual_coo()
+    width = max(int(np.max(dofs, initial=0)), int(np.max(r.a_dofs, initial=0))) + 1
+    dkey = np.asarray(drows, dtype=np.int64) * width + dofs
+    ukey, inv = np.unique(dkey, return_inverse=True)
+    dsum = np.bincount(inv, weights=vals, minlength=ukey.size)
+    akey = r.a_rows * width + r.a_dofs
+    pos = np.clip(np.searchsorted(ukey, akey), 0, max(ukey.size - 1, 0))
+    hit = ukey[pos] == akey if ukey.size else np.zeros(akey.size, dtype=bool)
+    return np.bincount(r.a_rows[hit], weights=r.a_vals[hit] * dsum[pos[hit]], minlength=r.nrows)
