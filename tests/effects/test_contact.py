@@ -1,0 +1,302 @@
+"""Contact and Coulomb friction through relations: the patch test across a non-matching
+interface, a block pressed on a rough rigid plane and sheared past the stick/slip limit
+(resultants, cone, iterations), the exact homogeneous stick and slip field of docs/contact.md
+§6, and the bad inputs (exit 2 with file and key)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from conftest import CONFIGS
+from parsolve.contact import references
+from parsolve.contact.friction import OPEN, SLIP, STICK
+from parsolve.errors import InputError
+from parsolve.mesh.generators import rectangle
+from parsolve.model import build_model
+from parsolve.scene import load_scene
+
+E, NU = 1000.0, 0.3
+LAM, G = E * NU / ((1 + NU) * (1 - 2 * NU)), E / (2 * (1 + NU))   # plane strain
+
+
+def two_blocks(path, nx_low: int, nx_up: int, ny: int = 2, lx: float = 1.0, h: float = 0.5) -> None:
+    """Two stacked rectangles as one mesh file (Gmsh 2.2): cell groups lower/upper and facet
+    groups <body>_top/bottom/left; the interface nodes are distinct (not connected)."""
+    import meshio
+
+    low = rectangle(lx, h, nx_low, ny)
+    up = rectangle(lx, h, nx_up, ny, origin=(0.0, h))
+    off = low.num_points
+    points = np.vstack([low.points, up.points])
+    lines = [(f"{body}_{side}", m.facet_groups[side] + o)
+             for body, m, o in (("lower", low, 0), ("upper", up, off))
+             for side in ("top", "bottom", "left")]
+    blocks = [("quad", low.cells), ("quad", up.cells + off)] + [("line", f) for _, f in lines]
+    tags = [1, 2] + [10 + i for i in range(len(lines))]
+    phys = [np.full(len(b[1]), tag) for b, tag in zip(blocks, tags)]
+    field = {"lower": np.array([1, 2]), "upper": np.array([2, 2])}
+    field.update({name: np.array([10 + i, 1]) for i, (name, _) in enumerate(lines)})
+    mesh = meshio.Mesh(np.column_stack([points, np.zeros(len(points))]), blocks,
+                       cell_data={"gmsh:physical": phys, "gmsh:geometrical": phys},
+                       field_data=field)
+    meshio.write(str(path), mesh, file_format="gmsh22", binary=False)
+
+
+PATCH = """
+title = "contact patch test"
+[mesh]
+file = "{mesh}"
+[model]
+hypothesis = "plane_strain"
+[[materials]]
+region = "lower"
+E = 1000.0
+nu = 0.3
+[[materials]]
+region = "upper"
+E = 300.0
+nu = 0.2
+[[loads]]
+name = "press"
+region = "upper_top"
+traction = [0.0, {traction}]
+[[relations]]
+name = "ground"
+type = "dirichlet"
+region = "lower_bottom"
+component = "y"
+[[relations]]
+name = "roll_low"
+type = "dirichlet"
+region = "lower_left"
+component = "x"
+[[relations]]
+name = "roll_up"
+type = "dirichlet"
+region = "upper_left"
+component = "x"
+[[contact]]
+name = "joint"
+slave = "upper_bottom"
+master = "lower_top"
+{extra}
+[steps]
+count = 2
+"""
+
+
+@pytest.mark.parametrize("nx_low, nx_up", [(4, 8), (3, 9), (5, 5)])
+def test_patch_pressure_is_transmitted_exactly(run, shared_tmp, nx_low, nx_up):
+    """Two bodies of different materials, the slave side a refinement of the master side
+    (node-to-segment passes the patch test when every master node is a slave node: the slave
+    nodes' trapezoidal rule then integrates the master's piecewise-linear shape functions
+    exactly). The uniform stress sigma_yy = -p is the discrete solution to round-off."""
+    mesh = shared_tmp / f"two_{nx_low}_{nx_up}.msh"
+    if MPI.COMM_WORLD.rank == 0:
+        two_blocks(mesh, nx_low, nx_up)
+    MPI.COMM_WORLD.Barrier()
+    p = 10.0
+    res = run(PATCH.format(mesh=mesh, traction=-p, extra=""), name=f"patch_{nx_low}_{nx_up}")
+    stress = res["fields/stress"][-1]
+    np.testing.assert_allclose(stress[:, 1], -p, atol=1e-12 * p)
+    np.testing.assert_allclose(stress[:, [0, 2]], 0.0, atol=1e-12 * p)
+    state = res["fields/joint_state"][-1, :, 0]
+    slave = np.flatnonzero(state >= 0)
+    assert slave.size == nx_up + 1 and np.all(state[slave] == STICK)   # all closed
+    x = res["mesh/points"][slave, 0]
+    h = 1.0 / nx_up
+    expected = np.where(np.isclose(x, 0.0) | np.isclose(x, 1.0), 0.5, 1.0) * p * h
+    np.testing.assert_allclose(res["fields/joint_normal_reaction"][-1, slave, 0], expected,
+                               rtol=1e-12)
+    np.testing.assert_allclose(res["fields/joint_gap"][-1, slave, 0], 0.0, atol=1e-15)
+    np.testing.assert_allclose(res["relations/joint_normal/normal_force"][:, 0], [p / 2, p],
+                               rtol=1e-12)
+    assert np.all(res["steps/iterations"] == 1)
+
+
+def test_patch_lift_off_under_tension(run, shared_tmp):
+    """The upper body hung from its top, lifted by 1e-3 and pulled up by its own weight
+    reversed: the active set opens every row, no contact force, the lower body unloaded."""
+    mesh = shared_tmp / "two_lift.msh"
+    if MPI.COMM_WORLD.rank == 0:
+        two_blocks(mesh, 4, 8)
+    MPI.COMM_WORLD.Barrier()
+    extra = ('[[relations]]\nname = "hold"\ntype = "dirichlet"\nregion = "upper_top"\n'
+             'component = "y"\nvalue = 1e-3\n[[loads]]\nname = "up"\nregion = "upper"\n'
+             'body = [0.0, 5.0]')
+    res = run(PATCH.format(mesh=mesh, traction=0.0, extra=extra), name="patch_lift")
+    state = res["fields/joint_state"][:, :, 0]
+    assert np.all(state[state >= 0] == OPEN)
+    assert np.all(res["fields/joint_normal_reaction"] == 0.0)
+    assert np.all(res["relations/joint_normal/normal_force"] == 0.0)
+    assert res["fields/joint_gap"][-1, state[-1] >= 0, 0].min() > 5e-4
+    lower = res["mesh/points"][:, 1] < 0.5 - 1e-9
+    assert np.abs(res["fields/stress"][-1][lower]).max() < 1e-12
+    # the hanger carries the whole body load (λ is minus the reaction)
+    np.testing.assert_allclose(res["relations/hold/multiplier"][-1].sum(), 5.0 * 0.5, rtol=1e-12)
+
+
+# ----------------------------------------------------------------------------- block on a plane
+
+
+def test_block_on_rough_plane_sticks_then_slides(run):
+    """configs/contact_block_friction.toml: a block pressed by p on a rigid rough plane, its top
+    moved sideways; free sides, so slip spreads from the edges. The total friction follows the
+    applied shear while it can, never exceeds mu N, and is mu N exactly once every node slides;
+    every node stays in its cone, nothing penetrates, each step takes at most 3 iterations."""
+    res = run(CONFIGS / "contact_block_friction.toml", name="block_friction")
+    p, mu, width = 10.0, 0.3, 1.0
+    n_force = res["relations/base_normal/normal_force"][:, 0]
+    t_force = res["relations/base_normal/tangential_force"][:, 0]
+    np.testing.assert_allclose(n_force, p * width, rtol=1e-12)
+    # the friction balances the force that moves the top (λ is minus the reaction)
+    np.testing.assert_allclose(t_force, -res["relations/shift/multiplier"].sum(axis=1),
+                               rtol=1e-11)
+    assert np.all(t_force <= mu * n_force * (1 + 1e-10))
+    state = res["fields/base_state"][:, :, 0]
+    rn = res["fields/base_normal_reaction"][:, :, 0]
+    rt = res["fields/base_tangential_reaction"][:, :, 0]
+    assert np.all(mu * rn - np.abs(rt) >= -1e-10 * mu * rn.max())
+    assert res["fields/base_gap"].min() >= -1e-12
+    closed = state > OPEN
+    sliding = np.array([np.all(s[c] == SLIP) for s, c in zip(state, closed)])
+    assert not sliding[0] and sliding[-1]
+    np.testing.assert_allclose(t_force[sliding], mu * p * width, rtol=1e-12)
+    assert np.all(t_force[~sliding] < mu * p * width)
+    assert np.any(state[0] == STICK) and np.any(state[0] == SLIP)   # partial slip first
+    assert res["steps/iterations"].max() <= 3
+
+
+def sheared_scene(delta_end: float, t_star: float, p: float, mu: float, height: float) -> str:
+    """A block of height H on the rigid plane y = 0, top pressed by p and moved by delta(t),
+    the sides loaded by the homogeneous stress of docs/contact.md §6: sigma_xx (constant) and
+    sigma_xy = min(G delta / H, mu p) (a ramp to mu p at t_star, then constant)."""
+    gy = -p / (LAM + 2 * G)
+    sxx, tau = LAM * gy, mu * p
+    return f"""
+[mesh]
+generator = "rectangle"
+lx = 1.0
+ly = {height}
+nx = 6
+ny = 3
+cell = "triangle"
+[model]
+hypothesis = "plane_strain"
+[[materials]]
+E = {E}
+nu = {NU}
+[[loads]]
+name = "press"
+region = "top"
+traction = [0.0, {-p}]
+evolution = "constant"
+[[loads]]
+name = "side_n"
+region = "right"
+traction = [{sxx}, 0.0]
+evolution = "constant"
+[[loads]]
+name = "side_n_left"
+region = "left"
+traction = [{-sxx}, 0.0]
+evolution = "constant"
+[[loads]]
+name = "side_t"
+region = "right"
+traction = [0.0, {tau}]
+evolution = "shear"
+[[loads]]
+name = "side_t_left"
+region = "left"
+traction = [0.0, {-tau}]
+evolution = "shear"
+[[relations]]
+name = "shift"
+type = "dirichlet"
+region = "top"
+component = "x"
+value = {delta_end}
+[[contact]]
+name = "base"
+slave = "bottom"
+obstacle = {{ plane = {{ origin = [0.0, 0.0], normal = [0.0, 1.0] }} }}
+friction = {mu}
+[evolutions.shear]
+times = [0.0, {t_star}, 2.0]
+values = [0.0, 1.0, 1.0]
+[steps]
+count = 10
+"""
+
+
+def test_sheared_block_matches_the_exact_stick_and_slip_fields(run):
+    """docs/contact.md §6: the homogeneous field u = (d + gx y, gy y), every node sticking
+    while G delta / H < mu p, every node sliding at the cone beyond, with the slip
+    d = delta - H mu p / G; linear, so reproduced to round-off by P1 at every step."""
+    p, mu, height, t_star = 10.0, 0.3, 0.5, 0.45
+    delta_end = mu * p * height / G / t_star
+    res = run(sheared_scene(delta_end, t_star, p, mu, height), name="sheared")
+    pts = res["mesh/points"]
+    times = res["steps/time"]
+    for k, t in enumerate(times):
+        ref = references.sheared_block(LAM, G, p, mu, height, delta_end * t)
+        u = res["fields/displacement"][k]
+        np.testing.assert_allclose(u, ref.displacement(pts), atol=1e-12 * np.abs(u).max())
+        state = res["fields/base_state"][k, :, 0]
+        bottom = np.isclose(pts[:, 1], 0.0)
+        assert np.all(state[bottom] == (SLIP if ref.sliding else STICK)), (t, state[bottom])
+        np.testing.assert_allclose(res["relations/base_normal/tangential_force"][k, 0],
+                                   ref.tau * 1.0, rtol=1e-11)
+        np.testing.assert_allclose(res["fields/base_slip"][k, bottom, 0], -ref.slip,
+                                   atol=1e-12 * delta_end)   # slip along t = (-1, 0)
+    assert (times < t_star).sum() == 4
+    iterations = res["steps/iterations"]
+    assert iterations.max() <= 3 and iterations[4] >= 2   # the stick → slip step
+    assert np.all(iterations[times < t_star] == 1)
+
+
+# ----------------------------------------------------------------------------- bad input
+
+BASE = """
+[mesh]
+generator = "rectangle"
+lx = 1.0
+ly = 0.5
+nx = 4
+ny = 2
+[model]
+hypothesis = "plane_strain"
+[[materials]]
+E = 1000.0
+nu = 0.3
+[[contact]]
+name = "base"
+{contact}
+"""
+
+PLANE = 'obstacle = { plane = { origin = [0.0, 0.0], normal = [0.0, 1.0] } }'
+
+
+@pytest.mark.parametrize("contact, key, words", [
+    (f'slave = "bottom"\n{PLANE}\nfriction = -0.1', "contact[0].friction", ">= 0"),
+    (f'slave = "middle"\n{PLANE}', "contact[0].slave", "boundary"),
+    ('slave = "bottom"\nmaster = "bottom"', "contact[0].master", "share"),
+    ('slave = "bottom"\nobstacle = { plane = { origin = [0.0, 0.0] } }',
+     "contact[0].obstacle.plane.normal", "missing"),
+    ('slave = "bottom"\nobstacle = { plane = { origin = [0.0, 0.0], normal = [0.0, 0.0] } }',
+     "contact[0].obstacle.plane", "non-zero"),
+    ('slave = "bottom"', "contact[0].master", "exactly one"),
+    (f'slave = "bottom"\n{PLANE}\ndirection = "sideways"', "contact[0].direction", "one of"),
+])
+def test_bad_input_names_file_and_key(shared_tmp, contact, key, words):
+    text = BASE.format(contact=contact) + '\n[regions]\nmiddle = "abs(y - 0.25) < 1e-9"\n'
+    path = shared_tmp / "bad_contact.toml"
+    if MPI.COMM_WORLD.rank == 0:
+        path.write_text(text)
+    MPI.COMM_WORLD.Barrier()
+    with pytest.raises(InputError) as err:
+        build_model(load_scene(path))
+    assert err.value.key == key and words in str(err.value) and str(path) in str(err.value)
