@@ -251,9 +251,16 @@ class Contact(Effect):
             return False
         rn, rt = self.forces(lam)
         closed = active[self.normal.name].astype(bool)
+        du = self.slip_increment(q)
+        closing = closed & (self.node_state == fr.OPEN)
         state, direction, changed = fr.friction_update(
-            self.node_state, self.direction, closed, rn, rt, self.slip_increment(q), self.mu,
-            self.spec.direction)
+            self.node_state, self.direction, closed, rn, rt, du, self.mu, self.spec.direction)
+        # a node that closes while it moves along the surface slides that way: sticking it
+        # at the step's starting point would pull it back (and may open it again: a cycle)
+        norm = np.linalg.norm(du, axis=1)
+        moving = closing & (norm > 1e-8 * max(float(np.abs(q - self.q_start).max()), 1e-300))
+        state[moving] = fr.SLIP
+        direction[moving] = du[moving] / norm[moving, None]
         self.node_state, self.direction = state, direction
         if changed:
             self._set_dual()

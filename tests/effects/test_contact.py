@@ -258,6 +258,114 @@ def test_sheared_block_matches_the_exact_stick_and_slip_fields(run):
     assert np.all(iterations[times < t_star] == 1)
 
 
+# ----------------------------------------------------------------------------- V-wedge
+
+
+def _patch(corners: np.ndarray, nx: int, ny: int) -> np.ndarray:
+    """Bilinear map of an (ny+1, nx+1) grid onto the quadrilateral corners (4, 2) ordered
+    (xi, eta) = (0, 0), (1, 0), (1, 1), (0, 1): points (ny+1, nx+1, 2)."""
+    xi, eta = np.meshgrid(np.linspace(0, 1, nx + 1), np.linspace(0, 1, ny + 1))
+    w = np.stack([(1 - xi) * (1 - eta), xi * (1 - eta), xi * eta, (1 - xi) * eta], -1)
+    return w @ corners
+
+
+def wedge_mesh(path, beta: float, n1: int = 4, n2: int = 3, ny: int = 4, a: float = 1.0,
+               b: float = 0.8, h: float = 1.0) -> None:
+    """A block on a V-wedge: patch 1 above face 1 (y = 0, 0 <= x <= a), patch 2 above face 2
+    (from the apex along e2 = (-cos b, sin b), length b), sharing the edge from the apex up.
+    Groups: face1, face2 (facets), face2_slave (face 2's nodes but the apex), right, top, left."""
+    import meshio
+
+    e2 = np.array([-np.cos(beta), np.sin(beta)])
+    bx = b * e2
+    p1 = _patch(np.array([[0, 0], [a, 0], [a, h], [0, h]], float), n1, ny)
+    p2 = _patch(np.array([bx, [0, 0], [0, h], [bx[0], h]], float), n2, ny)
+    ids1 = np.arange(p1.shape[0] * p1.shape[1]).reshape(p1.shape[:2])
+    ids2 = np.full(p2.shape[:2], -1)
+    ids2[:, -1] = ids1[:, 0]                               # the shared edge
+    ids2[:, :-1] = ids1.size + np.arange(p2.shape[0] * (p2.shape[1] - 1)).reshape(p2.shape[0], -1)
+    points = np.vstack([p1.reshape(-1, 2), p2[:, :-1].reshape(-1, 2)])
+
+    def quads(ids):
+        return np.stack([ids[:-1, :-1], ids[:-1, 1:], ids[1:, 1:], ids[1:, :-1]], -1).reshape(-1, 4)
+
+    def edges(line):
+        return np.stack([line[:-1], line[1:]], -1)
+
+    groups = {"face1": edges(ids1[0]), "face2": edges(ids2[0]), "right": edges(ids1[:, -1]),
+              "top": np.vstack([edges(ids2[-1]), edges(ids1[-1])]), "left": edges(ids2[:, 0])}
+    blocks = [("quad", np.vstack([quads(ids1), quads(ids2)]))]
+    blocks += [("line", f) for f in groups.values()]
+    blocks += [("vertex", ids2[0, :-1, None])]
+    tags = [1] + [10 + i for i in range(len(groups))] + [30]
+    phys = [np.full(len(blk[1]), tag) for blk, tag in zip(blocks, tags)]
+    field = {"block": np.array([1, 2]), "face2_slave": np.array([30, 0])}
+    field.update({name: np.array([10 + i, 1]) for i, name in enumerate(groups)})
+    mesh = meshio.Mesh(np.column_stack([points, np.zeros(len(points))]), blocks,
+                       cell_data={"gmsh:physical": phys, "gmsh:geometrical": phys},
+                       field_data=field)
+    meshio.write(str(path), mesh, file_format="gmsh22", binary=False)
+
+
+def test_wedge_stick_and_slip_side_by_side_is_exact(run, shared_tmp):
+    """docs/contact.md §7: a block on a rigid V-wedge, loaded on its other faces by the
+    traction of the homogeneous stress: face 1 sticks inside the cone, face 2 slides at the
+    cone with mu = G cot(beta) / lam, u = kappa t y e2 — to round-off, at every step of a
+    proportional ramp, in 2 iterations per step."""
+    beta, kappa = np.pi / 4, -1e-3
+    ref = references.wedge_stick_slip(LAM, G, beta, kappa)
+    mesh = shared_tmp / "wedge.msh"
+    if MPI.COMM_WORLD.rank == 0:
+        wedge_mesh(mesh, beta)
+    MPI.COMM_WORLD.Barrier()
+    loads = "".join(f"""
+[[loads]]
+name = "{side}"
+region = "{side}"
+traction = [{tx!r}, {ty!r}]
+""" for side, (tx, ty) in (("right", ref.traction(np.array([[1.0, 0.0]]))[0]),
+                           ("top", ref.traction(np.array([[0.0, 1.0]]))[0]),
+                           ("left", ref.traction(np.array([[-1.0, 0.0]]))[0])))
+    n2 = ref.normal2
+    text = f"""
+[mesh]
+file = "{mesh}"
+[model]
+hypothesis = "plane_strain"
+[[materials]]
+E = {E}
+nu = {NU}
+{loads}
+[[contact]]
+name = "one"
+slave = "face1"
+obstacle = {{ plane = {{ origin = [0.0, 0.0], normal = [0.0, 1.0] }} }}
+friction = {ref.mu!r}
+[[contact]]
+name = "two"
+slave = "face2_slave"
+obstacle = {{ plane = {{ origin = [0.0, 0.0], normal = [{n2[0]!r}, {n2[1]!r}] }} }}
+friction = {ref.mu!r}
+[steps]
+count = 3
+"""
+    res = run(text, name="wedge")
+    pts = res["mesh/points"]
+    for k, t in enumerate(res["steps/time"]):
+        u = res["fields/displacement"][k]
+        expected = t * ref.displacement(pts)
+        np.testing.assert_allclose(u, expected, atol=1e-11 * np.abs(expected).max())
+        s1, s2 = res["fields/one_state"][k, :, 0], res["fields/two_state"][k, :, 0]
+        assert np.all(s1[s1 >= 0] == STICK) and np.all(s2[s2 >= 0] == SLIP)
+        rn = res["fields/two_normal_reaction"][k, s2 >= 0, 0]
+        rt = res["fields/two_tangential_reaction"][k, s2 >= 0, 0]
+        np.testing.assert_allclose(rt, ref.mu * rn, rtol=1e-12)
+        rn1 = res["fields/one_normal_reaction"][k, s1 >= 0, 0]
+        rt1 = res["fields/one_tangential_reaction"][k, s1 >= 0, 0]
+        assert np.all(ref.mu * rn1 - np.abs(rt1) > 0.1 * ref.mu * rn1)   # strictly inside
+    assert res["steps/iterations"].max() <= 3
+
+
 # ----------------------------------------------------------------------------- bad input
 
 BASE = """
