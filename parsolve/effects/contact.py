@@ -135,7 +135,6 @@ class Contact(Effect):
         self.node_state = np.where(closed, fr.STICK, fr.OPEN).astype(np.int8)
         self.direction = np.ones((n, dm1)) / np.sqrt(dm1)
         self.committed = (self.node_state.copy(), self.direction.copy())
-        self.first = True
         self._build_rows()
 
     # ------------------------------------------------------------------ geometry
@@ -219,9 +218,9 @@ class Contact(Effect):
         """Start a step from the committed state: stick rows hold the tangential displacement
         of the step's start; True when the dual changed (values to copy into the system)."""
         self.node_state, self.direction = (a.copy() for a in self.committed)
-        if self.first:  # initially closed nodes start in contact
-            active[self.normal.name][:] = self.node_state != fr.OPEN
-            self.first = False
+        # the normal rows in contact at the last converged step (initially: the closed gaps);
+        # the same as the active set's after a converged step, and right after a failed one
+        active[self.normal.name][:] = self.node_state != fr.OPEN
         if not self.frictional:
             return False
         self.q_start = q.copy()

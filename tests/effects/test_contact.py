@@ -169,6 +169,26 @@ def test_block_on_rough_plane_sticks_then_slides(run):
     assert res["steps/iterations"].max() <= 3
 
 
+def test_controlled_pull_passes_the_stick_to_slip_plateau(run):
+    """configs/contact_control_friction.toml: the horizontal load is the multiplier of a
+    controlled mean displacement; it equals the total friction, rises through partial slip
+    and stays at mu N exactly while the block slides, the top following its ramp."""
+    res = run(CONFIGS / "contact_control_friction.toml", name="control_friction")
+    mu_n = 0.3 * 10.0
+    load = res["relations/drive/multiplier"][:, 0]
+    t_force = res["relations/base_normal/tangential_force"][:, 0]
+    np.testing.assert_allclose(load, t_force, rtol=1e-11)
+    np.testing.assert_allclose(res["relations/drive/primal"][:, 0], 0.02 * res["steps/time"],
+                               rtol=1e-12)
+    assert np.all(load <= mu_n * (1 + 1e-10)) and np.all(np.diff(load) >= -1e-12)
+    state = res["fields/base_state"][:, :, 0]
+    sliding = np.array([np.all(s[s > OPEN] == SLIP) for s in state])
+    assert not sliding[0] and sliding[-1]
+    np.testing.assert_allclose(load[sliding], mu_n, rtol=1e-12)
+    assert np.all(load[~sliding] < mu_n)
+    assert res["steps/iterations"].max() <= 3
+
+
 def sheared_scene(delta_end: float, t_star: float, p: float, mu: float, height: float) -> str:
     """A block of height H on the rigid plane y = 0, top pressed by p and moved by delta(t),
     the sides loaded by the homogeneous stress of docs/contact.md §6: sigma_xx (constant) and
