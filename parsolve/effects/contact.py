@@ -29,7 +29,8 @@ Scene schema::
     #            { cylinder = { centre = [..], radius = R, axis = [..] (3D), inside = false } }
     #            { sphere = { centre = [..], radius = R, inside = false } }
     friction = 0.3                 # μ ≥ 0; 0 or absent: frictionless
-    direction = "displacement"     # 3D slip direction update: "displacement" or "reaction"
+    direction = "reaction"         # 3D slip direction update: "reaction" (default) or
+    #                                "displacement" (see below; 2D: the sense needs neither)
     search_radius = 0.1            # largest initial gap paired (default: one facet extent)
     closed = 1e-9                  # initial gaps ≤ this (relative to the mesh size) start closed
 """
@@ -43,7 +44,8 @@ import numpy as np
 from parsolve.contact import friction as fr
 from parsolve.contact import obstacles
 from parsolve.contact.pairing import check_surfaces, pair_nodes
-from parsolve.contact.rows import friction_dual, normal_rows, normal_values, tangent_rows
+from parsolve.contact.rows import friction_dual, node_rows, normal_rows, normal_values, \
+    slip_vectors, tangent_rows
 from parsolve.effects.base import Effect
 from parsolve.errors import InputError
 from parsolve.evolution import CONSTANT
@@ -75,7 +77,7 @@ def parse(t, dim: int) -> ContactSpec:
         raise t.error("master", "give exactly one of master (a region) and obstacle")
     obstacle = _obstacle(obs, dim) if obs is not None else None
     mu = fr.check_mu(t.get("friction", (float, int), 0.0), t.source, t.key("friction"))
-    direction = t.get("direction", str, "displacement", choices=fr.DIRECTION_MODES)
+    direction = t.get("direction", str, "reaction", choices=fr.DIRECTION_MODES)
     radius = t.get("search_radius", float, None)
     if radius is not None and not radius > 0:
         raise t.error("search_radius", "must be positive")
@@ -169,9 +171,22 @@ class Contact(Effect):
         u0 = f.offset["u"]
         ncomp = f.ncomp
         self.nrows = normal_rows(p)
-        self.trows = tangent_rows(p)
+        self.trows = tangent_rows(p)        # along the fixed tangents (slip measure, outputs)
         self.n_dofs = self.nrows.node * ncomp + u0 + self.nrows.comp
         self.t_dofs = self.trows.node * ncomp + u0 + self.trows.comp
+
+    def _tangent_coefs(self) -> np.ndarray:
+        """Coefficients of the tangential relation's rows: 2D, along t; 3D, along the slip
+        direction s and across it (n × s), per node (same entries as the fixed tangents)."""
+        p = self.pairing
+        if self.mesh.dim == 2:
+            return self.trows.coef
+        sv = slip_vectors(p, self.direction)
+        vectors = np.stack([sv, np.cross(p.normal, sv)], axis=1).reshape(-1, 3)
+        return node_rows(p.subset(np.repeat(np.arange(len(p)), 2)), vectors).coef
+
+    def _u(self, q: np.ndarray) -> np.ndarray:
+        return q.reshape(self.mesh.num_points, -1)[:, self.fields_.columns("u")]
 
     @property
     def mu(self) -> float:
@@ -196,21 +211,32 @@ class Contact(Effect):
         out = [normal]
         if self.frictional:
             t = self.trows
-            tangent = Relation(f"{name}_tangent", t.nrows, t.row, self.t_dofs, t.coef,
-                               np.zeros(t.nrows), CONSTANT, "=", None, eliminate=False)
-            tangent.meta = {"type": "contact", "key": self.spec.key}
+            tangent = Relation(f"{name}_tangent", t.nrows, t.row, self.t_dofs,
+                               self._tangent_coefs(), np.zeros(t.nrows), CONSTANT, "=", None,
+                               eliminate=False)
+            tangent.meta = {"type": "contact", "key": self.spec.key,
+                            "refresh": self.mesh.dim == 3}
             self.tangent = tangent
             out.append(tangent)
         return out
 
     def _set_dual(self) -> None:
-        """The slip sense s into the normal row's dual, in place (same entries)."""
+        """The slip direction s into the normal row's dual and (3D) the tangential rows, in
+        place (same entries); the stick rows keep the step's starting position."""
         self.normal.dual[2][:] = -friction_dual(self.pairing, self.mu, self.direction).coef
+        if self.mesh.dim == 3:
+            self.tangent.a_vals[:] = self._tangent_coefs()
+            self.tangent.values[:] = self.tangent.primal(self.q_start)
 
     def _tangent_active(self, active: dict) -> None:
-        """Tangential rows enforced where the node sticks."""
-        dm1 = self.mesh.dim - 1
-        active[self.tangent.name][:] = np.repeat(self.node_state == fr.STICK, dm1)
+        """Tangential rows enforced where the node sticks; in 3D with the "reaction" mode a
+        sliding node keeps its row across s (its reaction tells how s must turn)."""
+        stick = self.node_state == fr.STICK
+        if self.mesh.dim == 2:
+            active[self.tangent.name][:] = stick
+            return
+        across = stick | (self.node_state == fr.SLIP) & (self.spec.direction == "reaction")
+        active[self.tangent.name][:] = np.stack([stick, across], axis=1).ravel()
 
     # ------------------------------------------------------------------ Newton hooks
 
@@ -224,22 +250,28 @@ class Contact(Effect):
         if not self.frictional:
             return False
         self.q_start = q.copy()
+        self.u_start = self.trows.apply(self._u(q))
+        self._set_dual()
         self.tangent.values[:] = self.tangent.primal(q)
         self._tangent_active(active)
-        self._set_dual()
         return True
 
     def forces(self, lam: dict) -> tuple[np.ndarray, np.ndarray]:
         """(Rn (n,), Rt (n, dim-1)) on the slave nodes from the multipliers."""
         dm1 = self.mesh.dim - 1
-        lam_t = lam[self.tangent.name].reshape(-1, dm1) if self.frictional else None
-        direction = self.direction if self.frictional else None
+        lam_t, direction = None, None
+        if self.frictional:
+            lam_t = lam[self.tangent.name].reshape(-1, dm1)
+            direction = self.direction
+            if dm1 == 2:  # rows along (s, n × s): back to the tangent basis (t1, t2)
+                s, c = self.direction, lam_t
+                lam_t = c[:, :1] * s + c[:, 1:] * np.column_stack([-s[:, 1], s[:, 0]])
         return fr.reactions(lam[self.normal.name], lam_t, self.mu, direction)
 
     def slip_increment(self, q: np.ndarray) -> np.ndarray:
         """Tangential displacement of the slave relative to the master since the step's start."""
         dm1 = self.mesh.dim - 1
-        return (self.tangent.primal(q) - self.tangent.values).reshape(-1, dm1)
+        return (self.trows.apply(self._u(q)) - self.u_start).reshape(-1, dm1)
 
     def refresh(self, q: np.ndarray, lam: dict, active: dict) -> bool:
         """One friction update between iterations (``active``: the normal rows' new set);
@@ -283,7 +315,7 @@ class Contact(Effect):
         else:
             state = np.where(active[self.normal.name], fr.STICK, fr.OPEN)
         gap = p.gap + self.normal.primal(q)
-        slip = tangent_rows(p).apply(q.reshape(npts, -1)[:, self.fields_.columns("u")])
+        slip = self.trows.apply(self._u(q))
 
         def nodal(values, k=1):
             out = np.zeros((npts, k))
