@@ -484,6 +484,33 @@ count = 3
     assert res["steps/iterations"].max() <= 3
 
 
+# ----------------------------------------------------------------------------- Hertz
+
+
+def test_hertz_cylinder_on_a_block(run):
+    """configs/contact_hertz_cylinder.toml: a rigid cylinder pressed into a block (frictionless,
+    lift-off handled by the active set): the peak nodal pressure within 3% of Hertz's p0 for
+    the computed load, the contact edge within one element of Hertz's half-width a."""
+    res = run(CONFIGS / "contact_hertz_cylinder.toml", name="hertz")
+    pts = res["mesh/points"]
+    load = -res["relations/indent_normal/resultant"][-1, 1]   # the vertical load on the block
+    ref = references.hertz_cylinder(load, 10.0, references.effective_modulus(E, NU))
+    rn = res["fields/indent_normal_reaction"][-1, :, 0]
+    h = 8.0 / 160
+    assert abs(rn.max() / h / ref.p0 - 1.0) < 0.03, (rn.max() / h, ref.p0)
+    state = res["fields/indent_state"][-1, :, 0]
+    edge = np.abs(pts[state > OPEN, 0]).max()
+    assert edge <= ref.a < edge + h, (edge, ref.a)
+    # the lift's reaction balances the load (λ is minus the reaction); the pressure is
+    # symmetric; the nodal forces are along the cylinder's normals, Σ Rn a hair above P
+    np.testing.assert_allclose(res["relations/lift/multiplier"][-1].sum(), -load, rtol=1e-10)
+    assert 0 < res["relations/indent_normal/normal_force"][-1, 0] / load - 1 < 1e-3
+    top = np.flatnonzero(state >= 0)
+    order = top[np.lexsort((pts[top, 0],))]
+    np.testing.assert_allclose(rn[order], rn[order[::-1]], atol=1e-9 * rn.max())
+    assert res["fields/indent_gap"][-1].min() >= -1e-12
+
+
 # ----------------------------------------------------------------------------- bad input
 
 BASE = """
