@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
-from parsolve.effects import diffusion, solubility
+from parsolve.effects import contact, diffusion, solubility
 
 
 @dataclass(frozen=True)
@@ -27,9 +27,14 @@ def _build_solubility(spec, ctx):
                                  ctx.scene.source)
 
 
+def _build_contact(spec, ctx):
+    return contact.Contact(spec, ctx.mesh, ctx.regions, ctx.fields, ctx.scene.source)
+
+
 # elasticity is read from [[materials]] by the scene itself (the historical layout)
 EFFECTS: dict[str, Entry] = {
     "diffusion": Entry("diffusion", True, lambda t, dim: diffusion.parse(t, dim), _build_diffusion),
     "solubility": Entry("solubility", False, lambda t, dim: solubility.parse(t), _build_solubility,
                         coupling=True),
+    "contact": Entry("contact", True, contact.parse, _build_contact, coupling=True),
 }

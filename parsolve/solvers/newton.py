@@ -68,6 +68,13 @@ class NewtonSolver:
         self.residual_history: list[float] = []
         self._mat = None
         self._oriented = False
+        # effects whose relations change between iterations (contact with friction): their
+        # begin_step / refresh / end_step hooks, and where each relation's D and A entries
+        # sit in the stacked block (values are copied there in place: same sparsity)
+        self.hooks = [e for e in model.effects if hasattr(e, "refresh")]
+        sizes = [(len(r.dual_coo()[2]), r.a_vals.size) for r in system.multiplied]
+        self._d_seg = np.concatenate([[0], np.cumsum([d for d, _ in sizes])]).astype(np.int64)
+        self._a_seg = np.concatenate([[0], np.cumsum([a for _, a in sizes])]).astype(np.int64)
 
     def snapshot(self) -> tuple:
         """The converged state, to come back to when a trial step fails."""
@@ -107,6 +114,8 @@ class NewtonSolver:
     def step(self, t: float) -> StepResult:
         system, spec = self.system, self.spec
         free = system.free_rows()
+        if self.hooks:
+            self._begin_hooks()
         self.active.start_step()
         self._start_rate(t)
         f_known = self.external(t)
@@ -129,6 +138,8 @@ class NewtonSolver:
             small_step = dq_norm <= spec.stol * max(float(np.abs(self.q).max()), 1e-300)
             if it > 0 and not changed and (residual <= spec.rtol or small_step and residual < 1e-6):
                 self.states, self.extras = trial, extras
+                for e in self.hooks:
+                    e.end_step()
                 self.t_prev, self.f_pure = t, self._f_trial
                 self.f_ext = f_known
                 return StepResult(it + predictions, residual, f_int)
@@ -149,11 +160,47 @@ class NewtonSolver:
             self.lam = system.multipliers(x_full)
             self.x_full = x_full
             changed = self._update_active(t) if self.active.unilateral else False
+            if self.hooks:
+                changed = self._refresh_hooks() or changed
         history = ", ".join(f"{r:.1e}" for r in self.residual_history[-6:])
         trend = "diverged" if len(self.residual_history) > 2 and \
             self.residual_history[-1] > self.residual_history[1] else "did not converge"
         raise SolverError(f"Newton {trend} at t = {t:.6g} after {spec.max_iterations} iterations "
                           f"(relative residuals ..., {history})")
+
+    # ------------------------------------------------------------ switched relations
+
+    def _views(self, x: np.ndarray) -> dict[str, np.ndarray]:
+        """Per multiplied relation, its rows of x (writable views)."""
+        first = self.system.block.first_row
+        return {r.name: x[first[k]:first[k + 1]] for k, r in enumerate(self.system.multiplied)}
+
+    def _begin_hooks(self) -> None:
+        changed = False
+        for e in self.hooks:
+            changed = e.begin_step(self.q, self._views(self.active.active)) or changed
+        if changed:
+            self._sync_relations()
+
+    def _refresh_hooks(self) -> bool:
+        """The effects' updates between iterations (e.g. friction states and slip senses);
+        their relation values are copied into the system, whose pattern does not change."""
+        lam, active = self._views(self.lam), self._views(self.active.active)
+        changed = False
+        for e in self.hooks:
+            changed = e.refresh(self.q, lam, active) or changed
+        if changed:
+            self._sync_relations()
+        return changed
+
+    def _sync_relations(self) -> None:
+        """Copy the current A and D values of the relations marked ``meta["refresh"]`` into
+        the stacked block (unscaled; the scales of the first assembly stay)."""
+        blk = self.system.block
+        for k, r in enumerate(self.system.multiplied):
+            if r.meta.get("refresh"):
+                blk.d_vals[self._d_seg[k]:self._d_seg[k + 1]] = r.dual_coo()[2]
+                blk.a_vals[self._a_seg[k]:self._a_seg[k + 1]] = r.a_vals
 
     def _unit_response(self, kmat, released: np.ndarray, f: np.ndarray) -> np.ndarray:
         """δq = K⁻¹ f with the tangent, the rows ``released`` switched off and the other

@@ -1,0 +1,346 @@
+"""Contact and Coulomb friction (the paper's third use) as relations only.
+
+Per paired slave node (``parsolve.contact``: node-to-segment/face pairing or a rigid obstacle):
+
+* frictionless (μ = 0): one unilateral associated row ``Dn·q ≥ −g0`` (relation
+  ``<name>_normal``): the active set closes and opens it;
+* Coulomb (μ > 0): the same normal row with the non-associated dual ``D = −(Dn − μ Dt·s)``
+  (the normal reaction carries the friction force of a sliding node, ``Rt = −μ Rn s``), and a
+  tangential associated equality row per tangent, ``Dt·q = Dt·q_n`` (relation
+  ``<name>_tangent``: no slip during the step). The tangential row is *switched*, not
+  unilateral: enforced in STICK, released in SLIP and OPEN. Its switch and the slip sense s
+  are decided between Newton iterations by ``parsolve.contact.friction.friction_update``
+  (``refresh``): a sticking node whose force leaves the cone slides with s = −Rt/|Rt|, a
+  sliding node that moves against s sticks again, a node that closes sticks. The sense s is
+  written in place into the normal row's dual, whose sparsity is that of ``Dn``: re-assembly
+  stays a value update. The normal rows stay with the active set (closing on penetration,
+  opening on tension, orientation o = −sign(A·D) = +1 since n·t = 0).
+
+In stick the normal dual still carries μ s (whatever s was last): the tangential multiplier
+absorbs it, the friction force is ``Rt = −λt − μ Rn s`` (``friction.reactions``).
+
+The tangential rows: in 2D one row along t per node (s = ±1 only flips the dual). In 3D two
+rows per node along s and n × s (same entries as Dt₁, Dt₂: a direction change is a value
+update of A, D and the stick values). With ``direction = "reaction"`` (the default) a sliding
+node releases the row along s and keeps the one across it: its multiplier is the friction
+the direction lacks, and s ← −Rt/|Rt| until the direction settles (linear convergence: the
+3D sheared box takes 27 iterations at its stick→slip step). ``"displacement"`` releases both
+and takes s along the slip increment: it did not converge in the 3D tests (kept for study).
+A node that closes while moving along the surface starts sliding that way (sticking it at
+the step's starting point would pull it back, open it again, and cycle).
+
+Decisions are made on every rank from the same gathered q and λ: the ranks agree.
+
+Scene schema::
+
+    [[contact]]
+    name = "base"                  # relations base_normal (and base_tangent)
+    slave = "bottom"               # boundary region (nodes) of the slave body
+    master = "top_of_foundation"   # boundary region (facets) of the master body, or:
+    # obstacle = { plane = { origin = [0, 0], normal = [0, 1] } }
+    #            { cylinder = { centre = [..], radius = R, axis = [..] (3D), inside = false } }
+    #            { sphere = { centre = [..], radius = R, inside = false } }
+    friction = 0.3                 # μ ≥ 0; 0 or absent: frictionless
+    direction = "reaction"         # 3D slip direction update: "reaction" (default) or
+    #                                "displacement" (see below; 2D: the sense needs neither)
+    search_radius = 0.1            # largest initial gap paired (default: one facet extent)
+    closed = 1e-9                  # initial gaps ≤ this (relative to the mesh size) start closed
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from parsolve.contact import friction as fr
+from parsolve.contact import obstacles
+from parsolve.contact.pairing import check_surfaces, pair_nodes
+from parsolve.contact.rows import friction_dual, node_rows, normal_rows, normal_values, \
+    slip_vectors, tangent_rows
+from parsolve.effects.base import Effect
+from parsolve.errors import InputError
+from parsolve.evolution import CONSTANT
+from parsolve.mesh.topology import boundary_facets
+from parsolve.relations import Relation
+
+OBSTACLES = ("plane", "cylinder", "sphere")
+
+
+@dataclass
+class ContactSpec:
+    name: str
+    slave: str
+    master: str | None
+    obstacle: tuple[str, dict] | None    # (kind, parameters)
+    mu: float
+    direction: str
+    search_radius: float | None
+    closed: float
+    key: str
+
+
+def parse(t, dim: int) -> ContactSpec:
+    name = t.get("name", str)
+    slave = t.get("slave", str)
+    master = t.get("master", str, None)
+    obs = t.table("obstacle", None)
+    if (master is None) == (obs is None):
+        raise t.error("master", "give exactly one of master (a region) and obstacle")
+    obstacle = _obstacle(obs, dim) if obs is not None else None
+    mu = fr.check_mu(t.get("friction", (float, int), 0.0), t.source, t.key("friction"))
+    direction = t.get("direction", str, "reaction", choices=fr.DIRECTION_MODES)
+    radius = t.get("search_radius", float, None)
+    if radius is not None and not radius > 0:
+        raise t.error("search_radius", "must be positive")
+    closed = t.get("closed", float, 1e-9)
+    if closed < 0:
+        raise t.error("closed", "must be >= 0")
+    t.done()
+    return ContactSpec(name, slave, master, obstacle, mu, direction, radius, closed, t.path)
+
+
+def _obstacle(t, dim: int) -> tuple[str, dict]:
+    kinds = [k for k in OBSTACLES if t.has(k)]
+    if len(kinds) != 1:
+        raise t.error(OBSTACLES[0], f"give exactly one of {', '.join(OBSTACLES)}")
+    sub = t.table(kinds[0])
+    t.done()
+    if kinds[0] == "plane":
+        params = {"origin": sub.floats("origin", dim), "normal": sub.floats("normal", dim)}
+    else:
+        params = {"centre": sub.floats("centre", dim), "radius": sub.get("radius", float),
+                  "inside": sub.get("inside", bool, False)}
+        if kinds[0] == "cylinder" and dim == 3:
+            params["axis"] = sub.floats("axis", 3)
+    sub.done()
+    return kinds[0], params
+
+
+class Contact(Effect):
+    """One contact surface (slave nodes against a master surface or a rigid obstacle)."""
+
+    symmetric = True
+
+    def __init__(self, spec: ContactSpec, mesh, regions, fields, source: str):
+        self.spec, self.mesh, self.fields_, self.source = spec, mesh, fields, source
+        self.name = f"contact {spec.name}"
+        key = spec.key
+        if "u" not in fields:
+            raise InputError("contact needs a displacement field (a [[materials]] section)",
+                             source, key)
+        slave = regions(spec.slave, f"{key}.slave").nodes
+        boundary = np.unique(boundary_facets(mesh)[0])
+        off = np.setdiff1d(slave, boundary)
+        if slave.size == 0 or off.size:
+            raise InputError(f"the slave region {spec.slave!r} must lie on the boundary "
+                             f"({off.size} of its {slave.size} nodes are inside the mesh)",
+                             source, f"{key}.slave")
+        self.pairing = self._pair(slave, regions).only_paired()
+        if len(self.pairing) == 0:
+            raise InputError("no slave node faces the master surface within the search radius",
+                             source, f"{key}.slave")
+        self.symmetric = spec.mu == 0.0
+        p = self.pairing
+        n, dm1 = len(p), mesh.dim - 1
+        size = float(np.ptp(mesh.points, axis=0).max())
+        closed = p.gap <= spec.closed * size
+        # per node: state, slip direction (tangent basis); the committed ones and the trial ones
+        self.node_state = np.where(closed, fr.STICK, fr.OPEN).astype(np.int8)
+        self.direction = np.ones((n, dm1)) / np.sqrt(dm1)
+        self.committed = (self.node_state.copy(), self.direction.copy())
+        self._build_rows()
+
+    # ------------------------------------------------------------------ geometry
+
+    def _pair(self, slave: np.ndarray, regions):
+        spec, mesh, key = self.spec, self.mesh, self.spec.key
+        pts = mesh.points
+        if spec.master is not None:
+            master = regions(spec.master, f"{key}.master")
+            facets = master.facets
+            if facets.size == 0:
+                raise InputError(f"the master region {spec.master!r} has no boundary facet",
+                                 self.source, f"{key}.master")
+            check_surfaces(slave, facets, self.source, f"{key}.master")
+            return pair_nodes(pts, slave, facets, mesh.facet_type, spec.search_radius)
+        kind, params = spec.obstacle
+        okey = f"{key}.obstacle.{kind}"
+        try:
+            if kind == "plane":
+                return obstacles.plane(pts, slave, params["origin"], params["normal"],
+                                       self.source, okey)
+            if kind == "cylinder":
+                return obstacles.cylinder(pts, slave, params["centre"], params["radius"],
+                                          params.get("axis"), params["inside"], self.source, okey)
+            return obstacles.sphere(pts, slave, params["centre"], params["radius"],
+                                    params["inside"], self.source, okey)
+        except ValueError as exc:
+            raise InputError(str(exc), self.source, okey) from None
+
+    def _build_rows(self) -> None:
+        p, f = self.pairing, self.fields_
+        u0 = f.offset["u"]
+        ncomp = f.ncomp
+        self.nrows = normal_rows(p)
+        self.trows = tangent_rows(p)        # along the fixed tangents (slip measure, outputs)
+        self.n_dofs = self.nrows.node * ncomp + u0 + self.nrows.comp
+        self.t_dofs = self.trows.node * ncomp + u0 + self.trows.comp
+
+    def _tangent_coefs(self) -> np.ndarray:
+        """Coefficients of the tangential relation's rows: 2D, along t; 3D, along the slip
+        direction s and across it (n × s), per node (same entries as the fixed tangents)."""
+        p = self.pairing
+        if self.mesh.dim == 2:
+            return self.trows.coef
+        sv = slip_vectors(p, self.direction)
+        vectors = np.stack([sv, np.cross(p.normal, sv)], axis=1).reshape(-1, 3)
+        return node_rows(p.subset(np.repeat(np.arange(len(p)), 2)), vectors).coef
+
+    def _u(self, q: np.ndarray) -> np.ndarray:
+        return q.reshape(self.mesh.num_points, -1)[:, self.fields_.columns("u")]
+
+    @property
+    def mu(self) -> float:
+        return self.spec.mu
+
+    @property
+    def frictional(self) -> bool:
+        return self.spec.mu > 0.0
+
+    # ------------------------------------------------------------------ relations
+
+    def relations(self) -> list[Relation]:
+        p, name = self.pairing, self.spec.name
+        r = self.nrows
+        dual = None
+        if self.frictional:
+            dual = (self.n_dofs, r.row, -friction_dual(p, self.mu, self.direction).coef)
+        normal = Relation(f"{name}_normal", r.nrows, r.row, self.n_dofs, r.coef,
+                          normal_values(p), CONSTANT, ">=", dual, eliminate=False)
+        normal.meta = {"type": "contact", "key": self.spec.key, "refresh": self.frictional}
+        self.normal = normal
+        out = [normal]
+        if self.frictional:
+            t = self.trows
+            tangent = Relation(f"{name}_tangent", t.nrows, t.row, self.t_dofs,
+                               self._tangent_coefs(), np.zeros(t.nrows), CONSTANT, "=", None,
+                               eliminate=False)
+            tangent.meta = {"type": "contact", "key": self.spec.key,
+                            "refresh": self.mesh.dim == 3}
+            self.tangent = tangent
+            out.append(tangent)
+        return out
+
+    def _set_dual(self) -> None:
+        """The slip direction s into the normal row's dual and (3D) the tangential rows, in
+        place (same entries); the stick rows keep the step's starting position."""
+        self.normal.dual[2][:] = -friction_dual(self.pairing, self.mu, self.direction).coef
+        if self.mesh.dim == 3:
+            self.tangent.a_vals[:] = self._tangent_coefs()
+            self.tangent.values[:] = self.tangent.primal(self.q_start)
+
+    def _tangent_active(self, active: dict) -> None:
+        """Tangential rows enforced where the node sticks; in 3D with the "reaction" mode a
+        sliding node keeps its row across s (its reaction tells how s must turn)."""
+        stick = self.node_state == fr.STICK
+        if self.mesh.dim == 2:
+            active[self.tangent.name][:] = stick
+            return
+        across = stick | (self.node_state == fr.SLIP) & (self.spec.direction == "reaction")
+        active[self.tangent.name][:] = np.stack([stick, across], axis=1).ravel()
+
+    # ------------------------------------------------------------------ Newton hooks
+
+    def begin_step(self, q: np.ndarray, active: dict) -> bool:
+        """Start a step from the committed state: stick rows hold the tangential displacement
+        of the step's start; True when the dual changed (values to copy into the system)."""
+        self.node_state, self.direction = (a.copy() for a in self.committed)
+        # the normal rows in contact at the last converged step (initially: the closed gaps);
+        # the same as the active set's after a converged step, and right after a failed one
+        active[self.normal.name][:] = self.node_state != fr.OPEN
+        if not self.frictional:
+            return False
+        self.q_start = q.copy()
+        self.u_start = self.trows.apply(self._u(q))
+        self._set_dual()
+        self.tangent.values[:] = self.tangent.primal(q)
+        self._tangent_active(active)
+        return True
+
+    def forces(self, lam: dict) -> tuple[np.ndarray, np.ndarray]:
+        """(Rn (n,), Rt (n, dim-1)) on the slave nodes from the multipliers."""
+        dm1 = self.mesh.dim - 1
+        lam_t, direction = None, None
+        if self.frictional:
+            lam_t = lam[self.tangent.name].reshape(-1, dm1)
+            direction = self.direction
+            if dm1 == 2:  # rows along (s, n × s): back to the tangent basis (t1, t2)
+                s, c = self.direction, lam_t
+                lam_t = c[:, :1] * s + c[:, 1:] * np.column_stack([-s[:, 1], s[:, 0]])
+        return fr.reactions(lam[self.normal.name], lam_t, self.mu, direction)
+
+    def slip_increment(self, q: np.ndarray) -> np.ndarray:
+        """Tangential displacement of the slave relative to the master since the step's start."""
+        dm1 = self.mesh.dim - 1
+        return (self.trows.apply(self._u(q)) - self.u_start).reshape(-1, dm1)
+
+    def refresh(self, q: np.ndarray, lam: dict, active: dict) -> bool:
+        """One friction update between iterations (``active``: the normal rows' new set);
+        True when a state or a slip direction changed (the dual and the tangential switches
+        are then updated in place)."""
+        if not self.frictional:
+            self.node_state = np.where(active[self.normal.name], fr.STICK, fr.OPEN).astype(np.int8)
+            return False
+        rn, rt = self.forces(lam)
+        closed = active[self.normal.name].astype(bool)
+        du = self.slip_increment(q)
+        closing = closed & (self.node_state == fr.OPEN)
+        state, direction, changed = fr.friction_update(
+            self.node_state, self.direction, closed, rn, rt, du, self.mu, self.spec.direction)
+        # a node that closes while it moves along the surface slides that way: sticking it
+        # at the step's starting point would pull it back (and may open it again: a cycle)
+        norm = np.linalg.norm(du, axis=1)
+        moving = closing & (norm > 1e-8 * max(float(np.abs(q - self.q_start).max()), 1e-300))
+        state[moving] = fr.SLIP
+        direction[moving] = du[moving] / norm[moving, None]
+        self.node_state, self.direction = state, direction
+        if changed:
+            self._set_dual()
+            self._tangent_active(active)
+        return changed
+
+    def end_step(self) -> None:
+        self.committed = (self.node_state.copy(), self.direction.copy())
+
+    # ------------------------------------------------------------------ outputs
+
+    def step_outputs(self, q: np.ndarray, lam: dict, active: dict) -> tuple[dict, dict]:
+        """Per slave node (fields over all nodes, 0 elsewhere; state −1 elsewhere): normal and
+        tangential reaction, gap (0 where the row is enforced), slip (total tangential
+        displacement relative to the master, in the tangent basis), state; per surface: the
+        resultant normal and tangential forces (Σ Rn, Σ Rt in the tangent basis)."""
+        p, name, npts = self.pairing, self.spec.name, self.mesh.num_points
+        dm1 = self.mesh.dim - 1
+        rn, rt = self.forces(lam)
+        if self.frictional:
+            state = np.where(active[self.normal.name], self.node_state, fr.OPEN)
+        else:
+            state = np.where(active[self.normal.name], fr.STICK, fr.OPEN)
+        # an enforced row's gap is zero (its computed value is round-off, which depends on
+        # the partition); an open node's is g0 + Dn·q
+        closed = active[self.normal.name].astype(bool)
+        gap = np.where(closed, 0.0, p.gap + self.normal.primal(q))
+        slip = self.trows.apply(self._u(q))
+
+        def nodal(values, k=1):
+            out = np.zeros((npts, k))
+            out[p.slave] = np.asarray(values).reshape(len(p), k)
+            return out
+
+        st = np.full((npts, 1), -1.0)
+        st[p.slave, 0] = state
+        fields = {f"{name}_normal_reaction": nodal(rn), f"{name}_tangential_reaction": nodal(rt, dm1),
+                  f"{name}_gap": nodal(gap), f"{name}_slip": nodal(slip, dm1), f"{name}_state": st}
+        extras = {"normal_force": np.array([rn.sum()]), "tangential_force": rt.sum(axis=0)}
+        return fields, {self.normal.name: extras}
