@@ -180,5 +180,6 @@ def build_model(scene: Scene) -> Model:
                 raise InputError(f"relation name {r.name!r} is taken by the {e.name} effect",
                                  scene.source, "relations")
             relations.append(r)
+            names.add(r.name)
     reference = (scene.nonlinear.arc_pattern,) if scene.nonlinear.method == "arc_length" else ()
     return Model(scene, mesh, fields, effects, patterns, relations, reference)

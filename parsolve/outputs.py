@@ -86,19 +86,11 @@ def step_outputs(comm: MPI.Comm, system, q: np.ndarray, multipliers: dict, newto
             k = system.multiplied.index(r)
             first = system.block.row_first[k]
             rel_out[r.name]["active"] = active[first:first + r.nrows].astype(np.int8)
-<<<<<<< HEAD
     states = {name: out["active"] for name, out in rel_out.items() if "active" in out}
     for effect in model.effects:  # per-node states of switched relations (solubility)
         fields.update(effect.state_outputs(states))
-=======
-    for effect in model.effects:  # per-node states (solubility)
-        if hasattr(effect, "state") and active is not None:
-            r = next(x for x in model.relations if x.name == "solubility")
-            k = system.multiplied.index(r)
-            first = system.block.first_row[k]
-            fields["solubility_state"] = effect.state(active[first:first + r.nrows])[:, None]
     if active is not None:  # contact: per-node reactions, gaps, slips, states; resultants
-        views = {r.name: active[system.block.first_row[k]:system.block.first_row[k + 1]]
+        views = {r.name: active[system.block.row_first[k]:system.block.row_first[k + 1]]
                  for k, r in enumerate(system.multiplied)}
         for effect in model.effects:
             if hasattr(effect, "step_outputs"):
@@ -106,7 +98,6 @@ def step_outputs(comm: MPI.Comm, system, q: np.ndarray, multipliers: dict, newto
                 fields.update(nodal)
                 for name, values in per_relation.items():
                     rel_out[name].update(values)
->>>>>>> contact2
     return fields, cell_fields, rel_out
 
 

@@ -72,7 +72,8 @@ class NewtonSolver:
         # begin_step / refresh / end_step hooks, and where each relation's D and A entries
         # sit in the stacked block (values are copied there in place: same sparsity)
         self.hooks = [e for e in model.effects if hasattr(e, "refresh")]
-        sizes = [(len(r.dual_coo()[2]), r.a_vals.size) for r in system.multiplied]
+        sizes = [(r.shared_dual[0].size if r.collapsed else len(r.dual_coo()[2]), r.a_vals.size)
+                 for r in system.multiplied] if self.hooks else [(0, 0)]
         self._d_seg = np.concatenate([[0], np.cumsum([d for d, _ in sizes])]).astype(np.int64)
         self._a_seg = np.concatenate([[0], np.cumsum([a for _, a in sizes])]).astype(np.int64)
 
@@ -171,8 +172,8 @@ class NewtonSolver:
     # ------------------------------------------------------------ switched relations
 
     def _views(self, x: np.ndarray) -> dict[str, np.ndarray]:
-        """Per multiplied relation, its rows of x (writable views)."""
-        first = self.system.block.first_row
+        """Per multiplied relation, its rows of x (relation rows; writable views)."""
+        first = self.system.block.row_first
         return {r.name: x[first[k]:first[k + 1]] for k, r in enumerate(self.system.multiplied)}
 
     def _begin_hooks(self) -> None:
@@ -185,7 +186,8 @@ class NewtonSolver:
     def _refresh_hooks(self) -> bool:
         """The effects' updates between iterations (e.g. friction states and slip senses);
         their relation values are copied into the system, whose pattern does not change."""
-        lam, active = self._views(self.lam), self._views(self.active.active)
+        lam = self._views(self.system.block.row_values(self.lam) if self.lam.size else self.lam)
+        active = self._views(self.active.active)
         changed = False
         for e in self.hooks:
             changed = e.refresh(self.q, lam, active) or changed

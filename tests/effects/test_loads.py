@@ -110,4 +110,4 @@ value = {value}
     # λ = minus the reaction: the left edge holds the unit pull
     np.testing.assert_allclose(res["relations/left/multiplier"][-1][0::2].sum(), 1.0, rtol=1e-10)
     with _pytest.raises(InputError):
-        run(text.format(value='"1e-3 * x"'), name="corner_bad")
+        run(text.format(value='"1e-3 * (1 + x)"'), name="corner_bad")
