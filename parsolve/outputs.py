@@ -127,20 +127,30 @@ class Balance:
         and through the relations' reactions — boundary fluxes, phase exchange)."""
         if self.initial is None:
             self.initial = self.storage(self.q0)
+            self.previous = dict(self.initial)
             self.sources = {n: 0.0 for n in self.names}
             self.reacted = {n: 0.0 for n in self.names}
         stored = self.storage(q)
         out = {}
+        step_total = 0.0
         for n in self.names:
-            self.sources[n] += dt * float(f_known.reshape(-1, self.ncomp)[:, self.cols[n]].sum())
-            self.reacted[n] += dt * self._reactions(n, multipliers)
+            step_sources = dt * float(f_known.reshape(-1, self.ncomp)[:, self.cols[n]].sum())
+            step_reactions = dt * self._reactions(n, multipliers)
+            self.sources[n] += step_sources
+            self.reacted[n] += step_reactions
             self.supplied[n] = self.sources[n] + self.reacted[n]
+            # this step's own closure (the error above accumulates the steps' round-off)
+            step_error = stored[n] - self.previous[n] - step_sources - step_reactions
+            out[f"balance/{n}/step_error"] = step_error
+            step_total += step_error
             out[f"balance/{n}/storage"] = stored[n]
             out[f"balance/{n}/sources"] = self.sources[n]
             out[f"balance/{n}/reactions"] = self.reacted[n]
             out[f"balance/{n}/supplied"] = self.supplied[n]
             out[f"balance/{n}/error"] = stored[n] - self.initial[n] - self.supplied[n]
+        self.previous = stored
         total = sum(stored.values())
+        out["balance/total/step_error"] = step_total
         out["balance/total/storage"] = total
         out["balance/total/error"] = total - sum(self.initial.values()) - sum(self.supplied.values())
         return out

@@ -47,6 +47,7 @@ def test_mass_is_conserved_to_round_off(run):
     res = run(CONFIGS / "solubility_grow_shrink.toml", name="balance")
     storage = res["balance/total/storage"]
     assert np.abs(res["balance/total/error"]).max() <= 1e-12 * storage.max()
+    assert np.abs(res["balance/total/step_error"]).max() <= 1e-13 * storage.max()  # each step
     # the injected 0.5 per unit width, less what the drain took, is what is stored
     injected = GROW_SHRINK["source"] * GROW_SHRINK["source_region"] * 0.5 * 0.05
     drained = -(res["balance/c_s/supplied"][-1] + res["balance/c_g/supplied"][-1] - injected)
