@@ -52,10 +52,20 @@ def peak_memory(stdout: Path) -> tuple[float | None, float | None]:
     return most, total
 
 
-def check_quantities(study: Study, settings: list[Setting]) -> None:
-    """Specs parse, and relations they name exist in every effective scene (before running)."""
+def relation_names(text: str, scene_path) -> list[str]:
+    """Every relation of a scene: its [[relations]] and the ones its effects contribute
+    (contact, solubility), from the model built as a run would build it."""
     import tomllib
 
+    from parsolve.model import build_model
+    from parsolve.scene import parse_scene
+
+    scene = parse_scene(tomllib.loads(text), str(scene_path), text, Path(scene_path).parent)
+    return [r.name for r in build_model(scene).relations]
+
+
+def check_quantities(study: Study, settings: list[Setting]) -> None:
+    """Specs parse, and relations they name exist in every effective scene (before running)."""
     from parsolve.post.spec import parse
 
     for q in study.quantities:
@@ -66,7 +76,7 @@ def check_quantities(study: Study, settings: list[Setting]) -> None:
         if spec.kind != "relation":
             continue
         for s in settings:
-            names = [r.get("name") for r in tomllib.loads(s.scene_text).get("relations", [])]
+            names = relation_names(s.scene_text, study.scene)
             if spec.name not in names:
                 raise InputError(f"no relation {spec.name!r} in the scene of {s.family} "
                                  f"(known: {', '.join(map(str, names))})", study.source, q.key + ".spec")

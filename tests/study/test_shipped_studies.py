@@ -23,7 +23,8 @@ def run_reduced(tmp_path, name):
 
 def test_every_shipped_study_is_tested_and_valid():
     assert sorted(p.stem for p in STUDIES.glob("*.toml")) == sorted(["kirsch", "cantilever_3d",
-                                                                   "controlled_bar", "solubility"])
+                                                                   "controlled_bar", "solubility",
+                                                                   "contact_hertz"])
     for path in STUDIES.glob("*.toml"):
         assert len(load_study(path, reduced=True).levels) < len(load_study(path).levels)
 
@@ -72,3 +73,12 @@ def test_solubility_reduced(tmp_path):
     lumped = [float(r["gas"]) for r in table if r["family"] == "lumped capacity"]
     assert lumped[1] > lumped[0]  # converging from below, by about 2.4e-3 per halving
     np.testing.assert_allclose(lumped[1] - lumped[0], 0.00240157, rtol=1e-4)
+
+
+@pytest.mark.serial
+def test_contact_hertz_reduced(tmp_path):
+    """The Hertz load converges with the mesh (first order: a contact edge inside an element);
+    the relation is the contact effect's own, found by building the model."""
+    table = run_reduced(tmp_path, "contact_hertz")
+    load = [float(r["load"]) for r in table]
+    assert len(load) == 2 and -5.1 < load[0] < load[1] < -4.9  # compressive, decreasing with h
