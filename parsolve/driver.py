@@ -78,14 +78,13 @@ def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log
     for step, t in enumerate(scene.times):
         t1 = time.perf_counter()
         assembly = 0.0
-        f_known = model.external_load(t)  # the loads the step balances (θ-weighted)
+        theta = scene.time.theta if model.transient else None
+        f_known = system.composition.known_loads(t, t_prev, theta)  # (θ-weighted)
         f_rhs = f_known
         if model.transient:
-            theta = scene.time.theta
             dt = t - t_prev
             if system.rate is None or not np.isclose(dt, system.rate.dt, rtol=1e-12, atol=0):
                 system.rate, mat = Rate(dt, theta, q_prev, np.zeros(0)), None
-            f_rhs = f_known = _theta_loads(system, theta, t, t_prev, f_known)
             if theta != 1.0:
                 if stiffness_blocks is None:
                     stiffness_blocks = [b for e in model.effects
@@ -116,14 +115,6 @@ def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log
                  f"  (linear its {linear_its})" + reported(scene, rel_out))
         _pass_notes(comm, solver, writer, log)
         q_prev, t_prev = q, t
-
-
-def _theta_loads(system, theta: float, t: float, t_prev: float, f: np.ndarray) -> np.ndarray:
-    """θ F(t) + (1 - θ) F(t_n) on the equations of fields with a capacity, F(t) elsewhere."""
-    if theta == 1.0:
-        return f
-    w = system.composition.theta_dofs(theta)
-    return w * f + (1 - w) * system.model.external_load(t_prev)
 
 
 def _run_newton(comm, system: SaddleSystem, cli_options, writer, log) -> None:

@@ -25,12 +25,7 @@ def _gather_cells(comm, owned: np.ndarray, values: np.ndarray, ncells: int):
 def resultant(relation, lam: np.ndarray, fields, points: np.ndarray) -> np.ndarray:
     """Sum of the reactions D λ per node DOF column (every field's components), then, for a
     model with a displacement field, their moment about the origin (z in 2D; x, y, z in 3D)."""
-    if relation.shared_dual is not None:  # Σ_rows λ_row v = (Σ λ) v: no copy per row
-        dofs, vals = relation.shared_dual
-        force = vals * lam.sum()
-    else:
-        dofs, rows, vals = relation.dual_coo()
-        force = vals * lam[rows]
+    dofs, force = relation.reaction(lam)
     ncomp = fields.ncomp
     out = np.bincount(dofs % ncomp, weights=force, minlength=ncomp)
     if "u" not in fields:
@@ -86,18 +81,14 @@ def step_outputs(comm: MPI.Comm, system, q: np.ndarray, multipliers: dict, newto
             k = system.multiplied.index(r)
             first = system.block.row_first[k]
             rel_out[r.name]["active"] = active[first:first + r.nrows].astype(np.int8)
-    states = {name: out["active"] for name, out in rel_out.items() if "active" in out}
-    for effect in model.effects:  # per-node states of switched relations (solubility)
-        fields.update(effect.state_outputs(states))
-    if active is not None:  # contact: per-node reactions, gaps, slips, states; resultants
+    if active is not None:  # switched relations' outputs: solubility states, contact
         views = {r.name: active[system.block.row_first[k]:system.block.row_first[k + 1]]
                  for k, r in enumerate(system.multiplied)}
         for effect in model.effects:
-            if hasattr(effect, "step_outputs"):
-                nodal, per_relation = effect.step_outputs(q, multipliers, views)
-                fields.update(nodal)
-                for name, values in per_relation.items():
-                    rel_out[name].update(values)
+            nodal, per_relation = effect.step_outputs(q, multipliers, views)
+            fields.update(nodal)
+            for name, values in per_relation.items():
+                rel_out[name].update(values)
     return fields, cell_fields, rel_out
 
 
@@ -159,14 +150,8 @@ class Balance:
         """Σ of the reactions D λ of every relation on a field's equations."""
         total = 0.0
         for r in self.system.model.relations:
-            if r.shared_dual is not None:
-                dofs, vals = r.shared_dual
-                on = np.isin(dofs % self.ncomp, self.cols[name])
-                total += float(vals[on].sum() * multipliers[r.name].sum())
-                continue
-            dofs, rows, vals = r.dual_coo()
-            on = np.isin(dofs % self.ncomp, self.cols[name])
-            total += float((vals[on] * multipliers[r.name][rows[on]]).sum())
+            dofs, force = r.reaction(multipliers[r.name])
+            total += float(force[np.isin(dofs % self.ncomp, self.cols[name])].sum())
         return total
 
 

@@ -95,6 +95,15 @@ class Relation:
             return self.a_dofs, self.a_rows, -self.a_vals
         return self.dual
 
+    def reaction(self, lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The reaction D λ as (dof, force) entries (a shared dual: one vector times Σ λ, no
+        copy per row)."""
+        if self.shared_dual is not None:
+            dofs, vals = self.shared_dual
+            return dofs, vals * lam.sum()
+        dofs, rows, vals = self.dual_coo()
+        return dofs, vals * lam[rows]
+
     def primal(self, q: np.ndarray) -> np.ndarray:
         """A q for a full primal vector q (input numbering)."""
         return np.bincount(self.a_rows, weights=self.a_vals * q[self.a_dofs], minlength=self.nrows)

@@ -68,7 +68,8 @@ class Effect:
         values}) of this rank's owned cells; the driver adds the ranks' sums and divides."""
         return {}, {}
 
-    def state_outputs(self, active: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """Per-node states from the active rows of the relations, by relation name:
-        {field name: (npoints, 1)}."""
-        return {}
+    def step_outputs(self, q: np.ndarray, lam: dict, active: dict) -> tuple[dict, dict]:
+        """Outputs of its switched relations at a converged step, from the primal vector and
+        the multipliers and active rows of every relation by name: ({field name: (npoints,
+        k)}, {relation name: {dataset: value}})."""
+        return {}, {}

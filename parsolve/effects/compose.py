@@ -58,11 +58,22 @@ class Composition:
         return {f.name: theta if f.name in rate else 1.0 for f in self.fields}
 
     def theta_dofs(self, theta: float) -> np.ndarray:
-        """The same per DOF (input numbering)."""
-        cols = np.ones(self.fields.ncomp)
-        for name, w in self.theta_of(theta).items():
-            cols[self.fields.columns(name)] = w
-        return np.tile(cols, self.npoints)
+        """The same per DOF (input numbering); computed once per θ (every iteration asks)."""
+        if getattr(self, "_theta", (None,))[0] != theta:
+            cols = np.ones(self.fields.ncomp)
+            for name, w in self.theta_of(theta).items():
+                cols[self.fields.columns(name)] = w
+            self._theta = (theta, np.tile(cols, self.npoints))
+        return self._theta[1]
+
+    def known_loads(self, t: float, t_prev: float, theta: float | None) -> np.ndarray:
+        """The loads a step balances: F(t), or in a θ-scheme step θ F(t) + (1 - θ) F(t_n) on
+        the equations of fields with a capacity (F(t) elsewhere)."""
+        f = self.model.external_load(t)
+        if theta is None or theta == 1.0:
+            return f
+        w = self.theta_dofs(theta)
+        return w * f + (1.0 - w) * self.model.external_load(t_prev)
 
     def _scatter(self, forces: dict[str, np.ndarray], out: np.ndarray, factor: float = 1.0) -> None:
         """Add element forces {field: (nc, nen, ncomp)} into a full vector."""

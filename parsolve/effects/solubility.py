@@ -117,9 +117,9 @@ class Solubility(Effect):
     def output_names(self) -> list[str]:
         return ["solubility_state"]
 
-    def state_outputs(self, active: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    def step_outputs(self, q: np.ndarray, lam: dict, active: dict) -> tuple[dict, dict]:
         """/fields/solubility_state per node: 0 dissolved, 1 saturated (no c_sat: -1)."""
         out = np.full(self.mesh.num_points, -1, dtype=np.int8)
         nodes = np.flatnonzero(np.isfinite(self.c_sat))
         out[nodes] = active["solubility"].reshape(-1, 2)[:, 1]
-        return {"solubility_state": out[:, None]}
+        return {"solubility_state": out[:, None]}, {}

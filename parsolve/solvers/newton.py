@@ -97,11 +97,8 @@ class NewtonSolver:
     def external(self, t: float) -> np.ndarray:
         """The known loads the step balances: F(t), or θ F(t) + (1 - θ) F(t_n) in a transient
         step."""
-        f = self.system.model.external_load(t)
-        if self.time is None or self.time.theta == 1.0:
-            return f
-        w = self.system.composition.theta_dofs(self.time.theta)
-        return w * f + (1.0 - w) * self.system.model.external_load(self.t_prev)
+        theta = None if self.time is None else self.time.theta
+        return self.system.composition.known_loads(t, self.t_prev, theta)
 
     def _start_rate(self, t: float) -> None:
         if self.time is not None:
