@@ -68,6 +68,28 @@ class Effect:
         values}) of this rank's owned cells; the driver adds the ranks' sums and divides."""
         return {}, {}
 
+    # ------------------------------------------------ relations that change within a step
+    # An effect whose relations change between Newton iterations (contact: friction states
+    # and slip senses) overrides these three; Newton calls them only for such effects. Values
+    # change in place, never the sparsity (``meta["refresh"]`` marks the relations to copy).
+
+    def begin_step(self, q: np.ndarray, active: dict) -> bool:
+        """Start a step from the committed state; True when relation values changed."""
+        return False
+
+    def refresh(self, q: np.ndarray, lam: dict, active: dict) -> bool:
+        """Update between iterations (``active``: rows by relation name, writable); True when
+        a relation value or a switch changed (the step has not converged then)."""
+        return False
+
+    def end_step(self) -> None:
+        """Commit the converged step's state."""
+
+    @property
+    def refreshes(self) -> bool:
+        """Whether the effect overrides the within-step hooks (``refresh``)."""
+        return type(self).refresh is not Effect.refresh
+
     def step_outputs(self, q: np.ndarray, lam: dict, active: dict) -> tuple[dict, dict]:
         """Outputs of its switched relations at a converged step, from the primal vector and
         the multipliers and active rows of every relation by name: ({field name: (npoints,
