@@ -8,50 +8,12 @@ from __future__ import annotations
 import numpy as np
 
 from parsolve.solvers.newton import ROUNDOFF
+from test_control import VON_MISES
 
-TRANSLATED = """
-[mesh]
-generator = "box"
-lx = 1.0
-ly = 0.2
-lz = 0.2
-nx = 5
-ny = 2
-nz = 2
-cell = "hexahedron"
-[model]
-hypothesis = "3d"
-[[materials]]
-model = "von_mises"
-E = 200e3
-nu = 0.3
-sigma_y = 250.0
-H = 2e3
-[[relations]]
-name = "left"
-type = "dirichlet"
-region = "xmin"
-components = ["x"]
-value = 1e-3
-[[relations]]
-name = "right"
-type = "dirichlet"
-region = "xmax"
-components = ["x"]
-value = 1e-3
-[[relations]]
-name = "sym_y"
-type = "dirichlet"
-region = "ymin"
-components = ["y"]
-[[relations]]
-name = "sym_z"
-type = "dirichlet"
-region = "zmin"
-components = ["z"]
-[steps]
-count = 3
-"""
+# the von Mises box of test_control, both ends moved by 1e-3 along x: a rigid translation
+TRANSLATED = VON_MISES.replace('components = ["x"]\n[[relations]]\nname = "sym_y"',
+                               'components = ["x"]\nvalue = 1e-3\n[[relations]]\nname = "sym_y"'
+                               ).replace("value = 4e-3", "value = 1e-3").replace("count = 8", "count = 3")
 
 APPROACH = """
 [mesh]
