@@ -11,14 +11,35 @@ import numpy as np
 from mpi4py import MPI
 
 
+def gather_rows(comm, values: np.ndarray, root: int = 0) -> np.ndarray | None:
+    """The ranks' arrays stacked along the first axis on ``root`` (buffer collective)."""
+    values = np.ascontiguousarray(values)
+    width = int(np.prod(values.shape[1:], dtype=np.int64))
+    counts = np.array(comm.gather(values.size, root=root)) if comm.size > 1 else [values.size]
+    if comm.size == 1:
+        return values
+    out = np.empty((int(np.sum(counts)) // max(width, 1),) + values.shape[1:], dtype=values.dtype) \
+        if comm.rank == root else None
+    comm.Gatherv(values, [out, counts] if comm.rank == root else None, root=root)
+    return out
+
+
+def reduce_sum(comm, values: np.ndarray, root: int = 0) -> np.ndarray | None:
+    """Σ over the ranks of an array, on ``root`` (buffer collective: no pickling)."""
+    values = np.ascontiguousarray(values, dtype=float)
+    out = np.empty_like(values) if comm.rank == root else None
+    comm.Reduce(values, out, op=MPI.SUM, root=root)
+    return out
+
+
 def _gather_cells(comm, owned: np.ndarray, values: np.ndarray, ncells: int):
     """Per-cell values of every rank's reported cells, in mesh order, on rank 0."""
-    parts = comm.gather((owned, values), root=0)
+    idx = gather_rows(comm, np.asarray(owned, dtype=np.int64))
+    val = gather_rows(comm, np.asarray(values, dtype=float))
     if comm.rank != 0:
         return None
     out = np.zeros((ncells,) + values.shape[1:])
-    for idx, val in parts:
-        out[idx] = val
+    out[idx] = val
     return out
 
 
@@ -67,7 +88,7 @@ def step_outputs(comm: MPI.Comm, system, q: np.ndarray, multipliers: dict, newto
             extra = (newton.extras[k], newton.states[k])
         nodal, cells = effect.outputs(owned, values, extra, system.local_cells)
         for name, (sums, weights) in nodal.items():  # only rank 0 writes: reduce there
-            sums, weights = comm.reduce(sums, root=0), comm.reduce(weights, root=0)
+            sums, weights = reduce_sum(comm, sums), reduce_sum(comm, weights)
             fields[name] = sums / np.maximum(weights, 1e-300)[:, None] if comm.rank == 0 else None
         for name, value in cells.items():
             cell_fields[name] = _gather_cells(comm, owned, value, mesh.num_cells)

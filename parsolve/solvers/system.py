@@ -202,7 +202,12 @@ class SaddleSystem:
     # ------------------------------------------------------------ back to fields
 
     def gather(self, x_owned: np.ndarray) -> np.ndarray:
-        return np.concatenate(self.comm.allgather(x_owned))
+        """The whole saddle vector on every rank (buffer collective: no pickling)."""
+        if not hasattr(self, "_gather_counts"):
+            self._gather_counts = np.array(self.comm.allgather(int(x_owned.size)))
+        out = np.empty(int(self._gather_counts.sum()))
+        self.comm.Allgatherv(np.ascontiguousarray(x_owned, dtype=float), [out, self._gather_counts])
+        return out
 
     def multipliers(self, x_full: np.ndarray) -> np.ndarray:
         """Unscaled λ of every multiplied row from a full saddle vector."""
@@ -234,7 +239,7 @@ class SaddleSystem:
         lam = np.zeros(self.elim_dofs.size)
         own = self.elim_own
         lam[own] = (f_full[self.elim_dofs[own]] - row_vals[sad[own] - self.offset]) / self.elim_coefs[own]
-        lam = self.comm.allreduce(lam, op=MPI.SUM)
+        self.comm.Allreduce(MPI.IN_PLACE, lam, op=MPI.SUM)
         out, start = {}, 0
         for r in self.eliminated:
             out[r.name] = lam[start:start + r.nrows]
