@@ -80,6 +80,7 @@ class ActiveSet:
         wrong_sign = self.free & self.active & (s * self.orient * lam < -tol_lam)
         new[violated] = True
         new[wrong_sign] = False
+        best = None
         if self.group_rows.size:
             rows = self.group_rows
             best = self.pick_groups(s[rows] * gap[rows], self.active[rows], self.tie[rows] * scale)
@@ -87,7 +88,7 @@ class ActiveSet:
         if np.array_equal(new, self.active):
             return False
         if new.tobytes() in self.seen:  # cycling: change only the worst row
-            new = self._one_change(gap, lam, violated, wrong_sign)
+            new = self._one_change(gap, lam, violated, wrong_sign, best)
         self.changes += 1
         if self.changes > self.max_changes:
             raise SolverError(f"active set did not settle after {self.max_changes} changes "
@@ -120,13 +121,33 @@ class ActiveSet:
         lowest = np.repeat(np.minimum.reduceat(index, starts), sizes)
         return np.where(keep, active & tied, np.arange(n) == lowest)
 
-    def _one_change(self, gap, lam, violated, wrong_sign) -> np.ndarray:
+    def _one_change(self, gap, lam, violated, wrong_sign, best) -> np.ndarray:
+        """The single most needed change: a violated row on, a wrong-sign row off, or a
+        maximum group's enforced row moved to its best row (scored by how far the best row
+        exceeds the enforced one). A group must be a candidate: the set it leaves may have
+        been seen only at an iterate far from equilibrium (the first iterations of a step),
+        and a fallback that cannot move it would report a change every iteration without
+        making one, until the bound of changes fails a converged step."""
         s = self.sign
         new = self.active.copy()
         score = np.where(violated, s * gap, -np.inf)
         score_l = np.where(wrong_sign, -s * self.orient * lam, -np.inf)
-        if score.max() >= score_l.max() and np.isfinite(score.max()):
+        score_g = np.full(s.size, -np.inf)
+        if best is not None:
+            rows = self.group_rows
+            value = s[rows] * gap[rows]
+            sizes = np.diff(np.concatenate([self.group_starts, [rows.size]]))
+            enforced = np.where(self.active[rows], value, -np.inf)
+            current = np.repeat(np.maximum.reduceat(enforced, self.group_starts), sizes)
+            score_g[rows] = np.where(best & ~self.active[rows], value - current, -np.inf)
+        kind = int(np.argmax([score.max(initial=-np.inf), score_l.max(initial=-np.inf),
+                              score_g.max(initial=-np.inf)]))
+        if kind == 0 and np.isfinite(score.max(initial=-np.inf)):
             new[int(np.argmax(score))] = True
-        elif np.isfinite(score_l.max()):
+        elif kind == 1 and np.isfinite(score_l.max(initial=-np.inf)):
             new[int(np.argmax(score_l))] = False
+        elif kind == 2 and np.isfinite(score_g.max(initial=-np.inf)):
+            row = int(np.argmax(score_g))
+            new[self.group == self.group[row]] = False
+            new[row] = True
         return new
