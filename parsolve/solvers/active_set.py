@@ -7,9 +7,13 @@ row that is violated becomes active; an active row whose multiplier has the wron
 for associated rows (D = -Aᵀ: a positive s λ pushes back); a non-associated row's dual may
 point either way, so o = -sign(A K⁻¹ D) from the row's own response. Rows of a *maximum*
 relation work as a group: exactly one, the one with the largest s (A q - b), is enforced (the
-paper's "maximum of several controlled quantities"). A set that comes back after having been
-left is cycling: the update then changes one row at a time (the most violated), and gives up
-after a bounded number of changes.
+paper's "maximum of several controlled quantities"). A maximum group never goes back, within
+one step, to a row it has left: that is the most loaded element changing back and forth where
+damage localizes, which a full Newton step cannot follow (its iterates wander from cell to cell
+until whole cells are fully damaged and the tangent is singular); the step fails at once, with
+that reason, and the stepper cuts it. Any other set that comes back after having been left is
+cycling: the update then changes one row (or one group's row) at a time, the most violated,
+and gives up after a bounded number of changes.
 """
 
 from __future__ import annotations
@@ -51,6 +55,9 @@ class ActiveSet:
         self.group_starts = starts                       # into group_rows
         # the control groups (a maximum relation), for the per-step predictor
         self.groups = [np.arange(first[k], first[k + 1]) for k, r in enumerate(relations) if r.maximum]
+        self.maximum = np.concatenate([np.full(r.nrows, r.maximum) for r in relations]) \
+            if relations else np.zeros(0, dtype=bool)
+        self.names, self.first = [r.name for r in relations], first
         self.free = (self.sign != 0) & ~grouped   # rows decided one by one
         self.active = self.sign == 0              # equalities are always enforced
         self.active[self.group_rows[starts]] = True  # a group is always enforced somewhere
@@ -60,6 +67,7 @@ class ActiveSet:
         self.max_changes = max_changes
         self.changes = 0
         self.seen: set[bytes] = set()
+        self.held = self.active.copy()
 
     @property
     def unilateral(self) -> bool:
@@ -68,6 +76,7 @@ class ActiveSet:
     def start_step(self) -> None:
         self.changes = 0
         self.seen = {self.active.tobytes()}
+        self.held = self.active.copy()  # rows enforced at some point of this step
 
     def update(self, gap: np.ndarray, lam: np.ndarray, tol_gap: float, tol_lam: float,
                scale: float | None = None) -> bool:
@@ -80,21 +89,36 @@ class ActiveSet:
         wrong_sign = self.free & self.active & (s * self.orient * lam < -tol_lam)
         new[violated] = True
         new[wrong_sign] = False
+        best = None
         if self.group_rows.size:
             rows = self.group_rows
             best = self.pick_groups(s[rows] * gap[rows], self.active[rows], self.tie[rows] * scale)
+            self._no_way_back(rows[best & ~self.active[rows] & self.held[rows] & self.maximum[rows]])
             new[rows] = best
         if np.array_equal(new, self.active):
             return False
         if new.tobytes() in self.seen:  # cycling: change only the worst row
-            new = self._one_change(gap, lam, violated, wrong_sign)
+            new = self._one_change(gap, lam, violated, wrong_sign, best)
         self.changes += 1
         if self.changes > self.max_changes:
             raise SolverError(f"active set did not settle after {self.max_changes} changes "
                               f"({int(self.active.sum())} active rows)")
         self.active = new
+        self.held |= new
         self.seen.add(new.tobytes())
         return True
+
+    def _no_way_back(self, back: np.ndarray) -> None:
+        """Fail the step when a maximum group would return to a row it left in this step."""
+        if back.size == 0:
+            return
+        row = int(back[0])
+        k = int(np.searchsorted(self.first, row, side="right") - 1)
+        now = int(np.flatnonzero(self.active & (self.group == self.group[row]))[0])
+        raise SolverError(f"maximum relation {self.names[k]!r}: the enforced row would go back "
+                          f"from row {now - self.first[k]} to row {row - self.first[k]}, which it "
+                          "left during this step (the most loaded element changes back and "
+                          "forth where damage localizes: the step is too large to follow it)")
 
     @staticmethod
     def pick(group: np.ndarray, score: np.ndarray, current: int, largest: bool, tol: float) -> int:
@@ -120,13 +144,35 @@ class ActiveSet:
         lowest = np.repeat(np.minimum.reduceat(index, starts), sizes)
         return np.where(keep, active & tied, np.arange(n) == lowest)
 
-    def _one_change(self, gap, lam, violated, wrong_sign) -> np.ndarray:
+    def _one_change(self, gap, lam, violated, wrong_sign, best) -> np.ndarray:
+        """The single most needed change: a violated row on, a wrong-sign row off, or a
+        group's enforced row moved to its best row (scored by how far the best row exceeds
+        the enforced one). Groups must be candidates: a fallback that cannot move them would
+        report a change at every iteration without making one, until the bound of changes
+        fails the step whatever its residual."""
         s = self.sign
         new = self.active.copy()
         score = np.where(violated, s * gap, -np.inf)
         score_l = np.where(wrong_sign, -s * self.orient * lam, -np.inf)
-        if score.max() >= score_l.max() and np.isfinite(score.max()):
+        score_g = np.full(s.size, -np.inf)
+        if best is not None:
+            rows = self.group_rows
+            value = s[rows] * gap[rows]
+            sizes = np.diff(np.concatenate([self.group_starts, [rows.size]]))
+            enforced = np.where(self.active[rows], value, -np.inf)
+            current = np.repeat(np.maximum.reduceat(enforced, self.group_starts), sizes)
+            score_g[rows] = np.where(best & ~self.active[rows], value - current, -np.inf)
+        tops = [score.max(initial=-np.inf), score_l.max(initial=-np.inf),
+                score_g.max(initial=-np.inf)]
+        kind = int(np.argmax(tops))
+        if not np.isfinite(tops[kind]):
+            return new
+        if kind == 0:
             new[int(np.argmax(score))] = True
-        elif np.isfinite(score_l.max()):
+        elif kind == 1:
             new[int(np.argmax(score_l))] = False
+        else:
+            row = int(np.argmax(score_g))
+            new[self.group == self.group[row]] = False
+            new[row] = True
         return new

@@ -222,8 +222,11 @@ class LinearSolver:
             return
         F = pc.getFactorMatrix()
         if F.getType() == "mumps" and F.getMumpsInfog(28) > 0:
+            # (the third cause is what a diverged Newton iterate of a softening material
+            # reaches: cells damaged to exactly D = 1 around a node leave it no stiffness)
             raise SolverError(f"singular system: MUMPS found {F.getMumpsInfog(28)} null pivot(s) "
-                              "(a body not held, or redundant relations)")
+                              "(a body not held, redundant relations, or a tangent that lost "
+                              "its stiffness: e.g. every cell around a node fully damaged)")
 
     def _reason(self, exc: PETSc.Error) -> str:
         pc = self.ksp.getPC()

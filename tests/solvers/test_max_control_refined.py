@@ -1,0 +1,139 @@
+"""Maximum control past the onset of localization on a refined mesh (issue 8: the refined
+control plate stopped at step 6 with null pivots).
+
+Where damage localizes, the enforced row of the maximum group moves from cell to cell during a
+full step's Newton iterations. When it wanted to come back to a row it had left, the active
+set's cycling fallback (which knew single rows only) changed nothing yet reported a change at
+every iteration: a row below the maximum stayed enforced, the iterates ran away (strains of
+1e-2 to 10), Mazars' damage reached exactly 1 in whole cells, the nodes surrounded by them
+lost all stiffness and MUMPS reported their null pivots (or, when the iterates did converge,
+"active set did not settle"). A maximum group now fails the step at once when it would go
+back to a row it left, so that the stepper cuts it; other groups cycle one change at a time.
+"""
+
+import tomllib
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from conftest import CONFIGS
+from parsolve.errors import SolverError
+from parsolve.relations import Relation
+from parsolve.solvers.active_set import ActiveSet
+
+
+def group(n: int, maximum: bool = True) -> ActiveSet:
+    rel = Relation("max", n, np.arange(n), np.arange(n), np.ones(n), np.zeros(n), sense="<=",
+                   maximum=maximum, groups=None if maximum else np.zeros(n, dtype=np.int64))
+    aset = ActiveSet([rel], max_changes=6)
+    aset.start_step()
+    return aset
+
+
+def test_maximum_group_does_not_go_back_to_a_row_it_left():
+    aset = group(3)
+    assert np.flatnonzero(aset.active).tolist() == [0]
+    # an early iterate: row 1 is the largest, the group moves there
+    assert aset.update(np.array([0.0, 0.2, -1.0]), np.zeros(3), 1e-12, 1e-12)
+    assert np.flatnonzero(aset.active).tolist() == [1]
+    # then row 2 (never enforced in this step): allowed
+    assert aset.update(np.array([-0.3, 0.0, 0.1]), np.zeros(3), 1e-12, 1e-12)
+    assert np.flatnonzero(aset.active).tolist() == [2]
+    # row 0 exceeds the enforced row: the group would go back, the step fails at once
+    with pytest.raises(SolverError, match=r"'max'.* from row 2 to row 0, which it left"):
+        aset.update(np.array([0.1, -0.2, 0.0]), np.zeros(3), 1e-12, 1e-12)
+    # a new step may enforce any row again
+    aset.start_step()
+    assert aset.update(np.array([0.1, -0.2, 0.0]), np.zeros(3), 1e-12, 1e-12)
+    assert np.flatnonzero(aset.active).tolist() == [0]
+
+
+def test_local_group_cycles_one_change_at_a_time():
+    """A group that is not a maximum (solubility's states of a node) may come back to a row;
+    the cycling fallback moves it (it used to leave it and report a change anyway)."""
+    aset = group(2, maximum=False)
+    assert aset.update(np.array([0.0, 0.2]), np.zeros(2), 1e-12, 1e-12)
+    assert aset.update(np.array([0.1, 0.0]), np.zeros(2), 1e-12, 1e-12)
+    assert np.flatnonzero(aset.active).tolist() == [0]
+    assert not aset.update(np.array([0.0, -0.05]), np.zeros(2), 1e-12, 1e-12)
+    assert aset.changes == 2
+    with pytest.raises(SolverError, match="did not settle after 6 changes"):
+        for _ in range(20):  # rows that exceed each other in turn forever: bounded
+            aset.update(np.where(aset.active, 0.0, 0.1), np.zeros(2), 1e-12, 1e-12)
+
+
+def plate(level: int, steps: int) -> str:
+    text = (CONFIGS / "plate_hole_control.toml").read_text()
+    text = text.replace("n_radial = 8", f"n_radial = {8 * level}")
+    text = text.replace("n_angular = 12", f"n_angular = {12 * level}")
+    return text.replace("count = 30", f"count = {steps}\nend = {steps / 30}")
+
+
+def test_full_step_at_the_onset_of_localization_fails_at_once():
+    """The plate refined 2× per direction, full steps (no cut). Steps 1-5: the enforced row at
+    its value, no row above it, equilibrium F + D λ = f_int checked apart from Newton's own
+    residual. Step 6 (t = 0.2): the enforced row moves 368 → 352 and would go back: the step
+    fails after 3 iterations with that reason (it used to run 15 iterations into 1 null
+    pivot: 2 nodes whose cells were all fully damaged)."""
+    from parsolve.driver import make_solver
+    from parsolve.model import build_model
+    from parsolve.scene import parse_scene
+    from parsolve.solvers.newton import NewtonSolver
+    from parsolve.solvers.system import SaddleSystem
+
+    comm = MPI.COMM_WORLD
+    text = plate(2, 6)
+    scene = parse_scene(tomllib.loads(text), "plate.toml", text)
+    model = build_model(scene)
+    system = SaddleSystem(comm, model)
+    newton = NewtonSolver(comm, system, make_solver(comm, system, {}), scene.nonlinear)
+    (rel,) = [r for r in system.multiplied if r.maximum]
+    free = np.ones(model.mesh.num_points * model.ncomp, dtype=bool)
+    free[system.elim_dofs] = False
+    lams = []
+    for t in scene.times[:5]:
+        states = newton.states
+        newton.step(t)
+        b = 1.2e-3 * t
+        values = rel.primal(newton.q)
+        enforced = np.flatnonzero(newton.active.active)
+        assert enforced.tolist() == [368]
+        np.testing.assert_allclose(values[enforced], b, rtol=1e-9)
+        assert values.max() <= b * (1 + 1e-7)
+        lam = float(newton.lam[0])
+        # f_int from this rank's cells is exact on the DOFs it owns
+        f_int = system.composition.evaluate(newton.q, states, False)[1]
+        dofs, pattern = rel.shared_dual
+        force = model.external_load(t)
+        np.add.at(force, dofs, pattern * lam)
+        mine = system.owned_input_dofs[free[system.owned_input_dofs]]
+        r2, f2 = comm.allreduce(np.array([np.sum((force - f_int)[mine] ** 2),
+                                          np.sum(f_int[mine] ** 2)]))
+        assert np.sqrt(r2 / f2) < 1e-8
+        lams.append(lam)
+    # steps 1 and 2 are elastic (no damage below eps_d0 = 1e-4): the load doubles exactly
+    np.testing.assert_allclose(lams[1], 2 * lams[0], rtol=1e-10)
+    with pytest.raises(SolverError, match="from row 352 to row 368, which it left"):
+        newton.step(scene.times[5])
+    assert len(newton.residual_history) <= 4
+
+
+def test_refined_plate_follows_localization_with_cut_steps(run):
+    """The plate refined 3× per direction through t = 11/30 with the stepper's cuts: it
+    failed at t = 0.334 before (Newton stalled in a two-cycle after 4 cuts); now every step
+    finishes, each with one enforced row at its value and no row above it."""
+    steps = 11
+    res = run(plate(3, steps), name="plate3")
+    assert res["attrs"]["status"] == "complete"
+    t = res["steps/time"]
+    np.testing.assert_allclose(t[-1], steps / 30, rtol=1e-12)
+    primal = res["relations/max_strain/primal"]
+    active = res["relations/max_strain/active"].astype(bool)
+    assert np.all(active.sum(axis=1) == 1)
+    b = 1.2e-3 * t
+    np.testing.assert_allclose(primal[active], b, rtol=1e-9)
+    assert np.all(primal.max(axis=1) <= b * (1 + 1e-7))
+    lam = res["relations/max_strain/multiplier"][active]
+    np.testing.assert_allclose(lam[1], 2 * lam[0], rtol=1e-10)
+    assert lam.max() > 1.5 * lam[1] > 0  # the load went on growing past the elastic range
