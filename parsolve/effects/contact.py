@@ -149,6 +149,7 @@ class Contact(Effect):
         self.node_state = np.where(closed, fr.STICK, fr.OPEN).astype(np.int8)
         self.direction = np.ones((n, dm1)) / np.sqrt(dm1)
         self.committed = (self.node_state.copy(), self.direction.copy())
+        self.turning = fr.DirectionIteration()
         self._build_rows()
 
     # ------------------------------------------------------------------ geometry
@@ -247,7 +248,8 @@ class Contact(Effect):
         if self.mesh.dim == 2:
             active[self.tangent.name][:] = stick
             return
-        across = stick | (self.node_state == fr.SLIP) & (self.spec.direction == "reaction")
+        across = stick | (self.node_state == fr.SLIP) & (self.spec.direction == "reaction") \
+            & self.turning.held
         active[self.tangent.name][:] = np.stack([stick, across], axis=1).ravel()
 
     # ------------------------------------------------------------------ Newton hooks
@@ -262,6 +264,7 @@ class Contact(Effect):
         if not self.frictional:
             return False
         self.q_start = q.copy()
+        self.turning.start(self.node_state)
         self.u_start = self.trows.apply(self._u(q))
         self._set_dual()
         self.tangent.values[:] = self.tangent.primal(q)
@@ -296,19 +299,40 @@ class Contact(Effect):
         closed = active[self.normal.name].astype(bool)
         du = self.slip_increment(q)
         closing = closed & (self.node_state == fr.OPEN)
+        turning = self.mesh.dim == 3 and self.spec.direction == "reaction"
         state, direction, changed = fr.friction_update(
-            self.node_state, self.direction, closed, rn, rt, du, self.mu, self.spec.direction)
+            self.node_state, self.direction, closed, rn, rt, du, self.mu, self.spec.direction,
+            tol_angle=np.inf if turning else fr.TOL_ANGLE)   # (turning: settled by _turn)
         # a node that closes while it moves along the surface slides that way: sticking it
         # at the step's starting point would pull it back (and may open it again: a cycle)
         norm = np.linalg.norm(du, axis=1)
         moving = closing & (norm > 1e-8 * max(float(np.abs(q - self.q_start).max()), 1e-300))
         state[moving] = fr.SLIP
         direction[moving] = du[moving] / norm[moving, None]
+        if turning:
+            changed = self._turn(state, direction, lam, rn, du) or changed
         self.node_state, self.direction = state, direction
         if changed:
             self._set_dual()
             self._tangent_active(active)
         return changed
+
+    def _turn(self, state, direction, lam, rn, du) -> bool:
+        """Turn the directions of the nodes that slide before and after this update
+        (``fr.DirectionIteration``); True when one is not settled yet."""
+        it = self.turning
+        sliding = (self.node_state == fr.SLIP) & (state == fr.SLIP)
+        f = lam[self.tangent.name].reshape(-1, 2)[:, 1]       # the cross rows' multipliers
+        s = self.direction
+        across = np.column_stack([-s[:, 1], s[:, 0]])
+        w = np.einsum("mj,mj->m", du, across)
+        murn = self.mu * np.maximum(rn, 0.0)
+        gamma = np.maximum(np.einsum("mj,mj->m", du, s), 0.0)
+        reset = bool(np.any(state != self.node_state))
+        step, residual = it.turn(sliding, s, f, w, murn, gamma, reset)
+        direction[sliding] = fr.rotate(s[sliding], step[sliding])
+        it.held |= state != fr.SLIP      # a node that starts sliding is held first
+        return bool(np.any(np.abs(residual) > fr.TOL_ANGLE))
 
     def end_step(self) -> None:
         self.committed = (self.node_state.copy(), self.direction.copy())
