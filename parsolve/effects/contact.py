@@ -281,7 +281,10 @@ class Contact(Effect):
             if dm1 == 2:  # rows along (s, n × s): back to the tangent basis (t1, t2)
                 s, c = self.direction, lam_t
                 lam_t = c[:, :1] * s + c[:, 1:] * np.column_stack([-s[:, 1], s[:, 0]])
-        return fr.reactions(lam[self.normal.name], lam_t, self.mu, direction)
+        rn, rt = fr.reactions(lam[self.normal.name], lam_t, self.mu, direction)
+        if rt.shape[1] != dm1:   # frictionless 3D: no tangential force, two components
+            rt = np.zeros((rn.size, dm1))
+        return rn, rt
 
     def slip_increment(self, q: np.ndarray) -> np.ndarray:
         """Tangential displacement of the slave relative to the master since the step's start."""
