@@ -266,7 +266,8 @@ class DirectionIteration:
         self._s_last = s[idx].copy()
         thetas.append(base)
         steps.append(step[idx])
-        del thetas[:-self.memory - 1], steps[:-self.memory - 1]
+        keep = min(self.memory, idx.size) + 1     # no more differences than unknowns
+        del thetas[:-keep], steps[:-keep]
         if len(thetas) > 1:
             dx = np.diff(np.array(thetas), axis=0).T       # (nslide, m)
             dr = np.diff(np.array(steps), axis=0).T
