@@ -26,6 +26,8 @@ from parsolve.errors import InputError
 OPEN, STICK, SLIP = 0, 1, 2
 STATE_NAMES = {OPEN: "open", STICK: "stick", SLIP: "slip"}
 DIRECTION_MODES = ("displacement", "reaction")
+#: A sliding direction has settled when it turns by less than this (radians) in an update.
+TOL_ANGLE = 1e-10
 
 
 def check_mu(mu: float, source: str | None = None, key: str | None = None) -> float:
@@ -119,7 +121,7 @@ def friction_update(
     mode: str = "displacement",
     tol_force: float = 1e-12,
     tol_slip: float = 1e-14,
-    tol_angle: float = 1e-10,
+    tol_angle: float = TOL_ANGLE,
 ) -> tuple[np.ndarray, np.ndarray, bool]:
     """One friction active-set update between global iterations.
 
@@ -170,3 +172,105 @@ def friction_update(
     angle = np.linalg.norm(new_dir[both] - direction[both], axis=1)
     changed = bool(np.any(new_state != state) or np.any(angle > tol_angle))
     return new_state, new_dir, changed
+
+
+def signed_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angle (n,) turning the unit 2-vectors a (n, 2) to b (n, 2), in (-pi, pi]."""
+    return np.arctan2(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0], np.einsum("mj,mj->m", a, b))
+
+
+def rotate(s: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """The unit 2-vectors s (n, 2) turned by angle (n,)."""
+    c, d = np.cos(angle), np.sin(angle)
+    return np.column_stack([c * s[:, 0] - d * s[:, 1], d * s[:, 0] + c * s[:, 1]])
+
+
+class DirectionIteration:
+    """The 3D slip-direction iteration of one step (the "reaction" mode).
+
+    A sliding node is solved either *held*: its row along s released (friction ``-mu Rn s``)
+    and its row across s blocked, whose force ``f`` (the cross row's multiplier, along
+    ``n x s``) is what the direction lacks; or *free*: both rows released, the node slides by
+    ``γ`` along s and ``w`` across it. Turning s by ``dθ`` turns the friction force by
+    ``mu Rn dθ`` and, for a held node on its line at distance ``γ``, moves it across by
+    ``γ dθ`` against the tangential stiffness ``k`` of the structure. With ``ξ = k γ / (mu Rn)``
+    the plain updates multiply an angle error by ``-ξ`` (held, ``s = -Rt/|Rt|``) or by ``-1/ξ``
+    (free, ``s = Δu_t/|Δu_t|``): each diverges where the other converges. The Newton-like turns
+    of a one-node model are
+
+        held: dθ = atan2(f, mu Rn + k γ),     free: dθ = ξ/(1 + ξ) · atan2(w, γ),
+
+    and a node is held while ``ξ < 1`` (small slips, barely pressed nodes are free). ``k`` is
+    estimated once per step, one number for the surface, by least squares from the first two
+    iterations in which the same nodes slide held (the secant ``-Δf/Δθ = mu Rn + k γ``), and
+    kept for the rest of the step so that the map θ → θ + dθ stays the same. The nodes are
+    coupled through the structure: the turns are accelerated by Anderson mixing over the
+    angles of the sliding nodes (``memory`` last iterations; restarted whenever a state or a
+    mode changes). Deterministic arithmetic on the gathered arrays: every rank takes the same
+    decisions.
+    """
+
+    def __init__(self, memory: int = 10):
+        self.memory = memory
+        self.start(np.zeros(0, dtype=bool))
+
+    def start(self, held: np.ndarray) -> None:
+        """Forget everything (the start of a step); ``held`` (n,) the initial modes."""
+        self.k: float | None = None
+        self.last: tuple | None = None        # (sliding held mask, s, f) of the last iteration
+        self.history: tuple | None = None     # (sliding mask, [θ], [dθ])
+        self.held = np.ones(len(held), dtype=bool)
+
+    def _estimate(self, sliding, s, f, murn, gamma) -> None:
+        mask0, s0, f0 = self.last
+        ok = sliding & mask0
+        dth = signed_angle(s0[ok], s[ok])
+        a = gamma[ok] * dth
+        den = float(a @ a)
+        if den > 0.0:
+            k = -float(((f - f0)[ok] + murn[ok] * dth) @ a) / den
+            if k > 0.0:
+                self.k = k
+
+    def turn(self, sliding: np.ndarray, s: np.ndarray, f: np.ndarray, w: np.ndarray,
+             murn: np.ndarray, gamma: np.ndarray, reset: bool) -> tuple[np.ndarray, np.ndarray]:
+        """(turn (n,), residual (n,)) of every sliding node's direction s (n, 2) (0 elsewhere;
+        the residual is the turn before the Anderson mixing, the direction's error to first
+        order: the angle between s and -Rt (held) or the slip (free) is below twice that), from the cross forces f (n,) of held nodes, the cross slips w (n,) of
+        free ones, mu Rn (n,) and the slips γ (n,) along s of the iteration just solved.
+        ``reset``: a state changed since the last call. Afterwards ``held`` tells which
+        nodes the next solve holds across s (set it for the nodes that start sliding)."""
+        sliding = np.asarray(sliding, dtype=bool)
+        held = self.held & sliding
+        if self.k is None and self.last is not None:
+            self._estimate(held, s, f, murn, gamma)
+            if self.k is not None:  # free the nodes that slide far for their pressure
+                free = sliding & (self.k * gamma > murn)
+                if np.any(free):
+                    self.held = self.held & ~free
+                    reset = True
+        self.last = (held.copy(), s.copy(), f.copy())
+        kg = (self.k or 0.0) * gamma
+        step = np.where(held, np.arctan2(f, murn + kg),
+                        kg / np.maximum(murn + kg, 1e-300) * np.arctan2(w, gamma))
+        step[~sliding] = 0.0
+        residual = step.copy()    # the Newton-like turn: the angle error, to first order
+        if self.k is None:
+            return step, residual
+        idx = np.flatnonzero(sliding)
+        if reset or self.history is None or not np.array_equal(self.history[0], sliding):
+            self.history = (sliding.copy(), [], [])
+        _, thetas, steps = self.history
+        # angles unwrapped from the first direction of each node in this history
+        base = thetas[-1] + signed_angle(self._s_last, s[idx]) if thetas else np.zeros(idx.size)
+        self._s_last = s[idx].copy()
+        thetas.append(base)
+        steps.append(step[idx])
+        keep = min(self.memory, idx.size) + 1     # no more differences than unknowns
+        del thetas[:-keep], steps[:-keep]
+        if len(thetas) > 1:
+            dx = np.diff(np.array(thetas), axis=0).T       # (nslide, m)
+            dr = np.diff(np.array(steps), axis=0).T
+            coef = np.linalg.lstsq(dr, step[idx], rcond=None)[0]
+            step[idx] = step[idx] - (dx + dr) @ coef
+        return step, residual
