@@ -74,7 +74,11 @@ def test_augmented_lagrangian_reaches_the_relations_answer(run):
     """Uzawa augmentations close the gap and stop the sticking nodes: the displacements, the
     contact forces and the states of the relations form to the augmentation tolerance."""
     exact = run(CONFIGS / "contact_block_friction.toml", name="block_relations_al")
-    res = block(run, "augmented_lagrangian", "augmentation_tolerance = 1e-9", name="block_al")
+    # status cycles of the inner Newton fail some steps of the partial slip spreading (the
+    # driver cuts them): fail them after 15 iterations rather than 30
+    text = switched(BLOCK, "friction = 0.3",
+                    'formulation = "augmented_lagrangian"\naugmentation_tolerance = 1e-9')
+    res = run(text + "\n[nonlinear]\nmax_iterations = 15\n", name="block_al")
     times = res["steps/time"]
     keep = [int(np.argmin(np.abs(times - t))) for t in exact["steps/time"]]   # steps cut: extra
     np.testing.assert_allclose(times[keep], exact["steps/time"], rtol=1e-14)
