@@ -21,7 +21,10 @@ from parsolve.scene import load_scene
 
 E, NU = 1000.0, 0.3
 BLOCK = (CONFIGS / "contact_block_friction.toml").read_text()
-HERTZ = (CONFIGS / "contact_hertz_cylinder.toml").read_text()
+# the Hertz scene on a mesh half as fine (its Hertz accuracy is test_contact.py's): the AL is
+# compared with the relations form on the same mesh
+HERTZ = (CONFIGS / "contact_hertz_cylinder.toml").read_text().replace("nx = 160\nny = 40",
+                                                                       "nx = 80\nny = 20")
 
 
 def switched(text: str, after: str, lines: str) -> str:
@@ -123,10 +126,12 @@ def hertz(run, formulation: str, extra: str, name: str) -> dict:
 
 
 def test_hertz_cylinder_penalty_and_augmented_lagrangian(run):
-    """configs/contact_hertz_cylinder.toml: the penalty's penetration and its error against the
-    relations form fall as 1/ε; the AL gives the relations form's pressures (and so Hertz's
-    peak within 3 % and the contact edge within one element of its half-width)."""
-    exact = run(CONFIGS / "contact_hertz_cylinder.toml", name="hertz_relations")
+    """configs/contact_hertz_cylinder.toml (80×20): the penalty's penetration and its error
+    against the relations form fall as 1/ε; the AL gives the relations form's displacements and
+    pressures (the peak within 5 % of Hertz's p0 on this mesh, the contact edge within one
+    element of its half-width)."""
+    assert "nx = 80" in HERTZ
+    exact = run(HERTZ.replace("[output]\nfile = ", "# file = "), name="hertz_relations")
     u_ref = exact["fields/displacement"][-1]
     rn_ref = exact["fields/indent_normal_reaction"][-1, :, 0]
     penetration, error = [], []
@@ -143,8 +148,8 @@ def test_hertz_cylinder_penalty_and_augmented_lagrangian(run):
     pts = res["mesh/points"]
     load = -exact["relations/indent_normal/resultant"][-1, 1]
     ref = references.hertz_cylinder(load, 10.0, references.effective_modulus(E, NU))
-    h = 8.0 / 160
-    assert abs(rn.max() / h / ref.p0 - 1.0) < 0.03
+    h = 8.0 / 80
+    assert abs(rn.max() / h / ref.p0 - 1.0) < 0.05
     state = res["fields/indent_state"][-1, :, 0]
     edge = np.abs(pts[state > OPEN, 0]).max()
     assert edge <= ref.a < edge + h, (edge, ref.a)
