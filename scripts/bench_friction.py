@@ -156,7 +156,7 @@ def case_hertz(work: Path):
     text = (ROOT / "configs" / "contact_hertz_cylinder.toml").read_text()
 
     def error(res):
-        load = -res["fields/indent_normal_reaction"][-1, :, 0].sum()   # ≈ P (normals ≈ vertical)
+        load = -res["relations/lift/multiplier"][-1].sum()   # the load P (λ: minus the reaction)
         ref = references.hertz_cylinder(load, 10.0, references.effective_modulus(E, NU))
         return abs(res["fields/indent_normal_reaction"][-1, :, 0].max() / (8.0 / 160) / ref.p0 - 1)
     return "Hertz cylinder 2D (160×40 quad)", text, ["indent"], 0.0, error, 0.05
