@@ -20,17 +20,18 @@ node's tributary area, the consistent nodal force of a unit pressure on the slav
 elastic-plastic spring: the slip is what the return mapping takes out). The penetration is
 p_N/ε: it falls as 1/ε.
 
-**Augmented Lagrangian (Uzawa):** the same forces with multipliers λ_N ≥ 0 and λ_T updated
-``λ_N ← p_N``, ``λ_T ← t`` (the return-mapped force) after every Newton iteration (the
-effect's ``refresh`` hook), until the update changes them by less than
-``augmentation_tolerance × max λ_N``; then the last update is not applied and the step
-converges on the penalty problem of those multipliers. The inner penalty problem is piecewise
-linear, so one Newton iteration solves it exactly whenever the contact status did not change:
-this is Uzawa's loop with one Newton iteration per augmentation, and /steps/iterations counts
-all of them. At the fixed point the gap is closed (λ_N = λ_N − ε g) and a sticking node has not
-moved (λ_T = λ_T + ε_T Δg_T): the constraints of the relations form, reached to the tolerance.
-A step exceeding ``max_augmentations`` fails (cut like any failed step). The multipliers start
-each step from the last converged forces.
+**Augmented Lagrangian (Uzawa, not the semi-smooth Newton on (u, λ)):** the same forces with
+multipliers λ_N ≥ 0 and λ_T, updated ``λ_N ← p_N``, ``λ_T ← t`` (the return-mapped force)
+between Newton iterations (the effect's ``refresh`` hook) once the inner penalty problem is
+solved: it is piecewise linear, so a Newton iteration after which no node changed status (nor,
+in 3D, slip direction) has solved it exactly; after INNER_LIMIT iterations without settling it
+augments anyway. It stops when an update would move the multipliers by less than
+``augmentation_tolerance × max p_N``: that update is not applied and the step converges on the
+penalty problem of the current multipliers. /steps/iterations counts every Newton iteration,
+the augmentations' included. At the fixed point the gap is closed (λ_N = λ_N − ε g) and a
+sticking node has not moved during the step (λ_T = λ_T + ε_T Δg_T): the constraints of the
+relations form, to the tolerance. A step that needs more than ``max_augmentations`` fails (and
+is cut like any failed step). The multipliers start each step from the last converged forces.
 
 **Contact elements and the sparsity:** against a rigid obstacle a pair couples one node with
 itself: its block is the node's diagonal block, already in the stiffness pattern; it is added
@@ -139,7 +140,6 @@ class PenaltyContact(Effect):
     """One contact surface against a rigid obstacle, by penalty (see the module docstring)."""
 
     linear = False
-    augmented = False
 
     def __init__(self, spec: BaselineSpec, mesh, regions, fields, scene):
         key = spec.key
@@ -192,12 +192,10 @@ class PenaltyContact(Effect):
         mu = self.spec.mu
         t_tr = lam_t + self.eps_t[:, None] * (gT - state["gT"])
         norm = np.linalg.norm(t_tr, axis=1)
-        slip = closed & (norm > mu * pN) if mu > 0 else closed
+        slip = closed & (norm > mu * pN) & (mu > 0)   # frictionless: closed nodes "stick"
         scale = np.where(slip, mu * pN / np.maximum(norm, 1e-300), 1.0)
-        t = np.where(closed[:, None], t_tr * scale[:, None], 0.0)
-        if mu == 0.0:
-            t[:] = 0.0
-        status = np.where(closed, np.where(slip & (mu > 0), SLIP, STICK), OPEN).astype(np.int8)
+        t = np.where(closed[:, None] & (mu > 0), t_tr * scale[:, None], 0.0)
+        status = np.where(closed, np.where(slip, SLIP, STICK), OPEN).astype(np.int8)
         return {"g": g, "gT": gT, "pN": pN, "t": t, "t_tr": t_tr, "norm": norm, "state": status}
 
     def node_tangents(self, f: dict) -> np.ndarray:
@@ -286,7 +284,7 @@ class PenaltyContact(Effect):
 class AugmentedContact(PenaltyContact):
     """The same forces with Uzawa-augmented multipliers (see the module docstring)."""
 
-    augmented = True
+    augmentations, total_augmentations, _fresh, _inner = 0, 0, True, 0
 
     def multipliers(self, state: dict) -> tuple[np.ndarray, np.ndarray]:
         """The current multipliers; at a step's first evaluation, the last converged forces."""
@@ -300,7 +298,7 @@ class AugmentedContact(PenaltyContact):
         return False
 
     def end_step(self) -> None:
-        self.total_augmentations = getattr(self, "total_augmentations", 0) + self.augmentations
+        self.total_augmentations += self.augmentations
 
     def refresh(self, q: np.ndarray, lam: dict, active: dict) -> bool:
         """Between Newton iterations: while the inner penalty problem is not solved (the status
