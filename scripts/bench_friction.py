@@ -96,11 +96,11 @@ def contact_measures(res: dict, names: list[str], mu: float) -> tuple[float, flo
 def case_block(work: Path):
     text = (ROOT / "configs" / "contact_block_friction.toml").read_text()
 
-    def error(res, ref):
+    def error(res, first):
         """No analytic field (the resultants N = pN and, sliding, T = μN hold to round-off in
         every formulation): the displacements against the relations form's at its steps."""
-        keep = [int(np.argmin(np.abs(res["steps/time"] - t))) for t in ref["steps/time"]]
-        u, u_ref = res["fields/displacement"][keep], ref["fields/displacement"]
+        keep = [int(np.argmin(np.abs(res["steps/time"] - t))) for t in first["steps/time"]]
+        u, u_ref = res["fields/displacement"][keep], first["fields/displacement"]
         return float(np.abs(u - u_ref).max() / np.abs(u_ref).max())
     return "block 2D (8×4 quad)", text, ["base"], MU, error, 0.125
 
@@ -142,7 +142,7 @@ friction = {ref.mu!r}
 count = 3
 """
 
-    def error(res, ref):
+    def error(res, first):
         pts = res["mesh/points"]
         exact = np.array([t * ref.displacement(pts) for t in res["steps/time"]])
         return float(np.abs(res["fields/displacement"] - exact).max() / np.abs(exact).max())
@@ -152,7 +152,7 @@ count = 3
 def case_hertz(work: Path):
     text = (ROOT / "configs" / "contact_hertz_cylinder.toml").read_text()
 
-    def error(res, ref):
+    def error(res, first):
         load = -res["relations/lift/multiplier"][-1].sum()   # the load P (λ: minus the reaction)
         ref = references.hertz_cylinder(load, 10.0, references.effective_modulus(E, NU))
         return abs(res["fields/indent_normal_reaction"][-1, :, 0].max() / (8.0 / 160) / ref.p0 - 1)
@@ -167,7 +167,7 @@ def case_box(work: Path, n: int):
     text = text.replace("nx = 3\nny = 3\nnz = 2", f"nx = {n}\nny = {n}\nnz = {max(2, n // 3)}")
     gz = -p / (LAM + 2 * G)
 
-    def error(res, ref):
+    def error(res, first):
         pts = res["mesh/points"]
         worst = 0.0
         for k, t in enumerate(res["steps/time"]):
