@@ -217,3 +217,61 @@ def test_bad_baseline_exits_2(tmp_path, contact, key):
     assert proc.returncode == 2, proc.stderr
     line = proc.stderr.strip()
     assert "scene.toml" in line and key in line and "\n" not in line, line
+
+
+# ----------------------------------------------------------------------------- tangent
+
+
+BOX = """
+[mesh]
+generator = "box"
+lx = 1.0
+ly = 1.0
+lz = 0.5
+nx = 2
+ny = 2
+nz = 1
+[model]
+hypothesis = "3d"
+[[materials]]
+E = 1000.0
+nu = 0.3
+[[contact]]
+name = "base"
+slave = "zmin"
+obstacle = { sphere = { centre = [0.5, 0.5, -3.0], radius = 3.0 } }
+friction = 0.4
+formulation = "penalty"
+"""
+
+
+def test_penalty_tangent_is_the_derivative_of_the_contact_forces(shared_tmp):
+    """The consistent tangent of the nodal contact forces (open, stick and 3D slip nodes on a
+    curved obstacle, a committed friction force) against central differences of the forces."""
+    path = shared_tmp / "penalty_box.toml"
+    if MPI.COMM_WORLD.rank == 0:
+        path.write_text(BOX)
+    MPI.COMM_WORLD.Barrier()
+    effect = build_model(load_scene(path)).effects[-1]
+    p = effect.pairing
+    n = len(p)
+    rng = np.random.default_rng(3)
+    u = np.zeros((effect.mesh.num_points, 3))
+    u[p.slave, :2] = rng.normal(size=(n, 2)) * np.where(np.arange(n) % 2, 1e-1, 1e-4)[:, None]
+    u[p.slave, 2] = rng.uniform(-0.1, 0.02, n)
+    state = {"gT": rng.normal(size=(n, 2)) * 1e-3}
+    lam_t = rng.normal(size=(n, 2)) * 0.5
+
+    def force(uu):
+        f = effect.forces(uu, state, np.zeros(n), lam_t)
+        return -f["pN"][:, None] * p.normal + np.einsum("mjx,mj->mx", p.tangents, f["t"]), f
+
+    f0, info = force(u)
+    assert {OPEN, STICK, SLIP} <= set(info["state"].tolist())
+    k = effect.node_tangents(info)
+    h = 1e-9
+    for c in range(3):
+        du = np.zeros_like(u)
+        du[p.slave, c] = h
+        fd = (force(u + du)[0] - force(u - du)[0]) / (2 * h)
+        np.testing.assert_allclose(k[:, :, c], fd, atol=1e-5 * np.abs(k).max())
