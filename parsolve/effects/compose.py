@@ -21,6 +21,35 @@ from parsolve.fem.element_matrices import BlockMatrices, apply
 
 
 @dataclass
+class NodeBlocks:
+    """Blocks on single nodes (node springs, contact with a rigid obstacle), added through the
+    rank's cells: block k (d², k-th column) goes to the diagonal block of local node
+    ``local[k]`` of cell ``cell[k]`` (positions in the rank's cells), a slot of the stiffness
+    pattern the cells already made. Reduced like ``ElementMatrices``: a value update."""
+
+    values: np.ndarray   # (d², k)
+    cell: np.ndarray     # (k,)
+    local: np.ndarray    # (k,)
+
+    def reduce(self, pair_slot: np.ndarray, npairs: int) -> np.ndarray:
+        slots = pair_slot[self.local, self.local, self.cell]
+        return np.stack([np.bincount(slots, weights=v, minlength=npairs + 1)[:npairs]
+                         for v in self.values]) if len(self.values) else np.zeros((0, npairs))
+
+
+def node_places(cell_nodes: np.ndarray, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(cell, local position) of the first cell of ``cell_nodes`` (nc, nen) holding each of
+    ``nodes``; (-1, -1) where none does (a node of another rank's cells)."""
+    flat = cell_nodes.ravel()
+    present, first = np.unique(flat, return_index=True)
+    pos = np.minimum(np.searchsorted(present, nodes), max(present.size - 1, 0))
+    hit = present[pos] == nodes if present.size else np.zeros(len(nodes), dtype=bool)
+    where = np.where(hit, first[pos] if present.size else -1, -1)
+    nen = cell_nodes.shape[1]
+    return np.where(where >= 0, where // nen, -1), np.where(where >= 0, where % nen, -1)
+
+
+@dataclass
 class Rate:
     """The rate terms of one transient step."""
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
-from parsolve.effects import contact, diffusion, solubility
+from parsolve.effects import contact, contact_penalty, diffusion, solubility
 
 
 @dataclass(frozen=True)
@@ -27,7 +27,17 @@ def _build_solubility(spec, ctx):
                                  ctx.scene.source)
 
 
+def _parse_contact(t, dim):
+    """[[contact]]: ``formulation`` and the baselines' keys are consumed first (so that
+    contact.parse, which checks that no key is left, stays as it is)."""
+    baseline = contact_penalty.read_formulation(t)
+    return contact_penalty.with_baseline(contact.parse(t, dim), baseline)
+
+
 def _build_contact(spec, ctx):
+    # formulation = "relations" (the paper's) or a baseline (penalty, augmented Lagrangian)
+    if isinstance(spec, contact_penalty.BaselineSpec):
+        return contact_penalty.build(spec, ctx.mesh, ctx.regions, ctx.fields, ctx.scene)
     return contact.Contact(spec, ctx.mesh, ctx.regions, ctx.fields, ctx.scene.source)
 
 
@@ -36,5 +46,5 @@ EFFECTS: dict[str, Entry] = {
     "diffusion": Entry("diffusion", True, lambda t, dim: diffusion.parse(t, dim), _build_diffusion),
     "solubility": Entry("solubility", False, lambda t, dim: solubility.parse(t), _build_solubility,
                         coupling=True),
-    "contact": Entry("contact", True, contact.parse, _build_contact, coupling=True),
+    "contact": Entry("contact", True, _parse_contact, _build_contact, coupling=True),
 }

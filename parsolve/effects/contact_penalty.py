@@ -1,0 +1,339 @@
+"""Baselines for frictional contact: the penalty method and an augmented Lagrangian (Uzawa,
+Alart–Curnier type), selected by ``formulation`` in a ``[[contact]]`` section. They exist to
+measure the paper's formulation (relations, ``parsolve.effects.contact``) against the classical
+ones on the same scenes: same pairing, same rows, same linearised gap ``g = g0 + Dn·q``.
+
+Per paired slave node i (rigid obstacles only, see below), with ε_i = penalty × A_i (A_i: the
+node's tributary area, the consistent nodal force of a unit pressure on the slave facets):
+
+* normal force (contact pressure force on the slave, along n):
+  ``p_N = max(λ_N − ε_i g, 0)``;
+* friction, return mapping on a tangential spring ε_T,i = penalty_tangential × A_i:
+  trial ``t_tr = λ_T + ε_T,i (g_T − g_T,n)`` (g_T: tangential displacement in the tangent basis,
+  g_T,n its value at the step's start), stick ``t = t_tr`` while ``|t_tr| ≤ μ p_N``, else slip
+  ``t = μ p_N t_tr/|t_tr|``; friction force on the slave ``Rt = −t`` (it opposes the slip);
+* internal force ``f = −p_N n + T t`` on the slave's DOFs (T: the tangents as columns) and its
+  consistent tangent: ``ε n nᵀ`` in contact, ``+ ε_T T Tᵀ`` in stick, and in slip
+  ``− μ ε (T ŝ) nᵀ + μ p_N ε_T/|t_tr| T (I − ŝ ŝᵀ) Tᵀ`` (ŝ = t_tr/|t_tr|): not symmetric.
+
+**Penalty:** λ_N = 0; λ_T = the committed friction force t_n of the last converged step (an
+elastic-plastic spring: the slip is what the return mapping takes out). The penetration is
+p_N/ε: it falls as 1/ε.
+
+**Augmented Lagrangian (Uzawa, not the semi-smooth Newton on (u, λ)):** the same forces with
+multipliers λ_N ≥ 0 and λ_T, updated ``λ_N ← p_N``, ``λ_T ← t`` (the return-mapped force)
+between Newton iterations (the effect's ``refresh`` hook) once the inner penalty problem is
+solved: it is piecewise linear, so a Newton iteration after which no node changed status (nor,
+in 3D, slip direction) has solved it exactly; after INNER_LIMIT iterations without settling it
+augments anyway. It stops when an update would move the multipliers by less than
+``augmentation_tolerance × max p_N``: that update is not applied and the step converges on the
+penalty problem of the current multipliers. /steps/iterations counts every Newton iteration,
+the augmentations' included. At the fixed point the gap is closed (λ_N = λ_N − ε g) and a
+sticking node has not moved during the step (λ_T = λ_T + ε_T Δg_T): the constraints of the
+relations form, to the tolerance. A step that needs more than ``max_augmentations`` fails (and
+is cut like any failed step). The multipliers start each step from the last converged forces.
+
+**Contact elements and the sparsity:** against a rigid obstacle a pair couples one node with
+itself: its block is the node's diagonal block, already in the stiffness pattern; it is added
+through one of the rank's cells holding the node (``compose.NodeBlocks``), so re-assembly stays
+a value update of the fixed pattern. A deformable master surface (slave node + master facet
+nodes) needs node pairs that no cell holds: it is refused (exit 2) until the system's pattern
+takes contact elements (see the report of this work).
+
+Scene keys (besides those of ``parsolve.effects.contact``)::
+
+    formulation = "penalty"          # "relations" (default) | "penalty" | "augmented_lagrangian"
+    penalty = 1e5                    # per unit area (pressure per unit penetration, E/length);
+                                     # default 100 E_max / h (h: mean slave facet size)
+    penalty_tangential = 1e5         # default: penalty
+    augmentation_tolerance = 1e-6    # AL: max |Δλ| / max λ_N to stop augmenting
+    max_augmentations = 25           # AL: per step
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from parsolve.contact.friction import OPEN, SLIP, STICK
+from parsolve.effects import contact
+from parsolve.effects.base import Effect
+from parsolve.effects.compose import NodeBlocks, node_places
+from parsolve.errors import InputError, SolverError
+from parsolve.fem import kernels
+from parsolve.mesh.topology import facets_from_nodes
+
+FORMULATIONS = ("relations", "penalty", "augmented_lagrangian")
+BASELINE_KEYS = ("penalty", "penalty_tangential")
+AL_KEYS = ("augmentation_tolerance", "max_augmentations")
+DEFAULT_FACTOR = 100.0     # default penalty: DEFAULT_FACTOR × E / h
+INNER_LIMIT = 4            # AL: Newton iterations on one penalty problem before augmenting anyway
+
+
+@dataclass
+class BaselineSpec(contact.ContactSpec):
+    formulation: str = "penalty"
+    penalty: float | None = None
+    penalty_tangential: float | None = None
+    augmentation_tolerance: float = 1e-6
+    max_augmentations: int = 25
+
+
+def read_formulation(t) -> dict:
+    """Consume ``formulation`` and the baseline keys from a [[contact]] table (before
+    ``contact.parse`` checks that no key is left); {} for the relations form."""
+    formulation = t.get("formulation", str, "relations", choices=FORMULATIONS)
+    keys = BASELINE_KEYS + AL_KEYS
+    if formulation == "relations":
+        for k in keys:
+            if t.has(k):
+                raise t.error(k, "applies only with formulation = \"penalty\" or "
+                                 "\"augmented_lagrangian\"")
+        return {}
+    if formulation == "penalty":
+        for k in AL_KEYS:
+            if t.has(k):
+                raise t.error(k, "applies only with formulation = \"augmented_lagrangian\"")
+    out = {"formulation": formulation}
+    for k in BASELINE_KEYS:
+        value = t.get(k, float, None)
+        if value is not None and not value > 0:
+            raise t.error(k, f"must be positive, got {value!r}")
+        out[k] = value
+    if formulation == "augmented_lagrangian":
+        tol = t.get("augmentation_tolerance", float, 1e-6)
+        if not 0 < tol < 1:
+            raise t.error("augmentation_tolerance", f"must lie in (0, 1), got {tol!r}")
+        count = t.get("max_augmentations", int, 25)
+        if count < 1:
+            raise t.error("max_augmentations", f"must be at least 1, got {count!r}")
+        out.update(augmentation_tolerance=tol, max_augmentations=count)
+    return out
+
+
+def with_baseline(spec: contact.ContactSpec, baseline: dict) -> contact.ContactSpec:
+    """The relations form's spec as is ({} from read_formulation), else a BaselineSpec."""
+    return BaselineSpec(**dataclasses.asdict(spec), **baseline) if baseline else spec
+
+
+def build(spec: BaselineSpec, mesh, regions, fields, scene) -> Effect:
+    cls = AugmentedContact if spec.formulation == "augmented_lagrangian" else PenaltyContact
+    return cls(spec, mesh, regions, fields, scene)
+
+
+def nodal_areas(mesh, nodes: np.ndarray, thickness: float) -> np.ndarray:
+    """Tributary area of each node (n,): the consistent nodal force of a unit pressure on the
+    boundary facets all of whose nodes are in ``nodes`` (2D: length × thickness)."""
+    mask = np.zeros(mesh.num_points, dtype=bool)
+    mask[nodes] = True
+    facets = facets_from_nodes(mesh, mask)[0]
+    area = np.zeros(mesh.num_points)
+    if facets.size:
+        fe = kernels.facet_load(mesh.points[facets], mesh.facet_type, np.ones(1), thickness)
+        area = np.bincount(facets.ravel(), weights=fe.ravel(), minlength=mesh.num_points)
+    return area[nodes]
+
+
+class PenaltyContact(Effect):
+    """One contact surface against a rigid obstacle, by penalty (see the module docstring)."""
+
+    linear = False
+
+    def __init__(self, spec: BaselineSpec, mesh, regions, fields, scene):
+        key = spec.key
+        if spec.master is not None:
+            raise InputError(f"formulation = {spec.formulation!r} supports rigid obstacles only "
+                             "(a deformable master needs contact elements in the stiffness "
+                             "pattern); use the relations form", scene.source, f"{key}.master")
+        # the relations form's set-up does the checks, the pairing and the rows: reused as is
+        geo = contact.Contact(spec, mesh, regions, fields, scene.source)
+        self.spec, self.mesh, self.fields_ = spec, mesh, fields
+        self.name = f"contact {spec.name} ({spec.formulation})"
+        self.pairing, self.nrows, self.trows = geo.pairing, geo.nrows, geo.trows
+        self.symmetric = spec.mu == 0.0
+        p = self.pairing
+        dim = mesh.dim
+        thickness = scene.thickness if dim == 2 else 1.0
+        area = nodal_areas(mesh, p.slave, thickness)
+        area = np.where(area > 0, area, area[area > 0].mean() if np.any(area > 0) else 1.0)
+        self.h = float((area.mean() / thickness) ** (1.0 / (dim - 1)))
+        if spec.penalty is None:
+            emax = max((m.params.get("E", 0.0) for m in scene.materials), default=0.0)
+            if emax <= 0:
+                raise InputError("no Young's modulus to size the default penalty: give penalty",
+                                 scene.source, f"{key}.penalty")
+            self.penalty = DEFAULT_FACTOR * emax / self.h
+        else:
+            self.penalty = spec.penalty
+        self.penalty_t = self.penalty if spec.penalty_tangential is None else spec.penalty_tangential
+        self.eps_n = self.penalty * area           # per node (force per unit penetration)
+        self.eps_t = self.penalty_t * area
+        self._last = None
+        self._places = (None, None)
+
+    # ------------------------------------------------------------------ kinematics
+
+    def _u(self, values: dict) -> np.ndarray:
+        return values["u"]
+
+    def gaps(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(g (n,), g_T (n, dim-1)): linearised gap g0 + Dn·q and tangential displacement."""
+        p = self.pairing
+        return p.gap + self.nrows.apply(u), self.trows.apply(u).reshape(len(p), -1)
+
+    def forces(self, u: np.ndarray, state: dict, lam_n: np.ndarray, lam_t: np.ndarray) -> dict:
+        """Normal and friction forces at the displacement u (all nodes, every rank alike)."""
+        g, gT = self.gaps(u)
+        trial = lam_n - self.eps_n * g
+        pN = np.maximum(trial, 0.0)
+        closed = trial >= 0.0   # touching (g = 0) counts: its stiffness holds a body laid on it
+        mu = self.spec.mu
+        t_tr = lam_t + self.eps_t[:, None] * (gT - state["gT"])
+        norm = np.linalg.norm(t_tr, axis=1)
+        slip = closed & (norm > mu * pN) & (mu > 0)   # frictionless: closed nodes "stick"
+        scale = np.where(slip, mu * pN / np.maximum(norm, 1e-300), 1.0)
+        t = np.where(closed[:, None] & (mu > 0), t_tr * scale[:, None], 0.0)
+        status = np.where(closed, np.where(slip, SLIP, STICK), OPEN).astype(np.int8)
+        return {"g": g, "gT": gT, "pN": pN, "t": t, "t_tr": t_tr, "norm": norm, "state": status}
+
+    def node_tangents(self, f: dict) -> np.ndarray:
+        """Consistent tangent (n, dim, dim) of each node's contact force."""
+        p, mu = self.pairing, self.spec.mu
+        n_vec, T = p.normal, np.swapaxes(p.tangents, 1, 2)          # (n, dim), (n, dim, dim-1)
+        closed, slip = f["state"] != OPEN, f["state"] == SLIP
+        k = (self.eps_n * closed)[:, None, None] * np.einsum("mi,mj->mij", n_vec, n_vec)
+        if mu == 0.0:
+            return k
+        stick = f["state"] == STICK
+        k += (self.eps_t * stick)[:, None, None] * np.einsum("mik,mjk->mij", T, T)
+        s = f["t_tr"] / np.maximum(f["norm"], 1e-300)[:, None]       # (n, dim-1)
+        ts = np.einsum("mik,mk->mi", T, s)                           # T ŝ
+        k -= (mu * self.eps_n * slip)[:, None, None] * np.einsum("mi,mj->mij", ts, n_vec)
+        dm1 = s.shape[1]
+        if dm1 > 1:  # the direction turns with the trial force (3D only)
+            proj = np.eye(dm1)[None] - np.einsum("mk,ml->mkl", s, s)
+            c = mu * f["pN"] * self.eps_t / np.maximum(f["norm"], 1e-300) * slip
+            k += c[:, None, None] * np.einsum("mik,mkl,mjl->mij", T, proj, T)
+        return k
+
+    # ------------------------------------------------------------------ the Effect interface
+
+    def output_names(self) -> list[str]:
+        name = self.spec.name
+        return [f"{name}_{k}" for k in ("normal_reaction", "tangential_reaction", "gap", "slip",
+                                        "state")]
+
+    def init_state(self, cells: np.ndarray) -> dict:
+        """Per slave node (all of them, the same on every rank): the normal force, the friction
+        force and the tangential displacement of the last converged step."""
+        n, dm1 = len(self.pairing), self.mesh.dim - 1
+        return {"pN": np.zeros(n), "t": np.zeros((n, dm1)), "gT": np.zeros((n, dm1))}
+
+    def multipliers(self, state: dict) -> tuple[np.ndarray, np.ndarray]:
+        """(λ_N, λ_T): penalty, none normal, and the committed friction force."""
+        return np.zeros(len(self.pairing)), state["t"]
+
+    def evaluate(self, cells: np.ndarray, values: dict, state, secant: bool):
+        u = self._u(values)
+        lam_n, lam_t = self.multipliers(state)
+        f = self.forces(u, state, lam_n, lam_t)
+        self._last, self._state = f, state
+        trial = {"pN": f["pN"], "t": f["t"], "gT": f["gT"]}
+        p = self.pairing
+        node_force = -f["pN"][:, None] * p.normal + np.einsum("mjx,mj->mx", p.tangents, f["t"])
+        cell, local = self._node_places(cells)
+        has = cell >= 0
+        nodes = self.mesh.cells[cells]
+        fe = np.zeros(nodes.shape + (self.mesh.dim,))
+        fe[cell[has], local[has]] = node_force[has]
+        k = self.node_tangents(f)[has]
+        blocks = NodeBlocks(k.reshape(len(k), -1).T.copy(), cell[has], local[has])
+        return {"u": fe}, [("u", "u", blocks)], trial, None
+
+    def _node_places(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(cell, local node) of one of the rank's cells holding each slave node (-1: none);
+        computed once per set of cells."""
+        if self._places[0] is not cells:
+            self._places = (cells, node_places(self.mesh.cells[cells], self.pairing.slave))
+        return self._places[1]
+
+    # ------------------------------------------------------------------ outputs
+
+    def step_outputs(self, q: np.ndarray, lam: dict, active: dict) -> tuple[dict, dict]:
+        """Per slave node, as the relations form: normal force Rn = p_N, friction Rt = −t in the
+        tangent basis, gap (the actual one: negative where it penetrates), slip (tangential
+        displacement), state (−1 not a contact node, 0 open, 1 stick, 2 slip)."""
+        f, p, name = self._last, self.pairing, self.spec.name
+        npts, dm1 = self.mesh.num_points, self.mesh.dim - 1
+
+        def nodal(values, k=1):
+            out = np.zeros((npts, k))
+            out[p.slave] = np.asarray(values).reshape(len(p), k)
+            return out
+
+        state = np.full((npts, 1), -1.0)
+        state[p.slave, 0] = f["state"]
+        return {f"{name}_normal_reaction": nodal(f["pN"]),
+                f"{name}_tangential_reaction": nodal(-f["t"], dm1),
+                f"{name}_gap": nodal(f["g"]), f"{name}_slip": nodal(f["gT"], dm1),
+                f"{name}_state": state}, {}
+
+
+class AugmentedContact(PenaltyContact):
+    """The same forces with Uzawa-augmented multipliers (see the module docstring)."""
+
+    augmentations, total_augmentations, _fresh, _inner = 0, 0, True, 0
+
+    def multipliers(self, state: dict) -> tuple[np.ndarray, np.ndarray]:
+        """The current multipliers; at a step's first evaluation, the last converged forces."""
+        if self._fresh:
+            self.lam_n, self.lam_t = state["pN"].copy(), state["t"].copy()
+            self._fresh = False
+        return self.lam_n, self.lam_t
+
+    def begin_step(self, q: np.ndarray, active: dict) -> bool:
+        self.augmentations, self._fresh, self._inner = 0, True, 0
+        return False
+
+    def end_step(self) -> None:
+        self.total_augmentations += self.augmentations
+
+    def refresh(self, q: np.ndarray, lam: dict, active: dict) -> bool:
+        """Between Newton iterations: while the inner penalty problem is not solved (the status
+        of a node, or a 3D slip direction, changed since the tangent was made), True and
+        nothing else; once it is, one augmentation λ_N ← p_N, λ_T ← t, True while it moves
+        them by more than the tolerance."""
+        u = q.reshape(self.mesh.num_points, -1)[:, self.fields_.columns("u")]
+        f = self.forces(u, self._state, self.lam_n, self.lam_t)
+        self._inner += 1
+        if not self._settled(f, self._last) and self._inner < INNER_LIMIT:
+            return True
+        self._inner = 0
+        change = max(float(np.abs(f["pN"] - self.lam_n).max(initial=0.0)),
+                     float(np.abs(f["t"] - self.lam_t).max(initial=0.0)))
+        scale = max(float(f["pN"].max(initial=0.0)), 1e-300)
+        if change <= self.spec.augmentation_tolerance * scale:
+            return False
+        if self.augmentations >= self.spec.max_augmentations:
+            raise SolverError(f"contact {self.spec.name!r}: the augmented Lagrangian did not "
+                              f"converge in {self.spec.max_augmentations} augmentations "
+                              f"(last change {change / scale:.1e} of the largest force)")
+        self.augmentations += 1
+        self.lam_n, self.lam_t = f["pN"], f["t"]
+        return True
+
+    @staticmethod
+    def _settled(new: dict, old: dict, tol_angle: float = 1e-8) -> bool:
+        """The last Newton step solved the inner (piecewise linear) problem: same status at
+        every node and, in 3D, the same slip directions."""
+        if not np.array_equal(new["state"], old["state"]):
+            return False
+        if new["t_tr"].shape[1] == 1:
+            slip = new["state"] == SLIP
+            return bool(np.all(np.sign(new["t_tr"][slip]) == np.sign(old["t_tr"][slip])))
+        slip = new["state"] == SLIP
+        a = new["t_tr"][slip] / np.maximum(new["norm"][slip], 1e-300)[:, None]
+        b = old["t_tr"][slip] / np.maximum(old["norm"][slip], 1e-300)[:, None]
+        return bool(np.all(np.linalg.norm(a - b, axis=1) <= tol_angle))
