@@ -255,10 +255,7 @@ class Scene:
     @property
     def fields(self) -> dict[str, int]:
         """Field name -> number of components, as the effects will declare them."""
-        out = {"u": self.dim} if self.materials else {}
-        for spec in self.effect_specs.get("diffusion", []):
-            out[spec.field] = 1
-        return out
+        return _declared_fields(bool(self.materials), self.effect_specs, self.dim)
 
 
 # ---------------------------------------------------------------- parsing
@@ -319,8 +316,7 @@ def parse_scene(data: dict, source: str, text: str = "", base: Path = Path("."))
         raise InputError("nothing to simulate: give [[materials]] (elasticity) or a physics "
                          "section (" + ", ".join(f"[{e}]" for e in _registry()) + ")", source,
                          "materials")
-    fields = ({"u": dim} if materials else {}) | \
-        {s.field: 1 for s in effect_specs.get("diffusion", [])}
+    fields = _declared_fields(bool(materials), effect_specs, dim)
     loads = [_load(t, dim, fields) for t in top.tables("loads")]
     relations = [_relation(t, dim, fields) for t in top.tables("relations")]
     time_spec = _time(top.table("time", None))
@@ -575,6 +571,16 @@ def _strain_direction(t: Table, dim: int) -> list[float]:
     raise t.error("component", "shear components are controlled through 'direction'")
 
 
+def _declared_fields(elastic: bool, effect_specs: dict, dim: int) -> dict[str, int]:
+    """Field name -> components: the displacement of [[materials]], then what each listed
+    effect declares (its registry entry says)."""
+    out = {"u": dim} if elastic else {}
+    for name, specs in effect_specs.items():
+        for spec in specs:
+            out |= _registry()[name].fields(spec, dim)
+    return out
+
+
 def _registry() -> dict:
     from parsolve.effects.registry import EFFECTS
 
@@ -589,10 +595,14 @@ def _effect_specs(top: Table, dim: int) -> dict[str, list]:
             continue
         tables = top.tables(entry.section) if entry.array else [top.table(entry.section)]
         specs[name] = [entry.parse(t, dim) for t in tables]
-    names = [s.field for s in specs.get("diffusion", [])]
-    dup = sorted({n for n in names if names.count(n) > 1} | ({"u"} & set(names)))
-    if dup:
-        raise InputError(f"field {dup[0]!r} is declared twice", top.source, "diffusion")
+    seen = {"u"}   # the displacement of [[materials]]
+    for name, entry_specs in specs.items():
+        for spec in entry_specs:
+            for field_name in _registry()[name].fields(spec, dim):
+                if field_name in seen:
+                    raise InputError(f"field {field_name!r} is declared twice", top.source,
+                                     spec.key + ".field")
+                seen.add(field_name)
     return specs
 
 
@@ -707,14 +717,14 @@ def _cross_check(scene: Scene) -> None:
 
     for m in scene.materials:
         region(m.region, m.key + ".region")
-    for spec in scene.effect_specs.get("diffusion", []):
-        for m in spec.materials:
-            region(m.region, m.key + ".region")
-    for spec in scene.effect_specs.get("solubility", []):
-        if spec.evolution not in scene.evolutions:
-            raise InputError(f"unknown evolution {spec.evolution!r}", src, spec.key + ".evolution")
-        for name, _, key in spec.saturation:
-            region(name, key.rsplit(".", 1)[0] + ".region")
+    for name, specs in scene.effect_specs.items():
+        entry = _registry()[name]
+        for spec in specs:
+            for evolution, key in entry.evolutions(spec):
+                if evolution not in scene.evolutions:
+                    raise InputError(f"unknown evolution {evolution!r}", src, key)
+            for region_name, key in entry.regions(spec):
+                region(region_name, key)
     patterns = {l.pattern for l in scene.loads}
     if scene.nonlinear.method == "arc_length" and scene.nonlinear.arc_pattern not in patterns:
         raise InputError(f"names no load pattern: {scene.nonlinear.arc_pattern!r}", src,

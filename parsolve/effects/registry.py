@@ -16,6 +16,11 @@ class Entry:
     parse: Callable              # (Table, dim) -> spec
     build: Callable              # (spec, context) -> Effect
     coupling: bool = False       # built once the fields of the others are known
+    # what the scene checks before reading the mesh: the fields a spec declares {name:
+    # components}, and the regions and evolutions it names [(name, dotted key)]
+    fields: Callable = lambda spec, dim: {}
+    regions: Callable = lambda spec: []
+    evolutions: Callable = lambda spec: []
 
 
 def _build_diffusion(spec, ctx):
@@ -43,8 +48,13 @@ def _build_contact(spec, ctx):
 
 # elasticity is read from [[materials]] by the scene itself (the historical layout)
 EFFECTS: dict[str, Entry] = {
-    "diffusion": Entry("diffusion", True, lambda t, dim: diffusion.parse(t, dim), _build_diffusion),
+    "diffusion": Entry("diffusion", True, lambda t, dim: diffusion.parse(t, dim), _build_diffusion,
+                       fields=lambda spec, dim: {spec.field: 1},
+                       regions=lambda spec: [(m.region, m.key + ".region") for m in spec.materials]),
     "solubility": Entry("solubility", False, lambda t, dim: solubility.parse(t), _build_solubility,
-                        coupling=True),
+                        coupling=True,
+                        regions=lambda spec: [(name, key.rsplit(".", 1)[0] + ".region")
+                                              for name, _, key in spec.saturation],
+                        evolutions=lambda spec: [(spec.evolution, spec.key + ".evolution")]),
     "contact": Entry("contact", True, _parse_contact, _build_contact, coupling=True),
 }

@@ -248,3 +248,22 @@ conductivity = 1.0
     np.testing.assert_allclose(res["fields/displacement"], static["fields/displacement"],
                                rtol=1e-10, atol=1e-14)
     np.testing.assert_allclose(res["balance/total/storage"], 0.5 * 0.2, rtol=1e-12)  # ∫ x
+
+
+@pytest.mark.parametrize("field", ["h", "u"])
+def test_a_field_is_declared_once(field):
+    """Two [[diffusion]] sections on one field, or one named like the displacement: exit 2
+    naming the second section's field key (the registry says which fields a section declares)."""
+    from parsolve.scene import parse_scene
+
+    section = f"""
+[[diffusion]]
+field = "{field}"
+[[diffusion.materials]]
+conductivity = 1.0
+"""
+    text = COUPLED + section * (2 if field == "h" else 1)
+    with pytest.raises(InputError) as err:
+        parse_scene(tomllib.loads(text), "scene.toml", text)
+    assert "declared twice" in err.value.message
+    assert err.value.key == ("diffusion[1].field" if field == "h" else "diffusion[0].field")
