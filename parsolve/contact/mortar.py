@@ -47,7 +47,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from parsolve.contact.pairing import Pairing, candidate_pairs, facet_frame, project_on_facets
+from parsolve.contact.pairing import Pairing, candidate_pairs, empty_pairing, facet_frame, \
+    project_on_facets
 from parsolve.contact.rows import Rows, normal_rows, normal_values, tangent_rows
 from parsolve.fem.elements import element
 
@@ -284,13 +285,15 @@ def _assemble(points, s_nodes, m_nodes, values, weight, normals) -> Mortar:
     slave = slave[np.isin(slave, s)]
     on = np.isin(s, slave)
     s, a, m_ia = s[on], a[on], m_ia[on]
+    n = slave.size
+    if n == 0:
+        return Mortar(empty_pairing(slave, 2, 0), np.zeros(0))
     row = np.searchsorted(slave, s)
-    count = np.bincount(row, minlength=slave.size)
-    width = int(count.max()) if count.size else 0
+    count = np.bincount(row, minlength=n)
+    width = int(count.max())
     start = np.concatenate([[0], np.cumsum(count)[:-1]])
     col = np.arange(s.size) - np.repeat(start, count)
-    n = slave.size
-    master = np.repeat(a[start][:, None] if n else np.zeros((0, 1), np.int64), width, axis=1)
+    master = np.repeat(a[start][:, None], width, axis=1)
     weights = np.zeros((n, width))
     master[row, col] = a
     weights[row, col] = m_ia / weight[s]
