@@ -105,6 +105,8 @@ def mortar_pairing(
     lo, hi = _overlap(xs_f[e], xm_f[f], facet_type)
     keep = hi - lo > 1e-12
     e, f, lo, hi = e[keep], f[keep], lo[keep], hi[keep]
+    if e.size == 0:
+        return Mortar(empty_pairing(np.zeros(0, dtype=np.int64), 2, 0), np.zeros(0))
     pieces = _integrate_pieces(el, xs_f[e], xm_f[f], lo, hi, QUADRATURE[facet_type])
     phi, jw, nm, gap = pieces
     # pieces whose slave and master are farther apart than the search radius are not paired
@@ -176,9 +178,14 @@ def _overlap(xs: np.ndarray, xm: np.ndarray, facet_type: str) -> tuple[np.ndarra
     end nodes projected on the slave facet (closest point: along the slave normal), clipped
     to [−1, 1] (hi ≤ lo: no overlap)."""
     m = xs.shape[0]
-    ends = xm[:, :CORNERS].reshape(m * CORNERS, 2)
-    xi = project_on_facets(ends, np.repeat(xs, CORNERS, axis=0), facet_type)[0]
-    xi = xi[:, 0].reshape(m, CORNERS)
+    if facet_type == "line":   # straight: the orthogonal projection in closed form
+        t = xs[:, 1] - xs[:, 0]
+        rel = xm[:, :CORNERS] - xs[:, None, 0]
+        xi = 2.0 * np.einsum("mcx,mx->mc", rel, t) / np.einsum("mx,mx->m", t, t)[:, None] - 1.0
+    else:
+        ends = xm[:, :CORNERS].reshape(m * CORNERS, 2)
+        xi = project_on_facets(ends, np.repeat(xs, CORNERS, axis=0), facet_type)[0]
+        xi = xi[:, 0].reshape(m, CORNERS)
     return np.clip(xi.min(axis=1), -1.0, 1.0), np.clip(xi.max(axis=1), -1.0, 1.0)
 
 
@@ -205,25 +212,38 @@ def _integrate_pieces(el, xs, xm, lo, hi, nq: int):
     return phi, jw, nm, gap
 
 
-def _ray_on_master(el, x: np.ndarray, n: np.ndarray, xm: np.ndarray, iterations: int = 25) -> np.ndarray:
+def _ray_on_master(el, x: np.ndarray, n: np.ndarray, xm: np.ndarray, iterations: int = 30,
+                   tol: float = 1e-13) -> np.ndarray:
     """Master reference coordinate η (P, nq) where the line through x along n meets the master
-    facet: (x_m(η) − x) × n = 0, exact for straight facets (start on the chord), Newton for
-    curved ones."""
+    facet: (x_m(η) − x) × n = 0, exact for straight facets (start on the chord), Newton on
+    the points still moving for curved ones."""
+    # relative to the facet's first node: residuals of the facet's size, η to round-off
+    x = x - xm[:, None, 0]
+    xm = xm - xm[:, None, 0]
     a, b = xm[:, None, 0], xm[:, None, 1]
-    cross = lambda u, v: u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]  # noqa: E731
-    eta = 2.0 * (-cross(a - x, n) / cross(b - a, n)) - 1.0
+    eta = 2.0 * (-_cross(a - x, n) / _cross(b - a, n)) - 1.0
     if xm.shape[1] == CORNERS:
         return eta
     P, nq = eta.shape
+    flat, xf, nf = eta.ravel(), x.reshape(-1, 2), n.reshape(-1, 2)
+    facet = np.repeat(np.arange(P), nq)
+    active = np.arange(flat.size)
     for _ in range(iterations):
-        e = eta.reshape(-1, 1)
-        xe = np.einsum("pgk,pkx->pgx", el.shape(e).reshape(P, nq, -1), xm)
-        de = np.einsum("pgk,pkx->pgx", el.grad_shape(e)[:, :, 0].reshape(P, nq, -1), xm)
-        step = cross(xe - x, n) / cross(de, n)
-        eta = eta - step
-        if np.all(np.abs(step) < 1e-14):
+        e = flat[active, None]
+        coords = xm[facet[active]]
+        xe = np.matmul(el.shape(e)[:, None, :], coords)[:, 0]
+        de = np.matmul(el.grad_shape(e)[:, :, 0][:, None, :], coords)[:, 0]
+        step = _cross(xe - xf[active], nf[active]) / _cross(de, nf[active])
+        flat[active] -= step
+        active = active[np.abs(step) > tol]
+        if active.size == 0:
             break
-    return eta
+    return flat.reshape(P, nq)
+
+
+def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """z component of u × v for stacks of 2-vectors."""
+    return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
 
 
 # ----------------------------------------------------------------------------- dual basis
@@ -243,8 +263,22 @@ def _dual_coefficients(phi, jw, e, nfacets: int, xs_f, el, min_cover: float):
     if np.any(covered):
         mc = mass[covered]
         diag = mc.sum(axis=2)                                   # ∫ φ_i over the covered part
-        a[covered] = diag[:, :, None] * np.linalg.inv(mc)
+        a[covered] = diag[:, :, None] * _inverse(mc)
     return a, covered
+
+
+def _inverse(m: np.ndarray) -> np.ndarray:
+    """Inverses of a stack of small matrices (closed forms for 2x2 and 3x3: numpy's batched
+    inverse is slow on tiny matrices)."""
+    if m.shape[1] == 3:   # columns of the inverse: cross products of the rows over det
+        r0, r1, r2 = m[:, 0], m[:, 1], m[:, 2]
+        cols = np.stack([np.cross(r1, r2), np.cross(r2, r0), np.cross(r0, r1)], axis=2)
+        return cols / np.einsum("mx,mx->m", r0, cols[:, :, 0])[:, None, None]
+    if m.shape[1] != 2:
+        return np.linalg.inv(m)
+    det = m[:, 0, 0] * m[:, 1, 1] - m[:, 0, 1] * m[:, 1, 0]
+    out = np.stack([np.stack([m[:, 1, 1], -m[:, 0, 1]], 1), np.stack([-m[:, 1, 0], m[:, 0, 0]], 1)], 1)
+    return out / det[:, None, None]
 
 
 def _facet_lengths(xs_f: np.ndarray, el, nq: int = 5) -> np.ndarray:
