@@ -114,16 +114,10 @@ def mortar_pairing(
     e, f, phi, jw, nm = e[near], f[near], phi[near], jw[near], nm[near]
     a_dual, covered = _dual_coefficients(phi, jw, e, sf.shape[0], xs_f, el, min_cover)
     ok = covered[e]
-    e, f, phi, jw, nm = e[ok], f[ok], phi[ok], jw[ok], nm[ok]
-    psi = np.einsum("pij,pgj->pgi", a_dual[e], phi)           # (P, nq, k)
-    m_loc = np.einsum("pgi,pga,pg->pia", psi, nm, jw)         # ∫ ψ_i N_a ds per piece
-    d_loc = np.einsum("pgi,pg->pi", phi, jw)                  # ∫ φ_i ds per piece
-    k = sf.shape[1]
-    s_nodes = np.repeat(sf[e][:, :, None], mf.shape[1], axis=2)
-    m_nodes = np.repeat(mf[f][:, None, :], k, axis=1)
-    weight = np.bincount(sf[e].ravel(), weights=d_loc.ravel(), minlength=points.shape[0])
+    s_nodes, m_nodes, m_ia, weight = _integrals(phi[ok], jw[ok], nm[ok], a_dual[e[ok]],
+                                                sf[e[ok]], mf[f[ok]], points.shape[0])
     normals = _nodal_normals(points, sf[covered], el)
-    return _assemble(points, s_nodes.ravel(), m_nodes.ravel(), m_loc.ravel(), weight, normals)
+    return _assemble(points, s_nodes, m_nodes, m_ia, weight, normals)
 
 
 def mortar_rows(mortar: Mortar, integrated: bool = True) -> tuple[Rows, Rows, np.ndarray]:
@@ -279,6 +273,18 @@ def _inverse(m: np.ndarray) -> np.ndarray:
     det = m[:, 0, 0] * m[:, 1, 1] - m[:, 0, 1] * m[:, 1, 0]
     out = np.stack([np.stack([m[:, 1, 1], -m[:, 0, 1]], 1), np.stack([-m[:, 1, 0], m[:, 0, 0]], 1)], 1)
     return out / det[:, None, None]
+
+
+def _integrals(phi, jw, nm, a_dual, s_facets, m_facets, npts: int):
+    """COO (slave node, master node, ∫ψ_i N_a ds) over the pieces, and w (npts,) = ∫φ_i ds."""
+    psi = np.einsum("pij,pgj->pgi", a_dual, phi)              # (P, nq, k)
+    m_loc = np.einsum("pgi,pga,pg->pia", psi, nm, jw)         # ∫ ψ_i N_a ds per piece
+    d_loc = np.einsum("pgi,pg->pi", phi, jw)                  # ∫ φ_i ds per piece
+    k, km = s_facets.shape[1], m_facets.shape[1]
+    s_nodes = np.repeat(s_facets[:, :, None], km, axis=2)
+    m_nodes = np.repeat(m_facets[:, None, :], k, axis=1)
+    weight = np.bincount(s_facets.ravel(), weights=d_loc.ravel(), minlength=npts)
+    return s_nodes.ravel(), m_nodes.ravel(), m_loc.ravel(), weight
 
 
 def _facet_lengths(xs_f: np.ndarray, el, nq: int = 5) -> np.ndarray:
