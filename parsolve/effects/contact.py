@@ -48,6 +48,8 @@ Scene schema::
     direction = "reaction"         # 3D slip direction update: "reaction" (default) or
     #                                "displacement" (see below; 2D: the sense needs neither)
     search_radius = 0.1            # largest initial gap paired (default: one facet extent)
+    discretization = "mortar"      # "node_to_segment" (default) or "mortar" (2D, master
+    #                                region only: dual mortar rows, parsolve.contact.mortar)
     closed = 1e-9                  # initial gaps ≤ this (relative to the mesh size) start closed
 """
 
@@ -59,6 +61,7 @@ import numpy as np
 
 from parsolve.contact import friction as fr
 from parsolve.contact import obstacles
+from parsolve.contact.mortar import mortar_pairing
 from parsolve.contact.pairing import check_surfaces, pair_nodes
 from parsolve.contact.rows import friction_dual, node_rows, normal_rows, normal_values, \
     slip_vectors, tangent_rows
@@ -69,6 +72,7 @@ from parsolve.mesh.topology import boundary_facets
 from parsolve.relations import Relation
 
 OBSTACLES = ("plane", "cylinder", "sphere")
+DISCRETIZATIONS = ("node_to_segment", "mortar")
 
 
 @dataclass
@@ -82,6 +86,7 @@ class ContactSpec:
     search_radius: float | None
     closed: float
     key: str
+    discretization: str = "node_to_segment"
 
 
 def parse(t, dim: int) -> ContactSpec:
@@ -100,8 +105,12 @@ def parse(t, dim: int) -> ContactSpec:
     closed = t.get("closed", float, 1e-9)
     if closed < 0:
         raise t.error("closed", "must be >= 0")
+    discretization = t.get("discretization", str, "node_to_segment", choices=DISCRETIZATIONS)
+    if discretization == "mortar" and (master is None or dim != 2):
+        raise t.error("discretization", "mortar needs a master region in 2D")
     t.done()
-    return ContactSpec(name, slave, master, obstacle, mu, direction, radius, closed, t.path)
+    return ContactSpec(name, slave, master, obstacle, mu, direction, radius, closed, t.path,
+                       discretization)
 
 
 def _obstacle(t, dim: int) -> tuple[str, dict]:
@@ -168,6 +177,12 @@ class Contact(Effect):
                 raise InputError(f"the master region {spec.master!r} has no boundary facet",
                                  self.source, f"{key}.master")
             check_surfaces(slave, facets, self.source, f"{key}.master")
+            if spec.discretization == "mortar":
+                # normalised mortar rows are a pairing (row i divided by ∫φ_i): the rows, the
+                # values, the friction dual and the outputs below stay as they are
+                slave_facets = regions(spec.slave, f"{key}.slave").facets
+                return mortar_pairing(pts, slave_facets, facets, mesh.facet_type,
+                                      spec.search_radius).pairing
             return pair_nodes(pts, slave, facets, mesh.facet_type, spec.search_radius)
         kind, params = spec.obstacle
         okey = f"{key}.obstacle.{kind}"
