@@ -80,4 +80,6 @@ TESTED = ["controlled_bar.toml", "kirsch.toml", "cantilever_3d.toml",
           # tests/solvers/test_control.py; solubility: tests/effects/test_solubility.py
           "solubility_well_mixed.toml", "solubility_grow_shrink.toml", "solubility_two_regions.toml",
           "seepage_overflow.toml",  # tests/effects/test_diffusion_effect.py
-          "contact_block_friction.toml", "contact_control_friction.toml", "contact_hertz_cylinder.toml"]  # contact: tests/effects/test_contact.py
+          "contact_block_friction.toml", "contact_control_friction.toml", "contact_hertz_cylinder.toml",
+          # contact: tests/effects/test_contact.py; 3D: tests/effects/test_contact_3d_scene.py
+          "contact_friction_3d.toml"]
