@@ -270,13 +270,21 @@ class ParallelResultWriter(ResultWriter):
                     f[name].resize(step + 1, axis=0)
             for name in sorted(slabs):          # the same order on every rank
                 self._append(name, slabs[name])
-            if self.comm.rank == 0:             # independent writes, last: no rank waits
+        except (OSError, RuntimeError) as exc:
+            self._fail(exc, f"writing step {step + 1} to")
+        if self.comm.rank == 0 and f is not None and self.error is None:
+            try:                                # independent writes: no other rank waits
                 for name, value in small.items():
                     if name != "steps/time":
                         self._append(name, value)
-            f.flush()
-        except (OSError, RuntimeError) as exc:
-            self._fail(exc, f"writing step {step + 1} to")
+            except (OSError, RuntimeError) as exc:
+                self._fail(exc, f"writing step {step + 1} to")
+        if f is not None:
+            try:
+                f.flush()                       # collective: every rank with the file open
+            except (OSError, RuntimeError) as exc:
+                if self.error is None:
+                    self._fail(exc, f"writing step {step + 1} to")
         failed = any(e is not None for e in self.comm.allgather(self.error))
         try:
             if f is not None and not failed:

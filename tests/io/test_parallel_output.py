@@ -1,0 +1,206 @@
+"""Output mode "parallel" (issue 8): every rank writes its own rows of every field into the result
+file (MPI-IO, collectively), rank 0 the small per-step data. The file is the one the "swmr" mode
+writes, dataset by dataset; XDMF, disk full, interruption and a crash between steps behave as
+in that mode. Runs on 1, 2 and 3 ranks (subprocess tests: serial, they start their own ranks)."""
+
+import errno
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import h5py
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+import tests.io.test_xdmf as xdmf_tests
+from conftest import CONFIGS, ROOT
+from parsolve import driver
+from parsolve.errors import Interrupted, OutputError
+from parsolve.io.hdf5 import ResultWriter
+from parsolve.io.parallel import ParallelResultWriter
+from parsolve.io.slabs import OwnedRows, Rows, block_bounds, runs
+from parsolve.mesh.generators import rectangle
+from parsolve.model import build_model
+from parsolve.scene import load_scene
+from tests.io.test_xdmf import SCENE_2D, SCENE_3D
+
+SOLUBILITY = (CONFIGS / "solubility_grow_shrink.toml").read_text().replace("count = 100", "count = 6")
+CONTACT = (CONFIGS / "contact_block_friction.toml").read_text()
+
+
+def datasets(path) -> dict:
+    out = {}
+    with h5py.File(path, "r") as f:
+        f.visititems(lambda n, o: out.__setitem__(n, o[()]) if isinstance(o, h5py.Dataset) else None)
+        out["attrs"] = dict(f.attrs)
+    return out
+
+
+class Tee:
+    """Both modes' writers fed the very same steps by one run."""
+
+    def __init__(self, *writers):
+        self.writers = writers
+
+    def write_step(self, *args, **kw):
+        for w in self.writers:
+            w.write_step(*args, **kw)
+
+    def note(self, text):
+        for w in self.writers:
+            w.note(text)
+
+    def close(self, status):
+        for w in self.writers:
+            w.close(status)
+
+
+@pytest.mark.parametrize("text", [SCENE_2D, SCENE_3D, SOLUBILITY, CONTACT],
+                         ids=["2d", "3d", "solubility", "contact"])
+def test_parallel_file_is_the_swmr_file(text, run, monkeypatch):
+    """Every dataset (mesh, fields, cell fields, states, relations, balance, steps) and every
+    attribute is the same in both modes; only the timings may differ."""
+    def both(mode, comm, path, mesh, *args, owners=None, **kw):
+        return Tee(ResultWriter(comm, path, mesh, *args, owners=owners, **kw),
+                   ParallelResultWriter(comm, str(path).replace(".h5", "_par.h5"), mesh, *args,
+                                        owners=owners, **kw))
+
+    monkeypatch.setattr(driver, "result_writer", both)
+    swmr = run(text)
+    par = datasets(str(run.last).replace(".h5", "_par.h5"))
+    assert par.keys() == swmr.keys()
+    for name, expected in swmr.items():
+        if name == "attrs":
+            assert par[name].keys() == expected.keys()
+            for key, value in expected.items():
+                assert par[name][key] == value, key
+        elif not name.startswith("timings/"):
+            assert par[name].dtype == expected.dtype and par[name].shape == expected.shape, name
+            np.testing.assert_allclose(par[name], expected, rtol=1e-15, atol=0, err_msg=name)
+    assert swmr["attrs"]["status"] == "complete" and swmr["attrs"]["nprocs"] == MPI.COMM_WORLD.size
+    assert len(swmr["steps/time"]) >= 2
+
+
+@pytest.fixture
+def run_mode(shared_tmp):
+    """run_mode(text, mode, name) -> (path, datasets): a scene run through the driver."""
+    comm = MPI.COMM_WORLD
+
+    def _run(text: str, mode: str = "parallel", name: str = "result"):
+        src, out = shared_tmp / f"{name}.toml", shared_tmp / f"{name}.h5"
+        if comm.rank == 0:
+            src.write_text(text)
+        comm.Barrier()
+        model = build_model(load_scene(src))
+        try:
+            driver.run(comm, model, str(out), {}, log=lambda *a: None, output=mode)
+        finally:
+            comm.Barrier()  # every rank is done with the file
+        return out, datasets(out)
+
+    return _run
+
+
+def test_parallel_mode_from_the_driver(run_mode):
+    """Chosen by the driver's output argument: the file is in input order (the generator's
+    points and cells exactly) and holds the linear solution (step k = k × step 1)."""
+    _, data = run_mode(SCENE_2D)
+    mesh = rectangle(2.0, 1.0, 8, 4, cell="triangle")
+    np.testing.assert_array_equal(data["mesh/points"], mesh.points)
+    np.testing.assert_array_equal(data["mesh/cells/triangle"], mesh.cells)
+    assert data["attrs"]["status"] == "complete"
+    assert data["attrs"]["nprocs"] == MPI.COMM_WORLD.size
+    np.testing.assert_allclose(data["steps/time"], [1 / 3, 2 / 3, 1.0], rtol=1e-15)
+    u = data["fields/displacement"]
+    assert u.shape == (3, len(mesh.points), 2)
+    np.testing.assert_allclose(u[1], 2 * u[0], rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(u[2], 3 * u[0], rtol=1e-12, atol=1e-14)
+    assert np.abs(u[0]).max() > 0
+
+
+@pytest.mark.parametrize("text, dim", [(SCENE_2D, 2), (SCENE_3D, 3)], ids=["2d", "3d"])
+def test_xdmf_of_a_parallel_result_reads_in_meshio_and_vtk(text, dim, run_mode):
+    path, data = run_mode(text, name=f"xdmf{dim}")
+    data = {k: v for k, v in data.items() if k != "attrs"}
+    xdmf_tests.test_meshio_reads_every_step((path, data, dim))
+    xdmf_tests.test_vtk_reads_every_step((path, data, dim))
+
+
+def test_disk_full_exits_4_and_keeps_the_finished_steps(shared_tmp, monkeypatch):
+    """The injected ENOSPC of the swmr tests, in the third step's stress: exit status 4 from the
+    command line, two finished steps readable, status left "running"."""
+    from parsolve.cli import main
+
+    original = ParallelResultWriter._append
+
+    def full(self, name, value):
+        if name == "fields/stress" and len(self.times) == 2:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        original(self, name, value)
+
+    monkeypatch.setattr(ParallelResultWriter, "_append", full)
+    monkeypatch.setattr(sys, "excepthook", sys.excepthook)  # main sets its own under MPI
+    scene, out = shared_tmp / "full.toml", shared_tmp / "full.h5"
+    if MPI.COMM_WORLD.rank == 0:
+        scene.write_text(SCENE_2D.replace("count = 3", "count = 5"))
+    MPI.COMM_WORLD.Barrier()
+    assert main(["run", str(scene), "-o", str(out), "--output-mode", "parallel"]) == 4
+    MPI.COMM_WORLD.Barrier()
+    _check_two_linear_steps(out, "running", [0.2, 0.4])
+
+
+def test_rank0_alone_failing_is_every_ranks_error(run_mode, shared_tmp, monkeypatch):
+    """A small dataset (written by rank 0 only) fails: every rank raises the same OutputError
+    instead of waiting for rank 0 in the next collective call."""
+    original = ParallelResultWriter._append
+
+    def full(self, name, value):
+        if name == "steps/residual" and len(self.times) == 1:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        original(self, name, value)
+
+    monkeypatch.setattr(ParallelResultWriter, "_append", full)
+    with pytest.raises(OutputError, match="No space left on device; the 1 finished step"):
+        run_mode(SCENE_2D, name="rank0")
+    with h5py.File(shared_tmp / "rank0.h5", "r") as f:
+        assert f.attrs["status"] == "running"
+        np.testing.assert_allclose(f["steps/time"][()], [1 / 3], rtol=1e-15)
+
+
+def test_interrupted_status(shared_tmp, monkeypatch):
+    """SIGTERM's exception after the second step: exit 143 from the command line, status
+    "interrupted: SIGTERM", two finished steps."""
+    from parsolve.cli import main
+
+    original = driver.progress
+
+    def progress(log, comm, step, *args, **kw):
+        original(log, comm, step, *args, **kw)
+        if step == 2:
+            raise Interrupted(signal.SIGTERM, "SIGTERM")
+
+    monkeypatch.setattr(driver, "progress", progress)
+    monkeypatch.setattr(sys, "excepthook", sys.excepthook)
+    scene, out = shared_tmp / "stop.toml", shared_tmp / "stop.h5"
+    if MPI.COMM_WORLD.rank == 0:
+        scene.write_text(SCENE_2D.replace("count = 3", "count = 5"))
+    MPI.COMM_WORLD.Barrier()
+    assert main(["run", str(scene), "-o", str(out), "--output-mode", "parallel"]) == 143
+    MPI.COMM_WORLD.Barrier()
+    _check_two_linear_steps(out, "interrupted: SIGTERM", [0.2, 0.4])
+
+
+def _check_two_linear_steps(out, status, times):
+    with h5py.File(out, "r") as f:   # a plain reader: no SWMR in this mode
+        assert f.attrs["status"] == status
+        n = len(f["steps/time"])
+        np.testing.assert_allclose(f["steps/time"][()], times, rtol=1e-15)
+        u = f["fields/displacement"][:n]
+        s = f["cell_fields/stress"][:n]
+    np.testing.assert_allclose(u[1], 2 * u[0], rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(s[1], 2 * s[0], rtol=1e-12, atol=1e-12)
+    assert np.abs(u[0]).max() > 0
