@@ -1,4 +1,15 @@
-"""The result file (DESIGN §5), written step by step by rank 0.
+"""The result file (DESIGN §5), written step by step by rank 0 (output mode "swmr", the default).
+
+Two output modes write the same file (same datasets and values; :func:`result_writer`):
+
+* ``swmr`` (this module): rank 0 gathers and writes everything, in SWMR mode, so that a reader
+  can follow the run live;
+* ``parallel`` (:mod:`parsolve.io.parallel`): every rank writes its own rows of every field
+  through MPI-IO, rank 0 only the small per-step data; no SWMR (MPI-IO and SWMR exclude each
+  other), so the file is read after the run (or between steps), with a plain reader.
+* ``auto``: parallel on 2 ranks or more from AUTO_PARALLEL_DOFS DOFs, else swmr.
+
+Rules of the swmr mode:
 
 Guarantees, and the rules a reader follows:
 

@@ -49,6 +49,7 @@ from parsolve.io.slabs import OwnedRows, Rows, split_owners
 from parsolve.io.xdmf import XdmfWriter, sidecar_path
 
 SELECTIONS = ("blocks", "runs")
+CLOSE_WAIT = 30.0  # seconds the other ranks wait at close for rank 0's status
 LIBVER = ("v108", "v108")  # superblock v2: no consistency flags left set by a crash
 
 
@@ -88,7 +89,8 @@ class ParallelResultWriter(ResultWriter):
                  selection: str = "blocks"):
         if selection not in SELECTIONS:
             raise ValueError(f"selection {selection!r} is not one of {SELECTIONS}")
-        self.comm, self.path, self.mesh = comm, Path(path), mesh
+        # its own communicator: the wait at close never meets another collective call
+        self.comm, self.path, self.mesh = comm.Dup(), Path(path), mesh
         self.relations = relations
         self.times: list[float] = []
         self.fields: dict[str, int] = {}
@@ -348,6 +350,9 @@ class ParallelResultWriter(ResultWriter):
     def close(self, status: str) -> None:
         """Record ``status`` (rank 0, on the closed file: no other rank needed). A failed write
         wins over the caller's status; no finished step is never "complete"."""
+        if getattr(self, "closed", False):
+            return
+        self.closed = True
         if self.error is not None:
             status = f"failed: {self.error}"
         elif status == "complete" and not self.times:
@@ -364,17 +369,30 @@ class ParallelResultWriter(ResultWriter):
                 self._xdmf.close()
             except (OSError, RuntimeError):
                 pass
-        if self.comm.rank != 0 or self.error is not None:
-            return  # after a failed write nothing more goes in (see ResultWriter.close)
-        with signals_held():
-            try:
-                with h5py.File(self.path, "r+", locking=False) as f:
-                    self._trim(f)
-                    f.attrs["status"] = status
-                    if getattr(self, "notes", None):
-                        f.attrs["warnings"] = "\n".join(self.notes)
-            except (OSError, RuntimeError, FileNotFoundError):
-                pass  # the file was never created (its OutputError was raised then)
+        if self.comm.rank == 0 and self.error is None:  # after a failed write: nothing more
+            with signals_held():
+                try:
+                    with h5py.File(self.path, "r+", locking=False) as f:
+                        self._trim(f)
+                        f.attrs["status"] = status
+                        if getattr(self, "notes", None):
+                            f.attrs["warnings"] = "\n".join(self.notes)
+                except (OSError, RuntimeError):
+                    pass  # the file was never created (its OutputError was raised then)
+        self._wait_for_rank0()
+
+    def _wait_for_rank0(self, seconds: float = CLOSE_WAIT) -> None:
+        """The other ranks wait (a bounded time) until rank 0 has written the status: under
+        mpirun the first rank to exit with a non-zero status (3, 130, 143) gets the others
+        killed, rank 0 included, maybe before the status is in the file. Bounded, because
+        after a signal rank 0 may be stuck in a collective call of the solver."""
+        request = self.comm.Ibarrier()
+        deadline = time.monotonic() + seconds
+        while not request.Test():
+            if time.monotonic() > deadline:
+                return  # (the communicator is left as it is: a rank never came)
+            time.sleep(0.005)
+        self.comm.Free()
 
     def _trim(self, f: h5py.File) -> None:
         n = len(self.times)
