@@ -53,18 +53,31 @@ from parsolve.io.xdmf import XdmfWriter, sidecar_path
 
 STEP_CHUNK = 64  # rows per chunk of the one-number-per-step datasets (/steps/*, /timings/*)
 MODES = ("swmr", "parallel", "auto")
-AUTO_PARALLEL_DOFS = 1_000_000  # "auto": parallel output from this many DOFs on 2 ranks or more
+AUTO_PARALLEL_DOFS = 1_000_000  # "auto": parallel output from this many DOFs on several nodes
 
 
 def output_mode(mode: str | None, comm, dofs: int) -> str:
     """The mode a run writes with: "swmr" (rank 0 writes, readers follow the run live) unless
-    "parallel" is asked for, or "auto" on several ranks and a large problem."""
+    "parallel" is asked for, or "auto" with ranks on several nodes and a large problem (on one
+    node the parallel mode was slower: scripts/results/bench_output.md). Collective."""
     mode = mode or "swmr"
     if mode not in MODES:
         raise ValueError(f"output mode {mode!r} is not one of {MODES}")
     if mode == "auto":
-        return "parallel" if comm.size > 1 and dofs >= AUTO_PARALLEL_DOFS else "swmr"
+        return "parallel" if dofs >= AUTO_PARALLEL_DOFS and nodes(comm) > 1 else "swmr"
     return mode
+
+
+def nodes(comm) -> int:
+    """How many machines (shared-memory nodes) the ranks run on."""
+    from mpi4py import MPI
+
+    if comm.size == 1:
+        return 1
+    local = comm.Split_type(MPI.COMM_TYPE_SHARED)
+    count = comm.allreduce(int(local.rank == 0))
+    local.Free()
+    return count
 
 
 def result_writer(mode: str, comm, path, mesh, scene_text: str, petsc_version: str,

@@ -295,3 +295,42 @@ def test_sigterm_stops_a_parallel_run(ranks, tmp_path):
         assert lengths == {n}
         c = f["fields/c_s"][()] + f["fields/c_g"][()]
         assert np.isfinite(c).all() and np.abs(c).max() > 0
+
+
+def test_output_mode_choice():
+    """swmr by default; auto picks parallel only from 1M DOFs with ranks on several nodes (here
+    one node); an unknown mode is refused."""
+    from parsolve.io.hdf5 import AUTO_PARALLEL_DOFS, nodes, output_mode
+
+    comm = MPI.COMM_WORLD
+    assert nodes(comm) == 1
+    assert output_mode(None, comm, 10) == "swmr"
+    assert output_mode("parallel", comm, 10) == "parallel"
+    assert output_mode("auto", comm, AUTO_PARALLEL_DOFS) == "swmr"
+    with pytest.raises(ValueError, match="not one of"):
+        output_mode("fast", comm, 10)
+
+
+def test_rows_exchanges_match_an_independent_placement():
+    """The row bookkeeping of parsolve/io/slabs.py against plain indexing: runs of ids, the
+    contiguous blocks made by Alltoallv, Scatterv from rank 0 and Gatherv back."""
+    comm = MPI.COMM_WORLD
+    starts, lengths = runs(np.array([0, 1, 2, 5, 7, 8]))
+    assert starts.tolist() == [0, 5, 7] and lengths.tolist() == [3, 1, 2]
+    n = 23
+    owner = (np.arange(n) * 7 + 3) % comm.size   # scattered ownership, every rank some rows
+    whole = np.arange(n * 2, dtype=float).reshape(n, 2) ** 1.5
+    rows = Rows(comm, owner)
+    mine = whole[owner == comm.rank]
+    first, block = rows.to_block(mine)
+    bounds = block_bounds(n, comm.size)
+    assert first == bounds[comm.rank]
+    np.testing.assert_array_equal(block, whole[bounds[comm.rank]:bounds[comm.rank + 1]])
+    np.testing.assert_array_equal(rows.scatter(whole if comm.rank == 0 else None, (2,), float), mine)
+    gathered = rows.gather(mine)
+    if comm.rank == 0:
+        np.testing.assert_array_equal(gathered, whole)
+    else:
+        assert gathered is None
+    np.testing.assert_array_equal(rows.local(OwnedRows(mine)), mine)
+    np.testing.assert_array_equal(rows.local(whole), mine)
