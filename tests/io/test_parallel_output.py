@@ -334,3 +334,30 @@ def test_rows_exchanges_match_an_independent_placement():
         assert gathered is None
     np.testing.assert_array_equal(rows.local(OwnedRows(mine)), mine)
     np.testing.assert_array_equal(rows.local(whole), mine)
+
+
+@pytest.mark.parametrize("cls", [ResultWriter, ParallelResultWriter], ids=["swmr", "parallel"])
+def test_owned_rows_make_the_same_file_as_whole_arrays(cls, shared_tmp):
+    """Values given as OwnedRows (every rank only its rows, scattered ownership) land where the
+    whole arrays do."""
+    comm = MPI.COMM_WORLD
+    mesh = rectangle(1.0, 1.0, 4, 3)
+    owners = ((np.arange(mesh.num_points) * 5) % comm.size, (np.arange(mesh.num_cells) * 3) % comm.size)
+    u = np.arange(mesh.num_points * 2, dtype=float).reshape(-1, 2) / 7
+    s = np.arange(mesh.num_cells * 3, dtype=float).reshape(-1, 3) / 3
+    mine = owners[0] == comm.rank, owners[1] == comm.rank
+    paths = [shared_tmp / f"{cls.__name__}_{kind}.h5" for kind in ("owned", "whole")]
+    for path, owned in zip(paths, (True, False)):
+        w = cls(comm, path, mesh, "scene", "3.18", {"r": (1, False)}, owners=owners)
+        for t in (1.0, 2.0):
+            fields = {"displacement": OwnedRows(t * u[mine[0]]) if owned else t * u}
+            cells = {"stress": OwnedRows(t * s[mine[1]]) if owned else t * s}
+            w.write_step(t, 1, 0.0, fields, cells, {"r": {"multiplier": [t], "primal": [0.0]}},
+                         {"total": 0.1})
+        w.close("complete")
+        comm.Barrier()
+    owned, whole = datasets(paths[0]), datasets(paths[1])
+    np.testing.assert_array_equal(owned["fields/displacement"], [u, 2 * u])
+    np.testing.assert_array_equal(owned["cell_fields/stress"], [s, 2 * s])
+    np.testing.assert_array_equal(whole["fields/displacement"], owned["fields/displacement"])
+    assert owned["attrs"]["status"] == "complete"
