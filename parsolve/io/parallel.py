@@ -105,7 +105,8 @@ class ParallelResultWriter(ResultWriter):
         self.selection = selection
         node_owner, cell_owner = owners if owners is not None else (
             split_owners(mesh.num_points, comm.size), split_owners(mesh.num_cells, comm.size))
-        self.rows = {"fields": Rows(comm, node_owner), "cell_fields": Rows(comm, cell_owner)}
+        self.rows = {"fields": Rows(self.comm, node_owner),
+                     "cell_fields": Rows(self.comm, cell_owner)}
         self.mpio = mpi_h5py()
         if comm.size > 1 and not self.mpio:
             raise OutputError(f"writing {self.path} in parallel needs h5py's MPI build "
