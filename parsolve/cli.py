@@ -19,9 +19,10 @@ import sys
 from contextlib import contextmanager
 from pathlib import Path
 
-USAGE = "parsolve {run,check,study,batch,post} SCENE [-o OUT.h5] [--export-system DIR] [PETSc options]"
-LONG_FLAGS = ("--output", "--export-system", "--help")
-VALUED = ("-o", "--output", "--export-system")  # flags of ours that take the next word
+USAGE = ("parsolve {run,check,study,batch,post} SCENE [-o OUT.h5] [--export-system DIR] "
+         "[--output-mode swmr|parallel|auto] [PETSc options]")
+LONG_FLAGS = ("--output", "--export-system", "--output-mode", "--help")
+VALUED = ("-o", "--output", "--export-system", "--output-mode")  # flags of ours that take the next word
 
 
 class UsageError(Exception):
@@ -43,6 +44,10 @@ def _parser() -> argparse.ArgumentParser:
                                             "file, else SCENE.h5 in the current directory")
     run.add_argument("--export-system", metavar="DIR",
                      help="write the first assembled system (PETSc binary) to DIR")
+    run.add_argument("--output-mode", choices=("swmr", "parallel", "auto"), default=None,
+                     help="swmr (default): rank 0 writes, readers can follow the run; parallel: "
+                          "every rank writes its rows (MPI-IO), no live reading; auto: parallel "
+                          "on 2+ ranks from 1M DOFs")
     check = sub.add_parser("check", help="validate a scene (mesh, regions, relations, PETSc "
                                          "options) without solving", allow_abbrev=False)
     check.add_argument("scene")
@@ -255,7 +260,8 @@ def main(argv: list[str] | None = None) -> int:
         from parsolve.driver import run
 
         with _signals_interrupt():
-            run(comm, model, out, cli_options, args.export_system, log=say)
+            run(comm, model, out, cli_options, args.export_system, log=say,
+                output=args.output_mode)
         for name in unused_options(scene.solver.prefix, {**scene.solver.options, **cli_options}):
             say(f"parsolve: warning: PETSc option {name} was not used by any solver object",
                 sys.stderr)

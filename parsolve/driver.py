@@ -13,7 +13,7 @@ from mpi4py import MPI
 from parsolve.diagnostics import unsupported
 from parsolve.effects.compose import Rate
 from parsolve.errors import Interrupted, SolverError
-from parsolve.io.hdf5 import ResultWriter
+from parsolve.io.hdf5 import output_mode, result_writer
 from parsolve.model import Model
 from parsolve.outputs import Balance, progress, resultant_labels, step_outputs
 from parsolve.solvers.arc_length import run_arc_length
@@ -29,16 +29,22 @@ def needs_newton(model: Model) -> bool:
 
 
 def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
-        export_dir: str | None = None, log=print) -> str:
-    """Solve every step and write the result file; returns the final status."""
+        export_dir: str | None = None, log=print, output: str | None = None) -> str:
+    """Solve every step and write the result file; returns the final status. ``output``: the
+    output mode ("swmr", "parallel", "auto"; default: the scene's, else "swmr")."""
     scene = model.scene
     system = SaddleSystem(comm, model)
     relations_meta = {r.name: (r.nrows, r.sense != "=") for r in model.relations}
     unknowns = {"unknowns": " ".join(f.output for f in model.fields),
                 "dofs": model.mesh.num_points * model.ncomp,
                 "resultant_components": " ".join(resultant_labels(model.fields, model.mesh.dim))}
-    writer = ResultWriter(comm, out, model.mesh, scene.text, petsc_version(), relations_meta,
-                          attrs=unknowns)
+    mesh, part = model.mesh, system.part
+    mode = output_mode(output or getattr(scene, "output_mode", None), comm,
+                       mesh.num_points * model.ncomp)
+    # the rows each rank reports: its nodes, and the cells whose lowest node owner it is
+    owners = (part.node_part, part.node_part[mesh.cells].min(axis=1))
+    writer = result_writer(mode, comm, out, mesh, scene.text, petsc_version(), relations_meta,
+                           attrs=unknowns, owners=owners)
     status = "complete"
     try:
         if scene.nonlinear.method == "arc_length":

@@ -1,4 +1,15 @@
-"""The result file (DESIGN §5), written step by step by rank 0.
+"""The result file (DESIGN §5), written step by step by rank 0 (output mode "swmr", the default).
+
+Two output modes write the same file (same datasets and values; :func:`result_writer`):
+
+* ``swmr`` (this module): rank 0 gathers and writes everything, in SWMR mode, so that a reader
+  can follow the run live;
+* ``parallel`` (:mod:`parsolve.io.parallel`): every rank writes its own rows of every field
+  through MPI-IO, rank 0 only the small per-step data; no SWMR (MPI-IO and SWMR exclude each
+  other), so the file is read after the run (or between steps), with a plain reader.
+* ``auto``: parallel on 2 ranks or more from AUTO_PARALLEL_DOFS DOFs, else swmr.
+
+Rules of the swmr mode:
 
 Guarantees, and the rules a reader follows:
 
@@ -37,9 +48,50 @@ import numpy as np
 
 from parsolve import __version__
 from parsolve.errors import OutputError
+from parsolve.io.slabs import OwnedRows, Rows, split_owners
 from parsolve.io.xdmf import XdmfWriter, sidecar_path
 
 STEP_CHUNK = 64  # rows per chunk of the one-number-per-step datasets (/steps/*, /timings/*)
+MODES = ("swmr", "parallel", "auto")
+AUTO_PARALLEL_DOFS = 1_000_000  # "auto": parallel output from this many DOFs on several nodes
+
+
+def output_mode(mode: str | None, comm, dofs: int) -> str:
+    """The mode a run writes with: "swmr" (rank 0 writes, readers follow the run live) unless
+    "parallel" is asked for, or "auto" with ranks on several nodes and a large problem (on one
+    node the parallel mode was slower: scripts/results/bench_output.md). Collective."""
+    mode = mode or "swmr"
+    if mode not in MODES:
+        raise ValueError(f"output mode {mode!r} is not one of {MODES}")
+    if mode == "auto":
+        return "parallel" if dofs >= AUTO_PARALLEL_DOFS and nodes(comm) > 1 else "swmr"
+    return mode
+
+
+def nodes(comm) -> int:
+    """How many machines (shared-memory nodes) the ranks run on."""
+    from mpi4py import MPI
+
+    if comm.size == 1:
+        return 1
+    local = comm.Split_type(MPI.COMM_TYPE_SHARED)
+    count = comm.allreduce(int(local.rank == 0))
+    local.Free()
+    return count
+
+
+def result_writer(mode: str, comm, path, mesh, scene_text: str, petsc_version: str,
+                  relations: dict, xdmf: bool = True, attrs: dict | None = None,
+                  owners: tuple | None = None) -> "ResultWriter":
+    """The writer of output mode ``mode`` ("swmr" or "parallel"; see :func:`output_mode`).
+    ``owners``: (rank of each node, rank of each cell), the rows each rank reports."""
+    if mode == "parallel":
+        from parsolve.io.parallel import ParallelResultWriter
+
+        return ParallelResultWriter(comm, path, mesh, scene_text, petsc_version, relations,
+                                    xdmf=xdmf, attrs=attrs, owners=owners)
+    return ResultWriter(comm, path, mesh, scene_text, petsc_version, relations, xdmf=xdmf,
+                        attrs=attrs, owners=owners)
 
 
 def _create(f: h5py.File, name: str, row_shape: tuple, dtype) -> None:
@@ -60,9 +112,12 @@ class ResultWriter:
 
     def __init__(self, comm, path: str | Path, mesh, scene_text: str, petsc_version: str,
                  relations: dict[str, tuple[int, bool]], xdmf: bool = True,
-                 attrs: dict | None = None):
-        """``attrs``: more root attributes (e.g. the unknown fields and their DOFs)."""
+                 attrs: dict | None = None, owners: tuple | None = None):
+        """``attrs``: more root attributes (e.g. the unknown fields and their DOFs);
+        ``owners``: (rank of each node, rank of each cell), needed only for values given as
+        :class:`parsolve.io.slabs.OwnedRows` (gathered to rank 0)."""
         self.comm, self.path, self.mesh = comm, Path(path), mesh
+        self.owners = owners
         self.relations = relations  # name -> (nrows, unilateral)
         self.times: list[float] = []
         self.fields: dict[str, int] = {}
@@ -113,12 +168,26 @@ class ResultWriter:
         extra: other per-step values by dataset path (/balance/..., /steps/cuts).
 
         Raises OutputError (rank 0) if the file cannot be written; the finished steps stay."""
+        fields, cell_fields = self._whole(fields), self._whole(cell_fields, cells=True)
         if self.comm.rank == 0 and self.error is None:
             self._write_step(t, iterations, residual, fields, cell_fields, relations, timings,
                              extra or {})
         elif self.comm.rank != 0:
             self.times.append(t)
         self._raise_if_failed()
+
+    def _whole(self, values: dict, cells: bool = False) -> dict:
+        """Values given as OwnedRows (every rank its own rows) gathered whole on rank 0."""
+        owned = [name for name, v in values.items() if isinstance(v, OwnedRows)]
+        if not owned:
+            return values
+        if self.owners is None:
+            owner = split_owners(self.mesh.num_cells if cells else self.mesh.num_points,
+                                 self.comm.size)
+        else:
+            owner = self.owners[1 if cells else 0]
+        rows = Rows(self.comm, owner)
+        return {**values, **{name: rows.gather(values[name].values) for name in owned}}
 
     def _raise_if_failed(self) -> None:
         """Collective: every rank raises the same OutputError once rank 0 failed."""
