@@ -39,7 +39,7 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
                 "dofs": model.mesh.num_points * model.ncomp,
                 "resultant_components": " ".join(resultant_labels(model.fields, model.mesh.dim))}
     mesh, part = model.mesh, system.part
-    mode = output_mode(output or getattr(scene, "output_mode", None), comm,
+    mode = output_mode(output or scene.output_mode, comm,
                        mesh.num_points * model.ncomp)
     # the rows each rank reports: its nodes, and the cells whose lowest node owner it is
     owners = (part.node_part, part.node_part[mesh.cells].min(axis=1))

@@ -2,45 +2,28 @@
 (stresses, fluxes, history variables), every relation's multiplier, primal value, active rows
 and resultant, and for transient runs the balance of each conserved field.
 
-Per-cell values are gathered on rank 0 in mesh order; nodal averages are sums over the ranks'
-owned cells divided by the summed weights."""
+Per-cell values stay on the rank that owns the cell, nodal averages on the rank that owns the
+node (sums over the ranks' owned cells, reduce-scattered, divided by the summed weights): the
+result writer places every rank's rows (parsolve.io)."""
 
 from __future__ import annotations
 
 import numpy as np
 from mpi4py import MPI
 
-
-def gather_rows(comm, values: np.ndarray, root: int = 0) -> np.ndarray | None:
-    """The ranks' arrays stacked along the first axis on ``root`` (buffer collective)."""
-    values = np.ascontiguousarray(values)
-    width = int(np.prod(values.shape[1:], dtype=np.int64))
-    counts = np.array(comm.gather(values.size, root=root)) if comm.size > 1 else [values.size]
-    if comm.size == 1:
-        return values
-    out = np.empty((int(np.sum(counts)) // max(width, 1),) + values.shape[1:], dtype=values.dtype) \
-        if comm.rank == root else None
-    comm.Gatherv(values, [out, counts] if comm.rank == root else None, root=root)
-    return out
+from parsolve.io.slabs import OwnedRows
 
 
-def reduce_sum(comm, values: np.ndarray, root: int = 0) -> np.ndarray | None:
-    """Σ over the ranks of an array, on ``root`` (buffer collective: no pickling)."""
-    values = np.ascontiguousarray(values, dtype=float)
-    out = np.empty_like(values) if comm.rank == root else None
-    comm.Reduce(values, out, op=MPI.SUM, root=root)
-    return out
-
-
-def _gather_cells(comm, owned: np.ndarray, values: np.ndarray, ncells: int):
-    """Per-cell values of every rank's reported cells, in mesh order, on rank 0."""
-    idx = gather_rows(comm, np.asarray(owned, dtype=np.int64))
-    val = gather_rows(comm, np.asarray(values, dtype=float))
-    if comm.rank != 0:
-        return None
-    out = np.zeros((ncells,) + values.shape[1:])
-    out[idx] = val
-    return out
+def owned_sums(comm, node_part: np.ndarray, sums: np.ndarray, weights: np.ndarray):
+    """(sums (n_owned, k), weights (n_owned,)) of this rank's owned nodes, in increasing id,
+    from every rank's contributions over all nodes: one reduce-scatter, no gather."""
+    order = np.argsort(node_part, kind="stable")   # rows grouped by owner, ids increasing
+    counts = np.bincount(node_part, minlength=comm.size)
+    both = np.column_stack([sums, weights])[order]
+    k = both.shape[1]
+    out = np.empty((int(counts[comm.rank]), k))
+    comm.Reduce_scatter(np.ascontiguousarray(both), out, recvcounts=counts * k, op=MPI.SUM)
+    return out[:, :-1], out[:, -1]
 
 
 def resultant(relation, lam: np.ndarray, fields, points: np.ndarray) -> np.ndarray:
@@ -87,11 +70,11 @@ def step_outputs(comm: MPI.Comm, system, q: np.ndarray, multipliers: dict, newto
         if newton is not None and newton.extras[k] is not None:
             extra = (newton.extras[k], newton.states[k])
         nodal, cells = effect.outputs(owned, values, extra, system.local_cells)
-        for name, (sums, weights) in nodal.items():  # only rank 0 writes: reduce there
-            sums, weights = reduce_sum(comm, sums), reduce_sum(comm, weights)
-            fields[name] = sums / np.maximum(weights, 1e-300)[:, None] if comm.rank == 0 else None
-        for name, value in cells.items():
-            cell_fields[name] = _gather_cells(comm, owned, value, mesh.num_cells)
+        for name, (sums, weights) in nodal.items():  # each rank its owned nodes' averages
+            sums, weights = owned_sums(comm, system.part.node_part, sums, weights)
+            fields[name] = OwnedRows(sums / np.maximum(weights, 1e-300)[:, None])
+        for name, value in cells.items():  # owned cells, in increasing id: the writer places them
+            cell_fields[name] = OwnedRows(np.asarray(value, dtype=float))
     rel_out = {}
     active = newton.active.active if newton is not None else None
     for r in model.relations:

@@ -245,6 +245,7 @@ class Scene:
     effect_specs: dict[str, list] = field(default_factory=dict)   # registry name -> specs
     time: TimeSpec | None = None                                  # None: quasi-static
     dimension: int = 2                                            # without a hypothesis
+    output_mode: str | None = None                                # [output] mode; None: swmr
 
     @property
     def dim(self) -> int:
@@ -328,11 +329,13 @@ def parse_scene(data: dict, source: str, text: str = "", base: Path = Path("."))
     nonlinear = _nonlinear(top.table("nonlinear", {}))
     out = top.table("output", {})
     output = out.get("file", str, None)
+    output_mode = out.get("mode", str, None, choices=("swmr", "parallel", "auto"))
     out.done()
     top.done()
     scene = Scene(source, text, title, mesh, hypothesis, thickness, regions, materials,
                   evolutions, loads, relations, steps.times, solver, output, nonlinear, steps,
-                  effect_specs=effect_specs, time=time_spec, dimension=dim)
+                  effect_specs=effect_specs, time=time_spec, dimension=dim,
+                  output_mode=output_mode)
     _cross_check(scene)
     scene.effects = _effects(scene)
     return scene

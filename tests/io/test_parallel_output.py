@@ -360,3 +360,19 @@ def test_owned_rows_make_the_same_file_as_whole_arrays(cls, shared_tmp):
     np.testing.assert_array_equal(owned["cell_fields/stress"], [s, 2 * s])
     np.testing.assert_array_equal(whole["fields/displacement"], owned["fields/displacement"])
     assert owned["attrs"]["status"] == "complete"
+
+
+def test_output_mode_from_the_scene():
+    """[output] mode in the scene: read and checked (exit 2 naming output.mode on a bad one)."""
+    import tomllib
+
+    from parsolve.errors import InputError
+    from parsolve.scene import parse_scene
+
+    text = SCENE_2D + '\n[output]\nmode = "parallel"\n'
+    assert parse_scene(tomllib.loads(text), "s.toml", text).output_mode == "parallel"
+    assert parse_scene(tomllib.loads(SCENE_2D), "s.toml", SCENE_2D).output_mode is None
+    bad = text.replace('"parallel"', '"parralel"')
+    with pytest.raises(InputError) as err:
+        parse_scene(tomllib.loads(bad), "s.toml", bad)
+    assert err.value.key == "output.mode" and err.value.source == "s.toml"
