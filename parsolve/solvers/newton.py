@@ -169,7 +169,16 @@ class NewtonSolver:
                 self._mat = mat
             x, rhs = self._vectors(mat)
             rhs.array[:] = system.rhs(t, f_int=f_int, q=self.q, f_ext=f_known)[0]
-            self.linear.solve(rhs, x)
+            try:
+                self.linear.solve(rhs, x)
+            except SolverError as exc:
+                if it == 0:
+                    raise
+                # singular at a later iterate only: the iterates diverged first (a softening
+                # material driven past full damage), which is what the cut step must know
+                history = ", ".join(f"{r:.1e}" for r in self.residual_history[-4:])
+                raise SolverError(f"Newton diverged at t = {t:.6g}, iteration {it} (relative "
+                                  f"residuals ..., {history}): {exc}") from None
             x_full = system.gather(x.array)
             dq = x_full[system.saddle_of_input]
             dq_norm = float(np.abs(dq).max())
