@@ -27,7 +27,7 @@ from parsolve.mesh.topology import _all_facets, _row_groups, _sorted_vertex_keys
 PARTITIONERS = ("scotch", "bisection")
 # below this many cells per part a graph partitioner has nothing to gain (and PT-Scotch may
 # leave a part empty): coordinate bisection instead
-MIN_CELLS_PER_PART = 32
+MIN_CELLS_PER_PART = 8
 
 
 @dataclass
