@@ -105,10 +105,24 @@ def scene_text(problem: str, size: int, method: str) -> str:
 # worker (under mpirun)
 
 
+class Clock(Phase):
+    """Phase plus .cpu_s: the largest rank's CPU seconds (on a loaded machine the wall time
+    counts other processes' work too; the CPU time does not)."""
+
+    def __exit__(self, *exc):
+        cpu = time.process_time() - self.c0
+        super().__exit__(*exc)
+        if exc[0] is None:
+            from mpi4py import MPI
+
+            self.cpu_s = self.comm.allreduce(cpu, op=MPI.MAX)
+        return False
+
+
 def _events() -> dict:
     from petsc4py import PETSc
 
-    names = ("MatCholFctrSym", "MatCholFctrNum", "MatLUFactorSym", "MatLUFactorNum", "KSPSolve")
+    names = ("MatCholFctrSym", "MatCholFctrNum", "MatLUFactorSym", "MatLUFactorNum", "MatSolve")
     return {e: PETSc.Log.Event(e).getPerfInfo()["time"] for e in names}
 
 
@@ -130,7 +144,7 @@ def partition_stats(comm, mesh, method: str) -> dict:
     from parsolve.mesh.partition import cell_parts, dual_graph, edge_cut, partition
 
     cell_parts(mesh, comm.size, method, comm)     # warm-up: imports, PETSc registration
-    with Phase(comm) as p:
+    with Clock(comm) as p:
         parts, used = cell_parts(mesh, comm.size, method, comm)
     graph = dual_graph(mesh)
     lo = np.full(mesh.num_points, comm.size)
@@ -139,7 +153,7 @@ def partition_stats(comm, mesh, method: str) -> dict:
     np.maximum.at(hi, mesh.cells, parts[:, None])
     part = partition(mesh, comm.size, method, comm)
     owned = np.diff(part.node_ranges)
-    return dict(method=used, t_partition=p.t, edge_cut=edge_cut(*graph, parts),
+    return dict(method=used, t_partition=p.t, cpu_partition=p.cpu_s, edge_cut=edge_cut(*graph, parts),
                 interface_nodes=int(np.count_nonzero((hi >= 0) & (lo != hi))),
                 dof_balance=float(owned.max() / owned.mean()),
                 cell_balance=float(np.bincount(parts).max() * comm.size / mesh.num_cells))
@@ -153,18 +167,20 @@ def solve_stats(comm, system, mat, ordering: str) -> dict:
     solver = make_solver(comm, system, {"mat_mumps_icntl_7": ordering})
     gc.collect()
     ev0 = _events()
-    with Phase(comm) as p_set:
+    with Clock(comm) as p_set:
         solver.set_operator(mat)
-    with Phase(comm) as p_solve:
+    with Clock(comm) as p_solve:
         solver.solve(rhs, x)
     ev = _slowest(comm, ev0)
     F = solver.ksp.getPC().getFactorMatrix()
-    out = dict(ordering_used=int(F.getMumpsInfog(7)), est_entries=_entries(F.getMumpsInfog(3)),
+    out = dict(ordering_used=int(F.getMumpsInfog(7)), analysis_kind=int(F.getMumpsInfog(32)),
+               est_entries=_entries(F.getMumpsInfog(3)),
                est_flops=float(F.getMumpsRinfog(1)), flops=float(F.getMumpsRinfog(3)),
                entries=_entries(F.getMumpsInfog(29)),
                t_analysis=ev["MatCholFctrSym"] + ev["MatLUFactorSym"],
                t_numeric=ev["MatCholFctrNum"] + ev["MatLUFactorNum"],
-               t_set_operator=p_set.t, t_solve=p_solve.t, unorm=float(x.norm()),
+               t_backsub=ev["MatSolve"], t_total=p_set.t + p_solve.t,
+               cpu_total=p_set.cpu_s + p_solve.cpu_s, unorm=float(x.norm()),
                cpu_share=min(p_set.cpu, p_solve.cpu), pc=solver.ksp.getPC().getType())
     solver.ksp.destroy()
     return out
@@ -220,10 +236,10 @@ def g(x: float) -> str:
 
 def table(results: list[dict], orderings: list[str]) -> tuple[list[str], list[list[str]]]:
     head = ["problem", "DOFs", "np", "partitioner", "edge cut", "interface nodes", "DOF bal.",
-            "partition s"]
+            "partition s (cpu)"]
     for o in orderings:
         head += [f"{o} INFOG(3)", f"{o} RINFOG(1)", f"{o} flops vs np=1", f"{o} analysis s",
-                 f"{o} factor s", f"{o} solve s"]
+                 f"{o} factor s", f"{o} solve s", f"{o} total s (cpu)"]
     rows = []
     base = {}
     for r in results:
@@ -237,13 +253,15 @@ def table(results: list[dict], orderings: list[str]) -> tuple[list[str], list[li
                 base[key] = {o: run["orderings"][o]["est_flops"] for o in orderings}
             row = [r["problem"], str(run["dofs"]), str(r["nranks"]),
                    run["method"], str(run["edge_cut"]), str(run["interface_nodes"]),
-                   f"{run['dof_balance']:.3f}", f"{run['t_partition']:.3f}"]
+                   f"{run['dof_balance']:.3f}",
+                   f"{run['t_partition']:.2f} ({run['cpu_partition']:.2f})"]
             for o in orderings:
                 s = run["orderings"][o]
                 ref = base.get(key, {}).get(o)
                 row += [g(s["est_entries"]), g(s["est_flops"]),
                         f"{s['est_flops'] / ref:.2f}×" if ref else "-",
-                        f"{s['t_analysis']:.2f}", f"{s['t_numeric']:.2f}", f"{s['t_solve']:.2f}"]
+                        f"{s['t_analysis']:.2f}", f"{s['t_numeric']:.2f}",
+                        f"{s['t_backsub']:.2f}", f"{s['t_total']:.2f} ({s['cpu_total']:.2f})"]
             rows.append(row)
     return head, rows
 
@@ -266,14 +284,15 @@ def findings(results: list[dict], orderings: list[str]) -> list[str]:
         parts = [f"{r['problem']} {b['dofs']} DOFs, np={r['nranks']}: edge cut "
                  f"{s['edge_cut']}/{b['edge_cut']} = {s['edge_cut'] / max(b['edge_cut'], 1):.2f}, "
                  f"interface nodes {s['interface_nodes'] / max(b['interface_nodes'], 1):.2f}, "
-                 f"partition {s['t_partition']:.2f} s vs {b['t_partition']:.2f} s"]
+                 f"partition CPU {s['cpu_partition']:.2f} s vs {b['cpu_partition']:.2f} s"]
         for o in orderings:
             so, bo = s["orderings"][o], b["orderings"][o]
             one = base.get(key, {}).get("orderings", {}).get(o)
             vs1 = (f" (np=1: {g(one['est_flops'])}; RCB {bo['est_flops'] / one['est_flops']:.2f}×, "
                    f"Scotch {so['est_flops'] / one['est_flops']:.2f}×)") if one else ""
             parts.append(f"{o} flops Scotch/RCB {so['est_flops'] / bo['est_flops']:.2f}{vs1}, "
-                         f"numeric factorization {so['t_numeric'] / max(bo['t_numeric'], 1e-9):.2f}×")
+                         f"set-up + solve CPU "
+                         f"{so['cpu_total'] / max(bo['cpu_total'], 1e-9):.2f}×")
         lines.append("- " + "; ".join(parts))
     return lines
 
@@ -342,9 +361,11 @@ def report(out: dict, full: bool) -> int:
         "MUMPS LDLᵀ of the `direct` preset with the ordering QAMD (parsolve's default, "
         "icntl_7 6) and METIS (5): INFOG(3) = estimated factor entries, RINFOG(1) = estimated "
         "flops (analysis), 'flops vs np=1' = RINFOG(1) against the same problem on 1 rank; "
-        "analysis / factor = PETSc events MatCholFctrSym / MatCholFctrNum (slowest rank), "
-        "solve = back-substitution. Times are noisy (shared 2-core machine); counts and flops "
-        "are not.",
+        "analysis / factor / solve = PETSc events MatCholFctrSym / MatCholFctrNum / MatSolve "
+        "(slowest rank, wall), total = `set_operator` + `solve` (the preset's whole "
+        "factorization and solve), wall (the largest rank's CPU seconds). Wall times are noisy (shared 2-core machine, "
+        "often loaded: see the load average below); CPU times much less so, counts and flops "
+        "not at all.",
         "",
         machine_line(out["machine"], out["elapsed_s"]),
         "",
