@@ -15,9 +15,10 @@ bandwidth the input mesh had).
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
+import functools
 import os
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -105,16 +106,33 @@ def bisect(centroids: np.ndarray, nparts: int) -> np.ndarray:
     return part
 
 
+@functools.lru_cache(maxsize=1)
+def _loaded_ptscotch() -> ctypes.CDLL | None:
+    """The PT-Scotch library PETSc loaded (found in this process's memory map: faster than
+    ctypes.util.find_library, which runs ldconfig), or None."""
+    try:
+        maps = Path("/proc/self/maps").read_text()
+    except OSError:
+        return None
+    paths = {line.split()[-1] for line in maps.splitlines() if "/libptscotch-" in line
+             or line.endswith("/libptscotch.so")}
+    for path in sorted(paths):
+        try:
+            lib = ctypes.CDLL(path)
+            lib.SCOTCH_randomReset  # noqa: B018 (present?)
+            return lib
+        except (OSError, AttributeError):
+            continue
+    return None
+
+
 def _scotch_random_reset() -> None:
     """Restart Scotch's random generator from its fixed seed, so that a second partition in
-    the same process repeats the first (the generator's state otherwise carries over)."""
-    name = ctypes.util.find_library("ptscotch")
-    if name is None:
-        return
-    try:
-        ctypes.CDLL(name).SCOTCH_randomReset()
-    except (OSError, AttributeError):  # another Scotch: determinism then rests on the threads
-        pass
+    the same process repeats the first (the generator's state otherwise carries over).
+    Without the library (another platform), determinism rests on the single thread alone."""
+    lib = _loaded_ptscotch()
+    if lib is not None:
+        lib.SCOTCH_randomReset()
 
 
 def scotch(comm, indptr: np.ndarray, indices: np.ndarray) -> np.ndarray:

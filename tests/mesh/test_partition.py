@@ -223,6 +223,9 @@ def test_scene_partitioner_key():
 
 
 SHIPPED = sorted(p.name for p in CONFIGS.glob("*.toml"))
+# past its peak the softening bar's tangent is ill-conditioned: the round-off of a different
+# summation order (2.5e-10 of the stress measured at 3 ranks) is amplified beyond 1e-10
+TOLERANCE = {"localization_bar.toml": 1e-9}
 
 
 def run_with(path, method: str, out) -> dict:
@@ -262,4 +265,5 @@ def test_shipped_scene_same_on_either_partitioner(name, shared_tmp, comm):
             assert np.array_equal(scotch[key], rcb[key]), key
         else:
             scale = max(family[key.rsplit("/", 1)[-1]], 1e-300)
-            assert np.abs(scotch[key] - rcb[key]).max() <= 1e-10 * scale + 1e-13, key
+            tol = TOLERANCE.get(name, 1e-10)
+            assert np.abs(scotch[key] - rcb[key]).max() <= tol * scale + 1e-13, key
