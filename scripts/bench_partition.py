@@ -49,6 +49,7 @@ sys.path.pop(0)
 
 PLATE_K = [2, 4, 6]
 BOX_N = [32]
+SQUARE_N = [707]
 RANKS = [1, 2, 3, 4]
 ORDERINGS = {"QAMD": "6", "METIS": "5"}
 METHODS = ("bisection", "scotch")
@@ -96,8 +97,18 @@ components = ["x", "y", "z"]
 """
 
 
+def square_text(n: int) -> str:
+    """bench_solve's problem (where the issue measured QAMD's 2.2×): unit square, N × N quads
+    split into P1 triangles, plane strain, left edge clamped, traction on the right."""
+    sys.path.insert(0, str(ROOT / "scripts"))
+    from bench_assembly import scene_text as square
+
+    sys.path.pop(0)
+    return square(n, "triangle", "direct").split("[solver]")[0]   # ours is appended
+
+
 def scene_text(problem: str, size: int, method: str) -> str:
-    text = plate_text(size) if problem == "plate" else box_text(size)
+    text = {"plate": plate_text, "box": box_text, "square": square_text}[problem](size)
     return text + f'\n[solver]\npreset = "direct"\npartitioner = "{method}"\n'
 
 
@@ -243,9 +254,7 @@ def table(results: list[dict], orderings: list[str]) -> tuple[list[str], list[li
     rows = []
     base = {}
     for r in results:
-        if "error" in r:
-            rows.append([r["problem"], "-", str(r["nranks"]), r["error"][:60]]
-                        + ["-"] * (len(head) - 4))
+        if "error" in r:   # listed under the table (see report)
             continue
         for m, run in r["runs"].items():
             key = (r["problem"], r["size"])
@@ -307,9 +316,14 @@ def main(argv=None) -> int:
     p.add_argument("--plate", type=int, nargs="*", default=PLATE_K,
                    help="Kirsch refinement factors (default 2 4 6)")
     p.add_argument("--box", type=int, nargs="*", default=BOX_N, help="box cells per side")
+    p.add_argument("--square", type=int, nargs="*", default=SQUARE_N,
+                   help="unit square quads per side (bench_solve's problem)")
     p.add_argument("--ranks", type=int, nargs="+", default=RANKS)
     p.add_argument("--orderings", nargs="+", default=list(ORDERINGS), choices=list(ORDERINGS))
     p.add_argument("--timeout", type=float, default=1800.0)
+    p.add_argument("--out", default="partition", help="bench_results/OUT.json")
+    p.add_argument("--render", type=Path, nargs="+", default=None, metavar="JSON",
+                   help="only write the tables from earlier runs' JSON files (merged)")
     p.add_argument("--wait", type=float, default=5.0,
                    help="before each process wait up to this many seconds for idle CPUs")
     args = p.parse_args(argv)
@@ -317,13 +331,16 @@ def main(argv=None) -> int:
         worker(args)
         return 0
     RESULTS.mkdir(exist_ok=True)
+    if args.render:
+        return render(args.render)
     CONTENTION.update(wait=args.wait, retries=0, budget=10 * args.wait)
     info = machine_info()
     info["idle_at_start"] = cpu_idle(1.0)
     info["git_status"] = git_status()
     t0 = time.perf_counter()
     results = []
-    jobs = [("plate", k) for k in args.plate] + [("box", n) for n in args.box]
+    jobs = [("plate", k) for k in args.plate] + [("box", n) for n in args.box] + \
+        [("square", n) for n in args.square]
     for i, (problem, size) in enumerate(jobs):
         for j, nr in enumerate(args.ranks):
             wargs = ["--problem", problem, "--size", str(size), "--orderings", *args.orderings]
@@ -342,9 +359,20 @@ def main(argv=None) -> int:
     elapsed = time.perf_counter() - t0
     info["loadavg_end"] = os.getloadavg()[0]
     out = dict(machine=info, elapsed_s=elapsed, results=results, orderings=args.orderings)
-    (RESULTS / "partition.json").write_text(json.dumps(out, indent=1))
+    (RESULTS / f"{args.out}.json").write_text(json.dumps(out, indent=1))
     return report(out, full=(args.plate == PLATE_K and args.box == BOX_N and args.ranks == RANKS
+                             and args.square == SQUARE_N
                              and args.orderings == list(ORDERINGS)))
+
+
+def render(paths: list[Path]) -> int:
+    """One report from several runs (e.g. problems measured in separate invocations)."""
+    runs = [json.loads(p.read_text()) for p in paths]
+    out = dict(runs[0])
+    out["results"] = [r for run in runs for r in run["results"]]
+    out["elapsed_s"] = sum(run["elapsed_s"] for run in runs)
+    out["machine"]["loadavg_end"] = max(run["machine"].get("loadavg_end", 0) for run in runs)
+    return report(out, full=True)
 
 
 def report(out: dict, full: bool) -> int:
@@ -374,6 +402,9 @@ def report(out: dict, full: bool) -> int:
         "## Scotch against RCB, per problem and rank count",
         "",
         *summary,
+        "",
+        *[f"- not measured: {r['problem']} size {r['size']} np={r['nranks']} ({r['error'][:80]})"
+          for r in out["results"] if "error" in r],
         "",
         "Rerun: `.venv/bin/python scripts/bench_partition.py`",
         "",

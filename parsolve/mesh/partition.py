@@ -135,9 +135,9 @@ def _scotch_random_reset() -> None:
         lib.SCOTCH_randomReset()
 
 
-def scotch(comm, indptr: np.ndarray, indices: np.ndarray) -> np.ndarray:
+def scotch(comm, indptr: np.ndarray, indices: np.ndarray) -> np.ndarray | None:
     """PT-Scotch partition of a graph (CSR, every rank holding all of it) into comm.size parts,
-    the same on every rank.
+    the same on every rank; None when PETSc has no PT-Scotch.
 
     Each rank hands PETSc its block of rows (an MPIAIJ adjacency matrix that MatPartitioning
     converts to MPIAdj: petsc4py 3.18 has no createAdj); the parts come back as an IS of the
@@ -159,7 +159,12 @@ def scotch(comm, indptr: np.ndarray, indices: np.ndarray) -> np.ndarray:
     adj.assemble()
     part = PETSc.MatPartitioning().create(comm=comm)
     part.setAdjacency(adj)
-    part.setType(PETSc.MatPartitioning.Type.PARTITIONINGPTSCOTCH)
+    try:
+        part.setType(PETSc.MatPartitioning.Type.PARTITIONINGPTSCOTCH)
+    except PETSc.Error:  # a PETSc built without PT-Scotch (on every rank alike)
+        part.destroy()
+        adj.destroy()
+        return None
     threads = os.environ.get("SCOTCH_PTHREAD_NUMBER")
     os.environ["SCOTCH_PTHREAD_NUMBER"] = "1"  # read by Scotch at each call
     try:
@@ -184,8 +189,8 @@ def cell_parts(mesh: Mesh, nparts: int, method: str = "bisection", comm=None
                ) -> tuple[np.ndarray, str]:
     """(part of each cell, the partitioner that ran). ``method``: "scotch" (graph partition
     over the ranks of ``comm``, nparts = comm.size) or "bisection". One part needs no
-    partitioner; meshes with fewer than MIN_CELLS_PER_PART cells per part, and a graph
-    partition that left a part empty, fall back to bisection."""
+    partitioner; meshes with fewer than MIN_CELLS_PER_PART cells per part, a PETSc without
+    PT-Scotch and a graph partition that left a part empty fall back to bisection."""
     if method not in PARTITIONERS:
         raise ValueError(f"unknown partitioner {method!r} (expected one of {PARTITIONERS})")
     if nparts == 1:
@@ -195,7 +200,7 @@ def cell_parts(mesh: Mesh, nparts: int, method: str = "bisection", comm=None
             raise ValueError("the scotch partition is computed by the ranks it is for: "
                              f"nparts ({nparts}) must be the size of comm")
         part = scotch(comm, *dual_graph(mesh))
-        if np.bincount(part, minlength=nparts).min() > 0:
+        if part is not None and np.bincount(part, minlength=nparts).min() > 0:
             return part, "scotch"
     return bisect(mesh.points[mesh.cells].mean(axis=1), nparts), "bisection"
 

@@ -267,3 +267,13 @@ def test_shipped_scene_same_on_either_partitioner(name, shared_tmp, comm):
             scale = max(family[key.rsplit("/", 1)[-1]], 1e-300)
             tol = TOLERANCE.get(name, 1e-10)
             assert np.abs(scotch[key] - rcb[key]).max() <= tol * scale + 1e-13, key
+
+
+def test_a_petsc_without_ptscotch_falls_back(comm, monkeypatch):
+    from petsc4py import PETSc
+
+    monkeypatch.setattr(PETSc.MatPartitioning.Type, "PARTITIONINGPTSCOTCH", "no_such_partitioner")
+    mesh = MESHES["plate_hole"]()
+    part, used = cell_parts(mesh, comm.size, "scotch", comm)
+    assert used == ("none" if comm.size == 1 else "bisection")
+    assert np.array_equal(part, cell_parts(mesh, comm.size, "bisection", comm)[0])
