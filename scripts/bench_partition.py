@@ -4,9 +4,12 @@ decides of MUMPS's cost.
 
 Problems:
   plate : configs/kirsch.toml (quarter plate with a hole, P2 triangles, plane stress, symmetry
-          conditions eliminated) refined k× per direction (k = 2, 4, 6: 100k, 400k, 900k DOFs);
+          conditions eliminated) refined k× per direction (k = 2, 4: 100k, 400k DOFs; 6: 900k);
   box   : 3D elasticity on a unit cube of N³ Q1 hexahedra (x = 0 clamped, traction on x = 1),
-          3 (N+1)³ DOFs (N = 32: 108k DOFs).
+          3 (N+1)³ DOFs (N = 20: 28k DOFs; N = 33: 118k DOFs, whose factorization takes
+          minutes per run: `--box 33 --orderings` measures its partitions alone);
+  square: bench_solve's problem, where issue 8 measured QAMD's 2.2× (unit square, N × N quads
+          split into P1 triangles, N = 707: 1M DOFs).
 One fresh process per (problem, ranks) under `scripts/mpirun.sh -n RANKS` (2, 3 and 4 ranks,
 4 oversubscribed on 2 cores; 1 rank = the input numbering, no partition, for reference), both
 partitioners in that process (order alternating between processes, so that neither always
@@ -47,8 +50,8 @@ from bench_assembly import (COMMITTED, CONTENTION, RESULTS, ROOT, Phase,  # noqa
 
 sys.path.pop(0)
 
-PLATE_K = [2, 4, 6]
-BOX_N = [32]
+PLATE_K = [2, 4]
+BOX_N = [20]
 SQUARE_N = [707]
 RANKS = [1, 2, 3, 4]
 ORDERINGS = {"QAMD": "6", "METIS": "5"}
@@ -208,6 +211,9 @@ def run_method(comm, problem: str, size: int, method: str, orderings: list[str])
     model = build_model(parse_scene(tomllib.loads(text), "bench.toml", text))
     out = dict(dofs=model.mesh.num_points * model.ncomp, cells=model.mesh.num_cells)
     out.update(partition_stats(comm, model.mesh, method))
+    out["orderings"] = {}
+    if not orderings:   # the partition alone
+        return out
     with Phase(comm) as p_sys:
         system = SaddleSystem(comm, model)
         mat = system.assemble()
@@ -231,8 +237,8 @@ def worker(args) -> None:
     for m in methods:
         out["runs"][m] = run_method(comm, args.problem, args.size, m, args.orderings)
         gc.collect()
-    out["cpu_share"] = min(o["cpu_share"] for r in out["runs"].values()
-                           for o in r["orderings"].values())
+    out["cpu_share"] = min([o["cpu_share"] for r in out["runs"].values()
+                            for o in r["orderings"].values()] or [1.0])
     if comm.rank == 0:
         Path(args.json).write_text(json.dumps(out, indent=1))
 
@@ -259,12 +265,16 @@ def table(results: list[dict], orderings: list[str]) -> tuple[list[str], list[li
         for m, run in r["runs"].items():
             key = (r["problem"], r["size"])
             if r["nranks"] == 1:
-                base[key] = {o: run["orderings"][o]["est_flops"] for o in orderings}
+                base[key] = {o: run["orderings"][o]["est_flops"] for o in orderings
+                             if o in run["orderings"]}
             row = [r["problem"], str(run["dofs"]), str(r["nranks"]),
                    run["method"], str(run["edge_cut"]), str(run["interface_nodes"]),
                    f"{run['dof_balance']:.3f}",
                    f"{run['t_partition']:.2f} ({run['cpu_partition']:.2f})"]
             for o in orderings:
+                if o not in run["orderings"]:   # partition only
+                    row += ["-"] * 7
+                    continue
                 s = run["orderings"][o]
                 ref = base.get(key, {}).get(o)
                 row += [g(s["est_entries"]), g(s["est_flops"]),
@@ -295,6 +305,8 @@ def findings(results: list[dict], orderings: list[str]) -> list[str]:
                  f"interface nodes {s['interface_nodes'] / max(b['interface_nodes'], 1):.2f}, "
                  f"partition CPU {s['cpu_partition']:.2f} s vs {b['cpu_partition']:.2f} s"]
         for o in orderings:
+            if o not in s["orderings"] or o not in b["orderings"]:
+                continue
             so, bo = s["orderings"][o], b["orderings"][o]
             one = base.get(key, {}).get("orderings", {}).get(o)
             vs1 = (f" (np=1: {g(one['est_flops'])}; RCB {bo['est_flops'] / one['est_flops']:.2f}×, "
@@ -314,12 +326,13 @@ def main(argv=None) -> int:
     p.add_argument("--flip", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--json", help=argparse.SUPPRESS)
     p.add_argument("--plate", type=int, nargs="*", default=PLATE_K,
-                   help="Kirsch refinement factors (default 2 4 6)")
+                   help="Kirsch refinement factors (default 2 4)")
     p.add_argument("--box", type=int, nargs="*", default=BOX_N, help="box cells per side")
     p.add_argument("--square", type=int, nargs="*", default=SQUARE_N,
                    help="unit square quads per side (bench_solve's problem)")
     p.add_argument("--ranks", type=int, nargs="+", default=RANKS)
-    p.add_argument("--orderings", nargs="+", default=list(ORDERINGS), choices=list(ORDERINGS))
+    p.add_argument("--orderings", nargs="*", default=list(ORDERINGS), choices=list(ORDERINGS),
+                   help="none: the partition alone (no factorization)")
     p.add_argument("--timeout", type=float, default=1800.0)
     p.add_argument("--out", default="partition", help="bench_results/OUT.json")
     p.add_argument("--render", type=Path, nargs="+", default=None, metavar="JSON",
@@ -354,8 +367,8 @@ def main(argv=None) -> int:
             results.append(r)
             print(f"[bench] {problem} {size} np={nr}: "
                   + (r["error"][-300:] if "error" in r else
-                     ", ".join(f"{m} cut {v['edge_cut']} QAMD {g(v['orderings'].get('QAMD', v['orderings'][args.orderings[0]])['est_flops'])}"
-                               for m, v in r["runs"].items())), flush=True)
+                     ", ".join(f"{m} cut {v['edge_cut']}" for m, v in r["runs"].items())),
+                  flush=True)
     elapsed = time.perf_counter() - t0
     info["loadavg_end"] = os.getloadavg()[0]
     out = dict(machine=info, elapsed_s=elapsed, results=results, orderings=args.orderings)
