@@ -407,8 +407,9 @@ def report(out: dict, full: bool) -> int:
     md = "\n".join([
         "# Partition benchmark: coordinate bisection (RCB) vs PT-Scotch",
         "",
-        "Kirsch plate (`configs/kirsch.toml`, P2 triangles, refined k× per direction) and a 3D "
-        "box of Q1 hexahedra; one fresh process per (problem, ranks), both partitioners in it; "
+        "Kirsch plate (`configs/kirsch.toml`, P2 triangles, refined k× per direction), "
+        "bench_solve's unit square (P1 triangles, where issue 8 measured QAMD's 2.2×) and a 3D "
+        "box of Q1 hexahedra (box 33: partitions only, `--orderings` empty); one fresh process per (problem, ranks), both partitioners in it; "
         "4 ranks are oversubscribed on 2 cores; np=1 is the input numbering (no partition). "
         "Partition = `cell_parts` (PT-Scotch: dual graph + MPIAdj rows + PT-Scotch + gather). "
         "MUMPS LDLᵀ of the `direct` preset with the ordering QAMD (parsolve's default, "
@@ -429,7 +430,9 @@ def report(out: dict, full: bool) -> int:
         "",
         *summary,
         "",
-        *[f"- not measured: {r['problem']} size {r['size']} np={r['nranks']} ({r['error'][:80]})"
+        *[f"- not measured: {r['problem']} size {r['size']} np={r['nranks']} (the worker was "
+          f"stopped or failed: {r['error'][:60].strip() or '?'}; stopped ones were ended for the "
+          "time budget on a machine at load average ~20)"
           for r in out["results"] if "error" in r],
         "",
         "Rerun: `.venv/bin/python scripts/bench_partition.py`",
