@@ -23,6 +23,8 @@ COMPONENTS = {"x": 0, "y": 1, "z": 2, "ux": 0, "uy": 1, "uz": 2}
 RELATION_TYPES = ("dirichlet", "equal", "mean", "linear", "strain")
 STRAIN_COMPONENTS = {"xx": (0, 0), "yy": (1, 1), "zz": (2, 2), "xy": (0, 1), "yz": (1, 2), "xz": (0, 2)}
 PRESETS = ("direct", "iterative")
+PARTITIONERS = ("scotch", "bisection")   # parsolve.mesh.partition.PARTITIONERS
+DEFAULT_PARTITIONER = "scotch"
 MATERIAL_MODELS = {
     "elastic": (("E", "nu"), {}),
     "mazars": (("E", "nu", "eps_d0", "At", "Bt", "Ac", "Bc"), {"beta": 1.06}),
@@ -221,6 +223,7 @@ class SolverSpec:
     options: dict[str, str]
     eliminate: bool
     split: str = "primal"   # fieldsplit blocks: "primal" (q, lambda) or "fields" (one per field)
+    partitioner: str = DEFAULT_PARTITIONER  # cells to ranks: "scotch" (PT-Scotch) or "bisection"
 
 
 @dataclass
@@ -702,9 +705,10 @@ def _solver(t: Table) -> SolverSpec:
         raise t.error("prefix", "must be non-empty, alphanumeric and end with '_'")
     eliminate = t.get("eliminate", bool, True)
     split = t.get("split", str, "primal", choices=("primal", "fields"))
+    partitioner = t.get("partitioner", str, DEFAULT_PARTITIONER, choices=PARTITIONERS)
     options = _flatten(t.table("petsc", {}))
     t.done()
-    return SolverSpec(preset, prefix, options, eliminate, split)
+    return SolverSpec(preset, prefix, options, eliminate, split, partitioner)
 
 
 def _cross_check(scene: Scene) -> None:

@@ -1,19 +1,34 @@
 """Cell partition and node renumbering.
 
-Every rank holds the whole (replicated) mesh and computes the same partition, so no
-communication is needed to agree on it. Cells are split by recursive coordinate bisection of
-their centroids; a node belongs to the lowest rank among the cells that touch it. Nodes are then
-renumbered so that each rank owns a contiguous block, keeping the input order inside a block
-(which keeps the bandwidth the input mesh had).
+Every rank holds the whole (replicated) mesh. Cells are split into one part per rank either by
+PT-Scotch (a graph partitioner, through PETSc's MatPartitioning) on the cell dual graph (cells
+sharing a facet), or by recursive coordinate bisection of the centroids (RCB: no communication,
+the fallback for one rank, for meshes too small to be worth a graph partitioner, or on request).
+PT-Scotch runs once at set-up, each rank handing it its block of dual-graph rows; the parts are
+then gathered so that every rank knows every cell's part.
+
+A node belongs to the lowest rank among the cells that touch it. Nodes are then renumbered so
+that each rank owns a contiguous block, keeping the input order inside a block (which keeps the
+bandwidth the input mesh had).
 """
 
 from __future__ import annotations
 
+import ctypes
+import functools
+import os
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from parsolve.mesh.mesh import Mesh
+from parsolve.mesh.topology import _all_facets, _row_groups, _sorted_vertex_keys
+
+PARTITIONERS = ("scotch", "bisection")
+# below this many cells per part a graph partitioner has nothing to gain (and PT-Scotch may
+# leave a part empty): coordinate bisection instead
+MIN_CELLS_PER_PART = 8
 
 
 @dataclass
@@ -25,6 +40,7 @@ class Partition:
     node_part: np.ndarray   # (npoints,) rank owning each node
     new_of_old: np.ndarray  # (npoints,) new node number of each input node
     node_ranges: np.ndarray  # (nparts + 1,) node block [node_ranges[r], node_ranges[r+1]) of rank r
+    method: str = "bisection"  # the partitioner that actually ran ("none" for one part)
 
     def local_cells(self, rank: int, cells: np.ndarray) -> np.ndarray:
         """Cells that touch a node owned by ``rank``: the ones it needs to assemble its rows."""
@@ -34,6 +50,40 @@ class Partition:
         """Cells this rank reports: those whose lowest node owner is ``rank`` (a subset of its
         local cells, so it holds their history variables)."""
         return np.flatnonzero(self.node_part[cells].min(axis=1) == rank)
+
+
+# ------------------------------------------------------------------ dual graph
+
+
+def dual_graph(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
+    """CSR (indptr, indices) of the cell dual graph: cells are neighbours when they share a
+    facet (same corner nodes). Rows list their neighbours in increasing order, no self loops.
+
+    A facet seen by exactly two cells is an edge; boundary facets (one cell), the two sides of
+    a crack (duplicate points: different node ids) and non-manifold facets (three or more
+    cells) are not."""
+    ncells = mesh.num_cells
+    nodes, owner, _ = _all_facets(mesh.cells, mesh.cell_type)
+    gid, counts = _row_groups(_sorted_vertex_keys(nodes, mesh.facet_type))
+    shared = np.flatnonzero(counts[gid] == 2)
+    pairs = owner[shared[np.argsort(gid[shared], kind="stable")]].reshape(-1, 2)
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]  # a collapsed cell seeing itself twice
+    # both directions, one key per (row, neighbour): sorted and without repeats (two cells
+    # sharing two facets, which only a folded mesh has)
+    key = np.unique(np.concatenate([pairs[:, 0] * ncells + pairs[:, 1],
+                                    pairs[:, 1] * ncells + pairs[:, 0]]))
+    rows, indices = key // max(ncells, 1), key % max(ncells, 1)
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=ncells))])
+    return indptr.astype(np.int64), indices.astype(np.int64)
+
+
+def edge_cut(indptr: np.ndarray, indices: np.ndarray, cell_part: np.ndarray) -> int:
+    """Dual-graph edges (shared facets) between cells of different parts."""
+    rows = np.repeat(np.arange(indptr.size - 1), np.diff(indptr))
+    return int(np.count_nonzero(cell_part[rows] != cell_part[indices])) // 2
+
+
+# ------------------------------------------------------------------ partitioners
 
 
 def bisect(centroids: np.ndarray, nparts: int) -> np.ndarray:
@@ -56,13 +106,110 @@ def bisect(centroids: np.ndarray, nparts: int) -> np.ndarray:
     return part
 
 
-def partition(mesh: Mesh, nparts: int) -> Partition:
-    """Partition cells, assign node owners and renumber nodes contiguously per rank."""
-    npts = mesh.num_points
+@functools.lru_cache(maxsize=1)
+def _loaded_ptscotch() -> ctypes.CDLL | None:
+    """The PT-Scotch library PETSc loaded (found in this process's memory map: faster than
+    ctypes.util.find_library, which runs ldconfig), or None."""
+    try:
+        maps = Path("/proc/self/maps").read_text()
+    except OSError:
+        return None
+    paths = {line.split()[-1] for line in maps.splitlines() if "/libptscotch-" in line
+             or line.endswith("/libptscotch.so")}
+    for path in sorted(paths):
+        try:
+            lib = ctypes.CDLL(path)
+            lib.SCOTCH_randomReset  # noqa: B018 (present?)
+            return lib
+        except (OSError, AttributeError):
+            continue
+    return None
+
+
+def _scotch_random_reset() -> None:
+    """Restart Scotch's random generator from its fixed seed, so that a second partition in
+    the same process repeats the first (the generator's state otherwise carries over).
+    Without the library (another platform), determinism rests on the single thread alone."""
+    lib = _loaded_ptscotch()
+    if lib is not None:
+        lib.SCOTCH_randomReset()
+
+
+def scotch(comm, indptr: np.ndarray, indices: np.ndarray) -> np.ndarray | None:
+    """PT-Scotch partition of a graph (CSR, every rank holding all of it) into comm.size parts,
+    the same on every rank; None when PETSc has no PT-Scotch.
+
+    Each rank hands PETSc its block of rows (an MPIAIJ adjacency matrix that MatPartitioning
+    converts to MPIAdj: petsc4py 3.18 has no createAdj); the parts come back as an IS of the
+    block and are gathered once. Deterministic: PT-Scotch is run with one thread per process
+    (Debian's build spawns threads whose timing changes the result from run to run; no
+    MatPartitioning strategy avoids that) and its random generator restarted from its fixed
+    seed. Uniform vertex weights: a mesh has one cell type, so nodes per cell are the same for
+    every cell."""
+    from mpi4py import MPI
+    from petsc4py import PETSc
+
+    n, size, rank = indptr.size - 1, comm.size, comm.rank
+    starts = np.array([n * r // size for r in range(size + 1)], dtype=np.int64)
+    r0, r1 = int(starts[rank]), int(starts[rank + 1])
+    local_ptr = (indptr[r0:r1 + 1] - indptr[r0]).astype(PETSc.IntType)
+    local_idx = indices[indptr[r0]:indptr[r1]].astype(PETSc.IntType)
+    adj = PETSc.Mat().createAIJ(size=((r1 - r0, n), (r1 - r0, n)),
+                                csr=(local_ptr, local_idx, np.ones(local_idx.size)), comm=comm)
+    adj.assemble()
+    part = PETSc.MatPartitioning().create(comm=comm)
+    part.setAdjacency(adj)
+    try:
+        part.setType(PETSc.MatPartitioning.Type.PARTITIONINGPTSCOTCH)
+    except PETSc.Error:  # a PETSc built without PT-Scotch (on every rank alike)
+        part.destroy()
+        adj.destroy()
+        return None
+    threads = os.environ.get("SCOTCH_PTHREAD_NUMBER")
+    os.environ["SCOTCH_PTHREAD_NUMBER"] = "1"  # read by Scotch at each call
+    try:
+        _scotch_random_reset()
+        parts = PETSc.IS()
+        part.apply(parts)
+    finally:
+        if threads is None:
+            del os.environ["SCOTCH_PTHREAD_NUMBER"]
+        else:
+            os.environ["SCOTCH_PTHREAD_NUMBER"] = threads
+    local = parts.getIndices().astype(np.int64)
+    for obj in (parts, part, adj):
+        obj.destroy()
+    cell_part = np.empty(n, dtype=np.int64)
+    counts = np.diff(starts)
+    comm.Allgatherv(local, [cell_part, counts, starts[:-1], MPI.INT64_T])
+    return cell_part
+
+
+def cell_parts(mesh: Mesh, nparts: int, method: str = "bisection", comm=None
+               ) -> tuple[np.ndarray, str]:
+    """(part of each cell, the partitioner that ran). ``method``: "scotch" (graph partition
+    over the ranks of ``comm``, nparts = comm.size) or "bisection". One part needs no
+    partitioner; meshes with fewer than MIN_CELLS_PER_PART cells per part, a PETSc without
+    PT-Scotch and a graph partition that left a part empty fall back to bisection."""
+    if method not in PARTITIONERS:
+        raise ValueError(f"unknown partitioner {method!r} (expected one of {PARTITIONERS})")
     if nparts == 1:
-        cell_part = np.zeros(mesh.num_cells, dtype=np.int64)
-    else:
-        cell_part = bisect(mesh.points[mesh.cells].mean(axis=1), nparts)
+        return np.zeros(mesh.num_cells, dtype=np.int64), "none"
+    if method == "scotch" and mesh.num_cells >= MIN_CELLS_PER_PART * nparts:
+        if comm is None or comm.size != nparts:
+            raise ValueError("the scotch partition is computed by the ranks it is for: "
+                             f"nparts ({nparts}) must be the size of comm")
+        part = scotch(comm, *dual_graph(mesh))
+        if part is not None and np.bincount(part, minlength=nparts).min() > 0:
+            return part, "scotch"
+    return bisect(mesh.points[mesh.cells].mean(axis=1), nparts), "bisection"
+
+
+def partition(mesh: Mesh, nparts: int, method: str = "bisection", comm=None) -> Partition:
+    """Partition cells (see ``cell_parts``), assign node owners and renumber nodes
+    contiguously per rank."""
+    npts = mesh.num_points
+    cell_part, used = cell_parts(mesh, nparts, method, comm)
     node_part = np.full(npts, nparts, dtype=np.int64)
     for rank in range(nparts - 1, -1, -1):  # lowest rank written last wins
         node_part[mesh.cells[cell_part == rank]] = rank
@@ -73,4 +220,4 @@ def partition(mesh: Mesh, nparts: int) -> Partition:
     new_of_old[order] = np.arange(npts)
     counts = np.bincount(node_part, minlength=nparts)
     node_ranges = np.concatenate([[0], np.cumsum(counts)])
-    return Partition(nparts, cell_part, node_part, new_of_old, node_ranges)
+    return Partition(nparts, cell_part, node_part, new_of_old, node_ranges, used)

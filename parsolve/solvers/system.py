@@ -42,7 +42,7 @@ class SaddleSystem:
         rank = comm.rank
         self.timings = {}
         t0 = time.perf_counter()
-        self.part = partition(mesh, comm.size)
+        self.part = partition(mesh, comm.size, model.scene.solver.partitioner, comm)
         self.eliminated = [r for r in model.relations if r.eliminable()]
         self.multiplied = [r for r in model.relations if not r.eliminable()]
         nmult = sum(1 if r.collapsed else r.nrows for r in self.multiplied)
