@@ -14,7 +14,8 @@ distributed by it, with the same PETSc solver options as parsolve's preset (Debi
 /usr/bin/python3 runs scripts/bench_peers.py's `dolfinx_phases`). Every run is a fresh process
 under scripts/mpirun.sh, one thread per rank.
 
-Phases (seconds, the slowest rank's):
+Phases (CPU seconds, max over ranks: the machine is shared, so wall seconds also count other
+processes; wall seconds are in the JSON and the last columns):
   set-up          parsolve: load_scene + build_model (mesh generation, regions, effects) +
                   SaddleSystem (partition, numbering, pattern, operator) + make_solver;
                   DOLFINx: create_mesh + function spaces + BC + meshtags (the forms' JIT apart);
@@ -31,18 +32,20 @@ the solver's factorization, step_outputs, ResultWriter) from this script; the pa
 changed. Its /timings group (assembly, factorization, solve) is kept in the JSON beside them.
 
 Memory per rank: VmHWM (peak resident, /proc/self/status) after every phase, the max over ranks;
-split into: mesh / operator / element / other numpy (tracemalloc, by the parsolve module that
-allocated: parsolve.mesh, parsolve.la, parsolve.fem + effects, the rest), the PETSc matrix
-(MatGetInfo: allocated nonzeros × 12 B + row offsets) and MUMPS's own factor memory (INFOG(21):
-used, max over ranks; INFOG(16): estimated). tracemalloc costs time: runs with --no-trace for
-timings only (the default traces; the overhead measured is in the JSON).
+the numpy arrays parsolve holds, by what holds them (mesh; operator = node pattern + saddle
+operator + relation block; element = the effects and their composition; vectors = the step's
+solution, multipliers and output fields; other = partition, numbering, relations), found by
+walking the objects after assembly and after the post-processing; the PETSc matrix (MatGetInfo:
+allocated nonzeros × 12 B + row offsets) and MUMPS's own factor memory (INFOG(21): used, max
+over ranks; INFOG(16): estimated). --trace adds tracemalloc's peak of Python + numpy memory per
+phase (slower: not for timings).
 
-Fits (least squares, relative): memory per rank = a + b·N + c·N/P and time per phase likewise,
-on every (N, P) measured (4-rank runs count for memory, not for time: 2 cores), then the model
-at 64 ranks × 50M DOFs.
+Fits (least squares on the relative error, coefficients ≥ 0): memory per rank = a + b·N + c·N/P
+and CPU time per phase likewise, on every (N, P) measured (4-rank runs count for memory, not for
+time: 2 cores), then the model at 64 ranks × 50M DOFs.
 
 Usage (repository root):
-    .venv/bin/python scripts/bench_scale.py                  # ≈ 35-40 min on 2 shared cores
+    .venv/bin/python scripts/bench_scale.py                  # ≈ 35-40 min on 2 loaded cores
     .venv/bin/python scripts/bench_scale.py --quick          # small sizes, a smoke test
     .venv/bin/python scripts/bench_scale.py --sizes 2d-direct=1000,1414,2000 3d-iterative=60,79,100
     .venv/bin/python scripts/bench_scale.py --report         # tables again from the JSON
@@ -634,6 +637,9 @@ def fits(out: dict) -> dict:
             if not rows:
                 continue
             f = {"peak": fit([(r["dofs"], r["nranks"], peak(r)) for r in rows])}
+            if any(memory_parts(r)["mumps"] for r in rows):  # the peak besides MUMPS's factor
+                f["rest"] = fit([(r["dofs"], r["nranks"],
+                                  peak(r) - (memory_parts(r)["mumps"] or 0.0)) for r in rows])
             for part in PARTS + ("matrix", "mumps"):
                 f[part] = fit([(r["dofs"], r["nranks"], memory_parts(r)[part]) for r in rows])
             timed = [r for r in rows if r["nranks"] <= 2]
@@ -808,46 +814,78 @@ def fit_table(fs: dict) -> str:
     return md_table(head, body)
 
 
-def model_lines(out: dict, fs: dict) -> list[str]:
-    """The 64 × 50M model per case, parsolve against DOLFINx, and the direct factor's growth."""
+def factor_growth(case: str, n_big: int, N: float) -> tuple[float, float]:
+    """Nested-dissection growth from n_big to N DOFs: (factor memory, flops) multipliers."""
+    if CASES[case]["dim"] == 2:
+        return (N / n_big) * np.log(N) / np.log(n_big), (N / n_big) ** 1.5
+    return (N / n_big) ** (4 / 3), (N / n_big) ** 2
+
+
+def memory_model(fs: dict, case: str, code: str, rows: list[dict]) -> dict | None:
+    """Memory per rank at TARGET: the fit of (peak − MUMPS used) plus MUMPS's factor grown
+    by nested dissection from the largest run (total used, spread evenly over the ranks); for
+    an iterative case, the fit of the peak."""
     P, N = TARGET
+    f = fs.get(f"{case}/{code}")
+    if not f or not f.get("peak"):
+        return None
+    mine = [r for r in rows if r["code"] == code and r["case"] == case]
+    big = max(mine, key=lambda r: (r["dofs"], -r["nranks"]))
+    mu = big.get("mumps") or {}
+    if not mu.get("used_mb_sum") or not f.get("rest"):
+        return dict(total=at(f["peak"], N, P), rest=at(f["peak"], N, P), factor=0.0)
+    factor = mu["used_mb_sum"] * 1e6 * factor_growth(case, big["dofs"], N)[0] / P
+    rest = at(f["rest"], N, P)
+    return dict(total=rest + factor, rest=rest, factor=factor)
+
+
+def model_lines(out: dict, fs: dict) -> list[str]:
+    """The 64 × 50M model per case, parsolve against DOLFINx."""
+    P, N = TARGET
+    rows = ok_rows(out["rows"])
     lines = []
     for case in out["cases"]:
         p, d = fs.get(f"{case}/parsolve"), fs.get(f"{case}/dolfinx")
-        if not p or not p["peak"]:
+        mp, md = (memory_model(fs, case, c, rows) for c in ("parsolve", "dolfinx"))
+        if not mp:
             continue
-        mp = at(p["peak"], N, P)
-        md = at(d["peak"], N, P) if d and d["peak"] else None
-        rep = p["peak"]["b"] * N
-        line = (f"- **{case}** at {P} ranks × {N / 1e6:.0f}M DOFs: parsolve "
-                f"{mp / 2 ** 30:.1f} GiB per rank, of which {rep / 2 ** 30:.1f} GiB replicated "
-                f"(b·N: the same on every rank whatever P)")
+        held = sum(p[k]["b"] for k in PARTS if p.get(k)) * N  # parsolve's replicated arrays
+        line = (f"- **{case}** at {P} ranks × {N / 1e6:.0f}M DOFs, memory per rank: parsolve "
+                f"**{mp['total'] / 2 ** 30:.1f} GiB**")
+        if mp["factor"]:
+            line += (f" ({mp['rest'] / 2 ** 30:.1f} GiB besides MUMPS + "
+                     f"{mp['factor'] / 2 ** 30:.1f} GiB of factor)")
+        line += (f", of which {held / 2 ** 30:.1f} GiB of numpy arrays every rank holds whole "
+                 f"(the b·N terms of mesh, vectors, operator, element, other)")
         if md:
-            line += f"; DOLFINx {md / 2 ** 30:.1f} GiB per rank (×{mp / md:.1f})"
+            line += f"; DOLFINx **{md['total'] / 2 ** 30:.1f} GiB** (×{mp['total'] / md['total']:.1f})"
+        line += f"; the plain fit of the peak gives {at(p['peak'], N, P) / 2 ** 30:.1f} GiB"
+        if d and d.get("peak"):
+            line += f" (DOLFINx {at(d['peak'], N, P) / 2 ** 30:.1f})"
+        lines.append(line + ".")
         tp = [at(p[f"t_{ph}"], N, P) for ph in PHASES]
         if all(t is not None for t in tp):
-            line += ("; time " + ", ".join(f"{ph} {t:,.0f} s" for ph, t in zip(PHASES, tp))
+            tline = ("  - CPU time per rank: " + ", ".join(f"{ph} {t:,.0f} s"
+                                                          for ph, t in zip(PHASES, tp))
                      + f" (total {sum(tp):,.0f} s")
             td = [at(d[f"t_{ph}"], N, P) for ph in PHASES] if d else []
             if td and all(t is not None for t in td):
-                line += f"; DOLFINx {sum(td):,.0f} s"
-            line += ")"
-        lines.append(line + ".")
-        big = max(ok_rows(out["rows"], "parsolve", case), key=lambda r: (r["dofs"], -r["nranks"]))
-        mu = (big.get("mumps") or {})
+                tline += f"; DOLFINx {sum(td):,.0f} s"
+            lines.append(tline + ").")
+        big = max((r for r in rows if r["code"] == "parsolve" and r["case"] == case),
+                  key=lambda r: (r["dofs"], -r["nranks"]))
+        mu = big.get("mumps") or {}
         if mu.get("used_mb_sum"):
-            dim = CASES[case]["dim"]
-            grow = (N / big["dofs"]) * np.log(N) / np.log(big["dofs"]) if dim == 2 \
-                else (N / big["dofs"]) ** (4 / 3)
-            fl = (N / big["dofs"]) ** (1.5 if dim == 2 else 2.0)
+            grow, fl = factor_growth(case, big["dofs"], N)
             lines.append(
-                f"  - MUMPS factor by nested-dissection growth from the largest run "
-                f"({big['dofs']:,} DOFs, {mu['used_mb_sum']:,} MB used in total, "
-                f"{mu['flops']:.2e} flops): {mu['used_mb_sum'] * grow / P / 1e3:,.1f} GB per "
-                f"rank if spread evenly ({'N log N' if dim == 2 else 'N^(4/3)'}), "
-                f"{mu['flops'] * fl:.2e} flops ({'N^1.5' if dim == 2 else 'N^2'}): at the "
-                f"largest run's rate {big['cpu']['factorization'] * fl / P:,.0f} s on "
-                f"{P} ranks with perfect speed-up.")
+                f"  - MUMPS from the largest 1-rank run ({big['dofs']:,} DOFs, "
+                f"{mu['used_mb_sum']:,} MB used, {mu['flops']:.2e} flops), grown as nested "
+                f"dissection ({'N log N' if CASES[case]['dim'] == 2 else 'N^(4/3)'} memory, "
+                f"{'N^1.5' if CASES[case]['dim'] == 2 else 'N^2'} flops): "
+                f"{mu['used_mb_sum'] * grow / 1e3:,.0f} GB in all, {mu['flops'] * fl:.2e} flops, "
+                f"{big['cpu']['factorization'] * fl / P:,.0f} s on {P} ranks at this core's "
+                f"rate with perfect speed-up (the linear fit above says "
+                f"{tp[2]:,.0f} s).")
     return lines
 
 
@@ -861,23 +899,25 @@ no term the runs cannot see — communication growing with P (allgather and redu
 vectors cost ∝ N per rank and step over the network, counted only through b), load imbalance,
 and a direct factorization whose fill and flops grow faster than N (nested dissection: factor
 entries ∝ N log N in 2D, N^(4/3) in 3D; flops ∝ N^1.5, N^2): for the direct case the linear
-fit underestimates the factorization, hence the separate MUMPS line. GAMG's iterations are
-taken as constant (measured: nearly flat with N)."""
+fit underestimates the factorization and its memory: the direct model is the fit of the peak
+without MUMPS's factor plus that factor grown by nested dissection from the largest run and
+spread evenly over the ranks (MUMPS's own per-rank balance is not modelled). GAMG's iterations
+are taken as constant (measured: nearly flat with N). CPU time, not wall: the runs shared 2
+cores with other jobs."""
 
 
 def verdicts(out: dict, fs: dict, fall_misses: list[str]) -> list[str]:
     lines = []
-    worst = []
-    for p, d in pairs(out):
-        if "failed" in p or not d or p["nranks"] > 2:
+    for case in out["cases"]:
+        worst = [(peak(p) / peak(d), p) for p, d in pairs(out) if p["case"] == case
+                 and "failed" not in p and d and p["nranks"] <= 2]
+        if not worst:
             continue
-        worst.append((peak(p) / peak(d), p))
-    if worst:
         over = [(q, p) for q, p in worst if q > 1.5]
         q, p = max(worst, key=lambda x: x[0])
-        lines.append(f"- **Peak memory ≤ 1.5× DOLFINx** (1 and 2 ranks): "
+        lines.append(f"- **Peak memory ≤ 1.5× DOLFINx**, {case} (1 and 2 ranks): "
                      f"{'MET' if not over else 'MISSED'} — ratios {min(w for w, _ in worst):.2f}"
-                     f"–{q:.2f}, worst {p['case']} {p['dofs']:,} DOFs np={p['nranks']}"
+                     f"–{q:.2f}, worst {p['dofs']:,} DOFs np={p['nranks']}"
                      + (f"; {len(over)} of {len(worst)} runs above 1.5" if over else "") + ".")
     lines.append("- **Mesh, vectors and matrix per rank at 2 ranks ≤ 0.6× 1 rank**: "
                  + ("MET." if not fall_misses else "MISSED — worst 2-rank / 1-rank ratio: "
@@ -916,11 +956,15 @@ def markdown(out: dict) -> str:
         "",
         "## Peak memory per rank (MiB, max over ranks) and its parts",
         "",
-        "*np* columns: numpy memory live at its largest snapshot, by the parsolve module that "
-        "allocated it (mesh = parsolve.mesh, operator = parsolve.la: pattern, operator values "
-        "and positions; element = parsolve.fem + effects; other = vectors, relations, outputs). "
-        "PETSc Mat: allocated nonzeros × 12 B + row offsets. MUMPS used = INFOG(21) (max over "
-        "ranks; the direct case). DOLFINx mesh+spaces = resident growth over its set-up.",
+        "*np* columns: numpy arrays parsolve holds (at the larger of two snapshots: after "
+        "assembly, after post-processing), by what holds them: mesh = the model's mesh; "
+        "operator = node pattern + saddle operator (values, positions, columns) + relation "
+        "block; element = the effects and their composition (element work arrays); vectors = "
+        "the step's solution, multipliers and output fields (rank 0 holds the gathered ones); "
+        "other = partition, numbering, relations, regions. PETSc Mat: allocated nonzeros × 12 B "
+        "+ row offsets. MUMPS used = INFOG(21) (max over ranks; the direct case). DOLFINx "
+        "mesh+spaces = resident growth over its set-up (its data live in C++). *cpu*: CPU "
+        "seconds / wall seconds of the run, parsolve/DOLFINx (1 = a core to itself).",
         "",
         memory_table(out),
         "",
