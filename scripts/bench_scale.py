@@ -282,8 +282,9 @@ def instrument(drv, rec: Recorder) -> dict:
         held["system"] = system
         rec.snap("system")
         system.assemble = rec.timed("assembly", system.assemble, on_matrix)
-        system.gather = rec.timed("post", system.gather)
-        system.unpack = rec.timed("post", system.unpack)
+        for name in ("gather", "unpack"):  # the solution back to fields (if the driver has them)
+            if hasattr(system, name):
+                setattr(system, name, rec.timed("post", getattr(system, name)))
 
     def on_matrix(mat):
         held["mat"] = mat
