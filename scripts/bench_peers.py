@@ -415,6 +415,268 @@ def dolfinx_versions() -> dict:
 
 
 # --------------------------------------------------------------------------------------------------
+# DOLFINx 0.5: every phase of a linear run, with the memory of each (scripts/bench_scale.py)
+
+
+def proc_memory() -> dict:
+    """This process's resident memory now (VmRSS) and its peak so far (VmHWM), in bytes, from
+    /proc/self/status (Linux); zeros elsewhere."""
+    out = {"rss": 0, "hwm": 0}
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith(("VmRSS:", "VmHWM:")):
+                    out["rss" if line.startswith("VmRSS") else "hwm"] = int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return out
+
+
+def mat_bytes(A) -> float:
+    """Bytes of an assembled AIJ matrix on this rank, from MatGetInfo (PETSc 3.18 leaves
+    MatInfo.memory at 0): values + column indices of the allocated nonzeros, row offsets."""
+    from petsc4py import PETSc
+
+    info = A.getInfo(PETSc.Mat.InfoType.LOCAL)
+    isize = np.dtype(PETSc.IntType).itemsize
+    rows = A.getLocalSize()[0]
+    return info["nz_allocated"] * (np.dtype(PETSc.ScalarType).itemsize + isize) + (rows + 1) * isize
+
+
+def mumps_memory(ksp) -> dict:
+    """MUMPS's own memory (MB = 1e6 bytes) if the KSP's PC is a MUMPS factorization: INFOG(16)
+    estimated in-core factorization memory (max over ranks), INFOG(18) allocated, INFOG(21)
+    effectively used (max over ranks), INFOG(22) used (sum), INFO(22) used on this rank;
+    RINFOG(3) flops, INFOG(29) factor entries (negative: millions)."""
+    pc = ksp.getPC()
+    if pc.getType() not in ("lu", "cholesky"):
+        return {}
+    F = pc.getFactorMatrix()
+    if F.getType() != "mumps":
+        return {}
+    g = {k: int(F.getMumpsInfog(k)) for k in (16, 18, 21, 22, 29)}
+    entries = float(g[29]) if g[29] >= 0 else -float(g[29]) * 1e6
+    return dict(estimated_mb_max=g[16], allocated_mb_max=g[18], used_mb_max=g[21],
+                used_mb_sum=g[22], used_mb_local=int(F.getMumpsInfo(22)),
+                flops=float(F.getMumpsRinfog(3)), factor_entries=entries)
+
+
+def _voigt(s, dim: int):
+    """Voigt vector of a symmetric tensor: 2D (xx, yy, xy), 3D (xx, yy, zz, yz, xz, xy)."""
+    import ufl
+
+    if dim == 2:
+        return ufl.as_vector([s[0, 0], s[1, 1], s[0, 1]])
+    return ufl.as_vector([s[0, 0], s[1, 1], s[2, 2], s[1, 2], s[0, 2], s[0, 1]])
+
+
+def dolfinx_phases(mesh_file: str, cell: str, options: dict, out_file: str | None = None,
+                   traction=None, plane: str = "strain", comm=None,
+                   jit_cache: str | None = None, near_null: bool = False) -> dict:
+    """A clamped block under an end traction, every phase timed and its memory recorded.
+
+    The mesh is read on rank 0 from ``mesh_file`` (npz: ``points`` (N, d), ``cells`` (M, k) in
+    meshio/VTK order; 2D triangles/quads or 3D hexahedra/tetrahedra) and distributed by DOLFINx.
+    P1/Q1 vector elasticity, E = 1, nu = 0.3 (plane strain in 2D), u = 0 on x = 0, traction
+    ``traction`` (default: -1 along the last axis) on x = 1. Phases (barrier, perf_counter; the
+    slowest rank's): ``setup`` = create_mesh + function spaces + boundary conditions + meshtags
+    (forms excluded: their JIT is ``t_forms``); ``assembly`` = create_matrix + assemble_matrix with
+    the BC + the right-hand side (lifting, set_bc); ``factorization`` = KSPSetUp + PCSetUp (the
+    MUMPS factorization, or GAMG's hierarchy); ``solve`` = KSPSolve; ``post`` = the stresses:
+    cell values (interpolation into DG0, the cell's centre) and nodal averages (a lumped
+    projection: ∫σ·w / ∫w on P1, the cells' stresses weighted by their share of each node);
+    ``output`` = XDMF/HDF5 of the mesh, u and both stresses (skipped without ``out_file``).
+    Returns ``seconds`` and ``cpu`` (CPU seconds, max over ranks: on a shared machine the wall
+    time also counts other processes) per phase, ``forms`` among them. ``options``: the KSP's PETSc options (no prefix); ``near_null``: rigid-body modes for GAMG.
+    Memory per phase: VmRSS/VmHWM after it (max and mean over ranks), the matrix's bytes and
+    MUMPS's INFOG figures. Checks: ||u||₂, max |u|, u at the corner x = y (= z) = 1.
+    """
+    import ufl
+    from dolfinx import fem, io, mesh as dmesh
+    import dolfinx.fem.petsc as fpetsc
+    from dolfinx.cpp.io import perm_vtk
+    from mpi4py import MPI
+    from petsc4py import PETSc
+
+    comm = _comm(comm)
+    mem: dict[str, dict] = {}
+    wall: dict[str, float] = {}
+    cpu: dict[str, float] = {}
+
+    def clock(name: str, fn, *args):
+        """Barrier, fn(*args), barrier: wall seconds and CPU seconds (max over ranks)."""
+        comm.Barrier()
+        t0, c0 = time.perf_counter(), _cpu_now()
+        out = fn(*args)
+        comm.Barrier()
+        wall[name] = time.perf_counter() - t0
+        cpu[name] = comm.allreduce(_cpu_now() - c0, op=MPI.MAX)
+        return out
+
+    def snap(name: str, extra: dict | None = None) -> None:
+        m = proc_memory()
+        row = {"rss_max": comm.allreduce(m["rss"], op=MPI.MAX),
+               "rss_mean": comm.allreduce(m["rss"]) / comm.size,
+               "hwm_max": comm.allreduce(m["hwm"], op=MPI.MAX),
+               "hwm_mean": comm.allreduce(m["hwm"]) / comm.size}
+        mem[name] = {**row, **(extra or {})}
+
+    snap("start")
+    kinds = {"triangle": ("triangle", dmesh.CellType.triangle, 3, 2),
+             "quad": ("quadrilateral", dmesh.CellType.quadrilateral, 4, 2),
+             "tetra": ("tetrahedron", dmesh.CellType.tetrahedron, 4, 3),
+             "hexahedron": ("hexahedron", dmesh.CellType.hexahedron, 8, 3)}
+    ufl_cell, ctype, k, dim = kinds[cell]
+    if comm.rank == 0:
+        data = np.load(mesh_file)
+        points = np.ascontiguousarray(data["points"][:, :dim], dtype=np.float64)
+        cells = np.ascontiguousarray(data["cells"][:, perm_vtk(ctype, k)].astype(np.int64))
+        del data
+    else:
+        points, cells = np.zeros((0, dim)), np.zeros((0, k), dtype=np.int64)
+    traction = tuple(traction) if traction is not None else (0.0,) * (dim - 1) + (-1.0,)
+    lmbda, mu = lame(E_MOD, NU, plane) if dim == 2 else lame(E_MOD, NU, "strain")
+
+    def eps(w):
+        return ufl.sym(ufl.grad(w))
+
+    def sigma(w):
+        return 2.0 * mu * eps(w) + lmbda * ufl.tr(eps(w)) * ufl.Identity(dim)
+
+    def setup():
+        domain = ufl.Mesh(ufl.VectorElement("Lagrange", ufl_cell, 1))
+        msh = dmesh.create_mesh(comm, cells, points, domain)
+        V = fem.VectorFunctionSpace(msh, ("Lagrange", 1))
+        fdim = dim - 1
+        left = dmesh.locate_entities_boundary(msh, fdim, lambda x: np.isclose(x[0], 0.0))
+        right = dmesh.locate_entities_boundary(msh, fdim, lambda x: np.isclose(x[0], 1.0))
+        tags = dmesh.meshtags(msh, fdim, right, np.full(len(right), 1, dtype=np.int32))
+        bc = fem.dirichletbc(np.zeros(dim, dtype=PETSc.ScalarType),
+                             fem.locate_dofs_topological(V, fdim, left), V)
+        nv = 3 if dim == 2 else 6
+        S_cell = fem.VectorFunctionSpace(msh, ("DG", 0), dim=nv)
+        S_node = fem.VectorFunctionSpace(msh, ("Lagrange", 1), dim=nv)
+        W = fem.FunctionSpace(msh, ("Lagrange", 1))
+        return msh, V, tags, bc, S_cell, S_node, W
+
+    msh, V, tags, bc, S_cell, S_node, W = clock("setup", setup)
+    del points, cells
+    snap("setup")
+
+    u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
+    uh = fem.Function(V, name="displacement")
+    ds = ufl.Measure("ds", domain=msh, subdomain_data=tags)
+    t_vec = fem.Constant(msh, np.array(traction, dtype=PETSc.ScalarType))
+    jit = _jit_params(comm, jit_cache)
+
+    def forms():
+        a = _form(ufl.inner(sigma(u), eps(v)) * ufl.dx, jit)
+        L = _form(ufl.inner(t_vec, v) * ds(1), jit)
+        s_u = _voigt(sigma(uh), dim)
+        expr = fem.Expression(s_u, S_cell.element.interpolation_points())
+        p = _form(ufl.inner(s_u, ufl.TestFunction(S_node)) * ufl.dx, jit)
+        m = _form(ufl.TestFunction(W) * ufl.dx, jit)
+        return a, L, expr, p, m
+
+    a, L, expr, p_form, m_form = clock("forms", forms)
+
+    def assembly():
+        A = fpetsc.create_matrix(a)
+        fpetsc.assemble_matrix(A, a, bcs=[bc])
+        A.assemble()
+        b = fpetsc.assemble_vector(L)
+        fpetsc.apply_lifting(b, [a], bcs=[[bc]])
+        b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        fpetsc.set_bc(b, [bc])
+        return A, b
+
+    A, b = clock("assembly", assembly)
+    snap("assembly", {"mat_bytes_max": comm.allreduce(mat_bytes(A), op=MPI.MAX),
+                      "mat_bytes_sum": comm.allreduce(mat_bytes(A))})
+
+    prefix = "bench_scale_"
+    opts = PETSc.Options()
+    for key, val in options.items():
+        opts[prefix + key] = val
+    ksp = PETSc.KSP().create(comm)
+    ksp.setOptionsPrefix(prefix)
+    if near_null:
+        nown = V.dofmap.index_map.size_local
+        xyz = np.ascontiguousarray(V.tabulate_dof_coordinates()[:nown, :dim]).ravel()
+        coords = PETSc.Vec().createWithArray(xyz, bsize=dim, comm=comm)
+        A.setNearNullSpace(PETSc.NullSpace().createRigidBody(coords))
+    ksp.setOperators(A)
+    ksp.setFromOptions()
+    x = A.createVecRight()
+
+    def factorize():
+        ksp.setUp()
+        ksp.getPC().setUp()
+
+    clock("factorization", factorize)
+    snap("factorization", mumps_memory(ksp))
+    clock("solve", ksp.solve, b, x)
+    r = b.duplicate()
+    A.mult(x, r)
+    r.aypx(-1.0, b)
+    relres = r.norm() / b.norm()
+    snap("solve")
+
+    def post():
+        uh.x.array[: x.getLocalSize()] = x.getArray()
+        uh.x.scatter_forward()
+        s_cell = fem.Function(S_cell, name="stress_cells")
+        s_cell.interpolate(expr)
+        s_node = fem.Function(S_node, name="stress")
+        sums = fpetsc.assemble_vector(p_form)
+        sums.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        weights = fpetsc.assemble_vector(m_form)
+        weights.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        nv = s_node.x.bs
+        nown = S_node.dofmap.index_map.size_local
+        s_node.x.array[: nown * nv] = (sums.array.reshape(-1, nv)
+                                        / weights.array[:, None]).ravel()
+        s_node.x.scatter_forward()
+        return s_cell, s_node
+
+    s_cell, s_node = clock("post", post)
+    snap("post")
+
+    def output():
+        with io.XDMFFile(comm, out_file, "w") as f:
+            f.write_mesh(msh)
+            f.write_function(uh, 1.0)
+            f.write_function(s_node, 1.0)
+            try:  # DG0: cell data
+                f.write_function(s_cell, 1.0)
+            except RuntimeError:
+                pass
+
+    if out_file:
+        clock("output", output)
+    snap("output")
+
+    nown = V.dofmap.index_map.size_local
+    owned = uh.x.array[: nown * dim].reshape(-1, dim)
+    xdof = V.tabulate_dof_coordinates()[:nown, :dim]
+    hit = np.flatnonzero(np.all(np.isclose(xdof, 1.0), axis=1))
+    corner = owned[hit[0]].tolist() if len(hit) else None
+    corner = [c for c in comm.allgather(corner) if c is not None][0]
+    umax = comm.allreduce(float(np.abs(owned).max()) if nown else 0.0, op=MPI.MAX)
+    its, reason = ksp.getIterationNumber(), int(ksp.getConvergedReason())
+    for key in options:
+        opts.delValue(prefix + key)
+    ksp.destroy()
+    A.destroy()
+    return dict(peer="dolfinx", cell=cell, dim=dim, nranks=comm.size,
+                dofs=V.dofmap.index_map.size_global * dim,
+                ncells=msh.topology.index_map(dim).size_global, options=options,
+                seconds=wall, cpu=cpu, iterations=its,
+                converged_reason=reason, relres=float(relres), unorm=float(x.norm()),
+                umax=umax, corner=corner, memory=mem, versions=dolfinx_versions())
+
+
+# --------------------------------------------------------------------------------------------------
 # scikit-fem
 
 

@@ -1,0 +1,1094 @@
+#!/usr/bin/env python3
+"""Scale benchmark (issue 8): memory per rank and time per phase against DOLFINx 0.5 at 1 and 2
+ranks, weak scaling at 1, 2 and 4 ranks, and a model of 64 ranks × 50M DOFs fitted on them.
+
+Problems: a clamped block under an end traction (E = 1, ν = 0.3; u = 0 on x = 0, traction −1
+along the last axis on x = 1), one linear step:
+  2d-direct     unit square, N × N quads split into 2N² P1 triangles, plane strain, MUMPS
+                (parsolve's direct preset: LDLᵀ, QAMD, null-pivot detection), 2(N+1)² DOFs;
+  3d-iterative  unit cube, N³ Q1 hexahedra, CG + GAMG with the rigid-body modes (parsolve's
+                iterative preset, rtol 1e-10 on the true residual), 3(N+1)³ DOFs;
+  (2d-iterative and 3d-direct on request: --cases).
+The same points and cells (parsolve's generator, saved as npz) go to DOLFINx, given on rank 0 and
+distributed by it, with the same PETSc solver options as parsolve's preset (Debian's
+/usr/bin/python3 runs scripts/bench_peers.py's `dolfinx_phases`). Every run is a fresh process
+under scripts/mpirun.sh, one thread per rank.
+
+Phases (CPU seconds, max over ranks: the machine is shared, so wall seconds also count other
+processes; wall seconds are in the JSON and the last columns):
+  set-up          parsolve: load_scene + build_model (mesh generation, regions, effects) +
+                  SaddleSystem (partition, numbering, pattern, operator) + make_solver;
+                  DOLFINx: create_mesh + function spaces + BC + meshtags (the forms' JIT apart);
+  assembly        parsolve: SaddleSystem.assemble (first); DOLFINx: create_matrix +
+                  assemble_matrix + the right-hand side;
+  factorization   PCSetUp: MUMPS analysis + factorization, or GAMG's hierarchy;
+  solve           KSPSolve (parsolve: + its true-residual check);
+  post            the stresses: parsolve: gather + unpack + step_outputs (cell means, nodal
+                  averages, relation outputs); DOLFINx: DG0 interpolation + lumped projection;
+  output          parsolve: ResultWriter (HDF5 + XDMF: create, write_step, close); DOLFINx:
+                  XDMFFile of the mesh, u and both stresses.
+parsolve's phases are timed by wrapping the driver's own calls (SaddleSystem, make_solver,
+the solver's factorization, step_outputs, ResultWriter) from this script; the package is not
+changed. Its /timings group (assembly, factorization, solve) is kept in the JSON beside them.
+
+Memory per rank: VmHWM (peak resident, /proc/self/status) after every phase, the max over ranks;
+the numpy arrays parsolve holds, by what holds them (mesh; operator = node pattern + saddle
+operator + relation block; element = the effects and their composition; vectors = the step's
+solution, multipliers and output fields; other = partition, numbering, relations), found by
+walking the objects after assembly and after the post-processing; the PETSc matrix (MatGetInfo:
+allocated nonzeros × 12 B + row offsets) and MUMPS's own factor memory (INFOG(21): used, max
+over ranks; INFOG(16): estimated). --trace adds tracemalloc's peak of Python + numpy memory per
+phase (slower: not for timings).
+
+Fits (least squares on the relative error, coefficients ≥ 0): memory per rank = a + b·N + c·N/P
+and CPU time per phase likewise, on every (N, P) measured (4-rank runs count for memory, not for
+time: 2 cores), then the model at 64 ranks × 50M DOFs.
+
+Usage (repository root):
+    .venv/bin/python scripts/bench_scale.py                  # ≈ 35-40 min on 2 loaded cores
+    .venv/bin/python scripts/bench_scale.py --quick          # small sizes, a smoke test
+    .venv/bin/python scripts/bench_scale.py --sizes 2d-direct=1000,1414,2000 3d-iterative=60,79,100
+    .venv/bin/python scripts/bench_scale.py --report         # tables again from the JSON
+Writes scripts/results/bench_scale.md and .json; scratch in bench_results/scale/.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+SCRIPTS = ROOT / "scripts"
+RESULTS = SCRIPTS / "results"
+SCRATCH = ROOT / "bench_results" / "scale"
+VENV_PY = str(ROOT / ".venv" / "bin" / "python")
+DEBIAN_PY = "/usr/bin/python3"
+MiB = 2.0 ** 20
+
+CASES = {
+    "2d-direct": dict(dim=2, cell="triangle", preset="direct"),
+    "3d-iterative": dict(dim=3, cell="hexahedron", preset="iterative"),
+    "2d-iterative": dict(dim=2, cell="triangle", preset="iterative"),
+    "3d-direct": dict(dim=3, cell="hexahedron", preset="direct"),
+}
+# cells per side; each size about twice the one before, so that (1, 2, 4) ranks on them is weak
+# scaling. This machine (2 cores, 24 GiB, shared with other engineers' test runs): the largest
+# ≲ 1.5M DOFs at most, here less to stay within 40 minutes of a loaded machine; --sizes for
+# bigger runs elsewhere (e.g. 2d-direct=432,611,865 3d-iterative=37,47,59: up to 1.5M / 648k).
+SIZES = {"2d-direct": [305, 432, 611],          # 187k, 375k, 749k DOFs
+         "3d-iterative": [29, 37, 47],          # 81k, 165k, 332k DOFs
+         "2d-iterative": [305, 432, 611],
+         "3d-direct": [14, 18, 23]}             # 10k, 21k, 41k DOFs
+QUICK = {"2d-direct": [60, 85, 120], "3d-iterative": [10, 13, 16], "2d-iterative": [60, 85, 120],
+         "3d-direct": [8, 10, 13]}
+DEFAULT_CASES = ["2d-direct", "3d-iterative"]
+PHASES = ("setup", "assembly", "factorization", "solve", "post", "output")
+TARGET = (64, 50e6)  # ranks, DOFs of the model
+TRACE_FRAMES = 1
+PARTS = ("mesh", "operator", "element", "vectors", "other")
+
+
+def dofs_of(case: str, n: int) -> int:
+    dim = CASES[case]["dim"]
+    return dim * (n + 1) ** dim
+
+
+def scene_text(case: str, n: int) -> str:
+    c = CASES[case]
+    if c["dim"] == 2:
+        mesh = f'generator = "rectangle"\nlx = 1.0\nly = 1.0\nnx = {n}\nny = {n}\ncell = "{c["cell"]}"'
+        model, left, right = 'hypothesis = "plane_strain"', "left", "right"
+        traction, comps = "[0.0, -1.0]", '["x", "y"]'
+    else:
+        mesh = (f'generator = "box"\nlx = 1.0\nly = 1.0\nlz = 1.0\nnx = {n}\nny = {n}\nnz = {n}\n'
+                f'cell = "{c["cell"]}"')
+        model, left, right = 'hypothesis = "3d"', "xmin", "xmax"
+        traction, comps = "[0.0, 0.0, -1.0]", '["x", "y", "z"]'
+    return f"""title = "bench_scale {case} n={n}"
+[mesh]
+{mesh}
+[model]
+{model}
+[[materials]]
+E = 1.0
+nu = 0.3
+[[loads]]
+name = "end"
+region = "{right}"
+traction = {traction}
+[[relations]]
+name = "clamp"
+type = "dirichlet"
+region = "{left}"
+components = {comps}
+[steps]
+count = 1
+[solver]
+preset = "{c['preset']}"
+"""
+
+
+def tag_of(code: str, case: str, n: int, nranks: int) -> str:
+    return f"{code}_{case}_{n}_np{nranks}"
+
+
+# ------------------------------------------------------------------------------------------------
+# memory helpers (both workers)
+
+
+def cpu_seconds() -> float:
+    """CPU seconds of this process (user + system)."""
+    t = os.times()
+    return t.user + t.system
+
+
+def proc_memory() -> dict:
+    """VmRSS and VmHWM of this process in bytes."""
+    out = {"rss": 0, "hwm": 0}
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith(("VmRSS:", "VmHWM:")):
+                out["rss" if line.startswith("VmRSS") else "hwm"] = int(line.split()[1]) * 1024
+    return out
+
+
+def held_bytes(roots: dict[str, list]) -> dict[str, int]:
+    """numpy memory held by objects, per category: every array reachable from a category's
+    roots through parsolve objects' attributes, dicts, lists and tuples (not through PETSc or
+    MPI objects), counted once (views by their base) and in the first category that reaches
+    it. Held memory, not temporaries: the peak resident memory shows those."""
+    seen: set[int] = set()
+    bases: set[int] = set()
+    out = {}
+    for cat, objs in roots.items():
+        total, stack = 0, list(objs)
+        while stack:
+            o = stack.pop()
+            if id(o) in seen:
+                continue
+            seen.add(id(o))
+            if isinstance(o, np.ndarray):
+                base = o
+                while isinstance(base.base, np.ndarray):
+                    base = base.base
+                if id(base) not in bases:
+                    bases.add(id(base))
+                    total += base.nbytes
+            elif isinstance(o, dict):
+                stack.extend(o.values())
+            elif isinstance(o, (list, tuple, set, frozenset)):
+                stack.extend(o)
+            elif type(o).__module__.startswith("parsolve"):
+                stack.extend(vars(o).values() if hasattr(o, "__dict__") else ())
+                stack.extend(getattr(o, k) for k in getattr(type(o), "__slots__", ())
+                             if hasattr(o, k))
+        out[cat] = total
+    return out
+
+
+def parsolve_categories(system, step: tuple | None) -> dict[str, int]:
+    """mesh: the model's mesh; operator: the node pattern, the saddle operator, the relations'
+    block; element: the effects and their composition (element work arrays); vectors: the
+    step's solution, multipliers and output fields; other: the rest of the system and model
+    (partition, numbering, relations, regions)."""
+    model = system.model
+    roots = {"mesh": [model.mesh],
+             "operator": [getattr(system, k, None) for k in ("pattern", "op", "block")],
+             "element": [model.effects, getattr(system, "composition", None)],
+             "vectors": list(step or ()),
+             "other": [system, model]}
+    return held_bytes(roots)
+
+
+# ------------------------------------------------------------------------------------------------
+# parsolve worker (parsolve's venv, under mpirun)
+
+
+class Recorder:
+    """Per-rank phase seconds and memory snapshots; reduced over ranks by ``result``."""
+
+    def __init__(self, comm, trace: bool):
+        self.comm, self.trace = comm, trace
+        self.seconds = dict.fromkeys(PHASES, 0.0)
+        self.cpu = dict.fromkeys(PHASES, 0.0)
+        self.memory: dict[str, dict] = {}
+        self.extra: dict = {}
+        self.snap_seconds = self.snap_cpu = 0.0  # spent measuring memory: not in the phases
+
+    def timed(self, phase: str, fn, after=None):
+        """fn timed into ``phase``, minus the snapshots taken while it ran; then ``after``."""
+        def wrapper(*args, **kwargs):
+            t0, c0, s0, sc0 = time.perf_counter(), cpu_seconds(), self.snap_seconds, self.snap_cpu
+            out = fn(*args, **kwargs)
+            self.seconds[phase] += time.perf_counter() - t0 - (self.snap_seconds - s0)
+            self.cpu[phase] += cpu_seconds() - c0 - (self.snap_cpu - sc0)
+            if after is not None:
+                after(out)
+            return out
+        return wrapper
+
+    def snap(self, name: str, parts=None, **extra) -> None:
+        """Resident memory now and at its peak; ``parts()``: held numpy bytes by category;
+        with tracing, the traced (Python + numpy) memory now and its peak since the last snap."""
+        from mpi4py import MPI
+
+        t0, c0 = time.perf_counter(), cpu_seconds()
+        m = proc_memory()
+        row = {"rss": m["rss"], "hwm": m["hwm"], **extra}
+        if parts is not None:
+            row.update({f"np_{k}": v for k, v in parts().items()})
+        if self.trace:
+            import tracemalloc
+
+            row["traced"], row["traced_peak"] = tracemalloc.get_traced_memory()
+            tracemalloc.reset_peak()
+        keys = sorted(row)
+        vals = np.array([float(row[k]) for k in keys])
+        mx, sm = np.empty_like(vals), np.empty_like(vals)
+        self.comm.Allreduce(vals, mx, op=MPI.MAX)
+        self.comm.Allreduce(vals, sm, op=MPI.SUM)
+        self.memory[name] = {**{f"{k}_max": float(v) for k, v in zip(keys, mx)},
+                             **{f"{k}_mean": float(v) / self.comm.size for k, v in zip(keys, sm)}}
+        self.snap_seconds += time.perf_counter() - t0
+        self.snap_cpu += cpu_seconds() - c0
+
+    def result(self) -> dict:
+        from mpi4py import MPI
+
+        seconds, cpu = dict(self.seconds), dict(self.cpu)
+        seconds["solve"] -= seconds["factorization"]  # solver.solve factorizes first
+        cpu["solve"] -= cpu["factorization"]
+        slowest = {k: self.comm.allreduce(v, op=MPI.MAX) for k, v in seconds.items()}
+        cpu = {k: self.comm.allreduce(v, op=MPI.MAX) for k, v in cpu.items()}
+        return {"seconds": slowest, "cpu": cpu, "memory": self.memory,
+                "snap_seconds": self.comm.allreduce(self.snap_seconds, op=MPI.MAX), **self.extra}
+
+
+def instrument(drv, rec: Recorder) -> dict:
+    """Wrap the driver's calls to time and measure each phase (the package is not changed).
+    Returns the objects caught on the way (system, matrix, solver)."""
+    held: dict = {}
+    mat_bytes = _mat_bytes
+
+    def on_system(system):
+        held["system"] = system
+        rec.snap("system")
+        system.assemble = rec.timed("assembly", system.assemble, on_matrix)
+        for name in ("gather", "unpack"):  # the solution back to fields (if the driver has them)
+            if hasattr(system, name):
+                setattr(system, name, rec.timed("post", getattr(system, name)))
+
+    def on_matrix(mat):
+        held["mat"] = mat
+        rec.snap("assembly", lambda: parsolve_categories(held["system"], None),
+                 mat_bytes=mat_bytes(mat))
+
+    def on_solver(solver):
+        held["solver"] = solver
+        if hasattr(solver, "_prepare"):  # the factorization, when the operator changed
+            solver._prepare = rec.timed("factorization", solver._prepare,
+                                        lambda _: rec.snap("factorization"))
+        solver.solve = rec.timed("solve", solver.solve, lambda _: rec.snap("solve"))
+
+    drv.SaddleSystem = rec.timed("setup", drv.SaddleSystem, on_system)
+    drv.make_solver = rec.timed("setup", drv.make_solver, on_solver)
+    step_outputs = rec.timed("post", drv.step_outputs)
+
+    def outputs(comm, system, q, multipliers, *args, **kwargs):
+        out = step_outputs(comm, system, q, multipliers, *args, **kwargs)
+        rec.snap("post", lambda: parsolve_categories(system, (q, multipliers, out)))
+        return out
+
+    drv.step_outputs = outputs
+    base = drv.ResultWriter
+
+    class TimedWriter(base):
+        """The result file's creation, steps and closing: the output phase."""
+
+        def __init__(self, *args, **kwargs):
+            rec.timed("output", super().__init__)(*args, **kwargs)
+
+        def write_step(self, *args, **kwargs):
+            return rec.timed("output", super().write_step)(*args, **kwargs)
+
+        def close(self, *args, **kwargs):
+            return rec.timed("output", super().close)(*args, **kwargs)
+
+    drv.ResultWriter = TimedWriter
+    return held
+
+
+def _mat_bytes(A) -> float:
+    """Bytes of an assembled AIJ/BAIJ matrix on this rank: allocated nonzeros × (value + column
+    index) + row offsets (PETSc 3.18's MatInfo.memory is 0)."""
+    from petsc4py import PETSc
+
+    info = A.getInfo(PETSc.Mat.InfoType.LOCAL)
+    isize = np.dtype(PETSc.IntType).itemsize
+    bs = max(int(info["block_size"]), 1)
+    rows = A.getLocalSize()[0]
+    return (info["nz_allocated"] * np.dtype(PETSc.ScalarType).itemsize
+            + info["nz_allocated"] / (bs * bs) * isize + (rows / bs + 1) * isize)
+
+
+def _mumps(solver) -> dict:
+    pc = solver.ksp.getPC()
+    if pc.getType() not in ("lu", "cholesky") or pc.getFactorMatrix().getType() != "mumps":
+        return {}
+    F = pc.getFactorMatrix()
+    g = {k: int(F.getMumpsInfog(k)) for k in (16, 18, 21, 22, 29)}
+    return dict(estimated_mb_max=g[16], allocated_mb_max=g[18], used_mb_max=g[21],
+                used_mb_sum=g[22], flops=float(F.getMumpsRinfog(3)),
+                factor_entries=float(g[29]) if g[29] >= 0 else -float(g[29]) * 1e6)
+
+
+def parsolve_worker(case: str, n: int, h5: str, json_out: str, trace: bool) -> None:
+    if trace:
+        import tracemalloc
+
+        tracemalloc.start(TRACE_FRAMES)
+    from mpi4py import MPI
+
+    import parsolve.driver as drv
+    from parsolve.mesh import memory
+    from parsolve.model import build_model
+    from parsolve.scene import load_scene
+
+    comm = MPI.COMM_WORLD
+    rec = Recorder(comm, trace)
+    rec.snap("start")
+    scene_file = Path(h5).with_suffix(".toml")
+    if comm.rank == 0:
+        scene_file.write_text(scene_text(case, n))
+    comm.Barrier()
+    held = instrument(drv, rec)
+    t_wall, cpu = time.perf_counter(), cpu_seconds()
+
+    def model_of():
+        scene = load_scene(scene_file)
+        with memory.agreed_over(comm):
+            return build_model(scene)
+
+    model = rec.timed("setup", model_of)()
+    rec.snap("model")
+    lines: list[str] = []
+    status = drv.run(comm, model, h5, {}, log=lines.append)
+    share = (cpu_seconds() - cpu) / (time.perf_counter() - t_wall)  # this rank's
+    t_wall = comm.allreduce(time.perf_counter() - t_wall, op=MPI.MAX)
+    share = comm.allreduce(share, op=MPI.MIN)
+    rec.snap("end")
+    out = rec.result()
+    mumps = _mumps(held["solver"])
+    its = held["solver"].ksp.getIterationNumber()
+    if comm.rank == 0:
+        out.update(code="parsolve", case=case, n=n, nranks=comm.size, dofs=dofs_of(case, n),
+                   status=status, t_wall=t_wall, cpu_share=share, iterations=its, mumps=mumps, trace=trace,
+                   log=lines, **_solution_checks(h5, model.mesh.points))
+        Path(json_out).write_text(json.dumps(out, indent=1))
+
+
+def _solution_checks(h5: str, points: np.ndarray) -> dict:
+    """||u||₂, max |u|, u at the corner x = y (= z) = 1, and the file's /timings."""
+    import h5py
+
+    with h5py.File(h5, "r") as f:
+        u = f["fields/displacement"][-1]
+        timings = {k: float(f[f"timings/{k}"][()].sum()) for k in f["timings"]}
+        residual = float(f["steps/residual"][-1])
+    corner = np.flatnonzero(np.all(np.isclose(points, 1.0), axis=1))[0]
+    return dict(unorm=float(np.linalg.norm(u)), umax=float(np.abs(u).max()),
+                corner=u[corner].tolist(), timings=timings, relres=residual)
+
+
+# ------------------------------------------------------------------------------------------------
+# DOLFINx worker (Debian's python: scripts/bench_peers.py's dolfinx_phases)
+
+
+def dolfinx_worker(case: str, n: int, mesh_file: str, options: str, out_file: str,
+                   json_out: str) -> None:
+    sys.path.insert(0, str(SCRIPTS))
+    import bench_peers
+    from mpi4py import MPI
+
+    comm = MPI.COMM_WORLD
+    c = CASES[case]
+    t0 = time.perf_counter()
+    r = bench_peers.dolfinx_phases(mesh_file, c["cell"], json.loads(options), out_file,
+                                   comm=comm, jit_cache=str(SCRATCH / "jit"),
+                                   near_null=c["preset"] == "iterative")
+    wall = time.perf_counter() - t0
+    forms = r["seconds"]["forms"]  # JIT: not a phase (a C compiler runs in a child)
+    share = sum(r["cpu"].get(p, 0.0) for p in PHASES) / sum(r["seconds"].get(p, 0.0)
+                                                           for p in PHASES)
+    wall = comm.allreduce(wall, op=MPI.MAX)
+    if comm.rank == 0:
+        mem = r["memory"]
+        out = dict(code="dolfinx", case=case, n=n, nranks=comm.size, dofs=r["dofs"],
+                   seconds={p: r["seconds"].get(p, 0.0) for p in PHASES},
+                   cpu={p: r["cpu"].get(p, 0.0) for p in PHASES},
+                   memory={k: _dolfinx_mem(v) for k, v in mem.items()},
+                   mumps={k: v for k, v in mem["factorization"].items()
+                          if not k.startswith(("rss", "hwm"))},
+                   iterations=r["iterations"], relres=r["relres"], unorm=r["unorm"],
+                   umax=r["umax"], corner=r["corner"], t_forms=forms,
+                   t_wall=wall, cpu_share=share,
+                   versions=r["versions"], status="complete" if r["converged_reason"] > 0
+                   else f"failed: reason {r['converged_reason']}")
+        Path(json_out).write_text(json.dumps(out, indent=1))
+
+
+def _dolfinx_mem(row: dict) -> dict:
+    """The memory figures of a snapshot (rss_*, hwm_*, mat_bytes_*), as the parsolve worker's."""
+    return {k: v for k, v in row.items() if k.startswith(("rss", "hwm", "mat_bytes"))}
+
+
+# ------------------------------------------------------------------------------------------------
+# driver
+
+
+def child_env() -> dict:
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "OPAL_"))}
+    env.update(OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", PYTHONPATH=str(ROOT))
+    return env
+
+
+def save_mesh(case: str, n: int) -> Path:
+    from parsolve.mesh.generators import box, rectangle
+
+    path = SCRATCH / f"mesh_{case.split('-')[0]}_{n}.npz"
+    if not path.exists():
+        c = CASES[case]
+        mesh = (rectangle(1.0, 1.0, n, n, cell=c["cell"]) if c["dim"] == 2
+                else box(1.0, 1.0, 1.0, n, n, n, cell=c["cell"]))
+        np.savez(path, points=mesh.points, cells=mesh.cells)
+    return path
+
+
+def solver_options(case: str) -> dict:
+    """parsolve's preset options for this case (symmetric, no multipliers): DOLFINx gets them."""
+    from parsolve.solvers.linear import preset_options
+
+    return preset_options(CASES[case]["preset"], True, False)
+
+
+def launch(code: str, case: str, n: int, nranks: int, trace: bool, timeout: float) -> dict:
+    tag = tag_of(code, case, n, nranks)
+    js = SCRATCH / f"{tag}.json"
+    js.unlink(missing_ok=True)
+    if code == "parsolve":
+        args = [VENV_PY, __file__, "--worker", "parsolve", case, str(n), "--h5",
+                str(SCRATCH / f"{tag}.h5"), "--json", str(js)] + (["--trace"] if trace else [])
+    else:
+        args = [DEBIAN_PY, __file__, "--worker", "dolfinx", case, str(n), "--mesh",
+                str(save_mesh(case, n)), "--options", json.dumps(solver_options(case)),
+                "--h5", str(SCRATCH / f"{tag}.xdmf"), "--json", str(js)]
+    cmd = ["bash", str(SCRIPTS / "mpirun.sh"), "-n", str(nranks), *args]
+    t0 = time.perf_counter()
+    try:
+        proc = subprocess.run(cmd, cwd=ROOT, env=child_env(), capture_output=True, text=True,
+                              timeout=timeout)
+        failed = proc.returncode != 0 or not js.exists()
+        tail = " / ".join((proc.stdout + proc.stderr).strip().splitlines()[-4:])
+    except subprocess.TimeoutExpired:
+        failed, tail = True, f"timed out after {timeout:.0f} s"
+    wall = time.perf_counter() - t0
+    for junk in SCRATCH.glob(f"{tag}.*"):  # results: only the JSON is kept
+        if junk.suffix in (".h5", ".xdmf") or junk.name.endswith(".xdmf.h5"):
+            junk.unlink(missing_ok=True)
+    if failed:
+        return dict(code=code, case=case, n=n, nranks=nranks, dofs=dofs_of(case, n),
+                    failed=tail[-600:], process_wall=wall)
+    out = json.loads(js.read_text())
+    out["process_wall"] = wall
+    out["loadavg"] = os.getloadavg()[0]
+    return out
+
+
+def plan(cases: list[str], sizes: dict, ranks: list[int], weak: list[int]) -> list[tuple]:
+    """(case, n, nranks) in run order: every size at every rank count, then the weak-scaling
+    points not measured yet (weak[i] ranks on sizes[i])."""
+    runs = []
+    for case in cases:
+        for n in sizes[case]:
+            runs += [(case, n, p) for p in ranks]
+        runs += [(case, sizes[case][i], p) for i, p in enumerate(weak)
+                 if i < len(sizes[case]) and (case, sizes[case][i], p) not in runs]
+    return runs
+
+
+def run_all(args) -> dict:
+    SCRATCH.mkdir(parents=True, exist_ok=True)
+    info = machine_info()
+    sizes = {**(QUICK if args.quick else SIZES), **args.sizes}
+    rows = []
+    t_start = time.perf_counter()
+    for case, n, p in plan(args.cases, sizes, args.ranks, args.weak):
+        codes = ["parsolve"] + ([] if args.no_peers else ["dolfinx"])
+        for code in codes:
+            if code == "dolfinx":
+                save_mesh(case, n)
+            r = launch(code, case, n, p, args.trace, args.timeout)
+            rows.append(r)
+            print(progress_line(r), flush=True)
+    info["loadavg_end"] = os.getloadavg()
+    return dict(machine=info, elapsed=time.perf_counter() - t_start, rows=rows,
+                sizes={c: sizes[c] for c in args.cases}, ranks=args.ranks, weak=args.weak,
+                cases=args.cases, trace=args.trace)
+
+
+def progress_line(r: dict) -> str:
+    head = f"[bench_scale] {r['code']:8s} {r['case']:12s} n={r['n']:4d} np={r['nranks']} " \
+           f"DOFs={r['dofs']:>9,}"
+    if "failed" in r:
+        return f"{head}  FAILED: {r['failed']}"
+    s = r["cpu"]
+    return (f"{head}  peak/rank {peak(r) / MiB:7.0f} MiB  "
+            + "CPU s: " + " ".join(f"{k} {s[k]:.2f}" for k in PHASES)
+            + f"  wall {r['process_wall']:.0f} s, cpu share {r.get('cpu_share', 0):.2f}")
+
+
+def machine_info() -> dict:
+    import datetime
+
+    mem = 0
+    with open("/proc/meminfo") as f:
+        for line in f:
+            if line.startswith("MemTotal:"):
+                mem = int(line.split()[1]) * 1024
+    return dict(cpus=os.cpu_count(), mem_gib=mem / 2 ** 30, machine=platform.machine(),
+                date=datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+                loadavg_start=os.getloadavg())
+
+
+# ------------------------------------------------------------------------------------------------
+# analysis
+
+
+def peak(r: dict) -> float:
+    """Peak resident memory per rank (max over ranks) over the whole run, bytes."""
+    return max(v.get("hwm_max", 0.0) for v in r["memory"].values())
+
+
+def memory_parts(r: dict) -> dict:
+    """The split of one run, bytes per rank (max over ranks): the process before the mesh
+    (start), held numpy by category at its largest (parsolve), the matrix, MUMPS (used and
+    estimated), and for DOLFINx the resident growth over its set-up (mesh + spaces, C++)."""
+    m = r["memory"]
+    out = {"peak": peak(r), "start": m["start"]["rss_max"]}
+    for part in PARTS:
+        out[part] = max((v[f"np_{part}_max"] for v in m.values() if f"np_{part}_max" in v),
+                        default=None)
+    out["traced_peak"] = max((v["traced_peak_max"] for v in m.values()
+                              if "traced_peak_max" in v), default=None)
+    out["matrix"] = max((v.get("mat_bytes_max", 0.0) for v in m.values()), default=0.0)
+    mumps = r.get("mumps") or {}
+    out["mumps"] = mumps["used_mb_max"] * 1e6 if "used_mb_max" in mumps else None
+    out["mumps_est"] = mumps["estimated_mb_max"] * 1e6 if "estimated_mb_max" in mumps else None
+    if r["code"] == "dolfinx":
+        out["mesh"] = m["setup"]["rss_max"] - m["start"]["rss_max"]
+    return out
+
+
+def fit(points: list[tuple[float, float, float]]) -> dict | None:
+    """y = a + b·N + c·N/P, a, b, c ≥ 0, least squares on the relative error (every subset of
+    the terms is tried, the best non-negative one kept); points (N, P, y)."""
+    pts = [(N, P, y) for N, P, y in points if y is not None and y > 0]
+    if len({(N, P) for N, P, _ in pts}) < 3 or len({P for _, P, _ in pts}) < 2:
+        return None
+    N, P, y = (np.array(v, dtype=float) for v in zip(*pts))
+    X = np.column_stack([np.ones_like(N), N, N / P])
+    best = None
+    for mask in ((1, 1, 1), (1, 1, 0), (1, 0, 1), (0, 1, 1), (1, 0, 0), (0, 1, 0), (0, 0, 1)):
+        cols = [k for k in range(3) if mask[k]]
+        sol, *_ = np.linalg.lstsq(X[:, cols] / y[:, None], np.ones_like(y), rcond=None)
+        if np.any(sol < 0):
+            continue
+        coef = np.zeros(3)
+        coef[cols] = sol
+        err = float(np.sum((X @ coef / y - 1) ** 2))
+        if best is None or err < best[0]:
+            best = (err, coef)
+    coef = best[1]
+    return dict(a=float(coef[0]), b=float(coef[1]), c=float(coef[2]),
+                worst=float(np.max(np.abs(X @ coef / y - 1))), points=len(pts))
+
+
+def at(f: dict | None, N: float, P: float) -> float | None:
+    return None if f is None else f["a"] + f["b"] * N + f["c"] * N / P
+
+
+def ok_rows(rows, code=None, case=None):
+    return [r for r in rows if "failed" not in r and (code is None or r["code"] == code)
+            and (case is None or r["case"] == case)]
+
+
+def fits(out: dict) -> dict:
+    """Per case and code: the fits of peak memory per rank, of each memory part, and of each
+    phase's time (1 and 2 ranks only: 4 ranks on 2 cores time the oversubscription)."""
+    res = {}
+    for case in out["cases"]:
+        for code in ("parsolve", "dolfinx"):
+            rows = ok_rows(out["rows"], code, case)
+            if not rows:
+                continue
+            f = {"peak": fit([(r["dofs"], r["nranks"], peak(r)) for r in rows])}
+            if any(memory_parts(r)["mumps"] for r in rows):  # the peak besides MUMPS's factor
+                f["rest"] = fit([(r["dofs"], r["nranks"],
+                                  peak(r) - (memory_parts(r)["mumps"] or 0.0)) for r in rows])
+            for part in PARTS + ("matrix", "mumps"):
+                f[part] = fit([(r["dofs"], r["nranks"], memory_parts(r)[part]) for r in rows])
+            timed = [r for r in rows if r["nranks"] <= 2]
+            for ph in PHASES:
+                f[f"t_{ph}"] = fit([(r["dofs"], r["nranks"], r["cpu"][ph]) for r in timed])
+            f["t_total"] = fit([(r["dofs"], r["nranks"], sum(r["cpu"].values()))
+                                for r in timed])
+            res[f"{case}/{code}"] = f
+    return res
+
+
+# ------------------------------------------------------------------------------------------------
+# tables
+
+
+def fmt(x, spec=".2f") -> str:
+    return "–" if x is None else format(x, spec)
+
+
+def mib(x) -> str:
+    return "–" if x is None else f"{x / MiB:,.0f}"
+
+
+def md_table(head: list[str], body: list[list[str]]) -> str:
+    return "\n".join(["| " + " | ".join(head) + " |",
+                      "|" + "|".join("---" if i == 0 else "---:" for i in range(len(head))) + "|"]
+                     + ["| " + " | ".join(r) + " |" for r in body])
+
+
+def pairs(out: dict):
+    """(parsolve row, DOLFINx row or None) for every parsolve run, in run order."""
+    peers = {(r["case"], r["n"], r["nranks"]): r for r in ok_rows(out["rows"], "dolfinx")}
+    for r in out["rows"]:
+        if r["code"] == "parsolve":
+            yield r, peers.get((r["case"], r["n"], r["nranks"]))
+
+
+def memory_table(out: dict) -> str:
+    head = ["case", "DOFs", "np", "parsolve peak MiB/rank", "DOLFINx", "ratio",
+            *(f"{k} np" for k in PARTS), "PETSc Mat", "DOLFINx Mat", "MUMPS used (INFOG 21)",
+            "DOLFINx MUMPS", "DOLFINx mesh+spaces ΔRSS", "cpu"]
+    body = []
+    for p, d in pairs(out):
+        if "failed" in p:
+            body.append([p["case"], f"{p['dofs']:,}", str(p["nranks"]), "FAILED"]
+                        + ["–"] * (len(head) - 4))
+            continue
+        a = memory_parts(p)
+        b = memory_parts(d) if d else {}
+        body.append([p["case"], f"{p['dofs']:,}", str(p["nranks"]), mib(a["peak"]),
+                     mib(b.get("peak")), fmt(a["peak"] / b["peak"]) if b else "–",
+                     *(mib(a[k]) for k in PARTS), mib(a["matrix"]), mib(b.get("matrix")),
+                     mib(a["mumps"]), mib(b.get("mumps")), mib(b.get("mesh")),
+                     cpu_cell(p, d)])
+    return md_table(head, body)
+
+
+def cpu_cell(p: dict, d: dict | None) -> str:
+    """CPU seconds / wall seconds of the run (lowest rank): well under 1, other processes took
+    the cores (parsolve / DOLFINx)."""
+    return "/".join(fmt(x.get("cpu_share")) for x in (p, d) if x)
+
+
+def phase_table(out: dict) -> str:
+    head = ["case", "DOFs", "np"] + [f"{ph} (×DOLFINx)" for ph in PHASES] + \
+           ["total (×DOLFINx)", "wall s (DOLFINx)", "its (DOLFINx)"]
+    body = []
+    for p, d in pairs(out):
+        if "failed" in p:
+            continue
+        cells = []
+        for ph in PHASES + ("total",):
+            a = sum(p["cpu"].values()) if ph == "total" else p["cpu"][ph]
+            b = None
+            if d:
+                b = sum(d["cpu"].values()) if ph == "total" else d["cpu"][ph]
+            cells.append(f"{a:.2f} ({fmt(a / b) if b else '–'})")
+        its = f"{p['iterations']} ({d['iterations']})" if d else str(p["iterations"])
+        wall = f"{sum(p['seconds'].values()):.1f}" + (f" ({sum(d['seconds'].values()):.1f})"
+                                                       if d else "")
+        body.append([p["case"], f"{p['dofs']:,}", str(p["nranks"]), *cells, wall, its])
+    return md_table(head, body)
+
+
+def dolfinx_phase_table(out: dict) -> str:
+    head = ["case", "DOFs", "np"] + [f"{ph} s" for ph in PHASES] + ["forms (JIT, wall) s"]
+    body = [[d["case"], f"{d['dofs']:,}", str(d["nranks"])]
+            + [fmt(d["cpu"][ph]) for ph in PHASES] + [fmt(d.get("t_forms"))]
+            for d in ok_rows(out["rows"], "dolfinx")]
+    return md_table(head, body)
+
+
+def falls_table(out: dict) -> tuple[str, list[str]]:
+    """Per case and size: 2 ranks / 1 rank of each memory part (target ≤ 0.6 for mesh, vectors,
+    matrix)."""
+    head = ["case", "DOFs", "peak", *(f"{k} np" for k in PARTS), "PETSc Mat", "MUMPS used",
+            "DOLFINx peak"]
+    body, worst = [], {}
+    by = {(r["code"], r["case"], r["n"], r["nranks"]): r for r in ok_rows(out["rows"])}
+    for (code, case, n, p), r1 in by.items():
+        if code != "parsolve" or p != 1 or (code, case, n, 2) not in by:
+            continue
+        a, b = memory_parts(r1), memory_parts(by[(code, case, n, 2)])
+        d1, d2 = by.get(("dolfinx", case, n, 1)), by.get(("dolfinx", case, n, 2))
+
+        def q(k):
+            return fmt(b[k] / a[k]) if a.get(k) and b.get(k) is not None else "–"
+
+        body.append([case, f"{r1['dofs']:,}", q("peak"), *(q(k) for k in PARTS), q("matrix"),
+                     q("mumps"), fmt(peak(d2) / peak(d1)) if d1 and d2 else "–"])
+        for k in ("mesh", "vectors", "operator", "matrix"):
+            if a.get(k) and b.get(k) is not None:
+                worst.setdefault((case, k), []).append(b[k] / a[k])
+    verdicts = [f"{case} {k} {max(v):.2f}" for (case, k), v in worst.items() if max(v) > 0.6]
+    return md_table(head, body), verdicts
+
+
+def weak_table(out: dict) -> str:
+    """Weak scaling: weak[i] ranks on sizes[i]; correctness: u against the same mesh at the other
+    rank counts (parsolve) and against DOLFINx (same mesh, same ranks)."""
+    head = ["case", "np", "DOFs", "DOFs/rank", "peak MiB/rank", "DOLFINx", "CPU s (max rank)",
+            "DOLFINx", "‖u‖₂", "max Δu vs parsolve other np (rel.)", "vs DOLFINx (rel.)"]
+    body = []
+    rows = ok_rows(out["rows"])
+    for case in out["cases"]:
+        for i, p in enumerate(out["weak"]):
+            sizes = out["sizes"][case]
+            if i >= len(sizes):
+                continue
+            n = sizes[i]
+            r = next((x for x in rows if (x["code"], x["case"], x["n"], x["nranks"])
+                      == ("parsolve", case, n, p)), None)
+            d = next((x for x in rows if (x["code"], x["case"], x["n"], x["nranks"])
+                      == ("dolfinx", case, n, p)), None)
+            if r is None:
+                body.append([case, str(p), "–", "–", "FAILED"] + ["–"] * 6)
+                continue
+            same = [x for x in rows if x["code"] == "parsolve" and x["case"] == case
+                    and x["n"] == n and x["nranks"] != p]
+            body.append([case, str(p) + (" (oversubscribed)" if p > (os.cpu_count() or 2) else ""),
+                         f"{r['dofs']:,}", f"{r['dofs'] // p:,}", mib(peak(r)),
+                         mib(peak(d)) if d else "–", f"{sum(r['cpu'].values()):.2f}",
+                         f"{sum(d['cpu'].values()):.2f}" if d else "–", f"{r['unorm']:.10g}",
+                         fmt(max((rel_diff(r, x) for x in same), default=None), ".1e"),
+                         fmt(rel_diff(r, d), ".1e") if d else "–"])
+    return md_table(head, body)
+
+
+def rel_diff(a: dict, b: dict) -> float:
+    """Largest relative difference of ||u||, max|u| and the corner displacement."""
+    ca, cb = np.array(a["corner"]), np.array(b["corner"])
+    scale = max(np.abs(ca).max(), 1e-300)
+    return float(max(abs(a["unorm"] - b["unorm"]) / a["unorm"],
+                     abs(a["umax"] - b["umax"]) / a["umax"], np.abs(ca - cb).max() / scale))
+
+
+def fit_table(fs: dict) -> str:
+    head = ["case / code", "quantity", "a", "b (per DOF)", "c (per DOF per rank)",
+            "worst misfit", f"at {TARGET[0]} ranks × {TARGET[1] / 1e6:.0f}M DOFs"]
+    body = []
+    for key, f in fs.items():
+        for q, v in f.items():
+            if v is None:
+                continue
+            if q.startswith("t_"):
+                vals = [f"{v['a']:.3g} s", f"{v['b'] * 1e6:.3g} µs", f"{v['c'] * 1e6:.3g} µs"]
+                model = f"{at(v, TARGET[1], TARGET[0]):,.0f} s"
+            else:
+                vals = [f"{v['a'] / MiB:.0f} MiB", f"{v['b']:.0f} B", f"{v['c']:,.0f} B"]
+                model = f"{at(v, TARGET[1], TARGET[0]) / 2 ** 30:,.2f} GiB"
+            body.append([key, q, *vals, f"{v['worst']:.0%}", model])
+    return md_table(head, body)
+
+
+def factor_growth(case: str, n_big: int, N: float) -> tuple[float, float]:
+    """Nested-dissection growth from n_big to N DOFs: (factor memory, flops) multipliers."""
+    if CASES[case]["dim"] == 2:
+        return (N / n_big) * np.log(N) / np.log(n_big), (N / n_big) ** 1.5
+    return (N / n_big) ** (4 / 3), (N / n_big) ** 2
+
+
+def memory_model(fs: dict, case: str, code: str, rows: list[dict]) -> dict | None:
+    """Memory per rank at TARGET: the fit of (peak − MUMPS used) plus MUMPS's factor grown
+    by nested dissection from the largest run (total used, spread evenly over the ranks); for
+    an iterative case, the fit of the peak."""
+    P, N = TARGET
+    f = fs.get(f"{case}/{code}")
+    if not f or not f.get("peak"):
+        return None
+    mine = [r for r in rows if r["code"] == code and r["case"] == case]
+    big = max(mine, key=lambda r: (r["dofs"], -r["nranks"]))
+    mu = big.get("mumps") or {}
+    if not mu.get("used_mb_sum") or not f.get("rest"):
+        return dict(total=at(f["peak"], N, P), rest=at(f["peak"], N, P), factor=0.0)
+    factor = mu["used_mb_sum"] * 1e6 * factor_growth(case, big["dofs"], N)[0] / P
+    rest = at(f["rest"], N, P)
+    return dict(total=rest + factor, rest=rest, factor=factor)
+
+
+def model_lines(out: dict, fs: dict) -> list[str]:
+    """The 64 × 50M model per case, parsolve against DOLFINx."""
+    P, N = TARGET
+    rows = ok_rows(out["rows"])
+    lines = []
+    for case in out["cases"]:
+        p, d = fs.get(f"{case}/parsolve"), fs.get(f"{case}/dolfinx")
+        mp, md = (memory_model(fs, case, c, rows) for c in ("parsolve", "dolfinx"))
+        if not mp:
+            continue
+        held = sum(p[k]["b"] for k in PARTS if p.get(k)) * N  # parsolve's replicated arrays
+        line = (f"- **{case}** at {P} ranks × {N / 1e6:.0f}M DOFs, memory per rank: parsolve "
+                f"**{mp['total'] / 2 ** 30:.1f} GiB**")
+        if mp["factor"]:
+            line += (f" ({mp['rest'] / 2 ** 30:.1f} GiB besides MUMPS + "
+                     f"{mp['factor'] / 2 ** 30:.1f} GiB of factor)")
+        line += (f", of which {held / 2 ** 30:.1f} GiB of numpy arrays every rank holds whole "
+                 f"(the b·N terms of mesh, vectors, operator, element, other)")
+        if md:
+            line += f"; DOLFINx **{md['total'] / 2 ** 30:.1f} GiB** (×{mp['total'] / md['total']:.1f})"
+        line += f"; the plain fit of the peak gives {at(p['peak'], N, P) / 2 ** 30:.1f} GiB"
+        if d and d.get("peak"):
+            line += f" (DOLFINx {at(d['peak'], N, P) / 2 ** 30:.1f})"
+        lines.append(line + ".")
+        tp = [at(p[f"t_{ph}"], N, P) for ph in PHASES]
+        if all(t is not None for t in tp):
+            tline = ("  - CPU time per rank: " + ", ".join(f"{ph} {t:,.0f} s"
+                                                          for ph, t in zip(PHASES, tp))
+                     + f" (total {sum(tp):,.0f} s")
+            td = [at(d[f"t_{ph}"], N, P) for ph in PHASES] if d else []
+            if td and all(t is not None for t in td):
+                tline += f"; DOLFINx {sum(td):,.0f} s"
+            lines.append(tline + ").")
+        big = max((r for r in rows if r["code"] == "parsolve" and r["case"] == case),
+                  key=lambda r: (r["dofs"], -r["nranks"]))
+        mu = big.get("mumps") or {}
+        if mu.get("used_mb_sum"):
+            grow, fl = factor_growth(case, big["dofs"], N)
+            lines.append(
+                f"  - MUMPS from the largest 1-rank run ({big['dofs']:,} DOFs, "
+                f"{mu['used_mb_sum']:,} MB used, {mu['flops']:.2e} flops), grown as nested "
+                f"dissection ({'N log N' if CASES[case]['dim'] == 2 else 'N^(4/3)'} memory, "
+                f"{'N^1.5' if CASES[case]['dim'] == 2 else 'N^2'} flops): "
+                f"{mu['used_mb_sum'] * grow / 1e3:,.0f} GB in all, {mu['flops'] * fl:.2e} flops, "
+                f"{big['cpu']['factorization'] * fl / P:,.0f} s on {P} ranks at this core's "
+                f"rate with perfect speed-up (the linear fit above says "
+                f"{tp[2]:,.0f} s).")
+    return lines
+
+
+ASSUMPTIONS = """Assumptions of the model: memory per rank and each phase's time are a + b·N + c·N/P
+(a: the process and libraries; b·N: what every rank holds or does whole — replicated mesh,
+full-length vectors, gathers; c·N/P: the distributed part), fitted by least squares on the
+relative error over the runs of this table (memory: 1, 2 and 4 ranks; time: 1 and 2 ranks, the
+4-rank runs sharing 2 cores). Extrapolated 33× in N and 32× in P: it assumes the same problem
+family (structured block, one linear step), ranks with the memory bandwidth of these cores, and
+no term the runs cannot see — communication growing with P (allgather and reduce of full-length
+vectors cost ∝ N per rank and step over the network, counted only through b), load imbalance,
+and a direct factorization whose fill and flops grow faster than N (nested dissection: factor
+entries ∝ N log N in 2D, N^(4/3) in 3D; flops ∝ N^1.5, N^2): for the direct case the linear
+fit underestimates the factorization and its memory: the direct model is the fit of the peak
+without MUMPS's factor plus that factor grown by nested dissection from the largest run and
+spread evenly over the ranks (MUMPS's own per-rank balance is not modelled). GAMG's iterations
+are taken as constant (measured: nearly flat with N). CPU time, not wall: the runs shared 2
+cores with other jobs."""
+
+
+def verdicts(out: dict, fs: dict, fall_misses: list[str]) -> list[str]:
+    lines = []
+    for case in out["cases"]:
+        worst = [(peak(p) / peak(d), p) for p, d in pairs(out) if p["case"] == case
+                 and "failed" not in p and d and p["nranks"] <= 2]
+        if not worst:
+            continue
+        over = [(q, p) for q, p in worst if q > 1.5]
+        q, p = max(worst, key=lambda x: x[0])
+        lines.append(f"- **Peak memory ≤ 1.5× DOLFINx**, {case} (1 and 2 ranks): "
+                     f"{'MET' if not over else 'MISSED'} — ratios {min(w for w, _ in worst):.2f}"
+                     f"–{q:.2f}, worst {p['dofs']:,} DOFs np={p['nranks']}"
+                     + (f"; {len(over)} of {len(worst)} runs above 1.5" if over else "") + ".")
+    lines.append("- **Mesh, vectors and matrix per rank at 2 ranks ≤ 0.6× 1 rank**: "
+                 + ("MET." if not fall_misses else "MISSED — worst 2-rank / 1-rank ratio: "
+                    + "; ".join(fall_misses) + "."))
+    for ph in PHASES:
+        rs = [(p["cpu"][ph] / d["cpu"][ph], p) for p, d in pairs(out)
+              if "failed" not in p and d and p["nranks"] <= 2 and d["cpu"][ph]]
+        if rs:
+            lines.append(f"- {ph}: parsolve / DOLFINx {min(r for r, _ in rs):.2f}–"
+                         f"{max(r for r, _ in rs):.2f}"
+                         + (" (target for post-processing: ≤ 1.5)" if ph == "post" else "")
+                         + (f" — {'MET' if max(r for r, _ in rs) <= 1.5 else 'MISSED'}"
+                            if ph == "post" else "") + ".")
+    return lines
+
+
+def markdown(out: dict) -> str:
+    fs = fits(out)
+    falls, misses = falls_table(out)
+    m = out["machine"]
+    load = "; ".join(f"{k.split('_')[1]}: " + " / ".join(f"{x:.1f}" for x in m[k])
+                     for k in ("loadavg_start", "loadavg_end") if k in m)
+    sizes = "; ".join(f"{c}: n = {', '.join(map(str, out['sizes'][c]))} "
+                      f"({', '.join(f'{dofs_of(c, n):,}' for n in out['sizes'][c])} DOFs)"
+                      for c in out["cases"])
+    trace_note = ("parsolve runs traced by tracemalloc (--trace): their times carry its "
+                  "overhead." if out["trace"] else "")
+    parts = [
+        "# Scale benchmark: memory and phases against DOLFINx 0.5, weak scaling, 64-rank model",
+        "",
+        (__doc__ or "").split("Usage")[0].strip(),
+        "",
+        f"Machine: {m['machine']}, {m['cpus']} cores, {m['mem_gib']:.1f} GiB, shared with other "
+        f"engineers' test runs (load average 1/5/15 min at {load}); run started {m['date']}, "
+        f"{out['elapsed'] / 60:.1f} min. Sizes: {sizes}. On this machine the runs stay ≲ 1.5M "
+        "DOFs (its memory is shared), and were cut further to keep near 40 minutes under the "
+        "load above; `--sizes` runs bigger ones elsewhere. " + trace_note,
+        "",
+        "## Peak memory per rank (MiB, max over ranks) and its parts",
+        "",
+        "*np* columns: numpy arrays parsolve holds (at the larger of two snapshots: after "
+        "assembly, after post-processing), by what holds them: mesh = the model's mesh; "
+        "operator = node pattern + saddle operator (values, positions, columns) + relation "
+        "block; element = the effects and their composition (element work arrays); vectors = "
+        "the step's solution, multipliers and output fields (rank 0 holds the gathered ones); "
+        "other = partition, numbering, relations, regions. PETSc Mat: allocated nonzeros × 12 B "
+        "+ row offsets. MUMPS used = INFOG(21) (max over ranks; the direct case). DOLFINx "
+        "mesh+spaces = resident growth over its set-up (its data live in C++). *cpu*: CPU "
+        "seconds / wall seconds of the run, parsolve/DOLFINx (1 = a core to itself).",
+        "",
+        memory_table(out),
+        "",
+        "### 2 ranks / 1 rank, per rank (target ≤ 0.6 for mesh, vectors, matrix)",
+        "",
+        falls,
+        "",
+        "## Time per phase (CPU s, max over ranks; ×DOLFINx = parsolve / DOLFINx, < 1: faster)",
+        "",
+        "CPU seconds, not wall: the machine is shared (see *cpu* above: the share of a core each "
+        "run got); wall seconds of the whole run in the last column but one.",
+        "",
+        phase_table(out),
+        "",
+        "DOLFINx's phases:",
+        "",
+        dolfinx_phase_table(out),
+        "",
+        f"## Weak scaling ({', '.join(map(str, out['weak']))} ranks on the sizes above; more ranks "
+        "than cores are oversubscribed: correctness only)",
+        "",
+        weak_table(out),
+        "",
+        "## Fits and the model",
+        "",
+        fit_table(fs),
+        "",
+        "Times in the fits: CPU seconds (max over ranks).",
+        "",
+        *model_lines(out, fs),
+        "",
+        ASSUMPTIONS,
+        "",
+        "## Targets of issue 8",
+        "",
+        *verdicts(out, fs, misses),
+        "",
+        *note_lines(out),
+        "",
+        "Rerun: `.venv/bin/python scripts/bench_scale.py` (needs `bash scripts/bench_env.sh` for "
+        "DOLFINx); `--sizes CASE=n1,n2,n3`, `--cases`, `--trace`, `--report`.",
+    ]
+    return "\n".join(parts) + "\n"
+
+
+def note_lines(out: dict) -> list[str]:
+    notes = []
+    notes.append("- Fits: with only 1, 2 and 4 ranks, what does not fall from 1 to 2 ranks goes "
+                 "into b·N. DOLFINx's 3D peak barely falls from 1 to 2 ranks here (GAMG's "
+                 "parallel set-up adds about as much as the split saves at these sizes), so its "
+                 "3D extrapolation is pessimistic; parsolve's b·N is backed by the arrays it holds "
+                 "whole (mesh, vectors: 2 ranks / 1 rank = 1.00 above).")
+    for r in out["rows"]:
+        if "failed" in r:
+            notes.append(f"- FAILED: {r['code']} {r['case']} n={r['n']} np={r['nranks']}: "
+                         f"{r['failed']}")
+    d = next(iter(ok_rows(out["rows"], "dolfinx")), None)
+    if d:
+        notes.append("- DOLFINx: " + ", ".join(f"{k} {v}" for k, v in d["versions"].items()))
+    return notes
+
+
+def report(out: dict) -> int:
+    md = markdown(out)
+    print(md)
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    (RESULTS / "bench_scale.md").write_text(md)
+    (RESULTS / "bench_scale.json").write_text(json.dumps({**out, "fits": fits(out)}, indent=1))
+    return 0
+
+
+# ------------------------------------------------------------------------------------------------
+# command line
+
+
+def parse_sizes(items: list[str]) -> dict:
+    out = {}
+    for item in items:
+        case, _, ns = item.partition("=")
+        if case not in CASES or not ns:
+            raise SystemExit(f"--sizes: expected CASE=n1,n2,... with CASE in {list(CASES)}, "
+                             f"got {item!r}")
+        out[case] = [int(x) for x in ns.split(",")]
+    return out
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
+    p.add_argument("--cases", nargs="+", choices=list(CASES), default=DEFAULT_CASES)
+    p.add_argument("--sizes", nargs="+", default=[], metavar="CASE=n1,n2,n3",
+                   help="cells per side for a case (default: " + "; ".join(
+                       f"{c}={','.join(map(str, s))}" for c, s in SIZES.items()) + ")")
+    p.add_argument("--ranks", nargs="+", type=int, default=[1, 2])
+    p.add_argument("--weak", nargs="+", type=int, default=[1, 2, 4],
+                   help="weak scaling: these ranks on the 1st, 2nd, 3rd size")
+    p.add_argument("--quick", action="store_true", help="small sizes (a smoke test)")
+    p.add_argument("--no-peers", action="store_true", help="parsolve only")
+    p.add_argument("--trace", action="store_true",
+                   help="parsolve: tracemalloc's peak of Python + numpy memory per phase (slower)")
+    p.add_argument("--timeout", type=float, default=900.0, help="seconds per run")
+    p.add_argument("--report", action="store_true", help="tables again from the JSON")
+    p.add_argument("--worker", nargs=3, metavar=("CODE", "CASE", "N"), help=argparse.SUPPRESS)
+    p.add_argument("--h5", help=argparse.SUPPRESS)
+    p.add_argument("--json", help=argparse.SUPPRESS)
+    p.add_argument("--mesh", help=argparse.SUPPRESS)
+    p.add_argument("--options", help=argparse.SUPPRESS)
+    args = p.parse_args(argv)
+    if args.worker:
+        code, case, n = args.worker
+        if code == "parsolve":
+            parsolve_worker(case, int(n), args.h5, args.json, args.trace)
+        else:
+            dolfinx_worker(case, int(n), args.mesh, args.options, args.h5, args.json)
+        return 0
+    if args.report:
+        return report(json.loads((RESULTS / "bench_scale.json").read_text()))
+    args.sizes = parse_sizes(args.sizes)
+    return report(run_all(args))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
