@@ -20,6 +20,8 @@ from parsolve.mesh.mesh import Mesh
 MODELS = {"elastic": Elastic, "mazars": Mazars, "von_mises": VonMises}
 
 
+AFFINE = ("triangle", "tetra")   # constant gradients: one strain per cell
+
 class Elasticity(Effect):
     """Materials per cell (later entries of the scene override earlier ones on shared cells)."""
 
@@ -75,9 +77,10 @@ class Elasticity(Effect):
         (``extra`` = (stress at the quadrature points of the local cells, states)), the
         stress and history variables of the material state."""
         u = values["u"]
-        if extra is None:
-            sig = self.cell_stress(owned, u)
-            return {"stress": self.nodal_stress_sums(owned, u)}, {"stress": sig}
+        if extra is None:  # one geometry for both (the cell mean and the volume weights)
+            geo = self.geometry(owned)
+            sig = self.cell_stress(owned, u, geo)
+            return {"stress": self.nodal_stress_sums(owned, u, geo, sig)}, {"stress": sig}
         stress_qp, states = extra
         pos = np.searchsorted(local_cells, owned)
         wq = self.geometry(owned).wdet
@@ -108,9 +111,11 @@ class Elasticity(Effect):
         return ElementMatrices(geometric=self._work, tensors=tensors,
                                cell_material=self.cell_model[cells])
 
-    def cell_stress(self, cells: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """Mean stress over each cell (Voigt), from the full displacement array u (npoints, ncomp)."""
-        geo = self.geometry(cells)
+    def cell_stress(self, cells: np.ndarray, u: np.ndarray,
+                    geo: kernels.CellGeometry | None = None) -> np.ndarray:
+        """Mean stress over each cell (Voigt), from the full displacement array u (npoints, ncomp);
+        ``geo``: the cells' geometry at the quadrature points, if already computed."""
+        geo = self.geometry(cells) if geo is None else geo
         eps = kernels.voigt_strain(geo.dNdx, u[self.mesh.cells[cells]])
         w = geo.wdet / geo.wdet.sum(axis=1, keepdims=True)
         # σ is linear in ε: the cell mean of σ is C times the cell mean of ε
@@ -121,16 +126,26 @@ class Elasticity(Effect):
         C = self.C[self.cell_model[cells]]
         return np.einsum("cvw,c...w->c...v", C, eps)
 
-    def nodal_stress_sums(self, cells: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def nodal_stress_sums(self, cells: np.ndarray, u: np.ndarray,
+                          geo: kernels.CellGeometry | None = None,
+                          cell_sig: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Stress evaluated at each cell's nodes, summed per node with cell-volume weights.
 
         Returns (weighted sums (npoints, nvoigt), weights (npoints,)); the caller adds the
         ranks' sums and divides (a volume-weighted nodal average, as post-processors do).
+        ``geo`` / ``cell_sig``: the geometry at the quadrature points and the cell stresses,
+        if already computed. On affine cells (P1 triangles and tetrahedra) the strain is
+        constant: the stress at the nodes is the cell's, and no geometry at the nodes is needed.
         """
         mesh = self.mesh
-        geo = self.geometry(cells, at_nodes=True)
-        sig = self._hooke(cells, kernels.voigt_strain(geo.dNdx, u[mesh.cells[cells]]))  # (nc, nen, nv)
-        vol = self.geometry(cells).wdet.sum(axis=1)
+        vol = (self.geometry(cells) if geo is None else geo).wdet.sum(axis=1)
+        if mesh.cell_type in AFFINE:
+            cell_sig = self.cell_stress(cells, u, geo) if cell_sig is None else cell_sig
+            sig = cell_sig[:, None, :]                                     # (nc, 1, nv)
+        else:
+            at_nodes = self.geometry(cells, at_nodes=True)
+            sig = self._hooke(cells, kernels.voigt_strain(at_nodes.dNdx, u[mesh.cells[cells]]))
+        sig = np.broadcast_to(sig, (cells.size, mesh.cells.shape[1], sig.shape[2]))
         nodes = mesh.cells[cells].ravel()
         nv = sig.shape[2]
         sums = np.stack([np.bincount(nodes, weights=(sig[..., k] * vol[:, None]).ravel(),
