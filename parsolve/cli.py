@@ -14,9 +14,7 @@ from __future__ import annotations
 import argparse
 import difflib
 import os
-import signal
 import sys
-from contextlib import contextmanager
 from pathlib import Path
 
 USAGE = ("parsolve {run,check,study,batch,post} SCENE [-o OUT.h5] [--export-system DIR] "
@@ -111,23 +109,6 @@ def _abort_on_error(comm) -> None:
 
 # Commands that live in their own subpackage: ``parsolve.<name>.cli.main(argv) -> int``.
 SUBCOMMANDS = ("study", "batch", "post")
-
-
-@contextmanager
-def _signals_interrupt():
-    """SIGINT / SIGTERM raise Interrupted at once (the result file is closed with the status
-    "interrupted: ..." and its finished steps); the previous handlers come back afterwards."""
-    from parsolve.errors import Interrupted
-
-    def handler(signum, frame):
-        raise Interrupted(signum, signal.Signals(signum).name)
-
-    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    finally:
-        for s, h in previous.items():
-            signal.signal(s, h)
 
 
 def output_path(args, scene) -> tuple[str, str, str]:
@@ -259,7 +240,9 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         from parsolve.driver import run
 
-        with _signals_interrupt():
+        from parsolve.interrupts import interruptible
+
+        with interruptible(comm):
             run(comm, model, out, cli_options, args.export_system, log=say,
                 output=args.output_mode)
         for name in unused_options(scene.solver.prefix, {**scene.solver.options, **cli_options}):

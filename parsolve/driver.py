@@ -12,6 +12,7 @@ from mpi4py import MPI
 
 from parsolve.diagnostics import unsupported
 from parsolve.effects.compose import Rate
+from parsolve import interrupts
 from parsolve.errors import Interrupted, SolverError
 from parsolve.io.hdf5 import output_mode, result_writer
 from parsolve.model import Model
@@ -117,6 +118,7 @@ def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log
         timings["output"] = time.perf_counter() - t2
         timings["total"] = time.perf_counter() - t1
         writer.write_step(t, 1, solver.residual, fields, cell_fields, rel_out, timings, extra=extra)
+        interrupts.check(comm)
         progress(log, comm, step + 1, len(scene.times), t, 1, solver.residual, timings["total"],
                  f"  (linear its {linear_its})" + reported(scene, rel_out))
         _pass_notes(comm, solver, writer, log)
@@ -167,6 +169,7 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log) -> None:
         timings["total"] = time.perf_counter() - t1 + (setup if step == 1 else 0.0)
         writer.write_step(t, result.iterations, result.residual, fields, cell_fields, rel_out,
                           timings, extra=extra)
+        interrupts.check(comm)
         cut_note = f"  (after {schedule.cuts} cut{'s' * (schedule.cuts > 1)})" if schedule.cuts else ""
         # (the largest strain increment sizes automatic steps only; every rank takes this branch)
         schedule.done(t, _max_strain_increment(comm, system, newton.q - snap[0])

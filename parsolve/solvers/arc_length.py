@@ -12,6 +12,7 @@ import time
 
 import numpy as np
 
+from parsolve import interrupts
 from parsolve.errors import SolverError
 from parsolve.solvers.newton import NewtonSolver
 
@@ -123,5 +124,6 @@ def run_arc_length(comm, system, cli_options, writer, log) -> None:
         fields, cell_fields, rel_out = step_outputs(comm, system, solver.q, multipliers, solver)
         writer.write_step(solver.mu, iterations, residual, fields, cell_fields, rel_out,
                           {"assembly": 0.0, "solve": seconds, "total": seconds})
+        interrupts.check(comm)
         progress(log, comm, step + 1, nsteps, solver.mu, iterations, residual, seconds,
                   "  (t = load factor)")

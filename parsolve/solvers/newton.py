@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from mpi4py import MPI
 
+from parsolve import interrupts
 from parsolve.effects.compose import Rate
 from parsolve.errors import SolverError
 from parsolve.scene import NonlinearSpec
@@ -136,6 +137,7 @@ class NewtonSolver:
         changed, dq_norm, predictions = True, np.inf, 0
         self.residual_history = []
         for it in range(spec.max_iterations + 1):
+            interrupts.check(self.comm)   # every rank at the same iteration (see interrupts)
             f_int, kmat, trial, extras = self._evaluate(self.q)
             if it == 0 and not self._oriented:
                 self._orient(kmat)

@@ -1,0 +1,32 @@
+"""A signal on one rank stops every rank at the same point (parsolve.interrupts): the ranks
+agree in ``check``, so none is left waiting in a collective call."""
+
+from __future__ import annotations
+
+import os
+import signal
+
+import pytest
+from mpi4py import MPI
+
+from parsolve import interrupts
+from parsolve.errors import Interrupted
+
+
+def test_a_signal_on_one_rank_stops_every_rank_at_the_check():
+    comm = MPI.COMM_WORLD
+    before = signal.getsignal(signal.SIGTERM)
+    with interrupts.interruptible(comm):
+        interrupts.check(comm)                       # nothing pending: no effect
+        if comm.rank == comm.size - 1:
+            if comm.size == 1:
+                with pytest.raises(Interrupted):     # one rank: at once
+                    os.kill(os.getpid(), signal.SIGTERM)
+                interrupts._pending = signal.SIGTERM  # as if it had arrived during a call
+            else:
+                os.kill(os.getpid(), signal.SIGTERM)  # several ranks: only marked
+        comm.Barrier()
+        with pytest.raises(Interrupted) as err:
+            interrupts.check(comm)
+    assert err.value.exit_status == 143 and str(err.value) == "interrupted: SIGTERM"
+    assert signal.getsignal(signal.SIGTERM) is before   # the previous handler is back
