@@ -40,7 +40,7 @@ from parsolve.driver import run  # noqa: E402
 from parsolve.effects.contact_penalty import PenaltyContact  # noqa: E402
 from parsolve.model import build_model  # noqa: E402
 from parsolve.scene import load_scene  # noqa: E402
-from test_contact import G, LAM, sheared_box_scene, wedge_mesh  # noqa: E402  (reused scenes)
+from test_contact import G, LAM, sheared_box_scene, wedge_mesh, wedge_scene  # noqa: E402,E501
 
 E, NU, MU = 1000.0, 0.3, 0.3
 FORMULATIONS = [("relations", ""), ("penalty", 'formulation = "penalty"'),
@@ -110,37 +110,7 @@ def case_wedge(work: Path):
     ref = references.wedge_stick_slip(LAM, G, beta, kappa)
     mesh = work / "wedge.msh"
     wedge_mesh(mesh, beta)
-    loads = "".join(f"""
-[[loads]]
-name = "{side}"
-region = "{side}"
-traction = [{tx!r}, {ty!r}]
-""" for side, (tx, ty) in (("right", ref.traction(np.array([[1.0, 0.0]]))[0]),
-                           ("top", ref.traction(np.array([[0.0, 1.0]]))[0]),
-                           ("left", ref.traction(np.array([[-1.0, 0.0]]))[0])))
-    n2 = ref.normal2
-    text = f"""
-[mesh]
-file = "{mesh}"
-[model]
-hypothesis = "plane_strain"
-[[materials]]
-E = {E}
-nu = {NU}
-{loads}
-[[contact]]
-name = "one"
-slave = "face1"
-obstacle = {{ plane = {{ origin = [0.0, 0.0], normal = [0.0, 1.0] }} }}
-friction = {ref.mu!r}
-[[contact]]
-name = "two"
-slave = "face2_slave"
-obstacle = {{ plane = {{ origin = [0.0, 0.0], normal = [{n2[0]!r}, {n2[1]!r}] }} }}
-friction = {ref.mu!r}
-[steps]
-count = 3
-"""
+    text = wedge_scene(mesh, ref)
 
     def error(res, first):
         pts = res["mesh/points"]

@@ -426,17 +426,9 @@ def wedge_mesh(path, beta: float, n1: int = 4, n2: int = 3, ny: int = 4, a: floa
     meshio.write(str(path), mesh, file_format="gmsh22", binary=False)
 
 
-def test_wedge_stick_and_slip_side_by_side_is_exact(run, shared_tmp):
-    """docs/contact.md §7: a block on a rigid V-wedge, loaded on its other faces by the
-    traction of the homogeneous stress: face 1 sticks inside the cone, face 2 slides at the
-    cone with mu = G cot(beta) / lam, u = kappa t y e2 — to round-off, at every step of a
-    proportional ramp, in 2 iterations per step."""
-    beta, kappa = np.pi / 4, -1e-3
-    ref = references.wedge_stick_slip(LAM, G, beta, kappa)
-    mesh = shared_tmp / "wedge.msh"
-    if MPI.COMM_WORLD.rank == 0:
-        wedge_mesh(mesh, beta)
-    MPI.COMM_WORLD.Barrier()
+def wedge_scene(mesh, ref) -> str:
+    """The V-wedge scene of docs/contact.md §7 on ``mesh`` (see ``wedge_mesh``): the other
+    faces loaded by the traction of the exact homogeneous stress of ``ref``."""
     loads = "".join(f"""
 [[loads]]
 name = "{side}"
@@ -446,7 +438,7 @@ traction = [{tx!r}, {ty!r}]
                            ("top", ref.traction(np.array([[0.0, 1.0]]))[0]),
                            ("left", ref.traction(np.array([[-1.0, 0.0]]))[0])))
     n2 = ref.normal2
-    text = f"""
+    return f"""
 [mesh]
 file = "{mesh}"
 [model]
@@ -468,6 +460,20 @@ friction = {ref.mu!r}
 [steps]
 count = 3
 """
+
+
+def test_wedge_stick_and_slip_side_by_side_is_exact(run, shared_tmp):
+    """docs/contact.md §7: a block on a rigid V-wedge, loaded on its other faces by the
+    traction of the homogeneous stress: face 1 sticks inside the cone, face 2 slides at the
+    cone with mu = G cot(beta) / lam, u = kappa t y e2 — to round-off, at every step of a
+    proportional ramp, in 2 iterations per step."""
+    beta, kappa = np.pi / 4, -1e-3
+    ref = references.wedge_stick_slip(LAM, G, beta, kappa)
+    mesh = shared_tmp / "wedge.msh"
+    if MPI.COMM_WORLD.rank == 0:
+        wedge_mesh(mesh, beta)
+    MPI.COMM_WORLD.Barrier()
+    text = wedge_scene(mesh, ref)
     res = run(text, name="wedge")
     pts = res["mesh/points"]
     for k, t in enumerate(res["steps/time"]):

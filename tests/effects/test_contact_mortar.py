@@ -14,6 +14,7 @@ from parsolve.errors import InputError
 from parsolve.mesh.generators import rectangle
 from parsolve.model import build_model
 from parsolve.scene import load_scene
+from test_contact import PATCH as CONTACT_PATCH
 
 MIDS = {"triangle6": [(0, 1), (1, 2), (2, 0)]}   # midside node k+3 between corners (a, b)
 
@@ -64,47 +65,10 @@ def write_mesh(path, *args, **kw):
     MPI.COMM_WORLD.Barrier()
 
 
-PATCH = """
-title = "mortar patch test"
-[mesh]
-file = "{mesh}"
-[model]
-hypothesis = "plane_strain"
-[[materials]]
-region = "lower"
-E = 1000.0
-nu = 0.3
-[[materials]]
-region = "upper"
-E = 300.0
-nu = 0.2
-[[loads]]
-name = "press"
-region = "upper_top"
-traction = [0.0, {traction}]
-[[relations]]
-name = "ground"
-type = "dirichlet"
-region = "lower_bottom"
-component = "y"
-[[relations]]
-name = "roll_low"
-type = "dirichlet"
-region = "lower_left"
-component = "x"
-[[relations]]
-name = "roll_up"
-type = "dirichlet"
-region = "upper_left"
-component = "x"
-[[contact]]
-name = "joint"
-slave = "upper_bottom"
-master = "lower_top"
-discretization = "{discretization}"
-[steps]
-count = 2
-"""
+def patch(mesh, traction: float, discretization: str) -> str:
+    """The two-body patch scene of test_contact.py with the contact's discretization."""
+    return CONTACT_PATCH.format(mesh=mesh, traction=traction,
+                                extra=f'discretization = "{discretization}"')
 
 
 def slave_weights(x: np.ndarray, quadratic: bool) -> np.ndarray:
@@ -137,7 +101,7 @@ def test_mortar_patch_pressure_is_transmitted_exactly(run, shared_tmp, nx_low, n
     mesh = shared_tmp / f"mortar_{nx_low}_{nx_up}_{cell}.msh"
     write_mesh(mesh, nx_low, nx_up, cell)
     p = 10.0
-    res = run(PATCH.format(mesh=mesh, traction=-p, discretization="mortar"),
+    res = run(patch(mesh, -p, "mortar"),
               name=f"mortar_patch_{nx_low}_{nx_up}_{cell}")
     stress = res["fields/stress"][-1]
     np.testing.assert_allclose(stress[:, 1], -p, atol=1e-12 * p)
@@ -161,7 +125,7 @@ def test_node_to_segment_fails_the_same_patch(run, shared_tmp):
     mesh = shared_tmp / "nts_3_5.msh"
     write_mesh(mesh, 3, 5)
     p = 10.0
-    res = run(PATCH.format(mesh=mesh, traction=-p, discretization="node_to_segment"),
+    res = run(patch(mesh, -p, "node_to_segment"),
               name="nts_patch_3_5")
     stress = res["fields/stress"][-1]
     assert np.abs(stress[:, 1] + p).max() > 1e-3 * p
