@@ -18,6 +18,7 @@ from parsolve.contact.friction import OPEN, SLIP, STICK
 from parsolve.errors import InputError
 from parsolve.model import build_model
 from parsolve.scene import load_scene
+from test_contact import BASE as CONTACT_BASE, PLANE
 
 E, NU = 1000.0, 0.3
 BLOCK = (CONFIGS / "contact_block_friction.toml").read_text()
@@ -158,25 +159,8 @@ def test_hertz_cylinder_penalty_and_augmented_lagrangian(run):
 
 # ----------------------------------------------------------------------------- bad input
 
-BASE = """
-[mesh]
-generator = "rectangle"
-lx = 1.0
-ly = 0.5
-nx = 4
-ny = 2
-[model]
-hypothesis = "plane_strain"
-[[materials]]
-E = 1000.0
-nu = 0.3
-[[contact]]
-name = "base"
-slave = "bottom"
-{contact}
-"""
-
-PLANE = 'obstacle = { plane = { origin = [0.0, 0.0], normal = [0.0, 1.0] } }'
+# the bad-input scene of test_contact.py, its slave the bottom edge
+BASE = CONTACT_BASE.replace("{contact}", 'slave = "bottom"\n{contact}')
 
 
 @pytest.mark.parametrize("contact, key, words", [
