@@ -43,12 +43,15 @@ def interruptible(comm: MPI.Comm = MPI.COMM_WORLD):
     try:
         yield
     finally:
+        _pending = 0
         for s, h in previous.items():
             signal.signal(s, h)
 
 
 def check(comm: MPI.Comm) -> None:
     """Collective over ``comm``: raise Interrupted on every rank when any rank got a signal."""
+    global _pending
     signum = _pending if comm.size == 1 else comm.allreduce(_pending, op=MPI.MAX)
     if signum:
+        _pending = 0   # acted on: raised once, on every rank
         raise _interrupted(signum)

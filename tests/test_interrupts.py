@@ -30,3 +30,4 @@ def test_a_signal_on_one_rank_stops_every_rank_at_the_check():
             interrupts.check(comm)
     assert err.value.exit_status == 143 and str(err.value) == "interrupted: SIGTERM"
     assert signal.getsignal(signal.SIGTERM) is before   # the previous handler is back
+    interrupts.check(comm)                               # acted on once: nothing pending
