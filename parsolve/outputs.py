@@ -19,10 +19,10 @@ def owned_sums(comm, node_part: np.ndarray, sums: np.ndarray, weights: np.ndarra
     from every rank's contributions over all nodes: one reduce-scatter, no gather."""
     order = np.argsort(node_part, kind="stable")   # rows grouped by owner, ids increasing
     counts = np.bincount(node_part, minlength=comm.size)
-    both = np.column_stack([sums, weights])[order]
+    both = np.ascontiguousarray(np.column_stack([sums, weights])[order], dtype=np.float64)
     k = both.shape[1]
-    out = np.empty((int(counts[comm.rank]), k))
-    comm.Reduce_scatter(np.ascontiguousarray(both), out, recvcounts=counts * k, op=MPI.SUM)
+    out = np.empty((int(counts[comm.rank]), k), dtype=np.float64)
+    comm.Reduce_scatter([both, MPI.DOUBLE], [out, MPI.DOUBLE], recvcounts=counts * k, op=MPI.SUM)
     return out[:, :-1], out[:, -1]
 
 
