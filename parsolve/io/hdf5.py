@@ -102,6 +102,19 @@ def _create(f: h5py.File, name: str, row_shape: tuple, dtype) -> None:
     f.create_dataset(name, (0,) + tuple(row_shape), maxshape=maxshape, chunks=chunks, dtype=dtype)
 
 
+
+def known_datasets(relations: dict) -> dict:
+    """{name: (row shape, dtype)} of the per-step datasets known before any step: they exist
+    even if no step finishes (a failure before the first step)."""
+    known = {"steps/time": ((), np.float64), "steps/iterations": ((), np.int64),
+             "steps/residual": ((), np.float64)}
+    for name, (nrows, unilateral) in relations.items():
+        known[f"relations/{name}/multiplier"] = ((nrows,), np.float64)
+        known[f"relations/{name}/primal"] = ((nrows,), np.float64)
+        if unilateral:
+            known[f"relations/{name}/active"] = ((nrows,), np.int8)
+    return known
+
 class ResultWriter:
     """Appends one saved step at a time; only rank 0 touches the file, but ``write_step`` and
     the constructor are collective (every rank raises the same OutputError).
@@ -149,14 +162,7 @@ class ResultWriter:
         f["mesh/points"] = self.mesh.points
         f[f"mesh/cells/{self.mesh.cell_type}"] = self.mesh.cells
         # What is known now exists even if no step finishes (a failure before the first step)
-        known = {"steps/time": ((), np.float64), "steps/iterations": ((), np.int64),
-                 "steps/residual": ((), np.float64)}
-        for name, (nrows, unilateral) in self.relations.items():
-            known[f"relations/{name}/multiplier"] = ((nrows,), np.float64)
-            known[f"relations/{name}/primal"] = ((nrows,), np.float64)
-            if unilateral:
-                known[f"relations/{name}/active"] = ((nrows,), np.int8)
-        for name, (shape, dtype) in known.items():
+        for name, (shape, dtype) in known_datasets(self.relations).items():
             _create(f, name, shape, dtype)
             self._known[name] = (shape, dtype)
         f.flush()

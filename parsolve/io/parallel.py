@@ -44,7 +44,7 @@ from mpi4py import MPI
 
 from parsolve import __version__
 from parsolve.errors import OutputError
-from parsolve.io.hdf5 import ResultWriter, _create
+from parsolve.io.hdf5 import ResultWriter, _create, known_datasets
 from parsolve.io.slabs import OwnedRows, Rows, split_owners
 from parsolve.io.xdmf import XdmfWriter, sidecar_path
 
@@ -147,14 +147,7 @@ class ParallelResultWriter(ResultWriter):
                                      (f"mesh/cells/{mesh.cell_type}", mesh.cells, "cell_fields")):
                 ds = f.create_dataset(name, data.shape, dtype=data.dtype)
                 self._write_rows(ds, None, kind, self.rows[kind].local(data))
-            known = {"steps/time": ((), np.float64), "steps/iterations": ((), np.int64),
-                     "steps/residual": ((), np.float64)}
-            for name, (nrows, unilateral) in self.relations.items():
-                known[f"relations/{name}/multiplier"] = ((nrows,), np.float64)
-                known[f"relations/{name}/primal"] = ((nrows,), np.float64)
-                if unilateral:
-                    known[f"relations/{name}/active"] = ((nrows,), np.int8)
-            for name, (shape, dtype) in known.items():
+            for name, (shape, dtype) in known_datasets(self.relations).items():
                 _create(f, name, shape, dtype)
                 self._known[name] = (shape, np.dtype(dtype))
             self.file = None
