@@ -162,10 +162,8 @@ def _same(a: Path, b: Path) -> bool:
 
 def _check_all_regions(model) -> None:
     """Regions no effect uses are evaluated too: their selectors must be valid and finite."""
-    from parsolve.mesh.regions import RegionResolver
-
     scene = model.scene
-    resolver = RegionResolver(model.mesh, scene.regions, scene.source)
+    resolver = model.regions()
     for name, spec in scene.regions.items():
         resolver(name, spec.key)
 
@@ -228,13 +226,15 @@ def main(argv: list[str] | None = None) -> int:
             inputs = [Path(args.scene)] + ([scene.mesh.file] if scene.mesh.file else [])
             check_output(out, source, key, inputs, args.export_system)
         with memory.agreed_over(comm):
-            model = build_model(scene)
+            model = build_model(scene, comm)
         _check_all_regions(model)
         _validate_options(comm, model, cli_options)
         for warning in model.mesh.warnings:
             say(f"parsolve: warning: {warning}", sys.stderr)
         if args.command == "check":
-            say(f"{args.scene}: ok ({model.mesh.num_points} nodes, {model.mesh.num_cells} "
+            mesh = model.mesh
+            say(f"{args.scene}: ok ({getattr(mesh, 'num_global_points', mesh.num_points)} nodes, "
+                f"{getattr(mesh, 'num_global_cells', mesh.num_cells)} "
                 f"{model.mesh.cell_type} cells, {len(model.relations)} relations, "
                 f"{len(scene.times)} steps; effects: {', '.join(scene.effects)})")
             return 0

@@ -15,6 +15,7 @@ from parsolve.effects.compose import Rate
 from parsolve import interrupts
 from parsolve.errors import Interrupted, SolverError
 from parsolve.io.hdf5 import output_mode, result_writer
+from parsolve.io.mesh_rows import output_mesh
 from parsolve.model import Model
 from parsolve.outputs import Balance, progress, resultant_labels, step_outputs
 from parsolve.solvers.arc_length import run_arc_length
@@ -37,14 +38,16 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
     system = SaddleSystem(comm, model)
     relations_meta = {r.name: (r.nrows, r.sense != "=") for r in model.relations}
     unknowns = {"unknowns": " ".join(f.output for f in model.fields),
-                "dofs": model.mesh.num_points * model.ncomp,
+                "dofs": getattr(model.mesh, "num_global_points", model.mesh.num_points) * model.ncomp,
                 "resultant_components": " ".join(resultant_labels(model.fields, model.mesh.dim))}
     mesh, part = model.mesh, system.part
-    mode = output_mode(output or scene.output_mode, comm,
-                       mesh.num_points * model.ncomp)
-    # the rows each rank reports: its nodes, and the cells whose lowest node owner it is
-    owners = (part.node_part, part.node_part[mesh.cells].min(axis=1))
-    writer = result_writer(mode, comm, out, mesh, scene.text, petsc_version(), relations_meta,
+    mode = output_mode(output or scene.output_mode, comm, unknowns["dofs"])
+    if model.distributed:   # the file's mesh and rows from every rank's owned part
+        written, owners = output_mesh(comm, mesh, system.part)
+    else:
+        # the rows each rank reports: its nodes, and the cells whose lowest node owner it is
+        written, owners = mesh, (part.node_part, part.node_part[mesh.cells].min(axis=1))
+    writer = result_writer(mode, comm, out, written, scene.text, petsc_version(), relations_meta,
                            attrs=unknowns, owners=owners)
     status = "complete"
     try:
@@ -161,7 +164,7 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log) -> None:
         pivots = solver.negative_pivots()  # the saddle's: one per enforced multiplier row
         if pivots is not None:
             pivots -= int(newton.active.active.sum())
-        warning = watch.check(newton.q - snap[0], pivots)
+        warning = watch.check(system.norm(newton.q - snap[0]), pivots)
         extra.update({"steps/cuts": schedule.cuts, "steps/branch_warning": int(warning is not None)})
         timings = solver.take_timings()
         timings["assembly"] = system.timings.get("assembly", 0.0) + (setup if step == 1 else 0.0)
@@ -208,12 +211,13 @@ class BranchWatch:
         self.nonlinear = nonlinear  # a linear scene's increments may legitimately jump
         self.pivots, self.previous = None, None
 
-    def check(self, dq: np.ndarray, pivots: int | None) -> str | None:
+    def check(self, dq, pivots: int | None) -> str | None:
+        """``dq``: the step's increment, or its norm (the same on every rank)."""
         warning = None
         if pivots is not None and self.pivots is not None and pivots != self.pivots:
             warning = (f"the tangent's negative pivots went from {self.pivots} to {pivots}: "
                        "a limit point or a bifurcation was crossed")
-        size = float(np.linalg.norm(dq))
+        size = float(np.linalg.norm(dq)) if np.ndim(dq) else float(dq)
         if self.nonlinear and self.previous is not None and self.previous > 0 \
                 and size > 10 * self.previous:
             warning = (f"the increment is {size / self.previous:.0f}× the previous one: the run may "

@@ -17,6 +17,8 @@ from parsolve.errors import InputError
 from parsolve.fields import FieldSet
 from parsolve.mesh import memory
 from parsolve.mesh.checks import check_mesh
+from parsolve.mesh.distribute import LocalMesh, distribute
+from parsolve.mesh.local_regions import LocalRegions
 from parsolve.mesh.generators import GENERATORS, make_quadratic
 from parsolve.mesh.mesh import Mesh
 from parsolve.mesh.reader import read_mesh
@@ -34,6 +36,16 @@ class Model:
     patterns: dict[str, LoadPattern]
     relations: list[Relation]
     reference_patterns: tuple[str, ...] = ()  # applied by a solver (arc-length), not as loads
+    comm: object = None   # the ranks sharing a distributed mesh (None: every rank has it all)
+
+    @property
+    def distributed(self) -> bool:
+        """Each rank holds only its part of the mesh (``mesh.distribute``)."""
+        return isinstance(self.mesh, LocalMesh)
+
+    def regions(self) -> RegionResolver:
+        """A fresh resolver of the scene's regions on this model's mesh."""
+        return resolver(self.scene, self.mesh, self.comm)
 
     @property
     def ncomp(self) -> int:
@@ -165,9 +177,45 @@ def _generator_key(exc: Exception) -> str:
     return f"mesh.{name}" if name.isidentifier() and name != "invalid" else "mesh"
 
 
-def build_model(scene: Scene) -> Model:
-    mesh = build_mesh(scene)
-    regions = RegionResolver(mesh, scene.regions, scene.source)
+def resolver(scene: Scene, mesh: Mesh, comm=None) -> RegionResolver:
+    if isinstance(mesh, LocalMesh):
+        return LocalRegions(comm, mesh, scene.regions, scene.source)
+    return RegionResolver(mesh, scene.regions, scene.source)
+
+
+def distributed_mesh(scene: Scene, comm) -> bool:
+    """Whether to distribute the mesh: asked for (``[solver] mesh``), on several ranks, and
+    every effect of the scene works on a mesh part (the others need the whole mesh)."""
+    if comm is None or comm.size == 1 or scene.solver.mesh == "replicated":
+        return False
+    unsupported = [name for name in scene.effect_specs if not EFFECTS[name].distributed]
+    if scene.nonlinear.method == "arc_length":
+        unsupported.append("arc-length")
+    return not unsupported
+
+
+def _distributed_mesh(scene: Scene, comm) -> LocalMesh:
+    """Rank 0 builds and checks the whole mesh, then every rank gets its part; an input error
+    of rank 0's is raised on every rank."""
+    whole, error = None, None
+    if comm.rank == 0:
+        try:
+            with memory.agreed_over(None):   # rank 0 alone (see README: the whole on one rank)
+                whole = build_mesh(scene)
+        except InputError as exc:
+            error = (exc.message, exc.source, exc.key)
+    error = comm.bcast(error, root=0)
+    if error is not None:
+        raise InputError(*error)
+    return distribute(comm, whole, scene.solver.partitioner)
+
+
+def build_model(scene: Scene, comm=None) -> Model:
+    """The model of a scene; with ``comm`` and a scene that allows it, on a distributed mesh
+    (``distributed_mesh``): then collective."""
+    distributed = distributed_mesh(scene, comm)
+    mesh = _distributed_mesh(scene, comm) if distributed else build_mesh(scene)
+    regions = resolver(scene, mesh, comm)
     effects, fields = build_effects(scene, mesh, regions)
     patterns = load_patterns(mesh, scene.loads, regions, scene.evolutions, scene.thickness,
                              scene.source, fields)
@@ -182,4 +230,5 @@ def build_model(scene: Scene) -> Model:
             relations.append(r)
             names.add(r.name)
     reference = (scene.nonlinear.arc_pattern,) if scene.nonlinear.method == "arc_length" else ()
-    return Model(scene, mesh, fields, effects, patterns, relations, reference)
+    return Model(scene, mesh, fields, effects, patterns, relations, reference,
+                 comm if distributed else None)

@@ -26,9 +26,11 @@ def owned_sums(comm, node_part: np.ndarray, sums: np.ndarray, weights: np.ndarra
     return out[:, :-1], out[:, -1]
 
 
-def resultant(relation, lam: np.ndarray, fields, points: np.ndarray) -> np.ndarray:
+def resultant(relation, lam: np.ndarray, fields, points) -> np.ndarray:
     """Sum of the reactions D λ per node DOF column (every field's components), then, for a
-    model with a displacement field, their moment about the origin (z in 2D; x, y, z in 3D)."""
+    model with a displacement field, their moment about the origin (z in 2D; x, y, z in 3D).
+    ``points``: the coordinates of the relation's nodes by id (an array, or a function of the
+    ids)."""
     dofs, force = relation.reaction(lam)
     ncomp = fields.ncomp
     out = np.bincount(dofs % ncomp, weights=force, minlength=ncomp)
@@ -41,7 +43,7 @@ def resultant(relation, lam: np.ndarray, fields, points: np.ndarray) -> np.ndarr
     x = np.zeros((force.size, 3))
     on_u = np.isin(col, cols)
     f[on_u, col[on_u] - cols[0]] = force[on_u]
-    x[:, :dim] = points[node]
+    x[:, :dim] = points(node) if callable(points) else points[node]
     moment = np.cross(x, f).sum(axis=0)
     return np.concatenate([out, moment[2:] if dim == 2 else moment])
 
@@ -63,24 +65,36 @@ def step_outputs(comm: MPI.Comm, system, q: np.ndarray, multipliers: dict, newto
     mesh = model.mesh
     owned = system.part.owned_cells(comm.rank, mesh.cells)
     values = system.composition.values(q)
-    fields = {f.output: values[f.name] for f in model.fields}
+    if system.distributed:   # owned nodes first: this rank's rows, in increasing input id
+        n_owned = mesh.n_owned
+        fields = {f.output: OwnedRows(values[f.name][:n_owned]) for f in model.fields}
+        # every local cell: the sums on owned nodes are then complete, no exchange
+        computed = system.local_cells
+        keep = np.isin(computed, owned, assume_unique=True)
+    else:
+        fields = {f.output: values[f.name] for f in model.fields}
+        computed = owned
     cell_fields = {}
     for k, effect in enumerate(model.effects):
         extra = None
         if newton is not None and newton.extras[k] is not None:
             extra = (newton.extras[k], newton.states[k])
-        nodal, cells = effect.outputs(owned, values, extra, system.local_cells)
+        nodal, cells = effect.outputs(computed, values, extra, system.local_cells)
         for name, (sums, weights) in nodal.items():  # each rank its owned nodes' averages
-            sums, weights = owned_sums(comm, system.part.node_part, sums, weights)
+            if system.distributed:
+                sums, weights = sums[:n_owned], weights[:n_owned]
+            else:
+                sums, weights = owned_sums(comm, system.part.node_part, sums, weights)
             fields[name] = OwnedRows(sums / np.maximum(weights, 1e-300)[:, None])
         for name, value in cells.items():  # owned cells, in increasing id: the writer places them
-            cell_fields[name] = OwnedRows(np.asarray(value, dtype=float))
+            value = np.asarray(value, dtype=float)
+            cell_fields[name] = OwnedRows(value[keep] if system.distributed else value)
     rel_out = {}
     active = newton.active.active if newton is not None else None
     for r in model.relations:
         lam = multipliers[r.name]
-        rel_out[r.name] = {"multiplier": lam, "primal": r.primal(q),
-                           "resultant": resultant(r, lam, model.fields, mesh.points)}
+        rel_out[r.name] = {"multiplier": lam, "primal": system.relation_primal(r, q),
+                           "resultant": resultant(r, lam, model.fields, system.rdofs.points_of)}
         if r.sense != "=":
             k = system.multiplied.index(r)
             first = system.block.row_first[k]
@@ -129,7 +143,7 @@ class Balance:
         out = {}
         step_total = 0.0
         for n in self.names:
-            step_sources = dt * float(f_known.reshape(-1, self.ncomp)[:, self.cols[n]].sum())
+            step_sources = dt * self.comm.allreduce(float(f_known[self.owned[n]].sum()))
             step_reactions = dt * self._reactions(n, multipliers)
             self.sources[n] += step_sources
             self.reacted[n] += step_reactions

@@ -20,7 +20,7 @@ def build_relations(specs: list, regions, evolutions: dict, patterns: dict, fiel
         r = _one(spec, regions, evolutions, fields, source)
         r.sense, r.maximum = spec.sense, spec.maximum
         if spec.dual is not None:
-            rel.with_dual(r, patterns[spec.dual].vector())
+            r.shared_dual = regions.relation_vector(patterns[spec.dual].vector(), ncomp)
         r.eliminate = spec.eliminate if spec.eliminate is not None else (eliminate and None)
         r.meta = {"type": spec.type, "key": spec.key, "dual": spec.dual}
         out.append(r)
@@ -42,15 +42,15 @@ def _one(spec, regions, evolutions, fields, source: str) -> rel.Relation:
     ncomp = fields.ncomp
     comps = [fields.component(spec.field, c) for c in spec.components]
     if spec.type == "dirichlet":
-        nodes = regions(spec.region, spec.key + ".region").nodes
+        nodes = regions.relation_nodes(spec.region, spec.key + ".region")
         value = spec.value
         if isinstance(value, str):  # an expression of the coordinates, per node
-            per_node = selectors.evaluate_value(value, regions.mesh.points[nodes], source,
+            per_node = selectors.evaluate_value(value, regions.points_of(nodes), source,
                                                 spec.key + ".value")
             value = np.repeat(per_node[:, None], len(spec.components), axis=1)
         return rel.dirichlet(spec.name, nodes, comps, ncomp, value, evol)
     if spec.type == "equal":
-        nodes = regions(spec.region, spec.key + ".region").nodes
+        nodes = regions.relation_nodes(spec.region, spec.key + ".region")
         if len(nodes) < 2:
             raise InputError(f"region {spec.region!r} has fewer than 2 nodes", source, spec.key + ".region")
         return rel.equal(spec.name, nodes, comps[0], ncomp)
@@ -59,7 +59,7 @@ def _one(spec, regions, evolutions, fields, source: str) -> rel.Relation:
     terms = []
     for i, term in enumerate(spec.terms):
         key = f"{spec.key}.terms[{i}].region" if spec.type == "linear" else spec.key + ".region"
-        nodes = regions(term.region, key).nodes
+        nodes = regions.relation_nodes(term.region, key)
         terms.append((nodes, fields.component(term.field, term.component), term.coefficient,
                       term.mean))
     r = rel.combination(spec.name, terms, ncomp, spec.value, evol)
@@ -90,13 +90,16 @@ def strain_rows(mesh, cells: np.ndarray, direction: np.ndarray, thickness: float
 def _strain(spec, regions, evol, source: str, fields) -> rel.Relation:
     """Strain n·ε·n of a region: its mean (one row), or one row per cell (per_cell)."""
     region = regions(spec.region, spec.key + ".region")
-    if region.cells.size == 0:
+    if regions.cell_count(region.cells) == 0:
         raise InputError(f"region {spec.region!r} contains no cell (a strain needs cells)",
                          source, spec.key + ".region")
     dofs, coefs, vol = strain_rows(regions.mesh, region.cells, spec.direction, fields=fields)
+    # (on a distributed mesh: the owned cells' rows of every rank, in input ids)
+    cells, dofs, coefs, vol = regions.owned_cell_rows(region.cells, fields.ncomp, dofs, coefs,
+                                                        vol)
     if not spec.per_cell:
         coefs = (coefs * (vol / vol.sum())[:, None]).reshape(1, -1)
         dofs = dofs.reshape(1, -1)
     r = rel.rows(spec.name, dofs, coefs, spec.value, evol, spec.sense)
-    r.meta["cells"] = region.cells
+    r.meta["cells"] = cells
     return r

@@ -10,6 +10,8 @@ import numpy as np
 
 from parsolve.errors import InputError
 from parsolve.fem import kernels
+from parsolve.fem.elements import (default_degree, element, facet_measure_and_normal,
+                                   quadrature)
 from parsolve.mesh.mesh import Mesh
 
 
@@ -36,27 +38,42 @@ def _field_dofs(fields, field: str, nodes: np.ndarray) -> np.ndarray:
     return fields.dofs(field, nodes.ravel()).reshape(nodes.shape[0], -1)
 
 
-def part_vector(mesh: Mesh, spec, region, thickness: float, source: str, fields) -> np.ndarray:
-    """Global force vector (input DOF numbering) of one load entry, on its field."""
+def part_vector(mesh: Mesh, spec, region, thickness: float, source: str, fields,
+                regions=None) -> np.ndarray:
+    """Force vector (the mesh's DOF numbering) of one load entry, on its field. ``regions``
+    (the resolver) counts and sums over the whole mesh when the mesh is one rank's part."""
     ndof = mesh.num_points * fields.ncomp
     vec = np.asarray(spec.vector)
     if spec.kind == "nodal":
         dofs = _field_dofs(fields, spec.field, region.nodes[:, None])
         return _scatter(ndof, dofs, np.tile(vec, (len(region.nodes), 1)))
     if spec.kind == "body":
-        if region.cells.size == 0:
+        if (region.cells.size if regions is None else regions.cell_count(region.cells)) == 0:
             raise InputError(f"region {spec.region!r} contains no cell", source, spec.key + ".region")
+        if region.cells.size == 0:
+            return np.zeros(ndof)
         cells = mesh.cells[region.cells]
         fe = kernels.body_load(mesh.points[cells], mesh.cell_type, vec, thickness)
         return _scatter(ndof, _field_dofs(fields, spec.field, cells), fe)
-    if region.facets.size == 0:
+    if (region.facets.shape[0] if regions is None else regions.facet_count(region.facets)) == 0:
         raise InputError(f"region {spec.region!r} contains no boundary facet", source,
                          spec.key + ".region")
+    if region.facets.shape[0] == 0:   # none on this rank's part of a distributed mesh
+        return np.zeros(ndof)
     coords = mesh.points[region.facets]
     if spec.kind == "total_force":
-        vec = vec / kernels.facet_measure(coords, mesh.facet_type, thickness)
+        vec = vec / _measure(coords, mesh.facet_type, thickness, region.facets, regions)
     fe = kernels.facet_load(coords, mesh.facet_type, vec, thickness)
     return _scatter(ndof, _field_dofs(fields, spec.field, region.facets), fe)
+
+
+def _measure(coords, facet_type: str, thickness: float, facets, regions) -> float:
+    """Total measure of a region's facets (over every rank's part, each facet once)."""
+    if regions is None:
+        return kernels.facet_measure(coords, facet_type, thickness)
+    xi, w = quadrature(facet_type, default_degree(facet_type, "load"))
+    ds, _ = facet_measure_and_normal(coords, element(facet_type).grad_shape(xi))
+    return regions.facet_total(facets, (ds * w).sum(axis=1) * thickness)
 
 
 def load_patterns(mesh: Mesh, specs: list, regions, evolutions: dict, thickness: float,
@@ -64,7 +81,8 @@ def load_patterns(mesh: Mesh, specs: list, regions, evolutions: dict, thickness:
     patterns: dict[str, LoadPattern] = {}
     for spec in specs:
         region = regions(spec.region, spec.key + ".region")
-        vec = part_vector(mesh, spec, region, thickness if mesh.dim == 2 else 1.0, source, fields)
+        vec = part_vector(mesh, spec, region, thickness if mesh.dim == 2 else 1.0, source, fields,
+                          regions)
         patterns.setdefault(spec.pattern, LoadPattern(spec.pattern)).parts.append(
             (vec, evolutions[spec.evolution]))
     return patterns

@@ -21,6 +21,8 @@ class Entry:
     fields: Callable = lambda spec, dim: {}
     regions: Callable = lambda spec: []
     evolutions: Callable = lambda spec: []
+    # works on one rank's part of a distributed mesh (its cells, its owned rows)
+    distributed: bool = False
 
 
 def _build_diffusion(spec, ctx):
@@ -50,7 +52,8 @@ def _build_contact(spec, ctx):
 EFFECTS: dict[str, Entry] = {
     "diffusion": Entry("diffusion", True, lambda t, dim: diffusion.parse(t, dim), _build_diffusion,
                        fields=lambda spec, dim: {spec.field: 1},
-                       regions=lambda spec: [(m.region, m.key + ".region") for m in spec.materials]),
+                       regions=lambda spec: [(m.region, m.key + ".region") for m in spec.materials],
+                       distributed=True),
     "solubility": Entry("solubility", False, lambda t, dim: solubility.parse(t), _build_solubility,
                         coupling=True,
                         regions=lambda spec: [(name, key.rsplit(".", 1)[0] + ".region")

@@ -142,6 +142,9 @@ class ResultWriter:
         self._known: dict[str, tuple] = {}   # those created with the file
         self._xdmf = XdmfWriter(self.path, mesh) if xdmf else None
         self.attrs = attrs or {}
+        # the mesh as rank 0 writes it (gathered when every rank holds only its part)
+        self._points = self._whole({"p": mesh.points})["p"]
+        self._cells = self._whole({"c": mesh.cells}, cells=True)["c"]
         if comm.rank == 0:
             try:
                 self._open(scene_text, petsc_version)
@@ -159,8 +162,9 @@ class ResultWriter:
         f = self.file = h5py.File(self.path, "w", libver="latest", rdcc_nbytes=0)
         f.attrs.update(parsolve_version=__version__, petsc_version=petsc_version,
                        nprocs=self.comm.size, status="running", scene=scene_text, **self.attrs)
-        f["mesh/points"] = self.mesh.points
-        f[f"mesh/cells/{self.mesh.cell_type}"] = self.mesh.cells
+        f["mesh/points"] = self._points
+        f[f"mesh/cells/{self.mesh.cell_type}"] = self._cells
+        self._points = self._cells = None
         # What is known now exists even if no step finishes (a failure before the first step)
         for name, (shape, dtype) in known_datasets(self.relations).items():
             _create(f, name, shape, dtype)
@@ -192,7 +196,7 @@ class ResultWriter:
                                  self.comm.size)
         else:
             owner = self.owners[1 if cells else 0]
-        rows = Rows(self.comm, owner)
+        rows = owner if isinstance(owner, Rows) else Rows(self.comm, owner)
         return {**values, **{name: rows.gather(values[name].values) for name in owned}}
 
     def _raise_if_failed(self) -> None:

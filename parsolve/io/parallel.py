@@ -105,8 +105,8 @@ class ParallelResultWriter(ResultWriter):
         self.selection = selection
         node_owner, cell_owner = owners if owners is not None else (
             split_owners(mesh.num_points, comm.size), split_owners(mesh.num_cells, comm.size))
-        self.rows = {"fields": Rows(self.comm, node_owner),
-                     "cell_fields": Rows(self.comm, cell_owner)}
+        self.rows = {kind: owner if isinstance(owner, Rows) else Rows(self.comm, owner)
+                     for kind, owner in (("fields", node_owner), ("cell_fields", cell_owner))}
         self.mpio = mpi_h5py()
         if comm.size > 1 and not self.mpio:
             raise OutputError(f"writing {self.path} in parallel needs h5py's MPI build "
@@ -145,8 +145,9 @@ class ParallelResultWriter(ResultWriter):
                            nprocs=self.comm.size, status="running", scene=scene_text, **self.attrs)
             for name, data, kind in (("mesh/points", mesh.points, "fields"),
                                      (f"mesh/cells/{mesh.cell_type}", mesh.cells, "cell_fields")):
-                ds = f.create_dataset(name, data.shape, dtype=data.dtype)
-                self._write_rows(ds, None, kind, self.rows[kind].local(data))
+                rows = self.rows[kind].local(data)
+                ds = f.create_dataset(name, (self.rows[kind].n,) + rows.shape[1:], dtype=rows.dtype)
+                self._write_rows(ds, None, kind, rows)
             for name, (shape, dtype) in known_datasets(self.relations).items():
                 _create(f, name, shape, dtype)
                 self._known[name] = (shape, np.dtype(dtype))

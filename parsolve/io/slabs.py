@@ -63,6 +63,25 @@ class Rows:
         self.starts, self.lengths = runs(self.ids)
         self._exchange = None
 
+    @classmethod
+    def from_ids(cls, comm: MPI.Comm, ids: np.ndarray, n: int) -> "Rows":
+        """Rows of a distributed mesh: each rank knows only its own (sorted input ids); rank 0
+        learns every rank's once, to place gathered rows (``owner`` is None elsewhere)."""
+        rows = cls.__new__(cls)
+        rows.comm, rows.n = comm, int(n)
+        rows.ids = np.sort(np.asarray(ids, dtype=np.int64))
+        rows.counts = np.array(comm.allgather(int(rows.ids.size)), dtype=np.int64)
+        rows.starts, rows.lengths = runs(rows.ids)
+        rows._exchange = None
+        everyone = np.empty(int(rows.counts.sum()) if comm.rank == 0 else 0, dtype=np.int64)
+        comm.Gatherv(rows.ids, [everyone, rows.counts, _displacements(rows.counts), MPI.INT64_T]
+                     if comm.rank == 0 else None, root=0)
+        rows.owner = None
+        if comm.rank == 0:
+            rows.owner = np.empty(rows.n, dtype=np.int64)
+            rows.owner[everyone] = np.repeat(np.arange(comm.size), rows.counts)
+        return rows
+
     # ---------------------------------------------------------------- this rank's rows
     def local(self, value) -> np.ndarray | None:
         """This rank's owned rows of ``value`` (see the module's doc); collective when rank 0

@@ -122,7 +122,7 @@ class XdmfWriter:
         tmp.write_bytes(head + TAIL)
         tmp.replace(self.path)
         self.offset = len(head)
-        nodes = mesh.cells.shape[1]
+        nodes = mesh.nodes_per_cell
         self._mesh = (
             f'<Topology TopologyType="{TOPOLOGY[mesh.cell_type]}" NumberOfElements="{mesh.num_cells}">'
             f'<DataItem Dimensions="{mesh.num_cells} {nodes}" NumberType="Int" Precision="8" '

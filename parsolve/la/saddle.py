@@ -87,8 +87,10 @@ class RelationBlock:
                 self.col_scale[sl] = self.row_scale[sl]
 
 
-def stack_relations(relations: list[Relation], layout: Layout) -> RelationBlock:
-    """Concatenate relations into global multiplier rows, in new DOF numbering."""
+def stack_relations(relations: list[Relation], layout: Layout, new_dof=None) -> RelationBlock:
+    """Concatenate relations into global multiplier rows, in new DOF numbering. ``new_dof``:
+    the relations' DOFs to new DOFs (default: the layout's, for a replicated mesh)."""
+    new_dof = new_dof or layout.new_dof
     sizes = [r.nrows for r in relations]
     mult_sizes = [1 if r.collapsed else r.nrows for r in relations]
     row_first = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
@@ -99,14 +101,14 @@ def stack_relations(relations: list[Relation], layout: Layout) -> RelationBlock:
         mult.append(local + first[k])
         ar.append(local[rel.a_rows] + first[k])
         arel.append(rel.a_rows + row_first[k])
-        ac.append(layout.new_dof(rel.a_dofs))
+        ac.append(new_dof(rel.a_dofs))
         av.append(rel.a_vals)
         if rel.collapsed:  # one copy of the shared vector
             dofs, vals = rel.shared_dual
             rows = np.zeros(dofs.size, dtype=np.int64)
         else:
             dofs, rows, vals = rel.dual_coo()
-        dr.append(layout.new_dof(dofs))
+        dr.append(new_dof(dofs))
         dc.append(np.asarray(rows, dtype=np.int64) + first[k])
         dv.append(np.asarray(vals, dtype=float))
 

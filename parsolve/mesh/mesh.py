@@ -58,5 +58,9 @@ class Mesh:
         return self.points.shape[0]
 
     @property
+    def nodes_per_cell(self) -> int:
+        return self.cells.shape[1]
+
+    @property
     def num_cells(self) -> int:
         return self.cells.shape[0]

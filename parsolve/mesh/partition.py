@@ -147,14 +147,34 @@ def scotch(comm, indptr: np.ndarray, indices: np.ndarray) -> np.ndarray | None:
     seed. Uniform vertex weights: a mesh has one cell type, so nodes per cell are the same for
     every cell."""
     from mpi4py import MPI
-    from petsc4py import PETSc
 
     n, size, rank = indptr.size - 1, comm.size, comm.rank
-    starts = np.array([n * r // size for r in range(size + 1)], dtype=np.int64)
+    starts = block_starts(n, size)
     r0, r1 = int(starts[rank]), int(starts[rank + 1])
-    local_ptr = (indptr[r0:r1 + 1] - indptr[r0]).astype(PETSc.IntType)
-    local_idx = indices[indptr[r0]:indptr[r1]].astype(PETSc.IntType)
-    adj = PETSc.Mat().createAIJ(size=((r1 - r0, n), (r1 - r0, n)),
+    local = scotch_block(comm, n, indptr[r0:r1 + 1] - indptr[r0], indices[indptr[r0]:indptr[r1]])
+    if local is None:
+        return None
+    cell_part = np.empty(n, dtype=np.int64)
+    counts = np.diff(starts)
+    comm.Allgatherv(local, [cell_part, counts, starts[:-1], MPI.INT64_T])
+    return cell_part
+
+
+def block_starts(n: int, size: int) -> np.ndarray:
+    """Rows [starts[r], starts[r+1]) of a graph of n vertices that rank r hands PT-Scotch."""
+    return np.array([n * r // size for r in range(size + 1)], dtype=np.int64)
+
+
+def scotch_block(comm, n: int, local_ptr: np.ndarray, local_idx: np.ndarray) -> np.ndarray | None:
+    """PT-Scotch parts of this rank's block of rows (``block_starts``) of a graph of n
+    vertices given as the block's CSR (global column ids); collective; None without PT-Scotch.
+    See ``scotch`` for how it is made deterministic."""
+    from petsc4py import PETSc
+
+    local_ptr = np.asarray(local_ptr).astype(PETSc.IntType)
+    local_idx = np.asarray(local_idx).astype(PETSc.IntType)
+    nloc = local_ptr.size - 1
+    adj = PETSc.Mat().createAIJ(size=((nloc, n), (nloc, n)),
                                 csr=(local_ptr, local_idx, np.ones(local_idx.size)), comm=comm)
     adj.assemble()
     part = PETSc.MatPartitioning().create(comm=comm)
@@ -179,10 +199,7 @@ def scotch(comm, indptr: np.ndarray, indices: np.ndarray) -> np.ndarray | None:
     local = parts.getIndices().astype(np.int64)
     for obj in (parts, part, adj):
         obj.destroy()
-    cell_part = np.empty(n, dtype=np.int64)
-    counts = np.diff(starts)
-    comm.Allgatherv(local, [cell_part, counts, starts[:-1], MPI.INT64_T])
-    return cell_part
+    return local
 
 
 def cell_parts(mesh: Mesh, nparts: int, method: str = "bisection", comm=None
@@ -208,8 +225,14 @@ def cell_parts(mesh: Mesh, nparts: int, method: str = "bisection", comm=None
 def partition(mesh: Mesh, nparts: int, method: str = "bisection", comm=None) -> Partition:
     """Partition cells (see ``cell_parts``), assign node owners and renumber nodes
     contiguously per rank."""
-    npts = mesh.num_points
     cell_part, used = cell_parts(mesh, nparts, method, comm)
+    return from_cell_parts(mesh, cell_part, nparts, used)
+
+
+def from_cell_parts(mesh: Mesh, cell_part: np.ndarray, nparts: int, used: str) -> Partition:
+    """Node owners (the lowest rank among the cells that touch a node) and the contiguous
+    node numbering that follow from the cells' parts."""
+    npts = mesh.num_points
     node_part = np.full(npts, nparts, dtype=np.int64)
     for rank in range(nparts - 1, -1, -1):  # lowest rank written last wins
         node_part[mesh.cells[cell_part == rank]] = rank

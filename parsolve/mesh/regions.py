@@ -45,8 +45,34 @@ class RegionResolver:
         return self._centroids
 
     def _from_mask(self, name: str, mask: np.ndarray, cell_mask: np.ndarray) -> Region:
-        facets = facets_from_nodes(self.mesh, mask)[0]
+        facets = self._kept(facets_from_nodes(self.mesh, mask)[0])
         return Region(name, np.flatnonzero(mask), facets, np.flatnonzero(cell_mask))
+
+    # ------------------------------------------------ what a distributed mesh changes (below)
+    def _local(self, fn, *args):
+        """A check on this rank's points (raises InputError)."""
+        return fn(*args)
+
+    def _kept(self, facets: np.ndarray) -> np.ndarray:
+        """The boundary facets this mesh really has (all of them here)."""
+        return facets
+
+    def _closest(self, spec) -> np.ndarray:
+        """Mask of the node closest to a point region's point."""
+        mask = np.zeros(self.mesh.num_points, dtype=bool)
+        mask[selectors.closest_point(spec.value, self.mesh.points, self.source, spec.key)] = True
+        return mask
+
+    def _empty(self, region: Region) -> bool:
+        return region.nodes.size == 0 and region.cells.size == 0
+
+    def points_of(self, nodes: np.ndarray) -> np.ndarray:
+        """Coordinates of nodes given by the ids relations use (here: the mesh's own)."""
+        return self.mesh.points[nodes]
+
+    def relation_nodes(self, name: str, key: str) -> np.ndarray:
+        """A region's nodes as the ids relations use (here: the mesh's own)."""
+        return self(name, key).nodes
 
     def _resolve(self, name: str, key: str) -> Region:
         m = self.mesh
@@ -54,19 +80,20 @@ class RegionResolver:
             spec = self.specs[name]
             pts, cen = m.points, self.centroids()
             if spec.kind == "expr":
-                mask = selectors.evaluate(spec.value, pts, self.tol, self.source, spec.key)
-                cmask = selectors.evaluate(spec.value, cen, self.tol, self.source, spec.key)
+                mask, cmask = self._local(lambda: (
+                    selectors.evaluate(spec.value, pts, self.tol, self.source, spec.key),
+                    selectors.evaluate(spec.value, cen, self.tol, self.source, spec.key)))
             elif spec.kind == "box":
-                mask = selectors.box(*spec.value, pts, self.tol, self.source, spec.key)
-                cmask = selectors.box(*spec.value, cen, self.tol, self.source, spec.key)
+                mask, cmask = self._local(lambda: (
+                    selectors.box(*spec.value, pts, self.tol, self.source, spec.key),
+                    selectors.box(*spec.value, cen, self.tol, self.source, spec.key)))
             elif spec.kind == "point":
-                mask = np.zeros(m.num_points, dtype=bool)
-                mask[selectors.closest_point(spec.value, pts, self.source, spec.key)] = True
+                mask = self._closest(spec)
                 cmask = np.zeros(m.num_cells, dtype=bool)
             else:
                 return self._group(spec.value, spec.key, name)
             region = self._from_mask(name, mask, cmask)
-            if region.nodes.size == 0 and region.cells.size == 0:
+            if self._empty(region):
                 raise InputError(f"region {name!r} selects no node and no cell", self.source, spec.key)
             return region
         return self._group(name, key, name)
@@ -74,7 +101,8 @@ class RegionResolver:
     def _group(self, group: str, key: str, name: str) -> Region:
         m = self.mesh
         if group == "all":
-            return Region(name, np.arange(m.num_points), boundary_facets(m)[0], np.arange(m.num_cells))
+            return Region(name, np.arange(m.num_points), self._kept(boundary_facets(m)[0]),
+                          np.arange(m.num_cells))
         if group in m.cell_groups:
             cells = m.cell_groups[group]
             mask = np.zeros(m.num_points, dtype=bool)
@@ -83,10 +111,30 @@ class RegionResolver:
             region.cells = cells
             return region
         if group in m.facet_groups:
-            facets = match_facets(m, m.facet_groups[group], self.source, key)[2]
+            facets = self._local(match_facets, m, m.facet_groups[group], self.source, key)[2]
             return Region(name, np.unique(facets), facets, np.zeros(0, dtype=np.int64))
         if group in m.node_groups:
             nodes = np.asarray(m.node_groups[group], dtype=np.int64)
             return Region(name, nodes, np.zeros((0, 0), dtype=np.int64), np.zeros(0, dtype=np.int64))
         known = ", ".join(sorted(self.names()))
         raise InputError(f"unknown region {group!r} (known: {known})", self.source, key)
+
+    def owned_cell_rows(self, cells: np.ndarray, ncomp: int, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Per-cell rows as relations number them: (cell ids, DOFs, the other arrays)."""
+        return (cells,) + arrays
+
+    def cell_count(self, cells: np.ndarray) -> int:
+        return int(cells.size)
+
+    def facet_count(self, facets: np.ndarray) -> int:
+        """Whether any rank has facets (their number here)."""
+        return int(facets.shape[0])
+
+    def facet_total(self, facets: np.ndarray, values: np.ndarray) -> float:
+        """Σ of per-facet values over the region's facets, each facet once."""
+        return float(np.sum(values))
+
+    def relation_vector(self, vector: np.ndarray, ncomp: int) -> tuple[np.ndarray, np.ndarray]:
+        """A nodal vector (DOFs of this mesh) as relations take it: (DOFs, nonzero values)."""
+        nz = np.flatnonzero(vector)
+        return nz, vector[nz]

@@ -63,9 +63,11 @@ class NewtonSolver:
         self.states = system.composition.init_states()
         self.active = ActiveSet(system.multiplied, spec.max_active_set_changes)
         self.ndof = model.mesh.num_points * model.ncomp
+        # bound of the relations' DOF numbers (input numbering: the whole mesh's)
+        self.ndof_keys = getattr(model.mesh, "num_global_points", model.mesh.num_points) * model.ncomp
         self.q = model.initial_q()
         self.lam = np.zeros(system.layout.nl)
-        self.x_full = np.zeros(system.layout.size)
+        self.x_full = system.zero_saddle()
         self.extras = [None] * len(model.effects)   # e.g. stresses at the quadrature points
         self.time = model.scene.time                # transient: θ-scheme from t_prev to t
         self.t_prev = 0.0
@@ -153,7 +155,7 @@ class NewtonSolver:
             r_norm = self._norm(r)
             residual = r_norm / max(ref, self._roundoff_force() / spec.rtol)
             self.residual_history.append(residual)
-            small_step = dq_norm <= spec.stol * max(float(np.abs(self.q).max()), 1e-300)
+            small_step = dq_norm <= spec.stol * max(system.max_abs(self.q), 1e-300)
             balanced = residual <= spec.rtol or small_step and r_norm < 1e-6 * ref
             if it > 0 and not changed and balanced:
                 self.states, self.extras = trial, extras
@@ -182,8 +184,8 @@ class NewtonSolver:
                 raise SolverError(f"Newton diverged at t = {t:.6g}, iteration {it} (relative "
                                   f"residuals ..., {history}): {exc}") from None
             x_full = system.gather(x.array)
-            dq = x_full[system.saddle_of_input]
-            dq_norm = float(np.abs(dq).max())
+            dq = system.primal_of(x_full)
+            dq_norm = system.max_abs(dq)
             self.q = self.q + dq
             self.lam = system.multipliers(x_full)
             self.x_full = x_full
@@ -246,19 +248,16 @@ class NewtonSolver:
         rhs.array[:] = system.rhs_from(f, np.zeros(system.block.nrows),
                                        np.zeros(system.elim_dofs.size))[0]
         self.linear.solve(rhs, x)
-        return system.gather(x.array)[system.saddle_of_input]
+        return system.primal_of(system.gather(x.array))
 
     def _dual_column(self, k: int, row: int | None = None) -> np.ndarray:
         """Column of D of relation k (its first row when every row shares one vector)."""
         rel = self.system.multiplied[k]
-        f = np.zeros(self.ndof)
         if rel.shared_dual is not None:
-            np.add.at(f, *rel.shared_dual)
-            return f
+            return self.system.to_local(*rel.shared_dual)
         dofs, rows, vals = rel.dual_coo()
         sel = rows == (0 if row is None else row)
-        np.add.at(f, dofs[sel], vals[sel])
-        return f
+        return self.system.to_local(dofs[sel], vals[sel])
 
     def _orient(self, kmat) -> None:
         """o = -sign(A K⁻¹ D) of every free unilateral non-associated row, from the first
@@ -271,9 +270,10 @@ class NewtonSolver:
                 continue  # a group's enforced row is chosen by value, whatever its sign
             rows = np.arange(blk.row_first[k], blk.row_first[k + 1])
             if r.meta.get("dual"):
-                rate = r.primal(self._unit_response(kmat, rows, self._dual_column(k)))
+                rate = system.relation_primal(r, self._unit_response(kmat, rows,
+                                                                     self._dual_column(k)))
             else:
-                rate = _row_dots(r, self.ndof)
+                rate = _row_dots(r, self.ndof_keys)
             if np.any(np.abs(rate) <= 1e-12 * max(float(np.abs(rate).max()), 1e-300)):
                 raise SolverError(f"relation {r.name!r}: its dual does not move its primal value "
                                   "(A K⁻¹ D = 0), so the sense of its reaction is undefined")
@@ -321,6 +321,5 @@ class NewtonSolver:
 
     def multipliers(self, t: float, f_int: np.ndarray) -> dict[str, np.ndarray]:
         """λ of every relation by name (eliminated ones recovered from their rows)."""
-        x = self.x_full.copy()
-        x[self.system.saddle_of_input] = self.q
+        x = self.system.with_primal(self.x_full, self.q)
         return self.system.unpack(x, t, f_int=f_int, f_ext=getattr(self, "f_ext", None))[1]

@@ -21,8 +21,11 @@ def rigid_body_modes(comm: MPI.Comm, system: SaddleSystem) -> PETSc.NullSpace | 
     lo, hi = part.node_ranges[comm.rank], part.node_ranges[comm.rank + 1]
     if model.fields.names() != ["u"]:
         return None if model.ncomp > 1 else PETSc.NullSpace().create(constant=True, comm=comm)
-    old_of_new = np.argsort(part.new_of_old)
-    coords = mesh.points[old_of_new[lo:hi]]
+    if system.distributed:   # owned nodes first, in the global numbering's order
+        coords = mesh.points[:mesh.n_owned]
+    else:
+        old_of_new = np.argsort(part.new_of_old)
+        coords = mesh.points[old_of_new[lo:hi]]
     vec = PETSc.Vec().createWithArray(coords.ravel().copy(), size=(coords.size, None),
                                       bsize=mesh.dim, comm=comm)
     return PETSc.NullSpace().createRigidBody(vec)

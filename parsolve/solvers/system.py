@@ -17,10 +17,13 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from parsolve.effects.compose import Composition, Rate
+from parsolve.la.ghosts import GhostExchange, SaddleValues, value_keys
 from parsolve.la.layout import make_layout
+from parsolve.la.relation_dofs import RelationDofs, ReplicatedDofs
 from parsolve.la.pattern import node_pattern
 from parsolve.la.petsc import SaddleOperator
 from parsolve.la.saddle import stack_relations
+from parsolve.mesh.local_regions import allgather_rows
 from parsolve.mesh.partition import partition
 from parsolve.model import Model
 
@@ -42,19 +45,25 @@ class SaddleSystem:
         rank = comm.rank
         self.timings = {}
         t0 = time.perf_counter()
-        self.part = partition(mesh, comm.size, model.scene.solver.partitioner, comm)
+        self.distributed = model.distributed
+        self.part = mesh.partition() if self.distributed else \
+            partition(mesh, comm.size, model.scene.solver.partitioner, comm)
         self.eliminated = [r for r in model.relations if r.eliminable()]
         self.multiplied = [r for r in model.relations if not r.eliminable()]
         nmult = sum(1 if r.collapsed else r.nrows for r in self.multiplied)
         self.layout = lay = make_layout(self.part, ncomp, nmult)
+        # relations name input DOFs; on a distributed mesh they map to local ones here
+        self.unused = self.unused_dofs()
+        self.rdofs = RelationDofs(comm, mesh, ncomp, self._relation_dofs()) if self.distributed \
+            else ReplicatedDofs(lay, mesh.points, ncomp)
         self.local_cells = self.part.local_cells(rank, mesh.cells)
         lumped = model.scene.time is None or model.scene.time.mass == "lumped"
         self.composition = Composition(model, self.local_cells, lumped)
         self.rate: Rate | None = None  # the rate terms of a transient step (set by the stepper)
         new_cells = self.part.new_of_old[mesh.cells[self.local_cells]]
         lo, hi = self.part.node_ranges[rank], self.part.node_ranges[rank + 1]
-        self.pattern = pattern = node_pattern(new_cells, lo, hi, ncomp, mesh.num_points)
-        self.block = stack_relations(self.multiplied, lay)
+        self.pattern = pattern = node_pattern(new_cells, lo, hi, ncomp, int(self.part.node_ranges[-1]))
+        self.block = stack_relations(self.multiplied, lay, self.rdofs.new_dof)
         self.op = SaddleOperator(comm, lay, pattern, self.block)
         ndof = mesh.num_points * ncomp
         self.saddle_of_input = lay.q_index(lay.new_dof(np.arange(ndof)))
@@ -63,6 +72,11 @@ class SaddleSystem:
         self.owned_input_dofs = np.flatnonzero((lay.new_dof(np.arange(ndof)) >= q0)
                                                & (lay.new_dof(np.arange(ndof)) < q1))
         self.offset = int(lay.offsets[rank])
+        # relation entries on this rank's owned DOFs (A q = Σ over ranks of these)
+        self._owned_entries: dict[int, tuple] = {}
+        if self.distributed:
+            self._ghosts = self._ghost_exchange()
+            self._keys = value_keys(self.saddle_of_input, self.saddle_of_mult)
         self._elimination_setup()
         self.timings["setup"] = time.perf_counter() - t0
         self.assembled = False
@@ -71,12 +85,32 @@ class SaddleSystem:
 
     def unused_dofs(self) -> np.ndarray:
         """DOFs of the points no cell uses (Gmsh writes such points): held at zero, out of
-        the system's way, instead of making it singular."""
+        the system's way, instead of making it singular. Input DOFs (every rank's)."""
         mesh = self.model.mesh
         used = np.zeros(mesh.num_points, dtype=bool)
         used[mesh.cells.ravel()] = True
         nodes = np.flatnonzero(~used)
+        if self.distributed:   # owned ones (a ghost is a node of a cell), from every rank
+            nodes = np.sort(allgather_rows(self.comm, mesh.global_nodes[nodes[nodes < mesh.n_owned]]))
         return (nodes[:, None] * self.model.ncomp + np.arange(self.model.ncomp)).ravel()
+
+    def _relation_dofs(self) -> list[np.ndarray]:
+        """Every input DOF a relation names (A and D entries), and the unused points'."""
+        out = [self.unused]
+        for r in self.model.relations:
+            out.append(r.a_dofs)
+            if r.shared_dual is not None:
+                out.append(r.shared_dual[0])
+            elif r.dual is not None:
+                out.append(np.asarray(r.dual[0]))
+        return out
+
+    def _ghost_exchange(self) -> GhostExchange:
+        """Who sends this rank the values of its ghost nodes' DOFs."""
+        mesh, nc = self.model.mesh, self.model.ncomp
+        ghost_dofs = np.arange(mesh.n_owned * nc, mesh.num_points * nc)
+        owner = np.repeat(mesh.node_owner[mesh.n_owned:], nc)
+        return GhostExchange(self.comm, self.saddle_of_input[ghost_dofs], owner, self.offset)
 
     def _elimination_setup(self) -> None:
         dofs, coefs = [], []
@@ -85,7 +119,7 @@ class SaddleSystem:
             dofs.append(r.a_dofs[order])
             coefs.append(r.a_vals[order])
         self.n_unused = 0
-        unused = self.unused_dofs()
+        unused = self.unused
         if unused.size:
             taken = np.concatenate(dofs) if dofs else np.zeros(0, dtype=np.int64)
             unused = np.setdiff1d(unused, taken)
@@ -94,7 +128,8 @@ class SaddleSystem:
             coefs.append(np.ones(unused.size))
         self.elim_dofs = np.concatenate(dofs) if dofs else np.zeros(0, dtype=np.int64)
         self.elim_coefs = np.concatenate(coefs) if coefs else np.zeros(0)
-        sad = self.saddle_of_input[self.elim_dofs]
+        self.elim_local = self.rdofs.local(self.elim_dofs)   # -1: not on this rank
+        self.elim_saddle = sad = self.layout.q_index(self.rdofs.new_dof(self.elim_dofs))
         n = self.op.nrows
         own = (sad >= self.offset) & (sad < self.offset + n)
         self.elim_own = own
@@ -148,8 +183,14 @@ class SaddleSystem:
             target = target - self.primal_values(q)[self.block.rep_row] * self.block.row_scale
         values = self.elim_values(t)
         if q is not None and self.elim_dofs.size:
-            values = values - q[self.elim_dofs]
+            values = values - self._at_local(q, self.elim_local)
         return self.rhs_from(f_full, target, values)
+
+    @staticmethod
+    def _at_local(v: np.ndarray, local: np.ndarray) -> np.ndarray:
+        """v at local DOFs, 0 where -1 (not on this rank: no owned row needs those)."""
+        return np.where(local >= 0, v[np.maximum(local, 0)], 0.0) if v.size else \
+            np.zeros(local.size)
 
     def rhs_from(self, f_full: np.ndarray, target: np.ndarray, elim_values: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray]:
@@ -158,9 +199,13 @@ class SaddleSystem:
         b = self.to_owned(f_full)
         q0, q1, l0, l1 = self.layout.owned(self.comm.rank)
         b[q1 - q0:] = (target * self.op.active)[l0:l1]
-        x_e = np.zeros(self.layout.size)
-        if self.elim_dofs.size:
-            x_e[self.saddle_of_input[self.elim_dofs]] = elim_values
+        if self.distributed:   # the eliminated DOFs' values only, not a whole saddle vector
+            x_e = SaddleValues(value_keys(self.elim_saddle, np.zeros(0, np.int64)),
+                               np.asarray(elim_values, dtype=float), np.zeros(0))
+        else:
+            x_e = np.zeros(self.layout.size)
+            if self.elim_dofs.size:
+                x_e[self.elim_saddle] = elim_values
             b -= self.op.lifting(x_e)
             b[self.op.elim_rows - self.offset] = self.kscale * x_e[self.op.elim_rows]
         return b, x_e
@@ -177,9 +222,50 @@ class SaddleSystem:
         return (b - self.primal_values(q))[self.block.rep_row]
 
     def primal_values(self, q: np.ndarray) -> np.ndarray:
-        """A q of every multiplied row (unscaled), q a full primal vector (input numbering)."""
-        return np.concatenate([r.primal(q) for r in self.multiplied]) if self.multiplied \
-            else np.zeros(0)
+        """A q of every multiplied row (unscaled), q a primal vector of this mesh's DOFs."""
+        if not self.multiplied:
+            return np.zeros(0)
+        if not self.distributed:
+            return np.concatenate([r.primal(q) for r in self.multiplied])
+        out = np.concatenate([self._owned_primal(r, q) for r in self.multiplied])
+        self.comm.Allreduce(MPI.IN_PLACE, out, op=MPI.SUM)
+        return out
+
+    def relation_primal(self, r, q: np.ndarray) -> np.ndarray:
+        """A q of one relation's rows (any relation of the model). Collective on a
+        distributed mesh."""
+        if not self.distributed:
+            return r.primal(q)
+        out = self._owned_primal(r, q)
+        self.comm.Allreduce(MPI.IN_PLACE, out, op=MPI.SUM)
+        return out
+
+    def _owned_primal(self, r, q: np.ndarray) -> np.ndarray:
+        """This rank's part of A q: the entries on its owned DOFs."""
+        key = id(r)
+        if key not in self._owned_entries:
+            local = self.rdofs.local(r.a_dofs)
+            own = (local >= 0) & (local < self.model.mesh.n_owned * self.model.ncomp)
+            self._owned_entries[key] = (np.flatnonzero(own), local[own])
+        sel, local = self._owned_entries[key]
+        return np.bincount(r.a_rows[sel], weights=r.a_vals[sel] * q[local], minlength=r.nrows)
+
+    def to_local(self, dofs: np.ndarray, values: np.ndarray) -> np.ndarray:
+        """A vector of this mesh's DOFs from (input DOFs, values) entries (duplicates add;
+        entries of nodes not on this rank dropped)."""
+        local = self.rdofs.local(dofs)
+        on = local >= 0
+        return np.bincount(local[on], weights=np.asarray(values, dtype=float)[on],
+                           minlength=self.model.mesh.num_points * self.model.ncomp)
+
+    def norm(self, v: np.ndarray) -> float:
+        """2-norm of a primal vector of this mesh's DOFs, each DOF once (owned rows)."""
+        own = v[self.owned_input_dofs]
+        return float(np.sqrt(self.comm.allreduce(float(own @ own))))
+
+    def max_abs(self, v: np.ndarray) -> float:
+        """max |v| over every rank (the same number on all)."""
+        return self.comm.allreduce(float(np.abs(v).max()) if v.size else 0.0, op=MPI.MAX)
 
     def reactions(self, lam: np.ndarray) -> np.ndarray:
         """Owned rows of D λ (unscaled λ of all multiplied rows)."""
@@ -201,22 +287,62 @@ class SaddleSystem:
 
     # ------------------------------------------------------------ back to fields
 
-    def gather(self, x_owned: np.ndarray) -> np.ndarray:
-        """The whole saddle vector on every rank (buffer collective: no pickling)."""
+    def gather(self, x_owned: np.ndarray):
+        """The whole saddle vector on every rank (buffer collective: no pickling); on a
+        distributed mesh, what this rank needs of it (``SaddleValues``: its DOFs, ghosts
+        included, and every multiplier)."""
+        if self.distributed:
+            return self._spread(x_owned)
         if not hasattr(self, "_gather_counts"):
             self._gather_counts = np.array(self.comm.allgather(int(x_owned.size)))
         out = np.empty(int(self._gather_counts.sum()))
         self.comm.Allgatherv(np.ascontiguousarray(x_owned, dtype=float), [out, self._gather_counts])
         return out
 
-    def multipliers(self, x_full: np.ndarray) -> np.ndarray:
+    def _spread(self, x_owned: np.ndarray) -> SaddleValues:
+        mesh, nc = self.model.mesh, self.model.ncomp
+        nq = mesh.n_owned * nc
+        q = np.empty(mesh.num_points * nc)
+        q[:nq] = x_owned[:nq]          # owned DOFs first in both numberings
+        q[nq:] = self._ghosts.fetch(x_owned)
+        counts = getattr(self, "_lam_counts", None)
+        if counts is None:
+            counts = self._lam_counts = np.array(self.comm.allgather(int(x_owned.size - nq)))
+        lam = np.empty(int(counts.sum()))
+        self.comm.Allgatherv(np.ascontiguousarray(x_owned[nq:], dtype=float), [lam, counts])
+        return SaddleValues(self._keys, q, lam)
+
+    def zero_saddle(self):
+        """A zero saddle vector, as ``gather`` returns them."""
+        if self.distributed:
+            return SaddleValues(self._keys, np.zeros(self.model.mesh.num_points * self.model.ncomp),
+                                np.zeros(self.layout.nl))
+        return np.zeros(self.layout.size)
+
+    def primal_of(self, x_full) -> np.ndarray:
+        """The primal DOFs (this mesh's numbering) of what ``gather`` returned."""
+        return x_full.q if self.distributed else x_full[self.saddle_of_input]
+
+    def with_primal(self, x_full, q: np.ndarray):
+        """A copy of ``x_full`` with its primal part replaced by q."""
+        x = x_full.copy()
+        if self.distributed:
+            x.q = q.copy()
+        else:
+            x[self.saddle_of_input] = q
+        return x
+
+    def multipliers(self, x_full) -> np.ndarray:
         """Unscaled λ of every multiplied row from a full saddle vector."""
-        return x_full[self.saddle_of_mult] * self.block.col_scale if self.block.nrows else np.zeros(0)
+        if not self.block.nrows:
+            return np.zeros(0)
+        lam = x_full.lam if self.distributed else x_full[self.saddle_of_mult]
+        return lam * self.block.col_scale
 
     def unpack(self, x_full: np.ndarray, t: float, f_int: np.ndarray | None = None,
                f_ext: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """Primal vector (input numbering) and unscaled multipliers of every relation."""
-        q = x_full[self.saddle_of_input]
+        q = self.primal_of(x_full)
         lam = self.multipliers(x_full)
         out = {}
         per_row = self.block.row_values(lam) if self.block.nrows else lam
@@ -235,10 +361,10 @@ class SaddleSystem:
             row_vals = self.op.eliminated_rows(x_full)
         else:  # x_full holds λ; the primal part of the row is the internal force
             row_vals = self.to_owned(f_int) - self.reactions(self.multipliers(x_full))
-        sad = self.saddle_of_input[self.elim_dofs]
+        sad = self.elim_saddle
         lam = np.zeros(self.elim_dofs.size)
         own = self.elim_own
-        lam[own] = (f_full[self.elim_dofs[own]] - row_vals[sad[own] - self.offset]) / self.elim_coefs[own]
+        lam[own] = (f_full[self.elim_local[own]] - row_vals[sad[own] - self.offset]) / self.elim_coefs[own]
         self.comm.Allreduce(MPI.IN_PLACE, lam, op=MPI.SUM)
         out, start = {}, 0
         for r in self.eliminated:

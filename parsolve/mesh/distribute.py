@@ -1,0 +1,152 @@
+"""The distributed mesh: each rank keeps only its part, with the input ids of what it holds.
+
+Rank 0 reads (or generates) and checks the whole mesh, partitions its cells (PT-Scotch through
+PETSc, every rank handing it one block of the dual graph; or coordinate bisection), and sends
+every rank its part; then it drops the whole mesh like the others never had it. The rules are
+those of the replicated partition (``partition.from_cell_parts``), so the numbering, the
+pattern and the assembled operator are the same:
+
+* a node belongs to the lowest rank among the cells that touch it;
+* a rank's **local cells** are every cell that touches one of its nodes (its owned cells and one
+  layer of ghosts): every sum over cells (stiffness, internal forces, loads, nodal averages) is
+  complete on the owned nodes without communication;
+* **local nodes** are its owned nodes (increasing input id, which is the global numbering's
+  order) then the ghost nodes of its cells (increasing global number).
+
+The part is a ``LocalMesh``: a ``Mesh`` in local numbering, so that everything working on cells
+and nodes (effects, regions, loads) works on it unchanged, plus the input ids of its nodes and
+cells (``global_nodes``, ``global_cells``: results are written in input order) and the owners
+and global numbers of its nodes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from parsolve.mesh.mesh import Mesh
+from parsolve.mesh.partition import (MIN_CELLS_PER_PART, PARTITIONERS, Partition, bisect,
+                                     block_starts, dual_graph, from_cell_parts, scotch_block)
+
+
+@dataclass
+class LocalMesh(Mesh):
+    """One rank's part of a distributed mesh, in local numbering (see the module's doc)."""
+
+    global_nodes: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    global_cells: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    node_owner: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    node_new: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    node_ranges: np.ndarray = field(default_factory=lambda: np.zeros(2, np.int64))
+    num_global_points: int = 0
+    num_global_cells: int = 0
+    partitioner: str = "none"
+    extent: np.ndarray = field(default_factory=lambda: np.zeros(0))  # ptp of all points
+
+    rank: int = 0
+
+    @property
+    def n_owned(self) -> int:
+        """Owned nodes: the first ``n_owned`` local nodes."""
+        return int(self.node_ranges[self.rank + 1] - self.node_ranges[self.rank])
+
+    def partition(self) -> Partition:
+        """The replicated ``Partition``'s view of this part (arrays over local nodes/cells)."""
+        nparts = self.node_ranges.size - 1
+        return Partition(nparts, self.node_owner[self.cells].min(axis=1), self.node_owner,
+                         self.node_new, self.node_ranges, self.partitioner)
+
+
+def distribute(comm, whole: Mesh | None, method: str = "scotch") -> LocalMesh:
+    """Rank 0's ``whole`` mesh (None on the other ranks) → every rank's ``LocalMesh``.
+    Collective."""
+    if method not in PARTITIONERS:
+        raise ValueError(f"unknown partitioner {method!r} (expected one of {PARTITIONERS})")
+    cell_part, used = _cell_parts(comm, whole, method)
+    if comm.rank == 0:
+        part = from_cell_parts(whole, cell_part, comm.size, used)
+        parts = [_extract(whole, part, r) for r in range(comm.size)]
+        extent = np.ptp(whole.points, axis=0) if whole.num_points else np.zeros(whole.dim)
+        common = {"cell_type": whole.cell_type, "node_ranges": part.node_ranges,
+                  "num_global_points": whole.num_points, "num_global_cells": whole.num_cells,
+                  "partitioner": used, "warnings": list(whole.warnings), "extent": extent}
+        for r, payload in enumerate(parts):
+            payload.update(common)
+    else:
+        parts = None
+    mine = comm.scatter(parts, root=0)
+    return LocalMesh(rank=comm.rank, **mine)
+
+
+def _cell_parts(comm, whole: Mesh | None, method: str) -> tuple[np.ndarray | None, str]:
+    """(rank 0: the part of every cell; elsewhere None, the partitioner that ran)."""
+    size = comm.size
+    if size == 1:
+        return np.zeros(whole.num_cells, dtype=np.int64), "none"
+    use_scotch = comm.bcast(method == "scotch" and whole is not None
+                            and whole.num_cells >= MIN_CELLS_PER_PART * size, root=0)
+    part = None
+    if use_scotch:
+        blocks = None
+        if comm.rank == 0:
+            indptr, indices = dual_graph(whole)
+            starts = block_starts(whole.num_cells, size)
+            blocks = [(indptr[starts[r]:starts[r + 1] + 1] - indptr[starts[r]],
+                       indices[indptr[starts[r]]:indptr[starts[r + 1]]]) for r in range(size)]
+        ptr, idx = comm.scatter(blocks, root=0)
+        n = comm.bcast(whole.num_cells if comm.rank == 0 else None, root=0)
+        local = scotch_block(comm, n, ptr, idx)
+        gathered = comm.gather(local, root=0)
+        if comm.rank == 0 and all(g is not None for g in gathered):
+            part = np.concatenate(gathered).astype(np.int64)
+            if np.bincount(part, minlength=size).min() == 0:
+                part = None
+    used = None
+    if comm.rank == 0:
+        if part is None:
+            part = bisect(whole.points[whole.cells].mean(axis=1), size)
+            used = "bisection"
+        else:
+            used = "scotch"
+    used = comm.bcast(used, root=0)
+    return part, used
+
+
+def _extract(whole: Mesh, part: Partition, rank: int) -> dict:
+    """Rank ``rank``'s part of the whole mesh (see the module's doc), as LocalMesh fields."""
+    cells = whole.cells
+    node_part = part.node_part
+    local_cells = np.flatnonzero((node_part[cells] == rank).any(axis=1))
+    owned = np.flatnonzero(node_part == rank)
+    touched = np.unique(cells[local_cells])
+    ghosts = touched[node_part[touched] != rank]
+    ghosts = ghosts[np.argsort(part.new_of_old[ghosts], kind="stable")]
+    local_nodes = np.concatenate([owned, ghosts])
+    to_local = np.full(whole.num_points, -1, dtype=np.int64)
+    to_local[local_nodes] = np.arange(local_nodes.size)
+    cell_groups = {}
+    for name, ids in whole.cell_groups.items():
+        ids = np.asarray(ids, dtype=np.int64)
+        pos = np.searchsorted(local_cells, ids)
+        hit = (pos < local_cells.size) & (local_cells[np.minimum(pos, local_cells.size - 1)] == ids) \
+            if local_cells.size else np.zeros(ids.size, dtype=bool)
+        cell_groups[name] = pos[hit]
+    facet_groups = {}
+    for name, facets in whole.facet_groups.items():
+        facets = np.asarray(facets, dtype=np.int64)
+        if facets.ndim != 2 or facets.size == 0:
+            facet_groups[name] = facets.reshape(0, facets.shape[-1] if facets.ndim == 2 else 1)
+            continue
+        mapped = to_local[facets]
+        # facets with an owned node: their cell is local, so they are boundary facets here too
+        keep = (mapped >= 0).all(axis=1) & (mapped < owned.size).any(axis=1)
+        facet_groups[name] = mapped[keep]
+    node_groups = {}
+    for name, ids in whole.node_groups.items():
+        mapped = to_local[np.asarray(ids, dtype=np.int64)]
+        node_groups[name] = mapped[mapped >= 0]
+    return {"points": whole.points[local_nodes], "cells": to_local[cells[local_cells]],
+            "cell_groups": cell_groups, "facet_groups": facet_groups, "node_groups": node_groups,
+            "global_nodes": local_nodes, "global_cells": local_cells,
+            "node_owner": node_part[local_nodes], "node_new": part.new_of_old[local_nodes]}

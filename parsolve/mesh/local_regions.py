@@ -1,0 +1,131 @@
+"""Regions resolved on one rank's part of a distributed mesh (``distribute.LocalMesh``).
+
+Node, facet and cell sets are local (local ids), but every decision is the whole mesh's: the
+geometric tolerance from the whole extent, a point region's node (the closest over all ranks,
+ties to the lowest input id), "selects nothing" from the counts over all ranks, and an input
+error raised on one rank is raised on every rank. Boundary facets are kept only where they have
+an owned node: a facet of a ghost cell whose other side lives on another rank looks like a
+boundary facet here, but it has no owned node.
+
+Relations are built on the whole mesh's numbering (input ids): ``relation_nodes`` gathers a
+region's owned nodes from every rank (the region's size, not the mesh's).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from mpi4py import MPI
+
+from parsolve.collective import agree
+from parsolve.errors import InputError
+from parsolve.mesh import selectors
+from parsolve.mesh.distribute import LocalMesh
+from parsolve.mesh.regions import Region, RegionResolver
+
+
+def allgather_rows(comm, local: np.ndarray) -> np.ndarray:
+    """Every rank's rows, concatenated in rank order (buffer collective)."""
+    local = np.ascontiguousarray(local)
+    width = int(np.prod(local.shape[1:], dtype=np.int64))
+    counts = np.array(comm.allgather(local.shape[0]), dtype=np.int64)
+    out = np.empty((int(counts.sum()),) + local.shape[1:], dtype=local.dtype)
+    kind = MPI._typedict[local.dtype.char]
+    comm.Allgatherv([local, kind], [out, counts * width, kind])
+    return out
+
+
+class LocalRegions(RegionResolver):
+    def __init__(self, comm, mesh: LocalMesh, specs: dict, source: str):
+        super().__init__(mesh, specs, source)
+        self.comm = comm
+        extent = float(mesh.extent.max()) if mesh.extent.size else 1.0
+        self.tol = 1e-8 * max(extent, 1e-300)
+        self._coords: dict[str, np.ndarray] = {}
+
+    def _local(self, fn, *args):
+        return agree(self.comm, fn, *args)
+
+    def _kept(self, facets: np.ndarray) -> np.ndarray:
+        if facets.size == 0:
+            return facets
+        return facets[(facets < self.mesh.n_owned).any(axis=1)]
+
+    def _closest(self, spec) -> np.ndarray:
+        m = self.mesh
+        p = self._local(selectors._as_point, spec.value, m.points.shape[1], "point",
+                        self.source, spec.key)
+        d2 = np.sum((m.points[:m.n_owned] - p) ** 2, axis=1)
+        best = (float(d2.min()), int(m.global_nodes[np.argmin(d2)])) if d2.size else (np.inf, -1)
+        # the smallest distance, then the lowest input id (the replicated argmin's first)
+        candidates = self.comm.allgather(best)
+        dist = min(c[0] for c in candidates)
+        node = min(c[1] for c in candidates if c[0] == dist)
+        if node < 0:
+            raise InputError("no points to choose from", self.source, spec.key)
+        return m.global_nodes == node
+
+    def _empty(self, region: Region) -> bool:
+        m = self.mesh
+        owned_cells = m.node_owner[m.cells[region.cells]].min(axis=1) == m.rank \
+            if region.cells.size else np.zeros(0, dtype=bool)
+        count = int(np.count_nonzero(region.nodes < m.n_owned)) + int(owned_cells.sum())
+        return self.comm.allreduce(count) == 0
+
+    def relation_nodes(self, name: str, key: str) -> np.ndarray:
+        """The region's nodes as input ids, the whole region on every rank (sorted)."""
+        if name not in self._coords:
+            region = self(name, key)
+            own = region.nodes[region.nodes < self.mesh.n_owned]
+            ids = allgather_rows(self.comm, self.mesh.global_nodes[own])
+            pts = allgather_rows(self.comm, self.mesh.points[own])
+            order = np.argsort(ids)
+            self._coords[name] = (ids[order], pts[order])
+        return self._coords[name][0]
+
+    def points_of(self, nodes: np.ndarray) -> np.ndarray:
+        """Coordinates of input ids of nodes of regions already asked for ``relation_nodes``."""
+        for ids, pts in self._coords.values():
+            pos = np.minimum(np.searchsorted(ids, nodes), max(ids.size - 1, 0))
+            if ids.size and np.array_equal(ids[pos], nodes):
+                return pts[pos]
+        raise KeyError("points_of: nodes of no gathered region")
+
+    def owned_cell_rows(self, cells: np.ndarray, ncomp: int, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Per-cell rows (``arrays``, cell-first, local DOFs in ``arrays[0]``) of the owned
+        ones among ``cells``, from every rank, in input cell order: (input cell ids, DOFs as
+        input DOFs, the other arrays)."""
+        m = self.mesh
+        own = m.node_owner[m.cells[cells]].min(axis=1) == m.rank if cells.size else \
+            np.zeros(0, dtype=bool)
+        dofs = arrays[0][own]
+        node, comp = np.divmod(dofs, ncomp)
+        gathered = [allgather_rows(self.comm, m.global_cells[cells[own]]),
+                    allgather_rows(self.comm, m.global_nodes[node] * ncomp + comp)]
+        gathered += [allgather_rows(self.comm, a[own]) for a in arrays[1:]]
+        order = np.argsort(gathered[0], kind="stable")
+        return tuple(g[order] for g in gathered)
+
+    def cell_count(self, cells: np.ndarray) -> int:
+        m = self.mesh
+        own = m.node_owner[m.cells[cells]].min(axis=1) == m.rank if cells.size else \
+            np.zeros(0, dtype=bool)
+        return self.comm.allreduce(int(own.sum()))
+
+    def facet_count(self, facets: np.ndarray) -> int:
+        return self.comm.allreduce(int(facets.shape[0]))
+
+    def facet_total(self, facets: np.ndarray, values: np.ndarray) -> float:
+        """Each facet counted by the rank owning its lowest-owner node."""
+        m = self.mesh
+        own = m.node_owner[facets].min(axis=1) == m.rank if facets.size else \
+            np.zeros(0, dtype=bool)
+        return self.comm.allreduce(float(np.sum(np.asarray(values)[own])))
+
+    def relation_vector(self, vector: np.ndarray, ncomp: int) -> tuple[np.ndarray, np.ndarray]:
+        """The owned rows' nonzeros of every rank, as input DOFs (sorted)."""
+        nz = np.flatnonzero(vector[:self.mesh.n_owned * ncomp])
+        node, comp = np.divmod(nz, ncomp)
+        dofs = allgather_rows(self.comm, self.mesh.global_nodes[node] * ncomp + comp)
+        vals = allgather_rows(self.comm, np.ascontiguousarray(vector[nz], dtype=float))
+        order = np.argsort(dofs)
+        return dofs[order], vals[order]
