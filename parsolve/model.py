@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from parsolve.collective import agree
 from parsolve.effects.base import Effect
 from parsolve.effects.constraints import build_relations
 from parsolve.effects.elasticity import Elasticity
@@ -216,11 +217,14 @@ def build_model(scene: Scene, comm=None) -> Model:
     distributed = distributed_mesh(scene, comm)
     mesh = _distributed_mesh(scene, comm) if distributed else build_mesh(scene)
     regions = resolver(scene, mesh, comm)
-    effects, fields = build_effects(scene, mesh, regions)
-    patterns = load_patterns(mesh, scene.loads, regions, scene.evolutions, scene.thickness,
-                             scene.source, fields)
-    relations = build_relations(scene.relations, regions, scene.evolutions, patterns, fields,
-                                scene.source, scene.solver.eliminate)
+    # on a distributed mesh, a check of a rank's part (cells without a material) fails there
+    # alone: every rank raises it (the checks that decide for the whole mesh are collective)
+    together = (lambda fn, *a: agree(comm, fn, *a)) if distributed else (lambda fn, *a: fn(*a))
+    effects, fields = together(build_effects, scene, mesh, regions)
+    patterns = together(load_patterns, mesh, scene.loads, regions, scene.evolutions,
+                        scene.thickness, scene.source, fields)
+    relations = together(build_relations, scene.relations, regions, scene.evolutions, patterns,
+                         fields, scene.source, scene.solver.eliminate)
     names = {r.name for r in relations}
     for e in effects:
         for r in e.relations():

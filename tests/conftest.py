@@ -119,3 +119,42 @@ def dense(mat, comm=MPI.COMM_WORLD) -> np.ndarray:
     """The whole matrix on every rank (small systems only)."""
     rows = mat.convert("dense").getDenseArray().copy()
     return np.concatenate(comm.allgather(rows), axis=0)
+
+
+def run_scene(path, out, **solver) -> dict:
+    """Run a scene file in this process on every rank (``solver``: [solver] keys to set) and
+    read its result file back."""
+    from parsolve.driver import run
+    from parsolve.model import build_model
+    from parsolve.scene import load_scene
+
+    scene = load_scene(path)
+    for key, value in solver.items():
+        setattr(scene.solver, key, value)
+    model = build_model(scene, MPI.COMM_WORLD)
+    try:
+        run(MPI.COMM_WORLD, model, str(out), {}, None, log=lambda *a: None)
+    finally:
+        MPI.COMM_WORLD.Barrier()
+    return read_results(out)
+
+
+def assert_same_results(a: dict, b: dict, tol: float = 1e-10) -> None:
+    """Two result files hold the same datasets, equal to ``tol`` of the largest value of each
+    kind of dataset (``stress``, ``multiplier``, ...), integers and active rows exactly; the
+    residuals (round-off over round-off) and timings apart."""
+    assert a["attrs"]["status"] == b["attrs"]["status"] == "complete"
+    keys = [k for k in b if k not in ("attrs", "steps/residual")
+            and not (k.startswith("balance") and k.endswith("error"))
+            and not k.startswith("timings")]
+    assert sorted(keys) == sorted(k for k in a if k in keys)
+    family = {}
+    for k in keys:
+        tail = k.rsplit("/", 1)[-1]
+        family[tail] = max(family.get(tail, 0.0), float(np.abs(b[k]).max(initial=0.0)))
+    for key in keys:
+        if key.endswith("/active") or b[key].dtype.kind in "iub":
+            assert np.array_equal(a[key], b[key]), key
+        else:
+            scale = max(family[key.rsplit("/", 1)[-1]], 1e-300)
+            assert np.abs(a[key] - b[key]).max() <= tol * scale + 1e-13, key

@@ -88,7 +88,7 @@ class Diffusion(Effect):
         self.cell_material = np.full(mesh.num_cells, -1, dtype=np.int64)
         for i, m in enumerate(spec.materials):
             region = regions(m.region, m.key + ".region")
-            if region.cells.size == 0:
+            if regions.cell_count(region.cells) == 0:   # (over every rank)
                 raise InputError(f"region {m.region!r} contains no cell", source, m.key + ".region")
             self.cell_material[region.cells] = i
         missing = np.flatnonzero(self.cell_material < 0)

@@ -36,7 +36,7 @@ class Elasticity(Effect):
         self.cell_model = np.full(mesh.num_cells, -1, dtype=np.int64)
         for spec in materials:
             region = regions(spec.region, spec.key + ".region")
-            if region.cells.size == 0:
+            if regions.cell_count(region.cells) == 0:   # (over every rank)
                 raise InputError(f"region {spec.region!r} contains no cell", source, spec.key + ".region")
             self.cell_model[region.cells] = len(self.models)
             try:

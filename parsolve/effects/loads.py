@@ -29,7 +29,7 @@ class LoadPattern:
 
 
 def _scatter(ndof: int, dofs: np.ndarray, values: np.ndarray) -> np.ndarray:
-    return np.bincount(dofs.ravel(), weights=values.ravel(), minlength=ndof)
+    return np.bincount(dofs.ravel(), weights=values.ravel(), minlength=ndof).astype(float, copy=False)
 
 
 def _field_dofs(fields, field: str, nodes: np.ndarray) -> np.ndarray:
@@ -58,11 +58,11 @@ def part_vector(mesh: Mesh, spec, region, thickness: float, source: str, fields,
     if (region.facets.shape[0] if regions is None else regions.facet_count(region.facets)) == 0:
         raise InputError(f"region {spec.region!r} contains no boundary facet", source,
                          spec.key + ".region")
+    coords = mesh.points[region.facets]
+    if spec.kind == "total_force":   # (collective on a distributed mesh)
+        vec = vec / _measure(coords, mesh.facet_type, thickness, region.facets, regions)
     if region.facets.shape[0] == 0:   # none on this rank's part of a distributed mesh
         return np.zeros(ndof)
-    coords = mesh.points[region.facets]
-    if spec.kind == "total_force":
-        vec = vec / _measure(coords, mesh.facet_type, thickness, region.facets, regions)
     fe = kernels.facet_load(coords, mesh.facet_type, vec, thickness)
     return _scatter(ndof, _field_dofs(fields, spec.field, region.facets), fe)
 
@@ -71,6 +71,8 @@ def _measure(coords, facet_type: str, thickness: float, facets, regions) -> floa
     """Total measure of a region's facets (over every rank's part, each facet once)."""
     if regions is None:
         return kernels.facet_measure(coords, facet_type, thickness)
+    if coords.shape[0] == 0:
+        return regions.facet_total(facets, np.zeros(0))
     xi, w = quadrature(facet_type, default_degree(facet_type, "load"))
     ds, _ = facet_measure_and_normal(coords, element(facet_type).grad_shape(xi))
     return regions.facet_total(facets, (ds * w).sum(axis=1) * thickness)

@@ -206,6 +206,7 @@ class SaddleSystem:
             x_e = np.zeros(self.layout.size)
             if self.elim_dofs.size:
                 x_e[self.elim_saddle] = elim_values
+        if self.elim_dofs.size:
             b -= self.op.lifting(x_e)
             b[self.op.elim_rows - self.offset] = self.kscale * x_e[self.op.elim_rows]
         return b, x_e
@@ -248,7 +249,9 @@ class SaddleSystem:
             own = (local >= 0) & (local < self.model.mesh.n_owned * self.model.ncomp)
             self._owned_entries[key] = (np.flatnonzero(own), local[own])
         sel, local = self._owned_entries[key]
-        return np.bincount(r.a_rows[sel], weights=r.a_vals[sel] * q[local], minlength=r.nrows)
+        # (float even with no entry here: numpy's bincount of nothing is int64)
+        return np.bincount(r.a_rows[sel], weights=r.a_vals[sel] * q[local],
+                           minlength=r.nrows).astype(float, copy=False)
 
     def to_local(self, dofs: np.ndarray, values: np.ndarray) -> np.ndarray:
         """A vector of this mesh's DOFs from (input DOFs, values) entries (duplicates add;
@@ -256,7 +259,8 @@ class SaddleSystem:
         local = self.rdofs.local(dofs)
         on = local >= 0
         return np.bincount(local[on], weights=np.asarray(values, dtype=float)[on],
-                           minlength=self.model.mesh.num_points * self.model.ncomp)
+                           minlength=self.model.mesh.num_points * self.model.ncomp
+                           ).astype(float, copy=False)
 
     def norm(self, v: np.ndarray) -> float:
         """2-norm of a primal vector of this mesh's DOFs, each DOF once (owned rows)."""

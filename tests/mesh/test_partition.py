@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from conftest import CONFIGS, ROOT, read_results
+from conftest import CONFIGS, ROOT, assert_same_results, run_scene
 from parsolve.errors import InputError
 from parsolve.mesh.generators import box, plate_with_hole, rectangle
 from parsolve.mesh.mesh import Mesh
@@ -228,45 +228,15 @@ SHIPPED = sorted(p.name for p in CONFIGS.glob("*.toml"))
 TOLERANCE = {"localization_bar.toml": 1e-9}
 
 
-def run_with(path, method: str, out) -> dict:
-    from parsolve.driver import run
-    from parsolve.model import build_model
-    from parsolve.scene import load_scene
-
-    scene = load_scene(path)
-    scene.solver.partitioner = method
-    model = build_model(scene)
-    try:
-        run(MPI.COMM_WORLD, model, str(out), {}, None, log=lambda *a: None)
-    finally:
-        MPI.COMM_WORLD.Barrier()
-    return read_results(out)
-
-
 @pytest.mark.parametrize("name", SHIPPED)
 def test_shipped_scene_same_on_either_partitioner(name, shared_tmp, comm):
     """Results are in input order: the two partitions give the same arrays to 1e-10 of
     each quantity's size (active rows exactly)."""
     if comm.size == 1:
         pytest.skip("one rank: both partitioners give the one trivial part")
-    scotch = run_with(CONFIGS / name, "scotch", shared_tmp / "scotch.h5")
-    rcb = run_with(CONFIGS / name, "bisection", shared_tmp / "rcb.h5")
-    assert scotch["attrs"]["status"] == rcb["attrs"]["status"] == "complete"
-    keys = [k for k in rcb if k not in ("attrs", "steps/residual")
-            and not (k.startswith("balance") and k.endswith("error"))
-            and not k.startswith("timings")]
-    assert sorted(keys) == sorted(k for k in scotch if k in keys)
-    family = {}
-    for k in keys:
-        tail = k.rsplit("/", 1)[-1]
-        family[tail] = max(family.get(tail, 0.0), float(np.abs(rcb[k]).max(initial=0.0)))
-    for key in keys:
-        if key.endswith("/active") or rcb[key].dtype.kind in "iub":
-            assert np.array_equal(scotch[key], rcb[key]), key
-        else:
-            scale = max(family[key.rsplit("/", 1)[-1]], 1e-300)
-            tol = TOLERANCE.get(name, 1e-10)
-            assert np.abs(scotch[key] - rcb[key]).max() <= tol * scale + 1e-13, key
+    scotch = run_scene(CONFIGS / name, shared_tmp / "scotch.h5", partitioner="scotch")
+    rcb = run_scene(CONFIGS / name, shared_tmp / "rcb.h5", partitioner="bisection")
+    assert_same_results(scotch, rcb, TOLERANCE.get(name, 1e-10))
 
 
 def test_a_petsc_without_ptscotch_falls_back(comm, monkeypatch):

@@ -1,0 +1,161 @@
+"""The distributed mesh: each rank's part against the replicated partition it must reproduce,
+groups restricted to the parts, regions decided for the whole mesh, collective input errors,
+and the scene key."""
+
+import tomllib
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from parsolve.errors import InputError
+from parsolve.mesh.distribute import distribute
+from parsolve.mesh.generators import box, plate_with_hole, rectangle
+from parsolve.mesh.local_regions import LocalRegions, allgather_rows
+from parsolve.mesh.partition import partition
+from parsolve.mesh.regions import RegionResolver
+from parsolve.scene import parse_scene
+
+MESHES = {
+    "quad": lambda: rectangle(2.0, 1.0, 12, 5, cell="quad"),
+    "triangle6": lambda: plate_with_hole(4.0, 4.0, 1.0, 4, 8, cell="triangle6"),
+    "tetra": lambda: box(1.0, 1.0, 2.0, 3, 3, 5, cell="tetra"),
+    "hexahedron": lambda: box(1.0, 2.0, 1.0, 3, 4, 2, cell="hexahedron"),
+}
+
+
+def parts(name, comm, method="scotch"):
+    whole = MESHES[name]()
+    local = distribute(comm, whole if comm.rank == 0 else None, method)
+    return whole, local
+
+
+@pytest.mark.parametrize("method", ["scotch", "bisection"])
+@pytest.mark.parametrize("name", sorted(MESHES))
+def test_parts_are_the_replicated_partition(name, method, comm):
+    """Same owners and numbering as the replicated partition; local cells = every cell
+    touching an owned node (input order), owned nodes first, ghosts by global number."""
+    whole, local = parts(name, comm, method)
+    part = partition(whole, comm.size, method, comm)
+    rank = comm.rank
+    assert local.partitioner == part.method
+    assert np.array_equal(local.global_cells, part.local_cells(rank, whole.cells))
+    owned = np.flatnonzero(part.node_part == rank)
+    assert local.n_owned == owned.size
+    assert np.array_equal(local.global_nodes[:local.n_owned], owned)
+    ghosts = local.global_nodes[local.n_owned:]
+    assert np.all(part.node_part[ghosts] != rank)
+    assert np.all(np.diff(part.new_of_old[ghosts]) > 0)
+    assert np.array_equal(local.node_new, part.new_of_old[local.global_nodes])
+    assert np.array_equal(local.node_owner, part.node_part[local.global_nodes])
+    assert np.array_equal(local.points, whole.points[local.global_nodes])
+    assert np.array_equal(local.global_nodes[local.cells], whole.cells[local.global_cells])
+    assert local.num_global_points == whole.num_points
+    assert local.num_global_cells == whole.num_cells
+    # every cell reported by exactly one rank, every node owned by exactly one
+    reported = local.partition().owned_cells(rank, local.cells)
+    cells = np.sort(allgather_rows(comm, local.global_cells[reported]))
+    assert np.array_equal(cells, np.arange(whole.num_cells))
+    nodes = np.sort(allgather_rows(comm, local.global_nodes[:local.n_owned]))
+    assert np.array_equal(nodes, np.arange(whole.num_points))
+
+
+def test_a_part_is_smaller_than_the_whole(comm):
+    whole, local = parts("hexahedron", comm)
+    if comm.size == 1:
+        assert local.num_points == whole.num_points
+    else:
+        assert local.num_cells < whole.num_cells and local.num_points < whole.num_points
+
+
+@pytest.mark.parametrize("name", sorted(MESHES))
+def test_groups_are_restricted_to_the_parts(name, comm):
+    """Each rank keeps the group facets that have an owned node (their cell is then local)
+    and the cells and nodes it holds; together the ranks hold each group whole."""
+    whole, local = parts(name, comm)
+    for group, facets in whole.facet_groups.items():
+        mine = local.facet_groups[group]
+        assert np.all((mine < local.n_owned).any(axis=1))
+        key = np.sort(local.global_nodes[mine], axis=1)
+        everyone = np.unique(allgather_rows(comm, key), axis=0)
+        assert np.array_equal(everyone, np.unique(np.sort(facets, axis=1), axis=0)), group
+    for group, cells in whole.cell_groups.items():
+        mine = local.global_cells[local.cell_groups[group]]
+        assert np.array_equal(np.unique(allgather_rows(comm, mine)), np.unique(cells)), group
+    for group, nodes in whole.node_groups.items():
+        mine = local.global_nodes[local.node_groups[group]]
+        assert np.array_equal(np.unique(allgather_rows(comm, mine)), np.unique(nodes)), group
+
+
+SPECS = """
+[mesh]
+generator = "rectangle"
+lx = 2.0
+ly = 1.0
+nx = 12
+ny = 5
+cell = "quad"
+[model]
+hypothesis = "plane_stress"
+[regions]
+near = { point = [1.04, 0.51] }
+strip = "x >= 0.5 and x <= 0.8"
+corner_box = { box = [[1.7, 0.0], [2.0, 0.3]] }
+[[materials]]
+E = 1.0
+nu = 0.3
+"""
+
+
+@pytest.mark.parametrize("region", ["near", "strip", "corner_box", "all", "left", "top"])
+def test_regions_are_the_whole_meshs(region, comm):
+    """A region on the parts is the replicated region: the same nodes (by input id), cells
+    and boundary facets, each counted once over the ranks."""
+    scene = parse_scene(tomllib.loads(SPECS), "s.toml")
+    whole, local = parts("quad", comm)
+    expected = RegionResolver(whole, scene.regions, "s.toml")(region, "k")
+    got = LocalRegions(comm, local, scene.regions, "s.toml")
+    r = got(region, "k")
+    assert np.array_equal(got.relation_nodes(region, "k"), expected.nodes)
+    owned_cells = r.cells[local.node_owner[local.cells[r.cells]].min(axis=1) == comm.rank]
+    assert np.array_equal(np.sort(allgather_rows(comm, local.global_cells[owned_cells])),
+                          expected.cells)
+    facets = r.facets[local.node_owner[r.facets].min(axis=1) == comm.rank] if r.facets.size \
+        else r.facets.reshape(0, 2)
+    mine = np.sort(local.global_nodes[facets], axis=1)
+    assert np.array_equal(np.unique(allgather_rows(comm, mine), axis=0),
+                          np.unique(np.sort(expected.facets, axis=1), axis=0))
+
+
+def test_a_region_empty_on_some_parts_is_not_empty(comm):
+    """'selects no node and no cell' is decided over every rank; a region that some parts do
+    not reach is fine, one that no part reaches fails on every rank."""
+    text = SPECS.replace('strip = "x >= 0.5 and x <= 0.8"',
+                         'strip = "x >= 1.95"\nnowhere = "x > 5"')
+    scene = parse_scene(tomllib.loads(text), "s.toml")
+    _, local = parts("quad", comm)
+    regions = LocalRegions(comm, local, scene.regions, "s.toml")
+    assert regions.relation_nodes("strip", "k").size == 6
+    with pytest.raises(InputError, match="region 'nowhere' selects no node and no cell"):
+        regions("nowhere", "regions.nowhere")
+
+
+def test_an_expression_error_on_one_part_is_raised_on_every_rank(comm):
+    """An expression that is not finite on one rank's points only: every rank raises it
+    (no rank is left waiting in the next collective call)."""
+    text = SPECS.replace('strip = "x >= 0.5 and x <= 0.8"', 'strip = "1 / (x - 2) > 0"')
+    scene = parse_scene(tomllib.loads(text), "s.toml")
+    _, local = parts("quad", comm)
+    regions = LocalRegions(comm, local, scene.regions, "s.toml")
+    with pytest.raises(InputError, match="regions.strip"):
+        regions("strip", "k")
+    comm.Barrier()
+
+
+def test_scene_key_mesh():
+    base = SPECS
+    assert parse_scene(tomllib.loads(base), "s.toml").solver.mesh == "replicated"
+    text = base + '[solver]\nmesh = "distributed"\n'
+    assert parse_scene(tomllib.loads(text), "s.toml").solver.mesh == "distributed"
+    with pytest.raises(InputError, match="solver.mesh"):
+        parse_scene(tomllib.loads(base + '[solver]\nmesh = "scattered"\n'), "s.toml")
