@@ -228,15 +228,30 @@ SHIPPED = sorted(p.name for p in CONFIGS.glob("*.toml"))
 TOLERANCE = {"localization_bar.toml": 1e-9}
 
 
+def distributable(path, comm) -> bool:
+    """Every effect of the scene works on a distributed mesh."""
+    from parsolve.model import distributed_mesh
+    from parsolve.scene import load_scene
+
+    scene = load_scene(path)
+    scene.solver.mesh = "distributed"
+    return distributed_mesh(scene, comm)
+
+
 @pytest.mark.parametrize("name", SHIPPED)
-def test_shipped_scene_same_on_either_partitioner(name, shared_tmp, comm):
+def test_shipped_scene_same_on_any_partition_and_mesh(name, shared_tmp, comm):
     """Results are in input order: the two partitions give the same arrays to 1e-10 of
-    each quantity's size (active rows exactly)."""
+    each quantity's size (active rows exactly), and so does the distributed mesh (each rank
+    its part only) where the scene's effects allow it."""
     if comm.size == 1:
         pytest.skip("one rank: both partitioners give the one trivial part")
     scotch = run_scene(CONFIGS / name, shared_tmp / "scotch.h5", partitioner="scotch")
     rcb = run_scene(CONFIGS / name, shared_tmp / "rcb.h5", partitioner="bisection")
     assert_same_results(scotch, rcb, TOLERANCE.get(name, 1e-10))
+    if distributable(CONFIGS / name, comm):
+        parts = run_scene(CONFIGS / name, shared_tmp / "parts.h5", partitioner="scotch",
+                          mesh="distributed")
+        assert_same_results(parts, scotch, TOLERANCE.get(name, 1e-10))
 
 
 def test_a_petsc_without_ptscotch_falls_back(comm, monkeypatch):
