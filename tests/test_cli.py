@@ -318,3 +318,53 @@ def test_marked_relations_report_their_resultant(tmp_path):
     assert proc.returncode == 0, proc.stderr
     lines = proc.stdout.splitlines()
     assert lines[-2].strip() == "control: resultant 10000 0 -500"  # moment: -F · H/2
+
+
+DISTRIBUTED = '\n[solver]\nmesh = "distributed"\n'
+
+
+@pytest.mark.parametrize("mode", ["swmr", "parallel"])
+@pytest.mark.parametrize("nranks", [2, 3])
+def test_mpirun_distributed_mesh_matches_one_rank(nranks, mode, tmp_path):
+    """Each rank holding its part of the mesh only: the result file (both output modes) is
+    the one-rank file, in input order, to round-off."""
+    scene = tmp_path / "k.toml"
+    scene.write_text((CONFIGS / "kirsch.toml").read_text().replace("n_radial = 48", "n_radial = 12")
+                     .replace("n_angular = 64", "n_angular = 16") + DISTRIBUTED)
+    one, many = tmp_path / "one.h5", tmp_path / "many.h5"
+    assert parsolve("run", scene, "-o", one).returncode == 0
+    proc = parsolve("run", scene, "-o", many, "--output-mode", mode, mpi=nranks)
+    assert proc.returncode == 0, proc.stderr
+    with h5py.File(one) as a, h5py.File(many) as b:
+        assert b.attrs["status"] == "complete" and b.attrs["dofs"] == a.attrs["dofs"]
+        np.testing.assert_array_equal(a["mesh/points"][()], b["mesh/points"][()])
+        np.testing.assert_array_equal(a["mesh/cells/triangle6"][()], b["mesh/cells/triangle6"][()])
+        for key in ("fields/displacement", "fields/stress", "cell_fields/stress",
+                    "relations/symmetry_x/multiplier", "relations/symmetry_x/resultant"):
+            x, y = a[key][()], b[key][()]
+            assert np.abs(x - y).max() <= 1e-10 * np.abs(x).max(), key
+
+
+@pytest.mark.parametrize("case", ["missing mesh file", "unknown region", "bad selector",
+                                  "not finite on one part", "no cell on any part"])
+def test_distributed_input_errors_on_every_rank(case, tmp_path):
+    """On a distributed mesh an input error found on one rank's part (or by rank 0 building
+    the mesh) stops every rank with exit 2 and one line: no rank is left waiting."""
+    if case == "not finite on one part":   # x = 1 is on one rank's part only
+        text = GOOD.replace("[regions]", '[regions]\nodd = "1 / (x - 1) > 0"\n')
+        source, key = "scene.toml", "regions.odd"
+    elif case == "no cell on any part":
+        text = GOOD.replace("[[materials]]", '[[materials]]\nregion = "beyond"', 1).replace(
+            "[regions]", '[regions]\nbeyond = "x > 2"\n')
+        source, key = "scene.toml", "regions.beyond"
+    else:
+        text, source, key = BAD[case]
+    if case in ("bad selector", "not finite on one part"):
+        text = text.replace('region = "corner"', 'region = "odd"')
+    (tmp_path / "scene.toml").write_text(text + DISTRIBUTED)
+    proc = parsolve("run", "scene.toml", "-o", tmp_path / "out.h5", cwd=tmp_path, mpi=2)
+    assert proc.returncode == 2, proc.stderr
+    lines = [line for line in proc.stderr.strip().splitlines() if line.startswith("parsolve")]
+    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert source in lines[0] and key in lines[0], lines[0]
+    assert not list(tmp_path.glob("*.h5"))
