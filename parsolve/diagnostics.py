@@ -23,7 +23,10 @@ def bodies(cells: np.ndarray, npoints: int) -> np.ndarray:
 
 def unsupported(model) -> list[str]:
     """One sentence per (body, field) that no relation touches, for fields whose operator is
-    singular without one (steady fields)."""
+    singular without one (steady fields). Not on a distributed mesh: a rank's part is not a
+    body (it would take the whole mesh's connectivity)."""
+    if getattr(model, "distributed", False):
+        return []
     mesh, fields = model.mesh, model.fields
     label = bodies(mesh.cells, mesh.num_points)
     used = np.unique(mesh.cells)

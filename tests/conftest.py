@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
@@ -55,9 +56,15 @@ def read_results(path: Path) -> dict:
     return out
 
 
+# PARSOLVE_TEST_MESH=distributed runs every scene of the tests on the distributed mesh (where
+# its effects allow it): a whole suite's check of the distributed path, slower than CI's
+TEST_MESH = os.environ.get("PARSOLVE_TEST_MESH")
+
+
 def run_scene(scene, out: Path, comm=MPI.COMM_WORLD, options: dict | None = None,
-              export: str | None = None) -> dict:
-    """Run a scene (path, or TOML text written beside ``out``) and read its results on every rank."""
+              export: str | None = None, solver: dict | None = None) -> dict:
+    """Run a scene (path, or TOML text written beside ``out``) and read its results on every
+    rank; ``solver``: [solver] keys to set."""
     from parsolve.driver import run
     from parsolve.model import build_model
     from parsolve.scene import load_scene
@@ -68,7 +75,10 @@ def run_scene(scene, out: Path, comm=MPI.COMM_WORLD, options: dict | None = None
             src.write_text(scene)
         comm.Barrier()
         scene = src
-    model = build_model(load_scene(scene))
+    scene = load_scene(scene)
+    for key, value in (({"mesh": TEST_MESH} if TEST_MESH else {}) | (solver or {})).items():
+        setattr(scene.solver, key, value)
+    model = build_model(scene, comm)
     try:
         run(comm, model, str(out), options or {}, export, log=lambda *a: None)
     finally:
@@ -120,23 +130,6 @@ def dense(mat, comm=MPI.COMM_WORLD) -> np.ndarray:
     rows = mat.convert("dense").getDenseArray().copy()
     return np.concatenate(comm.allgather(rows), axis=0)
 
-
-def run_scene(path, out, **solver) -> dict:
-    """Run a scene file in this process on every rank (``solver``: [solver] keys to set) and
-    read its result file back."""
-    from parsolve.driver import run
-    from parsolve.model import build_model
-    from parsolve.scene import load_scene
-
-    scene = load_scene(path)
-    for key, value in solver.items():
-        setattr(scene.solver, key, value)
-    model = build_model(scene, MPI.COMM_WORLD)
-    try:
-        run(MPI.COMM_WORLD, model, str(out), {}, None, log=lambda *a: None)
-    finally:
-        MPI.COMM_WORLD.Barrier()
-    return read_results(out)
 
 
 def assert_same_results(a: dict, b: dict, tol: float = 1e-10) -> None:

@@ -245,12 +245,14 @@ def test_shipped_scene_same_on_any_partition_and_mesh(name, shared_tmp, comm):
     its part only) where the scene's effects allow it."""
     if comm.size == 1:
         pytest.skip("one rank: both partitioners give the one trivial part")
-    scotch = run_scene(CONFIGS / name, shared_tmp / "scotch.h5", partitioner="scotch")
-    rcb = run_scene(CONFIGS / name, shared_tmp / "rcb.h5", partitioner="bisection")
+    scotch = run_scene(CONFIGS / name, shared_tmp / "scotch.h5",
+                       solver={"partitioner": "scotch", "mesh": "replicated"})
+    rcb = run_scene(CONFIGS / name, shared_tmp / "rcb.h5",
+                    solver={"partitioner": "bisection", "mesh": "replicated"})
     assert_same_results(scotch, rcb, TOLERANCE.get(name, 1e-10))
     if distributable(CONFIGS / name, comm):
-        parts = run_scene(CONFIGS / name, shared_tmp / "parts.h5", partitioner="scotch",
-                          mesh="distributed")
+        parts = run_scene(CONFIGS / name, shared_tmp / "parts.h5",
+                          solver={"partitioner": "scotch", "mesh": "distributed"})
         assert_same_results(parts, scotch, TOLERANCE.get(name, 1e-10))
 
 
