@@ -184,7 +184,7 @@ class NewtonSolver:
             if it == 0 and not self._oriented:
                 self._orient(kmat)
                 self._oriented = True
-            if it == 0 and self.active.groups:
+            if it == 0 and self.active.groups and spec.matrix != "secant":
                 kmat = self._loading_tangent(kmat)
                 self._predict_maximum_rows(t, kmat)
                 predictions = 1
@@ -346,8 +346,9 @@ class NewtonSolver:
         only grow: past the peak, where the enforced cell softens and its neighbours must
         unload, the first iterate loads every cell of the band and the next tangent, softening
         in all of them, is nearly singular (the plate refined 8× ran into null pivots). The
-        enforced cell's loading tangent is taken at q + δ with δ along its row (A δ of 1e-7
-        of the row's value), all other cells keep theirs."""
+        enforced cell's loading tangent is taken at q + δ with δ along its row (A δ of 1e-10
+        of the row's value), all other cells keep theirs. Not for a secant matrix: it does not
+        tell loading from unloading (and a perturbed cell would break a symmetric tie)."""
         system = self.system
         cells = self._enforced_cells()
         blk = system.block
@@ -360,10 +361,9 @@ class NewtonSolver:
             a = np.asarray(rel.a_vals)[sel]
             dofs = np.asarray(rel.a_dofs)[sel]
             value = abs(float(a @ self.q[dofs]))
-            size = 1e-7 * max(value, abs(float(rel.rhs(self.t_prev)[row - blk.row_first[k]])), 1e-300)
+            size = 1e-10 * max(value, abs(float(rel.rhs(self.t_prev)[row - blk.row_first[k]])), 1e-300)
             np.add.at(delta, dofs, self.active.sign[row] * a * size / max(float(a @ a), 1e-300))
-        loading = self.system.composition.evaluate(self.q + delta, self.states,
-                                                   self.spec.matrix == "secant", system.rate)[2]
+        loading = system.composition.evaluate(self.q + delta, self.states, False, system.rate)[2]
         return _CellReplaced(kmat, loading, cells)
 
     def _predict_maximum_rows(self, t: float, kmat) -> None:
