@@ -2,12 +2,14 @@
 (the enforced row's coefficients in one multiplier row) against the former layout, one copy of
 the control vector per element row (O(N^1.5) entries).
 
-The plate with a hole of configs/plate_hole_control.toml refined 1×, 2×, 4× (and 8× for the
-collapsed layout) per direction; a few steps past the elastic range. Reports the operator's
-nonzeros, the relation block's, set-up + first assembly, and seconds per global iteration.
+The plate with a hole of configs/plate_hole_control.toml refined 1×, 2×, 4×, 8×, 16× per
+direction (the per-row copies up to ``--old-up-to``), through its 30 steps past the peak.
+Reports the operator's nonzeros, the relation block's, set-up + first assembly, and seconds
+per global iteration (also per 1000 DOFs: flat when the cost grows no faster than the mesh).
 Steps follow ``parsolve run``: a step that fails is cut in two and retried (the driver's
-StepSchedule); ``--no-cuts`` takes the scene's steps as they are, which is how the refined
-plate stopped at step 6 (t = 0.2, where damage localizes) with null pivots.
+StepSchedule); ``--no-cuts`` takes the scene's steps as they are. Before the first tangent of
+a step put the enforced cell on its loading branch (``NewtonSolver._loading_tangent``), the
+plate refined 8× stopped at t = 0.182 after 4 cuts (null pivots) and the 2× plate needed cuts.
 
     .venv/bin/python scripts/bench_max_control.py [--steps 30] [--levels 1 2 4 8 16] [--no-cuts]
 """

@@ -184,8 +184,9 @@ class NewtonSolver:
             if it == 0 and not self._oriented:
                 self._orient(kmat)
                 self._oriented = True
-            if it == 0 and self.active.groups and spec.matrix != "secant":
-                kmat = self._loading_tangent(kmat)
+            if it == 0 and self.active.groups:
+                if spec.matrix != "secant":
+                    kmat = self._loading_tangent(kmat)
                 self._predict_maximum_rows(t, kmat)
                 predictions = 1
             f_ext = system.to_owned(f_known) + system.reactions(self.lam)
@@ -322,20 +323,27 @@ class NewtonSolver:
                                   "(A K⁻¹ D = 0), so the sense of its reaction is undefined")
             self.active.orient[rows] = -np.sign(rate)
 
-    def _enforced_cells(self) -> np.ndarray:
-        """Positions (in this rank's cells) of the cells measured by the enforced rows of the
-        maximum groups: the cells all of whose nodes carry an entry of such a row."""
+    def _enforced_rows(self) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
+        """Per maximum group, its enforced row: (row, its relation row b index, A's DOFs and
+        coefficients on that row)."""
         system, blk = self.system, self.system.block
-        ncomp = system.model.ncomp
-        marked = np.zeros(system.model.mesh.num_points, dtype=bool)
+        out = []
         for g in self.active.groups:
             row = int(g[self.active.active[g]][0])
             k = int(np.searchsorted(blk.row_first, row, side="right") - 1)
-            rel = system.multiplied[k]
-            sel = rel.a_rows == row - blk.row_first[k]
-            marked[np.asarray(rel.a_dofs)[sel] // ncomp] = True
-        nodes = system.model.mesh.cells[self.cells]
-        return np.flatnonzero(marked[nodes].all(axis=1))
+            rel, local = system.multiplied[k], row - int(blk.row_first[k])
+            sel = rel.a_rows == local
+            out.append((row, k, np.asarray(rel.a_dofs)[sel], np.asarray(rel.a_vals)[sel]))
+        return out
+
+    def _enforced_cells(self) -> np.ndarray:
+        """Positions (in this rank's cells) of the cells measured by the enforced rows of the
+        maximum groups: the cells all of whose nodes carry an entry of such a row."""
+        model = self.system.model
+        marked = np.zeros(model.mesh.num_points, dtype=bool)
+        for _, _, dofs, _ in self._enforced_rows():
+            marked[dofs // model.ncomp] = True
+        return np.flatnonzero(marked[model.mesh.cells[self.cells]].all(axis=1))
 
     def _loading_tangent(self, kmat):
         """The first tangent of a step for a maximum control: the enforced rows' cells on
@@ -344,27 +352,19 @@ class NewtonSolver:
         At a converged state no material point is loading (its history equals its current
         value), so the first tangent is the unloading one everywhere and the control load can
         only grow: past the peak, where the enforced cell softens and its neighbours must
-        unload, the first iterate loads every cell of the band and the next tangent, softening
-        in all of them, is nearly singular (the plate refined 8× ran into null pivots). The
-        enforced cell's loading tangent is taken at q + δ with δ along its row (A δ of 1e-10
-        of the row's value), all other cells keep theirs. Not for a secant matrix: it does not
-        tell loading from unloading (and a perturbed cell would break a symmetric tie)."""
-        system = self.system
-        cells = self._enforced_cells()
-        blk = system.block
+        unload, the first iterate loaded every cell of the band, and the next tangent, softening
+        in all of them, was nearly singular (the plate refined 8× ran into null pivots). The
+        enforced cell's loading tangent is taken at q + δ, δ along its row with A δ = 1e-10 of
+        the row's value; all other cells keep theirs. Not for a secant matrix: it does not tell
+        loading from unloading (and a perturbed cell would break a symmetric tie)."""
+        system, blk = self.system, self.system.block
         delta = np.zeros(self.ndof)
-        for g in self.active.groups:
-            row = int(g[self.active.active[g]][0])
-            k = int(np.searchsorted(blk.row_first, row, side="right") - 1)
-            rel = system.multiplied[k]
-            sel = rel.a_rows == row - blk.row_first[k]
-            a = np.asarray(rel.a_vals)[sel]
-            dofs = np.asarray(rel.a_dofs)[sel]
-            value = abs(float(a @ self.q[dofs]))
-            size = 1e-10 * max(value, abs(float(rel.rhs(self.t_prev)[row - blk.row_first[k]])), 1e-300)
+        for row, k, dofs, a in self._enforced_rows():
+            b = system.multiplied[k].rhs(self.t_prev)[row - blk.row_first[k]]
+            size = 1e-10 * max(abs(float(a @ self.q[dofs])), abs(float(b)), 1e-300)
             np.add.at(delta, dofs, self.active.sign[row] * a * size / max(float(a @ a), 1e-300))
         loading = system.composition.evaluate(self.q + delta, self.states, False, system.rate)[2]
-        return _CellReplaced(kmat, loading, cells)
+        return _CellReplaced(kmat, loading, self._enforced_cells())
 
     def _predict_maximum_rows(self, t: float, kmat) -> None:
         """For each maximum relation, enforce the row that reaches its value first under the
