@@ -52,6 +52,48 @@ def _row_dots(r, ndof: int) -> np.ndarray:
     return np.bincount(r.a_rows[hit], weights=r.a_vals[hit] * d[pos[hit]], minlength=r.nrows)
 
 
+class _CellReplaced:
+    """Tangent blocks with the element matrices of a few cells taken from another evaluation
+    (same effects, same parts): reduced like ``BlockMatrices`` plus the few cells' difference."""
+
+    def __init__(self, base, other, cells: np.ndarray):
+        self.base, self.other, self.cells = base, other, cells
+
+    def reduce(self, pair_slot: np.ndarray, npairs: int) -> np.ndarray:
+        out = self.base.reduce(pair_slot, npairs)
+        if self.cells.size == 0:
+            return out
+        nc = self.base.ncomp
+        slots = pair_slot[:, :, self.cells].ravel()
+        for (ci, cj, m0, fac), (_, _, m1, _) in zip(self.base.parts, self.other.parts):
+            diff = (_cell_values(m1, self.cells) - _cell_values(m0, self.cells))
+            diff = diff.reshape(len(diff), -1)
+            idx = (np.asarray(ci)[:, None] * nc + np.asarray(cj)[None, :]).ravel()
+            out[idx] += fac * np.stack([np.bincount(slots, weights=v, minlength=npairs + 1)[:npairs]
+                                        for v in diff])
+        return out
+
+
+def _cell_values(m, cells: np.ndarray) -> np.ndarray:
+    """Element matrices (d², nen, nen, len(cells)) of some cells, whatever the form."""
+    if m.values is not None:
+        return m.values[..., cells]
+    return np.einsum("ckm,kabc->mabc", m.tensors[m.cell_material[cells]], m.geometric[..., cells])
+
+
+def _branch_reach(rate: np.ndarray, room: np.ndarray, current: int) -> np.ndarray:
+    """Control load at which each row of a maximum group reaches its value, along the branch
+    the enforced row ``current`` follows (rate: d(s A q)/dλ with the enforced row loading;
+    room: s (b - A q)). Rising branch (the enforced row's rate > 0, before its peak): rows
+    with r > 0 reach it at room / r. Past the enforced row's peak (rate < 0), its value grows
+    only as the load falls, while the other rows unload: the rows with r < 0 reach it at
+    room / -r. Rows that never reach it on that branch: +inf."""
+    tol = 1e-9 * max(float(np.abs(rate).max()), 1e-300)
+    side = -1.0 if rate[current] < -tol else 1.0
+    r = side * rate
+    return np.where(r > tol, room / np.where(r > tol, r, 1.0), np.inf)
+
+
 class NewtonSolver:
     """Carries the converged state (q, λ, material history) from step to step."""
 
@@ -145,6 +187,8 @@ class NewtonSolver:
                 self._orient(kmat)
                 self._oriented = True
             if it == 0 and self.active.groups:
+                if spec.matrix != "secant":
+                    kmat = self._loading_tangent(kmat)
                 self._predict_maximum_rows(t, kmat)
                 predictions = 1
             f_ext = system.to_owned(f_known) + system.reactions(self.lam)
@@ -279,10 +323,56 @@ class NewtonSolver:
                                   "(A K⁻¹ D = 0), so the sense of its reaction is undefined")
             self.active.orient[rows] = -np.sign(rate)
 
+    def _enforced_rows(self) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
+        """Per maximum group, its enforced row: (row, its relation row b index, A's DOFs and
+        coefficients on that row)."""
+        system, blk = self.system, self.system.block
+        out = []
+        for g in self.active.groups:
+            row = int(g[self.active.active[g]][0])
+            k = int(np.searchsorted(blk.row_first, row, side="right") - 1)
+            rel, local = system.multiplied[k], row - int(blk.row_first[k])
+            sel = rel.a_rows == local
+            out.append((row, k, np.asarray(rel.a_dofs)[sel], np.asarray(rel.a_vals)[sel]))
+        return out
+
+    def _enforced_cells(self) -> np.ndarray:
+        """Positions (in this rank's cells) of the cells measured by the enforced rows of the
+        maximum groups: the cells all of whose nodes carry an entry of such a row."""
+        system, model = self.system, self.system.model
+        marked = np.zeros(model.mesh.num_points, dtype=bool)
+        for _, _, dofs, _ in self._enforced_rows():   # (input DOFs: this rank's nodes of them)
+            marked |= system.to_local(dofs, np.ones(dofs.size)).reshape(-1, model.ncomp).any(axis=1)
+        return np.flatnonzero(marked[model.mesh.cells[self.cells]].all(axis=1))
+
+    def _loading_tangent(self, kmat):
+        """The first tangent of a step for a maximum control: the enforced rows' cells on
+        their loading branch, every other cell as it is at the converged state (unloading).
+
+        At a converged state no material point is loading (its history equals its current
+        value), so the first tangent is the unloading one everywhere and the control load can
+        only grow: past the peak, where the enforced cell softens and its neighbours must
+        unload, the first iterate loaded every cell of the band, and the next tangent, softening
+        in all of them, was nearly singular (the plate refined 8× ran into null pivots). The
+        enforced cell's loading tangent is taken at q + δ, δ along its row with A δ = 1e-10 of
+        the row's value; all other cells keep theirs. Not for a secant matrix: it does not tell
+        loading from unloading (and a perturbed cell would break a symmetric tie)."""
+        system, blk = self.system, self.system.block
+        delta = np.zeros(self.ndof)
+        for row, k, dofs, a in self._enforced_rows():
+            rel, local = system.multiplied[k], row - blk.row_first[k]
+            b = rel.rhs(self.t_prev)[local]
+            value = system.relation_primal(rel, self.q)[local]   # A q of the row (collective)
+            size = 1e-10 * max(abs(float(value)), abs(float(b)), 1e-300)
+            delta += system.to_local(dofs, self.active.sign[row] * a * size / max(float(a @ a), 1e-300))
+        loading = system.composition.evaluate(self.q + delta, self.states, False, system.rate)[2]
+        return _CellReplaced(kmat, loading, self._enforced_cells())
+
     def _predict_maximum_rows(self, t: float, kmat) -> None:
         """For each maximum relation, enforce the row that reaches its value first under the
-        relation's own control load: one solve with the tangent and a unit control load, rates
-        r = A δq, then the smallest (b - A q) / r over rows with r > 0."""
+        relation's own control load: one solve with the tangent (``_loading_tangent``) and a
+        unit control load, rates r = A δq, then the smallest (b - A q) / |r| along the branch
+        the enforced row follows (``_branch_reach``)."""
         system = self.system
         blk = system.block
         groups = np.concatenate(self.active.groups)
@@ -294,11 +384,9 @@ class NewtonSolver:
         gap = np.concatenate([r.rhs(t) for r in system.multiplied]) - system.primal_values(self.q)
         for g in self.active.groups:
             s = self.active.sign[g]
-            r, room = s * rates[g], s * gap[g]
-            tol = 1e-9 * max(float(np.abs(r).max()), 1e-300)
-            reach = np.where(r > tol, room / np.where(r > tol, r, 1.0), np.inf)
+            current = g[self.active.active[g]][0]
+            reach = _branch_reach(s * rates[g], s * gap[g], int(current - g[0]))
             if np.isfinite(reach).any():
-                current = g[self.active.active[g]][0]
                 tol = GROUP_TOL * float(np.abs(reach[np.isfinite(reach)]).min())
                 best = self.active.pick(g, reach, current, False, tol)
                 self.active.active[g] = False

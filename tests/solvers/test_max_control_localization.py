@@ -1,0 +1,126 @@
+"""Maximum control past the peak, where damage localizes (issue 8: the control plate refined 8×
+and 16× stopped near t = 0.18).
+
+At a converged state no material point is loading, so the first tangent of a step was the
+unloading one in every cell: the control load could only grow, the first iterate loaded every
+cell of the band next to the enforced one, and the next tangent, softening in all of them, was
+nearly singular; the enforced row wandered from cell to cell (or came back, which fails the step)
+and cut steps ended in null pivots. Now the first tangent has the enforced cell on its loading
+branch and the others unloading, and the per-step predictor follows the enforced row's own
+branch: past its peak (its rate under the control load negative), its value grows as the load
+falls while the other rows unload.
+"""
+
+import tomllib
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from conftest import CONFIGS
+from parsolve.fem.element_matrices import BlockMatrices, ElementMatrices
+from parsolve.solvers.newton import _branch_reach, _CellReplaced
+
+
+def plate(level: int, steps: int) -> str:
+    text = (CONFIGS / "plate_hole_control.toml").read_text()
+    text = text.replace("n_radial = 8", f"n_radial = {8 * level}")
+    text = text.replace("n_angular = 12", f"n_angular = {12 * level}")
+    return text.replace("count = 30", f"count = {steps}\nend = {steps / 30}")
+
+
+def test_branch_reach_rising_and_past_the_peak():
+    room = np.array([0.0, 1.0, 2.0, 4.0])   # s (b - A q): the enforced row 0 is at its value
+    rate = np.array([2.0, 4.0, -1.0, 0.5])
+    # the enforced row still rising: rows with r > 0 reach b at room / r
+    np.testing.assert_array_equal(_branch_reach(rate, room, 0), [0.0, 0.25, np.inf, 8.0])
+    # past its peak (r < 0): only rows whose value grows as the load falls reach b
+    rate = np.array([-2.0, 4.0, -1.0, 0.5])
+    np.testing.assert_array_equal(_branch_reach(rate, room, 0), [0.0, np.inf, 2.0, np.inf])
+
+
+def test_cell_replaced_reduces_like_the_mixed_element_matrices():
+    """Two evaluations' element matrices, cells 1 and 3 taken from the second: the same node
+    blocks as a BlockMatrices built from the mixed values (one factored part, one full)."""
+    rng = np.random.default_rng(3)
+    nen, nc, npairs = 3, 5, 7
+    slots = rng.integers(0, npairs + 1, size=(nen, nen, nc))  # npairs: owned elsewhere
+    geo = rng.normal(size=(4, nen, nen, nc))
+    tensors = rng.normal(size=(2, 4, 4))
+    mat = np.array([0, 1, 1, 0, 1])
+    base = BlockMatrices(2, [([0, 1], [0, 1], ElementMatrices(geometric=geo, tensors=tensors,
+                                                              cell_material=mat), 1.0),
+                             ([1], [1], ElementMatrices(values=rng.normal(size=(1, nen, nen, nc))),
+                              0.5)])
+    other = BlockMatrices(2, [([0, 1], [0, 1], ElementMatrices(values=rng.normal(size=(4, nen, nen, nc))), 1.0),
+                              ([1], [1], ElementMatrices(values=rng.normal(size=(1, nen, nen, nc))), 0.5)])
+    cells = np.array([1, 3])
+    full0 = np.einsum("ckm,kabc->mabc", tensors[mat], geo)
+    mixed = []
+    for (ci, cj, m0, fac), (_, _, m1, _) in zip(base.parts, other.parts):
+        v = (full0 if m0.values is None else m0.values).copy()
+        v[..., cells] = m1.values[..., cells]
+        mixed.append((ci, cj, ElementMatrices(values=v), fac))
+    expected = BlockMatrices(2, mixed).reduce(slots, npairs)
+    got = _CellReplaced(base, other, cells).reduce(slots, npairs)
+    np.testing.assert_allclose(got, expected, rtol=1e-13, atol=1e-13)
+
+
+def test_plate_full_steps_through_the_peak():
+    """The plate refined 2× per direction, 10 full steps (no cut) to t = 1/3. It used to fail at
+    step 6 (t = 0.2): the enforced row moved 368 → 352 and would have gone back. Now every
+    step converges with row 368 enforced at its value, no row above it, equilibrium
+    F + D λ = f_int checked apart from Newton's residual; the load doubles in the elastic
+    steps, peaks, then falls (softening) while the controlled strain keeps growing. Past the
+    peak, the enforced row's rate under the control load is negative with its loading
+    tangent (positive with the unloading one: the branch the first tangent used to take)."""
+    from parsolve.driver import make_solver
+    from parsolve.model import build_model
+    from parsolve.scene import parse_scene
+    from parsolve.solvers.newton import NewtonSolver
+    from parsolve.solvers.system import SaddleSystem
+
+    comm = MPI.COMM_WORLD
+    text = plate(2, 10)
+    scene = parse_scene(tomllib.loads(text), "plate.toml", text)
+    model = build_model(scene)
+    system = SaddleSystem(comm, model)
+    newton = NewtonSolver(comm, system, make_solver(comm, system, {}), scene.nonlinear)
+    (rel,) = [r for r in system.multiplied if r.maximum]
+    free = np.ones(model.mesh.num_points * model.ncomp, dtype=bool)
+    free[system.elim_dofs] = False
+    mine = system.owned_input_dofs[free[system.owned_input_dofs]]
+    lams, iterations = [], []
+    for t in scene.times:
+        states = newton.states
+        iterations.append(newton.step(t).iterations)
+        b = 1.2e-3 * t
+        values = rel.primal(newton.q)
+        assert np.flatnonzero(newton.active.active).tolist() == [368]
+        np.testing.assert_allclose(values[368], b, rtol=1e-9)
+        assert values.max() <= b * (1 + 1e-7)
+        lam = float(newton.lam[0])
+        f_int = system.composition.evaluate(newton.q, states, False)[1]
+        dofs, pattern = rel.shared_dual
+        force = model.external_load(t)
+        np.add.at(force, dofs, pattern * lam)
+        r2, f2 = comm.allreduce(np.array([np.sum((force - f_int)[mine] ** 2),
+                                          np.sum(f_int[mine] ** 2)]))
+        assert np.sqrt(r2 / f2) < 1e-8
+        lams.append(lam)
+    lams = np.array(lams)
+    np.testing.assert_allclose(lams[1], 2 * lams[0], rtol=1e-10)  # elastic below eps_d0
+    peak = int(np.argmax(lams))
+    assert 4 <= peak <= 7 and np.all(np.diff(lams[peak:]) < 0) and lams[-1] < 0.98 * lams[peak]
+    assert max(iterations) <= 8
+
+    # the branch past the peak: the enforced row's rate with either first tangent
+    kmat = newton._evaluate(newton.q)[1]
+    group = newton.active.groups[0]
+    f = newton._dual_column(0)
+    unloading = system.primal_values(newton._unit_response(kmat, group, f))[368]
+    loading = system.primal_values(newton._unit_response(newton._loading_tangent(kmat),
+                                                         group, f))[368]
+    assert unloading > 0 > loading
+    np.testing.assert_array_equal(newton._enforced_cells(),
+                                  np.flatnonzero(system.local_cells == 368))
