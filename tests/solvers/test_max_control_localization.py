@@ -11,22 +11,14 @@ branch: past its peak (its rate under the control load negative), its value grow
 falls while the other rows unload.
 """
 
-import tomllib
 
 import numpy as np
 import pytest
 from mpi4py import MPI
 
-from conftest import CONFIGS
+from test_max_control_refined import plate_newton
 from parsolve.fem.element_matrices import BlockMatrices, ElementMatrices
 from parsolve.solvers.newton import _branch_reach, _CellReplaced
-
-
-def plate(level: int, steps: int) -> str:
-    text = (CONFIGS / "plate_hole_control.toml").read_text()
-    text = text.replace("n_radial = 8", f"n_radial = {8 * level}")
-    text = text.replace("n_angular = 12", f"n_angular = {12 * level}")
-    return text.replace("count = 30", f"count = {steps}\nend = {steps / 30}")
 
 
 def test_branch_reach_rising_and_past_the_peak():
@@ -74,21 +66,8 @@ def test_plate_full_steps_through_the_peak():
     steps, peaks, then falls (softening) while the controlled strain keeps growing. Past the
     peak, the enforced row's rate under the control load is negative with its loading
     tangent (positive with the unloading one: the branch the first tangent used to take)."""
-    from parsolve.driver import make_solver
-    from parsolve.model import build_model
-    from parsolve.scene import parse_scene
-    from parsolve.solvers.newton import NewtonSolver
-    from parsolve.solvers.system import SaddleSystem
-
     comm = MPI.COMM_WORLD
-    text = plate(2, 10)
-    scene = parse_scene(tomllib.loads(text), "plate.toml", text)
-    model = build_model(scene)
-    system = SaddleSystem(comm, model)
-    newton = NewtonSolver(comm, system, make_solver(comm, system, {}), scene.nonlinear)
-    (rel,) = [r for r in system.multiplied if r.maximum]
-    free = np.ones(model.mesh.num_points * model.ncomp, dtype=bool)
-    free[system.elim_dofs] = False
+    scene, model, system, newton, rel, free = plate_newton(2, 10)
     mine = system.owned_input_dofs[free[system.owned_input_dofs]]
     lams, iterations = [], []
     for t in scene.times:

@@ -70,12 +70,9 @@ def plate(level: int, steps: int) -> str:
     return text.replace("count = 30", f"count = {steps}\nend = {steps / 30}")
 
 
-def test_full_step_at_the_onset_of_localization():
-    """The plate refined 2× per direction, full steps (no cut). Steps 1-5: the enforced row at
-    its value, no row above it, equilibrium F + D λ = f_int checked apart from Newton's own
-    residual. Step 6 (t = 0.2), where damage localizes, converges in one full step with row 368
-    still enforced at its value (it used to fail: the enforced row moved 368 → 352 and would
-    have gone back; see test_max_control_localization.py)."""
+def plate_newton(refine: int, steps: int):
+    """The refined plate's (scene, model, system, Newton solver, maximum relation, mask of
+    the DOFs not eliminated), ready for its first step."""
     from parsolve.driver import make_solver
     from parsolve.model import build_model
     from parsolve.scene import parse_scene
@@ -83,7 +80,7 @@ def test_full_step_at_the_onset_of_localization():
     from parsolve.solvers.system import SaddleSystem
 
     comm = MPI.COMM_WORLD
-    text = plate(2, 6)
+    text = plate(refine, steps)
     scene = parse_scene(tomllib.loads(text), "plate.toml", text)
     model = build_model(scene)
     system = SaddleSystem(comm, model)
@@ -91,6 +88,17 @@ def test_full_step_at_the_onset_of_localization():
     (rel,) = [r for r in system.multiplied if r.maximum]
     free = np.ones(model.mesh.num_points * model.ncomp, dtype=bool)
     free[system.elim_dofs] = False
+    return scene, model, system, newton, rel, free
+
+
+def test_full_step_at_the_onset_of_localization():
+    """The plate refined 2× per direction, full steps (no cut). Steps 1-5: the enforced row at
+    its value, no row above it, equilibrium F + D λ = f_int checked apart from Newton's own
+    residual. Step 6 (t = 0.2), where damage localizes, converges in one full step with row 368
+    still enforced at its value (it used to fail: the enforced row moved 368 → 352 and would
+    have gone back; see test_max_control_localization.py)."""
+    comm = MPI.COMM_WORLD
+    scene, model, system, newton, rel, free = plate_newton(2, 6)
     lams = []
     for t in scene.times[:5]:
         states = newton.states
