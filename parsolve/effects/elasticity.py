@@ -101,12 +101,16 @@ class Elasticity(Effect):
                                     points=points)
 
     def stiffness(self, cells: np.ndarray) -> ElementMatrices:
-        """Element stiffness of the given cells, factored (geometry × constant Hooke tensor)."""
+        """Element stiffness of the given cells, factored (geometry × constant Hooke tensor).
+
+        The geometric part (d², nen, nen, nc) is not kept: it lives as long as the caller holds
+        the result (an assembly: until the matrix has its values), so the steps after it do not
+        carry it (389 MiB at 2D 1.6M DOFs). A re-assembly allocates it again: about as fast as
+        refilling a kept one (scripts/results/bench_post.md)."""
         coords = self.mesh.points[self.mesh.cells[cells]]
         G, wdet = kernels.gradients_cell_last(coords, self.mesh.cell_type, thickness=self.thickness)
-        self._work = kernels.geometric_part(G, wdet, out=getattr(self, "_work", None))
         tensors = np.stack([kernels.voigt_to_tensor(C, self.mesh.dim) for C in self.C])
-        return ElementMatrices(geometric=self._work, tensors=tensors,
+        return ElementMatrices(geometric=kernels.geometric_part(G, wdet), tensors=tensors,
                                cell_material=self.cell_model[cells])
 
     def _stresses(self, cells: np.ndarray, u: np.ndarray):
