@@ -78,7 +78,7 @@ class Elasticity(Effect):
         stress and history variables of the material state."""
         u = values["u"]
         npts = self.mesh.num_points
-        nodes = self.mesh.cells[owned]
+        nodes = self.mesh.cells.T[:, owned].T   # (nc, nen), a view of node-major (nen, nc)
         if extra is None:
             at_nodes, sig, vol = self._stresses(owned, u)
             return {"stress": kernels.nodal_sums(nodes, at_nodes, vol, npts)}, \
@@ -120,7 +120,7 @@ class Elasticity(Effect):
         the cell mean of ε. On affine cells (P1 triangles and tetrahedra) the strain is
         constant: the stress at the nodes is the cell's."""
         mesh = self.mesh
-        rows = kernels.cell_rows(mesh.points, u, mesh.cells[cells])        # (nen, 2d, nc)
+        rows = kernels.cell_rows(mesh.points, u, mesh.cells.T[:, cells].T)  # (nen, 2d, nc)
         g, vol = kernels.mean_gradient(rows, mesh.cell_type, thickness=self.thickness)
         sig = self._hooke(cells, kernels.voigt_of_gradient(g))
         if mesh.cell_type in AFFINE:
