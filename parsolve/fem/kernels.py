@@ -227,10 +227,9 @@ def cell_rows(points: np.ndarray, values: np.ndarray, cells: np.ndarray) -> np.n
     return rows
 
 
-def _gradients_at(rows: np.ndarray, dN: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(det J (np, nc), M = (∂v/∂ξ) adj(J) (k, d, np, nc)) at the points of dN (np, nen, d):
-    the values' physical gradient there is M / det J (no shape-gradient array is formed: one
-    product of the reference gradients with the rows gives J and ∂v/∂ξ together)."""
+def _reference_derivatives(rows: np.ndarray, dN: np.ndarray) -> np.ndarray:
+    """R[p, j, i, c] = ∂(x, v)_i/∂ξ_j at the points of dN (np, nen, d): one product of the
+    reference gradients with the rows gives the Jacobian and the values' derivatives together."""
     nen, dk, nc = rows.shape
     npts, _, d = dN.shape
     A = dN.transpose(0, 2, 1).reshape(npts * d, nen)
@@ -238,17 +237,29 @@ def _gradients_at(rows: np.ndarray, dN: np.ndarray) -> tuple[np.ndarray, np.ndar
     R = np.empty((npts * d, dk * nc))
     for s in range(0, npts * d, 12):  # Debian's OpenBLAS: 24 rows at once take 2× two 12s
         np.matmul(A[s:s + 12], B, out=R[s:s + 12])
-    R = R.reshape(npts, d, dk, nc)                      # R[p, j, i] = ∂(x, v)_i/∂ξ_j
+    return R.reshape(npts, d, dk, nc)
+
+
+def _det_adj(R: np.ndarray, d: int) -> tuple[np.ndarray, list]:
+    """det J and adj(J) (adj[j][l]: (np, nc)), J[i][j] = R[:, j, i]."""
     J = [[R[:, j, i] for j in range(d)] for i in range(d)]
     if d == 2:
-        adj = [[J[1][1], -J[0][1]], [-J[1][0], J[0][0]]]
-        det = J[0][0] * J[1][1] - J[0][1] * J[1][0]
-    else:  # adj[j][l] = cofactor (l, j), cyclic indices carry the signs
-        cof = [[J[(l + 1) % 3][(j + 1) % 3] * J[(l + 2) % 3][(j + 2) % 3]
-                - J[(l + 1) % 3][(j + 2) % 3] * J[(l + 2) % 3][(j + 1) % 3]
-                for j in range(3)] for l in range(3)]
-        adj = [[cof[l][j] for l in range(3)] for j in range(3)]
-        det = J[0][0] * cof[0][0] + J[0][1] * cof[0][1] + J[0][2] * cof[0][2]
+        return J[0][0] * J[1][1] - J[0][1] * J[1][0], [[J[1][1], -J[0][1]], [-J[1][0], J[0][0]]]
+    # adj[j][l] = cofactor (l, j), cyclic indices carry the signs
+    cof = [[J[(l + 1) % 3][(j + 1) % 3] * J[(l + 2) % 3][(j + 2) % 3]
+            - J[(l + 1) % 3][(j + 2) % 3] * J[(l + 2) % 3][(j + 1) % 3]
+            for j in range(3)] for l in range(3)]
+    det = J[0][0] * cof[0][0] + J[0][1] * cof[0][1] + J[0][2] * cof[0][2]
+    return det, [[cof[l][j] for l in range(3)] for j in range(3)]
+
+
+def _gradients_at(rows: np.ndarray, dN: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(det J (np, nc), M = (∂v/∂ξ) adj(J) (k, d, np, nc)) at the points of dN (np, nen, d):
+    the values' physical gradient there is M / det J (no shape-gradient array is formed)."""
+    nen, dk, nc = rows.shape
+    npts, _, d = dN.shape
+    R = _reference_derivatives(rows, dN)
+    det, adj = _det_adj(R, d)
     k = dk - d
     M = np.empty((k, d, npts, nc))
     tmp = np.empty((npts, nc))
@@ -266,16 +277,32 @@ def mean_gradient(rows: np.ndarray, cell_type: str, degree: int | None = None,
     """Cell means of the values' gradient, Σ_q w|J| ∇v / Σ_q w|J| (k, d, nc), and the cells'
     measures Σ_q w|J| (nc,), over the quadrature rule of ``degree`` (default: the stiffness')."""
     xi, w = quadrature(cell_type, default_degree(cell_type, "stiffness") if degree is None else degree)
-    det, M = _gradients_at(rows, element(cell_type).grad_shape(xi))
+    dN = element(cell_type).grad_shape(xi)
     if len(w) == 1:  # one point (P1): the gradient is the mean
+        det, M = _gradients_at(rows, dN)
         return M[:, :, 0] / det[0], np.abs(det[0]) * (w[0] * thickness)
+    # Several points: the mean is linear in the values, Σ_a v_a ⊗ Ḡ_a with the cells' mean
+    # shape gradients Ḡ_a = Σ_q w sign(J) dN_a adj(J) / Σ_q w|J|: the Jacobians at the points,
+    # one small product for Ḡ, then k·d·nen products over the cells (not k·d·d·nq).
+    nen, dk, nc = rows.shape
+    nq, _, d = dN.shape
+    det, adj = _det_adj(_reference_derivatives(rows[:, :d], dN), d)
     wq = w[:, None] * thickness
     vol = (np.abs(det) * wq).sum(axis=0)
-    s = np.sign(det) * wq                               # w|J| ∇v = w sign(J) M
-    g = M[:, :, 0] * s[0]
-    for q in range(1, len(w)):
-        g += M[:, :, q] * s[q]
-    g /= vol
+    s = np.sign(det) * wq / vol                         # w|J|/vol ∇N_a = w sign(J)/vol dN_a adj
+    W = np.empty((nq, d, d, nc))
+    for j in range(d):
+        for l in range(d):
+            np.multiply(adj[j][l], s, out=W[:, j, l])
+    Gm = (dN.transpose(1, 0, 2).reshape(nen, nq * d) @ W.reshape(nq * d, d * nc))
+    Gm = Gm.reshape(nen, d, nc)                         # Ḡ[a, l, c]
+    g = np.empty((dk - d, d, nc))
+    tmp = np.empty((d, nc))
+    for m in range(dk - d):
+        np.multiply(rows[0, d + m], Gm[0], out=g[m])
+        for a in range(1, nen):
+            np.multiply(rows[a, d + m], Gm[a], out=tmp)
+            g[m] += tmp
     return g, vol
 
 
@@ -284,7 +311,7 @@ def cell_measures(rows: np.ndarray, cell_type: str, thickness: float = 1.0) -> n
     xi, w = quadrature(cell_type, default_degree(cell_type, "stiffness"))
     dN = element(cell_type).grad_shape(xi)
     d = dN.shape[2]
-    det, _ = _gradients_at(rows[:, :d], dN)
+    det, _ = _det_adj(_reference_derivatives(rows[:, :d], dN), d)
     return (np.abs(det) * (w[:, None] * thickness)).sum(axis=0)
 
 
