@@ -1147,8 +1147,9 @@ def post_memory_table(out: dict) -> str:
     codes = (["baseline"] if out.get("baseline") else []) + ["parsolve"]
     head = ["case", "DOFs", "np"]
     for c in codes:
-        head += [f"{c}: element np after assembly MiB", "after post", "peak MiB/rank",
-                 "assembly s", "re-assembly s"]
+        head += [f"{c}: element np after assembly MiB", "after post",
+                 "peak MiB/rank through the step", "with the re-assembly", "assembly s",
+                 "re-assembly s"]
     head += ["DOLFINx peak MiB/rank"]
     body = []
     for (case, n, p), by in post_rows(out).items():
@@ -1156,10 +1157,11 @@ def post_memory_table(out: dict) -> str:
         for c in codes:
             r = by.get(c)
             if not _ok(r):
-                row += ["–"] * 5
+                row += ["–"] * 6
                 continue
             row += [mib(_held(r, "element", "assembly")), mib(_held(r, "element", "post")),
-                    mib(peak(r)), fmt(r["cpu"]["assembly"]), fmt(r.get("reassembly"))]
+                    mib(r["memory"]["end"]["hwm_max"]), mib(peak(r)),
+                    fmt(r["cpu"]["assembly"]), fmt(r.get("reassembly"))]
         d = by.get("dolfinx")
         row.append(mib(peak(d)) if _ok(d) else "–")
         body.append(row)
@@ -1215,8 +1217,10 @@ def post_markdown(out: dict) -> str:
         "## Memory: element arrays held, peak per rank; assembly and re-assembly",
         "",
         "element np: numpy arrays the effects and their composition hold (bench_scale.md's "
-        "*element*), after the first assembly and after the post-processing; re-assembly: a "
-        "second `SaddleSystem.assemble` after the step (CPU s, max over ranks).",
+        "*element*), after the first assembly and after the post-processing; peak through the "
+        "step: VmHWM at the end of the step (set-up, assembly, factorization, solve, post); "
+        "re-assembly: a second `SaddleSystem.assemble` after the step, with the factor still "
+        "held (CPU s, max over ranks), and the peak with it.",
         "",
         post_memory_table(out),
         "",
@@ -1229,6 +1233,29 @@ def post_markdown(out: dict) -> str:
         "`--phases post --report` for the tables again from bench_post.json.",
     ]
     return "\n".join(lines) + "\n"
+
+
+def collect(args) -> dict:
+    """The runs of a --phases post plan whose JSON is in the scratch folder (a run cut short,
+    or runs made one by one): the same tables from what finished."""
+    sizes = {**POST_SIZES, **args.sizes}
+    codes = (["baseline"] if args.baseline else []) + ["parsolve"] \
+        + ([] if args.no_peers else ["dolfinx"])
+    rows, stamps = [], []
+    for case, n, p in plan(args.cases, sizes, args.ranks, []):
+        for code in codes:
+            js = SCRATCH / f"{tag_of(code, case, n, p)}.json"
+            if js.exists():
+                r = json.loads(js.read_text())
+                r["code"] = code
+                rows.append(r)
+                stamps.append(js.stat().st_mtime)
+    info = machine_info()
+    info["loadavg_end"] = os.getloadavg()
+    return dict(machine=info, elapsed=(max(stamps) - min(stamps)) if stamps else 0.0, rows=rows,
+                sizes={c: sizes[c] for c in args.cases}, ranks=args.ranks, weak=[],
+                cases=args.cases, trace=False, phases="post", baseline=args.baseline,
+                baseline_label=args.baseline_label, collected=True)
 
 
 def post_report(out: dict) -> int:
@@ -1277,6 +1304,9 @@ def main(argv=None) -> int:
                    help="also run parsolve's package from DIR (e.g. a copy of main: `git archive "
                         "main | tar -x -C DIR`) in the same run, as 'baseline'")
     p.add_argument("--baseline-label", default="", help="what DIR holds (e.g. a commit)")
+    p.add_argument("--collect", action="store_true",
+                   help="with --phases post: the tables from the runs' JSON in the scratch "
+                        "folder (what finished of a run cut short)")
     p.add_argument("--worker", nargs=3, metavar=("CODE", "CASE", "N"), help=argparse.SUPPRESS)
     p.add_argument("--h5", help=argparse.SUPPRESS)
     p.add_argument("--json", help=argparse.SUPPRESS)
@@ -1290,6 +1320,9 @@ def main(argv=None) -> int:
         else:
             dolfinx_worker(case, int(n), args.mesh, args.options, args.h5, args.json)
         return 0
+    if args.collect:
+        args.sizes = parse_sizes(args.sizes)
+        return post_report(collect(args))
     if args.report:
         if args.phases == "post":
             return post_report(json.loads((RESULTS / "bench_post.json").read_text()))

@@ -78,7 +78,7 @@ class Elasticity(Effect):
         stress and history variables of the material state."""
         u = values["u"]
         npts = self.mesh.num_points
-        nodes = self.mesh.cells.T[:, owned].T   # (nc, nen), a view of node-major (nen, nc)
+        nodes = self.mesh.cells[owned]
         if extra is None:
             at_nodes, sig, vol = self._stresses(owned, u)
             return {"stress": kernels.nodal_sums(nodes, at_nodes, vol, npts)}, \
@@ -103,15 +103,19 @@ class Elasticity(Effect):
     def stiffness(self, cells: np.ndarray) -> ElementMatrices:
         """Element stiffness of the given cells, factored (geometry × constant Hooke tensor).
 
-        The geometric part (d², nen, nen, nc) is not kept: it lives as long as the caller holds
-        the result (an assembly: until the matrix has its values), so the steps after it do not
-        carry it (389 MiB at 2D 1.6M DOFs). A re-assembly allocates it again: about as fast as
-        refilling a kept one (scripts/results/bench_post.md)."""
+        The geometric part (d², nen, nen, nc: 120 MiB at 2D 375k DOFs) lives as long as the
+        caller holds the result: after a single assembly (a linear run) nothing of it stays
+        for the factorization, the solve and the steps. From the second call on (a run that
+        re-assembles: a transient step of a new size), it is kept and refilled in place, as
+        allocating it anew each time costs page faults (scripts/results/bench_post.md)."""
         coords = self.mesh.points[self.mesh.cells[cells]]
         G, wdet = kernels.gradients_cell_last(coords, self.mesh.cell_type, thickness=self.thickness)
+        self._assemblies = getattr(self, "_assemblies", 0) + 1
+        P = kernels.geometric_part(G, wdet, out=getattr(self, "_work", None))
+        if self._assemblies > 1:
+            self._work = P
         tensors = np.stack([kernels.voigt_to_tensor(C, self.mesh.dim) for C in self.C])
-        return ElementMatrices(geometric=kernels.geometric_part(G, wdet), tensors=tensors,
-                               cell_material=self.cell_model[cells])
+        return ElementMatrices(geometric=P, tensors=tensors, cell_material=self.cell_model[cells])
 
     def _stresses(self, cells: np.ndarray, u: np.ndarray):
         """(stress at the cells' nodes (nv, nen, nc), or (nv, nc) where it is constant over the
@@ -120,7 +124,7 @@ class Elasticity(Effect):
         the cell mean of ε. On affine cells (P1 triangles and tetrahedra) the strain is
         constant: the stress at the nodes is the cell's."""
         mesh = self.mesh
-        rows = kernels.cell_rows(mesh.points, u, mesh.cells.T[:, cells].T)  # (nen, 2d, nc)
+        rows = kernels.cell_rows(mesh.points, u, mesh.cells[cells])        # (nen, 2d, nc)
         g, vol = kernels.mean_gradient(rows, mesh.cell_type, thickness=self.thickness)
         sig = self._hooke(cells, kernels.voigt_of_gradient(g))
         if mesh.cell_type in AFFINE:

@@ -130,17 +130,24 @@ def test_outputs_of_quadrature_stresses(name):
     np.testing.assert_allclose(weights.sum(), vol.sum() * mesh.cells.shape[1], rtol=1e-13)
 
 
-def test_stiffness_keeps_no_element_arrays():
-    """The geometric part of the element matrices lives as long as the caller holds it: after
-    an assembly the effect carries nothing of the size of the mesh."""
+def test_stiffness_keeps_element_arrays_only_when_re_assembled():
+    """After a single assembly the geometric part lives as long as the caller holds it: the
+    effect carries nothing of the size of the mesh. From the second assembly on it is kept
+    and refilled in place (same values, no new allocation)."""
     import gc
     import weakref
 
     mesh = CELL_MESHES["hexahedron"]()
     mech = two_materials(mesh)
-    m = mech.stiffness(np.arange(mesh.num_cells))
+    cells = np.arange(mesh.num_cells)
+    m = mech.stiffness(cells)
+    first = m.geometric.copy()
     P = weakref.ref(m.geometric)
     assert m.geometric.shape == (9, 8, 8, mesh.num_cells)
     del m
     gc.collect()
     assert P() is None
+    second = mech.stiffness(cells).geometric
+    third = mech.stiffness(cells).geometric
+    assert third is second
+    np.testing.assert_array_equal(third, first)
