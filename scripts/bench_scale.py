@@ -49,7 +49,12 @@ Usage (repository root):
     .venv/bin/python scripts/bench_scale.py --quick          # small sizes, a smoke test
     .venv/bin/python scripts/bench_scale.py --sizes 2d-direct=1000,1414,2000 3d-iterative=60,79,100
     .venv/bin/python scripts/bench_scale.py --report         # tables again from the JSON
-Writes scripts/results/bench_scale.md and .json; scratch in bench_results/scale/.
+    .venv/bin/python scripts/bench_scale.py --phases post --baseline /tmp/main  # post only
+Writes scripts/results/bench_scale.md and .json; scratch in bench_results/scale/. With
+--phases post: set-up, one solve and the post-processing only (no output phase, no weak
+scaling, sizes 2d-direct 432, 611 and 3d-iterative 37, 47), with a second assembly timed, and
+--baseline DIR runs parsolve's package from DIR too (e.g. main before a change) in the same
+run: scripts/results/bench_post.md and .json.
 """
 
 from __future__ import annotations
@@ -90,6 +95,8 @@ SIZES = {"2d-direct": [305, 432, 611],          # 187k, 375k, 749k DOFs
 QUICK = {"2d-direct": [60, 85, 120], "3d-iterative": [10, 13, 16], "2d-iterative": [60, 85, 120],
          "3d-direct": [8, 10, 13]}
 DEFAULT_CASES = ["2d-direct", "3d-iterative"]
+# --phases post: set-up, one solve and the post-processing only (no output, no weak scaling)
+POST_SIZES = {**SIZES, "2d-direct": [432, 611], "3d-iterative": [37, 47]}  # 375k, 749k; 165k, 332k
 PHASES = ("setup", "assembly", "factorization", "solve", "post", "output")
 TARGET = (64, 50e6)  # ranks, DOFs of the model
 TRACE_FRAMES = 1
@@ -272,14 +279,23 @@ class Recorder:
                 "snap_seconds": self.comm.allreduce(self.snap_seconds, op=MPI.MAX), **self.extra}
 
 
-def instrument(drv, rec: Recorder) -> dict:
+class NullWriter:
+    """Takes every call of a result writer and writes nothing (--phases post: no output)."""
+
+    def __getattr__(self, name):
+        return lambda *args, **kwargs: None
+
+
+def instrument(drv, rec: Recorder, output: bool = True) -> dict:
     """Wrap the driver's calls to time and measure each phase (the package is not changed).
-    Returns the objects caught on the way (system, matrix, solver)."""
+    Returns the objects caught on the way (system, matrix, solver, the step's primal vector,
+    the unwrapped assembly). ``output`` False: no result file (a NullWriter takes the steps)."""
     held: dict = {}
     mat_bytes = _mat_bytes
 
     def on_system(system):
         held["system"] = system
+        held["assemble"] = system.assemble
         rec.snap("system")
         system.assemble = rec.timed("assembly", system.assemble, on_matrix)
         for name in ("gather", "unpack"):  # the solution back to fields (if the driver has them)
@@ -304,25 +320,23 @@ def instrument(drv, rec: Recorder) -> dict:
 
     def outputs(comm, system, q, multipliers, *args, **kwargs):
         out = step_outputs(comm, system, q, multipliers, *args, **kwargs)
+        held["q"] = q
         rec.snap("post", lambda: parsolve_categories(system, (q, multipliers, out)))
         return out
 
     drv.step_outputs = outputs
-    base = drv.ResultWriter
+    make_writer = drv.result_writer
 
-    class TimedWriter(base):
+    def writer_of(*args, **kwargs):
         """The result file's creation, steps and closing: the output phase."""
+        if not output:
+            return NullWriter()
+        writer = rec.timed("output", make_writer)(*args, **kwargs)
+        for name in ("write_step", "close"):
+            setattr(writer, name, rec.timed("output", getattr(writer, name)))
+        return writer
 
-        def __init__(self, *args, **kwargs):
-            rec.timed("output", super().__init__)(*args, **kwargs)
-
-        def write_step(self, *args, **kwargs):
-            return rec.timed("output", super().write_step)(*args, **kwargs)
-
-        def close(self, *args, **kwargs):
-            return rec.timed("output", super().close)(*args, **kwargs)
-
-    drv.ResultWriter = TimedWriter
+    drv.result_writer = writer_of
     return held
 
 
@@ -350,7 +364,8 @@ def _mumps(solver) -> dict:
                 factor_entries=float(g[29]) if g[29] >= 0 else -float(g[29]) * 1e6)
 
 
-def parsolve_worker(case: str, n: int, h5: str, json_out: str, trace: bool) -> None:
+def parsolve_worker(case: str, n: int, h5: str, json_out: str, trace: bool,
+                    phases: str = "all") -> None:
     if trace:
         import tracemalloc
 
@@ -369,7 +384,7 @@ def parsolve_worker(case: str, n: int, h5: str, json_out: str, trace: bool) -> N
     if comm.rank == 0:
         scene_file.write_text(scene_text(case, n))
     comm.Barrier()
-    held = instrument(drv, rec)
+    held = instrument(drv, rec, output=phases == "all")
     t_wall, cpu = time.perf_counter(), cpu_seconds()
 
     def model_of():
@@ -385,13 +400,20 @@ def parsolve_worker(case: str, n: int, h5: str, json_out: str, trace: bool) -> N
     t_wall = comm.allreduce(time.perf_counter() - t_wall, op=MPI.MAX)
     share = comm.allreduce(share, op=MPI.MIN)
     rec.snap("end")
+    if phases == "post":  # a second assembly: what keeping (or not) element work arrays costs
+        c0 = cpu_seconds()
+        held["assemble"]()
+        rec.extra["reassembly"] = comm.allreduce(cpu_seconds() - c0, op=MPI.MAX)
+        rec.snap("reassembly", lambda: parsolve_categories(held["system"], None))
     out = rec.result()
     mumps = _mumps(held["solver"])
     its = held["solver"].ksp.getIterationNumber()
     if comm.rank == 0:
         out.update(code="parsolve", case=case, n=n, nranks=comm.size, dofs=dofs_of(case, n),
                    status=status, t_wall=t_wall, cpu_share=share, iterations=its, mumps=mumps, trace=trace,
-                   log=lines, **_solution_checks(h5, model.mesh.points))
+                   log=lines, phases=phases,
+                   **(_solution_checks(h5, model.mesh.points) if phases == "all"
+                      else _q_checks(held["q"], model.mesh.points)))
         Path(json_out).write_text(json.dumps(out, indent=1))
 
 
@@ -406,6 +428,14 @@ def _solution_checks(h5: str, points: np.ndarray) -> dict:
     corner = np.flatnonzero(np.all(np.isclose(points, 1.0), axis=1))[0]
     return dict(unorm=float(np.linalg.norm(u)), umax=float(np.abs(u).max()),
                 corner=u[corner].tolist(), timings=timings, relres=residual)
+
+
+def _q_checks(q: np.ndarray, points: np.ndarray) -> dict:
+    """||u||₂, max |u|, u at the corner x = y (= z) = 1, from the step's full primal vector."""
+    u = q.reshape(len(points), -1)
+    corner = np.flatnonzero(np.all(np.isclose(points, 1.0), axis=1))[0]
+    return dict(unorm=float(np.linalg.norm(u)), umax=float(np.abs(u).max()),
+                corner=u[corner].tolist())
 
 
 # ------------------------------------------------------------------------------------------------
@@ -479,21 +509,30 @@ def solver_options(case: str) -> dict:
     return preset_options(CASES[case]["preset"], True, False)
 
 
-def launch(code: str, case: str, n: int, nranks: int, trace: bool, timeout: float) -> dict:
+def launch(code: str, case: str, n: int, nranks: int, trace: bool, timeout: float,
+           phases: str = "all", baseline: str | None = None) -> dict:
+    """One run in a fresh process. ``code``: parsolve, dolfinx, or baseline (parsolve's worker
+    on the package found in the folder ``baseline``, e.g. an unchanged copy of main)."""
     tag = tag_of(code, case, n, nranks)
     js = SCRATCH / f"{tag}.json"
     js.unlink(missing_ok=True)
-    if code == "parsolve":
+    env = child_env()
+    if code in ("parsolve", "baseline"):
         args = [VENV_PY, __file__, "--worker", "parsolve", case, str(n), "--h5",
-                str(SCRATCH / f"{tag}.h5"), "--json", str(js)] + (["--trace"] if trace else [])
+                str(SCRATCH / f"{tag}.h5"), "--json", str(js), "--phases", phases] \
+            + (["--trace"] if trace else [])
+        if code == "baseline":
+            env["PYTHONPATH"] = str(Path(baseline).resolve())
     else:
         args = [DEBIAN_PY, __file__, "--worker", "dolfinx", case, str(n), "--mesh",
                 str(save_mesh(case, n)), "--options", json.dumps(solver_options(case)),
-                "--h5", str(SCRATCH / f"{tag}.xdmf"), "--json", str(js)]
+                "--json", str(js)]
+        if phases == "all":  # no output file: no output phase
+            args += ["--h5", str(SCRATCH / f"{tag}.xdmf")]
     cmd = ["bash", str(SCRIPTS / "mpirun.sh"), "-n", str(nranks), *args]
     t0 = time.perf_counter()
     try:
-        proc = subprocess.run(cmd, cwd=ROOT, env=child_env(), capture_output=True, text=True,
+        proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True,
                               timeout=timeout)
         failed = proc.returncode != 0 or not js.exists()
         tail = " / ".join((proc.stdout + proc.stderr).strip().splitlines()[-4:])
@@ -505,8 +544,9 @@ def launch(code: str, case: str, n: int, nranks: int, trace: bool, timeout: floa
             junk.unlink(missing_ok=True)
     if failed:
         return dict(code=code, case=case, n=n, nranks=nranks, dofs=dofs_of(case, n),
-                    failed=tail[-600:], process_wall=wall)
+                    failed=tail[-600:], process_wall=wall, phases=phases)
     out = json.loads(js.read_text())
+    out["code"] = code
     out["process_wall"] = wall
     out["loadavg"] = os.getloadavg()[0]
     return out
@@ -527,25 +567,29 @@ def plan(cases: list[str], sizes: dict, ranks: list[int], weak: list[int]) -> li
 def run_all(args) -> dict:
     SCRATCH.mkdir(parents=True, exist_ok=True)
     info = machine_info()
-    sizes = {**(QUICK if args.quick else SIZES), **args.sizes}
+    post = args.phases == "post"
+    sizes = {**(QUICK if args.quick else POST_SIZES if post else SIZES), **args.sizes}
     rows = []
     t_start = time.perf_counter()
-    for case, n, p in plan(args.cases, sizes, args.ranks, args.weak):
-        codes = ["parsolve"] + ([] if args.no_peers else ["dolfinx"])
-        for code in codes:
+    weak = [] if post else args.weak
+    codes = (["baseline"] if args.baseline else []) + ["parsolve"] \
+        + ([] if args.no_peers else ["dolfinx"])
+    for case, n, p in plan(args.cases, sizes, args.ranks, weak):
+        for code in codes:  # one after the other: the same load on the machine
             if code == "dolfinx":
                 save_mesh(case, n)
-            r = launch(code, case, n, p, args.trace, args.timeout)
+            r = launch(code, case, n, p, args.trace, args.timeout, args.phases, args.baseline)
             rows.append(r)
             print(progress_line(r), flush=True)
     info["loadavg_end"] = os.getloadavg()
     return dict(machine=info, elapsed=time.perf_counter() - t_start, rows=rows,
-                sizes={c: sizes[c] for c in args.cases}, ranks=args.ranks, weak=args.weak,
-                cases=args.cases, trace=args.trace)
+                sizes={c: sizes[c] for c in args.cases}, ranks=args.ranks, weak=weak,
+                cases=args.cases, trace=args.trace, phases=args.phases,
+                baseline=args.baseline, baseline_label=args.baseline_label)
 
 
 def progress_line(r: dict) -> str:
-    head = f"[bench_scale] {r['code']:8s} {r['case']:12s} n={r['n']:4d} np={r['nranks']} " \
+    head = f"[bench_scale] {r['code']:9s} {r['case']:12s} n={r['n']:4d} np={r['nranks']} " \
            f"DOFs={r['dofs']:>9,}"
     if "failed" in r:
         return f"{head}  FAILED: {r['failed']}"
@@ -1042,6 +1086,188 @@ def report(out: dict) -> int:
 
 
 # ------------------------------------------------------------------------------------------------
+# --phases post: the post-processing against DOLFINx (and a baseline), into bench_post.md
+
+
+POST_TARGET = 1.5  # issue 8: post-processing within 1.5× DOLFINx's time
+
+
+def post_rows(out: dict):
+    """(case, n, np) → {code: row} for every configuration, in run order."""
+    by: dict = {}
+    for r in out["rows"]:
+        by.setdefault((r["case"], r["n"], r["nranks"]), {})[r["code"]] = r
+    return by
+
+
+def _ok(r: dict | None) -> bool:
+    return r is not None and "failed" not in r
+
+
+def _held(r: dict, part: str, snap: str) -> float | None:
+    return r["memory"].get(snap, {}).get(f"np_{part}_max")
+
+
+def post_table(out: dict) -> tuple[str, list[str]]:
+    """Post-processing CPU seconds (max over ranks) of the baseline, parsolve and DOLFINx, the
+    ratios, and the verdicts against the target."""
+    base = bool(out.get("baseline"))
+    head = ["case", "DOFs", "np"] + (["baseline post s (×DOLFINx)"] if base else []) + \
+        ["parsolve post s (×DOLFINx)", "DOLFINx post s"] + (["speed-up"] if base else []) + \
+        ["‖u‖ rel. diff. vs DOLFINx"]
+    body, verdicts = [], []
+    for (case, n, p), codes in post_rows(out).items():
+        d, a, b = codes.get("dolfinx"), codes.get("parsolve"), codes.get("baseline")
+        td = d["cpu"]["post"] if _ok(d) else None
+
+        def cell(r):
+            if not _ok(r):
+                return "FAILED" if r else "–"
+            t = r["cpu"]["post"]
+            return f"{t:.3f} ({fmt(t / td) if td else '–'})"
+
+        row = [case, f"{dofs_of(case, n):,}", str(p)] + ([cell(b)] if base else [])
+        row += [cell(a), fmt(td, ".3f")]
+        if base:
+            row.append(fmt(b["cpu"]["post"] / a["cpu"]["post"]) + "×"
+                       if _ok(a) and _ok(b) and a["cpu"]["post"] > 0 else "–")
+        row.append(fmt(abs(a["unorm"] - d["unorm"]) / d["unorm"], ".1e")
+                   if _ok(a) and _ok(d) else "–")
+        body.append(row)
+        if _ok(a) and td:
+            ratio = a["cpu"]["post"] / td
+            verdicts.append(f"{case} {dofs_of(case, n):,} DOFs np={p}: {ratio:.2f}× DOLFINx — "
+                            + ("met" if ratio <= POST_TARGET else "MISSED"))
+    return md_table(head, body), verdicts
+
+
+def post_memory_table(out: dict) -> str:
+    """Element arrays held after the assembly (the effects' work arrays), peak memory per rank,
+    first and second assembly (CPU s) of the baseline and parsolve."""
+    codes = (["baseline"] if out.get("baseline") else []) + ["parsolve"]
+    head = ["case", "DOFs", "np"]
+    for c in codes:
+        head += [f"{c}: element np after assembly MiB", "after post",
+                 "peak MiB/rank through the step", "with the re-assembly", "assembly s",
+                 "re-assembly s"]
+    head += ["DOLFINx peak MiB/rank"]
+    body = []
+    for (case, n, p), by in post_rows(out).items():
+        row = [case, f"{dofs_of(case, n):,}", str(p)]
+        for c in codes:
+            r = by.get(c)
+            if not _ok(r):
+                row += ["–"] * 6
+                continue
+            row += [mib(_held(r, "element", "assembly")), mib(_held(r, "element", "post")),
+                    mib(r["memory"]["end"]["hwm_max"]), mib(peak(r)),
+                    fmt(r["cpu"]["assembly"]), fmt(r.get("reassembly"))]
+        d = by.get("dolfinx")
+        row.append(mib(peak(d)) if _ok(d) else "–")
+        body.append(row)
+    return md_table(head, body)
+
+
+def post_phase_table(out: dict) -> str:
+    """Every phase run (CPU s, max over ranks) of every code, for context."""
+    head = ["case", "DOFs", "np", "code"] + [ph for ph in PHASES if ph != "output"] + \
+        ["cpu share", "load avg"]
+    body = []
+    for (case, n, p), by in post_rows(out).items():
+        for code, r in by.items():
+            if not _ok(r):
+                continue
+            body.append([case, f"{dofs_of(case, n):,}", str(p), code]
+                        + [fmt(r["cpu"][ph]) for ph in PHASES if ph != "output"]
+                        + [fmt(r.get("cpu_share")), fmt(r.get("loadavg"), ".1f")])
+    return md_table(head, body)
+
+
+def post_markdown(out: dict) -> str:
+    m = out["machine"]
+    table, verdicts = post_table(out)
+    label = out.get("baseline_label") or out.get("baseline") or ""
+    lines = [
+        "# Post-processing against DOLFINx 0.5 (issue 8: within 1.5× DOLFINx's time)",
+        "",
+        "`scripts/bench_scale.py --phases post`: the problems of `bench_scale.md` (a clamped "
+        "block under an end traction, one linear step), run as set-up, assembly, one solve and "
+        "the post-processing only (no result file, no output phase), each a fresh process under "
+        "scripts/mpirun.sh, one thread per rank, the codes one after the other on each "
+        "configuration so that they share the machine's load.",
+        "",
+        "post: parsolve: gather + unpack + step_outputs (cell-mean stresses, volume-weighted "
+        "nodal averages of the stress at the cells' nodes, relation outputs); DOLFINx: "
+        "DG0 interpolation of σ(u) (the cell's centre) + a lumped projection on P1 "
+        "(∫σ·w / ∫w, assembled vectors with ghost updates). CPU seconds, max over ranks.",
+        "",
+        (f"baseline: parsolve from `{out['baseline']}` ({label}), run by the same worker in "
+         "the same run." if out.get("baseline") else ""),
+        "",
+        f"Machine: {m['machine']}, {m['cpus']} cores, {m['mem_gib']:.1f} GiB, shared with other "
+        f"engineers' runs (load average at start {m['loadavg_start'][0]:.1f}, at end "
+        f"{m['loadavg_end'][0]:.1f}); run started {m['date']}, {out['elapsed'] / 60:.1f} min.",
+        "",
+        "## Post-processing time (CPU s, max over ranks)",
+        "",
+        table,
+        "",
+        *[f"- {v}" for v in verdicts],
+        "",
+        "## Memory: element arrays held, peak per rank; assembly and re-assembly",
+        "",
+        "element np: numpy arrays the effects and their composition hold (bench_scale.md's "
+        "*element*), after the first assembly and after the post-processing; peak through the "
+        "step: VmHWM at the end of the step (set-up, assembly, factorization, solve, post); "
+        "re-assembly: a second `SaddleSystem.assemble` after the step, with the factor still "
+        "held (CPU s, max over ranks), and the peak with it.",
+        "",
+        post_memory_table(out),
+        "",
+        "## Every phase run (CPU s, max over ranks)",
+        "",
+        post_phase_table(out),
+        "",
+        "Rerun: `.venv/bin/python scripts/bench_scale.py --phases post [--baseline DIR "
+        "--baseline-label TEXT] [--cases ...] [--sizes CASE=n1,n2] [--ranks 1 2]`; "
+        "`--phases post --report` for the tables again from bench_post.json.",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def collect(args) -> dict:
+    """The runs of a --phases post plan whose JSON is in the scratch folder (a run cut short,
+    or runs made one by one): the same tables from what finished."""
+    sizes = {**POST_SIZES, **args.sizes}
+    codes = (["baseline"] if args.baseline else []) + ["parsolve"] \
+        + ([] if args.no_peers else ["dolfinx"])
+    rows, stamps = [], []
+    for case, n, p in plan(args.cases, sizes, args.ranks, []):
+        for code in codes:
+            js = SCRATCH / f"{tag_of(code, case, n, p)}.json"
+            if js.exists():
+                r = json.loads(js.read_text())
+                r["code"] = code
+                rows.append(r)
+                stamps.append(js.stat().st_mtime)
+    info = machine_info()
+    info["loadavg_end"] = os.getloadavg()
+    return dict(machine=info, elapsed=(max(stamps) - min(stamps)) if stamps else 0.0, rows=rows,
+                sizes={c: sizes[c] for c in args.cases}, ranks=args.ranks, weak=[],
+                cases=args.cases, trace=False, phases="post", baseline=args.baseline,
+                baseline_label=args.baseline_label, collected=True)
+
+
+def post_report(out: dict) -> int:
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    (RESULTS / "bench_post.json").write_text(json.dumps(out, indent=1))
+    text = post_markdown(out)
+    print(text)
+    (RESULTS / "bench_post.md").write_text(text)
+    return 0
+
+
+# ------------------------------------------------------------------------------------------------
 # command line
 
 
@@ -1071,6 +1297,16 @@ def main(argv=None) -> int:
                    help="parsolve: tracemalloc's peak of Python + numpy memory per phase (slower)")
     p.add_argument("--timeout", type=float, default=900.0, help="seconds per run")
     p.add_argument("--report", action="store_true", help="tables again from the JSON")
+    p.add_argument("--phases", choices=("all", "post"), default="all",
+                   help="post: set-up, one solve and the post-processing only, against DOLFINx "
+                        "(and --baseline), into bench_post.md")
+    p.add_argument("--baseline", metavar="DIR",
+                   help="also run parsolve's package from DIR (e.g. a copy of main: `git archive "
+                        "main | tar -x -C DIR`) in the same run, as 'baseline'")
+    p.add_argument("--baseline-label", default="", help="what DIR holds (e.g. a commit)")
+    p.add_argument("--collect", action="store_true",
+                   help="with --phases post: the tables from the runs' JSON in the scratch "
+                        "folder (what finished of a run cut short)")
     p.add_argument("--worker", nargs=3, metavar=("CODE", "CASE", "N"), help=argparse.SUPPRESS)
     p.add_argument("--h5", help=argparse.SUPPRESS)
     p.add_argument("--json", help=argparse.SUPPRESS)
@@ -1080,14 +1316,20 @@ def main(argv=None) -> int:
     if args.worker:
         code, case, n = args.worker
         if code == "parsolve":
-            parsolve_worker(case, int(n), args.h5, args.json, args.trace)
+            parsolve_worker(case, int(n), args.h5, args.json, args.trace, args.phases)
         else:
             dolfinx_worker(case, int(n), args.mesh, args.options, args.h5, args.json)
         return 0
+    if args.collect:
+        args.sizes = parse_sizes(args.sizes)
+        return post_report(collect(args))
     if args.report:
+        if args.phases == "post":
+            return post_report(json.loads((RESULTS / "bench_post.json").read_text()))
         return report(json.loads((RESULTS / "bench_scale.json").read_text()))
     args.sizes = parse_sizes(args.sizes)
-    return report(run_all(args))
+    out = run_all(args)
+    return post_report(out) if args.phases == "post" else report(out)
 
 
 if __name__ == "__main__":

@@ -133,10 +133,8 @@ class Diffusion(Effect):
 
     def outputs(self, owned, values, extra, local_cells):
         """Flux -k ∇h: cell means and volume-weighted nodal averages."""
-        h = values[self.field][:, 0]
         k = self.tensors[self.cell_material[owned]]
-        cells = self.mesh.cells[owned]
-        flux = kern.cell_flux(self.mesh.points[cells], self.mesh.cell_type, k, h[cells])
-        sums = kern.nodal_flux_sums(self.mesh.points, cells, self.mesh.cell_type, k, h)
+        flux, sums = kern.flux_outputs(self.mesh.points, self.mesh.cells[owned],
+                                       self.mesh.cell_type, k, values[self.field])
         name = f"{self.field}_flux"
         return {name: sums}, {name: flux}

@@ -77,24 +77,22 @@ class Elasticity(Effect):
         (``extra`` = (stress at the quadrature points of the local cells, states)), the
         stress and history variables of the material state."""
         u = values["u"]
-        if extra is None:  # one geometry for both (the cell mean and the volume weights)
-            geo = self.geometry(owned)
-            sig = self.cell_stress(owned, u, geo)
-            return {"stress": self.nodal_stress_sums(owned, u, geo, sig)}, {"stress": sig}
+        npts = self.mesh.num_points
+        nodes = self.mesh.cells[owned]
+        if extra is None:
+            at_nodes, sig, vol = self._stresses(owned, u)
+            return {"stress": kernels.nodal_sums(nodes, at_nodes, vol, npts)}, \
+                {"stress": np.ascontiguousarray(sig.T)}
         stress_qp, states = extra
         pos = np.searchsorted(local_cells, owned)
-        wq = self.geometry(owned).wdet
-        sig = (stress_qp[pos] * wq[:, :, None]).sum(axis=1) / wq.sum(axis=1)[:, None]
-        vol = wq.sum(axis=1)
-        nodes = self.mesh.cells[owned].ravel()
-        nen, npts = self.mesh.cells.shape[1], self.mesh.num_points
-        sums = np.stack([np.bincount(nodes, weights=np.repeat(sig[:, k] * vol, nen), minlength=npts)
-                         for k in range(sig.shape[1])], 1)
-        weights = np.bincount(nodes, weights=np.repeat(vol, nen), minlength=npts)
+        wq = kernels.weights_cell_last(self.mesh.points[nodes], self.mesh.cell_type,
+                                       self.thickness)                 # (nq, nc)
+        vol = wq.sum(axis=0)
+        sig = np.einsum("cqv,qc->vc", stress_qp[pos], wq) / vol         # (nv, nc)
         cells = {name: value[pos] for name, value in
                  self.internal_variables(local_cells, states).items()}
-        cells["stress"] = sig
-        return {"stress": (sums, weights)}, cells
+        cells["stress"] = np.ascontiguousarray(sig.T)
+        return {"stress": kernels.nodal_sums(nodes, sig, vol, npts)}, cells
 
     def geometry(self, cells: np.ndarray, at_nodes: bool = False) -> kernels.CellGeometry:
         coords = self.mesh.points[self.mesh.cells[cells]]
@@ -103,56 +101,62 @@ class Elasticity(Effect):
                                     points=points)
 
     def stiffness(self, cells: np.ndarray) -> ElementMatrices:
-        """Element stiffness of the given cells, factored (geometry × constant Hooke tensor)."""
+        """Element stiffness of the given cells, factored (geometry × constant Hooke tensor).
+
+        The geometric part (d², nen, nen, nc: 120 MiB at 2D 375k DOFs) lives as long as the
+        caller holds the result: after a single assembly (a linear run) nothing of it stays
+        for the factorization, the solve and the steps. From the second call on (a run that
+        re-assembles: a transient step of a new size), it is kept and refilled in place, as
+        allocating it anew each time costs page faults (scripts/results/bench_post.md)."""
         coords = self.mesh.points[self.mesh.cells[cells]]
         G, wdet = kernels.gradients_cell_last(coords, self.mesh.cell_type, thickness=self.thickness)
-        self._work = kernels.geometric_part(G, wdet, out=getattr(self, "_work", None))
+        self._assemblies = getattr(self, "_assemblies", 0) + 1
+        P = kernels.geometric_part(G, wdet, out=getattr(self, "_work", None))
+        if self._assemblies > 1:
+            self._work = P
         tensors = np.stack([kernels.voigt_to_tensor(C, self.mesh.dim) for C in self.C])
-        return ElementMatrices(geometric=self._work, tensors=tensors,
-                               cell_material=self.cell_model[cells])
+        return ElementMatrices(geometric=P, tensors=tensors, cell_material=self.cell_model[cells])
 
-    def cell_stress(self, cells: np.ndarray, u: np.ndarray,
-                    geo: kernels.CellGeometry | None = None) -> np.ndarray:
-        """Mean stress over each cell (Voigt), from the full displacement array u (npoints, ncomp);
-        ``geo``: the cells' geometry at the quadrature points, if already computed."""
-        geo = self.geometry(cells) if geo is None else geo
-        eps = kernels.voigt_strain(geo.dNdx, u[self.mesh.cells[cells]])
-        w = geo.wdet / geo.wdet.sum(axis=1, keepdims=True)
-        # σ is linear in ε: the cell mean of σ is C times the cell mean of ε
-        return self._hooke(cells, (eps * w[:, :, None]).sum(axis=1))
+    def _stresses(self, cells: np.ndarray, u: np.ndarray):
+        """(stress at the cells' nodes (nv, nen, nc), or (nv, nc) where it is constant over the
+        cell; cell-mean stress (nv, nc); cell measures (nc,)), cell-last, from the full
+        displacement array u (npoints, ncomp). σ is linear in ε: the cell mean of σ is C times
+        the cell mean of ε. On affine cells (P1 triangles and tetrahedra) the strain is
+        constant: the stress at the nodes is the cell's."""
+        mesh = self.mesh
+        rows = kernels.cell_rows(mesh.points, u, mesh.cells[cells])        # (nen, 2d, nc)
+        g, vol = kernels.mean_gradient(rows, mesh.cell_type, thickness=self.thickness)
+        sig = self._hooke(cells, kernels.voigt_of_gradient(g))
+        if mesh.cell_type in AFFINE:
+            return sig, sig, vol
+        g = kernels.gradient_at_nodes(rows, mesh.cell_type)
+        return self._hooke(cells, kernels.voigt_of_gradient(g)), sig, vol
 
     def _hooke(self, cells: np.ndarray, eps: np.ndarray) -> np.ndarray:
-        """σ = C ε with each cell's own Hooke matrix; eps (nc, ..., nv)."""
-        C = self.C[self.cell_model[cells]]
-        return np.einsum("cvw,c...w->c...v", C, eps)
+        """σ = C ε with each cell's own Hooke matrix, cell-last: eps (nv, ..., nc)."""
+        nv = eps.shape[0]
+        if len(self.models) == 1:
+            return (self.C[0] @ eps.reshape(nv, -1)).reshape(eps.shape)
+        sig = np.empty_like(eps)
+        material = self.cell_model[cells]
+        for k, C in enumerate(self.C):  # one product per material, on its cells
+            idx = np.flatnonzero(material == k)
+            part = eps[..., idx]
+            sig[..., idx] = (C @ part.reshape(nv, -1)).reshape(part.shape)
+        return sig
 
-    def nodal_stress_sums(self, cells: np.ndarray, u: np.ndarray,
-                          geo: kernels.CellGeometry | None = None,
-                          cell_sig: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def cell_stress(self, cells: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Mean stress over each cell (nc, nv) (Voigt), from the full displacement array u
+        (npoints, ncomp)."""
+        return np.ascontiguousarray(self._stresses(cells, u)[1].T)
+
+    def nodal_stress_sums(self, cells: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Stress evaluated at each cell's nodes, summed per node with cell-volume weights.
 
         Returns (weighted sums (npoints, nvoigt), weights (npoints,)); the caller adds the
-        ranks' sums and divides (a volume-weighted nodal average, as post-processors do).
-        ``geo`` / ``cell_sig``: the geometry at the quadrature points and the cell stresses,
-        if already computed. On affine cells (P1 triangles and tetrahedra) the strain is
-        constant: the stress at the nodes is the cell's, and no geometry at the nodes is needed.
-        """
-        mesh = self.mesh
-        vol = (self.geometry(cells) if geo is None else geo).wdet.sum(axis=1)
-        if mesh.cell_type in AFFINE:
-            cell_sig = self.cell_stress(cells, u, geo) if cell_sig is None else cell_sig
-            sig = cell_sig[:, None, :]                                     # (nc, 1, nv)
-        else:
-            at_nodes = self.geometry(cells, at_nodes=True)
-            sig = self._hooke(cells, kernels.voigt_strain(at_nodes.dNdx, u[mesh.cells[cells]]))
-        sig = np.broadcast_to(sig, (cells.size, mesh.cells.shape[1], sig.shape[2]))
-        nodes = mesh.cells[cells].ravel()
-        nv = sig.shape[2]
-        sums = np.stack([np.bincount(nodes, weights=(sig[..., k] * vol[:, None]).ravel(),
-                                     minlength=mesh.num_points) for k in range(nv)], axis=1)
-        weights = np.bincount(nodes, weights=np.repeat(vol, mesh.cells.shape[1]),
-                              minlength=mesh.num_points)
-        return sums, weights
+        ranks' sums and divides (a volume-weighted nodal average, as post-processors do)."""
+        at_nodes, _, vol = self._stresses(cells, u)
+        return kernels.nodal_sums(self.mesh.cells[cells], at_nodes, vol, self.mesh.num_points)
 
     # ------------------------------------------------------------ nonlinear materials
 

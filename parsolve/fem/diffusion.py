@@ -26,7 +26,8 @@ import numpy as np
 from parsolve.fem.element_matrices import ElementMatrices
 from parsolve.fem.elements import default_degree, element, facet_measure_and_normal, \
     jacobians, polynomial_order, quadrature
-from parsolve.fem.kernels import CellGeometry, geometric_part, gradients_cell_last
+from parsolve.fem import kernels
+from parsolve.fem.kernels import geometric_part, gradients_cell_last
 
 
 def conductivity_tensor(k, nc: int, dim: int) -> np.ndarray:
@@ -169,17 +170,37 @@ def facet_flux_vector(coords: np.ndarray, facet_type: str, q, thickness: float =
     return (qq * wds) @ N
 
 
-def _flux_at(geo: CellGeometry, kt: np.ndarray, he: np.ndarray) -> np.ndarray:
-    grad = np.einsum("cqad,ca->cqd", geo.dNdx, he)             # (nc, nq, d)
-    return -np.einsum("cij,cqj->cqi", kt, grad)
+def _flux_of(kt: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """−k ∇h cell-last: kt (nc, d, d), g (d, ..., nc) → (d, ..., nc)."""
+    K = kt.transpose(1, 2, 0)                                  # (d, d, nc)
+    d = K.shape[0]
+    flux = np.zeros_like(g)
+    for i in range(d):
+        for j in range(d):
+            flux[i] -= K[i, j] * g[j]
+    return flux
+
+
+def _rows_of(coords: np.ndarray, he: np.ndarray) -> np.ndarray:
+    """``kernels.cell_rows`` from element coordinates (nc, nen, d) and node values (nc, nen)."""
+    return np.concatenate([coords.transpose(1, 2, 0), he.T[:, None, :]], axis=1)
+
+
+def _cell_flux(rows: np.ndarray, cell_type: str, kt: np.ndarray) -> np.ndarray:
+    g, _ = kernels.mean_gradient(rows, cell_type, degree=default_degree(cell_type, "mass"))
+    return np.ascontiguousarray(_flux_of(kt, g[0]).T)
+
+
+def _nodal_flux_sums(rows: np.ndarray, cells: np.ndarray, cell_type: str, kt: np.ndarray,
+                     npoints: int) -> tuple[np.ndarray, np.ndarray]:
+    flux = _flux_of(kt, kernels.gradient_at_nodes(rows, cell_type)[0])   # (d, nen, nc)
+    return kernels.nodal_sums(cells, flux, kernels.cell_measures(rows, cell_type), npoints)
 
 
 def cell_flux(coords: np.ndarray, cell_type: str, k, he: np.ndarray) -> np.ndarray:
     """Mean flux −k ∇h over each cell (nc, d), from element node values he (nc, nen)."""
-    geo = CellGeometry(coords, cell_type, degree=default_degree(cell_type, "mass"))
-    kt = conductivity_tensor(k, coords.shape[0], geo.dNdx.shape[-1])
-    w = geo.wdet / geo.wdet.sum(axis=1, keepdims=True)
-    return (_flux_at(geo, kt, he) * w[:, :, None]).sum(axis=1)
+    kt = conductivity_tensor(k, coords.shape[0], coords.shape[2])
+    return _cell_flux(_rows_of(coords, he), cell_type, kt)
 
 
 def nodal_flux_sums(points: np.ndarray, cells: np.ndarray, cell_type: str, k,
@@ -190,15 +211,14 @@ def nodal_flux_sums(points: np.ndarray, cells: np.ndarray, cell_type: str, k,
     on all points. Returns (sums (npoints, d), weights (npoints,)): the caller adds the ranks'
     sums and divides, as ``Elasticity.nodal_stress_sums``.
     """
-    coords = points[cells]
-    nc, nen = cells.shape
-    geo = CellGeometry(coords, cell_type, points=element(cell_type).nodes)
-    kt = conductivity_tensor(k, nc, geo.dNdx.shape[-1])
-    flux = _flux_at(geo, kt, h[cells])                         # (nc, nen, d)
-    vol = CellGeometry(coords, cell_type).wdet.sum(axis=1)
-    nodes = cells.ravel()
-    npts = len(points)
-    sums = np.stack([np.bincount(nodes, weights=(flux[..., i] * vol[:, None]).ravel(), minlength=npts)
-                     for i in range(flux.shape[2])], axis=1)
-    weights = np.bincount(nodes, weights=np.repeat(vol, nen), minlength=npts)
-    return sums, weights
+    kt = conductivity_tensor(k, len(cells), points.shape[1])
+    rows = kernels.cell_rows(points, np.asarray(h, dtype=float).reshape(-1, 1), cells)
+    return _nodal_flux_sums(rows, cells, cell_type, kt, len(points))
+
+
+def flux_outputs(points: np.ndarray, cells: np.ndarray, cell_type: str, k, h: np.ndarray):
+    """(cell_flux, nodal_flux_sums) of the same cells, the cells' data gathered once."""
+    kt = conductivity_tensor(k, len(cells), points.shape[1])
+    rows = kernels.cell_rows(points, np.asarray(h, dtype=float).reshape(-1, 1), cells)
+    return _cell_flux(rows, cell_type, kt), _nodal_flux_sums(rows, cells, cell_type, kt,
+                                                             len(points))

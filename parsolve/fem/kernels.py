@@ -129,14 +129,33 @@ def gradients_cell_last(coords: np.ndarray, cell_type: str, degree: int | None =
     dN = ref.grad_shape(xi)                                   # (nq, nen, d)
     nc, nen, d = coords.shape
     nq = len(w)
-    X = coords.transpose(2, 0, 1).reshape(d * nc, nen)        # rows (i, c)
-    J = (X @ dN.transpose(1, 0, 2).reshape(nen, nq * d)).reshape(d, nc, nq, d)
-    J = np.ascontiguousarray(J.transpose(0, 3, 2, 1))         # J[i, j, q, c] = dx_i/dxi_j
-    det, inv = _det_inv_cell_last(J)
+    det, inv = _det_inv_cell_last(_jacobians_cell_last(coords, dN))
     G = np.empty((d, nq, nen, nc))
     for q in range(nq):  # dN/dx_k = sum_j dN/dxi_j dxi_j/dx_k
         G[:, q] = np.tensordot(dN[q], inv[:, :, q], axes=([1], [0])).transpose(1, 0, 2)
     return G, np.abs(det) * (w[:, None] * thickness)
+
+
+def _jacobians_cell_last(coords: np.ndarray, dN: np.ndarray) -> np.ndarray:
+    """J[i, j, q, c] = dx_i/dxi_j of cells coords (nc, nen, d) at the points of dN (nq, nen, d)."""
+    nc, nen, d = coords.shape
+    nq = dN.shape[0]
+    X = coords.transpose(2, 0, 1).reshape(d * nc, nen)        # rows (i, c)
+    J = (X @ dN.transpose(1, 0, 2).reshape(nen, nq * d)).reshape(d, nc, nq, d)
+    return np.ascontiguousarray(J.transpose(0, 3, 2, 1))
+
+
+def weights_cell_last(coords: np.ndarray, cell_type: str, thickness: float = 1.0) -> np.ndarray:
+    """Quadrature weights w|J| (nq, nc) of the stiffness rule, without the gradients."""
+    xi, w = quadrature(cell_type, default_degree(cell_type, "stiffness"))
+    J = _jacobians_cell_last(coords, element(cell_type).grad_shape(xi))
+    if J.shape[0] == 2:
+        det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
+    else:
+        det = (J[0, 0] * (J[1, 1] * J[2, 2] - J[1, 2] * J[2, 1])
+               - J[0, 1] * (J[1, 0] * J[2, 2] - J[1, 2] * J[2, 0])
+               + J[0, 2] * (J[1, 0] * J[2, 1] - J[1, 1] * J[2, 0]))
+    return np.abs(det) * (w[:, None] * thickness)
 
 
 def _det_inv_cell_last(J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -185,3 +204,142 @@ def geometric_part(G: np.ndarray, wdet: np.ndarray, out: np.ndarray | None = Non
                 np.multiply(Gw[k, q][:, None, :], G[l, q][None, :, :], out=tmp)
                 target += tmp
     return out
+
+
+# ---------------------------------------------------------------- cell-last outputs (post-processing)
+#
+# Cell means and nodal averages of a field's gradient (stress, flux) over all cells at once,
+# cell index last like the stiffness kernels above: every operation is one long vector.
+
+
+def cell_rows(points: np.ndarray, values: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """Coordinates and node values of the cells (nc, nen), cell-last in one array:
+    rows[a, i, c] = x_i of node a of cell c (i < d), then the k values (npoints, k) there:
+    (nen, d + k, nc), the right-hand side of one product with the reference gradients."""
+    nc, nen = cells.shape
+    d = points.shape[1]
+    idx = np.ascontiguousarray(cells.T)
+    rows = np.empty((nen, d + values.shape[1], nc))
+    for i in range(d):
+        np.take(points[:, i], idx, out=rows[:, i], mode="clip")
+    for i in range(values.shape[1]):
+        np.take(values[:, i], idx, out=rows[:, d + i], mode="clip")
+    return rows
+
+
+def _reference_derivatives(rows: np.ndarray, dN: np.ndarray) -> np.ndarray:
+    """R[p, j, i, c] = ∂(x, v)_i/∂ξ_j at the points of dN (np, nen, d): one product of the
+    reference gradients with the rows gives the Jacobian and the values' derivatives together."""
+    nen, dk, nc = rows.shape
+    npts, _, d = dN.shape
+    A = dN.transpose(0, 2, 1).reshape(npts * d, nen)
+    B = rows.reshape(nen, dk * nc)
+    R = np.empty((npts * d, dk * nc))
+    for s in range(0, npts * d, 12):  # Debian's OpenBLAS: 24 rows at once take 2× two 12s
+        np.matmul(A[s:s + 12], B, out=R[s:s + 12])
+    return R.reshape(npts, d, dk, nc)
+
+
+def _det_adj(R: np.ndarray, d: int) -> tuple[np.ndarray, list]:
+    """det J and adj(J) (adj[j][l]: (np, nc)), J[i][j] = R[:, j, i]."""
+    J = [[R[:, j, i] for j in range(d)] for i in range(d)]
+    if d == 2:
+        return J[0][0] * J[1][1] - J[0][1] * J[1][0], [[J[1][1], -J[0][1]], [-J[1][0], J[0][0]]]
+    # adj[j][l] = cofactor (l, j), cyclic indices carry the signs
+    cof = [[J[(l + 1) % 3][(j + 1) % 3] * J[(l + 2) % 3][(j + 2) % 3]
+            - J[(l + 1) % 3][(j + 2) % 3] * J[(l + 2) % 3][(j + 1) % 3]
+            for j in range(3)] for l in range(3)]
+    det = J[0][0] * cof[0][0] + J[0][1] * cof[0][1] + J[0][2] * cof[0][2]
+    return det, [[cof[l][j] for l in range(3)] for j in range(3)]
+
+
+def _gradients_at(rows: np.ndarray, dN: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(det J (np, nc), M = (∂v/∂ξ) adj(J) (k, d, np, nc)) at the points of dN (np, nen, d):
+    the values' physical gradient there is M / det J (no shape-gradient array is formed)."""
+    nen, dk, nc = rows.shape
+    npts, _, d = dN.shape
+    R = _reference_derivatives(rows, dN)
+    det, adj = _det_adj(R, d)
+    k = dk - d
+    M = np.empty((k, d, npts, nc))
+    tmp = np.empty((npts, nc))
+    for m in range(k):  # in place: no temporaries of the cells' size per term
+        for l in range(d):
+            np.multiply(R[:, 0, d + m], adj[0][l], out=M[m, l])
+            for j in range(1, d):
+                np.multiply(R[:, j, d + m], adj[j][l], out=tmp)
+                M[m, l] += tmp
+    return det, M
+
+
+def mean_gradient(rows: np.ndarray, cell_type: str, degree: int | None = None,
+                  thickness: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Cell means of the values' gradient, Σ_q w|J| ∇v / Σ_q w|J| (k, d, nc), and the cells'
+    measures Σ_q w|J| (nc,), over the quadrature rule of ``degree`` (default: the stiffness')."""
+    xi, w = quadrature(cell_type, default_degree(cell_type, "stiffness") if degree is None else degree)
+    dN = element(cell_type).grad_shape(xi)
+    if len(w) == 1:  # one point (P1): the gradient is the mean
+        det, M = _gradients_at(rows, dN)
+        return M[:, :, 0] / det[0], np.abs(det[0]) * (w[0] * thickness)
+    # Several points: the mean is linear in the values, Σ_a v_a ⊗ Ḡ_a with the cells' mean
+    # shape gradients Ḡ_a = Σ_q w sign(J) dN_a adj(J) / Σ_q w|J|: the Jacobians at the points,
+    # one small product for Ḡ, then k·d·nen products over the cells (not k·d·d·nq).
+    nen, dk, nc = rows.shape
+    nq, _, d = dN.shape
+    det, adj = _det_adj(_reference_derivatives(rows[:, :d], dN), d)
+    wq = w[:, None] * thickness
+    vol = (np.abs(det) * wq).sum(axis=0)
+    s = np.sign(det) * wq / vol                         # w|J|/vol ∇N_a = w sign(J)/vol dN_a adj
+    W = np.empty((nq, d, d, nc))
+    for j in range(d):
+        for l in range(d):
+            np.multiply(adj[j][l], s, out=W[:, j, l])
+    Gm = (dN.transpose(1, 0, 2).reshape(nen, nq * d) @ W.reshape(nq * d, d * nc))
+    Gm = Gm.reshape(nen, d, nc)                         # Ḡ[a, l, c]
+    g = np.empty((dk - d, d, nc))
+    tmp = np.empty((d, nc))
+    for m in range(dk - d):
+        np.multiply(rows[0, d + m], Gm[0], out=g[m])
+        for a in range(1, nen):
+            np.multiply(rows[a, d + m], Gm[a], out=tmp)
+            g[m] += tmp
+    return g, vol
+
+
+def cell_measures(rows: np.ndarray, cell_type: str, thickness: float = 1.0) -> np.ndarray:
+    """Σ_q w|J| (nc,) over the stiffness rule, from the coordinate rows of ``cell_rows``."""
+    xi, w = quadrature(cell_type, default_degree(cell_type, "stiffness"))
+    dN = element(cell_type).grad_shape(xi)
+    d = dN.shape[2]
+    det, _ = _det_adj(_reference_derivatives(rows[:, :d], dN), d)
+    return (np.abs(det) * (w[:, None] * thickness)).sum(axis=0)
+
+
+def gradient_at_nodes(rows: np.ndarray, cell_type: str) -> np.ndarray:
+    """The values' gradient at each cell's nodes, (k, d, nen, nc)."""
+    det, M = _gradients_at(rows, element(cell_type).grad_shape(element(cell_type).nodes))
+    M /= det
+    return M
+
+
+def voigt_of_gradient(g: np.ndarray) -> np.ndarray:
+    """Strain (nv, ..., nc), engineering shear, Voigt order xx yy (zz) (yz xz) xy, from a
+    displacement gradient g[i, j, ..., c] = ∂u_i/∂x_j."""
+    if g.shape[0] == 2:
+        return np.stack([g[0, 0], g[1, 1], g[0, 1] + g[1, 0]])
+    return np.stack([g[0, 0], g[1, 1], g[2, 2], g[1, 2] + g[2, 1], g[0, 2] + g[2, 0],
+                     g[0, 1] + g[1, 0]])
+
+
+def nodal_sums(cells: np.ndarray, values: np.ndarray, vol: np.ndarray,
+               npoints: int) -> tuple[np.ndarray, np.ndarray]:
+    """Cell-volume weighted sums per node: (Σ vol·value (npoints, k), Σ vol (npoints,)) over the
+    cells (nc, nen), of values at the cells' nodes (k, nen, nc) or constant per cell (k, nc)."""
+    nc, nen = cells.shape
+    idx = cells.T.ravel()                                     # (nen, nc) order, as the values
+    sums = np.empty((npoints, len(values)))
+    for m, v in enumerate(values):
+        wv = np.broadcast_to(v * vol, (nen, nc)).ravel()
+        sums[:, m] = np.bincount(idx, weights=wv, minlength=npoints)
+    weights = np.bincount(idx, weights=np.tile(vol, nen), minlength=npoints)
+    return sums, weights
