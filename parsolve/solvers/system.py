@@ -183,14 +183,21 @@ class SaddleSystem:
             target = target - self.primal_values(q)[self.block.rep_row] * self.block.row_scale
         values = self.elim_values(t)
         if q is not None and self.elim_dofs.size:
-            values = values - self._at_local(q, self.elim_local)
+            values = values - self.eliminated_values(q)
         return self.rhs_from(f_full, target, values)
 
-    @staticmethod
-    def _at_local(v: np.ndarray, local: np.ndarray) -> np.ndarray:
-        """v at local DOFs, 0 where -1 (not on this rank: no owned row needs those)."""
-        return np.where(local >= 0, v[np.maximum(local, 0)], 0.0) if v.size else \
-            np.zeros(local.size)
+    def eliminated_values(self, q: np.ndarray) -> np.ndarray:
+        """q at every eliminated DOF. On a distributed mesh from their owners (one reduction
+        of their number): a relation row owned here may name an eliminated DOF of a node
+        this rank does not hold, whose value its lifting needs."""
+        if not self.distributed:
+            return q[self.elim_dofs]
+        n_owned = self.model.mesh.n_owned * self.model.ncomp
+        own = (self.elim_local >= 0) & (self.elim_local < n_owned)
+        out = np.zeros(self.elim_dofs.size)
+        out[own] = q[self.elim_local[own]]
+        self.comm.Allreduce(MPI.IN_PLACE, out, op=MPI.SUM)
+        return out
 
     def rhs_from(self, f_full: np.ndarray, target: np.ndarray, elim_values: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray]:
