@@ -14,6 +14,8 @@ P, one thread per rank.
 Per rank (max and min over ranks, and rank 0 apart: it builds the whole mesh before it
 distributes it):
   peak            VmHWM (/proc/self/status) at the end of the run;
+  hwm model       VmHWM once build_model returned (rank 0 of a distributed run: the whole mesh
+                  it built, partitioned and sent);
   rss setup       VmRSS once the SaddleSystem is built (mesh, model, partition, operator);
   mesh            numpy bytes of the model's mesh (points, cells, groups; for a LocalMesh also
                   global_nodes, global_cells, node_owner, node_new, node_ranges);
@@ -63,9 +65,11 @@ from bench_scale import (CASES, _mat_bytes, child_env, dofs_of, held_bytes,  # n
 
 MODES = ("replicated", "distributed")
 PHASES = ("build_model", "system", "assembly", "solve", "outputs")
-SIZES = {"2d-direct": [305, 611], "3d-iterative": [29, 47]}   # 187k/749k, 81k/332k DOFs
+# 187k / 749k and 47k / 165k DOFs: ≈ 26 min on this loaded 2-core machine (3d n = 47, 332k
+# DOFs, would add ≈ 20 min: --sizes 3d-iterative=29,47 where there is time)
+SIZES = {"2d-direct": [305, 611], "3d-iterative": [24, 37]}
 QUICK = {"2d-direct": [40, 60], "3d-iterative": [8, 12]}
-MEMORY = ("peak", "rss_setup", "mesh", "part", "vectors", "matrix")
+MEMORY = ("peak", "hwm_model", "rss_setup", "mesh", "part", "vectors", "matrix")
 
 
 # ------------------------------------------------------------------------------------------------
@@ -233,12 +237,22 @@ def run_all(args) -> dict:
             for nranks in args.ranks:
                 for mode in MODES:
                     rows.append(run_one(case, n, mode, nranks, args.timeout))
+                    save(summary(args, sizes, rows, start, t0))  # --report works mid-run
+    return summary(args, sizes, rows, start, t0)
+
+
+def summary(args, sizes: dict, rows: list[dict], start: dict, t0: float) -> dict:
     compare(rows)
     mem = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2 ** 30
     machine = dict(machine=platform.machine(), cpus=os.cpu_count(), mem_gib=mem,
                    loadavg_end=list(os.getloadavg()), **start)
     return dict(machine=machine, cases=args.cases, sizes={c: sizes[c] for c in args.cases},
                 ranks=args.ranks, rows=rows, elapsed=time.perf_counter() - t0)
+
+
+def save(out: dict) -> None:
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    (RESULTS / "bench_distributed.json").write_text(json.dumps(out, indent=1))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -296,6 +310,9 @@ def time_table(out: dict) -> str:
     return md_table(head, body)
 
 
+MV = ("mesh", "vectors")
+
+
 def held(r: dict, keys=("mesh", "vectors", "matrix"), which: int = 0) -> float:
     """Max over ranks (which=0) of the sum of ``keys`` per rank."""
     vals = [sum(x[k] for k in keys) for x in r["ranks"]]
@@ -305,7 +322,7 @@ def held(r: dict, keys=("mesh", "vectors", "matrix"), which: int = 0) -> float:
 def ratio_table(out: dict) -> str:
     """distributed / replicated per rank (max over ranks), same case, n, P."""
     head = ["case", "DOFs", "P", "peak", "peak rank 0", "rss setup", "mesh", "part", "vectors",
-            "matrix", "mesh+vectors+matrix"]
+            "matrix", "mesh+vectors", "mesh+vectors+matrix"]
     body = []
     for d in ok(out["rows"]):
         if d["mode"] != "distributed":
@@ -317,13 +334,14 @@ def ratio_table(out: dict) -> str:
         body.append([d["case"], f"{d['dofs']:,}", str(d["nranks"]), f"{q('peak'):.2f}",
                      f"{q('peak', 2):.2f}", f"{q('rss_setup'):.2f}",
                      *[f"{q(k):.2f}" for k in ("mesh", "part", "vectors", "matrix")],
-                     f"{held(d) / held(r):.2f}"])
+                     f"{held(d, MV) / held(r, MV):.2f}", f"{held(d) / held(r):.2f}"])
     return md_table(head, body)
 
 
 def fall_table(out: dict) -> tuple[str, list[str]]:
     """Per-rank mesh, vectors, matrix and their sum (max over ranks) at P ranks / 1 rank."""
-    head = ["case", "DOFs", "mesh mode", "P", "mesh", "vectors", "matrix", "mesh+vectors+matrix",
+    head = ["case", "DOFs", "mesh mode", "P", "mesh", "vectors", "matrix", "mesh+vectors",
+            "mesh+vectors+matrix",
             "peak", "target (P=2: ≤ 0.6)"]
     body, misses = [], []
     for r in ok(out["rows"]):
@@ -337,12 +355,24 @@ def fall_table(out: dict) -> tuple[str, list[str]]:
         verdict = ""
         if r["nranks"] == 2:
             verdict = "MET" if total <= 0.6 else "MISSED"
-            if verdict == "MISSED" and r["mode"] == "distributed":
-                misses.append(f"{r['case']} {r['dofs']:,} DOFs: {total:.2f}")
+            if r["mode"] == "distributed":
+                misses.append((r, total, held(r, MV) / held(one, MV)))
         body.append([r["case"], f"{r['dofs']:,}", r["mode"], str(r["nranks"]),
-                     *[f"{q(k):.2f}" for k in ("mesh", "vectors", "matrix")], f"{total:.2f}",
+                     *[f"{q(k):.2f}" for k in ("mesh", "vectors", "matrix")],
+                     f"{held(r, MV) / held(one, MV):.2f}", f"{total:.2f}",
                      f"{q('peak'):.2f}", verdict])
     return md_table(head, body), misses
+
+
+def verdict_lines(falls: list) -> list[str]:
+    """The 0.6 target on mesh + vectors + matrix, and on mesh + vectors alone."""
+    lines = []
+    for label, i in (("mesh + vectors + matrix", 1), ("mesh + vectors alone", 2)):
+        over = [f[0] for f in falls if f[i] > 0.6]
+        worst = ", ".join(f"{f[0]['case']} {f[0]['dofs']:,} DOFs {f[i]:.2f}" for f in falls)
+        lines.append(f"- **distributed mesh, 2 ranks ≤ 0.6× 1 rank ({label})**: "
+                     + ("MET" if not over else "MISSED") + f" ({worst}).")
+    return lines
 
 
 def markdown(out: dict) -> str:
@@ -377,12 +407,15 @@ def markdown(out: dict) -> str:
         "",
         "## Fall with the ranks: P ranks / 1 rank, per rank (max over ranks), same mesh mode",
         "",
-        "Target of issue 8: at 2 ranks, mesh + vectors + matrix per rank ≤ 0.6× 1 rank.",
+        "Target of issue 8: at 2 ranks, mesh + vectors + matrix per rank ≤ 0.6× 1 rank. The "
+        "matrix is distributed in both modes and outweighs mesh + vectors, so the sum can meet "
+        "it with a replicated mesh: *mesh+vectors* is the column the distributed mesh changes. "
+        "At 1 rank a distributed scene runs on the whole mesh (build_model distributes only on "
+        "several ranks): both modes are the same run there.",
         "",
         fall,
         "",
-        "- **distributed mesh, 2 ranks ≤ 0.6× 1 rank (mesh + vectors + matrix)**: "
-        + ("MET." if not misses else "MISSED — " + "; ".join(misses) + "."),
+        *verdict_lines(misses),
         "",
         "## Wall seconds per phase (max over ranks)",
         "",
@@ -404,9 +437,8 @@ def markdown(out: dict) -> str:
 def report(out: dict) -> int:
     md = markdown(out)
     print(md)
-    RESULTS.mkdir(parents=True, exist_ok=True)
+    save(out)
     (RESULTS / "bench_distributed.md").write_text(md)
-    (RESULTS / "bench_distributed.json").write_text(json.dumps(out, indent=1))
     return 0
 
 
