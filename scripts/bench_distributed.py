@@ -230,9 +230,20 @@ def run_all(args) -> dict:
     t0 = time.perf_counter()
     start = dict(date=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
                  loadavg_start=list(os.getloadavg()))
-    rows = []
+    rows, previous = [], None
+    if args.append:  # the earlier runs of the JSON, but those run again now
+        previous = json.loads((RESULTS / "bench_distributed.json").read_text())
+        again = {(c, n) for c in args.cases for n in sizes[c]}
+        rows = [r for r in previous["rows"] if (r["case"], r["n"]) not in again]
+        for c, ns in previous["sizes"].items():
+            sizes[c] = sorted(set(ns) | set(sizes[c] if c in args.cases else ()))
+        args.cases = [c for c in SIZES if c in set(args.cases) | set(previous["cases"])]
+        start = {**start, **{k: previous["machine"][k] for k in ("date", "loadavg_start")}}
+        t0 -= previous["elapsed"]
     for case in args.cases:
         for n in sizes[case]:
+            if any((r["case"], r["n"]) == (case, n) for r in rows):
+                continue
             print(f"{case} n={n} ({dofs_of(case, n):,} DOFs)", flush=True)
             for nranks in args.ranks:
                 for mode in MODES:
@@ -465,6 +476,8 @@ def main(argv=None) -> int:
     p.add_argument("--quick", action="store_true", help="small sizes (a smoke test)")
     p.add_argument("--timeout", type=float, default=600.0, help="seconds per run")
     p.add_argument("--report", action="store_true", help="tables again from the JSON")
+    p.add_argument("--append", action="store_true",
+                   help="add these runs to the JSON's (same case and size: run again)")
     p.add_argument("--worker", nargs=3, metavar=("CASE", "N", "MODE"), help=argparse.SUPPRESS)
     p.add_argument("--h5", help=argparse.SUPPRESS)
     p.add_argument("--json", help=argparse.SUPPRESS)
