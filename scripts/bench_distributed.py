@@ -36,6 +36,8 @@ Usage (repository root):
     .venv/bin/python scripts/bench_distributed.py --quick      # small sizes, a smoke test
     .venv/bin/python scripts/bench_distributed.py --sizes 2d-direct=305,611 3d-iterative=29,47
     .venv/bin/python scripts/bench_distributed.py --report     # tables again from the JSON
+    .venv/bin/python scripts/bench_distributed.py --append --cases 3d-iterative --sizes 3d-iterative=59
+                                                   # more runs added to the JSON's
 Writes scripts/results/bench_distributed.md and .json; scratch in bench_results/distributed/.
 """
 
@@ -65,9 +67,8 @@ from bench_scale import (CASES, _mat_bytes, child_env, dofs_of, held_bytes,  # n
 
 MODES = ("replicated", "distributed")
 PHASES = ("build_model", "system", "assembly", "solve", "outputs")
-# 187k / 749k and 47k / 165k DOFs: ≈ 26 min on this loaded 2-core machine (3d n = 47, 332k
-# DOFs, would add ≈ 20 min: --sizes 3d-iterative=29,47 where there is time)
-SIZES = {"2d-direct": [305, 611], "3d-iterative": [24, 37]}
+# 187k / 749k and 47k / 165k / 332k DOFs: ≈ 25 min on this loaded 2-core machine
+SIZES = {"2d-direct": [305, 611], "3d-iterative": [24, 37, 47]}
 QUICK = {"2d-direct": [40, 60], "3d-iterative": [8, 12]}
 MEMORY = ("peak", "hwm_model", "rss_setup", "mesh", "part", "vectors", "matrix")
 
