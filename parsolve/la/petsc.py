@@ -285,9 +285,15 @@ class SaddleOperator:
         self._row_cols = ecol[order]
         # entries in eliminated columns: only in node-pair blocks whose column node has an
         # eliminated DOF, and in relation rows
-        nc = self.layout.ncomp
-        pair_col = self.layout.q_index(self.pattern.ucol * nc)
-        node_elim = is_elim[pair_col[:, None] + np.arange(nc)].any(axis=1)
+        nc, lay = self.layout.ncomp, self.layout
+        # nodes with an eliminated DOF (new numbering), then the node pairs in their columns
+        prim = np.asarray(rows, dtype=np.int64)
+        owner = np.searchsorted(lay.offsets, prim, side="right") - 1
+        new_dof = prim - lay.offsets[owner] + lay.q_ranges[owner]
+        prim_rows = new_dof < lay.q_ranges[owner + 1]
+        node_flag = np.zeros(lay.part.node_ranges[-1] + 1, dtype=bool)
+        node_flag[new_dof[prim_rows] // nc] = True
+        node_elim = node_flag[self.pattern.ucol]
         cand = np.concatenate([self.block_pos[:, :, node_elim].ravel(), self.a_final])
         cand = cand[is_elim[self.global_columns(cand)]]
         crow, ccol = self.row_of(cand), self.global_columns(cand)

@@ -56,7 +56,10 @@ def assert_same(new: NodePattern, ref: NodePattern) -> None:
     assert (new.lo, new.nown, new.ncomp) == (ref.lo, ref.nown, ref.ncomp)
     for name in ("nb", "ucol", "pair_slot", "diag_rank"):
         a, b = getattr(new, name), getattr(ref, name)
-        assert a.dtype == b.dtype, name
+        if name == "pair_slot":  # int32 below 2³¹ slots: half the memory of the reference's
+            assert a.dtype == np.int32, name
+        else:
+            assert a.dtype == b.dtype, name
         np.testing.assert_array_equal(a, b, err_msg=name)
 
 
