@@ -250,6 +250,9 @@ class SaddleOperator:
         """Create the Mat on first call, on the operator's own arrays; afterwards the values
         are already in place: assembling tells PETSc they changed (its state increases, so a
         preconditioner or factorization set up on the old values is set up again)."""
+        if self.mat is not None and self.mat.getType() != self._mat_type:
+            self.mat = None   # converted in place (e.g. Mat.convert("dense") with no target):
+            # it no longer works on ``data``, so a new one is made
         if self.mat is None:
             n, d = self.nrows, self.data
             diag = (self.rowptr_d, self.cols_d, d[:self.nnz_d])
@@ -260,6 +263,7 @@ class SaddleOperator:
             self.mat = PETSc.Mat().createAIJWithArrays(size=((n, self.size), (n, self.size)),
                                                        csr=csr, comm=self.comm)
             self.mat.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
+            self._mat_type = self.mat.getType()
         self.mat.assemble()
         return self.mat
 
