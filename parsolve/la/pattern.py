@@ -35,24 +35,31 @@ class NodePattern:
         """Stiffness entries of each owned DOF row (node-major DOFs)."""
         return np.repeat(self.nb * self.ncomp, self.ncomp)
 
-    def block_positions(self, row_start: np.ndarray, dtype: type | None = None) -> np.ndarray:
-        """(ncomp, ncomp, nnzb) slot of entry (i, j) of each node-pair block in a CSR whose owned
-        DOF row r starts at row_start[r] with its stiffness entries first.
+    def block_starts(self, row_start: np.ndarray, dtype: type | None = None) -> np.ndarray:
+        """(ncomp, nnzb) slot of entry (i, 0) of each node-pair block in a CSR whose owned DOF
+        row r starts at row_start[r] with its stiffness entries first; entry (i, j) is j
+        further (a block row's entries are consecutive).
 
         dtype: of the result (default: row_start's, at least int64); np.int32 halves the memory
         of a map kept for every re-assembly when the CSR has fewer than 2³¹ entries."""
-        # entry (i, j) of pair p in node row n: row_start[n nc + i] + nc (p - bptr[n]) + j; the
-        # per-row part is repeated once per component, the rest is a ramp: no (nc, nnzb) gather
+        # entry (i, 0) of pair p in node row n: row_start[n nc + i] + nc (p - bptr[n]); the
+        # per-row part is repeated once per pair, the rest is a ramp
         nc = self.ncomp
         bptr = np.concatenate([[0], np.cumsum(self.nb)])
         first = row_start.reshape(-1, nc) - nc * bptr[:-1, None]                # (nown, nc)
         ramp = nc * np.arange(self.nnzb, dtype=np.int64)
-        out = np.empty((nc, nc, self.nnzb), dtype=dtype or np.result_type(row_start, np.int64))
+        out = np.empty((nc, self.nnzb), dtype=dtype or np.result_type(row_start, np.int64))
         for i in range(nc):
             start = np.repeat(first[:, i], self.nb)
-            start += ramp
-            for j in range(nc):
-                np.add(start, j, out=out[i, j], casting="unsafe")
+            np.add(start, ramp, out=out[i], casting="unsafe")
+        return out
+
+    def block_positions(self, row_start: np.ndarray, dtype: type | None = None) -> np.ndarray:
+        """(ncomp, ncomp, nnzb) slot of entry (i, j) of each node-pair block (see block_starts)."""
+        starts = self.block_starts(row_start, dtype)
+        out = np.empty((self.ncomp,) + starts.shape, dtype=starts.dtype)
+        for j in range(self.ncomp):
+            np.add(starts, j, out=out[:, j], casting="unsafe")
         return out
 
     def diagonal_positions(self, row_start: np.ndarray) -> np.ndarray:
@@ -99,8 +106,8 @@ def node_pattern(cells: np.ndarray, lo: int, hi: int, ncomp: int, nnodes: int) -
     The pattern is symmetric, so only the unordered node pairs (edges) of each cell are sorted:
     nen(nen-1)/2 keys per cell instead of nen². A row's columns are its lower neighbours, then
     itself, then its upper neighbours; the upper ones come sorted with the edges, the lower ones
-    from one stable sort by their other end. Node numbers are int32 when they fit, and so is
-    ``pair_slot`` (the map kept for every re-assembly)."""
+    from one stable sort by their other end. Node numbers are int32 when they fit (their DOF
+    numbers too), and so are ``ucol`` and ``pair_slot`` (kept for every re-assembly)."""
     ct = np.ascontiguousarray(cells.T, dtype=_index_type(nnodes))            # (nen, ncells)
     nen, ncells = ct.shape
     nown = hi - lo
@@ -154,7 +161,7 @@ def node_pattern(cells: np.ndarray, lo: int, hi: int, ncomp: int, nnodes: int) -
     down_rank = np.arange(down_idx.size) - np.concatenate([[0], np.cumsum(n_down)])[down_rows]
     down_slot = slots[:nedge]
     down_slot[down_idx] = bptr[down_rows] + down_rank
-    ucol = np.empty(nnzb, dtype=np.int64)
+    ucol = np.empty(nnzb, dtype=_index_type(nnodes * max(ncomp, 1)))   # DOF numbers fit too
     ucol[up_slot[up_idx]] = e_large[up_idx] + lo
     ucol[down_slot[down_idx]] = e_small[down_idx] + lo
     diag_slot = np.append(bptr[:-1] + n_down, nnzb).astype(stype)          # dump slot last

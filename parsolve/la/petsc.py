@@ -125,14 +125,21 @@ class SaddleOperator:
         # stiffness entries: positions of the owned-column pairs by a ramp (NodePattern), then
         # the few other pairs
         shift = rowptr_d[:nqo] + empty - nc * np.repeat(n_low, nc)
-        self.block_pos = pattern.block_positions(shift, dtype=itype if nnz < 2**31 else np.int64)
-        ramp = np.arange(nc)
+        # entry (i, j) of pair p is at block_start[i, p] + j: a block row's entries are
+        # consecutive (a relation column never falls inside a node's DOFs)
+        self.block_start = starts = pattern.block_starts(
+            shift, dtype=itype if nnz < 2**31 else np.int64)
         if all_in:
             local = (pattern.ucol - lo) * nc
-            cols_d[self.block_pos] = (local[None, :] + ramp[:, None])[None]
+            for i in range(nc):
+                for j in range(nc):
+                    cols_d[j:][starts[i]] = local + j
         else:
             local = (pattern.ucol[pair_in] - lo) * nc
-            cols_d[self.block_pos[:, :, pair_in]] = (local[None, :] + ramp[:, None])[None]
+            for i in range(nc):
+                inner = starts[i, pair_in]
+                for j in range(nc):
+                    cols_d[j:][inner] = local + j
             p_out = np.flatnonzero(~pair_in)
             node = np.searchsorted(bptr, p_out, side="right") - 1
             k = p_out - bptr[node]
@@ -141,8 +148,8 @@ class SaddleOperator:
             for i in range(nc):
                 row = node * nc + i
                 start = rowptr_o[row] + nc * k_out + _count_below(d_out_key, row, qcol, self.size)
+                starts[i, p_out] = nnz_d + start
                 for j in range(nc):
-                    self.block_pos[i, j, p_out] = nnz_d + start + j
                     cols_o[start + j] = qcol + j
             # pairs outside, as sorted keys (node, global column of their first component)
             pair_out_key = node * self.size + qcol
@@ -170,7 +177,8 @@ class SaddleOperator:
         cols_d[self.l_diag] = nqo + np.arange(nlo)
         # diagonal entries of the primal rows
         rows = np.arange(nqo)
-        self.diag_pos = np.where(empty, rowptr_d[:nqo], pattern.diagonal_positions(shift))
+        self.diag_pos = np.where(empty, rowptr_d[:nqo], pattern.diagonal_positions(shift)).astype(
+            starts.dtype)
         cols_d[rowptr_d[rows[empty]]] = rows[empty]
         self.rowptr_d, self.cols_d = rowptr_d.astype(itype), cols_d
         self.rowptr_o, self._cols_o = rowptr_o.astype(itype), cols_o
@@ -205,6 +213,13 @@ class SaddleOperator:
         return out
 
     @property
+    def block_pos(self) -> np.ndarray:
+        """(ncomp, ncomp, nnzb) place in ``data`` of entry (i, j) of each node-pair block
+        (built on demand from ``block_start``: not kept)."""
+        nc = self.layout.ncomp
+        return self.block_start[:, None, :] + np.arange(nc, dtype=self.block_start.dtype)[None, :, None]
+
+    @property
     def cols(self) -> np.ndarray:
         """Global column of every entry of ``data`` (built on demand: not kept)."""
         return np.concatenate([self.cols_d + np.int64(self.offset), self._cols_o])
@@ -235,7 +250,10 @@ class SaddleOperator:
         Relation values are written by ``relation_values`` (they need the stiffness scale).
         """
         nc = self.layout.ncomp
-        self.data[self.block_pos] = blocks.reshape(nc, nc, -1)
+        blocks = blocks.reshape(nc, nc, -1)
+        for i in range(nc):
+            for j in range(nc):
+                self.data[j:][self.block_start[i]] = blocks[i, j]
 
     def diagonal_scale(self) -> float:
         """Mean absolute stiffness diagonal over all ranks (scale for relations and eliminations)."""
@@ -298,7 +316,8 @@ class SaddleOperator:
         node_flag = np.zeros(lay.part.node_ranges[-1] + 1, dtype=bool)
         node_flag[new_dof[prim_rows] // nc] = True
         node_elim = node_flag[self.pattern.ucol]
-        cand = np.concatenate([self.block_pos[:, :, node_elim].ravel(), self.a_final])
+        first = self.block_start[:, None, node_elim].astype(np.int64)
+        cand = np.concatenate([(first + np.arange(nc)[None, :, None]).ravel(), self.a_final])
         cand = cand[is_elim[self.global_columns(cand)]]
         crow, ccol = self.row_of(cand), self.global_columns(cand)
         order = np.lexsort((ccol, crow))
