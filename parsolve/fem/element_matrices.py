@@ -45,7 +45,10 @@ def _slots(pair_slot: np.ndarray) -> np.ndarray:
 
 def _bincount_rows(slots: np.ndarray, values: np.ndarray, npairs: int) -> np.ndarray:
     """Row-wise bincount, dropping the dump slot ``npairs`` (rows owned by another rank)."""
-    return np.stack([np.bincount(slots, weights=v, minlength=npairs + 1)[:npairs] for v in values])
+    out = np.empty((len(values), npairs))
+    for k, v in enumerate(values):  # one row's counts alive at a time, not all of them
+        out[k] = np.bincount(slots, weights=v, minlength=npairs + 1)[:npairs]
+    return out
 
 
 def full_values(m: ElementMatrices) -> np.ndarray:

@@ -282,6 +282,10 @@ class SaddleOperator:
                                                        csr=csr, comm=self.comm)
             self.mat.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
             self._mat_type = self.mat.getType()
+            # petsc4py falls back to a copying constructor (global columns everywhere) when an
+            # off-diagonal array has no storage: that would be another matrix
+            if int(self.mat.getInfo(PETSc.Mat.InfoType.LOCAL)["nz_used"]) != d.size:
+                raise RuntimeError("PETSc did not take the operator's arrays as given")
         self.mat.assemble()
         return self.mat
 

@@ -109,6 +109,8 @@ def test_pattern_matches_reference(cell, nparts, shuffle):
         got = new.block_positions(row_start)
         np.testing.assert_array_equal(got, reference_block_positions(new, row_start))
         assert got.dtype == np.int64
+        starts = new.block_starts(row_start)
+        np.testing.assert_array_equal(starts, got[:, 0])
         small = new.block_positions(row_start.astype(np.int32), dtype=np.int32)
         assert small.dtype == np.int32
         np.testing.assert_array_equal(small, got)
