@@ -13,6 +13,21 @@ same process (the old one patched in), split into node_pattern, block_positions,
 first assembly (create_matrix + assemble_matrix, scripts/bench_peers.py) in the same run, 2D
 only (bench_peers builds no 3D mesh).
 
+Section *compare* (1 rank; `--compare REF`): the assembly code as it is at git ref REF
+(parsolve/la/pattern.py, parsolve/la/petsc.py, parsolve/fem/element_matrices.py, read with
+`git show` into a temporary folder and patched in) against the working tree, on the same model
+in the same process, alternately, best of the repeats: set-up (`SaddleSystem`), first
+`assemble()`, first assembly (both), re-assembly (best of 3 more `assemble()`), CPU and wall
+seconds; the two matrices must agree (the same product with a random vector, bit for bit).
+Memory, in a fresh process per version: numpy arrays the pattern and operator hold, split into
+those PETSc works on (new: the operator's value, column and row arrays are the matrix's own)
+and those beside the matrix; the matrix (allocated entries × 12 B + row offsets, whoever owns
+them); the element arrays (the effects' work arrays: the same code in both); the growth of
+resident memory over set-up + two assemblies, and of its peak. DOLFINx 0.5's first assembly
+(create_matrix + assemble_matrix) in the same run: 2D on the same arrays (bench_peers.run_peer),
+3D on its own box (bench_peers.run_dolfinx_box) with UFL's quadrature degree and with degree 2
+(parsolve's 2×2×2 points). 3D runs use the iterative preset (no solve is made: assembly only).
+
 Section *mumps* (1 and 2 ranks): the saddle system of a clamped 2D / 3D block under an end
 traction, factorised by MUMPS (the direct preset's options: Cholesky when symmetric, LU with a
 non-associated relation) with each ordering: analysis + factorisation time (ksp.setUp, slowest
@@ -27,6 +42,7 @@ Usage (from the repository root):
     .venv/bin/python scripts/bench_setup.py                 # everything
     .venv/bin/python scripts/bench_setup.py --sections pattern first --quick
     .venv/bin/python scripts/bench_setup.py --report      # table again from bench_results/setup.json
+    .venv/bin/python scripts/bench_setup.py --sections compare --compare HEAD~3
 Writes bench_results/setup.json and scripts/results/bench_setup.md.
 """
 
@@ -220,6 +236,154 @@ def child_first(cell: str, n: int, repeats: int) -> dict:
                 repeats=repeats, **best)
 
 
+COMPARED = ("parsolve/la/pattern.py", "parsolve/la/petsc.py", "parsolve/fem/element_matrices.py")
+COMPARE_CASES = {"quick": [("triangle", 223), ("quad", 223), ("hexahedron", 20)],
+                 "full": [("triangle", 223), ("triangle", 707), ("quad", 223), ("quad", 707),
+                          ("hexahedron", 32), ("hexahedron", 69)]}
+
+
+def compare_scene(cell: str, n: int) -> str:
+    dim = 3 if cell == "hexahedron" else 2
+    text = scene(dim, n, cell)
+    return text.replace('preset = "direct"', 'preset = "iterative"') if dim == 3 else text
+
+
+def extract_ref(ref: str, dest: Path) -> str:
+    """The compared files as they are at ``ref`` into dest/ref_<name>.py; returns the commit."""
+    for path in COMPARED:
+        text = subprocess.run(["git", "show", f"{ref}:{path}"], cwd=ROOT, check=True, text=True,
+                              capture_output=True).stdout
+        (dest / f"ref_{Path(path).stem}.py").write_text(text)
+    return subprocess.run(["git", "rev-parse", "--short", ref], cwd=ROOT, check=True, text=True,
+                          capture_output=True).stdout.strip()
+
+
+def assembly_versions(refdir: str | None) -> dict:
+    """{"ref": ..., "new": ...}: node_pattern, SaddleOperator and the element reductions of each
+    version (the reference's from the files extract_ref wrote)."""
+    import importlib.util
+
+    import parsolve.fem.element_matrices as em
+    import parsolve.la.pattern as pat
+    import parsolve.la.petsc as pet
+
+    def version(p, o, e):
+        return dict(node_pattern=p.node_pattern, SaddleOperator=o.SaddleOperator,
+                    em_reduce=e.ElementMatrices.reduce, bm_reduce=e.BlockMatrices.reduce)
+
+    out = {"new": version(pat, pet, em)}
+    if refdir:
+        mods = {}
+        for path in COMPARED:
+            name = f"ref_{Path(path).stem}"
+            spec = importlib.util.spec_from_file_location(name, Path(refdir) / f"{name}.py")
+            mods[name] = importlib.util.module_from_spec(spec)
+            sys.modules[name] = mods[name]
+            spec.loader.exec_module(mods[name])
+        out["ref"] = version(mods["ref_pattern"], mods["ref_petsc"], mods["ref_element_matrices"])
+    return out
+
+
+def use_version(v: dict) -> None:
+    import parsolve.fem.element_matrices as em
+    import parsolve.solvers.system as system_mod
+
+    system_mod.node_pattern = v["node_pattern"]
+    system_mod.SaddleOperator = v["SaddleOperator"]
+    em.ElementMatrices.reduce = v["em_reduce"]
+    em.BlockMatrices.reduce = v["bm_reduce"]
+
+
+def child_compare(cell: str, n: int, repeats: int, refdir: str) -> dict:
+    """Set-up, first assembly and re-assembly of both versions, alternately in this process."""
+    import numpy as np
+    from mpi4py import MPI
+
+    import parsolve.solvers.system as system_mod
+
+    comm = MPI.COMM_WORLD
+    dim = 3 if cell == "hexahedron" else 2
+    model = build(compare_scene(cell, n))
+    versions = assembly_versions(refdir)
+    best: dict[str, float] = {}
+    x = y = None
+    for rep in range(repeats):
+        for tag in (("ref", "new") if rep % 2 == 0 else ("new", "ref")):
+            use_version(versions[tag])
+            gc.collect()
+            c0, w0 = time.process_time(), time.perf_counter()
+            system = system_mod.SaddleSystem(comm, model)
+            c1, w1 = time.process_time(), time.perf_counter()
+            mat = system.assemble()
+            c2, w2 = time.process_time(), time.perf_counter()
+            re_c, re_w = [], []
+            for _ in range(3):
+                c3, w3 = time.process_time(), time.perf_counter()
+                mat = system.assemble()
+                re_c.append(time.process_time() - c3)
+                re_w.append(time.perf_counter() - w3)
+            got = dict(setup_cpu=c1 - c0, setup_wall=w1 - w0, asm1_cpu=c2 - c1, asm1_wall=w2 - w1,
+                       first_cpu=c2 - c0, first_wall=w2 - w0, re_cpu=min(re_c), re_wall=min(re_w))
+            for key, value in got.items():
+                best[f"{key}_{tag}"] = min(best.get(f"{key}_{tag}", np.inf), value)
+            if rep == 0:   # the same matrix: its product with one random vector, bit for bit
+                if x is None:
+                    x = mat.createVecRight()
+                    x.setArray(np.random.default_rng(0).random(x.getLocalSize()))
+                b = mat.createVecLeft()
+                mat.mult(x, b)
+                if y is None:
+                    y = b.array.copy()
+                else:
+                    best["product_max_diff"] = float(np.abs(b.array - y).max())
+                best[f"nnz_{tag}"] = int(mat.getInfo()["nz_used"])
+            mat = None
+            system.op.mat.destroy()
+            del system
+            gc.collect()
+    return dict(section="compare", cell=cell, n=n, dofs=dofs_of(dim, n), repeats=repeats,
+                **best)
+
+
+def child_memory(cell: str, n: int, tag: str, refdir: str) -> dict:
+    """Memory of one version (fresh process): held numpy arrays, the matrix, resident growth."""
+    import numpy as np
+    from mpi4py import MPI
+    from petsc4py import PETSc
+
+    import parsolve.solvers.system as system_mod
+    from bench_scale import held_bytes, proc_memory
+
+    comm = MPI.COMM_WORLD
+    dim = 3 if cell == "hexahedron" else 2
+    model = build(compare_scene(cell, n))
+    use_version(assembly_versions(refdir if tag == "ref" else None)[tag])
+    gc.collect()
+    m0 = proc_memory()
+    system = system_mod.SaddleSystem(comm, model)
+    mat = system.assemble()
+    mat = system.assemble()
+    gc.collect()
+    m1 = proc_memory()
+    op = system.op
+    # arrays PETSc works on (the new operator's): part of the matrix, not beside it
+    shared = [getattr(op, k) for k in ("data", "cols_d", "rowptr_d", "rowptr_o")] \
+        if hasattr(op, "cols_d") else []
+    # the reference's classes live in ref_* modules, which held_bytes does not walk: start
+    # from their attribute dictionaries
+    held = held_bytes({"petsc": shared, "operator": [vars(system.pattern), vars(op)],
+                       "element": [model.effects, system.composition]})
+    # entries × (value + column) + row offsets: MatGetInfo's nz_allocated is 0 for a Mat on
+    # the caller's arrays, so both versions are counted from the entries used
+    isize = np.dtype(PETSc.IntType).itemsize
+    nnz = int(mat.getInfo()["nz_used"])
+    matrix = nnz * (8 + isize) + (mat.getLocalSize()[0] + 1) * isize
+    return dict(section="memory", cell=cell, n=n, dofs=dofs_of(dim, n), tag=tag,
+                shared=held["petsc"], beside=held["operator"], element=held["element"],
+                matrix=matrix, nnz=nnz,
+                rss_growth=m1["rss"] - m0["rss"], hwm_growth=m1["hwm"] - m0["hwm"])
+
+
 def child_mumps(dim: int, n: int, control: str) -> list[dict]:
     import numpy as np
     from mpi4py import MPI
@@ -385,7 +549,11 @@ def machine() -> str:
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--sections", nargs="+", default=["pattern", "first", "mumps"],
-                   choices=["pattern", "first", "mumps"])
+                   choices=["pattern", "first", "mumps", "compare"])
+    p.add_argument("--compare", default=None, metavar="REF",
+                   help="git ref of the assembly code to compare with (section compare)")
+    p.add_argument("--compare-cases", nargs="+", default=None, metavar="CELL:N",
+                   help="e.g. triangle:707 hexahedron:69 (default: 2D N=223, 707; 3D N=32, 69)")
     p.add_argument("--quick", action="store_true", help="small sizes only (a smoke test)")
     p.add_argument("--no-peers", action="store_true")
     p.add_argument("--n2d", type=int, nargs="+", default=None, help="2D sizes (quads per side)")
@@ -406,6 +574,10 @@ def main() -> None:
             out = child_pattern(rest[0], int(rest[1]), int(rest[2]))
         elif kind == "first":
             out = child_first(rest[0], int(rest[1]), int(rest[2]))
+        elif kind == "compare":
+            out = child_compare(rest[0], int(rest[1]), int(rest[2]), rest[3])
+        elif kind == "memory":
+            out = child_memory(rest[0], int(rest[1]), rest[2], rest[3])
         else:
             out = child_mumps(int(rest[0]), int(rest[1]), rest[2])
         from mpi4py import MPI
@@ -420,7 +592,7 @@ def main() -> None:
     RESULTS.mkdir(exist_ok=True)
     # sections not run now keep their last results; every row is saved as soon as it is measured
     results = json.loads(saved.read_text()) if saved.exists() else {}
-    for section in ("pattern", "first", "mumps"):
+    for section in ("pattern", "first", "mumps", "compare"):
         if (section in a.sections and not a.report) or section not in results:
             results[section] = []
     results.setdefault("peers", [])
@@ -447,6 +619,12 @@ def main() -> None:
         peers = run_dolfinx({c: [n for n in s2] for c in ("triangle", "quad")})
         results["peers"] = [dict(v, key=list(k)) for k, v in peers.items()]
     save()
+    if "compare" in a.sections and not a.report:
+        if not a.compare:
+            p.error("--sections compare needs --compare REF")
+        cases = ([(c.split(":")[0], int(c.split(":")[1])) for c in a.compare_cases]
+                 if a.compare_cases else COMPARE_CASES["quick" if a.quick else "full"])
+        run_compare(results, a.compare, cases, a.repeats, not a.no_peers, save)
     if "mumps" in a.sections and not a.report:
         sizes = {2: 60 if a.quick else a.mumps_2d, 3: 8 if a.quick else a.mumps_3d}
         for dim in (2, 3):
@@ -458,23 +636,134 @@ def main() -> None:
     write_report(results, time.time() - t_start)
 
 
+def run_compare(results: dict, ref: str, cases: list, repeats: int | None, peers: bool,
+                save) -> None:
+    """Section compare: both versions timed in one child, memory in one fresh child each,
+    DOLFINx's first assembly of the same size."""
+    import bench_peers
+
+    t0 = time.time()
+    with tempfile.TemporaryDirectory() as refdir:
+        commit = extract_ref(ref, Path(refdir))
+        results["compare_ref"] = f"`{ref}` ({commit})"
+        for cell, n in cases:
+            dim = 3 if cell == "hexahedron" else 2
+            reps = repeats or (3 if dofs_of(dim, n) < 200_000 else 2)
+            row = spawn(["compare", cell, str(n), str(reps), refdir])
+            if row is None:
+                continue
+            for tag in ("ref", "new"):
+                row[f"memory_{tag}"] = spawn(["memory", cell, str(n), tag, refdir])
+            if peers:
+                try:
+                    if dim == 2:
+                        res = bench_peers.run_peer("dolfinx", [n], cells=(cell,), nranks=1,
+                                                   repeats=reps, timeout=1800)
+                        row["dolfinx"] = [r for r in res["assembly"] if r["n"] == n][0]
+                    else:
+                        row["dolfinx"] = bench_peers.run_dolfinx_box(n, reps)
+                        row["dolfinx_deg2"] = bench_peers.run_dolfinx_box(n, reps, degree=2)
+                except Exception as err:  # noqa: BLE001 - report without the peer
+                    print(f"[bench] DOLFINx {cell} {n}: {err}"[:2000], file=sys.stderr, flush=True)
+            results["compare"].append(row)
+            results["compare_machine"] = machine() + f" Section compare: {time.time() - t0:.0f} s."
+            save()
+            print(f"[compare] {cell} {n}: first cpu ref {row['first_cpu_ref']:.2f} new "
+                  f"{row['first_cpu_new']:.2f}; re ref {row['re_cpu_ref']:.2f} new "
+                  f"{row['re_cpu_new']:.2f}; dolfinx {row.get('dolfinx', {}).get('t_first')}",
+                  flush=True)
+
+
+def compare_tables(rows: list[dict]) -> list[str]:
+    mib = 2.0 ** 20
+    out = ["Times: best of the repeats, CPU seconds (wall seconds in brackets); ×faster = ref / "
+           "new; ×DOLFINx = DOLFINx's first assembly time / parsolve's (a rate ratio; ≥ 0.5 is the "
+           "target of issue 8), on CPU seconds: DOLFINx's = its wall time × its CPU share over "
+           "the timed sections (bench_peers' `cpu_share`: the machine is shared), then on wall "
+           "seconds in brackets. 3D DOLFINx: UFL's quadrature degree (4) / degree 2 (2×2×2 "
+           "points, as parsolve's hexahedra).", "",
+           "| cell | DOFs | set-up ref / new s | first assemble() ref / new s | first assembly ref s "
+           "| new s | ×faster | re-assembly ref / new s | ×faster | DOLFINx 1st s CPU (wall) "
+           "| ×DOLFINx ref | ×DOLFINx new | A·x ref − new |",
+           "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in rows:
+        peers = [p for p in (r.get("dolfinx"), r.get("dolfinx_deg2")) if p]
+
+        def cpu(p):
+            return p["t_first"] * min(p.get("cpu_share", 1.0), 1.0)
+
+        tds = " / ".join(f"{cpu(p):.2f} ({p['t_first']:.2f})" for p in peers) or "–"
+
+        def vs(tag):
+            c, w = r[f"first_cpu_{tag}"], r[f"first_wall_{tag}"]
+            return " / ".join(f"{cpu(p) / c:.2f} ({p['t_first'] / w:.2f})" for p in peers) or "–"
+
+        out.append(
+            f"| {r['cell']} | {r['dofs']:,} | {r['setup_cpu_ref']:.2f} / {r['setup_cpu_new']:.2f} "
+            f"| {r['asm1_cpu_ref']:.2f} / {r['asm1_cpu_new']:.2f} | {r['first_cpu_ref']:.2f} "
+            f"({r['first_wall_ref']:.2f}) | {r['first_cpu_new']:.2f} ({r['first_wall_new']:.2f}) "
+            f"| {r['first_cpu_ref'] / r['first_cpu_new']:.2f} | {r['re_cpu_ref']:.3f} / "
+            f"{r['re_cpu_new']:.3f} | {r['re_cpu_ref'] / r['re_cpu_new']:.2f} | {tds} | {vs('ref')} "
+            f"| {vs('new')} | {r.get('product_max_diff', float('nan')):.1e} |")
+    out += ["", "Memory (MiB), fresh process per version, after set-up + two assemblies: *matrix* "
+            "= allocated entries × 12 B + row offsets, owned by PETSc (ref) or by the operator "
+            "and used by PETSc in place (new); *beside* = numpy arrays of the node pattern and "
+            "the operator that are not the matrix; *element* = the effects' element arrays "
+            "(not changed here); ratios to the matrix; RSS / peak growth = resident memory "
+            "(VmRSS / VmHWM) after minus before `SaddleSystem`.", "",
+            "| cell | DOFs | matrix | beside ref | beside new | beside/matrix ref → new | element "
+            "| (beside + element)/matrix ref → new | RSS growth ref / new | peak "
+            "growth ref / new |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in rows:
+        a, b = r.get("memory_ref"), r.get("memory_new")
+        if not a or not b:
+            continue
+        mat = b["matrix"]
+        tot_a = (a["beside"] + a["element"]) / a["matrix"]
+        tot_b = (b["beside"] + b["element"]) / b["matrix"]
+        out.append(
+            f"| {r['cell']} | {r['dofs']:,} | {mat / mib:.0f} | {a['beside'] / mib:.0f} | "
+            f"{b['beside'] / mib:.0f} | {a['beside'] / a['matrix']:.2f} → "
+            f"{b['beside'] / b['matrix']:.2f} | {b['element'] / mib:.0f} | {tot_a:.2f} → "
+            f"{tot_b:.2f} | {a['rss_growth'] / mib:.0f} / {b['rss_growth'] / mib:.0f} | "
+            f"{a['hwm_growth'] / mib:.0f} / {b['hwm_growth'] / mib:.0f} |")
+    return out
+
+
 def write_report(results: dict, seconds: float) -> None:
+    """scripts/results/bench_setup.md (sections pattern, first, mumps: rewritten only when one
+    of them has rows) and scripts/results/bench_setup_compare.md (section compare)."""
     peers = {tuple(p["key"]): p for p in results.get("peers", [])}
-    text = ["# parsolve set-up benchmark", "", __doc__.split("\n\n", 1)[1].split("Usage")[0].strip(),
-            "", machine() + f" {seconds:.0f} s.", "", *results.get("notes", [])]
-    if results["pattern"]:
-        text += ["## Node-pair pattern (1 rank, old = previous builder, same process)", "",
-                 pattern_table(results["pattern"])]
-    if results["first"]:
-        text += ["## First assembly (1 rank): SaddleSystem + first assemble()", "",
-                 first_table(results["first"], peers)]
-    if results["mumps"]:
-        text += ["## MUMPS orderings (direct preset's options otherwise)", "",
-                 mumps_table(results["mumps"])]
-    md = "\n".join(text)
     COMMITTED.mkdir(exist_ok=True)
-    (COMMITTED / "bench_setup.md").write_text(md)
-    print(md)
+    intro = __doc__.split("\n\n", 1)[1].split("Usage")[0].strip()
+    if results["pattern"] or results["first"] or results["mumps"]:
+        text = ["# parsolve set-up benchmark", "", intro, "", machine() + f" {seconds:.0f} s.", "",
+                *results.get("notes", [])]
+        if results["pattern"]:
+            text += ["## Node-pair pattern (1 rank, old = previous builder, same process)", "",
+                     pattern_table(results["pattern"])]
+        if results["first"]:
+            text += ["## First assembly (1 rank): SaddleSystem + first assemble()", "",
+                     first_table(results["first"], peers)]
+        if results["mumps"]:
+            text += ["## MUMPS orderings (direct preset's options otherwise)", "",
+                     mumps_table(results["mumps"])]
+        md = "\n".join(text)
+        (COMMITTED / "bench_setup.md").write_text(md)
+        print(md)
+    if results.get("compare"):
+        section = [b for b in intro.split("\n\n") if b.startswith("Section *compare*")]
+        text = ["# parsolve assembly: before / after, and DOLFINx's first assembly", "",
+                *section, "", results.get("compare_machine", machine()), "",
+                *results.get("compare_notes", []), "",
+                f"## The assembly code at {results.get('compare_ref', '?')} against the working "
+                "tree (1 rank, same run)", "", *compare_tables(results["compare"]), "",
+                "Rerun: `.venv/bin/python scripts/bench_setup.py --sections compare --compare REF` "
+                "(`--compare-cases triangle:707 hexahedron:69`, `--quick`, `--no-peers`; "
+                "`bash scripts/bench_env.sh` once for DOLFINx).", ""]
+        md = "\n".join(text)
+        (COMMITTED / "bench_setup_compare.md").write_text(md)
+        print(md)
 
 
 if __name__ == "__main__":

@@ -126,8 +126,11 @@ def solve_in_process(text: str, comm=MPI.COMM_WORLD, t: float = 1.0, options: di
 
 
 def dense(mat, comm=MPI.COMM_WORLD) -> np.ndarray:
-    """The whole matrix on every rank (small systems only)."""
-    rows = mat.convert("dense").getDenseArray().copy()
+    """The whole matrix on every rank (small systems only); converted into a new Mat: the
+    assembled one works on the operator's own arrays and must stay as it is."""
+    from petsc4py import PETSc
+
+    rows = mat.convert("dense", PETSc.Mat()).getDenseArray().copy()
     return np.concatenate(comm.allgather(rows), axis=0)
 
 

@@ -22,7 +22,7 @@ class ElementMatrices:
 
     def reduce(self, pair_slot: np.ndarray, npairs: int) -> np.ndarray:
         """Sum over cells into node-pair blocks: (d², npairs)."""
-        slots = pair_slot.ravel()
+        slots = _slots(pair_slot)
         if self.values is not None:
             return _bincount_rows(slots, self.values.reshape(len(self.values), -1), npairs)
         P = self.geometric.reshape(len(self.geometric), -1)
@@ -37,9 +37,18 @@ class ElementMatrices:
         return out
 
 
+def _slots(pair_slot: np.ndarray) -> np.ndarray:
+    """The pair slots flat, as np.bincount takes them (intp): the pattern keeps them int32 to
+    halve their memory, so they are widened once per reduction, not once per row."""
+    return pair_slot.astype(np.intp, copy=False).ravel()
+
+
 def _bincount_rows(slots: np.ndarray, values: np.ndarray, npairs: int) -> np.ndarray:
     """Row-wise bincount, dropping the dump slot ``npairs`` (rows owned by another rank)."""
-    return np.stack([np.bincount(slots, weights=v, minlength=npairs + 1)[:npairs] for v in values])
+    out = np.empty((len(values), npairs))
+    for k, v in enumerate(values):  # one row's counts alive at a time, not all of them
+        out[k] = np.bincount(slots, weights=v, minlength=npairs + 1)[:npairs]
+    return out
 
 
 def full_values(m: ElementMatrices) -> np.ndarray:
@@ -68,6 +77,7 @@ class BlockMatrices:
 
     def reduce(self, pair_slot: np.ndarray, npairs: int) -> np.ndarray:
         nc = self.ncomp
+        pair_slot = pair_slot.astype(np.intp, copy=False)   # widened once for every part
         if len(self.parts) == 1:
             ci, cj, m, fac = self.parts[0]
             if len(ci) == len(cj) == nc and np.all(ci == np.arange(nc)) \

@@ -35,24 +35,31 @@ class NodePattern:
         """Stiffness entries of each owned DOF row (node-major DOFs)."""
         return np.repeat(self.nb * self.ncomp, self.ncomp)
 
-    def block_positions(self, row_start: np.ndarray, dtype: type | None = None) -> np.ndarray:
-        """(ncomp, ncomp, nnzb) slot of entry (i, j) of each node-pair block in a CSR whose owned
-        DOF row r starts at row_start[r] with its stiffness entries first.
+    def block_starts(self, row_start: np.ndarray, dtype: type | None = None) -> np.ndarray:
+        """(ncomp, nnzb) slot of entry (i, 0) of each node-pair block in a CSR whose owned DOF
+        row r starts at row_start[r] with its stiffness entries first; entry (i, j) is j
+        further (a block row's entries are consecutive).
 
         dtype: of the result (default: row_start's, at least int64); np.int32 halves the memory
         of a map kept for every re-assembly when the CSR has fewer than 2³¹ entries."""
-        # entry (i, j) of pair p in node row n: row_start[n nc + i] + nc (p - bptr[n]) + j; the
-        # per-row part is repeated once per component, the rest is a ramp: no (nc, nnzb) gather
+        # entry (i, 0) of pair p in node row n: row_start[n nc + i] + nc (p - bptr[n]); the
+        # per-row part is repeated once per pair, the rest is a ramp
         nc = self.ncomp
         bptr = np.concatenate([[0], np.cumsum(self.nb)])
         first = row_start.reshape(-1, nc) - nc * bptr[:-1, None]                # (nown, nc)
         ramp = nc * np.arange(self.nnzb, dtype=np.int64)
-        out = np.empty((nc, nc, self.nnzb), dtype=dtype or np.result_type(row_start, np.int64))
+        out = np.empty((nc, self.nnzb), dtype=dtype or np.result_type(row_start, np.int64))
         for i in range(nc):
             start = np.repeat(first[:, i], self.nb)
-            start += ramp
-            for j in range(nc):
-                np.add(start, j, out=out[i, j], casting="unsafe")
+            np.add(start, ramp, out=out[i], casting="unsafe")
+        return out
+
+    def block_positions(self, row_start: np.ndarray, dtype: type | None = None) -> np.ndarray:
+        """(ncomp, ncomp, nnzb) slot of entry (i, j) of each node-pair block (see block_starts)."""
+        starts = self.block_starts(row_start, dtype)
+        out = np.empty((self.ncomp,) + starts.shape, dtype=starts.dtype)
+        for j in range(self.ncomp):
+            np.add(starts, j, out=out[:, j], casting="unsafe")
         return out
 
     def diagonal_positions(self, row_start: np.ndarray) -> np.ndarray:
@@ -63,17 +70,34 @@ class NodePattern:
 
 
 def _unique_inverse(key: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """np.unique(key, return_inverse=True) by a stable sort: keys taken cell after cell for one
-    pair of element nodes come in long nearly sorted runs when the numbering follows the mesh,
-    which timsort merges several times faster than np.unique's quicksort sorts them."""
-    order = np.argsort(key, kind="stable")
-    sorted_key = key[order]
-    new = np.empty(key.size, dtype=bool)
+    """np.unique(key, return_inverse=True) of non-negative keys by a stable sort: keys taken
+    cell after cell for one pair of element nodes come in long nearly sorted runs when the
+    numbering follows the mesh, which timsort merges several times faster than np.unique's
+    quicksort sorts them. When key and position fit in 63 bits together, the values
+    key << bits | position are sorted instead of the positions by key (an argsort): the sorted
+    keys and their order then come out in sequence, with no gather through the order."""
+    n = key.size
+    shift = max(int(n - 1).bit_length(), 1)
+    if n and int(key.max()).bit_length() + shift <= 62:
+        packed = np.left_shift(key, shift)
+        packed |= np.arange(n)
+        packed.sort(kind="stable")
+        order = packed & ((1 << shift) - 1)
+        sorted_key = np.right_shift(packed, shift, out=packed)
+    else:
+        order = np.argsort(key, kind="stable")
+        sorted_key = key[order]
+    new = np.empty(n, dtype=bool)
     new[:1] = True
     np.not_equal(sorted_key[1:], sorted_key[:-1], out=new[1:])
-    inv = np.empty(key.size, dtype=np.intp)
+    inv = np.empty(n, dtype=np.intp)
     inv[order] = np.cumsum(new) - 1
     return sorted_key[new], inv
+
+
+def _index_type(bound: int) -> type:
+    """int32 for numbers below 2³¹ (half the memory and traffic), else int64."""
+    return np.int32 if bound < 2**31 else np.int64
 
 
 def node_pattern(cells: np.ndarray, lo: int, hi: int, ncomp: int, nnodes: int) -> NodePattern:
@@ -82,65 +106,92 @@ def node_pattern(cells: np.ndarray, lo: int, hi: int, ncomp: int, nnodes: int) -
     The pattern is symmetric, so only the unordered node pairs (edges) of each cell are sorted:
     nen(nen-1)/2 keys per cell instead of nen². A row's columns are its lower neighbours, then
     itself, then its upper neighbours; the upper ones come sorted with the edges, the lower ones
-    from one stable sort by their other end."""
-    ct = np.ascontiguousarray(cells.T, dtype=np.int64)                      # (nen, ncells)
+    from one stable sort by their other end. Node numbers are int32 when they fit (their DOF
+    numbers too), and so are ``ucol`` and ``pair_slot`` (kept for every re-assembly)."""
+    ct = np.ascontiguousarray(cells.T, dtype=_index_type(nnodes))            # (nen, ncells)
     nen, ncells = ct.shape
     nown = hi - lo
     iu, ju = np.triu_indices(nen, 1)
     a, b = ct[iu], ct[ju]                                                   # (npairs, ncells)
     forward = a < b
-    small, large = np.where(forward, a, b), np.where(forward, b, a)
-    ct_own = (ct >= lo) & (ct < hi)
+    small, large = np.minimum(a, b), np.maximum(a, b)
     same = a == b                                   # a repeated node: a diagonal entry
-    touches = ct_own[iu] | ct_own[ju]
-    if same.any():
-        touches &= ~same
-    key = small * nnodes + large
-    if not touches.all():
+    del a, b
+    any_same = bool(same.any())
+    all_own = ncells == 0 or (int(ct.min()) >= lo and int(ct.max()) < hi)
+    if all_own:                                     # one rank, or a rank with no ghost node
+        ct_own = touches = None
+    else:
+        ct_own = (ct >= lo) & (ct < hi)
+        touches = ct_own[iu] | ct_own[ju]
+    if any_same:
+        touches = ~same if touches is None else touches & ~same
+    key = small.astype(np.int64)
+    key *= nnodes
+    key += large
+    del small, large
+    if touches is not None:
         key = key[touches]
     ukey, inv = _unique_inverse(key.ravel())
+    del key
     e_small, e_large = ukey // nnodes - lo, ukey % nnodes - lo               # local rows
     up = (e_small >= 0) & (e_small < nown)          # entry (small, large) in an owned row
     down = (e_large >= 0) & (e_large < nown)        # entry (large, small) in an owned row
-    has_diag = np.bincount(ct[ct_own] - lo, minlength=nown) > 0
+    own_nodes = ct.ravel() - lo if all_own else ct[ct_own] - lo
+    has_diag = np.bincount(own_nodes, minlength=nown) > 0
+    del own_nodes
     n_up = np.bincount(e_small[up], minlength=nown)
     n_down = np.bincount(e_large[down], minlength=nown)
     nb = n_down + has_diag + n_up
     bptr = np.concatenate([[0], np.cumsum(nb)])
     nnzb = int(bptr[-1])
+    stype = _index_type(nnzb + 1)
     # place of each entry: its row's start, then its rank among the row's lower / upper entries
+    # (slots of edges with no owned end, and the dump slot last, are nnzb)
     up_idx = np.flatnonzero(up)
     up_rows = e_small[up_idx]
     up_rank = np.arange(up_idx.size) - np.concatenate([[0], np.cumsum(n_up)])[up_rows]
-    up_slot = np.full(ukey.size + 1, nnzb, dtype=np.intp)
+    nedge = ukey.size + 1                            # edges, then the dump
+    slots = np.full(2 * nedge, nnzb, dtype=stype)    # [down slot of each edge, up slot of each]
+    up_slot = slots[nedge:]
     up_slot[up_idx] = bptr[up_rows] + n_down[up_rows] + has_diag[up_rows] + up_rank
     down_idx = np.flatnonzero(down)
     down_idx = down_idx[np.argsort(e_large[down_idx], kind="stable")]  # stable: small ascending
     down_rows = e_large[down_idx]
     down_rank = np.arange(down_idx.size) - np.concatenate([[0], np.cumsum(n_down)])[down_rows]
-    down_slot = np.full(ukey.size + 1, nnzb, dtype=np.intp)
+    down_slot = slots[:nedge]
     down_slot[down_idx] = bptr[down_rows] + down_rank
-    ucol = np.empty(nnzb, dtype=np.int64)
+    ucol = np.empty(nnzb, dtype=_index_type(nnodes * max(ncomp, 1)))   # DOF numbers fit too
     ucol[up_slot[up_idx]] = e_large[up_idx] + lo
     ucol[down_slot[down_idx]] = e_small[down_idx] + lo
-    diag_slot = np.append(bptr[:-1] + n_down, nnzb)                        # dump slot last
+    diag_slot = np.append(bptr[:-1] + n_down, nnzb).astype(stype)          # dump slot last
     ucol[diag_slot[:-1][has_diag]] = np.flatnonzero(has_diag) + lo
-    # element pairs: edge id (ukey.size = dump: no owned end), then which side of the edge
-    if touches.all():
-        edge = inv.reshape(a.shape)
+    # element pairs: edge id (ukey.size = dump: no owned end), then which side of the edge: the
+    # pair (i, j) of a cell is the edge's up entry when its node i is the smaller
+    if touches is None:
+        edge = inv.reshape(forward.shape)
     else:
-        edge = np.full(a.shape, ukey.size, dtype=np.intp)
+        edge = np.full(forward.shape, ukey.size, dtype=np.intp)
         edge[touches] = inv
-    s_up, s_down = up_slot[edge], down_slot[edge]
-    pair_slot = np.empty((nen, nen, ncells), dtype=np.intp)
-    pair_slot[iu, ju] = np.where(forward, s_up, s_down)
-    pair_slot[ju, iu] = np.where(forward, s_down, s_up)
-    if same.any():                                   # degenerate cells: both are the diagonal
-        d = diag_slot[np.where((a >= lo) & (a < hi), a - lo, nown)]
+    del inv
+    pair_slot = np.empty((nen, nen, ncells), dtype=stype)
+    pick = np.empty(ncells, dtype=np.intp)
+    for k, (i, j) in enumerate(zip(iu, ju)):        # nen(nen-1)/2 pairs of element nodes
+        np.multiply(forward[k], nedge, out=pick)
+        pick += edge[k]
+        np.take(slots, pick, out=pair_slot[i, j])                         # (i, j): up if forward
+        np.subtract(edge[k], pick, out=pick)
+        pick += edge[k] + nedge
+        np.take(slots, pick, out=pair_slot[j, i])                         # (j, i): the other side
+    del edge, pick
+    if any_same:                                     # degenerate cells: both are the diagonal
+        in_rows = (ct[iu] >= lo) & (ct[iu] < hi)
+        d = diag_slot[np.where(in_rows, ct[iu] - lo, nown)]
         pair_slot[iu, ju] = np.where(same, d, pair_slot[iu, ju])
         pair_slot[ju, iu] = np.where(same, d, pair_slot[ju, iu])
-    dn = np.arange(nen)
-    pair_slot[dn, dn] = diag_slot[np.where(ct_own, ct - lo, nown)]
+    for i in range(nen):
+        node = ct[i] - lo if all_own else np.where(ct_own[i], ct[i] - lo, nown)
+        np.take(diag_slot, node, out=pair_slot[i, i])
     # an owned node in no local cell has an empty row: keep the old convention for its diagonal
     diag_rank = np.where(has_diag, n_down, np.minimum(bptr[:-1], nnzb - 1) - bptr[:-1])
     return NodePattern(lo, nown, ncomp, nb, ucol, pair_slot, diag_rank.astype(np.int64))

@@ -56,7 +56,10 @@ def assert_same(new: NodePattern, ref: NodePattern) -> None:
     assert (new.lo, new.nown, new.ncomp) == (ref.lo, ref.nown, ref.ncomp)
     for name in ("nb", "ucol", "pair_slot", "diag_rank"):
         a, b = getattr(new, name), getattr(ref, name)
-        assert a.dtype == b.dtype, name
+        if name in ("pair_slot", "ucol"):  # int32 below 2³¹: half the memory of the reference's
+            assert a.dtype == np.int32, name
+        else:
+            assert a.dtype == b.dtype, name
         np.testing.assert_array_equal(a, b, err_msg=name)
 
 
@@ -106,6 +109,8 @@ def test_pattern_matches_reference(cell, nparts, shuffle):
         got = new.block_positions(row_start)
         np.testing.assert_array_equal(got, reference_block_positions(new, row_start))
         assert got.dtype == np.int64
+        starts = new.block_starts(row_start)
+        np.testing.assert_array_equal(starts, got[:, 0])
         small = new.block_positions(row_start.astype(np.int32), dtype=np.int32)
         assert small.dtype == np.int32
         np.testing.assert_array_equal(small, got)

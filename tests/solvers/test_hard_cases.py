@@ -215,7 +215,8 @@ field = "h"
 source = 1.0
 """
     with _pytest.raises(SolverError) as err:
-        run(text, name="floating")
+        # (the hint needs the whole mesh's connectivity: not given on a distributed one)
+        run(text, name="floating", solver={"mesh": "replicated"})
     assert "no relation holds field 'h' on the body" in str(err.value)
 
 
