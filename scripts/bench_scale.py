@@ -349,8 +349,10 @@ def _mat_bytes(A) -> float:
     isize = np.dtype(PETSc.IntType).itemsize
     bs = max(int(info["block_size"]), 1)
     rows = A.getLocalSize()[0]
-    return (info["nz_allocated"] * np.dtype(PETSc.ScalarType).itemsize
-            + info["nz_allocated"] / (bs * bs) * isize + (rows / bs + 1) * isize)
+    # a Mat made on the caller's arrays (parsolve's operator) reports nothing allocated
+    nz = max(info["nz_allocated"], info["nz_used"])
+    return (nz * np.dtype(PETSc.ScalarType).itemsize
+            + nz / (bs * bs) * isize + (rows / bs + 1) * isize)
 
 
 def _mumps(solver) -> dict:
