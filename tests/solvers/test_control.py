@@ -61,10 +61,11 @@ def test_load_control_stops_at_the_peak(run):
     np.testing.assert_allclose(end_delta(res), force / (E * H), rtol=1e-9)  # elastic until then
 
 
-def test_displacement_control_stops_at_the_snap_back(run):
+def displacement_control() -> str:
+    """The bar pulled by a prescribed end displacement instead of a controlled load."""
     text = without_control(BAR).replace('[[loads]]\nname = "pull"\nregion = "right"\n'
                                         'total_force = [1.0, 0.0]\n', "")
-    text = text.replace("[regions]\n", "[regions]\nend = { point = [1.0, 0.0] }\n") + """
+    return text.replace("[regions]\n", "[regions]\nend = { point = [1.0, 0.0] }\n") + """
 [[relations]]
 name = "end_displacement"
 type = "dirichlet"
@@ -72,6 +73,10 @@ region = "end"
 components = ["x"]
 value = 2.4e-4
 """
+
+
+def test_displacement_control_stops_at_the_snap_back(run):
+    text = displacement_control()
     with pytest.raises(SolverError):
         run(text, name="bar_disp")
     from conftest import read_results

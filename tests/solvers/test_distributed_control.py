@@ -4,24 +4,13 @@ edge kept straight by an `equal` relation that names the controlled node)."""
 
 import numpy as np
 
-from test_control import BAR, without_control
-
-DISPLACEMENT_CONTROL = without_control(BAR).replace(
-    '[[loads]]\nname = "pull"\nregion = "right"\ntotal_force = [1.0, 0.0]\n', "").replace(
-    "[regions]\n", "[regions]\nend = { point = [1.0, 0.0] }\n") + """
-[[relations]]
-name = "end_displacement"
-type = "dirichlet"
-region = "end"
-components = ["x"]
-value = 2.4e-4
-"""
+from test_control import displacement_control
 
 
 def test_prescribed_dof_in_a_relation_row_on_the_parts(run, comm):
     """The elastic steps before the peak: the same forces and displacements on both meshes
     (the lifting of the `equal` rows needs the prescribed node's value on every rank)."""
-    text = DISPLACEMENT_CONTROL.replace("count = 24", f"count = 5\nend = {5 / 24!r}")
+    text = displacement_control().replace("count = 24", f"count = 5\nend = {5 / 24!r}")
     assert "count = 5" in text
     whole = run(text, name="whole", solver={"mesh": "replicated"})
     parts = run(text, name="parts", solver={"mesh": "distributed"})
