@@ -42,6 +42,13 @@ class LocalRegions(RegionResolver):
         self.tol = 1e-8 * max(extent, 1e-300)
         self._coords: dict[str, np.ndarray] = {}
 
+    def _reported(self, nodes: np.ndarray) -> np.ndarray:
+        """Which cells or facets (rows of node ids) this rank counts: those whose lowest node
+        owner it is, so that each is counted once over the ranks."""
+        if nodes.size == 0:
+            return np.zeros(nodes.shape[0], dtype=bool)
+        return self.mesh.node_owner[nodes].min(axis=1) == self.mesh.rank
+
     def _local(self, fn, *args):
         return agree(self.comm, fn, *args)
 
@@ -66,9 +73,8 @@ class LocalRegions(RegionResolver):
 
     def _empty(self, region: Region) -> bool:
         m = self.mesh
-        owned_cells = m.node_owner[m.cells[region.cells]].min(axis=1) == m.rank \
-            if region.cells.size else np.zeros(0, dtype=bool)
-        count = int(np.count_nonzero(region.nodes < m.n_owned)) + int(owned_cells.sum())
+        count = int(np.count_nonzero(region.nodes < m.n_owned)) + \
+            int(self._reported(m.cells[region.cells]).sum())
         return self.comm.allreduce(count) == 0
 
     def relation_nodes(self, name: str, key: str) -> np.ndarray:
@@ -95,8 +101,7 @@ class LocalRegions(RegionResolver):
         ones among ``cells``, from every rank, in input cell order: (input cell ids, DOFs as
         input DOFs, the other arrays)."""
         m = self.mesh
-        own = m.node_owner[m.cells[cells]].min(axis=1) == m.rank if cells.size else \
-            np.zeros(0, dtype=bool)
+        own = self._reported(m.cells[cells])
         dofs = arrays[0][own]
         node, comp = np.divmod(dofs, ncomp)
         gathered = [allgather_rows(self.comm, m.global_cells[cells[own]]),
@@ -107,8 +112,7 @@ class LocalRegions(RegionResolver):
 
     def cell_count(self, cells: np.ndarray) -> int:
         m = self.mesh
-        own = m.node_owner[m.cells[cells]].min(axis=1) == m.rank if cells.size else \
-            np.zeros(0, dtype=bool)
+        own = self._reported(m.cells[cells])
         return self.comm.allreduce(int(own.sum()))
 
     def facet_count(self, facets: np.ndarray) -> int:
@@ -117,8 +121,7 @@ class LocalRegions(RegionResolver):
     def facet_total(self, facets: np.ndarray, values: np.ndarray) -> float:
         """Each facet counted by the rank owning its lowest-owner node."""
         m = self.mesh
-        own = m.node_owner[facets].min(axis=1) == m.rank if facets.size else \
-            np.zeros(0, dtype=bool)
+        own = self._reported(facets)
         return self.comm.allreduce(float(np.sum(np.asarray(values)[own])))
 
     def relation_vector(self, vector: np.ndarray, ncomp: int) -> tuple[np.ndarray, np.ndarray]:
