@@ -223,9 +223,18 @@ def test_scene_partitioner_key():
 
 
 SHIPPED = sorted(p.name for p in CONFIGS.glob("*.toml"))
-# past its peak the softening bar's tangent is ill-conditioned: the round-off of a different
-# summation order (2.5e-10 of the stress measured at 3 ranks) is amplified beyond 1e-10
-TOLERANCE = {"localization_bar.toml": 1e-9}
+# The softening bar's steps (localization_bar.toml) are solved by secant iterations, which converge linearly: a step
+# ends about its tolerance (relative residual 1e-9 to 2e-9 past the peak, against rtol = 1e-8)
+# from equilibrium, and its damage carries that error into the next step, where the peak
+# amplifies it (measured at 3 ranks, scotch against bisection: 1e-17 of the strain at step 1,
+# x5 a step to 5e-10 at step 12, 1.15e-9 on another CPU). Two partitions of such a run are only
+# as close as its convergence tolerance: the comparison is made to the scene's own rtol, a bound
+# round-off does not move. Every other shipped scene converges quadratically or is linear.
+def tolerance(name: str) -> float:
+    from parsolve.scene import load_scene
+
+    nonlinear = load_scene(CONFIGS / name).nonlinear
+    return nonlinear.rtol if nonlinear.matrix == "secant" else 1e-10
 
 
 def distributable(path, comm) -> bool:
@@ -249,11 +258,11 @@ def test_shipped_scene_same_on_any_partition_and_mesh(name, shared_tmp, comm):
                        solver={"partitioner": "scotch", "mesh": "replicated"})
     rcb = run_scene(CONFIGS / name, shared_tmp / "rcb.h5",
                     solver={"partitioner": "bisection", "mesh": "replicated"})
-    assert_same_results(scotch, rcb, TOLERANCE.get(name, 1e-10))
+    assert_same_results(scotch, rcb, tolerance(name))
     if distributable(CONFIGS / name, comm):
         parts = run_scene(CONFIGS / name, shared_tmp / "parts.h5",
                           solver={"partitioner": "scotch", "mesh": "distributed"})
-        assert_same_results(parts, scotch, TOLERANCE.get(name, 1e-10))
+        assert_same_results(parts, scotch, tolerance(name))
 
 
 def test_a_petsc_without_ptscotch_falls_back(comm, monkeypatch):
