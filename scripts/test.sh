@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The test suite: installs what it needs, then runs pytest on 1 rank (everything), on 2 and
 # 3 ranks (every test that can run in parallel), once more on 2 ranks with every scene the tests
-# run on the distributed mesh, and the partition tests on 4. Fails when any test fails.
+# run on the distributed mesh, and the partition and
+# distributed-mesh tests on 4. Fails when any test fails.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
@@ -23,8 +24,10 @@ PARSOLVE_TEST_MESH=distributed timeout 1200 bash scripts/mpirun.sh -n 2 bash -c 
   opts="-q --color=no -p no:cacheprovider -o faulthandler_timeout=300"
   if [ "${OMPI_COMM_WORLD_RANK:-0}" = 0 ]; then exec '"$PY"' -m pytest $opts tests "$@";
   else exec '"$PY"' -m pytest $opts tests "$@" > /dev/null; fi' _ "$@"
-echo "== pytest, 4 ranks (oversubscribed): partition independence"
+echo "== pytest, 4 ranks (oversubscribed): partition independence, distributed mesh"
+# every shipped scene at 4 ranks against 1 rank, on both partitioners and on the parts
+FOUR="tests/solvers/test_rank_independence.py tests/mesh/test_distribute.py tests/mesh/test_partition.py"
 timeout 1200 bash scripts/mpirun.sh -n 4 bash -c '
   opts="-q --color=no -p no:cacheprovider -o faulthandler_timeout=300"
-  if [ "${OMPI_COMM_WORLD_RANK:-0}" = 0 ]; then exec '"$PY"' -m pytest $opts tests/solvers/test_rank_independence.py "$@";
-  else exec '"$PY"' -m pytest $opts tests/solvers/test_rank_independence.py "$@" > /dev/null; fi' _ "$@"
+  if [ "${OMPI_COMM_WORLD_RANK:-0}" = 0 ]; then exec '"$PY"' -m pytest $opts '"$FOUR"' "$@";
+  else exec '"$PY"' -m pytest $opts '"$FOUR"' "$@" > /dev/null; fi' _ "$@"
