@@ -201,14 +201,21 @@ def _distributed_mesh(scene: Scene, comm) -> LocalMesh:
     whole, error = None, None
     if comm.rank == 0:
         try:
-            with memory.agreed_over(None):   # rank 0 alone (see README: the whole on one rank)
+            with memory.whole_mesh_only():   # rank 0 alone (see README: the whole on one rank)
                 whole = build_mesh(scene)
         except InputError as exc:
             error = (exc.message, exc.source, exc.key)
     error = comm.bcast(error, root=0)
     if error is not None:
         raise InputError(*error)
-    return distribute(comm, whole, scene.solver.partitioner)
+    part = distribute(comm, whole, scene.solver.partitioner)
+    del whole
+    # the solve, each rank its share (every rank's machine: the verdict is collective)
+    source, key = ((str(scene.mesh.file), "mesh.file") if scene.mesh.file is not None
+                   else (scene.source, "mesh.generator"))
+    memory.check_fits_distributed(part.num_global_points, part.dim, scene.solver.preset, source,
+                                  key, f"a mesh of {part.num_global_cells} {part.cell_type} cells")
+    return part
 
 
 def build_model(scene: Scene, comm=None) -> Model:

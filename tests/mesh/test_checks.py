@@ -207,3 +207,53 @@ def test_file_with_an_inverted_cell_is_refused(shared_tmp):
     text = _scene_with_file(nan_path)
     with pytest.raises(InputError, match=r"non-finite coordinates \(NaN or inf\): points 2"):
         build_mesh(parse_scene(tomllib.loads(text), "s.toml", text))
+
+
+def test_memory_check_of_a_distributed_run(monkeypatch):
+    """A distributed run checks rank 0's whole mesh and each rank's share of the solve, without
+    the replicated share: memory between the two estimates refuses the replicated run only;
+    memory below the whole mesh refuses both, naming rank 0's build."""
+    import tomllib
+
+    from mpi4py import MPI
+
+    from parsolve.model import build_model
+    from parsolve.scene import parse_scene
+
+    comm = MPI.COMM_WORLD
+    if comm.size == 1:
+        pytest.skip("one rank: nothing is distributed")
+    text = """[mesh]
+generator = "rectangle"
+lx = 1.0
+ly = 1.0
+nx = 40
+ny = 40
+[model]
+hypothesis = "plane_stress"
+[[materials]]
+E = 1.0
+nu = 0.3
+"""
+    dofs, n = 2 * 41**2, comm.size
+    shared = n * memory.estimate_bytes(dofs, 2, "direct", n, replicated=False)
+    replicated = n * memory.estimate_bytes(dofs, 2, "direct", n)
+    assert replicated - shared == pytest.approx(n * dofs * 200.0)
+    assert memory.whole_mesh_bytes(dofs) < shared
+
+    def build(mesh: str, have: float):
+        monkeypatch.setattr(memory, "available_bytes", lambda: have)
+        scene = parse_scene(tomllib.loads(text), "s.toml")
+        scene.solver.mesh = mesh
+        with memory.agreed_over(comm):
+            return build_model(scene, comm)
+
+    between = (shared + replicated) / 2
+    with pytest.raises(InputError) as info:
+        build("replicated", between)
+    assert info.value.key == "mesh.generator" and "too large for this machine" in info.value.message
+    model = build("distributed", between)
+    assert model.distributed and model.mesh.num_global_points == 41**2
+    with pytest.raises(InputError) as info:
+        build("distributed", memory.whole_mesh_bytes(dofs) * 0.99)
+    assert info.value.key == "mesh.generator" and "built on one rank" in info.value.message
