@@ -5,6 +5,7 @@ set of cells) that no relation holds, for a field whose operator has a kernel wi
 from __future__ import annotations
 
 import numpy as np
+from mpi4py import MPI
 
 
 def bodies(cells: np.ndarray, npoints: int) -> np.ndarray:
@@ -21,20 +22,55 @@ def bodies(cells: np.ndarray, npoints: int) -> np.ndarray:
         label = new
 
 
+def _lowest_per_body(cells: np.ndarray, label: np.ndarray) -> np.ndarray:
+    """Every node's label replaced by the lowest label of its body in ``cells``."""
+    body = bodies(cells, label.size)
+    low = label.copy()
+    np.minimum.at(low, body, label)
+    return low[body]
+
+
+def bodies_distributed(comm, mesh) -> np.ndarray:
+    """``bodies`` on a distributed mesh (a ``LocalMesh``): the label of every local node, the
+    smallest input node id of its body over the whole mesh. Each round labels the bodies of
+    every part, then a node's copies agree on their lowest label through its owner; a body
+    crossing k parts takes about k rounds (only run when a solve has failed)."""
+    n, n_owned, size = mesh.num_points, mesh.n_owned, comm.size
+    label = np.asarray(mesh.global_nodes, dtype=np.int64).copy()
+    owner = np.searchsorted(mesh.node_ranges, mesh.node_new[n_owned:], side="right") - 1
+    order = np.argsort(owner, kind="stable")
+    counts = np.bincount(owner, minlength=size)
+    bounds = np.concatenate([[0], np.cumsum(counts)])
+    ghosts = n_owned + order
+    asked = comm.alltoall([mesh.node_new[ghosts[bounds[r]:bounds[r + 1]]] for r in range(size)])
+    first = mesh.node_ranges[comm.rank]
+    asked_local = [np.asarray(a, dtype=np.int64) - first for a in asked]  # owned: global order
+    while True:
+        before = label.copy()
+        label = _lowest_per_body(mesh.cells, label)
+        sent = comm.alltoall([label[ghosts[bounds[r]:bounds[r + 1]]] for r in range(size)])
+        for idx, values in zip(asked_local, sent):   # owners take the lowest of every copy
+            np.minimum.at(label, idx, values)
+        back = comm.alltoall([label[idx] for idx in asked_local])
+        if ghosts.size:
+            label[ghosts] = np.concatenate(back)
+        if not comm.allreduce(bool((label != before).any()), op=MPI.LOR):
+            return label
+
+
 def unsupported(model) -> list[str]:
     """One sentence per (body, field) that no relation touches, for fields whose operator is
-    singular without one (steady fields). Not on a distributed mesh: a rank's part is not a
-    body (it would take the whole mesh's connectivity)."""
-    if getattr(model, "distributed", False):
-        return []
+    singular without one (steady fields). Collective on a distributed mesh."""
     mesh, fields = model.mesh, model.fields
-    label = bodies(mesh.cells, mesh.num_points)
-    used = np.unique(mesh.cells)
-    names = np.unique(label[used])
     if model.transient:  # a capacity holds a scalar field; only displacements can float
         checked = [f for f in fields if f.name == "u"]
     else:
         checked = list(fields)
+    if getattr(model, "distributed", False):
+        return _unsupported_distributed(model, checked)
+    label = bodies(mesh.cells, mesh.num_points)
+    used = np.unique(mesh.cells)
+    names = np.unique(label[used])
     held = np.zeros((mesh.num_points, fields.ncomp), dtype=bool)
     for r in model.relations:
         node, col = np.divmod(r.a_dofs, fields.ncomp)
@@ -46,7 +82,44 @@ def unsupported(model) -> list[str]:
         np.logical_or.at(body_held, label, held[:, cols].any(axis=1))
         for b in names[~body_held[names]]:
             cells = np.flatnonzero(label[mesh.cells[:, 0]] == b)
-            which = f"body of {cells.size} cells (cells {cells[0]}..{cells[-1]})" if names.size > 1 \
-                else "the body"
-            out.append(f"no relation holds field {f.name!r} on {which}")
+            out.append(_sentence(f.name, names.size, cells.size, cells[0], cells[-1]))
+    return out
+
+
+def _sentence(field: str, nbodies: int, ncells: int, first: int, last: int) -> str:
+    which = f"body of {ncells} cells (cells {first}..{last})" if nbodies > 1 else "the body"
+    return f"no relation holds field {field!r} on {which}"
+
+
+def _unsupported_distributed(model, checked) -> list[str]:
+    """``unsupported`` from the parts: labels of the whole mesh's bodies, the relations' input
+    nodes looked up among each rank's owned nodes, cells counted by the rank owning their
+    lowest-owner node. Everything exchanged is a body's or a relation's size."""
+    comm, mesh, fields = model.comm, model.mesh, model.fields
+    label = bodies_distributed(comm, mesh)
+    n_owned = mesh.n_owned
+    owned_ids = np.asarray(mesh.global_nodes[:n_owned], dtype=np.int64)  # increasing input id
+    node_owner = np.searchsorted(mesh.node_ranges, mesh.node_new, side="right") - 1
+    mine = node_owner[mesh.cells].min(axis=1) == comm.rank
+    cell_label = label[mesh.cells[mine, 0]]
+    cell_ids = np.asarray(mesh.global_cells, dtype=np.int64)[mine]
+    names = np.unique(np.concatenate(comm.allgather(np.unique(cell_label))))
+    out = []
+    for f in checked:
+        cols = fields.columns(f.name)
+        held = []
+        for r in model.relations:
+            node, col = np.divmod(np.asarray(r.a_dofs, dtype=np.int64), fields.ncomp)
+            node = node[np.isin(col, cols)]
+            pos = np.minimum(np.searchsorted(owned_ids, node), max(n_owned - 1, 0))
+            here = (owned_ids[pos] == node) if n_owned else np.zeros(node.size, dtype=bool)
+            held.append(label[pos[here]])
+        held = np.unique(np.concatenate(comm.allgather(np.unique(np.concatenate(held + [[]]))
+                                                       .astype(np.int64))))
+        for b in names[~np.isin(names, held)]:
+            ids = cell_ids[cell_label == b]
+            ncells = comm.allreduce(int(ids.size))
+            first = comm.allreduce(int(ids.min()) if ids.size else np.iinfo(np.int64).max, op=MPI.MIN)
+            last = comm.allreduce(int(ids.max()) if ids.size else -1, op=MPI.MAX)
+            out.append(_sentence(f.name, names.size, ncells, first, last))
     return out

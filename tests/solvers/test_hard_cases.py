@@ -215,8 +215,7 @@ field = "h"
 source = 1.0
 """
     with _pytest.raises(SolverError) as err:
-        # (the hint needs the whole mesh's connectivity: not given on a distributed one)
-        run(text, name="floating", solver={"mesh": "replicated"})
+        run(text, name="floating")
     assert "no relation holds field 'h' on the body" in str(err.value)
 
 

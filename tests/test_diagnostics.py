@@ -1,0 +1,96 @@
+"""The hint of a singular system (parsolve/diagnostics.py): bodies no relation holds, on the
+replicated and on the distributed mesh."""
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from parsolve.diagnostics import bodies, bodies_distributed
+from parsolve.mesh.distribute import distribute
+from parsolve.mesh.generators import rectangle
+from parsolve.mesh.mesh import Mesh
+
+
+def three_bodies() -> Mesh:
+    """A long strip, an L-shaped strip and a small square, apart (three bodies), the strips
+    cut across by any partition several times."""
+    a = rectangle(10.0, 0.5, 40, 2, cell="quad")
+    b = rectangle(0.5, 6.0, 2, 24, cell="triangle")
+    c = rectangle(1.0, 1.0, 2, 2, cell="quad")
+    b.points = b.points + [0.0, 2.0]
+    c.points = c.points + [5.0, 5.0]
+    # one cell type: the quads cut into triangles
+    tri = [m if m.cell_type == "triangle" else _triangles(m) for m in (a, b, c)]
+    offsets = np.cumsum([0] + [m.num_points for m in tri[:-1]])
+    points = np.concatenate([m.points for m in tri])
+    cells = np.concatenate([m.cells + o for m, o in zip(tri, offsets)])
+    # shuffle the input numbering so that bodies' nodes are interleaved
+    perm = np.random.default_rng(3).permutation(points.shape[0])
+    inverse = np.argsort(perm)
+    return Mesh(points[perm], "triangle", inverse[cells])
+
+
+def _triangles(m: Mesh) -> Mesh:
+    q = m.cells
+    return Mesh(m.points, "triangle", np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]]))
+
+
+@pytest.mark.parametrize("method", ["scotch", "bisection"])
+def test_bodies_of_a_distributed_mesh_are_the_whole_meshs(method, comm):
+    whole = three_bodies()
+    expected = bodies(whole.cells, whole.num_points)
+    assert np.unique(expected).size == 3
+    part = distribute(comm, whole if comm.rank == 0 else None, method)
+    label = bodies_distributed(comm, part)
+    assert np.array_equal(label, expected[part.global_nodes])
+
+
+BODY = """
+[mesh]
+file = "{path}"
+[model]
+dimension = 2
+[[diffusion]]
+field = "h"
+[[diffusion.materials]]
+conductivity = 1.0
+[[loads]]
+name = "s"
+field = "h"
+source = 1.0
+[regions]
+held = "x < 0.1 and y < 1.0"
+[[relations]]
+name = "fix"
+type = "dirichlet"
+region = "held"
+field = "h"
+"""
+
+
+@pytest.mark.parametrize("mesh", ["replicated", "distributed"])
+def test_the_bodies_no_relation_holds_are_named(mesh, run, shared_tmp, comm):
+    """Two of three bodies float: the message names them, with their cells in input numbers,
+    the same on both meshes."""
+    import meshio
+
+    from parsolve.errors import SolverError
+
+    whole = three_bodies()
+    path = shared_tmp / "three_bodies.vtu"
+    if comm.rank == 0:
+        meshio.write(path, meshio.Mesh(whole.points, [("triangle", whole.cells)]))
+    comm.Barrier()
+    label = bodies(whole.cells, whole.num_points)
+    held = label[np.flatnonzero((whole.points[:, 0] < 0.1) & (whole.points[:, 1] < 1.0))]
+    assert np.unique(held).size == 1
+    cell_body = label[whole.cells[:, 0]]
+    expected = []
+    for b in np.unique(label):
+        if b != held[0]:
+            ids = np.flatnonzero(cell_body == b)
+            expected.append(f"no relation holds field 'h' on body of {ids.size} cells "
+                            f"(cells {ids[0]}..{ids[-1]})")
+    with pytest.raises(SolverError) as err:
+        run(BODY.format(path=path), name=f"floating_{mesh}", solver={"mesh": mesh})
+    assert str(err.value).endswith("likely cause: " + "; ".join(expected)), str(err.value)
