@@ -26,7 +26,7 @@ PARSOLVE_TEST_MESH=distributed timeout 1200 bash scripts/mpirun.sh -n 2 bash -c 
   else exec '"$PY"' -m pytest $opts tests "$@" > /dev/null; fi' _ "$@"
 echo "== pytest, 4 ranks (oversubscribed): partition independence, distributed mesh"
 # every shipped scene at 4 ranks against 1 rank, on both partitioners and on the parts
-FOUR="tests/solvers/test_rank_independence.py tests/mesh/test_distribute.py tests/mesh/test_partition.py"
+FOUR="tests/solvers/test_rank_independence.py tests/mesh/test_distribute.py tests/mesh/test_partition.py tests/mesh/test_empty_parts.py"
 timeout 1200 bash scripts/mpirun.sh -n 4 bash -c '
   opts="-q --color=no -p no:cacheprovider -o faulthandler_timeout=300"
   if [ "${OMPI_COMM_WORLD_RANK:-0}" = 0 ]; then exec '"$PY"' -m pytest $opts '"$FOUR"' "$@";

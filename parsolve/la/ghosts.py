@@ -28,6 +28,8 @@ class SaddleValues:
     def _where(self, idx) -> np.ndarray:
         order, sorted_keys = self._keys
         idx = np.asarray(idx, dtype=np.int64)
+        if idx.size == 0:   # (a rank with no cell asks for nothing)
+            return np.zeros(idx.shape, dtype=np.int64)
         pos = np.minimum(np.searchsorted(sorted_keys, idx), max(sorted_keys.size - 1, 0))
         if sorted_keys.size == 0 or not np.array_equal(sorted_keys[pos], idx):
             miss = idx[sorted_keys[pos] != idx] if sorted_keys.size else idx

@@ -40,7 +40,7 @@ class RelationDofs:
         sorted_ids = mesh.global_nodes[order]
         pos = np.minimum(np.searchsorted(sorted_ids, nodes), max(sorted_ids.size - 1, 0))
         here = sorted_ids[pos] == nodes if sorted_ids.size else np.zeros(nodes.size, dtype=bool)
-        self.local_node = np.where(here, order[pos], -1)
+        self.local_node = np.where(here, order[pos], -1) if order.size else np.full(nodes.size, -1)
         owned = here & (self.local_node < mesh.n_owned)
         # each node's owner contributes its global number and coordinates; one reduction
         packed = np.zeros((nodes.size, 1 + mesh.points.shape[1]))
