@@ -16,7 +16,7 @@ from parsolve.effects.loads import LoadPattern, load_patterns
 from parsolve.effects.registry import EFFECTS
 from parsolve.errors import InputError
 from parsolve.fields import FieldSet
-from parsolve.mesh import memory
+from parsolve.mesh import blocks, memory
 from parsolve.mesh.checks import check_mesh
 from parsolve.mesh.distribute import LocalMesh, distribute
 from parsolve.mesh.local_regions import LocalRegions
@@ -88,18 +88,25 @@ class Model:
         return f
 
 
-def build_mesh(scene: Scene) -> Mesh:
+def mesh_source(scene: Scene) -> tuple[str, str]:
+    """(file, key) that the mesh's errors name."""
+    if scene.mesh.file is not None:
+        return str(scene.mesh.file), "mesh.file"
+    return scene.source, "mesh"
+
+
+def build_mesh(scene: Scene, check_cells: bool = True) -> Mesh:
     """The scene's mesh, checked: size against the machine's memory (a generator's before it
-    runs, a file's once read), coordinates, cell shapes; ``mesh.warnings`` says the rest."""
+    runs, a file's once read), coordinates, cell shapes (unless ``check_cells`` is False: a
+    distributed run checks them by blocks); ``mesh.warnings`` says the rest."""
     spec = scene.mesh
     preset = scene.solver.preset
+    source, key = mesh_source(scene)
     if spec.file is not None:
-        source, key = str(spec.file), "mesh.file"
         mesh = read_mesh(source)
         memory.check_fits(_points_after_order(mesh, spec.order), mesh.dim, preset, source, key,
                           f"a mesh of {mesh.num_cells} {mesh.cell_type} cells")
     else:
-        source, key = scene.source, "mesh"
         try:
             points, cells, dim = memory.cell_counts(spec.generator, spec.params, spec.order)
         except (TypeError, ValueError):  # bad parameters: the generator says which below
@@ -120,7 +127,7 @@ def build_mesh(scene: Scene) -> Mesh:
     if mesh.dim != scene.dim:
         raise InputError(f"a {mesh.dim}D mesh ({mesh.cell_type}) cannot carry hypothesis "
                          f"{scene.hypothesis!r}", scene.source, "model.hypothesis")
-    mesh.warnings = [f"{source}: {key}: {w}" for w in check_mesh(mesh, source, key)]
+    mesh.warnings = [f"{source}: {key}: {w}" for w in check_mesh(mesh, source, key, check_cells)]
     return mesh
 
 
@@ -202,13 +209,18 @@ def _distributed_mesh(scene: Scene, comm) -> LocalMesh:
     if comm.rank == 0:
         try:
             with memory.whole_mesh_only():   # rank 0 alone (see README: the whole on one rank)
-                whole = build_mesh(scene)
+                whole = build_mesh(scene, check_cells=False)
         except InputError as exc:
             error = (exc.message, exc.source, exc.key)
     error = comm.bcast(error, root=0)
     if error is not None:
         raise InputError(*error)
-    part = distribute(comm, whole, scene.solver.partitioner)
+    # the cells checked and the dual graph built by every rank on a block of cells
+    block = blocks.scatter_blocks(comm, whole)
+    blocks.check_jacobians(comm, block, *mesh_source(scene))
+    graph = blocks.facet_groups(comm, block, *mesh_source(scene))
+    del block
+    part = distribute(comm, whole, scene.solver.partitioner, graph)
     del whole
     # the solve, each rank its share (every rank's machine: the verdict is collective)
     source, key = ((str(scene.mesh.file), "mesh.file") if scene.mesh.file is not None

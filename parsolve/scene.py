@@ -224,9 +224,9 @@ class SolverSpec:
     eliminate: bool
     split: str = "primal"   # fieldsplit blocks: "primal" (q, lambda) or "fields" (one per field)
     partitioner: str = DEFAULT_PARTITIONER  # cells to ranks: "scotch" (PT-Scotch) or "bisection"
-    # "distributed": each rank holds its part of the mesh (when every effect allows it);
-    # "replicated": every rank holds the whole mesh
-    mesh: str = "replicated"
+    # "distributed" (default): each rank holds its part of the mesh (when every effect allows
+    # it); "replicated": every rank holds the whole mesh
+    mesh: str = "distributed"
 
 
 @dataclass
@@ -709,7 +709,7 @@ def _solver(t: Table) -> SolverSpec:
     eliminate = t.get("eliminate", bool, True)
     split = t.get("split", str, "primal", choices=("primal", "fields"))
     partitioner = t.get("partitioner", str, DEFAULT_PARTITIONER, choices=PARTITIONERS)
-    mesh = t.get("mesh", str, "replicated", choices=("replicated", "distributed"))
+    mesh = t.get("mesh", str, "distributed", choices=("replicated", "distributed"))
     options = _flatten(t.table("petsc", {}))
     t.done()
     return SolverSpec(preset, prefix, options, eliminate, split, partitioner, mesh)

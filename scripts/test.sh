@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # The test suite: installs what it needs, then runs pytest on 1 rank (everything), on 2 and
-# 3 ranks (every test that can run in parallel), once more on 2 ranks with every scene the tests
-# run on the distributed mesh, and the partition and
-# distributed-mesh tests on 4. Fails when any test fails.
+# 3 ranks (every test that can run in parallel; scenes on the distributed mesh, the default),
+# once more on 2 ranks with every scene the tests run on the replicated mesh, and the partition
+# and distributed-mesh tests on 4. Fails when any test fails.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
@@ -19,8 +19,8 @@ for n in 2 3; do
     if [ "${OMPI_COMM_WORLD_RANK:-0}" = 0 ]; then exec '"$PY"' -m pytest $opts tests "$@";
     else exec '"$PY"' -m pytest $opts tests "$@" > /dev/null; fi' _ "$@"
 done
-echo "== pytest, 2 ranks, every test's scene on the distributed mesh (PARSOLVE_TEST_MESH)"
-PARSOLVE_TEST_MESH=distributed timeout 1200 bash scripts/mpirun.sh -n 2 bash -c '
+echo "== pytest, 2 ranks, every test's scene on the replicated mesh (PARSOLVE_TEST_MESH)"
+PARSOLVE_TEST_MESH=replicated timeout 1200 bash scripts/mpirun.sh -n 2 bash -c '
   opts="-q --color=no -p no:cacheprovider -o faulthandler_timeout=300"
   if [ "${OMPI_COMM_WORLD_RANK:-0}" = 0 ]; then exec '"$PY"' -m pytest $opts tests "$@";
   else exec '"$PY"' -m pytest $opts tests "$@" > /dev/null; fi' _ "$@"

@@ -56,8 +56,8 @@ def read_results(path: Path) -> dict:
     return out
 
 
-# PARSOLVE_TEST_MESH=distributed runs every scene of the tests on the distributed mesh (where
-# its effects allow it): a whole suite's check of the distributed path, slower than CI's
+# PARSOLVE_TEST_MESH=replicated (or distributed, the default) runs every scene of the tests on
+# that mesh unless a test says otherwise: scripts/test.sh checks the replicated path this way
 TEST_MESH = os.environ.get("PARSOLVE_TEST_MESH")
 
 

@@ -27,11 +27,13 @@ def _ids(ids: np.ndarray) -> str:
     return shown + (f", ... ({ids.size} in all)" if ids.size > SHOW else "")
 
 
-def check_mesh(mesh: Mesh, source: str | None, key: str | None) -> list[str]:
-    """Raise InputError for invalid coordinates or cells; return the warnings."""
+def check_mesh(mesh: Mesh, source: str | None, key: str | None, cells: bool = True) -> list[str]:
+    """Raise InputError for invalid coordinates or cells; return the warnings. ``cells``
+    False: the cells are checked elsewhere (by blocks on a distributed run: ``mesh.blocks``)."""
     check_points(mesh, source, key)
-    check_jacobians(mesh, source, key)
-    check_folds(mesh, source, key)
+    if cells:
+        check_jacobians(mesh, source, key)
+        check_folds(mesh, source, key)
     return unused_warning(mesh) + duplicate_warning(mesh)
 
 
@@ -62,16 +64,26 @@ def reference_points(cell_type: str) -> np.ndarray:
 
 def jacobian_range(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per cell: (min det J, max det J) over ``reference_points``, and the cell size^dim."""
-    xi = reference_points(mesh.cell_type)
-    g = element(mesh.cell_type).grad_shape(xi)                     # (nq, nen, dim)
-    n = mesh.num_cells
+    return _jacobian_range(lambda a, b: mesh.points[mesh.cells[a:b]], mesh.num_cells,
+                           mesh.cell_type, mesh.dim)
+
+
+def jacobian_range_of(coords: np.ndarray, cell_type: str, dim: int
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``jacobian_range`` of cells given by their nodes' coordinates (ncells, nen, dim)."""
+    return _jacobian_range(lambda a, b: coords[a:b], coords.shape[0], cell_type, dim)
+
+
+def _jacobian_range(cell_coords, n: int, cell_type: str, dim: int):
+    xi = reference_points(cell_type)
+    g = element(cell_type).grad_shape(xi)                           # (nq, nen, dim)
     lo, hi, scale = np.empty(n), np.empty(n), np.empty(n)
     for start in range(0, n, CHUNK):                                # batches, not cells
-        x = mesh.points[mesh.cells[start:start + CHUNK]]            # (nc, nen, dim)
+        x = cell_coords(start, start + CHUNK)                       # (nc, nen, dim)
         det = _det(np.tensordot(x, g, axes=([1], [1])))            # J: (nc, a, nq, b)
         lo[start:start + CHUNK] = det.min(axis=1)
         hi[start:start + CHUNK] = det.max(axis=1)
-        scale[start:start + CHUNK] = np.ptp(x, axis=1).max(axis=1) ** mesh.dim
+        scale[start:start + CHUNK] = np.ptp(x, axis=1).max(axis=1) ** dim
     return lo, hi, scale
 
 
@@ -93,20 +105,23 @@ def check_jacobians(mesh: Mesh, source: str | None, key: str | None) -> None:
         lo, hi, scale = jacobian_range(mesh)
         tol = RELATIVE_JACOBIAN * scale
         bad = ~(lo > tol)  # also NaN
-    if not bad.any():
-        return
-    ids = np.flatnonzero(bad)
-    kinds = np.where(hi[ids] <= tol[ids],
-                     np.where(hi[ids] < -tol[ids], "inverted", "collapsed (zero area/volume)"),
-                     np.where(lo[ids] < -tol[ids], "folded or bow-tie (det J changes sign)",
-                              "degenerate (det J vanishes at a point)"))
-    first = ids[0]
-    raise InputError(f"{ids.size} invalid {mesh.cell_type} cell(s): cells {_ids(ids)}; cell "
-                     f"{first} is {kinds[0]} (det J from {lo[first]:.3g} to {hi[first]:.3g})",
+    if bad.any():
+        ids = np.flatnonzero(bad)
+        raise_jacobians(ids, lo[ids], hi[ids], tol[ids], mesh.cell_type, source, key)
+
+
+def raise_jacobians(ids: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: np.ndarray,
+                    cell_type: str, source: str | None, key: str | None) -> None:
+    """The InputError for the invalid cells ``ids`` (increasing) with their det J range."""
+    kind = (("inverted" if hi[0] < -tol[0] else "collapsed (zero area/volume)") if hi[0] <= tol[0]
+            else "folded or bow-tie (det J changes sign)" if lo[0] < -tol[0]
+            else "degenerate (det J vanishes at a point)")
+    raise InputError(f"{ids.size} invalid {cell_type} cell(s): cells {_ids(ids)}; cell "
+                     f"{ids[0]} is {kind} (det J from {lo[0]:.3g} to {hi[0]:.3g})",
                      source, key)
 
 
-def _facet_direction(nodes: np.ndarray) -> np.ndarray:
+def facet_direction(nodes: np.ndarray) -> np.ndarray:
     """Orientation of each facet's corner cycle: True when, starting at its smallest node,
     it goes on to the smaller of its two neighbours (edges: a < b)."""
     n = nodes.shape[1]
@@ -135,7 +150,7 @@ def check_folds(mesh: Mesh, source: str | None, key: str | None) -> None:
         cells = np.unique(owner[many])
         raise InputError(f"a facet is shared by more than two cells (cells {_ids(cells)}): "
                          "not a valid volume mesh", source, key)
-    forward = _facet_direction(nodes)
+    forward = facet_direction(nodes)
     # per shared facet: the number of its two copies that run forward must be exactly 1
     fwd = np.bincount(group, weights=forward, minlength=counts.size)
     folded = (counts[group] == 2) & (fwd[group] != 1)

@@ -58,12 +58,14 @@ class LocalMesh(Mesh):
                          self.node_new, self.node_ranges, self.partitioner)
 
 
-def distribute(comm, whole: Mesh | None, method: str = "scotch") -> LocalMesh:
+def distribute(comm, whole: Mesh | None, method: str = "scotch",
+               graph: tuple[np.ndarray, np.ndarray] | None = None) -> LocalMesh:
     """Rank 0's ``whole`` mesh (None on the other ranks) → every rank's ``LocalMesh``.
-    Collective."""
+    ``graph``: this rank's block of the dual graph (``blocks.facet_groups``), else rank 0
+    builds it. Collective."""
     if method not in PARTITIONERS:
         raise ValueError(f"unknown partitioner {method!r} (expected one of {PARTITIONERS})")
-    cell_part, used = _cell_parts(comm, whole, method)
+    cell_part, used = _cell_parts(comm, whole, method, graph)
     if comm.rank == 0:
         part = from_cell_parts(whole, cell_part, comm.size, used)
         parts = [_extract(whole, part, r) for r in range(comm.size)]
@@ -79,7 +81,8 @@ def distribute(comm, whole: Mesh | None, method: str = "scotch") -> LocalMesh:
     return LocalMesh(rank=comm.rank, **mine)
 
 
-def _cell_parts(comm, whole: Mesh | None, method: str) -> tuple[np.ndarray | None, str]:
+def _cell_parts(comm, whole: Mesh | None, method: str, graph=None
+                ) -> tuple[np.ndarray | None, str]:
     """(rank 0: the part of every cell; elsewhere None, the partitioner that ran)."""
     size = comm.size
     if size == 1:
@@ -89,12 +92,12 @@ def _cell_parts(comm, whole: Mesh | None, method: str) -> tuple[np.ndarray | Non
     part = None
     if use_scotch:
         blocks = None
-        if comm.rank == 0:
+        if comm.rank == 0 and graph is None:
             indptr, indices = dual_graph(whole)
             starts = block_starts(whole.num_cells, size)
             blocks = [(indptr[starts[r]:starts[r + 1] + 1] - indptr[starts[r]],
                        indices[indptr[starts[r]]:indptr[starts[r + 1]]]) for r in range(size)]
-        ptr, idx = comm.scatter(blocks, root=0)
+        ptr, idx = graph if graph is not None else comm.scatter(blocks, root=0)
         n = comm.bcast(whole.num_cells if comm.rank == 0 else None, root=0)
         local = scotch_block(comm, n, ptr, idx)
         gathered = comm.gather(local, root=0)

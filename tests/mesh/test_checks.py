@@ -185,7 +185,7 @@ def test_file_with_an_inverted_cell_is_refused(shared_tmp):
     import meshio
     from mpi4py import MPI
 
-    from parsolve.model import build_mesh
+    from parsolve.model import build_mesh, build_model
     from parsolve.scene import parse_scene
 
     pts = np.array([[0, 0], [1, 0], [1, 1], [0, 1], [0.5, 0.5]], float)
@@ -204,9 +204,14 @@ def test_file_with_an_inverted_cell_is_refused(shared_tmp):
     with pytest.raises(InputError, match="overlap a neighbour") as info:
         build_mesh(parse_scene(tomllib.loads(text), "s.toml", text))
     assert info.value.source == str(path) and info.value.key == "mesh.file"
+    # a distributed run checks the cells by blocks on every rank: the same error everywhere
+    with pytest.raises(InputError) as parts:
+        build_model(parse_scene(tomllib.loads(text), "s.toml", text), MPI.COMM_WORLD)
+    assert str(parts.value) == str(info.value)
     text = _scene_with_file(nan_path)
-    with pytest.raises(InputError, match=r"non-finite coordinates \(NaN or inf\): points 2"):
-        build_mesh(parse_scene(tomllib.loads(text), "s.toml", text))
+    for build in (build_mesh, lambda scene: build_model(scene, MPI.COMM_WORLD)):
+        with pytest.raises(InputError, match=r"non-finite coordinates \(NaN or inf\): points 2"):
+            build(parse_scene(tomllib.loads(text), "s.toml", text))
 
 
 def test_memory_check_of_a_distributed_run(monkeypatch):

@@ -154,8 +154,8 @@ def test_an_expression_error_on_one_part_is_raised_on_every_rank(comm):
 
 def test_scene_key_mesh():
     base = SPECS
-    assert parse_scene(tomllib.loads(base), "s.toml").solver.mesh == "replicated"
-    text = base + '[solver]\nmesh = "distributed"\n'
-    assert parse_scene(tomllib.loads(text), "s.toml").solver.mesh == "distributed"
+    assert parse_scene(tomllib.loads(base), "s.toml").solver.mesh == "distributed"
+    text = base + '[solver]\nmesh = "replicated"\n'
+    assert parse_scene(tomllib.loads(text), "s.toml").solver.mesh == "replicated"
     with pytest.raises(InputError, match="solver.mesh"):
         parse_scene(tomllib.loads(base + '[solver]\nmesh = "scattered"\n'), "s.toml")

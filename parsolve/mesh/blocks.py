@@ -1,0 +1,151 @@
+"""The whole mesh checked, and its dual graph built, by every rank on one block of cells.
+
+A distributed run's rank 0 reads or generates the whole mesh; the cell checks (Jacobians,
+cells folded over a neighbour, facets of three cells) and the dual graph PT-Scotch partitions
+cost time and memory in proportion to the mesh, so rank 0 hands each rank a block of cells
+(``partition.block_starts``, the block PT-Scotch takes anyway) with its nodes' coordinates, and
+the ranks do that work together:
+
+* Jacobians: per cell, on the block's own cells;
+* facets: every block's cell facets are sent to the rank ``min corner id % size``, so that the
+  copies of a facet meet on one rank, which groups them: a facet of three cells or more, two
+  cells running through it the same way (a fold), or else a pair of neighbours, sent back to
+  both cells' blocks as rows of the dual graph.
+
+The graph is exactly ``partition.dual_graph``'s and the error messages are ``checks``'s (the
+same cells named), so a run does not depend on where this happened.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from mpi4py import MPI
+
+from parsolve.errors import InputError
+from parsolve.mesh import checks
+from parsolve.mesh.mesh import CELL_INFO, Mesh
+from parsolve.mesh.partition import block_starts
+from parsolve.mesh.topology import FACETS, NUM_VERTICES, _row_groups, _sorted_vertex_keys
+
+
+@dataclass
+class CellBlock:
+    """Rank r's cells [start, start + cells.shape[0]) of the whole mesh (input node ids) and
+    the coordinates of their nodes, (ncells, nodes per cell, dim)."""
+
+    cells: np.ndarray
+    coords: np.ndarray
+    start: int
+    num_cells: int        # of the whole mesh
+    cell_type: str
+    dim: int
+
+
+def scatter_blocks(comm, whole: Mesh | None) -> CellBlock:
+    """Rank 0's whole mesh (None elsewhere) → every rank's block. Collective."""
+    meta = comm.bcast((whole.num_cells, whole.cell_type, whole.dim, whole.cells.shape[1])
+                      if comm.rank == 0 else None, root=0)
+    n, cell_type, dim, nen = meta
+    starts = block_starts(n, comm.size)
+    counts = np.diff(starts)
+    mine = int(counts[comm.rank])
+    cells = np.empty((mine, nen), dtype=np.int64)
+    coords = np.empty((mine, nen, dim))
+    send_cells = send_coords = None
+    if comm.rank == 0:
+        send_cells = (np.ascontiguousarray(whole.cells, dtype=np.int64), counts * nen)
+    comm.Scatterv(send_cells, cells, root=0)
+    # coordinates a block at a time from rank 0 (never the whole mesh's cell coordinates)
+    if comm.rank == 0:
+        coords[:] = whole.points[whole.cells[:mine]]
+        for r in range(1, comm.size):
+            comm.Send(np.ascontiguousarray(whole.points[whole.cells[starts[r]:starts[r + 1]]]),
+                      dest=r, tag=71)
+    else:
+        comm.Recv(coords, source=0, tag=71)
+    return CellBlock(cells, coords, int(starts[comm.rank]), n, cell_type, dim)
+
+
+# ------------------------------------------------------------------ checks
+
+
+def check_jacobians(comm, block: CellBlock, source: str | None, key: str | None) -> None:
+    """``checks.check_jacobians`` of the whole mesh from the blocks (collective)."""
+    with np.errstate(all="ignore"):
+        lo, hi, scale = checks.jacobian_range_of(block.coords, block.cell_type, block.dim)
+        bad = ~(lo > checks.RELATIVE_JACOBIAN * scale)  # also NaN
+    mine = np.flatnonzero(bad)
+    gathered = comm.allgather((mine + block.start, lo[mine], hi[mine], scale[mine]))
+    ids = np.concatenate([g[0] for g in gathered])
+    if ids.size:
+        lo, hi, scale = (np.concatenate([g[k] for g in gathered]) for k in (1, 2, 3))
+        checks.raise_jacobians(ids, lo, hi, checks.RELATIVE_JACOBIAN * scale, block.cell_type,
+                               source, key)
+
+
+def facet_groups(comm, block: CellBlock, source: str | None, key: str | None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Check the facets of the whole mesh (``checks.check_folds``) and return this block's
+    rows of the dual graph as CSR (indptr, neighbour cell ids), ``partition.dual_graph``'s.
+    Collective."""
+    size = comm.size
+    nv = NUM_VERTICES[CELL_INFO[block.cell_type][1]]
+    local = FACETS[block.cell_type]
+    ncells = block.cells.shape[0]
+    nodes = np.concatenate([block.cells[:, list(f[:nv])] for f in local], axis=0)
+    owner = np.tile(np.arange(ncells, dtype=np.int64) + block.start, len(local))
+    forward = checks.facet_direction(nodes)
+    keys = _sorted_vertex_keys(nodes, CELL_INFO[block.cell_type][1])
+    if size > 1:   # every copy of a facet to one rank: the one its smallest corner names
+        rows = np.column_stack([keys, owner, forward]).astype(np.int64)
+        got = _exchange(comm, rows, keys[:, 0] % size if keys.size else np.zeros(0, np.int64))
+        keys, owner, forward = got[:, :nv], got[:, nv], got[:, nv + 1]
+    group, counts = _row_groups(keys)
+    many = owner[counts[group] > 2] if group.size else np.zeros(0, np.int64)
+    _raise_cells(comm, many, lambda cells: (
+        f"a facet is shared by more than two cells (cells {checks._ids(cells)}): not a valid "
+        "volume mesh"), source, key)
+    fwd = np.bincount(group, weights=forward, minlength=counts.size)
+    folded = owner[(counts[group] == 2) & (fwd[group] != 1)] if group.size else many
+    _raise_cells(comm, folded, lambda cells: (
+        f"{cells.size} cells overlap a neighbour (inverted or folded over a shared facet): "
+        f"cells {checks._ids(cells)}"), source, key)
+    shared = np.flatnonzero(counts[group] == 2) if group.size else np.zeros(0, np.int64)
+    pairs = owner[shared[np.argsort(group[shared], kind="stable")]].reshape(-1, 2)
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]  # a collapsed cell seeing itself twice
+    both = np.concatenate([pairs, pairs[:, ::-1]])
+    starts = block_starts(block.num_cells, size)
+    back = _exchange(comm, both, np.searchsorted(starts, both[:, 0], side="right") - 1) \
+        if size > 1 else both
+    # one key per (row, neighbour), sorted, no repeats: the rows of dual_graph
+    n = max(block.num_cells, 1)
+    key = np.unique((back[:, 0] - block.start) * n + back[:, 1])
+    row, indices = key // n, key % n
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(row, minlength=ncells))])
+    return indptr.astype(np.int64), indices.astype(np.int64)
+
+
+def _raise_cells(comm, cells: np.ndarray, message, source, key) -> None:
+    """InputError on every rank when any rank found such cells (named in increasing id)."""
+    found = np.unique(np.concatenate(comm.allgather(np.unique(cells))))
+    if found.size:
+        raise InputError(message(found), source, key)
+
+
+def _exchange(comm, rows: np.ndarray, dest: np.ndarray) -> np.ndarray:
+    """Rows (int64, 2D) sent to rank ``dest`` of each; returns the rows this rank received,
+    in (source rank, row order). Two buffer Alltoallv calls (counts, then rows)."""
+    size, width = comm.size, rows.shape[1]
+    order = np.argsort(dest, kind="stable")
+    send = np.ascontiguousarray(rows[order], dtype=np.int64)
+    counts = np.bincount(dest, minlength=size).astype(np.int64) if dest.size \
+        else np.zeros(size, np.int64)
+    recv_counts = np.empty(size, dtype=np.int64)
+    comm.Alltoall(counts, recv_counts)
+    recv = np.empty((int(recv_counts.sum()), width), dtype=np.int64)
+    displ = lambda c: np.concatenate([[0], np.cumsum(c)[:-1]]) * width  # noqa: E731
+    comm.Alltoallv([send, counts * width, displ(counts), MPI.INT64_T],
+                   [recv, recv_counts * width, displ(recv_counts), MPI.INT64_T])
+    return recv

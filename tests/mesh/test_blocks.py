@@ -1,0 +1,96 @@
+"""The whole mesh's cell checks and dual graph by blocks of cells (parsolve/mesh/blocks.py):
+the same graph as ``dual_graph`` and the same errors as ``check_mesh``, at any rank count."""
+
+import numpy as np
+import pytest
+
+from parsolve.errors import InputError
+from parsolve.mesh import blocks
+from parsolve.mesh.checks import check_mesh
+from parsolve.mesh.generators import box, plate_with_hole, rectangle
+from parsolve.mesh.mesh import Mesh
+from parsolve.mesh.partition import block_starts, dual_graph
+from parsolve.mesh.topology import FLIP
+
+from test_checks import reference_cell
+
+MESHES = {
+    "quad": lambda: rectangle(1.0, 1.0, 30, 20, cell="quad"),
+    "triangle6": lambda: rectangle(1.0, 1.0, 9, 7, cell="triangle6"),
+    "tetra": lambda: box(1.0, 1.0, 1.0, 4, 3, 5, cell="tetra"),
+    "tetra10": lambda: box(1.0, 1.0, 1.0, 3, 3, 2, cell="tetra10"),
+    "hexahedron": lambda: box(1.0, 1.0, 1.0, 4, 3, 5),
+    "plate": lambda: plate_with_hole(5.0, 5.0, 1.0, 8, 12, cell="triangle"),
+}
+
+
+def by_blocks(comm, mesh: Mesh):
+    block = blocks.scatter_blocks(comm, mesh if comm.rank == 0 else None)
+    blocks.check_jacobians(comm, block, "m.msh", "mesh.file")
+    return blocks.facet_groups(comm, block, "m.msh", "mesh.file")
+
+
+@pytest.mark.parametrize("name", sorted(MESHES))
+def test_the_dual_graph_by_blocks_is_dual_graphs(name, comm):
+    mesh = MESHES[name]()
+    ptr, idx = by_blocks(comm, mesh)
+    indptr, indices = dual_graph(mesh)
+    s = block_starts(mesh.num_cells, comm.size)[comm.rank:comm.rank + 2]
+    assert np.array_equal(ptr, indptr[s[0]:s[1] + 1] - indptr[s[0]])
+    assert np.array_equal(idx, indices[indptr[s[0]]:indptr[s[1]]])
+
+
+def _inverted(cell_type):
+    m = reference_cell(cell_type)
+    m.cells = m.cells[:, FLIP[cell_type]]
+    return m
+
+
+def _collapsed(cell_type):
+    m = reference_cell(cell_type)
+    m.points[:, -1] = 0.0
+    return m
+
+
+def _many():
+    m = rectangle(1.0, 1.0, 4, 4, "quad")
+    bad = [3, 5, 8, 9, 11, 14]
+    m.cells[bad] = m.cells[bad][:, [0, 1, 3, 2]]
+    return m
+
+
+def _folded():
+    """Two triangles on the same side of their shared edge, among good cells."""
+    m = rectangle(1.0, 1.0, 3, 3, cell="triangle")
+    a, b = m.cells[0][:2]
+    pts = np.vstack([m.points, m.points[[a, b]].mean(axis=0) + [0.0, 0.2]])
+    # the new cell (a, b, new) lies over cell 0 (above the edge a-b): folded over it
+    cells = np.vstack([m.cells, [[a, b, pts.shape[0] - 1]]])
+    return Mesh(pts, "triangle", cells)
+
+
+def _three_on_a_facet():
+    pts = np.array([[0, 0], [1, 0], [0.5, 1], [0.5, -1], [0.6, 2]], float)
+    cells = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])
+    return Mesh(pts, "triangle", cells)
+
+
+# (name: the mesh, words of its error)
+BAD = {f"inverted_{t}": (lambda t=t: _inverted(t)) for t in ("triangle", "quad", "tetra10", "hexahedron")}
+BAD |= {"collapsed_tetra": lambda: _collapsed("tetra"), "many": _many, "folded": _folded,
+        "three_on_a_facet": _three_on_a_facet}
+
+
+@pytest.mark.parametrize("name", sorted(BAD))
+def test_the_errors_are_check_meshs(name, comm):
+    mesh = BAD[name]()
+    with pytest.raises(InputError) as serial:
+        check_mesh(mesh, "m.msh", "mesh.file")
+    with pytest.raises(InputError) as parallel:
+        by_blocks(comm, mesh)
+    assert str(parallel.value) == str(serial.value)
+    assert WORDS[name.split("_")[0]] in str(parallel.value)
+
+
+WORDS = {"inverted": "is inverted", "collapsed": "is collapsed", "many": "cells 3, 5, 8, 9, 11, ... (6 in all)",
+         "folded": "overlap a neighbour", "three": "shared by more than two cells"}
