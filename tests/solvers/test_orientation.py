@@ -82,6 +82,10 @@ def test_mirror_images_give_mirrored_answers(run):
     a = run(BAR.format(pull=0.3, dual=-1.0, value=1e-4, sense="<="), name="a")
     b = run(BAR.format(pull=-0.3, dual=1.0, value=-1e-4, sense=">="), name="b")
     np.testing.assert_array_equal(a["relations/stop/active"], b["relations/stop/active"])
-    np.testing.assert_allclose(a["fields/displacement"], -b["fields/displacement"], atol=1e-18)
+    # equal and opposite in exact arithmetic; in floating point to the round-off of a solve
+    # (MUMPS on several ranks adds contributions in the order messages arrive: the
+    # displacement that is zero in exact arithmetic, ~1e-18 here, is not reproducible)
+    u = a["fields/displacement"]
+    np.testing.assert_allclose(u, -b["fields/displacement"], atol=1e-12 * np.abs(u).max())
     np.testing.assert_allclose(a["relations/stop/multiplier"], b["relations/stop/multiplier"],
                                rtol=1e-12)
