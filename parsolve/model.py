@@ -196,10 +196,7 @@ def distributed_mesh(scene: Scene, comm) -> bool:
     every effect of the scene works on a mesh part (the others need the whole mesh)."""
     if comm is None or comm.size == 1 or scene.solver.mesh == "replicated":
         return False
-    unsupported = [name for name in scene.effect_specs if not EFFECTS[name].distributed]
-    if scene.nonlinear.method == "arc_length":
-        unsupported.append("arc-length")
-    return not unsupported
+    return all(EFFECTS[name].distributed for name in scene.effect_specs)
 
 
 def _distributed_mesh(scene: Scene, comm) -> LocalMesh:

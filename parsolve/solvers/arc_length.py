@@ -4,6 +4,10 @@ choice as Newton, so the comparison with non-associated control is like for like
 
 Unknowns: q and the load factor μ of a reference load pattern P:  f_int(q) = F + μ P, with
 the constraint ||q - q_n||² = Δl² on each step. The saved "time" of a step is μ.
+
+On a distributed mesh q, P and the responses are vectors of the rank's local DOFs (owned and
+ghost): the arc's norm and every dot product count the owned rows once and add them over the
+ranks (``system.dot``), so each rank takes the same root as on the replicated mesh.
 """
 
 from __future__ import annotations
@@ -22,22 +26,34 @@ class ArcLength(NewtonSolver):
 
     def __init__(self, comm, system, linear, spec):
         super().__init__(comm, system, linear, spec)
+        # this mesh's DOFs, like the known loads (on a part: its local DOFs)
         self.P = system.model.patterns[spec.arc_pattern].vector()
         self.mu = 0.0
         self.prev = None  # previous step's increment (q, μ), to keep going forward
 
     def _solve(self, f_full: np.ndarray, target: np.ndarray, elim: np.ndarray, mat):
+        """(Δq, unscaled λ, the saddle values as ``gather`` returns them) of one right-hand
+        side."""
         x, rhs = self._vectors(mat)
         rhs.array[:] = self.system.rhs_from(f_full, target, elim)[0]
         self.linear.solve(rhs, x)
         x_full = self.system.gather(x.array)
-        return x_full[self.system.saddle_of_input], self.system.multipliers(x_full)
+        return self.system.primal_of(x_full), self.system.multipliers(x_full), x_full
+
+    def _combined(self, x_r, x_p, dmu: float):
+        """x_r + dμ x_p of two gathered saddle vectors (the multipliers the step reports:
+        ``multipliers`` reads them from ``x_full``)."""
+        if not self.system.distributed:
+            return x_r + dmu * x_p
+        out = x_r.copy()
+        out.q, out.lam = x_r.q + dmu * x_p.q, x_r.lam + dmu * x_p.lam
+        return out
 
     def step(self, t: float, cuts: int = 8):
         """One arc step; on failure the arc is halved and retried from the last converged
         state (standard step cutting, up to ``cuts`` times). Returns (iterations summed over
         the tries, residual, f_int)."""
-        saved = (self.q.copy(), self.mu, self.lam.copy())
+        saved = (self.q.copy(), self.mu, self.lam.copy(), self.x_full.copy())
         dl, spent = self.spec.arc_length, 0
         for _ in range(cuts + 1):
             try:
@@ -46,6 +62,7 @@ class ArcLength(NewtonSolver):
             except SolverError as exc:
                 spent += getattr(exc, "iterations", self.spec.max_iterations)
                 self.q, self.mu, self.lam = saved[0].copy(), saved[1], saved[2].copy()
+                self.x_full = saved[3].copy()
                 dl *= 0.5
                 last = exc
         raise last
@@ -67,6 +84,9 @@ class ArcLength(NewtonSolver):
             residual = self._norm(r) / ref
             if it > 0 and residual <= spec.rtol:
                 self.states, self.extras = trial, extras
+                # the loads the step balances: the reactions of eliminated DOFs are F + μ P
+                # minus their rows (``multipliers``)
+                self.f_ext = system.model.external_load(t) + self.mu * self.P
                 self.prev = (self.q - q0, self.mu - mu0)
                 return it, residual, f_int
             if it == spec.max_iterations:
@@ -77,10 +97,12 @@ class ArcLength(NewtonSolver):
                 self._mat = mat
             # bordering: the response to the residual and to the reference load
             target_r = system.gap(t, self.q)
-            elim_r = system.elim_values(t) - self.q[system.elim_dofs] if system.elim_dofs.size else zero_e
+            elim_r = system.elim_values(t) - system.eliminated_values(self.q) \
+                if system.elim_dofs.size else zero_e
             f_r = system.model.external_load(t) + self.mu * self.P - f_int
-            dq_r, lam_r = self._solve(f_r, target_r * blk.row_scale if blk.nrows else zero_t, elim_r, mat)
-            dq_p, lam_p = self._solve(self.P, zero_t, zero_e, mat)
+            dq_r, lam_r, x_r = self._solve(f_r, target_r * blk.row_scale if blk.nrows else zero_t,
+                                           elim_r, mat)
+            dq_p, lam_p, x_p = self._solve(self.P, zero_t, zero_e, mat)
             try:
                 dmu = self._root(self.q - q0 + dq_r, dq_p, dl, it == 0)
             except SolverError as exc:
@@ -89,23 +111,28 @@ class ArcLength(NewtonSolver):
             self.q = self.q + dq_r + dmu * dq_p
             self.mu += dmu
             self.lam = lam_r + dmu * lam_p
+            self.x_full = self._combined(x_r, x_p, dmu)
         raise SolverError(f"arc-length: no convergence at step (load factor {self.mu:.6g}) after "
                           f"{spec.max_iterations} iterations (relative residual {residual:.1e})")
 
     def _root(self, a: np.ndarray, b: np.ndarray, dl: float, predictor: bool) -> float:
-        """dμ with ||a + dμ b|| = dl, the root that keeps going forward (Crisfield)."""
+        """dμ with ||a + dμ b|| = dl, the root that keeps going forward (Crisfield). The dot
+        products are the system's (owned rows once, summed over the ranks): the same on
+        every rank."""
+        dot = self.system.dot
         if predictor:
-            dmu = dl / max(float(np.linalg.norm(b)), 1e-300)
-            if self.prev is not None and float(self.prev[0] @ b) < 0:
+            dmu = dl / max(np.sqrt(dot(b, b)), 1e-300)
+            if self.prev is not None and dot(self.prev[0], b) < 0:
                 dmu = -dmu  # past a limit point the load decreases
             return dmu
-        A, B, C = b @ b, 2 * a @ b, a @ a - dl * dl
+        A, B, C = dot(b, b), 2 * dot(a, b), dot(a, a) - dl * dl
         disc = B * B - 4 * A * C
         if disc < 0:
             raise SolverError("arc-length: no intersection with the arc (complex roots)")
         roots = [(-B + s * np.sqrt(disc)) / (2 * A) for s in (1.0, -1.0)]
         ref = self.prev[0] if self.prev is not None else b
-        return max(roots, key=lambda m: float((a + m * b) @ ref))
+        a_ref, b_ref = dot(a, ref), dot(b, ref)   # (a + m b) · ref of each root m
+        return max(roots, key=lambda m: a_ref + m * b_ref)
 
 
 def run_arc_length(comm, system, cli_options, writer, log) -> None:

@@ -274,6 +274,12 @@ class SaddleSystem:
         own = v[self.owned_input_dofs]
         return float(np.sqrt(self.comm.allreduce(float(own @ own))))
 
+    def dot(self, u: np.ndarray, v: np.ndarray) -> float:
+        """u · v of two primal vectors of this mesh's DOFs, each DOF once (owned rows): the
+        same number on every rank, on either mesh."""
+        own = self.owned_input_dofs
+        return float(self.comm.allreduce(float(u[own] @ v[own])))
+
     def max_abs(self, v: np.ndarray) -> float:
         """max |v| over every rank (the same number on all)."""
         return self.comm.allreduce(float(np.abs(v).max()) if v.size else 0.0, op=MPI.MAX)

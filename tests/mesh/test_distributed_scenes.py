@@ -17,6 +17,18 @@ def test_effects_that_need_the_whole_mesh_keep_it(name, comm):
     assert model.mesh.num_points == build_model(load_scene(CONFIGS / name)).mesh.num_points
 
 
+def test_arc_length_gets_the_parts(comm):
+    """Arc-length does not fall back: its arc and dot products are the system's (owned rows,
+    summed over the ranks), so it runs on the parts (tests/solvers/test_distributed_arc_length)."""
+    scene = load_scene(CONFIGS / "cantilever_3d.toml")
+    scene.solver.mesh = "distributed"
+    nl = scene.nonlinear
+    nl.method, nl.arc_pattern, nl.arc_length = "arc_length", "end_load", 1e-3
+    model = build_model(scene, comm)
+    assert model.distributed == (comm.size > 1)
+    assert model.reference_patterns == ("end_load",)
+
+
 def test_a_distributed_model_holds_its_part(comm):
     scene = load_scene(CONFIGS / "cantilever_3d.toml")
     scene.solver.mesh = "distributed"
