@@ -7,14 +7,27 @@ from conftest import CONFIGS
 from parsolve.model import build_model
 from parsolve.scene import load_scene
 
+SOLUBILITY = sorted(p.name for p in CONFIGS.glob("solubility*.toml"))
 
-@pytest.mark.parametrize("name", ["contact_block_friction.toml", "solubility_well_mixed.toml"])
+
+@pytest.mark.parametrize("name", ["contact_block_friction.toml"])
 def test_effects_that_need_the_whole_mesh_keep_it(name, comm):
     scene = load_scene(CONFIGS / name)
     scene.solver.mesh = "distributed"
     model = build_model(scene, comm)
     assert not model.distributed
     assert model.mesh.num_points == build_model(load_scene(CONFIGS / name)).mesh.num_points
+
+
+@pytest.mark.parametrize("name", SOLUBILITY)
+def test_solubility_scenes_get_the_parts(name, comm):
+    """Solubility runs on the parts (its relation is gathered from the owned nodes)."""
+    scene = load_scene(CONFIGS / name)
+    scene.solver.mesh = "distributed"
+    model = build_model(scene, comm)
+    assert model.distributed == (comm.size > 1)
+    if comm.size > 1:
+        assert model.mesh.num_points < model.mesh.num_global_points
 
 
 def test_a_distributed_model_holds_its_part(comm):
