@@ -108,13 +108,16 @@ def test_the_part_builds_the_replicated_relation(comm):
         assert comm.allreduce(int(mine.sum())) == (N + 1) ** 2
 
 
-@pytest.mark.parametrize("drain", [False, True], ids=["closed", "drained"])
-def test_parts_give_the_replicated_results(drain, shared_tmp, comm):
+@pytest.mark.parametrize("drain, mode", [(False, "swmr"), (True, "parallel")],
+                         ids=["closed", "drained"])
+def test_parts_give_the_replicated_results(drain, mode, shared_tmp, comm):
     """Every dataset (fields, states, multipliers, active rows, balance) to 1e-10, integer
-    states and active rows exactly; the states switch both ways during the run."""
+    states and active rows exactly, in both output modes (the parts written by rank 0, or
+    each rank its owned rows); the states switch both ways during the run."""
     text = SCENE.replace("{csat}", CSAT) + (DRAIN if drain else "")
     name = "drained" if drain else "closed"
     whole = run_scene(text, shared_tmp / f"{name}_whole.h5", comm, solver={"mesh": "replicated"})
+    text += f'\n[output]\nmode = "{mode}"\n'
     parts = run_scene(text, shared_tmp / f"{name}_parts.h5", comm, solver={"mesh": "distributed"})
     assert_same_results(parts, whole, 1e-10)
     state = parts["fields/solubility_state"][..., 0]
