@@ -58,6 +58,7 @@ EFFECTS: dict[str, Entry] = {
                         coupling=True,
                         regions=lambda spec: [(name, key.rsplit(".", 1)[0] + ".region")
                                               for name, _, key in spec.saturation],
-                        evolutions=lambda spec: [(spec.evolution, spec.key + ".evolution")]),
+                        evolutions=lambda spec: [(spec.evolution, spec.key + ".evolution")],
+                        distributed=True),
     "contact": Entry("contact", True, _parse_contact, _build_contact, coupling=True),
 }

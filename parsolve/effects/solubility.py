@@ -34,9 +34,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from parsolve.collective import agree
 from parsolve.effects.base import Effect
 from parsolve.errors import InputError
+from parsolve.io.slabs import OwnedRows
 from parsolve.mesh import selectors
+from parsolve.mesh.distribute import LocalMesh
+from parsolve.mesh.local_regions import allgather_rows
 from parsolve.relations import Relation
 
 
@@ -71,6 +75,10 @@ def _saturation(t) -> float | str:
 
 
 class Solubility(Effect):
+    """On a distributed mesh (``LocalMesh``) each rank knows c_sat on its owned nodes only;
+    the relation is whole on every rank (the size of its region: every node with a c_sat),
+    in input numbering, gathered from the ranks' owned nodes in input order."""
+
     name = "solubility"
     symmetric = False
 
@@ -80,30 +88,58 @@ class Solubility(Effect):
             if name not in fields or not fields[name].scalar:
                 raise InputError(f"names no scalar diffusion field: {name!r} (fields: "
                                  f"{', '.join(fields.names())})", source, f"{spec.key}.{key}")
+        self.comm = regions.comm if isinstance(mesh, LocalMesh) else None
         self.c_sat = self._levels(regions)
+        self.nodes, self.saturation = self._relation_nodes()
         self.evolution = evolutions[spec.evolution]
 
+    @property
+    def n_nodes(self) -> int:
+        """The nodes this rank gives c_sat: every node, or a part's owned nodes."""
+        return self.mesh.n_owned if self.comm is not None else self.mesh.num_points
+
     def _levels(self, regions) -> np.ndarray:
-        """c_sat at every node (later region entries override earlier ones)."""
-        c_sat = np.full(self.mesh.num_points, np.nan)
-        for region, value, key in self.spec.saturation:
-            nodes = regions(region, key.rsplit(".", 1)[0] + ".region").nodes
+        """c_sat at every node of ``n_nodes`` (later region entries override earlier ones)."""
+        n = self.n_nodes
+        # every region first (collective on a part), then the values (this rank's points alone)
+        nodes = [regions(region, key.rsplit(".", 1)[0] + ".region").nodes
+                 for region, _, key in self.spec.saturation]
+        nodes = [k[k < n] for k in nodes]
+        if self.comm is None:
+            return self._fill(nodes)
+        return agree(self.comm, self._fill, nodes)   # an error on one part: on every rank
+
+    def _fill(self, nodes: list[np.ndarray]) -> np.ndarray:
+        c_sat = np.full(self.n_nodes, np.nan)
+        for at, (_, value, key) in zip(nodes, self.spec.saturation):
             if isinstance(value, str):
-                value = selectors.evaluate_value(value, self.mesh.points[nodes], self.source, key)
+                value = selectors.evaluate_value(value, self.mesh.points[at], self.source, key)
                 if not np.all(np.isfinite(value) & (value > 0)):
                     raise InputError("c_sat must be finite and positive at every node", self.source, key)
-            c_sat[nodes] = value
+            c_sat[at] = value
         return c_sat
 
+    def _relation_nodes(self) -> tuple[np.ndarray, np.ndarray]:
+        """(input ids of the nodes with a c_sat, increasing; their c_sat): on a part, every
+        rank's owned ones, gathered (a collective of the region's size)."""
+        has = np.flatnonzero(np.isfinite(self.c_sat))
+        if self.comm is None:
+            return has, self.c_sat[has]
+        ids = allgather_rows(self.comm, self.mesh.global_nodes[has])
+        values = allgather_rows(self.comm, self.c_sat[has])
+        order = np.argsort(ids)
+        return ids[order], values[order]
+
     def relations(self) -> list[Relation]:
-        nodes = np.flatnonzero(np.isfinite(self.c_sat))
+        nodes = self.nodes
         n = nodes.size
         f = self.fields_
+        # input DOFs: DOF numbers of input node ids (fields.dofs is node · ncomp + column)
         gas, dis = f.dofs(self.spec.gas, nodes)[:, 0], f.dofs(self.spec.dissolved, nodes)[:, 0]
         rows = np.arange(2 * n)
         a_dofs = np.stack([gas, dis], 1).ravel()
         a_vals = np.tile([-1.0, 1.0], n)
-        values = np.stack([np.zeros(n), self.c_sat[nodes]], 1).ravel()
+        values = np.stack([np.zeros(n), self.saturation], 1).ravel()
         # both rows of a node share the dual: -1 on c_s, +1 on c_g
         d_dofs = np.stack([dis, gas, dis, gas], 1).ravel()
         d_rows = np.repeat(rows, 2)
@@ -118,8 +154,13 @@ class Solubility(Effect):
         return ["solubility_state"]
 
     def step_outputs(self, q: np.ndarray, lam: dict, active: dict) -> tuple[dict, dict]:
-        """/fields/solubility_state per node: 0 dissolved, 1 saturated (no c_sat: -1)."""
-        out = np.full(self.mesh.num_points, -1, dtype=np.int8)
-        nodes = np.flatnonzero(np.isfinite(self.c_sat))
-        out[nodes] = active["solubility"].reshape(-1, 2)[:, 1]
-        return {"solubility_state": out[:, None]}, {}
+        """/fields/solubility_state per node: 0 dissolved, 1 saturated (no c_sat: -1). On a
+        part: its owned nodes' rows (in increasing input id), for the writer to place."""
+        out = np.full(self.n_nodes, -1, dtype=np.int8)
+        has = np.flatnonzero(np.isfinite(self.c_sat))
+        saturated = active["solubility"].reshape(-1, 2)[:, 1]   # per relation node
+        if self.comm is None:
+            out[has] = saturated
+            return {"solubility_state": out[:, None]}, {}
+        out[has] = saturated[np.searchsorted(self.nodes, self.mesh.global_nodes[has])]
+        return {"solubility_state": OwnedRows(out[:, None])}, {}

@@ -7,8 +7,10 @@ from conftest import CONFIGS
 from parsolve.model import build_model
 from parsolve.scene import load_scene
 
+SOLUBILITY = sorted(p.name for p in CONFIGS.glob("solubility*.toml"))
 
-@pytest.mark.parametrize("name", ["contact_block_friction.toml", "solubility_well_mixed.toml"])
+
+@pytest.mark.parametrize("name", ["contact_block_friction.toml"])
 def test_effects_that_need_the_whole_mesh_keep_it(name, comm):
     scene = load_scene(CONFIGS / name)
     scene.solver.mesh = "distributed"
@@ -27,6 +29,17 @@ def test_arc_length_gets_the_parts(comm):
     model = build_model(scene, comm)
     assert model.distributed == (comm.size > 1)
     assert model.reference_patterns == ("end_load",)
+
+
+@pytest.mark.parametrize("name", SOLUBILITY)
+def test_solubility_scenes_get_the_parts(name, comm):
+    """Solubility runs on the parts (its relation is gathered from the owned nodes)."""
+    scene = load_scene(CONFIGS / name)
+    scene.solver.mesh = "distributed"
+    model = build_model(scene, comm)
+    assert model.distributed == (comm.size > 1)
+    if comm.size > 1:
+        assert model.mesh.num_points < model.mesh.num_global_points
 
 
 def test_a_distributed_model_holds_its_part(comm):

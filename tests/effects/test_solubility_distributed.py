@@ -1,0 +1,166 @@
+"""Gas solubility on the distributed mesh (each rank its part): the same relation, the same
+results as the replicated mesh, mass conserved on the parts; an input error of one part is
+raised on every rank. Runs on 1, 2 and 3 ranks (on one rank both meshes are the whole one)."""
+
+import tomllib
+
+import numpy as np
+import pytest
+
+from conftest import assert_same_results, run_scene
+from parsolve.errors import InputError
+from parsolve.model import build_model
+from parsolve.scene import parse_scene
+
+N, SOURCE, FILL_END, DT = 12, 3.0, 0.5, 0.05
+FILL_END_STEP = round(FILL_END / DT) - 1       # the last step of the source
+
+# A closed unit square (walls of no flux), a uniform source of the dissolved phase until
+# t = 0.5, a mobile gas, c_sat growing with x (an expression, evaluated per node) and lower on
+# a box in the middle (a region's override): the gas appears first in the box, fronts move.
+SCENE = f"""
+[mesh]
+generator = "rectangle"
+lx = 1.0
+ly = 1.0
+nx = {N}
+ny = {N}
+cell = "quad"
+[model]
+dimension = 2
+[regions]
+core = {{ box = [[0.3, 0.3], [0.6, 0.7]] }}
+[evolutions.fill]
+times = [0.0, {FILL_END}, {FILL_END + DT}]
+values = [1.0, 1.0, 0.0]
+[[diffusion]]
+field = "c_s"
+[[diffusion.materials]]
+conductivity = 0.05
+capacity = 1.0
+[[diffusion]]
+field = "c_g"
+[[diffusion.materials]]
+conductivity = 0.01
+capacity = 1.0
+[solubility]
+saturation = "{{csat}}"
+[[solubility.regions]]
+region = "core"
+saturation = 0.3
+[[loads]]
+name = "fill"
+field = "c_s"
+source = {SOURCE}
+evolution = "fill"
+[time]
+mass = "lumped"
+[steps]
+count = 30
+end = {30 * DT}
+"""
+CSAT = "0.6 + 0.8 * x"
+# a drain of the dissolved phase on the right side: the gas re-dissolves and leaves
+DRAIN = """
+[[relations]]
+name = "drain"
+type = "dirichlet"
+field = "c_s"
+region = "right"
+value = 0.0
+"""
+
+
+def model_of(text: str, comm, mesh: str):
+    scene = parse_scene(tomllib.loads(text), "test.toml", text)
+    scene.solver.mesh = mesh
+    return build_model(scene, comm)
+
+
+def solubility(model):
+    return next(e for e in model.effects if e.name == "solubility")
+
+
+def test_the_part_builds_the_replicated_relation(comm):
+    """The relation is whole on every rank, in input numbering: rows, DOFs, values, dual and
+    groups equal to the replicated mesh's, from c_sat known on the owned nodes only."""
+    text = SCENE.replace("{csat}", CSAT)
+    whole = model_of(text, comm, "replicated")
+    parts = model_of(text, comm, "distributed")
+    assert parts.distributed == (comm.size > 1)
+    a = next(r for r in whole.relations if r.name == "solubility")
+    b = next(r for r in parts.relations if r.name == "solubility")
+    assert a.nrows == b.nrows == 2 * (N + 1) ** 2
+    for name in ("a_rows", "a_dofs", "a_vals", "values", "groups"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    for x, y in zip(a.dual, b.dual):
+        assert np.array_equal(x, y)
+    assert np.array_equal(a.meta["nodes"], b.meta["nodes"])
+    # the known levels: the core's nodes at 0.3, the others at 0.6 + 0.8 x
+    x, y = whole.mesh.points[:, 0], whole.mesh.points[:, 1]
+    core = (x >= 0.3 - 1e-9) & (x <= 0.6 + 1e-9) & (y >= 0.3 - 1e-9) & (y <= 0.7 + 1e-9)
+    np.testing.assert_allclose(b.values[1::2], np.where(core, 0.3, 0.6 + 0.8 * x), rtol=1e-15)
+    assert np.all(b.values[::2] == 0.0)
+    if parts.distributed:   # c_sat on the owned nodes only
+        mesh = parts.mesh
+        assert solubility(parts).c_sat.shape == (mesh.n_owned,)
+        mine = np.isin(b.meta["nodes"], mesh.global_nodes[:mesh.n_owned])
+        assert comm.allreduce(int(mine.sum())) == (N + 1) ** 2
+
+
+@pytest.mark.parametrize("drain, mode", [(False, "swmr"), (True, "parallel")],
+                         ids=["closed", "drained"])
+def test_parts_give_the_replicated_results(drain, mode, shared_tmp, comm):
+    """Every dataset (fields, states, multipliers, active rows, balance) to 1e-10, integer
+    states and active rows exactly, in both output modes (the parts written by rank 0, or
+    each rank its owned rows); the states switch both ways during the run."""
+    text = SCENE.replace("{csat}", CSAT) + (DRAIN if drain else "")
+    name = "drained" if drain else "closed"
+    whole = run_scene(text, shared_tmp / f"{name}_whole.h5", comm, solver={"mesh": "replicated"})
+    text += f'\n[output]\nmode = "{mode}"\n'
+    parts = run_scene(text, shared_tmp / f"{name}_parts.h5", comm, solver={"mesh": "distributed"})
+    assert_same_results(parts, whole, 1e-10)
+    state = parts["fields/solubility_state"][..., 0]
+    assert state.dtype.kind == "i" and set(np.unique(state)) == {0, 1}
+    mixed = [(s == 1).any() and (s == 0).any() for s in state]
+    assert any(mixed)                                   # a front: both states in one step
+    assert np.array_equal(parts["relations/solubility/active"][:, 1::2], state)
+    # the gas appears while the source fills (most nodes saturated at its last step), then
+    # redissolves where diffusion or the drain lowers c_s below c_sat
+    saturated = state.sum(axis=1)
+    assert saturated[0] == 0 and saturated.argmax() == FILL_END_STEP
+    assert saturated[-1] < 0.75 * saturated.max()          # (measured: 0.68, 0.70)
+
+
+def test_mass_is_conserved_on_the_parts(shared_tmp, comm):
+    """Closed walls: c_s + c_g integrates to what the source put in (3 · t until t = 0.5, then
+    1.5) at every step, from the parts' fields with the lumped nodal areas (h²/4 per cell
+    touching a node) and in the balance the parts reduce; each node obeys the
+    complementarity (c_g = 0 dissolved, c_s = c_sat saturated)."""
+    text = SCENE.replace("{csat}", CSAT)
+    res = run_scene(text, shared_tmp / "mass.h5", comm, solver={"mesh": "distributed"})
+    t = res["steps/time"]
+    injected = SOURCE * 1.0 * np.minimum(t, FILL_END)
+    cells = res["mesh/cells/quad"]
+    area = np.bincount(cells.ravel(), minlength=res["mesh/points"].shape[0]) / (4.0 * N * N)
+    cs, cg = res["fields/c_s"][..., 0], res["fields/c_g"][..., 0]
+    np.testing.assert_allclose((cs + cg) @ area, injected, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(res["balance/total/storage"], injected, rtol=1e-12, atol=1e-14)
+    assert injected[-1] == pytest.approx(1.5)
+    assert (cg @ area)[-1] > 0.1                        # a good part of it is gas
+    x, y = res["mesh/points"][:, 0], res["mesh/points"][:, 1]
+    core = (x >= 0.3 - 1e-9) & (x <= 0.6 + 1e-9) & (y >= 0.3 - 1e-9) & (y <= 0.7 + 1e-9)
+    c_sat = np.where(core, 0.3, 0.6 + 0.8 * x)
+    state = res["fields/solubility_state"][..., 0]
+    assert np.all(cs <= c_sat + 1e-12) and np.all(cg >= -1e-12)
+    np.testing.assert_allclose(np.where(state == 1, cs - c_sat, cg), 0.0, atol=1e-12)
+
+
+def test_a_level_invalid_on_one_part_fails_on_every_rank(comm):
+    """c_sat = 1 - x is 0 on the right side only (one rank's nodes on a part): every rank
+    raises the same input error, none is left waiting."""
+    text = SCENE.replace("{csat}", "1 - x")
+    with pytest.raises(InputError) as err:
+        model_of(text, comm, "distributed")
+    assert err.value.key == "solubility.saturation"
+    assert "finite and positive" in err.value.message
