@@ -4,7 +4,11 @@ are those of the replicated mesh."""
 
 import pytest
 
-from conftest import assert_same_results, run_scene
+from conftest import CONFIGS, assert_same_results, run_scene
+
+# the gas-solubility scene on two triangles: a relation of per-node groups, transient fields
+SOLUBILITY_PAIR = (CONFIGS / "solubility_well_mixed.toml").read_text().replace(
+    "nx = 4", "nx = 1").replace("ny = 4", "ny = 1")
 
 PLASTIC_PAIR = """
 [mesh]
@@ -63,7 +67,8 @@ components = ["x", "y"]
 """
 
 
-@pytest.mark.parametrize("scene", [ELASTIC_PAIR, PLASTIC_PAIR], ids=["elastic", "plastic"])
+@pytest.mark.parametrize("scene", [ELASTIC_PAIR, PLASTIC_PAIR, SOLUBILITY_PAIR],
+                         ids=["elastic", "plastic", "solubility"])
 def test_two_cells_on_any_number_of_ranks(scene, shared_tmp, comm):
     parts = run_scene(scene, shared_tmp / "parts.h5", solver={"mesh": "distributed"})
     whole = run_scene(scene, shared_tmp / "whole.h5", solver={"mesh": "replicated"})
