@@ -189,7 +189,8 @@ def distributed_mesh(scene: Scene, comm) -> bool:
     every effect of the scene works on a mesh part (the others need the whole mesh)."""
     if comm is None or comm.size == 1 or scene.solver.mesh == "replicated":
         return False
-    unsupported = [name for name in scene.effect_specs if not EFFECTS[name].distributed]
+    unsupported = [name for name, specs in scene.effect_specs.items()
+                   if not all(EFFECTS[name].on_parts(spec) for spec in specs)]
     if scene.nonlinear.method == "arc_length":
         unsupported.append("arc-length")
     return not unsupported
