@@ -421,7 +421,6 @@ class Contact(Effect):
         displacement relative to the master, in the tangent basis), state; per surface: the
         resultant normal and tangential forces (Σ Rn, Σ Rt in the tangent basis)."""
         p, name = self.pairing, self.spec.name
-        dm1 = self.mesh.dim - 1
         rn, rt = self.forces(lam)
         if self.frictional:
             state = np.where(active[self.normal.name], self.node_state, fr.OPEN)
