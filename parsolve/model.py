@@ -196,7 +196,8 @@ def distributed_mesh(scene: Scene, comm) -> bool:
     every effect of the scene works on a mesh part (the others need the whole mesh)."""
     if comm is None or comm.size == 1 or scene.solver.mesh == "replicated":
         return False
-    return all(EFFECTS[name].distributed for name in scene.effect_specs)
+    return all(EFFECTS[name].on_parts(spec)
+               for name, specs in scene.effect_specs.items() for spec in specs)
 
 
 def _distributed_mesh(scene: Scene, comm) -> LocalMesh:

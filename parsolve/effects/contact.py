@@ -33,7 +33,11 @@ converge in partial slip (kept for study).
 A node that closes while moving along the surface starts sliding that way (sticking it at
 the step's starting point would pull it back, open it again, and cycle).
 
-Decisions are made on every rank from the same gathered q and λ: the ranks agree.
+Decisions are made on every rank from the same row values and λ: the ranks agree. On a
+distributed mesh (each rank its part) the surfaces are gathered once (their nodes' input ids
+and coordinates: the surfaces' size), every rank pairs them as the replicated mesh does, and
+the rows stay in input DOFs; per iteration only row values (``PartValues``: owned entries and
+one reduction of the rows' size) and the multipliers every rank holds are used.
 
 Scene schema::
 
@@ -63,12 +67,15 @@ from parsolve.contact import friction as fr
 from parsolve.contact import obstacles
 from parsolve.contact.mortar import mortar_pairing
 from parsolve.contact.pairing import check_surfaces, pair_nodes
+from parsolve.contact.part_values import PartValues
 from parsolve.contact.rows import friction_dual, node_rows, normal_rows, normal_values, \
     slip_vectors, tangent_rows
+from parsolve.contact.surfaces import Surfaces, canonical_facets
 from parsolve.effects.base import Effect
 from parsolve.errors import InputError
 from parsolve.evolution import CONSTANT
-from parsolve.mesh.topology import boundary_facets
+from parsolve.mesh.local_regions import gather_facets
+from parsolve.mesh.topology import FACETS, boundary_facets
 from parsolve.relations import Relation
 
 OBSTACLES = ("plane", "cylinder", "sphere")
@@ -142,21 +149,18 @@ class Contact(Effect):
         if "u" not in fields:
             raise InputError("contact needs a displacement field (a [[materials]] section)",
                              source, key)
-        slave = regions(spec.slave, f"{key}.slave").nodes
-        boundary = np.unique(boundary_facets(mesh)[0])
-        off = np.setdiff1d(slave, boundary)
-        if slave.size == 0 or off.size:
-            raise InputError(f"the slave region {spec.slave!r} must lie on the boundary "
-                             f"({off.size} of its {slave.size} nodes are inside the mesh)",
-                             source, f"{key}.slave")
-        self.pairing = self._pair(slave, regions).only_paired()
+        # rows over input DOFs; their values from this rank's vector (part_values)
+        self.values = PartValues(mesh, fields.ncomp, getattr(regions, "comm", None))
+        self._check_slave(regions)
+        self.pairing = self._pair(regions)
         if len(self.pairing) == 0:
             raise InputError("no slave node faces the master surface within the search radius",
                              source, f"{key}.slave")
         self.symmetric = spec.mu == 0.0
         p = self.pairing
         n, dm1 = len(p), mesh.dim - 1
-        size = float(np.ptp(mesh.points, axis=0).max())
+        extent = mesh.extent if self.values.distributed else np.ptp(mesh.points, axis=0)
+        size = float(np.max(extent))   # the whole mesh's (a part's own would differ)
         closed = p.gap <= spec.closed * size
         # per node: state, slip direction (tangent basis); the committed ones and the trial ones
         self.node_state = np.where(closed, fr.STICK, fr.OPEN).astype(np.int8)
@@ -167,12 +171,52 @@ class Contact(Effect):
 
     # ------------------------------------------------------------------ geometry
 
-    def _pair(self, slave: np.ndarray, regions):
+    def _check_slave(self, regions) -> None:
+        """The slave region lies on the boundary. On a distributed mesh each rank checks its
+        owned nodes (all their cells are local: a local boundary facet through an owned node
+        is a boundary facet of the whole mesh) and the counts are summed: every rank agrees."""
+        key = self.spec.key
+        slave = regions(self.spec.slave, f"{key}.slave").nodes
+        if self.values.distributed:
+            slave = slave[slave < self.mesh.n_owned]
+        boundary = np.unique(boundary_facets(self.mesh)[0])
+        counts = np.array([np.setdiff1d(slave, boundary).size, slave.size])
+        if self.values.distributed:
+            counts = self.values.comm.allreduce(counts)
+        off, total = (int(c) for c in counts)
+        if total == 0 or off:
+            raise InputError(f"the slave region {self.spec.slave!r} must lie on the boundary "
+                             f"({off} of its {total} nodes are inside the mesh)",
+                             self.source, f"{key}.slave")
+
+    def _slave_nodes(self, regions) -> tuple[np.ndarray, np.ndarray]:
+        """The whole slave region: sorted input ids and their coordinates."""
+        key = f"{self.spec.key}.slave"
+        if self.values.distributed:
+            ids = regions.relation_nodes(self.spec.slave, key)
+            return ids, regions.points_of(ids)
+        ids = np.unique(regions(self.spec.slave, key).nodes)
+        return ids, self.mesh.points[ids]
+
+    def _facets(self, region) -> tuple[np.ndarray, np.ndarray]:
+        """A region's boundary facets on the whole mesh: input ids and coordinates, each facet
+        once, in the canonical order (``surfaces``)."""
+        nfn = len(FACETS[self.mesh.cell_type][0])
+        facets = np.asarray(region.facets, dtype=np.int64).reshape(-1, nfn)
+        if self.values.distributed:
+            ids, pts = gather_facets(self.values.comm, self.mesh, facets, nfn)
+        else:
+            ids, pts = facets, self.mesh.points[facets]
+        return canonical_facets(ids, pts)
+
+    def _pair(self, regions):
+        """The paired slave nodes, in input ids. The pairing runs on the surfaces alone (every
+        rank the same arrays: the same pairing on any partition and mesh distribution)."""
         spec, mesh, key = self.spec, self.mesh, self.spec.key
-        pts = mesh.points
+        slave, slave_pts = self._slave_nodes(regions)
         if spec.master is not None:
             master = regions(spec.master, f"{key}.master")
-            facets = master.facets
+            facets, facet_pts = self._facets(master)
             if facets.size == 0:
                 raise InputError(f"the master region {spec.master!r} has no boundary facet",
                                  self.source, f"{key}.master")
@@ -180,23 +224,30 @@ class Contact(Effect):
             if spec.discretization == "mortar":
                 # normalised mortar rows are a pairing (row i divided by ∫φ_i): the rows, the
                 # values, the friction dual and the outputs below stay as they are
-                slave_facets = regions(spec.slave, f"{key}.slave").facets
-                return mortar_pairing(pts, slave_facets, facets, mesh.facet_type,
-                                      spec.search_radius).pairing
-            return pair_nodes(pts, slave, facets, mesh.facet_type, spec.search_radius)
+                sfacets, sfacet_pts = self._facets(regions(spec.slave, f"{key}.slave"))
+                surf = Surfaces.of([(facets, facet_pts), (sfacets, sfacet_pts)])
+                return surf.to_input(mortar_pairing(surf.points, surf.compact(sfacets),
+                                                    surf.compact(facets), mesh.facet_type,
+                                                    spec.search_radius).pairing.only_paired())
+            surf = Surfaces.of([(slave, slave_pts), (facets, facet_pts)])
+            return surf.to_input(pair_nodes(surf.points, surf.compact(slave), surf.compact(facets),
+                                            mesh.facet_type, spec.search_radius).only_paired())
+        surf = Surfaces.of([(slave, slave_pts)])
+        pts, nodes = surf.points, surf.compact(slave)
         kind, params = spec.obstacle
         okey = f"{key}.obstacle.{kind}"
         try:
             if kind == "plane":
-                return obstacles.plane(pts, slave, params["origin"], params["normal"],
-                                       self.source, okey)
-            if kind == "cylinder":
-                return obstacles.cylinder(pts, slave, params["centre"], params["radius"],
-                                          params.get("axis"), params["inside"], self.source, okey)
-            return obstacles.sphere(pts, slave, params["centre"], params["radius"],
-                                    params["inside"], self.source, okey)
+                p = obstacles.plane(pts, nodes, params["origin"], params["normal"], self.source, okey)
+            elif kind == "cylinder":
+                p = obstacles.cylinder(pts, nodes, params["centre"], params["radius"],
+                                       params.get("axis"), params["inside"], self.source, okey)
+            else:
+                p = obstacles.sphere(pts, nodes, params["centre"], params["radius"],
+                                     params["inside"], self.source, okey)
         except ValueError as exc:
             raise InputError(str(exc), self.source, okey) from None
+        return surf.to_input(p.only_paired())
 
     def _build_rows(self) -> None:
         p, f = self.pairing, self.fields_
@@ -217,8 +268,10 @@ class Contact(Effect):
         vectors = np.stack([sv, np.cross(p.normal, sv)], axis=1).reshape(-1, 3)
         return node_rows(p.subset(np.repeat(np.arange(len(p)), 2)), vectors).coef
 
-    def _u(self, q: np.ndarray) -> np.ndarray:
-        return q.reshape(self.mesh.num_points, -1)[:, self.fields_.columns("u")]
+    def _slip(self, q: np.ndarray) -> np.ndarray:
+        """Tangential displacement of the slave relative to the master (rows of ``trows``)."""
+        t = self.trows
+        return self.values.rows(self.t_dofs, t.row, t.coef, t.nrows, q)
 
     @property
     def mu(self) -> float:
@@ -258,7 +311,7 @@ class Contact(Effect):
         self.normal.dual[2][:] = -friction_dual(self.pairing, self.mu, self.direction).coef
         if self.mesh.dim == 3:
             self.tangent.a_vals[:] = self._tangent_coefs()
-            self.tangent.values[:] = self.tangent.primal(self.q_start)
+            self.tangent.values[:] = self.values.relation(self.tangent, self.q_start)
 
     def _tangent_active(self, active: dict) -> None:
         """Tangential rows enforced where the node sticks; in 3D with the "reaction" mode a
@@ -285,9 +338,9 @@ class Contact(Effect):
             return False
         self.q_start = q.copy()
         self.turning.start(self.node_state)
-        self.u_start = self.trows.apply(self._u(q))
+        self.u_start = self._slip(q)
         self._set_dual()
-        self.tangent.values[:] = self.tangent.primal(q)
+        self.tangent.values[:] = self.values.relation(self.tangent, q)
         self._tangent_active(active)
         return True
 
@@ -309,7 +362,7 @@ class Contact(Effect):
     def slip_increment(self, q: np.ndarray) -> np.ndarray:
         """Tangential displacement of the slave relative to the master since the step's start."""
         dm1 = self.mesh.dim - 1
-        return (self.trows.apply(self._u(q)) - self.u_start).reshape(-1, dm1)
+        return (self._slip(q) - self.u_start).reshape(-1, dm1)
 
     def refresh(self, q: np.ndarray, lam: dict, active: dict) -> bool:
         """One friction update between iterations (``active``: the normal rows' new set);
@@ -329,7 +382,7 @@ class Contact(Effect):
         # a node that closes while it moves along the surface slides that way: sticking it
         # at the step's starting point would pull it back (and may open it again: a cycle)
         norm = np.linalg.norm(du, axis=1)
-        moving = closing & (norm > 1e-8 * max(float(np.abs(q - self.q_start).max()), 1e-300))
+        moving = closing & (norm > 1e-8 * max(self.values.max_abs(q - self.q_start), 1e-300))
         state[moving] = fr.SLIP
         direction[moving] = du[moving] / norm[moving, None]
         if turning:
@@ -367,8 +420,7 @@ class Contact(Effect):
         tangential reaction, gap (0 where the row is enforced), slip (total tangential
         displacement relative to the master, in the tangent basis), state; per surface: the
         resultant normal and tangential forces (Σ Rn, Σ Rt in the tangent basis)."""
-        p, name, npts = self.pairing, self.spec.name, self.mesh.num_points
-        dm1 = self.mesh.dim - 1
+        p, name = self.pairing, self.spec.name
         rn, rt = self.forces(lam)
         if self.frictional:
             state = np.where(active[self.normal.name], self.node_state, fr.OPEN)
@@ -377,17 +429,13 @@ class Contact(Effect):
         # an enforced row's gap is zero (its computed value is round-off, which depends on
         # the partition); an open node's is g0 + Dn·q
         closed = active[self.normal.name].astype(bool)
-        gap = np.where(closed, 0.0, p.gap + self.normal.primal(q))
-        slip = self.trows.apply(self._u(q))
-
-        def nodal(values, k=1):
-            out = np.zeros((npts, k))
-            out[p.slave] = np.asarray(values).reshape(len(p), k)
-            return out
-
-        st = np.full((npts, 1), -1.0)
-        st[p.slave, 0] = state
-        fields = {f"{name}_normal_reaction": nodal(rn), f"{name}_tangential_reaction": nodal(rt, dm1),
-                  f"{name}_gap": nodal(gap), f"{name}_slip": nodal(slip, dm1), f"{name}_state": st}
+        gap = np.where(closed, 0.0, p.gap + self.values.relation(self.normal, q))
+        slip = self._slip(q)
+        # over every node (0 elsewhere; state -1), or this rank's owned rows on a part
+        nodal = self.values.nodal
+        fields = {f"{name}_normal_reaction": nodal(p.slave, rn),
+                  f"{name}_tangential_reaction": nodal(p.slave, rt),
+                  f"{name}_gap": nodal(p.slave, gap), f"{name}_slip": nodal(p.slave, slip),
+                  f"{name}_state": nodal(p.slave, state, fill=-1.0)}
         extras = {"normal_force": np.array([rn.sum()]), "tangential_force": rt.sum(axis=0)}
         return fields, {self.normal.name: extras}

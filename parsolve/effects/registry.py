@@ -21,8 +21,13 @@ class Entry:
     fields: Callable = lambda spec, dim: {}
     regions: Callable = lambda spec: []
     evolutions: Callable = lambda spec: []
-    # works on one rank's part of a distributed mesh (its cells, its owned rows)
-    distributed: bool = False
+    # works on one rank's part of a distributed mesh (its cells, its owned rows); or a
+    # function of the spec when that depends on it (contact: the baselines do not)
+    distributed: bool | Callable = False
+
+    def on_parts(self, spec) -> bool:
+        """Whether this spec's effect works on a distributed mesh."""
+        return bool(self.distributed(spec)) if callable(self.distributed) else self.distributed
 
 
 def _build_diffusion(spec, ctx):
@@ -60,5 +65,8 @@ EFFECTS: dict[str, Entry] = {
                                               for name, _, key in spec.saturation],
                         evolutions=lambda spec: [(spec.evolution, spec.key + ".evolution")],
                         distributed=True),
-    "contact": Entry("contact", True, _parse_contact, _build_contact, coupling=True),
+    # the relations form on parts (surfaces gathered once); the penalty and augmented-
+    # Lagrangian baselines keep the replicated mesh
+    "contact": Entry("contact", True, _parse_contact, _build_contact, coupling=True,
+                     distributed=lambda spec: not isinstance(spec, contact_penalty.BaselineSpec)),
 }

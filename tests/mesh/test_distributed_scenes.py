@@ -1,6 +1,7 @@
 """Scenes on the distributed mesh: which ones get it, and what a rank then holds. (Every
 shipped scene is compared with the replicated mesh in ``test_partition``.)"""
 
+import numpy as np
 import pytest
 
 from conftest import CONFIGS
@@ -10,13 +11,42 @@ from parsolve.scene import load_scene
 SOLUBILITY = sorted(p.name for p in CONFIGS.glob("solubility*.toml"))
 
 
-@pytest.mark.parametrize("name", ["contact_block_friction.toml"])
-def test_effects_that_need_the_whole_mesh_keep_it(name, comm):
-    scene = load_scene(CONFIGS / name)
+def penalty_contact(path):
+    """contact_block_friction.toml with the penalty baseline instead of relations."""
+    text = (CONFIGS / "contact_block_friction.toml").read_text()
+    path.write_text(text.replace("friction = 0.3", 'friction = 0.3\nformulation = "penalty"'))
+    return path
+
+
+def test_effects_that_need_the_whole_mesh_keep_it(comm, shared_tmp):
+    """Contact's penalty / augmented-Lagrangian baselines (their contact forces are summed
+    over the slave nodes' cells: the replicated mesh's)."""
+    path = shared_tmp / "penalty_contact.toml"
+    if comm.rank == 0:
+        penalty_contact(path)
+    comm.Barrier()
+    scene = load_scene(path)
+    assert scene.effect_specs["contact"][0].formulation == "penalty"
     scene.solver.mesh = "distributed"
     model = build_model(scene, comm)
     assert not model.distributed
-    assert model.mesh.num_points == build_model(load_scene(CONFIGS / name)).mesh.num_points
+    assert model.mesh.num_points == build_model(load_scene(path)).mesh.num_points
+
+
+def test_relations_contact_gets_the_parts(comm):
+    """Contact as relations (the paper's form) runs on the parts: the surfaces are gathered
+    once, the relations are whole on every rank in input numbering."""
+    scene = load_scene(CONFIGS / "contact_block_friction.toml")
+    scene.solver.mesh = "distributed"
+    model = build_model(scene, comm)
+    assert model.distributed == (comm.size > 1)
+    whole = build_model(load_scene(CONFIGS / "contact_block_friction.toml"))
+    assert model.mesh.num_points < whole.mesh.num_points or comm.size == 1
+    ours = {r.name: r for r in model.relations}
+    for r in whole.relations:   # the same rows, DOFs and values on every rank
+        assert np.array_equal(ours[r.name].a_dofs, r.a_dofs)
+        np.testing.assert_array_equal(ours[r.name].a_vals, r.a_vals)
+        np.testing.assert_array_equal(ours[r.name].values, r.values)
 
 
 def test_arc_length_gets_the_parts(comm):

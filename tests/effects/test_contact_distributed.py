@@ -1,0 +1,96 @@
+"""Contact and friction (the relations form) on the distributed mesh: each rank its part, the
+contact surfaces gathered once, rows in input DOFs. Node-to-segment with friction, mortar
+with friction (2D, a meshed foundation), 3D friction against a plane: the same results as the
+replicated mesh (1e-10 of each quantity, active rows and states exactly) and the known
+resultants; the bad surfaces raised on every rank. At 1 rank both runs are replicated."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from conftest import assert_same_results
+from parsolve.contact.friction import SLIP, STICK
+from parsolve.errors import InputError
+from parsolve.model import build_model, distributed_mesh
+from parsolve.scene import load_scene
+from test_contact import BASE, PLANE
+from test_contact_3d import OBLIQUE
+from test_contact_mortar import FOUNDATION, write_mesh
+
+
+def both_meshes(run, text: str, name: str) -> tuple[dict, dict]:
+    """(results on the parts, results on the replicated mesh) of a scene."""
+    parts = run(text, name=f"{name}_parts", solver={"mesh": "distributed"})
+    scene = load_scene(run.last.with_suffix(".toml"))
+    scene.solver.mesh = "distributed"
+    assert distributed_mesh(scene, MPI.COMM_WORLD) == (MPI.COMM_WORLD.size > 1)
+    whole = run(text, name=f"{name}_whole", solver={"mesh": "replicated"})
+    return parts, whole
+
+
+@pytest.mark.parametrize("discretization", ["node_to_segment", "mortar"])
+def test_foundation_friction_on_parts_is_the_replicated_run(run, shared_tmp, discretization):
+    """A block (8 elements, distorted) pressed by p = 10 on a meshed foundation (5 elements)
+    and shifted: a master region, Coulomb friction (mu = 0.3). On the parts: the replicated
+    run's fields, multipliers, states and active rows; the normal resultant p, the friction
+    balancing the force that moves the top (1e-11), μN exactly once every node slides."""
+    mesh = shared_tmp / "foundation_parts.msh"
+    write_mesh(mesh, 5, 8, ny_up=4, seed=4)
+    parts, whole = both_meshes(run, FOUNDATION.format(mesh=mesh, discretization=discretization),
+                               f"foundation_{discretization}")
+    assert_same_results(parts, whole)
+    p, mu = 10.0, 0.3
+    n_force = parts["relations/base_normal/normal_force"][:, 0]
+    t_force = parts["relations/base_normal/tangential_force"][:, 0]
+    np.testing.assert_allclose(n_force, p, rtol=1e-12)
+    np.testing.assert_allclose(t_force, -parts["relations/shift/multiplier"].sum(axis=1),
+                               rtol=1e-11)
+    state = parts["fields/base_state"][:, :, 0]
+    all_slide = np.all((state == SLIP) | (state < STICK), axis=1)   # every closed node slides
+    assert all_slide[-1] and not all_slide[0]              # sticks first, slides at the end
+    np.testing.assert_allclose(np.abs(t_force[all_slide]), mu * p, rtol=1e-10)
+
+
+def test_oblique_pull_3d_on_parts_is_the_replicated_run(run):
+    """3D: a box pressed by p = 10 on a rough plane (mu = 0.3) and pulled along (2, 1)/√5
+    up to 0.9 μp, partial slip with slip directions turned between iterations: on the parts
+    the replicated run to 1e-10 (states and active rows exactly), the friction equal to the
+    pull to 1e-10, the same iterations per step."""
+    mu, p = 0.3, 10.0
+    e = np.array([2.0, 1.0]) / np.sqrt(5.0)
+    q = 0.9 * mu * p * e
+    parts, whole = both_meshes(run, OBLIQUE.format(cell="hexahedron", E=1000.0, NU=0.3,
+                                                   qx=q[0], qy=q[1]), "oblique")
+    assert_same_results(parts, whole)
+    assert np.array_equal(parts["steps/iterations"], whole["steps/iterations"])
+    times = parts["steps/time"]
+    np.testing.assert_allclose(parts["relations/base_normal/tangential_force"],
+                               -np.outer(times, q), atol=1e-10 * p)
+    np.testing.assert_allclose(parts["relations/base_normal/normal_force"][:, 0], p, rtol=1e-12)
+    state = parts["fields/base_state"][-1, :, 0]
+    assert np.any(state == SLIP) and np.any(state == STICK)          # partial slip
+
+
+@pytest.mark.parametrize("contact, key, words", [
+    (f'slave = "middle"\n{PLANE}', "contact[0].slave", "boundary"),
+    ('slave = "bottom"\nmaster = "bottom"', "contact[0].master", "share"),
+    ('slave = "bottom"\nmaster = "middle"', "contact[0].master", "no boundary facet"),
+    ('slave = "bottom"\nmaster = "top"', "contact[0].slave", "faces the master"),
+    ('slave = "bottom"\nobstacle = { plane = { origin = [0.0, 0.0], normal = [0.0, 0.0] } }',
+     "contact[0].obstacle.plane", "non-zero"),
+])
+def test_bad_surfaces_on_parts_raise_on_every_rank(shared_tmp, comm, contact, key, words):
+    """A surface error found on the parts (some ranks hold none of the slave region) is the
+    replicated mesh's, raised on every rank."""
+    text = BASE.format(contact=contact) + '\n[regions]\nmiddle = "abs(y - 0.25) < 1e-9"\n'
+    path = shared_tmp / "bad_contact_parts.toml"
+    if comm.rank == 0:
+        path.write_text(text)
+    comm.Barrier()
+    scene = load_scene(path)
+    scene.solver.mesh = "distributed"
+    with pytest.raises(InputError) as err:
+        build_model(scene, comm)
+    assert err.value.key == key and words in str(err.value) and str(path) in str(err.value)
