@@ -105,7 +105,7 @@ def worker(case: str, n: int, mode: str, h5: str, json_out: str) -> None:
 
     scene_file = Path(h5).with_suffix(".toml")
     if comm.rank == 0:
-        scene_file.write_text(scene_text(case, n) + f'mesh = "{mode}"\n')
+        scene_file.write_text(scene_text(case, n, mode))
     comm.Barrier()
 
     def model_of():
