@@ -18,7 +18,7 @@ distributes it):
                   it built, partitioned and sent);
   rss setup       VmRSS once the SaddleSystem is built (mesh, model, partition, operator);
   mesh            numpy bytes of the model's mesh (points, cells, groups; for a LocalMesh also
-                  global_nodes, global_cells, node_owner, node_new, node_ranges);
+                  global_nodes, global_cells, node_new, node_ranges; the owners are computed);
   part            numpy bytes of the partition (system.part: cell_part, node_part, new_of_old,
                   node_ranges);
   vectors         the primal vectors the step holds: q (and the step's previous q) as the driver
@@ -105,7 +105,7 @@ def worker(case: str, n: int, mode: str, h5: str, json_out: str) -> None:
 
     scene_file = Path(h5).with_suffix(".toml")
     if comm.rank == 0:
-        scene_file.write_text(scene_text(case, n) + f'mesh = "{mode}"\n')
+        scene_file.write_text(scene_text(case, n, mode))
     comm.Barrier()
 
     def model_of():

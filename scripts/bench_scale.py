@@ -44,8 +44,14 @@ Fits (least squares on the relative error, coefficients ≥ 0): memory per rank 
 and CPU time per phase likewise, on every (N, P) measured (4-rank runs count for memory, not for
 time: 2 cores), then the model at 64 ranks × 50M DOFs.
 
+Mesh modes (--mesh): parsolve runs on the replicated mesh (every rank the whole mesh), on the
+distributed one ([solver] mesh = "distributed": each rank its owned cells + one ghost layer,
+code "parsolve-dist" in the tables), or both; at 1 rank both are the same run (build_model
+distributes only on several ranks), so the distributed mode's 1-rank row is the replicated one.
+
 Usage (repository root):
     .venv/bin/python scripts/bench_scale.py                  # ≈ 35-40 min on 2 loaded cores
+    .venv/bin/python scripts/bench_scale.py --mesh both --sizes 2d-direct=216,305,432 3d-iterative=23,29,37
     .venv/bin/python scripts/bench_scale.py --quick          # small sizes, a smoke test
     .venv/bin/python scripts/bench_scale.py --sizes 2d-direct=1000,1414,2000 3d-iterative=60,79,100
     .venv/bin/python scripts/bench_scale.py --report         # tables again from the JSON
@@ -101,6 +107,8 @@ PHASES = ("setup", "assembly", "factorization", "solve", "post", "output")
 TARGET = (64, 50e6)  # ranks, DOFs of the model
 TRACE_FRAMES = 1
 PARTS = ("mesh", "operator", "element", "vectors", "other")
+MESH_MODES = {"replicated": "parsolve", "distributed": "parsolve-dist"}  # mode -> code
+PARSOLVE_CODES = tuple(MESH_MODES.values())
 
 
 def dofs_of(case: str, n: int) -> int:
@@ -108,7 +116,7 @@ def dofs_of(case: str, n: int) -> int:
     return dim * (n + 1) ** dim
 
 
-def scene_text(case: str, n: int) -> str:
+def scene_text(case: str, n: int, mesh_mode: str = "replicated") -> str:
     c = CASES[case]
     if c["dim"] == 2:
         mesh = f'generator = "rectangle"\nlx = 1.0\nly = 1.0\nnx = {n}\nny = {n}\ncell = "{c["cell"]}"'
@@ -140,6 +148,7 @@ components = {comps}
 count = 1
 [solver]
 preset = "{c['preset']}"
+mesh = "{mesh_mode}"
 """
 
 
@@ -367,7 +376,7 @@ def _mumps(solver) -> dict:
 
 
 def parsolve_worker(case: str, n: int, h5: str, json_out: str, trace: bool,
-                    phases: str = "all") -> None:
+                    phases: str = "all", mesh_mode: str = "replicated") -> None:
     if trace:
         import tracemalloc
 
@@ -384,7 +393,7 @@ def parsolve_worker(case: str, n: int, h5: str, json_out: str, trace: bool,
     rec.snap("start")
     scene_file = Path(h5).with_suffix(".toml")
     if comm.rank == 0:
-        scene_file.write_text(scene_text(case, n))
+        scene_file.write_text(scene_text(case, n, mesh_mode))
     comm.Barrier()
     held = instrument(drv, rec, output=phases == "all")
     t_wall, cpu = time.perf_counter(), cpu_seconds()
@@ -392,7 +401,7 @@ def parsolve_worker(case: str, n: int, h5: str, json_out: str, trace: bool,
     def model_of():
         scene = load_scene(scene_file)
         with memory.agreed_over(comm):
-            return build_model(scene)
+            return build_model(scene, comm)   # comm: a distributed scene's parts
 
     model = rec.timed("setup", model_of)()
     rec.snap("model")
@@ -411,20 +420,22 @@ def parsolve_worker(case: str, n: int, h5: str, json_out: str, trace: bool,
     mumps = _mumps(held["solver"])
     its = held["solver"].ksp.getIterationNumber()
     if comm.rank == 0:
-        out.update(code="parsolve", case=case, n=n, nranks=comm.size, dofs=dofs_of(case, n),
+        out.update(code=MESH_MODES[mesh_mode], mesh_mode=mesh_mode, case=case, n=n, nranks=comm.size, dofs=dofs_of(case, n),
                    status=status, t_wall=t_wall, cpu_share=share, iterations=its, mumps=mumps, trace=trace,
                    log=lines, phases=phases,
-                   **(_solution_checks(h5, model.mesh.points) if phases == "all"
+                   **(_solution_checks(h5) if phases == "all"
                       else _q_checks(held["q"], model.mesh.points)))
         Path(json_out).write_text(json.dumps(out, indent=1))
 
 
-def _solution_checks(h5: str, points: np.ndarray) -> dict:
-    """||u||₂, max |u|, u at the corner x = y (= z) = 1, and the file's /timings."""
+def _solution_checks(h5: str) -> dict:
+    """||u||₂, max |u|, u at the corner x = y (= z) = 1, and the file's /timings (the file's
+    points: a distributed mesh's rank 0 holds only its part)."""
     import h5py
 
     with h5py.File(h5, "r") as f:
         u = f["fields/displacement"][-1]
+        points = f["mesh/points"][...]
         timings = {k: float(f[f"timings/{k}"][()].sum()) for k in f["timings"]}
         residual = float(f["steps/residual"][-1])
     corner = np.flatnonzero(np.all(np.isclose(points, 1.0), axis=1))[0]
@@ -519,14 +530,15 @@ def launch(code: str, case: str, n: int, nranks: int, trace: bool, timeout: floa
     js = SCRATCH / f"{tag}.json"
     js.unlink(missing_ok=True)
     env = child_env()
-    if code in ("parsolve", "baseline"):
+    if code in PARSOLVE_CODES + ("baseline",):
+        mode = "distributed" if code == MESH_MODES["distributed"] else "replicated"
         args = [VENV_PY, __file__, "--worker", "parsolve", case, str(n), "--h5",
-                str(SCRATCH / f"{tag}.h5"), "--json", str(js), "--phases", phases] \
-            + (["--trace"] if trace else [])
+                str(SCRATCH / f"{tag}.h5"), "--json", str(js), "--phases", phases,
+                "--mesh", mode] + (["--trace"] if trace else [])
         if code == "baseline":
             env["PYTHONPATH"] = str(Path(baseline).resolve())
     else:
-        args = [DEBIAN_PY, __file__, "--worker", "dolfinx", case, str(n), "--mesh",
+        args = [DEBIAN_PY, __file__, "--worker", "dolfinx", case, str(n), "--mesh-file",
                 str(save_mesh(case, n)), "--options", json.dumps(solver_options(case)),
                 "--json", str(js)]
         if phases == "all":  # no output file: no output phase
@@ -574,24 +586,32 @@ def run_all(args) -> dict:
     rows = []
     t_start = time.perf_counter()
     weak = [] if post else args.weak
-    codes = (["baseline"] if args.baseline else []) + ["parsolve"] \
+    modes = list(MESH_MODES) if args.mesh == "both" else [args.mesh]
+    codes = (["baseline"] if args.baseline else []) + [MESH_MODES[m] for m in modes] \
         + ([] if args.no_peers else ["dolfinx"])
     for case, n, p in plan(args.cases, sizes, args.ranks, weak):
         for code in codes:  # one after the other: the same load on the machine
             if code == "dolfinx":
                 save_mesh(case, n)
-            r = launch(code, case, n, p, args.trace, args.timeout, args.phases, args.baseline)
+            same = next((r for r in rows if (r["code"], r["case"], r["n"], r["nranks"])
+                         == ("parsolve", case, n, 1)), None)
+            if code == MESH_MODES["distributed"] and p == 1 and same is not None:
+                # one rank: a distributed scene runs on the whole mesh, the replicated run
+                r = {**same, "code": code, "mesh_mode": "distributed", "same_as": "parsolve"}
+            else:
+                r = launch(code, case, n, p, args.trace, args.timeout, args.phases,
+                           args.baseline)
             rows.append(r)
             print(progress_line(r), flush=True)
     info["loadavg_end"] = os.getloadavg()
     return dict(machine=info, elapsed=time.perf_counter() - t_start, rows=rows,
                 sizes={c: sizes[c] for c in args.cases}, ranks=args.ranks, weak=weak,
-                cases=args.cases, trace=args.trace, phases=args.phases,
+                cases=args.cases, trace=args.trace, phases=args.phases, mesh=args.mesh,
                 baseline=args.baseline, baseline_label=args.baseline_label)
 
 
 def progress_line(r: dict) -> str:
-    head = f"[bench_scale] {r['code']:9s} {r['case']:12s} n={r['n']:4d} np={r['nranks']} " \
+    head = f"[bench_scale] {r['code']:13s} {r['case']:12s} n={r['n']:4d} np={r['nranks']} " \
            f"DOFs={r['dofs']:>9,}"
     if "failed" in r:
         return f"{head}  FAILED: {r['failed']}"
@@ -681,7 +701,7 @@ def fits(out: dict) -> dict:
     phase's time (1 and 2 ranks only: 4 ranks on 2 cores time the oversubscription)."""
     res = {}
     for case in out["cases"]:
-        for code in ("parsolve", "dolfinx"):
+        for code in PARSOLVE_CODES + ("dolfinx",):
             rows = ok_rows(out["rows"], code, case)
             if not rows:
                 continue
@@ -719,11 +739,17 @@ def md_table(head: list[str], body: list[list[str]]) -> str:
 
 
 def pairs(out: dict):
-    """(parsolve row, DOLFINx row or None) for every parsolve run, in run order."""
+    """(parsolve row, DOLFINx row or None) for every parsolve run (either mesh mode), in run
+    order."""
     peers = {(r["case"], r["n"], r["nranks"]): r for r in ok_rows(out["rows"], "dolfinx")}
     for r in out["rows"]:
-        if r["code"] == "parsolve":
+        if r["code"] in PARSOLVE_CODES:
             yield r, peers.get((r["case"], r["n"], r["nranks"]))
+
+
+def label(r: dict) -> str:
+    """The case, and the mesh mode of a distributed-mesh run."""
+    return r["case"] + (" (distributed mesh)" if r["code"] == MESH_MODES["distributed"] else "")
 
 
 def memory_table(out: dict) -> str:
@@ -733,12 +759,12 @@ def memory_table(out: dict) -> str:
     body = []
     for p, d in pairs(out):
         if "failed" in p:
-            body.append([p["case"], f"{p['dofs']:,}", str(p["nranks"]), "FAILED"]
+            body.append([label(p), f"{p['dofs']:,}", str(p["nranks"]), "FAILED"]
                         + ["–"] * (len(head) - 4))
             continue
         a = memory_parts(p)
         b = memory_parts(d) if d else {}
-        body.append([p["case"], f"{p['dofs']:,}", str(p["nranks"]), mib(a["peak"]),
+        body.append([label(p), f"{p['dofs']:,}", str(p["nranks"]), mib(a["peak"]),
                      mib(b.get("peak")), fmt(a["peak"] / b["peak"]) if b else "–",
                      *(mib(a[k]) for k in PARTS), mib(a["matrix"]), mib(b.get("matrix")),
                      mib(a["mumps"]), mib(b.get("mumps")), mib(b.get("mesh")),
@@ -769,7 +795,7 @@ def phase_table(out: dict) -> str:
         its = f"{p['iterations']} ({d['iterations']})" if d else str(p["iterations"])
         wall = f"{sum(p['seconds'].values()):.1f}" + (f" ({sum(d['seconds'].values()):.1f})"
                                                        if d else "")
-        body.append([p["case"], f"{p['dofs']:,}", str(p["nranks"]), *cells, wall, its])
+        body.append([label(p), f"{p['dofs']:,}", str(p["nranks"]), *cells, wall, its])
     return md_table(head, body)
 
 
@@ -789,7 +815,7 @@ def falls_table(out: dict) -> tuple[str, list[str]]:
     body, worst = [], {}
     by = {(r["code"], r["case"], r["n"], r["nranks"]): r for r in ok_rows(out["rows"])}
     for (code, case, n, p), r1 in by.items():
-        if code != "parsolve" or p != 1 or (code, case, n, 2) not in by:
+        if code not in PARSOLVE_CODES or p != 1 or (code, case, n, 2) not in by:
             continue
         a, b = memory_parts(r1), memory_parts(by[(code, case, n, 2)])
         d1, d2 = by.get(("dolfinx", case, n, 1)), by.get(("dolfinx", case, n, 2))
@@ -797,38 +823,42 @@ def falls_table(out: dict) -> tuple[str, list[str]]:
         def q(k):
             return fmt(b[k] / a[k]) if a.get(k) and b.get(k) is not None else "–"
 
-        body.append([case, f"{r1['dofs']:,}", q("peak"), *(q(k) for k in PARTS), q("matrix"),
-                     q("mumps"), fmt(peak(d2) / peak(d1)) if d1 and d2 else "–"])
+        body.append([label(by[(code, case, n, 2)]), f"{r1['dofs']:,}", q("peak"),
+                     *(q(k) for k in PARTS), q("matrix"), q("mumps"),
+                     fmt(peak(d2) / peak(d1)) if d1 and d2 else "–"])
         for k in ("mesh", "vectors", "operator", "matrix"):
             if a.get(k) and b.get(k) is not None:
-                worst.setdefault((case, k), []).append(b[k] / a[k])
-    verdicts = [f"{case} {k} {max(v):.2f}" for (case, k), v in worst.items() if max(v) > 0.6]
-    return md_table(head, body), verdicts
+                worst.setdefault((label(by[(code, case, n, 2)]), k), []).append(b[k] / a[k])
+    return md_table(head, body), worst
 
 
 def weak_table(out: dict) -> str:
     """Weak scaling: weak[i] ranks on sizes[i]; correctness: u against the same mesh at the other
     rank counts (parsolve) and against DOLFINx (same mesh, same ranks)."""
     head = ["case", "np", "DOFs", "DOFs/rank", "peak MiB/rank", "DOLFINx", "CPU s (max rank)",
-            "DOLFINx", "‖u‖₂", "max Δu vs parsolve other np (rel.)", "vs DOLFINx (rel.)"]
+            "DOLFINx", "‖u‖₂", "max Δu vs parsolve other np or mesh mode (rel.)",
+            "vs DOLFINx (rel.)"]
     body = []
     rows = ok_rows(out["rows"])
-    for case in out["cases"]:
+    codes = [c for c in PARSOLVE_CODES if any(x["code"] == c for x in out["rows"])]
+    for case, code in ((c, k) for c in out["cases"] for k in codes):
         for i, p in enumerate(out["weak"]):
             sizes = out["sizes"][case]
             if i >= len(sizes):
                 continue
             n = sizes[i]
             r = next((x for x in rows if (x["code"], x["case"], x["n"], x["nranks"])
-                      == ("parsolve", case, n, p)), None)
+                      == (code, case, n, p)), None)
             d = next((x for x in rows if (x["code"], x["case"], x["n"], x["nranks"])
                       == ("dolfinx", case, n, p)), None)
+            name = case + (" (distributed mesh)" if code == MESH_MODES["distributed"] else "")
             if r is None:
-                body.append([case, str(p), "–", "–", "FAILED"] + ["–"] * 6)
+                body.append([name, str(p), "–", "–", "FAILED"] + ["–"] * 6)
                 continue
-            same = [x for x in rows if x["code"] == "parsolve" and x["case"] == case
-                    and x["n"] == n and x["nranks"] != p]
-            body.append([case, str(p) + (" (oversubscribed)" if p > (os.cpu_count() or 2) else ""),
+            # the same mesh on other rank counts, and in the other mesh mode
+            same = [x for x in rows if x["code"] in PARSOLVE_CODES and x["case"] == case
+                    and x["n"] == n and (x["nranks"] != p or x["code"] != code)]
+            body.append([name, str(p) + (" (oversubscribed)" if p > (os.cpu_count() or 2) else ""),
                          f"{r['dofs']:,}", f"{r['dofs'] // p:,}", mib(peak(r)),
                          mib(peak(d)) if d else "–", f"{sum(r['cpu'].values()):.2f}",
                          f"{sum(d['cpu'].values()):.2f}" if d else "–", f"{r['unorm']:.10g}",
@@ -893,13 +923,14 @@ def model_lines(out: dict, fs: dict) -> list[str]:
     P, N = TARGET
     rows = ok_rows(out["rows"])
     lines = []
-    for case in out["cases"]:
-        p, d = fs.get(f"{case}/parsolve"), fs.get(f"{case}/dolfinx")
-        mp, md = (memory_model(fs, case, c, rows) for c in ("parsolve", "dolfinx"))
+    for case, code in ((c, k) for c in out["cases"] for k in PARSOLVE_CODES):
+        p, d = fs.get(f"{case}/{code}"), fs.get(f"{case}/dolfinx")
+        mp, md = (memory_model(fs, case, c, rows) for c in (code, "dolfinx"))
         if not mp:
             continue
         held = sum(p[k]["b"] for k in PARTS if p.get(k)) * N  # parsolve's replicated arrays
-        line = (f"- **{case}** at {P} ranks × {N / 1e6:.0f}M DOFs, memory per rank: parsolve "
+        name = case + (", distributed mesh" if code == MESH_MODES["distributed"] else "")
+        line = (f"- **{name}** at {P} ranks × {N / 1e6:.0f}M DOFs, memory per rank: parsolve "
                 f"**{mp['total'] / 2 ** 30:.1f} GiB**")
         if mp["factor"]:
             line += (f" ({mp['rest'] / 2 ** 30:.1f} GiB besides MUMPS + "
@@ -921,7 +952,7 @@ def model_lines(out: dict, fs: dict) -> list[str]:
             if td and all(t is not None for t in td):
                 tline += f"; DOLFINx {sum(td):,.0f} s"
             lines.append(tline + ").")
-        big = max((r for r in rows if r["code"] == "parsolve" and r["case"] == case),
+        big = max((r for r in rows if r["code"] == code and r["case"] == case),
                   key=lambda r: (r["dofs"], -r["nranks"]))
         mu = big.get("mumps") or {}
         if mu.get("used_mb_sum"):
@@ -942,7 +973,7 @@ ASSUMPTIONS = """Assumptions of the model: memory per rank and each phase's time
 (a: the process and libraries; b·N: what every rank holds or does whole — replicated mesh,
 full-length vectors, gathers; c·N/P: the distributed part), fitted by least squares on the
 relative error over the runs of this table (memory: 1, 2 and 4 ranks; time: 1 and 2 ranks, the
-4-rank runs sharing 2 cores). Extrapolated 33× in N and 32× in P: it assumes the same problem
+4-rank runs sharing 2 cores). Extrapolated {grow} in N and 32× in P: it assumes the same problem
 family (structured block, one linear step), ranks with the memory bandwidth of these cores, and
 no term the runs cannot see — communication growing with P (allgather and reduce of full-length
 vectors cost ∝ N per rank and step over the network, counted only through b), load imbalance,
@@ -955,7 +986,7 @@ are taken as constant (measured: nearly flat with N). CPU time, not wall: the ru
 cores with other jobs."""
 
 
-def verdicts(out: dict, fs: dict, fall_misses: list[str]) -> list[str]:
+def verdicts(out: dict, fs: dict, falls: dict) -> list[str]:
     lines = []
     for case in out["cases"]:
         worst = [(peak(p) / peak(d), p) for p, d in pairs(out) if p["case"] == case
@@ -968,9 +999,17 @@ def verdicts(out: dict, fs: dict, fall_misses: list[str]) -> list[str]:
                      f"{'MET' if not over else 'MISSED'} — ratios {min(w for w, _ in worst):.2f}"
                      f"–{q:.2f}, worst {p['dofs']:,} DOFs np={p['nranks']}"
                      + (f"; {len(over)} of {len(worst)} runs above 1.5" if over else "") + ".")
-    lines.append("- **Mesh, vectors and matrix per rank at 2 ranks ≤ 0.6× 1 rank**: "
-                 + ("MET." if not fall_misses else "MISSED — worst 2-rank / 1-rank ratio: "
-                    + "; ".join(fall_misses) + "."))
+    for dist in (False, True):  # per mesh mode: the distributed mesh is what the target asks
+        mine = {key: max(v) for key, v in falls.items()
+                if ("(distributed mesh)" in key[0]) == dist}
+        if not mine:
+            continue
+        misses = [f"{c} {k} {v:.2f}" for (c, k), v in mine.items() if v > 0.6]
+        every = ", ".join(f"{c.split(' ')[0]} {k} {v:.2f}" for (c, k), v in mine.items())
+        lines.append(f"- **Mesh, vectors and matrix per rank at 2 ranks ≤ 0.6× 1 rank**, "
+                     f"{'distributed' if dist else 'replicated'} mesh: "
+                     + ("MET" if not misses else "MISSED (" + "; ".join(misses) + ")")
+                     + f" — worst 2-rank / 1-rank ratios: {every}.")
     for ph in PHASES:
         rs = [(p["cpu"][ph] / d["cpu"][ph], p) for p, d in pairs(out)
               if "failed" not in p and d and p["nranks"] <= 2 and d["cpu"][ph]]
@@ -1047,7 +1086,8 @@ def markdown(out: dict) -> str:
         "",
         *model_lines(out, fs),
         "",
-        ASSUMPTIONS,
+        ASSUMPTIONS.format(grow=" and ".join(
+            f"{TARGET[1] / dofs_of(c, max(out['sizes'][c])):,.0f}× ({c})" for c in out["cases"])),
         "",
         "## Targets of issue 8",
         "",
@@ -1067,7 +1107,9 @@ def note_lines(out: dict) -> list[str]:
                  "into b·N. DOLFINx's 3D peak barely falls from 1 to 2 ranks here (GAMG's "
                  "parallel set-up adds about as much as the split saves at these sizes), so its "
                  "3D extrapolation is pessimistic; parsolve's b·N is backed by the arrays it holds "
-                 "whole (mesh, vectors: 2 ranks / 1 rank = 1.00 above).")
+                 "whole (the replicated mesh: 2 ranks / 1 rank = 1.00 above; full-length "
+                 "vectors) and by the fit's noise on small parts (the distributed mesh's b·N "
+                 "terms).")
     for r in out["rows"]:
         if "failed" in r:
             notes.append(f"- FAILED: {r['code']} {r['case']} n={r['n']} np={r['nranks']}: "
@@ -1312,16 +1354,23 @@ def main(argv=None) -> int:
     p.add_argument("--worker", nargs=3, metavar=("CODE", "CASE", "N"), help=argparse.SUPPRESS)
     p.add_argument("--h5", help=argparse.SUPPRESS)
     p.add_argument("--json", help=argparse.SUPPRESS)
-    p.add_argument("--mesh", help=argparse.SUPPRESS)
+    p.add_argument("--mesh", choices=(*MESH_MODES, "both"), default="replicated",
+                   help="parsolve's mesh: replicated on every rank, distributed (each rank "
+                        "its part), or both in the same run")
+    p.add_argument("--mesh-file", help=argparse.SUPPRESS)
     p.add_argument("--options", help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.worker:
         code, case, n = args.worker
         if code == "parsolve":
-            parsolve_worker(case, int(n), args.h5, args.json, args.trace, args.phases)
+            parsolve_worker(case, int(n), args.h5, args.json, args.trace, args.phases,
+                            args.mesh)
         else:
-            dolfinx_worker(case, int(n), args.mesh, args.options, args.h5, args.json)
+            dolfinx_worker(case, int(n), args.mesh_file, args.options, args.h5, args.json)
         return 0
+    if args.phases == "post" and args.mesh != "replicated":
+        raise SystemExit("--phases post runs the replicated mesh only (its checks read the "
+                         "whole primal vector)")
     if args.collect:
         args.sizes = parse_sizes(args.sizes)
         return post_report(collect(args))

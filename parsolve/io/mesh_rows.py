@@ -34,7 +34,8 @@ def output_mesh(comm, mesh, part) -> tuple[OutputMesh, tuple[Rows, Rows]]:
     n_owned = mesh.n_owned
     written = OutputMesh(mesh.cell_type, mesh.num_global_points, mesh.num_global_cells,
                          mesh.nodes_per_cell, OwnedRows(mesh.points[:n_owned]),
-                         OwnedRows(mesh.global_nodes[mesh.cells[owned_cells]]))
+                         # the file's connectivity stays int64 (the HDF5 layout's)
+                         OwnedRows(mesh.global_nodes[mesh.cells[owned_cells]].astype(np.int64)))
     rows = (Rows.from_ids(comm, mesh.global_nodes[:n_owned], mesh.num_global_points),
             Rows.from_ids(comm, mesh.global_cells[owned_cells], mesh.num_global_cells))
     return written, rows

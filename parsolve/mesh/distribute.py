@@ -15,8 +15,13 @@ pattern and the assembled operator are the same:
 
 The part is a ``LocalMesh``: a ``Mesh`` in local numbering, so that everything working on cells
 and nodes (effects, regions, loads) works on it unchanged, plus the input ids of its nodes and
-cells (``global_nodes``, ``global_cells``: results are written in input order) and the owners
-and global numbers of its nodes.
+cells (``global_nodes``, ``global_cells``: results are written in input order) and the global
+numbers of its nodes (``node_new``); their owners follow from those and the ranks' node blocks
+(``node_owner``, computed when asked, not kept).
+
+Index arrays are int32 while the numbers fit (``index_dtype``): a part's index arrays are then
+half the whole mesh's int64 per node. Node numbers keep a margin of 64 components per node
+because they are multiplied into DOF numbers (``node * ncomp + c``, e.g. ``Layout.new_dof``).
 """
 
 from __future__ import annotations
@@ -30,13 +35,22 @@ from parsolve.mesh.partition import (MIN_CELLS_PER_PART, PARTITIONERS, Partition
                                      block_starts, dual_graph, from_cell_parts, scotch_block)
 
 
+# node numbers are multiplied by up to this many components per node into DOF numbers
+COMPONENT_MARGIN = 64
+INT32_MAX = np.iinfo(np.int32).max
+
+
+def index_dtype(count: int, per_item: int = 1) -> np.dtype:
+    """int32 when every number below ``count`` times ``per_item`` fits it, else int64."""
+    return np.dtype(np.int32) if count * per_item <= INT32_MAX else np.dtype(np.int64)
+
+
 @dataclass
 class LocalMesh(Mesh):
     """One rank's part of a distributed mesh, in local numbering (see the module's doc)."""
 
     global_nodes: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     global_cells: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
-    node_owner: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     node_new: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     node_ranges: np.ndarray = field(default_factory=lambda: np.zeros(2, np.int64))
     num_global_points: int = 0
@@ -51,11 +65,23 @@ class LocalMesh(Mesh):
         """Owned nodes: the first ``n_owned`` local nodes."""
         return int(self.node_ranges[self.rank + 1] - self.node_ranges[self.rank])
 
+    def owner_of(self, nodes: np.ndarray) -> np.ndarray:
+        """The rank owning each of the local ``nodes`` (any shape): the block of the ranks'
+        node numbering (``node_ranges``) its global number falls in."""
+        new = self.node_new[np.asarray(nodes)]
+        return (np.searchsorted(self.node_ranges, new, side="right") - 1).astype(np.int32)
+
+    @property
+    def node_owner(self) -> np.ndarray:
+        """The rank owning each local node (a new array: not kept, see ``owner_of``)."""
+        return self.owner_of(np.arange(self.num_points))
+
     def partition(self) -> Partition:
         """The replicated ``Partition``'s view of this part (arrays over local nodes/cells)."""
         nparts = self.node_ranges.size - 1
-        return Partition(nparts, self.node_owner[self.cells].min(axis=1), self.node_owner,
-                         self.node_new, self.node_ranges, self.partitioner)
+        owner = self.node_owner
+        return Partition(nparts, owner[self.cells].min(axis=1), owner, self.node_new,
+                         self.node_ranges, self.partitioner)
 
 
 def distribute(comm, whole: Mesh | None, method: str = "scotch",
@@ -126,7 +152,9 @@ def _extract(whole: Mesh, part: Partition, rank: int) -> dict:
     ghosts = touched[node_part[touched] != rank]
     ghosts = ghosts[np.argsort(part.new_of_old[ghosts], kind="stable")]
     local_nodes = np.concatenate([owned, ghosts])
-    to_local = np.full(whole.num_points, -1, dtype=np.int64)
+    node_type = index_dtype(whole.num_points, COMPONENT_MARGIN)
+    local_type = index_dtype(local_nodes.size, COMPONENT_MARGIN)
+    to_local = np.full(whole.num_points, -1, dtype=local_type)
     to_local[local_nodes] = np.arange(local_nodes.size)
     cell_groups = {}
     for name, ids in whole.cell_groups.items():
@@ -134,12 +162,13 @@ def _extract(whole: Mesh, part: Partition, rank: int) -> dict:
         pos = np.searchsorted(local_cells, ids)
         hit = (pos < local_cells.size) & (local_cells[np.minimum(pos, local_cells.size - 1)] == ids) \
             if local_cells.size else np.zeros(ids.size, dtype=bool)
-        cell_groups[name] = pos[hit]
+        cell_groups[name] = pos[hit].astype(index_dtype(local_cells.size))
     facet_groups = {}
     for name, facets in whole.facet_groups.items():
         facets = np.asarray(facets, dtype=np.int64)
         if facets.ndim != 2 or facets.size == 0:
-            facet_groups[name] = facets.reshape(0, facets.shape[-1] if facets.ndim == 2 else 1)
+            facet_groups[name] = facets.reshape(0, facets.shape[-1] if facets.ndim == 2 else 1) \
+                .astype(local_type)
             continue
         mapped = to_local[facets]
         # facets with an owned node: their cell is local, so they are boundary facets here too
@@ -151,5 +180,6 @@ def _extract(whole: Mesh, part: Partition, rank: int) -> dict:
         node_groups[name] = mapped[mapped >= 0]
     return {"points": whole.points[local_nodes], "cells": to_local[cells[local_cells]],
             "cell_groups": cell_groups, "facet_groups": facet_groups, "node_groups": node_groups,
-            "global_nodes": local_nodes, "global_cells": local_cells,
-            "node_owner": node_part[local_nodes], "node_new": part.new_of_old[local_nodes]}
+            "global_nodes": local_nodes.astype(node_type),
+            "global_cells": local_cells.astype(index_dtype(whole.num_cells)),
+            "node_new": part.new_of_old[local_nodes].astype(node_type)}

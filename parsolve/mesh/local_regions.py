@@ -47,7 +47,7 @@ class LocalRegions(RegionResolver):
         owner it is, so that each is counted once over the ranks."""
         if nodes.size == 0:
             return np.zeros(nodes.shape[0], dtype=bool)
-        return self.mesh.node_owner[nodes].min(axis=1) == self.mesh.rank
+        return self.mesh.owner_of(nodes).min(axis=1) == self.mesh.rank
 
     def _local(self, fn, *args):
         return agree(self.comm, fn, *args)
@@ -82,7 +82,8 @@ class LocalRegions(RegionResolver):
         if name not in self._coords:
             region = self(name, key)
             own = region.nodes[region.nodes < self.mesh.n_owned]
-            ids = allgather_rows(self.comm, self.mesh.global_nodes[own])
+            # input ids as int64: relations turn them into DOFs (node * ncomp + c)
+            ids = allgather_rows(self.comm, self.mesh.global_nodes[own].astype(np.int64))
             pts = allgather_rows(self.comm, self.mesh.points[own])
             order = np.argsort(ids)
             self._coords[name] = (ids[order], pts[order])
@@ -104,8 +105,8 @@ class LocalRegions(RegionResolver):
         own = self._reported(m.cells[cells])
         dofs = arrays[0][own]
         node, comp = np.divmod(dofs, ncomp)
-        gathered = [allgather_rows(self.comm, m.global_cells[cells[own]]),
-                    allgather_rows(self.comm, m.global_nodes[node] * ncomp + comp)]
+        gathered = [allgather_rows(self.comm, m.global_cells[cells[own]].astype(np.int64)),
+                    allgather_rows(self.comm, m.global_nodes[node].astype(np.int64) * ncomp + comp)]
         gathered += [allgather_rows(self.comm, a[own]) for a in arrays[1:]]
         order = np.argsort(gathered[0], kind="stable")
         return tuple(g[order] for g in gathered)
@@ -128,7 +129,8 @@ class LocalRegions(RegionResolver):
         """The owned rows' nonzeros of every rank, as input DOFs (sorted)."""
         nz = np.flatnonzero(vector[:self.mesh.n_owned * ncomp])
         node, comp = np.divmod(nz, ncomp)
-        dofs = allgather_rows(self.comm, self.mesh.global_nodes[node] * ncomp + comp)
+        dofs = allgather_rows(self.comm, self.mesh.global_nodes[node].astype(np.int64) * ncomp
+                              + comp)
         vals = allgather_rows(self.comm, np.ascontiguousarray(vector[nz], dtype=float))
         order = np.argsort(dofs)
         return dofs[order], vals[order]

@@ -9,7 +9,7 @@ import pytest
 from mpi4py import MPI
 
 from parsolve.errors import InputError
-from parsolve.mesh.distribute import distribute
+from parsolve.mesh.distribute import COMPONENT_MARGIN, distribute, index_dtype
 from parsolve.mesh.generators import box, plate_with_hole, rectangle
 from parsolve.mesh.local_regions import LocalRegions, allgather_rows
 from parsolve.mesh.partition import partition
@@ -48,6 +48,8 @@ def test_parts_are_the_replicated_partition(name, method, comm):
     assert np.all(np.diff(part.new_of_old[ghosts]) > 0)
     assert np.array_equal(local.node_new, part.new_of_old[local.global_nodes])
     assert np.array_equal(local.node_owner, part.node_part[local.global_nodes])
+    assert np.array_equal(local.owner_of(local.cells), part.node_part[whole.cells[local.global_cells]])
+    assert np.all(local.node_owner[:local.n_owned] == rank)
     assert np.array_equal(local.points, whole.points[local.global_nodes])
     assert np.array_equal(local.global_nodes[local.cells], whole.cells[local.global_cells])
     assert local.num_global_points == whole.num_points
@@ -58,6 +60,28 @@ def test_parts_are_the_replicated_partition(name, method, comm):
     assert np.array_equal(cells, np.arange(whole.num_cells))
     nodes = np.sort(allgather_rows(comm, local.global_nodes[:local.n_owned]))
     assert np.array_equal(nodes, np.arange(whole.num_points))
+
+
+@pytest.mark.parametrize("name", sorted(MESHES))
+def test_index_arrays_are_int32_when_they_fit(name, comm):
+    """A part keeps no owner array (it follows from the global numbers), and its index arrays
+    are int32 at these sizes: 4 bytes per entry against the whole mesh's 8."""
+    whole, local = parts(name, comm)
+    assert "node_owner" not in vars(local)
+    for key in ("cells", "global_nodes", "global_cells", "node_new"):
+        assert getattr(local, key).dtype == np.int32, key
+    for groups in (local.cell_groups, local.facet_groups, local.node_groups):
+        assert all(ids.dtype == np.int32 for ids in groups.values())
+    assert local.node_owner.dtype == np.int32
+
+
+def test_index_dtype_keeps_int64_where_a_number_can_pass_int32():
+    limit = 2**31 - 1
+    assert index_dtype(limit) == np.int32 and index_dtype(limit + 1) == np.int64
+    # node numbers are multiplied by up to COMPONENT_MARGIN components into DOF numbers
+    nodes = limit // COMPONENT_MARGIN
+    assert index_dtype(nodes, COMPONENT_MARGIN) == np.int32
+    assert index_dtype(nodes + 1, COMPONENT_MARGIN) == np.int64
 
 
 def test_a_part_is_smaller_than_the_whole(comm):
