@@ -37,7 +37,7 @@ def bodies_distributed(comm, mesh) -> np.ndarray:
     crossing k parts takes about k rounds (only run when a solve has failed)."""
     n, n_owned, size = mesh.num_points, mesh.n_owned, comm.size
     label = np.asarray(mesh.global_nodes, dtype=np.int64).copy()
-    owner = np.searchsorted(mesh.node_ranges, mesh.node_new[n_owned:], side="right") - 1
+    owner = mesh.owner_of(np.arange(n_owned, n))
     order = np.argsort(owner, kind="stable")
     counts = np.bincount(owner, minlength=size)
     bounds = np.concatenate([[0], np.cumsum(counts)])
@@ -99,8 +99,7 @@ def _unsupported_distributed(model, checked) -> list[str]:
     label = bodies_distributed(comm, mesh)
     n_owned = mesh.n_owned
     owned_ids = np.asarray(mesh.global_nodes[:n_owned], dtype=np.int64)  # increasing input id
-    node_owner = np.searchsorted(mesh.node_ranges, mesh.node_new, side="right") - 1
-    mine = node_owner[mesh.cells].min(axis=1) == comm.rank
+    mine = mesh.owner_of(mesh.cells).min(axis=1) == comm.rank
     cell_label = label[mesh.cells[mine, 0]]
     cell_ids = np.asarray(mesh.global_cells, dtype=np.int64)[mine]
     names = np.unique(np.concatenate(comm.allgather(np.unique(cell_label))))

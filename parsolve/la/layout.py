@@ -42,7 +42,7 @@ class Layout:
     def new_dof(self, dofs: np.ndarray) -> np.ndarray:
         """Input DOF numbers (node * ncomp + c) to the partition's numbering."""
         dofs = np.asarray(dofs, dtype=np.int64)
-        return self.part.new_of_old[dofs // self.ncomp] * self.ncomp + dofs % self.ncomp
+        return self.part.new_of_old[dofs // self.ncomp].astype(np.int64) * self.ncomp + dofs % self.ncomp
 
     def q_index(self, new_dofs: np.ndarray) -> np.ndarray:
         """Saddle index of primal DOFs given in the new numbering."""

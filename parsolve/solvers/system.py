@@ -109,7 +109,7 @@ class SaddleSystem:
         """Who sends this rank the values of its ghost nodes' DOFs."""
         mesh, nc = self.model.mesh, self.model.ncomp
         ghost_dofs = np.arange(mesh.n_owned * nc, mesh.num_points * nc)
-        owner = np.repeat(mesh.node_owner[mesh.n_owned:], nc)
+        owner = np.repeat(mesh.owner_of(np.arange(mesh.n_owned, mesh.num_points)), nc)
         return GhostExchange(self.comm, self.saddle_of_input[ghost_dofs], owner, self.offset)
 
     def _elimination_setup(self) -> None:
