@@ -81,3 +81,31 @@ class PartValues:
         out = np.full((self.mesh.n_owned, values.shape[1]), fill)
         out[local] = values[own]
         return OwnedRows(out)
+
+    def node_rows(self, rows: list, u: np.ndarray) -> list[np.ndarray]:
+        """Values of ``Rows`` (``parsolve.contact.rows``, nodes as input ids) for a nodal field
+        u (npoints, k) of this rank's nodes, every rank the same: on a replicated mesh
+        ``rows.apply(u)``; on a distributed one the entries on owned nodes, summed over the
+        ranks in one reduction of the rows' total size (each entry counted once)."""
+        if not self.distributed:
+            return [r.apply(u) for r in rows]
+        parts = []
+        for r in rows:
+            own, local = self.owned_nodes(r.node)
+            parts.append(np.bincount(r.row[own], weights=r.coef[own] * u[local, r.comp[own]],
+                                     minlength=r.nrows).astype(float, copy=False))
+        out = np.concatenate(parts) if parts else np.zeros(0)
+        self.comm.Allreduce(MPI.IN_PLACE, out, op=MPI.SUM)
+        return np.split(out, np.cumsum([r.nrows for r in rows])[:-1])
+
+    def node_sum(self, nodes: np.ndarray, values: np.ndarray) -> np.ndarray:
+        """Per input node of ``nodes``, ``values`` (one per node, computed on this rank's
+        nodes) taken where the node is owned and summed over the ranks: each node's value from
+        its owner, the same on every rank (one reduction of the nodes' size)."""
+        values = np.asarray(values, dtype=float)
+        if not self.distributed:
+            return values
+        own, _ = self.owned_nodes(nodes)
+        out = np.where(own.reshape(own.shape + (1,) * (values.ndim - 1)), values, 0.0)
+        self.comm.Allreduce(MPI.IN_PLACE, out, op=MPI.SUM)
+        return out

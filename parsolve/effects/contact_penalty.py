@@ -40,6 +40,15 @@ a value update of the fixed pattern. A deformable master surface (slave node + m
 nodes) needs node pairs that no cell holds: it is refused (exit 2) until the system's pattern
 takes contact elements (see the report of this work).
 
+**On a distributed mesh** (each rank its part) the pairing is the relations form's, whole on
+every rank in input ids (the surfaces gathered once). The areas A_i come from each rank's
+facets through its owned slave nodes, summed over the ranks; the gaps g and g_T of every
+paired node from its owner's displacement, one reduction of the pairing's size per
+evaluation. The forces, the states and every decision of the augmented Lagrangian (settled,
+the augmentation's change and stop) are then computed from the same whole arrays on every
+rank: the ranks agree. Each owned slave node's block and force go in through one of the
+rank's cells (a ghost node's are its owner's); outputs are each rank's owned rows.
+
 Scene keys (besides those of ``parsolve.effects.contact``)::
 
     formulation = "penalty"          # "relations" (default) | "penalty" | "augmented_lagrangian"
@@ -58,6 +67,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from parsolve.contact.friction import OPEN, SLIP, STICK
+from parsolve.contact.part_values import PartValues
 from parsolve.effects import contact
 from parsolve.effects.base import Effect
 from parsolve.effects.compose import NodeBlocks, node_places
@@ -123,6 +133,20 @@ def build(spec: BaselineSpec, mesh, regions, fields, scene) -> Effect:
     return cls(spec, mesh, regions, fields, scene)
 
 
+def slave_areas(values: PartValues, mesh, slave: np.ndarray, thickness: float) -> np.ndarray:
+    """``nodal_areas`` of the paired slave nodes (input ids), every rank the same. On a part
+    each rank computes them on its local facets and keeps its owned nodes' (every cell through
+    an owned node is local, so a boundary facet through it is one of the whole mesh and all of
+    them are here), summed over the ranks: one reduction of the pairing's size."""
+    if not values.distributed:
+        return nodal_areas(mesh, slave, thickness)
+    local = values.local_nodes(slave)
+    here = local >= 0
+    area = np.zeros(len(slave))
+    area[here] = nodal_areas(mesh, local[here], thickness)
+    return values.node_sum(slave, area)
+
+
 def nodal_areas(mesh, nodes: np.ndarray, thickness: float) -> np.ndarray:
     """Tributary area of each node (n,): the consistent nodal force of a unit pressure on the
     boundary facets all of whose nodes are in ``nodes`` (2D: length × thickness)."""
@@ -152,11 +176,16 @@ class PenaltyContact(Effect):
         self.spec, self.mesh, self.fields_ = spec, mesh, fields
         self.name = f"contact {spec.name} ({spec.formulation})"
         self.pairing, self.nrows, self.trows = geo.pairing, geo.nrows, geo.trows
+        # input ids → this rank's nodes (a part: owned + ghosts); the element-like blocks go
+        # in through the owned slave nodes only (each node's force added once)
+        self.values = geo.values
+        self.owned_slave = np.flatnonzero(self.values.owned_nodes(geo.pairing.slave)[0])
+        self.owned_local = self.values.owned_nodes(geo.pairing.slave)[1]
         self.symmetric = spec.mu == 0.0
         p = self.pairing
         dim = mesh.dim
         thickness = scene.thickness if dim == 2 else 1.0
-        area = nodal_areas(mesh, p.slave, thickness)
+        area = slave_areas(self.values, mesh, p.slave, thickness)
         area = np.where(area > 0, area, area[area > 0].mean() if np.any(area > 0) else 1.0)
         self.h = float((area.mean() / thickness) ** (1.0 / (dim - 1)))
         if spec.penalty is None:
@@ -179,9 +208,12 @@ class PenaltyContact(Effect):
         return values["u"]
 
     def gaps(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(g (n,), g_T (n, dim-1)): linearised gap g0 + Dn·q and tangential displacement."""
+        """(g (n,), g_T (n, dim-1)): linearised gap g0 + Dn·q and tangential displacement at
+        every paired node, every rank alike (u: this rank's nodes; on a part each node's rows
+        from its owner, one reduction of the pairing's size: collective)."""
         p = self.pairing
-        return p.gap + self.nrows.apply(u), self.trows.apply(u).reshape(len(p), -1)
+        gn, gt = self.values.node_rows([self.nrows, self.trows], u)
+        return p.gap + gn, gt.reshape(len(p), -1)
 
     def forces(self, u: np.ndarray, state: dict, lam_n: np.ndarray, lam_t: np.ndarray) -> dict:
         """Normal and friction forces at the displacement u (all nodes, every rank alike)."""
@@ -245,18 +277,19 @@ class PenaltyContact(Effect):
         node_force = -f["pN"][:, None] * p.normal + np.einsum("mjx,mj->mx", p.tangents, f["t"])
         cell, local = self._node_places(cells)
         has = cell >= 0
+        which = self.owned_slave[has]
         nodes = self.mesh.cells[cells]
         fe = np.zeros(nodes.shape + (self.mesh.dim,))
-        fe[cell[has], local[has]] = node_force[has]
-        k = self.node_tangents(f)[has]
+        fe[cell[has], local[has]] = node_force[which]
+        k = self.node_tangents(f)[which]
         blocks = NodeBlocks(k.reshape(len(k), -1).T.copy(), cell[has], local[has])
         return {"u": fe}, [("u", "u", blocks)], trial, None
 
     def _node_places(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(cell, local node) of one of the rank's cells holding each slave node (-1: none);
-        computed once per set of cells."""
+        """(cell, local node) of one of the rank's cells holding each owned slave node
+        (``owned_slave``; -1: none); computed once per set of cells."""
         if self._places[0] is not cells:
-            self._places = (cells, node_places(self.mesh.cells[cells], self.pairing.slave))
+            self._places = (cells, node_places(self.mesh.cells[cells], self.owned_local))
         return self._places[1]
 
     # ------------------------------------------------------------------ outputs
@@ -266,19 +299,12 @@ class PenaltyContact(Effect):
         tangent basis, gap (the actual one: negative where it penetrates), slip (tangential
         displacement), state (−1 not a contact node, 0 open, 1 stick, 2 slip)."""
         f, p, name = self._last, self.pairing, self.spec.name
-        npts, dm1 = self.mesh.num_points, self.mesh.dim - 1
-
-        def nodal(values, k=1):
-            out = np.zeros((npts, k))
-            out[p.slave] = np.asarray(values).reshape(len(p), k)
-            return out
-
-        state = np.full((npts, 1), -1.0)
-        state[p.slave, 0] = f["state"]
-        return {f"{name}_normal_reaction": nodal(f["pN"]),
-                f"{name}_tangential_reaction": nodal(-f["t"], dm1),
-                f"{name}_gap": nodal(f["g"]), f"{name}_slip": nodal(f["gT"], dm1),
-                f"{name}_state": state}, {}
+        # over every node (0 elsewhere; state -1), or this rank's owned rows on a part
+        nodal = self.values.nodal
+        return {f"{name}_normal_reaction": nodal(p.slave, f["pN"]),
+                f"{name}_tangential_reaction": nodal(p.slave, -f["t"]),
+                f"{name}_gap": nodal(p.slave, f["g"]), f"{name}_slip": nodal(p.slave, f["gT"]),
+                f"{name}_state": nodal(p.slave, f["state"], fill=-1.0)}, {}
 
 
 class AugmentedContact(PenaltyContact):

@@ -22,7 +22,7 @@ class Entry:
     regions: Callable = lambda spec: []
     evolutions: Callable = lambda spec: []
     # works on one rank's part of a distributed mesh (its cells, its owned rows); or a
-    # function of the spec when that depends on it (contact: the baselines do not)
+    # function of the spec when that depends on it
     distributed: bool | Callable = False
 
     def on_parts(self, spec) -> bool:
@@ -65,8 +65,8 @@ EFFECTS: dict[str, Entry] = {
                                               for name, _, key in spec.saturation],
                         evolutions=lambda spec: [(spec.evolution, spec.key + ".evolution")],
                         distributed=True),
-    # the relations form on parts (surfaces gathered once); the penalty and augmented-
-    # Lagrangian baselines keep the replicated mesh
+    # on parts (surfaces gathered once), the relations form and the penalty and augmented-
+    # Lagrangian baselines alike
     "contact": Entry("contact", True, _parse_contact, _build_contact, coupling=True,
-                     distributed=lambda spec: not isinstance(spec, contact_penalty.BaselineSpec)),
+                     distributed=True),
 }

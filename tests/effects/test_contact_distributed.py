@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from conftest import assert_same_results
+from conftest import CONFIGS, assert_same_results
 from parsolve.contact.friction import SLIP, STICK
 from parsolve.errors import InputError
 from parsolve.model import build_model, distributed_mesh
@@ -71,6 +71,51 @@ def test_oblique_pull_3d_on_parts_is_the_replicated_run(run):
     np.testing.assert_allclose(parts["relations/base_normal/normal_force"][:, 0], p, rtol=1e-12)
     state = parts["fields/base_state"][-1, :, 0]
     assert np.any(state == SLIP) and np.any(state == STICK)          # partial slip
+
+
+@pytest.mark.parametrize("formulation, extra", [
+    ("penalty", "penalty = 1e6"),
+    ("augmented_lagrangian", "augmentation_tolerance = 1e-9"),
+])
+def test_block_baselines_on_parts_are_the_replicated_run(run, formulation, extra):
+    """contact_block_friction.toml (p = 10 on a rough plane, μ = 0.3) with the penalty or the
+    augmented-Lagrangian baseline, the top shifted by 0.01 in 5 steps (cut steps included:
+    stick, slip spreading, the block sliding at the end): on the parts the replicated run to
+    1e-10 (states exactly, the same steps and iterations); Σ Rn = p, the friction balancing
+    the pull (1e-9), μN = 3 once the block slides; the penalty's penetration is Rn / (ε A)
+    (ε = 1e6, A = 1/8 at an inner node), the augmented Lagrangian's gap closed.
+
+    (Not further: once every node slides, the augmented Lagrangian's converged friction sits on
+    the cone, |t_tr| = μ p_N to round-off, and whether a node sticks for one iteration, which
+    adds iterations, varies from run to run on the replicated mesh itself at 2 ranks.)"""
+    text = (CONFIGS / "contact_block_friction.toml").read_text()
+    text = text.replace("friction = 0.3", f'friction = 0.3\nformulation = "{formulation}"\n{extra}')
+    text = text.replace("value = 0.02", "value = 0.01").replace("count = 10", "count = 5")
+    text = text.replace('[output]\nfile = ', '# file = ')
+    # as test_contact_baselines: status cycles of the inner Newton cut some steps
+    text += "\n[nonlinear]\nmax_iterations = 15\n"
+    parts, whole = both_meshes(run, text, f"block_{formulation}")
+    assert_same_results(parts, whole)
+    np.testing.assert_array_equal(parts["steps/iterations"], whole["steps/iterations"])
+    rn = parts["fields/base_normal_reaction"][:, :, 0]
+    rt = parts["fields/base_tangential_reaction"][:, :, 0]
+    np.testing.assert_allclose(rn.sum(axis=1), 10.0, rtol=1e-10)
+    pull = parts["relations/shift/multiplier"].sum(axis=1)
+    np.testing.assert_allclose(rt.sum(axis=1), -pull, rtol=1e-9)
+    sliding = np.all(parts["fields/base_state"][:, :, 0] != STICK, axis=1)
+    assert sliding[-1] and not sliding[0]
+    np.testing.assert_allclose(rt[sliding].sum(axis=1), 3.0, rtol=1e-9)
+    gap = parts["fields/base_gap"][:, :, 0]
+    if formulation == "penalty":
+        pts = parts["mesh/points"]
+        inner = np.isclose(pts[:, 1], 0.0) & (pts[:, 0] > 1e-9) & (pts[:, 0] < 1 - 1e-9)
+        closed = rn[:, inner] > 0
+        assert closed.sum() > 20
+        np.testing.assert_allclose(gap[:, inner][closed], -rn[:, inner][closed] / (1e6 / 8),
+                                   rtol=1e-12)
+    else:
+        u = parts["fields/displacement"]
+        assert -gap.min() < 1e-9 * np.abs(u).max()
 
 
 @pytest.mark.parametrize("contact, key, words", [

@@ -11,26 +11,35 @@ from parsolve.scene import load_scene
 SOLUBILITY = sorted(p.name for p in CONFIGS.glob("solubility*.toml"))
 
 
-def penalty_contact(path):
-    """contact_block_friction.toml with the penalty baseline instead of relations."""
+def penalty_contact(path, formulation: str = "penalty"):
+    """contact_block_friction.toml with a baseline (penalty by default) instead of relations."""
     text = (CONFIGS / "contact_block_friction.toml").read_text()
-    path.write_text(text.replace("friction = 0.3", 'friction = 0.3\nformulation = "penalty"'))
+    path.write_text(text.replace("friction = 0.3", f'friction = 0.3\nformulation = "{formulation}"'))
     return path
 
 
-def test_effects_that_need_the_whole_mesh_keep_it(comm, shared_tmp):
-    """Contact's penalty / augmented-Lagrangian baselines (their contact forces are summed
-    over the slave nodes' cells: the replicated mesh's)."""
-    path = shared_tmp / "penalty_contact.toml"
+@pytest.mark.parametrize("formulation", ["penalty", "augmented_lagrangian"])
+def test_contact_baselines_get_the_parts(comm, shared_tmp, formulation):
+    """Contact's penalty / augmented-Lagrangian baselines run on the parts too (no effect
+    keeps the whole mesh): a rank holds its part, the pairing is whole on every rank in input
+    ids, the tributary areas (hence the per-node penalties) are the replicated mesh's."""
+    path = shared_tmp / f"{formulation}_contact.toml"
     if comm.rank == 0:
-        penalty_contact(path)
+        penalty_contact(path, formulation)
     comm.Barrier()
     scene = load_scene(path)
-    assert scene.effect_specs["contact"][0].formulation == "penalty"
+    assert scene.effect_specs["contact"][0].formulation == formulation
     scene.solver.mesh = "distributed"
     model = build_model(scene, comm)
-    assert not model.distributed
-    assert model.mesh.num_points == build_model(load_scene(path)).mesh.num_points
+    assert model.distributed == (comm.size > 1)
+    whole = build_model(load_scene(path))
+    assert model.mesh.num_points < whole.mesh.num_points or comm.size == 1
+    ours, theirs = model.effects[-1], whole.effects[-1]
+    np.testing.assert_array_equal(ours.pairing.slave, theirs.pairing.slave)
+    np.testing.assert_array_equal(ours.pairing.gap, theirs.pairing.gap)
+    np.testing.assert_allclose(ours.eps_n, theirs.eps_n, rtol=1e-14)
+    # Σ A_i: the bottom's length 1 (thickness 1): the areas are complete, each node once
+    np.testing.assert_allclose(ours.eps_n.sum(), ours.penalty, rtol=1e-12)
 
 
 def test_relations_contact_gets_the_parts(comm):
