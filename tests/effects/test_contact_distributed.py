@@ -2,7 +2,8 @@
 contact surfaces gathered once, rows in input DOFs. Node-to-segment with friction, mortar
 with friction (2D, a meshed foundation), 3D friction against a plane: the same results as the
 replicated mesh (1e-10 of each quantity, active rows and states exactly) and the known
-resultants; the bad surfaces raised on every rank. At 1 rank both runs are replicated."""
+resultants; the bad surfaces raised on every rank. The penalty and augmented-Lagrangian
+baselines on the parts: the replicated run too. At 1 rank both runs are replicated."""
 
 from __future__ import annotations
 

@@ -14,7 +14,8 @@ SOLUBILITY = sorted(p.name for p in CONFIGS.glob("solubility*.toml"))
 def penalty_contact(path, formulation: str = "penalty"):
     """contact_block_friction.toml with a baseline (penalty by default) instead of relations."""
     text = (CONFIGS / "contact_block_friction.toml").read_text()
-    path.write_text(text.replace("friction = 0.3", f'friction = 0.3\nformulation = "{formulation}"'))
+    path.write_text(text.replace("friction = 0.3",
+                                 f'friction = 0.3\nformulation = "{formulation}"'))
     return path
 
 
