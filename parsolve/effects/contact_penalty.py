@@ -282,7 +282,8 @@ class PenaltyContact(Effect):
         fe = np.zeros(nodes.shape + (self.mesh.dim,))
         fe[cell[has], local[has]] = node_force[which]
         k = self.node_tangents(f)[which]
-        blocks = NodeBlocks(k.reshape(len(k), -1).T.copy(), cell[has], local[has])
+        # (a rank may hold no slave node: k is (0, dim, dim))
+        blocks = NodeBlocks(k.reshape(len(k), self.mesh.dim ** 2).T.copy(), cell[has], local[has])
         return {"u": fe}, [("u", "u", blocks)], trial, None
 
     def _node_places(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
