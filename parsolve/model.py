@@ -221,8 +221,8 @@ def _distributed_mesh(scene: Scene, comm) -> LocalMesh:
     part = distribute(comm, whole, scene.solver.partitioner, graph)
     del whole
     # the solve, each rank its share (every rank's machine: the verdict is collective)
-    source, key = ((str(scene.mesh.file), "mesh.file") if scene.mesh.file is not None
-                   else (scene.source, "mesh.generator"))
+    source, key = mesh_source(scene)
+    key = "mesh.generator" if key == "mesh" else key   # as build_mesh's memory check names it
     memory.check_fits_distributed(part.num_global_points, part.dim, scene.solver.preset, source,
                                   key, f"a mesh of {part.num_global_cells} {part.cell_type} cells")
     return part
