@@ -9,7 +9,7 @@ import numpy as np
 from parsolve.effects.base import Effect
 from parsolve.errors import InputError
 from parsolve.fem import kernels
-from parsolve.fem.element_matrices import ElementMatrices
+from parsolve.fem.element_matrices import CellKernel, ElementMatrices
 from parsolve.fem.elements import element
 from parsolve.fem.materials.elastic import Elastic
 from parsolve.fem.materials.mazars import Mazars
@@ -101,21 +101,19 @@ class Elasticity(Effect):
                                     points=points)
 
     def stiffness(self, cells: np.ndarray) -> ElementMatrices:
-        """Element stiffness of the given cells, factored (geometry × constant Hooke tensor).
+        """Element stiffness of the given cells, factored (geometry × constant Hooke tensor)
+        and blocked: the geometric part (d², nen, nen, nc) is computed a block of cells at a
+        time when the assembly reduces it (``CellKernel``), never for every cell at once."""
+        mesh, d = self.mesh, self.mesh.dim
 
-        The geometric part (d², nen, nen, nc: 120 MiB at 2D 375k DOFs) lives as long as the
-        caller holds the result: after a single assembly (a linear run) nothing of it stays
-        for the factorization, the solve and the steps. From the second call on (a run that
-        re-assembles: a transient step of a new size), it is kept and refilled in place, as
-        allocating it anew each time costs page faults (scripts/results/bench_post.md)."""
-        coords = self.mesh.points[self.mesh.cells[cells]]
-        G, wdet = kernels.gradients_cell_last(coords, self.mesh.cell_type, thickness=self.thickness)
-        self._assemblies = getattr(self, "_assemblies", 0) + 1
-        P = kernels.geometric_part(G, wdet, out=getattr(self, "_work", None))
-        if self._assemblies > 1:
-            self._work = P
-        tensors = np.stack([kernels.voigt_to_tensor(C, self.mesh.dim) for C in self.C])
-        return ElementMatrices(geometric=P, tensors=tensors, cell_material=self.cell_model[cells])
+        def geometric(sel, out):
+            coords = mesh.points[mesh.cells[cells[sel]]]
+            G, wdet = kernels.gradients_cell_last(coords, mesh.cell_type, thickness=self.thickness)
+            return kernels.geometric_part(G, wdet, out=out)
+
+        tensors = np.stack([kernels.voigt_to_tensor(C, d) for C in self.C])
+        kernel = CellKernel(geometric, len(cells), d * d, mesh.cells.shape[1])
+        return ElementMatrices(tensors=tensors, cell_material=self.cell_model[cells], kernel=kernel)
 
     def _stresses(self, cells: np.ndarray, u: np.ndarray):
         """(stress at the cells' nodes (nv, nen, nc), or (nv, nc) where it is constant over the

@@ -4,28 +4,101 @@ Either *factored*: ``K_e[ij] = Σ_kl M[material][kl, ij] P[kl]`` with a geometri
 ``P`` (d², nen, nen, nc) and constant material tensors ``M`` (nmat, d², d²) -- then the
 material contraction can be done after summing over cells, on far fewer numbers -- or *full*:
 the values (d², nen, nen, nc) themselves (a tangent that varies from point to point).
+
+Either held (the arrays themselves) or *blocked*: a ``CellKernel`` that computes them for a
+range of cells into a reused work array, so that a reduction or a product goes over cell
+blocks of a bounded size (``BLOCK_BYTES`` of element values) and never holds every cell's
+element matrices at once: the memory beside the matrix stays bounded whatever the mesh size,
+and the first assembly does not pay page faults on a mesh-sized array.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable, Iterator
 
 import numpy as np
 
+BLOCK_BYTES = 4 << 20   # element values of one block of cells (a few MB: stays in cache-ish
+#                         memory, small beside any matrix worth blocking for)
 
-@dataclass
+
+def block_cells(bytes_per_cell: int, budget: int | None = None) -> int:
+    """Cells per block for element arrays of ``bytes_per_cell`` bytes a cell."""
+    return max(1, int(BLOCK_BYTES if budget is None else budget) // max(int(bytes_per_cell), 1))
+
+
+def cell_ranges(ncells: int, size: int) -> Iterator[slice]:
+    """Consecutive blocks of at most ``size`` cells."""
+    for start in range(0, ncells, size):
+        yield slice(start, min(start + size, ncells))
+
+
+class CellKernel:
+    """Element arrays of a range of cells on demand: ``compute(cells, out)`` returns the
+    (rows, nen, nen, len(cells)) values of the cells ``cells`` (a slice or an index array of
+    the kernel's cells), written into ``out`` when it has that shape (the reused work array)."""
+
+    def __init__(self, compute: Callable, ncells: int, rows: int, nen: int,
+                 block: int | None = None):
+        self.compute, self.ncells, self.rows, self.nen = compute, ncells, rows, nen
+        self.block = block_cells(rows * nen * nen * 8) if block is None else max(int(block), 1)
+
+    def blocks(self) -> Iterator[tuple[slice, np.ndarray]]:
+        """(cells, values) block after block, the values in one work array reused."""
+        work = None
+        for sl in cell_ranges(self.ncells, self.block):
+            n = sl.stop - sl.start
+            if work is None or work.shape[-1] != n:
+                work = np.empty((self.rows, self.nen, self.nen, n))
+            yield sl, self.compute(sl, work)
+
+    def all(self) -> np.ndarray:
+        """Every cell's values at once (for callers that need them whole: small sets)."""
+        return self.compute(slice(0, self.ncells), None)
+
+
+SPAN_FACTOR = 8   # a block's slots are bincounted over their range when it is at most this
+#                   many times their number (numbering that follows the mesh), else compressed
+
+
 class ElementMatrices:
-    values: np.ndarray | None = None          # full: (d², nen, nen, nc)
-    geometric: np.ndarray | None = None       # factored: P (d², nen, nen, nc)
-    tensors: np.ndarray | None = None         # factored: M (nmat, d², ncomp²)
-    cell_material: np.ndarray | None = None   # factored: (nc,) index into tensors
+    """Element matrices of a set of cells, factored or full, held or blocked (see above)."""
+
+    def __init__(self, values: np.ndarray | None = None, geometric: np.ndarray | None = None,
+                 tensors: np.ndarray | None = None, cell_material: np.ndarray | None = None,
+                 kernel: CellKernel | None = None):
+        """``kernel``: computes the geometric part (with ``tensors``) or the full values
+        (without) block by block, instead of ``geometric`` / ``values``."""
+        self._values, self._geometric, self.kernel = values, geometric, kernel
+        self.tensors, self.cell_material = tensors, cell_material
+
+    @property
+    def factored(self) -> bool:
+        return self.tensors is not None
+
+    @property
+    def values(self) -> np.ndarray | None:
+        """Full values (d², nen, nen, nc); a blocked full form computes them all here."""
+        if self._values is None and self.kernel is not None and not self.factored:
+            return self.kernel.all()
+        return self._values
+
+    @property
+    def geometric(self) -> np.ndarray | None:
+        """Geometric part P; a blocked factored form computes it for every cell here."""
+        if self._geometric is None and self.kernel is not None and self.factored:
+            return self.kernel.all()
+        return self._geometric
 
     def reduce(self, pair_slot: np.ndarray, npairs: int) -> np.ndarray:
         """Sum over cells into node-pair blocks: (d², npairs)."""
+        if self.kernel is not None:
+            return self._reduce_blocks(pair_slot, npairs)
         slots = _slots(pair_slot)
-        if self.values is not None:
-            return _bincount_rows(slots, self.values.reshape(len(self.values), -1), npairs)
-        P = self.geometric.reshape(len(self.geometric), -1)
+        if not self.factored:
+            return _bincount_rows(slots, self._values.reshape(len(self._values), -1), npairs)
+        P = self._geometric.reshape(len(self._geometric), -1)
         nmat = len(self.tensors)
         if nmat == 1:
             return self.tensors[0].T @ _bincount_rows(slots, P, npairs)
@@ -35,6 +108,77 @@ class ElementMatrices:
             mask = np.tile(self.cell_material == m, nen2).astype(float)
             out += self.tensors[m].T @ _bincount_rows(slots, P * mask, npairs)
         return out
+
+    def _reduce_blocks(self, pair_slot: np.ndarray, npairs: int) -> np.ndarray:
+        """Block after block: element values of a block, summed into the node pairs its slots
+        reach. One material: the geometric parts are summed and contracted once at the end
+        (on the node pairs, fewer numbers than the cells'); several: each block contracted."""
+        k = self.kernel
+        one = self.factored and len(self.tensors) == 1
+        rows = self.tensors.shape[2] if self.factored and not one else k.rows
+        acc = np.zeros((rows, npairs))
+        for sl, V in k.blocks():
+            if self.factored and not one:
+                V = contract(self.tensors, self.cell_material[sl], V)
+            _accumulate(acc, pair_slot[:, :, sl], V.reshape(len(V), -1), npairs)
+        return _left_multiply(self.tensors[0].T, acc) if one else acc
+
+    def block_values(self) -> Iterator[tuple[slice, np.ndarray]]:
+        """(cells, full values of those cells) block after block (held: one block)."""
+        if self.kernel is None:
+            yield slice(0, None), full_values(self)
+            return
+        for sl, V in self.kernel.blocks():
+            yield sl, (contract(self.tensors, self.cell_material[sl], V) if self.factored else V)
+
+    @property
+    def ncells(self) -> int:
+        if self.kernel is not None:
+            return self.kernel.ncells
+        return (self._values if self._values is not None else self._geometric).shape[-1]
+
+
+def contract(tensors: np.ndarray, cell_material: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """Full values Σ_k M[material][k, m] P[k] (m, nen, nen, nc) of geometric parts P."""
+    nmat, _, rows = tensors.shape
+    if nmat == 1:
+        return np.tensordot(tensors[0].T, P, axes=1)
+    out = np.empty((rows,) + P.shape[1:])
+    for m in np.unique(cell_material):  # one product per material present
+        idx = np.flatnonzero(cell_material == m)
+        out[..., idx] = np.tensordot(tensors[m].T, P[..., idx], axes=1)
+    return out
+
+
+def _left_multiply(M: np.ndarray, acc: np.ndarray, chunk: int = 1 << 16) -> np.ndarray:
+    """M @ acc column chunk by column chunk, in place when M is square (no second array of
+    the node pairs' size)."""
+    out = acc if M.shape[0] == acc.shape[0] else np.empty((M.shape[0], acc.shape[1]))
+    for s in range(0, acc.shape[1], chunk):
+        out[:, s:s + chunk] = M @ acc[:, s:s + chunk]
+    return out
+
+
+def _accumulate(acc: np.ndarray, pair_slot: np.ndarray, values: np.ndarray, npairs: int) -> None:
+    """acc[:, slot] += values summed by slot, for one block's slots (nen, nen, nb) and values
+    (rows, nen·nen·nb) in the same order; slot ``npairs`` (rows owned elsewhere) dropped. The
+    counts go over the slots' range (contiguous in a numbering that follows the mesh), or over
+    the slots present when that range is wide."""
+    slots = pair_slot.astype(np.intp).ravel()
+    if slots.size == 0:
+        return
+    lo, hi = int(slots.min()), int(slots.max()) + 1
+    if hi - lo <= SPAN_FACTOR * slots.size:
+        slots -= lo
+        top = min(hi, npairs) - lo
+        for k, v in enumerate(values):
+            acc[k, lo:lo + top] += np.bincount(slots, weights=v, minlength=hi - lo)[:top]
+        return
+    keys, inv = np.unique(slots, return_inverse=True)
+    keep = keys < npairs
+    dest = keys[keep]
+    for k, v in enumerate(values):
+        acc[k, dest] += np.bincount(inv, weights=v, minlength=keys.size)[keep]
 
 
 def _slots(pair_slot: np.ndarray) -> np.ndarray:
@@ -52,19 +196,23 @@ def _bincount_rows(slots: np.ndarray, values: np.ndarray, npairs: int) -> np.nda
 
 
 def full_values(m: ElementMatrices) -> np.ndarray:
-    """The element matrices (d², nen, nen, nc) whatever their form."""
-    if m.values is not None:
+    """The element matrices (d², nen, nen, nc) whatever their form (a blocked one: all)."""
+    if not m.factored:
         return m.values
-    M = m.tensors[m.cell_material]                      # (nc, d², d²)
-    return np.einsum("ckm,kabc->mabc", M, m.geometric)
+    return contract(m.tensors, m.cell_material, m.geometric)
 
 
 def apply(m: ElementMatrices, ue: np.ndarray) -> np.ndarray:
-    """Element products K_e u_e: ue (nc, nen, dj) → (nc, nen, di), d² = di·dj."""
-    V = full_values(m)
+    """Element products K_e u_e: ue (nc, nen, dj) → (nc, nen, di), d² = di·dj; block by
+    block for a blocked form."""
     nc, nen, dj = ue.shape
-    di = V.shape[0] // dj
-    return np.einsum("ijabc,cbj->cai", V.reshape(di, dj, nen, nen, nc), ue)
+    rows = m.tensors.shape[2] if m.factored else \
+        (m.kernel.rows if m.kernel is not None else len(m.values))
+    out = np.empty((nc, nen, rows // dj))
+    for sl, V in m.block_values():
+        n = V.shape[-1]
+        out[sl] = np.einsum("ijabc,cbj->cai", V.reshape(rows // dj, dj, nen, nen, n), ue[sl])
+    return out
 
 
 @dataclass
