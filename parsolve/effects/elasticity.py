@@ -9,7 +9,7 @@ import numpy as np
 from parsolve.effects.base import Effect
 from parsolve.errors import InputError
 from parsolve.fem import kernels
-from parsolve.fem.element_matrices import CellKernel, ElementMatrices
+from parsolve.fem.element_matrices import CellKernel, ElementMatrices, block_cells, cell_ranges
 from parsolve.fem.elements import element
 from parsolve.fem.materials.elastic import Elastic
 from parsolve.fem.materials.mazars import Mazars
@@ -21,6 +21,7 @@ MODELS = {"elastic": Elastic, "mazars": Mazars, "von_mises": VonMises}
 
 
 AFFINE = ("triangle", "tetra")   # constant gradients: one strain per cell
+POST_BLOCK_BYTES = 2 << 20       # work arrays of one block of the stress post-processing
 
 class Elasticity(Effect):
     """Materials per cell (later entries of the scene override earlier ones on shared cells)."""
@@ -80,9 +81,8 @@ class Elasticity(Effect):
         npts = self.mesh.num_points
         nodes = self.mesh.cells[owned]
         if extra is None:
-            at_nodes, sig, vol = self._stresses(owned, u)
-            return {"stress": kernels.nodal_sums(nodes, at_nodes, vol, npts)}, \
-                {"stress": np.ascontiguousarray(sig.T)}
+            sums, cell = self._stress_outputs(owned, u)
+            return {"stress": sums}, {"stress": cell}
         stress_qp, states = extra
         pos = np.searchsorted(local_cells, owned)
         wq = kernels.weights_cell_last(self.mesh.points[nodes], self.mesh.cell_type,
@@ -143,18 +143,34 @@ class Elasticity(Effect):
             sig[..., idx] = (C @ part.reshape(nv, -1)).reshape(part.shape)
         return sig
 
+    def _stress_outputs(self, cells: np.ndarray, u: np.ndarray) -> tuple[tuple, np.ndarray]:
+        """((nodal stress sums (npoints, nv), weights (npoints,)), cell-mean stress (nc, nv))
+        of the given cells, computed a block of cells at a time (``POST_BLOCK_BYTES`` of work
+        arrays): nothing of the cells' size is formed but the cell stress itself."""
+        mesh = self.mesh
+        nen, d = mesh.cells.shape[1], mesh.dim
+        nv = 3 if d == 2 else 6
+        # per cell: the rows (nen, 2d), gradients and strains at the nodes, their stresses
+        size = block_cells(8 * nen * (2 * d + 3 * d * d + 2 * nv), POST_BLOCK_BYTES)
+        cell = np.empty((len(cells), nv))
+        sums, weights = np.zeros((mesh.num_points, nv)), np.zeros(mesh.num_points)
+        for sl in cell_ranges(len(cells), size):
+            at_nodes, sig, vol = self._stresses(cells[sl], u)
+            cell[sl] = sig.T
+            kernels.add_nodal_sums(sums, weights, mesh.cells[cells[sl]], at_nodes, vol)
+        return (sums, weights), cell
+
     def cell_stress(self, cells: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Mean stress over each cell (nc, nv) (Voigt), from the full displacement array u
         (npoints, ncomp)."""
-        return np.ascontiguousarray(self._stresses(cells, u)[1].T)
+        return self._stress_outputs(cells, u)[1]
 
     def nodal_stress_sums(self, cells: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Stress evaluated at each cell's nodes, summed per node with cell-volume weights.
 
         Returns (weighted sums (npoints, nvoigt), weights (npoints,)); the caller adds the
         ranks' sums and divides (a volume-weighted nodal average, as post-processors do)."""
-        at_nodes, _, vol = self._stresses(cells, u)
-        return kernels.nodal_sums(self.mesh.cells[cells], at_nodes, vol, self.mesh.num_points)
+        return self._stress_outputs(cells, u)[0]
 
     # ------------------------------------------------------------ nonlinear materials
 

@@ -343,3 +343,25 @@ def nodal_sums(cells: np.ndarray, values: np.ndarray, vol: np.ndarray,
         sums[:, m] = np.bincount(idx, weights=wv, minlength=npoints)
     weights = np.bincount(idx, weights=np.tile(vol, nen), minlength=npoints)
     return sums, weights
+
+
+def add_nodal_sums(sums: np.ndarray, weights: np.ndarray, cells: np.ndarray, values: np.ndarray,
+                   vol: np.ndarray) -> None:
+    """``nodal_sums`` of one block of cells added into ``sums`` (npoints, k) and ``weights``
+    (npoints,): counted over the block's range of nodes (the nodes of consecutive cells are
+    close in a numbering that follows the mesh), or over the nodes present when it is wide."""
+    nc, nen = cells.shape
+    if nc == 0:
+        return
+    idx = cells.T.astype(np.intp).ravel()                      # (nen, nc) order, as the values
+    lo, hi = int(idx.min()), int(idx.max()) + 1
+    if hi - lo <= 8 * idx.size:
+        idx -= lo
+        dest, n = slice(lo, hi), hi - lo
+    else:
+        dest, idx = np.unique(idx, return_inverse=True)
+        n = dest.size
+    for m, v in enumerate(values):
+        wv = np.broadcast_to(v * vol, (nen, nc)).ravel()
+        sums[dest, m] += np.bincount(idx, weights=wv, minlength=n)
+    weights[dest] += np.bincount(idx, weights=np.tile(vol, nen), minlength=n)
