@@ -21,7 +21,7 @@ MODELS = {"elastic": Elastic, "mazars": Mazars, "von_mises": VonMises}
 
 
 AFFINE = ("triangle", "tetra")   # constant gradients: one strain per cell
-POST_BLOCK_BYTES = 2 << 20       # work arrays of one block of the stress post-processing
+POST_BLOCK_BYTES = 8 << 20       # work arrays of one block of the stress post-processing
 
 class Elasticity(Effect):
     """Materials per cell (later entries of the scene override earlier ones on shared cells)."""
