@@ -120,8 +120,8 @@ class Diffusion(Effect):
         return self.mesh.points[self.mesh.cells[cells]]
 
     def stiffness_blocks(self, cells: np.ndarray):
-        m = kern.conductivity_factored(self._coords(cells), self.mesh.cell_type, self.tensors,
-                                       self.cell_material[cells], self.thickness)
+        m = kern.conductivity_blocks(self.mesh.points, self.mesh.cells[cells], self.mesh.cell_type,
+                                     self.tensors, self.cell_material[cells], self.thickness)
         return [(self.field, self.field, m)]
 
     def mass_blocks(self, cells: np.ndarray, lumped: bool):

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from parsolve.fem.element_matrices import ElementMatrices
+from parsolve.fem.element_matrices import CellKernel, ElementMatrices
 from parsolve.fem.elements import default_degree, element, facet_measure_and_normal, \
     jacobians, polynomial_order, quadrature
 from parsolve.fem import kernels
@@ -85,6 +85,22 @@ def conductivity_factored(coords: np.ndarray, cell_type: str, tensors: np.ndarra
     t = np.asarray(tensors, dtype=float).reshape(-1, d * d, 1)
     return ElementMatrices(geometric=geometric_part(G, wdet), tensors=t,
                            cell_material=np.asarray(cell_material))
+
+
+def conductivity_blocks(points: np.ndarray, cell_nodes: np.ndarray, cell_type: str,
+                        tensors: np.ndarray, cell_material: np.ndarray,
+                        thickness: float = 1.0) -> ElementMatrices:
+    """``conductivity_factored`` of the cells ``cell_nodes`` (nc, nen), blocked: the geometric
+    part is computed a block of cells at a time when it is reduced or applied."""
+    d = points.shape[1]
+
+    def geometric(sel, out):
+        G, wdet = gradients_cell_last(points[cell_nodes[sel]], cell_type, thickness=thickness)
+        return geometric_part(G, wdet, out=out)
+
+    t = np.asarray(tensors, dtype=float).reshape(-1, d * d, 1)
+    kernel = CellKernel(geometric, len(cell_nodes), d * d, cell_nodes.shape[1])
+    return ElementMatrices(tensors=t, cell_material=np.asarray(cell_material), kernel=kernel)
 
 
 def _mass_rule(cell_type: str, thickness: float, coords: np.ndarray):
