@@ -81,7 +81,7 @@ def close(a: np.ndarray, b: np.ndarray) -> None:
 
 @pytest.mark.parametrize("cell", list(MESHES))
 def test_block_size_does_not_change_the_answer(cell, monkeypatch):
-    whole = assembled(cell)
+    whole = assembled(cell)          # the default budget: every cell of these meshes in one block
     monkeypatch.setattr(element_matrices, "block_cells", lambda *args: 7)
     monkeypatch.setattr(elasticity, "block_cells", lambda *args: 7)
     blocked = assembled(cell)
