@@ -72,13 +72,32 @@ def dependent_rows(rows: np.ndarray, dofs: np.ndarray, vals: np.ndarray, nrows: 
     pos[order] = np.arange(order.size)
     block = np.zeros((cols.size, order.size))
     np.add.at(block, (col, pos[r[on]]), v[on])
-    if cols.size < order.size:   # more rows than DOFs: pad, the distances stay the same
-        block = np.vstack([block, np.zeros((order.size - cols.size, order.size))])
-    dist = np.abs(np.diag(np.linalg.qr(block, mode="r")))
-    size = np.linalg.norm(block, axis=0)
-    dep = order[dist <= TOL * np.maximum(size, 1e-300)]
+    dep = order[_dependent_columns(block)]
     out[dep[candidate[dep]]] = True
     return out
+
+
+def _dependent_columns(block: np.ndarray) -> np.ndarray:
+    """Positions of the columns in the span of the columns before them. Householder QR gives
+    each column's distance to the span of the previous ones (|R_kk|) up to the first dependent
+    column only (past it the diagonal no longer measures distances): that column is set aside
+    and the rest factored again, once per dependent column (few: one per held, tied or shared
+    node direction)."""
+    index = np.arange(block.shape[1])
+    out, start = [], 0
+    size = np.maximum(np.linalg.norm(block, axis=0), 1e-300)
+    while index.size > start:
+        sub = block[:, index]
+        if sub.shape[0] < sub.shape[1]:   # more rows than DOFs: pad (distances unchanged)
+            sub = np.vstack([sub, np.zeros((sub.shape[1] - sub.shape[0], sub.shape[1]))])
+        dist = np.abs(np.diag(np.linalg.qr(sub, mode="r")))
+        bad = np.flatnonzero(dist[start:] <= TOL * size[index[start:]])
+        if bad.size == 0:
+            break
+        k = start + int(bad[0])
+        out.append(index[k])
+        index, start = np.delete(index, k), k
+    return np.array(out, dtype=np.int64)
 
 
 def _merged(rows: np.ndarray, dofs: np.ndarray, vals: np.ndarray):

@@ -166,7 +166,9 @@ class NewtonSolver:
             return
         system = self.system
         gap = system.primal_values(self.q) - np.concatenate([r.rhs(t) for r in system.multiplied])
-        scale = max(float(np.abs(system.primal_values(self.q)).max()), 1e-300)
+        # against the rows' values and the displacements (a row at rest on the plane has A q = 0)
+        scale = max(float(np.abs(system.primal_values(self.q)).max()), system.max_abs(self.q),
+                    1e-300)
         bad = self.left_out & (self.active.sign * gap > 1e-9 * scale)
         if bad.any():
             row = int(np.flatnonzero(bad)[0])
