@@ -159,6 +159,24 @@ class NewtonSolver:
         self.left_out = dependent_rows(rows, dofs, vals, active.size, active, candidate, fixed)
         return active & ~self.left_out
 
+    def _close_contact(self) -> bool:
+        """Enforce every contact row that is not (True when there was one): the first solve of
+        a step failed with rows open, which is a body held only by contact (nothing else, or
+        soft supports, in the contact direction: a singular or ill-conditioned operator).
+        Started in contact, the body is held; the active set then opens the rows that pull
+        (a frictional node closing this way sticks or slides as any closing node). No
+        tolerance to guess (``closed``) and the same answer: the set is decided as always.
+        Every rank decides from the same active set."""
+        if self._rows is None:
+            return False
+        closing = self._rows[3] & ~self.active.active
+        if not closing.any():
+            return False
+        self.active.active[closing] = True
+        self.active.held |= closing
+        self.active.seen.add(self.active.active.tobytes())
+        return True
+
     def _check_left_out(self, t: float) -> None:
         """A left-out row is decided by the rows it depends on: fail when they violate it (a
         node held inside the obstacle), rather than return a penetrating answer."""
@@ -261,23 +279,27 @@ class NewtonSolver:
                 return StepResult(it + predictions, residual, f_int)
             if it == spec.max_iterations:
                 break
-            system.set_active(self._enforceable(self.active.active))
-            mat = system.assemble(kmat)
-            if self._mat is None:
-                self.linear.set_operator(mat)
-                self._mat = mat
-            x, rhs = self._vectors(mat)
-            rhs.array[:] = system.rhs(t, f_int=f_int, q=self.q, f_ext=f_known)[0]
-            try:
-                self.linear.solve(rhs, x)
-            except SolverError as exc:
-                if it == 0:
-                    raise
-                # singular at a later iterate only: the iterates diverged first (a softening
-                # material driven past full damage), which is what the cut step must know
-                history = ", ".join(f"{r:.1e}" for r in self.residual_history[-4:])
-                raise SolverError(f"Newton diverged at t = {t:.6g}, iteration {it} (relative "
-                                  f"residuals ..., {history}): {exc}") from None
+            for attempt in (0, 1):
+                system.set_active(self._enforceable(self.active.active))
+                mat = system.assemble(kmat)
+                if self._mat is None:
+                    self.linear.set_operator(mat)
+                    self._mat = mat
+                x, rhs = self._vectors(mat)
+                rhs.array[:] = system.rhs(t, f_int=f_int, q=self.q, f_ext=f_known)[0]
+                try:
+                    self.linear.solve(rhs, x)
+                    break
+                except SolverError as exc:
+                    if it == 0 and attempt == 0 and self._close_contact():
+                        continue   # a body floating until contact: start it in contact
+                    if it == 0:
+                        raise
+                    # singular at a later iterate only: the iterates diverged first (a
+                    # softening material driven past full damage), which the cut step must know
+                    history = ", ".join(f"{r:.1e}" for r in self.residual_history[-4:])
+                    raise SolverError(f"Newton diverged at t = {t:.6g}, iteration {it} (relative "
+                                      f"residuals ..., {history}): {exc}") from None
             x_full = system.gather(x.array)
             dq = system.primal_of(x_full)
             dq_norm = system.max_abs(dq)
