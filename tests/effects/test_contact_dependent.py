@@ -133,3 +133,56 @@ def test_dependent_rows_on_known_blocks():
     enforced[:] = [False, True, True, True, True, True]
     dep = dependent_rows(rows, dofs, vals, 6, enforced, candidate, np.zeros(0, np.int64))
     assert dep.tolist() == [False, False, False, False, False, True]
+
+
+BOX = """
+[mesh]
+generator = "box"
+lx = 1.0
+ly = 1.0
+lz = 0.5
+nx = 4
+ny = 4
+nz = 2
+[model]
+hypothesis = "3d"
+[regions]
+corner = {{ point = [0.0, 0.0, 0.0] }}
+but_corner = "z < 1e-9 and (x > 1e-9 or y > 1e-9)"
+[[materials]]
+E = 1000.0
+nu = 0.3
+[[loads]]
+name = "press"
+region = "zmax"
+traction = [1.0, 0.5, -10.0]
+evolution = "constant"
+[[relations]]
+name = "hold"
+type = "dirichlet"
+region = "corner"
+components = ["x", "y", "z"]
+value = 0.0
+[[contact]]
+name = "base"
+slave = "{slave}"
+obstacle = {{ plane = {{ origin = [0.0, 0.0, 0.0], normal = [0.0, 0.0, 1.0] }} }}
+friction = 0.3
+[steps]
+count = 2
+"""
+
+
+def test_held_corner_in_3d_with_friction(run):
+    """The 3D box on a rough plane (three rows per node: normal, along s and across it), its
+    bottom corner held in x, y, z: the corner's three rows are left out, the answer is the
+    one with the corner out of the contact surface."""
+    res = run(BOX.format(slave="zmin"), name="dep_box")
+    ref = run(BOX.format(slave="but_corner"), name="dep_box_ref")
+    u, u_ref = res["fields/displacement"], ref["fields/displacement"]
+    assert np.abs(u_ref[-1]).max() > 1e-3
+    np.testing.assert_allclose(u, u_ref, rtol=0, atol=1e-12 * np.abs(u_ref).max())
+    np.testing.assert_allclose(res["relations/hold/multiplier"],
+                               ref["relations/hold/multiplier"], atol=1e-11)
+    np.testing.assert_allclose(res["relations/base_normal/normal_force"],
+                               ref["relations/base_normal/normal_force"], rtol=1e-12)
