@@ -39,22 +39,40 @@ and coordinates: the surfaces' size), every rank pairs them as the replicated me
 the rows stay in input DOFs; per iteration only row values (``PartValues``: owned entries and
 one reduction of the rows' size) and the multipliers every rank holds are used.
 
+Held, tied and shared nodes: a contact node that a Dirichlet condition also holds, a periodic
+tie between contact nodes, a node in two surfaces along one normal make the enforced rows
+dependent; the solver leaves the dependent contact rows out of each solve (exactly, by
+``parsolve.contact.dependent``: the same displacements as with the node out of the surface,
+its reaction taken by the rows it depends on) and fails, naming the row, if those rows push it
+through the obstacle. A body held only by contact (nothing, or a soft support, in the contact
+direction) starts with its rows open and a singular first operator: the first solve is then
+retried with every contact row closed, and the active set opens those that pull (no
+``closed`` tolerance to guess).
+
+Refused input (exit 2, file and key): a name that is not a plain name (it names relations,
+fields and HDF5 groups), μ < 0, not finite or above ``friction.MU_MAX``, an obstacle that no
+facet of the slave surface faces or that every slave node starts inside. An obstacle farther
+than the mesh's size from every slave node is legitimate (a body lowered onto it over the
+steps) and said in a warning; ``search_radius`` bounds an obstacle's initial gaps too.
+
 Scene schema::
 
     [[contact]]
-    name = "base"                  # relations base_normal (and base_tangent)
+    name = "base"                  # relations base_normal (and base_tangent); a plain name
     slave = "bottom"               # boundary region (nodes) of the slave body
     master = "top_of_foundation"   # boundary region (facets) of the master body, or:
     # obstacle = { plane = { origin = [0, 0], normal = [0, 1] } }
     #            { cylinder = { centre = [..], radius = R, axis = [..] (3D), inside = false } }
     #            { sphere = { centre = [..], radius = R, inside = false } }
-    friction = 0.3                 # μ ≥ 0; 0 or absent: frictionless
+    friction = 0.3                 # 0 ≤ μ ≤ 10; 0 or absent: frictionless
     direction = "reaction"         # 3D slip direction update: "reaction" (default) or
     #                                "displacement" (see below; 2D: the sense needs neither)
-    search_radius = 0.1            # largest initial gap paired (default: one facet extent)
+    search_radius = 0.1            # largest initial gap paired (default: one facet extent;
+    #                                obstacles: any gap)
     discretization = "mortar"      # "node_to_segment" (default) or "mortar" (2D, master
     #                                region only: dual mortar rows, parsolve.contact.mortar)
     closed = 1e-9                  # initial gaps ≤ this (relative to the mesh size) start closed
+    #                                (a floating body needs no larger one: see above)
 """
 
 from __future__ import annotations
