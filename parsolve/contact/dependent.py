@@ -15,7 +15,8 @@ The test is exact linear algebra on a small block, not a regularisation:
 1. the columns of eliminated DOFs (single-DOF Dirichlet conditions) are dropped: a row left
    with no entry is fixed by them alone (a contact row on a fully held obstacle node);
 2. a row with an entry on a DOF that no other row touches is independent of all others, and
-   so are the rows left with such a DOF once those are set aside (peeling, vectorised);
+   so are the rows that alone touch a node on which they are independent (the rows of one
+   contact node); so are the rows left so once those are set aside (peeling, vectorised);
 3. the few rows that remain (those of held, tied or shared nodes) form a dense block whose
    Householder QR in the fixed order gives each row's distance to the span of the rows before
    it: a distance below ``TOL`` of the row's norm is a dependent row.
@@ -40,12 +41,12 @@ MAX_CORE = 4000
 
 def dependent_rows(rows: np.ndarray, dofs: np.ndarray, vals: np.ndarray, nrows: int,
                    enforced: np.ndarray, candidate: np.ndarray,
-                   fixed_dofs: np.ndarray) -> np.ndarray:
+                   fixed_dofs: np.ndarray, ncomp: int = 1) -> np.ndarray:
     """Mask (nrows,) of the ``candidate`` rows among the ``enforced`` ones that depend on the
     enforced rows before them (non-candidates first, then candidates in row order).
 
-    rows, dofs, vals: COO entries of every row (DOFs in any one numbering); fixed_dofs: DOFs
-    whose columns are eliminated (their values known)."""
+    rows, dofs, vals: COO entries of every row (DOFs ``node * ncomp + component``); fixed_dofs:
+    DOFs whose columns are eliminated (their values known)."""
     out = np.zeros(nrows, dtype=bool)
     keep = enforced[rows] & (vals != 0.0) & ~np.isin(dofs, fixed_dofs)
     norm = np.sqrt(np.bincount(rows, weights=vals ** 2, minlength=nrows))
@@ -54,11 +55,12 @@ def dependent_rows(rows: np.ndarray, dofs: np.ndarray, vals: np.ndarray, nrows: 
     out[empty & candidate] = True
     r, d, v = _merged(rows[keep], dofs[keep], vals[keep])
     alive = enforced & ~empty
-    while True:   # peel the rows with a DOF of their own
+    while True:   # peel the rows with a DOF of their own, or a node of their own
         on = alive[r]
         _, inv, count = np.unique(d[on], return_inverse=True, return_counts=True)
         own = np.zeros(nrows, dtype=bool)
         own[r[on][count[inv] == 1]] = True
+        own |= _own_node(r[on], d[on], v[on], nrows, ncomp)
         if not own.any():
             break
         alive &= ~own
@@ -74,6 +76,37 @@ def dependent_rows(rows: np.ndarray, dofs: np.ndarray, vals: np.ndarray, nrows: 
     np.add.at(block, (col, pos[r[on]]), v[on])
     dep = order[_dependent_columns(block)]
     out[dep[candidate[dep]]] = True
+    return out
+
+
+def _own_node(r: np.ndarray, d: np.ndarray, v: np.ndarray, nrows: int, ncomp: int) -> np.ndarray:
+    """Rows independent of all others through a node: where the rows touching a node's DOFs
+    are independent on those DOFs alone (at most ncomp of them, a full-rank block), no
+    combination of all rows can vanish unless theirs do (the normal and tangential rows of a
+    contact node on an inclined surface share its DOFs: no DOF of their own, but their node).
+    Every node's block at once (batched singular values)."""
+    out = np.zeros(nrows, dtype=bool)
+    if r.size == 0:
+        return out
+    node, comp = np.divmod(d, ncomp)
+    keys = np.unique(node * nrows + r)               # (node, row) pairs, by node
+    knode, krow = np.divmod(keys, nrows)
+    nodes, first, count = np.unique(knode, return_index=True, return_counts=True)
+    slot = np.arange(keys.size) - np.repeat(first, count)
+    small = count <= ncomp
+    if not small.any():
+        return out
+    at = np.searchsorted(nodes, node)
+    pick = small[at]
+    blocks = np.zeros((nodes.size, ncomp, ncomp))
+    np.add.at(blocks, (at[pick], slot[np.searchsorted(keys, node[pick] * nrows + r[pick])],
+                       comp[pick]), v[pick])
+    sv = np.linalg.svd(blocks[small], compute_uv=False)
+    k = count[small]
+    full = sv[np.arange(k.size), k - 1] > TOL * np.maximum(sv[:, 0], 1e-300)
+    good = np.zeros(nodes.size, dtype=bool)
+    good[np.flatnonzero(small)[full]] = True
+    out[krow[good[np.searchsorted(nodes, knode)]]] = True
     return out
 
 

@@ -156,7 +156,8 @@ class NewtonSolver:
             return active
         rows, dofs, rels, candidate, fixed = self._rows
         vals = np.concatenate([r.a_vals for r in rels])   # current (friction turns them)
-        self.left_out = dependent_rows(rows, dofs, vals, active.size, active, candidate, fixed)
+        self.left_out = dependent_rows(rows, dofs, vals, active.size, active, candidate, fixed,
+                                       self.system.model.ncomp)
         return active & ~self.left_out
 
     def _close_contact(self) -> bool:

@@ -186,3 +186,23 @@ def test_held_corner_in_3d_with_friction(run):
                                ref["relations/hold/multiplier"], atol=1e-11)
     np.testing.assert_allclose(res["relations/base_normal/normal_force"],
                                ref["relations/base_normal/normal_force"], rtol=1e-12)
+
+
+def test_rows_of_one_node_on_an_inclined_surface_are_peeled():
+    """The normal and tangential rows of a node on an inclined plane share both its DOFs (no
+    DOF of their own) but are independent there: set aside by their node, so the dense block
+    is not the whole surface. A third row on the node (a tie along x to another node) keeps
+    them in it, and there the tangential row of the second node depends on the rest."""
+    from parsolve.contact.dependent import _own_node
+
+    n, t = np.array([-0.5, np.sqrt(3) / 2]), np.array([np.sqrt(3) / 2, 0.5])
+    a = np.zeros((4, 4))             # nodes 0, 1 (DOFs 0, 1 and 2, 3), ncomp = 2
+    a[0, :2], a[1, :2], a[2, 2:], a[3, 2:] = n, t, n, t
+    rows, dofs, vals = _coo(a)
+    assert _own_node(rows, dofs, vals, 4, 2).all()
+    tie = np.vstack([a, [[1.0, 0, -1.0, 0], [0, 1.0, 0, -1.0]]])
+    rows, dofs, vals = _coo(tie)
+    assert not _own_node(rows, dofs, vals, 6, 2).any()
+    candidate = np.array([True, True, True, True, False, False])
+    dep = dependent_rows(rows, dofs, vals, 6, np.ones(6, bool), candidate, np.zeros(0, np.int64), 2)
+    assert dep.tolist() == [False, False, True, True, False, False]
