@@ -192,9 +192,10 @@ class NewtonSolver:
         if bad.any():
             row = int(np.flatnonzero(bad)[0])
             k = int(np.searchsorted(system.block.row_first, row, side="right") - 1)
-            raise SolverError(f"contact row {row - int(system.block.row_first[k])} of "
-                              f"{system.multiplied[k].name!r} depends on other relations (a "
-                              "held or tied node) that violate it by "
+            rel, local = system.multiplied[k], row - int(system.block.row_first[k])
+            node = int(rel.a_dofs[rel.a_rows == local][0]) // system.model.ncomp
+            raise SolverError(f"contact row {local} of {rel.name!r} (node {node}) depends on "
+                              "other relations (a held or tied node) that violate it by "
                               f"{abs(float(gap[row])):.3g}: they push it into the obstacle")
 
     def snapshot(self) -> tuple:

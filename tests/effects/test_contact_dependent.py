@@ -206,3 +206,13 @@ def test_rows_of_one_node_on_an_inclined_surface_are_peeled():
     candidate = np.array([True, True, True, True, False, False])
     dep = dependent_rows(rows, dofs, vals, 6, np.ones(6, bool), candidate, np.zeros(0, np.int64), 2)
     assert dep.tolist() == [False, False, True, True, False, False]
+
+
+def test_held_corner_pushed_into_the_plane_is_an_error(run):
+    """The hold moves the corner 0.01 into the plane: its contact row, left out, is violated by
+    the rows it depends on. An error naming the row and the node, not a penetrating answer."""
+    from parsolve.errors import SolverError
+
+    pushed = HOLD.replace("value = 0.0", "value = -0.01")
+    with pytest.raises(SolverError, match=r"row 0 of 'base_normal' \(node 0\).*into the obstacle"):
+        run(scene(pushed, [("base", "bottom")], 0.0), name="dep_pushed")
