@@ -30,6 +30,13 @@ DIRECTION_MODES = ("displacement", "reaction")
 TOL_ANGLE = 1e-10
 
 
+#: The largest friction coefficient accepted. Measured dry coefficients stay below about 2
+#: (rubber on dry rock, clean metals in vacuum reach 1–2); far above, the frictional dual
+#: Dn − μ Dt·s is dominated by μ and the saddle system's conditioning goes with it (1e30
+#: gives garbage, not stick).
+MU_MAX = 10.0
+
+
 def check_mu(mu: float, source: str | None = None, key: str | None = None) -> float:
     """The friction coefficient as a float; InputError unless finite and >= 0."""
     try:
@@ -38,6 +45,10 @@ def check_mu(mu: float, source: str | None = None, key: str | None = None) -> fl
         raise InputError(f"friction coefficient must be a number, got {mu!r}", source, key) from None
     if not np.isfinite(value) or value < 0.0:
         raise InputError(f"friction coefficient must be >= 0, got {mu!r}", source, key)
+    if value > MU_MAX:
+        raise InputError(f"friction coefficient {value:.3g} is beyond any measured one (at most "
+                         f"{MU_MAX:g}): a surface that must not slip is a tie relation", source,
+                         key)
     return value
 
 

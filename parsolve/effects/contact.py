@@ -39,22 +39,40 @@ and coordinates: the surfaces' size), every rank pairs them as the replicated me
 the rows stay in input DOFs; per iteration only row values (``PartValues``: owned entries and
 one reduction of the rows' size) and the multipliers every rank holds are used.
 
+Held, tied and shared nodes: a contact node that a Dirichlet condition also holds, a periodic
+tie between contact nodes, a node in two surfaces along one normal make the enforced rows
+dependent; the solver leaves the dependent contact rows out of each solve (exactly, by
+``parsolve.contact.dependent``: the same displacements as with the node out of the surface,
+its reaction taken by the rows it depends on) and fails, naming the row, if those rows push it
+through the obstacle. A body held only by contact (nothing, or a soft support, in the contact
+direction) starts with its rows open and a singular first operator: the first solve is then
+retried with every contact row closed, and the active set opens those that pull (no
+``closed`` tolerance to guess).
+
+Refused input (exit 2, file and key): a name that is not a plain name (it names relations,
+fields and HDF5 groups), μ < 0, not finite or above ``friction.MU_MAX``, an obstacle that no
+facet of the slave surface faces or that every slave node starts inside. An obstacle farther
+than the mesh's size from every slave node is legitimate (a body lowered onto it over the
+steps) and said in a warning; ``search_radius`` bounds an obstacle's initial gaps too.
+
 Scene schema::
 
     [[contact]]
-    name = "base"                  # relations base_normal (and base_tangent)
+    name = "base"                  # relations base_normal (and base_tangent); a plain name
     slave = "bottom"               # boundary region (nodes) of the slave body
     master = "top_of_foundation"   # boundary region (facets) of the master body, or:
     # obstacle = { plane = { origin = [0, 0], normal = [0, 1] } }
     #            { cylinder = { centre = [..], radius = R, axis = [..] (3D), inside = false } }
     #            { sphere = { centre = [..], radius = R, inside = false } }
-    friction = 0.3                 # μ ≥ 0; 0 or absent: frictionless
+    friction = 0.3                 # 0 ≤ μ ≤ 10; 0 or absent: frictionless
     direction = "reaction"         # 3D slip direction update: "reaction" (default) or
     #                                "displacement" (see below; 2D: the sense needs neither)
-    search_radius = 0.1            # largest initial gap paired (default: one facet extent)
+    search_radius = 0.1            # largest initial gap paired (default: one facet extent;
+    #                                obstacles: any gap)
     discretization = "mortar"      # "node_to_segment" (default) or "mortar" (2D, master
     #                                region only: dual mortar rows, parsolve.contact.mortar)
     closed = 1e-9                  # initial gaps ≤ this (relative to the mesh size) start closed
+    #                                (a floating body needs no larger one: see above)
 """
 
 from __future__ import annotations
@@ -77,6 +95,7 @@ from parsolve.evolution import CONSTANT
 from parsolve.mesh.local_regions import gather_facets
 from parsolve.mesh.topology import FACETS, boundary_facets
 from parsolve.relations import Relation
+from parsolve.scene import NAME_PATTERN
 
 OBSTACLES = ("plane", "cylinder", "sphere")
 DISCRETIZATIONS = ("node_to_segment", "mortar")
@@ -98,6 +117,9 @@ class ContactSpec:
 
 def parse(t, dim: int) -> ContactSpec:
     name = t.get("name", str)
+    if not NAME_PATTERN.fullmatch(name):   # it names relations and HDF5 groups and fields
+        raise t.error("name", f"{name!r} is not a plain name (a letter or '_', then letters, "
+                              "digits, '_' or '-'; at most 64 characters)")
     slave = t.get("slave", str)
     master = t.get("master", str, None)
     obs = t.table("obstacle", None)
@@ -247,7 +269,47 @@ class Contact(Effect):
                                      params["inside"], self.source, okey)
         except ValueError as exc:
             raise InputError(str(exc), self.source, okey) from None
+        self._check_reach(p, okey)
+        self._check_facing(p, surf, regions, okey)
+        if spec.search_radius is not None:
+            p.paired &= p.gap <= spec.search_radius
         return surf.to_input(p.only_paired())
+
+    def _check_facing(self, p, surf: Surfaces, regions, key: str) -> None:
+        """Refuse an obstacle that no facet of the slave surface faces (outward normal of the
+        slave body against the obstacle's normal: n_s · n < 0 somewhere): its normal points
+        into the slave body, which would then be pushed through it."""
+        facets, pts = self._facets(regions(self.spec.slave, f"{self.spec.key}.slave"))
+        if facets.shape[0] == 0:
+            return
+        if self.mesh.dim == 2:
+            d = pts[:, 1] - pts[:, 0]
+            normal = np.column_stack([d[:, 1], -d[:, 0]])   # outward (FACETS orientation)
+        else:
+            normal = np.cross(pts[:, 1] - pts[:, 0], pts[:, 2] - pts[:, 0])
+        at = np.searchsorted(p.slave, surf.compact(facets[:, 0]))
+        facing = np.einsum("fx,fx->f", normal, p.normal[at]) < -1e-6 * np.linalg.norm(normal, axis=1)
+        if not facing.any():
+            raise InputError("no facet of the slave surface faces the obstacle (its normal "
+                             "points into the slave body: is its sign right?)", self.source, key)
+
+    def _check_reach(self, p, key: str) -> None:
+        """An obstacle the slave surface cannot meet as written: every slave node behind its
+        surface (its normal points into the slave body, or the body starts inside it) is
+        refused; an obstacle farther than the mesh's size from every slave node is legitimate
+        (a body lowered onto it over the steps) but said in a warning: a misplaced origin
+        would otherwise give a run without contact and no message."""
+        size = float(np.max(self.mesh.extent if self.values.distributed
+                            else np.ptp(self.mesh.points, axis=0)))
+        if np.all(p.gap < -1e-9 * size):
+            raise InputError(f"every slave node starts inside the obstacle (gaps from "
+                             f"{p.gap.min():.3g} to {p.gap.max():.3g}): does its normal point "
+                             "into the slave body?", self.source, key)
+        if p.gap.min() > size and hasattr(self.mesh, "warnings"):
+            self.mesh.warnings.append(
+                f"{self.source}: {key}: no slave node is within the mesh's size ({size:.3g}) of "
+                f"the obstacle (smallest gap {p.gap.min():.3g}): contact only if the body "
+                "travels that far")
 
     def _build_rows(self) -> None:
         p, f = self.pairing, self.fields_

@@ -18,6 +18,7 @@ import numpy as np
 from mpi4py import MPI
 
 from parsolve import interrupts
+from parsolve.contact.dependent import dependent_rows
 from parsolve.effects.compose import Rate
 from parsolve.errors import SolverError
 from parsolve.scene import NonlinearSpec
@@ -127,6 +128,75 @@ class NewtonSolver:
                  for r in system.multiplied] if self.hooks else [(0, 0)]
         self._d_seg = np.concatenate([[0], np.cumsum([d for d, _ in sizes])]).astype(np.int64)
         self._a_seg = np.concatenate([[0], np.cumsum([a for _, a in sizes])]).astype(np.int64)
+        self._rows = self._dependence_rows()
+        self.left_out = np.zeros(self.active.sign.size, dtype=bool)
+
+    def _dependence_rows(self) -> tuple | None:
+        """The multiplied rows as COO (row numbers of the active set) with the contact rows
+        marked, and the eliminated DOFs: what ``_enforceable`` needs (None without contact)."""
+        system = self.system
+        mult = system.multiplied
+        if not any(r.meta.get("type") == "contact" for r in mult):
+            return None
+        first = system.block.row_first
+        keep = [k for k, r in enumerate(mult) if not r.collapsed]
+        rows = np.concatenate([mult[k].a_rows + first[k] for k in keep])
+        dofs = np.concatenate([mult[k].a_dofs for k in keep])
+        candidate = np.zeros(int(first[-1]), dtype=bool)
+        for k, r in enumerate(mult):
+            candidate[first[k]:first[k + 1]] = r.meta.get("type") == "contact"
+        fixed = np.concatenate([r.a_dofs for r in system.eliminated] + [np.zeros(0, np.int64)])
+        return rows, dofs, [mult[k] for k in keep], candidate, np.unique(fixed)
+
+    def _enforceable(self, active: np.ndarray) -> np.ndarray:
+        """The active rows less the contact rows that depend on the others (a held, tied or
+        shared contact node: ``parsolve.contact.dependent``), which the solve leaves out (their
+        multipliers zero): the same displacements, and no null pivot."""
+        if self._rows is None:
+            return active
+        rows, dofs, rels, candidate, fixed = self._rows
+        vals = np.concatenate([r.a_vals for r in rels])   # current (friction turns them)
+        self.left_out = dependent_rows(rows, dofs, vals, active.size, active, candidate, fixed,
+                                       self.system.model.ncomp)
+        return active & ~self.left_out
+
+    def _close_contact(self) -> bool:
+        """Enforce every contact row that is not (True when there was one): the first solve of
+        a step failed with rows open, which is a body held only by contact (nothing else, or
+        soft supports, in the contact direction: a singular or ill-conditioned operator).
+        Started in contact, the body is held; the active set then opens the rows that pull
+        (a frictional node closing this way sticks or slides as any closing node). No
+        tolerance to guess (``closed``) and the same answer: the set is decided as always.
+        Every rank decides from the same active set."""
+        if self._rows is None:
+            return False
+        closing = self._rows[3] & ~self.active.active
+        if not closing.any():
+            return False
+        self.active.active[closing] = True
+        self.active.held |= closing
+        self.active.seen.add(self.active.active.tobytes())
+        return True
+
+    def _check_left_out(self, t: float) -> None:
+        """A left-out row is decided by the rows it depends on: fail when they violate it (a
+        node held inside the obstacle), rather than return a penetrating answer."""
+        if not self.left_out.any():
+            return
+        system = self.system
+        gap = system.primal_values(self.q) - np.concatenate([r.rhs(t) for r in system.multiplied])
+        # against the rows' values and the displacements (a row at rest on the plane has A q = 0)
+        scale = max(float(np.abs(system.primal_values(self.q)).max()), system.max_abs(self.q),
+                    1e-300)
+        bad = self.left_out & (self.active.sign * gap > 1e-9 * scale)
+        if bad.any():
+            row = int(np.flatnonzero(bad)[0])
+            k = int(np.searchsorted(system.block.row_first, row, side="right") - 1)
+            rel, local = system.multiplied[k], row - int(system.block.row_first[k])
+            node = int(rel.a_dofs[rel.a_rows == local][0]) // system.model.ncomp
+            raise SolverError(f"contact row {local} of {rel.name!r} (node {node}) depends on "
+                              "other relations (a held or tied node) that violate it by "
+                              f"{abs(float(gap[row])):.3g}: they push it into the obstacle")
 
     def snapshot(self) -> tuple:
         """The converged state, to come back to when a trial step fails."""
@@ -202,6 +272,7 @@ class NewtonSolver:
             small_step = dq_norm <= spec.stol * max(system.max_abs(self.q), 1e-300)
             balanced = residual <= spec.rtol or small_step and r_norm < 1e-6 * ref
             if it > 0 and not changed and balanced:
+                self._check_left_out(t)
                 self.states, self.extras = trial, extras
                 for e in self.hooks:
                     e.end_step()
@@ -210,23 +281,27 @@ class NewtonSolver:
                 return StepResult(it + predictions, residual, f_int)
             if it == spec.max_iterations:
                 break
-            system.set_active(self.active.active)
-            mat = system.assemble(kmat)
-            if self._mat is None:
-                self.linear.set_operator(mat)
-                self._mat = mat
-            x, rhs = self._vectors(mat)
-            rhs.array[:] = system.rhs(t, f_int=f_int, q=self.q, f_ext=f_known)[0]
-            try:
-                self.linear.solve(rhs, x)
-            except SolverError as exc:
-                if it == 0:
-                    raise
-                # singular at a later iterate only: the iterates diverged first (a softening
-                # material driven past full damage), which is what the cut step must know
-                history = ", ".join(f"{r:.1e}" for r in self.residual_history[-4:])
-                raise SolverError(f"Newton diverged at t = {t:.6g}, iteration {it} (relative "
-                                  f"residuals ..., {history}): {exc}") from None
+            for attempt in (0, 1):
+                system.set_active(self._enforceable(self.active.active))
+                mat = system.assemble(kmat)
+                if self._mat is None:
+                    self.linear.set_operator(mat)
+                    self._mat = mat
+                x, rhs = self._vectors(mat)
+                rhs.array[:] = system.rhs(t, f_int=f_int, q=self.q, f_ext=f_known)[0]
+                try:
+                    self.linear.solve(rhs, x)
+                    break
+                except SolverError as exc:
+                    if it == 0 and attempt == 0 and self._close_contact():
+                        continue   # a body floating until contact: start it in contact
+                    if it == 0:
+                        raise
+                    # singular at a later iterate only: the iterates diverged first (a
+                    # softening material driven past full damage), which the cut step must know
+                    history = ", ".join(f"{r:.1e}" for r in self.residual_history[-4:])
+                    raise SolverError(f"Newton diverged at t = {t:.6g}, iteration {it} (relative "
+                                      f"residuals ..., {history}): {exc}") from None
             x_full = system.gather(x.array)
             dq = system.primal_of(x_full)
             dq_norm = system.max_abs(dq)
@@ -283,7 +358,7 @@ class NewtonSolver:
         system = self.system
         active = self.active.active.copy()
         active[released] = False
-        system.set_active(active)
+        system.set_active(self._enforceable(active))
         mat = system.assemble(kmat)
         if self._mat is None:
             self.linear.set_operator(mat)
