@@ -83,8 +83,9 @@ def strain_rows(mesh, cells: np.ndarray, direction: np.ndarray, thickness: float
     coefs = np.einsum("cqvd,v,cq->cd", B, nv, geo.wdet) / vol[:, None]
     if fields is None:
         return kernels.cell_dofs(mesh.cells[cells], mesh.dim), coefs, vol
-    nodes = mesh.cells[cells]
-    return fields.dofs("u", nodes.ravel()).reshape(len(cells), -1), coefs, vol
+    nodes = mesh.cells[cells]   # (none on a rank's part that holds none of the region)
+    width = nodes.shape[1] * fields["u"].ncomp
+    return fields.dofs("u", nodes.ravel()).reshape(len(cells), width), coefs, vol
 
 
 def _strain(spec, regions, evol, source: str, fields) -> rel.Relation:
