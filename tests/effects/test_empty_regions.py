@@ -211,6 +211,15 @@ components = ["y"]
 value = -0.05
 sense = ">="
 """, "top"),
+    "periodic": (ELASTIC, PULL + """
+[[relations]]
+name = "tie"
+type = "periodic"
+region = "upper_left"
+target = "upper_right"
+translation = [2.0, 0.0]
+components = ["x", "y"]
+""", "upper_left"),
     "scalar_flux": (SCALAR, """
 [[loads]]
 name = "inflow"
