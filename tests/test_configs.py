@@ -104,6 +104,18 @@ def test_periodic_shear_laminate(run):
     check_laminate(run(CONFIGS / "periodic_shear_laminate.toml", name="periodic_laminate"))
 
 
+def test_springs_bar_supports(run):
+    """The two-spring network of the scene's comment, exactly (ν = 0)."""
+    ea, kg, kc, force = 100.0, 5.0, 7.0, 1.0
+    k1, k2 = ea / 3.0, ea + 2 * kc
+    u3, u4 = np.linalg.solve([[k1 + k2, -k2], [-k2, k2 + 2 * kg]], [0.0, force])
+    res = run(CONFIGS / "springs_bar_supports.toml", name="springs_bar_supports")
+    x, u = res["mesh/points"][:, 0], res["fields/displacement"][-1]
+    expected = np.where(x <= 3.0, u3 * x / 3.0, u3 + (u4 - u3) * (x - 3.0))
+    np.testing.assert_allclose(u[:, 0], expected, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(u[:, 1], 0.0, atol=1e-14)
+
+
 TESTED = ["controlled_bar.toml", "kirsch.toml", "cantilever_3d.toml",
           "localization_bar.toml", "plate_hole_control.toml", "two_controls.toml",  # control:
           # tests/solvers/test_control.py; solubility: tests/effects/test_solubility.py
@@ -112,4 +124,5 @@ TESTED = ["controlled_bar.toml", "kirsch.toml", "cantilever_3d.toml",
           "contact_block_friction.toml", "contact_control_friction.toml", "contact_hertz_cylinder.toml",
           # contact: tests/effects/test_contact.py; 3D: tests/effects/test_contact_3d_scene.py
           "contact_friction_3d.toml",
-          "periodic_shear_laminate.toml"]  # periodic: tests/effects/test_periodic.py
+          "periodic_shear_laminate.toml",  # periodic: tests/effects/test_periodic.py
+          "springs_bar_supports.toml"]  # springs: tests/effects/test_springs.py

@@ -1,4 +1,4 @@
-"""Every load kind and every relation type on the distributed mesh when ranks hold none of
+"""Every load kind, every relation type and the springs on the distributed mesh when ranks hold none of
 their region: a tall strip (2 × 16 cells) whose top, tip and upper cells live on one or two
 ranks of 2, 3 or 4. Each case runs on the parts (every rank of the world) and alone (one
 rank, the whole mesh, on every rank): the same results to 1e-10 of each quantity, and at
@@ -29,6 +29,7 @@ tip = {{ point = [2.0, 16.0] }}
 upper = {{ box = [[0.0, 14.0], [2.0, 16.0]] }}
 upper_left = "x < 1e-9 and y > 13.9"
 upper_right = "x > 2 - 1e-9 and y > 13.9"
+upper_middle = "abs(x - 1) < 1e-9 and y > 13.9"
 {physics}
 {case}
 """
@@ -219,6 +220,18 @@ region = "upper_left"
 target = "upper_right"
 translation = [2.0, 0.0]
 components = ["x", "y"]
+""", "upper_left"),
+    "springs_to_ground": (ELASTIC, PULL + """
+[[springs]]
+region = "top"
+stiffness = [0.5, 2.0]
+""", "top"),
+    "springs_node_to_node": (ELASTIC, PULL + """
+[[springs]]
+region = "upper_left"
+target = "upper_middle"
+translation = [1.0, 0.0]
+stiffness = [30.0, 10.0]
 """, "upper_left"),
     "scalar_flux": (SCALAR, """
 [[loads]]
