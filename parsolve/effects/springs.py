@@ -25,6 +25,9 @@ position + ``translation`` (default zero: coincident nodes), within the regions'
 Scene schema (one table per set of springs)::
 
     [[springs]]
+    name = "support"             # optional (default springs0, springs1, ...): the output
+    #                              /fields/<name>_force, the force the springs exert on
+    #                              each node (zero elsewhere)
     region = "base"              # its nodes, each with its own spring
     stiffness = [0.0, 1e3]       # per component (x, y(, z)), >= 0, not all zero
     target = "pin"               # optional: node to node instead of to the ground
@@ -45,6 +48,7 @@ from parsolve.fem.element_matrices import CellKernel, ElementMatrices
 
 @dataclass
 class SpringSpec:
+    name: str
     region: str
     stiffness: list[float]
     key: str
@@ -54,6 +58,9 @@ class SpringSpec:
 
 def parse(t, dim: int) -> SpringSpec:
     """A ``[[springs]]`` table (a scene Table) → spec; raises the scene's InputError."""
+    name = t.get("name", str, t.path.replace("[", "").replace("]", ""))   # springs0, ...
+    if not name.isidentifier():
+        raise t.error("name", f"a plain name (letters, digits, '_'), not {name!r}")
     region = t.get("region", str)
     stiffness = t.floats("stiffness", dim)
     if any(k < 0 for k in stiffness) or not any(k > 0 for k in stiffness):
@@ -63,7 +70,7 @@ def parse(t, dim: int) -> SpringSpec:
     if translation is not None and target is None:
         raise t.error("translation", "a translation pairs nodes with a 'target' region")
     t.done()
-    return SpringSpec(region, stiffness, t.path, target, translation)
+    return SpringSpec(name, region, stiffness, t.path, target, translation)
 
 
 def regions(spec: SpringSpec) -> list[tuple[str, str]]:
@@ -230,3 +237,25 @@ class Springs(Effect):
         fe = np.zeros((len(cells), self.mesh.cells.shape[1], d))
         np.add.at(fe, (cell, row), force)
         return {"u": fe}, [("u", "u", m)], state, None
+
+    def output_names(self) -> list[str]:
+        return [f"{self.spec.name}_force"]
+
+    def outputs(self, owned, values, extra, local_cells):
+        """The force the springs exert on each node, -K (u_a - u_b) on a and its opposite on
+        b, complete on every node this rank holds with its partner (all the owned ones);
+        weight 1 there, so that the ranks' contributions average to it."""
+        npts, d = self.mesh.num_points, self.mesh.dim
+        a, b = self.pairs[:, 0], self.pairs[:, 1]
+        u = values["u"]
+        ground = self.spec.target is None
+        on = (a >= 0) if ground else (a >= 0) & (b >= 0)
+        a, b = a[on], b[on]
+        f = -self.k * (u[a] - (0.0 if ground else u[b]))
+        force, weight = np.zeros((npts, d)), np.zeros(npts)
+        np.add.at(force, a, f)
+        weight[a] = 1.0
+        if not ground:
+            np.add.at(force, b, -f)
+            weight[b] = 1.0
+        return {f"{self.spec.name}_force": (force * weight[:, None], weight)}, {}

@@ -69,7 +69,11 @@ stiffness = [6.0, 0.0]
     pts, u = res["mesh/points"], res["fields/displacement"][-1]
     np.testing.assert_allclose(u[:, 0], u_end * pts[:, 0] / L, rtol=0, atol=1e-14)
     np.testing.assert_allclose(u[:, 1], 0.0, atol=1e-14)
-    # the clamp carries what the springs do not
+    # the springs' force on each node (zero off their region); the clamp carries the rest
+    force = res["fields/springs0_force"][-1]
+    end = np.isclose(pts[:, 0], L)
+    np.testing.assert_allclose(force[end], [[-k * u_end, 0.0]] * 2, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(force[~end], 0.0, atol=0)
     np.testing.assert_allclose(res["relations/clamp/resultant"][-1][0], -(F - 2 * k * u_end),
                                rtol=1e-12)
 
@@ -99,6 +103,7 @@ def test_two_nodes_coupled_across_a_segment(run):
     kc = 7.0
     rest = CLAMP + """
 [[springs]]
+name = "brace"
 region = "section"
 target = "right"
 translation = [1.0, 0.0]
@@ -108,6 +113,13 @@ stiffness = [7.0, 4.0]
     u3 = F / (E / 3.0)
     np.testing.assert_allclose(ux_at(res, 3.0), u3, rtol=1e-12)
     np.testing.assert_allclose(ux_at(res, 4.0), u3 + F / (E + 2 * kc), rtol=1e-12)
+    # equal and opposite on the two ends of each spring, named by the scene
+    force = res["fields/brace_force"][-1]
+    x = res["mesh/points"][:, 0]
+    np.testing.assert_allclose(force[np.isclose(x, 3.0), 0], kc * F / (E + 2 * kc), rtol=1e-12)
+    np.testing.assert_allclose(force[np.isclose(x, 4.0), 0], -kc * F / (E + 2 * kc), rtol=1e-12)
+    np.testing.assert_allclose(force[:, 1], 0.0, atol=1e-14)
+    np.testing.assert_allclose(force[(x < 2.5)], 0.0, atol=0)
 
 
 def network(res: dict) -> None:
@@ -223,6 +235,8 @@ def check_error(shared_tmp, text: str, key: str, words: str) -> None:
     (('target = "right"\n', ""), "springs[1].translation", "'target'"),
     (('region = "right"            #', 'region = "nowhere"            #'), "springs[0].region",
      "unknown region"),
+    (('region = "right"            #', 'name = "a b"\nregion = "right"  #'), "springs[0].name",
+     "plain name"),
 ])
 def test_input_errors(shared_tmp, change, key, words):
     text = (CONFIGS / "springs_bar_supports.toml").read_text()
