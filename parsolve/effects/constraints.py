@@ -25,6 +25,7 @@ def build_relations(specs: list, regions, evolutions: dict, patterns: dict, fiel
         r.meta = {"type": spec.type, "key": spec.key, "dual": spec.dual}
         out.append(r)
     out = rel.drop_repeated_rows(out)
+    out = _drop_held_ties(out, source)
     dups = rel.duplicate_rows(out)
     if dups:
         a, b, dof = dups[0]
@@ -129,7 +130,6 @@ def _periodic(spec, regions, comps: list[int], ncomp: int, evol, source: str) ->
     dofs = np.stack([(a[:, None] * ncomp + c).ravel(), (b[:, None] * ncomp + c).ravel()], axis=1)
     r = rel.rows(spec.name, dofs, np.tile([1.0, -1.0], (dofs.shape[0], 1)), 0.0, evol,
                  spec.sense)
-    r.meta["pairs"] = np.stack([a, b], axis=1)
     return r
 
 
@@ -161,4 +161,60 @@ def partners(points: np.ndarray, ids: np.ndarray, candidates: np.ndarray, transl
         d = np.linalg.norm(candidates[j] - images, axis=1)
         better = at & (d <= tol) & ((d < best) | (d == best) & (ids[j] < out))
         out[better], best[better] = ids[j][better], d[better]
+    return out
+
+
+def _held_values(relations: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(DOF, value, evolution number) of every single-DOF associated equality row (sorted by
+    DOF), the evolutions numbered by their first appearance."""
+    evolutions, dof, value, evol = [], [], [], []
+    for r in relations:
+        if r.meta.get("type") == "periodic" or r.sense != "=" or not r.associated:
+            continue
+        at = np.bincount(r.a_rows, minlength=r.nrows)[r.a_rows] == 1
+        if r.evolution not in evolutions:
+            evolutions.append(r.evolution)
+        dof.append(r.a_dofs[at])
+        value.append(r.values[r.a_rows[at]] / r.a_vals[at])
+        evol.append(np.full(int(at.sum()), evolutions.index(r.evolution)))
+    if not dof:
+        return np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64)
+    dof, value, evol = np.concatenate(dof), np.concatenate(value), np.concatenate(evol)
+    order = np.argsort(dof, kind="stable")
+    return dof[order], value[order], evol[order]
+
+
+def _drop_held_ties(relations: list, source: str) -> list:
+    """A periodic row between two DOFs that Dirichlet rows both hold (the corners of a cell
+    whose top and bottom are held) would constrain nothing and make the system singular: it
+    is dropped when the two held values agree (same value and evolution: the tie holds by
+    itself), an input error when they do not."""
+    ties = [k for k, r in enumerate(relations) if r.meta.get("type") == "periodic"]
+    if not ties:
+        return relations
+    dof, value, evol = _held_values(relations)
+    out = list(relations)
+    for k in ties:   # a loop over relations, not rows
+        r = out[k]
+        ends = []
+        for side in (r.a_vals > 0, r.a_vals < 0):   # u_a (+1) and u_b (-1) of each row
+            d = np.empty(r.nrows, dtype=np.int64)
+            d[r.a_rows[side]] = r.a_dofs[side]
+            pos = np.minimum(np.searchsorted(dof, d), max(dof.size - 1, 0))
+            held = dof[pos] == d if dof.size else np.zeros(r.nrows, dtype=bool)
+            ends.append((d, held, value[pos] if dof.size else d * 0.0,
+                         evol[pos] if dof.size else d * 0))
+        (da, ha, va, ea), (_, hb, vb, eb) = ends
+        both = ha & hb
+        clash = both & ((va != vb) | (ea != eb))
+        if clash.any():
+            raise InputError(f"a tied pair is held by conditions of different values (DOF "
+                             f"{int(da[np.argmax(clash)])} and its partner, {int(clash.sum())} "
+                             "such rows): the tie contradicts them", source,
+                             r.meta["key"] + ".region")
+        if both.all():
+            raise InputError("every tied DOF is held by other conditions: the tie constrains "
+                             "nothing", source, r.meta["key"] + ".region")
+        if both.any():
+            out[k] = rel.keep_rows(r, ~both)
     return out
