@@ -180,7 +180,7 @@ class Springs(Effect):
         # only the cells holding a spring's first node (a few): no array of the mesh's size
         near = np.flatnonzero(np.isin(self.mesh.cells[cells], a[a >= 0]).any(axis=1))
         nodes = self.mesh.cells[cells[near]]
-        nc, nen = nodes.shape
+        nen = nodes.shape[1]
         n = max(self.mesh.num_points, 1)
         ground = np.full(len(a), self.spec.target is None)   # (b = -1 also: not on this part)
         # keys (node, partner) of the ordered node pairs of every cell, and (node, node) for
@@ -207,7 +207,6 @@ class Springs(Effect):
     def _matrices(self, cells: np.ndarray) -> SpringMatrices:
         if self._cache[0] is not cells:
             cell, la, lb = self._places(cells)
-            d = self.mesh.dim
             K = np.diag(self.k).ravel()[:, None]                # (d², 1), row-major (i, j)
             ground = self.spec.target is None
             g = (cell >= 0) & ground
@@ -221,7 +220,6 @@ class Springs(Effect):
             self._cache = (cells, SpringMatrices(values, np.concatenate(rows),
                                                  np.concatenate(cols), hosts, len(cells),
                                                  self.mesh.cells.shape[1]))
-            assert values.shape[0] == d * d
         return self._cache[1]
 
     def stiffness_blocks(self, cells: np.ndarray):

@@ -265,3 +265,24 @@ region = "right"
 stiffness = [1.0, 1.0]
 """
     check_error(shared_tmp, text, "springs[0]", "[[materials]]")
+
+
+def test_element_form_is_the_springs_blocks():
+    """What a θ-scheme step or a maximum control asks of the blocks (every cell's element
+    matrices, element products) agrees with the springs' own forces; a few cells per block
+    of the kernel, to go through several blocks."""
+    from parsolve.effects.springs import Springs
+    from parsolve.fem.element_matrices import apply
+
+    model = build_model(load_scene(CONFIGS / "springs_bar_supports.toml"))
+    cells = np.arange(model.mesh.num_cells)
+    u = np.random.default_rng(3).normal(size=(model.mesh.num_points, 2))
+    for effect in (e for e in model.effects if isinstance(e, Springs)):
+        m = effect.stiffness_blocks(cells)[0][2]
+        m.kernel.block = 3
+        forces = effect.evaluate(cells, {"u": u}, None, False)[0]["u"]
+        np.testing.assert_allclose(apply(m, u[model.mesh.cells]), forces, rtol=1e-13, atol=1e-13)
+        V = m.values                                    # (4, nen, nen, nc): symmetric blocks
+        np.testing.assert_array_equal(V, V.reshape(2, 2, 4, 4, -1).transpose(1, 0, 3, 2, 4)
+                                      .reshape(V.shape))
+        assert np.count_nonzero(V.any(axis=0)) == (2 if effect.spec.target is None else 8)
