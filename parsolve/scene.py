@@ -20,7 +20,7 @@ from parsolve.evolution import CONSTANT, RAMP, Evolution
 
 HYPOTHESES = ("plane_stress", "plane_strain", "3d")
 COMPONENTS = {"x": 0, "y": 1, "z": 2, "ux": 0, "uy": 1, "uz": 2}
-RELATION_TYPES = ("dirichlet", "equal", "mean", "linear", "strain")
+RELATION_TYPES = ("dirichlet", "equal", "mean", "linear", "strain", "periodic")
 STRAIN_COMPONENTS = {"xx": (0, 0), "yy": (1, 1), "zz": (2, 2), "xy": (0, 1), "yz": (1, 2), "xz": (0, 2)}
 PRESETS = ("direct", "iterative")
 PARTITIONERS = ("scotch", "bisection")   # parsolve.mesh.partition.PARTITIONERS
@@ -184,6 +184,8 @@ class RelationSpec:
     maximum: bool = False                  # unilateral rows of which the largest is enforced
     field: str = "u"                       # the field the relation constrains
     report: bool = False                   # print its resultant with each step's progress line
+    target: str | None = None              # periodic: the region tied to ``region``
+    translation: list[float] | None = None  # periodic: target node = region node + this
 
 
 @dataclass
@@ -497,10 +499,12 @@ def _relation(t: Table, dim: int, fields: dict[str, int]) -> RelationSpec:
     rtype = t.get("type", str, choices=RELATION_TYPES)
     field = _field(t, fields)
     region, comps, terms, direction = None, [], [], None
-    if rtype == "dirichlet":
+    if rtype in ("dirichlet", "periodic"):
         region = t.get("region", str)
         raw = t.get("components", list, None)
-        if fields[field] == 1 and raw is None:
+        if rtype == "periodic" and raw is None and not t.has("component"):
+            comps = list(range(fields[field]))   # every component of the field by default
+        elif fields[field] == 1 and raw is None:
             comps = [_field_component(t, "component", dim, field, fields)]
         elif raw is None:
             comps = [_component(t, "component", dim)]
@@ -537,6 +541,8 @@ def _relation(t: Table, dim: int, fields: dict[str, int]) -> RelationSpec:
             sub.done()
         if not terms:
             raise t.error("terms", "a linear relation needs at least one term")
+    target = t.get("target", str) if rtype == "periodic" else None
+    translation = t.floats("translation", dim) if rtype == "periodic" else None
     value = t.get("value", (float, str) if rtype == "dirichlet" else float, 0.0)
     evolution = t.get("evolution", str, "ramp")
     dual = t.get("dual", str, None)
@@ -545,15 +551,16 @@ def _relation(t: Table, dim: int, fields: dict[str, int]) -> RelationSpec:
     per_cell = t.get("per_cell", bool, False) if rtype == "strain" else False
     maximum = t.get("maximum", bool, False)
     report = t.get("report", bool, False)
-    if rtype == "equal" and t.has("value"):
-        raise t.error("value", "an 'equal' relation has no value")
+    if rtype in ("equal", "periodic") and t.has("value"):
+        raise t.error("value", f"an {rtype!r} relation has no value")
     if maximum and sense == "=":
         raise t.error("maximum", "a maximum control needs a unilateral sense ('<=' or '>=')")
     if maximum and not per_cell:
         raise t.error("maximum", "a maximum control needs several rows (per_cell = true)")
     t.done()
     return RelationSpec(name, rtype, region, comps, value, evolution, terms, dual, sense,
-                        eliminate, t.path, direction, per_cell, maximum, field, report)
+                        eliminate, t.path, direction, per_cell, maximum, field, report, target,
+                        translation)
 
 
 def _strain_direction(t: Table, dim: int) -> list[float]:
@@ -750,6 +757,7 @@ def _cross_check(scene: Scene) -> None:
             raise InputError(f"duplicate relation name {r.name!r}", src, r.key + ".name")
         names.add(r.name)
         region(r.region, r.key + ".region")
+        region(r.target, r.key + ".target")
         for i, term in enumerate(r.terms):
             region(term.region, f"{r.key}.terms[{i}].region")
         if r.evolution not in scene.evolutions:

@@ -75,6 +75,47 @@ def test_cantilever_p2_beats_p1(run):
     assert p2 < 0.015 and p1 > 0.3, (p1, p2)   # P1 tetrahedra lock in bending
 
 
+U, H1, G1, G2 = 0.01, 0.5, 1000.0 / 2.5, 250.0 / 2.5   # G = E / (2 (1 + ν)), ν = 0.25
+TAU = U / (H1 / G1 + (1.0 - H1) / G2)
+
+
+def laminate_ux(y: np.ndarray) -> np.ndarray:
+    return np.where(y <= H1, TAU * y / G1, TAU * H1 / G1 + TAU * (y - H1) / G2)
+
+
+def check_laminate(res: dict) -> None:
+    """Exact laminate field; the tie carries the shear force of each side node (τ h, h =
+    1/8 its tributary length) and nothing along x; its resultant is the couple of the pairs' forces."""
+    y = res["mesh/points"][:, 1]
+    u = res["fields/displacement"][-1]
+    np.testing.assert_allclose(u[:, 0], laminate_ux(y), rtol=0, atol=1e-14)
+    np.testing.assert_allclose(u[:, 1], 0.0, atol=1e-14)
+    lam = res["relations/cell/multiplier"][-1].reshape(-1, 2)   # node-major: (x, y) per pair
+    assert lam.shape == (7, 2)
+    np.testing.assert_allclose(lam[:, 1], TAU / 8, rtol=1e-12)
+    np.testing.assert_allclose(lam[:, 0], 0.0, atol=1e-12 * TAU)
+    # equal and opposite forces: no resultant force, the couple of 7 pairs one unit apart
+    resultant = res["relations/cell/resultant"][-1]
+    np.testing.assert_allclose(resultant[:2], 0.0, atol=1e-12 * TAU)
+    np.testing.assert_allclose(resultant[2], 7 * TAU / 8 * 1.0, rtol=1e-12)
+
+
+def test_periodic_shear_laminate(run):
+    check_laminate(run(CONFIGS / "periodic_shear_laminate.toml", name="periodic_laminate"))
+
+
+def test_springs_bar_supports(run):
+    """The two-spring network of the scene's comment, exactly (ν = 0)."""
+    ea, kg, kc, force = 100.0, 5.0, 7.0, 1.0
+    k1, k2 = ea / 3.0, ea + 2 * kc
+    u3, u4 = np.linalg.solve([[k1 + k2, -k2], [-k2, k2 + 2 * kg]], [0.0, force])
+    res = run(CONFIGS / "springs_bar_supports.toml", name="springs_bar_supports")
+    x, u = res["mesh/points"][:, 0], res["fields/displacement"][-1]
+    expected = np.where(x <= 3.0, u3 * x / 3.0, u3 + (u4 - u3) * (x - 3.0))
+    np.testing.assert_allclose(u[:, 0], expected, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(u[:, 1], 0.0, atol=1e-14)
+
+
 TESTED = ["controlled_bar.toml", "kirsch.toml", "cantilever_3d.toml",
           "localization_bar.toml", "plate_hole_control.toml", "two_controls.toml",  # control:
           # tests/solvers/test_control.py; solubility: tests/effects/test_solubility.py
@@ -82,4 +123,6 @@ TESTED = ["controlled_bar.toml", "kirsch.toml", "cantilever_3d.toml",
           "seepage_overflow.toml",  # tests/effects/test_diffusion_effect.py
           "contact_block_friction.toml", "contact_control_friction.toml", "contact_hertz_cylinder.toml",
           # contact: tests/effects/test_contact.py; 3D: tests/effects/test_contact_3d_scene.py
-          "contact_friction_3d.toml"]
+          "contact_friction_3d.toml",
+          "periodic_shear_laminate.toml",  # periodic: tests/effects/test_periodic.py
+          "springs_bar_supports.toml"]  # springs: tests/effects/test_springs.py

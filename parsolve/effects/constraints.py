@@ -25,6 +25,7 @@ def build_relations(specs: list, regions, evolutions: dict, patterns: dict, fiel
         r.meta = {"type": spec.type, "key": spec.key, "dual": spec.dual}
         out.append(r)
     out = rel.drop_repeated_rows(out)
+    out = _drop_held_ties(out, source)
     dups = rel.duplicate_rows(out)
     if dups:
         a, b, dof = dups[0]
@@ -56,6 +57,8 @@ def _one(spec, regions, evolutions, fields, source: str) -> rel.Relation:
         return rel.equal(spec.name, nodes, comps[0], ncomp)
     if spec.type == "strain":
         return _strain(spec, regions, evol, source, fields)
+    if spec.type == "periodic":
+        return _periodic(spec, regions, comps, ncomp, evol, source)
     terms = []
     for i, term in enumerate(spec.terms):
         key = f"{spec.key}.terms[{i}].region" if spec.type == "linear" else spec.key + ".region"
@@ -83,8 +86,9 @@ def strain_rows(mesh, cells: np.ndarray, direction: np.ndarray, thickness: float
     coefs = np.einsum("cqvd,v,cq->cd", B, nv, geo.wdet) / vol[:, None]
     if fields is None:
         return kernels.cell_dofs(mesh.cells[cells], mesh.dim), coefs, vol
-    nodes = mesh.cells[cells]
-    return fields.dofs("u", nodes.ravel()).reshape(len(cells), -1), coefs, vol
+    nodes = mesh.cells[cells]   # (none on a rank's part that holds none of the region)
+    width = nodes.shape[1] * fields["u"].ncomp
+    return fields.dofs("u", nodes.ravel()).reshape(len(cells), width), coefs, vol
 
 
 def _strain(spec, regions, evol, source: str, fields) -> rel.Relation:
@@ -103,3 +107,114 @@ def _strain(spec, regions, evol, source: str, fields) -> rel.Relation:
     r = rel.rows(spec.name, dofs, coefs, spec.value, evol, spec.sense)
     r.meta["cells"] = cells
     return r
+
+
+def _periodic(spec, regions, comps: list[int], ncomp: int, evol, source: str) -> rel.Relation:
+    """u(a) - u(b) = 0 per listed component, for each node a of the region and its partner b,
+    the node of the target at x_a + translation (associated rows, node-major)."""
+    a = regions.relation_nodes(spec.region, spec.key + ".region")
+    b_all = regions.relation_nodes(spec.target, spec.key + ".target")
+    b = partners(regions.points_of(a), b_all, regions.points_of(b_all), spec.translation,
+                 regions.tol)
+    lost = np.flatnonzero(b < 0)
+    if lost.size:
+        x = ", ".join(f"{v:g}" for v in regions.points_of(a[lost[:1]])[0])
+        raise InputError(f"node {a[lost[0]]} of region {spec.region!r} (at {x}) has no node of "
+                         f"region {spec.target!r} at its position + translation (within "
+                         f"{regions.tol:.3g}; {lost.size} such nodes)", source,
+                         spec.key + ".target")
+    if np.any(a == b):
+        raise InputError("the translation pairs a node with itself", source,
+                         spec.key + ".translation")
+    c = np.asarray(comps, dtype=np.int64)
+    dofs = np.stack([(a[:, None] * ncomp + c).ravel(), (b[:, None] * ncomp + c).ravel()], axis=1)
+    r = rel.rows(spec.name, dofs, np.tile([1.0, -1.0], (dofs.shape[0], 1)), 0.0, evol,
+                 spec.sense)
+    return r
+
+
+# a generic direction: points of a mesh rarely share their projection on it, so the window
+# of candidates around each image is a point or two, whatever the region's shape
+_PROBE = np.array([1.0, np.sqrt(2.0), np.sqrt(3.0)]) / np.sqrt(6.0)
+
+
+def partners(points: np.ndarray, ids: np.ndarray, candidates: np.ndarray, translation,
+             tol: float) -> np.ndarray:
+    """For each point, the id (of ``ids``, coordinates ``candidates``) of the candidate at
+    point + translation within ``tol`` (the nearest; a tie to the lowest id), or -1."""
+    images = np.asarray(points, float) + np.asarray(translation, float)
+    ids = np.asarray(ids, dtype=np.int64)
+    out = np.full(len(images), -1, dtype=np.int64)
+    if len(images) == 0 or len(ids) == 0:
+        return out
+    probe = _PROBE[:images.shape[1]]
+    key = candidates @ probe
+    order = np.lexsort((ids, key))
+    key, ids, candidates = key[order], ids[order], candidates[order]
+    s = images @ probe
+    lo = np.searchsorted(key, s - 2.0 * tol, side="left")
+    hi = np.searchsorted(key, s + 2.0 * tol, side="right")
+    best = np.full(len(images), np.inf)
+    for k in range(int((hi - lo).max(initial=0))):   # a loop over the window, not the nodes
+        at = lo + k < hi
+        j = np.minimum(lo + k, len(ids) - 1)
+        d = np.linalg.norm(candidates[j] - images, axis=1)
+        better = at & (d <= tol) & ((d < best) | (d == best) & (ids[j] < out))
+        out[better], best[better] = ids[j][better], d[better]
+    return out
+
+
+def _held_values(relations: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(DOF, value, evolution number) of every single-DOF associated equality row (sorted by
+    DOF), the evolutions numbered by their first appearance."""
+    evolutions, dof, value, evol = [], [], [], []
+    for r in relations:
+        if r.meta.get("type") == "periodic" or r.sense != "=" or not r.associated:
+            continue
+        at = np.bincount(r.a_rows, minlength=r.nrows)[r.a_rows] == 1
+        if r.evolution not in evolutions:
+            evolutions.append(r.evolution)
+        dof.append(r.a_dofs[at])
+        value.append(r.values[r.a_rows[at]] / r.a_vals[at])
+        evol.append(np.full(int(at.sum()), evolutions.index(r.evolution)))
+    if not dof:
+        return np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64)
+    dof, value, evol = np.concatenate(dof), np.concatenate(value), np.concatenate(evol)
+    order = np.argsort(dof, kind="stable")
+    return dof[order], value[order], evol[order]
+
+
+def _drop_held_ties(relations: list, source: str) -> list:
+    """A periodic row between two DOFs that Dirichlet rows both hold (the corners of a cell
+    whose top and bottom are held) would constrain nothing and make the system singular: it
+    is dropped when the two held values agree (same value and evolution: the tie holds by
+    itself), an input error when they do not."""
+    ties = [k for k, r in enumerate(relations) if r.meta.get("type") == "periodic"]
+    if not ties:
+        return relations
+    dof, value, evol = _held_values(relations)
+    out = list(relations)
+    for k in ties:   # a loop over relations, not rows
+        r = out[k]
+        ends = []
+        for side in (r.a_vals > 0, r.a_vals < 0):   # u_a (+1) and u_b (-1) of each row
+            d = np.empty(r.nrows, dtype=np.int64)
+            d[r.a_rows[side]] = r.a_dofs[side]
+            pos = np.minimum(np.searchsorted(dof, d), max(dof.size - 1, 0))
+            held = dof[pos] == d if dof.size else np.zeros(r.nrows, dtype=bool)
+            ends.append((d, held, value[pos] if dof.size else d * 0.0,
+                         evol[pos] if dof.size else d * 0))
+        (da, ha, va, ea), (_, hb, vb, eb) = ends
+        both = ha & hb
+        clash = both & ((va != vb) | (ea != eb))
+        if clash.any():
+            raise InputError(f"a tied pair is held by conditions of different values (DOF "
+                             f"{int(da[np.argmax(clash)])} and its partner, {int(clash.sum())} "
+                             "such rows): the tie contradicts them", source,
+                             r.meta["key"] + ".region")
+        if both.all():
+            raise InputError("every tied DOF is held by other conditions: the tie constrains "
+                             "nothing", source, r.meta["key"] + ".region")
+        if both.any():
+            out[k] = rel.keep_rows(r, ~both)
+    return out

@@ -33,9 +33,11 @@ def _scatter(ndof: int, dofs: np.ndarray, values: np.ndarray) -> np.ndarray:
 
 
 def _field_dofs(fields, field: str, nodes: np.ndarray) -> np.ndarray:
-    """(n, nen·ncomp) DOFs of a field at (n, nen) nodes, node-major."""
+    """(n, nen·ncomp) DOFs of a field at (n, nen) nodes, node-major (n may be 0: a rank's
+    part that holds none of the region, so the width is given, not inferred)."""
     nodes = np.asarray(nodes)
-    return fields.dofs(field, nodes.ravel()).reshape(nodes.shape[0], -1)
+    width = nodes.shape[1] * fields[field].ncomp
+    return fields.dofs(field, nodes.ravel()).reshape(nodes.shape[0], width)
 
 
 def part_vector(mesh: Mesh, spec, region, thickness: float, source: str, fields,

@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
-from parsolve.effects import contact, contact_penalty, diffusion, solubility
+from parsolve.effects import contact, contact_penalty, diffusion, solubility, springs
 
 
 @dataclass(frozen=True)
@@ -69,4 +69,7 @@ EFFECTS: dict[str, Entry] = {
     # Lagrangian baselines alike
     "contact": Entry("contact", True, _parse_contact, _build_contact, coupling=True,
                      distributed=True),
+    "springs": Entry("springs", True, springs.parse,
+                     lambda spec, ctx: springs.Springs(spec, ctx.mesh, ctx.regions, ctx.scene),
+                     regions=springs.regions, distributed=True),
 }
