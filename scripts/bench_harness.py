@@ -233,10 +233,11 @@ def mib(x, missing: str = "–") -> str:
     return missing if x is None else f"{x / MiB:,.0f}"
 
 
-def md_table(head: list[str], rows: list[list[str]], first: str = "---:") -> str:
-    """A markdown table; ``first``: the first column's alignment row cell (others right)."""
+def md_table(head: list[str], rows: list[list[str]], first: str = "---:", rest: str = "---:") -> str:
+    """A markdown table; ``first``, ``rest``: the alignment cells of the first and the other
+    columns (right-aligned by default)."""
     out = ["| " + " | ".join(head) + " |",
-           "|" + "|".join(first if i == 0 else "---:" for i in range(len(head))) + "|"]
+           "|" + "|".join(first if i == 0 else rest for i in range(len(head))) + "|"]
     out += ["| " + " | ".join(r) + " |" for r in rows]
     return "\n".join(out)
 
