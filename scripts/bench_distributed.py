@@ -57,7 +57,7 @@ import numpy as np
 import bench_harness as bh
 from bench_harness import MiB, ROOT, SCRIPTS, VENV_PY, proc_memory  # noqa: F401
 from bench_harness import mat_bytes as _mat_bytes
-from bench_scale import CASES, child_env, dofs_of, held_bytes, scene_text
+from bench_scale import child_env, dofs_of, held_bytes, scene_text
 
 RESULTS = bh.PUBLISHED                # scripts/results/ (a temporary folder in smoke mode)
 SCRATCH = bh.SCRATCH / "distributed"

@@ -23,7 +23,6 @@ import time
 import tomllib
 from pathlib import Path
 
-import numpy as np
 from mpi4py import MPI
 
 import bench_harness as bh
