@@ -29,6 +29,7 @@ else
 fi
 
 failed=()
+touch "$TMP/.start"
 t_all=$(date +%s.%N)
 for n in "${names[@]}"; do
     t0=$(date +%s.%N)
@@ -44,6 +45,12 @@ for n in "${names[@]}"; do
     fi
 done
 printf '[bench_smoke] total %.1f s for %d benchmarks\n' "$(echo "$(date +%s.%N) - $t_all" | bc)" "${#names[@]}"
+# the published tables must be untouched (a benchmark that ignored the harness's folders)
+touched="$(find scripts/results -newer "$TMP/.start" -type f 2>/dev/null)"
+if [ -n "$touched" ]; then
+    echo "[bench_smoke] FAILED: smoke runs wrote into scripts/results/: $touched"
+    failed+=("scripts/results")
+fi
 if [ ${#failed[@]} -gt 0 ]; then
     echo "[bench_smoke] FAILED: ${failed[*]}"
     exit 1
