@@ -1,7 +1,7 @@
 """Benchmark: the paper's frictional contact (relations) against the penalty and augmented
 Lagrangian baselines (``formulation`` in [[contact]], parsolve/effects/contact_penalty.py).
 
-Cases (the scenes of tests/effects/test_contact.py, one process):
+Cases (the scenes of tests/effects/test_contact.py, from scripts/bench_scenes.py; one process):
   block   configs/contact_block_friction.toml: stick → partial slip → slip, 10 steps;
           analytic: the friction resultant is μN = 3 once the block slides
   wedge   the V-wedge of docs/contact.md §7, stick and slip side by side: exact field
