@@ -631,7 +631,7 @@ def main() -> None:
                  3: a.mumps_3d if a.smoke or not a.quick else 8}
         for dim in (2, 3):
             for control in ("none", "side", "body"):
-                for nranks in (1, 2):
+                for nranks in (1,) if a.smoke else (1, 2):   # smoke: 1 rank
                     rows = spawn(["mumps", str(dim), str(sizes[dim]), control], nranks=nranks)
                     results["mumps"].extend(rows or [])
                     save()
