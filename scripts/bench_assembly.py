@@ -25,6 +25,7 @@ Usage (from the repository root):
     .venv/bin/python scripts/bench_assembly.py --n 70 141 --ranks 1 --no-peers
     .venv/bin/python scripts/bench_assembly.py --peers-from bench_results   # reuse peer JSON
     .venv/bin/python scripts/bench_assembly.py --profile 707        # cProfile of one first assembly
+    .venv/bin/python scripts/bench_assembly.py --smoke              # CI: N = 8, files in a temp folder
 Writes bench_results/assembly.json, bench_results/assembly.md and scripts/results/bench_assembly.md.
 """
 
@@ -40,11 +41,13 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-SCRIPTS = ROOT / "scripts"
-PYTHON = str(ROOT / ".venv" / "bin" / "python")
-RESULTS = ROOT / "bench_results"
-COMMITTED = SCRIPTS / "results"
+import bench_harness as bh
+from bench_harness import (ROOT, SCRIPTS, child_env, cpu_idle, fmt, fmt_rate,  # noqa: F401
+                           git_status, machine_info, md_table, mpirun, text_table)
+
+PYTHON = bh.VENV_PY
+RESULTS = bh.SCRATCH          # bench_results/ (a temporary folder in smoke mode)
+COMMITTED = bh.PUBLISHED      # scripts/results/ (idem)
 DEFAULT_N = [70, 141, 223, 316, 500, 707]      # 10k, 40k, 100k, 200k, 500k, 1M DOFs
 CELLS = ("triangle", "quad")
 
@@ -159,33 +162,8 @@ class Phase:
         return False
 
 
-def mpirun(nranks: int, args: list[str]) -> list[str]:
-    return ["bash", str(SCRIPTS / "mpirun.sh"), "-n", str(nranks), PYTHON, *args]
-
-
-def child_env() -> dict:
-    env = dict(os.environ)
-    env.setdefault("OMP_NUM_THREADS", "1")   # as bench_peers: one thread per rank everywhere
-    env.setdefault("OPENBLAS_NUM_THREADS", "1")
-    return env
-
-
 # contention control (the machine has 2 cores and may be shared): set by main()
 CONTENTION = {"wait": 60.0, "retries": 1, "min_cpu": 0.85, "budget": 150.0}
-
-
-def cpu_idle(seconds: float = 1.0) -> float:
-    """Fraction of all CPUs idle over the next `seconds` (/proc/stat; 1.0 if unavailable)."""
-    def stat():
-        v = list(map(int, Path("/proc/stat").read_text().split("\n")[0].split()[1:]))
-        return sum(v), v[3] + v[4]
-    try:
-        a = stat()
-        time.sleep(seconds)
-        b = stat()
-        return (b[1] - a[1]) / max(1, b[0] - a[0])
-    except OSError:
-        return 1.0
 
 
 def wait_idle(max_wait: float, idle: float = 0.9, streak: int = 1) -> float:
@@ -248,70 +226,22 @@ def _run_worker_once(script, nranks, worker_args, timeout, retry_import) -> dict
     return {"error": "unreachable"}
 
 
+def load_bench_peers():
+    """scripts/bench_peers.py as a module, or (None, why)."""
+    try:
+        import bench_peers
+
+        return bench_peers, None
+    except Exception as exc:  # an unfinished edit of bench_peers must not stop the benchmark
+        return None, f"bench_peers import failed: {exc!r}"
+
+
 def peer_kwargs(bp, **kw) -> dict:
     """Keyword arguments that this version of bench_peers.run_peer accepts."""
     import inspect
 
     params = inspect.signature(bp.run_peer).parameters
     return {k: v for k, v in kw.items() if k in params}
-
-
-def load_bench_peers():
-    """scripts/bench_peers.py as a module, or (None, why)."""
-    try:
-        sys.path.insert(0, str(SCRIPTS))
-        import bench_peers  # noqa: F401
-
-        return bench_peers, None
-    except Exception as exc:  # another helper owns it: it may be unfinished
-        return None, f"bench_peers import failed: {exc!r}"
-    finally:
-        if sys.path and sys.path[0] == str(SCRIPTS):
-            sys.path.pop(0)
-
-
-def fmt_rate(x) -> str:
-    if x is None:
-        return "-"
-    return f"{x / 1e6:.2f}M" if x >= 1e6 else f"{x / 1e3:.0f}k"
-
-
-def fmt(x, spec=".3f") -> str:
-    return "-" if x is None else format(x, spec)
-
-
-def md_table(head: list[str], rows: list[list[str]]) -> str:
-    out = ["| " + " | ".join(head) + " |", "|" + "|".join("---:" for _ in head) + "|"]
-    out += ["| " + " | ".join(r) + " |" for r in rows]
-    return "\n".join(out)
-
-
-def text_table(head: list[str], rows: list[list[str]]) -> str:
-    w = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h) for i, h in enumerate(head)]
-    line = lambda cells: "  ".join(c.rjust(w[i]) for i, c in enumerate(cells))  # noqa: E731
-    return "\n".join([line(head), "-" * (sum(w) + 2 * (len(w) - 1))] + [line(r) for r in rows])
-
-
-def machine_info() -> dict:
-    info = {"cpus": os.cpu_count(), "loadavg": os.getloadavg()[0],
-            "date": time.strftime("%Y-%m-%d %H:%M:%S")}
-    try:
-        mem = Path("/proc/meminfo").read_text().split("\n")[0].split()[1]
-        info["mem_gib"] = round(int(mem) / 2**20, 1)
-        model = [l for l in Path("/proc/cpuinfo").read_text().splitlines() if "model name" in l]
-        info["cpu"] = model[0].split(":", 1)[1].strip() if model else "?"
-    except OSError:
-        pass
-    return info
-
-
-def git_status() -> str:
-    """`git status --short` of parsolve/ (the benchmarked code is the working tree)."""
-    try:
-        return subprocess.run(["git", "status", "--short", "parsolve"], cwd=ROOT, text=True,
-                              capture_output=True, timeout=30).stdout.strip()
-    except (OSError, subprocess.SubprocessError):
-        return "?"
 
 
 def machine_line(info: dict, elapsed: float) -> str:
@@ -559,10 +489,14 @@ def main(argv=None) -> int:
                    help="redo a measurement whose CPU share is < 0.85 this many times")
     p.add_argument("--no-auto-profile", action="store_true",
                    help="do not profile at the largest N when a target is missed")
+    bh.add_smoke(p)
     args = p.parse_args(argv)
     if args.worker:
         worker(args)
         return 0
+    if args.smoke:   # smallest size, 1 and 2 ranks, no waiting; peers only if installed
+        args.n, args.repeats, args.wait, args.retries, args.no_auto_profile = [8], 1, 0.0, 0, True
+        args.no_peers = args.no_peers or not bh.peer_available("dolfinx")
     if args.profile_worker:
         profile_worker(args)
         return 0
@@ -633,7 +567,7 @@ def write_outputs(name: str, out: dict, md: str, full: bool) -> None:
     else:
         print(f"[bench] partial run (non-default sizes/cells/ranks or --no-peers): "
               f"scripts/results/bench_{name}.md left as it was")
-    print("[bench] wrote " + ", ".join(str(w.relative_to(ROOT)) for w in written))
+    print("[bench] wrote " + ", ".join(str(w) for w in written))
 
 
 def run_profile(n: int, cell: str) -> dict:

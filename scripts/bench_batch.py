@@ -13,6 +13,7 @@ baseline's seconds per run. Every result is checked (end force = E·H·δ/L).
 Writes scripts/results/bench_batch.md.
 
     .venv/bin/python scripts/bench_batch.py [--runs 100] [--skip-slurm]
+    .venv/bin/python scripts/bench_batch.py --smoke   (2 runs, no SLURM; table in a temp folder)
 """
 
 from __future__ import annotations
@@ -30,12 +31,12 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+import bench_harness as bh
 from parsolve.batch import Run, effective_scene, execute
 from parsolve.batch.runner import environment
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = bh.ROOT
 BAR = ROOT / "configs" / "controlled_bar.toml"
-OUT = ROOT / "scripts" / "results" / "bench_batch.md"
 
 
 def runs(n: int) -> list[Run]:
@@ -104,7 +105,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=100)
     ap.add_argument("--skip-slurm", action="store_true")
+    bh.add_smoke(ap)
     opts = ap.parse_args()
+    if opts.smoke:   # 2 runs each way; SLURM skipped (tests/batch/test_slurm.py runs one)
+        opts.runs, opts.skip_slurm = 2, True
     n = opts.runs
     batch = runs(n)
     rows = []
@@ -147,9 +151,7 @@ def main() -> None:
               "overlap what one process leaves idle). Every result checked: end force = E·H·δ/L."]
     text = "\n".join(lines) + "\n"
     print(text)
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(text)
-    print(f"written: {OUT}")
+    print(f"written: {bh.publish('bench_batch.md', text)}")
 
 
 if __name__ == "__main__":

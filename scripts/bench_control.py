@@ -12,11 +12,12 @@ scripts/results/bench_control.png (load-displacement curves; needs matplotlib:
 apt-get install python3-matplotlib).
 
     .venv/bin/python scripts/bench_control.py
+    .venv/bin/python scripts/bench_control.py --smoke   # the bar, 4 steps; files in a temp folder
 """
 
 from __future__ import annotations
 
-import json
+import argparse
 import time
 from pathlib import Path
 
@@ -24,13 +25,15 @@ import h5py
 import numpy as np
 from mpi4py import MPI
 
+import bench_harness as bh
 from parsolve.driver import run
 from parsolve.errors import SolverError
 from parsolve.model import build_model
 from parsolve.scene import load_scene
 
-ROOT = Path(__file__).resolve().parents[1]
-OUT = ROOT / "bench_results"
+ROOT = bh.ROOT
+OUT = bh.SCRATCH              # bench_results/ (a temporary folder in smoke mode)
+SMOKE_STEPS = 4               # smoke runs: the localization bar, every method, 4 steps
 CASES = {
     "localization_bar": dict(scene="localization_bar.toml", edge=1.0, pattern="pull",
                              control="max_strain", arc=6e-5, arc_steps=60, peak_factor=1.2,
@@ -112,20 +115,30 @@ def with_matrix(text: str, matrix: str) -> str:
     return text.replace("[nonlinear]\n", f'[nonlinear]\nmatrix = "{matrix}"\nmax_iterations = 100\n')
 
 
-def run_case(name: str, case: dict) -> list[dict]:
+def shortened(text: str, steps: int | None) -> str:
+    """The scene with ``steps`` steps (None: as shipped)."""
+    if steps is None:
+        return text
+    return text.replace("count = 24", f"count = {steps}").replace("count = 30", f"count = {steps}")
+
+
+def run_case(name: str, case: dict, steps: int | None = None) -> list[dict]:
     """Every method with both matrices (consistent tangent, secant), so each baseline is shown
-    at its best."""
+    at its best. steps: fewer steps than shipped (smoke runs)."""
     rows = []
-    text = (ROOT / "configs" / case["scene"]).read_text()
+    text = shortened((ROOT / "configs" / case["scene"]).read_text(), steps)
+    if steps is not None:
+        case["arc_steps"] = steps
     shipped = "secant" if 'matrix = "secant"' in text else "tangent"
     path = OUT / f"control_{name}_control_{shipped}.h5"
     _run(text, path)
     d, F, its, status = curve(path, case, "control")
     case["peak"] = float(F.max())
-    for matrix in ("tangent", "secant"):
+    # smoke: the secant matrix only (the tangent runs diverge on 4 long steps: 100 iterations)
+    for matrix in ("tangent", "secant") if steps is None else ("secant",):
         for method, scene in variants(case, case["peak"]).items():
             path = OUT / f"control_{name}_{method}_{matrix}.h5"
-            seconds = _run(with_matrix(scene, matrix), path)
+            seconds = _run(with_matrix(shortened(scene, steps), matrix), path)
             d, F, its, status = curve(path, case, method)
             rows.append(_row(name, method, seconds, d, F, its, status) | {"matrix": matrix})
     return rows
@@ -189,19 +202,22 @@ def picture(rows: list[dict], path: Path) -> None:
     fig.savefig(path, dpi=110)
 
 
-def main() -> None:
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    bh.add_smoke(ap)
+    args = ap.parse_args(argv)
     OUT.mkdir(exist_ok=True)
     rows = []
-    for name, case in CASES.items():
-        rows += run_case(name, dict(case))
+    cases = {"localization_bar": CASES["localization_bar"]} if args.smoke else CASES
+    for name, case in cases.items():
+        rows += run_case(name, dict(case), SMOKE_STEPS if args.smoke else None)
     text = table(rows)
     print(text)
-    (OUT / "control.json").write_text(json.dumps(rows, indent=1))
-    results = ROOT / "scripts" / "results"
-    results.mkdir(exist_ok=True)
-    (results / "bench_control.md").write_text("# Control benchmark\n\n" + text)
-    picture(rows, results / "bench_control.png")
+    bh.write_json(OUT / "control.json", rows)
+    md = bh.publish("bench_control.md", "# Control benchmark\n\n" + text)
+    picture(rows, md.with_suffix(".png"))
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -34,6 +34,7 @@ max |u|.
 Usage (repository root):
     .venv/bin/python scripts/bench_distributed.py              # the default sizes below
     .venv/bin/python scripts/bench_distributed.py --quick      # small sizes, a smoke test
+    .venv/bin/python scripts/bench_distributed.py --smoke      # CI: tiny sizes, files in a temp folder
     .venv/bin/python scripts/bench_distributed.py --sizes 2d-direct=305,611 3d-iterative=29,47
     .venv/bin/python scripts/bench_distributed.py --report     # tables again from the JSON
     .venv/bin/python scripts/bench_distributed.py --append --cases 3d-iterative --sizes 3d-iterative=59
@@ -46,7 +47,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import subprocess
 import sys
 import time
@@ -54,16 +54,13 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-SCRIPTS = ROOT / "scripts"
-RESULTS = SCRIPTS / "results"
-SCRATCH = ROOT / "bench_results" / "distributed"
-VENV_PY = str(ROOT / ".venv" / "bin" / "python")
-MiB = 2.0 ** 20
-sys.path.insert(0, str(SCRIPTS))
+import bench_harness as bh
+from bench_harness import MiB, ROOT, SCRIPTS, VENV_PY, proc_memory  # noqa: F401
+from bench_harness import mat_bytes as _mat_bytes
+from bench_scale import child_env, dofs_of, held_bytes, scene_text
 
-from bench_scale import (CASES, _mat_bytes, child_env, dofs_of, held_bytes,  # noqa: E402
-                         proc_memory, scene_text)
+RESULTS = bh.PUBLISHED                # scripts/results/ (a temporary folder in smoke mode)
+SCRATCH = bh.SCRATCH / "distributed"
 
 MODES = ("replicated", "distributed")
 PHASES = ("build_model", "system", "assembly", "solve", "outputs")
@@ -255,9 +252,9 @@ def run_all(args) -> dict:
 
 def summary(args, sizes: dict, rows: list[dict], start: dict, t0: float) -> dict:
     compare(rows)
-    mem = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2 ** 30
-    machine = dict(machine=platform.machine(), cpus=os.cpu_count(), mem_gib=mem,
-                   loadavg_end=list(os.getloadavg()), **start)
+    info = bh.machine_info()
+    machine = dict(machine=info["machine"], cpus=info["cpus"], mem_gib=info["mem_gib"],
+                   cpu=info["cpu"], loadavg_end=list(os.getloadavg()), **start)
     return dict(machine=machine, cases=args.cases, sizes={c: sizes[c] for c in args.cases},
                 ranks=args.ranks, rows=rows, elapsed=time.perf_counter() - t0)
 
@@ -287,9 +284,7 @@ def find(rows, case, n, mode, nranks) -> dict | None:
 
 
 def md_table(head: list[str], body: list[list[str]]) -> str:
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    lines += ["| " + " | ".join(b) + " |" for b in body]
-    return "\n".join(lines)
+    return bh.md_table(head, body, first="---", rest="---")
 
 
 def mib(x: float) -> str:
@@ -482,7 +477,10 @@ def main(argv=None) -> int:
     p.add_argument("--worker", nargs=3, metavar=("CASE", "N", "MODE"), help=argparse.SUPPRESS)
     p.add_argument("--h5", help=argparse.SUPPRESS)
     p.add_argument("--json", help=argparse.SUPPRESS)
+    bh.add_smoke(p)
     args = p.parse_args(argv)
+    if args.smoke and not args.worker:   # one tiny size per case, 1 and 2 ranks
+        args.sizes, args.ranks = [f"{c}={QUICK[c][0] // 4}" for c in args.cases], [1, 2]
     if args.worker:
         case, n, mode = args.worker
         worker(case, int(n), mode, args.h5, args.json)

@@ -7,24 +7,25 @@ scene that does not ask pays nothing.
 
     .venv/bin/python scripts/bench_effects.py        → table, bench_results/effects.json,
                                                        scripts/results/bench_effects.md
+    .venv/bin/python scripts/bench_effects.py --smoke  (the coarsest plate; files in a temp folder)
 """
 
 from __future__ import annotations
 
-import json
+import argparse
 import time
-from pathlib import Path
 
 import h5py
 import numpy as np
 from mpi4py import MPI
 
+import bench_harness as bh
 from parsolve.driver import run
 from parsolve.model import build_model
 from parsolve.scene import load_scene
 
-ROOT = Path(__file__).resolve().parents[1]
-OUT = ROOT / "bench_results"
+ROOT = bh.ROOT
+OUT = bh.SCRATCH              # bench_results/ (a temporary folder in smoke mode)
 BASE = (ROOT / "configs" / "kirsch.toml").read_text().replace("[output]\nfile = \"kirsch.h5\"\n", "") \
     + "\n[steps]\ncount = 5\n"
 VARIANTS = {
@@ -45,10 +46,19 @@ sense = ">="
 }
 
 
-def main() -> None:
+def smallest(text: str) -> str:
+    """The Kirsch plate at its coarsest (smoke runs)."""
+    return text.replace("n_radial = 48", "n_radial = 6").replace("n_angular = 64", "n_angular = 8")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    bh.add_smoke(ap)
+    args = ap.parse_args(argv)
     OUT.mkdir(exist_ok=True)
     rows, reference = [], None
     for name, text in VARIANTS.items():
+        text = smallest(text) if args.smoke else text
         src = OUT / f"effects_{len(rows)}.toml"
         src.write_text(text)
         model = build_model(load_scene(src))
@@ -68,10 +78,10 @@ def main() -> None:
     table = head + "\n".join(f"| {r['variant']} | {r['effects']} | {r['dofs']} | {r['seconds']:.2f} | "
                              f"{r['iterations']} | {r['max_diff']:.1e} |" for r in rows) + "\n"
     print(table)
-    (OUT / "effects.json").write_text(json.dumps(rows, indent=1))
-    (ROOT / "scripts" / "results").mkdir(exist_ok=True)
-    (ROOT / "scripts" / "results" / "bench_effects.md").write_text("# Effects benchmark\n\n" + table)
+    bh.write_json(OUT / "effects.json", rows)
+    bh.publish("bench_effects.md", "# Effects benchmark\n\n" + table)
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

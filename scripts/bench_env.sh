@@ -57,3 +57,4 @@ say "bench-venv: $("$BENCH_VENV/bin/python" -c 'import skfem, scipy, numpy; prin
 say "done. Run e.g.:"
 say "  $PY scripts/bench_peers.py dolfinx --n 64 128 --cell triangle quad --json dolfinx.json"
 say "  $BENCH_VENV/bin/python scripts/bench_peers.py skfem --n 64 128 --cell triangle quad --json skfem.json"
+say "  bash scripts/bench_smoke.sh     # every benchmark at its smallest size, the peers above included"

@@ -1,7 +1,7 @@
 """Benchmark: the paper's frictional contact (relations) against the penalty and augmented
 Lagrangian baselines (``formulation`` in [[contact]], parsolve/effects/contact_penalty.py).
 
-Cases (the scenes of tests/effects/test_contact.py, one process):
+Cases (the scenes of tests/effects/test_contact.py, from scripts/bench_scenes.py; one process):
   block   configs/contact_block_friction.toml: stick → partial slip → slip, 10 steps;
           analytic: the friction resultant is μN = 3 once the block slides
   wedge   the V-wedge of docs/contact.md §7, stick and slip side by side: exact field
@@ -12,35 +12,36 @@ violation, error against the analytic solution, failed (cut) steps. Then contact
 (pairing) and the per-iteration contact update as the surface grows: the relations form's
 friction refresh (states + dual values) against the penalty's nodal forces and tangents.
 
-    .venv/bin/python scripts/bench_friction.py [--quick]
+    .venv/bin/python scripts/bench_friction.py [--quick | --smoke]
         → table, scripts/results/bench_friction.md and bench_friction.png
+        (--quick: printed only; --smoke: two small cases, files in a temporary folder)
 """
 
 from __future__ import annotations
 
-import sys
+import argparse
 import tempfile
 import time
 from pathlib import Path
 
+import h5py
 import numpy as np
 from mpi4py import MPI
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT / "tests"), str(ROOT / "tests" / "effects"), str(ROOT / "scripts")]
+import bench_harness as bh
+from bench_pairing import surface_2d, surface_3d  # (reused surfaces)
+from bench_scenes import G, LAM, sheared_box_scene, wedge_mesh, wedge_scene
+from parsolve.contact import friction as fr
+from parsolve.contact import references
+from parsolve.contact.pairing import pair_nodes
+from parsolve.contact.part_values import PartValues
+from parsolve.contact.rows import friction_dual, normal_rows, tangent_rows
+from parsolve.driver import run
+from parsolve.effects.contact_penalty import PenaltyContact
+from parsolve.model import build_model
+from parsolve.scene import load_scene
 
-import h5py  # noqa: E402
-
-from bench_pairing import surface_2d, surface_3d  # noqa: E402  (reused surfaces)
-from parsolve.contact import friction as fr  # noqa: E402
-from parsolve.contact import references  # noqa: E402
-from parsolve.contact.pairing import pair_nodes  # noqa: E402
-from parsolve.contact.rows import friction_dual, normal_rows, tangent_rows  # noqa: E402
-from parsolve.driver import run  # noqa: E402
-from parsolve.effects.contact_penalty import PenaltyContact  # noqa: E402
-from parsolve.model import build_model  # noqa: E402
-from parsolve.scene import load_scene  # noqa: E402
-from test_contact import G, LAM, sheared_box_scene, wedge_mesh, wedge_scene  # noqa: E402,E501
+ROOT = bh.ROOT
 
 E, NU, MU = 1000.0, 0.3, 0.3
 FORMULATIONS = [("relations", ""), ("penalty", 'formulation = "penalty"'),
@@ -152,8 +153,12 @@ def case_box(work: Path, n: int):
 # ----------------------------------------------------------------------------- runs
 
 
-def formulations_table(work: Path, quick: bool) -> tuple[list[str], list[dict]]:
-    cases = [case_block(work), case_wedge(work), case_hertz(work), case_box(work, 6 if quick else 12)]
+def formulations_table(work: Path, quick: bool, smoke: bool = False) -> tuple[list[str], list[dict]]:
+    if smoke:   # the smallest cases only: every formulation on a 2D and a 3D scene
+        cases = [case_wedge(work), case_box(work, 3)]
+    else:
+        cases = [case_block(work), case_wedge(work), case_hertz(work),
+                 case_box(work, 6 if quick else 12)]
     rows, records = [], []
     for label, text, names, mu, error, h in cases:
         big = 100 * 100 * E / h
@@ -184,10 +189,13 @@ def formulations_table(work: Path, quick: bool) -> tuple[list[str], list[dict]]:
     return head + rows, records
 
 
-def bare_penalty(pairing, mu: float, eps: float) -> PenaltyContact:
-    """The penalty effect's force and tangent kernels on a bare pairing (no mesh, no scene)."""
+def bare_penalty(pairing, mu: float, eps: float, dim: int) -> PenaltyContact:
+    """The penalty effect's force and tangent kernels on a bare pairing (no mesh, no scene):
+    the attributes PenaltyContact.forces and .node_tangents read, set by hand (``values``:
+    the replicated-mesh PartValues, whose node_rows is ``rows.apply(u)``)."""
     eff = object.__new__(PenaltyContact)
     eff.pairing, eff.nrows, eff.trows = pairing, normal_rows(pairing), tangent_rows(pairing)
+    eff.values = PartValues(None, dim)
     eff.eps_n = eff.eps_t = np.full(len(pairing), eps)
 
     class Spec:
@@ -197,10 +205,12 @@ def bare_penalty(pairing, mu: float, eps: float) -> PenaltyContact:
     return eff
 
 
-def update_times(quick: bool) -> tuple[list[str], list[tuple]]:
+def update_times(quick: bool, smoke: bool = False) -> tuple[list[str], list[tuple]]:
     """Pairing, rows, and the per-iteration contact update of each formulation, per surface."""
     sizes = {"2D": [1000, 4000, 16000, 64000] if not quick else [1000, 4000],
              "3D": [32, 64, 128, 256] if not quick else [32, 64]}
+    if smoke:
+        sizes = {"2D": [1000], "3D": [32]}
     rows, data = [], []
     for label, make in (("2D", surface_2d), ("3D", surface_3d)):
         for n in sizes[label]:
@@ -225,7 +235,7 @@ def update_times(quick: bool) -> tuple[list[str], list[tuple]]:
                 friction_dual(p, MU, direction)
                 t3 = time.perf_counter()
                 # penalty: nodal forces and consistent tangents (each Newton iteration)
-                eff = bare_penalty(p, MU, 1e5)
+                eff = bare_penalty(p, MU, 1e5, pts.shape[1])
                 u = rng.normal(size=pts.shape) * 1e-3
                 zero = {"gT": np.zeros((m, dm1))}
                 f = eff.forces(u, zero, np.zeros(m), np.zeros((m, dm1)))
@@ -277,11 +287,15 @@ def picture(records: list[dict], data: list[tuple], path: Path) -> None:
     fig.savefig(path, dpi=110)
 
 
-def main() -> None:
-    quick = "--quick" in sys.argv
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--quick", action="store_true", help="smaller 3D box and surfaces; no files")
+    bh.add_smoke(ap)
+    args = ap.parse_args(argv)
+    quick, smoke = args.quick or args.smoke, args.smoke
     with tempfile.TemporaryDirectory() as tmp:
-        table, records = formulations_table(Path(tmp), quick)
-    upd, data = update_times(quick)
+        table, records = formulations_table(Path(tmp), quick, smoke)
+    upd, data = update_times(quick, smoke)
     text = ("# Frictional contact: relations (the paper's) against penalty and augmented Lagrangian\n\n"
             "`scripts/bench_friction.py`, one process, direct solver (MUMPS). penalty: default "
             "100 E/h per unit area; penalty ×100: 10⁴ E/h; AL: Uzawa augmentations on the default "
@@ -296,14 +310,14 @@ def main() -> None:
             "one friction_update + the frictional dual's values (what the relations form does "
             "between iterations); 'penalty': the nodal forces and consistent tangents (what the "
             "baselines do at every iteration).\n\n" + "\n".join(upd) + "\n")
-    if not quick:
-        out = ROOT / "scripts" / "results" / "bench_friction.md"
-        out.write_text(text)
+    if not quick or smoke:   # smoke: into the harness's temporary folder
+        out = bh.publish("bench_friction.md", text)
         picture(records, data, out.with_suffix(".png"))
         print(f"written {out} and {out.with_suffix('.png')}")
     else:
         print(text)
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

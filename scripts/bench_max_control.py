@@ -12,6 +12,7 @@ a step put the enforced cell on its loading branch (``NewtonSolver._loading_tang
 plate refined 8× stopped at t = 0.182 after 4 cuts (null pivots) and the 2× plate needed cuts.
 
     .venv/bin/python scripts/bench_max_control.py [--steps 30] [--levels 1 2 4 8 16] [--no-cuts]
+    .venv/bin/python scripts/bench_max_control.py --smoke   # level 1, 3 steps; temp folder
 """
 
 from __future__ import annotations
@@ -22,10 +23,11 @@ import time
 import tomllib
 from pathlib import Path
 
-import numpy as np
 from mpi4py import MPI
 
-ROOT = Path(__file__).resolve().parents[1]
+import bench_harness as bh
+
+ROOT = bh.ROOT
 
 
 def scene_text(level: int, steps: int) -> str:
@@ -81,14 +83,17 @@ def run(level: int, steps: int, per_row_copies: bool, cuts: bool = True) -> dict
             "reached": reached, "status": status}
 
 
-def main() -> None:
-    p = argparse.ArgumentParser()
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--steps", type=int, default=30)
     p.add_argument("--levels", type=int, nargs="+", default=[1, 2, 4, 8, 16])
     p.add_argument("--old-up-to", type=int, default=4, help="largest level for the old layout")
     p.add_argument("--output", help="table file (default scripts/results/bench_max_control.md)")
     p.add_argument("--no-cuts", action="store_true", help="no step cuts (a failed step ends the run)")
-    args = p.parse_args()
+    bh.add_smoke(p)
+    args = p.parse_args(argv)
+    if args.smoke:   # level 1, both layouts, 3 steps; the table into a temporary folder
+        args.levels, args.steps = [1], 3
     rows = []
     for level in args.levels:
         for old in (False, True):
@@ -110,11 +115,12 @@ def main() -> None:
             f"1/30, {mode}; load average {load:.1f} on {os.cpu_count()} cores)\n\n" + head
             + "\n".join(lines) + "\n")
     print(text)
-    out = ROOT / "scripts" / "results" / "bench_max_control.md"
     if args.output is not None:
-        out = Path(args.output)
-    out.write_text(text)
+        Path(args.output).write_text(text)
+    else:
+        bh.publish("bench_max_control.md", text)
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -24,21 +24,23 @@ creates the datasets), the file size.
 
     .venv/bin/python scripts/bench_output.py [--n 707] [--steps 20]
         → table on stdout and in scripts/results/bench_output.md; scratch in bench_results/output/
+    .venv/bin/python scripts/bench_output.py --smoke   (n = 8, 3 steps; files in a temp folder)
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import os
 import resource
 import subprocess
 import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-PY = str(ROOT / ".venv" / "bin" / "python")
+import bench_harness as bh
+
+ROOT = bh.ROOT
+PY = bh.VENV_PY
 
 CONFIGS = [  # (ranks, mode, inputs, selection)
     (1, "swmr", "today", "-"),
@@ -132,19 +134,20 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=20)
     ap.add_argument("--child", nargs=3, metavar=("MODE", "INPUTS", "SELECTION"))
     ap.add_argument("--out")
+    bh.add_smoke(ap)
     args = ap.parse_args()
+    if args.smoke and not args.child:   # every configuration on 8 × 8 quads, 3 steps
+        args.n, args.steps = 8, 3
     if args.child:
         mode, inputs, selection = args.child
         return child(args.n, args.steps, mode, inputs, selection, Path(args.out))
-    scratch = ROOT / "bench_results" / "output"
-    scratch.mkdir(parents=True, exist_ok=True)
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_"))}
+    scratch = bh.scratch("output")
+    env = bh.child_env()
     rows = []
     for ranks, mode, inputs, selection in CONFIGS:
         out = scratch / f"r{ranks}_{mode}_{inputs}_{selection}.h5"
-        cmd = ["bash", str(ROOT / "scripts" / "mpirun.sh"), "-n", str(ranks), PY, __file__,
-               "--n", str(args.n), "--steps", str(args.steps), "--child", mode, inputs,
-               selection if selection != "-" else "blocks", "--out", str(out)]
+        cmd = bh.mpirun(ranks, [__file__, "--n", str(args.n), "--steps", str(args.steps), "--child", mode, inputs,
+               selection if selection != "-" else "blocks", "--out", str(out)], PY)
         proc = subprocess.run(cmd, env=env, capture_output=True, text=True)
         if proc.returncode != 0:
             sys.exit(f"{cmd} failed:\n{proc.stderr}")
@@ -171,7 +174,7 @@ def main() -> None:
                      f"{r['peak_mib'] - r['base_mib']:.0f} | {'yes' if r['ok'] else 'NO'} |")
     text = "\n".join(lines) + "\n"
     print(text)
-    (ROOT / "scripts" / "results" / "bench_output.md").write_text(text)
+    bh.publish("bench_output.md", text)
 
 
 if __name__ == "__main__":

@@ -6,21 +6,20 @@ master facet, 0.3 facet sizes above, shifted so that the meshes do not match). T
 vectorised Newton), and building the normal, tangential and frictional-dual rows. The time per
 slave node should stay flat: the work is linear in the surface size.
 
-    .venv/bin/python scripts/bench_pairing.py [--quick]   → table, scripts/results/bench_pairing.md
+    .venv/bin/python scripts/bench_pairing.py [--quick | --smoke]   → table, scripts/results/bench_pairing.md
 """
 
 from __future__ import annotations
 
-import sys
+import argparse
 import time
-from pathlib import Path
 
 import numpy as np
 
+import bench_harness as bh
 from parsolve.contact.pairing import pair_nodes
 from parsolve.contact.rows import friction_dual, normal_rows, tangent_rows
 
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def surface_2d(n: int, quadratic: bool):
@@ -80,10 +79,16 @@ def run_case(make, n: int, quadratic: bool, repeat: int = 3):
     return len(slaves), len(facets), int(p.paired.sum()), best_pair, best_rows
 
 
-def main() -> None:
-    quick = "--quick" in sys.argv
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--quick", action="store_true", help="two sizes; table printed only")
+    bh.add_smoke(ap)
+    args = ap.parse_args(argv)
+    quick = args.quick or args.smoke
     sizes_2d = [1000, 4000, 16000, 64000] if not quick else [1000, 4000]
     sizes_3d = [32, 64, 128, 256] if not quick else [32, 64]
+    if args.smoke:
+        sizes_2d, sizes_3d = [1000], [16]
     lines = ["| surface | facets | slave nodes | master facets | paired | pairing (s) | "
              "rows (s) | pairing µs/node |", "|---|---|---:|---:|---:|---:|---:|---:|"]
     for label, make, sizes in (("2D", surface_2d, sizes_2d), ("3D", surface_3d, sizes_3d)):
@@ -99,11 +104,10 @@ def main() -> None:
             "`scripts/bench_pairing.py`: best of 3, one process. Curved master surfaces, "
             "non-matching slave nodes 0.3 facet sizes above; default search radius (one facet extent), default tolerance. 'rows' = normal + tangential + frictional "
             "dual rows of the paired nodes.\n\n" + "\n".join(lines) + "\n")
-    if not quick:
-        out = ROOT / "scripts" / "results" / "bench_pairing.md"
-        out.write_text(text)
-        print(f"written {out}")
+    if not quick or args.smoke:   # smoke: into the harness's temporary folder
+        print(f"written {bh.publish('bench_pairing.md', text)}")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

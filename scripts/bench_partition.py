@@ -43,12 +43,10 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_assembly import (COMMITTED, CONTENTION, RESULTS, ROOT, Phase,  # noqa: E402
-                            cpu_idle, git_status, machine_info, machine_line, md_table,
-                            run_worker, text_table)
-
-sys.path.pop(0)
+import bench_harness as bh
+from bench_assembly import COMMITTED, CONTENTION, RESULTS, ROOT, Phase, machine_line, run_worker
+from bench_assembly import scene_text as square
+from bench_harness import cpu_idle, git_status, machine_info, md_table, text_table
 
 PLATE_K = [2, 4]
 BOX_N = [20]
@@ -114,10 +112,6 @@ components = ["x", "y", "z"]
 def square_text(n: int) -> str:
     """bench_solve's problem (where the issue measured QAMD's 2.2×): unit square, N × N quads
     split into P1 triangles, plane strain, left edge clamped, traction on the right."""
-    sys.path.insert(0, str(ROOT / "scripts"))
-    from bench_assembly import scene_text as square
-
-    sys.path.pop(0)
     return square(n, "triangle", "direct").split("[solver]")[0]   # ours is appended
 
 
@@ -351,10 +345,13 @@ def main(argv=None) -> int:
                    help="only write the tables from earlier runs' JSON files (merged)")
     p.add_argument("--wait", type=float, default=5.0,
                    help="before each process wait up to this many seconds for idle CPUs")
+    bh.add_smoke(p)
     args = p.parse_args(argv)
     if args.worker:
         worker(args)
         return 0
+    if args.smoke:   # the smallest Kirsch plate, small box and square, 2 ranks, no waiting
+        args.plate, args.box, args.square, args.ranks, args.wait = [1], [4], [8], [2], 0.0
     RESULTS.mkdir(exist_ok=True)
     if args.render:
         return render(args.render)

@@ -21,6 +21,7 @@ The two peers live in different environments, so this file is both a module and 
     /work/bench-venv/bin/python scripts/bench_peers.py skfem --n 100 200 --cell triangle quad --json s.json
     # sanity: same Frobenius norm from both peers (n=8), DOLFINx on 1 and 2 ranks, repeatable norms
     python scripts/bench_peers.py check
+    python scripts/bench_peers.py --smoke        # CI: check at n = 4, peers not installed skipped
 
 From a parsolve benchmark, `run_peer("dolfinx", [100, 200], ...)` runs the right interpreter (under
 mpirun if nranks > 1) as a subprocess and returns the parsed JSON.
@@ -44,6 +45,8 @@ from pathlib import Path
 
 import numpy as np
 
+import bench_harness as bh
+
 E_MOD = 1.0
 NU = 0.3
 TRACTION = (0.0, -1.0)
@@ -51,8 +54,9 @@ CELLS = ("triangle", "quad")
 SOLVE_METHODS = ("mumps", "gamg")
 GAMG_RTOL = 1e-8
 
-DEFAULT_BENCH_VENV = Path(os.environ.get("BENCH_VENV", "/work/bench-venv"))
-DEBIAN_PYTHON = "/usr/bin/python3"
+DEFAULT_BENCH_VENV = bh.BENCH_VENV
+DEBIAN_PYTHON = bh.DEBIAN_PY
+proc_memory, mat_bytes, _cpu_idle = bh.proc_memory, bh.mat_bytes, bh.cpu_idle
 
 
 # --------------------------------------------------------------------------------------------------
@@ -372,13 +376,14 @@ def dolfinx_assembly_box(n: int, repeats: int | None = None, comm=None,
 def run_dolfinx_box(n: int, repeats: int | None = None, degree: int | None = None,
                     timeout: float = 1800.0) -> dict:
     """``dolfinx_assembly_box`` in a fresh Debian-python process (1 rank); its result dict."""
-    code = ("import json, sys; sys.path.insert(0, sys.argv[1]); import bench_peers as b; "
-            "print('RESULT ' + json.dumps(b.dolfinx_assembly_box(int(sys.argv[2]), "
-            "int(sys.argv[3]) or None, degree=int(sys.argv[4]) or None)))")
+    # run in scripts/: `python -c` puts the working folder first on sys.path
+    code = ("import json, sys; import bench_peers as b; "
+            "print('RESULT ' + json.dumps(b.dolfinx_assembly_box(int(sys.argv[1]), "
+            "int(sys.argv[2]) or None, degree=int(sys.argv[3]) or None)))")
     env = dict(os.environ)
     env.setdefault("OMP_NUM_THREADS", "1")
-    proc = subprocess.run([DEBIAN_PYTHON, "-c", code, str(Path(__file__).resolve().parent),
-                           str(n), str(repeats or 0), str(degree or 0)], env=env, timeout=timeout, text=True,
+    proc = subprocess.run([DEBIAN_PYTHON, "-c", code, str(n), str(repeats or 0), str(degree or 0)],
+                          env=env, timeout=timeout, text=True, cwd=str(bh.SCRIPTS),
                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     line = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")]
     if proc.returncode != 0 or not line:
@@ -500,31 +505,6 @@ def dolfinx_versions() -> dict:
 
 # --------------------------------------------------------------------------------------------------
 # DOLFINx 0.5: every phase of a linear run, with the memory of each (scripts/bench_scale.py)
-
-
-def proc_memory() -> dict:
-    """This process's resident memory now (VmRSS) and its peak so far (VmHWM), in bytes, from
-    /proc/self/status (Linux); zeros elsewhere."""
-    out = {"rss": 0, "hwm": 0}
-    try:
-        with open("/proc/self/status") as f:
-            for line in f:
-                if line.startswith(("VmRSS:", "VmHWM:")):
-                    out["rss" if line.startswith("VmRSS") else "hwm"] = int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return out
-
-
-def mat_bytes(A) -> float:
-    """Bytes of an assembled AIJ matrix on this rank, from MatGetInfo (PETSc 3.18 leaves
-    MatInfo.memory at 0): values + column indices of the allocated nonzeros, row offsets."""
-    from petsc4py import PETSc
-
-    info = A.getInfo(PETSc.Mat.InfoType.LOCAL)
-    isize = np.dtype(PETSc.IntType).itemsize
-    rows = A.getLocalSize()[0]
-    return info["nz_allocated"] * (np.dtype(PETSc.ScalarType).itemsize + isize) + (rows + 1) * isize
 
 
 def mumps_memory(ksp) -> dict:
@@ -928,22 +908,6 @@ def solve_table(rows: list[dict]) -> str:
 # CLI
 
 
-def _cpu_idle(seconds: float = 1.0) -> float:
-    """Fraction of all CPUs idle over the next `seconds` (from /proc/stat; 1.0 if unavailable)."""
-    def stat():
-        with open("/proc/stat") as f:
-            v = [int(x) for x in f.readline().split()[1:]]
-        return sum(v), v[3] + v[4]
-
-    try:
-        a = stat()
-        time.sleep(seconds)
-        b = stat()
-    except OSError:
-        return 1.0
-    return (b[1] - a[1]) / max(1, b[0] - a[0])
-
-
 def wait_quiet(comm=None, max_wait: float = 0.0, idle: float = 0.93, streak: int = 3) -> float:
     """Wait (at most max_wait s) until the CPUs have been idle (> `idle`) `streak` seconds running:
     rank 0 watches /proc/stat while the other ranks sleep in a non-busy Ibarrier loop (a busy MPI
@@ -1064,24 +1028,31 @@ def _main_check(args) -> int:
     and GAMG agree."""
     ok = True
     n = args.n[0] if args.n else 8
-    runs = {
-        "dolfinx np=1": run_peer("dolfinx", [n], CELLS, solve=SOLVE_METHODS, plane=args.plane),
-        "dolfinx np=2": run_peer("dolfinx", [n], CELLS, nranks=2, solve=SOLVE_METHODS,
-                                 plane=args.plane),
-        "skfem": run_peer("skfem", [n], CELLS, plane=args.plane),
-    }
-    for cell in CELLS:
+    # smoke mode: the peers that are not installed are skipped (a full check needs both)
+    have = {peer: not args.smoke or bh.peer_available(peer) for peer in ("dolfinx", "skfem")}
+    runs = {}
+    if have["dolfinx"]:
+        runs["dolfinx np=1"] = run_peer("dolfinx", [n], CELLS, solve=SOLVE_METHODS,
+                                        plane=args.plane)
+        runs["dolfinx np=2"] = run_peer("dolfinx", [n], CELLS, nranks=2, solve=SOLVE_METHODS,
+                                        plane=args.plane)
+    if have["skfem"]:
+        runs["skfem"] = run_peer("skfem", [n], CELLS, plane=args.plane)
+    for peer, there in have.items():
+        if not there:
+            print(f"[check] {peer} not installed: skipped (bash scripts/bench_env.sh)")
+    for cell in CELLS if runs else ():
         fros = {k: [r for r in v["assembly"] if r["cell"] == cell][0] for k, v in runs.items()}
-        ref = fros["dolfinx np=1"]["fro"]
+        ref = next(iter(fros.values()))["fro"]
         for k, r in fros.items():
             rel = abs(r["fro"] - ref) / ref
             good = rel < 1e-12 and r["fro_rel_spread"] < 1e-14
             ok &= good
             print(f"[check] n={n} {cell:8s} {k:13s} fro={r['fro']:.15f} rel.diff={rel:.1e} "
                   f"spread over (re)assemblies={r['fro_rel_spread']:.1e} {'OK' if good else 'FAIL'}")
-        sol = [r for k in ("dolfinx np=1", "dolfinx np=2") for r in runs[k]["solve"]
-               if r["cell"] == cell]
-        uref = sol[0]["uy_corner"]
+        sol = [r for k in ("dolfinx np=1", "dolfinx np=2") if k in runs
+               for r in runs[k]["solve"] if r["cell"] == cell]
+        uref = sol[0]["uy_corner"] if sol else 0.0
         for r in sol:
             rel = abs(r["uy_corner"] - uref) / abs(uref)
             good = rel < 1e-6 and r["relres"] < 1e-7
@@ -1095,7 +1066,8 @@ def _main_check(args) -> int:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("peer", choices=["dolfinx", "skfem", "check"])
+    p.add_argument("peer", choices=["dolfinx", "skfem", "check"], nargs="?",
+                   help="(--smoke alone: `check` at n = 4 on the peers installed)")
     p.add_argument("--n", type=int, nargs="+", default=None, help="quads per side")
     p.add_argument("--cell", nargs="+", choices=CELLS, default=["triangle"])
     p.add_argument("--plane", choices=["strain", "stress"], default="strain")
@@ -1113,7 +1085,12 @@ def main(argv=None) -> int:
                    help="before each measurement wait (at most this long) for the CPUs to be idle "
                         "(other jobs on the machine); 0 = don't")
     p.add_argument("--json", default=None, help="write results here (rank 0)")
+    bh.add_smoke(p)
     args = p.parse_args(argv)
+    if args.smoke:
+        args.peer, args.n = args.peer or "check", args.n or [4]
+    if args.peer is None:
+        p.error("the peer (dolfinx, skfem or check) is required")
     if args.peer == "check":
         return _main_check(args)
     if not args.n:

@@ -53,6 +53,7 @@ Usage (repository root):
     .venv/bin/python scripts/bench_scale.py                  # ≈ 35-40 min on 2 loaded cores
     .venv/bin/python scripts/bench_scale.py --mesh both --sizes 2d-direct=216,305,432 3d-iterative=23,29,37
     .venv/bin/python scripts/bench_scale.py --quick          # small sizes, a smoke test
+    .venv/bin/python scripts/bench_scale.py --smoke          # CI: one tiny size, files in a temp folder
     .venv/bin/python scripts/bench_scale.py --sizes 2d-direct=1000,1414,2000 3d-iterative=60,79,100
     .venv/bin/python scripts/bench_scale.py --report         # tables again from the JSON
     .venv/bin/python scripts/bench_scale.py --phases post --baseline /tmp/main  # post only
@@ -68,7 +69,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import subprocess
 import sys
 import time
@@ -76,13 +76,31 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-SCRIPTS = ROOT / "scripts"
-RESULTS = SCRIPTS / "results"
-SCRATCH = ROOT / "bench_results" / "scale"
-VENV_PY = str(ROOT / ".venv" / "bin" / "python")
-DEBIAN_PY = "/usr/bin/python3"
-MiB = 2.0 ** 20
+import bench_harness as bh
+from bench_harness import (DEBIAN_PY, MiB, ROOT, SCRIPTS, VENV_PY, cpu_seconds,  # noqa: F401
+                           machine_info, proc_memory)
+from bench_harness import mat_bytes as _mat_bytes
+
+RESULTS = bh.PUBLISHED                # scripts/results/ (a temporary folder in smoke mode)
+SCRATCH = bh.SCRATCH / "scale"
+
+
+def child_env() -> dict:
+    """One thread per rank, no MPI singleton variables, the repository on PYTHONPATH (Debian's
+    python runs the DOLFINx worker)."""
+    return bh.child_env(pythonpath=True)
+
+
+def fmt(x, spec=".2f") -> str:
+    return bh.fmt(x, spec, "–")
+
+
+def mib(x) -> str:
+    return bh.mib(x)
+
+
+def md_table(head: list[str], body: list[list[str]]) -> str:
+    return bh.md_table(head, body, first="---")
 
 CASES = {
     "2d-direct": dict(dim=2, cell="triangle", preset="direct"),
@@ -158,22 +176,6 @@ def tag_of(code: str, case: str, n: int, nranks: int) -> str:
 
 # ------------------------------------------------------------------------------------------------
 # memory helpers (both workers)
-
-
-def cpu_seconds() -> float:
-    """CPU seconds of this process (user + system)."""
-    t = os.times()
-    return t.user + t.system
-
-
-def proc_memory() -> dict:
-    """VmRSS and VmHWM of this process in bytes."""
-    out = {"rss": 0, "hwm": 0}
-    with open("/proc/self/status") as f:
-        for line in f:
-            if line.startswith(("VmRSS:", "VmHWM:")):
-                out["rss" if line.startswith("VmRSS") else "hwm"] = int(line.split()[1]) * 1024
-    return out
 
 
 def held_bytes(roots: dict[str, list]) -> dict[str, int]:
@@ -349,21 +351,6 @@ def instrument(drv, rec: Recorder, output: bool = True) -> dict:
     return held
 
 
-def _mat_bytes(A) -> float:
-    """Bytes of an assembled AIJ/BAIJ matrix on this rank: allocated nonzeros × (value + column
-    index) + row offsets (PETSc 3.18's MatInfo.memory is 0)."""
-    from petsc4py import PETSc
-
-    info = A.getInfo(PETSc.Mat.InfoType.LOCAL)
-    isize = np.dtype(PETSc.IntType).itemsize
-    bs = max(int(info["block_size"]), 1)
-    rows = A.getLocalSize()[0]
-    # a Mat made on the caller's arrays (parsolve's operator) reports nothing allocated
-    nz = max(info["nz_allocated"], info["nz_used"])
-    return (nz * np.dtype(PETSc.ScalarType).itemsize
-            + nz / (bs * bs) * isize + (rows / bs + 1) * isize)
-
-
 def _mumps(solver) -> dict:
     pc = solver.ksp.getPC()
     if pc.getType() not in ("lu", "cholesky") or pc.getFactorMatrix().getType() != "mumps":
@@ -457,7 +444,6 @@ def _q_checks(q: np.ndarray, points: np.ndarray) -> dict:
 
 def dolfinx_worker(case: str, n: int, mesh_file: str, options: str, out_file: str,
                    json_out: str) -> None:
-    sys.path.insert(0, str(SCRIPTS))
     import bench_peers
     from mpi4py import MPI
 
@@ -495,12 +481,6 @@ def _dolfinx_mem(row: dict) -> dict:
 
 # ------------------------------------------------------------------------------------------------
 # driver
-
-
-def child_env() -> dict:
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "OPAL_"))}
-    env.update(OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", PYTHONPATH=str(ROOT))
-    return env
 
 
 def save_mesh(case: str, n: int) -> Path:
@@ -621,19 +601,6 @@ def progress_line(r: dict) -> str:
             + f"  wall {r['process_wall']:.0f} s, cpu share {r.get('cpu_share', 0):.2f}")
 
 
-def machine_info() -> dict:
-    import datetime
-
-    mem = 0
-    with open("/proc/meminfo") as f:
-        for line in f:
-            if line.startswith("MemTotal:"):
-                mem = int(line.split()[1]) * 1024
-    return dict(cpus=os.cpu_count(), mem_gib=mem / 2 ** 30, machine=platform.machine(),
-                date=datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
-                loadavg_start=os.getloadavg())
-
-
 # ------------------------------------------------------------------------------------------------
 # analysis
 
@@ -722,20 +689,6 @@ def fits(out: dict) -> dict:
 
 # ------------------------------------------------------------------------------------------------
 # tables
-
-
-def fmt(x, spec=".2f") -> str:
-    return "–" if x is None else format(x, spec)
-
-
-def mib(x) -> str:
-    return "–" if x is None else f"{x / MiB:,.0f}"
-
-
-def md_table(head: list[str], body: list[list[str]]) -> str:
-    return "\n".join(["| " + " | ".join(head) + " |",
-                      "|" + "|".join("---" if i == 0 else "---:" for i in range(len(head))) + "|"]
-                     + ["| " + " | ".join(r) + " |" for r in body])
 
 
 def pairs(out: dict):
@@ -1359,7 +1312,12 @@ def main(argv=None) -> int:
                         "its part), or both in the same run")
     p.add_argument("--mesh-file", help=argparse.SUPPRESS)
     p.add_argument("--options", help=argparse.SUPPRESS)
+    bh.add_smoke(p)
     args = p.parse_args(argv)
+    if args.smoke and not args.worker:   # one small size per case, 1 rank; DOLFINx if installed
+        args.sizes = [f"{c}={QUICK[c][0] // 3 if c.startswith('2d') else 4}" for c in args.cases]
+        args.ranks, args.weak = [1], []
+        args.no_peers = args.no_peers or not bh.peer_available("dolfinx")
     if args.worker:
         code, case, n = args.worker
         if code == "parsolve":

@@ -3,7 +3,7 @@
 ordering on 1 and 2 ranks.
 
 Section *pattern* (1 rank, all nodes owned): `node_pattern` and `NodePattern.block_positions`,
-the current builder ("new") against the one it replaced ("old", kept in tests/la/test_pattern.py
+the current builder ("new") against the one it replaced ("old", kept in scripts/baselines/pattern_reference.py
 as the reference), interleaved in the same process, best of the repeats.
 
 Section *first* (1 rank): first assembly as scripts/bench_assembly.py defines it --
@@ -43,6 +43,7 @@ Usage (from the repository root):
     .venv/bin/python scripts/bench_setup.py --sections pattern first --quick
     .venv/bin/python scripts/bench_setup.py --report      # table again from bench_results/setup.json
     .venv/bin/python scripts/bench_setup.py --sections compare --compare HEAD~3
+    .venv/bin/python scripts/bench_setup.py --smoke      # CI: smallest sizes, files in a temp folder
 Writes bench_results/setup.json and scripts/results/bench_setup.md.
 """
 
@@ -52,21 +53,18 @@ import argparse
 import gc
 import json
 import os
-import platform
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-SCRIPTS = ROOT / "scripts"
-PYTHON = str(ROOT / ".venv" / "bin" / "python")
-RESULTS = ROOT / "bench_results"
-COMMITTED = SCRIPTS / "results"
-sys.path.insert(0, str(SCRIPTS))
-sys.path.insert(0, str(ROOT / "tests" / "la"))
-sys.path.insert(0, str(ROOT))
+import bench_harness as bh
+from bench_harness import ROOT, SCRIPTS
+
+PYTHON = bh.VENV_PY
+RESULTS = bh.SCRATCH          # bench_results/ (a temporary folder in smoke mode)
+COMMITTED = bh.PUBLISHED      # scripts/results/ (idem)
 
 SIZES_2D = [70, 223, 707, 1000, 1414]        # 2(N+1)² DOFs: 10k, 100k, 1M, 2M, 4M
 SIZES_3D = [20, 40, 60, 79]                  # 3(N+1)³ DOFs: 28k, 207k, 681k, 1.54M
@@ -152,7 +150,7 @@ def slowest(comm, seconds: float) -> float:
 
 def child_pattern(cell: str, n: int, repeats: int) -> dict:
     import numpy as np
-    from test_pattern import reference_block_positions, reference_pattern
+    from baselines.pattern_reference import reference_block_positions, reference_pattern
 
     from parsolve.la.pattern import node_pattern
     from parsolve.mesh.generators import box, rectangle
@@ -186,7 +184,7 @@ def child_first(cell: str, n: int, repeats: int) -> dict:
     """SaddleSystem + first assemble, old and new builders, with the parts timed by wrappers."""
     import numpy as np
     from mpi4py import MPI
-    from test_pattern import reference_block_positions, reference_pattern
+    from baselines.pattern_reference import reference_block_positions, reference_pattern
 
     import parsolve.solvers.system as system_mod
     from parsolve.la.pattern import NodePattern, node_pattern
@@ -453,7 +451,7 @@ def spawn(args: list[str], nranks: int = 1, timeout: float = 1800.0):
         cmd = [PYTHON, str(Path(__file__).resolve()), "--child", *args, "--json", str(out)]
         if nranks > 1:
             cmd = ["bash", str(SCRIPTS / "mpirun.sh"), "-n", str(nranks), *cmd]
-        env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+        env = bh.child_env()
         proc = subprocess.run(cmd, env=env, timeout=timeout, text=True, stdout=subprocess.PIPE,
                               stderr=subprocess.STDOUT)
         if proc.returncode != 0 or not out.exists():
@@ -538,8 +536,7 @@ def mumps_table(rows: list[dict]) -> str:
 
 
 def machine() -> str:
-    cpu = next((ln.split(":", 1)[1].strip() for ln in Path("/proc/cpuinfo").read_text().splitlines()
-                if ln.startswith("model name")), platform.processor())
+    cpu = bh.cpu_model()
     load = os.getloadavg()
     return (f"Machine: {cpu}, {os.cpu_count()} cores; load average {load[0]:.2f} at the end "
             f"(> 2 means other jobs shared the cores: compare ratios within a row); "
@@ -567,7 +564,11 @@ def main() -> None:
     p.add_argument("--mumps-3d", type=int, default=20, help="hexes per side of the 3D MUMPS case")
     p.add_argument("--child", nargs="+", default=None, help=argparse.SUPPRESS)
     p.add_argument("--json", default=None, help=argparse.SUPPRESS)
+    bh.add_smoke(p)
     a = p.parse_args()
+    if a.smoke:   # smallest sizes of every default section; DOLFINx only if installed
+        a.quick, a.n2d, a.n3d, a.repeats, a.mumps_2d, a.mumps_3d = True, [8], [3], 1, 8, 3
+        a.no_peers = a.no_peers or not bh.peer_available("dolfinx")
     if a.child:
         kind, *rest = a.child
         if kind == "pattern":
@@ -626,10 +627,11 @@ def main() -> None:
                  if a.compare_cases else COMPARE_CASES["quick" if a.quick else "full"])
         run_compare(results, a.compare, cases, a.repeats, not a.no_peers, save)
     if "mumps" in a.sections and not a.report:
-        sizes = {2: 60 if a.quick else a.mumps_2d, 3: 8 if a.quick else a.mumps_3d}
+        sizes = {2: a.mumps_2d if a.smoke or not a.quick else 60,
+                 3: a.mumps_3d if a.smoke or not a.quick else 8}
         for dim in (2, 3):
             for control in ("none", "side", "body"):
-                for nranks in (1, 2):
+                for nranks in (1,) if a.smoke else (1, 2):   # smoke: 1 rank
                     rows = spawn(["mumps", str(dim), str(sizes[dim]), control], nranks=nranks)
                     results["mumps"].extend(rows or [])
                     save()

@@ -18,11 +18,12 @@ wall clock; the baseline's in-process time (it writes nothing).
 
     .venv/bin/python scripts/bench_solubility.py   → table on stdout,
         scripts/results/bench_solubility.md, .json, .png; scratch in bench_results/solubility/
+    .venv/bin/python scripts/bench_solubility.py --smoke   (smallest sizes; files in a temp folder)
 """
 
 from __future__ import annotations
 
-import importlib.util
+import argparse
 import json
 import os
 import platform
@@ -34,12 +35,15 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+import bench_harness as bh
+from baselines import solubility_ssn as BASELINE
+from bench_harness import child_env
 from parsolve.mesh.generators import rectangle
 
-ROOT = Path(__file__).resolve().parents[1]
-OUT = ROOT / "bench_results" / "solubility"
-RESULTS = ROOT / "scripts" / "results"
-PY = str(ROOT / ".venv" / "bin" / "python")
+ROOT = bh.ROOT
+OUT = bh.SCRATCH / "solubility"
+RESULTS = bh.PUBLISHED                # scripts/results/ (a temporary folder in smoke mode)
+PY = bh.VENV_PY
 # MUMPS' default workspace margin (icntl_14 = 50 in the direct preset) fails on the strip from
 # nx = 320 (INFOG(1) = -9, then -3 on every retry): more room, for every size alike.
 PETSC_OPTS = ["-mat_mumps_icntl_14", "200"]
@@ -48,15 +52,6 @@ SQUARE_N = (24, 48, 96)
 TWO_RANKS = {"strip": (320, 640), "corner": (96,)}
 
 
-def _baseline_module():
-    spec = importlib.util.spec_from_file_location(
-        "solubility_ssn", ROOT / "scripts" / "baselines" / "solubility_ssn.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-BASELINE = _baseline_module()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -164,7 +159,7 @@ def run_parsolve(case: dict, nranks: int) -> dict:
     scene.write_text(case["text"])
     cmd = [PY, "-m", "parsolve", "run", str(scene), "-o", str(out), *PETSC_OPTS]
     if nranks > 1:
-        cmd = ["bash", str(ROOT / "scripts" / "mpirun.sh"), "-n", str(nranks), *cmd]
+        cmd = bh.mpirun(nranks, cmd[1:], PY)
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, env=child_env())
     wall = time.perf_counter() - t0
@@ -180,14 +175,6 @@ def run_parsolve(case: dict, nranks: int) -> dict:
         r["state"] = f["fields/solubility_state"][..., 0]
     r["wall"] = wall
     return r
-
-
-def child_env() -> dict:
-    """This process's environment without its MPI singleton's variables (an mpirun started
-    from a process that initialised MPI exits silently otherwise); one thread per rank."""
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "OPAL_"))}
-    env.update(OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
-    return env
 
 
 def point_map(ours: np.ndarray, theirs: np.ndarray) -> np.ndarray:
@@ -416,28 +403,32 @@ def report(rows: list[dict], machine: str) -> str:
             f"(bench_solubility.png)\n\n## Findings\n\n{findings(rows)}")
 
 
-def main() -> None:
-    if "--report" in sys.argv:  # rewrite the markdown from the saved rows
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--report", action="store_true", help="rewrite the markdown from the JSON")
+    bh.add_smoke(ap)
+    args = ap.parse_args(argv)
+    if args.report:  # rewrite the markdown from the saved rows
         data = json.loads((RESULTS / "bench_solubility.json").read_text())
         (RESULTS / "bench_solubility.md").write_text(report(data["rows"], data["machine"]))
         picture(data["rows"], RESULTS / "bench_solubility.png")
-        return
+        return 0
     OUT.mkdir(parents=True, exist_ok=True)
     RESULTS.mkdir(exist_ok=True)
     load0, t0 = os.getloadavg(), time.perf_counter()
     print(HEAD, flush=True)
     rows = []
     rows += run_case(well_mixed_case(), (1,))
-    for nx in STRIP_NX:
-        rows += run_case(strip_case(nx), (1, 2) if nx in TWO_RANKS["strip"] else (1,))
-    for n in SQUARE_N:
-        rows += run_case(corner_case(n), (1, 2) if n in TWO_RANKS["corner"] else (1,))
+    # smoke: the smallest strip and corner square, the square on 1 and 2 ranks
+    strip_nx, square_n = ((STRIP_NX[0],), (8,)) if args.smoke else (STRIP_NX, SQUARE_N)
+    two = {"strip": (), "corner": (8,)} if args.smoke else TWO_RANKS
+    for nx in strip_nx:
+        rows += run_case(strip_case(nx), (1, 2) if nx in two["strip"] else (1,))
+    for n in square_n:
+        rows += run_case(corner_case(n), (1, 2) if n in two["corner"] else (1,))
     load1, seconds = os.getloadavg(), time.perf_counter() - t0
-    table = HEAD + "\n" + "\n".join(_line(r) for r in rows) + "\n"
-    machine = (f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores; load average "
-               f"(1/5/15 min) {load0[0]:.2f}/{load0[1]:.2f}/{load0[2]:.2f} at start, "
-               f"{load1[0]:.2f}/{load1[1]:.2f}/{load1[2]:.2f} at end; run "
-               f"{time.strftime('%Y-%m-%d %H:%M:%S', time.gmtime())} UTC, {seconds:.0f} s")
+    machine = (f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores; "
+               f"{bh.load_line(load0, load1)}; run {bh.utc_now()} UTC, {seconds:.0f} s")
     picture(rows, RESULTS / "bench_solubility.png")
     (RESULTS / "bench_solubility.json").write_text(json.dumps(
         dict(machine=machine, rows=[{k: (v.tolist() if isinstance(v, np.ndarray) else v)
@@ -445,6 +436,7 @@ def main() -> None:
     text = report(rows, machine)
     (RESULTS / "bench_solubility.md").write_text(text)
     print(f"\n{machine}\n\n{findings(rows)}")
+    return 0
 
 
 if __name__ == "__main__":

@@ -34,6 +34,7 @@ Usage (from the repository root):
     .venv/bin/python scripts/bench_solve.py                         # everything (~10.5 min; --control-n 141 282 skips the ~3 min PORD run at 640k)
     .venv/bin/python scripts/bench_solve.py --n 70 141 --ranks 1 --no-peers --control-n 141
     .venv/bin/python scripts/bench_solve.py --peers-from bench_results  # reuse peer JSON
+    .venv/bin/python scripts/bench_solve.py --smoke                 # CI: N = 8, files in a temp folder
 Writes bench_results/solve.json, bench_results/solve.md and scripts/results/bench_solve.md.
 """
 
@@ -49,14 +50,11 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_assembly import (COMMITTED, CONTENTION, RESULTS, ROOT, SCRIPTS, Phase,  # noqa: E402
-                            build, child_env, cpu_idle, default_repeats, fmt, full_run,
-                            git_status, load_bench_peers, machine_info, machine_line, md_table,
-                            num_dofs, peer_kwargs, run_worker, scene_text, text_table,
-                            write_outputs)
-
-sys.path.pop(0)
+import bench_harness as bh
+from bench_assembly import (COMMITTED, CONTENTION, RESULTS, ROOT, SCRIPTS, Phase, build,
+                            default_repeats, full_run, load_bench_peers, machine_line, num_dofs,
+                            peer_kwargs, run_worker, scene_text, write_outputs)
+from bench_harness import child_env, cpu_idle, fmt, git_status, machine_info, md_table, text_table
 
 DEFAULT_N = [70, 141, 223, 316, 707]           # 10k, 40k, 100k, 200k, 1M DOFs (add 500 with --n)
 CONTROL_N = [141, 282, 565]                    # 40k, 160k, 640k DOFs
@@ -537,10 +535,15 @@ def main(argv=None) -> int:
                    help="redo a measurement whose CPU share is < 0.85 this many times")
     p.add_argument("--render", type=Path, default=None, metavar="SOLVE_JSON",
                    help="only rewrite the tables/markdown from a previous run's solve.json")
+    bh.add_smoke(p)
     args = p.parse_args(argv)
     if args.worker:
         worker(args)
         return 0
+    if args.smoke:   # smallest sizes, no waiting; DOLFINx only if installed
+        args.n, args.control_n, args.repeats, args.wait, args.retries = [8], [8], 1, 0.0, 0
+        args.ranks = [1]      # bench_assembly --smoke covers 2 ranks
+        args.no_peers = args.no_peers or not bh.peer_available("dolfinx")
     RESULTS.mkdir(exist_ok=True)
     COMMITTED.mkdir(exist_ok=True)
     if args.render:

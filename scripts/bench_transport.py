@@ -24,6 +24,7 @@ refined strip.
 
     .venv/bin/python scripts/bench_transport.py [--sizes 125 250]   → table on stdout,
         scripts/results/bench_transport.md and .json; scratch in bench_results/transport/
+    .venv/bin/python scripts/bench_transport.py --smoke   (n = 8, 1 rank; files in a temp folder)
 """
 
 from __future__ import annotations
@@ -40,11 +41,13 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-OUT = ROOT / "bench_results" / "transport"
-RESULTS = ROOT / "scripts" / "results"
-VENV_PY = str(ROOT / ".venv" / "bin" / "python")
-DEBIAN_PY = "/usr/bin/python3"
+import bench_harness as bh
+from bench_harness import child_env
+
+ROOT = bh.ROOT
+OUT = bh.SCRATCH / "transport"
+RESULTS = bh.PUBLISHED                # scripts/results/ (a temporary folder in smoke mode)
+VENV_PY, DEBIAN_PY = bh.VENV_PY, bh.DEBIAN_PY
 SIZES = (125, 250, 500, 1000)      # (n+1)² DOFs: 16k, 63k, 251k, 1.0M
 CELLS = ("triangle", "quad")
 RANKS = (1, 2)
@@ -240,18 +243,11 @@ def dolfinx_worker(n: int, cell: str, json_out: str) -> None:
 # ---------------------------------------------------------------------------------------------
 # driver
 
-def child_env() -> dict:
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "OPAL_"))}
-    env.update(OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
-    return env
-
-
 def launch(code: str, n: int, cell: str, nranks: int) -> dict:
     py = DEBIAN_PY if code == "dolfinx" else VENV_PY
     js = OUT / f"{code}_{cell}_{n}_np{nranks}.json"
     js.unlink(missing_ok=True)
-    cmd = ["bash", str(ROOT / "scripts" / "mpirun.sh"), "-n", str(nranks), py, __file__,
-           code, "--n", str(n), "--cell", cell, "--json", str(js)]
+    cmd = bh.mpirun(nranks, [__file__, code, "--n", str(n), "--cell", cell, "--json", str(js)], py)
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, cwd=ROOT, env=child_env(), capture_output=True, text=True,
                           timeout=900)
@@ -261,10 +257,6 @@ def launch(code: str, n: int, cell: str, nranks: int) -> dict:
     out = json.loads(js.read_text())
     out["wall"] = time.perf_counter() - t0
     return out
-
-
-def dolfinx_available() -> bool:
-    return subprocess.run([DEBIAN_PY, "-c", "import dolfinx"], capture_output=True).returncode == 0
 
 
 def write_meshes(sizes: tuple[int, ...]) -> None:
@@ -409,7 +401,7 @@ def report(rows, machine: str) -> str:
             f"{solubility_table()}")
 
 
-def main(sizes: tuple[int, ...] = SIZES) -> None:
+def main(sizes: tuple[int, ...] = SIZES, ranks: tuple[int, ...] = RANKS) -> None:
     if "--report" in sys.argv[1:]:  # rewrite the markdown from the saved rows
         if "--partial" in sys.argv[1:]:  # a run cut short: the rows saved so far
             data = dict(rows=json.loads((OUT / "partial.json").read_text()),
@@ -425,12 +417,12 @@ def main(sizes: tuple[int, ...] = SIZES) -> None:
     RESULTS.mkdir(exist_ok=True)
     load0, t0 = os.getloadavg(), time.perf_counter()
     write_meshes(sizes)
-    peer = dolfinx_available()
+    peer = bh.peer_available("dolfinx")
     print(STEADY_HEAD, flush=True)
     rows = []
     for n in sizes:  # smallest sizes first everywhere: a cut-short run still has a trend
         for cell in CELLS:
-            for nr in RANKS:
+            for nr in ranks:
                 p = launch("parsolve", n, cell, nr)
                 d = launch("dolfinx", n, cell, nr) if peer else None
                 rows.append((p, d))
@@ -438,19 +430,17 @@ def main(sizes: tuple[int, ...] = SIZES) -> None:
                 (OUT / "partial.json").write_text(json.dumps([dict(parsolve=a, dolfinx=b) for a, b in rows]))
     rows.sort(key=lambda pd: (pd[0]["cell"], pd[0]["nranks"], pd[0]["n"]))
     load1, seconds = os.getloadavg(), time.perf_counter() - t0
-    machine = (f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores; load average "
-               f"(1/5/15 min) {load0[0]:.2f}/{load0[1]:.2f}/{load0[2]:.2f} at start, "
-               f"{load1[0]:.2f}/{load1[1]:.2f}/{load1[2]:.2f} at end; run "
-               f"{time.strftime('%Y-%m-%d %H:%M:%S', time.gmtime())} UTC, {seconds:.0f} s; "
+    machine = (f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores; "
+               f"{bh.load_line(load0, load1)}; run {bh.utc_now()} UTC, {seconds:.0f} s; "
                f"DOLFINx {'0.5 (Debian)' if peer else 'not installed'}")
     print(f"\n{machine}\n\n{findings(rows)}\n{solubility_table()}")
-    (RESULTS / "bench_transport.json").write_text(json.dumps(
-        dict(machine=machine, rows=[dict(parsolve=p, dolfinx=d) for p, d in rows]), indent=1))
+    bh.write_json(RESULTS / "bench_transport.json",
+                  dict(machine=machine, rows=[dict(parsolve=p, dolfinx=d) for p, d in rows]))
     (RESULTS / "bench_transport.md").write_text(report(rows, machine))
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("mode", nargs="?", default="main", choices=("main", "parsolve", "dolfinx"))
     ap.add_argument("--n", type=int)
     ap.add_argument("--sizes", type=int, nargs="+", default=list(SIZES),
@@ -459,10 +449,15 @@ if __name__ == "__main__":
     ap.add_argument("--json")
     ap.add_argument("--report", action="store_true", help="rewrite the markdown from the saved JSON")
     ap.add_argument("--partial", help="with --report: from the partial rows; the machine line")
+    bh.add_smoke(ap)
     a = ap.parse_args()
+    if a.smoke and a.mode == "main":   # n = 8, 1 rank, both cells; DOLFINx if installed
+        a.sizes, ranks = [8], (1,)
+    else:
+        ranks = RANKS
     if a.mode == "parsolve":
         parsolve_worker(a.n, a.cell, a.json)
     elif a.mode == "dolfinx":
         dolfinx_worker(a.n, a.cell, a.json)
     else:
-        sys.exit(main(tuple(a.sizes)))
+        sys.exit(main(tuple(a.sizes), ranks))

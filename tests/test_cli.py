@@ -1,8 +1,15 @@
-"""The command line: exit statuses, one-line errors naming file and key, result files."""
+"""The command line: exit statuses, one-line errors naming file and key, result files.
+
+Most tests call ``parsolve.cli.main(argv)`` in this process (the ``cli`` fixture: its exit
+status and what it printed, file descriptors included, so PETSc's own output too). A few run
+``python -m parsolve`` as a process, for what only a process shows: PETSc options read at
+PETSc's initialisation (-log_view, -options_left), mpirun, and the exit status as the shell
+sees it."""
 
 import os
 import subprocess
 import sys
+from typing import NamedTuple
 
 import h5py
 import numpy as np
@@ -10,12 +17,38 @@ import pytest
 
 from conftest import CONFIGS, ROOT
 
-pytestmark = pytest.mark.serial  # runs subprocesses; mpirun runs are in test_cli_parallel
+pytestmark = pytest.mark.serial  # in-process runs on one rank; the mpirun runs start their own
 
 GOOD = (CONFIGS / "controlled_bar.toml").read_text()
 
 
+class Outcome(NamedTuple):
+    returncode: int
+    stdout: str
+    stderr: str
+
+
+@pytest.fixture
+def cli(capfd, monkeypatch):
+    """``cli(*args, cwd=None)``: parsolve's command line in this process, as ``parsolve(...)``
+    returns it for a process (exit status, stdout, stderr)."""
+    from parsolve.cli import main
+
+    def call(*args, cwd=None) -> Outcome:
+        if cwd is not None:
+            monkeypatch.chdir(cwd)
+        capfd.readouterr()          # what came before is not this command's
+        try:
+            code = main([str(a) for a in args])
+        except SystemExit as exc:   # argparse's own exits
+            code = exc.code
+        out, err = capfd.readouterr()
+        return Outcome(code, out, err)
+    return call
+
+
 def parsolve(*args, cwd=None, mpi: int | None = None):
+    """``python -m parsolve ARGS`` as a process (under scripts/mpirun.sh with ``mpi`` ranks)."""
     cmd = [sys.executable, "-m", "parsolve", *map(str, args)]
     if mpi:
         cmd = ["bash", str(ROOT / "scripts" / "mpirun.sh"), "-n", str(mpi)] + cmd
@@ -72,7 +105,7 @@ BAD = {
 
 @pytest.mark.parametrize("case", sorted(BAD))
 @pytest.mark.parametrize("command", ["check", "run"])
-def test_bad_input(case, command, tmp_path):
+def test_bad_input(case, command, tmp_path, cli):
     text, source, key = BAD[case]
     if case == "output is the scene" and command == "check":
         pytest.skip("check writes nothing")
@@ -83,13 +116,25 @@ def test_bad_input(case, command, tmp_path):
     out = tmp_path / "out.h5"
     own_output = case == "output is the scene"
     args = [command, "scene.toml"] + (["-o", out] if command == "run" and not own_output else [])
-    proc = parsolve(*args, cwd=tmp_path)
+    proc = cli(*args, cwd=tmp_path)
     assert proc.returncode == 2, proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
     assert source in lines[0] and key in lines[0], lines[0]
     assert not out.exists() and not list(tmp_path.glob("*.h5")) and not list(tmp_path.glob("*.xdmf"))
     assert (tmp_path / "scene.toml").read_bytes() == before
+
+
+def test_bad_input_exit_2_from_the_process(tmp_path):
+    """The exit status as the shell sees it (``python -m parsolve``): 2, one line naming the
+    file and the key, no traceback, nothing written."""
+    text, source, key = BAD["unknown region"]
+    (tmp_path / "scene.toml").write_text(text)
+    proc = parsolve("run", "scene.toml", "-o", "out.h5", cwd=tmp_path)
+    assert proc.returncode == 2, proc.stderr
+    line, = proc.stderr.strip().splitlines()
+    assert source in line and key in line and "Traceback" not in proc.stderr, proc.stderr
+    assert not list(tmp_path.glob("*.h5")) and not list(tmp_path.glob("*.xdmf"))
 
 
 BAD_COMMAND_LINE = {  # arguments -> (exit 2) words in the one line
@@ -104,10 +149,10 @@ BAD_COMMAND_LINE = {  # arguments -> (exit 2) words in the one line
 
 @pytest.mark.parametrize("case", sorted(BAD_COMMAND_LINE))
 @pytest.mark.parametrize("command", ["check", "run"])
-def test_bad_command_line(case, command, tmp_path):
+def test_bad_command_line(case, command, tmp_path, cli):
     (tmp_path / "scene.toml").write_text(GOOD)
     extra, words = BAD_COMMAND_LINE[case]
-    proc = parsolve(command, "scene.toml", *extra, cwd=tmp_path)
+    proc = cli(command, "scene.toml", *extra, cwd=tmp_path)
     assert proc.returncode == 2, proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
@@ -117,7 +162,7 @@ def test_bad_command_line(case, command, tmp_path):
 
 @pytest.mark.parametrize("what", ["folder", "binary", "latin-1"])
 @pytest.mark.parametrize("command", ["check", "run"])
-def test_scene_file_that_is_not_text(what, command, tmp_path):
+def test_scene_file_that_is_not_text(what, command, tmp_path, cli):
     scene = tmp_path / "scene.toml"
     if what == "folder":
         scene.mkdir()
@@ -125,14 +170,14 @@ def test_scene_file_that_is_not_text(what, command, tmp_path):
         scene.write_bytes(b"\x7fELF\x02\x01\x00\x00")
     else:
         scene.write_bytes(b'title = "barre contr\xf4l\xe9e"\n')
-    proc = parsolve(command, "scene.toml", cwd=tmp_path)
+    proc = cli(command, "scene.toml", cwd=tmp_path)
     assert proc.returncode == 2, proc.stderr
     line, = proc.stderr.strip().splitlines()
     assert line.startswith("parsolve: scene.toml: ") and "Traceback" not in proc.stderr
     assert {"folder": "folder", "binary": "binary", "latin-1": "not UTF-8"}[what] in line
 
 
-def test_output_paths(tmp_path):
+def test_output_paths(tmp_path, cli):
     """Never an input; a folder, a parent that is a file, a missing folder: exit 2, the path."""
     (tmp_path / "scene.toml").write_text(GOOD)
     (tmp_path / "afile").write_text("x")
@@ -144,7 +189,7 @@ def test_output_paths(tmp_path):
             (tmp_path / "scene.toml").rename(tmp_path / "scene.xdmf")
             (tmp_path / "scene.xdmf").rename(tmp_path / "scene.toml")
             continue
-        proc = parsolve("run", "scene.toml", "-o", out, cwd=tmp_path)
+        proc = cli("run", "scene.toml", "-o", out, cwd=tmp_path)
         assert proc.returncode == 2, (out, proc.stderr)
         line, = proc.stderr.strip().splitlines()
         assert "command line: -o:" in line and out.split("/")[0] in line and words in line, line
@@ -163,7 +208,7 @@ def test_petsc_options_starting_with_o_reach_petsc(tmp_path):
     assert "options_left was not used" not in proc.stderr
 
 
-def test_unused_mesh_points_are_a_warning(tmp_path):
+def test_unused_mesh_points_are_a_warning(tmp_path, cli):
     """A Gmsh-like file with a point no cell uses: check and run say so, on one line each."""
     import meshio
 
@@ -185,20 +230,20 @@ type = "dirichlet"
 region = "left"
 components = ["x", "y"]
 ''')
-    proc = parsolve("check", "scene.toml", cwd=tmp_path)
+    proc = cli("check", "scene.toml", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr.strip() == ("parsolve: warning: m.vtu: mesh.file: 1 point(s) are used by no "
                                    "cell (points 4): they are left out of the system")
 
 
-def test_check_good_scene():
-    proc = parsolve("check", CONFIGS / "kirsch.toml")
+def test_check_good_scene(cli):
+    proc = cli("check", CONFIGS / "kirsch.toml")
     assert proc.returncode == 0 and "ok" in proc.stdout
 
 
-def test_run_result_file_layout(tmp_path):
+def test_run_result_file_layout(tmp_path, cli):
     out = tmp_path / "bar.h5"
-    proc = parsolve("run", CONFIGS / "controlled_bar.toml", "-o", out)
+    proc = cli("run", CONFIGS / "controlled_bar.toml", "-o", out)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.count("step ") == 10  # one progress line per step
     with h5py.File(out) as f:
@@ -225,14 +270,14 @@ def test_run_result_file_layout(tmp_path):
         and "bar.xdmf.h5:/fields/displacement/9" in xdmf
 
 
-def test_petsc_options_from_command_line_win(tmp_path):
+def test_petsc_options_from_command_line_win(tmp_path, cli):
     """-ksp_view goes to the solver (under its prefix); a scene option is overridden."""
     scene = tmp_path / "s.toml"
     scene.write_text(GOOD + '\n[solver.petsc]\nmat_mumps_icntl_7 = 0\n')
-    proc = parsolve("run", scene, "-o", tmp_path / "o.h5", "-ksp_view", "-mat_mumps_icntl_7", "6")
+    proc = cli("run", scene, "-o", tmp_path / "o.h5", "-ksp_view", "-mat_mumps_icntl_7", "6")
     assert proc.returncode == 0, proc.stderr
     assert "INFOG(7) (ordering option effectively used after analysis): 6" in proc.stdout
-    proc = parsolve("run", scene, "-o", tmp_path / "o.h5", "-ksp_view")
+    proc = cli("run", scene, "-o", tmp_path / "o.h5", "-ksp_view")
     assert "INFOG(7) (ordering option effectively used after analysis): 0" in proc.stdout
 
 
@@ -253,25 +298,29 @@ component = "x"
         assert f.attrs["status"].startswith("failed") and f["steps/time"].shape == (0,)
 
 
-def test_export_system_reproduces_the_solve(tmp_path):
+def test_export_system_reproduces_the_solve(tmp_path, cli):
     """DIR/system.dat and DIR/fields.dat: a bare petsc4py MUMPS solve gives the same answer."""
     out = tmp_path / "bar.h5"
-    proc = parsolve("run", CONFIGS / "controlled_bar.toml", "-o", out, "--export-system", tmp_path / "sys")
+    proc = cli("run", CONFIGS / "controlled_bar.toml", "-o", out, "--export-system", tmp_path / "sys")
     assert proc.returncode == 0, proc.stderr
-    code = f"""
-from petsc4py import PETSc
-v = PETSc.Viewer().createBinary('{tmp_path / "sys" / "system.dat"}', 'r')
-A = PETSc.Mat().load(v); b = PETSc.Vec().load(v); s = PETSc.Vec().load(v)
-w = PETSc.Viewer().createBinary('{tmp_path / "sys" / "fields.dat"}', 'r')
-isq = PETSc.IS().load(w); isl = PETSc.IS().load(w)
-ksp = PETSc.KSP().create(); ksp.setOperators(A); ksp.setType('preonly')
-pc = ksp.getPC(); pc.setType('lu'); pc.setFactorSolverType('mumps')
-x = b.duplicate(); ksp.solve(b, x)
-i = isl.getIndices()
-print(x.getValues(i)[0], (x.getValues(i) * s.getValues(i))[0], isq.getSize(), isl.getSize())
-"""
-    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
-    lam_scaled, lam_bare, nq, nl = res.stdout.split()
+    from petsc4py import PETSc   # a bare solve of the exported system, in this process
+
+    v = PETSc.Viewer().createBinary(str(tmp_path / "sys" / "system.dat"), "r", comm=PETSc.COMM_SELF)
+    A, b, s = PETSc.Mat().load(v), PETSc.Vec().load(v), PETSc.Vec().load(v)
+    w = PETSc.Viewer().createBinary(str(tmp_path / "sys" / "fields.dat"), "r", comm=PETSc.COMM_SELF)
+    isq, isl = PETSc.IS().load(w), PETSc.IS().load(w)
+    ksp = PETSc.KSP().create(comm=PETSc.COMM_SELF)
+    ksp.setOperators(A)
+    ksp.setType("preonly")
+    ksp.getPC().setType("lu")
+    ksp.getPC().setFactorSolverType("mumps")
+    x = b.duplicate()
+    ksp.solve(b, x)
+    i = isl.getIndices()
+    lam_scaled, lam_bare = x.getValues(i)[0], (x.getValues(i) * s.getValues(i))[0]
+    nq, nl = isq.getSize(), isl.getSize()
+    for obj in (ksp, x, A, b, s, isq, isl, v, w):
+        obj.destroy()
     assert int(nq) == 240 and int(nl) == 1
     with h5py.File(out) as f:
         lam = f["relations/control/multiplier"][0, 0]
@@ -281,13 +330,13 @@ print(x.getValues(i)[0], (x.getValues(i) * s.getValues(i))[0], isq.getSize(), is
 
 
 @pytest.mark.parametrize("nranks", [2, 3])
-def test_mpirun_results_match_one_rank(nranks, tmp_path):
+def test_mpirun_results_match_one_rank(nranks, tmp_path, cli):
     """Under mpirun the result file keeps the input mesh order and matches 1 rank to round-off."""
     scene = tmp_path / "k.toml"
     scene.write_text((CONFIGS / "kirsch.toml").read_text().replace("n_radial = 48", "n_radial = 12")
                      .replace("n_angular = 64", "n_angular = 16"))
     one, many = tmp_path / "one.h5", tmp_path / "many.h5"
-    assert parsolve("run", scene, "-o", one).returncode == 0
+    assert cli("run", scene, "-o", one).returncode == 0
     proc = parsolve("run", scene, "-o", many, mpi=nranks)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.count("step 1/1") == 1  # progress printed by rank 0 only
@@ -311,10 +360,10 @@ def test_global_petsc_options_reach_petsc(tmp_path):
     assert "Event" in proc.stdout and "Summary of Memory Usage in PETSc" in proc.stdout
 
 
-def test_marked_relations_report_their_resultant(tmp_path):
+def test_marked_relations_report_their_resultant(tmp_path, cli):
     """`report = true`: the resultant (Σ of the reactions per component, then the moment) is
     printed with each step's progress line; the controlled bar's end force E·H·δ/L = 1e4 N."""
-    proc = parsolve("run", CONFIGS / "controlled_bar.toml", "-o", tmp_path / "bar.h5")
+    proc = cli("run", CONFIGS / "controlled_bar.toml", "-o", tmp_path / "bar.h5")
     assert proc.returncode == 0, proc.stderr
     lines = proc.stdout.splitlines()
     assert lines[-2].strip() == "control: resultant 10000 0 -500"  # moment: -F · H/2

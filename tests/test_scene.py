@@ -58,7 +58,21 @@ def error_of(old: str, new: str) -> InputError:
 
 
 def test_base_is_valid():
-    parse(BASE)
+    """The base scene every case below breaks parses to what it says (so that each error
+    below is the one edit's)."""
+    scene = parse(BASE)
+    assert (scene.hypothesis, scene.thickness, scene.dim) == ("plane_stress", 1.0, 2)
+    assert scene.materials[0].params == {"E": 1.0, "nu": 0.3}
+    assert scene.mesh.params == {"lx": 1.0, "ly": 1.0, "nx": 2, "ny": 2}
+    assert scene.times == [0.5, 1.0]
+    load, = scene.loads
+    assert (load.pattern, load.region, load.kind, load.vector) == ("pull", "right", "traction",
+                                                                   [1.0, 0.0])
+    clamp, = scene.relations
+    assert (clamp.name, clamp.type, clamp.region, clamp.components, clamp.value) == \
+        ("clamp", "dirichlet", "left", [0, 1], 0.0)
+    assert scene.regions["box"].value == [[0.0, 0.0], [0.5, 0.5]]
+    assert scene.nonlinear.rtol == 1e-8
 
 
 @pytest.mark.parametrize("old, new, key, words", [

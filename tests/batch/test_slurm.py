@@ -12,7 +12,7 @@ import pytest
 
 from batch_helpers import ROOT, check_bar, jobs_file, parsolve
 
-pytestmark = pytest.mark.serial  # one cluster, subprocesses
+pytestmark = [pytest.mark.serial, pytest.mark.slow]  # one cluster, subprocesses (~30 s)
 
 SCRIPT = ROOT / "scripts" / "slurm_cluster.sh"
 

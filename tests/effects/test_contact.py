@@ -10,16 +10,13 @@ import pytest
 from mpi4py import MPI
 
 from conftest import CONFIGS
+from helpers.contact import BASE, LAM, NU, PATCH, PLANE, E, G, sheared_scene  # noqa: F401
 from parsolve.contact import references
 from parsolve.contact.friction import OPEN, SLIP, STICK
 from parsolve.errors import InputError
 from parsolve.mesh.generators import rectangle
 from parsolve.model import build_model
 from parsolve.scene import load_scene
-
-E, NU = 1000.0, 0.3
-LAM, G = E * NU / ((1 + NU) * (1 - 2 * NU)), E / (2 * (1 + NU))   # plane strain
-
 
 def two_blocks(path, nx_low: int, nx_up: int, ny: int = 2, lx: float = 1.0, h: float = 0.5) -> None:
     """Two stacked rectangles as one mesh file (Gmsh 2.2): cell groups lower/upper and facet
@@ -42,49 +39,6 @@ def two_blocks(path, nx_low: int, nx_up: int, ny: int = 2, lx: float = 1.0, h: f
                        cell_data={"gmsh:physical": phys, "gmsh:geometrical": phys},
                        field_data=field)
     meshio.write(str(path), mesh, file_format="gmsh22", binary=False)
-
-
-PATCH = """
-title = "contact patch test"
-[mesh]
-file = "{mesh}"
-[model]
-hypothesis = "plane_strain"
-[[materials]]
-region = "lower"
-E = 1000.0
-nu = 0.3
-[[materials]]
-region = "upper"
-E = 300.0
-nu = 0.2
-[[loads]]
-name = "press"
-region = "upper_top"
-traction = [0.0, {traction}]
-[[relations]]
-name = "ground"
-type = "dirichlet"
-region = "lower_bottom"
-component = "y"
-[[relations]]
-name = "roll_low"
-type = "dirichlet"
-region = "lower_left"
-component = "x"
-[[relations]]
-name = "roll_up"
-type = "dirichlet"
-region = "upper_left"
-component = "x"
-[[contact]]
-name = "joint"
-slave = "upper_bottom"
-master = "lower_top"
-{extra}
-[steps]
-count = 2
-"""
 
 
 @pytest.mark.parametrize("nx_low, nx_up", [(4, 8), (3, 9), (5, 5)])
@@ -187,69 +141,6 @@ def test_controlled_pull_passes_the_stick_to_slip_plateau(run):
     np.testing.assert_allclose(load[sliding], mu_n, rtol=1e-12)
     assert np.all(load[~sliding] < mu_n)
     assert res["steps/iterations"].max() <= 3
-
-
-def sheared_scene(delta_end: float, t_star: float, p: float, mu: float, height: float) -> str:
-    """A block of height H on the rigid plane y = 0, top pressed by p and moved by delta(t),
-    the sides loaded by the homogeneous stress of docs/contact.md §6: sigma_xx (constant) and
-    sigma_xy = min(G delta / H, mu p) (a ramp to mu p at t_star, then constant)."""
-    gy = -p / (LAM + 2 * G)
-    sxx, tau = LAM * gy, mu * p
-    return f"""
-[mesh]
-generator = "rectangle"
-lx = 1.0
-ly = {height}
-nx = 6
-ny = 3
-cell = "triangle"
-[model]
-hypothesis = "plane_strain"
-[[materials]]
-E = {E}
-nu = {NU}
-[[loads]]
-name = "press"
-region = "top"
-traction = [0.0, {-p}]
-evolution = "constant"
-[[loads]]
-name = "side_n"
-region = "right"
-traction = [{sxx}, 0.0]
-evolution = "constant"
-[[loads]]
-name = "side_n_left"
-region = "left"
-traction = [{-sxx}, 0.0]
-evolution = "constant"
-[[loads]]
-name = "side_t"
-region = "right"
-traction = [0.0, {tau}]
-evolution = "shear"
-[[loads]]
-name = "side_t_left"
-region = "left"
-traction = [0.0, {-tau}]
-evolution = "shear"
-[[relations]]
-name = "shift"
-type = "dirichlet"
-region = "top"
-component = "x"
-value = {delta_end}
-[[contact]]
-name = "base"
-slave = "bottom"
-obstacle = {{ plane = {{ origin = [0.0, 0.0], normal = [0.0, 1.0] }} }}
-friction = {mu}
-[evolutions.shear]
-times = [0.0, {t_star}, 2.0]
-values = [0.0, 1.0, 1.0]
-[steps]
-count = 10
-"""
 
 
 def test_sheared_block_matches_the_exact_stick_and_slip_fields(run):
@@ -519,26 +410,6 @@ def test_hertz_cylinder_on_a_block(run):
 
 
 # ----------------------------------------------------------------------------- bad input
-
-BASE = """
-[mesh]
-generator = "rectangle"
-lx = 1.0
-ly = 0.5
-nx = 4
-ny = 2
-[model]
-hypothesis = "plane_strain"
-[[materials]]
-E = 1000.0
-nu = 0.3
-[[contact]]
-name = "base"
-{contact}
-"""
-
-PLANE = 'obstacle = { plane = { origin = [0.0, 0.0], normal = [0.0, 1.0] } }'
-
 
 @pytest.mark.parametrize("contact, key, words", [
     (f'slave = "bottom"\n{PLANE}\nfriction = -0.1', "contact[0].friction", ">= 0"),

@@ -9,73 +9,12 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
+from helpers.contact import OBLIQUE, coulomb_checks  # noqa: F401
 from parsolve.contact import references
 from parsolve.contact.friction import SLIP, STICK
 from parsolve.mesh.generators import box
 
 E, NU = 1000.0, 0.3
-
-
-def coulomb_checks(res, name: str, mu: float, bottom: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The Coulomb conditions at every contact node of every step: Rn >= 0, |Rt| <= mu Rn
-    (1e-8), no penetration (1e-10), sticking nodes do not move during the step, sliding nodes
-    are on the cone and their slip increment is along -Rt (1e-8 rad). Returns (states, Rn)."""
-    state = res[f"fields/{name}_state"][:, :, 0]
-    rn = res[f"fields/{name}_normal_reaction"][:, :, 0]
-    rt = res[f"fields/{name}_tangential_reaction"]
-    slip = res[f"fields/{name}_slip"]
-    u = res["fields/displacement"]
-    scale = mu * rn.max()
-    assert np.all(rn >= -1e-12 * rn.max())
-    assert np.all(np.linalg.norm(rt, axis=2) <= mu * rn + 1e-8 * scale)
-    assert u[:, bottom, 2].min() >= -1e-10 * np.abs(u).max()          # no penetration
-    increment = np.diff(np.concatenate([np.zeros_like(slip[:1]), slip]), axis=0)
-    big = np.abs(increment).max()
-    stick, sliding = state == STICK, state == SLIP
-    assert np.abs(increment[stick]).max(initial=0.0) <= 1e-12 * big
-    t, d = rt[sliding], increment[sliding]
-    np.testing.assert_allclose(np.linalg.norm(t, axis=1), mu * rn[sliding], atol=1e-8 * scale)
-    cross = t[:, 0] * d[:, 1] - t[:, 1] * d[:, 0]
-    along = -np.einsum("mj,mj->m", t, d)
-    assert np.all(along > 0)
-    assert np.all(np.abs(cross) <= 1e-8 * np.linalg.norm(t, axis=1) * np.linalg.norm(d, axis=1))
-    return state, rn
-
-
-OBLIQUE = """
-[mesh]
-generator = "box"
-lx = 1.0
-ly = 1.0
-lz = 0.25
-nx = 6
-ny = 6
-nz = 2
-cell = "{cell}"
-[model]
-hypothesis = "3d"
-[[materials]]
-E = {E}
-nu = {NU}
-[[loads]]
-name = "press"
-region = "zmax"
-traction = [0.0, 0.0, -10.0]
-evolution = "constant"
-[[loads]]
-name = "pull"
-region = "zmax"
-traction = [{qx!r}, {qy!r}, 0.0]
-[[contact]]
-name = "base"
-slave = "zmin"
-obstacle = {{ plane = {{ origin = [0.0, 0.0, 0.0], normal = [0.0, 0.0, 1.0] }} }}
-friction = 0.3
-[steps]
-count = 6
-[nonlinear]
-max_iterations = 60
-"""
 
 
 @pytest.mark.parametrize("cell, bound", [("hexahedron", 20), ("tetra", 30)])

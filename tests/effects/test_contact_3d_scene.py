@@ -7,7 +7,7 @@ import numpy as np
 
 from conftest import CONFIGS
 from parsolve.contact.friction import OPEN, SLIP, STICK
-from test_contact_3d import coulomb_checks
+from helpers.contact import coulomb_checks
 
 
 def test_box_shifted_obliquely_sticks_slips_then_slides(run):

@@ -18,7 +18,7 @@ from parsolve.contact.friction import OPEN, SLIP, STICK
 from parsolve.errors import InputError
 from parsolve.model import build_model
 from parsolve.scene import load_scene
-from test_contact import BASE as CONTACT_BASE, PLANE
+from helpers.contact import BASE as CONTACT_BASE, PLANE
 
 E, NU = 1000.0, 0.3
 BLOCK = (CONFIGS / "contact_block_friction.toml").read_text()
@@ -101,7 +101,7 @@ def test_augmented_lagrangian_reaches_the_relations_answer(run):
 def test_sheared_block_exact_stick_and_slip_by_augmented_lagrangian(run):
     """docs/contact.md §6 (the sheared block of test_contact.py, 2D): the AL reproduces the
     exact homogeneous field, stick then uniform slip at μp, to the augmentation tolerance."""
-    from test_contact import G, LAM, sheared_scene
+    from helpers.contact import G, LAM, sheared_scene
 
     p, mu, height, t_star = 10.0, 0.3, 0.5, 0.45
     delta_end = mu * p * height / G / t_star

@@ -16,9 +16,7 @@ from parsolve.contact.friction import SLIP, STICK
 from parsolve.errors import InputError
 from parsolve.model import build_model, distributed_mesh
 from parsolve.scene import load_scene
-from test_contact import BASE, PLANE
-from test_contact_3d import OBLIQUE
-from test_contact_mortar import FOUNDATION, write_mesh
+from helpers.contact import BASE, FOUNDATION, OBLIQUE, PLANE, write_mesh
 
 
 def both_meshes(run, text: str, name: str) -> tuple[dict, dict]:

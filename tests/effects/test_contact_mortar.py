@@ -9,61 +9,11 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
+from helpers.contact import FOUNDATION, PATCH as CONTACT_PATCH, write_mesh  # noqa: F401
 from parsolve.contact.friction import OPEN, SLIP, STICK
 from parsolve.errors import InputError
-from parsolve.mesh.generators import rectangle
 from parsolve.model import build_model
 from parsolve.scene import load_scene
-from test_contact import PATCH as CONTACT_PATCH
-
-MIDS = {"triangle6": [(0, 1), (1, 2), (2, 0)]}   # midside node k+3 between corners (a, b)
-
-
-def distorted(lx, h, nx, ny, cell, origin, rng):
-    """A rectangle mesh whose interior nodes are moved randomly along x (by up to 0.3 of the
-    element width; the sides and the interfaces stay straight); quadratic cells keep their
-    midside nodes at the middle of straight edges."""
-    m = rectangle(lx, h, nx, ny, cell, origin=origin)
-    pts = m.points.copy()
-    inner = (pts[:, 0] > origin[0] + 1e-9) & (pts[:, 0] < origin[0] + lx - 1e-9)
-    pts[inner, 0] += rng.uniform(-0.3, 0.3, inner.sum()) * lx / nx
-    for k, (a, b) in enumerate(MIDS.get(cell, [])):
-        pts[m.cells[:, 3 + k]] = 0.5 * (pts[m.cells[:, a]] + pts[m.cells[:, b]])
-    return m, pts
-
-
-def two_blocks(path, nx_low: int, nx_up: int, cell: str = "quad", ny_low: int = 2,
-               ny_up: int = 2, seed: int = 0) -> None:
-    """Two stacked distorted rectangles [0, 1] × [0, ½] and [0, 1] × [½, 1] as one Gmsh 2.2
-    file: cell groups lower/upper, facet groups <body>_top/bottom/left; the interface nodes
-    are distinct (the bodies are not connected)."""
-    import meshio
-
-    rng = np.random.default_rng(seed)
-    low, p_low = distorted(1.0, 0.5, nx_low, ny_low, cell, (0.0, 0.0), rng)
-    up, p_up = distorted(1.0, 0.5, nx_up, ny_up, cell, (0.0, 0.5), rng)
-    off = low.num_points
-    points = np.vstack([p_low, p_up])
-    facet = "line" if cell in ("quad", "triangle") else "line3"
-    lines = [(f"{body}_{side}", m.facet_groups[side] + o)
-             for body, m, o in (("lower", low, 0), ("upper", up, off))
-             for side in ("top", "bottom", "left")]
-    blocks = [(cell, low.cells), (cell, up.cells + off)] + [(facet, f) for _, f in lines]
-    tags = [1, 2] + [10 + i for i in range(len(lines))]
-    phys = [np.full(len(b[1]), tag) for b, tag in zip(blocks, tags)]
-    field = {"lower": np.array([1, 2]), "upper": np.array([2, 2])}
-    field.update({name: np.array([10 + i, 1]) for i, (name, _) in enumerate(lines)})
-    mesh = meshio.Mesh(np.column_stack([points, np.zeros(len(points))]), blocks,
-                       cell_data={"gmsh:physical": phys, "gmsh:geometrical": phys},
-                       field_data=field)
-    meshio.write(str(path), mesh, file_format="gmsh22", binary=False)
-
-
-def write_mesh(path, *args, **kw):
-    if MPI.COMM_WORLD.rank == 0:
-        two_blocks(path, *args, **kw)
-    MPI.COMM_WORLD.Barrier()
-
 
 def patch(mesh, traction: float, discretization: str) -> str:
     """The two-body patch scene of test_contact.py with the contact's discretization."""
@@ -131,47 +81,6 @@ def test_node_to_segment_fails_the_same_patch(run, shared_tmp):
     assert np.abs(stress[:, 1] + p).max() > 1e-3 * p
     np.testing.assert_allclose(res["relations/joint_normal/normal_force"][:, 0], [p / 2, p],
                                rtol=1e-12)
-
-
-FOUNDATION = """
-title = "block on a meshed rough foundation"
-[mesh]
-file = "{mesh}"
-[model]
-hypothesis = "plane_strain"
-[[materials]]
-region = "lower"
-E = 2000.0
-nu = 0.25
-[[materials]]
-region = "upper"
-E = 1000.0
-nu = 0.3
-[[loads]]
-name = "press"
-region = "upper_top"
-traction = [0.0, -10.0]
-evolution = "constant"
-[[relations]]
-name = "ground"
-type = "dirichlet"
-region = "lower_bottom"
-components = ["x", "y"]
-[[relations]]
-name = "shift"
-type = "dirichlet"
-region = "upper_top"
-component = "x"
-value = 0.02
-[[contact]]
-name = "base"
-slave = "upper_bottom"
-master = "lower_top"
-friction = 0.3
-discretization = "{discretization}"
-[steps]
-count = 10
-"""
 
 
 @pytest.mark.parametrize("discretization", ["mortar", "node_to_segment"])

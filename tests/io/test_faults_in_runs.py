@@ -9,10 +9,9 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
+from helpers.xdmf import SCENE_2D
 from parsolve.errors import OutputError
 from parsolve.io.hdf5 import ResultWriter
-
-from tests.io.test_xdmf import SCENE_2D
 
 
 def test_disk_full_stops_every_rank_and_keeps_the_finished_steps(run, monkeypatch):

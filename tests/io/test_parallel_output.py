@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-import tests.io.test_xdmf as xdmf_tests
 from conftest import CONFIGS, ROOT
+from helpers.xdmf import SCENE_2D, SCENE_3D, meshio_reads_every_step, vtk_reads_every_step
 from parsolve import driver
 from parsolve.errors import Interrupted, OutputError
 from parsolve.io.hdf5 import ResultWriter
@@ -25,7 +25,6 @@ from parsolve.io.slabs import OwnedRows, Rows, block_bounds, runs
 from parsolve.mesh.generators import rectangle
 from parsolve.model import build_model
 from parsolve.scene import load_scene
-from tests.io.test_xdmf import SCENE_2D, SCENE_3D
 
 SOLUBILITY = (CONFIGS / "solubility_grow_shrink.toml").read_text().replace("count = 100", "count = 6")
 CONTACT = (CONFIGS / "contact_block_friction.toml").read_text()
@@ -125,8 +124,8 @@ def test_parallel_mode_from_the_driver(run_mode):
 def test_xdmf_of_a_parallel_result_reads_in_meshio_and_vtk(text, dim, run_mode):
     path, data = run_mode(text, name=f"xdmf{dim}")
     data = {k: v for k, v in data.items() if k != "attrs"}
-    xdmf_tests.test_meshio_reads_every_step((path, data, dim))
-    xdmf_tests.test_vtk_reads_every_step((path, data, dim))
+    meshio_reads_every_step(path, data, dim)
+    vtk_reads_every_step(path, data, dim)
 
 
 def test_disk_full_exits_4_and_keeps_the_finished_steps(shared_tmp, monkeypatch):

@@ -4,30 +4,9 @@ import numpy as np
 import pytest
 
 from conftest import CONFIGS
+from helpers.control import (ARC_BAR, BAR, VON_MISES, E, H, L, N, closed_form,  # noqa: F401
+                             displacement_control, end_delta, without_control)
 from parsolve.errors import InputError, SolverError
-
-BAR = (CONFIGS / "localization_bar.toml").read_text()
-E, H, L, N = 1e9, 0.1, 1.0, 29
-
-
-def closed_form(eps_d: np.ndarray):
-    """1D localization bar: the damaged column at strain ε_d sets the stress, the rest unloads
-    elastically. Mazars with At = 1 in uniaxial tension (ν = 0): D = 1 - exp(-Bt (κ - εd0))."""
-    kappa = np.maximum.accumulate(np.maximum(eps_d, 1e-4))
-    sigma = E * eps_d * np.exp(-1e4 * (kappa - 1e-4))
-    force = sigma * H
-    delta = eps_d * L / N + sigma / E * L * (N - 1) / N
-    return delta, force
-
-
-def end_delta(res):
-    pts = res["mesh/points"]
-    return res["fields/displacement"][:, np.isclose(pts[:, 0], L), 0].mean(axis=1)
-
-
-def without_control(text: str) -> str:
-    i = text.index('[[relations]]\nname = "max_strain"')
-    return text[:i] + text[text.index("[steps]"):]
 
 
 def test_localization_bar_closed_form(run):
@@ -59,20 +38,6 @@ def test_load_control_stops_at_the_peak(run):
     force = 1.2e4 * res["steps/time"]
     assert len(force) == 20 and force.max() <= 1e4 + 1e-6  # every step below the peak kept
     np.testing.assert_allclose(end_delta(res), force / (E * H), rtol=1e-9)  # elastic until then
-
-
-def displacement_control() -> str:
-    """The bar pulled by a prescribed end displacement instead of a controlled load."""
-    text = without_control(BAR).replace('[[loads]]\nname = "pull"\nregion = "right"\n'
-                                        'total_force = [1.0, 0.0]\n', "")
-    return text.replace("[regions]\n", "[regions]\nend = { point = [1.0, 0.0] }\n") + """
-[[relations]]
-name = "end_displacement"
-type = "dirichlet"
-region = "end"
-components = ["x"]
-value = 2.4e-4
-"""
 
 
 def test_displacement_control_stops_at_the_snap_back(run):
@@ -147,50 +112,6 @@ def test_bad_control_input(case, run):
     assert key in str(err.value)
 
 
-VON_MISES = """
-[mesh]
-generator = "box"
-lx = 1.0
-ly = 0.2
-nz = 2
-lz = 0.2
-nx = 5
-ny = 2
-cell = "hexahedron"
-[model]
-hypothesis = "3d"
-[[materials]]
-model = "von_mises"
-E = 200e3
-nu = 0.3
-sigma_y = 250.0
-H = 2e3
-[[relations]]
-name = "sym_x"
-type = "dirichlet"
-region = "xmin"
-components = ["x"]
-[[relations]]
-name = "sym_y"
-type = "dirichlet"
-region = "ymin"
-components = ["y"]
-[[relations]]
-name = "sym_z"
-type = "dirichlet"
-region = "zmin"
-components = ["z"]
-[[relations]]
-name = "pull"
-type = "dirichlet"
-region = "xmax"
-components = ["x"]
-value = 4e-3
-[steps]
-count = 8
-"""
-
-
 def test_von_mises_bar_follows_the_bilinear_curve(run):
     """Uniaxial tension with free contraction: σ = E ε, then σ_y + E H/(E + H) (ε - σ_y/E);
     the consistent tangent converges quadratically (4 iterations to 1e-8)."""
@@ -229,43 +150,6 @@ def test_fixed_steps_are_cut_and_retried(run):
     assert scene_steps.sum() == 30
     np.testing.assert_allclose(cut["relations/max_strain/multiplier"][scene_steps].sum(axis=1),
                                full["relations/max_strain/multiplier"].sum(axis=1), rtol=1e-3)
-
-
-ARC_BAR = """
-[mesh]
-generator = "rectangle"
-lx = 1.0
-ly = 0.1
-nx = 10
-ny = 2
-cell = "quad"
-[model]
-hypothesis = "plane_stress"
-[regions]
-corner = { point = [0.0, 0.0] }
-[[materials]]
-E = 1e3
-nu = 0.0
-[[loads]]
-name = "pull"
-region = "right"
-total_force = [1.0, 0.0]
-[[relations]]
-name = "clamp"
-type = "dirichlet"
-region = "left"
-components = ["x"]
-[[relations]]
-name = "corner"
-type = "dirichlet"
-region = "corner"
-components = ["y"]
-[nonlinear]
-method = "arc_length"
-arc_length = { pattern = "pull", length = 1e-3 }
-[steps]
-count = 3
-"""
 
 
 def test_arc_length_on_an_elastic_bar(run):

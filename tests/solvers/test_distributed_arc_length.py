@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from conftest import assert_same_results
-from test_control import ARC_BAR, BAR, E, H, L, closed_form, end_delta, without_control
+from helpers.control import ARC_BAR, BAR, E, H, L, closed_form, end_delta, without_control
 
 COLUMNS = 3
 EPS_D0 = 1e-4   # the Mazars column's damage threshold: the closed form's peak

@@ -4,7 +4,7 @@ edge kept straight by an `equal` relation that names the controlled node)."""
 
 import numpy as np
 
-from test_control import displacement_control
+from helpers.control import displacement_control
 
 
 def test_prescribed_dof_in_a_relation_row_on_the_parts(run, comm):

@@ -14,8 +14,13 @@ PRESETS = [("direct", True, True), ("direct", False, True), ("iterative", True, 
 
 @pytest.mark.parametrize("preset", PRESETS)
 def test_presets_and_good_options_pass(preset):
-    opt.validate(MPI.COMM_WORLD, "parsolve_", preset_options(*preset),
-                 {"ksp_monitor": "", "mat_mumps_icntl_14": "80"}, {"ksp_view": ""}, "s.toml")
+    """Accepted, and PETSc sets up a solver with the layered options (the probe returns 0)."""
+    scene, cli = {"ksp_monitor": "", "mat_mumps_icntl_14": "80"}, {"ksp_view": ""}
+    assert opt.validate(MPI.COMM_WORLD, "parsolve_", preset_options(*preset), scene, cli,
+                        "s.toml") is None
+    merged = opt.merge(preset_options(*preset), scene, cli)
+    assert merged["mat_mumps_icntl_14"] == "80" and merged["ksp_view"] == ""
+    assert opt.probe(MPI.COMM_WORLD, "parsolve_", merged) == 0
 
 
 @pytest.mark.parametrize("preset", PRESETS)
@@ -36,8 +41,13 @@ def test_bad_options_name_option_and_origin(preset, scene, cli, source, key, wor
 
 
 def test_a_good_command_line_value_overrides_a_bad_scene_one():
-    opt.validate(MPI.COMM_WORLD, "parsolve_", preset_options("direct", True, True),
-                 {"pc_type": "nosuch"}, {"pc_type": "lu"}, "s.toml")
+    """The command line's value is the one PETSc sees (the scene's alone is refused)."""
+    preset, scene, cli = preset_options("direct", True, True), {"pc_type": "nosuch"}, \
+        {"pc_type": "lu"}
+    assert opt.validate(MPI.COMM_WORLD, "parsolve_", preset, scene, cli, "s.toml") is None
+    assert opt.merge(preset, scene, cli)["pc_type"] == "lu"
+    assert opt.probe(MPI.COMM_WORLD, "parsolve_", opt.merge(preset, scene, cli)) == 0
+    assert opt.probe(MPI.COMM_WORLD, "parsolve_", opt.merge(preset, scene)) != 0
 
 
 def test_missing_value_of_a_type_found_by_petsc():

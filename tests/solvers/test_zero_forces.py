@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from helpers.control import VON_MISES
 from parsolve.solvers.newton import ROUNDOFF
-from test_control import VON_MISES
 
 # the von Mises box of test_control, both ends moved by 1e-3 along x: a rigid translation
 TRANSLATED = VON_MISES.replace('components = ["x"]\n[[relations]]\nname = "sym_y"',

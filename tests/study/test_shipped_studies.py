@@ -29,6 +29,7 @@ def test_every_shipped_study_is_tested_and_valid():
         assert len(load_study(path, reduced=True).levels) < len(load_study(path).levels)
 
 
+@pytest.mark.slow
 @pytest.mark.serial
 def test_kirsch_reduced(tmp_path):
     table = run_reduced(tmp_path, "kirsch")
@@ -53,6 +54,7 @@ def test_cantilever_reduced(tmp_path):
     np.testing.assert_allclose(tips["P1 tetra"], 0.0096691398, rtol=1e-7)   # regression
 
 
+@pytest.mark.slow
 @pytest.mark.serial
 def test_controlled_bar_reduced(tmp_path):
     table = run_reduced(tmp_path, "controlled_bar")
@@ -62,6 +64,7 @@ def test_controlled_bar_reduced(tmp_path):
     assert max(v for (f, _), v in err.items() if f == "iterative rtol 1e-6") < 1e-5
 
 
+@pytest.mark.slow
 @pytest.mark.serial
 def test_solubility_reduced(tmp_path):
     """Backward Euler is first order in time: halving the time step (and the cells) halves the

@@ -60,6 +60,7 @@ def run_study(tmp_path, name, ranks, reduced=False):
     return out, rows(out / "study.csv")
 
 
+@pytest.mark.slow
 @pytest.mark.serial
 def test_study_observed_orders_match_theory(tmp_path, capsys):
     out, table = run_study(tmp_path, "smooth", 1)

@@ -1,0 +1,126 @@
+"""The localization bar and the scenes of tests/solvers/test_control.py that other tests of the
+control and arc-length methods reuse, with the bar's closed form."""
+
+import numpy as np
+
+from conftest import CONFIGS
+
+BAR = (CONFIGS / "localization_bar.toml").read_text()
+
+
+E, H, L, N = 1e9, 0.1, 1.0, 29
+
+
+def closed_form(eps_d: np.ndarray):
+    """1D localization bar: the damaged column at strain ε_d sets the stress, the rest unloads
+    elastically. Mazars with At = 1 in uniaxial tension (ν = 0): D = 1 - exp(-Bt (κ - εd0))."""
+    kappa = np.maximum.accumulate(np.maximum(eps_d, 1e-4))
+    sigma = E * eps_d * np.exp(-1e4 * (kappa - 1e-4))
+    force = sigma * H
+    delta = eps_d * L / N + sigma / E * L * (N - 1) / N
+    return delta, force
+
+
+def end_delta(res):
+    pts = res["mesh/points"]
+    return res["fields/displacement"][:, np.isclose(pts[:, 0], L), 0].mean(axis=1)
+
+
+def without_control(text: str) -> str:
+    i = text.index('[[relations]]\nname = "max_strain"')
+    return text[:i] + text[text.index("[steps]"):]
+
+
+def displacement_control() -> str:
+    """The bar pulled by a prescribed end displacement instead of a controlled load."""
+    text = without_control(BAR).replace('[[loads]]\nname = "pull"\nregion = "right"\n'
+                                        'total_force = [1.0, 0.0]\n', "")
+    return text.replace("[regions]\n", "[regions]\nend = { point = [1.0, 0.0] }\n") + """
+[[relations]]
+name = "end_displacement"
+type = "dirichlet"
+region = "end"
+components = ["x"]
+value = 2.4e-4
+"""
+
+
+VON_MISES = """
+[mesh]
+generator = "box"
+lx = 1.0
+ly = 0.2
+nz = 2
+lz = 0.2
+nx = 5
+ny = 2
+cell = "hexahedron"
+[model]
+hypothesis = "3d"
+[[materials]]
+model = "von_mises"
+E = 200e3
+nu = 0.3
+sigma_y = 250.0
+H = 2e3
+[[relations]]
+name = "sym_x"
+type = "dirichlet"
+region = "xmin"
+components = ["x"]
+[[relations]]
+name = "sym_y"
+type = "dirichlet"
+region = "ymin"
+components = ["y"]
+[[relations]]
+name = "sym_z"
+type = "dirichlet"
+region = "zmin"
+components = ["z"]
+[[relations]]
+name = "pull"
+type = "dirichlet"
+region = "xmax"
+components = ["x"]
+value = 4e-3
+[steps]
+count = 8
+"""
+
+
+ARC_BAR = """
+[mesh]
+generator = "rectangle"
+lx = 1.0
+ly = 0.1
+nx = 10
+ny = 2
+cell = "quad"
+[model]
+hypothesis = "plane_stress"
+[regions]
+corner = { point = [0.0, 0.0] }
+[[materials]]
+E = 1e3
+nu = 0.0
+[[loads]]
+name = "pull"
+region = "right"
+total_force = [1.0, 0.0]
+[[relations]]
+name = "clamp"
+type = "dirichlet"
+region = "left"
+components = ["x"]
+[[relations]]
+name = "corner"
+type = "dirichlet"
+region = "corner"
+components = ["y"]
+[nonlinear]
+method = "arc_length"
+arc_length = { pattern = "pull", length = 1e-3 }
+[steps]
+count = 3
+"""
