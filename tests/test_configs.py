@@ -82,4 +82,5 @@ TESTED = ["controlled_bar.toml", "kirsch.toml", "cantilever_3d.toml",
           "seepage_overflow.toml",  # tests/effects/test_diffusion_effect.py
           "contact_block_friction.toml", "contact_control_friction.toml", "contact_hertz_cylinder.toml",
           # contact: tests/effects/test_contact.py; 3D: tests/effects/test_contact_3d_scene.py
-          "contact_friction_3d.toml"]
+          "contact_friction_3d.toml",
+          "thermal_expansion.toml"]  # tests/effects/test_thermal_expansion.py
