@@ -142,6 +142,8 @@ class ThermalExpansion(Effect):
         pairs = np.column_stack([el.cell_model.astype(float), self.alpha])
         combos, self.cell_combo = np.unique(pairs, axis=0, return_inverse=True)
         self.cell_combo = self.cell_combo.ravel()
+        if not len(combos):   # a rank without cells: one (zero) tensor all the same
+            combos = np.zeros((1, 2))
         S = [_stress_of_unit_strain(el.models[int(k)], el.hypothesis) for k, _ in combos]
         # M[j, i] = −α S_ij: the block's rows i from the geometric part's rows j
         self.tensors = np.stack([-a * _voigt_tensor(s, d).T for (_, a), s in zip(combos, S)])

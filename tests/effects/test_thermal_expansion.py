@@ -109,6 +109,26 @@ def test_bar_clamped_at_both_ends(hypothesis, cell, run):
     assert lam.sum() == pytest.approx(0.0, abs=1e-10 * abs(sxx))
 
 
+def test_bar_expanding_into_a_gap(run):
+    """Newton and the active set (a unilateral wall at a gap g = α ΔT L / 2 from the right end):
+    the bar closes the gap, u_x = g x / L, σ_xx = −E α ΔT / 2 (plane stress), the stress
+    output of a Newton run (quadrature-point stresses) less the eigenstrain too."""
+    gap = 0.5 * A * 2.0
+    relations = UNIFORM + dirichlet("left", "left", 0.0, components=["x"]) + \
+        dirichlet("bottom", "bottom", 0.0, components=["y"]) + \
+        dirichlet("wall", "right", gap, components=["x"]).replace(
+            'evolution = "constant"', 'evolution = "constant"\nsense = "<="')
+    res = run(SCENE.format(nx=4, ny=2, cell="quad", hypothesis="plane_stress", relations=relations),
+              name="gap")
+    p, u = res["mesh/points"], res["fields/displacement"][-1]
+    assert res["relations/wall/active"][-1].all()
+    np.testing.assert_allclose(u[:, 0], gap * p[:, 0] / 2.0, rtol=0, atol=1e-12 * A)
+    np.testing.assert_allclose(u[:, 1], (1 + NU / 2) * A * p[:, 1], rtol=0, atol=1e-12 * A)
+    for sig in stresses(res):
+        np.testing.assert_allclose(sig, np.tile([-E * A / 2, 0.0, 0.0], (len(sig), 1)), rtol=0,
+                                   atol=1e-10 * E * A)
+
+
 LINEAR = dirichlet("cold", "left", T_REF, field="T") + dirichlet("warm", "right", T_REF + DT, field="T") \
     + dirichlet("pin", "origin", 0.0, components=["x", "y"]) \
     + dirichlet("roller", "corner", 0.0, components=["y"])
