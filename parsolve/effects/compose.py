@@ -99,20 +99,24 @@ class Composition:
 
     def known_loads(self, t: float, t_prev: float, theta: float | None) -> np.ndarray:
         """The loads a step balances: F(t), or in a θ-scheme step θ F(t) + (1 - θ) F(t_n) on
-        the equations of fields with a capacity (F(t) elsewhere)."""
+        the equations of fields with a capacity (F(t) elsewhere); plus the effects' own
+        constant loads."""
         f = self.model.external_load(t)
         if theta is not None and theta != 1.0:
             w = self.theta_dofs(theta)
             f = w * f + (1.0 - w) * self.model.external_load(t_prev)
-        return f + self.effect_loads()
+        own = self.effect_loads()
+        return f if own is None else f + own
 
-    def effect_loads(self) -> np.ndarray:
-        """The effects' own constant loads (``Effect.loads``) as a full vector, built once."""
+    def effect_loads(self) -> np.ndarray | None:
+        """The effects' own constant loads (``Effect.loads``) as a full vector, built once
+        (None: no effect has any)."""
         if self._loads is None:
-            self._loads = np.zeros(self.ndof)
-            for e in self.model.effects:
-                self._scatter(e.loads(self.cells), self._loads)
-        return self._loads
+            parts = [p for e in self.model.effects if (p := e.loads(self.cells))]
+            self._loads = np.zeros(self.ndof) if parts else False
+            for p in parts:
+                self._scatter(p, self._loads)
+        return None if self._loads is False else self._loads
 
     def _scatter(self, forces: dict[str, np.ndarray], out: np.ndarray, factor: float = 1.0) -> None:
         """Add element forces {field: (nc, nen, ncomp)} into a full vector."""

@@ -139,7 +139,8 @@ class Elasticity(Effect):
         return self._hooke(cells, kernels.voigt_of_gradient(g) - at_nodes), sig, vol
 
     def _eigenstrain(self, cells: np.ndarray, values: dict | None):
-        """Σ of the ``eigenstrains`` (cell means, at the cells' nodes); 0 without any."""
+        """Σ of the ``eigenstrains`` (cell means, at the cells' nodes); 0 without any (or
+        without the fields' values: ``cell_stress`` of a displacement alone)."""
         parts = [e.eigenstrain(cells, values) for e in self.eigenstrains if values is not None]
         return (sum(p[0] for p in parts), sum(p[1] for p in parts)) if parts else (0.0, 0.0)
 

@@ -129,6 +129,27 @@ def test_bar_expanding_into_a_gap(run):
                                    atol=1e-10 * E * A)
 
 
+def test_alpha_per_region(run):
+    """α = 1e-3, and 3e-3 on the right half (a [[thermal_expansion.regions]] entry), plane
+    stress, u_x held at both ends and u_y on top and bottom: σ_xx = −E ᾱ ΔT / (1 − ν) with
+    ᾱ the length-weighted mean α, σ_yy = ν σ_xx − E α ΔT in each half (cell values)."""
+    relations = UNIFORM + dirichlet("ends", "ends", 0.0, components=["x"]) + \
+        dirichlet("sides", "sides", 0.0, components=["y"])
+    text = SCENE.format(nx=6, ny=2, cell="quad", hypothesis="plane_stress", relations=relations) \
+        .replace("[model]", '[regions.ends]\nexpr = "x == 0 or x == 2"\n[regions.sides]\n'
+                 'expr = "y == 0 or y == 1"\n[regions.hot_half]\nexpr = "x >= 1"\n[model]', 1) \
+        .replace("reference = 20.0", 'reference = 20.0\n[[thermal_expansion.regions]]\n'
+                 'region = "hot_half"\nalpha = 3e-3', 1)
+    res = run(text, name="alpha_regions")
+    centre = res["mesh/points"][res["mesh/cells/quad"]].mean(axis=1)[:, 0]
+    alpha = np.where(centre > 1.0, 3e-3, 1e-3)
+    sxx = -E * 2e-3 * DT / (1 - NU)
+    expected = np.column_stack([np.full(len(alpha), sxx), NU * sxx - E * alpha * DT,
+                                np.zeros(len(alpha))])
+    np.testing.assert_allclose(res["cell_fields/stress"][-1], expected, rtol=0,
+                               atol=1e-10 * abs(sxx))
+
+
 LINEAR = dirichlet("cold", "left", T_REF, field="T") + dirichlet("warm", "right", T_REF + DT, field="T") \
     + dirichlet("pin", "origin", 0.0, components=["x", "y"]) \
     + dirichlet("roller", "corner", 0.0, components=["y"])
@@ -303,3 +324,45 @@ def test_bad_input_exit_2(case, tmp_path):
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "scene.toml" in lines[0] and key in lines[0], proc.stderr
     assert not list(tmp_path.glob("*.h5"))
+
+
+def _assembled(text: str):
+    """(operator values, effect loads, cell stresses, nodal stress sums) of this rank, at a
+    non-uniform u and T."""
+    from parsolve.model import build_model
+    from parsolve.scene import parse_scene
+    from parsolve.solvers.system import SaddleSystem
+
+    model = build_model(parse_scene(tomllib.loads(text), "t.toml", text), MPI.COMM_WORLD)
+    system = SaddleSystem(MPI.COMM_WORLD, model)
+    system.assemble()
+    mech = model.effects[0]
+    x = model.mesh.points
+    values = {"u": np.stack([np.sin(x[:, 0] + 2 * x[:, 1]), np.cos(3 * x[:, 0] * x[:, 1])], 1),
+              "T": (T_REF + 30 * x[:, 0] ** 2 - 10 * x[:, 1])[:, None]}
+    nodal, cell = mech.outputs(system.local_cells, values, None, system.local_cells)
+    return system.op.data.copy(), system.composition.effect_loads(), cell["stress"], \
+        nodal["stress"][0]
+
+
+@pytest.mark.parametrize("cell", ["quad", "triangle6"])
+def test_block_size_does_not_change_the_answer(cell, monkeypatch):
+    """The coupling block is computed a block of cells at a time (CellKernel): blocks of 7
+    cells give the operator, the loads and the stresses of one block, to 1e-14 (two α: the
+    per-block contraction)."""
+    import parsolve.effects.elasticity as elasticity
+    import parsolve.fem.element_matrices as element_matrices
+
+    text = SCENE.format(nx=13, ny=7, cell=cell, hypothesis="plane_strain",
+                        relations=UNIFORM + ROLLERS) \
+        .replace("[model]", '[regions.inner]\nexpr = "x < 0.7"\n[model]', 1) \
+        .replace("reference = 20.0", 'reference = 20.0\n[[thermal_expansion.regions]]\n'
+                 'region = "inner"\nalpha = 4e-3', 1)
+    whole = _assembled(text)
+    monkeypatch.setattr(element_matrices, "block_cells", lambda *args: 7)
+    monkeypatch.setattr(elasticity, "block_cells", lambda *args: 7)
+    blocked = _assembled(text)
+    for a, b in zip(whole, blocked):
+        scale = MPI.COMM_WORLD.allreduce(float(np.abs(a).max(initial=0.0)), op=MPI.MAX)
+        assert a.shape == b.shape and np.abs(a - b).max(initial=0.0) <= 1e-14 * scale
+        assert scale > 0
