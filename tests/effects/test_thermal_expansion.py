@@ -150,6 +150,28 @@ def test_alpha_per_region(run):
                                atol=1e-10 * abs(sxx))
 
 
+@pytest.mark.parametrize("mass", ["lumped", "consistent"])
+def test_transient_heating_by_a_source(mass, run):
+    """θ = 1/2: an insulated plate heated by a uniform source s with capacity c warms
+    uniformly, T = T_ref + s t / c (exact for the scheme); the displacements follow
+    quasi-statically, u = f α (T − T_ref) x at every step (plane strain, f = 1 + ν)."""
+    text = SCENE.format(nx=4, ny=2, cell="quad", hypothesis="plane_strain", relations=ROLLERS) \
+        .replace("conductivity = 1.5", "conductivity = 1.5\ncapacity = 2.0") \
+        .replace('field = "T"\n[[diffusion.materials]]', 'field = "T"\ninitial = 20.0\n'
+                 '[[diffusion.materials]]', 1) \
+        + '[[loads]]\nname = "heater"\nfield = "T"\nsource = 4.0\nevolution = "constant"\n' \
+        + f'[time]\nscheme = "theta"\ntheta = 0.5\nmass = "{mass}"\n[steps]\ncount = 3\nend = 1.5\n'
+    res = run(text, name=f"transient_{mass}")
+    t, p = res["steps/time"], res["mesh/points"]
+    rise = 4.0 * t / 2.0
+    np.testing.assert_allclose(res["fields/T"][..., 0] - T_REF, np.repeat(rise[:, None], len(p), 1),
+                               rtol=1e-12)
+    for k, r in enumerate(rise):
+        np.testing.assert_allclose(res["fields/displacement"][k], (1 + NU) * ALPHA * r * p, rtol=0,
+                                   atol=1e-12 * ALPHA * r)
+        assert np.abs(res["cell_fields/stress"][k]).max() < 1e-10 * E * ALPHA * r
+
+
 LINEAR = dirichlet("cold", "left", T_REF, field="T") + dirichlet("warm", "right", T_REF + DT, field="T") \
     + dirichlet("pin", "origin", 0.0, components=["x", "y"]) \
     + dirichlet("roller", "corner", 0.0, components=["y"])
