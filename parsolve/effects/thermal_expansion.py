@@ -132,8 +132,9 @@ class ThermalExpansion(Effect):
     # ------------------------------------------------------------ coupling with elasticity
 
     def couple(self, effects: list[Effect]) -> None:
-        """Finds the elasticity: its Hooke matrices make the block, its stresses subtract
-        this eigenstrain. Per cell one (material, α) pair: the factored block's tensors."""
+        """Finds the elasticity (the composition calls this before any block is asked for):
+        its Hooke matrices make the block, its stresses subtract this eigenstrain. Per cell
+        one (material, α) pair: the factored block's tensors."""
         self.elasticity = el = next(e for e in effects if isinstance(e, Elasticity))
         self.u = el.fields()[0].name
         if self not in el.eigenstrains:
@@ -150,17 +151,18 @@ class ThermalExpansion(Effect):
         # the effective eigenstrain per unit α ΔT (Voigt), S = C m_eff: (1 + ν) in plane strain
         self.m_eff = np.stack([np.linalg.solve(el.C[int(k)], s) for (k, _), s in zip(combos, S)])
 
-    def _rule(self):
-        """The load rule (exact for ∫ ∂N N on affine cells): points, weights, N (nq, nen)."""
+    def _rule(self) -> tuple[np.ndarray, int]:
+        """The load rule (degree 2p: exact for ∫ ∂N_a N_b on affine cells): N (nq, nen) at
+        its points, and its degree."""
         ct = self.mesh.cell_type
-        xi, _ = quadrature(ct, default_degree(ct, "load"))
-        return xi, element(ct).shape(xi), default_degree(ct, "load")
+        degree = default_degree(ct, "load")
+        return element(ct).shape(quadrature(ct, degree)[0]), degree
 
     def coupling(self, cells: np.ndarray) -> ElementMatrices:
         """B_uT of the given cells, factored (P[j, a, b] = ∫ ∂_j N_a N_b, one tensor per
         (material, α) pair) and blocked (``CellKernel``: a block of cells at a time)."""
         mesh = self.mesh
-        _, N, degree = self._rule()
+        N, degree = self._rule()
 
         def geometric(sel, out):
             coords = mesh.points[mesh.cells[cells[sel]]]
@@ -193,7 +195,7 @@ class ThermalExpansion(Effect):
         eigenstrain α (T − T_ref) m_eff that the elasticity's stresses subtract."""
         mesh = self.mesh
         te = values[self.field][mesh.cells[cells], 0] - self.spec.reference   # (nc, nen)
-        _, N, degree = self._rule()
+        N, degree = self._rule()
         _, wdet = kernels.gradients_cell_last(mesh.points[mesh.cells[cells]], mesh.cell_type,
                                               degree, self.thickness)
         mean = ((N @ te.T) * wdet).sum(axis=0) / wdet.sum(axis=0)                # (nc,)
