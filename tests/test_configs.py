@@ -125,4 +125,5 @@ TESTED = ["controlled_bar.toml", "kirsch.toml", "cantilever_3d.toml",
           # contact: tests/effects/test_contact.py; 3D: tests/effects/test_contact_3d_scene.py
           "contact_friction_3d.toml",
           "periodic_shear_laminate.toml",  # periodic: tests/effects/test_periodic.py
-          "springs_bar_supports.toml"]  # springs: tests/effects/test_springs.py
+          "springs_bar_supports.toml",  # springs: tests/effects/test_springs.py
+          "thermal_expansion.toml"]  # tests/effects/test_thermal_expansion.py

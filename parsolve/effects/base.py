@@ -29,6 +29,15 @@ class Effect:
         """Linear operator blocks (a linear effect's K; a nonlinear one's initial tangent)."""
         return []
 
+    def loads(self, cells: np.ndarray) -> dict[str, np.ndarray]:
+        """Constant element loads {field: (nc, nen, ncomp)} of its own, added to every step's
+        known loads (thermal expansion's reference state); empty: none."""
+        return {}
+
+    def couple(self, effects: list["Effect"]) -> None:
+        """Called once the model's effects are composed: a coupling effect finds the effects
+        it acts on (thermal expansion: the elasticity). Nothing by default."""
+
     def mass_blocks(self, cells: np.ndarray, lumped: bool) -> Blocks:
         """Capacity blocks of a transient run (empty: the effect has no rate term)."""
         return []

@@ -65,7 +65,9 @@ class Composition:
         self.fields = model.fields
         self.nodes = model.mesh.cells[cells]                 # (nc, nen)
         self.npoints = model.mesh.num_points
-        self._mass = None
+        self._mass, self._loads = None, None
+        for e in model.effects:
+            e.couple(model.effects)
 
     @property
     def ndof(self) -> int:
@@ -97,12 +99,24 @@ class Composition:
 
     def known_loads(self, t: float, t_prev: float, theta: float | None) -> np.ndarray:
         """The loads a step balances: F(t), or in a θ-scheme step θ F(t) + (1 - θ) F(t_n) on
-        the equations of fields with a capacity (F(t) elsewhere)."""
+        the equations of fields with a capacity (F(t) elsewhere); plus the effects' own
+        constant loads."""
         f = self.model.external_load(t)
-        if theta is None or theta == 1.0:
-            return f
-        w = self.theta_dofs(theta)
-        return w * f + (1.0 - w) * self.model.external_load(t_prev)
+        if theta is not None and theta != 1.0:
+            w = self.theta_dofs(theta)
+            f = w * f + (1.0 - w) * self.model.external_load(t_prev)
+        own = self.effect_loads()
+        return f if own is None else f + own
+
+    def effect_loads(self) -> np.ndarray | None:
+        """The effects' own constant loads (``Effect.loads``) as a full vector, built once
+        (None: no effect has any)."""
+        if self._loads is None:
+            parts = [p for e in self.model.effects if (p := e.loads(self.cells))]
+            self._loads = np.zeros(self.ndof) if parts else False
+            for p in parts:
+                self._scatter(p, self._loads)
+        return None if self._loads is False else self._loads
 
     def _scatter(self, forces: dict[str, np.ndarray], out: np.ndarray, factor: float = 1.0) -> None:
         """Add element forces {field: (nc, nen, ncomp)} into a full vector."""

@@ -54,6 +54,9 @@ class Elasticity(Effect):
         # Mazars' consistent tangent is not symmetric (its secant (1 - D) C is)
         self.symmetric_secant = True
         self.symmetric = not any(isinstance(m, Mazars) for m in self.models)
+        # effects imposing a strain on the material (thermal expansion): the stresses are
+        # C (ε − Σ ε*), each giving ``eigenstrain(cells, values)`` = (cell means, at nodes)
+        self.eigenstrains: list = []
 
     def fields(self) -> list[Field]:
         return [Field("u", VECTOR_COMPONENTS[:self.mesh.dim], "displacement")]
@@ -81,7 +84,7 @@ class Elasticity(Effect):
         npts = self.mesh.num_points
         nodes = self.mesh.cells[owned]
         if extra is None:
-            sums, cell = self._stress_outputs(owned, u)
+            sums, cell = self._stress_outputs(owned, u, values)
             return {"stress": sums}, {"stress": cell}
         stress_qp, states = extra
         pos = np.searchsorted(local_cells, owned)
@@ -89,6 +92,8 @@ class Elasticity(Effect):
                                        self.thickness)                 # (nq, nc)
         vol = wq.sum(axis=0)
         sig = np.einsum("cqv,qc->vc", stress_qp[pos], wq) / vol         # (nv, nc)
+        if self.eigenstrains:   # the material saw ε alone
+            sig -= self._hooke(owned, self._eigenstrain(owned, values)[0])
         cells = {name: value[pos] for name, value in
                  self.internal_variables(local_cells, states).items()}
         cells["stress"] = np.ascontiguousarray(sig.T)
@@ -115,20 +120,29 @@ class Elasticity(Effect):
         kernel = CellKernel(geometric, len(cells), d * d, mesh.cells.shape[1])
         return ElementMatrices(tensors=tensors, cell_material=self.cell_model[cells], kernel=kernel)
 
-    def _stresses(self, cells: np.ndarray, u: np.ndarray):
+    def _stresses(self, cells: np.ndarray, u: np.ndarray, values: dict | None = None):
         """(stress at the cells' nodes (nv, nen, nc), or (nv, nc) where it is constant over the
         cell; cell-mean stress (nv, nc); cell measures (nc,)), cell-last, from the full
         displacement array u (npoints, ncomp). σ is linear in ε: the cell mean of σ is C times
         the cell mean of ε. On affine cells (P1 triangles and tetrahedra) the strain is
-        constant: the stress at the nodes is the cell's."""
+        constant: the stress at the nodes is the cell's (less the eigenstrains there)."""
         mesh = self.mesh
         rows = kernels.cell_rows(mesh.points, u, mesh.cells[cells])        # (nen, 2d, nc)
         g, vol = kernels.mean_gradient(rows, mesh.cell_type, thickness=self.thickness)
-        sig = self._hooke(cells, kernels.voigt_of_gradient(g))
+        eps = kernels.voigt_of_gradient(g)
+        mean, at_nodes = self._eigenstrain(cells, values)
+        sig = self._hooke(cells, eps - mean)
         if mesh.cell_type in AFFINE:
-            return sig, sig, vol
+            at = self._hooke(cells, eps[:, None] - at_nodes) if self.eigenstrains else sig
+            return at, sig, vol
         g = kernels.gradient_at_nodes(rows, mesh.cell_type)
-        return self._hooke(cells, kernels.voigt_of_gradient(g)), sig, vol
+        return self._hooke(cells, kernels.voigt_of_gradient(g) - at_nodes), sig, vol
+
+    def _eigenstrain(self, cells: np.ndarray, values: dict | None):
+        """Σ of the ``eigenstrains`` (cell means, at the cells' nodes); 0 without any (or
+        without the fields' values: ``cell_stress`` of a displacement alone)."""
+        parts = [e.eigenstrain(cells, values) for e in self.eigenstrains if values is not None]
+        return (sum(p[0] for p in parts), sum(p[1] for p in parts)) if parts else (0.0, 0.0)
 
     def _hooke(self, cells: np.ndarray, eps: np.ndarray) -> np.ndarray:
         """σ = C ε with each cell's own Hooke matrix, cell-last: eps (nv, ..., nc)."""
@@ -143,7 +157,8 @@ class Elasticity(Effect):
             sig[..., idx] = (C @ part.reshape(nv, -1)).reshape(part.shape)
         return sig
 
-    def _stress_outputs(self, cells: np.ndarray, u: np.ndarray) -> tuple[tuple, np.ndarray]:
+    def _stress_outputs(self, cells: np.ndarray, u: np.ndarray, values: dict | None = None
+                        ) -> tuple[tuple, np.ndarray]:
         """((nodal stress sums (npoints, nv), weights (npoints,)), cell-mean stress (nc, nv))
         of the given cells, computed a block of cells at a time (``POST_BLOCK_BYTES`` of work
         arrays): nothing of the cells' size is formed but the cell stress itself."""
@@ -155,7 +170,7 @@ class Elasticity(Effect):
         cell = np.empty((len(cells), nv))
         sums, weights = np.zeros((mesh.num_points, nv)), np.zeros(mesh.num_points)
         for sl in cell_ranges(len(cells), size):
-            at_nodes, sig, vol = self._stresses(cells[sl], u)
+            at_nodes, sig, vol = self._stresses(cells[sl], u, values)
             cell[sl] = sig.T
             kernels.add_nodal_sums(sums, weights, mesh.cells[cells[sl]], at_nodes, vol)
         return (sums, weights), cell

@@ -6,7 +6,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
-from parsolve.effects import contact, contact_penalty, diffusion, solubility, springs
+from parsolve.effects import (contact, contact_penalty, diffusion, solubility, springs,
+                              thermal_expansion)
 
 
 @dataclass(frozen=True)
@@ -65,6 +66,10 @@ EFFECTS: dict[str, Entry] = {
                                               for name, _, key in spec.saturation],
                         evolutions=lambda spec: [(spec.evolution, spec.key + ".evolution")],
                         distributed=True),
+    # the temperature of a diffusion field as an eigenstrain of the elasticity
+    "thermal_expansion": Entry("thermal_expansion", True, thermal_expansion.parse,
+                               thermal_expansion.build, coupling=True,
+                               regions=thermal_expansion.regions, distributed=True),
     # on parts (surfaces gathered once), the relations form and the penalty and augmented-
     # Lagrangian baselines alike
     "contact": Entry("contact", True, _parse_contact, _build_contact, coupling=True,
