@@ -35,9 +35,14 @@ def preset_options(preset: str, symmetric: bool, has_multipliers: bool) -> dict[
             "mat_mumps_icntl_14": "50",   # workspace margin for delayed pivots
             "ksp_error_if_not_converged": "true",
         }
+    # CG needs a symmetric operator: a coupling that makes K unsymmetric (thermal expansion's
+    # (u, T) block, non-associated relations eliminated into K) takes GMRES instead
+    krylov = "cg" if symmetric else "gmres"
     if not has_multipliers:
-        return {"ksp_type": "cg", "pc_type": "gamg", "ksp_rtol": "1e-10",
-                "ksp_norm_type": "unpreconditioned",  # rtol on the true residual
+        # rtol on the true residual (GMRES: right preconditioning, whose norm is the true one)
+        side = {} if symmetric else {"ksp_pc_side": "right"}
+        return {"ksp_type": krylov, "pc_type": "gamg", "ksp_rtol": "1e-10",
+                "ksp_norm_type": "unpreconditioned", **side,
                 "ksp_error_if_not_converged": "true"}
     return {
         "ksp_type": "fgmres",
@@ -48,7 +53,7 @@ def preset_options(preset: str, symmetric: bool, has_multipliers: bool) -> dict[
         "pc_fieldsplit_type": "schur",
         "pc_fieldsplit_schur_fact_type": "full",
         "pc_fieldsplit_schur_precondition": "selfp",
-        "fieldsplit_q_ksp_type": "cg",
+        "fieldsplit_q_ksp_type": krylov,
         "fieldsplit_q_ksp_rtol": "1e-4",
         "fieldsplit_q_pc_type": "gamg",
         "fieldsplit_lambda_ksp_type": "gmres",

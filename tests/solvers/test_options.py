@@ -73,3 +73,12 @@ def test_unused_options():
     # the validation's probe does not count as a use
     opt.probe(comm, "unusedtest2_", {"nosuch": "1", "ksp_type": "gmres"})
     assert opt.unused_options("unusedtest2_", {"ksp_type": "gmres"}) == ["-unusedtest2_ksp_type"]
+
+
+def test_iterative_preset_takes_gmres_for_an_unsymmetric_operator():
+    # CG on an unsymmetric operator (thermal expansion's (u, T) block) converges to a wrong
+    # answer (1e-6 off on configs/thermal_expansion.toml): the preset must not use it
+    assert preset_options("iterative", True, False)["ksp_type"] == "cg"
+    assert preset_options("iterative", False, False)["ksp_type"] == "gmres"
+    assert preset_options("iterative", True, True)["fieldsplit_q_ksp_type"] == "cg"
+    assert preset_options("iterative", False, True)["fieldsplit_q_ksp_type"] == "gmres"
