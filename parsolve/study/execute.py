@@ -52,34 +52,64 @@ def peak_memory(stdout: Path) -> tuple[float | None, float | None]:
     return most, total
 
 
-def relation_names(text: str, scene_path) -> list[str]:
-    """Every relation of a scene: its [[relations]] and the ones its effects contribute
-    (contact, solubility), from the model built as a run would build it."""
+def scene_model(text: str, scene_path):
+    """The model of an effective scene, built as a run would build it (one rank)."""
     import tomllib
 
     from parsolve.model import build_model
     from parsolve.scene import parse_scene
 
     scene = parse_scene(tomllib.loads(text), str(scene_path), text, Path(scene_path).parent)
-    return [r.name for r in build_model(scene).relations]
+    return build_model(scene)
 
 
 def check_quantities(study: Study, settings: list[Setting]) -> None:
-    """Specs parse, and relations they name exist in every effective scene (before running)."""
+    """Before anything runs: every spec parses, and on the coarsest scene of every family the
+    relation, field or region it names exists and its point lies in the mesh. (A dataset an
+    effect writes only in some runs, e.g. damage, and a point inside the coarsest mesh but
+    outside a finer one are still found when the runs are read.)"""
     from parsolve.post.spec import parse
 
+    specs = []
     for q in study.quantities:
         try:
-            spec = parse(q.spec)
+            specs.append((q, parse(q.spec)))
         except InputError as exc:
             raise InputError(exc.message, study.source, q.key + ".spec") from None
-        if spec.kind != "relation":
+    for s in settings:
+        if s.level != 0:
             continue
-        for s in settings:
-            names = relation_names(s.scene_text, study.scene)
-            if spec.name not in names:
-                raise InputError(f"no relation {spec.name!r} in the scene of {s.family} "
-                                 f"(known: {', '.join(map(str, names))})", study.source, q.key + ".spec")
+        model = scene_model(s.scene_text, study.scene)
+        for q, spec in specs:
+            problem = spec_problem(spec, model)
+            if problem:
+                raise InputError(f"{problem} in the scene of {s.family}", study.source,
+                                 q.key + ".spec")
+
+
+def spec_problem(spec, model) -> str | None:
+    """Why a run of ``model`` cannot give ``spec`` (a parsed post spec), or None."""
+    from parsolve.post.locate import locate
+
+    names = {"relation": [r.name for r in model.relations],
+             "field": [f.output for f in model.fields] + [n for e in model.effects for n in e.output_names()],
+             "cell_field": [n for e in model.effects for n in e.output_names()]}
+    group = "field" if spec.kind in ("max", "maxabs", "norm") else spec.kind
+    if group in names and spec.name not in names[group]:
+        what = "cell field" if group == "cell_field" else group
+        return f"no {what} {spec.name!r} (known: {', '.join(map(str, names[group])) or 'none'})"
+    mesh = model.mesh
+    if spec.at is not None:
+        if len(spec.at) != mesh.dim:
+            return f"the point needs {mesh.dim} coordinates"
+        if locate(mesh.points, mesh.cells, mesh.cell_type, spec.at) is None:
+            return f"point {spec.at} is outside the mesh"
+    if spec.region is not None:
+        try:
+            model.regions()(spec.region, spec.text)
+        except InputError as exc:
+            return f"region {spec.region!r}: {exc.message}"
+    return None
 
 
 def measure(study: Study, setting: Setting, outcome) -> Measured:
