@@ -247,24 +247,75 @@ def _unique(name: str, names: set, key: str | None, source: str) -> str:
 
 
 def check(runs: list[Run], points: list[dict], scene: Path, source: str) -> None:
-    """``parsolve check`` on every distinct effective scene; an error caused by a varied value
-    names the job file and that value's key."""
+    """``parsolve check`` on every distinct effective scene, with the PETSc options of its
+    runs; an error caused by a varied value names the job file and that value's key."""
     from parsolve.model import build_model
     from parsolve.scene import parse_scene
 
+    solvers: dict[str, tuple] = {}   # scene text -> (prefix, preset, scene options)
     seen = set()
     for run, point in zip(runs, points):
-        if run.scene_text in seen:
+        if run.scene_text not in solvers:
+            try:
+                model = build_model(parse_scene(tomllib.loads(run.scene_text), str(scene),
+                                                run.scene_text, scene.parent))
+            except InputError as exc:
+                key = _culprit(exc.key, point)
+                if key is None:
+                    raise InputError(f"{exc.message} (run {run.name})", exc.source, exc.key) from None
+                raise InputError(f"{exc.message} (run {run.name}, scene {scene})", source, key) from None
+            solvers[run.scene_text] = _solver_options(model)
+        prefix, preset, options = solvers[run.scene_text]
+        petsc = petsc_options(run.args)
+        if (prefix, tuple(preset.items()), tuple(options.items()), tuple(petsc.items())) in seen:
             continue
-        seen.add(run.scene_text)
-        try:
-            build_model(parse_scene(tomllib.loads(run.scene_text), str(scene), run.scene_text,
-                                    scene.parent))
-        except InputError as exc:
-            key = _culprit(exc.key, point)
-            if key is None:
-                raise InputError(f"{exc.message} (run {run.name})", exc.source, exc.key) from None
-            raise InputError(f"{exc.message} (run {run.name}, scene {scene})", source, key) from None
+        seen.add((prefix, tuple(preset.items()), tuple(options.items()), tuple(petsc.items())))
+        _check_options(prefix, preset, options, petsc, run, point, scene, source)
+
+
+def petsc_options(args: tuple[str, ...]) -> dict[str, str]:
+    """The PETSc options among a run's arguments (not ``-o FILE`` nor ``--long`` flags of
+    ``parsolve run`` and their values)."""
+    from parsolve.solvers.options import parse_cli
+
+    words, i = [], 0
+    while i < len(args):
+        word = args[i]
+        i += 1
+        if word == "-o" or word.startswith("--"):
+            if i < len(args) and not args[i].startswith("-") and "=" not in word:
+                i += 1
+            continue
+        words.append(word)
+    return parse_cli(words)
+
+
+def _solver_options(model) -> tuple[str, dict, dict]:
+    """(prefix, preset options, scene options) as ``parsolve run`` layers them."""
+    from parsolve.solvers.linear import preset_options
+
+    solver = model.scene.solver
+    multiplied = [r for r in model.relations if not r.eliminable()]
+    preset = preset_options(solver.preset, all(r.associated for r in multiplied), bool(multiplied))
+    return solver.prefix, preset, dict(solver.options)
+
+
+def _check_options(prefix: str, preset: dict, options: dict, petsc: dict, run: Run, point: dict,
+                   scene: Path, source: str) -> None:
+    """PETSc's own verdict on the options (unknown types, bad numbers), before any run: a
+    culprit from the run's arguments names the job file's args key."""
+    from mpi4py import MPI
+
+    from parsolve.solvers.options import validate
+
+    try:
+        validate(MPI.COMM_SELF, prefix, preset, options, petsc, str(scene))
+    except InputError as exc:
+        if exc.source != "command line":
+            raise InputError(f"{exc.message} (run {run.name})", exc.source, exc.key) from None
+        entry = point.get("args")
+        key = entry[1] if entry and exc.key in entry[0] else "args"
+        raise InputError(f"{exc.key}: {exc.message} (run {run.name})", source, key) from None
 
 
 def _culprit(key: str | None, point: dict) -> str | None:
