@@ -21,7 +21,8 @@ def check_output(path: str | None, key: str, inputs: list[str]) -> None:
     targets = [out, out.with_suffix(".xdmf")] if key == "--derive" else [out]
     for target in targets:
         if any(target.resolve() == Path(i).resolve() for i in inputs):
-            raise InputError(f"{target} is an input: inputs are never overwritten", path, key)
+            what = "writes a copy" if key == "--derive" else f"would overwrite {target}"
+            raise InputError(f"{key} {what}: the input is never overwritten", path, key)
         if target.is_dir():
             raise InputError(f"{target} is a folder, not a file", path, key)
     parent = out.parent if str(out.parent) else Path(".")
