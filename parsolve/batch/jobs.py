@@ -252,7 +252,7 @@ def check(runs: list[Run], points: list[dict], scene: Path, source: str) -> None
     from parsolve.model import build_model
     from parsolve.scene import parse_scene
 
-    solvers: dict[str, tuple] = {}   # scene text -> (prefix, preset, scene options)
+    solvers: dict[str, tuple] = {}   # scene text -> (prefix, preset, scene options, source)
     seen = set()
     for run, point in zip(runs, points):
         if run.scene_text not in solvers:
@@ -265,12 +265,29 @@ def check(runs: list[Run], points: list[dict], scene: Path, source: str) -> None
                     raise InputError(f"{exc.message} (run {run.name})", exc.source, exc.key) from None
                 raise InputError(f"{exc.message} (run {run.name}, scene {scene})", source, key) from None
             solvers[run.scene_text] = _solver_options(model)
-        prefix, preset, options = solvers[run.scene_text]
-        petsc = petsc_options(run.args)
-        if (prefix, tuple(preset.items()), tuple(options.items()), tuple(petsc.items())) in seen:
+        layers = solvers[run.scene_text] + (petsc_options(run.args),)
+        frozen = tuple(v if isinstance(v, str) else tuple(v.items()) for v in layers)
+        if frozen in seen:
             continue
-        seen.add((prefix, tuple(preset.items()), tuple(options.items()), tuple(petsc.items())))
-        _check_options(prefix, preset, options, petsc, run, point, scene, source)
+        seen.add(frozen)
+        exc = _validate(*layers)
+        if exc is None:
+            continue
+        if exc.source != "command line":
+            key = _culprit(exc.key, point)
+            if key is None:
+                raise InputError(f"{exc.message} (run {run.name})", exc.source, exc.key)
+            raise InputError(f"{exc.message} (run {run.name}, scene {scene})", source, key)
+        entry = point.get("args")
+        key = entry[1] if entry and exc.key in entry[0] else "args"
+        raise InputError(f"{exc.key}: {exc.message} (run {run.name})", source, key)
+
+
+def options_error(model, args: tuple[str, ...]) -> InputError | None:
+    """PETSc's verdict on a run of ``model`` with ``args`` (unknown types, bad numbers), as
+    ``parsolve run`` layers the options; a culprit among ``args`` has source "command line"
+    and the option as its key."""
+    return _validate(*_solver_options(model), petsc_options(args))
 
 
 def petsc_options(args: tuple[str, ...]) -> dict[str, str]:
@@ -290,32 +307,26 @@ def petsc_options(args: tuple[str, ...]) -> dict[str, str]:
     return parse_cli(words)
 
 
-def _solver_options(model) -> tuple[str, dict, dict]:
-    """(prefix, preset options, scene options) as ``parsolve run`` layers them."""
+def _solver_options(model) -> tuple[str, dict, dict, str]:
+    """(prefix, preset options, scene options, scene file) as ``parsolve run`` layers them."""
     from parsolve.solvers.linear import preset_options
 
     solver = model.scene.solver
     multiplied = [r for r in model.relations if not r.eliminable()]
     preset = preset_options(solver.preset, all(r.associated for r in multiplied), bool(multiplied))
-    return solver.prefix, preset, dict(solver.options)
+    return solver.prefix, preset, dict(solver.options), model.scene.source
 
 
-def _check_options(prefix: str, preset: dict, options: dict, petsc: dict, run: Run, point: dict,
-                   scene: Path, source: str) -> None:
-    """PETSc's own verdict on the options (unknown types, bad numbers), before any run: a
-    culprit from the run's arguments names the job file's args key."""
+def _validate(prefix: str, preset: dict, options: dict, source: str, petsc: dict) -> InputError | None:
     from mpi4py import MPI
 
     from parsolve.solvers.options import validate
 
     try:
-        validate(MPI.COMM_SELF, prefix, preset, options, petsc, str(scene))
+        validate(MPI.COMM_SELF, prefix, preset, options, petsc, source)
     except InputError as exc:
-        if exc.source != "command line":
-            raise InputError(f"{exc.message} (run {run.name})", exc.source, exc.key) from None
-        entry = point.get("args")
-        key = entry[1] if entry and exc.key in entry[0] else "args"
-        raise InputError(f"{exc.key}: {exc.message} (run {run.name})", source, key) from None
+        return exc
+    return None
 
 
 def _culprit(key: str | None, point: dict) -> str | None:

@@ -161,6 +161,9 @@ def _refine(t: Table, folder: Path) -> tuple[list[str], list]:
             raise t.error("files", "expected a list of mesh file names")
         if len(files) > MAX_LEVELS:
             raise t.error("files", f"{len(files)} mesh files, more than {MAX_LEVELS} levels")
+        for i, f in enumerate(files):
+            if not (folder / f).is_file():
+                raise InputError(f"no mesh file {str(folder / f)!r}", t.source, f"{t.key('files')}[{i}]")
         t.done()
         return ["mesh.file"], [str((folder / f).resolve()) for f in files]
     keys = t.get("keys", list)

@@ -17,6 +17,7 @@ from parsolve.errors import InputError
 from parsolve.study.config import Study
 from parsolve.study.grid import Setting
 
+RUN_ARGS = ("-memory_view",)   # added to every run's arguments (peak memory)
 _MEMORY = re.compile(r"Maximum \(over computational time\) process memory:\s+total\s+(\S+)\s+max\s+(\S+)")
 
 
@@ -80,11 +81,26 @@ def check_quantities(study: Study, settings: list[Setting]) -> None:
         if s.level != 0:
             continue
         model = scene_model(s.scene_text, study.scene)
+        _check_options(study, model, s.family)
         for q, spec in specs:
             problem = spec_problem(spec, model)
             if problem:
                 raise InputError(f"{problem} in the scene of {s.family}", study.source,
                                  q.key + ".spec")
+
+
+def _check_options(study: Study, model, family: str) -> None:
+    """The study's ``args`` and the scene's PETSc options, as PETSc sees them, before any run."""
+    from parsolve.batch.jobs import options_error
+
+    exc = options_error(model, tuple(study.args) + RUN_ARGS)
+    if exc is None:
+        return
+    if exc.source == "command line":
+        raise InputError(f"{exc.key}: {exc.message}", study.source, "args")
+    fam = next(f for f in study.families if f.name == family)
+    varied = any(exc.key == k or exc.key.startswith(k + ".") for k in fam.changes) if exc.key else False
+    raise InputError(f"{exc.oneline()} (scene of {family})", study.source, fam.key if varied else "scene")
 
 
 def spec_problem(spec, model) -> str | None:
@@ -99,6 +115,14 @@ def spec_problem(spec, model) -> str | None:
         what = "cell field" if group == "cell_field" else group
         return f"no {what} {spec.name!r} (known: {', '.join(map(str, names[group])) or 'none'})"
     mesh = model.mesh
+    field = next((f for f in model.fields if f.output == spec.name), None)
+    if field is not None and spec.kind in ("field", "max", "maxabs"):
+        from parsolve.post.result import COMPONENTS
+
+        comps = COMPONENTS.get((mesh.dim, field.ncomp), ())
+        if spec.sel not in comps and not (spec.sel.isdigit() and int(spec.sel) < field.ncomp):
+            return (f"no component {spec.sel!r} of {spec.name!r} (known: {', '.join(comps)}, "
+                    f"or 0..{field.ncomp - 1})")
     if spec.at is not None:
         if len(spec.at) != mesh.dim:
             return f"the point needs {mesh.dim} coordinates"
@@ -147,7 +171,7 @@ def run_grid(study: Study, settings: list[Setting], root: Path, executor: str, p
     kept (the batch API's resume): a study interrupted or extended runs only what is new."""
     from parsolve.batch.api import Run, execute
 
-    args = tuple(study.args) + ("-memory_view",)
+    args = tuple(study.args) + RUN_ARGS
     runs = [Run(s.name, s.scene_text, study.ranks, args, params=s.changes) for s in settings]
     kw = dict(executor=executor, parallel=parallel, resources=study.resources, resume=True, log=log)
     first = execute(runs[:1], root, **kw)[0]

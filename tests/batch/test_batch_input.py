@@ -8,7 +8,7 @@ from parsolve.batch.cli import main
 
 pytestmark = pytest.mark.serial
 
-BASE = f'scene = "{BAR}"\noutput = "runs"\n'
+BASE = 'scene = "scene.toml"\noutput = "runs"\n'
 SECOND_BAD = '[[runs]]\n"steps.count" = 2\n[[runs]]\n"steps.count" = 3\nargs = ["-pc_type", "nosuch"]\n'
 
 # (job file body after scene/output, extra command-line arguments, source, key, fragment)
@@ -21,6 +21,8 @@ CASES = [
     (SECOND_BAD, [], "jobs", 'runs[1]."args"', "-pc_type: unknown type ('nosuch') (run "),
     ('[grid]\n"steps.count" = [2, 3]\n[[runs]]\nargs = ["-ksp_type", "nosuch"]\n', [], "jobs",
      'runs[0]."args"', "unknown type"),
+    ('[grid]\n"solver.petsc.ksp_type" = ["gmres", "nosuch"]\n', [], "jobs", 'grid."solver.petsc.ksp_type"',
+     "unknown type ('nosuch') (PETSc option -parsolve_ksp_type) (run "),
     ('output = "a_file"\n', [], "jobs", "output", "is a file, not a folder"),
     ('output = "a_file/runs"\n', [], "jobs", "output", "a_file is a file, not a folder"),
     ("", ["-o", "{file}"], "command line", "-o", "is a file, not a folder"),
@@ -33,6 +35,7 @@ CASES = [
 def test_bad_job_input(tmp_path, capsys, body, extra, source, key, fragment):
     afile = tmp_path / "a_file"
     afile.write_text("not a folder")
+    (tmp_path / "scene.toml").write_text(BAR.read_text() + '\n[solver.petsc]\nksp_rtol = 1e-10\n')
     path = tmp_path / "jobs.toml"
     text = BASE + body
     if body.startswith("output"):
