@@ -103,6 +103,24 @@ def _check_options(study: Study, model, family: str) -> None:
     raise InputError(f"{exc.oneline()} (scene of {family})", study.source, fam.key if varied else "scene")
 
 
+def _relation_problem(spec, model) -> str | None:
+    """A row selector or a resultant component the relation cannot have (rows counted on the
+    coarsest mesh: a multi-row relation stays multi-row when refined)."""
+    from parsolve.outputs import resultant_labels
+
+    relation = next(r for r in model.relations if r.name == spec.name)
+    if spec.what == "resultant":
+        labels = resultant_labels(model.fields, model.mesh.dim)
+        return None if spec.sel in labels else \
+            f"no resultant component {spec.sel!r} (known: {', '.join(labels)})"
+    if spec.sel in ("sum", "mean") or (not spec.sel and relation.nrows == 1):
+        return None
+    if spec.sel.isdigit() and int(spec.sel) < relation.nrows:
+        return None
+    return (f"relation {spec.name!r} has {relation.nrows} rows: add :sum, :mean or a row number "
+            f"0..{relation.nrows - 1}")
+
+
 def spec_problem(spec, model) -> str | None:
     """Why a run of ``model`` cannot give ``spec`` (a parsed post spec), or None."""
     from parsolve.post.locate import locate
@@ -114,6 +132,8 @@ def spec_problem(spec, model) -> str | None:
     if group in names and spec.name not in names[group]:
         what = "cell field" if group == "cell_field" else group
         return f"no {what} {spec.name!r} (known: {', '.join(map(str, names[group])) or 'none'})"
+    if spec.kind == "relation":
+        return _relation_problem(spec, model)
     mesh = model.mesh
     field = next((f for f in model.fields if f.output == spec.name), None)
     if field is not None and spec.kind in ("field", "max", "maxabs"):
