@@ -22,8 +22,9 @@
     throttle = 4
 
 Every error names this file and the key: ``jobs.toml: grid."mesh.nxx": ...``. Each effective
-scene is validated as ``parsolve check`` would (scene, mesh, regions, relations) before
-anything runs.
+scene is validated as ``parsolve check`` would (scene, mesh, regions, relations, and the PETSc
+options of its runs: an unknown ``-ksp_type`` / ``-pc_type``, a bad number) before anything
+runs; ``parsolve batch`` also refuses an output folder that is a file or lies under one.
 """
 
 from __future__ import annotations

@@ -30,6 +30,13 @@
 
     [reduced]                         # --reduced: these dotted keys replace the above (CI)
     "refine.levels" = [1, 2]
+
+Refused (exit 2, naming this file and the key), before any run: ranks or parallel below 1, a
+target that is not a positive finite number, more than MAX_LEVELS levels or MAX_RUNS runs, a
+missing mesh file, a reference that is not finite or whose expression overflows, divides by
+zero or is too long or deeply nested (see expression.py); and, checked on the coarsest scene of
+every family (execute.check_quantities), a spec naming a relation, field, component, row or
+region the scene lacks, or a point outside its mesh, and PETSc options PETSc refuses.
 """
 
 from __future__ import annotations
