@@ -7,6 +7,7 @@ resumable, with a manifest. ``parsolve study`` and ``parsolve batch`` both call 
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -77,6 +78,24 @@ def execute(runs: list[Run], root: Path, executor: str = "local", parallel: int 
         manifest.write(root, specs)
     return [_outcome(root, r.name, "submitted" if r.name in submitted else
                      "running elsewhere" if r.name in busy else None) for r in runs]
+
+
+def folder_problem(path: Path) -> str | None:
+    """Why ``path`` cannot be (or become) a folder of runs, or None: it is a file, or the
+    nearest existing ancestor is a file or is read-only (mkdir would fail half way)."""
+    path = Path(path).resolve()
+    if path.exists():
+        if not path.is_dir():
+            return f"{path} is a file, not a folder"
+        return None if os.access(path, os.W_OK | os.X_OK) else f"folder {path} is read-only"
+    for parent in path.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                return f"cannot create {path}: {parent} is a file, not a folder"
+            if not os.access(parent, os.W_OK | os.X_OK):
+                return f"cannot create {path}: folder {parent} is read-only"
+            return None
+    return None
 
 
 def is_done(folder: Path, run: Run) -> bool:

@@ -42,10 +42,13 @@ def main(argv: list[str]) -> int:
         if args.parallel is not None and args.parallel < 1:
             raise InputError("must be at least 1", "command line", "--parallel")
         jobs = load_jobs(args.jobs, validate=not args.collect)
+        root = Path(args.output).resolve() if args.output else jobs.root
+        problem = None if args.collect else api.folder_problem(root)
+        if problem:  # before anything is written (mkdir would fail half way)
+            raise InputError(problem, *(("command line", "-o") if args.output else (args.jobs, "output")))
     except InputError as exc:
         print(f"parsolve: {exc.oneline()}", file=sys.stderr)
         return EXIT_INPUT
-    root = Path(args.output).resolve() if args.output else jobs.root
     if args.collect:
         if not (root / manifest.RUNS).exists():
             print(f"parsolve batch: {root} holds no batch (no {manifest.RUNS})", file=sys.stderr)

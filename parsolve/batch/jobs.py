@@ -22,8 +22,9 @@
     throttle = 4
 
 Every error names this file and the key: ``jobs.toml: grid."mesh.nxx": ...``. Each effective
-scene is validated as ``parsolve check`` would (scene, mesh, regions, relations) before
-anything runs.
+scene is validated as ``parsolve check`` would (scene, mesh, regions, relations, and the PETSc
+options of its runs: an unknown ``-ksp_type`` / ``-pc_type``, a bad number) before anything
+runs; ``parsolve batch`` also refuses an output folder that is a file or lies under one.
 """
 
 from __future__ import annotations
@@ -247,24 +248,86 @@ def _unique(name: str, names: set, key: str | None, source: str) -> str:
 
 
 def check(runs: list[Run], points: list[dict], scene: Path, source: str) -> None:
-    """``parsolve check`` on every distinct effective scene; an error caused by a varied value
-    names the job file and that value's key."""
+    """``parsolve check`` on every distinct effective scene, with the PETSc options of its
+    runs; an error caused by a varied value names the job file and that value's key."""
     from parsolve.model import build_model
     from parsolve.scene import parse_scene
 
+    solvers: dict[str, tuple] = {}   # scene text -> (prefix, preset, scene options, source)
     seen = set()
     for run, point in zip(runs, points):
-        if run.scene_text in seen:
+        if run.scene_text not in solvers:
+            try:
+                model = build_model(parse_scene(tomllib.loads(run.scene_text), str(scene),
+                                                run.scene_text, scene.parent))
+            except InputError as exc:
+                key = _culprit(exc.key, point)
+                if key is None:
+                    raise InputError(f"{exc.message} (run {run.name})", exc.source, exc.key) from None
+                raise InputError(f"{exc.message} (run {run.name}, scene {scene})", source, key) from None
+            solvers[run.scene_text] = _solver_options(model)
+        layers = solvers[run.scene_text] + (petsc_options(run.args),)
+        frozen = tuple(v if isinstance(v, str) else tuple(v.items()) for v in layers)
+        if frozen in seen:
             continue
-        seen.add(run.scene_text)
-        try:
-            build_model(parse_scene(tomllib.loads(run.scene_text), str(scene), run.scene_text,
-                                    scene.parent))
-        except InputError as exc:
+        seen.add(frozen)
+        exc = _validate(*layers)
+        if exc is None:
+            continue
+        if exc.source != "command line":
             key = _culprit(exc.key, point)
             if key is None:
-                raise InputError(f"{exc.message} (run {run.name})", exc.source, exc.key) from None
-            raise InputError(f"{exc.message} (run {run.name}, scene {scene})", source, key) from None
+                raise InputError(f"{exc.message} (run {run.name})", exc.source, exc.key)
+            raise InputError(f"{exc.message} (run {run.name}, scene {scene})", source, key)
+        entry = point.get("args")
+        key = entry[1] if entry and exc.key in entry[0] else "args"
+        raise InputError(f"{exc.key}: {exc.message} (run {run.name})", source, key)
+
+
+def options_error(model, args: tuple[str, ...]) -> InputError | None:
+    """PETSc's verdict on a run of ``model`` with ``args`` (unknown types, bad numbers), as
+    ``parsolve run`` layers the options; a culprit among ``args`` has source "command line"
+    and the option as its key."""
+    return _validate(*_solver_options(model), petsc_options(args))
+
+
+def petsc_options(args: tuple[str, ...]) -> dict[str, str]:
+    """The PETSc options among a run's arguments (not ``-o FILE`` nor ``--long`` flags of
+    ``parsolve run`` and their values)."""
+    from parsolve.solvers.options import parse_cli
+
+    words, i = [], 0
+    while i < len(args):
+        word = args[i]
+        i += 1
+        if word == "-o" or word.startswith("--"):
+            if i < len(args) and not args[i].startswith("-") and "=" not in word:
+                i += 1
+            continue
+        words.append(word)
+    return parse_cli(words)
+
+
+def _solver_options(model) -> tuple[str, dict, dict, str]:
+    """(prefix, preset options, scene options, scene file) as ``parsolve run`` layers them."""
+    from parsolve.solvers.linear import preset_options
+
+    solver = model.scene.solver
+    multiplied = [r for r in model.relations if not r.eliminable()]
+    preset = preset_options(solver.preset, all(r.associated for r in multiplied), bool(multiplied))
+    return solver.prefix, preset, dict(solver.options), model.scene.source
+
+
+def _validate(prefix: str, preset: dict, options: dict, source: str, petsc: dict) -> InputError | None:
+    from mpi4py import MPI
+
+    from parsolve.solvers.options import validate
+
+    try:
+        validate(MPI.COMM_SELF, prefix, preset, options, petsc, source)
+    except InputError as exc:
+        return exc
+    return None
 
 
 def _culprit(key: str | None, point: dict) -> str | None:

@@ -54,6 +54,17 @@ def parse(t, dim: int) -> DiffusionSpec:
     for sub in t.tables("materials"):
         region = sub.get("region", str, "all")
         raw = sub.get("conductivity", (float, list))
+        if isinstance(raw, list) and not (  # ragged, strings, booleans: refused before numpy
+                len(raw) == dim and all(isinstance(r, list) and len(r) == dim for r in raw)
+                and all(isinstance(v, (int, float)) and not isinstance(v, bool) for r in raw for v in r)):
+            raise sub.error("conductivity", f"expected a number or a {dim}×{dim} tensor of numbers, "
+                            f"got {raw!r}"[:200])
+        if isinstance(raw, list):  # finite, of sane magnitude, like every number of a scene
+            from parsolve.scene import check_number
+
+            for i, row in enumerate(raw):
+                for j, v in enumerate(row):
+                    check_number(v, sub.source, f"{sub.key('conductivity')}[{i}][{j}]")
         k = _tensor(sub, raw, dim)
         capacity = sub.get("capacity", float, 1.0)
         if capacity < 0:

@@ -43,6 +43,10 @@ def run(args) -> None:
         raise InputError("nothing to do: give --summary, --x/--y or --derive", args.results[0])
     if bool(args.x) != bool(args.y):
         raise InputError("--x and --y go together", args.results[0], "--x" if args.x else "--y")
+    from parsolve.post.curves import check_output
+
+    for key in ("csv", "png", "derive"):
+        check_output(getattr(args, key), f"--{key}", args.results)
     if args.summary:
         from parsolve.post.summary import summary
 

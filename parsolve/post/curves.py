@@ -3,9 +3,35 @@
 from __future__ import annotations
 
 import csv
+import os
 from pathlib import Path
 
 import numpy as np
+
+
+def check_output(path: str | None, key: str, inputs: list[str]) -> None:
+    """An output file (--csv, --png, --derive and the XDMF beside it) can be written: no
+    input, not a folder, in an existing writable folder. Checked before anything is computed
+    or written."""
+    from parsolve.errors import InputError
+
+    if path is None:
+        return
+    out = Path(path)
+    targets = [out, out.with_suffix(".xdmf")] if key == "--derive" else [out]
+    for target in targets:
+        if any(target.resolve() == Path(i).resolve() for i in inputs):
+            what = "writes a copy" if key == "--derive" else f"would overwrite {target}"
+            raise InputError(f"{key} {what}: the input is never overwritten", path, key)
+        if target.is_dir():
+            raise InputError(f"{target} is a folder, not a file", path, key)
+    parent = out.parent if str(out.parent) else Path(".")
+    if parent.exists() and not parent.is_dir():
+        raise InputError(f"{parent} is a file, not a folder", path, key)
+    if not parent.exists():
+        raise InputError(f"folder {parent} does not exist", path, key)
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise InputError(f"folder {parent} is read-only", path, key)
 
 
 def write_csv(path: str, xspec: str, yspec: str, curves: list[tuple[str, np.ndarray, np.ndarray]]) -> None:

@@ -27,6 +27,7 @@ from parsolve.post.locate import interpolate, locate
 from parsolve.post.result import Result
 
 RESULTANT = ("x", "y", "z", "mx", "my", "mz")
+MAX_LENGTH = 300    # characters of a spec (a name, a point, a region name: never an expression)
 
 
 @dataclass
@@ -45,6 +46,8 @@ def parse(text: str, source: str | None = None) -> Spec:
     def bad(why: str) -> InputError:
         return InputError(f"invalid spec: {why}", source, text)
 
+    if len(text) > MAX_LENGTH:
+        raise InputError(f"invalid spec: longer than {MAX_LENGTH} characters", source, text[:40] + "...")
     body, _, where = text.partition("@")
     parts = body.split(":")
     head = parts[0]
@@ -63,7 +66,9 @@ def parse(text: str, source: str | None = None) -> Spec:
         try:
             at = tuple(float(v) for v in where.split(","))
         except ValueError:
-            raise bad(f"point {where!r} is not numbers") from None
+            raise bad(f"point {where!r} is not numbers (x,y[,z]; no expressions)") from None
+        if not all(np.isfinite(at)) or not 2 <= len(at) <= 3:
+            raise bad(f"point {where!r} is not 2 or 3 finite numbers")
         return Spec(text, head, parts[1], sel=parts[2] if len(parts) == 3 else "0", at=at)
     if head in ("max", "maxabs") and len(parts) in (3, 4) and parts[1] == "field":
         return Spec(text, head, parts[2], sel=parts[3] if len(parts) == 4 else "0",

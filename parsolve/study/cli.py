@@ -21,8 +21,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("study", help="study file (TOML)")
     p.add_argument("--out", help="folder of the runs and the report (default: STUDY_runs)")
     p.add_argument("--executor", choices=("local", "slurm"), help="default: the study's, else local")
-    p.add_argument("--parallel", type=int, help="runs at a time (local executor)")
-    p.add_argument("--target", type=float, help="requested error of the first quantity")
+    p.add_argument("--parallel", help="runs at a time (local executor)")
+    p.add_argument("--target", help="requested error of the first quantity")
     p.add_argument("--reduced", action="store_true", help="apply the study's [reduced] table (CI)")
     p.add_argument("--save", metavar="PREFIX", help="also write PREFIX.md, PREFIX.csv, PREFIX.png")
     return p
@@ -35,14 +35,16 @@ def run(args) -> int:
     from parsolve.study.execute import check_quantities, run_grid
     from parsolve.study.grid import expand
 
+    parallel, target = _numbers(args)
     study = load_study(args.study, reduced=args.reduced)
+    root = Path(args.out or Path(args.study).stem + "_runs")
+    _check_outputs(root, args.save)
     settings = expand(study)
     check_quantities(study, settings)
     dim = parse_scene(tomllib.loads(settings[0].scene_text), str(study.scene)).dim
-    root = Path(args.out or Path(args.study).stem + "_runs")
     rows = run_grid(study, settings, root, args.executor or study.executor,
-                    args.parallel or study.parallel)
-    target = args.target if args.target is not None else study.target
+                    parallel or study.parallel)
+    target = target if target is not None else study.target
     a = report.analyse(study, rows, dim, target)
     head, body = report.table(study, rows, a)
     text = report.markdown(study, rows, a, head, body, target)
@@ -60,6 +62,50 @@ def run(args) -> int:
         print(f"parsolve study: {len(failed)} run(s) failed: {', '.join(failed)}", file=sys.stderr)
         return EXIT_SOLVER
     return 0
+
+
+def _numbers(args) -> tuple[int | None, float | None]:
+    """--parallel (a positive integer) and --target (a positive finite number), read here so
+    that a bad value is one line naming the option."""
+    from parsolve.study.config import positive_number
+
+    parallel = target = None
+    if args.parallel is not None:
+        try:
+            parallel = int(args.parallel)
+        except ValueError:
+            parallel = 0
+        if parallel < 1:
+            raise InputError(f"expected a positive integer, got {args.parallel!r}", "command line",
+                             "--parallel")
+    if args.target is not None:
+        try:
+            target = float(args.target)
+        except ValueError:
+            target = None
+        if not positive_number(target):
+            raise InputError(f"expected a positive finite number, got {args.target!r}",
+                             "command line", "--target")
+    return parallel, target
+
+
+def _check_outputs(root: Path, save: str | None) -> None:
+    """The run folder and the report files can be written (checked before the first run)."""
+    from parsolve.batch.api import folder_problem
+
+    problem = folder_problem(root)
+    if problem:
+        raise InputError(problem, "command line", "--out")
+    for name in ("study.md", "study.csv", "study.png"):
+        if (root / name).is_dir():
+            raise InputError(f"{root / name} is a folder, not a file", "command line", "--out")
+    if save:
+        problem = folder_problem(Path(save).parent)
+        if problem:
+            raise InputError(problem, "command line", "--save")
+        for ext in ("md", "csv", "png"):
+            if Path(f"{save}.{ext}").is_dir():
+                raise InputError(f"{save}.{ext} is a folder, not a file", "command line", "--save")
 
 
 def main(argv: list[str]) -> int:

@@ -30,11 +30,19 @@
 
     [reduced]                         # --reduced: these dotted keys replace the above (CI)
     "refine.levels" = [1, 2]
+
+Refused (exit 2, naming this file and the key), before any run: ranks or parallel below 1, a
+target that is not a positive finite number, more than MAX_LEVELS levels or MAX_RUNS runs, a
+missing mesh file, a reference that is not finite or whose expression overflows, divides by
+zero or is too long or deeply nested (see expression.py); and, checked on the coarsest scene of
+every family (execute.check_quantities), a spec naming a relation, field, component, row or
+region the scene lacks, or a point outside its mesh, and PETSc options PETSc refuses.
 """
 
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -43,6 +51,8 @@ from parsolve.scene import Table, read_toml
 from parsolve.study.expression import evaluate_expression
 
 ERRORS = ("relative", "absolute", "energy_norm")
+MAX_LEVELS = 12     # refinement levels (or mesh files) of a study
+MAX_RUNS = 200      # families × levels
 
 
 @dataclass
@@ -110,16 +120,22 @@ def _parse(top: Table, folder: Path) -> Study:
     scene = folder / top.get("scene", str)
     if not scene.is_file():
         raise top.error("scene", f"no scene file {str(scene)!r}")
-    ranks = top.get("ranks", int, 1)
+    ranks = _at_least_one(top, "ranks")
     executor = top.get("executor", str, "local", choices=("local", "slurm"))
-    parallel = top.get("parallel", int, 1)
+    parallel = _at_least_one(top, "parallel")
     cost = top.get("cost", str, "wall", choices=("wall", "compute"))
     target = top.get("target", float, None)
+    if target is not None and not positive_number(target):
+        raise top.error("target", f"expected a positive finite number, got {target!r}")
     args = tuple(str(a) for a in top.get("args", list, []))
     resources = top.get("slurm", dict, {})
     top.get("reduced", dict, {})
     keys, levels = _refine(top.table("refine"), folder)
     families = _families(top)
+    if len(families) * len(levels) > MAX_RUNS:
+        raise top.error("vary" if top.has("vary") else "families",
+                        f"{len(families)} families × {len(levels)} levels = "
+                        f"{len(families) * len(levels)} runs, more than {MAX_RUNS}")
     quantities = [_quantity(t) for t in top.tables("quantities")]
     if not quantities:
         raise InputError("at least one [[quantities]] entry is required", source, "quantities")
@@ -133,11 +149,28 @@ def _parse(top: Table, folder: Path) -> Study:
                  families, quantities, resources)
 
 
+def positive_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) \
+        and value > 0
+
+
+def _at_least_one(top: Table, name: str) -> int:
+    value = top.get(name, int, 1)
+    if value < 1:
+        raise top.error(name, f"must be at least 1, got {value}")
+    return value
+
+
 def _refine(t: Table, folder: Path) -> tuple[list[str], list]:
     if t.has("files"):
         files = t.get("files", list)
         if not files or not all(isinstance(f, str) for f in files):
             raise t.error("files", "expected a list of mesh file names")
+        if len(files) > MAX_LEVELS:
+            raise t.error("files", f"{len(files)} mesh files, more than {MAX_LEVELS} levels")
+        for i, f in enumerate(files):
+            if not (folder / f).is_file():
+                raise InputError(f"no mesh file {str(folder / f)!r}", t.source, f"{t.key('files')}[{i}]")
         t.done()
         return ["mesh.file"], [str((folder / f).resolve()) for f in files]
     keys = t.get("keys", list)
@@ -146,6 +179,8 @@ def _refine(t: Table, folder: Path) -> tuple[list[str], list]:
         raise t.error("keys", "expected a list of dotted scene keys, e.g. [\"mesh.nx\", \"mesh.ny\"]")
     if len(levels) < 2 or not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in levels):
         raise t.error("levels", "expected at least two positive integers, e.g. [1, 2, 4]")
+    if len(levels) > MAX_LEVELS:
+        raise t.error("levels", f"{len(levels)} levels, more than {MAX_LEVELS}")
     t.done()
     return keys, levels
 
@@ -187,6 +222,8 @@ def _quantity(t: Table) -> Quantity:
             ref = evaluate_expression(ref)
         except ValueError as exc:
             raise t.error("reference", f"expected a number, an expression or \"richardson\": {exc}") from None
+    if isinstance(ref, float) and not math.isfinite(ref):
+        raise t.error("reference", f"expected a finite number, got {ref}")
     error = t.get("error", str, "relative", choices=ERRORS)
     fam = t.get("richardson_family", str, None)
     t.done()

@@ -17,6 +17,7 @@ from parsolve.errors import InputError
 from parsolve.study.config import Study
 from parsolve.study.grid import Setting
 
+RUN_ARGS = ("-memory_view",)   # added to every run's arguments (peak memory)
 _MEMORY = re.compile(r"Maximum \(over computational time\) process memory:\s+total\s+(\S+)\s+max\s+(\S+)")
 
 
@@ -52,34 +53,107 @@ def peak_memory(stdout: Path) -> tuple[float | None, float | None]:
     return most, total
 
 
-def relation_names(text: str, scene_path) -> list[str]:
-    """Every relation of a scene: its [[relations]] and the ones its effects contribute
-    (contact, solubility), from the model built as a run would build it."""
+def scene_model(text: str, scene_path):
+    """The model of an effective scene, built as a run would build it (one rank)."""
     import tomllib
 
     from parsolve.model import build_model
     from parsolve.scene import parse_scene
 
     scene = parse_scene(tomllib.loads(text), str(scene_path), text, Path(scene_path).parent)
-    return [r.name for r in build_model(scene).relations]
+    return build_model(scene)
 
 
 def check_quantities(study: Study, settings: list[Setting]) -> None:
-    """Specs parse, and relations they name exist in every effective scene (before running)."""
+    """Before anything runs: every spec parses, and on the coarsest scene of every family the
+    relation, field or region it names exists and its point lies in the mesh. (A dataset an
+    effect writes only in some runs, e.g. damage, and a point inside the coarsest mesh but
+    outside a finer one are still found when the runs are read.)"""
     from parsolve.post.spec import parse
 
+    specs = []
     for q in study.quantities:
         try:
-            spec = parse(q.spec)
+            specs.append((q, parse(q.spec)))
         except InputError as exc:
             raise InputError(exc.message, study.source, q.key + ".spec") from None
-        if spec.kind != "relation":
+    for s in settings:
+        if s.level != 0:
             continue
-        for s in settings:
-            names = relation_names(s.scene_text, study.scene)
-            if spec.name not in names:
-                raise InputError(f"no relation {spec.name!r} in the scene of {s.family} "
-                                 f"(known: {', '.join(map(str, names))})", study.source, q.key + ".spec")
+        model = scene_model(s.scene_text, study.scene)
+        _check_options(study, model, s.family)
+        for q, spec in specs:
+            problem = spec_problem(spec, model)
+            if problem:
+                raise InputError(f"{problem} in the scene of {s.family}", study.source,
+                                 q.key + ".spec")
+
+
+def _check_options(study: Study, model, family: str) -> None:
+    """The study's ``args`` and the scene's PETSc options, as PETSc sees them, before any run."""
+    from parsolve.batch.jobs import options_error
+
+    exc = options_error(model, tuple(study.args) + RUN_ARGS)
+    if exc is None:
+        return
+    if exc.source == "command line":
+        raise InputError(f"{exc.key}: {exc.message}", study.source, "args")
+    fam = next(f for f in study.families if f.name == family)
+    varied = any(exc.key == k or exc.key.startswith(k + ".") for k in fam.changes) if exc.key else False
+    raise InputError(f"{exc.oneline()} (scene of {family})", study.source, fam.key if varied else "scene")
+
+
+def _relation_problem(spec, model) -> str | None:
+    """A row selector or a resultant component the relation cannot have (rows counted on the
+    coarsest mesh: a multi-row relation stays multi-row when refined)."""
+    from parsolve.outputs import resultant_labels
+
+    relation = next(r for r in model.relations if r.name == spec.name)
+    if spec.what == "resultant":
+        labels = resultant_labels(model.fields, model.mesh.dim)
+        return None if spec.sel in labels else \
+            f"no resultant component {spec.sel!r} (known: {', '.join(labels)})"
+    if spec.sel in ("sum", "mean") or (not spec.sel and relation.nrows == 1):
+        return None
+    if spec.sel.isdigit() and int(spec.sel) < relation.nrows:
+        return None
+    return (f"relation {spec.name!r} has {relation.nrows} rows: add :sum, :mean or a row number "
+            f"0..{relation.nrows - 1}")
+
+
+def spec_problem(spec, model) -> str | None:
+    """Why a run of ``model`` cannot give ``spec`` (a parsed post spec), or None."""
+    from parsolve.post.locate import locate
+
+    names = {"relation": [r.name for r in model.relations],
+             "field": [f.output for f in model.fields] + [n for e in model.effects for n in e.output_names()],
+             "cell_field": [n for e in model.effects for n in e.output_names()]}
+    group = "field" if spec.kind in ("max", "maxabs", "norm") else spec.kind
+    if group in names and spec.name not in names[group]:
+        what = "cell field" if group == "cell_field" else group
+        return f"no {what} {spec.name!r} (known: {', '.join(map(str, names[group])) or 'none'})"
+    if spec.kind == "relation":
+        return _relation_problem(spec, model)
+    mesh = model.mesh
+    field = next((f for f in model.fields if f.output == spec.name), None)
+    if field is not None and spec.kind in ("field", "max", "maxabs"):
+        from parsolve.post.result import COMPONENTS
+
+        comps = COMPONENTS.get((mesh.dim, field.ncomp), ())
+        if spec.sel not in comps and not (spec.sel.isdigit() and int(spec.sel) < field.ncomp):
+            return (f"no component {spec.sel!r} of {spec.name!r} (known: {', '.join(comps)}, "
+                    f"or 0..{field.ncomp - 1})")
+    if spec.at is not None:
+        if len(spec.at) != mesh.dim:
+            return f"the point needs {mesh.dim} coordinates"
+        if locate(mesh.points, mesh.cells, mesh.cell_type, spec.at) is None:
+            return f"point {spec.at} is outside the mesh"
+    if spec.region is not None:
+        try:
+            model.regions()(spec.region, spec.text)
+        except InputError as exc:
+            return f"region {spec.region!r}: {exc.message}"
+    return None
 
 
 def measure(study: Study, setting: Setting, outcome) -> Measured:
@@ -117,7 +191,7 @@ def run_grid(study: Study, settings: list[Setting], root: Path, executor: str, p
     kept (the batch API's resume): a study interrupted or extended runs only what is new."""
     from parsolve.batch.api import Run, execute
 
-    args = tuple(study.args) + ("-memory_view",)
+    args = tuple(study.args) + RUN_ARGS
     runs = [Run(s.name, s.scene_text, study.ranks, args, params=s.changes) for s in settings]
     kw = dict(executor=executor, parallel=parallel, resources=study.resources, resume=True, log=log)
     first = execute(runs[:1], root, **kw)[0]
