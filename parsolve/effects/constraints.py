@@ -26,6 +26,7 @@ def build_relations(specs: list, regions, evolutions: dict, patterns: dict, fiel
         out.append(r)
     out = rel.drop_repeated_rows(out)
     out = _drop_held_ties(out, source)
+    _check_duals(out, specs, source)
     dups = rel.duplicate_rows(out)
     if dups:
         a, b, dof = dups[0]
@@ -36,6 +37,27 @@ def build_relations(specs: list, regions, evolutions: dict, patterns: dict, fiel
         raise InputError(f"redundant relations: {what} {label} at node {node} "
                          f"({len(dups)} such DOFs); the system would be singular", source, "relations")
     return out
+
+
+def _check_duals(relations: list[rel.Relation], specs: list, source: str) -> None:
+    """A control relation's multiplier drives its load pattern; a pattern acting only on DOFs
+    that Dirichlet relations hold is taken by their reactions, leaves the multiplier nothing
+    to drive, and the system is singular (MUMPS null pivot): refuse it before any solve."""
+    held = [r.a_dofs for r in relations if r.meta.get("type") == "dirichlet" and r.sense == "="]
+    held = np.unique(np.concatenate(held)) if held else np.zeros(0, dtype=np.int64)
+    keys = {spec.name: spec.key for spec in specs}
+    for r in relations:
+        if r.shared_dual is None:
+            continue
+        dofs, vals = r.shared_dual
+        acting = dofs[vals != 0]
+        if acting.size and np.isin(acting, held).all():
+            holders = sorted({h.name for h in relations if h.meta.get("type") == "dirichlet"
+                              and np.isin(h.a_dofs, acting).any()})
+            raise InputError(f"load pattern {r.meta['dual']!r} acts only on DOFs that "
+                             f"{', '.join(map(repr, holders))} already hold: the control "
+                             "multiplier would drive nothing (singular system)",
+                             source, keys.get(r.name, "relations") + ".dual")
 
 
 def _one(spec, regions, evolutions, fields, source: str) -> rel.Relation:
