@@ -4,7 +4,8 @@ How: every key of a scene is read through ``parsolve.scene.Table.get`` (``floats
 and ``tables`` go through it too), by ``parsolve/scene.py`` and by each effect's ``parse``.
 This script wraps ``Table.get`` to record (section, key, type, default, choices) while
 ``load_scene`` reads every shipped scene (``configs/*.toml``) and every scene of the docs
-(the ```toml blocks of docs/**/*.md, which tests/docs/test_snippets.py checks). Recording
+(the ```toml blocks of docs/**/*.md) and the few scenes of tests/docs/scenes/ written for
+the keys no other scene uses (tests/docs/test_snippets.py checks all of these). Recording
 beats reading the source with ``ast``: the section of a key is known at run time only (the
 same helper reads ``relations[]`` and ``contact[].obstacle``), and so are defaults computed
 from other keys. What recording cannot see — a key that no scene uses — is caught by an
@@ -26,6 +27,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 PAGE = ROOT / "docs" / "reference" / "scene.md"
 FENCE = re.compile(r"^```toml\n(.*?)^```", re.S | re.M)
+MAXIMAL = ROOT / "tests" / "docs" / "scenes"   # scenes for the keys configs/ does not use
+USER_NAMED = ("regions", "evolutions")         # tables whose keys are the user's names
 
 
 def doc_scenes() -> list[tuple[str, str]]:
@@ -68,9 +71,18 @@ def record() -> tuple[dict, list[str]]:
     original = scene_mod.Table.get
 
     def get(self, name, kind, default=..., choices=None):
+        if "[" in name:  # the parser's own sub-tables of list items (regions' box[0])
+            return original(self, name, kind, default, choices)
         section = re.sub(r"\[\d+\]", "[]", self.path) or "(top level)"
+        head, _, rest = section.partition(".")
+        if section in USER_NAMED:
+            name_shown = "<name>"
+        else:
+            name_shown = name
+            if head in USER_NAMED and rest:
+                section = head + ".<name>" + rest[rest.find(".") :] if "." in rest else head + ".<name>"
         entry = seen.setdefault(section, {}).setdefault(
-            name, {"kinds": [], "defaults": [], "choices": None})
+            name_shown, {"kinds": [], "defaults": [], "choices": None})
         for lst, v in ((entry["kinds"], _kind(kind)), (entry["defaults"], _default(default))):
             if v not in lst:
                 lst.append(v)
@@ -81,7 +93,7 @@ def record() -> tuple[dict, list[str]]:
     names = []
     scene_mod.Table.get = get
     try:
-        for path in sorted((ROOT / "configs").glob("*.toml")):
+        for path in sorted((ROOT / "configs").glob("*.toml")) + sorted(MAXIMAL.glob("*.toml")):
             scene_mod.load_scene(path)
             names.append(str(path.relative_to(ROOT)))
         with tempfile.TemporaryDirectory() as tmp:
@@ -121,24 +133,32 @@ def render() -> str:
         "",
         "Every key below was recorded from the parser itself: `scripts/docs_reference.py` wraps",
         "`parsolve.scene.Table.get` — the one call through which `parsolve/scene.py` and every",
-        "effect's `parse` read a scene — and loads every shipped scene and every scene of these",
-        "docs. Recording rather than reading the source: a key's section and a default computed",
+        "effect's `parse` read a scene — and loads every shipped scene (`configs/`), every scene of",
+        "these docs and the scenes of `tests/docs/scenes/` written for the keys no other scene",
+        "uses. Recording rather than reading the source: a key's section and a default computed",
         "from other keys are known only at run time. Keys the code reads that none of those",
         "scenes uses are listed at the end, found by reading the source (`ast`).",
         "",
-        "*Section* `relations[]` is every entry of `[[relations]]`; `(none)` means the key may be",
-        "left out and changes nothing; several defaults mean the default depends on other keys.",
+        "*Section* `relations[]` is every entry of `[[relations]]`, `regions.<name>` any region;",
+        "`(none)`: the key may be left out (the code then does without it or computes a value,",
+        "e.g. `penalty`: 100 × E_max / h; see the guide and the theory);",
+        "several defaults mean the default depends on other keys.",
         "Physics sections (`[[diffusion]]`, `[solubility]`, `[[contact]]`, ...) are read only when",
         "present: *required* there means required inside the section.",
         "Values are also range-checked (see the [guide](../guide.md#the-command-line)).",
         "",
     ]
+    from parsolve.scene import _registry
+
+    physics = {entry.section for entry in _registry().values()}
     used: dict[str, set[str]] = {}
     for section in sorted(seen, key=lambda s: (s != "(top level)", s)):
         lines += [f"## `{section}`", "", "| key | type | default | choices |",
                   "|---|---|---|---|"]
         for key in sorted(seen[section]):
             e = seen[section][key]
+            if section == "(top level)" and key in physics:
+                e = {**e, "defaults": ["(none): a physics section, read when present"]}
             used.setdefault(key, set()).add(section)
             lines.append(f"| `{key}` | {' / '.join(e['kinds'])} | {' / '.join(e['defaults'])}"
                          f" | {e['choices'] or ''} |")

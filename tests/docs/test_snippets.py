@@ -1,4 +1,5 @@
-"""Every ```toml block of the docs is a complete scene, and `parsolve check` accepts it.
+"""Every ```toml block of the docs is a complete scene, and `parsolve check` accepts it; so
+are the scenes of tests/docs/scenes/ (written for the scene reference's keys no other uses).
 
 The convention (docs/guide.md's header): a ```toml fence holds a whole scene; excerpts, study
 and job files are plain text blocks. Each scene is written to its own folder and checked in
@@ -45,11 +46,12 @@ def write_bracket(path: Path) -> None:
     meshio.write(str(path), mesh, file_format="gmsh22", binary=False)
 
 
-ALL = snippets()
+ALL = snippets() + [(str(p.relative_to(ROOT)), p.read_text())
+                    for p in sorted((Path(__file__).parent / "scenes").glob("*.toml"))]
 
 
 def test_the_docs_hold_scenes():
-    assert len(ALL) >= 5, [name for name, _ in ALL]
+    assert len(snippets()) >= 5, [name for name, _ in ALL]
 
 
 @pytest.mark.parametrize("text", [t for _, t in ALL], ids=[n for n, _ in ALL])
