@@ -67,3 +67,46 @@ def test_snippet_passes_check(text, tmp_path, capsys):
     assert status == 0, out.err
     assert f"{scene}: ok (" in out.out or not out.out  # rank 0 prints, the others do not
     assert not list(tmp_path.glob("*.h5"))             # check writes nothing
+
+
+CHECKED = re.compile(r"^<!-- check: (study|jobs) -->\n```\w*\n(.*?)^```", re.S | re.M)
+
+
+def files() -> list[tuple[str, str, str]]:
+    """(name, kind, text) of every study and job file the docs mark as checked."""
+    out = []
+    for md in sorted((ROOT / "docs").rglob("*.md")):
+        for i, m in enumerate(CHECKED.finditer(md.read_text())):
+            out.append((f"{md.relative_to(ROOT)}#{m.group(1)}{i + 1}", m.group(1), m.group(2)))
+    return out
+
+
+FILES = files()
+
+
+def test_the_docs_hold_a_study_and_a_job_file():
+    assert sorted({kind for _, kind, _ in FILES}) == ["jobs", "study"]
+
+
+@pytest.mark.parametrize("kind,text", [(k, t) for _, k, t in FILES], ids=[n for n, _, _ in FILES])
+def test_study_or_job_file_is_valid(kind, text, tmp_path):
+    """Loaded as `parsolve study` / `parsolve batch` load them, every effective scene
+    validated; the shipped scene they name sits one folder up, as in configs/."""
+    import shutil
+
+    for scene in (ROOT / "configs").glob("*.toml"):
+        shutil.copyfile(scene, tmp_path / scene.name)
+    (tmp_path / kind).mkdir()
+    path = tmp_path / kind / "file.toml"
+    path.write_text(text)
+    if kind == "study":
+        from parsolve.study.config import load_study
+
+        study = load_study(path)
+        assert study.families and study.quantities
+    else:
+        from parsolve.batch.jobs import load_jobs
+
+        jobs = load_jobs(path, validate=True)
+        assert len(jobs.runs) == 4    # the grid's 2 values × the 2 [[runs]] entries
+    assert sorted(p.name for p in (tmp_path / kind).iterdir()) == ["file.toml"]  # nothing written
