@@ -19,4 +19,19 @@ if [ -z "$site" ]; then
   site=$(mktemp -d); trap 'rm -rf "$site"' EXIT
 fi
 mkdocs build --strict -q -d "$site"
+# mkdocs 1.4 checks that linked pages exist, not their anchors: check every #anchor too.
+$PY - "$site" <<'PYEOF'
+import re, sys
+from pathlib import Path
+site = Path(sys.argv[1]); bad = []
+ids = {p: set(re.findall(r'id="([^"]+)"', p.read_text())) for p in site.rglob("*.html")}
+for page, text in ((p, p.read_text()) for p in ids):
+    for target, anchor in re.findall(r'href="([^"#:]*)#([^"]+)"', text):
+        dest = (page.parent / target).resolve() if target else page
+        dest = dest / "index.html" if dest.is_dir() else dest
+        if anchor not in ids.get(dest, set()):
+            bad.append(f"{page.relative_to(site)}: #{anchor} -> {target or '(same page)'}")
+if bad:
+    sys.exit("docs: broken anchors:\n  " + "\n  ".join(bad))
+PYEOF
 echo "docs: built in $site"
