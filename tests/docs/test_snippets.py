@@ -110,3 +110,23 @@ def test_study_or_job_file_is_valid(kind, text, tmp_path):
         jobs = load_jobs(path, validate=True)
         assert len(jobs.runs) == 4    # the grid's 2 values × the 2 [[runs]] entries
     assert sorted(p.name for p in (tmp_path / kind).iterdir()) == ["file.toml"]  # nothing written
+
+
+PYTHON = re.compile(r"^<!-- check: python -->\n```python\n(.*?)^```", re.S | re.M)
+
+
+@pytest.mark.serial
+def test_python_reading_snippet_runs_on_the_first_run_result(tmp_path, monkeypatch, capsys):
+    """The guide's h5py snippet, on the result of the README's first run (configs/kirsch.toml,
+    run in process: one linear step)."""
+    from parsolve.cli import main
+
+    blocks = [m.group(1) for m in PYTHON.finditer((ROOT / "docs" / "guide.md").read_text())]
+    assert len(blocks) == 1
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", str(ROOT / "configs" / "kirsch.toml"), "-o", "kirsch.h5"]) == 0
+    capsys.readouterr()
+    exec(compile(blocks[0], "docs/guide.md", "exec"), {})
+    status, sizes = capsys.readouterr().out.splitlines()
+    assert status == "complete"
+    assert sizes == "1 (12513, 2) (1, 97)"    # 1 step; P2 quarter plate; 97 nodes on x = 0
