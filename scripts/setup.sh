@@ -5,7 +5,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 PACKAGES="python3-petsc4py python3-mpi4py python3-numpy python3-h5py-mpi python3-venv \
-python3-pytest python3-yaml python3-matplotlib openmpi-bin libopenblas0-serial"
+python3-pytest python3-yaml python3-matplotlib openmpi-bin libopenblas0-serial mkdocs"
 PETSC_DIR_DEB=/usr/lib/petscdir/petsc3.18/x86_64-linux-gnu-real
 
 missing=""
