@@ -82,4 +82,20 @@ TESTED = ["controlled_bar.toml", "kirsch.toml", "cantilever_3d.toml",
           "seepage_overflow.toml",  # tests/effects/test_diffusion_effect.py
           "contact_block_friction.toml", "contact_control_friction.toml", "contact_hertz_cylinder.toml",
           # contact: tests/effects/test_contact.py; 3D: tests/effects/test_contact_3d_scene.py
-          "contact_friction_3d.toml"]
+          "contact_friction_3d.toml",
+          "axisym_thick_cylinder.toml"]
+
+
+def test_axisym_thick_cylinder(run):
+    """Lamé's cylinder (P2, axisymmetric): u_r and the hoop stress against the exact solution,
+    the axial reaction of each held end 2ν p π a² (whole ring) to round-off."""
+    res = run(CONFIGS / "axisym_thick_cylinder.toml", name="axisym_thick_cylinder")
+    E, nu, p, a, b = 210e3, 0.3, 10.0, 1.0, 2.0
+    c1 = p * a * a / (b * b - a * a)
+    r = res["mesh/points"][:, 0]
+    ur = (1 + nu) / E * ((1 - 2 * nu) * c1 * r + c1 * b * b / r)
+    assert rel_err(res["fields/displacement"][-1][:, 0], ur) < 2e-5
+    inner = (r > a + 1e-9) & (r < b - 1e-9)
+    hoop = res["fields/stress"][-1][inner, 3]
+    assert rel_err(hoop, c1 * (1 + b * b / r[inner] ** 2)) < 2e-3
+    assert rel_err(res["relations/top/resultant"][-1][1], 2 * nu * p * np.pi * a * a) < 1e-12
