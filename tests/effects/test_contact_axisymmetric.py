@@ -109,3 +109,25 @@ def test_flat_punch_converges_to_boussinesq(run, shared_tmp):
     assert 0.8 < np.log2(steps[0] / steps[1]) < 1.3, ratio  # O(h)
     extrapolated = ratio[-1] - steps[-1]                   # Richardson, first order
     assert abs(extrapolated - 1.0) < 0.02 and abs(ratio[-1] - 1.0) < 0.03, (ratio, extrapolated)
+
+
+def test_rough_punch_sticks_as_bonded(run, shared_tmp):
+    """With enough friction every node of the punch face sticks: the force is the bonded
+    punch's, Mossakovskii's (1 - ν) ln(3 - 4ν) / (1 - 2ν) times the frictionless one (1.0286
+    for ν = 0.3); μ = 0.3 lets the outermost nodes slip, a force in between."""
+    path = shared_tmp / "punch_rough.vtu"
+    write_mesh(16, path)
+    text = SCENE.format(mesh=path, mid=H + GAP / 2, face=H + 1.5 * GAP, H=H,
+                        top=H + GAP + 0.5 * A - 1e-9, E=E, nu=NU, Ep=1e3 * E, push=-(GAP + DELTA))
+    force, state = {}, {}
+    for mu in (0.0, 0.3, 3.0):
+        res = run(text + (f"friction = {mu}\n" if mu else ""), name=f"punch_mu{mu}")
+        force[mu] = -res["relations/press/resultant"][-1][1]
+        if mu:
+            s = res["fields/face_state"][-1][:, 0]
+            state[mu] = s[s >= 0]                         # the punch face's nodes
+    bonded = (1 - NU) * np.log(3 - 4 * NU) / (1 - 2 * NU)
+    assert abs(force[3.0] / force[0.0] / bonded - 1.0) < 2e-3, force
+    assert np.all(state[3.0] == 1)                         # every node sticks
+    assert force[0.0] < force[0.3] < force[3.0]
+    assert np.any(state[0.3] == 2) and np.any(state[0.3] == 1)   # slip at the edge, stick inside
