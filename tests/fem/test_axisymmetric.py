@@ -278,6 +278,24 @@ def test_refused_inputs(change, key):
     assert err.value.key == key and err.value.source == "scene.toml"
 
 
+CONTACT = """
+[[contact]]
+name = "c"
+slave = "right"
+master = "left"
+"""
+
+
+@pytest.mark.parametrize("extra, key", [('discretization = "mortar"', "contact[0].discretization"),
+                                        ('formulation = "penalty"', "contact[0].formulation")])
+def test_contact_forms_refused(extra, key):
+    """Mortar rows and the penalty baselines are plane integrals: refused, exit 2 (node-to-
+    segment rows are per node, their multipliers the ring forces: accepted)."""
+    with pytest.raises(InputError) as err:
+        _model(cylinder(4, "quad") + CONTACT + extra + "\n")
+    assert err.value.key == key and err.value.source == "scene.toml"
+
+
 @pytest.mark.serial
 def test_negative_radius_exit_2(tmp_path):
     """A mesh with nodes at x = r < 0: exit 2, one line naming the mesh file, nothing written."""
@@ -292,3 +310,47 @@ def test_negative_radius_exit_2(tmp_path):
     assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
     assert "m.vtu: mesh.file:" in lines[0] and "x < 0" in lines[0], lines[0]
     assert not list(tmp_path.glob("*.h5"))
+
+
+COLUMN = """
+[mesh]
+generator = "rectangle"
+lx = 1.0
+ly = 2.0
+nx = 3
+ny = 5
+cell = "{cell}"
+[model]
+hypothesis = "axisymmetric"
+[[materials]]
+E = 100.0
+nu = 0.25
+[[loads]]
+name = "weight"
+body = [0.0, -0.5]
+[[loads]]
+name = "lid"
+region = "top"
+total_force = [0.0, -3.0]
+[[relations]]
+name = "axis"
+type = "dirichlet"
+region = "left"
+components = ["x"]
+[[relations]]
+name = "base"
+type = "dirichlet"
+region = "bottom"
+components = ["y"]
+"""
+
+
+@pytest.mark.parametrize("cell", ["quad", "triangle", "triangle6"])
+def test_loads_are_whole_ring_forces(cell, run):
+    """A solid column (r ≤ 1, height 2) under its weight ρg = 0.5 per unit volume and a lid
+    force of 3 (``total_force``: the whole ring's): the base carries 0.5 · 2π · 1² + 3, to
+    round-off; the axis (u_r = 0) carries no axial force."""
+    res = run(COLUMN.format(cell=cell), name=f"column_{cell}")
+    base = res["relations/base/resultant"][-1]
+    assert abs(base[1] - (0.5 * 2.0 * np.pi + 3.0)) < 1e-12 * base[1]
+    assert abs(res["relations/axis/resultant"][-1][1]) < 1e-14
