@@ -144,18 +144,22 @@ class Elasticity(Effect):
 
     def _stresses_axisymmetric(self, cells: np.ndarray, u: np.ndarray):
         """``_stresses`` of an axisymmetric model: the hoop strain u_r / r varies over every
-        cell (no constant-strain cell), and the cell mean is weighted by 2π r, the volume."""
-        mesh = self.mesh
-        coords, ue = mesh.points[mesh.cells[cells]], u[mesh.cells[cells]]
-        ue = ue.reshape(len(cells), -1)
-        geo = self.geometry(cells)
-        eps = kernels.strains(geo.strain_operator(), ue)                   # (nc, nq, nv)
+        cell (no constant-strain cell), and the cell mean is weighted by 2π r, the volume. At
+        a node on the axis the hoop strain is its limit ε_rr (u_r vanishes there)."""
+        mesh, d = self.mesh, self.mesh.dim
+        rows = kernels.cell_rows(mesh.points, u, mesh.cells[cells])        # (nen, 2d, nc)
+        g = kernels.gradient_at_nodes(rows, mesh.cell_type)                # (2, 2, nen, nc)
+        r, ur = rows[:, 0], rows[:, d]
+        hoop = np.where(r > 0.0, ur / np.where(r > 0.0, r, 1.0), g[0, 0])
+        at_nodes = np.concatenate([kernels.voigt_of_gradient(g), hoop[None]])
+        geo = self.geometry(cells)                                        # quadrature points
+        ue = u[mesh.cells[cells]]                                          # (nc, nen, 2)
         vol = geo.wdet.sum(axis=1)
-        mean = np.einsum("cqv,cq->vc", eps, geo.wdet) / vol
-        nodes = kernels.CellGeometry(coords, mesh.cell_type, thickness=self.thickness,
-                                     points=element(mesh.cell_type).nodes)
-        at_nodes = kernels.strains(nodes.strain_operator(), ue).transpose(2, 1, 0)
-        return self._hooke(cells, np.ascontiguousarray(at_nodes)), self._hooke(cells, mean), vol
+        mean = np.empty((4, len(cells)))
+        mean[:3] = np.einsum("cqv,cq->vc", kernels.voigt_strain(geo.dNdx, ue), geo.wdet)
+        mean[3] = np.einsum("cq,cq->c", (ue[:, :, 0] @ geo.N.T) / geo.r, geo.wdet)
+        mean /= vol
+        return self._hooke(cells, at_nodes), self._hooke(cells, mean), vol
 
     def _hooke(self, cells: np.ndarray, eps: np.ndarray) -> np.ndarray:
         """σ = C ε with each cell's own Hooke matrix, cell-last: eps (nv, ..., nc)."""
@@ -178,10 +182,10 @@ class Elasticity(Effect):
         nen, d = mesh.cells.shape[1], mesh.dim
         nv = self.nv
         # per cell: the rows (nen, 2d), gradients and strains at the nodes, their stresses
-        # (axisymmetric: the strain operators at the points and at the nodes)
+        # (axisymmetric: also the shape gradients and strains at the quadrature points)
         per_cell = 8 * nen * (2 * d + 3 * d * d + 2 * nv)
         if self.axisymmetric:
-            per_cell += 8 * nv * nen * d * (nen + 9)
+            per_cell += 8 * 9 * (nen * d + nv + 2)
         size = block_cells(per_cell, POST_BLOCK_BYTES)
         cell = np.empty((len(cells), nv))
         sums, weights = np.zeros((mesh.num_points, nv)), np.zeros(mesh.num_points)
