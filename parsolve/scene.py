@@ -17,6 +17,7 @@ from typing import Any
 
 from parsolve.errors import InputError
 from parsolve.evolution import CONSTANT, RAMP, Evolution
+from parsolve.fem.axisymmetric import Axisymmetric
 
 HYPOTHESES = ("plane_stress", "plane_strain", "3d", "axisymmetric")
 COMPONENTS = {"x": 0, "y": 1, "z": 2, "ux": 0, "uy": 1, "uz": 2}
@@ -722,7 +723,6 @@ def _solver(t: Table) -> SolverSpec:
 
 def _axisymmetric_measure(mesh: MeshSpec, source: str):
     """The 2π r measure; its mesh check names the mesh file (or the scene's [mesh])."""
-    from parsolve.fem.axisymmetric import Axisymmetric
     where = (str(mesh.file), "mesh.file") if mesh.file is not None else (source, "mesh")
     return Axisymmetric(mesh_source=where)
 
