@@ -17,8 +17,9 @@ from typing import Any
 
 from parsolve.errors import InputError
 from parsolve.evolution import CONSTANT, RAMP, Evolution
+from parsolve.fem.axisymmetric import Axisymmetric
 
-HYPOTHESES = ("plane_stress", "plane_strain", "3d")
+HYPOTHESES = ("plane_stress", "plane_strain", "3d", "axisymmetric")
 COMPONENTS = {"x": 0, "y": 1, "z": 2, "ux": 0, "uy": 1, "uz": 2}
 RELATION_TYPES = ("dirichlet", "equal", "mean", "linear", "strain", "periodic")
 STRAIN_COMPONENTS = {"xx": (0, 0), "yy": (1, 1), "zz": (2, 2), "xy": (0, 1), "yz": (1, 2), "xz": (0, 2)}
@@ -238,7 +239,7 @@ class Scene:
     title: str
     mesh: MeshSpec
     hypothesis: str
-    thickness: float
+    thickness: Any   # float, or fem.axisymmetric.Axisymmetric (2π r) for "axisymmetric"
     regions: dict[str, RegionSpec]
     materials: list[MaterialSpec]
     evolutions: dict[str, Evolution]
@@ -313,9 +314,14 @@ def parse_scene(data: dict, source: str, text: str = "", base: Path = Path("."))
     materials = [_material(t) for t in top.tables("materials")]
     hypothesis = model.get("hypothesis", str, ... if materials else None, choices=HYPOTHESES)
     dimension = model.get("dimension", int, 3 if hypothesis == "3d" else 2, choices=(2, 3))
+    if hypothesis == "axisymmetric" and model.has("thickness"):
+        raise model.error("thickness", "an axisymmetric model has no thickness (its measure "
+                          "is 2π r: forces are for the whole ring)")
     thickness = model.get("thickness", float, 1.0)
     if thickness <= 0:
         raise model.error("thickness", "must be positive")
+    if hypothesis == "axisymmetric":
+        thickness = _axisymmetric_measure(mesh, source)
     model.done()
     regions = _regions(top.table("regions", {}))
     evolutions = _evolutions(top.table("evolutions", {}))
@@ -722,10 +728,32 @@ def _solver(t: Table) -> SolverSpec:
     return SolverSpec(preset, prefix, options, eliminate, split, partitioner, mesh)
 
 
+def _axisymmetric_measure(mesh: MeshSpec, source: str):
+    """The 2π r measure; its mesh check names the mesh file (or the scene's [mesh])."""
+    where = (str(mesh.file), "mesh.file") if mesh.file is not None else (source, "mesh")
+    return Axisymmetric(mesh_source=where)
+
+
+def _check_axisymmetric(scene: Scene) -> None:
+    """What an axisymmetric scene cannot carry yet: the contact baselines (penalty areas are
+    plane) and mortar contact (its segment integrals are not weighted by 2π r)."""
+    for spec in scene.effect_specs.get("contact", []):
+        key = getattr(spec, "key", "contact")
+        if getattr(spec, "discretization", "node_to_segment") == "mortar":
+            raise InputError("mortar contact is not available with hypothesis 'axisymmetric' "
+                             "(use node_to_segment)", scene.source, key + ".discretization")
+        if getattr(spec, "formulation", "relations") != "relations":   # a baseline
+            raise InputError("the contact baselines are not available with hypothesis "
+                             "'axisymmetric' (use formulation = \"relations\")", scene.source,
+                             key + ".formulation")
+
+
 def _cross_check(scene: Scene) -> None:
     """References between sections: regions, evolutions, load patterns, relation names."""
     src = scene.source
     known = set(scene.regions) | {"all"}
+    if scene.hypothesis == "axisymmetric":
+        _check_axisymmetric(scene)
 
     def region(name: str | None, key: str) -> None:
         # file groups are only known once the mesh is read: checked again in model building

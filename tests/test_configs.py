@@ -126,4 +126,43 @@ TESTED = ["controlled_bar.toml", "kirsch.toml", "cantilever_3d.toml",
           "contact_friction_3d.toml",
           "periodic_shear_laminate.toml",  # periodic: tests/effects/test_periodic.py
           "springs_bar_supports.toml",  # springs: tests/effects/test_springs.py
-          "thermal_expansion.toml"]  # tests/effects/test_thermal_expansion.py
+          "thermal_expansion.toml",  # tests/effects/test_thermal_expansion.py
+          "axisym_thick_cylinder.toml", "contact_axisym_sphere.toml"]
+
+
+def test_axisym_thick_cylinder(run):
+    """Lamé's cylinder (P2, axisymmetric): u_r and the hoop stress against the exact solution,
+    the axial reaction of each held end 2ν p π a² (whole ring) to round-off."""
+    res = run(CONFIGS / "axisym_thick_cylinder.toml", name="axisym_thick_cylinder")
+    E, nu, p, a, b = 210e3, 0.3, 10.0, 1.0, 2.0
+    c1 = p * a * a / (b * b - a * a)
+    r = res["mesh/points"][:, 0]
+    ur = (1 + nu) / E * ((1 - 2 * nu) * c1 * r + c1 * b * b / r)
+    assert rel_err(res["fields/displacement"][-1][:, 0], ur) < 2e-5
+    inner = (r > a + 1e-9) & (r < b - 1e-9)
+    hoop = res["fields/stress"][-1][inner, 3]
+    assert rel_err(hoop, c1 * (1 + b * b / r[inner] ** 2)) < 2e-3
+    assert rel_err(res["relations/top/resultant"][-1][1], 2 * nu * p * np.pi * a * a) < 1e-12
+
+
+def test_contact_axisym_sphere(run):
+    """A rigid sphere on an elastic cylinder (axisymmetric, frictionless): the pressure at the
+    top nodes (ring force / 2π r h) within 1.5 % of Hertz's for the computed load, r ≤ 0.65 a;
+    the contact edge within one element of a = (3 P R / 4 E*)^(1/3); the lift balances P."""
+    res = run(CONFIGS / "contact_axisym_sphere.toml", name="axisym_sphere")
+    pts = res["mesh/points"]
+    load = -res["relations/indent_normal/resultant"][-1, 1]
+    radius, h, e_star = 10.0, 0.05, 1000.0 / (1 - 0.3 ** 2)
+    a = (3 * load * radius / (4 * e_star)) ** (1 / 3)
+    p0 = 3 * load / (2 * np.pi * a * a)
+    state = res["fields/indent_state"][-1, :, 0]
+    edge = pts[state > 0, 0].max()
+    assert edge <= a < edge + h, (edge, a)
+    rn = res["fields/indent_normal_reaction"][-1, :, 0]
+    r = pts[:, 0]
+    inside = (state >= 0) & (r > 0) & (r <= 0.65 * a)
+    hertz = p0 * np.sqrt(1 - (r[inside] / a) ** 2)
+    assert inside.sum() >= 5
+    assert rel_err(rn[inside] / (2 * np.pi * r[inside] * h), hertz) < 0.015
+    np.testing.assert_allclose(res["relations/lift/multiplier"][-1].sum(), -load, rtol=1e-10)
+    assert res["fields/indent_gap"][-1].min() >= -1e-12

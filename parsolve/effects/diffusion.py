@@ -23,6 +23,7 @@ import numpy as np
 from parsolve.effects.base import Effect
 from parsolve.errors import InputError
 from parsolve.fem import diffusion as kern
+from parsolve.fem.axisymmetric import is_axisymmetric
 from parsolve.fem.element_matrices import ElementMatrices
 from parsolve.fields import Field
 from parsolve.mesh import selectors
@@ -96,6 +97,8 @@ class Diffusion(Effect):
     def __init__(self, spec: DiffusionSpec, mesh, regions, thickness: float, source: str):
         self.spec, self.mesh = spec, mesh
         self.thickness = thickness if mesh.dim == 2 else 1.0
+        if is_axisymmetric(self.thickness):   # x = r: weights 2π r in conductivity and capacity
+            self.thickness.check_mesh(mesh.points)
         self.cell_material = np.full(mesh.num_cells, -1, dtype=np.int64)
         for i, m in enumerate(spec.materials):
             region = regions(m.region, m.key + ".region")

@@ -9,6 +9,7 @@ import numpy as np
 from parsolve.effects.base import Effect
 from parsolve.errors import InputError
 from parsolve.fem import kernels
+from parsolve.fem.axisymmetric import is_axisymmetric
 from parsolve.fem.element_matrices import CellKernel, ElementMatrices, block_cells, cell_ranges
 from parsolve.fem.elements import element
 from parsolve.fem.materials.elastic import Elastic
@@ -32,6 +33,9 @@ class Elasticity(Effect):
                  source: str):
         self.mesh, self.hypothesis = mesh, hypothesis
         self.thickness = thickness if mesh.dim == 2 else 1.0
+        self.axisymmetric = is_axisymmetric(self.thickness)   # x = r, y = z; weights 2π r
+        if self.axisymmetric:
+            self.thickness.check_mesh(mesh.points)
         self.ncomp = mesh.dim
         self.models = []
         self.cell_model = np.full(mesh.num_cells, -1, dtype=np.int64)
@@ -49,6 +53,7 @@ class Elasticity(Effect):
             raise InputError(f"{missing.size} cells have no material (e.g. cell {missing[0]})",
                              source, "materials")
         self.C = np.stack([m.C for m in self.models])
+        self.nv = self.C.shape[1]     # Voigt components: 3 (plane), 4 (axisymmetric), 6 (3D)
         self.nonlinear = any(not isinstance(m, Elastic) for m in self.models)
         self.linear = not self.nonlinear
         # Mazars' consistent tangent is not symmetric (its secant (1 - D) C is)
@@ -111,13 +116,18 @@ class Elasticity(Effect):
         time when the assembly reduces it (``CellKernel``), never for every cell at once."""
         mesh, d = self.mesh, self.mesh.dim
 
+        # axisymmetric: a third gradient direction N_a / r carries the hoop strain (P is 9 rows)
+        gradients = kernels.axisymmetric_gradients if self.axisymmetric else \
+            (lambda x, ct, thickness: kernels.gradients_cell_last(x, ct, thickness=thickness))
+
         def geometric(sel, out):
             coords = mesh.points[mesh.cells[cells[sel]]]
-            G, wdet = kernels.gradients_cell_last(coords, mesh.cell_type, thickness=self.thickness)
+            G, wdet = gradients(coords, mesh.cell_type, thickness=self.thickness)
             return kernels.geometric_part(G, wdet, out=out)
 
-        tensors = np.stack([kernels.voigt_to_tensor(C, d) for C in self.C])
-        kernel = CellKernel(geometric, len(cells), d * d, mesh.cells.shape[1])
+        tensors = np.stack([kernels.axisymmetric_tensor(C) if self.axisymmetric
+                            else kernels.voigt_to_tensor(C, d) for C in self.C])
+        kernel = CellKernel(geometric, len(cells), tensors.shape[1], mesh.cells.shape[1])
         return ElementMatrices(tensors=tensors, cell_material=self.cell_model[cells], kernel=kernel)
 
     def _stresses(self, cells: np.ndarray, u: np.ndarray, values: dict | None = None):
@@ -127,6 +137,8 @@ class Elasticity(Effect):
         the cell mean of ε. On affine cells (P1 triangles and tetrahedra) the strain is
         constant: the stress at the nodes is the cell's (less the eigenstrains there)."""
         mesh = self.mesh
+        if self.axisymmetric:
+            return self._stresses_axisymmetric(cells, u)
         rows = kernels.cell_rows(mesh.points, u, mesh.cells[cells])        # (nen, 2d, nc)
         g, vol = kernels.mean_gradient(rows, mesh.cell_type, thickness=self.thickness)
         eps = kernels.voigt_of_gradient(g)
@@ -143,6 +155,25 @@ class Elasticity(Effect):
         without the fields' values: ``cell_stress`` of a displacement alone)."""
         parts = [e.eigenstrain(cells, values) for e in self.eigenstrains if values is not None]
         return (sum(p[0] for p in parts), sum(p[1] for p in parts)) if parts else (0.0, 0.0)
+
+    def _stresses_axisymmetric(self, cells: np.ndarray, u: np.ndarray):
+        """``_stresses`` of an axisymmetric model: the hoop strain u_r / r varies over every
+        cell (no constant-strain cell), and the cell mean is weighted by 2π r, the volume. At
+        a node on the axis the hoop strain is its limit ε_rr (u_r vanishes there)."""
+        mesh, d = self.mesh, self.mesh.dim
+        rows = kernels.cell_rows(mesh.points, u, mesh.cells[cells])        # (nen, 2d, nc)
+        g = kernels.gradient_at_nodes(rows, mesh.cell_type)                # (2, 2, nen, nc)
+        r, ur = rows[:, 0], rows[:, d]
+        hoop = np.where(r > 0.0, ur / np.where(r > 0.0, r, 1.0), g[0, 0])
+        at_nodes = np.concatenate([kernels.voigt_of_gradient(g), hoop[None]])
+        geo = self.geometry(cells)                                        # quadrature points
+        ue = u[mesh.cells[cells]]                                          # (nc, nen, 2)
+        vol = geo.wdet.sum(axis=1)
+        mean = np.empty((4, len(cells)))
+        mean[:3] = np.einsum("cqv,cq->vc", kernels.voigt_strain(geo.dNdx, ue), geo.wdet)
+        mean[3] = np.einsum("cq,cq->c", (ue[:, :, 0] @ geo.N.T) / geo.r, geo.wdet)
+        mean /= vol
+        return self._hooke(cells, at_nodes), self._hooke(cells, mean), vol
 
     def _hooke(self, cells: np.ndarray, eps: np.ndarray) -> np.ndarray:
         """σ = C ε with each cell's own Hooke matrix, cell-last: eps (nv, ..., nc)."""
@@ -164,9 +195,13 @@ class Elasticity(Effect):
         arrays): nothing of the cells' size is formed but the cell stress itself."""
         mesh = self.mesh
         nen, d = mesh.cells.shape[1], mesh.dim
-        nv = 3 if d == 2 else 6
+        nv = self.nv
         # per cell: the rows (nen, 2d), gradients and strains at the nodes, their stresses
-        size = block_cells(8 * nen * (2 * d + 3 * d * d + 2 * nv), POST_BLOCK_BYTES)
+        # (axisymmetric: also the shape gradients and strains at the quadrature points)
+        per_cell = 8 * nen * (2 * d + 3 * d * d + 2 * nv)
+        if self.axisymmetric:
+            per_cell += 8 * 9 * (nen * d + nv + 2)
+        size = block_cells(per_cell, POST_BLOCK_BYTES)
         cell = np.empty((len(cells), nv))
         sums, weights = np.zeros((mesh.num_points, nv)), np.zeros(mesh.num_points)
         for sl in cell_ranges(len(cells), size):

@@ -10,8 +10,6 @@ import numpy as np
 
 from parsolve.errors import InputError
 from parsolve.fem import kernels
-from parsolve.fem.elements import (default_degree, element, facet_measure_and_normal,
-                                   quadrature)
 from parsolve.mesh.mesh import Mesh
 
 
@@ -75,9 +73,8 @@ def _measure(coords, facet_type: str, thickness: float, facets, regions) -> floa
         return kernels.facet_measure(coords, facet_type, thickness)
     if coords.shape[0] == 0:
         return regions.facet_total(facets, np.zeros(0))
-    xi, w = quadrature(facet_type, default_degree(facet_type, "load"))
-    ds, _ = facet_measure_and_normal(coords, element(facet_type).grad_shape(xi))
-    return regions.facet_total(facets, (ds * w).sum(axis=1) * thickness)
+    return regions.facet_total(facets, kernels.facet_weights(coords, facet_type,
+                                                             thickness).sum(axis=1))
 
 
 def load_patterns(mesh: Mesh, specs: list, regions, evolutions: dict, thickness: float,

@@ -27,6 +27,7 @@ from parsolve.fem.element_matrices import CellKernel, ElementMatrices
 from parsolve.fem.elements import default_degree, element, facet_measure_and_normal, \
     jacobians, polynomial_order, quadrature
 from parsolve.fem import kernels
+from parsolve.fem.axisymmetric import is_axisymmetric, scale
 from parsolve.fem.kernels import geometric_part, gradients_cell_last
 
 
@@ -114,7 +115,8 @@ def _mass_rule(cell_type: str, thickness: float, coords: np.ndarray):
         det = (J[..., 0, 0] * (J[..., 1, 1] * J[..., 2, 2] - J[..., 1, 2] * J[..., 2, 1])
                - J[..., 0, 1] * (J[..., 1, 0] * J[..., 2, 2] - J[..., 1, 2] * J[..., 2, 0])
                + J[..., 0, 2] * (J[..., 1, 0] * J[..., 2, 1] - J[..., 1, 1] * J[..., 2, 0]))
-    return N, np.abs(det) * w[None, :] * thickness            # (nc, nq)
+    r = coords[:, :, 0] @ N.T if is_axisymmetric(thickness) else None
+    return N, scale(np.abs(det) * w[None, :], r, thickness)   # (nc, nq)
 
 
 def mass(coords: np.ndarray, cell_type: str, capacity=1.0, thickness: float = 1.0) -> np.ndarray:
@@ -179,7 +181,8 @@ def facet_flux_vector(coords: np.ndarray, facet_type: str, q, thickness: float =
     xi, w = quadrature(facet_type, default_degree(facet_type, "mass"))
     N = ref.shape(xi)
     ds, _ = facet_measure_and_normal(coords, ref.grad_shape(xi))
-    wds = ds * w[None, :] * thickness                          # (nf, nq)
+    r = coords[:, :, 0] @ N.T if is_axisymmetric(thickness) else None
+    wds = scale(ds * w[None, :], r, thickness)                 # (nf, nq)
     q = np.asarray(q, dtype=float)
     nf = coords.shape[0]
     qq = q @ N.T if q.ndim == 2 else _per_cell(q, nf, "boundary flux")[:, None]

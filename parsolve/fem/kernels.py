@@ -4,8 +4,22 @@ from __future__ import annotations
 
 import numpy as np
 
+from parsolve.fem.axisymmetric import is_axisymmetric, scale
 from parsolve.fem.elements import default_degree, element, facet_measure_and_normal, \
     physical_gradients, quadrature
+
+# ``thickness`` below is the out-of-plane measure of a 2D model: a float (plane) or an
+# ``Axisymmetric`` (2π r at each point, see fem/axisymmetric.py).
+
+
+def stiffness_degree(cell_type: str, thickness=1.0) -> int:
+    """Quadrature degree of the stiffness: ``default_degree``'s, and for an axisymmetric
+    simplex 2·order (the weight r and the hoop terms N_a N_b make the integrand of degree
+    2·order: one point on a P1 triangle loses the rate, O(h) instead of O(h²))."""
+    deg = default_degree(cell_type, "stiffness")
+    if is_axisymmetric(thickness) and cell_type.startswith("triangle"):
+        return default_degree(cell_type, "mass")
+    return deg
 
 
 class CellGeometry:
@@ -13,25 +27,36 @@ class CellGeometry:
 
     def __init__(self, coords: np.ndarray, cell_type: str, degree: int | None = None,
                  thickness: float = 1.0, points: np.ndarray | None = None):
-        """``points``: evaluate at these reference points (unit weights) instead of quadrature."""
+        """``points``: evaluate at these reference points (unit weights) instead of quadrature.
+        Axisymmetric ``thickness``: ``r`` (nc, nq) the radius at the points, and the strain
+        operator has the hoop row."""
         ref = element(cell_type)
-        deg = default_degree(cell_type, "stiffness") if degree is None else degree
+        deg = stiffness_degree(cell_type, thickness) if degree is None else degree
         xi, w = quadrature(cell_type, deg) if points is None else (points, np.ones(len(points)))
         self.N = ref.shape(xi)                              # (nq, nen)
         self.dNdx, det = physical_gradients(coords, ref.grad_shape(xi))
-        self.wdet = np.abs(det) * w[None, :] * thickness    # (nc, nq)
+        self.axisymmetric = is_axisymmetric(thickness)
+        self.r = coords[:, :, 0] @ self.N.T if self.axisymmetric else None
+        self.wdet = scale(np.abs(det) * w[None, :], self.r, thickness)   # (nc, nq)
         self.nq = len(w)
 
     def strain_operator(self) -> np.ndarray:
-        """B (nc, nq, nvoigt, nen*dim), engineering shear, Voigt order xx yy (zz) (yz xz) xy."""
+        """B (nc, nq, nvoigt, nen*dim), engineering shear, Voigt order xx yy (zz) (yz xz) xy;
+        axisymmetric: rr zz rz θθ, the hoop row N_a / r on u_r (a point on the axis, r = 0,
+        takes the limit θθ = rr there: u_r vanishes on the axis)."""
         g = self.dNdx
         nc, nq, nen, dim = g.shape
         if dim == 2:
-            B = np.zeros((nc, nq, 3, nen, 2))
+            B = np.zeros((nc, nq, 4 if self.axisymmetric else 3, nen, 2))
             B[:, :, 0, :, 0] = g[..., 0]
             B[:, :, 1, :, 1] = g[..., 1]
             B[:, :, 2, :, 0] = g[..., 1]
             B[:, :, 2, :, 1] = g[..., 0]
+            if self.axisymmetric:
+                r = self.r[:, :, None]
+                on_axis = r == 0.0
+                B[:, :, 3, :, 0] = np.where(on_axis, g[..., 0],
+                                            self.N[None] / np.where(on_axis, 1.0, r))
         else:
             B = np.zeros((nc, nq, 6, nen, 3))
             for i in range(3):
@@ -86,27 +111,32 @@ def body_load(coords: np.ndarray, cell_type: str, force: np.ndarray, thickness: 
     xi, w = quadrature(cell_type, default_degree(cell_type, "load"))
     N = ref.shape(xi)
     _, det = physical_gradients(coords, ref.grad_shape(xi))
-    wn = (np.abs(det) * w * thickness) @ N                 # (nc, nen): ∫ N_a
+    r = coords[:, :, 0] @ N.T if is_axisymmetric(thickness) else None
+    wn = scale(np.abs(det) * w, r, thickness) @ N          # (nc, nen): ∫ N_a
     return (wn[:, :, None] * force[None, None, :]).reshape(len(coords), wn.shape[1] * len(force))
 
 
 def facet_load(coords: np.ndarray, facet_type: str, traction: np.ndarray,
                thickness: float = 1.0) -> np.ndarray:
     """Facet load vectors (nf, nfn*gdim) of a constant traction (force per unit area)."""
-    ref = element(facet_type)
-    xi, w = quadrature(facet_type, default_degree(facet_type, "load"))
-    N = ref.shape(xi)
-    ds, _ = facet_measure_and_normal(coords, ref.grad_shape(xi))
-    wn = (ds * w * thickness) @ N
+    N = element(facet_type).shape(quadrature(facet_type, default_degree(facet_type, "load"))[0])
+    wn = facet_weights(coords, facet_type, thickness) @ N
     return (wn[:, :, None] * traction[None, None, :]).reshape(len(coords), wn.shape[1] * len(traction))
 
 
-def facet_measure(coords: np.ndarray, facet_type: str, thickness: float = 1.0) -> float:
-    """Total measure (length × thickness in 2D, area in 3D) of a set of facets."""
+def facet_weights(coords: np.ndarray, facet_type: str, thickness: float = 1.0) -> np.ndarray:
+    """Quadrature weights ds·w × the out-of-plane measure (nf, nq) of the load rule on facets."""
     ref = element(facet_type)
     xi, w = quadrature(facet_type, default_degree(facet_type, "load"))
     ds, _ = facet_measure_and_normal(coords, ref.grad_shape(xi))
-    return float((ds * w).sum() * thickness)
+    r = coords[:, :, 0] @ ref.shape(xi).T if is_axisymmetric(thickness) else None
+    return scale(ds * w, r, thickness)
+
+
+def facet_measure(coords: np.ndarray, facet_type: str, thickness: float = 1.0) -> float:
+    """Total measure (length × thickness in 2D, area in 3D, the revolved area for an
+    axisymmetric model) of a set of facets."""
+    return float(facet_weights(coords, facet_type, thickness).sum())
 
 
 def cell_dofs(cells: np.ndarray, ncomp: int) -> np.ndarray:
@@ -125,7 +155,7 @@ def gradients_cell_last(coords: np.ndarray, cell_type: str, degree: int | None =
                         thickness: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """Physical shape gradients G (dim, nq, nen, nc) and weights w|J| (nq, nc)."""
     ref = element(cell_type)
-    xi, w = quadrature(cell_type, default_degree(cell_type, "stiffness") if degree is None else degree)
+    xi, w = quadrature(cell_type, stiffness_degree(cell_type, thickness) if degree is None else degree)
     dN = ref.grad_shape(xi)                                   # (nq, nen, d)
     nc, nen, d = coords.shape
     nq = len(w)
@@ -133,7 +163,26 @@ def gradients_cell_last(coords: np.ndarray, cell_type: str, degree: int | None =
     G = np.empty((d, nq, nen, nc))
     for q in range(nq):  # dN/dx_k = sum_j dN/dxi_j dxi_j/dx_k
         G[:, q] = np.tensordot(dN[q], inv[:, :, q], axes=([1], [0])).transpose(1, 0, 2)
-    return G, np.abs(det) * (w[:, None] * thickness)
+    return G, scale(np.abs(det) * w[:, None], _radius_cell_last(coords, ref.shape(xi), thickness),
+                    thickness)
+
+
+def _radius_cell_last(coords: np.ndarray, N: np.ndarray, thickness) -> np.ndarray | None:
+    """r (nq, nc) at the points of N (nq, nen) for an axisymmetric measure, else None."""
+    return N @ coords[:, :, 0].T if is_axisymmetric(thickness) else None
+
+
+def axisymmetric_gradients(coords: np.ndarray, cell_type: str,
+                           thickness) -> tuple[np.ndarray, np.ndarray]:
+    """The gradients of ``gradients_cell_last`` extended by a third "direction" N_a / r
+    (3, nq, nen, nc) and the weights 2π r w|J| (nq, nc): with ``axisymmetric_tensor`` the
+    factored stiffness then carries the hoop strain θθ = u_r / r. Quadrature points are
+    inside the cells, so r > 0 there for a mesh with r ≥ 0."""
+    G, wdet = gradients_cell_last(coords, cell_type, thickness=thickness)
+    xi, _ = quadrature(cell_type, stiffness_degree(cell_type, thickness))
+    N = element(cell_type).shape(xi)                              # (nq, nen)
+    r = N @ coords[:, :, 0].T                                     # (nq, nc)
+    return np.concatenate([G, (N[:, :, None] / r[:, None, :])[None]]), wdet
 
 
 def _jacobians_cell_last(coords: np.ndarray, dN: np.ndarray) -> np.ndarray:
@@ -147,15 +196,16 @@ def _jacobians_cell_last(coords: np.ndarray, dN: np.ndarray) -> np.ndarray:
 
 def weights_cell_last(coords: np.ndarray, cell_type: str, thickness: float = 1.0) -> np.ndarray:
     """Quadrature weights w|J| (nq, nc) of the stiffness rule, without the gradients."""
-    xi, w = quadrature(cell_type, default_degree(cell_type, "stiffness"))
+    xi, w = quadrature(cell_type, stiffness_degree(cell_type, thickness))
     J = _jacobians_cell_last(coords, element(cell_type).grad_shape(xi))
+    r = _radius_cell_last(coords, element(cell_type).shape(xi), thickness)
     if J.shape[0] == 2:
         det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
     else:
         det = (J[0, 0] * (J[1, 1] * J[2, 2] - J[1, 2] * J[2, 1])
                - J[0, 1] * (J[1, 0] * J[2, 2] - J[1, 2] * J[2, 0])
                + J[0, 2] * (J[1, 0] * J[2, 1] - J[1, 1] * J[2, 0]))
-    return np.abs(det) * (w[:, None] * thickness)
+    return scale(np.abs(det) * w[:, None], r, thickness)
 
 
 def _det_inv_cell_last(J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -187,6 +237,19 @@ def voigt_to_tensor(C: np.ndarray, dim: int) -> np.ndarray:
                 for l in range(dim):
                     M[k, l, i, j] = C[index[(i, k)], index[(j, l)]]
     return M.reshape(dim * dim, dim * dim)
+
+
+def axisymmetric_tensor(C: np.ndarray) -> np.ndarray:
+    """Axisymmetric Voigt matrix (rr, zz, rz, θθ) → M[(k, l), (i, j)] (9, 4) with
+    K_ai,bj = Σ G_ak M G_bl over the extended gradients (∂_r, ∂_z, 1/r) of
+    ``axisymmetric_gradients``: strain row of (component i, direction k) is rr (0, 0), zz
+    (1, 1), rz (0, 1) and (1, 0), θθ (0, 2); (1, 2) is no strain (u_z / r does not appear)."""
+    index = {(0, 0): 0, (1, 1): 1, (0, 1): 2, (1, 0): 2, (0, 2): 3}
+    M = np.zeros((3, 3, 2, 2))  # [k, l, i, j] = C[(i,k), (j,l)]
+    for (i, k), a in index.items():
+        for (j, l), b in index.items():
+            M[k, l, i, j] = C[a, b]
+    return M.reshape(9, 4)
 
 
 def geometric_part(G: np.ndarray, wdet: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:

@@ -6,8 +6,8 @@ Conventions shared by every model of this package:
 * strains carry the ENGINEERING shear ``gamma = 2 eps``, stresses the plain components, so
   that ``sigma = C @ eps`` and the strain energy is ``sigma . eps / 2``;
 * hypotheses ``"plane_stress"`` (3 components, sigma_zz = 0), ``"plane_strain"``
-  (3 components, eps_zz = 0, sigma_zz available from the model if needed) and ``"3d"``
-  (6 components).
+  (3 components, eps_zz = 0, sigma_zz available from the model if needed), ``"3d"``
+  (6 components) and ``"axisymmetric"`` (4 components (rr, zz, rz, θθ), x = r, y = z).
 
 A model is evaluated on all quadrature points at once: ``eps`` has shape ``(nq, nvoigt)``.
 ``update`` is a pure function of the total strain and of the converged state at the start of
@@ -22,7 +22,10 @@ from abc import ABC, abstractmethod
 import numpy as np
 
 #: Number of Voigt components of each modelling hypothesis.
-HYPOTHESES: dict[str, int] = {"plane_stress": 3, "plane_strain": 3, "3d": 6}
+HYPOTHESES: dict[str, int] = {"plane_stress": 3, "plane_strain": 3, "3d": 6, "axisymmetric": 4}
+#: The axisymmetric components (rr, zz, rz, θθ) in the 3D Voigt order (xx, yy, zz, yz, xz, xy)
+#: (x = r, y = z, z = θ; the rθ and zθ shears vanish).
+AXISYMMETRIC_COLS = [0, 1, 5, 2]
 
 
 def nvoigt_of(hypothesis: str) -> int:
@@ -53,7 +56,8 @@ def elastic_matrix(E: float, nu: float, hypothesis: str) -> np.ndarray:
 
     plane stress: ``E/(1-nu^2) [[1, nu, 0], [nu, 1, 0], [0, 0, (1-nu)/2]]``;
     plane strain: ``E/((1+nu)(1-2nu)) [[1-nu, nu, 0], [nu, 1-nu, 0], [0, 0, (1-2nu)/2]]``;
-    3d: ``lambda 1 (x) 1 + 2 mu I`` with ``mu`` (not ``2 mu``) on the shear diagonal.
+    3d: ``lambda 1 (x) 1 + 2 mu I`` with ``mu`` (not ``2 mu``) on the shear diagonal;
+    axisymmetric: the 3D matrix on (rr, zz, rz, θθ) = 3D rows (xx, yy, xy, zz).
     """
     nv = nvoigt_of(hypothesis)
     check_elastic_constants(E, nu)
@@ -61,6 +65,8 @@ def elastic_matrix(E: float, nu: float, hypothesis: str) -> np.ndarray:
         c = E / (1.0 - nu * nu)
         return c * np.array([[1.0, nu, 0.0], [nu, 1.0, 0.0], [0.0, 0.0, 0.5 * (1.0 - nu)]])
     lam, mu = lame(E, nu)
+    if hypothesis == "axisymmetric":
+        return elastic_matrix(E, nu, "3d")[np.ix_(AXISYMMETRIC_COLS, AXISYMMETRIC_COLS)]
     C = np.zeros((nv, nv))
     if hypothesis == "plane_strain":
         C[:2, :2] = lam

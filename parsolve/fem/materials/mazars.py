@@ -68,6 +68,9 @@ class Mazars(Material):
         beta: float = 1.06,
         fd_step: float = 1e-6,
     ):
+        if hypothesis == "axisymmetric":   # its principal strains are written for the plane ones
+            raise ValueError("Mazars supports 'plane_stress', 'plane_strain' and '3d', "
+                             "not 'axisymmetric'")
         super().__init__(E, nu, hypothesis)
         if not eps_d0 > 0.0:
             raise ValueError(f"eps_d0 must be positive, got {eps_d0}")

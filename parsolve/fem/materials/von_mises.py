@@ -11,7 +11,8 @@ The tangent is the consistent (algorithmic) one (Simo & Taylor 1985):
 
 with ``n = s_trial / |s_trial|``. Under uniaxial stress the slope after yield is E H/(E + H).
 
-Hypotheses ``"3d"`` and ``"plane_strain"``; plane stress would need a different (constrained)
+Hypotheses ``"3d"``, ``"plane_strain"`` and ``"axisymmetric"`` (the 3D algorithm on
+(rr, zz, θθ, 0, 0, γ_rz), every component of the plastic strain kept); plane stress would need a different (constrained)
 return mapping and is refused. Plane strain is computed with the 3D algorithm on the strain
 ``(eps_xx, eps_yy, 0, 0, 0, gamma_xy)`` and condensed by keeping the in-plane rows and columns
 (eps_zz is prescribed, so no static condensation is involved).
@@ -24,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import Material, elastic_matrix, lame
+from .base import AXISYMMETRIC_COLS, Material, elastic_matrix, lame
 
 _SQRT32 = np.sqrt(1.5)
 #: Relative yield tolerance: plastic only when q exceeds the radius by more than round-off.
@@ -42,8 +43,9 @@ class VonMises(Material):
     """J2 plasticity with linear isotropic hardening; state ``{"eps_p", "p"}``."""
 
     def __init__(self, E: float, nu: float, hypothesis: str, sigma_y: float, H: float):
-        if hypothesis not in ("3d", "plane_strain"):
-            raise ValueError(f"VonMises supports 'plane_strain' and '3d', not {hypothesis!r}")
+        if hypothesis not in ("3d", "plane_strain", "axisymmetric"):
+            raise ValueError(f"VonMises supports 'plane_strain', 'axisymmetric' and '3d', "
+                             f"not {hypothesis!r}")
         super().__init__(E, nu, hypothesis)
         if not sigma_y > 0.0:
             raise ValueError(f"sigma_y must be positive, got {sigma_y}")
@@ -55,8 +57,10 @@ class VonMises(Material):
         self.K = self.lam + 2.0 * self.mu / 3.0
         self._C6 = elastic_matrix(self.E, self.nu, "3d")
         # Voigt-6 columns of the in-plane strain and of the stored plastic strain.
-        self._strain_cols = [0, 1, 5] if hypothesis == "plane_strain" else list(range(6))
-        self._state_cols = [0, 1, 2, 5] if hypothesis == "plane_strain" else list(range(6))
+        self._strain_cols = {"plane_strain": [0, 1, 5],
+                             "axisymmetric": AXISYMMETRIC_COLS}.get(hypothesis, list(range(6)))
+        self._state_cols = {"plane_strain": [0, 1, 2, 5],
+                            "axisymmetric": AXISYMMETRIC_COLS}.get(hypothesis, list(range(6)))
 
     def init_state(self, nq: int) -> dict[str, np.ndarray]:
         """Virgin points: zero plastic strain and zero cumulated plastic strain."""
