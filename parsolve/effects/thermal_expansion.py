@@ -115,6 +115,9 @@ class ThermalExpansion(Effect):
         if scene.nonlinear.method == "arc_length":
             raise InputError("thermal expansion is not available with arc-length", self.source,
                              "nonlinear.method")
+        if scene.hypothesis == "axisymmetric":   # the eigenstrain's hoop term is not written
+            raise InputError("thermal expansion is not available with the axisymmetric "
+                             "hypothesis", self.source, "model.hypothesis")
         self.thickness = scene.thickness if mesh.dim == 2 else 1.0
         self.alpha = np.zeros(mesh.num_cells)
         for name, value, akey in spec.alpha:

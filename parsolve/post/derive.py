@@ -28,10 +28,12 @@ from parsolve.post.result import Result
 
 
 def full_tensor(sig: np.ndarray, dim: int, szz: np.ndarray | float = 0.0) -> np.ndarray:
-    """Voigt stresses (..., 3 or 6) → symmetric 3 × 3 tensors (..., 3, 3)."""
+    """Voigt stresses (..., 3, 4 or 6) → symmetric 3 × 3 tensors (..., 3, 3). Four components
+    are axisymmetric (rr, zz, rz, θθ): the hoop stress is the third principal direction."""
     T = np.zeros(sig.shape[:-1] + (3, 3))
     if dim == 2:
-        T[..., 0, 0], T[..., 1, 1], T[..., 2, 2] = sig[..., 0], sig[..., 1], szz
+        hoop = sig[..., 3] if sig.shape[-1] == 4 else szz
+        T[..., 0, 0], T[..., 1, 1], T[..., 2, 2] = sig[..., 0], sig[..., 1], hoop
         T[..., 0, 1] = T[..., 1, 0] = sig[..., 2]
         return T
     for k in range(3):
@@ -53,7 +55,10 @@ def principal(T: np.ndarray) -> np.ndarray:
 
 
 def out_of_plane(model, sig: np.ndarray) -> np.ndarray:
-    """σzz of each cell (nsteps, ncells): 0 except in plane strain, ν (σxx + σyy)."""
+    """σzz of each cell (nsteps, ncells): 0 except in plane strain, ν (σxx + σyy); the hoop
+    stress σθθ in an axisymmetric model (its 4th component)."""
+    if model.scene.hypothesis == "axisymmetric":
+        return sig[..., 3]
     if model.scene.hypothesis != "plane_strain":
         return np.zeros(sig.shape[:-1])
     nu = np.array([getattr(m, "nu", 0.0) for m in model.elasticity.models])[model.elasticity.cell_model]

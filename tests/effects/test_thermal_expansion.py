@@ -318,6 +318,8 @@ BAD = {
     "nonlinear material": (BAD_BASE.replace("nu = 0.3", 'nu = 0.3\nmodel = "von_mises"\nsigma_y = 1.0\nH = 10.0')
                            .replace('hypothesis = "plane_stress"', 'hypothesis = "plane_strain"'),
                            "materials[0].model"),
+    "axisymmetric": (BAD_BASE.replace('hypothesis = "plane_stress"', 'hypothesis = "axisymmetric"')
+                     .replace("thickness = ", "# thickness = "), "model.hypothesis"),
     "misspelt key": (BAD_BASE.replace("reference = 20.0", "referense = 20.0"),
                      "thermal_expansion[0].referense"),
 }
