@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import sys
 from pathlib import Path
 
@@ -56,11 +55,6 @@ def read_results(path: Path) -> dict:
     return out
 
 
-# PARSOLVE_TEST_MESH=replicated (or distributed, the default) runs every scene of the tests on
-# that mesh unless a test says otherwise: scripts/test.sh checks the replicated path this way
-TEST_MESH = os.environ.get("PARSOLVE_TEST_MESH")
-
-
 def run_scene(scene, out: Path, comm=MPI.COMM_WORLD, options: dict | None = None,
               export: str | None = None, solver: dict | None = None) -> dict:
     """Run a scene (path, or TOML text written beside ``out``) and read its results on every
@@ -76,7 +70,7 @@ def run_scene(scene, out: Path, comm=MPI.COMM_WORLD, options: dict | None = None
         comm.Barrier()
         scene = src
     scene = load_scene(scene)
-    for key, value in (({"mesh": TEST_MESH} if TEST_MESH else {}) | (solver or {})).items():
+    for key, value in (solver or {}).items():
         setattr(scene.solver, key, value)
     model = build_model(scene, comm)
     try:
@@ -114,7 +108,7 @@ def solve_in_process(text: str, comm=MPI.COMM_WORLD, t: float = 1.0, options: di
     from parsolve.solvers.system import SaddleSystem
     import tomllib
 
-    model = build_model(parse_scene(tomllib.loads(text), "test.toml", text))
+    model = build_model(parse_scene(tomllib.loads(text), "test.toml", text), comm)
     system = SaddleSystem(comm, model)
     mat = system.assemble()
     solver = make_solver(comm, system, options or {})
