@@ -95,6 +95,32 @@ def run(shared_tmp):
     return _run
 
 
+def saddle_of_input_dofs(comm, system) -> np.ndarray:
+    """The saddle index of every input DOF of the whole mesh (each from its owner; a rank's
+    ``system.saddle_of_input`` covers its local DOFs only)."""
+    from parsolve.mesh.local_regions import allgather_rows
+
+    mesh, nc = system.model.mesh, system.model.ncomp
+    own = system.owned_input_dofs
+    node, comp = np.divmod(own, nc)
+    pairs = allgather_rows(comm, np.column_stack([mesh.global_nodes[node].astype(np.int64) * nc
+                                                  + comp, system.saddle_of_input[own]]))
+    out = np.empty(mesh.num_global_points * nc, dtype=np.int64)
+    out[pairs[:, 0]] = pairs[:, 1]
+    return out
+
+
+def whole_points(comm, mesh) -> np.ndarray:
+    """The whole mesh's points in input order, from every rank's owned ones."""
+    from parsolve.mesh.local_regions import allgather_rows
+
+    ids = allgather_rows(comm, mesh.global_nodes[:mesh.n_owned].astype(np.int64))
+    pts = allgather_rows(comm, np.ascontiguousarray(mesh.points[:mesh.n_owned]))
+    out = np.empty((mesh.num_global_points, mesh.dim))
+    out[ids] = pts
+    return out
+
+
 def rel_err(a, b) -> float:
     a, b = np.asarray(a, float), np.asarray(b, float)
     return float(np.abs(a - b).max() / max(np.abs(b).max(), 1e-300))

@@ -82,12 +82,12 @@ def plate_newton(refine: int, steps: int):
     comm = MPI.COMM_WORLD
     text = plate(refine, steps)
     scene = parse_scene(tomllib.loads(text), "plate.toml", text)
-    model = build_model(scene)
+    model = build_model(scene, comm)
     system = SaddleSystem(comm, model)
     newton = NewtonSolver(comm, system, make_solver(comm, system, {}), scene.nonlinear)
     (rel,) = [r for r in system.multiplied if r.maximum]
     free = np.ones(model.mesh.num_points * model.ncomp, dtype=bool)
-    free[system.elim_dofs] = False
+    free[system.elim_local[system.elim_local >= 0]] = False   # (local DOFs of this rank)
     return scene, model, system, newton, rel, free
 
 
