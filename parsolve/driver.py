@@ -288,7 +288,7 @@ def _max_strain_increment(comm, system: SaddleSystem, dq: np.ndarray) -> float:
     if mech is None:
         return comm.allreduce(0.0, op=MPI.MAX)
     mesh = system.model.mesh
-    owned = system.part.owned_cells(comm.rank, mesh.cells)
+    owned = system.owned_cells
     if owned.size == 0:
         return comm.allreduce(0.0, op=MPI.MAX)
     from parsolve.fem.kernels import strains

@@ -51,14 +51,12 @@ def step_outputs(comm: MPI.Comm, system, q: np.ndarray, multipliers: dict, newto
     """(fields, cell fields, relations) of a step; ``newton`` carries the material states."""
     model = system.model
     mesh = model.mesh
-    owned = system.part.owned_cells(comm.rank, mesh.cells)
     values = system.composition.values(q)
     # owned nodes first: this rank's rows, in increasing input id
     n_owned = mesh.n_owned
     fields = {f.output: OwnedRows(values[f.name][:n_owned]) for f in model.fields}
     # every local cell: the sums on owned nodes are then complete, no exchange
-    computed = system.local_cells
-    keep = np.isin(computed, owned, assume_unique=True)
+    computed, keep = system.local_cells, system.reported
     cell_fields = {}
     for k, effect in enumerate(model.effects):
         extra = None

@@ -56,6 +56,9 @@ class SaddleSystem:
         self.unused = self.unused_dofs()
         self.rdofs = RelationDofs(comm, mesh, ncomp, self._relation_dofs())
         self.local_cells = self.part.local_cells(rank, mesh.cells)
+        # the cells this rank reports, and which of its local cells they are (every output step)
+        self.owned_cells = self.part.owned_cells(rank, mesh.cells)
+        self.reported = np.isin(self.local_cells, self.owned_cells, assume_unique=True)
         lumped = model.scene.time is None or model.scene.time.mass == "lumped"
         self.composition = Composition(model, self.local_cells, lumped)
         self.rate: Rate | None = None  # the rate terms of a transient step (set by the stepper)
