@@ -23,7 +23,7 @@ from parsolve.mesh.distribute import LocalMesh, distribute
 from parsolve.mesh.generators import GENERATORS, make_quadratic
 from parsolve.mesh.mesh import Mesh
 from parsolve.mesh.reader import read_mesh
-from parsolve.mesh.local_regions import LocalRegions
+from parsolve.mesh.regions import RegionResolver
 from parsolve.relations import Relation
 from parsolve.scene import Scene
 
@@ -39,9 +39,9 @@ class Model:
     reference_patterns: tuple[str, ...] = ()  # applied by a solver (arc-length), not as loads
     comm: object = None   # the ranks sharing the mesh
 
-    def regions(self) -> LocalRegions:
+    def regions(self) -> RegionResolver:
         """A fresh resolver of the scene's regions on this model's mesh."""
-        return LocalRegions(self.comm, self.mesh, self.scene.regions, self.scene.source)
+        return RegionResolver(self.mesh, self.scene.regions, self.scene.source, self.comm)
 
     @property
     def ncomp(self) -> int:
@@ -130,11 +130,11 @@ def build_mesh(scene: Scene, check_cells: bool = True) -> Mesh:
 class BuildContext:
     scene: Scene
     mesh: Mesh
-    regions: LocalRegions
+    regions: RegionResolver
     fields: FieldSet | None = None
 
 
-def build_effects(scene: Scene, mesh: LocalMesh, regions: LocalRegions) -> tuple[list[Effect], FieldSet]:
+def build_effects(scene: Scene, mesh: LocalMesh, regions: RegionResolver) -> tuple[list[Effect], FieldSet]:
     """The effects the scene lists, in registry order: the physics first (they declare the
     fields), then the couplings that need the fields (solubility)."""
     effects: list[Effect] = []
@@ -212,7 +212,7 @@ def build_model(scene: Scene, comm=None) -> Model:
     this process alone, ``MPI.COMM_SELF``)."""
     comm = MPI.COMM_SELF if comm is None else comm
     mesh = _distributed_mesh(scene, comm)
-    regions = LocalRegions(comm, mesh, scene.regions, scene.source)
+    regions = RegionResolver(mesh, scene.regions, scene.source, comm)
     # a check of a rank's part (cells without a material) fails there alone: every rank
     # raises it (the checks that decide for the whole mesh are collective)
     effects, fields = agree(comm, build_effects, scene, mesh, regions)

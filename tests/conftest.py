@@ -98,7 +98,7 @@ def run(shared_tmp):
 def saddle_of_input_dofs(comm, system) -> np.ndarray:
     """The saddle index of every input DOF of the whole mesh (each from its owner; a rank's
     ``system.saddle_of_input`` covers its local DOFs only)."""
-    from parsolve.mesh.local_regions import allgather_rows
+    from parsolve.mesh.regions import allgather_rows
 
     mesh, nc = system.model.mesh, system.model.ncomp
     own = system.owned_input_dofs
@@ -112,7 +112,7 @@ def saddle_of_input_dofs(comm, system) -> np.ndarray:
 
 def whole_points(comm, mesh) -> np.ndarray:
     """The whole mesh's points in input order, from every rank's owned ones."""
-    from parsolve.mesh.local_regions import allgather_rows
+    from parsolve.mesh.regions import allgather_rows
 
     ids = allgather_rows(comm, mesh.global_nodes[:mesh.n_owned].astype(np.int64))
     pts = allgather_rows(comm, np.ascontiguousarray(mesh.points[:mesh.n_owned]))

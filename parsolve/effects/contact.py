@@ -74,7 +74,7 @@ from parsolve.contact.surfaces import Surfaces, canonical_facets
 from parsolve.effects.base import Effect
 from parsolve.errors import InputError
 from parsolve.evolution import CONSTANT
-from parsolve.mesh.local_regions import gather_facets
+from parsolve.mesh.regions import gather_facets
 from parsolve.mesh.topology import FACETS, boundary_facets
 from parsolve.relations import Relation
 

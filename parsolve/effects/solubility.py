@@ -39,7 +39,7 @@ from parsolve.effects.base import Effect
 from parsolve.errors import InputError
 from parsolve.io.slabs import OwnedRows
 from parsolve.mesh import selectors
-from parsolve.mesh.local_regions import allgather_rows
+from parsolve.mesh.regions import allgather_rows
 from parsolve.relations import Relation
 
 

@@ -23,7 +23,7 @@ from parsolve.la.relation_dofs import RelationDofs
 from parsolve.la.pattern import node_pattern
 from parsolve.la.petsc import SaddleOperator
 from parsolve.la.saddle import stack_relations
-from parsolve.mesh.local_regions import allgather_rows
+from parsolve.mesh.regions import allgather_rows
 from parsolve.model import Model
 
 

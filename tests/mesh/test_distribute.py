@@ -11,7 +11,7 @@ from mpi4py import MPI
 from parsolve.errors import InputError
 from parsolve.mesh.distribute import COMPONENT_MARGIN, _extract, distribute, index_dtype
 from parsolve.mesh.generators import box, plate_with_hole, rectangle
-from parsolve.mesh.local_regions import LocalRegions, allgather_rows
+from parsolve.mesh.regions import allgather_rows
 from parsolve.mesh.partition import from_cell_parts, partition
 from parsolve.mesh.regions import RegionResolver
 from parsolve.scene import parse_scene
@@ -163,7 +163,7 @@ def test_regions_are_the_whole_meshs(region, comm):
     scene = parse_scene(tomllib.loads(SPECS), "s.toml")
     whole, local = parts("quad", comm)
     expected = RegionResolver(whole, scene.regions, "s.toml")(region, "k")
-    got = LocalRegions(comm, local, scene.regions, "s.toml")
+    got = RegionResolver(local, scene.regions, "s.toml", comm)
     r = got(region, "k")
     assert np.array_equal(got.relation_nodes(region, "k"), expected.nodes)
     owned_cells = r.cells[local.node_owner[local.cells[r.cells]].min(axis=1) == comm.rank]
@@ -183,7 +183,7 @@ def test_a_region_empty_on_some_parts_is_not_empty(comm):
                          'strip = "x >= 1.95"\nnowhere = "x > 5"')
     scene = parse_scene(tomllib.loads(text), "s.toml")
     _, local = parts("quad", comm)
-    regions = LocalRegions(comm, local, scene.regions, "s.toml")
+    regions = RegionResolver(local, scene.regions, "s.toml", comm)
     assert regions.relation_nodes("strip", "k").size == 6
     with pytest.raises(InputError, match="region 'nowhere' selects no node and no cell"):
         regions("nowhere", "regions.nowhere")
@@ -195,7 +195,7 @@ def test_an_expression_error_on_one_part_is_raised_on_every_rank(comm):
     text = SPECS.replace('strip = "x >= 0.5 and x <= 0.8"', 'strip = "1 / (x - 2) > 0"')
     scene = parse_scene(tomllib.loads(text), "s.toml")
     _, local = parts("quad", comm)
-    regions = LocalRegions(comm, local, scene.regions, "s.toml")
+    regions = RegionResolver(local, scene.regions, "s.toml", comm)
     with pytest.raises(InputError, match="regions.strip"):
         regions("strip", "k")
     comm.Barrier()
