@@ -1,6 +1,6 @@
 """The whole mesh checked, and its dual graph built, by every rank on one block of cells.
 
-A distributed run's rank 0 reads or generates the whole mesh; the cell checks (Jacobians,
+A run's rank 0 reads or generates the whole mesh; the cell checks (Jacobians,
 cells folded over a neighbour, facets of three cells) and the dual graph PT-Scotch partitions
 cost time and memory in proportion to the mesh, so rank 0 hands each rank a block of cells
 (``partition.block_starts``, the block PT-Scotch takes anyway) with its nodes' coordinates, and

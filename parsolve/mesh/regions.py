@@ -103,7 +103,7 @@ class RegionResolver:
                         self.source, spec.key)
         d2 = np.sum((m.points[:m.n_owned] - p) ** 2, axis=1)
         best = (float(d2.min()), int(m.global_nodes[np.argmin(d2)])) if d2.size else (np.inf, -1)
-        # the smallest distance, then the lowest input id (the replicated argmin's first)
+        # the smallest distance, then the lowest input id (the whole mesh's argmin's first)
         candidates = self.comm.allgather(best)
         dist = min(c[0] for c in candidates)
         node = min(c[1] for c in candidates if c[0] == dist)
