@@ -13,7 +13,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from parsolve.la.layout import Layout
 from parsolve.relations import Relation
 
 
