@@ -102,11 +102,9 @@ def build_mesh(scene: Scene, check_cells: bool = True) -> Mesh:
         memory.check_whole_mesh(_points_after_order(mesh, spec.order), mesh.dim, source, key,
                                 f"a mesh of {mesh.num_cells} {mesh.cell_type} cells")
     else:
-        try:
-            points, cells, dim = memory.cell_counts(spec.generator, spec.params, spec.order)
-        except (TypeError, ValueError):  # bad parameters: the generator says which below
-            points = None
-        if points is not None and points > 0:
+        counted = _generated_counts(scene)   # None: bad parameters, the generator says which
+        if counted is not None:
+            points, cells, dim = counted
             memory.check_whole_mesh(points, dim, scene.source, "mesh.generator",
                                     f"the {spec.generator} of {cells} cells and {points} nodes")
         try:
@@ -182,7 +180,14 @@ def _generator_key(exc: Exception) -> str:
 
 def _distributed_mesh(scene: Scene, comm) -> LocalMesh:
     """Rank 0 builds and checks the whole mesh, then every rank gets its part (on 1 rank: the
-    whole mesh itself, not a copy); an input error of rank 0's is raised on every rank."""
+    whole mesh itself, not a copy); an input error of rank 0's is raised on every rank. The
+    solve's share of every rank is checked against the memory before anything is built when
+    the mesh's size is known from a generator's parameters, else once the mesh is read."""
+    counted = _generated_counts(scene)
+    if counted is not None:   # every rank the same counts: the collective verdict before the build
+        points, cells, dim = counted
+        memory.check_fits(points, dim, scene.solver.preset, scene.source, "mesh.generator",
+                          f"the {scene.mesh.generator} of {cells} cells and {points} nodes")
     whole, error = None, None
     if comm.rank == 0:
         try:
@@ -199,12 +204,25 @@ def _distributed_mesh(scene: Scene, comm) -> LocalMesh:
     del block
     part = distribute(comm, whole, scene.solver.partitioner, graph)
     del whole
-    # the solve, each rank its share (every rank's machine: the verdict is collective)
-    source, key = mesh_source(scene)
-    key = "mesh.generator" if key == "mesh" else key   # as build_mesh's memory check names it
-    memory.check_fits(part.num_global_points, part.dim, scene.solver.preset, source,
-                                  key, f"a mesh of {part.num_global_cells} {part.cell_type} cells")
+    if counted is None:   # the solve, each rank its share (every rank's machine: collective)
+        source, key = mesh_source(scene)
+        key = "mesh.generator" if key == "mesh" else key   # as build_mesh's memory check names it
+        memory.check_fits(part.num_global_points, part.dim, scene.solver.preset, source, key,
+                          f"a mesh of {part.num_global_cells} {part.cell_type} cells")
     return part
+
+
+def _generated_counts(scene: Scene) -> tuple[int, int, int] | None:
+    """(points, cells, dim) of a generated mesh from its parameters (None: a file, or
+    parameters the generator refuses: it says why when it runs)."""
+    spec = scene.mesh
+    if spec.file is not None:
+        return None
+    try:
+        counts = memory.cell_counts(spec.generator, spec.params, spec.order)
+    except (TypeError, ValueError):
+        return None
+    return counts if counts[0] > 0 else None
 
 
 def build_model(scene: Scene, comm=None) -> Model:

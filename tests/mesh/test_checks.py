@@ -215,14 +215,15 @@ def test_file_with_an_inverted_cell_is_refused(shared_tmp):
 
 
 def test_memory_check_of_a_run(monkeypatch):
-    """A run checks rank 0's whole mesh (that rank alone) and each rank's share of the solve
-    (every machine's verdict): memory just above the ranks' shares builds the model, just
-    below refuses it; memory below the whole mesh refuses it naming rank 0's build."""
+    """A run checks each rank's share of the solve (every machine's verdict; for a generator
+    before the mesh is built) and rank 0's whole mesh (that rank alone): memory just above
+    the ranks' shares builds the model, just below refuses it; a file's mesh is checked once
+    read."""
     import tomllib
 
     from mpi4py import MPI
 
-    from parsolve.model import build_model
+    from parsolve.model import build_mesh, build_model
     from parsolve.scene import parse_scene
 
     comm = MPI.COMM_WORLD
@@ -255,6 +256,8 @@ nu = 0.3
         build(shared * 0.99)
     assert info.value.key == "mesh.generator" and "too large for this machine" in info.value.message
     assert "built on one rank" not in info.value.message
+    # the whole mesh alone on one rank (which a run's shares on one machine always exceed)
+    monkeypatch.setattr(memory, "available_bytes", lambda: memory.whole_mesh_bytes(dofs) * 0.99)
     with pytest.raises(InputError) as info:
-        build(memory.whole_mesh_bytes(dofs) * 0.99)
+        build_mesh(parse_scene(tomllib.loads(text), "s.toml"))
     assert info.value.key == "mesh.generator" and "built on one rank" in info.value.message
