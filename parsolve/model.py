@@ -66,7 +66,7 @@ class Model:
                    for e in self.effects)
 
     def initial_q(self) -> np.ndarray:
-        """The primal vector at t = 0 (input numbering): the effects' initial values, else 0."""
+        """The primal vector at t = 0 (this rank's DOFs): the effects' initial values, else 0."""
         q = np.zeros((self.mesh.num_points, self.ncomp))
         for e in self.effects:
             for name, values in e.initial().items():
@@ -74,7 +74,7 @@ class Model:
         return q.ravel()
 
     def external_load(self, t: float) -> np.ndarray:
-        """Known loads at t (input DOF numbering); patterns used as duals are not applied."""
+        """Known loads at t (this rank's DOFs); patterns used as duals are not applied."""
         duals = {r.meta.get("dual") for r in self.relations} | set(self.reference_patterns)
         f = np.zeros(self.mesh.num_points * self.ncomp)
         for name, pattern in self.patterns.items():

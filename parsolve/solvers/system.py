@@ -10,8 +10,6 @@ the same multipliers.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
-
 import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
@@ -25,14 +23,6 @@ from parsolve.la.petsc import SaddleOperator
 from parsolve.la.saddle import stack_relations
 from parsolve.mesh.regions import allgather_rows
 from parsolve.model import Model
-
-
-@dataclass
-class Solution:
-    q: np.ndarray                       # full primal vector, input numbering
-    multipliers: dict[str, np.ndarray]  # relation name -> λ (unscaled, per row)
-    residual: float                     # relative residual of the linear system
-    iterations: int
 
 
 class SaddleSystem:
@@ -163,7 +153,7 @@ class SaddleSystem:
         return mat
 
     def to_owned(self, full: np.ndarray) -> np.ndarray:
-        """A full primal vector (input numbering) → this rank's rows (multiplier rows zero)."""
+        """A primal vector of this mesh's DOFs → this rank's rows (multiplier rows zero)."""
         out = np.zeros(self.op.nrows)
         own = self.owned_input_dofs
         out[self.saddle_of_input[own] - self.offset] = full[own]
@@ -200,7 +190,7 @@ class SaddleSystem:
 
     def rhs_from(self, f_full: np.ndarray, target: np.ndarray, elim_values: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray]:
-        """Right-hand side from a force vector (input numbering), scaled relation values of
+        """Right-hand side from a force vector (this mesh's DOFs), scaled relation values of
         every multiplied row, and values of the eliminated DOFs."""
         b = self.to_owned(f_full)
         q0, q1, l0, l1 = self.layout.owned(self.comm.rank)
@@ -332,7 +322,8 @@ class SaddleSystem:
 
     def unpack(self, x_full: np.ndarray, t: float, f_int: np.ndarray | None = None,
                f_ext: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        """Primal vector (input numbering) and unscaled multipliers of every relation."""
+        """Primal vector (this mesh's DOFs, owned then ghosts) and unscaled multipliers of
+        every relation."""
         q = self.primal_of(x_full)
         lam = self.multipliers(x_full)
         out = {}
