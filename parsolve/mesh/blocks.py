@@ -85,10 +85,11 @@ def check_jacobians(comm, block: CellBlock, source: str | None, key: str | None)
                                source, key)
 
 
-def facet_groups(comm, block: CellBlock, source: str | None, key: str | None
-                 ) -> tuple[np.ndarray, np.ndarray]:
+def facet_groups(comm, block: CellBlock, source: str | None, key: str | None,
+                 graph: bool = True) -> tuple[np.ndarray, np.ndarray] | None:
     """Check the facets of the whole mesh (``checks.check_folds``) and return this block's
-    rows of the dual graph as CSR (indptr, neighbour cell ids), ``partition.dual_graph``'s.
+    rows of the dual graph as CSR (indptr, neighbour cell ids), ``partition.dual_graph``'s
+    (``graph`` False: the checks only, None returned: one rank partitions nothing).
     Collective."""
     size = comm.size
     nv = NUM_VERTICES[CELL_INFO[block.cell_type][1]]
@@ -112,6 +113,9 @@ def facet_groups(comm, block: CellBlock, source: str | None, key: str | None
     _raise_cells(comm, folded, lambda cells: (
         f"{cells.size} cells overlap a neighbour (inverted or folded over a shared facet): "
         f"cells {checks._ids(cells)}"), source, key)
+    if not graph:
+        return None
+    del nodes, keys, forward
     shared = np.flatnonzero(counts[group] == 2) if group.size else np.zeros(0, np.int64)
     pairs = owner[shared[np.argsort(group[shared], kind="stable")]].reshape(-1, 2)
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]  # a collapsed cell seeing itself twice
