@@ -48,6 +48,9 @@ def scatter_blocks(comm, whole: Mesh | None) -> CellBlock:
     meta = comm.bcast((whole.num_cells, whole.cell_type, whole.dim, whole.cells.shape[1])
                       if comm.rank == 0 else None, root=0)
     n, cell_type, dim, nen = meta
+    if comm.size == 1:   # the one block is the whole mesh: its cells taken as they are
+        return CellBlock(np.asarray(whole.cells, dtype=np.int64), whole.points[whole.cells], 0, n,
+                         cell_type, dim)
     starts = block_starts(n, comm.size)
     counts = np.diff(starts)
     mine = int(counts[comm.rank])
