@@ -200,6 +200,7 @@ def _distributed_mesh(scene: Scene, comm) -> LocalMesh:
     # the cells checked and the dual graph built by every rank on a block of cells
     block = blocks.scatter_blocks(comm, whole)
     blocks.check_jacobians(comm, block, *mesh_source(scene))
+    block.coords = None   # (the facets need the cells only: the coordinates go before them)
     graph = blocks.facet_groups(comm, block, *mesh_source(scene), graph=comm.size > 1)
     del block
     part = distribute(comm, whole, scene.solver.partitioner, graph)
