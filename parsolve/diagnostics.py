@@ -60,42 +60,15 @@ def bodies_distributed(comm, mesh) -> np.ndarray:
 
 def unsupported(model) -> list[str]:
     """One sentence per (body, field) that no relation touches, for fields whose operator is
-    singular without one (steady fields). Collective on a distributed mesh."""
-    mesh, fields = model.mesh, model.fields
+    singular without one (steady fields). Labels of the whole mesh's bodies from the parts,
+    the relations' input nodes looked up among each rank's owned nodes, cells counted by the
+    rank owning their lowest-owner node: everything exchanged is a body's or a relation's
+    size. Collective."""
+    comm, mesh, fields = model.comm, model.mesh, model.fields
     if model.transient:  # a capacity holds a scalar field; only displacements can float
         checked = [f for f in fields if f.name == "u"]
     else:
         checked = list(fields)
-    if getattr(model, "distributed", False):
-        return _unsupported_distributed(model, checked)
-    label = bodies(mesh.cells, mesh.num_points)
-    used = np.unique(mesh.cells)
-    names = np.unique(label[used])
-    held = np.zeros((mesh.num_points, fields.ncomp), dtype=bool)
-    for r in model.relations:
-        node, col = np.divmod(r.a_dofs, fields.ncomp)
-        held[node, col] = True
-    out = []
-    for f in checked:
-        cols = fields.columns(f.name)
-        body_held = np.zeros(mesh.num_points, dtype=bool)
-        np.logical_or.at(body_held, label, held[:, cols].any(axis=1))
-        for b in names[~body_held[names]]:
-            cells = np.flatnonzero(label[mesh.cells[:, 0]] == b)
-            out.append(_sentence(f.name, names.size, cells.size, cells[0], cells[-1]))
-    return out
-
-
-def _sentence(field: str, nbodies: int, ncells: int, first: int, last: int) -> str:
-    which = f"body of {ncells} cells (cells {first}..{last})" if nbodies > 1 else "the body"
-    return f"no relation holds field {field!r} on {which}"
-
-
-def _unsupported_distributed(model, checked) -> list[str]:
-    """``unsupported`` from the parts: labels of the whole mesh's bodies, the relations' input
-    nodes looked up among each rank's owned nodes, cells counted by the rank owning their
-    lowest-owner node. Everything exchanged is a body's or a relation's size."""
-    comm, mesh, fields = model.comm, model.mesh, model.fields
     label = bodies_distributed(comm, mesh)
     n_owned = mesh.n_owned
     owned_ids = np.asarray(mesh.global_nodes[:n_owned], dtype=np.int64)  # increasing input id
@@ -122,3 +95,8 @@ def _unsupported_distributed(model, checked) -> list[str]:
             last = comm.allreduce(int(ids.max()) if ids.size else -1, op=MPI.MAX)
             out.append(_sentence(f.name, names.size, ncells, first, last))
     return out
+
+
+def _sentence(field: str, nbodies: int, ncells: int, first: int, last: int) -> str:
+    which = f"body of {ncells} cells (cells {first}..{last})" if nbodies > 1 else "the body"
+    return f"no relation holds field {field!r} on {which}"

@@ -38,15 +38,11 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
     system = SaddleSystem(comm, model)
     relations_meta = {r.name: (r.nrows, r.sense != "=") for r in model.relations}
     unknowns = {"unknowns": " ".join(f.output for f in model.fields),
-                "dofs": getattr(model.mesh, "num_global_points", model.mesh.num_points) * model.ncomp,
+                "dofs": model.mesh.num_global_points * model.ncomp,
                 "resultant_components": " ".join(resultant_labels(model.fields, model.mesh.dim))}
-    mesh, part = model.mesh, system.part
     mode = output_mode(output or scene.output_mode, comm, unknowns["dofs"])
-    if model.distributed:   # the file's mesh and rows from every rank's owned part
-        written, owners = output_mesh(comm, mesh, system.part)
-    else:
-        # the rows each rank reports: its nodes, and the cells whose lowest node owner it is
-        written, owners = mesh, (part.node_part, part.node_part[mesh.cells].min(axis=1))
+    # the file's mesh and rows from every rank's owned part
+    written, owners = output_mesh(comm, model.mesh, system.part)
     writer = result_writer(mode, comm, out, written, scene.text, petsc_version(), relations_meta,
                            attrs=unknowns, owners=owners)
     status = "complete"
@@ -292,7 +288,7 @@ def _max_strain_increment(comm, system: SaddleSystem, dq: np.ndarray) -> float:
     if mech is None:
         return comm.allreduce(0.0, op=MPI.MAX)
     mesh = system.model.mesh
-    owned = system.part.owned_cells(comm.rank, mesh.cells)
+    owned = system.owned_cells
     if owned.size == 0:
         return comm.allreduce(0.0, op=MPI.MAX)
     from parsolve.fem.kernels import strains

@@ -7,6 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from mpi4py import MPI
 
 from parsolve.collective import agree
 from parsolve.effects.base import Effect
@@ -19,7 +20,6 @@ from parsolve.fields import FieldSet
 from parsolve.mesh import blocks, memory
 from parsolve.mesh.checks import check_mesh
 from parsolve.mesh.distribute import LocalMesh, distribute
-from parsolve.mesh.local_regions import LocalRegions
 from parsolve.mesh.generators import GENERATORS, make_quadratic
 from parsolve.mesh.mesh import Mesh
 from parsolve.mesh.reader import read_mesh
@@ -31,22 +31,17 @@ from parsolve.scene import Scene
 @dataclass
 class Model:
     scene: Scene
-    mesh: Mesh
+    mesh: LocalMesh       # this rank's part (``mesh.distribute``; on 1 rank the whole mesh)
     fields: FieldSet
     effects: list[Effect]
     patterns: dict[str, LoadPattern]
     relations: list[Relation]
     reference_patterns: tuple[str, ...] = ()  # applied by a solver (arc-length), not as loads
-    comm: object = None   # the ranks sharing a distributed mesh (None: every rank has it all)
-
-    @property
-    def distributed(self) -> bool:
-        """Each rank holds only its part of the mesh (``mesh.distribute``)."""
-        return isinstance(self.mesh, LocalMesh)
+    comm: object = None   # the ranks sharing the mesh
 
     def regions(self) -> RegionResolver:
         """A fresh resolver of the scene's regions on this model's mesh."""
-        return resolver(self.scene, self.mesh, self.comm)
+        return RegionResolver(self.mesh, self.scene.regions, self.scene.source, self.comm)
 
     @property
     def ncomp(self) -> int:
@@ -71,7 +66,7 @@ class Model:
                    for e in self.effects)
 
     def initial_q(self) -> np.ndarray:
-        """The primal vector at t = 0 (input numbering): the effects' initial values, else 0."""
+        """The primal vector at t = 0 (this rank's DOFs): the effects' initial values, else 0."""
         q = np.zeros((self.mesh.num_points, self.ncomp))
         for e in self.effects:
             for name, values in e.initial().items():
@@ -79,7 +74,7 @@ class Model:
         return q.ravel()
 
     def external_load(self, t: float) -> np.ndarray:
-        """Known loads at t (input DOF numbering); patterns used as duals are not applied."""
+        """Known loads at t (this rank's DOFs); patterns used as duals are not applied."""
         duals = {r.meta.get("dual") for r in self.relations} | set(self.reference_patterns)
         f = np.zeros(self.mesh.num_points * self.ncomp)
         for name, pattern in self.patterns.items():
@@ -96,24 +91,22 @@ def mesh_source(scene: Scene) -> tuple[str, str]:
 
 
 def build_mesh(scene: Scene, check_cells: bool = True) -> Mesh:
-    """The scene's mesh, checked: size against the machine's memory (a generator's before it
-    runs, a file's once read), coordinates, cell shapes (unless ``check_cells`` is False: a
-    distributed run checks them by blocks); ``mesh.warnings`` says the rest."""
+    """The scene's whole mesh, checked: its size against this machine's memory (a generator's
+    before it runs, a file's once read; this process alone: rank 0 builds it), coordinates,
+    cell shapes (unless ``check_cells`` is False: ``build_model`` checks them by blocks);
+    ``mesh.warnings`` says the rest."""
     spec = scene.mesh
-    preset = scene.solver.preset
     source, key = mesh_source(scene)
     if spec.file is not None:
         mesh = read_mesh(source)
-        memory.check_fits(_points_after_order(mesh, spec.order), mesh.dim, preset, source, key,
-                          f"a mesh of {mesh.num_cells} {mesh.cell_type} cells")
+        memory.check_whole_mesh(_points_after_order(mesh, spec.order), mesh.dim, source, key,
+                                f"a mesh of {mesh.num_cells} {mesh.cell_type} cells")
     else:
-        try:
-            points, cells, dim = memory.cell_counts(spec.generator, spec.params, spec.order)
-        except (TypeError, ValueError):  # bad parameters: the generator says which below
-            points = None
-        if points is not None and points > 0:
-            memory.check_fits(points, dim, preset, scene.source, "mesh.generator",
-                              f"the {spec.generator} of {cells} cells and {points} nodes")
+        counted = _generated_counts(scene)   # None: bad parameters, the generator says which
+        if counted is not None:
+            points, cells, dim = counted
+            memory.check_whole_mesh(points, dim, scene.source, "mesh.generator",
+                                    f"the {spec.generator} of {cells} cells and {points} nodes")
         try:
             with np.errstate(over="raise", divide="raise", invalid="raise"):
                 mesh = GENERATORS[spec.generator](**spec.params)
@@ -139,7 +132,7 @@ class BuildContext:
     fields: FieldSet | None = None
 
 
-def build_effects(scene: Scene, mesh: Mesh, regions: RegionResolver) -> tuple[list[Effect], FieldSet]:
+def build_effects(scene: Scene, mesh: LocalMesh, regions: RegionResolver) -> tuple[list[Effect], FieldSet]:
     """The effects the scene lists, in registry order: the physics first (they declare the
     fields), then the couplings that need the fields (solubility)."""
     effects: list[Effect] = []
@@ -185,29 +178,20 @@ def _generator_key(exc: Exception) -> str:
     return f"mesh.{name}" if name.isidentifier() and name != "invalid" else "mesh"
 
 
-def resolver(scene: Scene, mesh: Mesh, comm=None) -> RegionResolver:
-    if isinstance(mesh, LocalMesh):
-        return LocalRegions(comm, mesh, scene.regions, scene.source)
-    return RegionResolver(mesh, scene.regions, scene.source)
-
-
-def distributed_mesh(scene: Scene, comm) -> bool:
-    """Whether to distribute the mesh: asked for (``[solver] mesh``), on several ranks, and
-    every effect of the scene works on a mesh part (the others need the whole mesh)."""
-    if comm is None or comm.size == 1 or scene.solver.mesh == "replicated":
-        return False
-    return all(EFFECTS[name].on_parts(spec)
-               for name, specs in scene.effect_specs.items() for spec in specs)
-
-
 def _distributed_mesh(scene: Scene, comm) -> LocalMesh:
-    """Rank 0 builds and checks the whole mesh, then every rank gets its part; an input error
-    of rank 0's is raised on every rank."""
+    """Rank 0 builds and checks the whole mesh, then every rank gets its part (on 1 rank: the
+    whole mesh itself, not a copy); an input error of rank 0's is raised on every rank. The
+    solve's share of every rank is checked against the memory before anything is built when
+    the mesh's size is known from a generator's parameters, else once the mesh is read."""
+    counted = _generated_counts(scene)
+    if counted is not None:   # every rank the same counts: the collective verdict before the build
+        points, cells, dim = counted
+        memory.check_fits(points, dim, scene.solver.preset, scene.source, "mesh.generator",
+                          f"the {scene.mesh.generator} of {cells} cells and {points} nodes")
     whole, error = None, None
     if comm.rank == 0:
         try:
-            with memory.whole_mesh_only():   # rank 0 alone (see README: the whole on one rank)
-                whole = build_mesh(scene, check_cells=False)
+            whole = build_mesh(scene, check_cells=False)   # rank 0 alone: the whole on one rank
         except InputError as exc:
             error = (exc.message, exc.source, exc.key)
     error = comm.bcast(error, root=0)
@@ -216,32 +200,45 @@ def _distributed_mesh(scene: Scene, comm) -> LocalMesh:
     # the cells checked and the dual graph built by every rank on a block of cells
     block = blocks.scatter_blocks(comm, whole)
     blocks.check_jacobians(comm, block, *mesh_source(scene))
-    graph = blocks.facet_groups(comm, block, *mesh_source(scene))
+    block.coords = None   # (the facets need the cells only: the coordinates go before them)
+    graph = blocks.facet_groups(comm, block, *mesh_source(scene), graph=comm.size > 1)
     del block
     part = distribute(comm, whole, scene.solver.partitioner, graph)
     del whole
-    # the solve, each rank its share (every rank's machine: the verdict is collective)
-    source, key = mesh_source(scene)
-    key = "mesh.generator" if key == "mesh" else key   # as build_mesh's memory check names it
-    memory.check_fits_distributed(part.num_global_points, part.dim, scene.solver.preset, source,
-                                  key, f"a mesh of {part.num_global_cells} {part.cell_type} cells")
+    if counted is None:   # the solve, each rank its share (every rank's machine: collective)
+        source, key = mesh_source(scene)
+        key = "mesh.generator" if key == "mesh" else key   # as build_mesh's memory check names it
+        memory.check_fits(part.num_global_points, part.dim, scene.solver.preset, source, key,
+                          f"a mesh of {part.num_global_cells} {part.cell_type} cells")
     return part
 
 
+def _generated_counts(scene: Scene) -> tuple[int, int, int] | None:
+    """(points, cells, dim) of a generated mesh from its parameters (None: a file, or
+    parameters the generator refuses: it says why when it runs)."""
+    spec = scene.mesh
+    if spec.file is not None:
+        return None
+    try:
+        counts = memory.cell_counts(spec.generator, spec.params, spec.order)
+    except (TypeError, ValueError):
+        return None
+    return counts if counts[0] > 0 else None
+
+
 def build_model(scene: Scene, comm=None) -> Model:
-    """The model of a scene; with ``comm`` and a scene that allows it, on a distributed mesh
-    (``distributed_mesh``): then collective."""
-    distributed = distributed_mesh(scene, comm)
-    mesh = _distributed_mesh(scene, comm) if distributed else build_mesh(scene)
-    regions = resolver(scene, mesh, comm)
-    # on a distributed mesh, a check of a rank's part (cells without a material) fails there
-    # alone: every rank raises it (the checks that decide for the whole mesh are collective)
-    together = (lambda fn, *a: agree(comm, fn, *a)) if distributed else (lambda fn, *a: fn(*a))
-    effects, fields = together(build_effects, scene, mesh, regions)
-    patterns = together(load_patterns, mesh, scene.loads, regions, scene.evolutions,
-                        scene.thickness, scene.source, fields)
-    relations = together(build_relations, scene.relations, regions, scene.evolutions, patterns,
-                         fields, scene.source, scene.solver.eliminate)
+    """The model of a scene on this rank's part of the mesh; collective over ``comm`` (None:
+    this process alone, ``MPI.COMM_SELF``)."""
+    comm = MPI.COMM_SELF if comm is None else comm
+    mesh = _distributed_mesh(scene, comm)
+    regions = RegionResolver(mesh, scene.regions, scene.source, comm)
+    # a check of a rank's part (cells without a material) fails there alone: every rank
+    # raises it (the checks that decide for the whole mesh are collective)
+    effects, fields = agree(comm, build_effects, scene, mesh, regions)
+    patterns = agree(comm, load_patterns, mesh, scene.loads, regions, scene.evolutions,
+                     scene.thickness, scene.source, fields)
+    relations = agree(comm, build_relations, scene.relations, regions, scene.evolutions,
+                      patterns, fields, scene.source, scene.solver.eliminate)
     names = {r.name for r in relations}
     for e in effects:
         for r in e.relations():
@@ -251,5 +248,4 @@ def build_model(scene: Scene, comm=None) -> Model:
             relations.append(r)
             names.add(r.name)
     reference = (scene.nonlinear.arc_pattern,) if scene.nonlinear.method == "arc_length" else ()
-    return Model(scene, mesh, fields, effects, patterns, relations, reference,
-                 comm if distributed else None)
+    return Model(scene, mesh, fields, effects, patterns, relations, reference, comm)

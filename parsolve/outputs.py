@@ -3,8 +3,8 @@
 and resultant, and for transient runs the balance of each conserved field.
 
 Per-cell values stay on the rank that owns the cell, nodal averages on the rank that owns the
-node (sums over the ranks' owned cells, reduce-scattered, divided by the summed weights): the
-result writer places every rank's rows (parsolve.io)."""
+node (sums over its local cells, complete on its owned nodes, divided by the summed weights):
+the result writer places every rank's rows (parsolve.io)."""
 
 from __future__ import annotations
 
@@ -12,18 +12,6 @@ import numpy as np
 from mpi4py import MPI
 
 from parsolve.io.slabs import OwnedRows
-
-
-def owned_sums(comm, node_part: np.ndarray, sums: np.ndarray, weights: np.ndarray):
-    """(sums (n_owned, k), weights (n_owned,)) of this rank's owned nodes, in increasing id,
-    from every rank's contributions over all nodes: one reduce-scatter, no gather."""
-    order = np.argsort(node_part, kind="stable")   # rows grouped by owner, ids increasing
-    counts = np.bincount(node_part, minlength=comm.size)
-    both = np.ascontiguousarray(np.column_stack([sums, weights])[order], dtype=np.float64)
-    k = both.shape[1]
-    out = np.empty((int(counts[comm.rank]), k), dtype=np.float64)
-    comm.Reduce_scatter([both, MPI.DOUBLE], [out, MPI.DOUBLE], recvcounts=counts * k, op=MPI.SUM)
-    return out[:, :-1], out[:, -1]
 
 
 def resultant(relation, lam: np.ndarray, fields, points) -> np.ndarray:
@@ -63,17 +51,12 @@ def step_outputs(comm: MPI.Comm, system, q: np.ndarray, multipliers: dict, newto
     """(fields, cell fields, relations) of a step; ``newton`` carries the material states."""
     model = system.model
     mesh = model.mesh
-    owned = system.part.owned_cells(comm.rank, mesh.cells)
     values = system.composition.values(q)
-    if system.distributed:   # owned nodes first: this rank's rows, in increasing input id
-        n_owned = mesh.n_owned
-        fields = {f.output: OwnedRows(values[f.name][:n_owned]) for f in model.fields}
-        # every local cell: the sums on owned nodes are then complete, no exchange
-        computed = system.local_cells
-        keep = np.isin(computed, owned, assume_unique=True)
-    else:
-        fields = {f.output: values[f.name] for f in model.fields}
-        computed = owned
+    # owned nodes first: this rank's rows, in increasing input id
+    n_owned = mesh.n_owned
+    fields = {f.output: OwnedRows(values[f.name][:n_owned]) for f in model.fields}
+    # every local cell: the sums on owned nodes are then complete, no exchange
+    computed, keep = system.local_cells, system.reported
     cell_fields = {}
     for k, effect in enumerate(model.effects):
         extra = None
@@ -81,14 +64,11 @@ def step_outputs(comm: MPI.Comm, system, q: np.ndarray, multipliers: dict, newto
             extra = (newton.extras[k], newton.states[k])
         nodal, cells = effect.outputs(computed, values, extra, system.local_cells)
         for name, (sums, weights) in nodal.items():  # each rank its owned nodes' averages
-            if system.distributed:
-                sums, weights = sums[:n_owned], weights[:n_owned]
-            else:
-                sums, weights = owned_sums(comm, system.part.node_part, sums, weights)
+            sums, weights = sums[:n_owned], weights[:n_owned]
             fields[name] = OwnedRows(sums / np.maximum(weights, 1e-300)[:, None])
         for name, value in cells.items():  # owned cells, in increasing id: the writer places them
             value = np.asarray(value, dtype=float)
-            cell_fields[name] = OwnedRows(value[keep] if system.distributed else value)
+            cell_fields[name] = OwnedRows(value[keep])
     rel_out = {}
     active = newton.active.active if newton is not None else None
     for r in model.relations:

@@ -10,6 +10,7 @@ import difflib
 import inspect
 import math
 import re
+import sys
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -227,9 +228,9 @@ class SolverSpec:
     eliminate: bool
     split: str = "primal"   # fieldsplit blocks: "primal" (q, lambda) or "fields" (one per field)
     partitioner: str = DEFAULT_PARTITIONER  # cells to ranks: "scotch" (PT-Scotch) or "bisection"
-    # "distributed" (default): each rank holds its part of the mesh (when every effect allows
-    # it); "replicated": every rank holds the whole mesh
-    mesh: str = "distributed"
+    # ([solver] mesh is deprecated: every run holds its part of the mesh, 1 rank included; the
+    # key is accepted whatever its value, ignored with a warning (``_deprecated_mesh``), and
+    # will be refused in the next release)
 
 
 @dataclass
@@ -722,10 +723,30 @@ def _solver(t: Table) -> SolverSpec:
     eliminate = t.get("eliminate", bool, True)
     split = t.get("split", str, "primal", choices=("primal", "fields"))
     partitioner = t.get("partitioner", str, DEFAULT_PARTITIONER, choices=PARTITIONERS)
-    mesh = t.get("mesh", str, "distributed", choices=("replicated", "distributed"))
+    if "mesh" in t.data:
+        t.used.add("mesh")   # whatever its value
+        _deprecated_mesh(t)
     options = _flatten(t.table("petsc", {}))
     t.done()
-    return SolverSpec(preset, prefix, options, eliminate, split, partitioner, mesh)
+    return SolverSpec(preset, prefix, options, eliminate, split, partitioner)
+
+
+_MESH_WARNED = False
+
+
+def _deprecated_mesh(t: Table) -> None:
+    """``[solver] mesh`` (any value): accepted and ignored for this release, said once per
+    process on rank 0; the next release refuses it (exit 2)."""
+    global _MESH_WARNED
+    if _MESH_WARNED:
+        return
+    _MESH_WARNED = True
+    from mpi4py import MPI
+
+    if MPI.COMM_WORLD.rank == 0:
+        print(f"parsolve: warning: {t.source}: {t.key('mesh')}: deprecated and ignored (every "
+              "run distributes the mesh, 1 rank included); it will be refused in the next "
+              "release: remove it", file=sys.stderr)
 
 
 def _axisymmetric_measure(mesh: MeshSpec, source: str):

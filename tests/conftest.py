@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import sys
 from pathlib import Path
 
@@ -56,11 +55,6 @@ def read_results(path: Path) -> dict:
     return out
 
 
-# PARSOLVE_TEST_MESH=replicated (or distributed, the default) runs every scene of the tests on
-# that mesh unless a test says otherwise: scripts/test.sh checks the replicated path this way
-TEST_MESH = os.environ.get("PARSOLVE_TEST_MESH")
-
-
 def run_scene(scene, out: Path, comm=MPI.COMM_WORLD, options: dict | None = None,
               export: str | None = None, solver: dict | None = None) -> dict:
     """Run a scene (path, or TOML text written beside ``out``) and read its results on every
@@ -76,7 +70,7 @@ def run_scene(scene, out: Path, comm=MPI.COMM_WORLD, options: dict | None = None
         comm.Barrier()
         scene = src
     scene = load_scene(scene)
-    for key, value in (({"mesh": TEST_MESH} if TEST_MESH else {}) | (solver or {})).items():
+    for key, value in (solver or {}).items():
         setattr(scene.solver, key, value)
     model = build_model(scene, comm)
     try:
@@ -101,6 +95,32 @@ def run(shared_tmp):
     return _run
 
 
+def saddle_of_input_dofs(comm, system) -> np.ndarray:
+    """The saddle index of every input DOF of the whole mesh (each from its owner; a rank's
+    ``system.saddle_of_input`` covers its local DOFs only)."""
+    from parsolve.mesh.regions import allgather_rows
+
+    mesh, nc = system.model.mesh, system.model.ncomp
+    own = system.owned_input_dofs
+    node, comp = np.divmod(own, nc)
+    pairs = allgather_rows(comm, np.column_stack([mesh.global_nodes[node].astype(np.int64) * nc
+                                                  + comp, system.saddle_of_input[own]]))
+    out = np.empty(mesh.num_global_points * nc, dtype=np.int64)
+    out[pairs[:, 0]] = pairs[:, 1]
+    return out
+
+
+def whole_points(comm, mesh) -> np.ndarray:
+    """The whole mesh's points in input order, from every rank's owned ones."""
+    from parsolve.mesh.regions import allgather_rows
+
+    ids = allgather_rows(comm, mesh.global_nodes[:mesh.n_owned].astype(np.int64))
+    pts = allgather_rows(comm, np.ascontiguousarray(mesh.points[:mesh.n_owned]))
+    out = np.empty((mesh.num_global_points, mesh.dim))
+    out[ids] = pts
+    return out
+
+
 def rel_err(a, b) -> float:
     a, b = np.asarray(a, float), np.asarray(b, float)
     return float(np.abs(a - b).max() / max(np.abs(b).max(), 1e-300))
@@ -114,7 +134,7 @@ def solve_in_process(text: str, comm=MPI.COMM_WORLD, t: float = 1.0, options: di
     from parsolve.solvers.system import SaddleSystem
     import tomllib
 
-    model = build_model(parse_scene(tomllib.loads(text), "test.toml", text))
+    model = build_model(parse_scene(tomllib.loads(text), "test.toml", text), comm)
     system = SaddleSystem(comm, model)
     mat = system.assemble()
     solver = make_solver(comm, system, options or {})

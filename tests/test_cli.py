@@ -369,9 +369,6 @@ def test_marked_relations_report_their_resultant(tmp_path, cli):
     assert lines[-2].strip() == "control: resultant 10000 0 -500"  # moment: -F · H/2
 
 
-DISTRIBUTED = '\n[solver]\nmesh = "distributed"\n'
-
-
 @pytest.mark.parametrize("mode", ["swmr", "parallel"])
 @pytest.mark.parametrize("nranks", [2, 3])
 def test_mpirun_distributed_mesh_matches_one_rank(nranks, mode, tmp_path):
@@ -379,7 +376,7 @@ def test_mpirun_distributed_mesh_matches_one_rank(nranks, mode, tmp_path):
     the one-rank file, in input order, to round-off."""
     scene = tmp_path / "k.toml"
     scene.write_text((CONFIGS / "kirsch.toml").read_text().replace("n_radial = 48", "n_radial = 12")
-                     .replace("n_angular = 64", "n_angular = 16") + DISTRIBUTED)
+                     .replace("n_angular = 64", "n_angular = 16"))
     one, many = tmp_path / "one.h5", tmp_path / "many.h5"
     assert parsolve("run", scene, "-o", one).returncode == 0
     proc = parsolve("run", scene, "-o", many, "--output-mode", mode, mpi=nranks)
@@ -410,7 +407,7 @@ def test_distributed_input_errors_on_every_rank(case, tmp_path):
         text, source, key = BAD[case]
     if case in ("bad selector", "not finite on one part"):
         text = text.replace('region = "corner"', 'region = "odd"')
-    (tmp_path / "scene.toml").write_text(text + DISTRIBUTED)
+    (tmp_path / "scene.toml").write_text(text)
     proc = parsolve("run", "scene.toml", "-o", tmp_path / "out.h5", cwd=tmp_path, mpi=2)
     assert proc.returncode == 2, proc.stderr
     lines = [line for line in proc.stderr.strip().splitlines() if line.startswith("parsolve")]

@@ -120,7 +120,7 @@ def _strain(spec, regions, evol, source: str, fields) -> rel.Relation:
         raise InputError(f"region {spec.region!r} contains no cell (a strain needs cells)",
                          source, spec.key + ".region")
     dofs, coefs, vol = strain_rows(regions.mesh, region.cells, spec.direction, fields=fields)
-    # (on a distributed mesh: the owned cells' rows of every rank, in input ids)
+    # (the owned cells' rows of every rank, in input ids)
     cells, dofs, coefs, vol = regions.owned_cell_rows(region.cells, fields.ncomp, dofs, coefs,
                                                         vol)
     if not spec.per_cell:

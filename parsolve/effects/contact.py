@@ -92,7 +92,7 @@ from parsolve.contact.surfaces import Surfaces, canonical_facets
 from parsolve.effects.base import Effect
 from parsolve.errors import InputError
 from parsolve.evolution import CONSTANT
-from parsolve.mesh.local_regions import gather_facets
+from parsolve.mesh.regions import gather_facets
 from parsolve.mesh.topology import FACETS, boundary_facets
 from parsolve.relations import Relation
 from parsolve.scene import NAME_PATTERN
@@ -181,8 +181,7 @@ class Contact(Effect):
         self.symmetric = spec.mu == 0.0
         p = self.pairing
         n, dm1 = len(p), mesh.dim - 1
-        extent = mesh.extent if self.values.distributed else np.ptp(mesh.points, axis=0)
-        size = float(np.max(extent))   # the whole mesh's (a part's own would differ)
+        size = float(np.max(mesh.extent))   # the whole mesh's (a part's own would differ)
         closed = p.gap <= spec.closed * size
         # per node: state, slip direction (tangent basis); the committed ones and the trial ones
         self.node_state = np.where(closed, fr.STICK, fr.OPEN).astype(np.int8)
@@ -199,12 +198,10 @@ class Contact(Effect):
         is a boundary facet of the whole mesh) and the counts are summed: every rank agrees."""
         key = self.spec.key
         slave = regions(self.spec.slave, f"{key}.slave").nodes
-        if self.values.distributed:
-            slave = slave[slave < self.mesh.n_owned]
+        slave = slave[slave < self.mesh.n_owned]
         boundary = np.unique(boundary_facets(self.mesh)[0])
         counts = np.array([np.setdiff1d(slave, boundary).size, slave.size])
-        if self.values.distributed:
-            counts = self.values.comm.allreduce(counts)
+        counts = self.values.comm.allreduce(counts)
         off, total = (int(c) for c in counts)
         if total == 0 or off:
             raise InputError(f"the slave region {self.spec.slave!r} must lie on the boundary "
@@ -214,21 +211,15 @@ class Contact(Effect):
     def _slave_nodes(self, regions) -> tuple[np.ndarray, np.ndarray]:
         """The whole slave region: sorted input ids and their coordinates."""
         key = f"{self.spec.key}.slave"
-        if self.values.distributed:
-            ids = regions.relation_nodes(self.spec.slave, key)
-            return ids, regions.points_of(ids)
-        ids = np.unique(regions(self.spec.slave, key).nodes)
-        return ids, self.mesh.points[ids]
+        ids = regions.relation_nodes(self.spec.slave, key)
+        return ids, regions.points_of(ids)
 
     def _facets(self, region) -> tuple[np.ndarray, np.ndarray]:
         """A region's boundary facets on the whole mesh: input ids and coordinates, each facet
         once, in the canonical order (``surfaces``)."""
         nfn = len(FACETS[self.mesh.cell_type][0])
         facets = np.asarray(region.facets, dtype=np.int64).reshape(-1, nfn)
-        if self.values.distributed:
-            ids, pts = gather_facets(self.values.comm, self.mesh, facets, nfn)
-        else:
-            ids, pts = facets, self.mesh.points[facets]
+        ids, pts = gather_facets(self.values.comm, self.mesh, facets, nfn)
         return canonical_facets(ids, pts)
 
     def _pair(self, regions):

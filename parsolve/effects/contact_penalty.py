@@ -138,8 +138,6 @@ def slave_areas(values: PartValues, mesh, slave: np.ndarray, thickness: float) -
     each rank computes them on its local facets and keeps its owned nodes' (every cell through
     an owned node is local, so a boundary facet through it is one of the whole mesh and all of
     them are here), summed over the ranks: one reduction of the pairing's size."""
-    if not values.distributed:
-        return nodal_areas(mesh, slave, thickness)
     local = values.local_nodes(slave)
     here = local >= 0
     area = np.zeros(len(slave))

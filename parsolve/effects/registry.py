@@ -22,13 +22,6 @@ class Entry:
     fields: Callable = lambda spec, dim: {}
     regions: Callable = lambda spec: []
     evolutions: Callable = lambda spec: []
-    # works on one rank's part of a distributed mesh (its cells, its owned rows); or a
-    # function of the spec when that depends on it
-    distributed: bool | Callable = False
-
-    def on_parts(self, spec) -> bool:
-        """Whether this spec's effect works on a distributed mesh."""
-        return bool(self.distributed(spec)) if callable(self.distributed) else self.distributed
 
 
 def _build_diffusion(spec, ctx):
@@ -58,23 +51,20 @@ def _build_contact(spec, ctx):
 EFFECTS: dict[str, Entry] = {
     "diffusion": Entry("diffusion", True, lambda t, dim: diffusion.parse(t, dim), _build_diffusion,
                        fields=lambda spec, dim: {spec.field: 1},
-                       regions=lambda spec: [(m.region, m.key + ".region") for m in spec.materials],
-                       distributed=True),
+                       regions=lambda spec: [(m.region, m.key + ".region") for m in spec.materials]),
     "solubility": Entry("solubility", False, lambda t, dim: solubility.parse(t), _build_solubility,
                         coupling=True,
                         regions=lambda spec: [(name, key.rsplit(".", 1)[0] + ".region")
                                               for name, _, key in spec.saturation],
-                        evolutions=lambda spec: [(spec.evolution, spec.key + ".evolution")],
-                        distributed=True),
+                        evolutions=lambda spec: [(spec.evolution, spec.key + ".evolution")]),
     # the temperature of a diffusion field as an eigenstrain of the elasticity
     "thermal_expansion": Entry("thermal_expansion", True, thermal_expansion.parse,
                                thermal_expansion.build, coupling=True,
-                               regions=thermal_expansion.regions, distributed=True),
+                               regions=thermal_expansion.regions),
     # on parts (surfaces gathered once), the relations form and the penalty and augmented-
     # Lagrangian baselines alike
-    "contact": Entry("contact", True, _parse_contact, _build_contact, coupling=True,
-                     distributed=True),
+    "contact": Entry("contact", True, _parse_contact, _build_contact, coupling=True),
     "springs": Entry("springs", True, springs.parse,
                      lambda spec, ctx: springs.Springs(spec, ctx.mesh, ctx.regions, ctx.scene),
-                     regions=springs.regions, distributed=True),
+                     regions=springs.regions),
 }

@@ -39,8 +39,7 @@ from parsolve.effects.base import Effect
 from parsolve.errors import InputError
 from parsolve.io.slabs import OwnedRows
 from parsolve.mesh import selectors
-from parsolve.mesh.distribute import LocalMesh
-from parsolve.mesh.local_regions import allgather_rows
+from parsolve.mesh.regions import allgather_rows
 from parsolve.relations import Relation
 
 
@@ -75,7 +74,7 @@ def _saturation(t) -> float | str:
 
 
 class Solubility(Effect):
-    """On a distributed mesh (``LocalMesh``) each rank knows c_sat on its owned nodes only;
+    """Each rank (its ``LocalMesh``) knows c_sat on its owned nodes only;
     the relation is whole on every rank (the size of its region: every node with a c_sat),
     in input numbering, gathered from the ranks' owned nodes in input order."""
 
@@ -88,15 +87,15 @@ class Solubility(Effect):
             if name not in fields or not fields[name].scalar:
                 raise InputError(f"names no scalar diffusion field: {name!r} (fields: "
                                  f"{', '.join(fields.names())})", source, f"{spec.key}.{key}")
-        self.comm = regions.comm if isinstance(mesh, LocalMesh) else None
+        self.comm = regions.comm
         self.c_sat = self._levels(regions)
         self.nodes, self.saturation = self._relation_nodes()
         self.evolution = evolutions[spec.evolution]
 
     @property
     def n_nodes(self) -> int:
-        """The nodes this rank gives c_sat: every node, or a part's owned nodes."""
-        return self.mesh.n_owned if self.comm is not None else self.mesh.num_points
+        """The nodes this rank gives c_sat: its owned nodes."""
+        return self.mesh.n_owned
 
     def _levels(self, regions) -> np.ndarray:
         """c_sat at every node of ``n_nodes`` (later region entries override earlier ones)."""
@@ -105,8 +104,6 @@ class Solubility(Effect):
         nodes = [regions(region, key.rsplit(".", 1)[0] + ".region").nodes
                  for region, _, key in self.spec.saturation]
         nodes = [k[k < n] for k in nodes]
-        if self.comm is None:
-            return self._fill(nodes)
         return agree(self.comm, self._fill, nodes)   # an error on one part: on every rank
 
     def _fill(self, nodes: list[np.ndarray]) -> np.ndarray:
@@ -123,8 +120,6 @@ class Solubility(Effect):
         """(input ids of the nodes with a c_sat, increasing; their c_sat): on a part, every
         rank's owned ones, gathered (a collective of the region's size)."""
         has = np.flatnonzero(np.isfinite(self.c_sat))
-        if self.comm is None:
-            return has, self.c_sat[has]
         ids = allgather_rows(self.comm, self.mesh.global_nodes[has])
         values = allgather_rows(self.comm, self.c_sat[has])
         order = np.argsort(ids)
@@ -159,8 +154,5 @@ class Solubility(Effect):
         out = np.full(self.n_nodes, -1, dtype=np.int8)
         has = np.flatnonzero(np.isfinite(self.c_sat))
         saturated = active["solubility"].reshape(-1, 2)[:, 1]   # per relation node
-        if self.comm is None:
-            out[has] = saturated
-            return {"solubility_state": out[:, None]}, {}
         out[has] = saturated[np.searchsorted(self.nodes, self.mesh.global_nodes[has])]
         return {"solubility_state": OwnedRows(out[:, None])}, {}

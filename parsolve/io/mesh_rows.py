@@ -1,4 +1,4 @@
-"""The result file's mesh from a distributed mesh: every rank hands the writers the rows it
+"""The result file's mesh from the ranks' parts: every rank hands the writers the rows it
 owns (its owned nodes' coordinates, its owned cells' connectivity in input ids), never the
 whole; the writers place them in input order (``slabs``)."""
 

@@ -1,10 +1,10 @@
-"""The solution on a distributed mesh: each rank's owned rows of the saddle vector, the values
-of its ghost nodes fetched from their owners, and every multiplier (a relation's size).
+"""The solution as a rank holds it: its owned rows of the saddle vector, the values of its
+ghost nodes fetched from their owners, and every multiplier (a relation's size).
 
 ``GhostExchange`` is planned once (who needs which saddle rows from whom) and then moves the
 values with two buffer ``Alltoallv`` calls; ``SaddleValues`` holds what a rank knows of the
-saddle vector and answers ``x[saddle indices]`` for those indices, as the whole vector did on
-a replicated mesh, without being as long as it.
+saddle vector and answers ``x[saddle indices]`` for those indices, as the whole vector would,
+without being as long as it.
 """
 
 from __future__ import annotations
@@ -37,11 +37,15 @@ class SaddleValues:
                              f"({miss.size} of {idx.size})")
         return order[pos]
 
-    def _all(self) -> np.ndarray:
-        return np.concatenate([self.q, self.lam])
-
     def __getitem__(self, idx) -> np.ndarray:
-        return self._all()[self._where(idx)]
+        # each value from q or lam directly: no concatenation of both at every lookup
+        where = self._where(idx)
+        nq = self.q.size
+        in_q = where < nq
+        out = np.empty(where.shape)
+        out[in_q] = self.q[where[in_q]]
+        out[~in_q] = self.lam[where[~in_q] - nq]
+        return out
 
     def copy(self) -> "SaddleValues":
         return SaddleValues(self._keys, self.q.copy(), self.lam.copy())

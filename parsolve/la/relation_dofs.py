@@ -1,30 +1,12 @@
-"""Relations on a distributed mesh are kept whole on every rank, in input numbering (they are
-the size of the boundaries and regions they constrain, not of the mesh). ``RelationDofs`` maps
-the input nodes they name to the global numbering, to this rank's local DOFs, and to their
-coordinates, each found once by a reduction over the relation nodes.
-
-On a replicated mesh the same maps are the partition's arrays (``ReplicatedDofs``)."""
+"""Relations are kept whole on every rank, in input numbering (they are the size of the
+boundaries and regions they constrain, not of the mesh). ``RelationDofs`` maps the input nodes
+they name to the global numbering, to this rank's local DOFs, and to their coordinates, each
+found once by a reduction over the relation nodes."""
 
 from __future__ import annotations
 
 import numpy as np
 from mpi4py import MPI
-
-
-class ReplicatedDofs:
-    """Input DOFs are the mesh's DOFs."""
-
-    def __init__(self, layout, points: np.ndarray, ncomp: int):
-        self.layout, self.points, self.ncomp = layout, points, ncomp
-
-    def new_dof(self, dofs: np.ndarray) -> np.ndarray:
-        return self.layout.new_dof(dofs)
-
-    def local(self, dofs: np.ndarray) -> np.ndarray:
-        return np.asarray(dofs, dtype=np.int64)
-
-    def points_of(self, nodes: np.ndarray) -> np.ndarray:
-        return self.points[nodes]
 
 
 class RelationDofs:

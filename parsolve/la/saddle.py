@@ -13,7 +13,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from parsolve.la.layout import Layout
 from parsolve.relations import Relation
 
 
@@ -87,10 +86,9 @@ class RelationBlock:
                 self.col_scale[sl] = self.row_scale[sl]
 
 
-def stack_relations(relations: list[Relation], layout: Layout, new_dof=None) -> RelationBlock:
+def stack_relations(relations: list[Relation], new_dof) -> RelationBlock:
     """Concatenate relations into global multiplier rows, in new DOF numbering. ``new_dof``:
-    the relations' DOFs to new DOFs (default: the layout's, for a replicated mesh)."""
-    new_dof = new_dof or layout.new_dof
+    the relations' input DOFs to new DOFs (``RelationDofs.new_dof``)."""
     sizes = [r.nrows for r in relations]
     mult_sizes = [1 if r.collapsed else r.nrows for r in relations]
     row_first = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)

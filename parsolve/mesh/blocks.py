@@ -1,6 +1,6 @@
 """The whole mesh checked, and its dual graph built, by every rank on one block of cells.
 
-A distributed run's rank 0 reads or generates the whole mesh; the cell checks (Jacobians,
+A run's rank 0 reads or generates the whole mesh; the cell checks (Jacobians,
 cells folded over a neighbour, facets of three cells) and the dual graph PT-Scotch partitions
 cost time and memory in proportion to the mesh, so rank 0 hands each rank a block of cells
 (``partition.block_starts``, the block PT-Scotch takes anyway) with its nodes' coordinates, and
@@ -48,6 +48,9 @@ def scatter_blocks(comm, whole: Mesh | None) -> CellBlock:
     meta = comm.bcast((whole.num_cells, whole.cell_type, whole.dim, whole.cells.shape[1])
                       if comm.rank == 0 else None, root=0)
     n, cell_type, dim, nen = meta
+    if comm.size == 1:   # the one block is the whole mesh: its cells taken as they are
+        return CellBlock(np.asarray(whole.cells, dtype=np.int64), whole.points[whole.cells], 0, n,
+                         cell_type, dim)
     starts = block_starts(n, comm.size)
     counts = np.diff(starts)
     mine = int(counts[comm.rank])
@@ -85,10 +88,11 @@ def check_jacobians(comm, block: CellBlock, source: str | None, key: str | None)
                                source, key)
 
 
-def facet_groups(comm, block: CellBlock, source: str | None, key: str | None
-                 ) -> tuple[np.ndarray, np.ndarray]:
+def facet_groups(comm, block: CellBlock, source: str | None, key: str | None,
+                 graph: bool = True) -> tuple[np.ndarray, np.ndarray] | None:
     """Check the facets of the whole mesh (``checks.check_folds``) and return this block's
-    rows of the dual graph as CSR (indptr, neighbour cell ids), ``partition.dual_graph``'s.
+    rows of the dual graph as CSR (indptr, neighbour cell ids), ``partition.dual_graph``'s
+    (``graph`` False: the checks only, None returned: one rank partitions nothing).
     Collective."""
     size = comm.size
     nv = NUM_VERTICES[CELL_INFO[block.cell_type][1]]
@@ -112,6 +116,9 @@ def facet_groups(comm, block: CellBlock, source: str | None, key: str | None
     _raise_cells(comm, folded, lambda cells: (
         f"{cells.size} cells overlap a neighbour (inverted or folded over a shared facet): "
         f"cells {checks._ids(cells)}"), source, key)
+    if not graph:
+        return None
+    del nodes, keys, forward
     shared = np.flatnonzero(counts[group] == 2) if group.size else np.zeros(0, np.int64)
     pairs = owner[shared[np.argsort(group[shared], kind="stable")]].reshape(-1, 2)
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]  # a collapsed cell seeing itself twice

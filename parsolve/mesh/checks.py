@@ -29,7 +29,7 @@ def _ids(ids: np.ndarray) -> str:
 
 def check_mesh(mesh: Mesh, source: str | None, key: str | None, cells: bool = True) -> list[str]:
     """Raise InputError for invalid coordinates or cells; return the warnings. ``cells``
-    False: the cells are checked elsewhere (by blocks on a distributed run: ``mesh.blocks``)."""
+    False: the cells are checked elsewhere (by blocks, in every run: ``mesh.blocks``)."""
     check_points(mesh, source, key)
     if cells:
         check_jacobians(mesh, source, key)

@@ -1,10 +1,11 @@
 """The distributed mesh: each rank keeps only its part, with the input ids of what it holds.
+Every run goes through it, 1 rank included.
 
 Rank 0 reads (or generates) and checks the whole mesh, partitions its cells (PT-Scotch through
 PETSc, every rank handing it one block of the dual graph; or coordinate bisection), and sends
-every rank its part; then it drops the whole mesh like the others never had it. The rules are
-those of the replicated partition (``partition.from_cell_parts``), so the numbering, the
-pattern and the assembled operator are the same:
+every rank its part; then it drops the whole mesh like the others never had it. On 1 rank the
+part is the whole mesh, its arrays taken as they are (not copied: the mesh is never held
+twice). The rules are ``partition.from_cell_parts``':
 
 * a node belongs to the lowest rank among the cells that touch it;
 * a rank's **local cells** are every cell that touches one of its nodes (its owned cells and one
@@ -77,7 +78,7 @@ class LocalMesh(Mesh):
         return self.owner_of(np.arange(self.num_points))
 
     def partition(self) -> Partition:
-        """The replicated ``Partition``'s view of this part (arrays over local nodes/cells)."""
+        """The ``Partition`` of this part (arrays over local nodes/cells)."""
         nparts = self.node_ranges.size - 1
         owner = self.node_owner
         return Partition(nparts, owner[self.cells].min(axis=1), owner, self.node_new,
@@ -91,6 +92,8 @@ def distribute(comm, whole: Mesh | None, method: str = "scotch",
     builds it. Collective."""
     if method not in PARTITIONERS:
         raise ValueError(f"unknown partitioner {method!r} (expected one of {PARTITIONERS})")
+    if comm.size == 1:
+        return _whole_part(whole)
     cell_part, used = _cell_parts(comm, whole, method, graph)
     if comm.rank == 0:
         part = from_cell_parts(whole, cell_part, comm.size, used)
@@ -140,6 +143,36 @@ def _cell_parts(comm, whole: Mesh | None, method: str, graph=None
             used = "scotch"
     used = comm.bcast(used, root=0)
     return part, used
+
+
+def _whole_part(whole: Mesh) -> LocalMesh:
+    """The one rank's part: the whole mesh, every node owned, input numbering kept (what
+    ``_extract`` gives on 1 rank), its arrays shared rather than copied."""
+    n, nc = whole.num_points, whole.num_cells
+    node_type = index_dtype(n, COMPONENT_MARGIN)
+    ids = np.arange(n, dtype=node_type)
+    return LocalMesh(whole.points, whole.cell_type, whole.cells.astype(node_type, copy=False),
+                     cell_groups={k: np.asarray(v).astype(index_dtype(nc), copy=False)
+                                  for k, v in whole.cell_groups.items()},
+                     facet_groups=_whole_facet_groups(whole, node_type),
+                     node_groups={k: np.asarray(v).astype(node_type, copy=False)
+                                  for k, v in whole.node_groups.items()},
+                     warnings=list(whole.warnings), global_nodes=ids,
+                     global_cells=np.arange(nc, dtype=index_dtype(nc)), node_new=ids,
+                     node_ranges=np.array([0, n], dtype=np.int64), num_global_points=n,
+                     num_global_cells=nc, partitioner="none",
+                     extent=np.ptp(whole.points, axis=0) if n else np.zeros(whole.dim), rank=0)
+
+
+def _whole_facet_groups(whole: Mesh, node_type) -> dict:
+    """``_extract``'s facet groups on 1 rank: every facet of a group is kept."""
+    out = {}
+    for name, facets in whole.facet_groups.items():
+        facets = np.asarray(facets, dtype=np.int64)
+        if facets.ndim != 2 or facets.size == 0:
+            facets = facets.reshape(0, facets.shape[-1] if facets.ndim == 2 else 1)
+        out[name] = facets.astype(node_type, copy=False)
+    return out
 
 
 def _extract(whole: Mesh, part: Partition, rank: int) -> dict:

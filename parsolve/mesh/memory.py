@@ -10,15 +10,15 @@ machine, PETSc 3.18 + MUMPS, 2026-12-01):
     3D direct      21³ nodes  27 783 DOFs:  612 MB (1 rank), 394 MB per rank (2 ranks)
     empty run (Python, numpy, PETSc, MPI): 92 MB
 
-So: 92 MB + DOFs × (0.2 KB replicated on every rank + c / ranks), with c = 3.1 KB (2D direct),
+So: 92 MB + DOFs × (0.2 KB for the whole mesh + c / ranks), with c = 3.1 KB (2D direct),
 2.2 KB (2D iterative), 18.6 KB × (DOFs / 27 783)^(1/3) (3D direct: a nested-dissection
 factor grows like n^(4/3)), 3D iterative taken as 2D's × 2 (27 nonzeros per row against 9).
 The estimate is honest to about a factor of two; a scene is refused only when the estimate
 exceeds what the machine has available.
 
-On a distributed mesh the two shares are checked apart: rank 0 alone builds the whole mesh
-(the replicated share, on rank 0's machine), then every rank holds its part of the solve
-(the other share over the ranks, nothing replicated; every machine's verdict, the worst for all).
+The two shares are checked apart: rank 0 alone builds the whole mesh (``check_whole_mesh``,
+the 0.2 KB share, on rank 0's machine), then every rank holds its part of the solve
+(``check_fits``: the other share over the ranks; every machine's verdict, the worst for all).
 """
 
 from __future__ import annotations
@@ -29,14 +29,12 @@ from typing import Iterator
 from parsolve.errors import InputError
 
 BASE = 92e6
-REPLICATED_PER_DOF = 200.0
+WHOLE_MESH_PER_DOF = 200.0   # the whole mesh, on the one rank that builds it
 PER_DOF = {(2, "direct"): 3.1e3, (2, "iterative"): 2.2e3, (3, "iterative"): 4.4e3}
 DIRECT_3D = (18.6e3, 27783)  # bytes per DOF at this many DOFs; grows like DOFs^(1/3)
 
 # set by ``agreed_over``: ranks then take one decision together (None: this process alone)
 _COMM = None
-# set by ``whole_mesh_only``: the check is of building the whole mesh, not of solving on it
-_WHOLE_MESH_ONLY = False
 
 
 def cell_counts(generator: str, params: dict, order: int = 1) -> tuple[int, int, int]:
@@ -68,20 +66,19 @@ def cell_counts(generator: str, params: dict, order: int = 1) -> tuple[int, int,
     return points + (3 * quads + nx + ny if quadratic else 0), 2 * quads, 2
 
 
-def estimate_bytes(dofs: int, dim: int, preset: str, nranks: int = 1,
-                   replicated: bool = True) -> float:
-    """Peak resident memory of one rank (see the module's figures); ``replicated`` False: a
-    distributed mesh's rank (no replicated share)."""
+def estimate_bytes(dofs: int, dim: int, preset: str, nranks: int = 1) -> float:
+    """Peak resident memory of one rank during the solve, its part of the mesh (see the
+    module's figures)."""
     if dim == 3 and preset == "direct":
         per_dof = DIRECT_3D[0] * (max(dofs, 1) / DIRECT_3D[1]) ** (1 / 3)
     else:
         per_dof = PER_DOF[(dim, preset)]
-    return BASE + dofs * (REPLICATED_PER_DOF * replicated + per_dof / nranks)
+    return BASE + dofs * per_dof / nranks
 
 
 def whole_mesh_bytes(dofs: int) -> float:
-    """Peak memory of the one rank that builds the whole mesh of a distributed run."""
-    return BASE + dofs * REPLICATED_PER_DOF
+    """Peak memory of the one rank that builds the whole mesh (rank 0)."""
+    return BASE + dofs * WHOLE_MESH_PER_DOF
 
 
 def available_bytes() -> float | None:
@@ -99,19 +96,6 @@ def available_bytes() -> float | None:
 def gib(n: float) -> str:
     g = n / 2**30
     return f"{g:.0f} GiB" if g >= 10 else f"{g:.1f} GiB" if g >= 0.1 else f"{n / 2**20:.0f} MiB"
-
-
-@contextmanager
-def whole_mesh_only() -> Iterator[None]:
-    """Inside, this process alone checks that it can build the whole mesh (a distributed run's
-    rank 0); the solve is checked once the mesh is distributed (``check_fits_distributed``)."""
-    global _COMM, _WHOLE_MESH_ONLY
-    previous = _COMM, _WHOLE_MESH_ONLY
-    _COMM, _WHOLE_MESH_ONLY = None, True
-    try:
-        yield
-    finally:
-        _COMM, _WHOLE_MESH_ONLY = previous
 
 
 @contextmanager
@@ -139,33 +123,30 @@ def _layout() -> tuple[int, int]:
         local.Free()
 
 
+def check_whole_mesh(points: int, dim: int, source: str | None, key: str | None,
+                     what: str) -> None:
+    """InputError when building the whole mesh does not fit this machine (this process
+    alone: rank 0 builds it; the solve is checked once the mesh is distributed)."""
+    dofs = points * dim
+    _verdict(whole_mesh_bytes(dofs), dofs, 1, 1, source, key, what + " built on one rank",
+             collective=False)
+
+
 def check_fits(points: int, dim: int, preset: str, source: str | None, key: str | None,
                what: str) -> None:
-    """InputError when the estimate exceeds the memory this machine has available."""
-    dofs = points * dim
-    if _WHOLE_MESH_ONLY:
-        _verdict(whole_mesh_bytes(dofs), dofs, 1, 1, source, key, what + " built on one rank")
-        return
+    """InputError when the solve's estimate, each rank its share, exceeds the memory this
+    machine has available (collective inside ``agreed_over``)."""
     nranks, local = _layout()
+    dofs = points * dim
     _verdict(local * estimate_bytes(dofs, dim, preset, nranks), dofs, nranks, local, source,
              key, what)
 
 
-def check_fits_distributed(points: int, dim: int, preset: str, source: str | None,
-                           key: str | None, what: str) -> None:
-    """``check_fits`` for the solve on a distributed mesh: each rank its share, no replicated
-    part (collective inside ``agreed_over``)."""
-    nranks, local = _layout()
-    dofs = points * dim
-    _verdict(local * estimate_bytes(dofs, dim, preset, nranks, replicated=False), dofs, nranks,
-             local, source, key, what)
-
-
 def _verdict(need: float, dofs: int, nranks: int, local: int, source: str | None,
-             key: str | None, what: str) -> None:
+             key: str | None, what: str, collective: bool = True) -> None:
     have = available_bytes()
     verdict = (need / have if have else 0.0, need, have or 0.0)
-    if _COMM is not None and _COMM.size > 1:
+    if collective and _COMM is not None and _COMM.size > 1:
         verdict = _COMM.allreduce(verdict, op=_max_op())  # the worst machine decides for all
     ratio, need, have = verdict
     if ratio > 1.0:

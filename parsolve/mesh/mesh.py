@@ -1,4 +1,5 @@
-"""The replicated mesh container: one volume cell type, meshio (VTK) node ordering."""
+"""The mesh container: one volume cell type, meshio (VTK) node ordering (the whole mesh as
+read or generated; a rank's part is a ``distribute.LocalMesh``)."""
 
 from __future__ import annotations
 

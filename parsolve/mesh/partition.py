@@ -1,6 +1,6 @@
 """Cell partition and node renumbering.
 
-Every rank holds the whole (replicated) mesh. Cells are split into one part per rank either by
+Rank 0 holds the whole mesh (``distribute``). Cells are split into one part per rank either by
 PT-Scotch (a graph partitioner, through PETSc's MatPartitioning) on the cell dual graph (cells
 sharing a facet), or by recursive coordinate bisection of the centroids (RCB: no communication,
 the fallback for one rank, for meshes too small to be worth a graph partitioner, or on request).

@@ -1,13 +1,28 @@
-"""Regions: named sets of nodes, boundary facets and cells, resolved on the mesh."""
+"""Regions: named sets of nodes, boundary facets and cells, resolved on one rank's part of the
+mesh (``distribute.LocalMesh``; on 1 rank the whole mesh).
+
+Node, facet and cell sets are local (local ids), but every decision is the whole mesh's: the
+geometric tolerance from the whole extent, a point region's node (the closest over all ranks,
+ties to the lowest input id), "selects nothing" from the counts over all ranks, and an input
+error raised on one rank is raised on every rank. Boundary facets are kept only where they have
+an owned node: a facet of a ghost cell whose other side lives on another rank looks like a
+boundary facet here, but it has no owned node.
+
+Relations are built on the whole mesh's numbering (input ids): ``relation_nodes`` gathers a
+region's owned nodes from every rank (the region's size, not the mesh's).
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
+from mpi4py import MPI
 
+from parsolve.collective import agree
 from parsolve.errors import InputError
 from parsolve.mesh import selectors
+from parsolve.mesh.distribute import LocalMesh, distribute
 from parsolve.mesh.mesh import Mesh
 from parsolve.mesh.topology import boundary_facets, facets_from_nodes, match_facets
 
@@ -20,15 +35,32 @@ class Region:
     cells: np.ndarray        # cell ids
 
 
-class RegionResolver:
-    """Resolves region names (scene selectors, file or generator groups, 'all') lazily, once."""
+def allgather_rows(comm, local: np.ndarray) -> np.ndarray:
+    """Every rank's rows, concatenated in rank order (buffer collective)."""
+    local = np.ascontiguousarray(local)
+    width = int(np.prod(local.shape[1:], dtype=np.int64))
+    counts = np.array(comm.allgather(local.shape[0]), dtype=np.int64)
+    out = np.empty((int(counts.sum()),) + local.shape[1:], dtype=local.dtype)
+    kind = MPI._typedict[local.dtype.char]
+    comm.Allgatherv([local, kind], [out, counts * width, kind])
+    return out
 
-    def __init__(self, mesh: Mesh, specs: dict, source: str):
+
+class RegionResolver:
+    """Resolves region names (scene selectors, file or generator groups, 'all') lazily, once,
+    on a rank's part of the mesh; collective over ``comm``. A whole ``Mesh`` (with no
+    ``comm``: this process alone) is taken as its 1-rank part (a view, not a copy)."""
+
+    def __init__(self, mesh: Mesh, specs: dict, source: str, comm=None):
+        self.comm = MPI.COMM_SELF if comm is None else comm
+        if not isinstance(mesh, LocalMesh):
+            mesh = distribute(MPI.COMM_SELF, mesh)
         self.mesh, self.specs, self.source = mesh, specs, source
-        extent = np.ptp(mesh.points, axis=0).max() if mesh.num_points else 1.0
+        extent = float(mesh.extent.max()) if mesh.extent.size else 1.0
         self.tol = 1e-8 * max(extent, 1e-300)
         self.cache: dict[str, Region] = {}
         self._centroids = None
+        self._coords: dict[str, np.ndarray] = {}
 
     def names(self) -> set[str]:
         m = self.mesh
@@ -48,31 +80,42 @@ class RegionResolver:
         facets = self._kept(facets_from_nodes(self.mesh, mask)[0])
         return Region(name, np.flatnonzero(mask), facets, np.flatnonzero(cell_mask))
 
-    # ------------------------------------------------ what a distributed mesh changes (below)
+    def _reported(self, nodes: np.ndarray) -> np.ndarray:
+        """Which cells or facets (rows of node ids) this rank counts: those whose lowest node
+        owner it is, so that each is counted once over the ranks."""
+        if nodes.size == 0:
+            return np.zeros(nodes.shape[0], dtype=bool)
+        return self.mesh.owner_of(nodes).min(axis=1) == self.mesh.rank
+
     def _local(self, fn, *args):
-        """A check on this rank's points (raises InputError)."""
-        return fn(*args)
+        """A check on this rank's points: its InputError raised on every rank."""
+        return agree(self.comm, fn, *args)
 
     def _kept(self, facets: np.ndarray) -> np.ndarray:
-        """The boundary facets this mesh really has (all of them here)."""
-        return facets
+        """The boundary facets with an owned node (see the module's doc)."""
+        if facets.size == 0:
+            return facets
+        return facets[(facets < self.mesh.n_owned).any(axis=1)]
 
     def _closest(self, spec) -> np.ndarray:
-        """Mask of the node closest to a point region's point."""
-        mask = np.zeros(self.mesh.num_points, dtype=bool)
-        mask[selectors.closest_point(spec.value, self.mesh.points, self.source, spec.key)] = True
-        return mask
+        m = self.mesh
+        p = self._local(selectors._as_point, spec.value, m.points.shape[1], "point",
+                        self.source, spec.key)
+        d2 = np.sum((m.points[:m.n_owned] - p) ** 2, axis=1)
+        best = (float(d2.min()), int(m.global_nodes[np.argmin(d2)])) if d2.size else (np.inf, -1)
+        # the smallest distance, then the lowest input id (the whole mesh's argmin's first)
+        candidates = self.comm.allgather(best)
+        dist = min(c[0] for c in candidates)
+        node = min(c[1] for c in candidates if c[0] == dist)
+        if node < 0:
+            raise InputError("no points to choose from", self.source, spec.key)
+        return m.global_nodes == node
 
     def _empty(self, region: Region) -> bool:
-        return region.nodes.size == 0 and region.cells.size == 0
-
-    def points_of(self, nodes: np.ndarray) -> np.ndarray:
-        """Coordinates of nodes given by the ids relations use (here: the mesh's own)."""
-        return self.mesh.points[nodes]
-
-    def relation_nodes(self, name: str, key: str) -> np.ndarray:
-        """A region's nodes as the ids relations use (here: the mesh's own)."""
-        return self(name, key).nodes
+        m = self.mesh
+        count = int(np.count_nonzero(region.nodes < m.n_owned)) + \
+            int(self._reported(m.cells[region.cells]).sum())
+        return self.comm.allreduce(count) == 0
 
     def _resolve(self, name: str, key: str) -> Region:
         m = self.mesh
@@ -119,22 +162,71 @@ class RegionResolver:
         known = ", ".join(sorted(self.names()))
         raise InputError(f"unknown region {group!r} (known: {known})", self.source, key)
 
+    def relation_nodes(self, name: str, key: str) -> np.ndarray:
+        """The region's nodes as input ids, the whole region on every rank (sorted)."""
+        if name not in self._coords:
+            region = self(name, key)
+            own = region.nodes[region.nodes < self.mesh.n_owned]
+            # input ids as int64: relations turn them into DOFs (node * ncomp + c)
+            ids = allgather_rows(self.comm, self.mesh.global_nodes[own].astype(np.int64))
+            pts = allgather_rows(self.comm, self.mesh.points[own])
+            order = np.argsort(ids)
+            self._coords[name] = (ids[order], pts[order])
+        return self._coords[name][0]
+
+    def points_of(self, nodes: np.ndarray) -> np.ndarray:
+        """Coordinates of input ids of nodes of regions already asked for ``relation_nodes``."""
+        for ids, pts in self._coords.values():
+            pos = np.minimum(np.searchsorted(ids, nodes), max(ids.size - 1, 0))
+            if ids.size and np.array_equal(ids[pos], nodes):
+                return pts[pos]
+        raise KeyError("points_of: nodes of no gathered region")
+
     def owned_cell_rows(self, cells: np.ndarray, ncomp: int, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
-        """Per-cell rows as relations number them: (cell ids, DOFs, the other arrays)."""
-        return (cells,) + arrays
+        """Per-cell rows (``arrays``, cell-first, local DOFs in ``arrays[0]``) of the owned
+        ones among ``cells``, from every rank, in input cell order: (input cell ids, DOFs as
+        input DOFs, the other arrays)."""
+        m = self.mesh
+        own = self._reported(m.cells[cells])
+        dofs = arrays[0][own]
+        node, comp = np.divmod(dofs, ncomp)
+        gathered = [allgather_rows(self.comm, m.global_cells[cells[own]].astype(np.int64)),
+                    allgather_rows(self.comm, m.global_nodes[node].astype(np.int64) * ncomp + comp)]
+        gathered += [allgather_rows(self.comm, a[own]) for a in arrays[1:]]
+        order = np.argsort(gathered[0], kind="stable")
+        return tuple(g[order] for g in gathered)
 
     def cell_count(self, cells: np.ndarray) -> int:
-        return int(cells.size)
+        m = self.mesh
+        own = self._reported(m.cells[cells])
+        return self.comm.allreduce(int(own.sum()))
 
     def facet_count(self, facets: np.ndarray) -> int:
-        """Whether any rank has facets (their number here)."""
-        return int(facets.shape[0])
+        return self.comm.allreduce(int(facets.shape[0]))
 
     def facet_total(self, facets: np.ndarray, values: np.ndarray) -> float:
-        """Σ of per-facet values over the region's facets, each facet once."""
-        return float(np.sum(values))
+        """Each facet counted by the rank owning its lowest-owner node."""
+        m = self.mesh
+        own = self._reported(facets)
+        return self.comm.allreduce(float(np.sum(np.asarray(values)[own])))
 
     def relation_vector(self, vector: np.ndarray, ncomp: int) -> tuple[np.ndarray, np.ndarray]:
-        """A nodal vector (DOFs of this mesh) as relations take it: (DOFs, nonzero values)."""
-        nz = np.flatnonzero(vector)
-        return nz, vector[nz]
+        """The owned rows' nonzeros of every rank, as input DOFs (sorted)."""
+        nz = np.flatnonzero(vector[:self.mesh.n_owned * ncomp])
+        node, comp = np.divmod(nz, ncomp)
+        dofs = allgather_rows(self.comm, self.mesh.global_nodes[node].astype(np.int64) * ncomp
+                              + comp)
+        vals = allgather_rows(self.comm, np.ascontiguousarray(vector[nz], dtype=float))
+        order = np.argsort(dofs)
+        return dofs[order], vals[order]
+
+
+def gather_facets(comm, mesh: LocalMesh, facets: np.ndarray, nfn: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every rank's facets (rows of ``nfn`` local node ids) as input node ids (nf, nfn) with
+    their coordinates (nf, nfn, dim), concatenated in rank order (a facet with owned nodes on
+    several ranks comes once from each: the caller keeps one). The surface's size, not the
+    mesh's."""
+    facets = np.asarray(facets, dtype=np.int64).reshape(-1, nfn)
+    ids = allgather_rows(comm, mesh.global_nodes[facets])
+    pts = allgather_rows(comm, np.ascontiguousarray(mesh.points[facets], dtype=float))
+    return ids, pts

@@ -267,16 +267,3 @@ def near_point(
     """Points within distance ``tol`` of ``p``: bool mask."""
     p = _as_point(p, points.shape[1], "point", source, key)
     return np.linalg.norm(points - p, axis=1) <= tol
-
-
-def closest_point(
-    p: Sequence[float],
-    points: np.ndarray,
-    source: str | None = None,
-    key: str | None = None,
-) -> int:
-    """Index of the point closest to ``p`` (the first one on ties)."""
-    p = _as_point(p, points.shape[1], "point", source, key)
-    if points.shape[0] == 0:
-        raise InputError("no points to choose from", source, key)
-    return int(np.argmin(np.sum((points - p) ** 2, axis=1)))

@@ -5,9 +5,9 @@ choice as Newton, so the comparison with non-associated control is like for like
 Unknowns: q and the load factor μ of a reference load pattern P:  f_int(q) = F + μ P, with
 the constraint ||q - q_n||² = Δl² on each step. The saved "time" of a step is μ.
 
-On a distributed mesh q, P and the responses are vectors of the rank's local DOFs (owned and
-ghost): the arc's norm and every dot product count the owned rows once and add them over the
-ranks (``system.dot``), so each rank takes the same root as on the replicated mesh.
+q, P and the responses are vectors of the rank's local DOFs (owned and ghost): the arc's norm
+and every dot product count the owned rows once and add them over the ranks (``system.dot``),
+so each rank takes the same root whatever the number of ranks.
 """
 
 from __future__ import annotations
@@ -43,8 +43,6 @@ class ArcLength(NewtonSolver):
     def _combined(self, x_r, x_p, dmu: float):
         """x_r + dμ x_p of two gathered saddle vectors (the multipliers the step reports:
         ``multipliers`` reads them from ``x_full``)."""
-        if not self.system.distributed:
-            return x_r + dmu * x_p
         out = x_r.copy()
         out.q, out.lam = x_r.q + dmu * x_p.q, x_r.lam + dmu * x_p.lam
         return out

@@ -17,15 +17,10 @@ from parsolve.solvers.system import SaddleSystem
 def rigid_body_modes(comm: MPI.Comm, system: SaddleSystem) -> PETSc.NullSpace | None:
     """Near-null space of the primal block (for GAMG), on the owned nodes in new numbering:
     rigid-body modes of a displacement-only model, constants of a scalar field."""
-    part, mesh, model = system.part, system.model.mesh, system.model
-    lo, hi = part.node_ranges[comm.rank], part.node_ranges[comm.rank + 1]
+    mesh, model = system.model.mesh, system.model
     if model.fields.names() != ["u"]:
         return None if model.ncomp > 1 else PETSc.NullSpace().create(constant=True, comm=comm)
-    if system.distributed:   # owned nodes first, in the global numbering's order
-        coords = mesh.points[:mesh.n_owned]
-    else:
-        old_of_new = np.argsort(part.new_of_old)
-        coords = mesh.points[old_of_new[lo:hi]]
+    coords = mesh.points[:mesh.n_owned]   # owned nodes first, in the global numbering's order
     vec = PETSc.Vec().createWithArray(coords.ravel().copy(), size=(coords.size, None),
                                       bsize=mesh.dim, comm=comm)
     return PETSc.NullSpace().createRigidBody(vec)

@@ -10,8 +10,6 @@ the same multipliers.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
-
 import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
@@ -19,21 +17,12 @@ from petsc4py import PETSc
 from parsolve.effects.compose import Composition, Rate
 from parsolve.la.ghosts import GhostExchange, SaddleValues, value_keys
 from parsolve.la.layout import make_layout
-from parsolve.la.relation_dofs import RelationDofs, ReplicatedDofs
+from parsolve.la.relation_dofs import RelationDofs
 from parsolve.la.pattern import node_pattern
 from parsolve.la.petsc import SaddleOperator
 from parsolve.la.saddle import stack_relations
-from parsolve.mesh.local_regions import allgather_rows
-from parsolve.mesh.partition import partition
+from parsolve.mesh.regions import allgather_rows
 from parsolve.model import Model
-
-
-@dataclass
-class Solution:
-    q: np.ndarray                       # full primal vector, input numbering
-    multipliers: dict[str, np.ndarray]  # relation name -> λ (unscaled, per row)
-    residual: float                     # relative residual of the linear system
-    iterations: int
 
 
 class SaddleSystem:
@@ -45,25 +34,28 @@ class SaddleSystem:
         rank = comm.rank
         self.timings = {}
         t0 = time.perf_counter()
-        self.distributed = model.distributed
-        self.part = mesh.partition() if self.distributed else \
-            partition(mesh, comm.size, model.scene.solver.partitioner, comm)
+        if model.comm.size != comm.size:
+            raise ValueError(f"the model's mesh is split over {model.comm.size} ranks, not "
+                             f"{comm.size}: build it with this communicator")
+        self.part = mesh.partition()
         self.eliminated = [r for r in model.relations if r.eliminable()]
         self.multiplied = [r for r in model.relations if not r.eliminable()]
         nmult = sum(1 if r.collapsed else r.nrows for r in self.multiplied)
         self.layout = lay = make_layout(self.part, ncomp, nmult)
-        # relations name input DOFs; on a distributed mesh they map to local ones here
+        # relations name input DOFs; they map to local ones here
         self.unused = self.unused_dofs()
-        self.rdofs = RelationDofs(comm, mesh, ncomp, self._relation_dofs()) if self.distributed \
-            else ReplicatedDofs(lay, mesh.points, ncomp)
+        self.rdofs = RelationDofs(comm, mesh, ncomp, self._relation_dofs())
         self.local_cells = self.part.local_cells(rank, mesh.cells)
+        # the cells this rank reports, and which of its local cells they are (every output step)
+        self.owned_cells = self.part.owned_cells(rank, mesh.cells)
+        self.reported = np.isin(self.local_cells, self.owned_cells, assume_unique=True)
         lumped = model.scene.time is None or model.scene.time.mass == "lumped"
         self.composition = Composition(model, self.local_cells, lumped)
         self.rate: Rate | None = None  # the rate terms of a transient step (set by the stepper)
         new_cells = self.part.new_of_old[mesh.cells[self.local_cells]]
         lo, hi = self.part.node_ranges[rank], self.part.node_ranges[rank + 1]
         self.pattern = pattern = node_pattern(new_cells, lo, hi, ncomp, int(self.part.node_ranges[-1]))
-        self.block = stack_relations(self.multiplied, lay, self.rdofs.new_dof)
+        self.block = stack_relations(self.multiplied, self.rdofs.new_dof)
         self.op = SaddleOperator(comm, lay, pattern, self.block)
         ndof = mesh.num_points * ncomp
         self.saddle_of_input = lay.q_index(lay.new_dof(np.arange(ndof)))
@@ -74,9 +66,8 @@ class SaddleSystem:
         self.offset = int(lay.offsets[rank])
         # relation entries on this rank's owned DOFs (A q = Σ over ranks of these)
         self._owned_entries: dict[int, tuple] = {}
-        if self.distributed:
-            self._ghosts = self._ghost_exchange()
-            self._keys = value_keys(self.saddle_of_input, self.saddle_of_mult)
+        self._ghosts = self._ghost_exchange()
+        self._keys = value_keys(self.saddle_of_input, self.saddle_of_mult)
         self._elimination_setup()
         self.timings["setup"] = time.perf_counter() - t0
         self.assembled = False
@@ -90,8 +81,8 @@ class SaddleSystem:
         used = np.zeros(mesh.num_points, dtype=bool)
         used[mesh.cells.ravel()] = True
         nodes = np.flatnonzero(~used)
-        if self.distributed:   # owned ones (a ghost is a node of a cell), from every rank
-            nodes = np.sort(allgather_rows(self.comm, mesh.global_nodes[nodes[nodes < mesh.n_owned]]))
+        # owned ones (a ghost is a node of a cell), from every rank
+        nodes = np.sort(allgather_rows(self.comm, mesh.global_nodes[nodes[nodes < mesh.n_owned]]))
         return (nodes[:, None] * self.model.ncomp + np.arange(self.model.ncomp)).ravel()
 
     def _relation_dofs(self) -> list[np.ndarray]:
@@ -162,7 +153,7 @@ class SaddleSystem:
         return mat
 
     def to_owned(self, full: np.ndarray) -> np.ndarray:
-        """A full primal vector (input numbering) → this rank's rows (multiplier rows zero)."""
+        """A primal vector of this mesh's DOFs → this rank's rows (multiplier rows zero)."""
         out = np.zeros(self.op.nrows)
         own = self.owned_input_dofs
         out[self.saddle_of_input[own] - self.offset] = full[own]
@@ -187,11 +178,9 @@ class SaddleSystem:
         return self.rhs_from(f_full, target, values)
 
     def eliminated_values(self, q: np.ndarray) -> np.ndarray:
-        """q at every eliminated DOF. On a distributed mesh from their owners (one reduction
-        of their number): a relation row owned here may name an eliminated DOF of a node
-        this rank does not hold, whose value its lifting needs."""
-        if not self.distributed:
-            return q[self.elim_dofs]
+        """q at every eliminated DOF, from their owners (one reduction of their number): a
+        relation row owned here may name an eliminated DOF of a node this rank does not hold,
+        whose value its lifting needs."""
         n_owned = self.model.mesh.n_owned * self.model.ncomp
         own = (self.elim_local >= 0) & (self.elim_local < n_owned)
         out = np.zeros(self.elim_dofs.size)
@@ -201,18 +190,14 @@ class SaddleSystem:
 
     def rhs_from(self, f_full: np.ndarray, target: np.ndarray, elim_values: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray]:
-        """Right-hand side from a force vector (input numbering), scaled relation values of
+        """Right-hand side from a force vector (this mesh's DOFs), scaled relation values of
         every multiplied row, and values of the eliminated DOFs."""
         b = self.to_owned(f_full)
         q0, q1, l0, l1 = self.layout.owned(self.comm.rank)
         b[q1 - q0:] = (target * self.op.active)[l0:l1]
-        if self.distributed:   # the eliminated DOFs' values only, not a whole saddle vector
-            x_e = SaddleValues(value_keys(self.elim_saddle, np.zeros(0, np.int64)),
-                               np.asarray(elim_values, dtype=float), np.zeros(0))
-        else:
-            x_e = np.zeros(self.layout.size)
-            if self.elim_dofs.size:
-                x_e[self.elim_saddle] = elim_values
+        # the eliminated DOFs' values only, not a whole saddle vector
+        x_e = SaddleValues(value_keys(self.elim_saddle, np.zeros(0, np.int64)),
+                           np.asarray(elim_values, dtype=float), np.zeros(0))
         if self.elim_dofs.size:
             b -= self.op.lifting(x_e)
             b[self.op.elim_rows - self.offset] = self.kscale * x_e[self.op.elim_rows]
@@ -233,17 +218,12 @@ class SaddleSystem:
         """A q of every multiplied row (unscaled), q a primal vector of this mesh's DOFs."""
         if not self.multiplied:
             return np.zeros(0)
-        if not self.distributed:
-            return np.concatenate([r.primal(q) for r in self.multiplied])
         out = np.concatenate([self._owned_primal(r, q) for r in self.multiplied])
         self.comm.Allreduce(MPI.IN_PLACE, out, op=MPI.SUM)
         return out
 
     def relation_primal(self, r, q: np.ndarray) -> np.ndarray:
-        """A q of one relation's rows (any relation of the model). Collective on a
-        distributed mesh."""
-        if not self.distributed:
-            return r.primal(q)
+        """A q of one relation's rows (any relation of the model). Collective."""
         out = self._owned_primal(r, q)
         self.comm.Allreduce(MPI.IN_PLACE, out, op=MPI.SUM)
         return out
@@ -276,7 +256,7 @@ class SaddleSystem:
 
     def dot(self, u: np.ndarray, v: np.ndarray) -> float:
         """u · v of two primal vectors of this mesh's DOFs, each DOF once (owned rows): the
-        same number on every rank, on either mesh."""
+        same number on every rank."""
         own = self.owned_input_dofs
         return float(self.comm.allreduce(float(u[own] @ v[own])))
 
@@ -304,19 +284,9 @@ class SaddleSystem:
 
     # ------------------------------------------------------------ back to fields
 
-    def gather(self, x_owned: np.ndarray):
-        """The whole saddle vector on every rank (buffer collective: no pickling); on a
-        distributed mesh, what this rank needs of it (``SaddleValues``: its DOFs, ghosts
-        included, and every multiplier)."""
-        if self.distributed:
-            return self._spread(x_owned)
-        if not hasattr(self, "_gather_counts"):
-            self._gather_counts = np.array(self.comm.allgather(int(x_owned.size)))
-        out = np.empty(int(self._gather_counts.sum()))
-        self.comm.Allgatherv(np.ascontiguousarray(x_owned, dtype=float), [out, self._gather_counts])
-        return out
-
-    def _spread(self, x_owned: np.ndarray) -> SaddleValues:
+    def gather(self, x_owned: np.ndarray) -> SaddleValues:
+        """What this rank needs of the saddle vector (its DOFs, ghosts included, and every
+        multiplier) from its owned rows (buffer collectives: no pickling)."""
         mesh, nc = self.model.mesh, self.model.ncomp
         nq = mesh.n_owned * nc
         q = np.empty(mesh.num_points * nc)
@@ -329,36 +299,31 @@ class SaddleSystem:
         self.comm.Allgatherv(np.ascontiguousarray(x_owned[nq:], dtype=float), [lam, counts])
         return SaddleValues(self._keys, q, lam)
 
-    def zero_saddle(self):
+    def zero_saddle(self) -> SaddleValues:
         """A zero saddle vector, as ``gather`` returns them."""
-        if self.distributed:
-            return SaddleValues(self._keys, np.zeros(self.model.mesh.num_points * self.model.ncomp),
-                                np.zeros(self.layout.nl))
-        return np.zeros(self.layout.size)
+        return SaddleValues(self._keys, np.zeros(self.model.mesh.num_points * self.model.ncomp),
+                            np.zeros(self.layout.nl))
 
-    def primal_of(self, x_full) -> np.ndarray:
+    def primal_of(self, x_full: SaddleValues) -> np.ndarray:
         """The primal DOFs (this mesh's numbering) of what ``gather`` returned."""
-        return x_full.q if self.distributed else x_full[self.saddle_of_input]
+        return x_full.q
 
-    def with_primal(self, x_full, q: np.ndarray):
+    def with_primal(self, x_full: SaddleValues, q: np.ndarray) -> SaddleValues:
         """A copy of ``x_full`` with its primal part replaced by q."""
         x = x_full.copy()
-        if self.distributed:
-            x.q = q.copy()
-        else:
-            x[self.saddle_of_input] = q
+        x.q = q.copy()
         return x
 
     def multipliers(self, x_full) -> np.ndarray:
         """Unscaled λ of every multiplied row from a full saddle vector."""
         if not self.block.nrows:
             return np.zeros(0)
-        lam = x_full.lam if self.distributed else x_full[self.saddle_of_mult]
-        return lam * self.block.col_scale
+        return x_full.lam * self.block.col_scale
 
     def unpack(self, x_full: np.ndarray, t: float, f_int: np.ndarray | None = None,
                f_ext: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        """Primal vector (input numbering) and unscaled multipliers of every relation."""
+        """Primal vector (this mesh's DOFs, owned then ghosts) and unscaled multipliers of
+        every relation."""
         q = self.primal_of(x_full)
         lam = self.multipliers(x_full)
         out = {}

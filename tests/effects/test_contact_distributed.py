@@ -1,9 +1,9 @@
 """Contact and friction (the relations form) on the distributed mesh: each rank its part, the
 contact surfaces gathered once, rows in input DOFs. Node-to-segment with friction, mortar
 with friction (2D, a meshed foundation), 3D friction against a plane: the same results as the
-replicated mesh (1e-10 of each quantity, active rows and states exactly) and the known
+1-rank run (1e-10 of each quantity, active rows and states exactly) and the known
 resultants; the bad surfaces raised on every rank. The penalty and augmented-Lagrangian
-baselines on the parts: the replicated run too. At 1 rank both runs are replicated."""
+baselines on the parts: the 1-rank run too."""
 
 from __future__ import annotations
 
@@ -14,25 +14,22 @@ from mpi4py import MPI
 from conftest import CONFIGS, assert_same_results
 from parsolve.contact.friction import SLIP, STICK
 from parsolve.errors import InputError
-from parsolve.model import build_model, distributed_mesh
+from parsolve.model import build_model
 from parsolve.scene import load_scene
 from helpers.contact import BASE, FOUNDATION, OBLIQUE, PLANE, write_mesh
 
 
 def both_meshes(run, text: str, name: str) -> tuple[dict, dict]:
-    """(results on the parts, results on the replicated mesh) of a scene."""
-    parts = run(text, name=f"{name}_parts", solver={"mesh": "distributed"})
-    scene = load_scene(run.last.with_suffix(".toml"))
-    scene.solver.mesh = "distributed"
-    assert distributed_mesh(scene, MPI.COMM_WORLD) == (MPI.COMM_WORLD.size > 1)
-    whole = run(text, name=f"{name}_whole", solver={"mesh": "replicated"})
+    """(results on the parts of every rank, results of each rank alone) of a scene."""
+    parts = run(text, name=f"{name}_parts")
+    whole = run(text, name=f"{name}_whole", comm=MPI.COMM_SELF)
     return parts, whole
 
 
 @pytest.mark.parametrize("discretization", ["node_to_segment", "mortar"])
-def test_foundation_friction_on_parts_is_the_replicated_run(run, shared_tmp, discretization):
+def test_foundation_friction_on_parts_is_the_one_rank_run(run, shared_tmp, discretization):
     """A block (8 elements, distorted) pressed by p = 10 on a meshed foundation (5 elements)
-    and shifted: a master region, Coulomb friction (mu = 0.3). On the parts: the replicated
+    and shifted: a master region, Coulomb friction (mu = 0.3). On the parts: the 1-rank
     run's fields, multipliers, states and active rows; the normal resultant p, the friction
     balancing the force that moves the top (1e-11), μN exactly once every node slides."""
     mesh = shared_tmp / "foundation_parts.msh"
@@ -52,10 +49,10 @@ def test_foundation_friction_on_parts_is_the_replicated_run(run, shared_tmp, dis
     np.testing.assert_allclose(np.abs(t_force[all_slide]), mu * p, rtol=1e-10)
 
 
-def test_oblique_pull_3d_on_parts_is_the_replicated_run(run):
+def test_oblique_pull_3d_on_parts_is_the_one_rank_run(run):
     """3D: a box pressed by p = 10 on a rough plane (mu = 0.3) and pulled along (2, 1)/√5
     up to 0.9 μp, partial slip with slip directions turned between iterations: on the parts
-    the replicated run to 1e-10 (states and active rows exactly), the friction equal to the
+    the 1-rank run to 1e-10 (states and active rows exactly), the friction equal to the
     pull to 1e-10, the same iterations per step."""
     mu, p = 0.3, 10.0
     e = np.array([2.0, 1.0]) / np.sqrt(5.0)
@@ -76,17 +73,17 @@ def test_oblique_pull_3d_on_parts_is_the_replicated_run(run):
     ("penalty", "penalty = 1e6"),
     ("augmented_lagrangian", "augmentation_tolerance = 1e-9"),
 ])
-def test_block_baselines_on_parts_are_the_replicated_run(run, formulation, extra):
+def test_block_baselines_on_parts_are_the_one_rank_run(run, formulation, extra):
     """contact_block_friction.toml (p = 10 on a rough plane, μ = 0.3) with the penalty or the
     augmented-Lagrangian baseline, the top shifted by 0.005 in 3 steps (stick, then slip
-    spreading from the trailing corner): on the parts the replicated run to 1e-10 (states
+    spreading from the trailing corner): on the parts the 1-rank run to 1e-10 (states
     exactly, the same steps and iterations); Σ Rn = p, the friction balancing the pull
     (1e-9) and under μN; the penalty's penetration is Rn / (ε A) (ε = 1e6, A = 1/8 at an inner
     node), the augmented Lagrangian's gap closed.
 
     (Not further: once the block slides, a slid node's committed friction sits on the cone,
     |t_tr| = μ p_N to round-off, and whether it sticks for one iteration, which adds
-    iterations, varies from run to run on the replicated mesh itself at 2 and 3 ranks.)"""
+    iterations, varied from run to run at 2 and 3 ranks.)"""
     text = (CONFIGS / "contact_block_friction.toml").read_text()
     text = text.replace("friction = 0.3", f'friction = 0.3\nformulation = "{formulation}"\n{extra}')
     text = text.replace("value = 0.02", "value = 0.005").replace("count = 10", "count = 3")
@@ -127,14 +124,13 @@ def test_block_baselines_on_parts_are_the_replicated_run(run, formulation, extra
 ])
 def test_bad_surfaces_on_parts_raise_on_every_rank(shared_tmp, comm, contact, key, words):
     """A surface error found on the parts (some ranks hold none of the slave region) is the
-    replicated mesh's, raised on every rank."""
+    whole mesh's, raised on every rank."""
     text = BASE.format(contact=contact) + '\n[regions]\nmiddle = "abs(y - 0.25) < 1e-9"\n'
     path = shared_tmp / "bad_contact_parts.toml"
     if comm.rank == 0:
         path.write_text(text)
     comm.Barrier()
     scene = load_scene(path)
-    scene.solver.mesh = "distributed"
     with pytest.raises(InputError) as err:
         build_model(scene, comm)
     assert err.value.key == key and words in str(err.value) and str(path) in str(err.value)

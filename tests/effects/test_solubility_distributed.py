@@ -1,11 +1,12 @@
 """Gas solubility on the distributed mesh (each rank its part): the same relation, the same
-results as the replicated mesh, mass conserved on the parts; an input error of one part is
-raised on every rank. Runs on 1, 2 and 3 ranks (on one rank both meshes are the whole one)."""
+results as one rank alone, mass conserved on the parts; an input error of one part is raised
+on every rank. Runs on 1, 2 and 3 ranks."""
 
 import tomllib
 
 import numpy as np
 import pytest
+from mpi4py import MPI
 
 from conftest import assert_same_results, run_scene
 from parsolve.errors import InputError
@@ -71,9 +72,8 @@ value = 0.0
 """
 
 
-def model_of(text: str, comm, mesh: str):
+def model_of(text: str, comm):
     scene = parse_scene(tomllib.loads(text), "test.toml", text)
-    scene.solver.mesh = mesh
     return build_model(scene, comm)
 
 
@@ -81,13 +81,12 @@ def solubility(model):
     return next(e for e in model.effects if e.name == "solubility")
 
 
-def test_the_part_builds_the_replicated_relation(comm):
+def test_the_part_builds_the_one_rank_relation(comm):
     """The relation is whole on every rank, in input numbering: rows, DOFs, values, dual and
-    groups equal to the replicated mesh's, from c_sat known on the owned nodes only."""
+    groups equal to one rank's, from c_sat known on the owned nodes only."""
     text = SCENE.replace("{csat}", CSAT)
-    whole = model_of(text, comm, "replicated")
-    parts = model_of(text, comm, "distributed")
-    assert parts.distributed == (comm.size > 1)
+    whole = model_of(text, MPI.COMM_SELF)
+    parts = model_of(text, comm)
     a = next(r for r in whole.relations if r.name == "solubility")
     b = next(r for r in parts.relations if r.name == "solubility")
     assert a.nrows == b.nrows == 2 * (N + 1) ** 2
@@ -101,24 +100,23 @@ def test_the_part_builds_the_replicated_relation(comm):
     core = (x >= 0.3 - 1e-9) & (x <= 0.6 + 1e-9) & (y >= 0.3 - 1e-9) & (y <= 0.7 + 1e-9)
     np.testing.assert_allclose(b.values[1::2], np.where(core, 0.3, 0.6 + 0.8 * x), rtol=1e-15)
     assert np.all(b.values[::2] == 0.0)
-    if parts.distributed:   # c_sat on the owned nodes only
-        mesh = parts.mesh
-        assert solubility(parts).c_sat.shape == (mesh.n_owned,)
-        mine = np.isin(b.meta["nodes"], mesh.global_nodes[:mesh.n_owned])
-        assert comm.allreduce(int(mine.sum())) == (N + 1) ** 2
+    mesh = parts.mesh   # c_sat on the owned nodes only
+    assert solubility(parts).c_sat.shape == (mesh.n_owned,)
+    mine = np.isin(b.meta["nodes"], mesh.global_nodes[:mesh.n_owned])
+    assert comm.allreduce(int(mine.sum())) == (N + 1) ** 2
 
 
 @pytest.mark.parametrize("drain, mode", [(False, "swmr"), (True, "parallel")],
                          ids=["closed", "drained"])
-def test_parts_give_the_replicated_results(drain, mode, shared_tmp, comm):
+def test_parts_give_the_one_rank_results(drain, mode, shared_tmp, comm):
     """Every dataset (fields, states, multipliers, active rows, balance) to 1e-10, integer
     states and active rows exactly, in both output modes (the parts written by rank 0, or
     each rank its owned rows); the states switch both ways during the run."""
     text = SCENE.replace("{csat}", CSAT) + (DRAIN if drain else "")
     name = "drained" if drain else "closed"
-    whole = run_scene(text, shared_tmp / f"{name}_whole.h5", comm, solver={"mesh": "replicated"})
+    whole = run_scene(text, shared_tmp / f"{name}_whole{comm.rank}.h5", MPI.COMM_SELF)
     text += f'\n[output]\nmode = "{mode}"\n'
-    parts = run_scene(text, shared_tmp / f"{name}_parts.h5", comm, solver={"mesh": "distributed"})
+    parts = run_scene(text, shared_tmp / f"{name}_parts.h5", comm)
     assert_same_results(parts, whole, 1e-10)
     state = parts["fields/solubility_state"][..., 0]
     assert state.dtype.kind == "i" and set(np.unique(state)) == {0, 1}
@@ -138,7 +136,7 @@ def test_mass_is_conserved_on_the_parts(shared_tmp, comm):
     touching a node) and in the balance the parts reduce; each node obeys the
     complementarity (c_g = 0 dissolved, c_s = c_sat saturated)."""
     text = SCENE.replace("{csat}", CSAT)
-    res = run_scene(text, shared_tmp / "mass.h5", comm, solver={"mesh": "distributed"})
+    res = run_scene(text, shared_tmp / "mass.h5", comm)
     t = res["steps/time"]
     injected = SOURCE * 1.0 * np.minimum(t, FILL_END)
     cells = res["mesh/cells/quad"]
@@ -161,6 +159,6 @@ def test_a_level_invalid_on_one_part_fails_on_every_rank(comm):
     raises the same input error, none is left waiting."""
     text = SCENE.replace("{csat}", "1 - x")
     with pytest.raises(InputError) as err:
-        model_of(text, comm, "distributed")
+        model_of(text, comm)
     assert err.value.key == "solubility.saturation"
     assert "finite and positive" in err.value.message

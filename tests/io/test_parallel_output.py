@@ -93,7 +93,7 @@ def run_mode(shared_tmp):
         if comm.rank == 0:
             src.write_text(text)
         comm.Barrier()
-        model = build_model(load_scene(src))
+        model = build_model(load_scene(src), comm)
         try:
             driver.run(comm, model, str(out), {}, log=lambda *a: None, output=mode)
         finally:

@@ -16,6 +16,7 @@ import pytest
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from conftest import saddle_of_input_dofs
 from test_dense import SCENE
 
 from parsolve.effects.compose import Composition
@@ -35,7 +36,12 @@ def dense(mat: PETSc.Mat) -> np.ndarray:
 
 
 def system_of(text: str) -> SaddleSystem:
-    return SaddleSystem(COMM, build_model(parse_scene(tomllib.loads(text), "t.toml", text)))
+    """The system on COMM's parts, with ``whole`` (the model on the whole mesh, this rank
+    alone: the brute-force references) and ``iq`` (the saddle index of every input DOF)."""
+    system = SaddleSystem(COMM, build_model(parse_scene(tomllib.loads(text), "t.toml", text), COMM))
+    system.whole = build_model(parse_scene(tomllib.loads(text), "t.toml", text))
+    system.iq = saddle_of_input_dofs(COMM, system)
+    return system
 
 
 def brute_stiffness(model, factor: float = 1.0) -> np.ndarray:
@@ -59,9 +65,9 @@ def brute_stiffness(model, factor: float = 1.0) -> np.ndarray:
 
 def brute_saddle(system: SaddleSystem, factor: float = 1.0) -> np.ndarray:
     """The whole saddle matrix before elimination, in the saddle numbering."""
-    iq, il = system.saddle_of_input, system.saddle_of_mult
+    iq, il = system.iq, system.saddle_of_mult
     S = np.zeros((system.layout.size, system.layout.size))
-    S[np.ix_(iq, iq)] = brute_stiffness(system.model, factor)
+    S[np.ix_(iq, iq)] = brute_stiffness(system.whole, factor)
     blk = system.block
     for k, rel in enumerate(system.multiplied):
         rows = il[blk.first_row[k]:blk.first_row[k + 1]]
@@ -107,8 +113,8 @@ def test_operator_is_the_dense_assembly(cell):
 
 def structure(system: SaddleSystem) -> np.ndarray:
     """Where the saddle matrix has entries, from the cells and the relations' coefficients."""
-    mesh, nc = system.model.mesh, system.model.ncomp
-    iq, il = system.saddle_of_input, system.saddle_of_mult
+    mesh, nc = system.whole.mesh, system.model.ncomp
+    iq, il = system.iq, system.saddle_of_mult
     nodes = np.zeros((mesh.num_points, mesh.num_points), dtype=bool)
     nen = mesh.cells.shape[1]
     nodes[np.repeat(mesh.cells, nen, axis=1).ravel(), np.tile(mesh.cells, nen).ravel()] = True
@@ -156,7 +162,7 @@ def test_elimination_lifting_and_reactions(cell):
     system = system_of(SCENE.format(cell=cell, preset="direct", eliminate="true"))
     mat = system.assemble()
     S = brute_saddle(system)
-    rows = system.saddle_of_input[system.elim_dofs]
+    rows = system.iq[system.elim_dofs]
     assert rows.size > 0
     E = eliminated(S, rows, system.kscale)
     np.testing.assert_allclose(dense(mat), E, rtol=0, atol=1e-13 * np.abs(S).max())
@@ -204,13 +210,13 @@ components = ["x", "y"]
     system = system_of(text)
     mat = system.assemble()
     op = system.op
-    unused = system.saddle_of_input[[12, 13]]
+    unused = system.iq[[12, 13]]
     np.testing.assert_array_equal(op.global_columns(op.diag_pos[unused - op.offset]), unused)
     M = dense(mat)
     np.testing.assert_array_equal(M[unused][:, unused], system.kscale * np.eye(2))
     assert np.abs(M[unused]).sum() == 2 * system.kscale
     S = brute_saddle(system)
-    rows = system.saddle_of_input[system.elim_dofs]
+    rows = system.iq[system.elim_dofs]
     np.testing.assert_allclose(M, eliminated(S, rows, system.kscale), rtol=0, atol=1e-14)
     b, x_e = system.rhs(1.0)
     x = np.linalg.solve(M, b)
@@ -220,6 +226,6 @@ components = ["x", "y"]
     other = system_of(text.replace("m.vtu", "m2.vtu"))
     M2 = dense(other.assemble())
     x2 = np.linalg.solve(M2, other.rhs(1.0)[0])
-    q, q2 = x[system.saddle_of_input[:12]], x2[other.saddle_of_input]
+    q, q2 = x[system.iq[:12]], x2[other.iq]
     assert np.abs(q).max() > 1.0
     np.testing.assert_allclose(q, q2, rtol=1e-12, atol=0)

@@ -152,18 +152,18 @@ nu = 0.3
         build_mesh(parse_scene(tomllib.loads(text), "s.toml"))
     assert time.perf_counter() - t0 < 5.0
     assert info.value.key == "mesh.generator"
-    need = memory.estimate_bytes(2 * 20001**2, 2, "direct")
-    assert need == pytest.approx(92e6 + 2 * 20001**2 * (200 + 3100))
+    need = memory.whole_mesh_bytes(2 * 20001**2)   # the whole mesh, before it is built
+    assert need == pytest.approx(92e6 + 2 * 20001**2 * 200)
     assert f"needs about {need / 2**30:.0f} GiB" in info.value.message
     assert "GiB available" in info.value.message
 
 
 def test_memory_estimate_per_rank():
     one, two = (memory.estimate_bytes(10**6, 2, "direct", n) for n in (1, 2))
-    assert one - 92e6 == pytest.approx(1e6 * 3300) and two - 92e6 == pytest.approx(1e6 * 1750)
+    assert one - 92e6 == pytest.approx(1e6 * 3100) and two - 92e6 == pytest.approx(1e6 * 1550)
     # 3D direct: measured 18.6 KB per DOF at 27 783 DOFs, growing like DOFs^(1/3)
     assert memory.estimate_bytes(8 * 27783, 3, "direct") == pytest.approx(
-        92e6 + 8 * 27783 * (200 + 2 * 18.6e3))
+        92e6 + 8 * 27783 * 2 * 18.6e3)
 
 
 def _scene_with_file(path) -> str:
@@ -214,20 +214,19 @@ def test_file_with_an_inverted_cell_is_refused(shared_tmp):
             build(parse_scene(tomllib.loads(text), "s.toml", text))
 
 
-def test_memory_check_of_a_distributed_run(monkeypatch):
-    """A distributed run checks rank 0's whole mesh and each rank's share of the solve, without
-    the replicated share: memory between the two estimates refuses the replicated run only;
-    memory below the whole mesh refuses both, naming rank 0's build."""
+def test_memory_check_of_a_run(monkeypatch):
+    """A run checks each rank's share of the solve (every machine's verdict; for a generator
+    before the mesh is built) and rank 0's whole mesh (that rank alone): memory just above
+    the ranks' shares builds the model, just below refuses it; a file's mesh is checked once
+    read."""
     import tomllib
 
     from mpi4py import MPI
 
-    from parsolve.model import build_model
+    from parsolve.model import build_mesh, build_model
     from parsolve.scene import parse_scene
 
     comm = MPI.COMM_WORLD
-    if comm.size == 1:
-        pytest.skip("one rank: nothing is distributed")
     text = """[mesh]
 generator = "rectangle"
 lx = 1.0
@@ -241,24 +240,24 @@ E = 1.0
 nu = 0.3
 """
     dofs, n = 2 * 41**2, comm.size
-    shared = n * memory.estimate_bytes(dofs, 2, "direct", n, replicated=False)
-    replicated = n * memory.estimate_bytes(dofs, 2, "direct", n)
-    assert replicated - shared == pytest.approx(n * dofs * 200.0)
+    shared = n * memory.estimate_bytes(dofs, 2, "direct", n)   # n ranks on this machine
+    assert shared == pytest.approx(n * (92e6 + dofs * 3.1e3 / n))
+    assert memory.whole_mesh_bytes(dofs) == pytest.approx(92e6 + dofs * 200.0)
     assert memory.whole_mesh_bytes(dofs) < shared
 
-    def build(mesh: str, have: float):
+    def build(have: float):
         monkeypatch.setattr(memory, "available_bytes", lambda: have)
         scene = parse_scene(tomllib.loads(text), "s.toml")
-        scene.solver.mesh = mesh
         with memory.agreed_over(comm):
             return build_model(scene, comm)
 
-    between = (shared + replicated) / 2
+    assert build(shared * 1.01).mesh.num_global_points == 41**2
     with pytest.raises(InputError) as info:
-        build("replicated", between)
+        build(shared * 0.99)
     assert info.value.key == "mesh.generator" and "too large for this machine" in info.value.message
-    model = build("distributed", between)
-    assert model.distributed and model.mesh.num_global_points == 41**2
+    assert "built on one rank" not in info.value.message
+    # the whole mesh alone on one rank (which a run's shares on one machine always exceed)
+    monkeypatch.setattr(memory, "available_bytes", lambda: memory.whole_mesh_bytes(dofs) * 0.99)
     with pytest.raises(InputError) as info:
-        build("distributed", memory.whole_mesh_bytes(dofs) * 0.99)
+        build_mesh(parse_scene(tomllib.loads(text), "s.toml"))
     assert info.value.key == "mesh.generator" and "built on one rank" in info.value.message

@@ -1,6 +1,6 @@
-"""The distributed mesh: each rank's part against the replicated partition it must reproduce,
-groups restricted to the parts, regions decided for the whole mesh, collective input errors,
-and the scene key."""
+"""The distributed mesh: each rank's part against the whole mesh's partition it must
+reproduce, the 1-rank part sharing the whole mesh's arrays, groups restricted to the parts,
+regions decided for the whole mesh, collective input errors, and the deprecated scene key."""
 
 import tomllib
 
@@ -9,10 +9,10 @@ import pytest
 from mpi4py import MPI
 
 from parsolve.errors import InputError
-from parsolve.mesh.distribute import COMPONENT_MARGIN, distribute, index_dtype
+from parsolve.mesh.distribute import COMPONENT_MARGIN, _extract, distribute, index_dtype
 from parsolve.mesh.generators import box, plate_with_hole, rectangle
-from parsolve.mesh.local_regions import LocalRegions, allgather_rows
-from parsolve.mesh.partition import partition
+from parsolve.mesh.regions import allgather_rows
+from parsolve.mesh.partition import from_cell_parts, partition
 from parsolve.mesh.regions import RegionResolver
 from parsolve.scene import parse_scene
 
@@ -32,8 +32,8 @@ def parts(name, comm, method="scotch"):
 
 @pytest.mark.parametrize("method", ["scotch", "bisection"])
 @pytest.mark.parametrize("name", sorted(MESHES))
-def test_parts_are_the_replicated_partition(name, method, comm):
-    """Same owners and numbering as the replicated partition; local cells = every cell
+def test_parts_are_the_whole_meshs_partition(name, method, comm):
+    """Same owners and numbering as the whole mesh's partition; local cells = every cell
     touching an owned node (input order), owned nodes first, ghosts by global number."""
     whole, local = parts(name, comm, method)
     part = partition(whole, comm.size, method, comm)
@@ -131,14 +131,39 @@ nu = 0.3
 """
 
 
+@pytest.mark.parametrize("name", sorted(MESHES))
+def test_one_rank_part_is_the_whole_mesh_not_a_copy(name):
+    """On 1 rank the part is what the general extraction gives (every node owned, input
+    numbering), but its coordinates are the whole mesh's array itself (and its cells too
+    where their type is kept): the set-up never holds the mesh twice."""
+    whole = MESHES[name]()
+    whole.node_groups["corner"] = np.array([0, 3])
+    local = distribute(MPI.COMM_SELF, whole, "scotch")
+    general = _extract(whole, from_cell_parts(whole, np.zeros(whole.num_cells, np.int64), 1,
+                                              "none"), 0)
+    assert local.points is whole.points
+    assert local.n_owned == local.num_points == whole.num_points and local.partitioner == "none"
+    for key, value in general.items():
+        got = getattr(local, key)
+        if isinstance(value, dict):
+            assert sorted(got) == sorted(value), key
+            for group in value:
+                assert got[group].dtype == value[group].dtype, (key, group)
+                assert np.array_equal(got[group], value[group]), (key, group)
+        else:
+            assert got.dtype == value.dtype and np.array_equal(got, value), key
+    if whole.cells.dtype == local.cells.dtype:
+        assert local.cells is whole.cells
+
+
 @pytest.mark.parametrize("region", ["near", "strip", "corner_box", "all", "left", "top"])
 def test_regions_are_the_whole_meshs(region, comm):
-    """A region on the parts is the replicated region: the same nodes (by input id), cells
+    """A region on the parts is the whole mesh's region: the same nodes (by input id), cells
     and boundary facets, each counted once over the ranks."""
     scene = parse_scene(tomllib.loads(SPECS), "s.toml")
     whole, local = parts("quad", comm)
     expected = RegionResolver(whole, scene.regions, "s.toml")(region, "k")
-    got = LocalRegions(comm, local, scene.regions, "s.toml")
+    got = RegionResolver(local, scene.regions, "s.toml", comm)
     r = got(region, "k")
     assert np.array_equal(got.relation_nodes(region, "k"), expected.nodes)
     owned_cells = r.cells[local.node_owner[local.cells[r.cells]].min(axis=1) == comm.rank]
@@ -158,7 +183,7 @@ def test_a_region_empty_on_some_parts_is_not_empty(comm):
                          'strip = "x >= 1.95"\nnowhere = "x > 5"')
     scene = parse_scene(tomllib.loads(text), "s.toml")
     _, local = parts("quad", comm)
-    regions = LocalRegions(comm, local, scene.regions, "s.toml")
+    regions = RegionResolver(local, scene.regions, "s.toml", comm)
     assert regions.relation_nodes("strip", "k").size == 6
     with pytest.raises(InputError, match="region 'nowhere' selects no node and no cell"):
         regions("nowhere", "regions.nowhere")
@@ -170,16 +195,25 @@ def test_an_expression_error_on_one_part_is_raised_on_every_rank(comm):
     text = SPECS.replace('strip = "x >= 0.5 and x <= 0.8"', 'strip = "1 / (x - 2) > 0"')
     scene = parse_scene(tomllib.loads(text), "s.toml")
     _, local = parts("quad", comm)
-    regions = LocalRegions(comm, local, scene.regions, "s.toml")
+    regions = RegionResolver(local, scene.regions, "s.toml", comm)
     with pytest.raises(InputError, match="regions.strip"):
         regions("strip", "k")
     comm.Barrier()
 
 
-def test_scene_key_mesh():
-    base = SPECS
-    assert parse_scene(tomllib.loads(base), "s.toml").solver.mesh == "distributed"
-    text = base + '[solver]\nmesh = "replicated"\n'
-    assert parse_scene(tomllib.loads(text), "s.toml").solver.mesh == "replicated"
-    with pytest.raises(InputError, match="solver.mesh"):
-        parse_scene(tomllib.loads(base + '[solver]\nmesh = "scattered"\n'), "s.toml")
+@pytest.mark.serial
+def test_scene_key_mesh_is_deprecated(capsys, monkeypatch):
+    """[solver] mesh, whatever its value, is accepted and ignored, said once per process on
+    rank 0 (naming the file and the key); a scene without it says nothing."""
+    import parsolve.scene as scene_module
+
+    monkeypatch.setattr(scene_module, "_MESH_WARNED", False)
+    base = parse_scene(tomllib.loads(SPECS), "s.toml")
+    assert capsys.readouterr().err == ""
+    for value in ('"replicated"', '"scattered"', "3"):
+        text = SPECS + f"[solver]\nmesh = {value}\n"
+        assert parse_scene(tomllib.loads(text), "s.toml").solver == base.solver
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert err.startswith("parsolve: warning: s.toml: solver.mesh: deprecated and ignored")
+    assert "refused in the next release" in err

@@ -1,5 +1,5 @@
-"""Scenes on the distributed mesh: which ones get it, and what a rank then holds. (Every
-shipped scene is compared with the replicated mesh in ``test_partition``.)"""
+"""Scenes on the distributed mesh: what a rank holds, the relations whole on every rank as on
+one rank alone. (Every shipped scene is compared across rank counts in ``test_partition``.)"""
 
 import numpy as np
 import pytest
@@ -7,9 +7,6 @@ import pytest
 from conftest import CONFIGS
 from parsolve.model import build_model
 from parsolve.scene import load_scene
-
-SOLUBILITY = sorted(p.name for p in CONFIGS.glob("solubility*.toml"))
-
 
 def penalty_contact(path, formulation: str = "penalty"):
     """contact_block_friction.toml with a baseline (penalty by default) instead of relations."""
@@ -23,16 +20,14 @@ def penalty_contact(path, formulation: str = "penalty"):
 def test_contact_baselines_get_the_parts(comm, shared_tmp, formulation):
     """Contact's penalty / augmented-Lagrangian baselines run on the parts too (no effect
     keeps the whole mesh): a rank holds its part, the pairing is whole on every rank in input
-    ids, the tributary areas (hence the per-node penalties) are the replicated mesh's."""
+    ids, the tributary areas (hence the per-node penalties) are one rank's."""
     path = shared_tmp / f"{formulation}_contact.toml"
     if comm.rank == 0:
         penalty_contact(path, formulation)
     comm.Barrier()
     scene = load_scene(path)
     assert scene.effect_specs["contact"][0].formulation == formulation
-    scene.solver.mesh = "distributed"
     model = build_model(scene, comm)
-    assert model.distributed == (comm.size > 1)
     whole = build_model(load_scene(path))
     assert model.mesh.num_points < whole.mesh.num_points or comm.size == 1
     ours, theirs = model.effects[-1], whole.effects[-1]
@@ -47,9 +42,7 @@ def test_relations_contact_gets_the_parts(comm):
     """Contact as relations (the paper's form) runs on the parts: the surfaces are gathered
     once, the relations are whole on every rank in input numbering."""
     scene = load_scene(CONFIGS / "contact_block_friction.toml")
-    scene.solver.mesh = "distributed"
     model = build_model(scene, comm)
-    assert model.distributed == (comm.size > 1)
     whole = build_model(load_scene(CONFIGS / "contact_block_friction.toml"))
     assert model.mesh.num_points < whole.mesh.num_points or comm.size == 1
     ours = {r.name: r for r in model.relations}
@@ -59,34 +52,9 @@ def test_relations_contact_gets_the_parts(comm):
         np.testing.assert_array_equal(ours[r.name].values, r.values)
 
 
-def test_arc_length_gets_the_parts(comm):
-    """Arc-length does not fall back: its arc and dot products are the system's (owned rows,
-    summed over the ranks), so it runs on the parts (tests/solvers/test_distributed_arc_length)."""
-    scene = load_scene(CONFIGS / "cantilever_3d.toml")
-    scene.solver.mesh = "distributed"
-    nl = scene.nonlinear
-    nl.method, nl.arc_pattern, nl.arc_length = "arc_length", "end_load", 1e-3
-    model = build_model(scene, comm)
-    assert model.distributed == (comm.size > 1)
-    assert model.reference_patterns == ("end_load",)
-
-
-@pytest.mark.parametrize("name", SOLUBILITY)
-def test_solubility_scenes_get_the_parts(name, comm):
-    """Solubility runs on the parts (its relation is gathered from the owned nodes)."""
-    scene = load_scene(CONFIGS / name)
-    scene.solver.mesh = "distributed"
-    model = build_model(scene, comm)
-    assert model.distributed == (comm.size > 1)
-    if comm.size > 1:
-        assert model.mesh.num_points < model.mesh.num_global_points
-
-
 def test_a_distributed_model_holds_its_part(comm):
     scene = load_scene(CONFIGS / "cantilever_3d.toml")
-    scene.solver.mesh = "distributed"
     model = build_model(scene, comm)
-    assert model.distributed == (comm.size > 1)
     if comm.size > 1:
         assert model.mesh.num_points < model.mesh.num_global_points
         assert model.mesh.num_cells < model.mesh.num_global_cells

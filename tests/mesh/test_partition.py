@@ -237,39 +237,14 @@ def tolerance(name: str) -> float:
     return nonlinear.rtol if nonlinear.matrix == "secant" else 1e-10
 
 
-def distributable(path, comm) -> bool:
-    """Every effect of the scene works on a distributed mesh."""
-    from parsolve.model import distributed_mesh
-    from parsolve.scene import load_scene
-
-    scene = load_scene(path)
-    scene.solver.mesh = "distributed"
-    return distributed_mesh(scene, comm)
-
-
 @pytest.mark.parametrize("name", SHIPPED)
-def test_shipped_scene_same_on_any_partition_and_mesh(name, shared_tmp, comm):
+def test_shipped_scene_same_on_any_partition(name, shared_tmp, comm):
     """Results are in input order: the two partitions give the same arrays to 1e-10 of
-    each quantity's size (active rows exactly), and so does the distributed mesh (each rank
-    its part only) where the scene's effects allow it."""
+    each quantity's size (active rows exactly), and so does one rank alone."""
     if comm.size == 1:
         pytest.skip("one rank: both partitioners give the one trivial part")
-    scotch = run_scene(CONFIGS / name, shared_tmp / "scotch.h5",
-                       solver={"partitioner": "scotch", "mesh": "replicated"})
-    rcb = run_scene(CONFIGS / name, shared_tmp / "rcb.h5",
-                    solver={"partitioner": "bisection", "mesh": "replicated"})
+    scotch = run_scene(CONFIGS / name, shared_tmp / "scotch.h5", solver={"partitioner": "scotch"})
+    rcb = run_scene(CONFIGS / name, shared_tmp / "rcb.h5", solver={"partitioner": "bisection"})
     assert_same_results(scotch, rcb, tolerance(name))
-    if distributable(CONFIGS / name, comm):
-        parts = run_scene(CONFIGS / name, shared_tmp / "parts.h5",
-                          solver={"partitioner": "scotch", "mesh": "distributed"})
-        assert_same_results(parts, scotch, tolerance(name))
-
-
-def test_a_petsc_without_ptscotch_falls_back(comm, monkeypatch):
-    from petsc4py import PETSc
-
-    monkeypatch.setattr(PETSc.MatPartitioning.Type, "PARTITIONINGPTSCOTCH", "no_such_partitioner")
-    mesh = MESHES["plate_hole"]()
-    part, used = cell_parts(mesh, comm.size, "scotch", comm)
-    assert used == ("none" if comm.size == 1 else "bisection")
-    assert np.array_equal(part, cell_parts(mesh, comm.size, "bisection", comm)[0])
+    alone = run_scene(CONFIGS / name, shared_tmp / f"alone{comm.rank}.h5", MPI.COMM_SELF)
+    assert_same_results(alone, scotch, tolerance(name))

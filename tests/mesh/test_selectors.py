@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from parsolve.errors import InputError
-from parsolve.mesh.selectors import box, closest_point, evaluate, near_point
+from parsolve.mesh.selectors import box, evaluate, near_point
 
 # a 3 x 3 grid of points on [0, 1]^2, numbered x fastest
 P2 = np.array([[x, y] for y in (0.0, 0.5, 1.0) for x in (0.0, 0.5, 1.0)])
@@ -110,14 +110,12 @@ def test_value_expressions_must_be_finite():
     assert info.value.oneline().startswith("s.toml: relations[0].value: invalid expression")
 
 
-def test_box_near_closest():
+def test_box_near():
     assert np.flatnonzero(box([0.0, 0.0], [0.5, 0.5], P2, TOL)).tolist() == [0, 1, 3, 4]
     assert np.flatnonzero(box([0.0, 0.0], [0.5 - 1e-10, 0.5], P2, TOL)).tolist() == [0, 1, 3, 4]
     assert np.flatnonzero(box([0, 0, 1], [1, 1, 3], P3, TOL)).tolist() == [2, 3]
     assert np.flatnonzero(near_point([0.5, 0.5], P2, 0.1)).tolist() == [4]
     assert np.flatnonzero(near_point([0.5, 0.25], P2, 0.25)).tolist() == [1, 4]
-    assert closest_point([0.9, 0.6], P2) == 5
-    assert closest_point((1, 1, 1.9), P3) == 3
     with pytest.raises(InputError, match="2 coordinates"):
         near_point([0.0, 0.0, 0.0], P2, 0.1)
     with pytest.raises(InputError, match="exceeds"):

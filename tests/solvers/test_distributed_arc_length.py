@@ -1,5 +1,5 @@
 """Crisfield's arc-length on the distributed mesh: the same steps, fields and multipliers as
-on the replicated mesh (1e-10, active rows exactly), through a limit point, and the analytic
+on one rank alone (1e-10, active rows exactly), through a limit point, and the analytic
 softening bar's numbers on the parts.
 
 The softening bar is the localization bar of ``test_control`` (its closed form, same Mazars
@@ -9,6 +9,7 @@ the path turns at a limit point, the closed form's peak load E H εd0 = 1e4 at �
 Crisfield's arc-length passes (on 29 columns it stalls at the snap-back: bench_control)."""
 
 import numpy as np
+from mpi4py import MPI
 import pytest
 
 from conftest import assert_same_results
@@ -46,8 +47,8 @@ def test_limit_point_same_on_the_parts(run, max_iterations, steps):
     """Through the limit point on both meshes; with at most 3 iterations the steps at and past
     the peak are cut (halved arcs, retried from the saved state) on both alike."""
     text = softening_bar(max_iterations, steps)
-    whole = run(text, name=f"whole{max_iterations}", solver={"mesh": "replicated"})
-    parts = run(text, name=f"parts{max_iterations}", solver={"mesh": "distributed"})
+    whole = run(text, name=f"whole{max_iterations}", comm=MPI.COMM_SELF)
+    parts = run(text, name=f"parts{max_iterations}")
     assert_same_results(parts, whole)
     mu = parts["steps/time"]
     assert np.diff(mu)[0] > 0 and np.diff(mu)[-1] < 0   # up to the limit point, then down
@@ -59,7 +60,7 @@ def test_softening_bar_closed_form_on_the_parts(run):
     """Every step on the closed form: the load factor is the force of the damaged column at
     its strain, the end moves by the damaged column's stretch plus the elastic columns'; the
     load rises to the limit load E H εd0 and falls past it, while the end keeps moving."""
-    res = run(softening_bar(), name="softening", solver={"mesh": "distributed"})
+    res = run(softening_bar(), name="softening")
     assert res["attrs"]["status"] == "complete"
     mu, eps_d = res["steps/time"], column_strain(res)
     np.testing.assert_allclose(mu, closed_form(eps_d)[1], rtol=1e-8)
@@ -80,8 +81,8 @@ def test_softening_bar_closed_form_on_the_parts(run):
 def test_multiplied_support_on_the_parts(run):
     """The elastic bar with its supports as multipliers (not eliminated): the clamp's
     multiplier balances the load factor, the same on both meshes."""
-    whole = run(ARC_BAR, name="bar_whole", solver={"mesh": "replicated", "eliminate": False})
-    parts = run(ARC_BAR, name="bar_parts", solver={"mesh": "distributed", "eliminate": False})
+    whole = run(ARC_BAR, name="bar_whole", comm=MPI.COMM_SELF, solver={"eliminate": False})
+    parts = run(ARC_BAR, name="bar_parts", solver={"eliminate": False})
     assert_same_results(parts, whole)
     mu = parts["steps/time"]
     np.testing.assert_allclose(parts["relations/clamp/multiplier"].sum(axis=1), mu, rtol=1e-10)
