@@ -290,8 +290,7 @@ class Contact(Effect):
         refused; an obstacle farther than the mesh's size from every slave node is legitimate
         (a body lowered onto it over the steps) but said in a warning: a misplaced origin
         would otherwise give a run without contact and no message."""
-        size = float(np.max(self.mesh.extent if self.values.distributed
-                            else np.ptp(self.mesh.points, axis=0)))
+        size = float(np.max(self.mesh.extent))   # the whole mesh's, on every rank
         if np.all(p.gap < -1e-9 * size):
             raise InputError(f"every slave node starts inside the obstacle (gaps from "
                              f"{p.gap.min():.3g} to {p.gap.max():.3g}): does its normal point "

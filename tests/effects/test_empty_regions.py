@@ -274,7 +274,6 @@ value = 1.0
 def missing_on_some_rank(path, region: str) -> bool:
     """Whether some rank of the distributed mesh owns no node of the region."""
     model = build_model(load_scene(path), MPI.COMM_WORLD)
-    assert model.distributed
     reg = model.regions()(region, "test")
     owned = int(np.count_nonzero(reg.nodes < model.mesh.n_owned))
     return min(MPI.COMM_WORLD.allgather(owned)) == 0
@@ -284,7 +283,7 @@ def missing_on_some_rank(path, region: str) -> bool:
 def test_region_missing_on_ranks(run, case):
     physics, sections, region = CASES[case]
     text = STRIP.format(physics=physics, case=sections)
-    parts = run(text, name=f"empty_{case}_parts", solver={"mesh": "distributed"})
+    parts = run(text, name=f"empty_{case}_parts")
     if MPI.COMM_WORLD.size > 1:
         assert missing_on_some_rank(run.last.with_suffix(".toml"), region)
     alone = run(text, name=f"empty_{case}_alone", comm=MPI.COMM_SELF)

@@ -17,8 +17,7 @@ from parsolve.model import build_model
 from parsolve.scene import load_scene
 
 def test_laminate_cell_on_parts_and_alone(run):
-    parts = run(CONFIGS / "periodic_shear_laminate.toml", name="laminate_parts",
-                solver={"mesh": "distributed"})
+    parts = run(CONFIGS / "periodic_shear_laminate.toml", name="laminate_parts")
     check_laminate(parts)
     alone = run(CONFIGS / "periodic_shear_laminate.toml", name="laminate_alone",
                 comm=MPI.COMM_SELF)

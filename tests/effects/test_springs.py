@@ -137,8 +137,7 @@ def network(res: dict) -> None:
 
 
 def test_shipped_scene_on_parts_and_alone(run):
-    parts = run(CONFIGS / "springs_bar_supports.toml", name="springs_parts",
-                solver={"mesh": "distributed"})
+    parts = run(CONFIGS / "springs_bar_supports.toml", name="springs_parts")
     network(parts)
     alone = run(CONFIGS / "springs_bar_supports.toml", name="springs_alone", comm=MPI.COMM_SELF)
     assert_same_results(parts, alone, tol=1e-10)
