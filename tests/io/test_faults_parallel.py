@@ -1,0 +1,65 @@
+"""Faults of real runs in their own processes (mpirun, 1 to 3 ranks): a really full disk
+(a small tmpfs) with ``--output-mode parallel``, and two runs writing the same result."""
+
+import os
+import subprocess
+import sys
+import time
+
+import h5py
+import numpy as np
+import pytest
+
+from conftest import ROOT
+from tests.io.test_xdmf import SCENE_2D
+
+pytestmark = pytest.mark.serial  # each test starts its own ranks
+
+ENV = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "OPAL_"))}
+MPIRUN = ["bash", str(ROOT / "scripts" / "mpirun.sh"), "-n"]
+BIG = (SCENE_2D.replace("nx = 8", "nx = 60").replace("ny = 4", "ny = 30")
+       .replace("count = 3", "count = 200"))   # ~180 kB a step: a 3 MB disk fills at step 11
+
+
+def launch(ranks: int, args: list[str], wait: bool = True):
+    cmd = MPIRUN + [str(ranks), sys.executable, "-m", "parsolve"] + args
+    if not wait:
+        return subprocess.Popen(cmd, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True, start_new_session=True)
+    return subprocess.run(cmd, env=ENV, capture_output=True, text=True, timeout=120)
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """A 3 MB file system (tmpfs), unmounted afterwards."""
+    where = tmp_path / "disk"
+    where.mkdir()
+    mount = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=3m", "tmpfs", str(where)],
+                           capture_output=True, text=True)
+    if mount.returncode != 0:
+        pytest.skip(f"cannot mount a small tmpfs here: {mount.stderr.strip()}")
+    yield where
+    subprocess.run(["umount", "-l", str(where)], check=False)
+
+
+@pytest.mark.parametrize("ranks", [1, 2, 3])
+def test_disk_full_in_parallel_mode_exits_4_everywhere(ranks, small_disk, tmp_path):
+    """Every rank stops with exit 4 at the step that does not fit; the file opens with plain
+    h5py, says why, and holds the finished steps: the linear solution, u(t) = t / t1 u(t1)."""
+    scene, out = tmp_path / "big.toml", small_disk / "out.h5"
+    scene.write_text(BIG)
+    proc = launch(ranks, ["run", str(scene), "-o", str(out), "--output-mode", "parallel"])
+    assert proc.returncode == 4, proc.stderr
+    assert "No space left on device" in proc.stderr and "Traceback" not in proc.stderr
+    with h5py.File(out, "r") as f:
+        status, t = f.attrs["status"], f["steps/time"][()]
+        n = len(t)
+        u, s = f["fields/displacement"][()], f["cell_fields/stress"][()]
+    assert 3 <= n < 200
+    assert status.startswith(f"failed: writing step {n + 1} to") and "No space left" in status
+    assert u.shape[0] == s.shape[0] == n
+    np.testing.assert_allclose(t, 0.005 * np.arange(1, n + 1), rtol=1e-12)
+    np.testing.assert_allclose(u, t[:, None, None] / t[0] * u[0], rtol=1e-9, atol=1e-14)
+    np.testing.assert_allclose(s, t[:, None, None] / t[0] * s[0], rtol=1e-9, atol=1e-9)
+    assert np.abs(u[0]).max() > 0
+    assert not (small_disk / "out.h5.lock").exists()
