@@ -21,8 +21,22 @@ BIG = (SCENE_2D.replace("nx = 8", "nx = 60").replace("ny = 4", "ny = 30")
        .replace("count = 3", "count = 200"))   # ~180 kB a step: a 3 MB disk fills at step 11
 
 
-def launch(ranks: int, args: list[str], wait: bool = True):
-    cmd = MPIRUN + [str(ranks), sys.executable, "-m", "parsolve"] + args
+SLOW = """
+import sys, time
+from parsolve import driver
+original = driver.progress
+def slow(*args, **kw):       # a step every 0.1 s: the second run starts while the first runs
+    original(*args, **kw)
+    time.sleep(0.1)
+driver.progress = slow
+from parsolve.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def launch(ranks: int, args: list[str], wait: bool = True, slow: bool = False):
+    cmd = MPIRUN + [str(ranks), sys.executable] + (["-c", SLOW] if slow else
+                                                   ["-m", "parsolve"]) + args
     if not wait:
         return subprocess.Popen(cmd, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                 text=True, start_new_session=True)
@@ -63,3 +77,58 @@ def test_disk_full_in_parallel_mode_exits_4_everywhere(ranks, small_disk, tmp_pa
     np.testing.assert_allclose(s, t[:, None, None] / t[0] * s[0], rtol=1e-9, atol=1e-9)
     assert np.abs(u[0]).max() > 0
     assert not (small_disk / "out.h5.lock").exists()
+
+
+def _locked(path) -> bool:
+    import fcntl
+
+    try:
+        fd = os.open(path, os.O_RDWR)
+    except FileNotFoundError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    finally:
+        os.close(fd)
+    return False
+
+
+@pytest.mark.parametrize("ranks", [1, 2, 3])
+def test_a_second_run_on_the_same_output_is_refused(ranks, tmp_path):
+    """The second run, started while the first holds the lock and has written steps, exits 2
+    at once and touches nothing; the first finishes with its three files whole and agreeing."""
+    import meshio
+
+    scene, out = tmp_path / "big.toml", tmp_path / "out.h5"
+    scene.write_text(BIG.replace("count = 200", "count = 60"))
+    first = launch(ranks, ["run", str(scene), "-o", str(out)], wait=False, slow=True)
+    xdmf, deadline = out.with_suffix(".xdmf"), time.time() + 120
+    while time.time() < deadline and not (
+            _locked(tmp_path / "out.h5.lock") and xdmf.exists()
+            and xdmf.read_text().count('<Grid Name="step') >= 2):
+        time.sleep(0.1)
+    assert first.poll() is None
+    inode = out.stat().st_ino
+    second = launch(ranks, ["run", str(scene), "-o", str(out)])
+    assert second.returncode == 2, second.stderr
+    assert second.stderr.splitlines()[0] == (f"parsolve: command line: -o: {out} is being written by "
+                                     f"another run (lock held on {out}.lock)")
+    assert second.stdout == ""
+    _, err = first.communicate(timeout=300)
+    assert first.returncode == 0, err
+    assert out.stat().st_ino == inode          # never replaced
+    with h5py.File(out, "r") as f:
+        assert f.attrs["status"] == "complete"
+        t = f["steps/time"][()]
+        u = f["fields/displacement"][()]
+    np.testing.assert_allclose(t, np.arange(1, 61) / 60, rtol=1e-12)
+    np.testing.assert_allclose(u, t[:, None, None] / t[0] * u[0], rtol=1e-9, atol=1e-14)
+    with meshio.xdmf.TimeSeriesReader(xdmf) as r:
+        r.read_points_cells()
+        assert r.num_steps == 60
+        tk, point_data, _ = r.read_data(59)
+    assert tk == t[59]
+    np.testing.assert_array_equal(point_data["displacement"][:, :2], u[59])
+    assert not (tmp_path / "out.h5.lock").exists()
