@@ -47,6 +47,7 @@ from mpi4py import MPI
 from parsolve import __version__
 from parsolve.errors import OutputError
 from parsolve.io.hdf5 import ResultWriter, _create, known_datasets
+from parsolve.interrupts import SIGNALS
 from parsolve.io.lock import free_reserve
 from parsolve.io.slabs import OwnedRows, Rows, split_owners
 from parsolve.io.xdmf import XdmfWriter, sidecar_path
@@ -66,8 +67,8 @@ def _row_form(value: np.ndarray) -> np.ndarray:
 
 @contextmanager
 def signals_held():
-    """SIGINT / SIGTERM wait until the block is over (then their handlers run as usual)."""
-    held = {signal.SIGINT, signal.SIGTERM}
+    """SIGINT / SIGTERM (and SIGUSR1 / SIGUSR2, parsolve.interrupts) wait until the block is over (then their handlers run as usual)."""
+    held = set(SIGNALS)
     previous = signal.pthread_sigmask(signal.SIG_BLOCK, held)
     try:
         yield
