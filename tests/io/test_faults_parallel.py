@@ -79,6 +79,11 @@ def test_disk_full_in_parallel_mode_exits_4_everywhere(ranks, small_disk, tmp_pa
     assert not (small_disk / "out.h5.lock").exists()
 
 
+def _children(pid: int) -> list[int]:
+    out = subprocess.run(["pgrep", "-P", str(pid)], capture_output=True, text=True).stdout
+    return [int(p) for p in out.split()]
+
+
 def _locked(path) -> bool:
     import fcntl
 
@@ -132,3 +137,53 @@ def test_a_second_run_on_the_same_output_is_refused(ranks, tmp_path):
     assert tk == t[59]
     np.testing.assert_array_equal(point_data["displacement"][:, :2], u[59])
     assert not (tmp_path / "out.h5.lock").exists()
+
+
+@pytest.mark.parametrize("ranks", [1, 2, 3])
+def test_post_recovers_a_killed_runs_file(ranks, tmp_path):
+    """kill -9 of every rank and of mpirun in the middle of a swmr run: plain h5py cannot open
+    the file and ``post`` says to use --recover; after it every finished step reads, the linear
+    solution u(t) = t / t1 u(t1), and the status says what happened."""
+    import signal
+
+    scene, out = tmp_path / "big.toml", tmp_path / "out.h5"
+    scene.write_text(BIG)
+    proc = launch(ranks, ["run", str(scene), "-o", str(out)], wait=False, slow=True)
+    deadline = time.time() + 120
+    while time.time() < deadline:
+        time.sleep(0.1)
+        try:
+            with h5py.File(out, "r", swmr=True) as f:
+                if len(f["steps/time"]) >= 3:
+                    break
+        except (OSError, KeyError):
+            pass
+    mpirun = _children(proc.pid)
+    for pid in _children(mpirun[0]):      # the ranks (in a process group of their own)
+        os.kill(pid, signal.SIGKILL)
+    proc.communicate(timeout=60)
+    with pytest.raises(OSError):
+        h5py.File(out, "r")
+    post = [sys.executable, "-m", "parsolve", "post", str(out)]
+    summary = subprocess.run(post + ["--summary"], env=ENV, capture_output=True, text=True)
+    assert summary.returncode == 2
+    assert summary.stderr.strip().endswith(
+        f"the run writing it was killed (status running): `parsolve post {out} --recover` "
+        "makes its finished steps readable")
+    fixed = subprocess.run(post + ["--recover"], env=ENV, capture_output=True, text=True)
+    assert fixed.returncode == 0, fixed.stderr
+    with h5py.File(out, "r") as f:           # a plain reader now
+        status, t = f.attrs["status"], f["steps/time"][()]
+        n = len(t)
+        u = f["fields/displacement"][()]
+        lengths = set()
+        f.visititems(lambda name, o: lengths.add(o.shape[0]) if isinstance(o, h5py.Dataset)
+                     and not name.startswith("mesh") else None)
+    assert status == "interrupted: killed (recovered)"
+    assert fixed.stdout.startswith(f"{out}: recovered {n} finished step(s)")
+    assert n >= 3 and lengths == {n}
+    np.testing.assert_allclose(t, 0.005 * np.arange(1, n + 1), rtol=1e-12)
+    np.testing.assert_allclose(u, t[:, None, None] / t[0] * u[0], rtol=1e-9, atol=1e-14)
+    again = subprocess.run(post + ["--recover"], env=ENV, capture_output=True, text=True)
+    assert again.returncode == 0 and "nothing to recover" in again.stdout
+    assert subprocess.run(post + ["--summary"], env=ENV, capture_output=True).returncode == 0
