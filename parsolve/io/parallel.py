@@ -23,9 +23,14 @@ Design decisions (MPI-IO and SWMR cannot be used on the same file at once):
 * **SIGINT / SIGTERM are held while a step is written** (they act right after it), so every
   rank leaves a step's collective calls together; the status is then written by rank 0 alone,
   on the closed file (POSIX driver): closing needs no other rank.
-* **Disk full**: an OSError on any rank is agreed on by all ranks before ``/steps/time`` is
-  written; every rank raises the same OutputError and nothing more is written; the finished
-  steps stay readable and, as in the SWMR mode, ``status`` stays "running".
+* **Disk full**: rank 0 allocates each step's space (``posix_fallocate``) before any rank
+  writes it, so a full disk shows outside HDF5; an error inside a collective HDF5 call is
+  agreed on by every rank after that call (``_together``), so no rank is left waiting in the
+  next one. Every rank raises the same OutputError (exit 4) and nothing more of the step is
+  written; the lock file's reserve (parsolve.io.lock) is given back so that the close and the
+  status ("failed: … No space left on device …") find room: the finished steps stay readable
+  by a plain reader. (Without that reserve, a run not started by ``parsolve run``, the status
+  stays "running".)
 
 Without h5py's MPI build (a run outside ``mpirun`` on Debian picks ``h5py._debian_h5py_serial``)
 a one-rank run writes the same file with the POSIX driver; more ranks need the MPI build.
@@ -67,7 +72,8 @@ def _row_form(value: np.ndarray) -> np.ndarray:
 
 @contextmanager
 def signals_held():
-    """SIGINT / SIGTERM (and SIGUSR1 / SIGUSR2, parsolve.interrupts) wait until the block is over (then their handlers run as usual)."""
+    """SIGINT / SIGTERM (and SIGUSR1 / SIGUSR2: parsolve.interrupts) wait until the block is
+    over (then their handlers run as usual)."""
     held = set(SIGNALS)
     previous = signal.pthread_sigmask(signal.SIG_BLOCK, held)
     try:
@@ -152,7 +158,8 @@ class ParallelResultWriter(ResultWriter):
             f.attrs.update(parsolve_version=__version__, petsc_version=petsc_version,
                            nprocs=self.comm.size, status="running", scene=scene_text, **self.attrs)
 
-        ok = self._together(doing, create)
+        ok = self._together(doing, self._room_for_mesh)
+        ok = ok and self._together(doing, create)
         f = box.get("f")
         for name, data, kind in (("mesh/points", mesh.points, "fields"),
                                  (f"mesh/cells/{mesh.cell_type}", mesh.cells, "cell_fields")):
@@ -345,6 +352,16 @@ class ParallelResultWriter(ResultWriter):
             ok = ok and self._together(doing, action)
         self._close_step(box.get("f"), ok, doing)
         self._raise_if_failed()
+
+    def _room_for_mesh(self) -> None:
+        """Rank 0: a disk without room for /mesh fails before the file is created."""
+        if self.comm.rank != 0:
+            return
+        widths = {kind: np.shape(getattr(data, "values", data))[1] for kind, data in
+                  (("fields", self.mesh.points), ("cell_fields", self.mesh.cells))}
+        need = ROOM_BYTES + 8 * sum(self.rows[kind].n * w for kind, w in widths.items())
+        if shutil.disk_usage(self.path.parent).free < need:
+            raise OSError(28, "No space left on device")
 
     def _make_room(self) -> None:
         """Rank 0 allocates the disk space of the coming step (its rows plus room for the
