@@ -48,6 +48,7 @@ import numpy as np
 
 from parsolve import __version__
 from parsolve.errors import OutputError
+from parsolve.io.lock import free_reserve
 from parsolve.io.slabs import OwnedRows, Rows, split_owners
 from parsolve.io.xdmf import XdmfWriter, sidecar_path
 
@@ -310,11 +311,20 @@ class ResultWriter:
         if self.error is not None:
             # After a failed write nothing more goes in: writing the status would need new space
             # and, on a full disk, leaves HDF5 unable to close the file (tested: it stays
-            # "running"; the exit status and the message say what happened).
+            # "running"; the exit status and the message say what happened) — unless the lock
+            # file's reserve (parsolve.io.lock, runs started by `parsolve run`) gives it room.
+            room = free_reserve(self.path)
             try:
                 f.close()
             except (OSError, RuntimeError):
-                pass
+                return
+            if room:
+                try:
+                    with h5py.File(self.path, "r+", locking=False) as f:
+                        self._trim(f)
+                        f.attrs["status"] = status
+                except (OSError, RuntimeError):
+                    pass
             return
         self._trim(f)
         f.attrs["status"] = status

@@ -57,12 +57,13 @@ def small_disk(tmp_path):
 
 
 @pytest.mark.parametrize("ranks", [1, 2, 3])
-def test_disk_full_in_parallel_mode_exits_4_everywhere(ranks, small_disk, tmp_path):
+@pytest.mark.parametrize("mode", ["parallel", "swmr"])
+def test_disk_full_exits_4_everywhere(mode, ranks, small_disk, tmp_path):
     """Every rank stops with exit 4 at the step that does not fit; the file opens with plain
     h5py, says why, and holds the finished steps: the linear solution, u(t) = t / t1 u(t1)."""
     scene, out = tmp_path / "big.toml", small_disk / "out.h5"
     scene.write_text(BIG)
-    proc = launch(ranks, ["run", str(scene), "-o", str(out), "--output-mode", "parallel"])
+    proc = launch(ranks, ["run", str(scene), "-o", str(out), "--output-mode", mode])
     assert proc.returncode == 4, proc.stderr
     assert "No space left on device" in proc.stderr and "Traceback" not in proc.stderr
     with h5py.File(out, "r") as f:
