@@ -53,8 +53,9 @@ MPIRUN_SH = ["bash", str(ROOT / "scripts" / "mpirun.sh"), "-n"]
 
 
 def _long_scene(path, count=4000, end=80.0):
-    path.write_text((CONFIGS / "solubility_grow_shrink.toml").read_text()
-                    .replace("count = 100", f"count = {count}").replace("end = 2.0", f"end = {end}"))
+    text = (CONFIGS / "solubility_grow_shrink.toml").read_text()
+    path.write_text(text.replace("count = 100", f"count = {count}")
+                    .replace("end = 2.0", f"end = {end}"))
     return path
 
 

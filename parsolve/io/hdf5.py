@@ -21,7 +21,8 @@ Guarantees, and the rules a reader follows:
   datasets at the first step, then the file switches to SWMR (a reader can open it from the
   end of the first step on). A reader opens it with ``h5py.File(path, "r", swmr=True)`` and
   calls ``refresh()`` on each dataset it reads to see new steps, ``/steps/time`` first. (A plain ``h5py.File(path, "r")`` works once the run has closed the file; after a
-  hard kill, -9 or a node failure, only ``swmr=True`` opens it — or run ``parsolve post RESULT.h5 --recover``.)
+  hard kill, -9 or a node failure, only ``swmr=True`` opens it — or run
+  ``parsolve post RESULT.h5 --recover``.)
 * **A step counts only once all its datasets are written.** Each step resizes and writes every
   per-step dataset first, ``/steps/time`` last, then flushes. ``n = len(/steps/time)`` is the
   number of finished steps; a reader takes ``[:n]`` of the other per-step datasets (after a crash

@@ -169,8 +169,9 @@ class ParallelResultWriter(ResultWriter):
                     f.create_dataset(name, (self.rows[kind].n,) + rows.shape[1:],
                                      dtype=rows.dtype), None, kind, rows))
         if ok:
-            ok = self._together(doing, lambda: [_create(f, name, shape, dtype) for name, (shape, dtype)
-                                                in known_datasets(self.relations).items()])
+            known = known_datasets(self.relations).items()
+            ok = self._together(doing, lambda: [_create(f, name, shape, dtype)
+                                                for name, (shape, dtype) in known])
         for name, (shape, dtype) in known_datasets(self.relations).items():
             self._known[name] = (shape, np.dtype(dtype))
         self._close_step(f, ok, doing)
@@ -372,8 +373,8 @@ class ParallelResultWriter(ResultWriter):
         of the file, inside this space, and cuts the rest off when the file is closed."""
         if self.comm.rank != 0:
             return
-        need = ROOM_BYTES + sum(ROOM_PER_DATASET + int(np.prod(shape, dtype=np.int64))
-                                * np.dtype(dtype).itemsize for shape, dtype in self._layout.values())
+        need = ROOM_BYTES + sum(ROOM_PER_DATASET + int(np.prod(shape, dtype=np.int64)) *
+                                np.dtype(dtype).itemsize for shape, dtype in self._layout.values())
         fd = os.open(self.path, os.O_WRONLY)
         try:
             os.posix_fallocate(fd, os.fstat(fd).st_size, need)

@@ -13,9 +13,13 @@ copy over the original (same name: the XDMF beside it keeps pointing at it). The
 
 from __future__ import annotations
 
+import fcntl
+import os
 from pathlib import Path
 
 import h5py
+
+from parsolve.io.lock import lock_path
 
 RECOVERED = "interrupted: killed (recovered)"
 
@@ -23,10 +27,6 @@ RECOVERED = "interrupted: killed (recovered)"
 def killed(path: str | Path) -> bool:
     """True for a result a killed run left: status "running" and no writer holding it. (A
     result being written now is locked, parsolve.io.lock: that one is not "killed".)"""
-    from parsolve.io.lock import lock_path
-    import fcntl
-    import os
-
     try:
         with h5py.File(path, "r", swmr=True) as f:
             if f.attrs.get("status") != "running":

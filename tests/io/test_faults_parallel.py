@@ -119,8 +119,8 @@ def test_a_second_run_on_the_same_output_is_refused(ranks, tmp_path):
     inode = out.stat().st_ino
     second = launch(ranks, ["run", str(scene), "-o", str(out)])
     assert second.returncode == 2, second.stderr
-    assert second.stderr.splitlines()[0] == (f"parsolve: command line: -o: {out} is being written by "
-                                     f"another run (lock held on {out}.lock)")
+    assert second.stderr.splitlines()[0] == (f"parsolve: command line: -o: {out} is being "
+                                             f"written by another run (lock held on {out}.lock)")
     assert second.stdout == ""
     _, err = first.communicate(timeout=300)
     assert first.returncode == 0, err

@@ -37,7 +37,8 @@ def test_cgroup_v2_limit_minus_usage_without_inactive_cache(tmp_path):
         "slurm/job_7/step_0/memory.current": "1\n",
         "memory.max": "max\n"}, available_kb=20 * 2**20)
     assert limits.cgroup_headroom(root) == (
-        4 * GIB - (3 * GIB - GIB // 2), f"the cgroup limit {root}/sys/fs/cgroup/slurm/job_7/memory.max")
+        4 * GIB - (3 * GIB - GIB // 2),
+        f"the cgroup limit {root}/sys/fs/cgroup/slurm/job_7/memory.max")
     have, bound = limits.available_bytes(root=root)
     if limits.address_space_headroom(root) is None:   # no ulimit -v on this test process
         assert (have, bound) == (int(1.5 * GIB), bound) and "slurm/job_7/memory.max" in bound
