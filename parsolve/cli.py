@@ -153,6 +153,31 @@ def check_output(path: str, source: str, key: str, inputs: list[Path],
                        "--export-system")
 
 
+def lock_output(comm, out: str, source: str, key: str):
+    """Rank 0 locks the result (parsolve.io.lock) and every rank learns the verdict: a result
+    another run is writing is an InputError, raised before any output is touched. Returns the
+    lock on rank 0 (None elsewhere)."""
+    from parsolve.errors import InputError
+    from parsolve.io.lock import OutputLock
+
+    lock, verdict = None, None
+    if comm.rank == 0:
+        lock = OutputLock(out)
+        try:
+            verdict = "ok" if lock.acquire() else "busy"
+        except OSError as exc:
+            verdict = f"cannot lock {lock.path}: {exc.strerror or exc}"
+        if verdict == "ok":
+            lock.reserve()
+    verdict = comm.bcast(verdict, root=0)
+    if verdict == "busy":
+        raise InputError(f"{out} is being written by another run (lock held on "
+                         f"{out}.lock)", source, key)
+    if verdict != "ok":
+        raise InputError(verdict, source, key)
+    return lock
+
+
 def _same(a: Path, b: Path) -> bool:
     try:
         return a.resolve() == b.resolve() or (a.exists() and b.exists() and a.samefile(b))
@@ -215,6 +240,7 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         say(f"parsolve: {exc}", sys.stderr)
         return 2
+    lock = None
     try:
         from parsolve.mesh import memory
         from parsolve.model import build_model
@@ -225,6 +251,7 @@ def main(argv: list[str] | None = None) -> int:
             out, source, key = output_path(args, scene)
             inputs = [Path(args.scene)] + ([scene.mesh.file] if scene.mesh.file else [])
             check_output(out, source, key, inputs, args.export_system)
+            lock = lock_output(comm, out, source, key)
         with memory.agreed_over(comm):
             model = build_model(scene, comm)
         _check_all_regions(model)
@@ -263,6 +290,9 @@ def main(argv: list[str] | None = None) -> int:
     except SolverError as exc:
         say(f"parsolve: solver failed: {exc}", sys.stderr)
         return 3
+    finally:
+        if lock is not None:
+            lock.release()
 
 
 if __name__ == "__main__":

@@ -7,6 +7,15 @@ signal only marks itself, and the ranks look at the marks together (``check``) a
 all pass: after each written step and at each Newton iteration. Every rank then raises the
 same ``Interrupted`` at the same place, and the result file is closed with the status
 "interrupted: SIGTERM" and its finished steps.
+
+Through ``mpirun`` (Open MPI 4.1): mpirun forwards SIGUSR1 / SIGUSR2 to every rank at once,
+but a SIGTERM or SIGINT sent to mpirun itself reaches the ranks only as a SIGCONT at once,
+SIGTERM ``odls_base_sigkill_timeout`` seconds later (default 1) and SIGKILL as long again after
+it, and mpirun then exits 1 (it cannot be told to forward SIGTERM: ess_base_forward_signals
+refuses it). So SIGUSR2 here means SIGTERM and SIGUSR1 means SIGINT (same exit status, the
+status says which signal came): ``scripts/mpirun.sh`` turns the SIGTERM / SIGINT it gets into
+them, and a batch system can send them itself (``scancel --signal=USR2``, ``sbatch
+--signal=USR2@60``).
 """
 
 from __future__ import annotations
@@ -18,12 +27,17 @@ from mpi4py import MPI
 
 from parsolve.errors import Interrupted
 
-SIGNALS = (signal.SIGINT, signal.SIGTERM)
+SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGUSR1, signal.SIGUSR2)
+STANDS_FOR = {signal.SIGUSR1: signal.SIGINT, signal.SIGUSR2: signal.SIGTERM}  # as mpirun forwards
 _pending = 0   # the last signal received and not yet acted on (several ranks)
 
 
 def _interrupted(signum: int) -> Interrupted:
-    return Interrupted(signum, signal.Signals(signum).name)
+    name = signal.Signals(signum).name
+    meant = STANDS_FOR.get(signum)
+    if meant is None:
+        return Interrupted(signum, name)
+    return Interrupted(meant, f"{meant.name} (sent as {name})")
 
 
 @contextmanager

@@ -21,7 +21,8 @@ Guarantees, and the rules a reader follows:
   datasets at the first step, then the file switches to SWMR (a reader can open it from the
   end of the first step on). A reader opens it with ``h5py.File(path, "r", swmr=True)`` and
   calls ``refresh()`` on each dataset it reads to see new steps, ``/steps/time`` first. (A plain ``h5py.File(path, "r")`` works once the run has closed the file; after a
-  hard kill, -9 or a node failure, only ``swmr=True`` opens it — or run ``recover(path)``.)
+  hard kill, -9 or a node failure, only ``swmr=True`` opens it — or run
+  ``parsolve post RESULT.h5 --recover``.)
 * **A step counts only once all its datasets are written.** Each step resizes and writes every
   per-step dataset first, ``/steps/time`` last, then flushes. ``n = len(/steps/time)`` is the
   number of finished steps; a reader takes ``[:n]`` of the other per-step datasets (after a crash
@@ -48,6 +49,7 @@ import numpy as np
 
 from parsolve import __version__
 from parsolve.errors import OutputError
+from parsolve.io.lock import free_reserve
 from parsolve.io.slabs import OwnedRows, Rows, split_owners
 from parsolve.io.xdmf import XdmfWriter, sidecar_path
 
@@ -310,11 +312,20 @@ class ResultWriter:
         if self.error is not None:
             # After a failed write nothing more goes in: writing the status would need new space
             # and, on a full disk, leaves HDF5 unable to close the file (tested: it stays
-            # "running"; the exit status and the message say what happened).
+            # "running"; the exit status and the message say what happened) — unless the lock
+            # file's reserve (parsolve.io.lock, runs started by `parsolve run`) gives it room.
+            room = free_reserve(self.path)
             try:
                 f.close()
             except (OSError, RuntimeError):
-                pass
+                return
+            if room:
+                try:
+                    with h5py.File(self.path, "r+", locking=False) as f:
+                        self._trim(f)
+                        f.attrs["status"] = status
+                except (OSError, RuntimeError):
+                    pass
             return
         self._trim(f)
         f.attrs["status"] = status
@@ -333,28 +344,3 @@ class ResultWriter:
 def open_result(path: str | Path) -> h5py.File:
     """Open a result for reading, during the run, after it, or after a hard kill."""
     return h5py.File(path, "r", swmr=True)
-
-
-def recover(path: str | Path) -> int:
-    """Make a result left by a hard kill (SIGKILL, node failure) readable by any HDF5 reader:
-    copy its finished steps into a clean file and rename it over the old one. Returns the
-    number of finished steps."""
-    path = Path(path)
-    tmp = path.with_name(path.name + ".recover")
-    with h5py.File(path, "r", swmr=True) as src, h5py.File(tmp, "w") as dst:
-        n = len(src["steps/time"])
-        dst.attrs.update(src.attrs)
-        if dst.attrs["status"] == "running":
-            dst.attrs["status"] = "failed: the run was killed (recovered)"
-
-        def copy(name, obj):
-            if not isinstance(obj, h5py.Dataset):
-                return
-            per_step = name.split("/")[0] in ("steps", "fields", "cell_fields", "timings",
-                                              "relations", "balance")
-            data = obj[:n] if per_step else obj[()]
-            dst.create_dataset(name, data=data, maxshape=(None,) + data.shape[1:] if per_step
-                               else None, chunks=obj.chunks)
-        src.visititems(copy)
-    tmp.replace(path)
-    return n

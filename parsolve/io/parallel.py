@@ -23,9 +23,14 @@ Design decisions (MPI-IO and SWMR cannot be used on the same file at once):
 * **SIGINT / SIGTERM are held while a step is written** (they act right after it), so every
   rank leaves a step's collective calls together; the status is then written by rank 0 alone,
   on the closed file (POSIX driver): closing needs no other rank.
-* **Disk full**: an OSError on any rank is agreed on by all ranks before ``/steps/time`` is
-  written; every rank raises the same OutputError and nothing more is written; the finished
-  steps stay readable and, as in the SWMR mode, ``status`` stays "running".
+* **Disk full**: rank 0 allocates each step's space (``posix_fallocate``) before any rank
+  writes it, so a full disk shows outside HDF5; an error inside a collective HDF5 call is
+  agreed on by every rank after that call (``_together``), so no rank is left waiting in the
+  next one. Every rank raises the same OutputError (exit 4) and nothing more of the step is
+  written; the lock file's reserve (parsolve.io.lock) is given back so that the close and the
+  status ("failed: … No space left on device …") find room: the finished steps stay readable
+  by a plain reader. (Without that reserve, a run not started by ``parsolve run``, the status
+  stays "running".)
 
 Without h5py's MPI build (a run outside ``mpirun`` on Debian picks ``h5py._debian_h5py_serial``)
 a one-rank run writes the same file with the POSIX driver; more ranks need the MPI build.
@@ -33,6 +38,8 @@ a one-rank run writes the same file with the POSIX driver; more ranks need the M
 
 from __future__ import annotations
 
+import os
+import shutil
 import signal
 import time
 from contextlib import contextmanager
@@ -45,11 +52,14 @@ from mpi4py import MPI
 from parsolve import __version__
 from parsolve.errors import OutputError
 from parsolve.io.hdf5 import ResultWriter, _create, known_datasets
+from parsolve.interrupts import SIGNALS
+from parsolve.io.lock import free_reserve
 from parsolve.io.slabs import OwnedRows, Rows, split_owners
 from parsolve.io.xdmf import XdmfWriter, sidecar_path
 
 SELECTIONS = ("blocks", "runs")
 CLOSE_WAIT = 30.0  # seconds the other ranks wait at close for rank 0's status
+ROOM_BYTES, ROOM_PER_DATASET = 64 << 10, 8 << 10  # metadata room allocated with each step
 LIBVER = ("v108", "v108")  # superblock v2: no consistency flags left set by a crash
 
 
@@ -62,8 +72,9 @@ def _row_form(value: np.ndarray) -> np.ndarray:
 
 @contextmanager
 def signals_held():
-    """SIGINT / SIGTERM wait until the block is over (then their handlers run as usual)."""
-    held = {signal.SIGINT, signal.SIGTERM}
+    """SIGINT / SIGTERM (and SIGUSR1 / SIGUSR2: parsolve.interrupts) wait until the block is
+    over (then their handlers run as usual)."""
+    held = set(SIGNALS)
     previous = signal.pthread_sigmask(signal.SIG_BLOCK, held)
     try:
         yield
@@ -137,21 +148,76 @@ class ParallelResultWriter(ResultWriter):
         return h5py.File(self.path, mode, libver=LIBVER, rdcc_nbytes=0, **extra)
 
     def _open(self, scene_text: str, petsc_version: str) -> None:
-        mesh = self.mesh
-        with self._h5("w") as f:
-            self.file = f
+        """Create the file: attributes, /mesh, the datasets known before any step. Every
+        collective call is agreed on (``_together``) as in ``_write``."""
+        mesh, doing, box = self.mesh, "creating", {}
+
+        def create():
+            f = box["f"] = self._h5("w")
             # attributes are metadata: every rank sets the same values
             f.attrs.update(parsolve_version=__version__, petsc_version=petsc_version,
                            nprocs=self.comm.size, status="running", scene=scene_text, **self.attrs)
-            for name, data, kind in (("mesh/points", mesh.points, "fields"),
-                                     (f"mesh/cells/{mesh.cell_type}", mesh.cells, "cell_fields")):
-                rows = self.rows[kind].local(data)
-                ds = f.create_dataset(name, (self.rows[kind].n,) + rows.shape[1:], dtype=rows.dtype)
-                self._write_rows(ds, None, kind, rows)
-            for name, (shape, dtype) in known_datasets(self.relations).items():
-                _create(f, name, shape, dtype)
-                self._known[name] = (shape, np.dtype(dtype))
-            self.file = None
+
+        ok = self._together(doing, self._room_for_mesh)
+        ok = ok and self._together(doing, create)
+        f = box.get("f")
+        for name, data, kind in (("mesh/points", mesh.points, "fields"),
+                                 (f"mesh/cells/{mesh.cell_type}", mesh.cells, "cell_fields")):
+            rows = self.rows[kind].local(data)
+            if ok:
+                ok = self._together(doing, lambda: self._write_rows(
+                    f.create_dataset(name, (self.rows[kind].n,) + rows.shape[1:],
+                                     dtype=rows.dtype), None, kind, rows))
+        if ok:
+            known = known_datasets(self.relations).items()
+            ok = self._together(doing, lambda: [_create(f, name, shape, dtype)
+                                                for name, (shape, dtype) in known])
+        for name, (shape, dtype) in known_datasets(self.relations).items():
+            self._known[name] = (shape, np.dtype(dtype))
+        self._close_step(f, ok, doing)
+
+    def _together(self, doing: str, action) -> bool:
+        """Run ``action`` (collective on the file, or a no-op on some ranks), then agree: True
+        when no rank has failed so far. Every rank makes the same calls up to the first failure
+        any rank sees, and none after it, so none waits for a rank that left (disk full on one
+        rank only would otherwise hang the run, or crash it inside MPI-IO)."""
+        if self.error is None:
+            try:
+                action()
+            except (OSError, RuntimeError) as exc:   # h5py reports some as RuntimeError
+                self._fail(exc, doing)
+        return not self.comm.allreduce(self.error is not None, op=MPI.LOR)
+
+    def _close_step(self, f, ok: bool, doing: str) -> None:
+        """Close the file collectively. After a failure rank 0 first frees the lock file's
+        reserve (parsolve.io.lock), so that the metadata the close writes finds room."""
+        self.file = None
+        if not ok:
+            if self.comm.rank == 0:
+                self._room = free_reserve(self.path)
+            self._room = self.comm.bcast(getattr(self, "_room", False), root=0)
+        if f is not None and ok:
+            self._together(doing, f.close)
+        elif f is not None:
+            self._close_quietly(f)
+
+    def _fail(self, exc: OSError, doing: str, path: Path | None = None) -> None:
+        # MPI-IO reports a full disk as "file write failed", without the errno
+        super()._fail(exc, doing, path)
+        try:
+            full = shutil.disk_usage(self.path.parent).free < ROOM_BYTES
+        except OSError:
+            full = False
+        if full and "No space left" not in self.error:
+            self.error = self.error.replace(" failed: ", " failed: No space left on device (", 1) \
+                .replace("; the ", "); the ", 1)
+
+    def _close_quietly(self, f) -> None:
+        try:
+            f.close()
+        except (OSError, RuntimeError):
+            pass
+        self.comm.Barrier()
 
     def _raise_if_failed(self) -> None:
         """Collective: any rank's failure becomes every rank's OutputError."""
@@ -252,12 +318,13 @@ class ParallelResultWriter(ResultWriter):
         return out
 
     def _write(self, small: dict, slabs: dict) -> None:
-        """One step: open, extend, slabs (collective), small rows (rank 0), flush, agree, then
-        /steps/time, close."""
+        """One step: open, extend, slabs (collective), small rows (rank 0), flush, then
+        /steps/time, close; every rank agrees after each of these (``_together``)."""
         step = len(self.times)
-        f = None
-        try:
-            f = self.file = self._h5("r+")
+        doing, box = f"writing step {step + 1} to", {}
+
+        def open_and_extend():
+            f = box["f"] = self.file = self._h5("r+")
             if step == 0:
                 for name, (shape, dtype) in self._layout.items():
                     if name not in self._known:
@@ -265,41 +332,54 @@ class ParallelResultWriter(ResultWriter):
             for name in self._layout:
                 if name != "steps/time":
                     f[name].resize(step + 1, axis=0)
-            for name in sorted(slabs):          # the same order on every rank
-                self._append(name, slabs[name])
-        except (OSError, RuntimeError) as exc:
-            self._fail(exc, f"writing step {step + 1} to")
-        if self.comm.rank == 0 and f is not None and self.error is None:
-            try:                                # independent writes: no other rank waits
+
+        def small_rows():               # independent writes: no other rank waits
+            if self.comm.rank == 0:
                 for name, value in small.items():
                     if name != "steps/time":
                         self._append(name, value)
-            except (OSError, RuntimeError) as exc:
-                self._fail(exc, f"writing step {step + 1} to")
-        if f is not None:
-            try:
-                f.flush()                       # collective: every rank with the file open
-            except (OSError, RuntimeError) as exc:
-                if self.error is None:
-                    self._fail(exc, f"writing step {step + 1} to")
-        failed = any(e is not None for e in self.comm.allgather(self.error))
-        try:
-            if f is not None and not failed:
-                ds = f["steps/time"]
-                ds.resize(step + 1, axis=0)     # last: the step now counts
-                if self.comm.rank == 0:
-                    ds[step] = small["steps/time"]
-        except (OSError, RuntimeError) as exc:
-            self._fail(exc, f"writing step {step + 1} to")
-        finally:
-            self.file = None
-            if f is not None:
-                try:
-                    f.close()
-                except (OSError, RuntimeError) as exc:
-                    if self.error is None:
-                        self._fail(exc, f"writing step {step + 1} to")
+
+        def step_time():                # last: the step now counts
+            ds = box["f"]["steps/time"]
+            ds.resize(step + 1, axis=0)
+            if self.comm.rank == 0:
+                ds[step] = small["steps/time"]
+
+        ok = self._together(doing, self._make_room)
+        ok = ok and self._together(doing, open_and_extend)
+        for name in sorted(slabs):      # the same order on every rank
+            ok = ok and self._together(doing, lambda: self._append(name, slabs[name]))
+        for action in (small_rows, lambda: box["f"].flush(), step_time):
+            ok = ok and self._together(doing, action)
+        self._close_step(box.get("f"), ok, doing)
         self._raise_if_failed()
+
+    def _room_for_mesh(self) -> None:
+        """Rank 0: a disk without room for /mesh fails before the file is created."""
+        if self.comm.rank != 0:
+            return
+        widths = {kind: np.shape(getattr(data, "values", data))[1] for kind, data in
+                  (("fields", self.mesh.points), ("cell_fields", self.mesh.cells))}
+        need = ROOM_BYTES + 8 * sum(self.rows[kind].n * w for kind, w in widths.items())
+        if shutil.disk_usage(self.path.parent).free < need:
+            raise OSError(28, "No space left on device")
+
+    def _make_room(self) -> None:
+        """Rank 0 allocates the disk space of the coming step (its rows plus room for the
+        metadata) at the end of the file before any rank writes: a full disk shows here, as one
+        rank's OSError outside HDF5. Inside HDF5's collective calls a write error on one rank
+        leaves the others waiting in the call (tested: a hang at 2 ranks, a crash at 3), and
+        the half-written metadata a file no reader opens. HDF5 places new data at its own end
+        of the file, inside this space, and cuts the rest off when the file is closed."""
+        if self.comm.rank != 0:
+            return
+        need = ROOM_BYTES + sum(ROOM_PER_DATASET + int(np.prod(shape, dtype=np.int64)) *
+                                np.dtype(dtype).itemsize for shape, dtype in self._layout.values())
+        fd = os.open(self.path, os.O_WRONLY)
+        try:
+            os.posix_fallocate(fd, os.fstat(fd).st_size, need)
+        finally:
+            os.close(fd)
 
     def _append(self, name: str, value) -> None:
         """Row ``len(self.times)`` of one dataset (already extended): a slab written by every
@@ -364,7 +444,8 @@ class ParallelResultWriter(ResultWriter):
                 self._xdmf.close()
             except (OSError, RuntimeError):
                 pass
-        if self.comm.rank == 0 and self.error is None:  # after a failed write: nothing more
+        # after a failed write nothing more goes in, unless the reserve made room for the status
+        if self.comm.rank == 0 and (self.error is None or getattr(self, "_room", False)):
             with signals_held():
                 try:
                     with h5py.File(self.path, "r+", locking=False) as f:

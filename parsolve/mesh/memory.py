@@ -82,15 +82,16 @@ def whole_mesh_bytes(dofs: int) -> float:
 
 
 def available_bytes() -> float | None:
-    """MemAvailable of /proc/meminfo (None where there is none)."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return float(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return None
+    """The tighter of MemAvailable, RLIMIT_AS and the cgroup limit (parsolve.mesh.limits); what
+    bound it is kept in ``AVAILABLE_BOUND`` for the message."""
+    global AVAILABLE_BOUND
+    from parsolve.mesh import limits
+
+    have, AVAILABLE_BOUND = limits.available_bytes(_layout()[1])  # RLIMIT_AS: per rank
+    return float(have) if have else None
+
+
+AVAILABLE_BOUND = "MemAvailable"
 
 
 def gib(n: float) -> str:
@@ -152,7 +153,8 @@ def _verdict(need: float, dofs: int, nranks: int, local: int, source: str | None
     if ratio > 1.0:
         ranks = f" ({local} of {nranks} ranks on one machine)" if nranks > 1 else ""
         raise InputError(f"too large for this machine: {what} ({_count(dofs)} DOFs) needs "
-                         f"about {gib(need)}{ranks}, this machine has {gib(have)} available",
+                         f"about {gib(need)}{ranks}, this machine has {gib(have)} available "
+                         f"(bound by {AVAILABLE_BOUND})",
                          source, key)
 
 

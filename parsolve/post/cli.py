@@ -21,6 +21,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--png", metavar="FILE", help="plot the curves, one line per file")
     p.add_argument("--derive", metavar="OUT.h5", help="copy of RESULT.h5 with strain, von Mises, "
                    "principal stresses, nodal stress per material region (+ XDMF)")
+    p.add_argument("--recover", action="store_true", help="make a killed run's result (status "
+                   "running) readable: its finished steps, status \"interrupted: killed "
+                   "(recovered)\" (parsolve/io/recover.py)")
     return p
 
 
@@ -80,11 +83,18 @@ def run(args) -> None:
 
 
 def main(argv: list[str]) -> int:
+    from parsolve.io import recover
+
     args = _parser().parse_args(argv)
     try:
+        if args.recover:
+            for path in args.results:
+                print(recover.recover(path)[1])
+            if not (args.summary or args.x or args.y or args.derive):
+                return 0
         run(args)
     except InputError as exc:
-        print(f"parsolve post: {exc.oneline()}", file=sys.stderr)
+        print(f"parsolve post: {exc.oneline()}{recover.hint(exc.source)}", file=sys.stderr)
         return 2
     except BrokenPipeError:  # | head
         return 0

@@ -1,0 +1,95 @@
+"""Make a result left by a hard kill (SIGKILL, OOM killer, node failure) readable by any reader:
+``parsolve post RESULT.h5 --recover``.
+
+Such a file says ``status = running``. In the swmr output mode HDF5's "open for writing"
+flags are still set, so a plain ``h5py.File(path, "r")`` refuses it (only ``swmr=True`` opens
+it); in either mode a per-step dataset may hold one unfinished row after the last finished
+step. Recovering copies everything into a clean file beside it (h5py's ``copy``: attributes,
+chunks and growable shapes kept), cuts every per-step dataset to the finished steps
+(``len(/steps/time)``), sets ``status`` to "interrupted: killed (recovered)" and renames the
+copy over the original (same name: the XDMF beside it keeps pointing at it). The same as
+``h5clear -s`` plus the trimming, without needing hdf5-tools; it costs one copy of the file.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import os
+from pathlib import Path
+
+import h5py
+
+from parsolve.io.lock import lock_path
+
+RECOVERED = "interrupted: killed (recovered)"
+
+
+def killed(path: str | Path) -> bool:
+    """True for a result a killed run left: status "running" and no writer holding it. (A
+    result being written now is locked, parsolve.io.lock: that one is not "killed".)"""
+    try:
+        with h5py.File(path, "r", swmr=True) as f:
+            if f.attrs.get("status") != "running":
+                return False
+    except (OSError, ValueError):
+        return False
+    lock = lock_path(path)
+    try:
+        fd = os.open(lock, os.O_RDONLY)
+    except OSError:
+        return True
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        return True
+    except BlockingIOError:
+        return False       # a run holds it: still running
+    finally:
+        os.close(fd)
+
+
+def hint(path: str | Path) -> str:
+    """What ``post`` adds to its message about a file it cannot read."""
+    if path is None or not killed(path):
+        return ""
+    return (f"; the run writing it was killed (status running): `parsolve post {path} --recover` "
+            "makes its finished steps readable")
+
+
+def recover(path: str | Path) -> tuple[int, str]:
+    """(finished steps, message). Only a killed run's file is changed."""
+    from parsolve.errors import InputError
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("no such result file", str(path), "--recover")
+    if not killed(path):
+        return -1, f"{path}: nothing to recover (not a killed run's result)"
+    tmp = path.with_name(path.name + ".recover")
+    try:
+        with h5py.File(path, "r", swmr=True) as src, h5py.File(tmp, "w", libver="latest") as dst:
+            n = len(src["steps/time"])
+            for key, value in src.attrs.items():
+                dst.attrs[key] = value
+            for name in src:
+                src.copy(src[name], dst, name=name)
+            trimmed = _trim(dst, n)
+            dst.attrs["status"] = RECOVERED
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    cut = f", {trimmed} unfinished row(s) cut" if trimmed else ""
+    return n, f"{path}: recovered {n} finished step(s){cut}; status \"{RECOVERED}\""
+
+
+def _trim(f: h5py.File, n: int) -> int:
+    """Cut every growable dataset (the per-step ones) to ``n`` rows; how many were longer."""
+    longer = []
+
+    def visit(name, obj):
+        if isinstance(obj, h5py.Dataset) and obj.maxshape and obj.maxshape[0] is None \
+                and obj.shape[0] > n:
+            longer.append(name)
+    f.visititems(visit)
+    for name in longer:
+        f[name].resize(n, axis=0)
+    return len(longer)
