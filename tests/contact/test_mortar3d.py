@@ -93,7 +93,8 @@ def test_matching_meshes_give_node_to_node_rows(cell):
     """Coincident meshes (the master 0.1 below, facing): each row pairs its slave node with the
     master node beneath it alone (∫ψ_i φ_a = δ_ia w_i), gap 0.1, tangents orthonormal with
     (t1, t2, n) right-handed."""
-    pts, fs, fm = interface(face_mesh((3, 2), cell, 0.0, True), face_mesh((3, 2), cell, -0.1, False))
+    pts, fs, fm = interface(face_mesh((3, 2), cell, 0.0, True),
+                            face_mesh((3, 2), cell, -0.1, False))
     p = mortar_pairing_3d(pts, fs, fm, cell).pairing
     big = np.argmax(np.abs(p.weights), axis=1)
     main = p.master[np.arange(len(p)), big]
@@ -103,8 +104,8 @@ def test_matching_meshes_give_node_to_node_rows(cell):
     np.testing.assert_allclose(p.gap, 0.1, rtol=1e-13)
     t = p.tangents
     np.testing.assert_allclose(np.cross(t[:, 0], t[:, 1]), p.normal, atol=1e-15)
-    np.testing.assert_allclose(np.einsum("mjx,mkx->mjk", t, t), np.broadcast_to(np.eye(2), (len(p), 2, 2)),
-                               atol=1e-15)
+    np.testing.assert_allclose(np.einsum("mjx,mkx->mjk", t, t),
+                               np.broadcast_to(np.eye(2), (len(p), 2, 2)), atol=1e-15)
 
 
 def test_tangent_basis_of_an_oblique_normal():
@@ -134,5 +135,5 @@ def test_partial_cover_keeps_the_identities():
 
 def test_quadratic_faces_are_refused():
     with pytest.raises(ValueError, match="no dual basis"):
-        mortar_pairing_3d(np.zeros((6, 3)), np.zeros((1, 6), dtype=int), np.zeros((1, 6), dtype=int),
-                          "triangle6")
+        faces = np.zeros((1, 6), dtype=int)
+        mortar_pairing_3d(np.zeros((6, 3)), faces, faces, "triangle6")
