@@ -36,9 +36,9 @@ triangles and parallelogram quads (affine maps: polynomial integrands of degree 
 is of degree 5); a non-parallelogram quad has a rational inverse map, so its integrals, and
 the patch test, are met to the rule's accuracy only (measured: 3e-7 of p in the stress of a
 randomly distorted 3×3 against 4×4 hexahedral patch). A warped quad is integrated on its two
-triangles' planes (an approximation of its area of the order of the warp). As in 2D, the dual basis of a
-partially covered face is biorthogonal on its covered part, and faces covered by less than
-``min_cover`` of their area are ignored.
+triangles' planes (an approximation of its area of the order of the warp). As in 2D, the
+dual basis of a partially covered face is biorthogonal on its covered part, and faces covered
+by less than ``min_cover`` of their area are ignored.
 
 **Quadratic faces (triangle6, quad8) are not supported:** the corner shape functions of the
 quadratic triangle integrate to zero (those of quad8 to a negative number), so w_i = ∫φ_i
