@@ -137,3 +137,24 @@ def test_quadratic_faces_are_refused():
     with pytest.raises(ValueError, match="no dual basis"):
         faces = np.zeros((1, 6), dtype=int)
         mortar_pairing_3d(np.zeros((6, 3)), faces, faces, "triangle6")
+
+
+@pytest.mark.parametrize("cell", ["quad", "triangle"])
+def test_curved_interface_keeps_the_identities(cell):
+    """Both sides on the cylinder z = 0.3 x² (non-matching 4×3 against 5×4, the master 0.01
+    below): the rows still transfer a constant exactly (weights summing to one, so a rigid
+    translation leaves the gaps unchanged), every slave node is paired, the normals unit and
+    upward, the gaps the offset 0.01 within the chords' sag (κ h²/8 per side, κ = 0.6, h ≤ ¼)."""
+    def bent(mesh, dz):
+        p, faces = mesh
+        p = p.copy()
+        p[:, 2] = 0.3 * p[:, 0] ** 2 + dz
+        return p, faces
+    pts, fs, fm = interface(bent(face_mesh((4, 3), cell, 0.0, True), 0.0),
+                            bent(face_mesh((5, 4), cell, 0.0, False), -0.01))
+    p = mortar_pairing_3d(pts, fs, fm, cell).pairing
+    assert np.array_equal(p.slave, np.unique(fs))
+    np.testing.assert_allclose(p.weights.sum(axis=1), 1.0, atol=1e-13)
+    np.testing.assert_allclose(np.linalg.norm(p.normal, axis=1), 1.0, atol=1e-15)
+    assert np.all(p.normal[:, 2] > 0.8)
+    assert np.all(np.abs(p.gap - 0.01) <= 2 * 0.6 * 0.25**2 / 8)
