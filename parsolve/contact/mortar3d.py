@@ -151,8 +151,11 @@ def _candidates(xs_f: np.ndarray, xm_f: np.ndarray, radius: float) -> tuple[np.n
     hi = xs_f.max(axis=1) + radius + half
     centres = 0.5 * (xm_f.min(axis=1) + xm_f.max(axis=1))
     f, e = candidate_pairs(centres, lo, hi)
+    # the boxes themselves (the slave's inflated by the radius) overlap, the faces face
+    lo_s, hi_s = xs_f[e].min(axis=1) - radius, xs_f[e].max(axis=1) + radius
+    boxes = np.all((xm_f[f].min(axis=1) <= hi_s) & (xm_f[f].max(axis=1) >= lo_s), axis=1)
     facing = np.einsum("mx,mx->m", _face_normal(xs_f[e]), _face_normal(xm_f[f])) < 0.0
-    e, f = e[facing], f[facing]
+    e, f = e[boxes & facing], f[boxes & facing]
     order = np.lexsort((f, e))
     return e[order], f[order]
 
@@ -181,8 +184,12 @@ def _segments(el, xs_f, xm_f, e, f):
     frame = np.stack([e1, e2], axis=2)                         # (P, 3, 2)
     t2 = np.einsum("pvx,pxa->pva", tri - origin[:, None], frame)
     m2 = np.einsum("pvx,pxa->pva", mas - origin[:, None], frame)
-    poly, count = _clip(m2, t2)
+    # sub-triangle pairs whose boxes in the slave plane are disjoint have nothing to clip
+    near = np.all((m2.min(axis=1) <= t2.max(axis=1)) & (m2.max(axis=1) >= t2.min(axis=1)), axis=1)
+    keep = np.flatnonzero(near)
+    poly, count = _clip(m2[keep], t2[keep])
     fan, owner = _fan(poly, count)
+    owner = keep[owner]
     if owner.size == 0:
         return None
     area = 0.5 * np.abs(_cross2(fan[:, 1] - fan[:, 0], fan[:, 2] - fan[:, 0]))
