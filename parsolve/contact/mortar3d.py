@@ -187,6 +187,8 @@ def _segments(el, xs_f, xm_f, e, f):
     # sub-triangle pairs whose boxes in the slave plane are disjoint have nothing to clip
     near = np.all((m2.min(axis=1) <= t2.max(axis=1)) & (m2.max(axis=1) >= t2.min(axis=1)), axis=1)
     keep = np.flatnonzero(near)
+    if keep.size == 0:
+        return None
     poly, count = _clip(m2[keep], t2[keep])
     fan, owner = _fan(poly, count)
     owner = keep[owner]

@@ -158,3 +158,15 @@ def test_curved_interface_keeps_the_identities(cell):
     np.testing.assert_allclose(np.linalg.norm(p.normal, axis=1), 1.0, atol=1e-15)
     assert np.all(p.normal[:, 2] > 0.8)
     assert np.all(np.abs(p.gap - 0.01) <= 2 * 0.6 * 0.25**2 / 8)
+
+
+def test_surfaces_out_of_reach_give_no_rows():
+    """A master 0.5 below the slave with a search radius of 0.1, or one beside it (no face
+    overlapping): no row, no weight."""
+    below = interface(face_mesh((2, 2), "quad", 0.0, True), face_mesh((2, 2), "quad", -0.5, False))
+    beside = interface(face_mesh((2, 2), "quad", 0.0, True), face_mesh((2, 2), "quad", 0.0, False))
+    beside[0][9:, 0] += 3.0
+    for (pts, fs, fm), radius in ((below, 0.1), (beside, None)):
+        mortar = mortar_pairing_3d(pts, fs, fm, "quad", search_radius=radius)
+        assert len(mortar.pairing) == 0 and mortar.weight.size == 0
+        assert overlap_areas(pts, fs, fm, "quad", radius).sum() == 0.0
