@@ -69,8 +69,9 @@ Scene schema::
     #                                "displacement" (see below; 2D: the sense needs neither)
     search_radius = 0.1            # largest initial gap paired (default: one facet extent;
     #                                obstacles: any gap)
-    discretization = "mortar"      # "node_to_segment" (default) or "mortar" (2D, master
-    #                                region only: dual mortar rows, parsolve.contact.mortar)
+    discretization = "mortar"      # "node_to_segment" (default) or "mortar" (master region
+    #                                only: dual mortar rows, parsolve.contact.mortar in 2D,
+    #                                mortar3d on triangle and quad faces in 3D)
     closed = 1e-9                  # initial gaps ≤ this (relative to the mesh size) start closed
     #                                (a floating body needs no larger one: see above)
 """
@@ -84,6 +85,7 @@ import numpy as np
 from parsolve.contact import friction as fr
 from parsolve.contact import obstacles
 from parsolve.contact.mortar import mortar_pairing
+from parsolve.contact.mortar3d import mortar_pairing_3d
 from parsolve.contact.pairing import check_surfaces, pair_nodes
 from parsolve.contact.part_values import PartValues
 from parsolve.contact.rows import friction_dual, node_rows, normal_rows, normal_values, \
@@ -135,8 +137,8 @@ def parse(t, dim: int) -> ContactSpec:
     if closed < 0:
         raise t.error("closed", "must be >= 0")
     discretization = t.get("discretization", str, "node_to_segment", choices=DISCRETIZATIONS)
-    if discretization == "mortar" and (master is None or dim != 2):
-        raise t.error("discretization", "mortar needs a master region in 2D")
+    if discretization == "mortar" and master is None:
+        raise t.error("discretization", "mortar needs a master region (not an obstacle)")
     t.done()
     return ContactSpec(name, slave, master, obstacle, mu, direction, radius, closed, t.path,
                        discretization)
@@ -239,9 +241,13 @@ class Contact(Effect):
                 # values, the friction dual and the outputs below stay as they are
                 sfacets, sfacet_pts = self._facets(regions(spec.slave, f"{key}.slave"))
                 surf = Surfaces.of([(facets, facet_pts), (sfacets, sfacet_pts)])
-                return surf.to_input(mortar_pairing(surf.points, surf.compact(sfacets),
-                                                    surf.compact(facets), mesh.facet_type,
-                                                    spec.search_radius).pairing.only_paired())
+                rows_of = mortar_pairing if mesh.dim == 2 else mortar_pairing_3d
+                try:
+                    mortar = rows_of(surf.points, surf.compact(sfacets), surf.compact(facets),
+                                     mesh.facet_type, spec.search_radius)
+                except ValueError as exc:   # 3D quadratic faces: no dual basis
+                    raise InputError(str(exc), self.source, f"{key}.discretization") from None
+                return surf.to_input(mortar.pairing.only_paired())
             surf = Surfaces.of([(slave, slave_pts), (facets, facet_pts)])
             return surf.to_input(pair_nodes(surf.points, surf.compact(slave), surf.compact(facets),
                                             mesh.facet_type, spec.search_radius).only_paired())
