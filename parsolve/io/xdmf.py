@@ -49,6 +49,8 @@ def layout(ncomp: int, dim: int) -> tuple[str, tuple]:
         return "Vector", tuple(range(dim)) + (None,) * (3 - dim)
     if ncomp == dim * (dim + 1) // 2:
         return "Tensor6", TENSOR6_FROM_VOIGT[dim]
+    if dim == 2 and ncomp == 4:   # axisymmetric (rr, zz, rz, θθ): the hoop value is the zz slot
+        return "Tensor6", (0, 2, None, 1, None, 3)
     return "Matrix", tuple(range(ncomp))
 
 

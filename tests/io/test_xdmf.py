@@ -63,3 +63,11 @@ def test_one_step_file_within_1_5_times_its_data(run, nx, ny):
     size = run.last.stat().st_size
     ratio = size / data_bytes(run.last)
     assert ratio <= 1.5, (size, ratio)
+
+
+def test_axisymmetric_tensor_layout():
+    """(rr, zz, rz, θθ) → XDMF Tensor6 (xx, xy, xz, yy, yz, zz): θθ is the out-of-plane slot."""
+    from parsolve.io.xdmf import layout
+
+    assert layout(4, 2) == ("Tensor6", (0, 2, None, 1, None, 3))
+    assert layout(3, 2) == ("Tensor6", (0, 2, None, 1, None, None))
