@@ -4,7 +4,9 @@ measure the paper's formulation (relations, ``parsolve.effects.contact``) agains
 ones on the same scenes: same pairing, same rows, same linearised gap ``g = g0 + Dn·q``.
 
 Per paired slave node i (rigid obstacles only, see below), with ε_i = penalty × A_i (A_i: the
-node's tributary area, the consistent nodal force of a unit pressure on the slave facets):
+node's tributary area, the consistent nodal force of a unit pressure on the slave facets; a
+slave given as a node group has as facets those all of whose nodes it holds, so a group that
+leaves out a neighbour, e.g. a wedge's apex, gives its end node half its area there):
 
 * normal force (contact pressure force on the slave, along n):
   ``p_N = max(λ_N − ε_i g, 0)``;
@@ -12,6 +14,12 @@ node's tributary area, the consistent nodal force of a unit pressure on the slav
   trial ``t_tr = λ_T + ε_T,i (g_T − g_T,n)`` (g_T: tangential displacement in the tangent basis,
   g_T,n its value at the step's start), stick ``t = t_tr`` while ``|t_tr| ≤ μ p_N``, else slip
   ``t = μ p_N t_tr/|t_tr|``; friction force on the slave ``Rt = −t`` (it opposes the slip);
+* closed when ``λ_N − ε_i g ≥ −ε_i g_c`` (g_c: the relations form's ``closed`` tolerance ×
+  the mesh's size): a node touching to round-off counts as closed whatever the sign of its
+  round-off gap (the V-wedge's inclined face: g0 = ±1e-17; started open, the first iteration
+  sank the block into that face and a node of the other face then flipped its slip sense at
+  every iteration: a 2D return mapping whose tangential penalty is far stiffer than the body
+  there cycles under Newton once it starts on the wrong side);
 * internal force ``f = −p_N n + T t`` on the slave's DOFs (T: the tangents as columns) and its
   consistent tangent: ``ε n nᵀ`` in contact, ``+ ε_T T Tᵀ`` in stick, and in slip
   ``− μ ε (T ŝ) nᵀ + μ p_N ε_T/|t_tr| T (I − ŝ ŝᵀ) Tᵀ`` (ŝ = t_tr/|t_tr|): not symmetric.
@@ -199,6 +207,13 @@ class PenaltyContact(Effect):
         self.penalty_t = self.penalty if spec.penalty_tangential is None else spec.penalty_tangential
         self.eps_n = self.penalty * area           # per node (force per unit penetration)
         self.eps_t = self.penalty_t * area
+        # the relations form's ``closed`` tolerance (a gap, spec.closed × the mesh's size): a
+        # node whose gap is within it of touching counts as closed (its stiffness in the
+        # tangent; its force max(λ_N − ε g, 0), zero there). A gap of round-off's size (a
+        # slave face lying on an inclined obstacle: g0 = ±1e-17) then starts closed whatever
+        # its sign, as in the relations form
+        extent = mesh.extent if self.values.distributed else np.ptp(mesh.points, axis=0)
+        self.touch = spec.closed * float(np.max(extent))   # the whole mesh's size, as there
         self._last = None
         self._places = (None, None)
 
@@ -220,7 +235,8 @@ class PenaltyContact(Effect):
         g, gT = self.gaps(u)
         trial = lam_n - self.eps_n * g
         pN = np.maximum(trial, 0.0)
-        closed = trial >= 0.0   # touching (g = 0) counts: its stiffness holds a body laid on it
+        # touching (g ≤ the closed tolerance) counts: its stiffness holds a body laid on it
+        closed = trial >= -self.eps_n * self.touch
         mu = self.spec.mu
         t_tr = lam_t + self.eps_t[:, None] * (gT - state["gT"])
         norm = np.linalg.norm(t_tr, axis=1)
