@@ -12,8 +12,9 @@ leaves out a neighbour, e.g. a wedge's apex, gives its end node half its area th
   ``p_N = max(λ_N − ε_i g, 0)``;
 * friction, return mapping on a tangential spring ε_T,i = penalty_tangential × A_i:
   trial ``t_tr = λ_T + ε_T,i (g_T − g_T,n)`` (g_T: tangential displacement in the tangent basis,
-  g_T,n its value at the step's start), stick ``t = t_tr`` while ``|t_tr| ≤ μ p_N``, else slip
-  ``t = μ p_N t_tr/|t_tr|``; friction force on the slave ``Rt = −t`` (it opposes the slip);
+  g_T,n its value at the step's start), stick ``t = t_tr`` while ``|t_tr| ≤ μ p_N (1 + 1e-12)``,
+  else slip ``t = μ p_N t_tr/|t_tr|`` (the tie rule: a node on the cone to round-off, as every
+  node of a full slide at a step's start, sticks whatever its last bits); friction force on the slave ``Rt = −t`` (it opposes the slip);
 * closed when ``λ_N − ε_i g ≥ −ε_i g_c`` (g_c: the relations form's ``closed`` tolerance ×
   the mesh's size): a node touching to round-off counts as closed whatever the sign of its
   round-off gap (the V-wedge's inclined face: g0 = ±1e-17; started open, the first iteration
@@ -87,6 +88,7 @@ FORMULATIONS = ("relations", "penalty", "augmented_lagrangian")
 BASELINE_KEYS = ("penalty", "penalty_tangential")
 AL_KEYS = ("augmentation_tolerance", "max_augmentations")
 DEFAULT_FACTOR = 100.0     # default penalty: DEFAULT_FACTOR × E / h
+CONE_TIE = 1e-12           # a node slides once |t_tr| > μ p_N (1 + CONE_TIE): see forces
 INNER_LIMIT = 4            # AL: Newton iterations on one penalty problem before augmenting anyway
 
 
@@ -240,7 +242,16 @@ class PenaltyContact(Effect):
         mu = self.spec.mu
         t_tr = lam_t + self.eps_t[:, None] * (gT - state["gT"])
         norm = np.linalg.norm(t_tr, axis=1)
-        slip = closed & (norm > mu * pN) & (mu > 0)   # frictionless: closed nodes "stick"
+        # frictionless: closed nodes "stick". The tie rule on the cone: a node slides only
+        # beyond μ p_N (1 + CONE_TIE). In full sliding the committed (or augmented) friction
+        # sits on the cone at a step's start, |t_tr| = μ p_N to round-off, and a strict test
+        # decided stick or slip by the last bits, which differ between runs on 2+ ranks. The
+        # tie goes to stick, the elastic predictor: started sliding, a 2D node without its
+        # tangential stiffness can overshoot and flip its slip sense at every iteration (the
+        # block's trailing corner did). The margin is far above round-off and far below any
+        # accuracy asked of a baseline (a cone violation of CONE_TIE at most). Decided on the
+        # whole arrays that every rank computes alike from the owners' values (``gaps``)
+        slip = closed & (norm > mu * pN * (1.0 + CONE_TIE)) & (mu > 0)
         scale = np.where(slip, mu * pN / np.maximum(norm, 1e-300), 1.0)
         t = np.where(closed[:, None] & (mu > 0), t_tr * scale[:, None], 0.0)
         status = np.where(closed, np.where(slip, SLIP, STICK), OPEN).astype(np.int8)
