@@ -15,9 +15,9 @@ leaves out a neighbour, e.g. a wedge's apex, gives its end node half its area th
   g_T,n its value at the step's start), stick ``t = t_tr`` while ``|t_tr| ≤ μ p_N (1 + 1e-12)``,
   else slip ``t = μ p_N t_tr/|t_tr|`` (the tie rule: a node on the cone to round-off, as every
   node of a full slide at a step's start, sticks whatever its last bits); friction force on the slave ``Rt = −t`` (it opposes the slip);
-* closed when ``λ_N − ε_i g ≥ −ε_i g_c`` (g_c: the relations form's ``closed`` tolerance ×
-  the mesh's size): a node touching to round-off counts as closed whatever the sign of its
-  round-off gap (the V-wedge's inclined face: g0 = ±1e-17; started open, the first iteration
+* closed when ``λ_N − ε_i g ≥ 0``, or when the node starts within the relations form's
+  ``closed`` tolerance g_c (× the mesh's size) and its gap stays ``≤ g_c``: a node touching to
+  round-off counts as closed whatever the sign of its round-off gap (the V-wedge's inclined face: g0 = ±1e-17; started open, the first iteration
   sank the block into that face and a node of the other face then flipped its slip sense at
   every iteration: a 2D return mapping whose tangential penalty is far stiffer than the body
   there cycles under Newton once it starts on the wrong side);
@@ -209,13 +209,15 @@ class PenaltyContact(Effect):
         self.penalty_t = self.penalty if spec.penalty_tangential is None else spec.penalty_tangential
         self.eps_n = self.penalty * area           # per node (force per unit penetration)
         self.eps_t = self.penalty_t * area
-        # the relations form's ``closed`` tolerance (a gap, spec.closed × the mesh's size): a
-        # node whose gap is within it of touching counts as closed (its stiffness in the
-        # tangent; its force max(λ_N − ε g, 0), zero there). A gap of round-off's size (a
-        # slave face lying on an inclined obstacle: g0 = ±1e-17) then starts closed whatever
-        # its sign, as in the relations form
+        # the relations form's ``closed`` rule (initial gaps ≤ spec.closed × the mesh's size
+        # start closed): such a node counts as closed while its gap stays within that tolerance
+        # (its stiffness in the tangent; its force max(λ_N − ε g, 0), zero there). A gap of
+        # round-off's size (a slave face lying on an inclined obstacle: g0 = ±1e-17) then
+        # starts closed whatever its sign, as in the relations form. Only the nodes that start
+        # touching: elsewhere (a contact edge's open neighbours) the plain test stays
         extent = mesh.extent if self.values.distributed else np.ptp(mesh.points, axis=0)
         self.touch = spec.closed * float(np.max(extent))   # the whole mesh's size, as there
+        self.touching = p.gap <= self.touch
         self._last = None
         self._places = (None, None)
 
@@ -237,8 +239,9 @@ class PenaltyContact(Effect):
         g, gT = self.gaps(u)
         trial = lam_n - self.eps_n * g
         pN = np.maximum(trial, 0.0)
-        # touching (g ≤ the closed tolerance) counts: its stiffness holds a body laid on it
-        closed = trial >= -self.eps_n * self.touch
+        # touching (g = 0, or a node that starts within the closed tolerance and stays there)
+        # counts: its stiffness holds a body laid on it
+        closed = (trial >= 0.0) | (self.touching & (g <= self.touch))
         mu = self.spec.mu
         t_tr = lam_t + self.eps_t[:, None] * (gT - state["gT"])
         norm = np.linalg.norm(t_tr, axis=1)
