@@ -14,13 +14,15 @@ leaves out a neighbour, e.g. a wedge's apex, gives its end node half its area th
   trial ``t_tr = λ_T + ε_T,i (g_T − g_T,n)`` (g_T: tangential displacement in the tangent basis,
   g_T,n its value at the step's start), stick ``t = t_tr`` while ``|t_tr| ≤ μ p_N (1 + 1e-12)``,
   else slip ``t = μ p_N t_tr/|t_tr|`` (the tie rule: a node on the cone to round-off, as every
-  node of a full slide at a step's start, sticks whatever its last bits); friction force on the slave ``Rt = −t`` (it opposes the slip);
+  node of a full slide at a step's start, sticks whatever its last bits); friction force on
+  the slave ``Rt = −t`` (it opposes the slip);
 * closed when ``λ_N − ε_i g ≥ 0``, or when the node starts within the relations form's
   ``closed`` tolerance g_c (× the mesh's size) and its gap stays ``≤ g_c``: a node touching to
-  round-off counts as closed whatever the sign of its round-off gap (the V-wedge's inclined face: g0 = ±1e-17; started open, the first iteration
-  sank the block into that face and a node of the other face then flipped its slip sense at
-  every iteration: a 2D return mapping whose tangential penalty is far stiffer than the body
-  there cycles under Newton once it starts on the wrong side);
+  round-off counts as closed whatever the sign of its round-off gap (the V-wedge's inclined
+  face: g0 = +3e-17..+6e-17; started open, the first iteration sank the block into that face
+  and face 1's end node then flipped its slip sense at every iteration: a 2D return mapping
+  whose tangential penalty is far stiffer than the body there cycles under Newton once it
+  starts on the wrong side);
 * internal force ``f = −p_N n + T t`` on the slave's DOFs (T: the tangents as columns) and its
   consistent tangent: ``ε n nᵀ`` in contact, ``+ ε_T T Tᵀ`` in stick, and in slip
   ``− μ ε (T ŝ) nᵀ + μ p_N ε_T/|t_tr| T (I − ŝ ŝᵀ) Tᵀ`` (ŝ = t_tr/|t_tr|): not symmetric.

@@ -193,7 +193,8 @@ def test_hertz_cylinder_penalty_and_augmented_lagrangian(run):
 
 def bench_scenes():
     """scripts/bench_scenes.py: the benchmark's V-wedge (the scene that failed) as it runs."""
-    spec = importlib.util.spec_from_file_location("bench_scenes", ROOT / "scripts" / "bench_scenes.py")
+    path = ROOT / "scripts" / "bench_scenes.py"
+    spec = importlib.util.spec_from_file_location("bench_scenes", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
