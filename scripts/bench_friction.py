@@ -197,6 +197,7 @@ def bare_penalty(pairing, mu: float, eps: float, dim: int) -> PenaltyContact:
     eff.pairing, eff.nrows, eff.trows = pairing, normal_rows(pairing), tangent_rows(pairing)
     eff.values = PartValues(None, dim)
     eff.eps_n = eff.eps_t = np.full(len(pairing), eps)
+    eff.touch, eff.touching = 0.0, np.zeros(len(pairing), bool)   # the closed rule: none here
 
     class Spec:
         pass

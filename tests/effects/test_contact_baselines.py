@@ -5,6 +5,7 @@ it to its tolerance; bad input exits 2 naming the file and the key."""
 
 from __future__ import annotations
 
+import importlib.util
 import subprocess
 import sys
 
@@ -12,7 +13,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from conftest import CONFIGS, ROOT
+from conftest import CONFIGS, ROOT, assert_same_results
 from parsolve.contact import references
 from parsolve.contact.friction import OPEN, SLIP, STICK
 from parsolve.errors import InputError
@@ -118,6 +119,36 @@ def test_sheared_block_exact_stick_and_slip_by_augmented_lagrangian(run):
         assert np.all(state == (SLIP if ref.sliding else STICK)), (t, state)
 
 
+@pytest.mark.parametrize("formulation, extra", [
+    ("penalty", "penalty = 1e6"),
+    ("augmented_lagrangian", "augmentation_tolerance = 1e-9"),
+])
+def test_block_baselines_through_full_sliding_on_parts_are_the_replicated_run(run, formulation,
+                                                                             extra):
+    """contact_block_friction.toml through full sliding (10 steps, the top shifted by 0.02) on
+    the distributed mesh: the replicated run's results to 1e-10, states exactly, the same steps,
+    cuts and iterations; T = μN (1e-10) once every closed node slides. In full sliding each
+    slid node's committed friction sits on the cone at a step's start, |t_tr| = μ p_N to
+    round-off: the tie rule (stick up to μ p_N (1 + 1e-12)) decides it alike in every run,
+    where a strict test decided it by the last bits (iterations varied from run to run)."""
+    text = switched(BLOCK, "friction = 0.3", f'formulation = "{formulation}"\n{extra}')
+    # as above: status cycles of the AL's inner Newton cut some steps of the partial slip
+    text += "\n[nonlinear]\nmax_iterations = 15\n"
+    parts = run(text, name=f"slide_{formulation}_parts", solver={"mesh": "distributed"})
+    whole = run(text, name=f"slide_{formulation}_whole", solver={"mesh": "replicated"})
+    assert_same_results(parts, whole)
+    for key in ("steps/iterations", "steps/cuts", "steps/time"):
+        np.testing.assert_array_equal(parts[key], whole[key])
+    rn = parts["fields/base_normal_reaction"][:, :, 0]
+    rt = parts["fields/base_tangential_reaction"][:, :, 0]
+    state = parts["fields/base_state"][:, :, 0]
+    sliding = np.all((state == SLIP) | (state <= OPEN), axis=1)
+    assert sliding[-3:].all() and not sliding[0]              # sticks first, slides at the end
+    np.testing.assert_allclose(rt.sum(axis=1)[sliding], 0.3 * rn.sum(axis=1)[sliding],
+                               rtol=1e-10)
+    np.testing.assert_allclose(rn.sum(axis=1), 10.0, rtol=1e-10)
+
+
 # ----------------------------------------------------------------------------- Hertz
 
 
@@ -155,6 +186,109 @@ def test_hertz_cylinder_penalty_and_augmented_lagrangian(run):
     edge = np.abs(pts[state > OPEN, 0]).max()
     assert edge <= ref.a < edge + h, (edge, ref.a)
     assert res["steps/iterations"][-1] > exact["steps/iterations"][-1]   # the augmentations
+
+
+# ----------------------------------------------------------------------------- V-wedge
+
+
+def bench_scenes():
+    """scripts/bench_scenes.py: the benchmark's V-wedge (the scene that failed) as it runs."""
+    path = ROOT / "scripts" / "bench_scenes.py"
+    spec = importlib.util.spec_from_file_location("bench_scenes", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def wedge(run, shared_tmp, keys: str, name: str, **kw) -> tuple[dict, object, list]:
+    """The V-wedge of docs/contact.md §7 (face 1 sticks, face 2 — a node group on an inclined
+    plane, its initial gaps ±1e-17 — slides on the cone) with ``keys`` in both [[contact]]
+    sections: (results, the exact solution, the two contact effects)."""
+    sc = bench_scenes()
+    beta = np.pi / 4
+    ref = references.wedge_stick_slip(sc.LAM, sc.G, beta, -1e-3)
+    mesh = shared_tmp / "wedge_baselines.msh"
+    if MPI.COMM_WORLD.rank == 0:
+        sc.wedge_mesh(mesh, beta)
+    MPI.COMM_WORLD.Barrier()
+    text = sc.wedge_scene(mesh, ref).replace("friction = ", f"{keys}\nfriction = ")
+    res = run(text, name=name, **kw)
+    effects = [e for e in build_model(load_scene(run.last.with_suffix(".toml"))).effects
+               if getattr(e, "pairing", None) is not None]
+    return res, ref, effects
+
+
+def wedge_error(res: dict, ref) -> float:
+    pts = res["mesh/points"]
+    exact = np.array([t * ref.displacement(pts) for t in res["steps/time"]])
+    return rel(res["fields/displacement"], exact)
+
+
+def test_wedge_penalty_converges_and_tends_to_the_exact_field(run, shared_tmp):
+    """The V-wedge (bench_friction's; it failed: face 2's round-off gaps started open, the
+    first iteration sank the block into face 2 and face 1's end node then flipped its slip
+    sense at every iteration). Now every step converges in ≤ 3 iterations, no cut; face 1
+    sticks, face 2 slides with |Rt| = μ Rn (1e-12); each penetration is Rn/(ε A) to round-off
+    (A: the effect's tributary areas); as ε grows ×10 the penetration and the error against the
+    exact field (the relations form's, to round-off) both fall ×10 (within 2 %)."""
+    errors, depths = [], []
+    for eps in (1e5, 1e6, 1e7):
+        res, ref, effects = wedge(run, shared_tmp, f'formulation = "penalty"\npenalty = {eps:g}',
+                                  f"wedge_pen_{eps:g}")
+        assert res["attrs"]["status"] == "complete"
+        np.testing.assert_allclose(res["steps/time"], [1 / 3, 2 / 3, 1.0], rtol=1e-14)
+        assert res["steps/iterations"].max() <= 3 and int(np.sum(res["steps/cuts"])) == 0
+        depth = 0.0
+        for effect, state in zip(effects, (STICK, SLIP)):
+            name, slave = effect.spec.name, effect.pairing.slave
+            rn = res[f"fields/{name}_normal_reaction"][:, slave, 0]
+            rt = res[f"fields/{name}_tangential_reaction"][:, slave, 0]
+            gap = res[f"fields/{name}_gap"][:, slave, 0]
+            assert np.all(res[f"fields/{name}_state"][:, slave, 0] == state), name
+            assert np.all(rn > 0)
+            assert effect.penalty == eps
+            np.testing.assert_allclose(-gap, rn / effect.eps_n, rtol=1e-12, atol=0)
+            if state == SLIP:
+                np.testing.assert_allclose(rt, ref.mu * rn, rtol=1e-12)
+            else:
+                assert np.all(np.abs(rt) < 0.9 * ref.mu * rn)        # strictly inside
+            depth = max(depth, float(-gap.min()))
+        depths.append(depth)
+        errors.append(wedge_error(res, ref))
+    depths, errors = np.array(depths), np.array(errors)
+    np.testing.assert_allclose(depths[:-1] / depths[1:], 10.0, rtol=0.02)
+    np.testing.assert_allclose(errors[:-1] / errors[1:], 10.0, rtol=0.02)
+    assert errors[-1] < 3e-4
+
+
+def test_wedge_augmented_lagrangian_gives_the_exact_field(run, shared_tmp):
+    """The V-wedge by the augmented Lagrangian (it failed after 25 augmentations): the exact
+    field to 1e-10, the gaps closed, face 1 stuck strictly inside its cone, face 2 on it."""
+    res, ref, effects = wedge(run, shared_tmp, 'formulation = "augmented_lagrangian"\n'
+                              "augmentation_tolerance = 1e-10", "wedge_al")
+    assert res["attrs"]["status"] == "complete" and int(np.sum(res["steps/cuts"])) == 0
+    assert wedge_error(res, ref) < 1e-10
+    u = np.abs(res["fields/displacement"]).max()
+    for effect, state in zip(effects, (STICK, SLIP)):
+        name, slave = effect.spec.name, effect.pairing.slave
+        assert np.all(res[f"fields/{name}_state"][:, slave, 0] == state), name
+        assert np.abs(res[f"fields/{name}_gap"][:, slave, 0]).max() < 1e-12 * u
+        rn = res[f"fields/{name}_normal_reaction"][:, slave, 0]
+        rt = res[f"fields/{name}_tangential_reaction"][:, slave, 0]
+        if state == SLIP:
+            np.testing.assert_allclose(rt, ref.mu * rn, rtol=1e-12)
+
+
+@pytest.mark.parametrize("keys", ['formulation = "penalty"',
+                                  'formulation = "augmented_lagrangian"'])
+def test_wedge_baselines_on_parts_are_the_replicated_run(run, shared_tmp, keys):
+    """The V-wedge by either baseline on the distributed mesh: the replicated run's results
+    (1e-10, states exactly) and the same iterations. (At 1 rank both runs are replicated.)"""
+    tag = keys.split('"')[1]
+    parts = wedge(run, shared_tmp, keys, f"wedge_{tag}_parts", solver={"mesh": "distributed"})[0]
+    whole = wedge(run, shared_tmp, keys, f"wedge_{tag}_whole", solver={"mesh": "replicated"})[0]
+    assert_same_results(parts, whole)
+    np.testing.assert_array_equal(parts["steps/iterations"], whole["steps/iterations"])
 
 
 # ----------------------------------------------------------------------------- bad input
