@@ -123,10 +123,10 @@ def test_sheared_block_exact_stick_and_slip_by_augmented_lagrangian(run):
     ("penalty", "penalty = 1e6"),
     ("augmented_lagrangian", "augmentation_tolerance = 1e-9"),
 ])
-def test_block_baselines_through_full_sliding_on_parts_are_the_replicated_run(run, formulation,
-                                                                             extra):
+def test_block_baselines_through_full_sliding_on_parts_are_the_one_rank_run(run, formulation,
+                                                                            extra):
     """contact_block_friction.toml through full sliding (10 steps, the top shifted by 0.02) on
-    the distributed mesh: the replicated run's results to 1e-10, states exactly, the same steps,
+    the ranks' parts: the one-rank run's results to 1e-10, states exactly, the same steps,
     cuts and iterations; T = μN (1e-10) once every closed node slides. In full sliding each
     slid node's committed friction sits on the cone at a step's start, |t_tr| = μ p_N to
     round-off: the tie rule (stick up to μ p_N (1 + 1e-12)) decides it alike in every run,
@@ -134,8 +134,8 @@ def test_block_baselines_through_full_sliding_on_parts_are_the_replicated_run(ru
     text = switched(BLOCK, "friction = 0.3", f'formulation = "{formulation}"\n{extra}')
     # as above: status cycles of the AL's inner Newton cut some steps of the partial slip
     text += "\n[nonlinear]\nmax_iterations = 15\n"
-    parts = run(text, name=f"slide_{formulation}_parts", solver={"mesh": "distributed"})
-    whole = run(text, name=f"slide_{formulation}_whole", solver={"mesh": "replicated"})
+    parts = run(text, name=f"slide_{formulation}_parts")
+    whole = run(text, name=f"slide_{formulation}_whole", comm=MPI.COMM_SELF)
     assert_same_results(parts, whole)
     for key in ("steps/iterations", "steps/cuts", "steps/time"):
         np.testing.assert_array_equal(parts[key], whole[key])
@@ -281,12 +281,12 @@ def test_wedge_augmented_lagrangian_gives_the_exact_field(run, shared_tmp):
 
 @pytest.mark.parametrize("keys", ['formulation = "penalty"',
                                   'formulation = "augmented_lagrangian"'])
-def test_wedge_baselines_on_parts_are_the_replicated_run(run, shared_tmp, keys):
-    """The V-wedge by either baseline on the distributed mesh: the replicated run's results
-    (1e-10, states exactly) and the same iterations. (At 1 rank both runs are replicated.)"""
+def test_wedge_baselines_on_parts_are_the_one_rank_run(run, shared_tmp, keys):
+    """The V-wedge by either baseline on the ranks' parts: the one-rank run's results
+    (1e-10, states exactly) and the same iterations."""
     tag = keys.split('"')[1]
-    parts = wedge(run, shared_tmp, keys, f"wedge_{tag}_parts", solver={"mesh": "distributed"})[0]
-    whole = wedge(run, shared_tmp, keys, f"wedge_{tag}_whole", solver={"mesh": "replicated"})[0]
+    parts = wedge(run, shared_tmp, keys, f"wedge_{tag}_parts")[0]
+    whole = wedge(run, shared_tmp, keys, f"wedge_{tag}_whole", comm=MPI.COMM_SELF)[0]
     assert_same_results(parts, whole)
     np.testing.assert_array_equal(parts["steps/iterations"], whole["steps/iterations"])
 
