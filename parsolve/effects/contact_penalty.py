@@ -215,8 +215,7 @@ class PenaltyContact(Effect):
         # round-off's size (a slave face lying on an inclined obstacle: g0 = ±1e-17) then
         # starts closed whatever its sign, as in the relations form. Only the nodes that start
         # touching: elsewhere (a contact edge's open neighbours) the plain test stays
-        extent = mesh.extent if self.values.distributed else np.ptp(mesh.points, axis=0)
-        self.touch = spec.closed * float(np.max(extent))   # the whole mesh's size, as there
+        self.touch = spec.closed * float(np.max(mesh.extent))   # the whole mesh's size, as there
         self.touching = p.gap <= self.touch
         self._last = None
         self._places = (None, None)
