@@ -378,3 +378,38 @@ def check_surfaces(slave_nodes: np.ndarray, master_facets: np.ndarray,
     if shared.size:
         raise InputError(f"master and slave surfaces share {shared.size} node(s) "
                          f"(first: {int(shared[0])})", source, key)
+
+
+def facet_spans(points: np.ndarray, slave_nodes: np.ndarray, master_facets: np.ndarray,
+                radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per slave node, the master facets whose box inflated by ``radius`` contains it, and
+    their nodes (finite sliding: the facets a slave may visit while it stays within radius
+    of where it started). Returns (facet_ptr, facets, node_ptr, nodes): CSR over the slave
+    nodes, facets and nodes increasing within each slave (facet indices are rows of
+    ``master_facets``, in its canonical order)."""
+    xs = np.asarray(points, dtype=float)[slave_nodes]
+    coords = np.asarray(points, dtype=float)[master_facets]
+    lo, hi = _facet_boxes(coords, radius)
+    sid, fid = candidate_pairs(xs, lo, hi)
+    order = np.lexsort((fid, sid))
+    sid, fid = sid[order], fid[order]
+    n = np.asarray(slave_nodes).size
+    facet_ptr = np.concatenate([[0], np.cumsum(np.bincount(sid, minlength=n))])
+    k = master_facets.shape[1]
+    pairs = np.unique(np.column_stack([np.repeat(sid, k), master_facets[fid].ravel()]), axis=0)
+    pairs = pairs.reshape(-1, 2)
+    node_ptr = np.concatenate([[0], np.cumsum(np.bincount(pairs[:, 0], minlength=n))])
+    return facet_ptr.astype(np.int64), fid, node_ptr.astype(np.int64), pairs[:, 1].copy()
+
+
+def in_spans(facet: np.ndarray, facet_ptr: np.ndarray, facets: np.ndarray) -> np.ndarray:
+    """True where entry i's facet is one of ``facets[facet_ptr[i]:facet_ptr[i+1]]``."""
+    n = facet.size
+    owner = np.repeat(np.arange(n, dtype=np.int64), np.diff(facet_ptr))
+    big = int(max(facets.max(initial=0), facet.max(initial=0))) + 1
+    key = owner * big + facets
+    cur = np.arange(n, dtype=np.int64) * big + facet
+    if key.size == 0:
+        return np.zeros(n, dtype=bool)
+    pos = np.minimum(np.searchsorted(key, cur), key.size - 1)
+    return (facet >= 0) & (key[pos] == cur)

@@ -84,13 +84,13 @@ import numpy as np
 from parsolve.contact import friction as fr
 from parsolve.contact import obstacles
 from parsolve.contact.mortar import mortar_pairing
-from parsolve.contact.pairing import check_surfaces, pair_nodes
+from parsolve.contact.pairing import check_surfaces, facet_spans, in_spans, pair_nodes
 from parsolve.contact.part_values import PartValues
 from parsolve.contact.rows import friction_dual, node_rows, normal_rows, normal_values, \
-    slip_vectors, tangent_rows
+    slip_vectors, span_rows, tangent_rows
 from parsolve.contact.surfaces import Surfaces, canonical_facets
 from parsolve.effects.base import Effect
-from parsolve.errors import InputError
+from parsolve.errors import InputError, SolverError
 from parsolve.evolution import CONSTANT
 from parsolve.mesh.local_regions import gather_facets
 from parsolve.mesh.topology import FACETS, boundary_facets
@@ -99,6 +99,7 @@ from parsolve.scene import NAME_PATTERN
 
 OBSTACLES = ("plane", "cylinder", "sphere")
 DISCRETIZATIONS = ("node_to_segment", "mortar")
+SLIDINGS = ("small", "finite")
 
 
 @dataclass
@@ -113,6 +114,22 @@ class ContactSpec:
     closed: float
     key: str
     discretization: str = "node_to_segment"
+    sliding: str = "small"
+
+
+@dataclass
+class Spans:
+    """Finite sliding: the surfaces (compact numbering), the paired slaves' compact ids, the
+    master facets (compact) and, per paired slave, the facets and master nodes (input ids) of
+    its span (``pairing.facet_spans``), fixed for the run: the rows' sparsity."""
+    surf: Surfaces
+    slave: np.ndarray
+    facets: np.ndarray
+    radius: float
+    facet_ptr: np.ndarray
+    facet_ids: np.ndarray
+    node_ptr: np.ndarray
+    nodes: np.ndarray
 
 
 def parse(t, dim: int) -> ContactSpec:
@@ -137,9 +154,13 @@ def parse(t, dim: int) -> ContactSpec:
     discretization = t.get("discretization", str, "node_to_segment", choices=DISCRETIZATIONS)
     if discretization == "mortar" and (master is None or dim != 2):
         raise t.error("discretization", "mortar needs a master region in 2D")
+    sliding = t.get("sliding", str, "small", choices=SLIDINGS)
+    if sliding == "finite" and (master is None or dim != 2 or discretization != "node_to_segment"):
+        raise t.error("sliding", "finite sliding needs a master region, node_to_segment "
+                                 "discretization, in 2D")
     t.done()
     return ContactSpec(name, slave, master, obstacle, mu, direction, radius, closed, t.path,
-                       discretization)
+                       discretization, sliding)
 
 
 def _obstacle(t, dim: int) -> tuple[str, dict]:
@@ -173,6 +194,7 @@ class Contact(Effect):
                              source, key)
         # rows over input DOFs; their values from this rank's vector (part_values)
         self.values = PartValues(mesh, fields.ncomp, getattr(regions, "comm", None))
+        self.span: Spans | None = None     # finite sliding (set by _pair)
         self._check_slave(regions)
         self.pairing = self._pair(regions)
         if len(self.pairing) == 0:
@@ -189,6 +211,8 @@ class Contact(Effect):
         self.direction = np.ones((n, dm1)) / np.sqrt(dm1)
         self.committed = (self.node_state.copy(), self.direction.copy())
         self.turning = fr.DirectionIteration()
+        # total slip = slip_base + Dt·q (finite sliding re-bases it when the rows change)
+        self.slip_base = np.zeros(n * dm1)
         self._build_rows()
 
     # ------------------------------------------------------------------ geometry
@@ -252,8 +276,11 @@ class Contact(Effect):
                                                     surf.compact(facets), mesh.facet_type,
                                                     spec.search_radius).pairing.only_paired())
             surf = Surfaces.of([(slave, slave_pts), (facets, facet_pts)])
-            return surf.to_input(pair_nodes(surf.points, surf.compact(slave), surf.compact(facets),
-                                            mesh.facet_type, spec.search_radius).only_paired())
+            p = pair_nodes(surf.points, surf.compact(slave), surf.compact(facets),
+                           mesh.facet_type, spec.search_radius).only_paired()
+            if spec.sliding == "finite":
+                self.span = self._spans(surf, p, surf.compact(facets))
+            return surf.to_input(p)
         surf = Surfaces.of([(slave, slave_pts)])
         pts, nodes = surf.points, surf.compact(slave)
         kind, params = spec.obstacle
@@ -274,6 +301,66 @@ class Contact(Effect):
         if spec.search_radius is not None:
             p.paired &= p.gap <= spec.search_radius
         return surf.to_input(p.only_paired())
+
+    def _spans(self, surf: Surfaces, p, facets: np.ndarray) -> Spans:
+        """Finite sliding: each paired slave's span, the facets within the search radius
+        (default: one facet extent, as the pairing's) of its initial position."""
+        radius = self.spec.search_radius
+        if radius is None:
+            coords = surf.points[facets]
+            radius = float(np.max(coords.max(axis=1) - coords.min(axis=1)))
+        fptr, fids, nptr, nodes = facet_spans(surf.points, p.slave, facets, radius)
+        return Spans(surf, p.slave.copy(), facets, radius, fptr, fids, nptr, surf.ids[nodes])
+
+    def _rows(self, vectors: np.ndarray, pairing=None):
+        """Rows along one vector per entry: node_rows, or (finite sliding) over the spans."""
+        p = self.pairing if pairing is None else pairing
+        if self.span is None:
+            return node_rows(p, vectors)
+        return span_rows(p, vectors, self.span.node_ptr, self.span.nodes)
+
+    def _dual_coef(self) -> np.ndarray:
+        """Coefficients of Dn − μ Dt·s (the normal rows' dual is their negation)."""
+        p = self.pairing
+        if self.span is None:
+            return friction_dual(p, self.mu, self.direction).coef
+        return self._rows(p.normal - self.mu * slip_vectors(p, self.direction)).coef
+
+    def _current_points(self, q: np.ndarray) -> np.ndarray:
+        """The surfaces' nodes in the current configuration X + u (every rank the same)."""
+        sp, f = self.span, self.fields_
+        dim = self.mesh.dim
+        m = sp.surf.ids.size
+        dofs = np.repeat(sp.surf.ids, dim) * f.ncomp + f.offset["u"] + np.tile(np.arange(dim), m)
+        u = self.values.rows(dofs, np.arange(m * dim), np.ones(m * dim), m * dim, q)
+        return sp.surf.points + u.reshape(m, dim)
+
+    def _slide(self, q: np.ndarray) -> None:
+        """Finite sliding, at a step's start: pair the slaves on the current configuration
+        (ties: the canonical facet order), and rewrite the rows' values in place over the
+        spans (the same entries): the gap linearised at q, g = g_q + Dn·(q' − q), i.e. the
+        entry's gap is g_q − Dn·q; the total slip carried over (``slip_base``); the stick
+        rows hold the step's starting point on the new facet (``begin_step``)."""
+        sp = self.span
+        total = self.slip_base + self._slip(q)
+        p = pair_nodes(self._current_points(q), sp.slave, sp.facets, self.mesh.facet_type,
+                       sp.radius)
+        bad = ~in_spans(p.facet, sp.facet_ptr, sp.facet_ids)
+        if bad.any():
+            node = int(sp.surf.ids[sp.slave[np.flatnonzero(bad)[0]]])
+            raise SolverError(f"{self.source}: {self.spec.key}.search_radius: slave node {node} "
+                              f"left the master facets within {sp.radius:.6g} of its start "
+                              f"({int(bad.sum())} such node(s)): give a larger search_radius")
+        p = sp.surf.to_input(p)
+        nrows = self._rows(p.normal, p)
+        p.gap = p.gap - self.values.rows(self.n_dofs, nrows.row, nrows.coef, nrows.nrows, q)
+        self.pairing, self.nrows = p, nrows
+        self.trows = self._rows(p.tangents[:, 0], p)
+        self.normal.a_vals[:] = nrows.coef
+        self.normal.values[:] = normal_values(p)
+        if self.frictional:
+            self.tangent.a_vals[:] = self.trows.coef
+        self.slip_base = total - self._slip(q)
 
     def _check_facing(self, p, surf: Surfaces, regions, key: str) -> None:
         """Refuse an obstacle that no facet of the slave surface faces (outward normal of the
@@ -315,8 +402,12 @@ class Contact(Effect):
         p, f = self.pairing, self.fields_
         u0 = f.offset["u"]
         ncomp = f.ncomp
-        self.nrows = normal_rows(p)
-        self.trows = tangent_rows(p)        # along the fixed tangents (slip measure, outputs)
+        if self.span is None:
+            self.nrows = normal_rows(p)
+            self.trows = tangent_rows(p)    # along the fixed tangents (slip measure, outputs)
+        else:                               # finite sliding (2D): over the spans
+            self.nrows = self._rows(p.normal)
+            self.trows = self._rows(p.tangents[:, 0])
         self.n_dofs = self.nrows.node * ncomp + u0 + self.nrows.comp
         self.t_dofs = self.trows.node * ncomp + u0 + self.trows.comp
 
@@ -350,10 +441,12 @@ class Contact(Effect):
         r = self.nrows
         dual = None
         if self.frictional:
-            dual = (self.n_dofs, r.row, -friction_dual(p, self.mu, self.direction).coef)
+            dual = (self.n_dofs, r.row, -self._dual_coef())
         normal = Relation(f"{name}_normal", r.nrows, r.row, self.n_dofs, r.coef,
                           normal_values(p), CONSTANT, ">=", dual, eliminate=False)
-        normal.meta = {"type": "contact", "key": self.spec.key, "refresh": self.frictional}
+        finite = self.span is not None    # its rows' values change at each step
+        normal.meta = {"type": "contact", "key": self.spec.key,
+                       "refresh": self.frictional or finite}
         self.normal = normal
         out = [normal]
         if self.frictional:
@@ -362,7 +455,7 @@ class Contact(Effect):
                                self._tangent_coefs(), np.zeros(t.nrows), CONSTANT, "=", None,
                                eliminate=False)
             tangent.meta = {"type": "contact", "key": self.spec.key,
-                            "refresh": self.mesh.dim == 3}
+                            "refresh": self.mesh.dim == 3 or finite}
             self.tangent = tangent
             out.append(tangent)
         return out
@@ -370,7 +463,7 @@ class Contact(Effect):
     def _set_dual(self) -> None:
         """The slip direction s into the normal row's dual and (3D) the tangential rows, in
         place (same entries); the stick rows keep the step's starting position."""
-        self.normal.dual[2][:] = -friction_dual(self.pairing, self.mu, self.direction).coef
+        self.normal.dual[2][:] = -self._dual_coef()
         if self.mesh.dim == 3:
             self.tangent.a_vals[:] = self._tangent_coefs()
             self.tangent.values[:] = self.values.relation(self.tangent, self.q_start)
@@ -393,11 +486,13 @@ class Contact(Effect):
         """Start a step from the committed state: stick rows hold the tangential displacement
         of the step's start; True when the dual changed (values to copy into the system)."""
         self.node_state, self.direction = (a.copy() for a in self.committed)
+        if self.span is not None:
+            self._slide(q)
         # the normal rows in contact at the last converged step (initially: the closed gaps);
         # the same as the active set's after a converged step, and right after a failed one
         active[self.normal.name][:] = self.node_state != fr.OPEN
         if not self.frictional:
-            return False
+            return self.span is not None
         self.q_start = q.copy()
         self.turning.start(self.node_state)
         self.u_start = self._slip(q)
@@ -492,7 +587,7 @@ class Contact(Effect):
         # the partition); an open node's is g0 + Dn·q
         closed = active[self.normal.name].astype(bool)
         gap = np.where(closed, 0.0, p.gap + self.values.relation(self.normal, q))
-        slip = self._slip(q)
+        slip = self.slip_base + self._slip(q)
         # over every node (0 elsewhere; state -1), or this rank's owned rows on a part
         nodal = self.values.nodal
         fields = {f"{name}_normal_reaction": nodal(p.slave, rn),
