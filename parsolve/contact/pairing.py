@@ -413,3 +413,27 @@ def in_spans(facet: np.ndarray, facet_ptr: np.ndarray, facets: np.ndarray) -> np
         return np.zeros(n, dtype=bool)
     pos = np.minimum(np.searchsorted(key, cur), key.size - 1)
     return (facet >= 0) & (key[pos] == cur)
+
+
+def pair_on(points: np.ndarray, slave_nodes: np.ndarray, master_facets: np.ndarray,
+            facet: np.ndarray, facet_type: str, tol: float = 1e-9) -> tuple[Pairing, np.ndarray]:
+    """Each slave node projected on one given facet (``facet[i]``, a row of
+    ``master_facets``), clipped to the facet as ``pair_nodes`` does within its tolerance:
+    (the pairing, True where the unclipped projection lies in the facet within ``tol``, in
+    reference coordinates: a slave on a vertex is in both facets whatever the round-off)."""
+    points = np.asarray(points, dtype=float)
+    xs = points[slave_nodes]
+    coords = points[master_facets[facet]]
+    xi, xm, jac = project_on_facets(xs, coords, facet_type)
+    inside = inside_reference(facet_type, xi, tol)
+    el = element(facet_type)
+    out = ~inside_reference(facet_type, xi, 0.0)
+    if out.any():
+        xi[out] = clip_to_reference(facet_type, xi[out])
+        xm[out] = np.einsum("mk,mkx->mx", el.shape(xi[out]), coords[out])
+        jac[out] = np.einsum("mka,mkx->mxa", el.grad_shape(xi[out]), coords[out])
+    normal, tangents = facet_frame(jac)
+    p = Pairing(np.asarray(slave_nodes, dtype=np.int64).copy(), np.ones(xs.shape[0], bool),
+                np.asarray(facet, dtype=np.int64).copy(), xi, master_facets[facet].copy(),
+                el.shape(xi), xm, normal, tangents, np.einsum("mx,mx->m", normal, xs - xm))
+    return p, inside

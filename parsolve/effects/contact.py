@@ -73,6 +73,20 @@ Scene schema::
     #                                region only: dual mortar rows, parsolve.contact.mortar)
     closed = 1e-9                  # initial gaps ≤ this (relative to the mesh size) start closed
     #                                (a floating body needs no larger one: see above)
+    sliding = "finite"             # "small" (default: paired once) or "finite" (2D, master
+    #                                region, node_to_segment: see below)
+
+Finite sliding (``sliding = "finite"``): the slaves are paired again on the current (displaced)
+configuration at each step's start and after each solve, until the rows stop changing (their
+fixed point: the gap and the slip of the current geometry, exact at convergence); a slave
+keeps its facet while it stays in it (no flip at a kink), else takes the closest (ties: the
+canonical facet order of ``surfaces``). Each row spans, once for the run, the master nodes of
+every facet within ``search_radius`` of the slave's start (``pairing.facet_spans``), zeros
+where a facet is not the current one: the operator's pattern never changes, and a slave that
+slides out of its span stops the run (exit 3, naming ``search_radius``). The stick rows hold
+the master's material point faced at the step's start, on whatever facet it now is; the slip
+output is the total over the steps. Small strain: the bodies' stiffness is the initial one,
+the contact geometry the current one.
 """
 
 from __future__ import annotations
@@ -84,7 +98,7 @@ import numpy as np
 from parsolve.contact import friction as fr
 from parsolve.contact import obstacles
 from parsolve.contact.mortar import mortar_pairing
-from parsolve.contact.pairing import check_surfaces, facet_spans, in_spans, pair_nodes
+from parsolve.contact.pairing import check_surfaces, facet_spans, in_spans, pair_nodes, pair_on
 from parsolve.contact.part_values import PartValues
 from parsolve.contact.rows import friction_dual, node_rows, normal_rows, normal_values, \
     slip_vectors, span_rows, tangent_rows
@@ -92,6 +106,7 @@ from parsolve.contact.surfaces import Surfaces, canonical_facets
 from parsolve.effects.base import Effect
 from parsolve.errors import InputError, SolverError
 from parsolve.evolution import CONSTANT
+from parsolve.fem.elements import element
 from parsolve.mesh.local_regions import gather_facets
 from parsolve.mesh.topology import FACETS, boundary_facets
 from parsolve.relations import Relation
@@ -100,6 +115,12 @@ from parsolve.scene import NAME_PATTERN
 OBSTACLES = ("plane", "cylinder", "sphere")
 DISCRETIZATIONS = ("node_to_segment", "mortar")
 SLIDINGS = ("small", "finite")
+TOL_ROWS = 1e-12   # finite sliding: the rows' fixed point (coefficients; gaps × search radius)
+# finite sliding: a slave keeps its facet while its projection is within this of the facet (in
+# reference coordinates, pair_nodes' own tolerance), clipped to the facet's end: at a kink of
+# the master (the corner of an indentation) the slave would otherwise flip between the two
+# facets, each solve sending it back over the vertex to the other
+KEEP_TOL = 1e-2
 
 
 @dataclass
@@ -195,6 +216,8 @@ class Contact(Effect):
         # rows over input DOFs; their values from this rank's vector (part_values)
         self.values = PartValues(mesh, fields.ncomp, getattr(regions, "comm", None))
         self.span: Spans | None = None     # finite sliding (set by _pair)
+        self._facet_now = None              # finite sliding: the facets faced now (compact)
+        self._committed_slip = False
         self._check_slave(regions)
         self.pairing = self._pair(regions)
         if len(self.pairing) == 0:
@@ -211,7 +234,7 @@ class Contact(Effect):
         self.direction = np.ones((n, dm1)) / np.sqrt(dm1)
         self.committed = (self.node_state.copy(), self.direction.copy())
         self.turning = fr.DirectionIteration()
-        # total slip = slip_base + Dt·q (finite sliding re-bases it when the rows change)
+        # finite sliding: the total slip of the converged steps (the output adds the step's)
         self.slip_base = np.zeros(n * dm1)
         self._build_rows()
 
@@ -335,32 +358,69 @@ class Contact(Effect):
         u = self.values.rows(dofs, np.arange(m * dim), np.ones(m * dim), m * dim, q)
         return sp.surf.points + u.reshape(m, dim)
 
-    def _slide(self, q: np.ndarray) -> None:
-        """Finite sliding, at a step's start: pair the slaves on the current configuration
-        (ties: the canonical facet order), and rewrite the rows' values in place over the
-        spans (the same entries): the gap linearised at q, g = g_q + Dn·(q' − q), i.e. the
-        entry's gap is g_q − Dn·q; the total slip carried over (``slip_base``); the stick
-        rows hold the step's starting point on the new facet (``begin_step``)."""
-        sp = self.span
-        total = self.slip_base + self._slip(q)
-        p = pair_nodes(self._current_points(q), sp.slave, sp.facets, self.mesh.facet_type,
-                       sp.radius)
+    def _repair(self, q: np.ndarray):
+        """Finite sliding: the slaves paired on the current configuration X + u (compact
+        numbering): the closest facet of the master (ties: the canonical facet order), except
+        that a slave keeps its current facet while its projection stays in it (within
+        ``KEEP_TOL``) and is as close (to 1e-9 of the search radius): a slave on a kink of the
+        master must not flip between its two facets from one iteration to the next. SolverError naming the key when a
+        slave leaves its span (the facets within search_radius of its start)."""
+        sp, ft = self.span, self.mesh.facet_type
+        x = self._current_points(q)
+        p = pair_nodes(x, sp.slave, sp.facets, ft, sp.radius)
+        if self._facet_now is not None:
+            cur, inside = pair_on(x, sp.slave, sp.facets, self._facet_now, ft, KEEP_TOL)
+            dist = np.abs(cur.gap)
+            best = np.where(p.paired, np.abs(p.gap), np.inf)
+            keep = inside & (dist <= best + 1e-9 * sp.radius)
+            for name in p.__dataclass_fields__:
+                getattr(p, name)[keep] = getattr(cur, name)[keep]
         bad = ~in_spans(p.facet, sp.facet_ptr, sp.facet_ids)
         if bad.any():
             node = int(sp.surf.ids[sp.slave[np.flatnonzero(bad)[0]]])
             raise SolverError(f"{self.source}: {self.spec.key}.search_radius: slave node {node} "
                               f"left the master facets within {sp.radius:.6g} of its start "
                               f"({int(bad.sum())} such node(s)): give a larger search_radius")
+        return p, x
+
+    def _tangential_offset(self, x: np.ndarray, p) -> np.ndarray:
+        """t · (x_s − x_m0): the slave's tangential distance, on the current configuration x,
+        from the master's material point it faced at the step's start (``_start_point``):
+        its slip in the step, whatever facets it crossed."""
+        sp, el = self.span, element(self.mesh.facet_type)
+        f0, xi0 = self._start_point
+        xm0 = np.einsum("mk,mkx->mx", el.shape(xi0), x[sp.facets[f0]])
+        return np.einsum("mx,mx->m", p.tangents[:, 0], x[sp.slave] - xm0)
+
+    def _slide(self, q: np.ndarray, start: bool) -> bool:
+        """Finite sliding: pair again on the current configuration and rewrite the rows'
+        values in place over the spans (the same entries). The normal rows: the gap
+        linearised at q, g = g_q + Dn·(q' − q) (the entry's gap is g_q − Dn·q); the stick
+        rows: the slip since the step's start, s_q + Dt·(q' − q) = 0, measured from the
+        master's material point faced at the step's start (``start``: that point is set
+        here). Both are exact at the fixed point the iterations reach (True while the rows
+        still change). Small strain: the bodies' stiffness is the initial one."""
+        sp = self.span
+        p, x = self._repair(q)
+        if start:
+            self._start_point = (p.facet.copy(), p.xi.copy())
+        self._facet_now = p.facet.copy()
+        self.du = self._tangential_offset(x, p)[:, None]
         p = sp.surf.to_input(p)
         nrows = self._rows(p.normal, p)
         p.gap = p.gap - self.values.rows(self.n_dofs, nrows.row, nrows.coef, nrows.nrows, q)
-        self.pairing, self.nrows = p, nrows
-        self.trows = self._rows(p.tangents[:, 0], p)
+        trows = self._rows(p.tangents[:, 0], p)
+        old = (self.nrows.coef, self.pairing.gap, self.trows.coef)
+        self.pairing, self.nrows, self.trows = p, nrows, trows
         self.normal.a_vals[:] = nrows.coef
         self.normal.values[:] = normal_values(p)
         if self.frictional:
-            self.tangent.a_vals[:] = self.trows.coef
-        self.slip_base = total - self._slip(q)
+            self.tangent.a_vals[:] = trows.coef
+            self.tangent.values[:] = self._slip(q) - self.du[:, 0]
+        size = sp.radius
+        return not (np.allclose(old[0], nrows.coef, rtol=0, atol=TOL_ROWS)
+                    and np.allclose(old[2], trows.coef, rtol=0, atol=TOL_ROWS)
+                    and np.allclose(old[1], p.gap, rtol=0, atol=TOL_ROWS * size))
 
     def _check_facing(self, p, surf: Surfaces, regions, key: str) -> None:
         """Refuse an obstacle that no facet of the slave surface faces (outward normal of the
@@ -487,7 +547,10 @@ class Contact(Effect):
         of the step's start; True when the dual changed (values to copy into the system)."""
         self.node_state, self.direction = (a.copy() for a in self.committed)
         if self.span is not None:
-            self._slide(q)
+            if self._committed_slip:   # the last step converged (its last refresh at this q)
+                self.slip_base += self.du[:, 0]
+                self._committed_slip = False
+            self._slide(q, start=True)
         # the normal rows in contact at the last converged step (initially: the closed gaps);
         # the same as the active set's after a converged step, and right after a failed one
         active[self.normal.name][:] = self.node_state != fr.OPEN
@@ -497,7 +560,8 @@ class Contact(Effect):
         self.turning.start(self.node_state)
         self.u_start = self._slip(q)
         self._set_dual()
-        self.tangent.values[:] = self.values.relation(self.tangent, q)
+        if self.span is None:
+            self.tangent.values[:] = self.values.relation(self.tangent, q)
         self._tangent_active(active)
         return True
 
@@ -519,15 +583,18 @@ class Contact(Effect):
     def slip_increment(self, q: np.ndarray) -> np.ndarray:
         """Tangential displacement of the slave relative to the master since the step's start."""
         dm1 = self.mesh.dim - 1
+        if self.span is not None:   # measured on the geometry (``_slide``)
+            return self.du
         return (self._slip(q) - self.u_start).reshape(-1, dm1)
 
     def refresh(self, q: np.ndarray, lam: dict, active: dict) -> bool:
         """One friction update between iterations (``active``: the normal rows' new set);
         True when a state or a slip direction changed (the dual and the tangential switches
         are then updated in place)."""
+        moved = self.span is not None and self._slide(q, start=False)
         if not self.frictional:
             self.node_state = np.where(active[self.normal.name], fr.STICK, fr.OPEN).astype(np.int8)
-            return False
+            return moved
         rn, rt = self.forces(lam)
         closed = active[self.normal.name].astype(bool)
         du = self.slip_increment(q)
@@ -545,10 +612,10 @@ class Contact(Effect):
         if turning:
             changed = self._turn(state, direction, lam, rn, du) or changed
         self.node_state, self.direction = state, direction
-        if changed:
+        if changed or moved:
             self._set_dual()
             self._tangent_active(active)
-        return changed
+        return changed or moved
 
     def _turn(self, state, direction, lam, rn, du) -> bool:
         """Turn the directions of the nodes that slide before and after this update
@@ -568,6 +635,7 @@ class Contact(Effect):
         return bool(np.any(np.abs(residual) > fr.TOL_ANGLE))
 
     def end_step(self) -> None:
+        self._committed_slip = self.span is not None
         self.committed = (self.node_state.copy(), self.direction.copy())
 
     # ------------------------------------------------------------------ outputs
@@ -587,7 +655,7 @@ class Contact(Effect):
         # the partition); an open node's is g0 + Dn·q
         closed = active[self.normal.name].astype(bool)
         gap = np.where(closed, 0.0, p.gap + self.values.relation(self.normal, q))
-        slip = self.slip_base + self._slip(q)
+        slip = self._slip(q) if self.span is None else self.slip_base + self.du[:, 0]
         # over every node (0 elsewhere; state -1), or this rank's owned rows on a part
         nodal = self.values.nodal
         fields = {f"{name}_normal_reaction": nodal(p.slave, rn),
