@@ -262,3 +262,37 @@ def test_bad_sliding_names_file_and_key(shared_tmp, mesh, edit, words):
         load_scene(path)
     assert err.value.key == "contact[0].sliding" and str(path) in str(err.value)
     assert words in err.value.message
+
+
+def test_frictionless_ironing_is_the_die_placed_there(run, shared_tmp):
+    """Frictionless, the answer does not depend on the path: the die dragged by 1.5625 over
+    twelve and a half facets of the deformed slab (finite sliding) ends where a die placed
+    there from the start and only pressed ends (the same displacements to 1e-9, the die's
+    shifted by its travel; the same contact forces). Small sliding keeps the first pairings
+    and does not."""
+    travel = 1.5625
+    moved = shared_tmp / "ironing_placed.msh"
+    if MPI.COMM_WORLD.rank == 0:
+        if not IRONING.with_suffix(".msh").exists():
+            write_ironing_mesh(IRONING.with_suffix(".msh"))
+        base_and_die(moved, SLAB, DIE[:4] + (DIE[4] + travel,))
+    MPI.COMM_WORLD.Barrier()
+    text = IRONING.read_text().replace("friction = 0.3", "friction = 0.0") \
+        .replace('file = "contact_ironing_2d.msh"', f'file = "{IRONING.with_suffix(".msh")}"')
+    dragged = run(text.replace("value = 1.5", f"value = {travel}"), name="ironing_free")
+    placed = run(text.replace("value = 1.5", "value = 0.0")
+                 .replace(f'file = "{IRONING.with_suffix(".msh")}"', f'file = "{moved}"'),
+                 name="ironing_placed")
+    u_d, u_p = dragged["fields/displacement"][-1], placed["fields/displacement"][-1]
+    die = np.arange(len(u_d)) >= 33 * 9
+    shift = np.where(die[:, None], [travel, 0.0], 0.0)
+    np.testing.assert_allclose(u_d, u_p + shift, atol=1e-9 * np.abs(u_p).max(), rtol=0)
+    rn_d = dragged["fields/ironing_normal_reaction"][-1, die, 0]
+    rn_p = placed["fields/ironing_normal_reaction"][-1, die, 0]
+    np.testing.assert_allclose(rn_d, rn_p, atol=1e-9 * rn_p.max(), rtol=0)
+    small = run(text.replace("value = 1.5", f"value = {travel}")
+                .replace('sliding = "finite"', 'sliding = "small"'), name="ironing_small")
+    off = np.abs(small["fields/displacement"][-1] - u_p - shift).max() / np.abs(u_p).max()
+    print("dragged vs placed:", np.abs(u_d - u_p - shift).max() / np.abs(u_p).max(),
+          "small sliding vs placed:", off, "iterations:", list(dragged["steps/iterations"]))
+    assert off > 1e-3
