@@ -217,6 +217,7 @@ class Contact(Effect):
         self.values = PartValues(mesh, fields.ncomp, getattr(regions, "comm", None))
         self.span: Spans | None = None     # finite sliding (set by _pair)
         self._facet_now = None              # finite sliding: the facets faced now (compact)
+        self._facet_committed = None        # ... at the last converged step
         self._committed_slip = False
         self._check_slave(regions)
         self.pairing = self._pair(regions)
@@ -550,6 +551,7 @@ class Contact(Effect):
             if self._committed_slip:   # the last step converged (its last refresh at this q)
                 self.slip_base += self.du[:, 0]
                 self._committed_slip = False
+            self._facet_now = self._facet_committed   # a retried step starts from there too
             self._slide(q, start=True)
         # the normal rows in contact at the last converged step (initially: the closed gaps);
         # the same as the active set's after a converged step, and right after a failed one
@@ -636,6 +638,7 @@ class Contact(Effect):
 
     def end_step(self) -> None:
         self._committed_slip = self.span is not None
+        self._facet_committed = self._facet_now
         self.committed = (self.node_state.copy(), self.direction.copy())
 
     # ------------------------------------------------------------------ outputs

@@ -296,3 +296,13 @@ def test_frictionless_ironing_is_the_die_placed_there(run, shared_tmp):
     print("dragged vs placed:", np.abs(u_d - u_p - shift).max() / np.abs(u_p).max(),
           "small sliding vs placed:", off, "iterations:", list(dragged["steps/iterations"]))
     assert off > 1e-3
+
+
+def test_slave_leaving_its_span_stops_the_run(run, mesh):
+    """The rows span the facets within search_radius of each slave's start: the die dragged
+    by 0.55 with a radius of 0.3 carries the slaves out of their spans, which stops the run
+    with a message naming the key (exit 3), not a silent wrong pairing."""
+    from parsolve.errors import SolverError
+
+    with pytest.raises(SolverError, match=r"contact\[0\]\.search_radius: slave node \d+ left"):
+        run(scene(mesh).replace("search_radius = 0.7", "search_radius = 0.3"), name="out_of_span")
