@@ -364,8 +364,11 @@ class Contact(Effect):
         numbering): the closest facet of the master (ties: the canonical facet order), except
         that a slave keeps its current facet while its projection stays in it (within
         ``KEEP_TOL``) and is as close (to 1e-9 of the search radius): a slave on a kink of the
-        master must not flip between its two facets from one iteration to the next. SolverError naming the key when a
-        slave leaves its span (the facets within search_radius of its start)."""
+        master must not flip between its two facets from one iteration to the next; a slave
+        that no facet faces any more (past the master's free end) stays on its last facet,
+        clipped to the facet's end (as small sliding keeps its first pairing). SolverError
+        naming the key when a slave leaves its span (the facets within search_radius of its
+        start)."""
         sp, ft = self.span, self.mesh.facet_type
         x = self._current_points(q)
         p = pair_nodes(x, sp.slave, sp.facets, ft, sp.radius)
@@ -373,7 +376,8 @@ class Contact(Effect):
             cur, inside = pair_on(x, sp.slave, sp.facets, self._facet_now, ft, KEEP_TOL)
             dist = np.abs(cur.gap)
             best = np.where(p.paired, np.abs(p.gap), np.inf)
-            keep = inside & (dist <= best + 1e-9 * sp.radius)
+            # ... and a slave beyond the master's free end stays on its last facet, at the end
+            keep = inside & (dist <= best + 1e-9 * sp.radius) | ~p.paired
             for name in p.__dataclass_fields__:
                 getattr(p, name)[keep] = getattr(cur, name)[keep]
         bad = ~in_spans(p.facet, sp.facet_ptr, sp.facet_ids)
