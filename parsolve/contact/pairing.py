@@ -378,3 +378,62 @@ def check_surfaces(slave_nodes: np.ndarray, master_facets: np.ndarray,
     if shared.size:
         raise InputError(f"master and slave surfaces share {shared.size} node(s) "
                          f"(first: {int(shared[0])})", source, key)
+
+
+def facet_spans(points: np.ndarray, slave_nodes: np.ndarray, master_facets: np.ndarray,
+                radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per slave node, the master facets whose box inflated by ``radius`` contains it, and
+    their nodes (finite sliding: the facets a slave may visit while it stays within radius
+    of where it started). Returns (facet_ptr, facets, node_ptr, nodes): CSR over the slave
+    nodes, facets and nodes increasing within each slave (facet indices are rows of
+    ``master_facets``, in its canonical order)."""
+    xs = np.asarray(points, dtype=float)[slave_nodes]
+    coords = np.asarray(points, dtype=float)[master_facets]
+    lo, hi = _facet_boxes(coords, radius)
+    sid, fid = candidate_pairs(xs, lo, hi)
+    order = np.lexsort((fid, sid))
+    sid, fid = sid[order], fid[order]
+    n = np.asarray(slave_nodes).size
+    facet_ptr = np.concatenate([[0], np.cumsum(np.bincount(sid, minlength=n))])
+    k = master_facets.shape[1]
+    pairs = np.unique(np.column_stack([np.repeat(sid, k), master_facets[fid].ravel()]), axis=0)
+    pairs = pairs.reshape(-1, 2)
+    node_ptr = np.concatenate([[0], np.cumsum(np.bincount(pairs[:, 0], minlength=n))])
+    return facet_ptr.astype(np.int64), fid, node_ptr.astype(np.int64), pairs[:, 1].copy()
+
+
+def in_spans(facet: np.ndarray, facet_ptr: np.ndarray, facets: np.ndarray) -> np.ndarray:
+    """True where entry i's facet is one of ``facets[facet_ptr[i]:facet_ptr[i+1]]``."""
+    n = facet.size
+    owner = np.repeat(np.arange(n, dtype=np.int64), np.diff(facet_ptr))
+    big = int(max(facets.max(initial=0), facet.max(initial=0))) + 1
+    key = owner * big + facets
+    cur = np.arange(n, dtype=np.int64) * big + facet
+    if key.size == 0:
+        return np.zeros(n, dtype=bool)
+    pos = np.minimum(np.searchsorted(key, cur), key.size - 1)
+    return (facet >= 0) & (key[pos] == cur)
+
+
+def pair_on(points: np.ndarray, slave_nodes: np.ndarray, master_facets: np.ndarray,
+            facet: np.ndarray, facet_type: str, tol: float = 1e-9) -> tuple[Pairing, np.ndarray]:
+    """Each slave node projected on one given facet (``facet[i]``, a row of
+    ``master_facets``), clipped to the facet as ``pair_nodes`` does within its tolerance:
+    (the pairing, True where the unclipped projection lies in the facet within ``tol``, in
+    reference coordinates: a slave on a vertex is in both facets whatever the round-off)."""
+    points = np.asarray(points, dtype=float)
+    xs = points[slave_nodes]
+    coords = points[master_facets[facet]]
+    xi, xm, jac = project_on_facets(xs, coords, facet_type)
+    inside = inside_reference(facet_type, xi, tol)
+    el = element(facet_type)
+    out = ~inside_reference(facet_type, xi, 0.0)
+    if out.any():
+        xi[out] = clip_to_reference(facet_type, xi[out])
+        xm[out] = np.einsum("mk,mkx->mx", el.shape(xi[out]), coords[out])
+        jac[out] = np.einsum("mka,mkx->mxa", el.grad_shape(xi[out]), coords[out])
+    normal, tangents = facet_frame(jac)
+    p = Pairing(np.asarray(slave_nodes, dtype=np.int64).copy(), np.ones(xs.shape[0], bool),
+                np.asarray(facet, dtype=np.int64).copy(), xi, master_facets[facet].copy(),
+                el.shape(xi), xm, normal, tangents, np.einsum("mx,mx->m", normal, xs - xm))
+    return p, inside

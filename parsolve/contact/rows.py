@@ -141,3 +141,38 @@ def tangential_components(pairing: Pairing, u: np.ndarray) -> np.ndarray:
     """Relative tangential displacement (slave minus master) in the tangent basis: (n, dim-1)."""
     n, dm1, _ = pairing.tangents.shape
     return tangent_rows(pairing).apply(u).reshape(n, dm1)
+
+
+def span_rows(pairing: Pairing, vectors: np.ndarray, ptr: np.ndarray, nodes: np.ndarray) -> Rows:
+    """Rows like :func:`node_rows` over a fixed superset of master nodes per entry (finite
+    sliding): entry i spans the slave node and the master nodes ``nodes[ptr[i]:ptr[i+1]]``
+    (increasing ids: every facet the slave may visit), the nodes of its current facet carry
+    -N_a v_i, the others 0. The layout depends on the span alone, so a slave moving to
+    another facet of its span is a value update of the same entries (no new sparsity).
+    ValueError when a current facet node is outside its entry's span."""
+    _check(pairing)
+    n, dim = vectors.shape
+    counts = np.diff(ptr)
+    owner = np.repeat(np.arange(n, dtype=np.int64), counts)
+    big = int(max(nodes.max(initial=0), pairing.master.max(initial=0))) + 1
+    key = owner * big + nodes                        # increasing: owners, then node ids
+    cur = (np.arange(n, dtype=np.int64)[:, None] * big + pairing.master).ravel()
+    pos = np.minimum(np.searchsorted(key, cur), max(key.size - 1, 0))
+    if key.size == 0 or np.any(key[pos] != cur):
+        raise ValueError("a current master facet lies outside the entry's span")
+    w = np.zeros(nodes.size)
+    np.add.at(w, pos, pairing.weights.ravel())      # distinct nodes of one facet: no overlap
+    # per entry: the slave node first, then its span (entry i starts at ptr[i] + i)
+    total = n + nodes.size
+    first = ptr[:-1] + np.arange(n)
+    is_slave = np.zeros(total, dtype=bool)
+    is_slave[first] = True
+    node_all = np.empty(total, dtype=np.int64)
+    node_all[first] = pairing.slave
+    node_all[~is_slave] = nodes
+    weight = np.ones(total)
+    weight[~is_slave] = -w
+    row_of = np.repeat(np.arange(n, dtype=np.int64), counts + 1)
+    coef = weight[:, None] * vectors[row_of]         # (total, dim)
+    return Rows(nrows=n, row=np.repeat(row_of, dim), node=np.repeat(node_all, dim),
+                comp=np.tile(np.arange(dim, dtype=np.int64), total), coef=coef.ravel(), width=0)

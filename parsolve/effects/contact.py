@@ -74,6 +74,20 @@ Scene schema::
     #                                mortar3d on triangle and quad faces in 3D)
     closed = 1e-9                  # initial gaps ≤ this (relative to the mesh size) start closed
     #                                (a floating body needs no larger one: see above)
+    sliding = "finite"             # "small" (default: paired once) or "finite" (2D, master
+    #                                region, node_to_segment: see below)
+
+Finite sliding (``sliding = "finite"``): the slaves are paired again on the current (displaced)
+configuration at each step's start and after each solve, until the rows stop changing (their
+fixed point: the gap and the slip of the current geometry, exact at convergence); a slave
+keeps its facet while it stays in it (no flip at a kink), else takes the closest (ties: the
+canonical facet order of ``surfaces``). Each row spans, once for the run, the master nodes of
+every facet within ``search_radius`` of the slave's start (``pairing.facet_spans``), zeros
+where a facet is not the current one: the operator's pattern never changes, and a slave that
+slides out of its span stops the run (exit 3, naming ``search_radius``). The stick rows hold
+the master's material point faced at the step's start, on whatever facet it now is; the slip
+output is the total over the steps. Small strain: the bodies' stiffness is the initial one,
+the contact geometry the current one.
 """
 
 from __future__ import annotations
@@ -86,14 +100,15 @@ from parsolve.contact import friction as fr
 from parsolve.contact import obstacles
 from parsolve.contact.mortar import mortar_pairing
 from parsolve.contact.mortar3d import mortar_pairing_3d
-from parsolve.contact.pairing import check_surfaces, pair_nodes
+from parsolve.contact.pairing import check_surfaces, facet_spans, in_spans, pair_nodes, pair_on
 from parsolve.contact.part_values import PartValues
 from parsolve.contact.rows import friction_dual, node_rows, normal_rows, normal_values, \
-    slip_vectors, tangent_rows
+    slip_vectors, span_rows, tangent_rows
 from parsolve.contact.surfaces import Surfaces, canonical_facets
 from parsolve.effects.base import Effect
-from parsolve.errors import InputError
+from parsolve.errors import InputError, SolverError
 from parsolve.evolution import CONSTANT
+from parsolve.fem.elements import element
 from parsolve.mesh.regions import gather_facets
 from parsolve.mesh.topology import FACETS, boundary_facets
 from parsolve.relations import Relation
@@ -101,6 +116,13 @@ from parsolve.scene import NAME_PATTERN
 
 OBSTACLES = ("plane", "cylinder", "sphere")
 DISCRETIZATIONS = ("node_to_segment", "mortar")
+SLIDINGS = ("small", "finite")
+TOL_ROWS = 1e-12   # finite sliding: the rows' fixed point (coefficients; gaps × search radius)
+# finite sliding: a slave keeps its facet while its projection is within this of the facet (in
+# reference coordinates, pair_nodes' own tolerance), clipped to the facet's end: at a kink of
+# the master (the corner of an indentation) the slave would otherwise flip between the two
+# facets, each solve sending it back over the vertex to the other
+KEEP_TOL = 1e-2
 
 
 @dataclass
@@ -115,6 +137,22 @@ class ContactSpec:
     closed: float
     key: str
     discretization: str = "node_to_segment"
+    sliding: str = "small"
+
+
+@dataclass
+class Spans:
+    """Finite sliding: the surfaces (compact numbering), the paired slaves' compact ids, the
+    master facets (compact) and, per paired slave, the facets and master nodes (input ids) of
+    its span (``pairing.facet_spans``), fixed for the run: the rows' sparsity."""
+    surf: Surfaces
+    slave: np.ndarray
+    facets: np.ndarray
+    radius: float
+    facet_ptr: np.ndarray
+    facet_ids: np.ndarray
+    node_ptr: np.ndarray
+    nodes: np.ndarray
 
 
 def parse(t, dim: int) -> ContactSpec:
@@ -139,9 +177,13 @@ def parse(t, dim: int) -> ContactSpec:
     discretization = t.get("discretization", str, "node_to_segment", choices=DISCRETIZATIONS)
     if discretization == "mortar" and master is None:
         raise t.error("discretization", "mortar needs a master region (not an obstacle)")
+    sliding = t.get("sliding", str, "small", choices=SLIDINGS)
+    if sliding == "finite" and (master is None or dim != 2 or discretization != "node_to_segment"):
+        raise t.error("sliding", "finite sliding needs a master region, node_to_segment "
+                                 "discretization, in 2D")
     t.done()
     return ContactSpec(name, slave, master, obstacle, mu, direction, radius, closed, t.path,
-                       discretization)
+                       discretization, sliding)
 
 
 def _obstacle(t, dim: int) -> tuple[str, dict]:
@@ -175,6 +217,10 @@ class Contact(Effect):
                              source, key)
         # rows over input DOFs; their values from this rank's vector (part_values)
         self.values = PartValues(mesh, fields.ncomp, getattr(regions, "comm", None))
+        self.span: Spans | None = None     # finite sliding (set by _pair)
+        self._facet_now = None              # finite sliding: the facets faced now (compact)
+        self._facet_committed = None        # ... at the last converged step
+        self._committed_slip = False
         self._check_slave(regions)
         self.pairing = self._pair(regions)
         if len(self.pairing) == 0:
@@ -190,6 +236,8 @@ class Contact(Effect):
         self.direction = np.ones((n, dm1)) / np.sqrt(dm1)
         self.committed = (self.node_state.copy(), self.direction.copy())
         self.turning = fr.DirectionIteration()
+        # finite sliding: the total slip of the converged steps (the output adds the step's)
+        self.slip_base = np.zeros(n * dm1)
         self._build_rows()
 
     # ------------------------------------------------------------------ geometry
@@ -249,8 +297,11 @@ class Contact(Effect):
                     raise InputError(str(exc), self.source, f"{key}.discretization") from None
                 return surf.to_input(mortar.pairing.only_paired())
             surf = Surfaces.of([(slave, slave_pts), (facets, facet_pts)])
-            return surf.to_input(pair_nodes(surf.points, surf.compact(slave), surf.compact(facets),
-                                            mesh.facet_type, spec.search_radius).only_paired())
+            p = pair_nodes(surf.points, surf.compact(slave), surf.compact(facets),
+                           mesh.facet_type, spec.search_radius).only_paired()
+            if spec.sliding == "finite":
+                self.span = self._spans(surf, p, surf.compact(facets))
+            return surf.to_input(p)
         surf = Surfaces.of([(slave, slave_pts)])
         pts, nodes = surf.points, surf.compact(slave)
         kind, params = spec.obstacle
@@ -271,6 +322,107 @@ class Contact(Effect):
         if spec.search_radius is not None:
             p.paired &= p.gap <= spec.search_radius
         return surf.to_input(p.only_paired())
+
+    def _spans(self, surf: Surfaces, p, facets: np.ndarray) -> Spans:
+        """Finite sliding: each paired slave's span, the facets within the search radius
+        (default: one facet extent, as the pairing's) of its initial position."""
+        radius = self.spec.search_radius
+        if radius is None:
+            coords = surf.points[facets]
+            radius = float(np.max(coords.max(axis=1) - coords.min(axis=1)))
+        fptr, fids, nptr, nodes = facet_spans(surf.points, p.slave, facets, radius)
+        return Spans(surf, p.slave.copy(), facets, radius, fptr, fids, nptr, surf.ids[nodes])
+
+    def _rows(self, vectors: np.ndarray, pairing=None):
+        """Rows along one vector per entry: node_rows, or (finite sliding) over the spans."""
+        p = self.pairing if pairing is None else pairing
+        if self.span is None:
+            return node_rows(p, vectors)
+        return span_rows(p, vectors, self.span.node_ptr, self.span.nodes)
+
+    def _dual_coef(self) -> np.ndarray:
+        """Coefficients of Dn − μ Dt·s (the normal rows' dual is their negation)."""
+        p = self.pairing
+        if self.span is None:
+            return friction_dual(p, self.mu, self.direction).coef
+        return self._rows(p.normal - self.mu * slip_vectors(p, self.direction)).coef
+
+    def _current_points(self, q: np.ndarray) -> np.ndarray:
+        """The surfaces' nodes in the current configuration X + u (every rank the same)."""
+        sp, f = self.span, self.fields_
+        dim = self.mesh.dim
+        m = sp.surf.ids.size
+        dofs = np.repeat(sp.surf.ids, dim) * f.ncomp + f.offset["u"] + np.tile(np.arange(dim), m)
+        u = self.values.rows(dofs, np.arange(m * dim), np.ones(m * dim), m * dim, q)
+        return sp.surf.points + u.reshape(m, dim)
+
+    def _repair(self, q: np.ndarray):
+        """Finite sliding: the slaves paired on the current configuration X + u (compact
+        numbering): the closest facet of the master (ties: the canonical facet order), except
+        that a slave keeps its current facet while its projection stays in it (within
+        ``KEEP_TOL``) and is as close (to 1e-9 of the search radius): a slave on a kink of the
+        master must not flip between its two facets from one iteration to the next; a slave
+        that no facet faces any more (past the master's free end) stays on its last facet,
+        clipped to the facet's end (as small sliding keeps its first pairing). SolverError
+        naming the key when a slave leaves its span (the facets within search_radius of its
+        start)."""
+        sp, ft = self.span, self.mesh.facet_type
+        x = self._current_points(q)
+        p = pair_nodes(x, sp.slave, sp.facets, ft, sp.radius)
+        if self._facet_now is not None:
+            cur, inside = pair_on(x, sp.slave, sp.facets, self._facet_now, ft, KEEP_TOL)
+            dist = np.abs(cur.gap)
+            best = np.where(p.paired, np.abs(p.gap), np.inf)
+            # ... and a slave beyond the master's free end stays on its last facet, at the end
+            keep = inside & (dist <= best + 1e-9 * sp.radius) | ~p.paired
+            for name in p.__dataclass_fields__:
+                getattr(p, name)[keep] = getattr(cur, name)[keep]
+        bad = ~in_spans(p.facet, sp.facet_ptr, sp.facet_ids)
+        if bad.any():
+            node = int(sp.surf.ids[sp.slave[np.flatnonzero(bad)[0]]])
+            raise SolverError(f"{self.source}: {self.spec.key}.search_radius: slave node {node} "
+                              f"left the master facets within {sp.radius:.6g} of its start "
+                              f"({int(bad.sum())} such node(s)): give a larger search_radius")
+        return p, x
+
+    def _tangential_offset(self, x: np.ndarray, p) -> np.ndarray:
+        """t · (x_s − x_m0): the slave's tangential distance, on the current configuration x,
+        from the master's material point it faced at the step's start (``_start_point``):
+        its slip in the step, whatever facets it crossed."""
+        sp, el = self.span, element(self.mesh.facet_type)
+        f0, xi0 = self._start_point
+        xm0 = np.einsum("mk,mkx->mx", el.shape(xi0), x[sp.facets[f0]])
+        return np.einsum("mx,mx->m", p.tangents[:, 0], x[sp.slave] - xm0)
+
+    def _slide(self, q: np.ndarray, start: bool) -> bool:
+        """Finite sliding: pair again on the current configuration and rewrite the rows'
+        values in place over the spans (the same entries). The normal rows: the gap
+        linearised at q, g = g_q + Dn·(q' − q) (the entry's gap is g_q − Dn·q); the stick
+        rows: the slip since the step's start, s_q + Dt·(q' − q) = 0, measured from the
+        master's material point faced at the step's start (``start``: that point is set
+        here). Both are exact at the fixed point the iterations reach (True while the rows
+        still change). Small strain: the bodies' stiffness is the initial one."""
+        sp = self.span
+        p, x = self._repair(q)
+        if start:
+            self._start_point = (p.facet.copy(), p.xi.copy())
+        self._facet_now = p.facet.copy()
+        self.du = self._tangential_offset(x, p)[:, None]
+        p = sp.surf.to_input(p)
+        nrows = self._rows(p.normal, p)
+        p.gap = p.gap - self.values.rows(self.n_dofs, nrows.row, nrows.coef, nrows.nrows, q)
+        trows = self._rows(p.tangents[:, 0], p)
+        old = (self.nrows.coef, self.pairing.gap, self.trows.coef)
+        self.pairing, self.nrows, self.trows = p, nrows, trows
+        self.normal.a_vals[:] = nrows.coef
+        self.normal.values[:] = normal_values(p)
+        if self.frictional:
+            self.tangent.a_vals[:] = trows.coef
+            self.tangent.values[:] = self._slip(q) - self.du[:, 0]
+        size = sp.radius
+        return not (np.allclose(old[0], nrows.coef, rtol=0, atol=TOL_ROWS)
+                    and np.allclose(old[2], trows.coef, rtol=0, atol=TOL_ROWS)
+                    and np.allclose(old[1], p.gap, rtol=0, atol=TOL_ROWS * size))
 
     def _check_facing(self, p, surf: Surfaces, regions, key: str) -> None:
         """Refuse an obstacle that no facet of the slave surface faces (outward normal of the
@@ -311,8 +463,12 @@ class Contact(Effect):
         p, f = self.pairing, self.fields_
         u0 = f.offset["u"]
         ncomp = f.ncomp
-        self.nrows = normal_rows(p)
-        self.trows = tangent_rows(p)        # along the fixed tangents (slip measure, outputs)
+        if self.span is None:
+            self.nrows = normal_rows(p)
+            self.trows = tangent_rows(p)    # along the fixed tangents (slip measure, outputs)
+        else:                               # finite sliding (2D): over the spans
+            self.nrows = self._rows(p.normal)
+            self.trows = self._rows(p.tangents[:, 0])
         self.n_dofs = self.nrows.node * ncomp + u0 + self.nrows.comp
         self.t_dofs = self.trows.node * ncomp + u0 + self.trows.comp
 
@@ -346,10 +502,12 @@ class Contact(Effect):
         r = self.nrows
         dual = None
         if self.frictional:
-            dual = (self.n_dofs, r.row, -friction_dual(p, self.mu, self.direction).coef)
+            dual = (self.n_dofs, r.row, -self._dual_coef())
         normal = Relation(f"{name}_normal", r.nrows, r.row, self.n_dofs, r.coef,
                           normal_values(p), CONSTANT, ">=", dual, eliminate=False)
-        normal.meta = {"type": "contact", "key": self.spec.key, "refresh": self.frictional}
+        finite = self.span is not None    # its rows' values change at each step
+        normal.meta = {"type": "contact", "key": self.spec.key,
+                       "refresh": self.frictional or finite}
         self.normal = normal
         out = [normal]
         if self.frictional:
@@ -358,7 +516,7 @@ class Contact(Effect):
                                self._tangent_coefs(), np.zeros(t.nrows), CONSTANT, "=", None,
                                eliminate=False)
             tangent.meta = {"type": "contact", "key": self.spec.key,
-                            "refresh": self.mesh.dim == 3}
+                            "refresh": self.mesh.dim == 3 or finite}
             self.tangent = tangent
             out.append(tangent)
         return out
@@ -366,7 +524,7 @@ class Contact(Effect):
     def _set_dual(self) -> None:
         """The slip direction s into the normal row's dual and (3D) the tangential rows, in
         place (same entries); the stick rows keep the step's starting position."""
-        self.normal.dual[2][:] = -friction_dual(self.pairing, self.mu, self.direction).coef
+        self.normal.dual[2][:] = -self._dual_coef()
         if self.mesh.dim == 3:
             self.tangent.a_vals[:] = self._tangent_coefs()
             self.tangent.values[:] = self.values.relation(self.tangent, self.q_start)
@@ -389,16 +547,23 @@ class Contact(Effect):
         """Start a step from the committed state: stick rows hold the tangential displacement
         of the step's start; True when the dual changed (values to copy into the system)."""
         self.node_state, self.direction = (a.copy() for a in self.committed)
+        if self.span is not None:
+            if self._committed_slip:   # the last step converged (its last refresh at this q)
+                self.slip_base += self.du[:, 0]
+                self._committed_slip = False
+            self._facet_now = self._facet_committed   # a retried step starts from there too
+            self._slide(q, start=True)
         # the normal rows in contact at the last converged step (initially: the closed gaps);
         # the same as the active set's after a converged step, and right after a failed one
         active[self.normal.name][:] = self.node_state != fr.OPEN
         if not self.frictional:
-            return False
+            return self.span is not None
         self.q_start = q.copy()
         self.turning.start(self.node_state)
         self.u_start = self._slip(q)
         self._set_dual()
-        self.tangent.values[:] = self.values.relation(self.tangent, q)
+        if self.span is None:
+            self.tangent.values[:] = self.values.relation(self.tangent, q)
         self._tangent_active(active)
         return True
 
@@ -420,15 +585,18 @@ class Contact(Effect):
     def slip_increment(self, q: np.ndarray) -> np.ndarray:
         """Tangential displacement of the slave relative to the master since the step's start."""
         dm1 = self.mesh.dim - 1
+        if self.span is not None:   # measured on the geometry (``_slide``)
+            return self.du
         return (self._slip(q) - self.u_start).reshape(-1, dm1)
 
     def refresh(self, q: np.ndarray, lam: dict, active: dict) -> bool:
         """One friction update between iterations (``active``: the normal rows' new set);
         True when a state or a slip direction changed (the dual and the tangential switches
         are then updated in place)."""
+        moved = self.span is not None and self._slide(q, start=False)
         if not self.frictional:
             self.node_state = np.where(active[self.normal.name], fr.STICK, fr.OPEN).astype(np.int8)
-            return False
+            return moved
         rn, rt = self.forces(lam)
         closed = active[self.normal.name].astype(bool)
         du = self.slip_increment(q)
@@ -446,10 +614,10 @@ class Contact(Effect):
         if turning:
             changed = self._turn(state, direction, lam, rn, du) or changed
         self.node_state, self.direction = state, direction
-        if changed:
+        if changed or moved:
             self._set_dual()
             self._tangent_active(active)
-        return changed
+        return changed or moved
 
     def _turn(self, state, direction, lam, rn, du) -> bool:
         """Turn the directions of the nodes that slide before and after this update
@@ -469,6 +637,8 @@ class Contact(Effect):
         return bool(np.any(np.abs(residual) > fr.TOL_ANGLE))
 
     def end_step(self) -> None:
+        self._committed_slip = self.span is not None
+        self._facet_committed = self._facet_now
         self.committed = (self.node_state.copy(), self.direction.copy())
 
     # ------------------------------------------------------------------ outputs
@@ -488,7 +658,7 @@ class Contact(Effect):
         # the partition); an open node's is g0 + Dn·q
         closed = active[self.normal.name].astype(bool)
         gap = np.where(closed, 0.0, p.gap + self.values.relation(self.normal, q))
-        slip = self._slip(q)
+        slip = self._slip(q) if self.span is None else self.slip_base + self.du[:, 0]
         # over every node (0 elsewhere; state -1), or this rank's owned rows on a part
         nodal = self.values.nodal
         fields = {f"{name}_normal_reaction": nodal(p.slave, rn),

@@ -1,0 +1,77 @@
+"""Finite sliding's building blocks (parsolve.contact.pairing.facet_spans, in_spans, pair_on;
+parsolve.contact.rows.span_rows): the spans hold the facets within the radius of each slave,
+rows over a span are the node-to-segment rows with zeros on the other span nodes, and a
+projection on a given facet is pair_nodes' when that facet is the closest."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from parsolve.contact.pairing import facet_spans, in_spans, pair_nodes, pair_on
+from parsolve.contact.rows import node_rows, span_rows
+
+
+def wavy_master(n: int = 12) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """points (master nodes on a wavy line y = 0.05 sin(3x), then 5 slaves above it),
+    master facets oriented outward (up: right to left), slave ids."""
+    x = np.linspace(0.0, 3.0, n + 1)
+    master = np.column_stack([x, 0.05 * np.sin(3 * x)])
+    slaves = np.column_stack([np.linspace(0.3, 2.7, 5), np.full(5, 0.2)])
+    points = np.vstack([master, slaves])
+    facets = np.column_stack([np.arange(1, n + 1), np.arange(n)])
+    return points, facets, np.arange(n + 1, n + 6)
+
+
+def test_spans_hold_the_facets_within_the_radius():
+    points, facets, slaves = wavy_master()
+    radius = 0.6
+    fptr, fids, nptr, nodes = facet_spans(points, slaves, facets, radius)
+    coords = points[facets]
+    lo, hi = coords.min(axis=1) - radius, coords.max(axis=1) + radius
+    for i, s in enumerate(slaves):          # the definition, facet by facet
+        near = np.flatnonzero(np.all((points[s] >= lo) & (points[s] <= hi), axis=1))
+        assert np.array_equal(fids[fptr[i]:fptr[i + 1]], near)
+        assert np.array_equal(nodes[nptr[i]:nptr[i + 1]], np.unique(facets[near]))
+    p = pair_nodes(points, slaves, facets, "line", radius)
+    assert np.all(in_spans(p.facet, fptr, fids))
+    assert not np.any(in_spans(np.full(5, facets.shape[0] - 1), fptr, fids)[:2])  # far facet
+    assert not np.any(in_spans(np.full(5, -1), fptr, fids))                     # unpaired
+
+
+def test_span_rows_are_node_rows_with_zeros_elsewhere():
+    points, facets, slaves = wavy_master()
+    fptr, fids, nptr, nodes = facet_spans(points, slaves, facets, 0.6)
+    p = pair_nodes(points, slaves, facets, "line", 0.6)
+    vectors = p.normal - 0.3 * p.tangents[:, 0]
+    wide, narrow = span_rows(p, vectors, nptr, nodes), node_rows(p, vectors)
+    ndof = 2 * points.shape[0]
+
+    def dense(r):
+        out = np.zeros((r.nrows, ndof))
+        np.add.at(out, (r.row, r.node * 2 + r.comp), r.coef)
+        return out
+
+    np.testing.assert_array_equal(dense(wide), dense(narrow))
+    # one entry per (row, node, component): no duplicate, the span's size per row
+    keys = wide.row * ndof + wide.node * 2 + wide.comp
+    assert np.unique(keys).size == keys.size
+    np.testing.assert_array_equal(np.bincount(wide.row), 2 * (1 + np.diff(nptr)))
+    outside = p.subset(np.arange(5))
+    outside.master = np.tile(facets[-1], (5, 1))      # the last facet: not in the first spans
+    with pytest.raises(ValueError, match="outside the entry's span"):
+        span_rows(outside, vectors, nptr, nodes)
+
+
+def test_projection_on_a_given_facet():
+    points, facets, slaves = wavy_master()
+    p = pair_nodes(points, slaves, facets, "line", 0.6)
+    q, inside = pair_on(points, slaves, facets, p.facet, "line")
+    assert inside.all()
+    for name in ("xi", "weights", "point", "normal", "tangents", "gap"):
+        np.testing.assert_allclose(getattr(q, name), getattr(p, name), atol=1e-14)
+    # on a facet three away from the closest one: outside, clipped to its end
+    q, inside = pair_on(points, slaves, facets, np.where(p.facet >= 3, p.facet - 3, p.facet + 3),
+                        "line")
+    assert not inside.any() and np.all(np.abs(q.xi) == 1.0)
+    np.testing.assert_allclose(q.weights.sum(axis=1), 1.0)
