@@ -81,13 +81,14 @@ def whole_mesh_bytes(dofs: int) -> float:
     return BASE + dofs * WHOLE_MESH_PER_DOF
 
 
-def available_bytes() -> float | None:
-    """The tighter of MemAvailable, RLIMIT_AS and the cgroup limit (parsolve.mesh.limits); what
-    bound it is kept in ``AVAILABLE_BOUND`` for the message."""
+def available_bytes(local: int = 1) -> float | None:
+    """The tighter of MemAvailable, RLIMIT_AS and the cgroup limit (parsolve.mesh.limits) for
+    ``local`` ranks on this machine (RLIMIT_AS is per rank); what bound it is kept in
+    ``AVAILABLE_BOUND`` for the message. Not collective: rank 0 alone checks the whole mesh."""
     global AVAILABLE_BOUND
     from parsolve.mesh import limits
 
-    have, AVAILABLE_BOUND = limits.available_bytes(_layout()[1])  # RLIMIT_AS: per rank
+    have, AVAILABLE_BOUND = limits.available_bytes(local)
     return float(have) if have else None
 
 
@@ -145,7 +146,7 @@ def check_fits(points: int, dim: int, preset: str, source: str | None, key: str 
 
 def _verdict(need: float, dofs: int, nranks: int, local: int, source: str | None,
              key: str | None, what: str, collective: bool = True) -> None:
-    have = available_bytes()
+    have = available_bytes(local)
     verdict = (need / have if have else 0.0, need, have or 0.0)
     if collective and _COMM is not None and _COMM.size > 1:
         verdict = _COMM.allreduce(verdict, op=_max_op())  # the worst machine decides for all

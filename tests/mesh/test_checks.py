@@ -246,7 +246,7 @@ nu = 0.3
     assert memory.whole_mesh_bytes(dofs) < shared
 
     def build(have: float):
-        monkeypatch.setattr(memory, "available_bytes", lambda: have)
+        monkeypatch.setattr(memory, "available_bytes", lambda local=1: have)
         scene = parse_scene(tomllib.loads(text), "s.toml")
         with memory.agreed_over(comm):
             return build_model(scene, comm)
@@ -257,7 +257,8 @@ nu = 0.3
     assert info.value.key == "mesh.generator" and "too large for this machine" in info.value.message
     assert "built on one rank" not in info.value.message
     # the whole mesh alone on one rank (which a run's shares on one machine always exceed)
-    monkeypatch.setattr(memory, "available_bytes", lambda: memory.whole_mesh_bytes(dofs) * 0.99)
+    monkeypatch.setattr(memory, "available_bytes",
+                        lambda local=1: memory.whole_mesh_bytes(dofs) * 0.99)
     with pytest.raises(InputError) as info:
         build_mesh(parse_scene(tomllib.loads(text), "s.toml"))
     assert info.value.key == "mesh.generator" and "built on one rank" in info.value.message
