@@ -117,8 +117,8 @@ preset = "{preset}"
     return text
 
 
-def build(text: str):
-    """Scene text -> parsolve Model (retried once a minute later if parsolve fails to import:
+def build(text: str, comm=None):
+    """Scene text -> parsolve Model on ``comm``'s parts (None: MPI.COMM_WORLD; retried once a minute later if parsolve fails to import:
     someone may be editing it)."""
     import tomllib
 
@@ -132,7 +132,10 @@ def build(text: str):
                 raise
             print("[bench] parsolve import failed, retrying in 60 s", file=sys.stderr, flush=True)
             time.sleep(60)
-    return build_model(parse_scene(tomllib.loads(text), "bench.toml", text))
+    from mpi4py import MPI
+
+    comm = MPI.COMM_WORLD if comm is None else comm
+    return build_model(parse_scene(tomllib.loads(text), "bench.toml", text), comm)
 
 
 def cpu_seconds() -> float:

@@ -147,7 +147,7 @@ def run_case(name: str, case: dict, steps: int | None = None) -> list[dict]:
 def _run(text: str, path: Path) -> float:
     src = path.with_suffix(".toml")
     src.write_text(text)
-    model = build_model(load_scene(src))
+    model = build_model(load_scene(src), MPI.COMM_WORLD)
     t0 = time.perf_counter()
     try:
         run(MPI.COMM_WORLD, model, str(path), {}, log=lambda *a: None)

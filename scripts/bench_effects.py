@@ -61,7 +61,7 @@ def main(argv=None) -> int:
         text = smallest(text) if args.smoke else text
         src = OUT / f"effects_{len(rows)}.toml"
         src.write_text(text)
-        model = build_model(load_scene(src))
+        model = build_model(load_scene(src), MPI.COMM_WORLD)
         out = src.with_suffix(".h5")
         t0 = time.perf_counter()
         run(MPI.COMM_WORLD, model, str(out), {}, log=lambda *a: None)

@@ -23,6 +23,7 @@ import argparse
 import tempfile
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import h5py
 import numpy as np
@@ -65,7 +66,7 @@ def add_keys(text: str, lines: str) -> str:
 def solve(text: str, work: Path, name: str) -> tuple[dict, float]:
     path = work / f"{name}.toml"
     path.write_text(text)
-    model = build_model(load_scene(path))
+    model = build_model(load_scene(path), MPI.COMM_WORLD)
     t0 = time.perf_counter()
     try:
         run(MPI.COMM_WORLD, model, str(work / f"{name}.h5"), {}, None, log=lambda *a: None)
@@ -189,13 +190,15 @@ def formulations_table(work: Path, quick: bool, smoke: bool = False) -> tuple[li
     return head + rows, records
 
 
-def bare_penalty(pairing, mu: float, eps: float, dim: int) -> PenaltyContact:
+def bare_penalty(pairing, mu: float, eps: float, dim: int, npoints: int) -> PenaltyContact:
     """The penalty effect's force and tangent kernels on a bare pairing (no mesh, no scene):
     the attributes PenaltyContact.forces and .node_tangents read, set by hand (``values``:
-    the replicated-mesh PartValues, whose node_rows is ``rows.apply(u)``)."""
+    the PartValues of a one-rank part holding all ``npoints`` nodes, owned, input order —
+    what build_model gives at 1 rank)."""
     eff = object.__new__(PenaltyContact)
     eff.pairing, eff.nrows, eff.trows = pairing, normal_rows(pairing), tangent_rows(pairing)
-    eff.values = PartValues(None, dim)
+    part = SimpleNamespace(global_nodes=np.arange(npoints, dtype=np.int64), n_owned=npoints)
+    eff.values = PartValues(part, dim, MPI.COMM_SELF)
     eff.eps_n = eff.eps_t = np.full(len(pairing), eps)
     eff.touch, eff.touching = 0.0, np.zeros(len(pairing), bool)   # the closed rule: none here
 
@@ -236,7 +239,7 @@ def update_times(quick: bool, smoke: bool = False) -> tuple[list[str], list[tupl
                 friction_dual(p, MU, direction)
                 t3 = time.perf_counter()
                 # penalty: nodal forces and consistent tangents (each Newton iteration)
-                eff = bare_penalty(p, MU, 1e5, pts.shape[1])
+                eff = bare_penalty(p, MU, 1e5, pts.shape[1], len(pts))
                 u = rng.normal(size=pts.shape) * 1e-3
                 zero = {"gT": np.zeros((m, dm1))}
                 f = eff.forces(u, zero, np.zeros(m), np.zeros((m, dm1)))

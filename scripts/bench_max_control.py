@@ -47,7 +47,7 @@ def run(level: int, steps: int, per_row_copies: bool, cuts: bool = True) -> dict
 
     text = scene_text(level, steps)
     scene = parse_scene(tomllib.loads(text), "plate.toml", text)
-    model = build_model(scene)
+    model = build_model(scene, MPI.COMM_WORLD)
     if per_row_copies:  # the former layout: every row its own copy of the control vector
         for r in model.relations:
             if r.collapsed:

@@ -213,12 +213,17 @@ def run_method(comm, problem: str, size: int, method: str, orderings: list[str])
     from parsolve.solvers.system import SaddleSystem
 
     text = scene_text(problem, size, method)
-    model = build_model(parse_scene(tomllib.loads(text), "bench.toml", text))
-    out = dict(dofs=model.mesh.num_points * model.ncomp, cells=model.mesh.num_cells)
-    out.update(partition_stats(comm, model.mesh, method))
+    scene = parse_scene(tomllib.loads(text), "bench.toml", text)
+    # the partitioner's statistics on the whole mesh (every rank its own copy, COMM_SELF);
+    # the system on the ranks' parts, as a run builds it
+    whole = build_model(scene)
+    out = dict(dofs=whole.mesh.num_points * whole.ncomp, cells=whole.mesh.num_cells)
+    out.update(partition_stats(comm, whole.mesh, method))
+    del whole
     out["orderings"] = {}
     if not orderings:   # the partition alone
         return out
+    model = build_model(scene, comm)
     with Phase(comm) as p_sys:
         system = SaddleSystem(comm, model)
         mat = system.assemble()

@@ -536,7 +536,8 @@ def _voigt(s, dim: int):
 
 def dolfinx_phases(mesh_file: str, cell: str, options: dict, out_file: str | None = None,
                    traction=None, plane: str = "strain", comm=None,
-                   jit_cache: str | None = None, near_null: bool = False) -> dict:
+                   jit_cache: str | None = None, near_null: bool = False,
+                   quadrature: tuple[int, ...] = ()) -> dict:
     """A clamped block under an end traction, every phase timed and its memory recorded.
 
     The mesh is read on rank 0 from ``mesh_file`` (npz: ``points`` (N, d), ``cells`` (M, k) in
@@ -550,6 +551,11 @@ def dolfinx_phases(mesh_file: str, cell: str, options: dict, out_file: str | Non
     cell values (interpolation into DG0, the cell's centre) and nodal averages (a lumped
     projection: ∫σ·w / ∫w on P1, the cells' stresses weighted by their share of each node);
     ``output`` = XDMF/HDF5 of the mesh, u and both stresses (skipped without ``out_file``).
+    Not phases (in ``seconds`` and ``cpu`` beside them): ``reassembly`` = assemble_matrix into
+    the same matrix again (zeroed; the matrix alone), right after the first assembly; per
+    degree q of ``quadrature``, once the phases are done and the first matrix destroyed:
+    ``assembly_q{q}`` and ``reassembly_q{q}``, the stiffness at quadrature degree q
+    (``forms_q{q}``: its JIT; degree 2 = 2×2×2 Gauss points on a hexahedron, parsolve's rule).
     Returns ``seconds`` and ``cpu`` (CPU seconds, max over ranks: on a shared machine the wall
     time also counts other processes) per phase, ``forms`` among them. ``options``: the KSP's PETSc options (no prefix); ``near_null``: rigid-body modes for GAMG.
     Memory per phase: VmRSS/VmHWM after it (max and mean over ranks), the matrix's bytes and
@@ -658,6 +664,13 @@ def dolfinx_phases(mesh_file: str, cell: str, options: dict, out_file: str | Non
     snap("assembly", {"mat_bytes_max": comm.allreduce(mat_bytes(A), op=MPI.MAX),
                       "mat_bytes_sum": comm.allreduce(mat_bytes(A))})
 
+    def reassembly(A, form):
+        A.zeroEntries()
+        fpetsc.assemble_matrix(A, form, bcs=[bc])
+        A.assemble()
+
+    clock("reassembly", reassembly, A, a)
+
     prefix = "bench_scale_"
     opts = PETSc.Options()
     for key, val in options.items():
@@ -720,6 +733,23 @@ def dolfinx_phases(mesh_file: str, cell: str, options: dict, out_file: str | Non
         clock("output", output)
     snap("output")
 
+    its, reason = ksp.getIterationNumber(), int(ksp.getConvergedReason())
+    ksp.destroy()
+    A.destroy()
+    for q in quadrature:   # the stiffness at another quadrature degree: first and again
+        a_q = clock(f"forms_q{q}", _form, ufl.inner(sigma(u), eps(v))
+                    * ufl.dx(metadata={"quadrature_degree": q}), jit)
+
+        def first_q():
+            A = fpetsc.create_matrix(a_q)
+            fpetsc.assemble_matrix(A, a_q, bcs=[bc])
+            A.assemble()
+            return A
+
+        A = clock(f"assembly_q{q}", first_q)
+        clock(f"reassembly_q{q}", reassembly, A, a_q)
+        A.destroy()
+
     nown = V.dofmap.index_map.size_local
     owned = uh.x.array[: nown * dim].reshape(-1, dim)
     xdof = V.tabulate_dof_coordinates()[:nown, :dim]
@@ -727,11 +757,8 @@ def dolfinx_phases(mesh_file: str, cell: str, options: dict, out_file: str | Non
     corner = owned[hit[0]].tolist() if len(hit) else None
     corner = [c for c in comm.allgather(corner) if c is not None][0]
     umax = comm.allreduce(float(np.abs(owned).max()) if nown else 0.0, op=MPI.MAX)
-    its, reason = ksp.getIterationNumber(), int(ksp.getConvergedReason())
     for key in options:
         opts.delValue(prefix + key)
-    ksp.destroy()
-    A.destroy()
     return dict(peer="dolfinx", cell=cell, dim=dim, nranks=comm.size,
                 dofs=V.dofmap.index_map.size_global * dim,
                 ncells=msh.topology.index_map(dim).size_global, options=options,

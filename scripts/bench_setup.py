@@ -136,7 +136,9 @@ def build(text: str):
 
     from parsolve.model import build_model
     from parsolve.scene import parse_scene
-    return build_model(parse_scene(tomllib.loads(text), "bench.toml", text))
+    from mpi4py import MPI
+
+    return build_model(parse_scene(tomllib.loads(text), "bench.toml", text), MPI.COMM_WORLD)
 
 
 def slowest(comm, seconds: float) -> float:

@@ -133,7 +133,7 @@ def parsolve_worker(n: int, cell: str, json_out: str) -> None:
         if comm.rank == 0:
             (OUT / f"{tag}_{preset}.toml").write_text(scene_text(n, cell, preset))
     comm.Barrier()
-    model, t_model = clock(lambda: build_model(load_scene(scene_file)))
+    model, t_model = clock(lambda: build_model(load_scene(scene_file), comm))
     system, t_system = clock(SaddleSystem, comm, model)
     _, t_asm = clock(system.assemble)
     out.update(t_setup=t_model + t_system, t_model=t_model, t_system=t_system, t_asm=t_asm,
@@ -141,7 +141,7 @@ def parsolve_worker(n: int, cell: str, json_out: str) -> None:
     del system, model
     for preset in PRESETS:
         lines = []
-        model = build_model(load_scene(OUT / f"{tag}_{preset}.toml"))
+        model = build_model(load_scene(OUT / f"{tag}_{preset}.toml"), comm)
         h5 = str(OUT / f"{tag}_{preset}.h5")
         _, t_run = clock(run, comm, model, h5, {}, log=lines.append)
         its = [int(m.group(1)) for m in (re.search(r"linear its (\d+)", s) for s in lines) if m]
