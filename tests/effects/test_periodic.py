@@ -11,7 +11,7 @@ import pytest
 from mpi4py import MPI
 
 from conftest import CONFIGS, assert_same_results
-from test_configs import U, check_laminate, laminate_ux
+from helpers.laminate import U, check_laminate, laminate_ux
 from parsolve.errors import InputError
 from parsolve.model import build_model
 from parsolve.scene import load_scene

@@ -1,7 +1,10 @@
 """The localization bar and the scenes of tests/solvers/test_control.py that other tests of the
 control and arc-length methods reuse, with the bar's closed form."""
 
+import tomllib
+
 import numpy as np
+from mpi4py import MPI
 
 from conftest import CONFIGS
 
@@ -124,3 +127,32 @@ arc_length = { pattern = "pull", length = 1e-3 }
 [steps]
 count = 3
 """
+
+
+# the refined control plate of tests/solvers/test_max_control_*.py
+def plate(level: int, steps: int) -> str:
+    text = (CONFIGS / "plate_hole_control.toml").read_text()
+    text = text.replace("n_radial = 8", f"n_radial = {8 * level}")
+    text = text.replace("n_angular = 12", f"n_angular = {12 * level}")
+    return text.replace("count = 30", f"count = {steps}\nend = {steps / 30}")
+
+
+def plate_newton(refine: int, steps: int):
+    """The refined plate's (scene, model, system, Newton solver, maximum relation, mask of
+    the DOFs not eliminated), ready for its first step."""
+    from parsolve.driver import make_solver
+    from parsolve.model import build_model
+    from parsolve.scene import parse_scene
+    from parsolve.solvers.newton import NewtonSolver
+    from parsolve.solvers.system import SaddleSystem
+
+    comm = MPI.COMM_WORLD
+    text = plate(refine, steps)
+    scene = parse_scene(tomllib.loads(text), "plate.toml", text)
+    model = build_model(scene, comm)
+    system = SaddleSystem(comm, model)
+    newton = NewtonSolver(comm, system, make_solver(comm, system, {}), scene.nonlinear)
+    (rel,) = [r for r in system.multiplied if r.maximum]
+    free = np.ones(model.mesh.num_points * model.ncomp, dtype=bool)
+    free[system.elim_local[system.elim_local >= 0]] = False   # (local DOFs of this rank)
+    return scene, model, system, newton, rel, free

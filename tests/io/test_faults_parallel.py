@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from conftest import ROOT
-from tests.io.test_xdmf import SCENE_2D
+from helpers.xdmf import SCENE_2D
 
 pytestmark = pytest.mark.serial  # each test starts its own ranks
 

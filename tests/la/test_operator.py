@@ -17,7 +17,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from conftest import saddle_of_input_dofs
-from test_dense import SCENE
+from helpers.saddle import SCENE
 
 from parsolve.effects.compose import Composition
 from parsolve.fem.element_matrices import ElementMatrices, full_values

@@ -12,7 +12,7 @@ from parsolve.mesh.mesh import Mesh
 from parsolve.mesh.partition import block_starts, dual_graph
 from parsolve.mesh.topology import FLIP
 
-from test_checks import reference_cell
+from helpers.cells import reference_cell
 
 MESHES = {
     "quad": lambda: rectangle(1.0, 1.0, 30, 20, cell="quad"),

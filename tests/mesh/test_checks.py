@@ -12,14 +12,9 @@ from parsolve.mesh import memory
 from parsolve.mesh.checks import check_mesh, duplicate_points
 from parsolve.mesh.mesh import Mesh
 from parsolve.mesh.topology import FLIP
+from helpers.cells import reference_cell
 
 TYPES = ["triangle", "triangle6", "quad", "tetra", "tetra10", "hexahedron"]
-
-
-def reference_cell(cell_type: str) -> Mesh:
-    """One cell on the reference element's own nodes (det J > 0 everywhere)."""
-    nodes = np.array(element(cell_type).nodes, dtype=float)
-    return Mesh(nodes.copy(), cell_type, np.arange(len(nodes))[None, :])
 
 
 def raises(mesh: Mesh, words: str) -> str:

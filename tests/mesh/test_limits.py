@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from parsolve.mesh import limits
-from tests.io.test_xdmf import SCENE_2D
+from helpers.xdmf import SCENE_2D
 
 GIB = 2**30
 

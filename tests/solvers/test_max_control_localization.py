@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from test_max_control_refined import plate_newton
+from helpers.control import plate_newton
 from parsolve.fem.element_matrices import BlockMatrices, ElementMatrices
 from parsolve.solvers.newton import _branch_reach, _CellReplaced
 

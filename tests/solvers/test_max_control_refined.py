@@ -11,13 +11,11 @@ lost all stiffness and MUMPS reported their null pivots (or, when the iterates d
 back to a row it left, so that the stepper cuts it; other groups cycle one change at a time.
 """
 
-import tomllib
-
 import numpy as np
 import pytest
 from mpi4py import MPI
 
-from conftest import CONFIGS
+from helpers.control import plate, plate_newton
 from parsolve.errors import SolverError
 from parsolve.relations import Relation
 from parsolve.solvers.active_set import ActiveSet
@@ -61,34 +59,6 @@ def test_local_group_cycles_one_change_at_a_time():
     with pytest.raises(SolverError, match="did not settle after 6 changes"):
         for _ in range(20):  # rows that exceed each other in turn forever: bounded
             aset.update(np.where(aset.active, 0.0, 0.1), np.zeros(2), 1e-12, 1e-12)
-
-
-def plate(level: int, steps: int) -> str:
-    text = (CONFIGS / "plate_hole_control.toml").read_text()
-    text = text.replace("n_radial = 8", f"n_radial = {8 * level}")
-    text = text.replace("n_angular = 12", f"n_angular = {12 * level}")
-    return text.replace("count = 30", f"count = {steps}\nend = {steps / 30}")
-
-
-def plate_newton(refine: int, steps: int):
-    """The refined plate's (scene, model, system, Newton solver, maximum relation, mask of
-    the DOFs not eliminated), ready for its first step."""
-    from parsolve.driver import make_solver
-    from parsolve.model import build_model
-    from parsolve.scene import parse_scene
-    from parsolve.solvers.newton import NewtonSolver
-    from parsolve.solvers.system import SaddleSystem
-
-    comm = MPI.COMM_WORLD
-    text = plate(refine, steps)
-    scene = parse_scene(tomllib.loads(text), "plate.toml", text)
-    model = build_model(scene, comm)
-    system = SaddleSystem(comm, model)
-    newton = NewtonSolver(comm, system, make_solver(comm, system, {}), scene.nonlinear)
-    (rel,) = [r for r in system.multiplied if r.maximum]
-    free = np.ones(model.mesh.num_points * model.ncomp, dtype=bool)
-    free[system.elim_local[system.elim_local >= 0]] = False   # (local DOFs of this rank)
-    return scene, model, system, newton, rel, free
 
 
 def test_full_step_at_the_onset_of_localization():

@@ -10,7 +10,7 @@ import pytest
 from mpi4py import MPI
 
 from conftest import dense, saddle_of_input_dofs
-from test_control import VON_MISES
+from helpers.control import VON_MISES
 
 
 def tangent_after(comm, text: str, steps: int) -> np.ndarray:
