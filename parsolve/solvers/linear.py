@@ -19,7 +19,11 @@ from parsolve.errors import SolverError
 from parsolve.solvers import options as opt
 
 
-def preset_options(preset: str, symmetric: bool, has_multipliers: bool) -> dict[str, str]:
+def preset_options(preset: str, symmetric: bool, has_multipliers: bool,
+                   stiffness_symmetric: bool | None = None) -> dict[str, str]:
+    """PETSc options of a preset. ``symmetric``: the whole operator (every multiplied relation
+    associated, every effect's tangent symmetric); ``stiffness_symmetric``: the primal block K
+    alone (default: ``symmetric``), what the fieldsplit's inner q solver sees."""
     if preset == "direct":
         return {
             "ksp_type": "preonly",
@@ -38,6 +42,7 @@ def preset_options(preset: str, symmetric: bool, has_multipliers: bool) -> dict[
     # CG needs a symmetric operator: a coupling that makes K unsymmetric (thermal expansion's
     # (u, T) block, non-associated relations eliminated into K) takes GMRES instead
     krylov = "cg" if symmetric else "gmres"
+    inner = "cg" if (symmetric if stiffness_symmetric is None else stiffness_symmetric) else "gmres"
     if not has_multipliers:
         # rtol on the true residual (GMRES: right preconditioning, whose norm is the true one)
         side = {} if symmetric else {"ksp_pc_side": "right"}
@@ -53,7 +58,7 @@ def preset_options(preset: str, symmetric: bool, has_multipliers: bool) -> dict[
         "pc_fieldsplit_type": "schur",
         "pc_fieldsplit_schur_fact_type": "full",
         "pc_fieldsplit_schur_precondition": "selfp",
-        "fieldsplit_q_ksp_type": krylov,
+        "fieldsplit_q_ksp_type": inner,
         "fieldsplit_q_ksp_rtol": "1e-4",
         "fieldsplit_q_pc_type": "gamg",
         "fieldsplit_lambda_ksp_type": "gmres",

@@ -31,9 +31,11 @@ def make_solver(comm: MPI.Comm, system: SaddleSystem, cli_options: dict[str, str
     tangent symmetric; the solver still checks each operator (LinearSolver)."""
     scene = system.model.scene
     secant = scene.nonlinear.matrix == "secant"
-    symmetric = all(r.associated for r in system.multiplied) and system.model.symmetric(secant)
+    stiffness_symmetric = system.model.symmetric(secant)
+    symmetric = all(r.associated for r in system.multiplied) and stiffness_symmetric
     has_mult = system.layout.nl > 0
-    settings = opt.merge(preset_options(scene.solver.preset, symmetric, has_mult),
+    settings = opt.merge(preset_options(scene.solver.preset, symmetric, has_mult,
+                                        stiffness_symmetric),
                          scene.solver.options, cli_options)
     is_q, is_l = system.op.index_sets()
     modes = rigid_body_modes(comm, system) if scene.solver.preset == "iterative" else None

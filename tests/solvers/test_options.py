@@ -82,3 +82,5 @@ def test_iterative_preset_takes_gmres_for_an_unsymmetric_operator():
     assert preset_options("iterative", False, False)["ksp_type"] == "gmres"
     assert preset_options("iterative", True, True)["fieldsplit_q_ksp_type"] == "cg"
     assert preset_options("iterative", False, True)["fieldsplit_q_ksp_type"] == "gmres"
+    # a non-associated relation leaves K symmetric: its block keeps CG
+    assert preset_options("iterative", False, True, True)["fieldsplit_q_ksp_type"] == "cg"
