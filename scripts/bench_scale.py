@@ -919,8 +919,9 @@ def model_lines(out: dict, fs: dict) -> list[str]:
                 f"{'N^1.5' if CASES[case]['dim'] == 2 else 'N^2'} flops): "
                 f"{mu['used_mb_sum'] * grow / 1e3:,.0f} GB in all, {mu['flops'] * fl:.2e} flops, "
                 f"{big['cpu']['factorization'] * fl / P:,.0f} s on {P} ranks at this core's "
-                f"rate with perfect speed-up (the linear fit above says "
-                f"{tp[2]:,.0f} s).")
+                f"rate with perfect speed-up"
+                + (f" (the linear fit above says {tp[2]:,.0f} s)." if tp[2] is not None
+                   else " (no linear fit: too few sizes)."))
     return lines
 
 
