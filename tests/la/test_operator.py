@@ -229,3 +229,36 @@ components = ["x", "y"]
     q, q2 = x[system.iq[:12]], x2[other.iq]
     assert np.abs(q).max() > 1.0
     np.testing.assert_allclose(q, q2, rtol=1e-12, atol=0)
+
+
+def test_block_size_of_a_multiplier_free_operator():
+    """Without multiplier rows every rank's rows are whole nodes: the Mat says so (GAMG's set-up
+    treated the 3D box as a scalar problem: ~25× its memory); with multipliers it cannot."""
+    box = """
+[mesh]
+generator = "box"
+lx = 1.0
+ly = 1.0
+lz = 1.0
+nx = 3
+ny = 2
+nz = 2
+cell = "hexahedron"
+[model]
+hypothesis = "3d"
+[[materials]]
+E = 1.0
+nu = 0.3
+[[relations]]
+name = "clamp"
+type = "dirichlet"
+region = "xmin"
+components = ["x", "y", "z"]
+[solver]
+eliminate = {eliminate}
+"""
+    eliminated = system_of(box.format(eliminate="true"))
+    multiplied = system_of(box.format(eliminate="false"))
+    assert eliminated.layout.nl == 0 and multiplied.layout.nl > 0
+    assert eliminated.assemble().getBlockSize() == 3
+    assert multiplied.assemble().getBlockSize() == 1
