@@ -166,7 +166,7 @@ class SaddleSystem:
         Linear: K q - D λ = F, A q = b. Newton (``f_int`` and ``q`` given, unknowns the
         increment Δq and the total λ): K Δq - D λ = F - f_int, A Δq = b - A q.
         """
-        f_full = self.model.external_load(t) if f_ext is None else f_ext
+        f_full = self.composition.known_loads(t, t, None) if f_ext is None else f_ext
         if f_int is not None:
             f_full = f_full - f_int
         target = self.block.rhs(t)
@@ -338,7 +338,7 @@ class SaddleSystem:
                                 f_ext: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """λ = (F - row of [K, -D] x) / a on each eliminated row (the row before zeroing); with
         ``f_int`` (nonlinear) the stiffness part of the row is f_int instead of K q."""
-        f_full = self.model.external_load(t) if f_ext is None else f_ext
+        f_full = self.composition.known_loads(t, t, None) if f_ext is None else f_ext
         if f_int is None:
             row_vals = self.op.eliminated_rows(x_full)
         else:  # x_full holds λ; the primal part of the row is the internal force
