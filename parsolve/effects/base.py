@@ -34,6 +34,17 @@ class Effect:
         known loads (thermal expansion's reference state); empty: none."""
         return {}
 
+    def node_pairs(self) -> np.ndarray:
+        """(k, 2) local node pairs that need a stiffness slot no cell gives (springs between
+        nodes that share no cell); the system adds them to its pattern and hands back their
+        slots (``set_pair_slots``). Empty by default."""
+        return np.zeros((0, 2), dtype=np.int64)
+
+    def set_pair_slots(self, slots: np.ndarray) -> None:
+        """The pattern slots of ``node_pairs``: (2, 2, k), slot of node pair (i, j) of pair
+        k (i, j: 0 its first node, 1 its second); the pattern's ``nnzb`` where the row is
+        owned by another rank. Called once, by the system, on every effect."""
+
     def couple(self, effects: list["Effect"]) -> None:
         """Called once the model's effects are composed: a coupling effect finds the effects
         it acts on (thermal expansion: the elasticity). Nothing by default."""

@@ -12,11 +12,13 @@ so an associated-only scene keeps its symmetric factorization.
 
 The blocks go into the stiffness pattern the cells already made, through one of the rank's
 cells holding the spring's nodes (a node's diagonal block; for a pair, the four blocks of a
-cell holding both): re-assembly stays a value update, nothing in the core changes. Hence the
-limit: the two nodes of a spring must share a cell (a node and its neighbour along an edge,
-across a cell's diagonal). A pair that shares no cell is an input error until the system's
-pattern takes extra node pairs (see the report of this work). Each rank adds each block once;
-the rows it does not own fall out of its pattern, so the ranks' sum is each spring once.
+cell holding both): re-assembly stays a value update. A pair whose nodes share no cell (two
+bodies joined by springs) asks the system for slots of its own (``node_pairs``: the system
+pads it into a pseudo-cell of its pattern); its forces go to a cell of each node. On parts,
+the rank owning either node of such a pair must hold the other one too (owned or ghost: the
+nodes of its cells); a pair split otherwise is an input error (exit 2; e.g. run on fewer
+ranks). Each rank adds each block once; the rows it does not own fall out of its pattern, so
+the ranks' sum is each spring once.
 
 Pairing (``target``): a target of one node takes every node of the region (a star, e.g. a
 region hung from one point); otherwise each region node is paired with the target node at its
@@ -41,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from parsolve.effects.base import Effect
+from parsolve.effects.compose import node_places
 from parsolve.effects.constraints import partners
 from parsolve.errors import InputError
 from parsolve.fem.element_matrices import CellKernel, ElementMatrices
@@ -102,9 +105,15 @@ class SpringMatrices(ElementMatrices):
         np.add.at(out, (slice(None), row[at], col[at], pos[cell[at]]), values[:, at])
         return out
 
+    # the blocks of pairs that share no cell: (d², m) values and their own pattern slots
+    loose = (np.zeros((0, 0)), np.zeros(0, dtype=np.intp))
+
     def reduce(self, pair_slot: np.ndarray, npairs: int) -> np.ndarray:
         values, row, col, cell = self.entries
         slots = pair_slot[row, col, cell].astype(np.intp)
+        if self.loose[1].size:
+            values = np.concatenate([values, self.loose[0]], axis=1)
+            slots = np.concatenate([slots, self.loose[1].astype(np.intp)])
         return np.stack([np.bincount(slots, weights=v, minlength=npairs + 1)[:npairs]
                          for v in values]) if len(values) else np.zeros((0, npairs))
 
@@ -122,7 +131,8 @@ class Springs(Effect):
         self.k = np.asarray(spec.stiffness, dtype=float)
         self.pairs = self._pairs(regions)   # (n, 2) local nodes (-1: not on this part; b to
         #                                     the ground: -1 throughout)
-        self._check_cells(regions)
+        self.loose = self._check_cells(regions)   # (n,) pairs that share no cell
+        self.slots = np.zeros((2, 2, 0), dtype=np.intp)
         self._cache = (None, None)
 
     # ------------------------------------------------------------------ pairing
@@ -159,19 +169,38 @@ class Springs(Effect):
         hit = glob[order][pos] == ids if glob.size else np.zeros(ids.size, dtype=bool)
         return np.where(hit, order[pos] if glob.size else -1, -1)
 
-    def _check_cells(self, regions) -> None:
-        """Every pair shares a cell somewhere (the ranks' cells together)."""
+    def _check_cells(self, regions) -> np.ndarray:
+        """Which pairs share no cell (the ranks' cells together); such a pair must have both
+        nodes on the rank owning either."""
         if self.spec.target is None:
-            return
+            return np.zeros(len(self.pairs), dtype=bool)
         cell = self._places(np.arange(self.mesh.num_cells))[0]
         found = cell >= 0
         comm = getattr(regions, "comm", None)
         if comm is not None:
             found = comm.allreduce(found.astype(np.int64)) > 0   # the pairs' size
-        if not found.all():
-            raise InputError(f"{int((~found).sum())} spring pairs join nodes that share no cell "
-                             "(node-to-node springs need the two nodes in one cell)",
-                             self.source, self.spec.key + ".target")
+        a, b = self.pairs[:, 0], self.pairs[:, 1]
+        owned = getattr(self.mesh, "n_owned", self.mesh.num_points)
+        split = ~found & (((a >= 0) & (a < owned) & (b < 0)) | ((b >= 0) & (b < owned) & (a < 0)))
+        nsplit = int(split.sum()) if comm is None else comm.allreduce(int(split.sum()))
+        if nsplit:
+            raise InputError(f"{nsplit} spring pairs join nodes that share no cell and lie on "
+                             "different ranks' parts (the rank owning one node must hold the "
+                             "other; run on fewer ranks)", self.source, self.spec.key + ".target")
+        return ~found
+
+    # ------------------------------------------------------------ pairs with slots of their own
+
+    def _own_pairs(self) -> np.ndarray:
+        """The pairs sharing no cell whose two nodes are both on this rank (it adds them)."""
+        return self.loose & (self.pairs[:, 0] >= 0) & (self.pairs[:, 1] >= 0)
+
+    def node_pairs(self) -> np.ndarray:
+        return self.pairs[self._own_pairs()]
+
+    def set_pair_slots(self, slots: np.ndarray) -> None:
+        self.slots = slots
+        self._cache = (None, None)
 
     def _places(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(position in ``cells``, local node of a, of b) of the first cell holding each
@@ -217,10 +246,34 @@ class Springs(Effect):
             values = np.concatenate([s * np.repeat(K, r.size, axis=1)
                                      for s, r in zip(sign, rows)], axis=1)
             hosts = np.concatenate([cell[g]] + [cell[p]] * 4)
-            self._cache = (cells, SpringMatrices(values, np.concatenate(rows),
-                                                 np.concatenate(cols), hosts, len(cells),
-                                                 self.mesh.cells.shape[1]))
+            m = SpringMatrices(values, np.concatenate(rows), np.concatenate(cols), hosts,
+                               len(cells), self.mesh.cells.shape[1])
+            m.loose = self._loose_blocks(K)
+            self._cache = (cells, m)
         return self._cache[1]
+
+    def _loose_blocks(self, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(values, slots) of the pairs sharing no cell: +K on (a, a), (b, b), −K on (a, b),
+        (b, a), each in the pseudo-cell slots the system gave (none: the element form alone,
+        e.g. a model not assembled by a system)."""
+        s = self.slots
+        n = s.shape[2]
+        if n == 0:
+            return SpringMatrices.loose
+        sign = np.repeat([1.0, 1.0, -1.0, -1.0], n)
+        slots = np.concatenate([s[0, 0], s[1, 1], s[0, 1], s[1, 0]])
+        return K * sign[None, :], slots
+
+    def _loose_forces(self, cells: np.ndarray, u: np.ndarray, fe: np.ndarray) -> None:
+        """K (u_a − u_b) on a, its opposite on b, for the pairs sharing no cell this rank adds,
+        each on a cell of the node (a nodal force: no common cell needed)."""
+        pairs = self.pairs[self._own_pairs()]
+        if len(pairs) == 0:
+            return
+        f = (u[pairs[:, 0]] - u[pairs[:, 1]]) * self.k
+        nodes = np.concatenate([pairs[:, 0], pairs[:, 1]])
+        cell, local = node_places(self.mesh.cells[cells], nodes)
+        np.add.at(fe, (cell, local), np.concatenate([f, -f]))
 
     def stiffness_blocks(self, cells: np.ndarray):
         return [("u", "u", self._matrices(cells))]
@@ -234,6 +287,7 @@ class Springs(Effect):
         force = np.einsum("ijn,nj->ni", vals.reshape(d, d, -1), u)
         fe = np.zeros((len(cells), self.mesh.cells.shape[1], d))
         np.add.at(fe, (cell, row), force)
+        self._loose_forces(cells, values["u"], fe)
         return {"u": fe}, [("u", "u", m)], state, None
 
     def output_names(self) -> list[str]:

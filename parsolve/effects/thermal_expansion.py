@@ -28,7 +28,7 @@ The stress output of the elasticity subtracts the same effective eigenstrain (it
 
 Only linear elastic materials: a nonlinear material would have to see ε − ε_th in its own
 update, which the off-diagonal block does not give; such scenes are refused. Arc-length runs
-(whose loads bypass the composition's) are refused too.
+balance the composition's known loads (these loads included) plus μ P.
 
 Scene schema::
 
@@ -112,9 +112,6 @@ class ThermalExpansion(Effect):
             if m.model != "elastic":
                 raise InputError(f"thermal expansion needs linear elastic materials, not "
                                  f"{m.model!r}", self.source, m.key + ".model")
-        if scene.nonlinear.method == "arc_length":
-            raise InputError("thermal expansion is not available with arc-length", self.source,
-                             "nonlinear.method")
         if scene.hypothesis == "axisymmetric":   # the eigenstrain's hoop term is not written
             raise InputError("thermal expansion is not available with the axisymmetric "
                              "hypothesis", self.source, "model.hypothesis")

@@ -74,7 +74,7 @@ class ArcLength(NewtonSolver):
         free = system.free_rows()
         for it in range(spec.max_iterations + 1):
             f_int, kmat, trial, extras = self._evaluate(self.q)
-            f_ext = system.to_owned(system.model.external_load(t) + self.mu * self.P) \
+            f_ext = system.to_owned(system.composition.known_loads(t, t, None) + self.mu * self.P) \
                 + system.reactions(self.lam)
             r = (f_ext - system.to_owned(f_int))[free]
             # the forces in play, reactions of eliminated DOFs included
@@ -84,7 +84,7 @@ class ArcLength(NewtonSolver):
                 self.states, self.extras = trial, extras
                 # the loads the step balances: the reactions of eliminated DOFs are F + μ P
                 # minus their rows (``multipliers``)
-                self.f_ext = system.model.external_load(t) + self.mu * self.P
+                self.f_ext = system.composition.known_loads(t, t, None) + self.mu * self.P
                 self.prev = (self.q - q0, self.mu - mu0)
                 return it, residual, f_int
             if it == spec.max_iterations:
@@ -97,7 +97,7 @@ class ArcLength(NewtonSolver):
             target_r = system.gap(t, self.q)
             elim_r = system.elim_values(t) - system.eliminated_values(self.q) \
                 if system.elim_dofs.size else zero_e
-            f_r = system.model.external_load(t) + self.mu * self.P - f_int
+            f_r = system.composition.known_loads(t, t, None) + self.mu * self.P - f_int
             dq_r, lam_r, x_r = self._solve(f_r, target_r * blk.row_scale if blk.nrows else zero_t,
                                            elim_r, mat)
             dq_p, lam_p, x_p = self._solve(self.P, zero_t, zero_e, mat)

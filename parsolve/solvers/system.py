@@ -52,9 +52,8 @@ class SaddleSystem:
         lumped = model.scene.time is None or model.scene.time.mass == "lumped"
         self.composition = Composition(model, self.local_cells, lumped)
         self.rate: Rate | None = None  # the rate terms of a transient step (set by the stepper)
-        new_cells = self.part.new_of_old[mesh.cells[self.local_cells]]
         lo, hi = self.part.node_ranges[rank], self.part.node_ranges[rank + 1]
-        self.pattern = pattern = node_pattern(new_cells, lo, hi, ncomp, int(self.part.node_ranges[-1]))
+        self.pattern = pattern = self._pattern(lo, hi)
         self.block = stack_relations(self.multiplied, self.rdofs.new_dof)
         self.op = SaddleOperator(comm, lay, pattern, self.block)
         ndof = mesh.num_points * ncomp
@@ -71,6 +70,31 @@ class SaddleSystem:
         self._elimination_setup()
         self.timings["setup"] = time.perf_counter() - t0
         self.assembled = False
+
+    def _pattern(self, lo: int, hi: int):
+        """The stiffness pattern of the local cells and of the effects' extra node pairs
+        (``Effect.node_pairs``), each padded into a pseudo-cell [a, b, b, ...] after the cells
+        (a repeated node is a diagonal entry); the cells' reductions get the cells' slots
+        only, each effect its pairs' slots."""
+        model = self.model
+        cells = model.mesh.cells[self.local_cells]
+        extra = [np.asarray(e.node_pairs(), dtype=np.int64).reshape(-1, 2) for e in model.effects]
+        pairs = np.concatenate(extra) if extra else np.zeros((0, 2), dtype=np.int64)
+        nnodes = int(self.part.node_ranges[-1])
+        if pairs.size == 0:
+            return node_pattern(self.part.new_of_old[cells], lo, hi, model.ncomp, nnodes)
+        pseudo = np.repeat(pairs[:, 1:], cells.shape[1], axis=1)
+        pseudo[:, 0] = pairs[:, 0]
+        pattern = node_pattern(self.part.new_of_old[np.concatenate([cells, pseudo])], lo, hi,
+                               model.ncomp, nnodes)
+        nc = len(cells)
+        slots = pattern.pair_slot[:2, :2, nc:]
+        pattern.pair_slot = np.ascontiguousarray(pattern.pair_slot[:, :, :nc])
+        start = 0
+        for e, p in zip(model.effects, extra):
+            e.set_pair_slots(np.ascontiguousarray(slots[:, :, start:start + len(p)]))
+            start += len(p)
+        return pattern
 
     # ------------------------------------------------------------ elimination
 
@@ -166,7 +190,7 @@ class SaddleSystem:
         Linear: K q - D λ = F, A q = b. Newton (``f_int`` and ``q`` given, unknowns the
         increment Δq and the total λ): K Δq - D λ = F - f_int, A Δq = b - A q.
         """
-        f_full = self.model.external_load(t) if f_ext is None else f_ext
+        f_full = self.composition.known_loads(t, t, None) if f_ext is None else f_ext
         if f_int is not None:
             f_full = f_full - f_int
         target = self.block.rhs(t)
@@ -338,7 +362,7 @@ class SaddleSystem:
                                 f_ext: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """λ = (F - row of [K, -D] x) / a on each eliminated row (the row before zeroing); with
         ``f_int`` (nonlinear) the stiffness part of the row is f_int instead of K q."""
-        f_full = self.model.external_load(t) if f_ext is None else f_ext
+        f_full = self.composition.known_loads(t, t, None) if f_ext is None else f_ext
         if f_int is None:
             row_vals = self.op.eliminated_rows(x_full)
         else:  # x_full holds λ; the primal part of the row is the internal force

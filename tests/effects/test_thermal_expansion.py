@@ -393,3 +393,27 @@ def test_block_size_does_not_change_the_answer(cell, monkeypatch):
         scale = MPI.COMM_WORLD.allreduce(float(np.abs(a).max(initial=0.0)), op=MPI.MAX)
         assert a.shape == b.shape and np.abs(a - b).max(initial=0.0) <= 1e-14 * scale
         assert scale > 0
+
+
+def test_arc_length_pull_on_a_heated_plate(run):
+    """Arc-length with thermal expansion (the effect's reference-state loads are among the
+    loads the steps balance): a heated plate on rollers pulled at its right end by μ P,
+    plane stress, unit height and thickness: σ_xx = μ, u_x = (α ΔT + μ / E) x,
+    u_y = (α ΔT − ν μ / E) y at every step's load factor μ."""
+    pull = '[[loads]]\nname = "pull"\nregion = "right"\ntotal_force = [1.0, 0.0]\n'
+    text = SCENE.format(nx=4, ny=2, cell="quad", hypothesis="plane_stress",
+                        relations=UNIFORM + ROLLERS + pull)
+    text += '[nonlinear]\nmethod = "arc_length"\narc_length = { pattern = "pull", length = 0.05 }\n' \
+            '[steps]\ncount = 2\n'
+    res = run(text, name="arc_heated")
+    assert res["attrs"]["status"] == "complete"
+    mu = res["steps/time"]
+    assert np.all(mu > 0)
+    p = res["mesh/points"]
+    for k, m in enumerate(mu):
+        u = res["fields/displacement"][k]
+        np.testing.assert_allclose(u[:, 0], (A + m / E) * p[:, 0], rtol=0, atol=1e-10 * A)
+        np.testing.assert_allclose(u[:, 1], (A - NU * m / E) * p[:, 1], rtol=0, atol=1e-10 * A)
+        sig = res["cell_fields/stress"][k]
+        np.testing.assert_allclose(sig, np.broadcast_to([m, 0.0, 0.0], sig.shape), rtol=0,
+                                   atol=1e-9 * max(m, E * A))
