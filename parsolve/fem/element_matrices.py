@@ -123,6 +123,33 @@ class ElementMatrices:
             _accumulate(acc, pair_slot[:, :, sl], V.reshape(len(V), -1), npairs)
         return _left_multiply(self.tensors[0].T, acc) if one else acc
 
+    def reduce_into(self, pair_slot: np.ndarray, npairs: int, target: "StiffnessTarget",
+                    ci: np.ndarray, cj: np.ndarray, fac: float = 1.0,
+                    fresh: bool = False) -> None:
+        """Add ``fac`` × the node-pair sums of rows (ci[a], cj[b]) into the target's values,
+        with no (d², npairs) array beside them. ``fresh``: those positions hold zeros and
+        no other part's values, so a single material's geometric parts can be summed there
+        and contracted in place (pair chunk by pair chunk)."""
+        ci, cj = np.asarray(ci), np.asarray(cj)
+        one = self.factored and len(self.tensors) == 1
+        in_place = one and fresh and self.tensors.shape[1] == self.tensors.shape[2]
+        rows = _Rows(target, ci, cj)
+        for sl, V in self._raw_blocks():
+            if self.factored and not in_place:
+                V = contract(self.tensors, self.cell_material[sl], V)
+            _accumulate(rows, pair_slot[:, :, sl], V.reshape(len(V), -1), npairs,
+                        1.0 if in_place else fac)
+        if in_place:
+            rows.contract(fac * self.tensors[0].T, npairs)
+
+    def _raw_blocks(self) -> Iterator[tuple[slice, np.ndarray]]:
+        """(cells, geometric parts or full values) block after block (held: one block)."""
+        if self.kernel is not None:
+            yield from self.kernel.blocks()
+            return
+        held = self._geometric if self.factored else self._values
+        yield slice(0, held.shape[-1]), held
+
     def block_values(self) -> Iterator[tuple[slice, np.ndarray]]:
         """(cells, full values of those cells) block after block (held: one block)."""
         if self.kernel is None:
@@ -159,11 +186,56 @@ def _left_multiply(M: np.ndarray, acc: np.ndarray, chunk: int = 1 << 16) -> np.n
     return out
 
 
-def _accumulate(acc: np.ndarray, pair_slot: np.ndarray, values: np.ndarray, npairs: int) -> None:
-    """acc[:, slot] += values summed by slot, for one block's slots (nen, nen, nb) and values
-    (rows, nen·nen·nb) in the same order; slot ``npairs`` (rows owned elsewhere) dropped. The
-    counts go over the slots' range (contiguous in a numbering that follows the mesh), or over
-    the slots present when that range is wide."""
+class StiffnessTarget:
+    """Where node-pair sums go: the operator's value array ``data``, entry (i, j) of pair p
+    at ``starts[i, p] + j`` (the layout of ``la.petsc``'s stiffness slots)."""
+
+    def __init__(self, data: np.ndarray, starts: np.ndarray):
+        self.data, self.starts = data, starts
+
+    def zero(self) -> None:
+        """Zero every stiffness slot (before parts are added into them)."""
+        nc = self.starts.shape[0]
+        for i in range(nc):
+            for j in range(nc):
+                self.data[j:][self.starts[i]] = 0.0
+
+
+class _Rows:
+    """Row k = (ci[k // len(cj)], cj[k % len(cj)]) of a part, as positions in the target."""
+
+    def __init__(self, target: StiffnessTarget, ci: np.ndarray, cj: np.ndarray):
+        self.target, self.ci, self.cj = target, ci, cj
+
+    def positions(self, k: int, pairs) -> np.ndarray:
+        a, b = divmod(k, len(self.cj))
+        return self.target.starts[self.ci[a], pairs] + self.cj[b]
+
+    def __setitem__(self, key, value) -> None:   # rows[k, pairs] += v: read, add, write back
+        k, pairs = key
+        self.target.data[self.positions(k, pairs)] = value
+
+    def __getitem__(self, key) -> np.ndarray:
+        k, pairs = key
+        return self.target.data[self.positions(k, pairs)]
+
+    def contract(self, M: np.ndarray, npairs: int, chunk: int = 1 << 14) -> None:
+        """Values ← M @ values on every pair, chunk by chunk (the rows hold geometric sums)."""
+        nrow = len(self.ci) * len(self.cj)
+        data = self.target.data
+        for s in range(0, npairs, chunk):
+            pairs = slice(s, min(s + chunk, npairs))
+            pos = np.stack([self.positions(k, pairs) for k in range(nrow)])
+            data[pos] = M @ data[pos]
+
+
+def _accumulate(acc, pair_slot: np.ndarray, values: np.ndarray, npairs: int,
+                fac: float = 1.0) -> None:
+    """acc[:, slot] += fac × values summed by slot, for one block's slots (nen, nen, nb) and
+    values (rows, nen·nen·nb) in the same order; slot ``npairs`` (rows owned elsewhere)
+    dropped. ``acc``: an array (rows, npairs) or a part's rows in the operator (``_Rows``).
+    The counts go over the slots' range (contiguous in a numbering that follows the mesh), or
+    over the slots present when that range is wide."""
     slots = pair_slot.astype(np.intp).ravel()
     if slots.size == 0:
         return
@@ -171,14 +243,17 @@ def _accumulate(acc: np.ndarray, pair_slot: np.ndarray, values: np.ndarray, npai
     if hi - lo <= SPAN_FACTOR * slots.size:
         slots -= lo
         top = min(hi, npairs) - lo
+        dest = slice(lo, lo + top)
         for k, v in enumerate(values):
-            acc[k, lo:lo + top] += np.bincount(slots, weights=v, minlength=hi - lo)[:top]
+            c = np.bincount(slots, weights=v, minlength=hi - lo)[:top]
+            acc[k, dest] += c if fac == 1.0 else fac * c
         return
     keys, inv = np.unique(slots, return_inverse=True)
     keep = keys < npairs
     dest = keys[keep]
     for k, v in enumerate(values):
-        acc[k, dest] += np.bincount(inv, weights=v, minlength=keys.size)[keep]
+        c = np.bincount(inv, weights=v, minlength=keys.size)[keep]
+        acc[k, dest] += c if fac == 1.0 else fac * c
 
 
 def _slots(pair_slot: np.ndarray) -> np.ndarray:
@@ -222,6 +297,20 @@ class BlockMatrices:
 
     ncomp: int
     parts: list  # (row components, column components, ElementMatrices, factor)
+
+    def reduce_into(self, pair_slot: np.ndarray, npairs: int, target: StiffnessTarget) -> None:
+        """Node-pair blocks straight into the operator's stiffness slots (zeroed first), with
+        no (ncomp², npairs) array beside them; a part on components already written by an
+        earlier part is added, contracted before (it cannot be contracted in place)."""
+        target.zero()
+        nc = self.ncomp
+        pair_slot = pair_slot.astype(np.intp, copy=False)
+        written = np.zeros((nc, nc), dtype=bool)
+        for ci, cj, m, fac in self.parts:
+            ci, cj = np.asarray(ci), np.asarray(cj)
+            fresh = not written[np.ix_(ci, cj)].any()
+            m.reduce_into(pair_slot, npairs, target, ci, cj, fac, fresh=fresh)
+            written[np.ix_(ci, cj)] = True
 
     def reduce(self, pair_slot: np.ndarray, npairs: int) -> np.ndarray:
         nc = self.ncomp
