@@ -316,13 +316,11 @@ class _Window:
         self.rows.add(pairs, sums)
 
 
-def _accumulate(acc, pair_slot: np.ndarray, values: np.ndarray, npairs: int,
-                fac: float = 1.0) -> None:
-    """acc[:, slot] += fac × values summed by slot, for one block's slots (nen, nen, nb) and
-    values (rows, nen·nen·nb) in the same order; slot ``npairs`` (rows owned elsewhere)
-    dropped. ``acc``: an array (rows, npairs) or a part's rows in the operator (``_Rows``).
-    The counts go over the slots' range (contiguous in a numbering that follows the mesh), or
-    over the slots present when that range is wide."""
+def _accumulate(acc: np.ndarray, pair_slot: np.ndarray, values: np.ndarray, npairs: int) -> None:
+    """acc[:, slot] += values summed by slot, for one block's slots (nen, nen, nb) and values
+    (rows, nen·nen·nb) in the same order; slot ``npairs`` (rows owned elsewhere) dropped. The
+    counts go over the slots' range (contiguous in a numbering that follows the mesh), or over
+    the slots present when that range is wide."""
     slots = pair_slot.astype(np.intp).ravel()
     if slots.size == 0:
         return
@@ -330,17 +328,14 @@ def _accumulate(acc, pair_slot: np.ndarray, values: np.ndarray, npairs: int,
     if hi - lo <= SPAN_FACTOR * slots.size:
         slots -= lo
         top = min(hi, npairs) - lo
-        dest = slice(lo, lo + top)
         for k, v in enumerate(values):
-            c = np.bincount(slots, weights=v, minlength=hi - lo)[:top]
-            acc[k, dest] += c if fac == 1.0 else fac * c
+            acc[k, lo:lo + top] += np.bincount(slots, weights=v, minlength=hi - lo)[:top]
         return
     keys, inv = np.unique(slots, return_inverse=True)
     keep = keys < npairs
     dest = keys[keep]
     for k, v in enumerate(values):
-        c = np.bincount(inv, weights=v, minlength=keys.size)[keep]
-        acc[k, dest] += c if fac == 1.0 else fac * c
+        acc[k, dest] += np.bincount(inv, weights=v, minlength=keys.size)[keep]
 
 
 def _slots(pair_slot: np.ndarray) -> np.ndarray:
