@@ -232,13 +232,22 @@ class Elasticity(Effect):
 
     def evaluate_u(self, cells: np.ndarray, u: np.ndarray, states: list[dict], secant: bool = False):
         """Internal forces (nc, ndof), tangent ElementMatrices, trial states and the stress at
-        the quadrature points (nc, nq, nv), at the displacement u (npoints, ncomp)."""
-        geo = self.geometry(cells)
-        B = geo.strain_operator()
-        nc, nq, nv, ndof = B.shape
-        eps = kernels.strains(B, u[self.mesh.cells[cells]].reshape(nc, ndof))
+        the quadrature points (nc, nq, nv), at the displacement u (npoints, ncomp). Strains
+        and forces go over cell blocks (the strain operator B of a block at a time); the
+        tangent is blocked (``CellKernel``: B and K_e of a block when the assembly reduces
+        it), so no array of every cell's B or K_e is held."""
+        nen, d = self.mesh.cells.shape[1], self.ncomp
+        ndof = nen * d
+        one = self.geometry(cells[:1]).strain_operator()   # sizes (nq, nv) from one cell
+        nq, nv = one.shape[1], one.shape[2]
+        # cells a block: B, its products with C and w|J|, K_e and its cell-last copy
+        blk = block_cells(nq * nv * ndof * 8 * 3 + ndof * ndof * 8 * 2)
+        eps = np.empty((len(cells), nq, nv))
+        for sl in cell_ranges(len(cells), blk):
+            B = self.geometry(cells[sl]).strain_operator()
+            eps[sl] = kernels.strains(B, u[self.mesh.cells[cells[sl]]].reshape(-1, ndof))
         sig = np.empty_like(eps)
-        tangent = np.empty((nc, nq, nv, nv))
+        tangent = np.empty((len(cells), nq, nv, nv))
         trial = []
         for k, model in enumerate(self.models):
             idx = np.flatnonzero(self.cell_model[cells] == k)
@@ -248,11 +257,23 @@ class Elasticity(Effect):
             sig[idx] = s.reshape(len(idx), nq, nv)
             tangent[idx] = c.reshape(len(idx), nq, nv, nv)
             trial.append(st)
-        fe = kernels.internal_forces(B, geo.wdet, sig)
-        ke = kernels.stiffness(B, geo.wdet, tangent)           # (nc, ndof, ndof) node-major
-        d, nen = self.ncomp, ndof // self.ncomp
-        values = ke.reshape(nc, nen, d, nen, d).transpose(2, 4, 1, 3, 0).reshape(d * d, nen, nen, nc)
-        return fe, ElementMatrices(values=np.ascontiguousarray(values)), trial, sig
+        fe = np.empty((len(cells), ndof))
+        for sl in cell_ranges(len(cells), blk):
+            geo = self.geometry(cells[sl])
+            fe[sl] = kernels.internal_forces(geo.strain_operator(), geo.wdet, sig[sl])
+
+        def values(sel, out):
+            geo = self.geometry(cells[sel])
+            ke = kernels.stiffness(geo.strain_operator(), geo.wdet, tangent[sel])
+            n = len(ke)
+            v = ke.reshape(n, nen, d, nen, d).transpose(2, 4, 1, 3, 0).reshape(d * d, nen, nen, n)
+            if out is None:
+                return np.ascontiguousarray(v)
+            out[...] = v
+            return out
+
+        kernel = CellKernel(values, len(cells), d * d, nen, block=blk)
+        return fe, ElementMatrices(kernel=kernel), trial, sig
 
     def internal_variables(self, cells: np.ndarray, states: list[dict]) -> dict[str, np.ndarray]:
         """Cell means of the scalar history variables worth plotting (damage, plastic strain)."""

@@ -123,6 +123,38 @@ class ElementMatrices:
             _accumulate(acc, pair_slot[:, :, sl], V.reshape(len(V), -1), npairs)
         return _left_multiply(self.tensors[0].T, acc) if one else acc
 
+    def reduce_into(self, pair_slot: np.ndarray, npairs: int, target: "StiffnessTarget",
+                    ci: np.ndarray, cj: np.ndarray, fac: float = 1.0,
+                    first: np.ndarray | None = None) -> None:
+        """Add ``fac`` × the node-pair sums of rows (ci[a], cj[b]) into the target's values,
+        with no (d², npairs) array beside them: block sums go into a window over the pairs
+        the blocks reach (a numbering that follows the mesh: a block's worth), flushed into
+        the target as the blocks move on. One material: geometric parts summed, contracted
+        when flushed (few numbers: the node pairs', not the cells'). ``first`` (per row): no
+        value written there yet (assigned rather than added: nothing to zero first)."""
+        one = self.factored and len(self.tensors) == 1
+        M = fac * self.tensors[0].T if one else None
+        ci, cj = np.asarray(ci), np.asarray(cj)
+        if first is None:
+            first = np.zeros(len(ci) * len(cj), dtype=bool)
+        rows = _Rows(target, ci, cj, first)
+        win = _Window(rows, npairs, M, 1.0 if one else fac)
+        for sl, V in self._raw_blocks():
+            if self.factored and not one:
+                V = contract(self.tensors, self.cell_material[sl], V)
+            win.add(pair_slot[:, :, sl], V.reshape(len(V), -1))
+        win.flush_all()
+        rows.finish(npairs)
+
+    def _raw_blocks(self) -> Iterator[tuple[slice, np.ndarray]]:
+        """(cells, geometric parts or full values) block after block (held: cut in blocks)."""
+        if self.kernel is not None:
+            yield from self.kernel.blocks()
+            return
+        held = self._geometric if self.factored else self._values
+        for sl in cell_ranges(held.shape[-1], block_cells(held[..., :1].nbytes)):
+            yield sl, held[..., sl]
+
     def block_values(self) -> Iterator[tuple[slice, np.ndarray]]:
         """(cells, full values of those cells) block after block (held: one block)."""
         if self.kernel is None:
@@ -157,6 +189,131 @@ def _left_multiply(M: np.ndarray, acc: np.ndarray, chunk: int = 1 << 16) -> np.n
     for s in range(0, acc.shape[1], chunk):
         out[:, s:s + chunk] = M @ acc[:, s:s + chunk]
     return out
+
+
+class StiffnessTarget:
+    """Where node-pair sums go: the operator's value array ``data``, entry (i, j) of pair p
+    at ``starts[i, p] + j`` (the layout of ``la.petsc``'s stiffness slots)."""
+
+    def __init__(self, data: np.ndarray, starts: np.ndarray):
+        self.data, self.starts = data, starts
+
+
+class _Rows:
+    """Row k = (ci[k // len(cj)], cj[k % len(cj)]) of a part, as positions in the target.
+
+    Rows ``first`` (no earlier part wrote their component pair) are not zeroed beforehand:
+    pairs at and past ``done`` have not been written yet, so they are assigned (the gaps
+    zeroed); the others are added to."""
+
+    def __init__(self, target: StiffnessTarget, ci: np.ndarray, cj: np.ndarray,
+                 first: np.ndarray):
+        self.target, self.ci, self.cj, self.first = target, ci, cj, first
+        self.done = 0
+
+    def _pos(self, k: int, pairs) -> np.ndarray:
+        a, b = divmod(k, len(self.cj))
+        return self.target.starts[self.ci[a], pairs] + self.cj[b]
+
+    def add(self, pairs, values: np.ndarray) -> None:
+        """target[row k, pairs] += values[k] for every row k (pairs: a slice or sorted keys)."""
+        data = self.target.data
+        if isinstance(pairs, slice):
+            s, e = pairs.start, pairs.stop
+            old = slice(s, min(max(self.done, s), e))   # already written: add
+            new = slice(old.stop, e)                    # not yet: assign
+            gap = slice(self.done, s) if s > self.done else None
+        else:
+            old, new = pairs, None
+            e = int(pairs[-1]) + 1 if pairs.size else 0
+            gap = slice(self.done, e) if e > self.done else None
+        n_old = old.stop - old.start if isinstance(old, slice) else len(old)
+        for k, v in enumerate(values):
+            if not self.first[k]:
+                data[self._pos(k, pairs)] += v
+                continue
+            if gap is not None:
+                data[self._pos(k, gap)] = 0.0
+            if n_old:
+                data[self._pos(k, old)] += v[:n_old] if new is not None else v
+            if new is not None and new.stop > new.start:
+                data[self._pos(k, new)] = v[n_old:]
+        self.done = max(self.done, e)
+
+    def finish(self, npairs: int) -> None:
+        """Zero the first rows' pairs past the last one written."""
+        if self.done < npairs:
+            for k in np.flatnonzero(self.first):
+                self.target.data[self._pos(int(k), slice(self.done, npairs))] = 0.0
+            self.done = npairs
+
+
+class _Window:
+    """Node-pair sums of pairs [lo, lo + n) in a buffer of a few blocks' range, added into the
+    target (after ``M`` @ or × ``fac``) when the blocks have moved past them. A pair reached
+    again after its flush is added again: correct for any numbering, each pair flushed once
+    (the sums of ``reduce`` exactly) when the blocks' slots move forward."""
+
+    def __init__(self, rows: _Rows, npairs: int, M: np.ndarray | None, fac: float):
+        self.rows, self.npairs, self.M, self.fac = rows, npairs, M, fac
+        self.buf, self.lo, self.n = None, 0, 0
+
+    def add(self, pair_slot: np.ndarray, values: np.ndarray) -> None:
+        slots = pair_slot.astype(np.intp).ravel()
+        if slots.size == 0:
+            return
+        lo, hi = int(slots.min()), int(slots.max()) + 1
+        if hi - lo > SPAN_FACTOR * slots.size:   # wide: the slots present, straight in
+            keys, inv = np.unique(slots, return_inverse=True)
+            keep = keys < self.npairs
+            sums = np.stack([np.bincount(inv, weights=v, minlength=keys.size)[keep]
+                             for v in values])
+            self._put(keys[keep], sums)
+            return
+        top = min(hi, self.npairs)
+        self._move_to(lo, top, len(values))
+        slots -= lo
+        off = lo - self.lo
+        for k, v in enumerate(values):
+            self.buf[k, off:off + top - lo] += np.bincount(slots, weights=v,
+                                                           minlength=hi - lo)[:top - lo]
+        self.n = max(self.n, top - self.lo)
+
+    def _move_to(self, lo: int, top: int, nrows: int) -> None:
+        """Window starting at ``lo`` with room up to ``top``: pairs before ``lo`` flushed."""
+        if self.buf is not None and lo >= self.lo and top - self.lo <= self.buf.shape[1]:
+            return   # room left: pairs before ``lo`` flushed later, several blocks at once
+        if self.buf is not None and lo >= self.lo:
+            k = min(lo - self.lo, self.n)
+            if k:
+                self._flush(k)
+                self.buf[:, :self.n - k] = self.buf[:, k:self.n]
+                self.buf[:, self.n - k:self.n] = 0.0
+                self.n -= k
+            self.lo = lo   # k = lo - lo_old, or the window emptied
+            if top - lo <= self.buf.shape[1]:
+                return
+        self.flush_all()
+        if self.buf is None or self.buf.shape[1] < top - lo:
+            self.buf = np.zeros((nrows, 2 * (top - lo)))
+        self.lo, self.n = lo, 0
+
+    def _flush(self, k: int) -> None:
+        self._put(slice(self.lo, self.lo + k), self.buf[:, :k])
+
+    def flush_all(self) -> None:
+        if self.buf is not None and self.n:
+            self._flush(self.n)
+            self.buf[:, :self.n] = 0.0
+            self.lo += self.n
+            self.n = 0
+
+    def _put(self, pairs, sums: np.ndarray) -> None:
+        if self.M is not None:
+            sums = self.M @ sums
+        elif self.fac != 1.0:
+            sums = self.fac * sums
+        self.rows.add(pairs, sums)
 
 
 def _accumulate(acc: np.ndarray, pair_slot: np.ndarray, values: np.ndarray, npairs: int) -> None:
@@ -222,6 +379,21 @@ class BlockMatrices:
 
     ncomp: int
     parts: list  # (row components, column components, ElementMatrices, factor)
+
+    def reduce_into(self, pair_slot: np.ndarray, npairs: int, target: StiffnessTarget) -> None:
+        """Node-pair blocks straight into the operator's stiffness slots, with no (ncomp²,
+        npairs) array beside them: the parts in turn, each component pair assigned by the
+        first part on it and added to by the next; those no part reaches zeroed."""
+        nc = self.ncomp
+        pair_slot = pair_slot.astype(np.intp, copy=False)
+        written = np.zeros((nc, nc), dtype=bool)
+        for ci, cj, m, fac in self.parts:
+            ci, cj = np.asarray(ci), np.asarray(cj)
+            first = ~written[np.ix_(ci, cj)].ravel()
+            m.reduce_into(pair_slot, npairs, target, ci, cj, fac, first=first)
+            written[np.ix_(ci, cj)] = True
+        for i, j in zip(*np.nonzero(~written)):
+            target.data[target.starts[i] + j] = 0.0
 
     def reduce(self, pair_slot: np.ndarray, npairs: int) -> np.ndarray:
         nc = self.ncomp

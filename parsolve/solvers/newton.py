@@ -77,6 +77,8 @@ class _CellReplaced:
 
 def _cell_values(m, cells: np.ndarray) -> np.ndarray:
     """Element matrices (d², nen, nen, len(cells)) of some cells, whatever the form."""
+    if m.kernel is not None and not m.factored:   # blocked full values: just these cells
+        return m.kernel.compute(cells, None)
     if m.values is not None:
         return m.values[..., cells]
     return np.einsum("ckm,kabc->mabc", m.tensors[m.cell_material[cells]], m.geometric[..., cells])

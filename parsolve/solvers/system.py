@@ -15,6 +15,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from parsolve.effects.compose import Composition, Rate
+from parsolve.fem.element_matrices import BlockMatrices, ElementMatrices, StiffnessTarget
 from parsolve.la.ghosts import GhostExchange, SaddleValues, value_keys
 from parsolve.la.layout import make_layout
 from parsolve.la.relation_dofs import RelationDofs
@@ -165,7 +166,7 @@ class SaddleSystem:
         e.g. a tangent) or the elastic stiffness."""
         t0 = time.perf_counter()
         ke = self.composition.stiffness(self.rate) if elements is None else elements
-        self.op.set_stiffness(ke.reduce(self.pattern.pair_slot, self.pattern.nnzb))
+        self._place_stiffness(ke)
         if self.block.row_scale is None:
             self.kscale = self.op.diagonal_scale()
             self.block.set_scales(self.kscale)
@@ -175,6 +176,19 @@ class SaddleSystem:
         self.assembled = True
         self.timings["assembly"] = time.perf_counter() - t0
         return mat
+
+    def _place_stiffness(self, ke) -> None:
+        """Node-pair sums of the element matrices into the operator's stiffness slots: summed
+        there directly (no node-pair array beside the matrix) when the form can, else reduced
+        and copied (a tangent with a few cells replaced)."""
+        slot, npairs = self.pattern.pair_slot, self.pattern.nnzb
+        if isinstance(ke, ElementMatrices):
+            nc = self.op.layout.ncomp
+            ke = BlockMatrices(nc, [(np.arange(nc), np.arange(nc), ke, 1.0)])
+        if isinstance(ke, BlockMatrices):
+            ke.reduce_into(slot, npairs, StiffnessTarget(self.op.data, self.op.block_start))
+        else:
+            self.op.set_stiffness(ke.reduce(slot, npairs))
 
     def to_owned(self, full: np.ndarray) -> np.ndarray:
         """A primal vector of this mesh's DOFs → this rank's rows (multiplier rows zero)."""
