@@ -46,7 +46,7 @@ from parsolve.effects.base import Effect
 from parsolve.effects.compose import node_places
 from parsolve.effects.constraints import partners
 from parsolve.errors import InputError
-from parsolve.fem.element_matrices import CellKernel, ElementMatrices
+from parsolve.fem.element_matrices import CellKernel, ElementMatrices, place_rows
 
 
 @dataclass
@@ -107,6 +107,13 @@ class SpringMatrices(ElementMatrices):
 
     # the blocks of pairs that share no cell: (d², m) values and their own pattern slots
     loose = (np.zeros((0, 0)), np.zeros(0, dtype=np.intp))
+
+    def reduce_into(self, pair_slot: np.ndarray, npairs: int, target, ci, cj, fac: float = 1.0,
+                    first: np.ndarray | None = None) -> None:
+        """Into the operator's slots through ``reduce`` (a few numbers: the cells' kernel would
+        miss the pairs that share no cell)."""
+        first = np.zeros(len(ci) * len(cj), dtype=bool) if first is None else first
+        place_rows(self.reduce(pair_slot, npairs), target, ci, cj, fac, first)
 
     def reduce(self, pair_slot: np.ndarray, npairs: int) -> np.ndarray:
         values, row, col, cell = self.entries

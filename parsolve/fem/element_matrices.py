@@ -372,6 +372,18 @@ def apply(m: ElementMatrices, ue: np.ndarray) -> np.ndarray:
     return out
 
 
+def place_rows(values: np.ndarray, target: "StiffnessTarget", ci, cj, fac: float,
+                first: np.ndarray) -> None:
+    """Rows k = (ci[k // len(cj)], cj[k % len(cj)]) of (rows, npairs) node-pair sums into the
+    target: assigned where ``first``, added elsewhere."""
+    for k, (i, j) in enumerate((i, j) for i in ci for j in cj):
+        pos = target.starts[i] + j
+        if first[k]:
+            target.data[pos] = fac * values[k]
+        else:
+            target.data[pos] += fac * values[k]
+
+
 @dataclass
 class BlockMatrices:
     """Element matrices of several effects, each on its own (row, column) components of the
@@ -390,7 +402,10 @@ class BlockMatrices:
         for ci, cj, m, fac in self.parts:
             ci, cj = np.asarray(ci), np.asarray(cj)
             first = ~written[np.ix_(ci, cj)].ravel()
-            m.reduce_into(pair_slot, npairs, target, ci, cj, fac, first=first)
+            if hasattr(m, "reduce_into"):
+                m.reduce_into(pair_slot, npairs, target, ci, cj, fac, first=first)
+            else:   # small forms with only ``reduce`` (node blocks, springs: few pairs)
+                place_rows(m.reduce(pair_slot, npairs), target, ci, cj, fac, first)
             written[np.ix_(ci, cj)] = True
         for i, j in zip(*np.nonzero(~written)):
             target.data[target.starts[i] + j] = 0.0
