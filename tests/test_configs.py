@@ -4,6 +4,7 @@ import numpy as np
 
 from conftest import CONFIGS, rel_err
 from helpers.laminate import check_laminate
+from helpers.scene import scene, shipped
 from parsolve.scene import load_scene
 
 
@@ -49,8 +50,9 @@ def test_kirsch(run):
 
 def test_kirsch_p2_beats_p1(run):
     """ux at (a, 0) on the same coarse mesh: P2 error far below P1's."""
-    text = (CONFIGS / "kirsch.toml").read_text().replace("n_radial = 48", "n_radial = 24") \
-        .replace("n_angular = 64", "n_angular = 32")
+    base = shipped("kirsch.toml")
+    assert (base["mesh"]["n_radial"], base["mesh"]["n_angular"], base["mesh"]["cell"]) == (48, 64, "triangle6")
+    text = scene(base, mesh={"n_radial": 24, "n_angular": 32})
     reference = 1.43873963e-5  # P2 on 192 × 256 (converged to 1e-8 relative)
 
     def ux_side(res):
@@ -58,7 +60,7 @@ def test_kirsch_p2_beats_p1(run):
         return res["fields/displacement"][-1][np.argmin(np.hypot(pts[:, 0] - 1, pts[:, 1])), 0]
 
     p2 = rel_err(ux_side(run(text, name="kirsch_p2")), reference)
-    p1 = rel_err(ux_side(run(text.replace('cell = "triangle6"', 'cell = "triangle"'), name="kirsch_p1")),
+    p1 = rel_err(ux_side(run(scene(base, mesh={"n_radial": 24, "n_angular": 32, "cell": "triangle"}), name="kirsch_p1")),
                  reference)
     assert p2 < 5e-4 and p1 > 1e-2, (p1, p2)
 
@@ -69,10 +71,11 @@ def test_cantilever(run):
 
 
 def test_cantilever_p2_beats_p1(run):
-    text = (CONFIGS / "cantilever_3d.toml").read_text().replace("nx = 40", "nx = 20") \
-        .replace("ny = 4", "ny = 2").replace("nz = 4", "nz = 2")
+    base = shipped("cantilever_3d.toml")
+    assert [base["mesh"][k] for k in ("nx", "ny", "nz", "cell")] == [40, 4, 4, "tetra10"]
+    text = scene(base, mesh={"nx": 20, "ny": 2, "nz": 2})
     p2 = rel_err(tip_deflection(run(text, name="cant_p2")), TIMOSHENKO)
-    p1 = rel_err(tip_deflection(run(text.replace('"tetra10"', '"tetra"'), name="cant_p1")), TIMOSHENKO)
+    p1 = rel_err(tip_deflection(run(scene(base, mesh={"nx": 20, "ny": 2, "nz": 2, "cell": "tetra"}), name="cant_p1")), TIMOSHENKO)
     assert p2 < 0.015 and p1 > 0.3, (p1, p2)   # P1 tetrahedra lock in bending
 
 

@@ -10,16 +10,15 @@ import time
 import h5py
 import pytest
 
-from conftest import CONFIGS
+from helpers.scene import shipped, write_scene
 
 pytestmark = pytest.mark.serial  # spawns a run
 
 
 @pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
 def test_signal_stops_the_run_and_keeps_finished_steps(sig, code, tmp_path):
-    scene = tmp_path / "long.toml"
-    scene.write_text((CONFIGS / "solubility_grow_shrink.toml").read_text()
-                     .replace("count = 100", "count = 4000").replace("end = 2.0", "end = 80.0"))
+    scene = write_scene(tmp_path / "long.toml", shipped("solubility_grow_shrink.toml"),
+                        steps={"count": 4000, "end": 80.0})
     out = tmp_path / "long.h5"
     env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "OPAL_"))}
     proc = subprocess.Popen([sys.executable, "-m", "parsolve", "run", str(scene), "-o", str(out)],
@@ -53,10 +52,7 @@ MPIRUN_SH = ["bash", str(ROOT / "scripts" / "mpirun.sh"), "-n"]
 
 
 def _long_scene(path, count=4000, end=80.0):
-    text = (CONFIGS / "solubility_grow_shrink.toml").read_text()
-    path.write_text(text.replace("count = 100", f"count = {count}")
-                    .replace("end = 2.0", f"end = {end}"))
-    return path
+    return write_scene(path, shipped("solubility_grow_shrink.toml"), steps={"count": count, "end": end})
 
 
 def _children(pid: int) -> list[int]:

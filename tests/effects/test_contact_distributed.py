@@ -11,12 +11,13 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from conftest import CONFIGS, assert_same_results
+from conftest import assert_same_results
 from parsolve.contact.friction import SLIP, STICK
 from parsolve.errors import InputError
 from parsolve.model import build_model
 from parsolve.scene import load_scene
 from helpers.contact import BASE, FOUNDATION, OBLIQUE, PLANE, write_mesh
+from helpers.scene import DROP, scene, shipped
 
 
 def both_meshes(run, text: str, name: str) -> tuple[dict, dict]:
@@ -70,8 +71,8 @@ def test_oblique_pull_3d_on_parts_is_the_one_rank_run(run):
 
 
 @pytest.mark.parametrize("formulation, extra", [
-    ("penalty", "penalty = 1e6"),
-    ("augmented_lagrangian", "augmentation_tolerance = 1e-9"),
+    ("penalty", {"penalty": 1e6}),
+    ("augmented_lagrangian", {"augmentation_tolerance": 1e-9}),
 ])
 def test_block_baselines_on_parts_are_the_one_rank_run(run, formulation, extra):
     """contact_block_friction.toml (p = 10 on a rough plane, μ = 0.3) with the penalty or the
@@ -84,12 +85,14 @@ def test_block_baselines_on_parts_are_the_one_rank_run(run, formulation, extra):
     (Not further: once the block slides, a slid node's committed friction sits on the cone,
     |t_tr| = μ p_N to round-off, and whether it sticks for one iteration, which adds
     iterations, varied from run to run at 2 and 3 ranks.)"""
-    text = (CONFIGS / "contact_block_friction.toml").read_text()
-    text = text.replace("friction = 0.3", f'friction = 0.3\nformulation = "{formulation}"\n{extra}')
-    text = text.replace("value = 0.02", "value = 0.005").replace("count = 10", "count = 3")
-    text = text.replace('[output]\nfile = ', '# file = ')
+    block = shipped("contact_block_friction.toml")
+    (contact,) = block["contact"]
+    assert contact["friction"] == 0.3 and block["steps"]["count"] == 10 and "nonlinear" not in block
+    shift = [r | {"value": 0.005} if r["name"] == "shift" else r for r in block["relations"]]
+    assert [r["value"] for r in block["relations"] if r["name"] == "shift"] == [0.02]
     # as test_contact_baselines: status cycles of the inner Newton cut some steps
-    text += "\n[nonlinear]\nmax_iterations = 15\n"
+    text = scene(block, contact=[contact | {"formulation": formulation} | extra], relations=shift,
+                 steps={"count": 3}, output=DROP, nonlinear={"max_iterations": 15})
     parts, whole = both_meshes(run, text, f"block_{formulation}")
     assert_same_results(parts, whole)
     np.testing.assert_array_equal(parts["steps/iterations"], whole["steps/iterations"])

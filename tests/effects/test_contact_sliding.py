@@ -16,6 +16,7 @@ import pytest
 from mpi4py import MPI
 
 from conftest import CONFIGS, assert_same_results
+from helpers.scene import scene as build, shipped
 from parsolve.contact.friction import OPEN, SLIP, STICK
 from parsolve.contact.pairing import pair_nodes
 from parsolve.errors import InputError
@@ -54,69 +55,34 @@ def base_and_die(path, base_box=(1.0, HB, 6, 3), die_box=(2.0, 0.25, 16, 1, -0.7
     meshio.write(str(path), mesh, file_format="gmsh22", binary=False)
 
 
-def scene(mesh, sliding: str = "finite", steps: int = 10) -> str:
+def scene(mesh, sliding: str = "finite", steps: int = 10, **contact) -> str:
+    """The base-and-die scene; ``contact`` adds or replaces keys of its [[contact]] entry."""
     gy = -DELTA / HB
     sxx, tau = LAM * gy, MU * P
     t_star = MU * P * HB / (G * D_END)
-    return f"""
-[mesh]
-file = "{mesh}"
-[model]
-hypothesis = "plane_strain"
-[[materials]]
-E = {E}
-nu = {NU}
-[[loads]]
-name = "side_n"
-region = "base_right"
-traction = [{sxx!r}, 0.0]
-evolution = "constant"
-[[loads]]
-name = "side_n_left"
-region = "base_left"
-traction = [{-sxx!r}, 0.0]
-evolution = "constant"
-[[loads]]
-name = "side_t"
-region = "base_right"
-traction = [0.0, {tau!r}]
-evolution = "shear"
-[[loads]]
-name = "side_t_left"
-region = "base_left"
-traction = [0.0, {-tau!r}]
-evolution = "shear"
-[[relations]]
-name = "ground"
-type = "dirichlet"
-region = "base_bottom"
-components = ["x", "y"]
-[[relations]]
-name = "drag"
-type = "dirichlet"
-region = "die"
-component = "x"
-value = {D_END}
-[[relations]]
-name = "press"
-type = "dirichlet"
-region = "die"
-component = "y"
-value = {-DELTA}
-evolution = "constant"
-[[contact]]
-name = "slide"
-slave = "base_top"
-master = "die_bottom"
-friction = {MU}
-search_radius = 0.7
-sliding = "{sliding}"
-[evolutions.shear]
-times = [0.0, {t_star!r}, 2.0]
-values = [0.0, 1.0, 1.0]
-[steps]
-count = {steps}
-"""
+
+    def load(name, region, traction, evolution):
+        return {"name": name, "region": region, "traction": traction, "evolution": evolution}
+
+    return build(
+        mesh={"file": str(mesh)},
+        model={"hypothesis": "plane_strain"},
+        materials=[{"E": E, "nu": NU}],
+        loads=[load("side_n", "base_right", [sxx, 0.0], "constant"),
+               load("side_n_left", "base_left", [-sxx, 0.0], "constant"),
+               load("side_t", "base_right", [0.0, tau], "shear"),
+               load("side_t_left", "base_left", [0.0, -tau], "shear")],
+        relations=[{"name": "ground", "type": "dirichlet", "region": "base_bottom",
+                    "components": ["x", "y"]},
+                   {"name": "drag", "type": "dirichlet", "region": "die", "component": "x",
+                    "value": D_END},
+                   {"name": "press", "type": "dirichlet", "region": "die", "component": "y",
+                    "value": -DELTA, "evolution": "constant"}],
+        contact=[{"name": "slide", "slave": "base_top", "master": "die_bottom", "friction": MU,
+                  "search_radius": 0.7, "sliding": sliding} | contact],
+        evolutions={"shear": {"times": [0.0, t_star, 2.0], "values": [0.0, 1.0, 1.0]}},
+        steps={"count": steps},
+    )
 
 
 def exact_base(pts: np.ndarray, d: float) -> tuple[np.ndarray, bool, float]:
@@ -243,14 +209,14 @@ def test_ironing_2d(run):
 
 
 @pytest.mark.parametrize("edit, words", [
-    ('sliding = "finite"', None),
-    ('sliding = "large"', "must be one of"),
-    ('sliding = "finite"\ndiscretization = "mortar"', "finite sliding needs"),
+    ({"sliding": "finite"}, None),
+    ({"sliding": "large"}, "must be one of"),
+    ({"sliding": "finite", "discretization": "mortar"}, "finite sliding needs"),
 ])
 def test_bad_sliding_names_file_and_key(shared_tmp, mesh, edit, words):
     """``sliding``: "small" (default) or "finite" (2D, a master region, node-to-segment);
     anything else: exit 2 naming the file and the key."""
-    text = scene(mesh).replace('sliding = "finite"', edit)
+    text = scene(mesh, **edit)
     path = shared_tmp / "bad_sliding.toml"
     if MPI.COMM_WORLD.rank == 0:
         path.write_text(text)
@@ -277,12 +243,18 @@ def test_frictionless_ironing_is_the_die_placed_there(run, shared_tmp):
             write_ironing_mesh(IRONING.with_suffix(".msh"))
         base_and_die(moved, SLAB, DIE[:4] + (DIE[4] + travel,))
     MPI.COMM_WORLD.Barrier()
-    text = IRONING.read_text().replace("friction = 0.3", "friction = 0.0") \
-        .replace('file = "contact_ironing_2d.msh"', f'file = "{IRONING.with_suffix(".msh")}"')
-    dragged = run(text.replace("value = 1.5", f"value = {travel}"), name="ironing_free")
-    placed = run(text.replace("value = 1.5", "value = 0.0")
-                 .replace(f'file = "{IRONING.with_suffix(".msh")}"', f'file = "{moved}"'),
-                 name="ironing_placed")
+    base = shipped(IRONING.name)
+    assert base["contact"][0]["friction"] == 0.3 and base["contact"][0]["sliding"] == "finite"
+
+    def ironing(drag: float, mesh_file, sliding: str = "finite") -> str:
+        """The shipped ironing, frictionless, the die dragged by ``drag`` (shipped: 1.5)."""
+        relations = [r | {"value": drag} if r["name"] == "die_x" else r for r in base["relations"]]
+        assert [r["value"] for r in base["relations"] if r["name"] == "die_x"] == [1.5]
+        return build(base, mesh={"file": str(mesh_file)}, relations=relations,
+                     contact=[base["contact"][0] | {"friction": 0.0, "sliding": sliding}])
+
+    dragged = run(ironing(travel, IRONING.with_suffix(".msh")), name="ironing_free")
+    placed = run(ironing(0.0, moved), name="ironing_placed")
     u_d, u_p = dragged["fields/displacement"][-1], placed["fields/displacement"][-1]
     die = np.arange(len(u_d)) >= 33 * 9
     shift = np.where(die[:, None], [travel, 0.0], 0.0)
@@ -290,8 +262,7 @@ def test_frictionless_ironing_is_the_die_placed_there(run, shared_tmp):
     rn_d = dragged["fields/ironing_normal_reaction"][-1, die, 0]
     rn_p = placed["fields/ironing_normal_reaction"][-1, die, 0]
     np.testing.assert_allclose(rn_d, rn_p, atol=1e-9 * rn_p.max(), rtol=0)
-    small = run(text.replace("value = 1.5", f"value = {travel}")
-                .replace('sliding = "finite"', 'sliding = "small"'), name="ironing_small")
+    small = run(ironing(travel, IRONING.with_suffix(".msh"), "small"), name="ironing_small")
     off = np.abs(small["fields/displacement"][-1] - u_p - shift).max() / np.abs(u_p).max()
     print("dragged vs placed:", np.abs(u_d - u_p - shift).max() / np.abs(u_p).max(),
           "small sliding vs placed:", off, "iterations:", list(dragged["steps/iterations"]))
@@ -305,4 +276,4 @@ def test_slave_leaving_its_span_stops_the_run(run, mesh):
     from parsolve.errors import SolverError
 
     with pytest.raises(SolverError, match=r"contact\[0\]\.search_radius: slave node \d+ left"):
-        run(scene(mesh).replace("search_radius = 0.7", "search_radius = 0.3"), name="out_of_span")
+        run(scene(mesh, search_radius=0.3), name="out_of_span")

@@ -6,12 +6,14 @@ from __future__ import annotations
 import pytest
 from mpi4py import MPI
 
-from conftest import CONFIGS
+from helpers.scene import scene, shipped
 from parsolve.errors import InputError
 from parsolve.model import build_model
 from parsolve.scene import load_scene
 
-BAR = (CONFIGS / "controlled_bar.toml").read_text()
+BAR = shipped("controlled_bar.toml")
+PULL = BAR["loads"][0]
+assert len(BAR["loads"]) == 1 and PULL == {"name": "pull", "region": "right", "total_force": [1.0, 0.0]}
 
 
 def _scene(folder, text):
@@ -24,8 +26,7 @@ def _scene(folder, text):
 
 def test_pattern_on_held_dofs_only_is_refused(shared_tmp):
     # the pull moved onto the clamped edge: its x components are held by 'left_x'
-    text = BAR.replace('name = "pull"\nregion = "right"', 'name = "pull"\nregion = "left"')
-    assert text != BAR
+    text = scene(BAR, loads=[PULL | {"region": "left"}])
     with pytest.raises(InputError) as exc:
         build_model(_scene(shared_tmp, text), MPI.COMM_WORLD)
     assert exc.value.key == "relations[2].dual"
@@ -34,6 +35,6 @@ def test_pattern_on_held_dofs_only_is_refused(shared_tmp):
 
 def test_pattern_partly_on_held_dofs_is_accepted(shared_tmp):
     # a pull on the whole boundary: the held part is taken by reactions, the rest drives
-    text = BAR.replace('name = "pull"\nregion = "right"', 'name = "pull"\nregion = "all"')
-    model = build_model(_scene(shared_tmp, text.replace("total_force", "body")), MPI.COMM_WORLD)
+    text = scene(BAR, loads=[{"name": "pull", "region": "all", "body": PULL["total_force"]}])
+    model = build_model(_scene(shared_tmp, text), MPI.COMM_WORLD)
     assert any(r.shared_dual is not None for r in model.relations)

@@ -7,40 +7,31 @@ import numpy as np
 import pytest
 
 from conftest import CONFIGS
+from helpers.scene import DROP, merge, scene, shipped
 from parsolve.errors import InputError
 
-POISSON = """
-[mesh]
-generator = "rectangle"
-lx = 2.0
-ly = 0.2
-nx = {nx}
-ny = 2
-cell = "{cell}"
-[model]
-dimension = 2
-[[diffusion]]
-field = "h"
-[[diffusion.materials]]
-conductivity = 0.5
-[[loads]]
-name = "rain"
-field = "h"
-source = 3.0
-[[relations]]
-name = "ends"
-type = "dirichlet"
-region = "{ends}"
-value = 0.0
-"""
+POISSON = {
+    "mesh": {"generator": "rectangle", "lx": 2.0, "ly": 0.2, "nx": 4, "ny": 2, "cell": "quad"},
+    "model": {"dimension": 2},
+    "diffusion": [{"field": "h", "materials": [{"conductivity": 0.5}]}],
+    "loads": [{"name": "rain", "field": "h", "source": 3.0}],
+    "relations": [{"name": "ends", "type": "dirichlet", "region": "left", "value": 0.0}],
+}
+DRAINS = {"ends": "x == 0 or x == 2"}   # a region for both ends
+RAIN, ENDS = POISSON["loads"][0], POISSON["relations"][0]
+
+
+def poisson(nx: int, cell: str, ends: str, **overrides) -> str:
+    """The strip on nx × 2 cells, h = 0 on the region ``ends``, with these overrides."""
+    base = merge(POISSON, {"mesh": {"nx": nx, "cell": cell}, "relations": [ENDS | {"region": ends}]})
+    return scene(base, **overrides)
 
 
 @pytest.mark.parametrize("cell", ["quad", "triangle", "triangle6"])
 def test_steady_source_between_two_drains(cell, run):
     """-k h'' = s, h(0) = h(L) = 0: h = s x (L - x) / (2k), exact at the nodes (P2: everywhere);
     each end takes half the source, the flux -k h' = s (x - L/2)."""
-    text = POISSON.format(nx=16, cell=cell, ends="ends").replace(
-        "[model]", '[regions]\nends = "x == 0 or x == 2"\n[model]')
+    text = poisson(16, cell, "ends", regions=DRAINS)
     res = run(text, name=f"poisson_{cell}")
     x = res["mesh/points"][:, 0]
     h = res["fields/h"][-1][:, 0]
@@ -78,18 +69,9 @@ def test_transient_decay_of_a_mode(run):
     """Backward Euler with lumped capacity on a Q1 strip: h(x, 0) = sin(pi x) would decay by
     (1 + dt λ)^-n; here the mode is excited by a source over the first step only, then
     decays freely between two drains: the ratio of successive steps is 1 / (1 + dt λ_h)."""
-    text = POISSON.format(nx=20, cell="quad", ends="ends").replace(
-        "[model]", '[regions]\nends = "x == 0 or x == 2"\n[model]').replace(
-        "source = 3.0", 'source = 3.0\nevolution = "pulse"') + """
-[evolutions.pulse]
-times = [0.0, 0.1, 0.1001]
-values = [1.0, 1.0, 0.0]
-[time]
-mass = "lumped"
-[steps]
-count = 12
-end = 1.2
-"""
+    text = poisson(20, "quad", "ends", regions=DRAINS, loads=[RAIN | {"evolution": "pulse"}],
+                   evolutions={"pulse": {"times": [0.0, 0.1, 0.1001], "values": [1.0, 1.0, 0.0]}},
+                   time={"mass": "lumped"}, steps={"count": 12, "end": 1.2})
     res = run(text, name="decay")
     h = res["fields/h"][..., 0]
     mid = np.argmin(np.abs(res["mesh/points"][:, 0] - 1.0) + res["mesh/points"][:, 1])
@@ -101,18 +83,16 @@ end = 1.2
     assert err <= 1e-13 * np.abs(res["balance/total/storage"]).max()
 
 
-BAD = {
-    "negative conductivity": (("conductivity = 0.5", "conductivity = -1.0"),
+MATERIAL = POISSON["diffusion"][0]["materials"][0]
+BAD = {  # overrides of the small strip (h = 0 on the left), each one input error
+    "negative conductivity": ({"diffusion": [{"field": "h", "materials": [{"conductivity": -1.0}]}]},
                               "diffusion[0].materials[0].conductivity"),
-    "relation on a missing field": (('name = "ends"\ntype = "dirichlet"',
-                                     'name = "ends"\nfield = "c"\ntype = "dirichlet"'),
-                                    "relations[0].field"),
-    "component of a scalar field": (('region = "left"', 'region = "left"\ncomponent = "x"'),
+    "relation on a missing field": ({"relations": [ENDS | {"field": "c"}]}, "relations[0].field"),
+    "component of a scalar field": ({"relations": [ENDS | {"component": "x"}]},
                                     "relations[0].component"),
-    "transient without steps": (("[[loads]]", "[time]\nmass = \"lumped\"\n[[loads]]"), "steps"),
-    "unknown mass matrix": (("[[loads]]", "[time]\nmass = \"diagonal\"\n[steps]\ncount = 2\n[[loads]]"),
-                            "time.mass"),
-    "negative capacity": (("conductivity = 0.5", "conductivity = 0.5\ncapacity = -2.0"),
+    "transient without steps": ({"time": {"mass": "lumped"}}, "steps"),
+    "unknown mass matrix": ({"time": {"mass": "diagonal"}, "steps": {"count": 2}}, "time.mass"),
+    "negative capacity": ({"diffusion": [{"field": "h", "materials": [MATERIAL | {"capacity": -2.0}]}]},
                           "diffusion[0].materials[0].capacity"),
 }
 
@@ -142,10 +122,8 @@ conductivity = 1.0
 def test_bad_diffusion_input(case):
     from parsolve.scene import parse_scene
 
-    (old, new), key = BAD[case]
-    text = POISSON.format(nx=4, cell="quad", ends="left")
-    assert old in text
-    text = text.replace(old, new, 1)
+    overrides, key = BAD[case]
+    text = poisson(4, "quad", "left", **overrides)
     with pytest.raises(InputError) as err:
         parse_scene(tomllib.loads(text), "scene.toml", text)
     assert err.value.key == key, err.value.oneline()
@@ -154,8 +132,9 @@ def test_bad_diffusion_input(case):
 def test_bad_saturation():
     from parsolve.scene import parse_scene
 
-    text = (CONFIGS / "solubility_well_mixed.toml").read_text().replace(
-        "saturation = 1.0", "saturation = -1.0")
+    base = shipped("solubility_well_mixed.toml")
+    assert base["solubility"]["saturation"] == 1.0
+    text = scene(base, solubility={"saturation": -1.0})
     with pytest.raises(InputError) as err:
         parse_scene(tomllib.loads(text), "scene.toml", text)
     assert err.value.key == "solubility.saturation"
@@ -167,16 +146,10 @@ def test_initial_field_relaxes_to_its_mean(run):
     (which needs f_int of the initial field)."""
     # Crank-Nicolson is not L-stable: its shortest modes decay slowly at this step (|factor|
     # ≈ 0.92 per step), hence the looser uniformity check
-    for scheme, atol in (('scheme = "backward_euler"', 1e-9), ('scheme = "theta"\ntheta = 0.5', 5e-3)):
-        text = POISSON.format(nx=10, cell="quad", ends="left").replace(
-            'field = "h"\n[[diffusion.materials]]', 'field = "h"\ninitial = "x"\n[[diffusion.materials]]'
-        ).replace('source = 3.0', 'source = 0.0').split("[[relations]]")[0] + f"""
-[time]
-{scheme}
-[steps]
-count = 40
-end = 40.0
-"""
+    for scheme, atol in (({"scheme": "backward_euler"}, 1e-9), ({"scheme": "theta", "theta": 0.5}, 5e-3)):
+        text = poisson(10, "quad", "left", relations=DROP, time=scheme, steps={"count": 40, "end": 40.0},
+                       diffusion=[POISSON["diffusion"][0] | {"initial": "x"}],
+                       loads=[RAIN | {"source": 0.0}])
         res = run(text, name="relax")
         storage = res["balance/total/storage"]
         np.testing.assert_allclose(storage, 2.0 * 0.2 * 1.0, rtol=1e-12)  # ∫ x over [0, 2] × 0.2
@@ -187,8 +160,7 @@ def test_initial_expression_must_be_finite():
     from parsolve.model import build_model
     from parsolve.scene import parse_scene
 
-    text = POISSON.format(nx=4, cell="quad", ends="left").replace(
-        'field = "h"\n[[diffusion.materials]]', 'field = "h"\ninitial = "sqrt(-1 - x)"\n[[diffusion.materials]]')
+    text = poisson(4, "quad", "left", diffusion=[POISSON["diffusion"][0] | {"initial": "sqrt(-1 - x)"}])
     with pytest.raises(InputError) as err:
         build_model(parse_scene(tomllib.loads(text), "scene.toml", text))
     assert err.value.key == "diffusion[0].initial"

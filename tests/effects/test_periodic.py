@@ -12,6 +12,7 @@ from mpi4py import MPI
 
 from conftest import CONFIGS, assert_same_results
 from helpers.laminate import U, check_laminate, laminate_ux
+from helpers.scene import DROP, merge, scene, shipped
 from parsolve.errors import InputError
 from parsolve.model import build_model
 from parsolve.scene import load_scene
@@ -24,18 +25,27 @@ def test_laminate_cell_on_parts_and_alone(run):
     assert_same_results(parts, alone, tol=1e-10)
 
 
+LAMINATE = shipped("periodic_shear_laminate.toml")
+
+
+def laminate(**edits: dict) -> str:
+    """The shipped laminate with keys of the relations named by ``edits`` replaced (``DROP``
+    removes a key): ``laminate(cell={"target": DROP})``."""
+    assert set(edits) <= {r["name"] for r in LAMINATE["relations"]}
+    return scene(LAMINATE, relations=[merge(r, edits.get(r["name"], {})) for r in LAMINATE["relations"]])
+
+
 def test_without_the_tie_the_cell_is_not_homogeneous(run):
     """The control: the same cell without the periodic relation is far from the laminate."""
-    text = (CONFIGS / "periodic_shear_laminate.toml").read_text()
-    text = text[:text.index('name = "cell"')].rsplit("[[relations]]", 1)[0] + "[steps]\ncount = 1\n"
+    assert LAMINATE["relations"][-1]["name"] == "cell" and LAMINATE["steps"] == {"count": 1}
+    text = scene(LAMINATE, relations=LAMINATE["relations"][:-1])
     res = run(text, name="laminate_untied")
     y = res["mesh/points"][:, 1]
     assert np.abs(res["fields/displacement"][-1][:, 0] - laminate_ux(y)).max() > 1e-2 * U
 
 
 def test_a_node_without_partner_is_an_input_error(shared_tmp):
-    text = (CONFIGS / "periodic_shear_laminate.toml").read_text().replace(
-        "translation = [1.0, 0.0]", "translation = [1.0, 0.03]")
+    text = laminate(cell={"translation": [1.0, 0.03]})
     path = shared_tmp / "periodic_lost.toml"
     if MPI.COMM_WORLD.rank == 0:
         path.write_text(text)
@@ -47,15 +57,12 @@ def test_a_node_without_partner_is_an_input_error(shared_tmp):
 
 
 @pytest.mark.parametrize("key, value, message", [
-    ("translation", "translation = [1.0]", "expected 2 numbers"),
-    ("value", 'value = 1.0', "has no value"),
-    ("target", None, "missing required key"),
+    ("translation", [1.0], "expected 2 numbers"),
+    ("value", 1.0, "has no value"),
+    ("target", DROP, "missing required key"),
 ])
 def test_scene_keys(shared_tmp, key, value, message):
-    text = (CONFIGS / "periodic_shear_laminate.toml").read_text()
-    old = 'target = "right_side"' if key == "target" else "translation = [1.0, 0.0]"
-    text = text.replace(old, "" if value is None else
-                        (old + "\n" + value if key == "value" else value))
+    text = laminate(cell={key: value})
     path = shared_tmp / f"periodic_{key}.toml"
     if MPI.COMM_WORLD.rank == 0:
         path.write_text(text)
@@ -65,24 +72,19 @@ def test_scene_keys(shared_tmp, key, value, message):
     assert exc.value.key == f"relations[3].{key}" and message in exc.value.message
 
 
-def whole_sides(text: str) -> str:
-    """The laminate scene tying the whole sides, corners included."""
-    return text.replace('region = "left_side"', 'region = "left"').replace(
-        'target = "right_side"', 'target = "right"')
+WHOLE_SIDES = {"region": "left", "target": "right"}   # the tie of the whole sides, corners included
 
 
 def test_held_corners_are_left_out_of_the_tie(run):
     """Tying the whole sides: the corners' rows join DOFs that the top and bottom conditions
     hold to the same values; they are dropped (14 rows, not 18) and the answer is the
     laminate's."""
-    res = run(whole_sides((CONFIGS / "periodic_shear_laminate.toml").read_text()),
-              name="laminate_corners")
+    res = run(laminate(cell=WHOLE_SIDES), name="laminate_corners")
     check_laminate(res)
 
 
 def test_held_corners_that_disagree_are_an_input_error(shared_tmp):
-    text = whole_sides((CONFIGS / "periodic_shear_laminate.toml").read_text()).replace(
-        "value = 0.01", 'value = "0.01 * x"')
+    text = laminate(cell=WHOLE_SIDES, top_shear={"value": "0.01 * x"})
     path = shared_tmp / "periodic_clash.toml"
     if MPI.COMM_WORLD.rank == 0:
         path.write_text(text)

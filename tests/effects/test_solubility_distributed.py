@@ -9,6 +9,7 @@ import pytest
 from mpi4py import MPI
 
 from conftest import assert_same_results, run_scene
+from helpers.scene import scene
 from parsolve.errors import InputError
 from parsolve.model import build_model
 from parsolve.scene import parse_scene
@@ -19,57 +20,26 @@ FILL_END_STEP = round(FILL_END / DT) - 1       # the last step of the source
 # A closed unit square (walls of no flux), a uniform source of the dissolved phase until
 # t = 0.5, a mobile gas, c_sat growing with x (an expression, evaluated per node) and lower on
 # a box in the middle (a region's override): the gas appears first in the box, fronts move.
-SCENE = f"""
-[mesh]
-generator = "rectangle"
-lx = 1.0
-ly = 1.0
-nx = {N}
-ny = {N}
-cell = "quad"
-[model]
-dimension = 2
-[regions]
-core = {{ box = [[0.3, 0.3], [0.6, 0.7]] }}
-[evolutions.fill]
-times = [0.0, {FILL_END}, {FILL_END + DT}]
-values = [1.0, 1.0, 0.0]
-[[diffusion]]
-field = "c_s"
-[[diffusion.materials]]
-conductivity = 0.05
-capacity = 1.0
-[[diffusion]]
-field = "c_g"
-[[diffusion.materials]]
-conductivity = 0.01
-capacity = 1.0
-[solubility]
-saturation = "{{csat}}"
-[[solubility.regions]]
-region = "core"
-saturation = 0.3
-[[loads]]
-name = "fill"
-field = "c_s"
-source = {SOURCE}
-evolution = "fill"
-[time]
-mass = "lumped"
-[steps]
-count = 30
-end = {30 * DT}
-"""
+BASE = {
+    "mesh": {"generator": "rectangle", "lx": 1.0, "ly": 1.0, "nx": N, "ny": N, "cell": "quad"},
+    "model": {"dimension": 2},
+    "regions": {"core": {"box": [[0.3, 0.3], [0.6, 0.7]]}},
+    "evolutions": {"fill": {"times": [0.0, FILL_END, FILL_END + DT], "values": [1.0, 1.0, 0.0]}},
+    "diffusion": [{"field": "c_s", "materials": [{"conductivity": 0.05, "capacity": 1.0}]},
+                  {"field": "c_g", "materials": [{"conductivity": 0.01, "capacity": 1.0}]}],
+    "solubility": {"regions": [{"region": "core", "saturation": 0.3}]},   # + saturation: square()
+    "loads": [{"name": "fill", "field": "c_s", "source": SOURCE, "evolution": "fill"}],
+    "time": {"mass": "lumped"},
+    "steps": {"count": 30, "end": 30 * DT},
+}
 CSAT = "0.6 + 0.8 * x"
 # a drain of the dissolved phase on the right side: the gas re-dissolves and leaves
-DRAIN = """
-[[relations]]
-name = "drain"
-type = "dirichlet"
-field = "c_s"
-region = "right"
-value = 0.0
-"""
+DRAIN = [{"name": "drain", "type": "dirichlet", "field": "c_s", "region": "right", "value": 0.0}]
+
+
+def square(csat: str = CSAT, **overrides) -> str:
+    """The square with c_sat = ``csat`` (an expression) outside the core."""
+    return scene(BASE, solubility={"saturation": csat}, **overrides)
 
 
 def model_of(text: str, comm):
@@ -84,7 +54,7 @@ def solubility(model):
 def test_the_part_builds_the_one_rank_relation(comm):
     """The relation is whole on every rank, in input numbering: rows, DOFs, values, dual and
     groups equal to one rank's, from c_sat known on the owned nodes only."""
-    text = SCENE.replace("{csat}", CSAT)
+    text = square()
     whole = model_of(text, MPI.COMM_SELF)
     parts = model_of(text, comm)
     a = next(r for r in whole.relations if r.name == "solubility")
@@ -112,10 +82,10 @@ def test_parts_give_the_one_rank_results(drain, mode, shared_tmp, comm):
     """Every dataset (fields, states, multipliers, active rows, balance) to 1e-10, integer
     states and active rows exactly, in both output modes (the parts written by rank 0, or
     each rank its owned rows); the states switch both ways during the run."""
-    text = SCENE.replace("{csat}", CSAT) + (DRAIN if drain else "")
+    text = square(relations=DRAIN) if drain else square()
     name = "drained" if drain else "closed"
     whole = run_scene(text, shared_tmp / f"{name}_whole{comm.rank}.h5", MPI.COMM_SELF)
-    text += f'\n[output]\nmode = "{mode}"\n'
+    text = square(output={"mode": mode}, **({"relations": DRAIN} if drain else {}))
     parts = run_scene(text, shared_tmp / f"{name}_parts.h5", comm)
     assert_same_results(parts, whole, 1e-10)
     state = parts["fields/solubility_state"][..., 0]
@@ -135,7 +105,7 @@ def test_mass_is_conserved_on_the_parts(shared_tmp, comm):
     1.5) at every step, from the parts' fields with the lumped nodal areas (h²/4 per cell
     touching a node) and in the balance the parts reduce; each node obeys the
     complementarity (c_g = 0 dissolved, c_s = c_sat saturated)."""
-    text = SCENE.replace("{csat}", CSAT)
+    text = square()
     res = run_scene(text, shared_tmp / "mass.h5", comm)
     t = res["steps/time"]
     injected = SOURCE * 1.0 * np.minimum(t, FILL_END)
@@ -157,7 +127,7 @@ def test_mass_is_conserved_on_the_parts(shared_tmp, comm):
 def test_a_level_invalid_on_one_part_fails_on_every_rank(comm):
     """c_sat = 1 - x is 0 on the right side only (one rank's nodes on a part): every rank
     raises the same input error, none is left waiting."""
-    text = SCENE.replace("{csat}", "1 - x")
+    text = square("1 - x")
     with pytest.raises(InputError) as err:
         model_of(text, comm)
     assert err.value.key == "solubility.saturation"

@@ -10,53 +10,43 @@ import pytest
 from mpi4py import MPI
 
 from conftest import CONFIGS, rel_err
+from helpers.scene import DROP, scene
 from parsolve.errors import InputError
 
 E, NU, ALPHA, T_REF, DT = 200.0, 0.3, 1e-3, 20.0, 50.0
 A = ALPHA * DT   # the free thermal strain
 
-SCENE = """
-[mesh]
-generator = "rectangle"
-lx = 2.0
-ly = 1.0
-nx = {nx}
-ny = {ny}
-cell = "{cell}"
-[regions]
-boundary = "x == 0 or x == 2 or y == 0 or y == 1"
-origin = {{ point = [0.0, 0.0] }}
-corner = {{ point = [2.0, 0.0] }}
-[model]
-hypothesis = "{hypothesis}"
-[[materials]]
-E = 200.0
-nu = 0.3
-[[diffusion]]
-field = "T"
-[[diffusion.materials]]
-conductivity = 1.5
-[[thermal_expansion]]
-field = "T"
-alpha = 1e-3
-reference = 20.0
-{relations}
-"""
+BASE = {
+    "mesh": {"generator": "rectangle", "lx": 2.0, "ly": 1.0, "nx": 4, "ny": 3, "cell": "quad"},
+    "regions": {"boundary": "x == 0 or x == 2 or y == 0 or y == 1",
+                "origin": {"point": [0.0, 0.0]}, "corner": {"point": [2.0, 0.0]}},
+    "model": {"hypothesis": "plane_stress"},
+    "materials": [{"E": 200.0, "nu": 0.3}],
+    "diffusion": [{"field": "T", "materials": [{"conductivity": 1.5}]}],
+    "thermal_expansion": [{"field": "T", "alpha": 1e-3, "reference": 20.0}],
+}
+EXPANSION = BASE["thermal_expansion"][0]
 
 
-def dirichlet(name, region, value, field=None, components=None) -> str:
-    text = f'[[relations]]\nname = "{name}"\ntype = "dirichlet"\nregion = "{region}"\n' \
-           f'value = {value}\nevolution = "constant"\n'
+def plate(nx: int, ny: int, cell: str, hypothesis: str, relations: list, **overrides) -> str:
+    """The 2 × 1 plate scene on an nx × ny mesh, with these relations and overrides."""
+    return scene(BASE, mesh={"nx": nx, "ny": ny, "cell": cell}, model={"hypothesis": hypothesis},
+                 relations=relations, **overrides)
+
+
+def dirichlet(name, region, value, field=None, components=None, **extra) -> dict:
+    rel = {"name": name, "type": "dirichlet", "region": region, "value": value,
+           "evolution": "constant"}
     if field:
-        text += f'field = "{field}"\n'
+        rel["field"] = field
     if components:
-        text += "components = [" + ", ".join(f'"{c}"' for c in components) + "]\n"
-    return text
+        rel["components"] = list(components)
+    return rel | extra
 
 
-UNIFORM = dirichlet("hot", "boundary", T_REF + DT, field="T")
-ROLLERS = dirichlet("left", "left", 0.0, components=["x"]) + \
-    dirichlet("bottom", "bottom", 0.0, components=["y"])
+UNIFORM = [dirichlet("hot", "boundary", T_REF + DT, field="T")]
+ROLLERS = [dirichlet("left", "left", 0.0, components=["x"]),
+           dirichlet("bottom", "bottom", 0.0, components=["y"])]
 
 
 def plane_factor(hypothesis: str) -> float:
@@ -73,8 +63,7 @@ def stresses(res):
 def test_free_plate_uniform_rise(hypothesis, cell, run):
     """T = T_ref + ΔT on the whole boundary (steady: uniform inside), free expansion on
     rollers: u = f α ΔT x, stress zero."""
-    res = run(SCENE.format(nx=4, ny=3, cell=cell, hypothesis=hypothesis,
-                           relations=UNIFORM + ROLLERS), name=f"free_{hypothesis}_{cell}")
+    res = run(plate(4, 3, cell, hypothesis, UNIFORM + ROLLERS), name=f"free_{hypothesis}_{cell}")
     p, u = res["mesh/points"], res["fields/displacement"][-1]
     np.testing.assert_allclose(res["fields/T"][-1][:, 0], T_REF + DT, rtol=1e-12)
     np.testing.assert_allclose(u, plane_factor(hypothesis) * A * p, rtol=0, atol=1e-12 * A)
@@ -88,10 +77,10 @@ def test_free_plate_uniform_rise(hypothesis, cell, run):
 def test_bar_clamped_at_both_ends(hypothesis, cell, run):
     """u_x = 0 at both ends, free laterally: σ_xx = −E α ΔT in plane stress, −E α ΔT / (1 − ν)
     in plane strain; σ_yy = σ_xy = 0; the walls take σ_xx times the height."""
-    relations = UNIFORM + dirichlet("ends", "ends", 0.0, components=["x"]) + \
-        dirichlet("bottom", "bottom", 0.0, components=["y"])
-    text = SCENE.format(nx=6, ny=2, cell=cell, hypothesis=hypothesis, relations=relations) \
-        .replace("[model]", '[regions.ends]\nexpr = "x == 0 or x == 2"\n[model]', 1)
+    relations = UNIFORM + [dirichlet("ends", "ends", 0.0, components=["x"]),
+                           dirichlet("bottom", "bottom", 0.0, components=["y"])]
+    text = plate(6, 2, cell, hypothesis, relations,
+                 regions={"ends": {"expr": "x == 0 or x == 2"}})
     res = run(text, name=f"clamped_{hypothesis}_{cell}")
     plane_strain = hypothesis == "plane_strain"
     sxx = -E * A / (1 - NU) if plane_strain else -E * A
@@ -114,12 +103,8 @@ def test_bar_expanding_into_a_gap(run):
     the bar closes the gap, u_x = g x / L, σ_xx = −E α ΔT / 2 (plane stress), the stress
     output of a Newton run (quadrature-point stresses) less the eigenstrain too."""
     gap = 0.5 * A * 2.0
-    relations = UNIFORM + dirichlet("left", "left", 0.0, components=["x"]) + \
-        dirichlet("bottom", "bottom", 0.0, components=["y"]) + \
-        dirichlet("wall", "right", gap, components=["x"]).replace(
-            'evolution = "constant"', 'evolution = "constant"\nsense = "<="')
-    res = run(SCENE.format(nx=4, ny=2, cell="quad", hypothesis="plane_stress", relations=relations),
-              name="gap")
+    relations = UNIFORM + ROLLERS + [dirichlet("wall", "right", gap, components=["x"], sense="<=")]
+    res = run(plate(4, 2, "quad", "plane_stress", relations), name="gap")
     p, u = res["mesh/points"], res["fields/displacement"][-1]
     assert res["relations/wall/active"][-1].all()
     np.testing.assert_allclose(u[:, 0], gap * p[:, 0] / 2.0, rtol=0, atol=1e-12 * A)
@@ -133,13 +118,12 @@ def test_alpha_per_region(run):
     """α = 1e-3, and 3e-3 on the right half (a [[thermal_expansion.regions]] entry), plane
     stress, u_x held at both ends and u_y on top and bottom: σ_xx = −E ᾱ ΔT / (1 − ν) with
     ᾱ the length-weighted mean α, σ_yy = ν σ_xx − E α ΔT in each half (cell values)."""
-    relations = UNIFORM + dirichlet("ends", "ends", 0.0, components=["x"]) + \
-        dirichlet("sides", "sides", 0.0, components=["y"])
-    text = SCENE.format(nx=6, ny=2, cell="quad", hypothesis="plane_stress", relations=relations) \
-        .replace("[model]", '[regions.ends]\nexpr = "x == 0 or x == 2"\n[regions.sides]\n'
-                 'expr = "y == 0 or y == 1"\n[regions.hot_half]\nexpr = "x >= 1"\n[model]', 1) \
-        .replace("reference = 20.0", 'reference = 20.0\n[[thermal_expansion.regions]]\n'
-                 'region = "hot_half"\nalpha = 3e-3', 1)
+    relations = UNIFORM + [dirichlet("ends", "ends", 0.0, components=["x"]),
+                           dirichlet("sides", "sides", 0.0, components=["y"])]
+    text = plate(6, 2, "quad", "plane_stress", relations,
+                 regions={"ends": {"expr": "x == 0 or x == 2"}, "sides": {"expr": "y == 0 or y == 1"},
+                          "hot_half": {"expr": "x >= 1"}},
+                 thermal_expansion=[EXPANSION | {"regions": [{"region": "hot_half", "alpha": 3e-3}]}])
     res = run(text, name="alpha_regions")
     centre = res["mesh/points"][res["mesh/cells/quad"]].mean(axis=1)[:, 0]
     alpha = np.where(centre > 1.0, 3e-3, 1e-3)
@@ -155,12 +139,12 @@ def test_transient_heating_by_a_source(mass, run):
     """θ = 1/2: an insulated plate heated by a uniform source s with capacity c warms
     uniformly, T = T_ref + s t / c (exact for the scheme); the displacements follow
     quasi-statically, u = f α (T − T_ref) x at every step (plane strain, f = 1 + ν)."""
-    text = SCENE.format(nx=4, ny=2, cell="quad", hypothesis="plane_strain", relations=ROLLERS) \
-        .replace("conductivity = 1.5", "conductivity = 1.5\ncapacity = 2.0") \
-        .replace('field = "T"\n[[diffusion.materials]]', 'field = "T"\ninitial = 20.0\n'
-                 '[[diffusion.materials]]', 1) \
-        + '[[loads]]\nname = "heater"\nfield = "T"\nsource = 4.0\nevolution = "constant"\n' \
-        + f'[time]\nscheme = "theta"\ntheta = 0.5\nmass = "{mass}"\n[steps]\ncount = 3\nend = 1.5\n'
+    text = plate(4, 2, "quad", "plane_strain", ROLLERS,
+                 diffusion=[{"field": "T", "initial": 20.0,
+                             "materials": [{"conductivity": 1.5, "capacity": 2.0}]}],
+                 loads=[{"name": "heater", "field": "T", "source": 4.0, "evolution": "constant"}],
+                 time={"scheme": "theta", "theta": 0.5, "mass": mass},
+                 steps={"count": 3, "end": 1.5})
     res = run(text, name=f"transient_{mass}")
     t, p = res["steps/time"], res["mesh/points"]
     rise = 4.0 * t / 2.0
@@ -172,9 +156,10 @@ def test_transient_heating_by_a_source(mass, run):
         assert np.abs(res["cell_fields/stress"][k]).max() < 1e-10 * E * ALPHA * r
 
 
-LINEAR = dirichlet("cold", "left", T_REF, field="T") + dirichlet("warm", "right", T_REF + DT, field="T") \
-    + dirichlet("pin", "origin", 0.0, components=["x", "y"]) \
-    + dirichlet("roller", "corner", 0.0, components=["y"])
+LINEAR = [dirichlet("cold", "left", T_REF, field="T"),
+          dirichlet("warm", "right", T_REF + DT, field="T"),
+          dirichlet("pin", "origin", 0.0, components=["x", "y"]),
+          dirichlet("roller", "corner", 0.0, components=["y"])]
 
 
 @pytest.mark.parametrize("hypothesis", ["plane_stress", "plane_strain"])
@@ -182,8 +167,7 @@ def test_linear_profile_free_plate_p2_exact(hypothesis, run):
     """Steady conduction between the left (T_ref) and right (T_ref + ΔT) faces: T − T_ref = g x.
     A free plate takes the strain α g x I with no stress (it is compatible): u_x = f α g
     (x² − y²) / 2, u_y = f α g x y. Quadratic: P2 reproduces it to round-off."""
-    res = run(SCENE.format(nx=4, ny=2, cell="triangle6", hypothesis=hypothesis, relations=LINEAR),
-              name=f"linear_{hypothesis}")
+    res = run(plate(4, 2, "triangle6", hypothesis, LINEAR), name=f"linear_{hypothesis}")
     g = DT / 2.0
     p, u = res["mesh/points"], res["fields/displacement"][-1]
     x, y = p[:, 0], p[:, 1]
@@ -199,49 +183,34 @@ def test_linear_profile_q1_is_not_exact_but_converges(run):
     """The same plate on Q1 (bilinear u cannot hold x² − y²): the stress is not zero, and
     halving the cells divides its largest cell value by about 2 (first order)."""
     def worst(n):
-        res = run(SCENE.format(nx=2 * n, ny=n, cell="quad", hypothesis="plane_stress",
-                               relations=LINEAR), name=f"linear_q1_{n}")
+        res = run(plate(2 * n, n, "quad", "plane_stress", LINEAR), name=f"linear_q1_{n}")
         return np.abs(res["cell_fields/stress"][-1]).max() / (E * A)
 
     coarse, fine = worst(2), worst(4)
     assert coarse > 1e-3 and 1.8 < coarse / fine < 2.2, (coarse, fine)
 
 
-CUBE = """
-[mesh]
-generator = "box"
-lx = 1.0
-ly = 1.0
-lz = 1.0
-nx = 2
-ny = 2
-nz = 2
-cell = "{cell}"
-[regions]
-boundary = "x == 0 or x == 1 or y == 0 or y == 1 or z == 0 or z == 1"
-ends = "x == 0 or x == 1"
-[model]
-hypothesis = "3d"
-[[materials]]
-E = 200.0
-nu = 0.3
-[[diffusion]]
-field = "T"
-[[diffusion.materials]]
-conductivity = 1.0
-[[thermal_expansion]]
-field = "T"
-alpha = 1e-3
-reference = 20.0
-""" + UNIFORM + dirichlet("y0", "ymin", 0.0, components=["y"]) \
-    + dirichlet("z0", "zmin", 0.0, components=["z"])
+CUBE = {
+    "mesh": {"generator": "box", "lx": 1.0, "ly": 1.0, "lz": 1.0, "nx": 2, "ny": 2, "nz": 2},
+    "regions": {"boundary": "x == 0 or x == 1 or y == 0 or y == 1 or z == 0 or z == 1",
+                "ends": "x == 0 or x == 1"},
+    "model": {"hypothesis": "3d"},
+    "materials": [{"E": 200.0, "nu": 0.3}],
+    "diffusion": [{"field": "T", "materials": [{"conductivity": 1.0}]}],
+    "thermal_expansion": [{"field": "T", "alpha": 1e-3, "reference": 20.0}],
+}
+CUBE_RELATIONS = UNIFORM + [dirichlet("y0", "ymin", 0.0, components=["y"]),
+                            dirichlet("z0", "zmin", 0.0, components=["z"])]
+
+
+def cube(cell: str, extra: dict) -> str:
+    return scene(CUBE, mesh={"cell": cell}, relations=CUBE_RELATIONS + [extra])
 
 
 @pytest.mark.parametrize("cell", ["hexahedron", "tetra"])
 def test_free_cube_uniform_rise(cell, run):
     """3D: u = α ΔT x, no stress."""
-    res = run(CUBE.format(cell=cell) + dirichlet("x0", "xmin", 0.0, components=["x"]),
-              name=f"cube_{cell}")
+    res = run(cube(cell, dirichlet("x0", "xmin", 0.0, components=["x"])), name=f"cube_{cell}")
     np.testing.assert_allclose(res["fields/displacement"][-1], A * res["mesh/points"], rtol=0,
                                atol=1e-12 * A)
     for sig in stresses(res):
@@ -250,7 +219,7 @@ def test_free_cube_uniform_rise(cell, run):
 
 def test_cube_clamped_in_x(run):
     """3D, u_x = 0 on both x faces, free laterally: σ_xx = −E α ΔT, u_y = (1 + ν) α ΔT y."""
-    res = run(CUBE.format(cell="hexahedron") + dirichlet("ends", "ends", 0.0, components=["x"]),
+    res = run(cube("hexahedron", dirichlet("ends", "ends", 0.0, components=["x"])),
               name="cube_clamped")
     p, u = res["mesh/points"], res["fields/displacement"][-1]
     np.testing.assert_allclose(u[:, 1:], (1 + NU) * A * p[:, 1:], rtol=0, atol=1e-12 * A)
@@ -268,12 +237,12 @@ def test_unsymmetric_declared_and_lu_chosen():
     from parsolve.solvers.setup import make_solver
     from parsolve.solvers.system import SaddleSystem
 
-    text = SCENE.format(nx=2, ny=1, cell="quad", hypothesis="plane_stress", relations=UNIFORM + ROLLERS)
+    text = plate(2, 1, "quad", "plane_stress", UNIFORM + ROLLERS)
     model = build_model(parse_scene(tomllib.loads(text), "t.toml", text), MPI.COMM_WORLD)
     assert not model.symmetric() and [e.name for e in model.effects][-1] == "thermal_expansion"
     system = SaddleSystem(MPI.COMM_WORLD, model)
     assert make_solver(MPI.COMM_WORLD, system, {}).settings["pc_type"] == "lu"
-    without = text.split("[[thermal_expansion]]")[0] + UNIFORM + ROLLERS
+    without = plate(2, 1, "quad", "plane_stress", UNIFORM + ROLLERS, thermal_expansion=DROP)
     assert build_model(parse_scene(tomllib.loads(without), "t.toml", without), MPI.COMM_WORLD).symmetric()
 
 
@@ -304,23 +273,27 @@ def test_shipped_scene(run):
         assert left + right == pytest.approx(0.0, abs=1e-10 * abs(sxx) * height)
 
 
-BAD_BASE = SCENE.format(nx=2, ny=1, cell="quad", hypothesis="plane_stress", relations=UNIFORM + ROLLERS)
+def bad(hypothesis: str = "plane_stress", **overrides) -> str:
+    """The small plate with these overrides (each case one input error)."""
+    return plate(2, 1, "quad", hypothesis, UNIFORM + ROLLERS, **overrides)
+
+
 BAD = {
-    "unknown field": (BAD_BASE.replace('field = "T"\nalpha', 'field = "theta"\nalpha'),
+    "unknown field": (bad(thermal_expansion=[EXPANSION | {"field": "theta"}]),
                       "thermal_expansion[0].field"),
-    "vector field": (BAD_BASE.replace('field = "T"\nalpha', 'field = "u"\nalpha'),
+    "vector field": (bad(thermal_expansion=[EXPANSION | {"field": "u"}]),
                      "thermal_expansion[0].field"),
-    "alpha inf": (BAD_BASE.replace("alpha = 1e-3", "alpha = inf"), "thermal_expansion[0].alpha"),
-    "alpha nan in a region": (BAD_BASE + '[[thermal_expansion.regions]]\nregion = "all"\nalpha = nan\n',
-                              "thermal_expansion[0].regions[0].alpha"),
-    "unknown region": (BAD_BASE.replace("reference = 20.0", 'reference = 20.0\nregion = "nowhere"'),
+    "alpha inf": (bad(thermal_expansion=[EXPANSION | {"alpha": float("inf")}]),
+                  "thermal_expansion[0].alpha"),
+    "alpha nan in a region": (bad(thermal_expansion=[EXPANSION | {"regions": [
+        {"region": "all", "alpha": float("nan")}]}]), "thermal_expansion[0].regions[0].alpha"),
+    "unknown region": (bad(thermal_expansion=[EXPANSION | {"region": "nowhere"}]),
                        "thermal_expansion[0].region"),
-    "nonlinear material": (BAD_BASE.replace("nu = 0.3", 'nu = 0.3\nmodel = "von_mises"\nsigma_y = 1.0\nH = 10.0')
-                           .replace('hypothesis = "plane_stress"', 'hypothesis = "plane_strain"'),
-                           "materials[0].model"),
-    "axisymmetric": (BAD_BASE.replace('hypothesis = "plane_stress"', 'hypothesis = "axisymmetric"')
-                     .replace("thickness = ", "# thickness = "), "model.hypothesis"),
-    "misspelt key": (BAD_BASE.replace("reference = 20.0", "referense = 20.0"),
+    "nonlinear material": (bad(materials=[{"E": 200.0, "nu": 0.3, "model": "von_mises",
+                                           "sigma_y": 1.0, "H": 10.0}],
+                               hypothesis="plane_strain"), "materials[0].model"),
+    "axisymmetric": (bad("axisymmetric"), "model.hypothesis"),
+    "misspelt key": (bad(thermal_expansion=[{"field": "T", "alpha": 1e-3, "referense": 20.0}]),
                      "thermal_expansion[0].referense"),
 }
 
@@ -380,11 +353,9 @@ def test_block_size_does_not_change_the_answer(cell, monkeypatch):
     import parsolve.effects.elasticity as elasticity
     import parsolve.fem.element_matrices as element_matrices
 
-    text = SCENE.format(nx=13, ny=7, cell=cell, hypothesis="plane_strain",
-                        relations=UNIFORM + ROLLERS) \
-        .replace("[model]", '[regions.inner]\nexpr = "x < 0.7"\n[model]', 1) \
-        .replace("reference = 20.0", 'reference = 20.0\n[[thermal_expansion.regions]]\n'
-                 'region = "inner"\nalpha = 4e-3', 1)
+    text = plate(13, 7, cell, "plane_strain", UNIFORM + ROLLERS,
+                 regions={"inner": {"expr": "x < 0.7"}},
+                 thermal_expansion=[EXPANSION | {"regions": [{"region": "inner", "alpha": 4e-3}]}])
     whole = _assembled(text)
     monkeypatch.setattr(element_matrices, "block_cells", lambda *args: 7)
     monkeypatch.setattr(elasticity, "block_cells", lambda *args: 7)
@@ -400,11 +371,10 @@ def test_arc_length_pull_on_a_heated_plate(run):
     loads the steps balance): a heated plate on rollers pulled at its right end by μ P,
     plane stress, unit height and thickness: σ_xx = μ, u_x = (α ΔT + μ / E) x,
     u_y = (α ΔT − ν μ / E) y at every step's load factor μ."""
-    pull = '[[loads]]\nname = "pull"\nregion = "right"\ntotal_force = [1.0, 0.0]\n'
-    text = SCENE.format(nx=4, ny=2, cell="quad", hypothesis="plane_stress",
-                        relations=UNIFORM + ROLLERS + pull)
-    text += '[nonlinear]\nmethod = "arc_length"\narc_length = { pattern = "pull", length = 0.05 }\n' \
-            '[steps]\ncount = 2\n'
+    text = plate(4, 2, "quad", "plane_stress", UNIFORM + ROLLERS,
+                 loads=[{"name": "pull", "region": "right", "total_force": [1.0, 0.0]}],
+                 nonlinear={"method": "arc_length", "arc_length": {"pattern": "pull", "length": 0.05}},
+                 steps={"count": 2})
     res = run(text, name="arc_heated")
     assert res["attrs"]["status"] == "complete"
     mu = res["steps/time"]

@@ -5,20 +5,23 @@ import os
 import subprocess
 import sys
 import time
+import tomllib
 
 import h5py
 import numpy as np
 import pytest
 
 from conftest import ROOT
+from helpers.scene import scene as build
 from helpers.xdmf import SCENE_2D
 
 pytestmark = pytest.mark.serial  # each test starts its own ranks
 
 ENV = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "OPAL_"))}
 MPIRUN = ["bash", str(ROOT / "scripts" / "mpirun.sh"), "-n"]
-BIG = (SCENE_2D.replace("nx = 8", "nx = 60").replace("ny = 4", "ny = 30")
-       .replace("count = 3", "count = 200"))   # ~180 kB a step: a 3 MB disk fills at step 11
+SMALL = tomllib.loads(SCENE_2D)   # 8 × 4 cells, 3 steps
+BIG = build(SMALL, mesh={"nx": 60, "ny": 30}, steps={"count": 200})   # ~180 kB a step: a 3 MB disk fills at step 11
+BIG_60 = build(SMALL, mesh={"nx": 60, "ny": 30}, steps={"count": 60})
 
 
 SLOW = """
@@ -108,7 +111,7 @@ def test_a_second_run_on_the_same_output_is_refused(ranks, tmp_path):
     import meshio
 
     scene, out = tmp_path / "big.toml", tmp_path / "out.h5"
-    scene.write_text(BIG.replace("count = 200", "count = 60"))
+    scene.write_text(BIG_60)
     first = launch(ranks, ["run", str(scene), "-o", str(out)], wait=False, slow=True)
     xdmf, deadline = out.with_suffix(".xdmf"), time.time() + 120
     while time.time() < deadline and not (

@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 import time
+import tomllib
 
 import h5py
 import numpy as np
@@ -16,6 +17,7 @@ import pytest
 from mpi4py import MPI
 
 from conftest import CONFIGS, ROOT
+from helpers.scene import scene as build, shipped
 from helpers.xdmf import SCENE_2D, SCENE_3D, meshio_reads_every_step, vtk_reads_every_step
 from parsolve import driver
 from parsolve.errors import Interrupted, OutputError
@@ -26,8 +28,10 @@ from parsolve.mesh.generators import rectangle
 from parsolve.model import build_model
 from parsolve.scene import load_scene
 
-SOLUBILITY = (CONFIGS / "solubility_grow_shrink.toml").read_text().replace("count = 100", "count = 6")
+SOLUBILITY = build(shipped("solubility_grow_shrink.toml"), steps={"count": 6})
 CONTACT = (CONFIGS / "contact_block_friction.toml").read_text()
+BASE_2D = tomllib.loads(SCENE_2D)
+FIVE_STEPS_2D = build(BASE_2D, steps={"count": 5})   # SCENE_2D has 3
 
 
 def datasets(path) -> dict:
@@ -145,7 +149,7 @@ def test_disk_full_exits_4_and_keeps_the_finished_steps(shared_tmp, monkeypatch)
     monkeypatch.setattr(sys, "excepthook", sys.excepthook)  # main sets its own under MPI
     scene, out = shared_tmp / "full.toml", shared_tmp / "full.h5"
     if MPI.COMM_WORLD.rank == 0:
-        scene.write_text(SCENE_2D.replace("count = 3", "count = 5"))
+        scene.write_text(FIVE_STEPS_2D)
     MPI.COMM_WORLD.Barrier()
     assert main(["run", str(scene), "-o", str(out), "--output-mode", "parallel"]) == 4
     MPI.COMM_WORLD.Barrier()
@@ -187,7 +191,7 @@ def test_interrupted_status(shared_tmp, monkeypatch):
     monkeypatch.setattr(sys, "excepthook", sys.excepthook)
     scene, out = shared_tmp / "stop.toml", shared_tmp / "stop.h5"
     if MPI.COMM_WORLD.rank == 0:
-        scene.write_text(SCENE_2D.replace("count = 3", "count = 5"))
+        scene.write_text(FIVE_STEPS_2D)
     MPI.COMM_WORLD.Barrier()
     assert main(["run", str(scene), "-o", str(out), "--output-mode", "parallel"]) == 143
     MPI.COMM_WORLD.Barrier()
@@ -243,7 +247,7 @@ def test_killed_between_steps_leaves_a_plain_readable_file(ranks, tmp_path):
     import meshio
 
     scene, out = tmp_path / "s.toml", tmp_path / "s.h5"
-    scene.write_text(SCENE_2D.replace("count = 3", "count = 5"))
+    scene.write_text(FIVE_STEPS_2D)
     proc = _launch(ranks, ["-c", DYING, "run", str(scene), "-o", str(out), "--output-mode", "parallel"])
     assert proc.returncode == 7, proc.stderr
     _check_two_linear_steps(out, "running", [0.2, 0.4])
@@ -266,8 +270,7 @@ def test_killed_between_steps_leaves_a_plain_readable_file(ranks, tmp_path):
 def test_sigterm_stops_a_parallel_run(ranks, tmp_path):
     """SIGTERM to every rank in the middle of a long run: exit 143, status "interrupted: SIGTERM" written by rank 0, whole steps only."""
     scene, out = tmp_path / "long.toml", tmp_path / "long.h5"
-    scene.write_text((CONFIGS / "solubility_grow_shrink.toml").read_text()
-                     .replace("count = 100", "count = 4000").replace("end = 2.0", "end = 80.0"))
+    scene.write_text(build(shipped("solubility_grow_shrink.toml"), steps={"count": 4000, "end": 80.0}))
     proc = _launch(ranks, ["-m", "parsolve", "run", str(scene), "-o", str(out),
                            "--output-mode", "parallel"], wait=False)
     xdmf, deadline = out.with_suffix(".xdmf"), time.time() + 120
@@ -367,15 +370,13 @@ def test_owned_rows_make_the_same_file_as_whole_arrays(cls, shared_tmp):
 
 def test_output_mode_from_the_scene():
     """[output] mode in the scene: read and checked (exit 2 naming output.mode on a bad one)."""
-    import tomllib
-
     from parsolve.errors import InputError
     from parsolve.scene import parse_scene
 
-    text = SCENE_2D + '\n[output]\nmode = "parallel"\n'
+    text = build(BASE_2D, output={"mode": "parallel"})
     assert parse_scene(tomllib.loads(text), "s.toml", text).output_mode == "parallel"
     assert parse_scene(tomllib.loads(SCENE_2D), "s.toml", SCENE_2D).output_mode is None
-    bad = text.replace('"parallel"', '"parralel"')
+    bad = build(BASE_2D, output={"mode": "parralel"})
     with pytest.raises(InputError) as err:
         parse_scene(tomllib.loads(bad), "s.toml", bad)
     assert err.value.key == "output.mode" and err.value.source == "s.toml"

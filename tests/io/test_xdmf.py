@@ -1,10 +1,13 @@
 """XDMF beside a result, read by meshio and by VTK's XDMF reader (issue 6 §7), and the size of
 result files (§3): runs through the real driver, on any number of ranks."""
 
+import tomllib
+
 import h5py
 import numpy as np
 import pytest
 
+from helpers.scene import scene
 from helpers.xdmf import SCENE_2D, SCENE_3D, meshio_reads_every_step, tensor6, vtk_reads_every_step
 from parsolve.io.xdmf import TENSOR6_FROM_VOIGT
 
@@ -57,8 +60,7 @@ def data_bytes(path) -> int:
 
 @pytest.mark.parametrize("nx, ny", [(30, 15), (120, 60)])
 def test_one_step_file_within_1_5_times_its_data(run, nx, ny):
-    text = SCENE_2D.replace("nx = 8", f"nx = {nx}").replace("ny = 4", f"ny = {ny}") \
-                   .replace("count = 3", "count = 1")
+    text = scene(tomllib.loads(SCENE_2D), mesh={"nx": nx, "ny": ny}, steps={"count": 1})
     run(text)
     size = run.last.stat().st_size
     ratio = size / data_bytes(run.last)

@@ -5,11 +5,11 @@ are those of the one rank alone."""
 import pytest
 from mpi4py import MPI
 
-from conftest import CONFIGS, assert_same_results, run_scene
+from conftest import assert_same_results, run_scene
+from helpers.scene import scene, shipped
 
 # the gas-solubility scene on two triangles: a relation of per-node groups, transient fields
-SOLUBILITY_PAIR = (CONFIGS / "solubility_well_mixed.toml").read_text().replace(
-    "nx = 4", "nx = 1").replace("ny = 4", "ny = 1")
+SOLUBILITY_PAIR = scene(shipped("solubility_well_mixed.toml"), mesh={"nx": 1, "ny": 1})
 
 PLASTIC_PAIR = """
 [mesh]

@@ -251,11 +251,12 @@ def test_mumps_workspace_is_raised_when_too_small(run):
     """The solubility strip at 320 cells delays enough pivots to overflow MUMPS' workspace
     (here with no margin at all; the default 50 % overflows too): INFOG(1) = -9, the
     factorization is redone with a larger margin, the run completes and the file says so."""
-    from conftest import CONFIGS
+    from helpers.scene import scene, shipped
 
-    text = (CONFIGS / "solubility_grow_shrink.toml").read_text().replace("nx = 80", "nx = 320") \
-        .replace("count = 100", "count = 10").replace("end = 2.0", "end = 0.2") \
-        .replace("[time]", "[solver.petsc]\nmat_mumps_icntl_14 = 0   # no margin for delayed pivots\n[time]")
+    base = shipped("solubility_grow_shrink.toml")
+    assert base["mesh"]["nx"] == 80 and "solver" not in base
+    text = scene(base, mesh={"nx": 320}, steps={"count": 10, "end": 0.2},
+                 solver={"petsc": {"mat_mumps_icntl_14": 0}})   # no margin for delayed pivots
     res = run(text, name="workspace")
     assert res["attrs"]["status"] == "complete"
     assert "MUMPS workspace too small: margin raised" in res["attrs"].get("warnings", "")

@@ -11,6 +11,9 @@ from mpi4py import MPI
 
 from conftest import dense, saddle_of_input_dofs
 from helpers.control import VON_MISES
+from helpers.scene import scene
+
+BAR = tomllib.loads(VON_MISES)   # nx = 5
 
 
 def tangent_after(comm, text: str, steps: int) -> np.ndarray:
@@ -35,7 +38,7 @@ def tangent_after(comm, text: str, steps: int) -> np.ndarray:
 
 @pytest.mark.parametrize("nx", [4, 5, 7])
 def test_von_mises_tangent_is_the_same_on_every_partition(nx):
-    text = VON_MISES.replace("nx = 5", f"nx = {nx}")
+    text = scene(BAR, mesh={"nx": nx})
     world = tangent_after(MPI.COMM_WORLD, text, 4)   # yielded at step 3: points on the surface
     alone = tangent_after(MPI.COMM_SELF, text, 4)
     scale = np.abs(alone).max()
@@ -46,7 +49,7 @@ def test_von_mises_tangent_is_the_same_on_every_partition(nx):
 @pytest.mark.parametrize("nx", [4, 5, 7])
 def test_von_mises_bar_on_several_meshes(nx, run):
     """The bar that failed at 3 ranks with nx = 4, 5, 7: complete, on the bilinear curve."""
-    res = run(VON_MISES.replace("nx = 5", f"nx = {nx}"), name=f"vm{nx}")
+    res = run(scene(BAR, mesh={"nx": nx}), name=f"vm{nx}")
     eps = 4e-3 * res["steps/time"]
     Et = 200e3 * 2e3 / (200e3 + 2e3)
     sigma = np.where(eps < 250 / 200e3, 200e3 * eps, 250 + Et * (eps - 250 / 200e3))

@@ -5,15 +5,19 @@ converge."""
 
 from __future__ import annotations
 
+import tomllib
+
 import numpy as np
 
 from helpers.control import VON_MISES
+from helpers.scene import scene
 from parsolve.solvers.newton import ROUNDOFF
 
 # the von Mises box of test_control, both ends moved by 1e-3 along x: a rigid translation
-TRANSLATED = VON_MISES.replace('components = ["x"]\n[[relations]]\nname = "sym_y"',
-                               'components = ["x"]\nvalue = 1e-3\n[[relations]]\nname = "sym_y"'
-                               ).replace("value = 4e-3", "value = 1e-3").replace("count = 8", "count = 3")
+_BOX = tomllib.loads(VON_MISES)
+assert [r.get("value") for r in _BOX["relations"] if r["name"] in ("sym_x", "pull")] == [None, 4e-3]
+TRANSLATED = scene(_BOX, steps={"count": 3}, relations=[
+    r | {"value": 1e-3} if r["name"] in ("sym_x", "pull") else r for r in _BOX["relations"]])
 
 APPROACH = """
 [mesh]

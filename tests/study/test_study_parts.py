@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from conftest import CONFIGS
+from helpers.scene import DROP, merge, shipped, write_scene
 from parsolve.errors import InputError
 from parsolve.study.config import load_study
 from parsolve.study.convergence import error, observed_orders, richardson
@@ -13,32 +14,25 @@ from parsolve.study.expression import evaluate_expression
 from parsolve.study.grid import expand
 from parsolve.study.pareto import cheapest, pareto_front
 
-STUDY = """
-title = "bar"
-scene = "{scene}"
-[refine]
-keys = ["mesh.nx", "mesh.ny"]
-levels = [1, 2, 4]
-[vary]
-"mesh.cell" = ["quad", "triangle"]
-"solver.preset" = ["direct"]
-[[quantities]]
-name = "force"
-spec = "relation:control:multiplier"
-reference = "1e9 * 0.1 * 1e-4 / 1"
-[reduced]
-"refine.levels" = [1, 2]
-"""
+STUDY = {
+    "title": "bar",
+    "scene": str(CONFIGS / "controlled_bar.toml"),
+    "refine": {"keys": ["mesh.nx", "mesh.ny"], "levels": [1, 2, 4]},
+    "vary": {"mesh.cell": ["quad", "triangle"], "solver.preset": ["direct"]},
+    "quantities": [{"name": "force", "spec": "relation:control:multiplier",
+                    "reference": "1e9 * 0.1 * 1e-4 / 1"}],
+    "reduced": {"refine.levels": [1, 2]},
+}
+FORCE = STUDY["quantities"][0]
 
 
-def write(tmp_path, text, name="study.toml"):
-    path = tmp_path / name
-    path.write_text(text.replace("{scene}", str(CONFIGS / "controlled_bar.toml")))
-    return path
+def write(tmp_path, name="study.toml", **overrides):
+    """The study file (STUDY with these overrides) in tmp_path."""
+    return write_scene(tmp_path / name, STUDY, **overrides)
 
 
 def test_grid_multiplies_the_base_values_per_family(tmp_path):
-    study = load_study(write(tmp_path, STUDY))
+    study = load_study(write(tmp_path))
     assert study.quantities[0].reference == pytest.approx(1e4, rel=1e-15)
     settings = expand(study)
     assert [(s.family, s.label) for s in settings] == [
@@ -49,20 +43,20 @@ def test_grid_multiplies_the_base_values_per_family(tmp_path):
     assert 'cell = "triangle"' in settings[4].scene_text and "nx = 58" in settings[4].scene_text
     assert 'preset = "direct"' in settings[4].scene_text
     assert len({s.name for s in settings}) == 6
-    reduced = load_study(write(tmp_path, STUDY), reduced=True)
+    reduced = load_study(write(tmp_path), reduced=True)
     assert reduced.levels == [1, 2]
 
 
 @pytest.mark.parametrize("change, key, message", [
-    (('levels = [1, 2, 4]', 'levels = [1, 2, 4]\nlevles = 3'), "refine.levles", "unknown key"),
-    (('"solver.preset"', '"solver.presett"'), "vary", "solver.presett: unknown key"),
-    (('"mesh.nx", "mesh.ny"', '"mesh.nz"'), "refine.keys", "'mesh.nz' does not exist in the scene"),
-    (('"mesh.cell" = ["quad", "triangle"]', '"materials[3].E" = [1.0]'), "vary", "materials[3] does not exist"),
-    (('reference = "1e9 * 0.1 * 1e-4 / 1"', 'reference = "__import__(1)"'), "quantities[0].reference", "expected a number"),
-    (('error', 'error'), None, None),
+    ({"refine": {"levles": 3}}, "refine.levles", "unknown key"),
+    ({"vary": {"solver.preset": DROP, "solver.presett": ["direct"]}}, "vary", "solver.presett: unknown key"),
+    ({"refine": {"keys": ["mesh.nz"]}}, "refine.keys", "'mesh.nz' does not exist in the scene"),
+    ({"vary": {"mesh.cell": DROP, "materials[3].E": [1.0]}}, "vary", "materials[3] does not exist"),
+    ({"quantities": [FORCE | {"reference": "__import__(1)"}]}, "quantities[0].reference", "expected a number"),
+    ({}, None, None),
 ])
 def test_bad_study_files_name_file_and_key(tmp_path, change, key, message):
-    path = write(tmp_path, STUDY.replace(*change))
+    path = write(tmp_path, **change)
     if key is None:
         expand(load_study(path))
         return
@@ -75,7 +69,7 @@ def test_bad_study_files_name_file_and_key(tmp_path, change, key, message):
 def test_quantity_naming_a_missing_relation(tmp_path):
     from parsolve.study.execute import check_quantities
 
-    path = write(tmp_path, STUDY.replace("relation:control:", "relation:contrl:"))
+    path = write(tmp_path, quantities=[FORCE | {"spec": "relation:contrl:multiplier"}])
     study = load_study(path)
     with pytest.raises(InputError) as exc:
         check_quantities(study, expand(study))
@@ -131,13 +125,17 @@ def test_refinement_by_mesh_files(tmp_path):
     for n in (2, 4):
         m = rectangle(lx=1.0, ly=1.0, nx=n, ny=n, cell="triangle")
         meshio.write(tmp_path / f"m{n}.vtu", meshio.Mesh(m.points, [("triangle", m.cells)]))
-    scene = (CONFIGS / "controlled_bar.toml").read_text()
-    (tmp_path / "scene.toml").write_text(scene.replace(
-        'generator = "rectangle"\nlx = 1.0\nly = 0.1\nnx = 29\nny = 3\ncell = "quad"', 'file = "m2.vtu"')
-        .replace('region = "right"', 'region = "rightside"').replace('region = "left"', 'region = "leftside"')
-        + '\n[regions]\nrightside = "x == 1"\nleftside = "x == 0"\ncorner = { point = [0.0, 0.0] }\n')
-    (tmp_path / "scene.toml").write_text((tmp_path / "scene.toml").read_text().replace(
-        "[regions]\ncorner = { point = [0.0, 0.0] }\n", "", 1))
+    # the controlled bar on the mesh file, its sides named regions (a file has no left/right)
+    base = shipped("controlled_bar.toml")
+    side = {"right": "rightside", "left": "leftside"}
+
+    def renamed(entries):
+        return [e | {"region": side.get(e["region"], e["region"])} for e in entries]
+
+    without_mesh = merge(base, {"mesh": DROP})
+    write_scene(tmp_path / "scene.toml", without_mesh, mesh={"file": "m2.vtu"},
+                regions={"rightside": "x == 1", "leftside": "x == 0"},
+                loads=renamed(base["loads"]), relations=renamed(base["relations"]))
     (tmp_path / "study.toml").write_text("""
 scene = "scene.toml"
 [refine]
