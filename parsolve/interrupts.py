@@ -20,6 +20,7 @@ them, and a batch system can send them itself (``scancel --signal=USR2``, ``sbat
 
 from __future__ import annotations
 
+import os
 import signal
 from contextlib import contextmanager
 
@@ -52,6 +53,7 @@ def interruptible(comm: MPI.Comm = MPI.COMM_WORLD):
         if comm.size == 1:
             raise _interrupted(signum)
         _pending = signum
+        _drop_progress()
 
     previous = {s: signal.signal(s, handler) for s in SIGNALS}
     try:
@@ -60,6 +62,19 @@ def interruptible(comm: MPI.Comm = MPI.COMM_WORLD):
         _pending = 0
         for s, h in previous.items():
             signal.signal(s, h)
+
+
+def _drop_progress() -> None:
+    """Progress lines after a signal go to /dev/null. An mpirun that got SIGTERM stops reading
+    the ranks' stdout before it relays the signal: a rank blocked writing a progress line into
+    the full pipe never reached the step's end and was SIGKILLed with its file open (seen: a
+    fast scene, 5 ms steps). The retried write now succeeds; the final message is on stderr."""
+    try:
+        fd = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(fd, 1)
+        os.close(fd)
+    except OSError:
+        pass
 
 
 def check(comm: MPI.Comm) -> None:
