@@ -66,7 +66,7 @@ def unsupported(model) -> list[str]:
     size. Collective."""
     comm, mesh, fields = model.comm, model.mesh, model.fields
     if model.transient:  # a capacity holds a scalar field; only displacements can float
-        checked = [f for f in fields if f.name == "u"]
+        checked = [f for f in fields if f.displacement]
     else:
         checked = list(fields)
     label = bodies_distributed(comm, mesh)

@@ -21,6 +21,8 @@ class Field:
     name: str                      # name in the scene (relations, loads): "u", "h", "c_s"
     components: tuple[str, ...]    # ("x", "y") for a 2D vector, ("",) for a scalar
     output: str                    # name of /fields/<output> in the result file
+    # a displacement: rigid-body modes are its null space, and no capacity holds it in time
+    displacement: bool = False
 
     @property
     def ncomp(self) -> int:

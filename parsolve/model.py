@@ -136,16 +136,16 @@ def build_effects(scene: Scene, mesh: LocalMesh, regions: RegionResolver) -> tup
     """The effects the scene lists, in registry order: the physics first (they declare the
     fields), then the couplings that need the fields (solubility)."""
     effects: list[Effect] = []
-    if scene.materials:
-        effects.append(Elasticity(mesh, scene.hypothesis, scene.thickness, scene.materials,
-                                  regions, scene.source))
     ctx = BuildContext(scene, mesh, regions)
     for coupling in (False, True):
         if coupling:
             ctx.fields = FieldSet([f for e in effects for f in e.fields()])
         for name, entry in EFFECTS.items():
-            if entry.coupling == coupling:
-                effects += [entry.build(spec, ctx) for spec in scene.effect_specs.get(name, [])]
+            specs = scene.effect_specs.get(name, [])
+            if entry.coupling != coupling or not specs:
+                continue
+            effects += [entry.build(specs, ctx)] if entry.whole else \
+                [entry.build(spec, ctx) for spec in specs]
     _check_output_names(effects, scene.source)
     return effects, ctx.fields
 

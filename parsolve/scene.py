@@ -27,12 +27,6 @@ STRAIN_COMPONENTS = {"xx": (0, 0), "yy": (1, 1), "zz": (2, 2), "xy": (0, 1), "yz
 PRESETS = ("direct", "iterative")
 PARTITIONERS = ("scotch", "bisection")   # parsolve.mesh.partition.PARTITIONERS
 DEFAULT_PARTITIONER = "scotch"
-MATERIAL_MODELS = {
-    "elastic": (("E", "nu"), {}),
-    "mazars": (("E", "nu", "eps_d0", "At", "Bt", "Ac", "Bc"), {"beta": 1.06}),
-    "von_mises": (("E", "nu", "sigma_y", "H"), {}),
-}
-NONLINEAR_MODELS = ("mazars", "von_mises")
 # Numbers beyond these magnitudes are not physical in any system of units, and their products
 # (stiffness = E × lengths^d, forces × lengths) overflow or underflow double precision.
 MAX_MAGNITUDE = 1e50
@@ -141,14 +135,6 @@ class RegionSpec:
 
 
 @dataclass
-class MaterialSpec:
-    region: str
-    model: str
-    params: dict
-    key: str
-
-
-@dataclass
 class LoadSpec:
     pattern: str
     region: str
@@ -156,7 +142,7 @@ class LoadSpec:
     vector: list[float]
     evolution: str
     key: str
-    field: str = "u"
+    field: str          # the field it loads
 
 
 @dataclass
@@ -165,7 +151,7 @@ class TermSpec:
     component: int
     coefficient: float
     mean: bool
-    field: str = "u"
+    field: str
 
 
 @dataclass
@@ -184,7 +170,7 @@ class RelationSpec:
     direction: list[float] | None = None   # strain: unit vector n of n·ε·n
     per_cell: bool = False                 # strain: one row per cell of the region
     maximum: bool = False                  # unilateral rows of which the largest is enforced
-    field: str = "u"                       # the field the relation constrains
+    field: str = ""                        # the field the relation constrains (always given)
     report: bool = False                   # print its resultant with each step's progress line
     target: str | None = None              # periodic: the region tied to ``region``
     translation: list[float] | None = None  # periodic: target node = region node + this
@@ -242,7 +228,6 @@ class Scene:
     hypothesis: str
     thickness: Any   # float, or fem.axisymmetric.Axisymmetric (2π r) for "axisymmetric"
     regions: dict[str, RegionSpec]
-    materials: list[MaterialSpec]
     evolutions: dict[str, Evolution]
     loads: list[LoadSpec]
     relations: list[RelationSpec]
@@ -266,7 +251,13 @@ class Scene:
     @property
     def fields(self) -> dict[str, int]:
         """Field name -> number of components, as the effects will declare them."""
-        return _declared_fields(bool(self.materials), self.effect_specs, self.dim)
+        return _declared_fields(self.effect_specs, self.dim)
+
+    @property
+    def materials(self) -> list:
+        """The [[materials]] entries (the elasticity's specs; none without elasticity)."""
+        specs = self.effect_specs
+        return specs["elasticity"] if "elasticity" in specs else []
 
 
 # ---------------------------------------------------------------- parsing
@@ -312,8 +303,9 @@ def parse_scene(data: dict, source: str, text: str = "", base: Path = Path("."))
     title = top.get("title", str, "")
     mesh = _mesh(top.table("mesh"), base)
     model = top.table("model")
-    materials = [_material(t) for t in top.tables("materials")]
-    hypothesis = model.get("hypothesis", str, ... if materials else None, choices=HYPOTHESES)
+    # the mechanics needs a hypothesis (its entries say so); other physics may go without
+    needed = any(e.hypothesis and top.has(e.section) for e in _registry().values())
+    hypothesis = model.get("hypothesis", str, ... if needed else None, choices=HYPOTHESES)
     dimension = model.get("dimension", int, 3 if hypothesis == "3d" else 2, choices=(2, 3))
     if hypothesis == "axisymmetric" and model.has("thickness"):
         raise model.error("thickness", "an axisymmetric model has no thickness (its measure "
@@ -328,13 +320,14 @@ def parse_scene(data: dict, source: str, text: str = "", base: Path = Path("."))
     evolutions = _evolutions(top.table("evolutions", {}))
     dim = dimension if hypothesis is None else 3 if hypothesis == "3d" else 2
     effect_specs = _effect_specs(top, dim)
-    if not materials and not effect_specs:
-        raise InputError("nothing to simulate: give [[materials]] (elasticity) or a physics "
-                         "section (" + ", ".join(f"[{e}]" for e in _registry()) + ")", source,
-                         "materials")
-    fields = _declared_fields(bool(materials), effect_specs, dim)
-    loads = [_load(t, dim, fields) for t in top.tables("loads")]
-    relations = [_relation(t, dim, fields) for t in top.tables("relations")]
+    if not effect_specs:
+        raise InputError("nothing to simulate: give a physics section (" + ", ".join(
+            f"[{e.section}] ({name})" for name, e in _registry().items()) + ")", source,
+            "materials")
+    fields = _declared_fields(effect_specs, dim)
+    primary = _primary_field(effect_specs, dim)
+    loads = [_load(t, dim, fields, primary) for t in top.tables("loads")]
+    relations = [_relation(t, dim, fields, primary) for t in top.tables("relations")]
     time_spec = _time(top.table("time", None))
     if time_spec is not None and not top.has("steps"):
         raise InputError("a transient scene needs its time steps ([steps] times or count/end)",
@@ -347,8 +340,7 @@ def parse_scene(data: dict, source: str, text: str = "", base: Path = Path("."))
     output_mode = out.get("mode", str, None, choices=("swmr", "parallel", "auto"))
     out.done()
     top.done()
-    scene = Scene(source, text, title, mesh, hypothesis, thickness, regions, materials,
-                  evolutions, loads, relations, steps.times, solver, output, nonlinear, steps,
+    scene = Scene(source, text, title, mesh, hypothesis, thickness, regions, evolutions, loads, relations, steps.times, solver, output, nonlinear, steps,
                   effect_specs=effect_specs, time=time_spec, dimension=dim,
                   output_mode=output_mode)
     _cross_check(scene)
@@ -418,35 +410,15 @@ def _evolutions(t: Table) -> dict[str, Evolution]:
     return evols
 
 
-def _material(t: Table) -> MaterialSpec:
-    region = t.get("region", str, "all")
-    model = t.get("model", str, "elastic", choices=tuple(MATERIAL_MODELS))
-    required, optional = MATERIAL_MODELS[model]
-    params = {p: t.get(p, float) for p in required}
-    params.update({p: t.get(p, float, default) for p, default in optional.items()})
-    for p in ("eps_d0", "sigma_y", "beta"):
-        if p in params and params[p] <= 0:
-            raise t.error(p, "must be positive")
-    for p in ("Bt", "Bc", "H"):
-        if p in params and params[p] < 0:
-            raise t.error(p, "must not be negative")
-    if params.get("E", 1.0) <= 0:
-        raise t.error("E", "must be positive")
-    if not -1.0 < params.get("nu", 0.0) < 0.5:
-        raise t.error("nu", "must lie in (-1, 0.5)")
-    t.done()
-    return MaterialSpec(region, model, params, t.path)
-
-
-def _field(t: Table, fields: dict[str, int]) -> str:
-    """The field a relation, term or load addresses: 'field', else the mechanical one, else
-    the only one."""
-    if t.has("field") or "u" not in fields and len(fields) != 1:
+def _field(t: Table, fields: dict[str, int], primary: str | None) -> str:
+    """The field a relation, term or load addresses: 'field', else the primary one (the
+    displacement), else the only one."""
+    if t.has("field") or primary is None and len(fields) != 1:
         name = t.get("field", str)
         if name not in fields:
             raise t.error("field", f"unknown field {name!r} (fields: {', '.join(fields)})")
         return name
-    return "u" if "u" in fields else next(iter(fields))
+    return primary if primary is not None else next(iter(fields))
 
 
 def _field_component(t: Table, name: str, dim: int, field: str, fields: dict[str, int]) -> int:
@@ -481,11 +453,11 @@ def _name(t: Table, default: Any = ...) -> str:
 SCALAR_LOADS = {"flux": "traction", "source": "body", "total_flux": "total_force", "nodal": "nodal"}
 
 
-def _load(t: Table, dim: int, fields: dict[str, int]) -> LoadSpec:
+def _load(t: Table, dim: int, fields: dict[str, int], primary: str | None) -> LoadSpec:
     pattern = _name(t, "loads")
-    field = _field(t, fields)
+    field = _field(t, fields, primary)
     ncomp = fields[field]
-    names = tuple(SCALAR_LOADS) if ncomp == 1 and field != "u" else \
+    names = tuple(SCALAR_LOADS) if ncomp == 1 else \
         ("traction", "total_force", "body", "nodal")
     kinds = [k for k in names if t.has(k)]
     if len(kinds) != 1:
@@ -501,10 +473,10 @@ def _load(t: Table, dim: int, fields: dict[str, int]) -> LoadSpec:
     return LoadSpec(pattern, region, kind, vector, evolution, t.path, field)
 
 
-def _relation(t: Table, dim: int, fields: dict[str, int]) -> RelationSpec:
+def _relation(t: Table, dim: int, fields: dict[str, int], primary: str | None) -> RelationSpec:
     name = _name(t)
     rtype = t.get("type", str, choices=RELATION_TYPES)
-    field = _field(t, fields)
+    field = _field(t, fields, primary)
     region, comps, terms, direction = None, [], [], None
     if rtype in ("dirichlet", "periodic"):
         region = t.get("region", str)
@@ -528,19 +500,19 @@ def _relation(t: Table, dim: int, fields: dict[str, int]) -> RelationSpec:
         if minus is not None:
             if rtype == "equal":
                 raise t.error("minus", "only a 'mean' relation takes 'minus'")
-            mfield = _field(minus, fields) if minus.has("field") else field
+            mfield = _field(minus, fields, primary) if minus.has("field") else field
             terms.append(TermSpec(minus.get("region", str),
                                   _field_component(minus, "component", dim, mfield, fields),
                                   -1.0, True, mfield))
             minus.done()
     elif rtype == "strain":
-        if field != "u":
+        if field != primary:
             raise t.error("type", "a strain relation constrains the displacement field")
         region = t.get("region", str)
         direction = _strain_direction(t, dim)
     else:
         for sub in t.tables("terms"):
-            tfield = _field(sub, fields) if sub.has("field") else field
+            tfield = _field(sub, fields, primary) if sub.has("field") else field
             terms.append(TermSpec(sub.get("region", str),
                                   _field_component(sub, "component", dim, tfield, fields),
                                   sub.get("coefficient", float, 1.0), sub.get("mean", bool, False),
@@ -594,14 +566,28 @@ def _strain_direction(t: Table, dim: int) -> list[float]:
     raise t.error("component", "shear components are controlled through 'direction'")
 
 
-def _declared_fields(elastic: bool, effect_specs: dict, dim: int) -> dict[str, int]:
-    """Field name -> components: the displacement of [[materials]], then what each listed
-    effect declares (its registry entry says)."""
-    out = {"u": dim} if elastic else {}
+def _declared_fields(effect_specs: dict, dim: int) -> dict[str, int]:
+    """Field name -> components, as each listed effect declares them (its registry entry
+    says), in the registry's order."""
+    out = {}
     for name, specs in effect_specs.items():
-        for spec in specs:
+        for spec in _declaring(name, specs):
             out |= _registry()[name].fields(spec, dim)
     return out
+
+
+def _declaring(name: str, specs: list) -> list:
+    """The specs that declare fields: each entry's, or the first one's when one effect takes
+    the whole section (every [[materials]] entry is the same displacement)."""
+    return specs[:1] if _registry()[name].whole else specs
+
+
+def _primary_field(effect_specs: dict, dim: int) -> str | None:
+    """The field loads and relations address without a ``field`` key (the displacement)."""
+    for name, specs in effect_specs.items():
+        if _registry()[name].primary:
+            return next(iter(_registry()[name].fields(specs[0], dim)))
+    return None
 
 
 def _registry() -> dict:
@@ -618,9 +604,9 @@ def _effect_specs(top: Table, dim: int) -> dict[str, list]:
             continue
         tables = top.tables(entry.section) if entry.array else [top.table(entry.section)]
         specs[name] = [entry.parse(t, dim) for t in tables]
-    seen = {"u"}   # the displacement of [[materials]]
+    seen = set()
     for name, entry_specs in specs.items():
-        for spec in entry_specs:
+        for spec in _declaring(name, entry_specs):
             for field_name in _registry()[name].fields(spec, dim):
                 if field_name in seen:
                     raise InputError(f"field {field_name!r} is declared twice", top.source,
@@ -782,8 +768,6 @@ def _cross_check(scene: Scene) -> None:
             if not _generator_group(scene, name):
                 raise InputError(f"unknown region {name!r}", src, key)
 
-    for m in scene.materials:
-        region(m.region, m.key + ".region")
     for name, specs in scene.effect_specs.items():
         entry = _registry()[name]
         for spec in specs:
@@ -825,8 +809,7 @@ def _generator_group(scene: Scene, name: str) -> bool:
 
 def _effects(scene: Scene) -> list[str]:
     """The effects the scene calls for; only these are built and iterated."""
-    effects = ["elasticity"] if scene.materials else []
-    effects += list(scene.effect_specs)
+    effects = list(scene.effect_specs)
     if scene.time is not None:
         effects.append("transient")
     if scene.loads:
@@ -837,6 +820,6 @@ def _effects(scene: Scene) -> list[str]:
         effects.append("control")
     if any(r.sense != "=" for r in scene.relations):
         effects.append("unilateral")
-    if any(m.model in NONLINEAR_MODELS for m in scene.materials):
-        effects.append("nonlinear material")
+    for name, specs in scene.effect_specs.items():   # e.g. "nonlinear material"
+        effects += _registry()[name].labels(specs)
     return effects

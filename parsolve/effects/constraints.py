@@ -94,7 +94,7 @@ def _one(spec, regions, evolutions, fields, source: str) -> rel.Relation:
 
 
 def strain_rows(mesh, cells: np.ndarray, direction: np.ndarray, thickness: float = 1.0,
-                fields=None):
+                fields=None, field: str | None = None):
     """Per cell: DOFs (nc, nen·d) and coefficients of the mean of n·ε·n over the cell, and the
     cell volumes."""
     geo = kernels.CellGeometry(mesh.points[mesh.cells[cells]], mesh.cell_type, thickness=thickness)
@@ -109,8 +109,8 @@ def strain_rows(mesh, cells: np.ndarray, direction: np.ndarray, thickness: float
     if fields is None:
         return kernels.cell_dofs(mesh.cells[cells], mesh.dim), coefs, vol
     nodes = mesh.cells[cells]   # (none on a rank's part that holds none of the region)
-    width = nodes.shape[1] * fields["u"].ncomp
-    return fields.dofs("u", nodes.ravel()).reshape(len(cells), width), coefs, vol
+    width = nodes.shape[1] * fields[field].ncomp
+    return fields.dofs(field, nodes.ravel()).reshape(len(cells), width), coefs, vol
 
 
 def _strain(spec, regions, evol, source: str, fields) -> rel.Relation:
@@ -119,7 +119,8 @@ def _strain(spec, regions, evol, source: str, fields) -> rel.Relation:
     if regions.cell_count(region.cells) == 0:
         raise InputError(f"region {spec.region!r} contains no cell (a strain needs cells)",
                          source, spec.key + ".region")
-    dofs, coefs, vol = strain_rows(regions.mesh, region.cells, spec.direction, fields=fields)
+    dofs, coefs, vol = strain_rows(regions.mesh, region.cells, spec.direction, fields=fields,
+                                   field=spec.field)
     # (the owned cells' rows of every rank, in input ids)
     cells, dofs, coefs, vol = regions.owned_cell_rows(region.cells, fields.ncomp, dofs, coefs,
                                                         vol)

@@ -4,6 +4,8 @@ outputs."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from parsolve.effects.base import Effect
@@ -12,6 +14,7 @@ from parsolve.fem import kernels
 from parsolve.fem.axisymmetric import is_axisymmetric
 from parsolve.fem.element_matrices import CellKernel, ElementMatrices, block_cells, cell_ranges
 from parsolve.fem.elements import element
+from parsolve.fem.materials.base import REQUIRED, parameter_problem
 from parsolve.fem.materials.elastic import Elastic
 from parsolve.fem.materials.mazars import Mazars
 from parsolve.fem.materials.von_mises import VonMises
@@ -19,6 +22,52 @@ from parsolve.fields import VECTOR_COMPONENTS, Field
 from parsolve.mesh.mesh import Mesh
 
 MODELS = {"elastic": Elastic, "mazars": Mazars, "von_mises": VonMises}
+
+
+@dataclass
+class MaterialSpec:
+    """One [[materials]] entry: a model and its parameters on a region."""
+    region: str
+    model: str
+    params: dict
+    key: str
+
+
+def parse(t, dim: int) -> MaterialSpec:
+    """[[materials]]: ``region`` (default all cells), ``model`` and the parameters the model
+    declares (``Material.PARAMETERS``: the model's own rules, checked here so that the error
+    names the key, and again by the model's constructor)."""
+    region = t.get("region", str, "all")
+    model = t.get("model", str, "elastic", choices=tuple(MODELS))
+    declared = MODELS[model].PARAMETERS
+    params = {p: t.get(p, float) if default is REQUIRED else t.get(p, float, default)
+              for p, (default, _) in declared.items()}
+    problem = parameter_problem(declared, params)
+    if problem is not None:
+        raise t.error(*problem)
+    t.done()
+    return MaterialSpec(region, model, params, t.path)
+
+
+def declared_fields(spec: MaterialSpec, dim: int) -> dict[str, int]:
+    """The displacement, one component per direction."""
+    return {"u": dim}
+
+
+def regions(spec: MaterialSpec) -> list[tuple[str, str]]:
+    return [(spec.region, spec.key + ".region")]
+
+
+def labels(specs: list[MaterialSpec]) -> list[str]:
+    """What the scene's effect list says beyond "elasticity"."""
+    return ["nonlinear material"] if any(s.model != "elastic" for s in specs) else []
+
+
+def build(specs: list[MaterialSpec], ctx) -> "Elasticity":
+    """One effect for every [[materials]] entry (later entries override earlier ones)."""
+    scene = ctx.scene
+    return Elasticity(ctx.mesh, scene.hypothesis, scene.thickness, specs, ctx.regions,
+                      scene.source)
 
 
 AFFINE = ("triangle", "tetra")   # constant gradients: one strain per cell
@@ -64,7 +113,7 @@ class Elasticity(Effect):
         self.eigenstrains: list = []
 
     def fields(self) -> list[Field]:
-        return [Field("u", VECTOR_COMPONENTS[:self.mesh.dim], "displacement")]
+        return [Field("u", VECTOR_COMPONENTS[:self.mesh.dim], "displacement", displacement=True)]
 
     def output_names(self) -> list[str]:
         return ["stress", "damage", "plastic_strain"]

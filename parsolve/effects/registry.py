@@ -1,13 +1,14 @@
 """The effects parsolve knows: each names its scene section, how to read it, and how to build
-itself on the mesh. Adding an effect is one line here (and its module)."""
+itself on the mesh. Adding an effect is one line here (and its module). The order is the
+fields' order in the system (the displacement first)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import Callable
 
-from parsolve.effects import (contact, contact_penalty, diffusion, solubility, springs,
-                              thermal_expansion)
+from parsolve.effects import (contact, contact_penalty, diffusion, elasticity, solubility,
+                              springs, thermal_expansion)
 
 
 @dataclass(frozen=True)
@@ -17,11 +18,15 @@ class Entry:
     parse: Callable              # (Table, dim) -> spec
     build: Callable              # (spec, context) -> Effect
     coupling: bool = False       # built once the fields of the others are known
+    whole: bool = False          # one effect for all the section's entries (build gets the list)
+    primary: bool = False        # its field is the one loads and relations name by default
+    hypothesis: bool = False     # the scene must give [model] hypothesis
     # what the scene checks before reading the mesh: the fields a spec declares {name:
     # components}, and the regions and evolutions it names [(name, dotted key)]
     fields: Callable = lambda spec, dim: {}
     regions: Callable = lambda spec: []
     evolutions: Callable = lambda spec: []
+    labels: Callable = lambda specs: []   # what the scene's list of effects adds for them
 
 
 def _build_diffusion(spec, ctx):
@@ -47,8 +52,12 @@ def _build_contact(spec, ctx):
     return contact.Contact(spec, ctx.mesh, ctx.regions, ctx.fields, ctx.scene.source)
 
 
-# elasticity is read from [[materials]] by the scene itself (the historical layout)
 EFFECTS: dict[str, Entry] = {
+    # [[materials]]: small-strain elasticity, linear or not, one effect for every entry
+    "elasticity": Entry("materials", True, elasticity.parse, elasticity.build, whole=True,
+                        primary=True, hypothesis=True,
+                        fields=elasticity.declared_fields, regions=elasticity.regions,
+                        labels=elasticity.labels),
     "diffusion": Entry("diffusion", True, lambda t, dim: diffusion.parse(t, dim), _build_diffusion,
                        fields=lambda spec, dim: {spec.field: 1},
                        regions=lambda spec: [(m.region, m.key + ".region") for m in spec.materials]),

@@ -25,7 +25,7 @@ def test_cell_and_nodal_stress_of_a_linear_field():
     """u = A x: uniform strain, so every cell and every node carries σ = C ε exactly."""
     from parsolve.effects.elasticity import Elasticity
     from parsolve.mesh.regions import RegionResolver
-    from parsolve.scene import MaterialSpec
+    from parsolve.effects.elasticity import MaterialSpec
 
     mesh = rectangle(2.0, 1.0, 6, 4, cell="triangle6")
     regions = RegionResolver(mesh, {}, "test")
@@ -53,7 +53,8 @@ def two_materials(mesh):
     """Elasticity with E = 100, ν = 0.3 everywhere but x < 1 (E = 7, ν = 0.2)."""
     from parsolve.effects.elasticity import Elasticity
     from parsolve.mesh.regions import RegionResolver
-    from parsolve.scene import MaterialSpec, RegionSpec
+    from parsolve.effects.elasticity import MaterialSpec
+    from parsolve.scene import RegionSpec
 
     regions = RegionResolver(mesh, {"left": RegionSpec("left", "expr", "x < 1.0", "regions.left")},
                              "test")

@@ -43,12 +43,44 @@ def lame(E: float, nu: float) -> tuple[float, float]:
     return E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)), E / (2.0 * (1.0 + nu))
 
 
+#: A parameter a model needs (no default).
+REQUIRED = None
+#: The rules a parameter obeys: name -> (test, what the message says when it fails).
+RULES = {
+    "positive": (lambda v: v > 0.0, "must be positive"),
+    "non_negative": (lambda v: v >= 0.0, "must not be negative"),
+    "poisson": (lambda v: -1.0 < v < 0.5, "must lie in (-1, 0.5)"),
+    "any": (lambda v: True, ""),
+}
+#: Hooke's parameters, shared by every model.
+ELASTIC_PARAMETERS = {"E": (REQUIRED, "positive"), "nu": (REQUIRED, "poisson")}
+
+
+def parameter_problem(parameters: dict, values: dict) -> tuple[str, str] | None:
+    """(name, message) of the first value breaking its rule (``parameters``: name ->
+    (default, rule)), else None. The one place the rules are checked: the scene names the key
+    with it, the models' constructors raise it."""
+    for name, (_, rule) in parameters.items():
+        if name not in values:
+            continue
+        test, message = RULES[rule]
+        value = values[name]
+        if not np.isfinite(value) or not test(value):
+            return name, message
+    return None
+
+
+def check_parameters(parameters: dict, values: dict) -> None:
+    """ValueError naming the first value that breaks its rule."""
+    problem = parameter_problem(parameters, values)
+    if problem is not None:
+        name, message = problem
+        raise ValueError(f"{name} {message}, got {name}={values[name]}")
+
+
 def check_elastic_constants(E: float, nu: float) -> None:
     """ValueError unless ``E > 0`` and ``-1 < nu < 1/2`` (positive-definite isotropic Hooke)."""
-    if not np.isfinite(E) or E <= 0.0:
-        raise ValueError(f"Young's modulus must be positive, got E={E}")
-    if not (-1.0 < nu < 0.5):
-        raise ValueError(f"Poisson's ratio must lie in (-1, 0.5), got nu={nu}")
+    check_parameters(ELASTIC_PARAMETERS, {"E": E, "nu": nu})
 
 
 def elastic_matrix(E: float, nu: float, hypothesis: str) -> np.ndarray:
@@ -79,6 +111,13 @@ def elastic_matrix(E: float, nu: float, hypothesis: str) -> np.ndarray:
     return C
 
 
+def check_hypothesis(model: type, hypothesis: str) -> None:
+    """ValueError unless ``model`` is written for ``hypothesis``."""
+    if hypothesis not in model.HYPOTHESES:
+        allowed = ", ".join(repr(h) for h in model.HYPOTHESES)
+        raise ValueError(f"{model.__name__} supports {allowed}, not {hypothesis!r}")
+
+
 class Material(ABC):
     """Constitutive model evaluated at ``nq`` points at once.
 
@@ -86,6 +125,10 @@ class Material(ABC):
     matrix) through ``Material.__init__`` and implement ``init_state`` and ``update``.
     """
 
+    #: name -> (default or REQUIRED, rule of ``RULES``): what the scene reads and checks
+    PARAMETERS: dict = ELASTIC_PARAMETERS
+    #: the hypotheses the model is written for
+    HYPOTHESES: tuple[str, ...] = tuple(HYPOTHESES)
     hypothesis: str
     nvoigt: int
     E: float
@@ -93,6 +136,7 @@ class Material(ABC):
     C: np.ndarray
 
     def __init__(self, E: float, nu: float, hypothesis: str):
+        check_hypothesis(type(self), hypothesis)
         self.hypothesis = hypothesis
         self.nvoigt = nvoigt_of(hypothesis)
         self.E = float(E)

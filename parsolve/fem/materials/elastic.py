@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from parsolve.fem.materials.base import elastic_matrix
+from parsolve.fem.materials.base import ELASTIC_PARAMETERS, HYPOTHESES, elastic_matrix
 
 
 class Elastic:
     """σ = C ε; no state."""
+
+    PARAMETERS = ELASTIC_PARAMETERS
+    HYPOTHESES = tuple(HYPOTHESES)
 
     def __init__(self, E: float, nu: float, hypothesis: str):
         self.E, self.nu, self.hypothesis = E, nu, hypothesis

@@ -49,11 +49,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import Material, lame
+from .base import ELASTIC_PARAMETERS, REQUIRED, Material, check_parameters, lame
 
 
 class Mazars(Material):
     """Mazars isotropic damage; state ``{"kappa": (nq,), "D": (nq,)}``."""
+
+    PARAMETERS = {**ELASTIC_PARAMETERS, "eps_d0": (REQUIRED, "positive"), "At": (REQUIRED, "any"),
+                  "Bt": (REQUIRED, "non_negative"), "Ac": (REQUIRED, "any"),
+                  "Bc": (REQUIRED, "non_negative"), "beta": (1.06, "positive")}
+    # its principal strains are written for the plane ones
+    HYPOTHESES = ("plane_stress", "plane_strain", "3d")
 
     def __init__(
         self,
@@ -68,16 +74,8 @@ class Mazars(Material):
         beta: float = 1.06,
         fd_step: float = 1e-6,
     ):
-        if hypothesis == "axisymmetric":   # its principal strains are written for the plane ones
-            raise ValueError("Mazars supports 'plane_stress', 'plane_strain' and '3d', "
-                             "not 'axisymmetric'")
         super().__init__(E, nu, hypothesis)
-        if not eps_d0 > 0.0:
-            raise ValueError(f"eps_d0 must be positive, got {eps_d0}")
-        if not (Bt >= 0.0 and Bc >= 0.0):
-            raise ValueError(f"Bt and Bc must be non-negative, got Bt={Bt}, Bc={Bc}")
-        if not beta > 0.0:
-            raise ValueError(f"beta must be positive, got {beta}")
+        check_parameters(self.PARAMETERS, {"eps_d0": eps_d0, "Bt": Bt, "Bc": Bc, "beta": beta})
         if not 0.0 < fd_step < 1e-2:
             raise ValueError(f"fd_step must lie in (0, 1e-2), got {fd_step}")
         self.eps_d0 = float(eps_d0)

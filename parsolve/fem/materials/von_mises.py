@@ -25,7 +25,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import AXISYMMETRIC_COLS, Material, elastic_matrix, lame
+from .base import (AXISYMMETRIC_COLS, ELASTIC_PARAMETERS, REQUIRED, Material, check_parameters,
+                   elastic_matrix, lame)
 
 _SQRT32 = np.sqrt(1.5)
 #: Relative yield tolerance: plastic only when q exceeds the radius by more than round-off.
@@ -42,15 +43,13 @@ _ONES[:3, :3] = 1.0
 class VonMises(Material):
     """J2 plasticity with linear isotropic hardening; state ``{"eps_p", "p"}``."""
 
+    PARAMETERS = {**ELASTIC_PARAMETERS, "sigma_y": (REQUIRED, "positive"),
+                  "H": (REQUIRED, "non_negative")}
+    HYPOTHESES = ("plane_strain", "axisymmetric", "3d")   # plane stress: not written
+
     def __init__(self, E: float, nu: float, hypothesis: str, sigma_y: float, H: float):
-        if hypothesis not in ("3d", "plane_strain", "axisymmetric"):
-            raise ValueError(f"VonMises supports 'plane_strain', 'axisymmetric' and '3d', "
-                             f"not {hypothesis!r}")
         super().__init__(E, nu, hypothesis)
-        if not sigma_y > 0.0:
-            raise ValueError(f"sigma_y must be positive, got {sigma_y}")
-        if not H >= 0.0:
-            raise ValueError(f"hardening modulus H must be non-negative, got {H}")
+        check_parameters(self.PARAMETERS, {"sigma_y": sigma_y, "H": H})
         self.sigma_y = float(sigma_y)
         self.H = float(H)
         self.lam, self.mu = lame(self.E, self.nu)
