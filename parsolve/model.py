@@ -238,7 +238,7 @@ def build_model(scene: Scene, comm=None) -> Model:
     patterns = agree(comm, load_patterns, mesh, scene.loads, regions, scene.evolutions,
                      scene.thickness, scene.source, fields)
     relations = agree(comm, build_relations, scene.relations, regions, scene.evolutions,
-                      patterns, fields, scene.source, scene.solver.eliminate)
+                      patterns, fields, scene.source, scene.solver.eliminate, scene.thickness)
     names = {r.name for r in relations}
     for e in effects:
         for r in e.relations():

@@ -12,12 +12,14 @@ from parsolve.mesh import selectors
 
 
 def build_relations(specs: list, regions, evolutions: dict, patterns: dict, fields,
-                    source: str, eliminate: bool) -> list[rel.Relation]:
-    """Relations on the fields' DOFs (node · ncomp + offset of the field + component)."""
+                    source: str, eliminate: bool, thickness=1.0) -> list[rel.Relation]:
+    """Relations on the fields' DOFs (node · ncomp + offset of the field + component);
+    ``thickness``: the model's out-of-plane measure (a strain's mean is over the volume: in
+    axisymmetry weighted by 2π r)."""
     ncomp = fields.ncomp
     out = []
     for spec in specs:
-        r = _one(spec, regions, evolutions, fields, source)
+        r = _one(spec, regions, evolutions, fields, source, thickness)
         r.sense, r.maximum = spec.sense, spec.maximum
         if spec.dual is not None:
             r.shared_dual = regions.relation_vector(patterns[spec.dual].vector(), ncomp)
@@ -60,7 +62,7 @@ def _check_duals(relations: list[rel.Relation], specs: list, source: str) -> Non
                              source, keys.get(r.name, "relations") + ".dual")
 
 
-def _one(spec, regions, evolutions, fields, source: str) -> rel.Relation:
+def _one(spec, regions, evolutions, fields, source: str, thickness=1.0) -> rel.Relation:
     evol = evolutions[spec.evolution]
     ncomp = fields.ncomp
     comps = [fields.component(spec.field, c) for c in spec.components]
@@ -78,7 +80,7 @@ def _one(spec, regions, evolutions, fields, source: str) -> rel.Relation:
             raise InputError(f"region {spec.region!r} has fewer than 2 nodes", source, spec.key + ".region")
         return rel.equal(spec.name, nodes, comps[0], ncomp)
     if spec.type == "strain":
-        return _strain(spec, regions, evol, source, fields)
+        return _strain(spec, regions, evol, source, fields, thickness)
     if spec.type == "periodic":
         return _periodic(spec, regions, comps, ncomp, evol, source)
     terms = []
@@ -100,7 +102,9 @@ def strain_rows(mesh, cells: np.ndarray, direction: np.ndarray, thickness: float
     geo = kernels.CellGeometry(mesh.points[mesh.cells[cells]], mesh.cell_type, thickness=thickness)
     B = geo.strain_operator()                                   # (nc, nq, nv, ndof)
     n = np.asarray(direction, dtype=float)
-    if mesh.dim == 2:
+    if geo.axisymmetric:   # (rr, zz, rz, θθ): n lies in the (r, z) plane
+        nv = np.array([n[0] ** 2, n[1] ** 2, n[0] * n[1], 0.0])
+    elif mesh.dim == 2:
         nv = np.array([n[0] ** 2, n[1] ** 2, n[0] * n[1]])
     else:
         nv = np.array([n[0] ** 2, n[1] ** 2, n[2] ** 2, n[1] * n[2], n[0] * n[2], n[0] * n[1]])
@@ -113,14 +117,14 @@ def strain_rows(mesh, cells: np.ndarray, direction: np.ndarray, thickness: float
     return fields.dofs(field, nodes.ravel()).reshape(len(cells), width), coefs, vol
 
 
-def _strain(spec, regions, evol, source: str, fields) -> rel.Relation:
+def _strain(spec, regions, evol, source: str, fields, thickness=1.0) -> rel.Relation:
     """Strain n·ε·n of a region: its mean (one row), or one row per cell (per_cell)."""
     region = regions(spec.region, spec.key + ".region")
     if regions.cell_count(region.cells) == 0:
         raise InputError(f"region {spec.region!r} contains no cell (a strain needs cells)",
                          source, spec.key + ".region")
-    dofs, coefs, vol = strain_rows(regions.mesh, region.cells, spec.direction, fields=fields,
-                                   field=spec.field)
+    dofs, coefs, vol = strain_rows(regions.mesh, region.cells, spec.direction, thickness,
+                                   fields=fields, field=spec.field)
     # (the owned cells' rows of every rank, in input ids)
     cells, dofs, coefs, vol = regions.owned_cell_rows(region.cells, fields.ncomp, dofs, coefs,
                                                         vol)

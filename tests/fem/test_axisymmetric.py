@@ -354,3 +354,30 @@ def test_loads_are_whole_ring_forces(cell, run):
     base = res["relations/base/resultant"][-1]
     assert abs(base[1] - (0.5 * 2.0 * np.pi + 3.0)) < 1e-12 * base[1]
     assert abs(res["relations/axis/resultant"][-1][1]) < 1e-14
+
+
+@pytest.mark.parametrize("cell", ["quad", "triangle"])
+def test_strain_relation_mean_is_over_the_ring_volume(cell):
+    """A strain relation's mean of n·ε·n in axisymmetry weights each cell by its ring volume
+    (2π r): on u_r = r², whose Q1/P1 interpolant has ε_rr = r_i + r_(i+1) on the cells between
+    r_i and r_(i+1), the row gives Σ s_i ∫r dr / Σ ∫r dr, not the plane mean (a + b here)."""
+    nx = 6
+    text = cylinder(nx, cell) + """
+[[relations]]
+name = "err"
+type = "strain"
+region = "all"
+direction = [1.0, 0.0]
+value = 0.0
+"""
+    model = build_model(parse_scene(tomllib.loads(text), "cyl.toml"))
+    r = next(rel for rel in model.relations if rel.name == "err")
+    x = model.mesh.points
+    q = np.zeros((x.shape[0], model.ncomp))
+    q[:, 0] = x[:, 0] ** 2
+    q[:, 1] = 0.1 * x[:, 1]          # ε_zz: not in the row (n = e_r)
+    value = float(np.sum(r.a_vals * q.ravel()[r.a_dofs]))
+    ri = np.linspace(A, B, nx + 1)
+    slopes, weights = ri[:-1] + ri[1:], (ri[1:] ** 2 - ri[:-1] ** 2) / 2
+    assert value == pytest.approx(slopes @ weights / weights.sum(), rel=1e-12)
+    assert abs(value - (A + B)) > 1e-2    # the plane mean would be A + B
