@@ -88,11 +88,17 @@ def finish(folder: Path, exit_code: int, seconds: float) -> None:
 
 
 def stop(proc: subprocess.Popen, grace: float = 10.0) -> int:
-    """SIGTERM to the run's process group (parsolve keeps its finished steps and exits 143;
-    mpirun forwards it to the ranks), SIGKILL after ``grace`` seconds."""
-    for sig, wait in ((signal.SIGTERM, grace), (signal.SIGKILL, 5.0)):
+    """Ask the run to stop (parsolve keeps its finished steps and exits 143), SIGKILL to its
+    process group after ``grace`` seconds. One rank: SIGTERM to the group. Under mpirun:
+    SIGUSR2 to mpirun alone, which forwards it to every rank at once and which parsolve reads
+    as SIGTERM — a SIGTERM to mpirun would reach the ranks as SIGTERM after 1 s and SIGKILL
+    soon after, killing a rank in the middle of a step with its file open."""
+    first = (signal.SIGUSR2, lambda sig: os.kill(proc.pid, sig)) if _under_mpirun(proc) else \
+        (signal.SIGTERM, lambda sig: os.killpg(proc.pid, sig))
+    for (sig, send), wait in ((first, grace),
+                              ((signal.SIGKILL, lambda sig: os.killpg(proc.pid, sig)), 5.0)):
         try:
-            os.killpg(proc.pid, sig)
+            send(sig)
         except ProcessLookupError:
             pass
         try:
@@ -100,6 +106,10 @@ def stop(proc: subprocess.Popen, grace: float = 10.0) -> int:
         except subprocess.TimeoutExpired:
             continue
     return proc.wait()
+
+
+def _under_mpirun(proc: subprocess.Popen) -> bool:
+    return Path(str(proc.args[0])).name == "mpirun"
 
 
 def run_here(folder: Path) -> int:

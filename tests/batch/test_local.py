@@ -8,6 +8,7 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import pytest
 
 from batch_helpers import BAR, check_bar, clean_env, end_force, jobs_file, parsolve
@@ -131,3 +132,32 @@ def test_ctrl_c_stops_children(tmp_path):
     states = sorted(r["status"].split(":")[0] for r in rows)
     assert states == ["interrupted", "interrupted", "missing"], rows
     assert {r["exit_code"] for r in rows if r["status"].startswith("interrupted")} <= {"130", "143"}
+
+
+def test_stop_under_mpirun_lets_every_rank_finish_its_step(tmp_path):
+    """A 2-rank run stopped by the batch: SIGUSR2 to mpirun (forwarded at once, read as
+    SIGTERM), so every rank ends its step and exits 143 with its file closed and readable —
+    not Open MPI's SIGTERM-then-SIGKILL of the ranks."""
+    import h5py
+
+    from parsolve.batch import runner
+
+    folder = tmp_path / "run"
+    text = BAR.read_text().replace("count = 10", "count = 100000")
+    runner.prepare(folder, text, 2, [], {})
+    proc = runner.start(folder)
+    result = folder / runner.RESULT
+    deadline = time.time() + 120
+    while time.time() < deadline and not (folder / runner.STDOUT).read_text().count("step"):
+        time.sleep(0.2)
+    time.sleep(1.0)
+    code = runner.stop(proc, grace=60.0)
+    assert runner.exit_status(code) == 143, (folder / runner.STDERR).read_text()
+    with pytest.raises(ProcessLookupError):
+        os.killpg(proc.pid, 0)   # no process of the run's group is left
+    with h5py.File(result, "r") as f:
+        assert f.attrs["status"].startswith("interrupted: SIGTERM"), f.attrs["status"]
+        steps = len(f["steps/time"])
+        delta = f["relations/control/primal"][:steps, 0]
+    assert steps >= 1
+    np.testing.assert_allclose(delta, 1e-4 * np.arange(1, steps + 1) / 100000, rtol=1e-10)
