@@ -427,14 +427,21 @@ def sphere_on_block(
     return _nodes_from_facets(mesh)
 
 
-def sphere_on_block_counts(params: dict) -> tuple[int, int, int]:
-    """(points, cells, dim) of ``sphere_on_block`` from its parameters (nothing built)."""
+def sphere_on_block_counts(params: dict, order: int = 1) -> tuple[int, int, int]:
+    """(points, cells, dim) of ``sphere_on_block`` from its parameters (nothing built; with
+    tetrahedra and ``order = 2``, the midside nodes: one per edge of the Kuhn split)."""
     n_fine, n_coarse, n_depth = (int(params.get(k, 1)) for k in ("n_fine", "n_coarse", "n_depth"))
     n_sphere = int(params.get("n_fine_sphere", max(1, (3 * n_fine + 2) // 4)))
-    columns = [(n + n_coarse) for n in (n_fine, n_sphere)]
-    points = sum((c + 1) ** 2 * (n_depth + 1) for c in columns)
-    hexes = sum(c * c * n_depth for c in columns)
-    return points, hexes * (1 if params.get("cell", "hexahedron") == "hexahedron" else 6), 3
+    tetra = params.get("cell", "hexahedron") == "tetra"
+    points = cells = 0
+    for c in (n_fine + n_coarse, n_sphere + n_coarse):   # each body: c × c × n_depth hexahedra
+        d, hexes = n_depth, c * c * n_depth
+        points += (c + 1) ** 2 * (d + 1)
+        cells += hexes * (6 if tetra else 1)
+        if tetra and order == 2:   # grid edges, face diagonals, one body diagonal per hexahedron
+            points += (2 * c * (c + 1) * (d + 1) + (c + 1) ** 2 * d
+                       + c * c * (d + 1) + 2 * c * (c + 1) * d + hexes)
+    return points, cells, 3
 
 
 # --------------------------------------------------------------------------------------

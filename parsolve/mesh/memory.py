@@ -42,7 +42,7 @@ def cell_counts(generator: str, params: dict, order: int = 1) -> tuple[int, int,
     if generator == "sphere_on_block":   # two bodies: the generator module counts them
         from parsolve.mesh.generators import sphere_on_block_counts
 
-        return sphere_on_block_counts(params)
+        return sphere_on_block_counts(params, order)
     cell = params.get("cell")
     n = {k: int(v) for k, v in params.items()
          if k in ("nx", "ny", "nz", "n_radial", "n_angular") and isinstance(v, (int, float))}

@@ -308,6 +308,8 @@ def test_sphere_on_block_bodies_and_faces(profile, cell):
     faces = [f for f in ([0, 1, 2, 3], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6],
                          [3, 0, 4, 7])] if cell == "hexahedron" else [[0, 1, 2], [0, 1, 3], [1, 2, 3], [0, 2, 3]]
     assert face_counts(m, faces).max() == 2
+    if cell == "tetra":   # order = 2: the counts of the upgraded mesh
+        assert memory.cell_counts("sphere_on_block", params, order=2)[0] == make_quadratic(m).num_points
 
 
 def test_sphere_on_block_bad_arguments():
