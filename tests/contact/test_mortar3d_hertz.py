@@ -26,6 +26,7 @@ from parsolve.mesh.generators import sphere_on_block
 SCENE = CONFIGS / "contact_mortar_sphere_3d.toml"
 E, NU = 1000.0, 0.3
 E_STAR = 1.0 / (2 * (1 - NU * NU) / E)          # two equal bodies
+SHIPPED = (0.0196, -0.0060)   # the shipped mesh's errors of p0 (tip) and a (moment), measured
 
 
 def hertz_measures(res, mesh) -> dict:
@@ -50,7 +51,8 @@ def hertz_measures(res, mesh) -> dict:
 
 
 def tip_weight(mesh) -> float:
-    """∫φ of the tip node over the slave surface: a quarter of its (square) cell."""
+    """∫φ of the tip node over the slave surface: a quarter of its (square) cell (hexahedra;
+    the tetrahedra's top triangles would give it a third)."""
     top = mesh.points[np.unique(mesh.facet_groups["block_top"])]
     h = np.unique(top[:, 0])[1]
     return 0.25 * h * h
@@ -105,26 +107,23 @@ def test_shipped_sphere_matches_hertz_on_any_partition(run):
           f"{m['edge'][1] / m['a'] - 1:+.4f}")
     assert abs(e_p) < 0.03 and abs(e_a) < 0.03
     assert m["a"] * 0.97 < m["edge"][1] and m["edge"][0] < m["a"] * 1.03
-    assert abs(e_p - 0.0196) < 1e-3 and abs(e_a + 0.0060) < 1e-3   # this mesh's values
+    assert abs(e_p - SHIPPED[0]) < 1e-3 and abs(e_a - SHIPPED[1]) < 1e-3   # this mesh's
     assert np.all(parts["steps/iterations"] <= 8)
 
 
 def test_hertz_errors_decrease_under_refinement(run):
-    """The fine zone's cells 1.5 × larger (n_fine 8, n_coarse 4, n_depth 6) against the
-    shipped mesh: both errors larger (measured p_tip +3.0 %, a_moment −0.52 %; the shipped
-    +1.96 %, −0.60 %: see docs/contact.md §2c for the table to n_fine = 16, +1.05 %, −0.20 %).
-    The moment's error is too small against the fine zone's to decrease steadily on these
-    two meshes: checked below 1 %."""
-    base = shipped("contact_mortar_sphere_3d.toml")
-    coarse_text = scene(base, mesh={"n_fine": 8, "n_coarse": 4, "n_depth": 6})
-    results = {}
-    for name, text in (("coarse", coarse_text), ("shipped", SCENE.read_text())):
-        res = run(text, name=f"mortar_sphere_{name}")
-        mesh = mesh_of(text)
-        check_contact(res, mesh)
-        results[name] = errors(hertz_measures(res, mesh))
-    (p_coarse, a_coarse), (p_fine, a_fine) = results["coarse"], results["shipped"]
-    print(f"\nHertz p_tip error {p_coarse:+.4f} -> {p_fine:+.4f}, a_moment {a_coarse:+.4f} -> "
-          f"{a_fine:+.4f}")
-    assert 0 < p_fine < 0.7 * p_coarse
-    assert max(abs(a_coarse), abs(a_fine)) < 0.01
+    """The fine zone's cells 1.5 × larger (n_fine 8, n_coarse 4, n_depth 6) than the shipped
+    mesh's: the tip pressure's error larger (measured +3.0 % against the shipped +1.96 %, which
+    the test above holds to 1e-3; docs/contact.md §2c has the table to n_fine = 20: +1.05 %,
+    +0.75 %). The moment's error is too small against the fine zone's to decrease steadily
+    over these two meshes (−0.52 %, −0.60 %; −0.20 %, −0.10 % on the finer ones): below 1 %."""
+    text = scene(shipped("contact_mortar_sphere_3d.toml"),
+                 mesh={"n_fine": 8, "n_coarse": 4, "n_depth": 6})
+    res = run(text, name="mortar_sphere_coarse")
+    mesh = mesh_of(text)
+    check_contact(res, mesh)
+    e_p, e_a = errors(hertz_measures(res, mesh))
+    print(f"\nHertz, coarse mesh: p_tip error {e_p:+.4f} (shipped {SHIPPED[0]:+.4f}), a_moment "
+          f"{e_a:+.4f} (shipped {SHIPPED[1]:+.4f})")
+    assert SHIPPED[0] < 0.7 * e_p < 0.03
+    assert abs(e_a) < 0.01
