@@ -208,6 +208,10 @@ class Contact(Effect):
 
     symmetric = True
 
+    # slave-surface nodes that rows hold besides their own slave node (3D mortar on triangle6:
+    # a midside's row holds its edge's corners); the resultants count each row's slave share
+    side_nodes = np.zeros(0, dtype=np.int64)
+
     def __init__(self, spec: ContactSpec, mesh, regions, fields, source: str):
         self.spec, self.mesh, self.fields_, self.source = spec, mesh, fields, source
         self.name = f"contact {spec.name}"
@@ -293,8 +297,9 @@ class Contact(Effect):
                 try:
                     mortar = rows_of(surf.points, surf.compact(sfacets), surf.compact(facets),
                                      mesh.facet_type, spec.search_radius)
-                except ValueError as exc:   # 3D quadratic faces: no dual basis
+                except ValueError as exc:   # 3D faces that are not triangle, quad, triangle6
                     raise InputError(str(exc), self.source, f"{key}.discretization") from None
+                self.side_nodes = np.unique(sfacets)
                 return surf.to_input(mortar.pairing.only_paired())
             surf = Surfaces.of([(slave, slave_pts), (facets, facet_pts)])
             p = pair_nodes(surf.points, surf.compact(slave), surf.compact(facets),
@@ -665,5 +670,7 @@ class Contact(Effect):
                   f"{name}_tangential_reaction": nodal(p.slave, rt),
                   f"{name}_gap": nodal(p.slave, gap), f"{name}_slip": nodal(p.slave, slip),
                   f"{name}_state": nodal(p.slave, state, fill=-1.0)}
-        extras = {"normal_force": np.array([rn.sum()]), "tangential_force": rt.sum(axis=0)}
+        share = 1.0 - np.where(np.isin(p.master, self.side_nodes), p.weights, 0.0).sum(axis=1)
+        extras = {"normal_force": np.array([(rn * share).sum()]),
+                  "tangential_force": (rt * share[:, None]).sum(axis=0)}
         return fields, {self.normal.name: extras}
