@@ -1,4 +1,5 @@
-"""Mortar (segment-to-segment) contact rows in 3D on triangle and quad faces, dual multipliers.
+"""Mortar (segment-to-segment) contact rows in 3D on triangle, quad and triangle6 faces, dual
+multipliers.
 
 The 3D counterpart of ``mortar.py`` (read it first: the rows, their normalisation and the
 properties are the same). For slave node i
@@ -40,10 +41,22 @@ triangles' planes (an approximation of its area of the order of the warp). As in
 dual basis of a partially covered face is biorthogonal on its covered part, and faces covered
 by less than ``min_cover`` of their area are ignored.
 
-**Quadratic faces (triangle6, quad8) are not supported:** the corner shape functions of the
-quadratic triangle integrate to zero (those of quad8 to a negative number), so w_i = ∫φ_i
-vanishes and the dual basis does not exist; they need the modified bases of Popp et al. (2012),
-not implemented.
+**Quadratic faces (triangle6): Popp et al. (2012)'s modified basis.** The corner shape
+functions of the quadratic triangle integrate to zero, so w_i = ∫φ_i vanishes and no dual
+basis biorthogonal to them exists. The slave side is interpolated instead with Ñ = T N:
+Ñ_c = N_c + α Σ N_m (the midsides adjacent to corner c), Ñ_m = (1 − 2α) N_m, α = 1/5; the Ñ
+still sum to one and ∫Ñ > 0, the dual basis is biorthogonal to Ñ, D stays diagonal, and the
+slave displacement u_s = Σ N_j d_j = Σ Ñ_j d̃_j has the transformed nodal values d̃_c = d_c,
+d̃_m = (d_m − α (d_a + d_b)) / (1 − 2α) (edge ab). A corner's row is then a node-to-face row
+as for linear faces; a midside's, multiplied by 1 − 2α, has its slave node with coefficient 1
+and its edge's two corners among the "master" entries with weight α (``_midside_rows``): the
+Pairing layout is kept, each row still has one slave node of its own. A row's multiplier is
+the transformed one: a uniform pressure gives λ_i = p w_i / share_i (``Mortar.weight``; share
+1 − 2α at a midside), the nodal forces p ∫N_j follow from the rows' entries, and a resultant
+weighs each multiplier by its row's slave share (the contact effect does). The master side
+keeps its standard N. Faces are clipped on their corner triangles (exact for flat faces
+with straight edges); the slave and master coordinates of a point come from the quadratic
+maps. quad8 faces (no parsolve element has them) are refused.
 """
 
 from __future__ import annotations

@@ -71,7 +71,7 @@ Scene schema::
     #                                obstacles: any gap)
     discretization = "mortar"      # "node_to_segment" (default) or "mortar" (master region
     #                                only: dual mortar rows, parsolve.contact.mortar in 2D,
-    #                                mortar3d on triangle and quad faces in 3D)
+    #                                mortar3d on triangle, quad, triangle6 faces in 3D)
     closed = 1e-9                  # initial gaps ≤ this (relative to the mesh size) start closed
     #                                (a floating body needs no larger one: see above)
     sliding = "finite"             # "small" (default: paired once) or "finite" (2D, master
