@@ -662,15 +662,18 @@ class Contact(Effect):
         # an enforced row's gap is zero (its computed value is round-off, which depends on
         # the partition); an open node's is g0 + Dn·q
         closed = active[self.normal.name].astype(bool)
-        gap = np.where(closed, 0.0, p.gap + self.values.relation(self.normal, q))
+        # a row's slave share: 1, or 1 − 2α for a 3D mortar row of a triangle6 midside (its
+        # row is scaled by it: its gap, its slip, its multiplier's share of the resultants)
+        share = 1.0 - np.where(np.isin(p.master, self.side_nodes), p.weights, 0.0).sum(axis=1)
+        gap = np.where(closed, 0.0, (p.gap + self.values.relation(self.normal, q)) / share)
         slip = self._slip(q) if self.span is None else self.slip_base + self.du[:, 0]
+        slip = (slip.reshape(share.size, -1) / share[:, None]).reshape(slip.shape)
         # over every node (0 elsewhere; state -1), or this rank's owned rows on a part
         nodal = self.values.nodal
         fields = {f"{name}_normal_reaction": nodal(p.slave, rn),
                   f"{name}_tangential_reaction": nodal(p.slave, rt),
                   f"{name}_gap": nodal(p.slave, gap), f"{name}_slip": nodal(p.slave, slip),
                   f"{name}_state": nodal(p.slave, state, fill=-1.0)}
-        share = 1.0 - np.where(np.isin(p.master, self.side_nodes), p.weights, 0.0).sum(axis=1)
         extras = {"normal_force": np.array([(rn * share).sum()]),
                   "tangential_force": (rt * share[:, None]).sum(axis=0)}
         return fields, {self.normal.name: extras}

@@ -115,3 +115,18 @@ def test_triangle6_partial_cover_keeps_the_identities():
     np.testing.assert_allclose(p.weights.sum(axis=1), 1.0, atol=1e-12)
     transfer = np.einsum("mk,mkx->mx", p.weights, pts[p.master])
     np.testing.assert_allclose(transfer, pts[p.slave], atol=1e-13)
+
+
+def test_triangle6_gap_over_the_share_is_the_separation():
+    """The master 0.01 below the slave: a row's gap is its share of the separation (1 at a
+    corner, 1 − 2α at a midside, whose row is scaled), so gap / share (the contact effect's
+    gap output) is 0.01 at every node."""
+    ps, fs = tri6_faces(3, 0.0, True, 4)
+    pm, fm = tri6_faces(4, -0.01, False, 5)
+    pts, fm = np.vstack([ps, pm]), fm + len(ps)
+    p = mortar_pairing_3d(pts, fs, fm, "triangle6").pairing
+    share = 1.0 - np.where(np.isin(p.master, fs), p.weights, 0.0).sum(axis=1)
+    corner = np.isin(p.slave, fs[:, :3])
+    np.testing.assert_allclose(share[corner], 1.0, rtol=1e-15)
+    np.testing.assert_allclose(share[~corner], 1 - 2 * ALPHA, rtol=1e-14)
+    np.testing.assert_allclose(p.gap / share, 0.01, rtol=1e-12)
