@@ -107,7 +107,8 @@ TESTED = ["controlled_bar.toml", "kirsch.toml", "cantilever_3d.toml",
           "periodic_shear_laminate.toml",  # periodic: tests/effects/test_periodic.py
           "springs_bar_supports.toml",  # springs: tests/effects/test_springs.py
           "thermal_expansion.toml",  # tests/effects/test_thermal_expansion.py
-          "axisym_thick_cylinder.toml", "contact_axisym_sphere.toml"]
+          "axisym_thick_cylinder.toml", "contact_axisym_sphere.toml",
+          "contact_mortar_sphere_3d.toml"]  # tests/contact/test_mortar3d_hertz.py
 
 
 def test_axisym_thick_cylinder(run):

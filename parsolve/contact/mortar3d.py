@@ -1,4 +1,5 @@
-"""Mortar (segment-to-segment) contact rows in 3D on triangle and quad faces, dual multipliers.
+"""Mortar (segment-to-segment) contact rows in 3D on triangle, quad and triangle6 faces, dual
+multipliers.
 
 The 3D counterpart of ``mortar.py`` (read it first: the rows, their normalisation and the
 properties are the same). For slave node i
@@ -40,10 +41,22 @@ triangles' planes (an approximation of its area of the order of the warp). As in
 dual basis of a partially covered face is biorthogonal on its covered part, and faces covered
 by less than ``min_cover`` of their area are ignored.
 
-**Quadratic faces (triangle6, quad8) are not supported:** the corner shape functions of the
-quadratic triangle integrate to zero (those of quad8 to a negative number), so w_i = ∫φ_i
-vanishes and the dual basis does not exist; they need the modified bases of Popp et al. (2012),
-not implemented.
+**Quadratic faces (triangle6): Popp et al. (2012)'s modified basis.** The corner shape
+functions of the quadratic triangle integrate to zero, so w_i = ∫φ_i vanishes and no dual
+basis biorthogonal to them exists. The slave side is interpolated instead with Ñ = T N:
+Ñ_c = N_c + α Σ N_m (the midsides adjacent to corner c), Ñ_m = (1 − 2α) N_m, α = 1/5; the Ñ
+still sum to one and ∫Ñ > 0, the dual basis is biorthogonal to Ñ, D stays diagonal, and the
+slave displacement u_s = Σ N_j d_j = Σ Ñ_j d̃_j has the transformed nodal values d̃_c = d_c,
+d̃_m = (d_m − α (d_a + d_b)) / (1 − 2α) (edge ab). A corner's row is then a node-to-face row
+as for linear faces; a midside's, multiplied by 1 − 2α, has its slave node with coefficient 1
+and its edge's two corners among the "master" entries with weight α (``_midside_rows``): the
+Pairing layout is kept, each row still has one slave node of its own. A row's multiplier is
+the transformed one: a uniform pressure gives λ_i = p w_i / share_i (``Mortar.weight``; share
+1 − 2α at a midside), the nodal forces p ∫N_j follow from the rows' entries, and a resultant
+weighs each multiplier by its row's slave share (the contact effect does). The master side
+keeps its standard N. Faces are clipped on their corner triangles (exact for flat faces
+with straight edges); the slave and master coordinates of a point come from the quadratic
+maps. quad8 faces (no parsolve element has them) are refused.
 """
 
 from __future__ import annotations
@@ -54,7 +67,12 @@ from parsolve.contact.mortar import Mortar
 from parsolve.contact.pairing import Pairing, candidate_pairs, empty_pairing, facet_frame
 from parsolve.fem.elements import element
 
-SPLIT = {"triangle": np.array([[0, 1, 2]]), "quad": np.array([[0, 1, 2], [0, 2, 3]])}
+# sub-triangles of a face's corners (a triangle6 face is clipped on its corner triangle)
+SPLIT = {"triangle": np.array([[0, 1, 2]]), "quad": np.array([[0, 1, 2], [0, 2, 3]]),
+         "triangle6": np.array([[0, 1, 2]])}
+# triangle6 (meshio order: corners 0-2, then the midsides of 01, 12, 20): (midside, its corners)
+EDGE_MIDS = {"triangle6": np.array([[3, 0, 1], [4, 1, 2], [5, 2, 0]])}
+ALPHA = 0.2   # Popp et al. (2012)'s modification: a corner takes α of each adjacent midside
 
 # 7-point degree-5 rule on the triangle (Radon; Dunavant's rule 5): barycentric points and
 # weights summing to 1 (multiplied by the triangle's area)
@@ -87,10 +105,10 @@ def mortar_pairing_3d(
     sf = np.asarray(slave_facets, dtype=np.int64)
     mf = np.asarray(master_facets, dtype=np.int64)
     if facet_type not in SPLIT or points.shape[1] != 3:
-        raise ValueError(f"3D mortar rows need triangle or quad faces, not {facet_type!r} "
-                         "(quadratic faces have no dual basis: their corner functions do not "
-                         "integrate to a positive weight)")
+        raise ValueError(f"3D mortar rows need triangle, quad or triangle6 faces, not "
+                         f"{facet_type!r}")
     el = element(facet_type)
+    modified = _modified_basis(facet_type, el.nodes.shape[0])
     xs_f, xm_f = points[sf], points[mf]
     extent = max(_extent(xs_f), _extent(xm_f))
     radius = float(extent if search_radius is None else search_radius)
@@ -101,13 +119,19 @@ def mortar_pairing_3d(
     owner, phi, nm, jw, gap = pieces
     near = np.all(np.abs(gap) <= radius * (1.0 + 1e-12), axis=1)
     owner, phi, nm, jw = owner[near], phi[near], nm[near], jw[near]
+    if modified is not None:   # Ñ = T N on the slave side (the master keeps N)
+        phi = np.einsum("tgj,kj->tgk", phi, modified)
     fe = e[owner]
     a_dual, covered = _dual_coefficients(phi, jw, fe, xs_f, min_cover)
     ok = covered[fe]
     s_nodes, m_nodes, m_ia, weight = _integrals(phi[ok], jw[ok], nm[ok], a_dual[fe[ok]],
                                                 sf[fe[ok]], mf[f[owner[ok]]], points.shape[0])
+    share = np.ones(points.shape[0])
+    if modified is not None:
+        s_nodes, m_nodes, m_ia, share = _midside_rows(sf[covered], EDGE_MIDS[facet_type],
+                                                      s_nodes, m_nodes, m_ia, weight)
     normals = _nodal_normals(points, sf[covered], el)
-    return _assemble(points, s_nodes, m_nodes, m_ia, weight, normals)
+    return _assemble(points, s_nodes, m_nodes, m_ia, weight, normals, share)
 
 
 def overlap_areas(points: np.ndarray, slave_facets: np.ndarray, master_facets: np.ndarray,
@@ -349,12 +373,52 @@ def tangent_basis(normal: np.ndarray) -> np.ndarray:
     return np.stack([t1, np.cross(normal, t1)], axis=1)
 
 
+# ----------------------------------------------------------------------------- quadratic faces
+
+
+def _modified_basis(facet_type: str, k: int) -> np.ndarray | None:
+    """T (k, k) of the modified slave basis Ñ = T N of a quadratic face (None: linear faces):
+    Ñ_c = N_c + α Σ N_m over the midsides m adjacent to corner c, Ñ_m = (1 − 2α) N_m. The Ñ
+    sum to one and ∫Ñ > 0 for 0 < α < ½ (triangle6: ∫N_c = 0, ∫N_m = A/3, so ∫Ñ_c = 2αA/3,
+    ∫Ñ_m = (1 − 2α)A/3), so the dual basis biorthogonal to Ñ exists."""
+    if facet_type not in EDGE_MIDS:
+        return None
+    t = np.eye(k)
+    mids = EDGE_MIDS[facet_type]
+    t[mids[:, 1], mids[:, 0]] = ALPHA
+    t[mids[:, 2], mids[:, 0]] = ALPHA
+    t[mids[:, 0], mids[:, 0]] = 1.0 - 2.0 * ALPHA
+    return t
+
+
+def _midside_rows(faces, mids, s_nodes, m_nodes, m_ia, weight):
+    """The rows of the transformed slave displacements d̃ (u_s = Σ Ñ_j d̃_j = Σ N_j d_j):
+    d̃_c = d_c at a corner, d̃_m = (d_m − α (d_a + d_b)) / (1 − 2α) at the midside of edge ab.
+    A corner's row is unchanged; a midside's row, times (1 − 2α) so that its slave node keeps
+    the coefficient 1, gains its edge's two corners as entries of weight α (after division by
+    w_m), the master weights times (1 − 2α). Returns the COO with those entries and each
+    node's share (1 − 2α at a midside, 1 elsewhere: the row's multiplier over its share is
+    the multiplier of the unscaled row)."""
+    share = np.ones(weight.shape[0])
+    edge = faces[:, mids].reshape(-1, 3)                      # (midside, corner a, corner b)
+    edge[:, 1:].sort(axis=1)                                  # the neighbour sees b, a
+    edge = np.unique(edge, axis=0)                            # a midside shared by two faces
+    share[edge[:, 0]] = 1.0 - 2.0 * ALPHA
+    extra_s = np.repeat(edge[:, 0], 2)
+    extra_m = edge[:, 1:].ravel()
+    extra_v = ALPHA * weight[extra_s]
+    return (np.concatenate([s_nodes, extra_s]), np.concatenate([m_nodes, extra_m]),
+            np.concatenate([m_ia * share[s_nodes], extra_v]), share)
+
+
 # ----------------------------------------------------------------------------- pairing
 
 
-def _assemble(points, s_nodes, m_nodes, values, weight, normals) -> Mortar:
+def _assemble(points, s_nodes, m_nodes, values, weight, normals, share) -> Mortar:
     """The normalised rows as a Pairing: per slave node with w_i > 0, its master nodes (sorted)
-    with weights M_ia / w_i, padded with zero weights on the row's first master node."""
+    with weights M_ia / w_i, padded with zero weights on the row's first master node; the
+    Mortar's weights w_i / share_i (a uniform pressure p gives the row multipliers p w_i /
+    share_i)."""
     npts = points.shape[0]
     ukey, inv = np.unique(s_nodes * npts + m_nodes, return_inverse=True)
     m_ia = np.bincount(inv, weights=values)
@@ -383,4 +447,4 @@ def _assemble(points, s_nodes, m_nodes, values, weight, normals) -> Mortar:
                       facet=np.full(n, -1, dtype=np.int64), xi=np.zeros((n, 2)),
                       master=master.astype(np.int64), weights=weights, point=point,
                       normal=normal, tangents=tangent_basis(normal), gap=gap)
-    return Mortar(pairing, weight[slave])
+    return Mortar(pairing, weight[slave] / share[slave])

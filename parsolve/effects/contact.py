@@ -71,7 +71,7 @@ Scene schema::
     #                                obstacles: any gap)
     discretization = "mortar"      # "node_to_segment" (default) or "mortar" (master region
     #                                only: dual mortar rows, parsolve.contact.mortar in 2D,
-    #                                mortar3d on triangle and quad faces in 3D)
+    #                                mortar3d on triangle, quad, triangle6 faces in 3D)
     closed = 1e-9                  # initial gaps ≤ this (relative to the mesh size) start closed
     #                                (a floating body needs no larger one: see above)
     sliding = "finite"             # "small" (default: paired once) or "finite" (2D, master
@@ -208,6 +208,10 @@ class Contact(Effect):
 
     symmetric = True
 
+    # slave-surface nodes that rows hold besides their own slave node (3D mortar on triangle6:
+    # a midside's row holds its edge's corners); the resultants count each row's slave share
+    side_nodes = np.zeros(0, dtype=np.int64)
+
     def __init__(self, spec: ContactSpec, mesh, regions, fields, source: str):
         self.spec, self.mesh, self.fields_, self.source = spec, mesh, fields, source
         self.name = f"contact {spec.name}"
@@ -293,8 +297,9 @@ class Contact(Effect):
                 try:
                     mortar = rows_of(surf.points, surf.compact(sfacets), surf.compact(facets),
                                      mesh.facet_type, spec.search_radius)
-                except ValueError as exc:   # 3D quadratic faces: no dual basis
+                except ValueError as exc:   # 3D faces that are not triangle, quad, triangle6
                     raise InputError(str(exc), self.source, f"{key}.discretization") from None
+                self.side_nodes = np.unique(sfacets)
                 return surf.to_input(mortar.pairing.only_paired())
             surf = Surfaces.of([(slave, slave_pts), (facets, facet_pts)])
             p = pair_nodes(surf.points, surf.compact(slave), surf.compact(facets),
@@ -657,13 +662,18 @@ class Contact(Effect):
         # an enforced row's gap is zero (its computed value is round-off, which depends on
         # the partition); an open node's is g0 + Dn·q
         closed = active[self.normal.name].astype(bool)
-        gap = np.where(closed, 0.0, p.gap + self.values.relation(self.normal, q))
+        # a row's slave share: 1, or 1 − 2α for a 3D mortar row of a triangle6 midside (its
+        # row is scaled by it: its gap, its slip, its multiplier's share of the resultants)
+        share = 1.0 - np.where(np.isin(p.master, self.side_nodes), p.weights, 0.0).sum(axis=1)
+        gap = np.where(closed, 0.0, (p.gap + self.values.relation(self.normal, q)) / share)
         slip = self._slip(q) if self.span is None else self.slip_base + self.du[:, 0]
+        slip = (slip.reshape(share.size, -1) / share[:, None]).reshape(slip.shape)
         # over every node (0 elsewhere; state -1), or this rank's owned rows on a part
         nodal = self.values.nodal
         fields = {f"{name}_normal_reaction": nodal(p.slave, rn),
                   f"{name}_tangential_reaction": nodal(p.slave, rt),
                   f"{name}_gap": nodal(p.slave, gap), f"{name}_slip": nodal(p.slave, slip),
                   f"{name}_state": nodal(p.slave, state, fill=-1.0)}
-        extras = {"normal_force": np.array([rn.sum()]), "tangential_force": rt.sum(axis=0)}
+        extras = {"normal_force": np.array([(rn * share).sum()]),
+                  "tangential_force": (rt * share[:, None]).sum(axis=0)}
         return fields, {self.normal.name: extras}

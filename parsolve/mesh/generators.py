@@ -1,4 +1,5 @@
-"""Structured mesh generators (rectangle, box, quarter plate with a hole) and P2 upgrade.
+"""Structured mesh generators (rectangle, box, quarter plate with a hole, a sphere on a block)
+and P2 upgrade.
 
 All meshes are built with vectorised index arithmetic on a structured (i, j[, k]) grid,
 with positively oriented cells (positive Jacobian) in meshio/VTK node ordering.
@@ -288,6 +289,162 @@ def _project_midnodes_to_circle(mesh: Mesh, hole: np.ndarray, radius: float) -> 
 
 
 # --------------------------------------------------------------------------------------
+# sphere on a block (Hertz, quarter model)
+# --------------------------------------------------------------------------------------
+
+
+def _expanding(first: float, length: float, n: int) -> np.ndarray:
+    """n+1 coordinates from 0 to ``length``: n cells in geometric progression whose first is
+    ``first`` (ratio q from first (q^n - 1)/(q - 1) = length, by bisection on log q: the sum
+    grows with q, so the root is unique; q < 1 when n cells of ``first`` exceed the length)."""
+    if n == 1 or np.isclose(n * first, length, rtol=1e-12):
+        return np.linspace(0.0, length, n + 1)
+    k = np.arange(n)
+    lo, hi = -50.0 / n, 50.0 / n + np.log(length / first) / max(n - 1, 1)
+    for _ in range(200):   # bisection on a scalar: 200 halvings reach round-off
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if first * np.exp(mid * k).sum() < length else (lo, mid)
+    sizes = first * np.exp(0.5 * (lo + hi) * k)
+    x = np.concatenate([[0.0], np.cumsum(sizes)])
+    return x * (length / x[-1])   # the last node exactly at the length
+
+
+def _refined_line(fine: float, n_fine: int, width: float, n_coarse: int) -> np.ndarray:
+    """Coordinates on [0, width]: n_fine equal cells on [0, fine], then n_coarse cells growing
+    geometrically from the fine size to the width."""
+    h = fine / n_fine
+    coarse = fine + _expanding(h, width - fine, n_coarse)
+    return np.concatenate([np.linspace(0.0, fine, n_fine + 1), coarse[1:]])
+
+
+def _profile(r: np.ndarray, radius: float, profile: str) -> np.ndarray:
+    """Height of the contact face above its tip at distance r from the axis."""
+    if profile == "paraboloid":
+        return r * r / (2.0 * radius)
+    return radius - np.sqrt(radius * radius - r * r)
+
+
+def _mapped_hexes(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Points and hexahedra of a mapped grid: node (i, j, k) at (x_i, y_j, z[k, j, i]), z
+    increasing with k (positive Jacobians: the map's matrix is triangular with a positive
+    diagonal). Node index i + j (nx+1) + k (nx+1)(ny+1), as ``box``."""
+    nz, ny, nx = (s - 1 for s in z.shape)
+    xx = np.broadcast_to(x[None, None, :], z.shape)
+    yy = np.broadcast_to(y[None, :, None], z.shape)
+    points = np.column_stack([xx.ravel(), yy.ravel(), z.ravel()])
+    k, j, i = _grid_indices(nx, ny, nz)
+    sx, sy = nx + 1, (nx + 1) * (ny + 1)
+    offs = np.array([dx + dy * sx + dz * sy for dx, dy, dz in _HEX_OFFSETS], dtype=np.int64)
+    return points, (i + j * sx + k * sy)[:, None] + offs[None, :]
+
+
+def _check_sphere_on_block(radius, width, depth, height, fine, gap, profile, cell) -> None:
+    _check_cell(cell, ("hexahedron", "tetra"))
+    lengths = dict(radius=radius, width=width, depth=depth, height=height, fine=fine)
+    _check_lengths((0.0,) * len(lengths), **lengths)
+    if not fine < width:
+        raise ValueError(f"fine must be smaller than width, got {fine!r} >= {width!r}")
+    if not gap >= 0:
+        raise ValueError(f"gap must be zero or positive, got {gap!r}")
+    if profile not in ("paraboloid", "sphere"):
+        raise ValueError(f"profile must be 'paraboloid' or 'sphere', got {profile!r}")
+    corner = np.sqrt(2.0) * width
+    if profile == "sphere" and not corner < radius:
+        raise ValueError(f"radius must exceed the quarter's diagonal width * sqrt(2) = {corner:g} "
+                         f"with profile 'sphere', got {radius!r}")
+    top = gap + float(_profile(np.array(corner), radius, profile))
+    if not height > top:
+        raise ValueError(f"height must exceed the contact face's highest point {top:g} "
+                         f"(its corner), got {height!r}")
+
+
+def sphere_on_block(
+    radius: float,
+    width: float,
+    depth: float,
+    height: float,
+    fine: float,
+    n_fine: int,
+    n_coarse: int,
+    n_depth: int,
+    n_fine_sphere: int | None = None,
+    gap: float = 0.0,
+    profile: str = "paraboloid",
+    cell: str = "hexahedron",
+) -> Mesh:
+    """Quarter model of Hertz's sphere on a block: two bodies on [0, width]², non-matching.
+
+    The block fills [0, width]² × [−depth, 0]; the sphere body stands on it, its bottom face
+    the surface z = gap + f(r) (r = √(x² + y²); f = r²/(2 radius) for ``profile =
+    "paraboloid"``, Hertz's own profile, or the sphere radius − √(radius² − r²)) and its top
+    the plane z = height. Each is a mapped hexahedral grid refined towards the tip: in x and
+    y, equal cells on [0, fine] (n_fine of them for the block, n_fine_sphere for the sphere
+    body: ¾ of n_fine by default, so that the contact faces do not match), then n_coarse
+    cells growing geometrically to the width; through each body n_depth cells growing from
+    the fine size at the contact face. cell: "hexahedron" or "tetra" (6 per hexahedron).
+    ``gap`` > 0 keeps the tip off the block's corner node (a duplicate point is warned of).
+
+    Cell groups "block" and "sphere"; facet and node groups "block_top" (the block's contact
+    face), "block_bottom", "sphere_surface" (the sphere body's contact face), "sphere_top",
+    "xmin" and "ymin" (the symmetry planes x = 0 and y = 0 of both bodies).
+    """
+    _check_counts(n_fine=n_fine, n_coarse=n_coarse, n_depth=n_depth)
+    if n_fine_sphere is None:
+        n_fine_sphere = max(1, (3 * int(n_fine) + 2) // 4)
+    _check_counts(n_fine_sphere=n_fine_sphere)
+    _check_sphere_on_block(radius, width, depth, height, fine, gap, profile, cell)
+    n_fine, n_coarse, n_depth, n_fine_sphere = map(int, (n_fine, n_coarse, n_depth, n_fine_sphere))
+    # the block: fine at its top z = 0
+    xb = _refined_line(fine, n_fine, width, n_coarse)
+    zb = -_expanding(fine / n_fine, depth, n_depth)[::-1]
+    pb, hb = _mapped_hexes(xb, xb, np.broadcast_to(zb[:, None, None], (n_depth + 1,) + (xb.size,) * 2))
+    # the sphere body: each column from the contact face up to the top, fine at the face
+    xs = _refined_line(fine, n_fine_sphere, width, n_coarse)
+    face = gap + _profile(np.hypot(xs[None, :], xs[:, None]), radius, profile)   # [j, i]
+    s = _expanding(fine / n_fine_sphere / (height - gap), 1.0, n_depth)
+    ps, hs = _mapped_hexes(xs, xs, face[None] + s[:, None, None] * (height - face[None]))
+    points = np.vstack([pb, ps])
+    hexes = np.vstack([hb, hs + pb.shape[0]])
+    lower = np.arange(hexes.shape[0]) < hb.shape[0]
+    if cell == "hexahedron":
+        cells, per = hexes, 1
+    else:
+        cells, per = hexes[:, _KUHN].reshape(-1, 4), _KUHN.shape[0]
+    block = np.repeat(lower, per)
+    mesh = Mesh(points, cell, cells,
+                cell_groups={"block": np.flatnonzero(block), "sphere": np.flatnonzero(~block)})
+    nb = pb.shape[0]
+    k_block = np.repeat(np.arange(n_depth + 1), xb.size ** 2)
+    k_sphere = np.repeat(np.arange(n_depth + 1), xs.size ** 2)
+    _side_groups(mesh, {
+        "block_top": np.concatenate([k_block == n_depth, np.zeros(ps.shape[0], bool)]),
+        "block_bottom": np.concatenate([k_block == 0, np.zeros(ps.shape[0], bool)]),
+        "sphere_surface": np.concatenate([np.zeros(nb, bool), k_sphere == 0]),
+        "sphere_top": np.concatenate([np.zeros(nb, bool), k_sphere == n_depth]),
+        "xmin": points[:, 0] == 0.0,
+        "ymin": points[:, 1] == 0.0,
+    })
+    return _nodes_from_facets(mesh)
+
+
+def sphere_on_block_counts(params: dict, order: int = 1) -> tuple[int, int, int]:
+    """(points, cells, dim) of ``sphere_on_block`` from its parameters (nothing built; with
+    tetrahedra and ``order = 2``, the midside nodes: one per edge of the Kuhn split)."""
+    n_fine, n_coarse, n_depth = (int(params.get(k, 1)) for k in ("n_fine", "n_coarse", "n_depth"))
+    n_sphere = int(params.get("n_fine_sphere", max(1, (3 * n_fine + 2) // 4)))
+    tetra = params.get("cell", "hexahedron") == "tetra"
+    points = cells = 0
+    for c in (n_fine + n_coarse, n_sphere + n_coarse):   # each body: c × c × n_depth hexahedra
+        d, hexes = n_depth, c * c * n_depth
+        points += (c + 1) ** 2 * (d + 1)
+        cells += hexes * (6 if tetra else 1)
+        if tetra and order == 2:   # grid edges, face diagonals, one body diagonal per hexahedron
+            points += (2 * c * (c + 1) * (d + 1) + (c + 1) ** 2 * d
+                       + c * c * (d + 1) + 2 * c * (c + 1) * d + hexes)
+    return points, cells, 3
+
+
+# --------------------------------------------------------------------------------------
 # quadratic upgrade
 # --------------------------------------------------------------------------------------
 
@@ -351,10 +508,13 @@ GENERATOR_GROUPS: dict[str, tuple[str, ...]] = {
     "rectangle": ("left", "right", "bottom", "top"),
     "box": ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax"),
     "plate_with_hole": ("hole", "left", "bottom", "right", "top"),
+    "sphere_on_block": ("block", "sphere", "block_top", "block_bottom", "sphere_surface",
+                        "sphere_top", "xmin", "ymin"),
 }
 
 GENERATORS: dict[str, Callable[..., Mesh]] = {
     "rectangle": rectangle,
     "box": box,
     "plate_with_hole": plate_with_hole,
+    "sphere_on_block": sphere_on_block,
 }

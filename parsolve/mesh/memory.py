@@ -39,6 +39,10 @@ _COMM = None
 
 def cell_counts(generator: str, params: dict, order: int = 1) -> tuple[int, int, int]:
     """(points, cells, dim) of a generated mesh, from its parameters alone (nothing built)."""
+    if generator == "sphere_on_block":   # two bodies: the generator module counts them
+        from parsolve.mesh.generators import sphere_on_block_counts
+
+        return sphere_on_block_counts(params, order)
     cell = params.get("cell")
     n = {k: int(v) for k, v in params.items()
          if k in ("nx", "ny", "nz", "n_radial", "n_angular") and isinstance(v, (int, float))}

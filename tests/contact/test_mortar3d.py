@@ -1,7 +1,7 @@
 """3D dual mortar rows (parsolve.contact.mortar3d): the segments cover a flat interface exactly
 on non-matching and rotated meshes, the rows transfer constants and linear fields exactly, the
 slave weights are ∫φ_i, matching meshes give identity rows, the gap and the frame, partial
-cover, quadratic faces refused."""
+cover, quad8 faces refused."""
 
 from __future__ import annotations
 
@@ -133,10 +133,13 @@ def test_partial_cover_keeps_the_identities():
     assert abs(mortar.weight.sum() - 0.5) < 1e-12
 
 
-def test_quadratic_faces_are_refused():
-    with pytest.raises(ValueError, match="no dual basis"):
-        faces = np.zeros((1, 6), dtype=int)
-        mortar_pairing_3d(np.zeros((6, 3)), faces, faces, "triangle6")
+def test_other_faces_are_refused():
+    """quad8 (no element of parsolve has them) and line faces: refused (triangle6: see
+    test_mortar3d_quadratic.py)."""
+    for kind, k in (("quad8", 8), ("line", 2)):
+        with pytest.raises(ValueError, match="need triangle, quad or triangle6 faces"):
+            faces = np.zeros((1, k), dtype=int)
+            mortar_pairing_3d(np.zeros((k, 3)), faces, faces, kind)
 
 
 @pytest.mark.parametrize("cell", ["quad", "triangle"])

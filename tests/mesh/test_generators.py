@@ -248,7 +248,8 @@ def test_make_quadratic_rejects_quads():
 
 
 def test_registry_keywords():
-    assert set(GENERATORS) == {"rectangle", "box", "plate_with_hole"} == set(GENERATOR_GROUPS)
+    assert set(GENERATORS) == {"rectangle", "box", "plate_with_hole", "sphere_on_block"} \
+        == set(GENERATOR_GROUPS)
     m = GENERATORS["rectangle"](lx=1.0, ly=1.0, nx=1, ny=1, cell="triangle", origin=(0, 0))
     assert m.num_cells == 2
     m = GENERATORS["box"](lx=1, ly=1, lz=1, nx=1, ny=1, nz=1, cell="tetra", origin=(0, 0, 0))
@@ -264,3 +265,64 @@ def test_registry_keywords():
     ]:
         m = GENERATORS[name](**kwargs)
         assert set(m.facet_groups) == set(m.node_groups) == set(GENERATOR_GROUPS[name])
+    m = GENERATORS["sphere_on_block"](radius=10, width=5, depth=5, height=5, fine=1, n_fine=2,
+                                      n_coarse=1, n_depth=1)
+    assert set(m.cell_groups) | set(m.facet_groups) == set(GENERATOR_GROUPS["sphere_on_block"])
+    assert set(m.facet_groups) == set(m.node_groups)
+
+
+# ---------------------------------------------------------------- sphere on a block
+
+
+@pytest.mark.parametrize("profile", ["paraboloid", "sphere"])
+@pytest.mark.parametrize("cell", ["hexahedron", "tetra"])
+def test_sphere_on_block_bodies_and_faces(profile, cell):
+    """Two bodies, positively oriented, each conforming (the faces between cells shared by
+    two), meeting only at the tip: the block [0, 5]² × [−5, 0] (volume 125 exactly), the
+    sphere body above the profile; the block top flat at z = 0, the sphere body's contact
+    nodes on the profile above the tip by the gap; the fine zone's cells of the block h =
+    0.8 / 4, the sphere body's 0.8 / 3 (¾ of the block's count: non-matching); counts as
+    memory.cell_counts says."""
+    from parsolve.mesh import memory
+    from parsolve.mesh.generators import sphere_on_block
+
+    params = dict(radius=10.0, width=5.0, depth=5.0, height=5.0, fine=0.8, n_fine=4,
+                  n_coarse=2, n_depth=3, gap=1e-3, profile=profile, cell=cell)
+    m = sphere_on_block(**params)
+    assert_valid(m)
+    assert memory.cell_counts("sphere_on_block", params) == (m.num_points, m.num_cells, 3)
+    vol = cell_measures(m)
+    assert vol[m.cell_groups["block"]].sum() == pytest.approx(125.0, rel=1e-13)
+    assert m.cell_groups["block"].size + m.cell_groups["sphere"].size == m.num_cells
+    x = m.points
+    top, face = np.unique(m.facet_groups["block_top"]), np.unique(m.facet_groups["sphere_surface"])
+    assert np.all(x[top, 2] == 0.0) and np.all(x[np.unique(m.facet_groups["block_bottom"]), 2] == -5.0)
+    assert np.all(x[np.unique(m.facet_groups["sphere_top"]), 2] == 5.0)
+    r = np.hypot(x[face, 0], x[face, 1])
+    f = r * r / 20.0 if profile == "paraboloid" else 10.0 - np.sqrt(100.0 - r * r)
+    np.testing.assert_allclose(x[face, 2], 1e-3 + f, rtol=1e-14, atol=1e-15)
+    assert top.size == 7 * 7 and face.size == 6 * 6
+    assert np.unique(x[top, 0])[1] == pytest.approx(0.2) and np.unique(x[face, 0])[1] == pytest.approx(0.8 / 3)
+    assert np.all(x[np.unique(m.facet_groups["xmin"]), 0] == 0.0)
+    assert np.all(x[np.unique(m.facet_groups["ymin"]), 1] == 0.0)
+    faces = [f for f in ([0, 1, 2, 3], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6],
+                         [3, 0, 4, 7])] if cell == "hexahedron" else [[0, 1, 2], [0, 1, 3], [1, 2, 3], [0, 2, 3]]
+    assert face_counts(m, faces).max() == 2
+    if cell == "tetra":   # order = 2: the counts of the upgraded mesh
+        assert memory.cell_counts("sphere_on_block", params, order=2)[0] == make_quadratic(m).num_points
+
+
+def test_sphere_on_block_bad_arguments():
+    """Each refusal names its parameter first (the scene's key: mesh.<name>)."""
+    from parsolve.mesh.generators import sphere_on_block
+
+    good = dict(radius=10.0, width=5.0, depth=5.0, height=5.0, fine=0.8, n_fine=4, n_coarse=2,
+                n_depth=3)
+    for change, first in [({"fine": 6.0}, "fine"), ({"n_fine": 0}, "n_fine"),
+                          ({"gap": -1.0}, "gap"), ({"profile": "cone"}, "profile"),
+                          ({"height": 2.0}, "height"), ({"cell": "tetra10"}, "unsupported"),
+                          ({"profile": "sphere", "radius": 7.0}, "radius"),
+                          ({"depth": 0.0}, "depth"), ({"n_fine_sphere": 1.5}, "n_fine_sphere")]:
+        with pytest.raises(ValueError) as err:
+            sphere_on_block(**{**good, **change})
+        assert str(err.value).split()[0] == first, (change, str(err.value))
