@@ -285,3 +285,56 @@ class DirectionIteration:
             coef = np.linalg.lstsq(dr, step[idx], rcond=None)[0]
             step[idx] = step[idx] - (dx + dr) @ coef
         return step, residual
+
+
+class SlipNewton:
+    """The 3D slip direction by a generalised Newton step inside the paper's relations.
+
+    A sliding node carries the friction ``-mu Rn s`` through its normal row's dual, with ``s``
+    the direction of its slip in the step, ``s = Δu_t/γ``, ``γ = |Δu_t|``. Linearised in the
+    displacement (the dual's dependence on s; Alart–Curnier, the semi-smooth Newton of
+    Hüeber–Stadler–Wohlmuth), the force is
+
+        d(-mu Rn s) = -mu s dRn - (mu Rn / γ) (I - s sᵀ) dΔu_t
+
+    the first term is the dual's own (Rn is a multiplier, an unknown of the solve), the second
+    a tangential stiffness ``κ = mu Rn / γ`` across s, which the effect adds to the Newton
+    matrix only: the forces, the residual and hence the converged answer are the relations'.
+    With it, ``s ← Δu_t/|Δu_t|`` after each solve is Newton's update of s (the *free* node:
+    both tangential rows released), quadratic near the answer, whatever the node's ξ =
+    kγ/(mu Rn) and the coupling through the structure. A node that starts sliding (γ = 0,
+    κ infinite) is *held* first: its row across s blocked (the limit κ → ∞), so that it
+    slides along s and gets a γ; it is then free. A node whose slip stays at or below ``tol``
+    (no direction to take from it) stays held and turns s towards −Rt (the plain update,
+    whose error factor ξ is then negligible). Deterministic arithmetic on the gathered
+    arrays: every rank takes the same decisions.
+    """
+
+    def __init__(self):
+        self.start(0)
+
+    def start(self, n: int) -> None:
+        """A new step: every node held, no stiffness."""
+        self.held = np.ones(n, dtype=bool)
+        self.kappa = np.zeros(n)
+
+    def turn(self, sliding: np.ndarray, s: np.ndarray, du: np.ndarray, rt: np.ndarray,
+             murn: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(new directions (n, 2), residual angles (n,), mode switched (n,)) of the nodes that
+        slide before and after the iteration just solved (``sliding``; the others keep s),
+        from its slip increments du (n, 2), friction forces rt (n, 2) and mu Rn (n,).
+        Afterwards ``held`` and ``kappa`` (the cross stiffness of the free nodes, 0 on the
+        others) are those of the next solve. The residual is the angle between s and the
+        slip (free) or −Rt (held): the direction's error."""
+        sliding = np.asarray(sliding, dtype=bool)
+        gamma = np.linalg.norm(du, axis=1)
+        free = sliding & (gamma > tol)
+        out = s.copy()
+        out[free] = du[free] / gamma[free, None]
+        held = sliding & ~free
+        out[held] = _unit(-rt[held], s[held], 0.0)
+        residual = np.where(sliding, np.abs(signed_angle(s, out)), 0.0)
+        switched = free & self.held
+        self.held = ~free
+        self.kappa = np.where(free, murn / np.where(free, gamma, 1.0), 0.0)
+        return out, residual, switched

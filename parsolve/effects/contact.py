@@ -106,6 +106,7 @@ from parsolve.contact.rows import friction_dual, node_rows, normal_rows, normal_
     slip_vectors, span_rows, tangent_rows
 from parsolve.contact.surfaces import Surfaces, canonical_facets
 from parsolve.effects.base import Effect
+from parsolve.effects.compose import NodeBlocks, node_places
 from parsolve.errors import InputError, SolverError
 from parsolve.evolution import CONSTANT
 from parsolve.fem.elements import element
@@ -235,7 +236,7 @@ class Contact(Effect):
         self.node_state = np.where(closed, fr.STICK, fr.OPEN).astype(np.int8)
         self.direction = np.ones((n, dm1)) / np.sqrt(dm1)
         self.committed = (self.node_state.copy(), self.direction.copy())
-        self.turning = fr.DirectionIteration()
+        self.turning = fr.SlipNewton()
         # finite sliding: the total slip of the converged steps (the output adds the step's)
         self.slip_base = np.zeros(n * dm1)
         self._build_rows()
@@ -559,7 +560,7 @@ class Contact(Effect):
         if not self.frictional:
             return self.span is not None
         self.q_start = q.copy()
-        self.turning.start(self.node_state)
+        self.turning.start(self.node_state.size)
         self.u_start = self._slip(q)
         self._set_dual()
         if self.span is None:
@@ -608,33 +609,58 @@ class Contact(Effect):
         # a node that closes while it moves along the surface slides that way: sticking it
         # at the step's starting point would pull it back (and may open it again: a cycle)
         norm = np.linalg.norm(du, axis=1)
-        moving = closing & (norm > 1e-8 * max(self.values.max_abs(q - self.q_start), 1e-300))
+        motion = max(self.values.max_abs(q - self.q_start), 1e-300)   # the step's, so far
+        moving = closing & (norm > 1e-8 * motion)
         state[moving] = fr.SLIP
         direction[moving] = du[moving] / norm[moving, None]
         if turning:
-            changed = self._turn(state, direction, lam, rn, du) or changed
+            changed = self._turn(state, direction, rn, rt, du, motion) or changed
         self.node_state, self.direction = state, direction
         if changed or moved:
             self._set_dual()
             self._tangent_active(active)
         return changed or moved
 
-    def _turn(self, state, direction, lam, rn, du) -> bool:
-        """Turn the directions of the nodes that slide before and after this update
-        (``fr.DirectionIteration``); True when one is not settled yet."""
-        it = self.turning
+    def _turn(self, state, direction, rn, rt, du, motion: float) -> bool:
+        """Newton's update of the directions of the nodes that slide before and after this
+        update (``fr.SlipNewton``: s along the slip, the cross stiffness of the next solve);
+        True when one is not settled yet or changes mode. A settled update leaves s as solved
+        (the outputs are those of the relations solved)."""
         sliding = (self.node_state == fr.SLIP) & (state == fr.SLIP)
-        f = lam[self.tangent.name].reshape(-1, 2)[:, 1]       # the cross rows' multipliers
-        s = self.direction
-        across = np.column_stack([-s[:, 1], s[:, 0]])
-        w = np.einsum("mj,mj->m", du, across)
-        murn = self.mu * np.maximum(rn, 0.0)
-        gamma = np.maximum(np.einsum("mj,mj->m", du, s), 0.0)
-        reset = bool(np.any(state != self.node_state))
-        step, residual = it.turn(sliding, s, f, w, murn, gamma, reset)
-        direction[sliding] = fr.rotate(s[sliding], step[sliding])
-        it.held |= state != fr.SLIP      # a node that starts sliding is held first
-        return bool(np.any(np.abs(residual) > fr.TOL_ANGLE))
+        # a slip below 1e-6 of the step's motion has no direction: such a node stays held
+        s, residual, switched = self.turning.turn(sliding, self.direction, du, rt,
+                                                  self.mu * np.maximum(rn, 0.0), 1e-6 * motion)
+        self.turning.held |= state != fr.SLIP     # a node that starts sliding is held first
+        unsettled = bool(np.any(residual > fr.TOL_ANGLE) or np.any(switched))
+        if unsettled:
+            direction[sliding] = s[sliding]
+        return unsettled
+
+    def evaluate(self, cells: np.ndarray, values: dict, state, secant: bool):
+        """No forces of its own (the contact acts through its relations); in 3D with friction,
+        the Newton matrix gets the cross stiffness κ (n × s)(n × s)ᵀ of each free sliding
+        node (``fr.SlipNewton``: the dual's dependence on s, linearised) on the slave node's
+        diagonal block (against a master body, its coupling to the master nodes is left out:
+        a quasi-Newton step)."""
+        if not (self.frictional and self.mesh.dim == 3 and self.spec.direction == "reaction"):
+            return {}, [], state, None
+        p = self.pairing
+        cell, local, which = self._slave_places(cells)
+        v = np.cross(p.normal[which], slip_vectors(p, self.direction)[which])
+        k = self.turning.kappa[which][:, None, None] * np.einsum("mi,mj->mij", v, v)
+        blocks = NodeBlocks(k.reshape(len(k), 9).T.copy(), cell, local)
+        return {}, [("u", "u", blocks)], state, None
+
+    def _slave_places(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(cell, local node, pairing entry) of the slave nodes this rank owns, through one of
+        its cells each; computed once per set of cells."""
+        cached = getattr(self, "_places", None)
+        if cached is None or cached[0] is not cells:
+            own, local = self.values.owned_nodes(self.pairing.slave)
+            cell, pos = node_places(self.mesh.cells[cells], local)
+            has = cell >= 0
+            self._places = (cells, (cell[has], pos[has], np.flatnonzero(own)[has]))
+        return self._places[1]
 
     def end_step(self) -> None:
         self._committed_slip = self.span is not None
