@@ -311,12 +311,25 @@ class SlipNewton:
     """
 
     def __init__(self):
-        self.start(0)
+        self.committed = np.zeros(0)
+        self.k: float | None = None    # the surface's tangential stiffness, once measured
+        self.start(np.zeros(0, dtype=np.int8))
 
-    def start(self, n: int) -> None:
-        """A new step: every node held, no stiffness."""
-        self.held = np.ones(n, dtype=bool)
-        self.kappa = np.zeros(n)
+    def start(self, state: np.ndarray) -> None:
+        """A new step from the committed node states: a node that slid at the end of the last
+        converged step starts free, with the cross stiffness it had there (its slip of the
+        last step for that of this one: equal steps of a steady slide); the others are held
+        and get no stiffness."""
+        n = len(state)
+        kappa = self.committed if self.committed.size == n else np.zeros(n)
+        free = (np.asarray(state) == SLIP) & (kappa > 0.0)
+        self.held = ~free
+        self.kappa = np.where(free, kappa, 0.0)
+        self.excess = np.zeros(n)
+
+    def commit(self) -> None:
+        """The step converged: keep its cross stiffnesses for the next step's start."""
+        self.committed = self.kappa.copy()
 
     def turn(self, sliding: np.ndarray, s: np.ndarray, du: np.ndarray, rt: np.ndarray,
              murn: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -335,6 +348,25 @@ class SlipNewton:
         out[held] = _unit(-rt[held], s[held], 0.0)
         residual = np.where(sliding, np.abs(signed_angle(s, out)), 0.0)
         switched = free & self.held
+        measured = switched & (self.excess > 0.0)
+        if self.k is None and np.any(measured):
+            # the held solve slid them by γ under the force their stick reaction had beyond
+            # the cone: k ≈ excess / γ (a median: one number for the surface, robust)
+            self.k = float(np.median(self.excess[measured] / gamma[measured]))
         self.held = ~free
         self.kappa = np.where(free, murn / np.where(free, gamma, 1.0), 0.0)
+        self.excess[:] = 0.0
         return out, residual, switched
+
+    def begin_slip(self, starting: np.ndarray, excess: np.ndarray, murn: np.ndarray) -> None:
+        """Nodes that start sliding (``starting``, from stick, their reaction ``excess`` =
+        |Rt| − mu Rn beyond the cone): held while the surface's tangential stiffness k is
+        not known; once it is, free at once with the cross stiffness of the slip that excess
+        will make, γ ≈ excess / k: κ = mu Rn k / excess (a held node spends a solve getting
+        its γ). Call after :meth:`turn`, which holds every node that is not free."""
+        self.excess[starting] = excess[starting]
+        if self.k is None:
+            self.held |= starting
+            return
+        self.held[starting] = False
+        self.kappa[starting] = murn[starting] * self.k / excess[starting]

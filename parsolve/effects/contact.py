@@ -560,7 +560,7 @@ class Contact(Effect):
         if not self.frictional:
             return self.span is not None
         self.q_start = q.copy()
-        self.turning.start(self.node_state.size)
+        self.turning.start(self.node_state)
         self.u_start = self._slip(q)
         self._set_dual()
         if self.span is None:
@@ -627,10 +627,13 @@ class Contact(Effect):
         True when one is not settled yet or changes mode. A settled update leaves s as solved
         (the outputs are those of the relations solved)."""
         sliding = (self.node_state == fr.SLIP) & (state == fr.SLIP)
+        murn = self.mu * np.maximum(rn, 0.0)
         # a slip below 1e-6 of the step's motion has no direction: such a node stays held
-        s, residual, switched = self.turning.turn(sliding, self.direction, du, rt,
-                                                  self.mu * np.maximum(rn, 0.0), 1e-6 * motion)
-        self.turning.held |= state != fr.SLIP     # a node that starts sliding is held first
+        s, residual, switched = self.turning.turn(sliding, self.direction, du, rt, murn,
+                                                  1e-6 * motion)
+        starting = (self.node_state == fr.STICK) & (state == fr.SLIP)
+        excess = np.linalg.norm(rt, axis=1) - murn
+        self.turning.begin_slip(starting & (excess > 0.0), excess, murn)
         unsettled = bool(np.any(residual > fr.TOL_ANGLE) or np.any(switched))
         if unsettled:
             direction[sliding] = s[sliding]
@@ -663,6 +666,7 @@ class Contact(Effect):
         return self._places[1]
 
     def end_step(self) -> None:
+        self.turning.commit()
         self._committed_slip = self.span is not None
         self._facet_committed = self._facet_now
         self.committed = (self.node_state.copy(), self.direction.copy())
