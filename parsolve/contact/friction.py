@@ -232,6 +232,9 @@ class DirectionIteration:
         self.history: tuple | None = None     # (sliding mask, [θ], [dθ])
         self.held = np.ones(len(held), dtype=bool)
 
+    def commit(self) -> None:
+        """Nothing is carried from one step to the next (``start`` forgets everything)."""
+
     def _estimate(self, sliding, s, f, murn, gamma) -> None:
         mask0, s0, f0 = self.last
         ok = sliding & mask0
@@ -285,6 +288,12 @@ class DirectionIteration:
             coef = np.linalg.lstsq(dr, step[idx], rcond=None)[0]
             step[idx] = step[idx] - (dx + dr) @ coef
         return step, residual
+
+
+#: A free sliding node's cross stiffness stays within this factor of the surface's tangential
+#: stiffness (a node that barely slides, whose κ = mu Rn / γ would be far above it, is held:
+#: the limit κ → ∞, without the ill-conditioning).
+KAPPA_MAX = 1e4
 
 
 class SlipNewton:
@@ -342,6 +351,8 @@ class SlipNewton:
         sliding = np.asarray(sliding, dtype=bool)
         gamma = np.linalg.norm(du, axis=1)
         free = sliding & (gamma > tol)
+        if self.k is not None:   # a cross stiffness far above the structure's: held instead
+            free &= murn <= KAPPA_MAX * self.k * gamma
         out = s.copy()
         out[free] = du[free] / gamma[free, None]
         held = sliding & ~free
@@ -368,5 +379,6 @@ class SlipNewton:
         if self.k is None:
             self.held |= starting
             return
-        self.held[starting] = False
-        self.kappa[starting] = murn[starting] * self.k / excess[starting]
+        free = starting & (murn <= KAPPA_MAX * excess)
+        self.held[starting] = ~free[starting]
+        self.kappa[free] = murn[free] * self.k / excess[free]

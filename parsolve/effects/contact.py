@@ -236,7 +236,7 @@ class Contact(Effect):
         self.node_state = np.where(closed, fr.STICK, fr.OPEN).astype(np.int8)
         self.direction = np.ones((n, dm1)) / np.sqrt(dm1)
         self.committed = (self.node_state.copy(), self.direction.copy())
-        self.turning = fr.SlipNewton()
+        self.turning = fr.SlipNewton() if spec.obstacle is not None else fr.DirectionIteration()
         # finite sliding: the total slip of the converged steps (the output adds the step's)
         self.slip_base = np.zeros(n * dm1)
         self._build_rows()
@@ -614,19 +614,21 @@ class Contact(Effect):
         state[moving] = fr.SLIP
         direction[moving] = du[moving] / norm[moving, None]
         if turning:
-            changed = self._turn(state, direction, rn, rt, du, motion) or changed
+            changed = self._turn(state, direction, lam, rn, rt, du, motion) or changed
         self.node_state, self.direction = state, direction
         if changed or moved:
             self._set_dual()
             self._tangent_active(active)
         return changed or moved
 
-    def _turn(self, state, direction, rn, rt, du, motion: float) -> bool:
+    def _turn(self, state, direction, lam, rn, rt, du, motion: float) -> bool:
         """Newton's update of the directions of the nodes that slide before and after this
         update (``fr.SlipNewton``: s along the slip, the cross stiffness of the next solve);
         True when one is not settled yet or changes mode. A settled update leaves s as solved
         (the outputs are those of the relations solved)."""
         sliding = (self.node_state == fr.SLIP) & (state == fr.SLIP)
+        if isinstance(self.turning, fr.DirectionIteration):
+            return self._turn_fixed_point(state, direction, lam, rn, du, sliding)
         murn = self.mu * np.maximum(rn, 0.0)
         # a slip below 1e-6 of the step's motion has no direction: such a node stays held
         s, residual, switched = self.turning.turn(sliding, self.direction, du, rt, murn,
@@ -639,13 +641,31 @@ class Contact(Effect):
             direction[sliding] = s[sliding]
         return unsettled
 
+    def _turn_fixed_point(self, state, direction, lam, rn, du, sliding) -> bool:
+        """Against a master body: the directions turned by ``fr.DirectionIteration`` (the
+        Newton-like fixed point with Anderson mixing; the cross stiffness would couple the
+        slave to the master nodes, outside the stiffness pattern)."""
+        it = self.turning
+        f = lam[self.tangent.name].reshape(-1, 2)[:, 1]       # the cross rows' multipliers
+        s = self.direction
+        across = np.column_stack([-s[:, 1], s[:, 0]])
+        w = np.einsum("mj,mj->m", du, across)
+        murn = self.mu * np.maximum(rn, 0.0)
+        gamma = np.maximum(np.einsum("mj,mj->m", du, s), 0.0)
+        reset = bool(np.any(state != self.node_state))
+        step, residual = it.turn(sliding, s, f, w, murn, gamma, reset)
+        direction[sliding] = fr.rotate(s[sliding], step[sliding])
+        it.held |= state != fr.SLIP      # a node that starts sliding is held first
+        return bool(np.any(np.abs(residual) > fr.TOL_ANGLE))
+
     def evaluate(self, cells: np.ndarray, values: dict, state, secant: bool):
         """No forces of its own (the contact acts through its relations); in 3D with friction,
         the Newton matrix gets the cross stiffness κ (n × s)(n × s)ᵀ of each free sliding
         node (``fr.SlipNewton``: the dual's dependence on s, linearised) on the slave node's
         diagonal block (against a master body, its coupling to the master nodes is left out:
         a quasi-Newton step)."""
-        if not (self.frictional and self.mesh.dim == 3 and self.spec.direction == "reaction"):
+        if not (self.frictional and self.mesh.dim == 3 and self.spec.direction == "reaction"
+                and isinstance(self.turning, fr.SlipNewton)):
             return {}, [], state, None
         p = self.pairing
         cell, local, which = self._slave_places(cells)
