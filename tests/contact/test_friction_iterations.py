@@ -1,9 +1,9 @@
-"""Global (Newton) iterations of 3D Coulomb friction (friction.SlipNewton: the slip direction
-by a generalised Newton step inside the paper's relations) on the shipped scene
-configs/contact_friction_3d.toml and on it refined 4× in cells: at most 10 per step at both
-sizes, the same counts on 1 and on every rank of the run, and the Coulomb answer (equilibrium,
-cone, full slip). Iteration counts, not timings (scripts/measure_friction_iterations.py prints
-them for 1×, 4×, 16×)."""
+"""Global (Newton) iterations of contact (issue 17): 3D Coulomb friction (friction.SlipNewton:
+the slip direction by a generalised Newton step inside the paper's relations) on the shipped
+scene configs/contact_friction_3d.toml and on it refined 4× in cells, at most 10 per step; a
+2D contact zone forming from nothing (the Hertz scene at 160 and 320 surface cells), at most
+5. Each with its answer and, on several ranks, the same counts as on one. Iteration counts,
+not timings (scripts/measure_friction_iterations.py prints them up to 16× and 640 cells)."""
 
 from __future__ import annotations
 
@@ -27,7 +27,8 @@ def scene(factor: int) -> str:
 def check_answer(res) -> None:
     """Coulomb at every node and step (cone 1e-8, no penetration, stick still, slip along
     -Rt); the normal force is the pressure's, the friction balances the forces that move the
-    top (1e-10: global equilibrium); once every node slides, sum |Rt| = mu N (1e-10)."""
+    top (1e-10: global equilibrium); once every node in contact slides, sum |Rt| = mu N
+    (1e-10)."""
     pts = res["mesh/points"]
     bottom = np.isclose(pts[:, 2], 0.0)
     state, _ = coulomb_checks(res, "base", MU, bottom)
@@ -101,3 +102,66 @@ def test_slip_newton_converges_quadratically_on_one_node(stiffness, length):
     big = [e for e in errors if 1e-12 < e < 0.1]
     for a, b in zip(big, big[1:]):
         assert b <= 10 * a * a, errors     # quadratic
+
+
+# ------------------------------------------------------------------ a 2D zone forming from nothing
+
+
+def hertz_scene(factor: int) -> str:
+    text = (CONFIGS / "contact_hertz_cylinder.toml").read_text()
+    text = text.replace("[output]\nfile = ", "# file = ")
+    return text.replace("nx = 160\nny = 40", f"nx = {160 * factor}\nny = {40 * factor}")
+
+
+@pytest.mark.parametrize("factor, measured", [(1, 3), (2, 4)])
+def test_hertz_zone_forming_from_nothing_takes_at_most_5_iterations(run, factor, measured):
+    """configs/contact_hertz_cylinder.toml at 160 and 320 surface cells: the contact zone forms
+    in one step from a single touching node. Closing only the rows penetrating by at least
+    half the deepest (``active_set.FORMING``), then the wrong-sign rule: 3 and 4 iterations
+    (were 5 and 5 closing every penetrating node; 640 cells: 5, scripts/
+    measure_friction_iterations.py). The answer: the lift balances the contact force
+    (1e-10), no pressure pulls, no node penetrates, open nodes carry nothing, the pressure is
+    symmetric; on one rank the same iterations and displacements."""
+    res = run(hertz_scene(factor), name=f"hertz_forming_{factor}")
+    its = res["steps/iterations"]
+    assert its.tolist() == [measured] and its.max() <= 5, its
+    pts = res["mesh/points"]
+    load = -res["relations/indent_normal/resultant"][-1, 1]
+    np.testing.assert_allclose(res["relations/lift/multiplier"][-1].sum(), -load, rtol=1e-10)
+    rn = res["fields/indent_normal_reaction"][-1, :, 0]
+    state = res["fields/indent_state"][-1, :, 0]
+    assert rn.min() >= -1e-12 * rn.max()
+    assert res["fields/indent_gap"][-1].min() >= -1e-12
+    np.testing.assert_array_equal(rn[state == fr.OPEN], 0.0)
+    top = np.flatnonzero(state >= 0)
+    order = top[np.lexsort((pts[top, 0],))]
+    np.testing.assert_allclose(rn[order], rn[order[::-1]], atol=1e-9 * rn.max())
+    if MPI.COMM_WORLD.size > 1 and factor == 1:
+        alone = run(hertz_scene(factor), name=f"hertz_forming_{factor}_alone", comm=MPI.COMM_SELF)
+        np.testing.assert_array_equal(alone["steps/iterations"], its)
+        u = res["fields/displacement"]
+        np.testing.assert_allclose(alone["fields/displacement"], u, rtol=0,
+                                   atol=1e-12 * np.abs(u).max())
+
+
+def test_a_forming_zone_closes_its_deepest_rows_first():
+    """The active-set rule alone: a contact relation with more violated rows than enforced ones
+    closes those penetrating by at least half the deepest; once the zone exists (as many
+    enforced as violated), every violated row; a relation that is not contact, every one."""
+    from parsolve.evolution import CONSTANT
+    from parsolve.relations import Relation
+    from parsolve.solvers.active_set import ActiveSet
+
+    def rel(name, kind):
+        r = Relation(name, 4, np.arange(4), np.arange(4), np.ones(4), np.zeros(4), CONSTANT,
+                     ">=", None, eliminate=False)
+        r.meta = {"type": kind}
+        return r
+
+    aset = ActiveSet([rel("c_normal", "contact"), rel("other", "user")])
+    gap = -np.array([1.0, 0.6, 0.4, 0.0, 1.0, 0.6, 0.4, 0.0])   # violations 1, 0.6, 0.4
+    assert aset.update(gap, np.zeros(8), 1e-12, 1e-12)
+    assert aset.active.tolist() == [True, True, False, False, True, True, True, False]
+    gap = -np.array([0.0, 0.0, 0.4, 0.3, 0, 0, 0, 0])            # the zone grows: 2 vs 2
+    assert aset.update(gap, -np.ones(8), 1e-12, 1e-12)
+    assert aset.active[:4].tolist() == [True, True, True, True]
