@@ -21,13 +21,15 @@ absorbs it, the friction force is ``Rt = −λt − μ Rn s`` (``friction.reacti
 
 The tangential rows: in 2D one row along t per node (s = ±1 only flips the dual). In 3D two
 rows per node along s and n × s (same entries as Dt₁, Dt₂: a direction change is a value
-update of A, D and the stick values). With ``direction = "reaction"`` (the default) a sliding
-node releases the row along s and keeps the one across it: its multiplier is the friction
-the direction lacks. The directions turn by Newton-like steps (``friction.DirectionIteration``,
-docs/contact.md §4.1): a node that slides far for its pressure is freed (both rows released,
-s turned towards its slip), the others stay held (s turned towards −Rt), the turns scaled by a
-tangential stiffness estimated once per step and mixed (Anderson) over the sliding nodes;
-7–27 iterations per step in the 3D tests, the same on any number of ranks. ``"displacement"``
+update of A, D and the stick values). With ``direction = "reaction"`` (the default), against
+a rigid obstacle, the directions follow a generalised Newton step (``friction.SlipNewton``):
+a node that starts sliding is held (its row across s blocked) until it has a slip, then free
+(both rows released) with s along its slip and, in the Newton matrix only, the cross
+stiffness mu Rn / γ that linearises the dual's dependence on s (``evaluate``): 5–10
+iterations per step in the 3D tests, not growing with the surface, the same on any number of
+ranks. Against a master body (whose nodes that stiffness would couple outside the pattern) a
+held node's cross-row multiplier is the friction the direction lacks and the directions turn
+by Newton-like steps (``friction.DirectionIteration``, docs/contact.md §4.1). ``"displacement"``
 releases both rows and takes s along the slip increment (the plain update): it does not
 converge in partial slip (kept for study).
 A node that closes while moving along the surface starts sliding that way (sticking it at
@@ -668,6 +670,8 @@ class Contact(Effect):
                 and isinstance(self.turning, fr.SlipNewton)):
             return {}, [], state, None
         p = self.pairing
+        if self.turning.kappa.size != len(p):   # before the first step: no stiffness yet
+            return {}, [], state, None
         cell, local, which = self._slave_places(cells)
         v = np.cross(p.normal[which], slip_vectors(p, self.direction)[which])
         k = self.turning.kappa[which][:, None, None] * np.einsum("mi,mj->mij", v, v)

@@ -46,9 +46,9 @@ def check_answer(res) -> None:
 
 @pytest.mark.parametrize("factor", [1, 2])
 def test_3d_friction_takes_at_most_10_iterations_per_step(run, factor):
-    """The shipped scene (6×6×2 hexahedra) and 4× its cells (12×12×2): ≤ 10 iterations at every
-    step (were 18 and 30 at the worst step with the direction fixed point), on this run's ranks
-    and on one rank alike, and the Coulomb answer."""
+    """The shipped scene (6×6×2 hexahedra) and 4× its cells (12×12×2): ≤ 10 iterations at
+    every step (were 18 and 30 at the worst step with the direction fixed point), on this
+    run's ranks and on one rank alike, and the Coulomb answer."""
     res = run(scene(factor), name=f"friction_3d_{factor}")
     check_answer(res)
     its = res["steps/iterations"]
