@@ -232,6 +232,9 @@ class DirectionIteration:
         self.history: tuple | None = None     # (sliding mask, [θ], [dθ])
         self.held = np.ones(len(held), dtype=bool)
 
+    def commit(self) -> None:
+        """Nothing is carried from one step to the next (``start`` forgets everything)."""
+
     def _estimate(self, sliding, s, f, murn, gamma) -> None:
         mask0, s0, f0 = self.last
         ok = sliding & mask0
@@ -285,3 +288,97 @@ class DirectionIteration:
             coef = np.linalg.lstsq(dr, step[idx], rcond=None)[0]
             step[idx] = step[idx] - (dx + dr) @ coef
         return step, residual
+
+
+#: A free sliding node's cross stiffness stays within this factor of the surface's tangential
+#: stiffness (a node that barely slides, whose κ = mu Rn / γ would be far above it, is held:
+#: the limit κ → ∞, without the ill-conditioning).
+KAPPA_MAX = 1e4
+
+
+class SlipNewton:
+    """The 3D slip direction by a generalised Newton step inside the paper's relations.
+
+    A sliding node carries the friction ``-mu Rn s`` through its normal row's dual, with ``s``
+    the direction of its slip in the step, ``s = Δu_t/γ``, ``γ = |Δu_t|``. Linearised in the
+    displacement (the dual's dependence on s; Alart–Curnier, the semi-smooth Newton of
+    Hüeber–Stadler–Wohlmuth), the force is
+
+        d(-mu Rn s) = -mu s dRn - (mu Rn / γ) (I - s sᵀ) dΔu_t
+
+    the first term is the dual's own (Rn is a multiplier, an unknown of the solve), the second
+    a tangential stiffness ``κ = mu Rn / γ`` across s, which the effect adds to the Newton
+    matrix only: the forces, the residual and hence the converged answer are the relations'.
+    With it, ``s ← Δu_t/|Δu_t|`` after each solve is Newton's update of s (the *free* node:
+    both tangential rows released), quadratic near the answer, whatever the node's ξ =
+    kγ/(mu Rn) and the coupling through the structure. A node that starts sliding (γ = 0,
+    κ infinite) is *held* first: its row across s blocked (the limit κ → ∞), so that it
+    slides along s and gets a γ; it is then free. A node whose slip stays at or below ``tol``
+    (no direction to take from it) stays held and turns s towards −Rt (the plain update,
+    whose error factor ξ is then negligible). Deterministic arithmetic on the gathered
+    arrays: every rank takes the same decisions.
+    """
+
+    def __init__(self):
+        self.committed = np.zeros(0)
+        self.k: float | None = None    # the surface's tangential stiffness, once measured
+        self.start(np.zeros(0, dtype=np.int8))
+
+    def start(self, state: np.ndarray) -> None:
+        """A new step from the committed node states: a node that slid at the end of the last
+        converged step starts free, with the cross stiffness it had there (its slip of the
+        last step for that of this one: equal steps of a steady slide); the others are held
+        and get no stiffness."""
+        n = len(state)
+        kappa = self.committed if self.committed.size == n else np.zeros(n)
+        free = (np.asarray(state) == SLIP) & (kappa > 0.0)
+        self.held = ~free
+        self.kappa = np.where(free, kappa, 0.0)
+        self.excess = np.zeros(n)
+
+    def commit(self) -> None:
+        """The step converged: keep its cross stiffnesses for the next step's start."""
+        self.committed = self.kappa.copy()
+
+    def turn(self, sliding: np.ndarray, s: np.ndarray, du: np.ndarray, rt: np.ndarray,
+             murn: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(new directions (n, 2), residual angles (n,), mode switched (n,)) of the nodes that
+        slide before and after the iteration just solved (``sliding``; the others keep s),
+        from its slip increments du (n, 2), friction forces rt (n, 2) and mu Rn (n,).
+        Afterwards ``held`` and ``kappa`` (the cross stiffness of the free nodes, 0 on the
+        others) are those of the next solve. The residual is the angle between s and the
+        slip (free) or −Rt (held): the direction's error."""
+        sliding = np.asarray(sliding, dtype=bool)
+        gamma = np.linalg.norm(du, axis=1)
+        free = sliding & (gamma > tol)
+        if self.k is not None:   # a cross stiffness far above the structure's: held instead
+            free &= murn <= KAPPA_MAX * self.k * gamma
+        out = s.copy()
+        out[free] = du[free] / gamma[free, None]
+        held = sliding & ~free
+        out[held] = _unit(-rt[held], s[held], 0.0)
+        residual = np.where(sliding, np.abs(signed_angle(s, out)), 0.0)
+        switched = free & self.held
+        measured = switched & (self.excess > 0.0)
+        if self.k is None and np.any(measured):
+            # the held solve slid them by γ under the force their stick reaction had beyond
+            # the cone: k ≈ excess / γ (a median: one number for the surface, robust)
+            self.k = float(np.median(self.excess[measured] / gamma[measured]))
+        self.held = ~free
+        self.kappa = np.where(free, murn / np.where(free, gamma, 1.0), 0.0)
+        self.excess[:] = 0.0
+        return out, residual, switched
+
+    def begin_slip(self, starting: np.ndarray, excess: np.ndarray, murn: np.ndarray) -> None:
+        """Nodes that start sliding (``starting``, from stick, their reaction ``excess`` =
+        |Rt| − mu Rn beyond the cone): held while the surface's tangential stiffness k is
+        not known; once it is, free at once with the cross stiffness of the slip that excess
+        will make, γ ≈ excess / k: κ = mu Rn k / excess (a held node spends a solve getting
+        its γ). Call after :meth:`turn`, which holds every node that is not free."""
+        self.excess[starting] = excess[starting]
+        if self.k is None:
+            self.held |= starting
+            return
+        free = starting & (murn <= KAPPA_MAX * excess)
+        self.held[starting] = ~free[starting]
+        self.kappa[free] = murn[free] * self.k / excess[free]

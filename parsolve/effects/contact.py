@@ -21,13 +21,15 @@ absorbs it, the friction force is ``Rt = −λt − μ Rn s`` (``friction.reacti
 
 The tangential rows: in 2D one row along t per node (s = ±1 only flips the dual). In 3D two
 rows per node along s and n × s (same entries as Dt₁, Dt₂: a direction change is a value
-update of A, D and the stick values). With ``direction = "reaction"`` (the default) a sliding
-node releases the row along s and keeps the one across it: its multiplier is the friction
-the direction lacks. The directions turn by Newton-like steps (``friction.DirectionIteration``,
-docs/contact.md §4.1): a node that slides far for its pressure is freed (both rows released,
-s turned towards its slip), the others stay held (s turned towards −Rt), the turns scaled by a
-tangential stiffness estimated once per step and mixed (Anderson) over the sliding nodes;
-7–27 iterations per step in the 3D tests, the same on any number of ranks. ``"displacement"``
+update of A, D and the stick values). With ``direction = "reaction"`` (the default), against
+a rigid obstacle, the directions follow a generalised Newton step (``friction.SlipNewton``):
+a node that starts sliding is held (its row across s blocked) until it has a slip, then free
+(both rows released) with s along its slip and, in the Newton matrix only, the cross
+stiffness mu Rn / γ that linearises the dual's dependence on s (``evaluate``): 5–10
+iterations per step in the 3D tests, not growing with the surface, the same on any number of
+ranks. Against a master body (whose nodes that stiffness would couple outside the pattern) a
+held node's cross-row multiplier is the friction the direction lacks and the directions turn
+by Newton-like steps (``friction.DirectionIteration``, docs/contact.md §4.1). ``"displacement"``
 releases both rows and takes s along the slip increment (the plain update): it does not
 converge in partial slip (kept for study).
 A node that closes while moving along the surface starts sliding that way (sticking it at
@@ -106,6 +108,7 @@ from parsolve.contact.rows import friction_dual, node_rows, normal_rows, normal_
     slip_vectors, span_rows, tangent_rows
 from parsolve.contact.surfaces import Surfaces, canonical_facets
 from parsolve.effects.base import Effect
+from parsolve.effects.compose import NodeBlocks, node_places
 from parsolve.errors import InputError, SolverError
 from parsolve.evolution import CONSTANT
 from parsolve.fem.elements import element
@@ -239,7 +242,7 @@ class Contact(Effect):
         self.node_state = np.where(closed, fr.STICK, fr.OPEN).astype(np.int8)
         self.direction = np.ones((n, dm1)) / np.sqrt(dm1)
         self.committed = (self.node_state.copy(), self.direction.copy())
-        self.turning = fr.DirectionIteration()
+        self.turning = fr.SlipNewton() if spec.obstacle is not None else fr.DirectionIteration()
         # finite sliding: the total slip of the converged steps (the output adds the step's)
         self.slip_base = np.zeros(n * dm1)
         self._build_rows()
@@ -613,22 +616,43 @@ class Contact(Effect):
         # a node that closes while it moves along the surface slides that way: sticking it
         # at the step's starting point would pull it back (and may open it again: a cycle)
         norm = np.linalg.norm(du, axis=1)
-        moving = closing & (norm > 1e-8 * max(self.values.max_abs(q - self.q_start), 1e-300))
+        motion = max(self.values.max_abs(q - self.q_start), 1e-300)   # the step's, so far
+        moving = closing & (norm > 1e-8 * motion)
         state[moving] = fr.SLIP
         direction[moving] = du[moving] / norm[moving, None]
         if turning:
-            changed = self._turn(state, direction, lam, rn, du) or changed
+            changed = self._turn(state, direction, lam, rn, rt, du, motion) or changed
         self.node_state, self.direction = state, direction
         if changed or moved:
             self._set_dual()
             self._tangent_active(active)
         return changed or moved
 
-    def _turn(self, state, direction, lam, rn, du) -> bool:
-        """Turn the directions of the nodes that slide before and after this update
-        (``fr.DirectionIteration``); True when one is not settled yet."""
-        it = self.turning
+    def _turn(self, state, direction, lam, rn, rt, du, motion: float) -> bool:
+        """Newton's update of the directions of the nodes that slide before and after this
+        update (``fr.SlipNewton``: s along the slip, the cross stiffness of the next solve);
+        True when one is not settled yet or changes mode. A settled update leaves s as solved
+        (the outputs are those of the relations solved)."""
         sliding = (self.node_state == fr.SLIP) & (state == fr.SLIP)
+        if isinstance(self.turning, fr.DirectionIteration):
+            return self._turn_fixed_point(state, direction, lam, rn, du, sliding)
+        murn = self.mu * np.maximum(rn, 0.0)
+        # a slip below 1e-6 of the step's motion has no direction: such a node stays held
+        s, residual, switched = self.turning.turn(sliding, self.direction, du, rt, murn,
+                                                  1e-6 * motion)
+        starting = (self.node_state == fr.STICK) & (state == fr.SLIP)
+        excess = np.linalg.norm(rt, axis=1) - murn
+        self.turning.begin_slip(starting & (excess > 0.0), excess, murn)
+        unsettled = bool(np.any(residual > fr.TOL_ANGLE) or np.any(switched))
+        if unsettled:
+            direction[sliding] = s[sliding]
+        return unsettled
+
+    def _turn_fixed_point(self, state, direction, lam, rn, du, sliding) -> bool:
+        """Against a master body: the directions turned by ``fr.DirectionIteration`` (the
+        Newton-like fixed point with Anderson mixing; the cross stiffness would couple the
+        slave to the master nodes, outside the stiffness pattern)."""
+        it = self.turning
         f = lam[self.tangent.name].reshape(-1, 2)[:, 1]       # the cross rows' multipliers
         s = self.direction
         across = np.column_stack([-s[:, 1], s[:, 0]])
@@ -641,7 +665,37 @@ class Contact(Effect):
         it.held |= state != fr.SLIP      # a node that starts sliding is held first
         return bool(np.any(np.abs(residual) > fr.TOL_ANGLE))
 
+    def evaluate(self, cells: np.ndarray, values: dict, state, secant: bool):
+        """No forces of its own (the contact acts through its relations); in 3D with friction,
+        the Newton matrix gets the cross stiffness κ (n × s)(n × s)ᵀ of each free sliding
+        node (``fr.SlipNewton``: the dual's dependence on s, linearised) on the slave node's
+        diagonal block (against a master body, its coupling to the master nodes is left out:
+        a quasi-Newton step)."""
+        if not (self.frictional and self.mesh.dim == 3 and self.spec.direction == "reaction"
+                and isinstance(self.turning, fr.SlipNewton)):
+            return {}, [], state, None
+        p = self.pairing
+        if self.turning.kappa.size != len(p):   # before the first step: no stiffness yet
+            return {}, [], state, None
+        cell, local, which = self._slave_places(cells)
+        v = np.cross(p.normal[which], slip_vectors(p, self.direction)[which])
+        k = self.turning.kappa[which][:, None, None] * np.einsum("mi,mj->mij", v, v)
+        blocks = NodeBlocks(k.reshape(len(k), 9).T.copy(), cell, local)
+        return {}, [("u", "u", blocks)], state, None
+
+    def _slave_places(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(cell, local node, pairing entry) of the slave nodes this rank owns, through one of
+        its cells each; computed once per set of cells."""
+        cached = getattr(self, "_places", None)
+        if cached is None or cached[0] is not cells:
+            own, local = self.values.owned_nodes(self.pairing.slave)
+            cell, pos = node_places(self.mesh.cells[cells], local)
+            has = cell >= 0
+            self._places = (cells, (cell[has], pos[has], np.flatnonzero(own)[has]))
+        return self._places[1]
+
     def end_step(self) -> None:
+        self.turning.commit()
         self._committed_slip = self.span is not None
         self._facet_committed = self._facet_now
         self.committed = (self.node_state.copy(), self.direction.copy())
