@@ -135,9 +135,16 @@ def facet_direction(nodes: np.ndarray) -> np.ndarray:
     n = nodes.shape[1]
     if n == 2:
         return nodes[:, 0] < nodes[:, 1]
-    rows = np.arange(nodes.shape[0])
-    i = nodes.argmin(axis=1)
-    return nodes[rows, (i + 1) % n] < nodes[rows, (i - 1) % n]
+    # column by column (numpy's argmin over short rows goes row by row): the smallest node's
+    # two neighbours in the cycle, the first smallest as argmin's
+    cols = [nodes[:, k] for k in range(n)]
+    low, after, before = cols[0], cols[1 % n], cols[n - 1]
+    for k in range(1, n):
+        less = cols[k] < low
+        low = np.where(less, cols[k], low)
+        after = np.where(less, cols[(k + 1) % n], after)
+        before = np.where(less, cols[k - 1], before)
+    return after < before
 
 
 def check_folds(mesh: Mesh, source: str | None, key: str | None) -> None:
