@@ -39,6 +39,7 @@ from parsolve.mesh.partition import (MIN_CELLS_PER_PART, PARTITIONERS, Partition
 # node numbers are multiplied by up to this many components per node into DOF numbers
 COMPONENT_MARGIN = 64
 INT32_MAX = np.iinfo(np.int32).max
+PART_TAG = 72   # the message of a rank's part
 
 
 def index_dtype(count: int, per_item: int = 1) -> np.dtype:
@@ -95,19 +96,19 @@ def distribute(comm, whole: Mesh | None, method: str = "scotch",
     if comm.size == 1:
         return _whole_part(whole)
     cell_part, used = _cell_parts(comm, whole, method, graph)
-    if comm.rank == 0:
-        part = from_cell_parts(whole, cell_part, comm.size, used)
-        parts = [_extract(whole, part, r) for r in range(comm.size)]
-        extent = np.ptp(whole.points, axis=0) if whole.num_points else np.zeros(whole.dim)
-        common = {"cell_type": whole.cell_type, "node_ranges": part.node_ranges,
-                  "num_global_points": whole.num_points, "num_global_cells": whole.num_cells,
-                  "partitioner": used, "warnings": list(whole.warnings), "extent": extent}
-        for r, payload in enumerate(parts):
-            payload.update(common)
-    else:
-        parts = None
-    mine = comm.scatter(parts, root=0)
-    return LocalMesh(rank=comm.rank, **mine)
+    if comm.rank != 0:
+        return LocalMesh(rank=comm.rank, **comm.recv(source=0, tag=PART_TAG))
+    part = from_cell_parts(whole, cell_part, comm.size, used)
+    del cell_part
+    extent = np.ptp(whole.points, axis=0) if whole.num_points else np.zeros(whole.dim)
+    common = {"cell_type": whole.cell_type, "node_ranges": part.node_ranges,
+              "num_global_points": whole.num_points, "num_global_cells": whole.num_cells,
+              "partitioner": used, "warnings": list(whole.warnings), "extent": extent}
+    # one part at a time, sent before the next is cut out: rank 0 holds the whole mesh and
+    # one other part (and its message), not every rank's part at once
+    for r in range(1, comm.size):
+        comm.send({**_extract(whole, part, r), **common}, dest=r, tag=PART_TAG)
+    return LocalMesh(rank=0, **_extract(whole, part, 0), **common)
 
 
 def _cell_parts(comm, whole: Mesh | None, method: str, graph=None
@@ -181,7 +182,9 @@ def _extract(whole: Mesh, part: Partition, rank: int) -> dict:
     node_part = part.node_part
     local_cells = np.flatnonzero((node_part[cells] == rank).any(axis=1))
     owned = np.flatnonzero(node_part == rank)
-    touched = np.unique(cells[local_cells])
+    touched = np.zeros(whole.num_points, dtype=bool)   # a mask, not a sort: np.unique's ids
+    touched[cells[local_cells]] = True
+    touched = np.flatnonzero(touched)
     ghosts = touched[node_part[touched] != rank]
     ghosts = ghosts[np.argsort(part.new_of_old[ghosts], kind="stable")]
     local_nodes = np.concatenate([owned, ghosts])
