@@ -1,9 +1,10 @@
 """The distributed mesh: each rank keeps only its part, with the input ids of what it holds.
 Every run goes through it, 1 rank included.
 
-Rank 0 reads (or generates) and checks the whole mesh, partitions its cells (PT-Scotch through
-PETSc, every rank handing it one block of the dual graph; or coordinate bisection), and sends
-every rank its part; then it drops the whole mesh like the others never had it. On 1 rank the
+Rank 0 reads (or generates) the whole mesh, every rank checks a block of its cells and builds
+that block's rows of the dual graph (``blocks``), its cells are partitioned (PT-Scotch through
+PETSc, every rank handing it its block of the graph; or coordinate bisection), and rank 0 sends
+every rank its part, one at a time; then it drops the whole mesh like the others never had it. On 1 rank the
 part is the whole mesh, its arrays taken as they are (not copied: the mesh is never held
 twice). The rules are ``partition.from_cell_parts``':
 
@@ -31,9 +32,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from parsolve.mesh import blocks
 from parsolve.mesh.mesh import Mesh
 from parsolve.mesh.partition import (MIN_CELLS_PER_PART, PARTITIONERS, Partition, bisect,
-                                     block_starts, dual_graph, from_cell_parts, scotch_block)
+                                     from_cell_parts, scotch_block)
 
 
 # node numbers are multiplied by up to this many components per node into DOF numbers
@@ -89,8 +91,8 @@ class LocalMesh(Mesh):
 def distribute(comm, whole: Mesh | None, method: str = "scotch",
                graph: tuple[np.ndarray, np.ndarray] | None = None) -> LocalMesh:
     """Rank 0's ``whole`` mesh (None on the other ranks) → every rank's ``LocalMesh``.
-    ``graph``: this rank's block of the dual graph (``blocks.facet_groups``), else rank 0
-    builds it. Collective."""
+    ``graph``: this rank's block of the dual graph (``blocks.check_cells``, which a run has
+    made while checking the cells), else it is made here the same way. Collective."""
     if method not in PARTITIONERS:
         raise ValueError(f"unknown partitioner {method!r} (expected one of {PARTITIONERS})")
     if comm.size == 1:
@@ -121,13 +123,8 @@ def _cell_parts(comm, whole: Mesh | None, method: str, graph=None
                             and whole.num_cells >= MIN_CELLS_PER_PART * size, root=0)
     part = None
     if use_scotch:
-        blocks = None
-        if comm.rank == 0 and graph is None:
-            indptr, indices = dual_graph(whole)
-            starts = block_starts(whole.num_cells, size)
-            blocks = [(indptr[starts[r]:starts[r + 1] + 1] - indptr[starts[r]],
-                       indices[indptr[starts[r]]:indptr[starts[r + 1]]]) for r in range(size)]
-        ptr, idx = graph if graph is not None else comm.scatter(blocks, root=0)
+        ptr, idx = graph if graph is not None else blocks.check_cells(
+            comm, whole if comm.rank == 0 else None, None, None)
         n = comm.bcast(whole.num_cells if comm.rank == 0 else None, root=0)
         local = scotch_block(comm, n, ptr, idx)
         gathered = comm.gather(local, root=0)
