@@ -88,7 +88,6 @@ def check_cells(comm, whole: Mesh | None, source: str | None, key: str | None,
     return facet_groups(comm, block, source, key, graph=graph)
 
 
-
 def check_jacobians(comm, block: CellBlock, source: str | None, key: str | None) -> None:
     """Every cell positively oriented with det J clearly positive at every checked point
     (``checks.reference_points``), from the blocks; collective."""

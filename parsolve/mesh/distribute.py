@@ -4,9 +4,9 @@ Every run goes through it, 1 rank included.
 Rank 0 reads (or generates) the whole mesh, every rank checks a block of its cells and builds
 that block's rows of the dual graph (``blocks``), its cells are partitioned (PT-Scotch through
 PETSc, every rank handing it its block of the graph; or coordinate bisection), and rank 0 sends
-every rank its part, one at a time; then it drops the whole mesh like the others never had it. On 1 rank the
-part is the whole mesh, its arrays taken as they are (not copied: the mesh is never held
-twice). The rules are ``partition.from_cell_parts``':
+every rank its part, one at a time; then it drops the whole mesh like the others never had it.
+On 1 rank the part is the whole mesh, its arrays taken as they are (not copied: the mesh is
+never held twice). The rules are ``partition.from_cell_parts``':
 
 * a node belongs to the lowest rank among the cells that touch it;
 * a rank's **local cells** are every cell that touches one of its nodes (its owned cells and one
