@@ -90,11 +90,10 @@ def mesh_source(scene: Scene) -> tuple[str, str]:
     return scene.source, "mesh"
 
 
-def build_mesh(scene: Scene, check_cells: bool = True) -> Mesh:
+def build_mesh(scene: Scene) -> Mesh:
     """The scene's whole mesh, checked: its size against this machine's memory (a generator's
-    before it runs, a file's once read; this process alone: rank 0 builds it), coordinates,
-    cell shapes (unless ``check_cells`` is False: ``build_model`` checks them by blocks);
-    ``mesh.warnings`` says the rest."""
+    before it runs, a file's once read; this process alone: rank 0 builds it), coordinates
+    (the cells: by blocks, ``build_model``); ``mesh.warnings`` says the rest."""
     spec = scene.mesh
     source, key = mesh_source(scene)
     if spec.file is not None:
@@ -120,7 +119,7 @@ def build_mesh(scene: Scene, check_cells: bool = True) -> Mesh:
     if mesh.dim != scene.dim:
         raise InputError(f"a {mesh.dim}D mesh ({mesh.cell_type}) cannot carry hypothesis "
                          f"{scene.hypothesis!r}", scene.source, "model.hypothesis")
-    mesh.warnings = [f"{source}: {key}: {w}" for w in check_mesh(mesh, source, key, check_cells)]
+    mesh.warnings = [f"{source}: {key}: {w}" for w in check_mesh(mesh, source, key)]
     return mesh
 
 
@@ -191,7 +190,7 @@ def _distributed_mesh(scene: Scene, comm) -> LocalMesh:
     whole, error = None, None
     if comm.rank == 0:
         try:
-            whole = build_mesh(scene, check_cells=False)   # rank 0 alone: the whole on one rank
+            whole = build_mesh(scene)   # rank 0 alone: the whole on one rank
         except InputError as exc:
             error = (exc.message, exc.source, exc.key)
     error = comm.bcast(error, root=0)

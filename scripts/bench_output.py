@@ -69,11 +69,12 @@ def child(n: int, steps: int, mode: str, inputs: str, selection: str, out: Path)
     from parsolve.io.parallel import ParallelResultWriter
     from parsolve.io.slabs import OwnedRows
     from parsolve.mesh.generators import rectangle
-    from parsolve.mesh.partition import partition
+    from parsolve.mesh.partition import bisect, from_cell_parts
 
     comm = MPI.COMM_WORLD
     mesh = rectangle(1.0, 1.0, n, n, cell="quad")
-    part = partition(mesh, comm.size)
+    part = from_cell_parts(mesh, bisect(mesh.points[mesh.cells].mean(axis=1), comm.size),
+                           comm.size, "bisection")
     owners = (part.node_part, part.node_part[mesh.cells].min(axis=1))
     nodes = np.flatnonzero(owners[0] == comm.rank)
     cells = np.flatnonzero(owners[1] == comm.rank)

@@ -14,8 +14,8 @@ One fresh process per (problem, ranks) under `scripts/mpirun.sh -n RANKS` (2, 3 
 4 oversubscribed on 2 cores; 1 rank = the input numbering, no partition, for reference), both
 partitioners in that process (order alternating between processes, so that neither always
 runs first):
-  * partition: `cell_parts` (for PT-Scotch: the cell dual graph, the MPIAdj rows, PT-Scotch,
-    the gather), seconds = slowest rank's; edge cut = shared facets between parts; interface
+  * partition: the run's (for PT-Scotch: the cell checks and dual graph by blocks, the MPIAdj
+    rows, PT-Scotch, the gather), seconds = slowest rank's; edge cut = shared facets between parts; interface
     nodes = nodes whose cells lie in more than one part; DOF balance = largest rank's owned
     DOFs / mean;
   * the system (`SaddleSystem` + `assemble`), then the `direct` preset (MUMPS LDLᵀ) with the
@@ -157,20 +157,28 @@ def _entries(v: int) -> float:
 
 
 def partition_stats(comm, mesh, method: str) -> dict:
-    """Time cell_parts alone, then the counts of the partition it gives."""
+    """Time the run's partition alone (``distribute``'s: for PT-Scotch the cell checks and dual
+    graph by blocks, the MPIAdj rows, PT-Scotch, the gather), then the counts it gives."""
     import numpy as np
+    from mpi4py import MPI
 
-    from parsolve.mesh.partition import cell_parts, dual_graph, edge_cut, partition
+    from parsolve.mesh import blocks
+    from parsolve.mesh.distribute import _cell_parts
+    from parsolve.mesh.partition import edge_cut, from_cell_parts
 
-    cell_parts(mesh, comm.size, method, comm)     # warm-up: imports, PETSc registration
+    def cell_parts():
+        parts, used = _cell_parts(comm, mesh, method)
+        return comm.bcast(parts, root=0), used
+
+    cell_parts()     # warm-up: imports, PETSc registration
     with Clock(comm) as p:
-        parts, used = cell_parts(mesh, comm.size, method, comm)
-    graph = dual_graph(mesh)
+        parts, used = cell_parts()
+    graph = blocks.check_cells(MPI.COMM_SELF, mesh, None, None)   # the whole graph, one block
     lo = np.full(mesh.num_points, comm.size)
     hi = np.full(mesh.num_points, -1)
     np.minimum.at(lo, mesh.cells, parts[:, None])
     np.maximum.at(hi, mesh.cells, parts[:, None])
-    part = partition(mesh, comm.size, method, comm)
+    part = from_cell_parts(mesh, parts, comm.size, used)
     owned = np.diff(part.node_ranges)
     return dict(method=used, t_partition=p.t, cpu_partition=p.cpu_s, edge_cut=edge_cut(*graph, parts),
                 interface_nodes=int(np.count_nonzero((hi >= 0) & (lo != hi))),
@@ -413,7 +421,8 @@ def report(out: dict, full: bool) -> int:
         "bench_solve's unit square (P1 triangles, where issue 8 measured QAMD's 2.2×) and a 3D "
         "box of Q1 hexahedra (box 33: partitions only, `--orderings` empty); one fresh process per (problem, ranks), both partitioners in it; "
         "4 ranks are oversubscribed on 2 cores; np=1 is the input numbering (no partition). "
-        "Partition = `cell_parts` (PT-Scotch: dual graph + MPIAdj rows + PT-Scotch + gather). "
+        "Partition = the run's (PT-Scotch: cell checks and dual graph by blocks + MPIAdj rows + "
+        "PT-Scotch + gather). "
         "MUMPS LDLᵀ of the `direct` preset with the ordering QAMD (parsolve's default, "
         "icntl_7 6) and METIS (5; Debian's MUMPS has no METIS: INFOG(7) says it ran PORD, "
         "shown as METIS→PORD): INFOG(3) = estimated factor entries, RINFOG(1) = estimated "

@@ -47,11 +47,15 @@ class NodePattern:
         nc = self.ncomp
         bptr = np.concatenate([[0], np.cumsum(self.nb)])
         first = row_start.reshape(-1, nc) - nc * bptr[:-1, None]                # (nown, nc)
-        ramp = nc * np.arange(self.nnzb, dtype=np.int64)
         out = np.empty((nc, self.nnzb), dtype=dtype or np.result_type(row_start, np.int64))
+        # in the result's type (every slot fits it), the row of each pair and the ramp made
+        # once for all components: no temporary of int64 per pair and component (fresh
+        # memory costs the kernel as much time as the arithmetic here)
+        row = np.repeat(np.arange(self.nown, dtype=_index_type(self.nown)), self.nb)
+        ramp = np.arange(0, nc * self.nnzb, nc, dtype=out.dtype)
         for i in range(nc):
-            start = np.repeat(first[:, i], self.nb)
-            np.add(start, ramp, out=out[i], casting="unsafe")
+            np.take(first[:, i].astype(out.dtype), row, out=out[i])
+            out[i] += ramp
         return out
 
     def block_positions(self, row_start: np.ndarray, dtype: type | None = None) -> np.ndarray:
@@ -80,7 +84,8 @@ def _unique_inverse(key: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     shift = max(int(n - 1).bit_length(), 1)
     if n and int(key.max()).bit_length() + shift <= 62:
         packed = np.left_shift(key, shift)
-        packed |= np.arange(n)
+        for start in range(0, n, _RAMP):            # bounded temporaries (see block_starts)
+            packed[start:start + _RAMP] |= np.arange(start, min(start + _RAMP, n))
         packed.sort(kind="stable")
         order = packed & ((1 << shift) - 1)
         sorted_key = np.right_shift(packed, shift, out=packed)
@@ -90,9 +95,15 @@ def _unique_inverse(key: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     new = np.empty(n, dtype=bool)
     new[:1] = True
     np.not_equal(sorted_key[1:], sorted_key[:-1], out=new[1:])
+    ukey = sorted_key[new]
+    rank = np.cumsum(new, out=sorted_key if sorted_key.dtype == np.int64 else None)
+    rank -= 1                                       # (the sorted keys' memory, no longer used)
     inv = np.empty(n, dtype=np.intp)
-    inv[order] = np.cumsum(new) - 1
-    return sorted_key[new], inv
+    inv[order] = rank
+    return ukey, inv
+
+
+_RAMP = 1 << 20   # entries per piece of a ramp added in place
 
 
 def _index_type(bound: int) -> type:

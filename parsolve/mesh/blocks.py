@@ -12,8 +12,11 @@ the ranks do that work together:
   cells running through it the same way (a fold), or else a pair of neighbours, sent back to
   both cells' blocks as rows of the dual graph.
 
-The graph is exactly ``partition.dual_graph``'s and the error messages are ``checks``'s (the
-same cells named), so a run does not depend on where this happened.
+The graph is the cell dual graph (cells are neighbours when they share a facet, the same
+corner nodes; boundary facets, the two sides of a crack and facets of three cells are not
+edges), its rows in increasing order without self loops, and the error messages name the same
+cells, at any rank count: a run does not depend on where this happened. This is the only
+place the whole mesh's cells are checked and its graph built.
 """
 
 from __future__ import annotations
@@ -74,8 +77,20 @@ def scatter_blocks(comm, whole: Mesh | None) -> CellBlock:
 # ------------------------------------------------------------------ checks
 
 
+def check_cells(comm, whole: Mesh | None, source: str | None, key: str | None,
+                graph: bool = True) -> tuple[np.ndarray, np.ndarray] | None:
+    """Rank 0's ``whole`` mesh (None elsewhere): its cells checked (Jacobians, folds, facets
+    of three cells) by every rank on its block, and this rank's rows of the dual graph
+    (``facet_groups``; ``graph`` False: the checks only). Collective."""
+    block = scatter_blocks(comm, whole)
+    check_jacobians(comm, block, source, key)
+    block.coords = None   # (the facets need the cells only: the coordinates go before them)
+    return facet_groups(comm, block, source, key, graph=graph)
+
+
 def check_jacobians(comm, block: CellBlock, source: str | None, key: str | None) -> None:
-    """``checks.check_jacobians`` of the whole mesh from the blocks (collective)."""
+    """Every cell positively oriented with det J clearly positive at every checked point
+    (``checks.reference_points``), from the blocks; collective."""
     with np.errstate(all="ignore"):
         lo, hi, scale = checks.jacobian_range_of(block.coords, block.cell_type, block.dim)
         bad = ~(lo > checks.RELATIVE_JACOBIAN * scale)  # also NaN
@@ -90,10 +105,12 @@ def check_jacobians(comm, block: CellBlock, source: str | None, key: str | None)
 
 def facet_groups(comm, block: CellBlock, source: str | None, key: str | None,
                  graph: bool = True) -> tuple[np.ndarray, np.ndarray] | None:
-    """Check the facets of the whole mesh (``checks.check_folds``) and return this block's
-    rows of the dual graph as CSR (indptr, neighbour cell ids), ``partition.dual_graph``'s
-    (``graph`` False: the checks only, None returned: one rank partitions nothing).
-    Collective."""
+    """Check the facets of the whole mesh and return this block's rows of the dual graph as
+    CSR (indptr, neighbour cell ids) (``graph`` False: the checks only, None returned: one
+    rank partitions nothing). Two positively oriented cells sharing a facet run through it in
+    opposite directions; the same direction means one is folded over the other (an inverted
+    cell in a file whose node order was flipped on reading, or a cell given twice). A facet
+    of 3 cells or more is not a volume mesh. Collective."""
     size = comm.size
     nv = NUM_VERTICES[CELL_INFO[block.cell_type][1]]
     local = FACETS[block.cell_type]
@@ -126,7 +143,8 @@ def facet_groups(comm, block: CellBlock, source: str | None, key: str | None,
     starts = block_starts(block.num_cells, size)
     back = _exchange(comm, both, np.searchsorted(starts, both[:, 0], side="right") - 1) \
         if size > 1 else both
-    # one key per (row, neighbour), sorted, no repeats: the rows of dual_graph
+    # one key per (row, neighbour), sorted, no repeats (two cells sharing two facets, which
+    # only a folded mesh has)
     n = max(block.num_cells, 1)
     key = np.unique((back[:, 0] - block.start) * n + back[:, 1])
     row, indices = key // n, key % n

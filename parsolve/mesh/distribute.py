@@ -1,11 +1,12 @@
 """The distributed mesh: each rank keeps only its part, with the input ids of what it holds.
 Every run goes through it, 1 rank included.
 
-Rank 0 reads (or generates) and checks the whole mesh, partitions its cells (PT-Scotch through
-PETSc, every rank handing it one block of the dual graph; or coordinate bisection), and sends
-every rank its part; then it drops the whole mesh like the others never had it. On 1 rank the
-part is the whole mesh, its arrays taken as they are (not copied: the mesh is never held
-twice). The rules are ``partition.from_cell_parts``':
+Rank 0 reads (or generates) the whole mesh, every rank checks a block of its cells and builds
+that block's rows of the dual graph (``blocks``), its cells are partitioned (PT-Scotch through
+PETSc, every rank handing it its block of the graph; or coordinate bisection), and rank 0 sends
+every rank its part, one at a time; then it drops the whole mesh like the others never had it.
+On 1 rank the part is the whole mesh, its arrays taken as they are (not copied: the mesh is
+never held twice). The rules are ``partition.from_cell_parts``':
 
 * a node belongs to the lowest rank among the cells that touch it;
 * a rank's **local cells** are every cell that touches one of its nodes (its owned cells and one
@@ -31,14 +32,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from parsolve.mesh import blocks
 from parsolve.mesh.mesh import Mesh
 from parsolve.mesh.partition import (MIN_CELLS_PER_PART, PARTITIONERS, Partition, bisect,
-                                     block_starts, dual_graph, from_cell_parts, scotch_block)
+                                     from_cell_parts, scotch_block)
 
 
 # node numbers are multiplied by up to this many components per node into DOF numbers
 COMPONENT_MARGIN = 64
 INT32_MAX = np.iinfo(np.int32).max
+PART_TAG = 72   # the message of a rank's part
 
 
 def index_dtype(count: int, per_item: int = 1) -> np.dtype:
@@ -88,26 +91,26 @@ class LocalMesh(Mesh):
 def distribute(comm, whole: Mesh | None, method: str = "scotch",
                graph: tuple[np.ndarray, np.ndarray] | None = None) -> LocalMesh:
     """Rank 0's ``whole`` mesh (None on the other ranks) → every rank's ``LocalMesh``.
-    ``graph``: this rank's block of the dual graph (``blocks.facet_groups``), else rank 0
-    builds it. Collective."""
+    ``graph``: this rank's block of the dual graph (``blocks.check_cells``, which a run has
+    made while checking the cells), else it is made here the same way. Collective."""
     if method not in PARTITIONERS:
         raise ValueError(f"unknown partitioner {method!r} (expected one of {PARTITIONERS})")
     if comm.size == 1:
         return _whole_part(whole)
     cell_part, used = _cell_parts(comm, whole, method, graph)
-    if comm.rank == 0:
-        part = from_cell_parts(whole, cell_part, comm.size, used)
-        parts = [_extract(whole, part, r) for r in range(comm.size)]
-        extent = np.ptp(whole.points, axis=0) if whole.num_points else np.zeros(whole.dim)
-        common = {"cell_type": whole.cell_type, "node_ranges": part.node_ranges,
-                  "num_global_points": whole.num_points, "num_global_cells": whole.num_cells,
-                  "partitioner": used, "warnings": list(whole.warnings), "extent": extent}
-        for r, payload in enumerate(parts):
-            payload.update(common)
-    else:
-        parts = None
-    mine = comm.scatter(parts, root=0)
-    return LocalMesh(rank=comm.rank, **mine)
+    if comm.rank != 0:
+        return LocalMesh(rank=comm.rank, **comm.recv(source=0, tag=PART_TAG))
+    part = from_cell_parts(whole, cell_part, comm.size, used)
+    del cell_part
+    extent = np.ptp(whole.points, axis=0) if whole.num_points else np.zeros(whole.dim)
+    common = {"cell_type": whole.cell_type, "node_ranges": part.node_ranges,
+              "num_global_points": whole.num_points, "num_global_cells": whole.num_cells,
+              "partitioner": used, "warnings": list(whole.warnings), "extent": extent}
+    # one part at a time, sent before the next is cut out: rank 0 holds the whole mesh and
+    # one other part (and its message), not every rank's part at once
+    for r in range(1, comm.size):
+        comm.send({**_extract(whole, part, r), **common}, dest=r, tag=PART_TAG)
+    return LocalMesh(rank=0, **_extract(whole, part, 0), **common)
 
 
 def _cell_parts(comm, whole: Mesh | None, method: str, graph=None
@@ -120,13 +123,8 @@ def _cell_parts(comm, whole: Mesh | None, method: str, graph=None
                             and whole.num_cells >= MIN_CELLS_PER_PART * size, root=0)
     part = None
     if use_scotch:
-        blocks = None
-        if comm.rank == 0 and graph is None:
-            indptr, indices = dual_graph(whole)
-            starts = block_starts(whole.num_cells, size)
-            blocks = [(indptr[starts[r]:starts[r + 1] + 1] - indptr[starts[r]],
-                       indices[indptr[starts[r]]:indptr[starts[r + 1]]]) for r in range(size)]
-        ptr, idx = graph if graph is not None else comm.scatter(blocks, root=0)
+        ptr, idx = graph if graph is not None else blocks.check_cells(
+            comm, whole if comm.rank == 0 else None, None, None)
         n = comm.bcast(whole.num_cells if comm.rank == 0 else None, root=0)
         local = scotch_block(comm, n, ptr, idx)
         gathered = comm.gather(local, root=0)
@@ -181,7 +179,9 @@ def _extract(whole: Mesh, part: Partition, rank: int) -> dict:
     node_part = part.node_part
     local_cells = np.flatnonzero((node_part[cells] == rank).any(axis=1))
     owned = np.flatnonzero(node_part == rank)
-    touched = np.unique(cells[local_cells])
+    touched = np.zeros(whole.num_points, dtype=bool)   # a mask, not a sort: np.unique's ids
+    touched[cells[local_cells]] = True
+    touched = np.flatnonzero(touched)
     ghosts = touched[node_part[touched] != rank]
     ghosts = ghosts[np.argsort(part.new_of_old[ghosts], kind="stable")]
     local_nodes = np.concatenate([owned, ghosts])

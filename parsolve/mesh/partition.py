@@ -2,10 +2,11 @@
 
 Rank 0 holds the whole mesh (``distribute``). Cells are split into one part per rank either by
 PT-Scotch (a graph partitioner, through PETSc's MatPartitioning) on the cell dual graph (cells
-sharing a facet), or by recursive coordinate bisection of the centroids (RCB: no communication,
-the fallback for one rank, for meshes too small to be worth a graph partitioner, or on request).
-PT-Scotch runs once at set-up, each rank handing it its block of dual-graph rows; the parts are
-then gathered so that every rank knows every cell's part.
+sharing a facet; every rank builds its block of rows, ``blocks.facet_groups``), or by recursive
+coordinate bisection of the centroids (RCB: no communication, the fallback for one rank, for
+meshes too small to be worth a graph partitioner, or on request). PT-Scotch runs once at
+set-up, each rank handing it its block of dual-graph rows (``scotch_block``); rank 0 gathers
+the parts (``distribute``).
 
 A node belongs to the lowest rank among the cells that touch it. Nodes are then renumbered so
 that each rank owns a contiguous block, keeping the input order inside a block (which keeps the
@@ -23,7 +24,6 @@ from pathlib import Path
 import numpy as np
 
 from parsolve.mesh.mesh import Mesh
-from parsolve.mesh.topology import _all_facets, _row_groups, _sorted_vertex_keys
 
 PARTITIONERS = ("scotch", "bisection")
 # below this many cells per part a graph partitioner has nothing to gain (and PT-Scotch may
@@ -53,28 +53,6 @@ class Partition:
 
 
 # ------------------------------------------------------------------ dual graph
-
-
-def dual_graph(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
-    """CSR (indptr, indices) of the cell dual graph: cells are neighbours when they share a
-    facet (same corner nodes). Rows list their neighbours in increasing order, no self loops.
-
-    A facet seen by exactly two cells is an edge; boundary facets (one cell), the two sides of
-    a crack (duplicate points: different node ids) and non-manifold facets (three or more
-    cells) are not."""
-    ncells = mesh.num_cells
-    nodes, owner, _ = _all_facets(mesh.cells, mesh.cell_type)
-    gid, counts = _row_groups(_sorted_vertex_keys(nodes, mesh.facet_type))
-    shared = np.flatnonzero(counts[gid] == 2)
-    pairs = owner[shared[np.argsort(gid[shared], kind="stable")]].reshape(-1, 2)
-    pairs = pairs[pairs[:, 0] != pairs[:, 1]]  # a collapsed cell seeing itself twice
-    # both directions, one key per (row, neighbour): sorted and without repeats (two cells
-    # sharing two facets, which only a folded mesh has)
-    key = np.unique(np.concatenate([pairs[:, 0] * ncells + pairs[:, 1],
-                                    pairs[:, 1] * ncells + pairs[:, 0]]))
-    rows, indices = key // max(ncells, 1), key % max(ncells, 1)
-    indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=ncells))])
-    return indptr.astype(np.int64), indices.astype(np.int64)
 
 
 def edge_cut(indptr: np.ndarray, indices: np.ndarray, cell_part: np.ndarray) -> int:
@@ -135,31 +113,6 @@ def _scotch_random_reset() -> None:
         lib.SCOTCH_randomReset()
 
 
-def scotch(comm, indptr: np.ndarray, indices: np.ndarray) -> np.ndarray | None:
-    """PT-Scotch partition of a graph (CSR, every rank holding all of it) into comm.size parts,
-    the same on every rank; None when PETSc has no PT-Scotch.
-
-    Each rank hands PETSc its block of rows (an MPIAIJ adjacency matrix that MatPartitioning
-    converts to MPIAdj: petsc4py 3.18 has no createAdj); the parts come back as an IS of the
-    block and are gathered once. Deterministic: PT-Scotch is run with one thread per process
-    (Debian's build spawns threads whose timing changes the result from run to run; no
-    MatPartitioning strategy avoids that) and its random generator restarted from its fixed
-    seed. Uniform vertex weights: a mesh has one cell type, so nodes per cell are the same for
-    every cell."""
-    from mpi4py import MPI
-
-    n, size, rank = indptr.size - 1, comm.size, comm.rank
-    starts = block_starts(n, size)
-    r0, r1 = int(starts[rank]), int(starts[rank + 1])
-    local = scotch_block(comm, n, indptr[r0:r1 + 1] - indptr[r0], indices[indptr[r0]:indptr[r1]])
-    if local is None:
-        return None
-    cell_part = np.empty(n, dtype=np.int64)
-    counts = np.diff(starts)
-    comm.Allgatherv(local, [cell_part, counts, starts[:-1], MPI.INT64_T])
-    return cell_part
-
-
 def block_starts(n: int, size: int) -> np.ndarray:
     """Rows [starts[r], starts[r+1]) of a graph of n vertices that rank r hands PT-Scotch."""
     return np.array([n * r // size for r in range(size + 1)], dtype=np.int64)
@@ -167,8 +120,15 @@ def block_starts(n: int, size: int) -> np.ndarray:
 
 def scotch_block(comm, n: int, local_ptr: np.ndarray, local_idx: np.ndarray) -> np.ndarray | None:
     """PT-Scotch parts of this rank's block of rows (``block_starts``) of a graph of n
-    vertices given as the block's CSR (global column ids); collective; None without PT-Scotch.
-    See ``scotch`` for how it is made deterministic."""
+    vertices given as the block's CSR (global column ids), into comm.size parts; collective;
+    None when PETSc has no PT-Scotch.
+
+    The block goes to PETSc as an MPIAIJ adjacency matrix that MatPartitioning converts to
+    MPIAdj (petsc4py 3.18 has no createAdj); the parts come back as an IS of the block.
+    Deterministic: PT-Scotch is run with one thread per process (Debian's build spawns threads
+    whose timing changes the result from run to run; no MatPartitioning strategy avoids that)
+    and its random generator restarted from its fixed seed. Uniform vertex weights: a mesh has
+    one cell type, so nodes per cell are the same for every cell."""
     from petsc4py import PETSc
 
     local_ptr = np.asarray(local_ptr).astype(PETSc.IntType)
@@ -200,33 +160,6 @@ def scotch_block(comm, n: int, local_ptr: np.ndarray, local_idx: np.ndarray) -> 
     for obj in (parts, part, adj):
         obj.destroy()
     return local
-
-
-def cell_parts(mesh: Mesh, nparts: int, method: str = "bisection", comm=None
-               ) -> tuple[np.ndarray, str]:
-    """(part of each cell, the partitioner that ran). ``method``: "scotch" (graph partition
-    over the ranks of ``comm``, nparts = comm.size) or "bisection". One part needs no
-    partitioner; meshes with fewer than MIN_CELLS_PER_PART cells per part, a PETSc without
-    PT-Scotch and a graph partition that left a part empty fall back to bisection."""
-    if method not in PARTITIONERS:
-        raise ValueError(f"unknown partitioner {method!r} (expected one of {PARTITIONERS})")
-    if nparts == 1:
-        return np.zeros(mesh.num_cells, dtype=np.int64), "none"
-    if method == "scotch" and mesh.num_cells >= MIN_CELLS_PER_PART * nparts:
-        if comm is None or comm.size != nparts:
-            raise ValueError("the scotch partition is computed by the ranks it is for: "
-                             f"nparts ({nparts}) must be the size of comm")
-        part = scotch(comm, *dual_graph(mesh))
-        if part is not None and np.bincount(part, minlength=nparts).min() > 0:
-            return part, "scotch"
-    return bisect(mesh.points[mesh.cells].mean(axis=1), nparts), "bisection"
-
-
-def partition(mesh: Mesh, nparts: int, method: str = "bisection", comm=None) -> Partition:
-    """Partition cells (see ``cell_parts``), assign node owners and renumber nodes
-    contiguously per rank."""
-    cell_part, used = cell_parts(mesh, nparts, method, comm)
-    return from_cell_parts(mesh, cell_part, nparts, used)
 
 
 def from_cell_parts(mesh: Mesh, cell_part: np.ndarray, nparts: int, used: str) -> Partition:

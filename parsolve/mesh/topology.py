@@ -70,35 +70,43 @@ FLIP: dict[str, list[int]] = {
 
 
 def _row_groups(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Group identical rows of an integer array: (group id of each row, group counts).
+    """Group identical rows of a non-negative integer array: (group id of each row, group
+    counts); groups are numbered in the rows' lexicographic order.
 
-    Rows are packed into one int64 when the ids are small enough, else lexsorted;
-    both are much faster than ``np.unique(axis=0)``.
-    """
+    The leading columns are packed into one int64 while their ids fit, the others into a
+    second one when they do not: a sort of one key (or a lexsort of two) is much faster than
+    a lexsort of every column or ``np.unique(axis=0)``. Only the keys' order matters, not the
+    order of equal rows, so the sort need not be stable."""
     n = keys.shape[0]
     if n == 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     base = int(keys.max()) + 1
-    if base ** keys.shape[1] < 2**62:
-        # pack each row into one int64 when it fits: a 1D sort is several times faster
-        packed = np.zeros(n, dtype=np.int64)
-        for col in keys.T:
-            packed = packed * base + col
-        order = np.argsort(packed, kind="stable")
+    width = keys.shape[1]
+    fit = 1                                      # columns per int64
+    while fit < width and base ** (fit + 1) < 2**62:
+        fit += 1
+    packs = [_pack(keys, range(start, min(start + fit, width)), base)
+             for start in range(0, width, fit)]
+    order = np.argsort(packs[0]) if len(packs) == 1 else np.lexsort(packs[::-1])
+    new = np.empty(n, dtype=bool)
+    new[0] = True
+    new[1:] = False
+    for packed in packs:
         sp = packed[order]
-        new = np.empty(n, dtype=bool)
-        new[0] = True
-        np.not_equal(sp[1:], sp[:-1], out=new[1:])
-    else:
-        order = np.lexsort(keys.T[::-1])
-        sk = keys[order]
-        new = np.empty(n, dtype=bool)
-        new[0] = True
-        np.any(sk[1:] != sk[:-1], axis=1, out=new[1:])
+        new[1:] |= sp[1:] != sp[:-1]
     gid_sorted = np.cumsum(new) - 1
     inv = np.empty(n, dtype=np.int64)
     inv[order] = gid_sorted
     return inv, np.bincount(gid_sorted)
+
+
+def _pack(keys: np.ndarray, columns, base: int) -> np.ndarray:
+    """The given columns of each row as one int64 in base ``base`` (the caller made it fit)."""
+    packed = np.zeros(keys.shape[0], dtype=np.int64)
+    for col in columns:
+        packed *= base
+        packed += keys[:, col]
+    return packed
 
 
 def _all_facets(cells: np.ndarray, cell_type: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -114,10 +122,17 @@ def _all_facets(cells: np.ndarray, cell_type: str) -> tuple[np.ndarray, np.ndarr
 def _sorted_vertex_keys(facet_nodes: np.ndarray, facet_type: str) -> np.ndarray:
     """Corner node ids of each facet in increasing order (identifies the facet)."""
     nv = NUM_VERTICES[facet_type]
-    if nv == 2:  # min/max is much faster than a row sort for edges
-        a, b = facet_nodes[:, 0], facet_nodes[:, 1]
-        return np.column_stack([np.minimum(a, b), np.maximum(a, b)])
-    return np.sort(facet_nodes[:, :nv], axis=1)
+    # a sorting network of min/max over whole columns: several times faster than a row sort
+    # (numpy sorts each short row on its own)
+    cols = [facet_nodes[:, k] for k in range(nv)]
+    for i, j in _NETWORK[nv]:
+        cols[i], cols[j] = np.minimum(cols[i], cols[j]), np.maximum(cols[i], cols[j])
+    return np.column_stack(cols) if facet_nodes.shape[0] else np.sort(facet_nodes[:, :nv], axis=1)
+
+
+# compare-exchange steps that sort 2, 3 and 4 values
+_NETWORK = {2: [(0, 1)], 3: [(0, 1), (1, 2), (0, 1)],
+            4: [(0, 1), (2, 3), (0, 2), (1, 3), (1, 2)]}
 
 
 def _sort_by_owner(nodes, owner, lidx):
@@ -165,6 +180,25 @@ def facets_from_nodes(
     return _single_facets(nodes, owner, lidx, mesh.facet_type)
 
 
+def _candidate_boundary(mesh: Mesh, corners: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The boundary facets (``boundary_facets``' triple and order) whose corners are all among
+    ``corners``' node ids: the only ones a facet of ``corners`` can be. An interior facet
+    among them is seen from both its cells, so counting within them is enough (as
+    ``facets_from_nodes``) and far cheaper than the whole boundary for a side of the mesh."""
+    mask = np.zeros(mesh.num_points, dtype=bool)
+    valid = (corners >= 0) & (corners < mesh.num_points)   # others match nothing
+    mask[corners[valid]] = True
+    nv = corners.shape[1]
+    cells = mesh.cells
+    parts = []
+    for li, f in enumerate(FACETS[mesh.cell_type]):
+        owner = np.flatnonzero(mask[cells[:, list(f[:nv])]].all(axis=1))
+        parts.append((cells[owner][:, list(f)], owner, np.full(owner.size, li, dtype=np.int64)))
+    nodes, owner, lidx = (np.concatenate(p) for p in zip(*parts))
+    return _single_facets(nodes, owner, lidx, mesh.facet_type)
+
+
 def match_facets(
     mesh: Mesh, facet_nodes: np.ndarray, source: str | None = None, key: str | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -181,7 +215,7 @@ def match_facets(
         raise InputError(
             f"facets must have at least {nv} nodes ({mesh.facet_type} facets)", source, key
         )
-    bnodes, bowner, blidx = boundary_facets(mesh)
+    bnodes, bowner, blidx = _candidate_boundary(mesh, facet_nodes[:, :nv])
     nb = bnodes.shape[0]
     keys = np.concatenate(
         [

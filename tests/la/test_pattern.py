@@ -9,7 +9,7 @@ import pytest
 
 from parsolve.la.pattern import NodePattern, node_pattern
 from parsolve.mesh.generators import box, rectangle
-from parsolve.mesh.partition import partition
+from parsolve.mesh.partition import bisect, from_cell_parts
 
 
 def reference_pattern(cells: np.ndarray, lo: int, hi: int, ncomp: int, nnodes: int) -> NodePattern:
@@ -95,7 +95,8 @@ def test_pattern_matches_reference(cell, nparts, shuffle):
     if shuffle:  # a random renumbering of the input nodes before partitioning
         perm = np.random.default_rng(nparts).permutation(mesh.num_points)
         mesh.points, mesh.cells = mesh.points[np.argsort(perm)], perm[mesh.cells]
-    part = partition(mesh, nparts)
+    part = from_cell_parts(mesh, bisect(mesh.points[mesh.cells].mean(axis=1), nparts), nparts,
+                           "bisection")
     ncomp = mesh.points.shape[1]
     for rank in range(nparts):
         cells = part.new_of_old[mesh.cells[part.local_cells(rank, mesh.cells)]]

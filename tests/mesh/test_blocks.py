@@ -1,16 +1,17 @@
 """The whole mesh's cell checks and dual graph by blocks of cells (parsolve/mesh/blocks.py):
-the same graph as ``dual_graph`` and the same errors as ``check_mesh``, at any rank count."""
+at any rank count, the rows of the graph one block (one process) gives and the same errors;
+the graph's known numbers are in tests/mesh/test_partition.py, the errors' in test_checks.py."""
 
 import numpy as np
 import pytest
+from mpi4py import MPI
 
 from parsolve.errors import InputError
 from parsolve.mesh import blocks
-from parsolve.mesh.checks import check_mesh
 from parsolve.mesh.generators import box, plate_with_hole, rectangle
 from parsolve.mesh.mesh import Mesh
-from parsolve.mesh.partition import block_starts, dual_graph
-from parsolve.mesh.topology import FLIP
+from parsolve.mesh.partition import block_starts
+from parsolve.mesh.topology import FLIP, NUM_VERTICES
 
 from helpers.cells import reference_cell
 
@@ -25,19 +26,27 @@ MESHES = {
 
 
 def by_blocks(comm, mesh: Mesh):
-    block = blocks.scatter_blocks(comm, mesh if comm.rank == 0 else None)
-    blocks.check_jacobians(comm, block, "m.msh", "mesh.file")
-    return blocks.facet_groups(comm, block, "m.msh", "mesh.file")
+    return blocks.check_cells(comm, mesh if comm.rank == 0 else None, "m.msh", "mesh.file")
 
 
 @pytest.mark.parametrize("name", sorted(MESHES))
-def test_the_dual_graph_by_blocks_is_dual_graphs(name, comm):
+def test_the_dual_graph_by_blocks_is_one_blocks(name, comm):
     mesh = MESHES[name]()
     ptr, idx = by_blocks(comm, mesh)
-    indptr, indices = dual_graph(mesh)
+    indptr, indices = by_blocks(MPI.COMM_SELF, mesh)
     s = block_starts(mesh.num_cells, comm.size)[comm.rank:comm.rank + 2]
     assert np.array_equal(ptr, indptr[s[0]:s[1] + 1] - indptr[s[0]])
     assert np.array_equal(idx, indices[indptr[s[0]]:indptr[s[1]]])
+    # and it is the dual graph: symmetric, no self loops or repeats, neighbours share a facet
+    rows = np.repeat(np.arange(mesh.num_cells), np.diff(indptr))
+    key = rows * mesh.num_cells + indices
+    assert np.all(rows != indices) and np.all(np.diff(key) > 0)
+    assert np.array_equal(np.sort(key), np.sort(indices * mesh.num_cells + rows))
+    nv = NUM_VERTICES[{"quad": "line", "triangle6": "line3", "plate": "line"}.get(
+        name, "triangle" if name.startswith("tetra") else "quad")]
+    c = mesh.cells[:, :NUM_VERTICES[mesh.cell_type]]
+    same = (c[rows][:, :, None] == c[indices][:, None, :]).any(axis=2).sum(axis=1)
+    assert np.all(same == nv)
 
 
 def _inverted(cell_type):
@@ -82,10 +91,10 @@ BAD |= {"collapsed_tetra": lambda: _collapsed("tetra"), "many": _many, "folded":
 
 
 @pytest.mark.parametrize("name", sorted(BAD))
-def test_the_errors_are_check_meshs(name, comm):
+def test_the_errors_are_one_blocks(name, comm):
     mesh = BAD[name]()
     with pytest.raises(InputError) as serial:
-        check_mesh(mesh, "m.msh", "mesh.file")
+        by_blocks(MPI.COMM_SELF, mesh)
     with pytest.raises(InputError) as parallel:
         by_blocks(comm, mesh)
     assert str(parallel.value) == str(serial.value)

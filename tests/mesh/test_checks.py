@@ -6,9 +6,11 @@ import time
 import numpy as np
 import pytest
 
+from mpi4py import MPI
+
 from parsolve.errors import InputError
 from parsolve.fem.elements import element
-from parsolve.mesh import memory
+from parsolve.mesh import blocks, memory
 from parsolve.mesh.checks import check_mesh, duplicate_points
 from parsolve.mesh.mesh import Mesh
 from parsolve.mesh.topology import FLIP
@@ -17,16 +19,24 @@ from helpers.cells import reference_cell
 TYPES = ["triangle", "triangle6", "quad", "tetra", "tetra10", "hexahedron"]
 
 
+def checked(mesh: Mesh) -> list[str]:
+    """Every check of a run in one process: coordinates and warnings, then the cells (by
+    blocks: one block here; tests/mesh/test_blocks.py has them at any rank count)."""
+    warnings = check_mesh(mesh, "m.msh", "mesh.file")
+    blocks.check_cells(MPI.COMM_SELF, mesh, "m.msh", "mesh.file", graph=False)
+    return warnings
+
+
 def raises(mesh: Mesh, words: str) -> str:
     with pytest.raises(InputError, match=words) as info:
-        check_mesh(mesh, "m.msh", "mesh.file")
+        checked(mesh)
     assert info.value.source == "m.msh" and info.value.key == "mesh.file"
     return info.value.message
 
 
 @pytest.mark.parametrize("cell_type", TYPES)
 def test_valid_cell(cell_type):
-    assert check_mesh(reference_cell(cell_type), "m.msh", "mesh.file") == []
+    assert checked(reference_cell(cell_type)) == []
 
 
 @pytest.mark.parametrize("cell_type", TYPES)
@@ -97,7 +107,7 @@ def test_unused_points_are_a_warning():
     m = reference_cell("triangle")
     m.points = np.vstack([m.points, [[3.0, 3.0], [4.0, 4.0]]])
     assert m.unused_points().tolist() == [3, 4]
-    assert check_mesh(m, "m.msh", "mesh.file") == [
+    assert checked(m) == [
         "2 point(s) are used by no cell (points 3, 4): they are left out of the system"]
 
 
@@ -106,7 +116,7 @@ def test_duplicate_points_crack_is_a_warning():
     pts = np.array([[0, 0], [1, 0], [0, 1], [1, 0], [1, 1], [0, 1]], float)
     m = Mesh(pts, "triangle", np.array([[0, 1, 2], [3, 4, 5]]))
     assert duplicate_points(m).tolist() == [[1, 3], [2, 5]]
-    (warning,) = check_mesh(m, "m.msh", "mesh.file")
+    (warning,) = checked(m)
     assert warning.startswith("2 point(s) duplicate another (first: points 1 and 3 at (1, 0))")
 
 
@@ -196,10 +206,10 @@ def test_file_with_an_inverted_cell_is_refused(shared_tmp):
         meshio.write(nan_path, meshio.Mesh(nan_pts, [("triangle", good)]))
     MPI.COMM_WORLD.Barrier()
     text = _scene_with_file(path)
+    # a run checks the cells by blocks on every rank: the same error everywhere, at any count
     with pytest.raises(InputError, match="overlap a neighbour") as info:
-        build_mesh(parse_scene(tomllib.loads(text), "s.toml", text))
+        build_model(parse_scene(tomllib.loads(text), "s.toml", text), MPI.COMM_SELF)
     assert info.value.source == str(path) and info.value.key == "mesh.file"
-    # a distributed run checks the cells by blocks on every rank: the same error everywhere
     with pytest.raises(InputError) as parts:
         build_model(parse_scene(tomllib.loads(text), "s.toml", text), MPI.COMM_WORLD)
     assert str(parts.value) == str(info.value)

@@ -12,7 +12,8 @@ from parsolve.errors import InputError
 from parsolve.mesh.distribute import COMPONENT_MARGIN, _extract, distribute, index_dtype
 from parsolve.mesh.generators import box, plate_with_hole, rectangle
 from parsolve.mesh.regions import allgather_rows
-from parsolve.mesh.partition import from_cell_parts, partition
+from parsolve.mesh.distribute import _cell_parts
+from parsolve.mesh.partition import from_cell_parts
 from parsolve.mesh.regions import RegionResolver
 from parsolve.scene import parse_scene
 
@@ -36,7 +37,8 @@ def test_parts_are_the_whole_meshs_partition(name, method, comm):
     """Same owners and numbering as the whole mesh's partition; local cells = every cell
     touching an owned node (input order), owned nodes first, ghosts by global number."""
     whole, local = parts(name, comm, method)
-    part = partition(whole, comm.size, method, comm)
+    cell_part, used = _cell_parts(comm, whole, method)   # the run's partition, on rank 0
+    part = from_cell_parts(whole, comm.bcast(cell_part, root=0), comm.size, used)
     rank = comm.rank
     assert local.partitioner == part.method
     assert np.array_equal(local.global_cells, part.local_cells(rank, whole.cells))

@@ -15,9 +15,27 @@ from conftest import CONFIGS, ROOT, assert_same_results, run_scene
 from parsolve.errors import InputError
 from parsolve.mesh.generators import box, plate_with_hole, rectangle
 from parsolve.mesh.mesh import Mesh
+from parsolve.mesh import blocks
+from parsolve.mesh.distribute import _cell_parts, distribute
 from parsolve.mesh.topology import NUM_VERTICES
-from parsolve.mesh.partition import (MIN_CELLS_PER_PART, bisect, cell_parts, dual_graph,
-                                     edge_cut, partition)
+from parsolve.mesh.partition import MIN_CELLS_PER_PART, bisect, edge_cut, from_cell_parts
+
+
+def dual_graph(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
+    """The whole dual graph: the run's block-wise graph with one block (one process)."""
+    return blocks.check_cells(MPI.COMM_SELF, mesh, None, None)
+
+
+def cell_parts(mesh: Mesh, comm, method: str) -> tuple[np.ndarray, str]:
+    """The run's partition (``distribute``'s: graph by blocks, PT-Scotch or bisection), every
+    cell's part on every rank."""
+    part, used = _cell_parts(comm, mesh, method)
+    return comm.bcast(part, root=0), used
+
+
+def partition(mesh: Mesh, comm, method: str):
+    part, used = cell_parts(mesh, comm, method)
+    return from_cell_parts(mesh, part, comm.size, used)
 
 
 def l_shape(n: int) -> Mesh:
@@ -111,7 +129,7 @@ MESHES = {
 def test_every_cell_in_one_balanced_part(name, method, comm):
     mesh = MESHES[name]()
     nparts = comm.size
-    part = partition(mesh, nparts, method, comm)
+    part = partition(mesh, comm, method)
     assert part.cell_part.shape == (mesh.num_cells,)
     assert part.cell_part.min() >= 0 and part.cell_part.max() < nparts
     counts = np.bincount(part.cell_part, minlength=nparts)
@@ -135,8 +153,8 @@ def test_every_cell_in_one_balanced_part(name, method, comm):
 def test_scotch_is_deterministic(name, comm):
     """Twice in the same process: the same parts (Scotch's random generator is restarted)."""
     mesh = MESHES[name]()
-    first = cell_parts(mesh, comm.size, "scotch", comm)[0]
-    second = cell_parts(mesh, comm.size, "scotch", comm)[0]
+    first = cell_parts(mesh, comm, "scotch")[0]
+    second = cell_parts(mesh, comm, "scotch")[0]
     assert np.array_equal(first, second)
 
 
@@ -144,8 +162,8 @@ def test_scotch_is_deterministic(name, comm):
 def test_scotch_cuts_no_more_than_bisection(name, comm):
     mesh = MESHES[name]()
     graph = dual_graph(mesh)
-    scotch, used = cell_parts(mesh, comm.size, "scotch", comm)
-    rcb, _ = cell_parts(mesh, comm.size, "bisection", comm)
+    scotch, used = cell_parts(mesh, comm, "scotch")
+    rcb, _ = cell_parts(mesh, comm, "bisection")
     assert edge_cut(*graph, scotch) <= edge_cut(*graph, rcb)
     if comm.size == 1:
         assert used == "none" and edge_cut(*graph, scotch) == 0
@@ -153,20 +171,16 @@ def test_scotch_cuts_no_more_than_bisection(name, comm):
 
 def test_the_fallbacks(comm):
     tiny = rectangle(1.0, 1.0, 2, 2, cell="quad")                  # 4 cells
-    part, used = cell_parts(tiny, comm.size, "scotch", comm)
+    part, used = cell_parts(tiny, comm, "scotch")
     assert used == ("none" if comm.size == 1 else "bisection")
     centroids = tiny.points[tiny.cells].mean(axis=1)
     assert np.array_equal(part, bisect(centroids, comm.size))
     big = rectangle(1.0, 1.0, 20, 20, cell="quad")
     assert big.num_cells >= MIN_CELLS_PER_PART * 4
-    with pytest.raises(ValueError, match="must be the size of comm"):
-        cell_parts(big, comm.size + 1, "scotch", comm)
-    with pytest.raises(ValueError, match="must be the size of comm"):
-        cell_parts(big, 2, "scotch", None)
     with pytest.raises(ValueError, match="unknown partitioner"):
-        cell_parts(big, 2, "metis", comm)
+        distribute(comm, big if comm.rank == 0 else None, "metis")
     # bisection needs no communicator and any number of parts
-    assert np.bincount(partition(big, 4).cell_part).tolist() == [100] * 4
+    assert np.bincount(bisect(big.points[big.cells].mean(axis=1), 4)).tolist() == [100] * 4
 
 
 @pytest.mark.serial
@@ -175,9 +189,9 @@ def test_scotch_gives_the_same_parts_in_every_run():
     from run to run; one thread per process and a fixed seed make it repeat."""
     code = ("from mpi4py import MPI; import hashlib, numpy as np;"
             "from parsolve.mesh.generators import plate_with_hole;"
-            "from parsolve.mesh.partition import cell_parts;"
+            "from parsolve.mesh.distribute import _cell_parts;"
             "m = plate_with_hole(10.0, 10.0, 1.0, 40, 80, cell='triangle');"
-            "p, used = cell_parts(m, MPI.COMM_WORLD.size, 'scotch', MPI.COMM_WORLD);"
+            "p, used = _cell_parts(MPI.COMM_WORLD, m, 'scotch');"
             "MPI.COMM_WORLD.rank or print(used, hashlib.sha1(p.tobytes()).hexdigest())")
     env = {k: v for k, v in os.environ.items() if k != "SCOTCH_PTHREAD_NUMBER"}
     for n in (2, 3):

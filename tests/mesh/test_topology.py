@@ -152,3 +152,38 @@ def test_orient_cells_repairs_flipped_cells(cell_type):
     fixed, n = orient_cells(m.points, cell_type, bad)
     assert n == len(bad[::2])
     assert np.array_equal(fixed, m.cells)
+
+
+@pytest.mark.parametrize("high", [3, 1000, 2**20, 2**40])
+@pytest.mark.parametrize("width", [1, 2, 3, 4])
+def test_row_groups_is_unique_rows(high, width):
+    """One packed key, two packed keys (ids too large for every column in one int64) or one
+    column per key: the groups of np.unique(axis=0), numbered in the rows' order."""
+    from parsolve.mesh.topology import _row_groups
+
+    rng = np.random.default_rng(width)
+    rows = rng.integers(0, high, size=(3000, width))
+    rows = np.concatenate([rows, rows[rng.integers(0, 3000, 1000)]])   # repeats
+    group, counts = _row_groups(rows)
+    unique, inverse, ucounts = np.unique(rows, axis=0, return_inverse=True, return_counts=True)
+    assert np.array_equal(group, inverse.ravel()) and np.array_equal(counts, ucounts)
+
+
+@pytest.mark.parametrize("nv, facet", [(2, "line"), (3, "triangle"), (4, "quad")])
+def test_sorted_vertex_keys_and_facet_direction(nv, facet):
+    """The sorting network sorts the corners (midside nodes after them ignored); the facet's
+    direction is read at its first smallest corner."""
+    from parsolve.mesh.checks import facet_direction
+    from parsolve.mesh.topology import _sorted_vertex_keys
+
+    rng = np.random.default_rng(nv)
+    nodes = rng.integers(0, 6, size=(5000, nv + 2))
+    assert np.array_equal(_sorted_vertex_keys(nodes, facet), np.sort(nodes[:, :nv], axis=1))
+    corners = nodes[:, :nv]
+    i = corners.argmin(axis=1)
+    rows = np.arange(corners.shape[0])
+    expected = (corners[:, 0] < corners[:, 1] if nv == 2 else
+                corners[rows, (i + 1) % nv] < corners[rows, (i - 1) % nv])
+    assert np.array_equal(facet_direction(corners), expected)
+    assert facet_direction(np.array([[4, 1, 7, 2]])).tolist() == [False]   # 1 → 7, back to 4
+    assert facet_direction(np.array([[4, 1, 2, 7]])).tolist() == [True]    # 1 → 2
