@@ -74,7 +74,7 @@ def step_outputs(comm: MPI.Comm, system, q: np.ndarray, multipliers: dict, newto
     for r in model.relations:
         lam = multipliers[r.name]
         rel_out[r.name] = {"multiplier": lam, "primal": system.relation_primal(r, q),
-                           "resultant": resultant(r, lam, model.fields, system.rdofs.points_of)}
+                           "resultant": resultant(r, lam, model.fields, system.dofmap.input_points)}
         if r.sense != "=":
             k = system.multiplied.index(r)
             first = system.block.row_first[k]
@@ -99,8 +99,7 @@ class Balance:
         self.comm, self.system, self.q0 = comm, system, q0
         fields = system.model.fields
         self.names = sorted({fi for fi, _, _ in system.composition.mass_parts()})
-        col = system.owned_input_dofs % fields.ncomp
-        self.owned = {n: system.owned_input_dofs[np.isin(col, fields.columns(n))] for n in self.names}
+        self.owned = {n: system.dofmap.field_dofs(fields.columns(n)) for n in self.names}
         self.ncomp = fields.ncomp
         self.cols = {n: fields.columns(n) for n in self.names}
         self.initial = None

@@ -111,7 +111,7 @@ class NewtonSolver:
         # bound of the relations' DOF numbers (input numbering: the whole mesh's)
         self.ndof_keys = getattr(model.mesh, "num_global_points", model.mesh.num_points) * model.ncomp
         self.q = model.initial_q()
-        self.lam = np.zeros(system.layout.nl)
+        self.lam = np.zeros(system.dofmap.nl)
         self.x_full = system.zero_saddle()
         self.extras = [None] * len(model.effects)   # e.g. stresses at the quadrature points
         self.time = model.scene.time                # transient: θ-scheme from t_prev to t

@@ -33,7 +33,7 @@ def make_solver(comm: MPI.Comm, system: SaddleSystem, cli_options: dict[str, str
     secant = scene.nonlinear.matrix == "secant"
     stiffness_symmetric = system.model.symmetric(secant)
     symmetric = all(r.associated for r in system.multiplied) and stiffness_symmetric
-    has_mult = system.layout.nl > 0
+    has_mult = system.dofmap.nl > 0
     settings = opt.merge(preset_options(scene.solver.preset, symmetric, has_mult,
                                         stiffness_symmetric),
                          scene.solver.options, cli_options)
@@ -65,7 +65,7 @@ def export_system(comm, directory: str, mat: PETSc.Mat, rhs: PETSc.Vec, system: 
     comm.Barrier()
     scale = rhs.duplicate()
     scale.set(1.0)
-    q0, q1, l0, l1 = system.layout.owned(comm.rank)
+    q0, q1, l0, l1 = system.dofmap.owned()
     if system.block.nrows:
         scale.array[q1 - q0:] = system.block.col_scale[l0:l1]
     viewer = PETSc.Viewer().createBinary(str(path / "system.dat"), "w", comm=comm)
@@ -80,12 +80,9 @@ def export_system(comm, directory: str, mat: PETSc.Mat, rhs: PETSc.Vec, system: 
 
 def field_index_sets(comm, system: SaddleSystem) -> dict[str, PETSc.IS]:
     """One index set per field (its DOFs among this rank's rows), named after the field."""
-    q0, q1, _, _ = system.layout.owned(comm.rank)
-    start = int(system.layout.offsets[comm.rank])
-    nodes_local = np.arange(q0, q1, system.model.ncomp) - q0
     out = {}
     for f in system.model.fields:
-        idx = (nodes_local[:, None] + system.model.fields.columns(f.name)[None, :]).ravel() + start
+        idx = system.dofmap.field_rows(system.model.fields.columns(f.name))
         iset = PETSc.IS().createGeneral(idx.astype(PETSc.IntType), comm=comm)
         iset.setName(f.name)
         out[f.name] = iset

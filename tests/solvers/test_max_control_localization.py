@@ -68,7 +68,7 @@ def test_plate_full_steps_through_the_peak():
     tangent (positive with the unloading one: the branch the first tangent used to take)."""
     comm = MPI.COMM_WORLD
     scene, model, system, newton, rel, free = plate_newton(2, 10)
-    mine = system.owned_input_dofs[free[system.owned_input_dofs]]
+    mine = system.dofmap.owned_dofs[free[system.dofmap.owned_dofs]]
     lams, iterations = [], []
     for t in scene.times:
         states = newton.states

@@ -85,7 +85,7 @@ def test_full_step_at_the_onset_of_localization():
         dofs, pattern = rel.shared_dual
         force = model.external_load(t)
         force += system.to_local(dofs, pattern * lam)   # (input DOFs to this rank's)
-        mine = system.owned_input_dofs[free[system.owned_input_dofs]]
+        mine = system.dofmap.owned_dofs[free[system.dofmap.owned_dofs]]
         r2, f2 = comm.allreduce(np.array([np.sum((force - f_int)[mine] ** 2),
                                           np.sum(f_int[mine] ** 2)]))
         assert np.sqrt(r2 / f2) < 1e-8
