@@ -105,7 +105,7 @@ def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log
             vecs = vecs or mat.createVecs()
             assembly = time.perf_counter() - t0
         x, rhs = vecs
-        rhs.array[:] = system.rhs_from(f_rhs, system.block.rhs(t), system.elim_values(t))[0]
+        rhs.array[:] = system.rhs_from(f_rhs, system.relation_set.rhs(t), system.elim_values(t))[0]
         if export_dir is not None and step == 0:
             export_system(comm, export_dir, mat, rhs, system)
         linear_its = solver.solve(rhs, x)

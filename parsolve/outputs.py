@@ -75,13 +75,11 @@ def step_outputs(comm: MPI.Comm, system, q: np.ndarray, multipliers: dict, newto
         lam = multipliers[r.name]
         rel_out[r.name] = {"multiplier": lam, "primal": system.relation_primal(r, q),
                            "resultant": resultant(r, lam, model.fields, system.dofmap.input_points)}
+    views = system.relation_set.views(active) if active is not None else {}
+    for r in model.relations:
         if r.sense != "=":
-            k = system.multiplied.index(r)
-            first = system.block.row_first[k]
-            rel_out[r.name]["active"] = active[first:first + r.nrows].astype(np.int8)
+            rel_out[r.name]["active"] = views[r.name].astype(np.int8)
     if active is not None:  # switched relations' outputs: solubility states, contact
-        views = {r.name: active[system.block.row_first[k]:system.block.row_first[k + 1]]
-                 for k, r in enumerate(system.multiplied)}
         for effect in model.effects:
             nodal, per_relation = effect.step_outputs(q, multipliers, views)
             fields.update(nodal)

@@ -26,7 +26,7 @@ from petsc4py import PETSc
 
 from parsolve.la.dofmap import DofMap
 from parsolve.la.pattern import NodePattern
-from parsolve.la.saddle import RelationBlock
+from parsolve.la.relation_set import RelationSet
 
 
 def _dedupe(rows: np.ndarray, cols: np.ndarray, ncols: int):
@@ -70,7 +70,7 @@ def _ranges(rowptr: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarra
 class SaddleOperator:
     """Owned rows of the saddle matrix, their fixed pattern, and the PETSc Mat built on them."""
 
-    def __init__(self, comm: MPI.Comm, layout: DofMap, pattern: NodePattern, block: RelationBlock):
+    def __init__(self, comm: MPI.Comm, layout: DofMap, pattern: NodePattern, block: RelationSet):
         self.comm = comm
         self.layout = layout   # the DofMap
         self.block = block

@@ -68,8 +68,8 @@ class ArcLength(NewtonSolver):
     def _step(self, t: float, dl: float):
         system, spec = self.system, self.spec
         q0, mu0 = self.q.copy(), self.mu
-        blk = system.block
-        zero_t = np.zeros(blk.nrows)
+        rset = self.rset
+        zero_t = np.zeros(rset.nrows)
         zero_e = np.zeros(system.elim_dofs.size)
         free = system.free_rows()
         for it in range(spec.max_iterations + 1):
@@ -98,7 +98,7 @@ class ArcLength(NewtonSolver):
             elim_r = system.elim_values(t) - system.eliminated_values(self.q) \
                 if system.elim_dofs.size else zero_e
             f_r = system.composition.known_loads(t, t, None) + self.mu * self.P - f_int
-            dq_r, lam_r, x_r = self._solve(f_r, target_r * blk.row_scale if blk.nrows else zero_t,
+            dq_r, lam_r, x_r = self._solve(f_r, target_r * rset.row_scale if rset.nrows else zero_t,
                                            elim_r, mat)
             dq_p, lam_p, x_p = self._solve(self.P, zero_t, zero_e, mat)
             try:

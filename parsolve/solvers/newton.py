@@ -124,12 +124,9 @@ class NewtonSolver:
         self._oriented = False
         # effects whose relations change between iterations (contact with friction): their
         # begin_step / refresh / end_step hooks, and where each relation's D and A entries
-        # sit in the stacked block (values are copied there in place: same sparsity)
+        # sit in the relation set (values are copied there in place: same sparsity)
         self.hooks = [e for e in model.effects if e.refreshes]
-        sizes = [(r.shared_dual[0].size if r.collapsed else len(r.dual_coo()[2]), r.a_vals.size)
-                 for r in system.multiplied] if self.hooks else [(0, 0)]
-        self._d_seg = np.concatenate([[0], np.cumsum([d for d, _ in sizes])]).astype(np.int64)
-        self._a_seg = np.concatenate([[0], np.cumsum([a for _, a in sizes])]).astype(np.int64)
+        self.rset = system.relation_set   # the stacked relations: views, values, refresh
         self._rows = self._dependence_rows()
         self.left_out = np.zeros(self.active.sign.size, dtype=bool)
 
@@ -140,13 +137,13 @@ class NewtonSolver:
         mult = system.multiplied
         if not any(r.meta.get("type") == "contact" for r in mult):
             return None
-        first = system.block.row_first
+        rset = self.rset
         keep = [k for k, r in enumerate(mult) if not r.collapsed]
-        rows = np.concatenate([mult[k].a_rows + first[k] for k in keep])
+        rows = np.concatenate([mult[k].a_rows + rset.rows_of(k).start for k in keep])
         dofs = np.concatenate([mult[k].a_dofs for k in keep])
-        candidate = np.zeros(int(first[-1]), dtype=bool)
+        candidate = np.zeros(rset.nrelrows, dtype=bool)
         for k, r in enumerate(mult):
-            candidate[first[k]:first[k + 1]] = r.meta.get("type") == "contact"
+            candidate[rset.rows_of(k)] = r.meta.get("type") == "contact"
         fixed = np.concatenate([r.a_dofs for r in system.eliminated] + [np.zeros(0, np.int64)])
         return rows, dofs, [mult[k] for k in keep], candidate, np.unique(fixed)
 
@@ -186,15 +183,15 @@ class NewtonSolver:
         if not self.left_out.any():
             return
         system = self.system
-        gap = system.primal_values(self.q) - np.concatenate([r.rhs(t) for r in system.multiplied])
+        gap = self.rset.primal_values(self.q) - self.rset.targets(t)
         # against the rows' values and the displacements (a row at rest on the plane has A q = 0)
-        scale = max(float(np.abs(system.primal_values(self.q)).max()), system.max_abs(self.q),
+        scale = max(float(np.abs(self.rset.primal_values(self.q)).max()), system.max_abs(self.q),
                     1e-300)
         bad = self.left_out & (self.active.sign * gap > 1e-9 * scale)
         if bad.any():
             row = int(np.flatnonzero(bad)[0])
-            k = int(np.searchsorted(system.block.row_first, row, side="right") - 1)
-            rel, local = system.multiplied[k], row - int(system.block.row_first[k])
+            k, local = self.rset.locate(row)
+            rel = system.multiplied[k]
             node = int(rel.a_dofs[rel.a_rows == local][0]) // system.model.ncomp
             raise SolverError(f"contact row {local} of {rel.name!r} (node {node}) depends on "
                               "other relations (a held or tied node) that violate it by "
@@ -323,8 +320,7 @@ class NewtonSolver:
 
     def _views(self, x: np.ndarray) -> dict[str, np.ndarray]:
         """Per multiplied relation, its rows of x (relation rows; writable views)."""
-        first = self.system.block.row_first
-        return {r.name: x[first[k]:first[k + 1]] for k, r in enumerate(self.system.multiplied)}
+        return self.rset.views(x)
 
     def _begin_hooks(self) -> None:
         changed = False
@@ -336,7 +332,7 @@ class NewtonSolver:
     def _refresh_hooks(self) -> bool:
         """The effects' updates between iterations (e.g. friction states and slip senses);
         their relation values are copied into the system, whose pattern does not change."""
-        lam = self._views(self.system.block.row_values(self.lam) if self.lam.size else self.lam)
+        lam = self._views(self.rset.row_values(self.lam) if self.lam.size else self.lam)
         active = self._views(self.active.active)
         changed = False
         for e in self.hooks:
@@ -347,12 +343,8 @@ class NewtonSolver:
 
     def _sync_relations(self) -> None:
         """Copy the current A and D values of the relations marked ``meta["refresh"]`` into
-        the stacked block (unscaled; the scales of the first assembly stay)."""
-        blk = self.system.block
-        for k, r in enumerate(self.system.multiplied):
-            if r.meta.get("refresh"):
-                blk.d_vals[self._d_seg[k]:self._d_seg[k + 1]] = r.dual_coo()[2]
-                blk.a_vals[self._a_seg[k]:self._a_seg[k + 1]] = r.a_vals
+        the relation set (unscaled; the scales of the first assembly stay)."""
+        self.rset.refresh()
 
     def _unit_response(self, kmat, released: np.ndarray, f: np.ndarray) -> np.ndarray:
         """δq = K⁻¹ f with the tangent, the rows ``released`` switched off and the other
@@ -366,7 +358,7 @@ class NewtonSolver:
             self.linear.set_operator(mat)
             self._mat = mat
         x, rhs = self._vectors(mat)
-        rhs.array[:] = system.rhs_from(f, np.zeros(system.block.nrows),
+        rhs.array[:] = system.rhs_from(f, np.zeros(self.rset.nrows),
                                        np.zeros(system.elim_dofs.size))[0]
         self.linear.solve(rhs, x)
         return system.primal_of(system.gather(x.array))
@@ -385,11 +377,12 @@ class NewtonSolver:
         tangent: the reaction must push the row back whichever way its dual points. A relation
         whose rows share one dual vector (a load pattern) costs one solve; rows with their own
         local duals take the sign of -A_k·D_k."""
-        system, blk = self.system, self.system.block
+        system = self.system
         for k, r in enumerate(system.multiplied):
             if r.sense == "=" or r.associated or r.maximum or r.groups is not None:
                 continue  # a group's enforced row is chosen by value, whatever its sign
-            rows = np.arange(blk.row_first[k], blk.row_first[k + 1])
+            span = self.rset.rows_of(k)
+            rows = np.arange(span.start, span.stop)
             if r.meta.get("dual"):
                 rate = system.relation_primal(r, self._unit_response(kmat, rows,
                                                                      self._dual_column(k)))
@@ -403,12 +396,12 @@ class NewtonSolver:
     def _enforced_rows(self) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
         """Per maximum group, its enforced row: (row, its relation row b index, A's DOFs and
         coefficients on that row)."""
-        system, blk = self.system, self.system.block
+        system = self.system
         out = []
         for g in self.active.groups:
             row = int(g[self.active.active[g]][0])
-            k = int(np.searchsorted(blk.row_first, row, side="right") - 1)
-            rel, local = system.multiplied[k], row - int(blk.row_first[k])
+            k, local = self.rset.locate(row)
+            rel = system.multiplied[k]
             sel = rel.a_rows == local
             out.append((row, k, np.asarray(rel.a_dofs)[sel], np.asarray(rel.a_vals)[sel]))
         return out
@@ -434,10 +427,10 @@ class NewtonSolver:
         enforced cell's loading tangent is taken at q + δ, δ along its row with A δ = 1e-10 of
         the row's value; all other cells keep theirs. Not for a secant matrix: it does not tell
         loading from unloading (and a perturbed cell would break a symmetric tie)."""
-        system, blk = self.system, self.system.block
+        system = self.system
         delta = np.zeros(self.ndof)
         for row, k, dofs, a in self._enforced_rows():
-            rel, local = system.multiplied[k], row - blk.row_first[k]
+            rel, local = system.multiplied[k], self.rset.locate(row)[1]
             b = rel.rhs(self.t_prev)[local]
             value = system.relation_primal(rel, self.q)[local]   # A q of the row (collective)
             size = 1e-10 * max(abs(float(value)), abs(float(b)), 1e-300)
@@ -451,14 +444,13 @@ class NewtonSolver:
         unit control load, rates r = A δq, then the smallest (b - A q) / |r| along the branch
         the enforced row follows (``_branch_reach``)."""
         system = self.system
-        blk = system.block
         groups = np.concatenate(self.active.groups)
         f = np.zeros(self.ndof)
         for g in self.active.groups:  # the control load of each group at unit intensity
-            f += self._dual_column(int(np.searchsorted(blk.row_first, g[0], side="right") - 1))
+            f += self._dual_column(self.rset.locate(int(g[0]))[0])
         dq = self._unit_response(kmat, groups, f)
         rates = system.primal_values(dq)
-        gap = np.concatenate([r.rhs(t) for r in system.multiplied]) - system.primal_values(self.q)
+        gap = self.rset.targets(t) - system.primal_values(self.q)
         for g in self.active.groups:
             s = self.active.sign[g]
             current = g[self.active.active[g]][0]
@@ -477,11 +469,11 @@ class NewtonSolver:
 
     def _update_active(self, t: float) -> bool:
         system = self.system
-        gap = system.primal_values(self.q) - np.concatenate([r.rhs(t) for r in system.multiplied])
+        gap = self.rset.primal_values(self.q) - self.rset.targets(t)
         scale_gap = max(float(np.abs(gap).max()), float(np.abs(system.primal_values(self.q)).max()),
                         1e-300)
         scale_lam = max(float(np.abs(self.lam).max()), 1e-300)
-        lam = self.system.block.row_values(self.lam) if self.lam.size else self.lam
+        lam = self.rset.row_values(self.lam) if self.lam.size else self.lam
         return self.active.update(gap, lam, 1e-9 * scale_gap, 1e-9 * scale_lam, scale_gap)
 
     def multipliers(self, t: float, f_int: np.ndarray) -> dict[str, np.ndarray]:

@@ -66,8 +66,8 @@ def export_system(comm, directory: str, mat: PETSc.Mat, rhs: PETSc.Vec, system: 
     scale = rhs.duplicate()
     scale.set(1.0)
     q0, q1, l0, l1 = system.dofmap.owned()
-    if system.block.nrows:
-        scale.array[q1 - q0:] = system.block.col_scale[l0:l1]
+    if system.relation_set.nrows:
+        scale.array[q1 - q0:] = system.relation_set.col_scale[l0:l1]
     viewer = PETSc.Viewer().createBinary(str(path / "system.dat"), "w", comm=comm)
     for obj in (mat, rhs, scale):
         obj.view(viewer)

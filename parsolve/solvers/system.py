@@ -19,7 +19,7 @@ from parsolve.fem.element_matrices import BlockMatrices, ElementMatrices, Stiffn
 from parsolve.la.dofmap import DofMap, HeldValues, held_keys
 from parsolve.la.pattern import node_pattern
 from parsolve.la.petsc import SaddleOperator
-from parsolve.la.saddle import stack_relations
+from parsolve.la.relation_set import RelationSet
 from parsolve.mesh.regions import allgather_rows
 from parsolve.model import Model
 
@@ -53,11 +53,9 @@ class SaddleSystem:
         self.rate: Rate | None = None  # the rate terms of a transient step (set by the stepper)
         lo, hi = self.part.node_ranges[rank], self.part.node_ranges[rank + 1]
         self.pattern = pattern = self._pattern(lo, hi)
-        self.block = stack_relations(self.multiplied, dm.input_new_dof)
-        self.op = SaddleOperator(comm, dm, pattern, self.block)
+        self.relation_set = RelationSet(self.multiplied, dm)
+        self.op = SaddleOperator(comm, dm, pattern, self.relation_set)
         self.offset = dm.offset
-        # relation entries on this rank's owned DOFs (A q = Σ over ranks of these)
-        self._owned_entries: dict[int, tuple] = {}
         self._elimination_setup()
         self.timings["setup"] = time.perf_counter() - t0
         self.assembled = False
@@ -150,9 +148,9 @@ class SaddleSystem:
         t0 = time.perf_counter()
         ke = self.composition.stiffness(self.rate) if elements is None else elements
         self._place_stiffness(ke)
-        if self.block.row_scale is None:
+        if not self.relation_set.scaled:
             self.kscale = self.op.diagonal_scale()
-            self.block.set_scales(self.kscale)
+            self.relation_set.set_scales(self.kscale)
         self.op.relation_values(self.kscale)
         self.op.eliminate(self.kscale)
         mat = self.op.petsc_matrix()
@@ -187,9 +185,7 @@ class SaddleSystem:
         f_full = self.composition.known_loads(t, t, None) if f_ext is None else f_ext
         if f_int is not None:
             f_full = f_full - f_int
-        target = self.block.rhs(t)
-        if q is not None and self.block.nrows:
-            target = target - self.primal_values(q)[self.block.rep_row] * self.block.row_scale
+        target = self.relation_set.scaled_residual(t, q)
         values = self.elim_values(t)
         if q is not None and self.elim_dofs.size:
             values = values - self.eliminated_values(q)
@@ -221,33 +217,19 @@ class SaddleSystem:
 
     def set_active(self, active_rows: np.ndarray) -> None:
         """Enforce these relation rows (a collapsed group carries its enforced row)."""
-        self.op.active = self.block.select(active_rows)
+        self.op.active = self.relation_set.select(active_rows)
 
     def gap(self, t: float, q: np.ndarray) -> np.ndarray:
-        """b(t) - A q of every multiplier row, unscaled."""
-        if not self.multiplied:
-            return np.zeros(0)
-        b = np.concatenate([r.rhs(t) for r in self.multiplied])
-        return (b - self.primal_values(q))[self.block.rep_row]
+        """b(t) - A q of every multiplier row, unscaled (the relation set's)."""
+        return self.relation_set.gap(t, q)
 
     def primal_values(self, q: np.ndarray) -> np.ndarray:
-        """A q of every multiplied row (unscaled), q a primal vector of this mesh's DOFs."""
-        if not self.multiplied:
-            return np.zeros(0)
-        return self.dofmap.sum_ranks(np.concatenate([self._owned_primal(r, q)
-                                                     for r in self.multiplied]))
+        """A q of every multiplied row (unscaled): one reduction (the relation set's)."""
+        return self.relation_set.primal_values(q)
 
     def relation_primal(self, r, q: np.ndarray) -> np.ndarray:
         """A q of one relation's rows (any relation of the model). Collective."""
-        return self.dofmap.sum_ranks(self._owned_primal(r, q))
-
-    def _owned_primal(self, r, q: np.ndarray) -> np.ndarray:
-        """This rank's part of A q: the entries on its owned DOFs."""
-        key = id(r)
-        if key not in self._owned_entries:
-            self._owned_entries[key] = self.dofmap.owned_dof_entries(r.a_dofs)
-        sel, local = self._owned_entries[key]
-        return self.dofmap.owned_part(sel, local, r.a_rows, r.a_vals, r.nrows, q)
+        return self.relation_set.relation_primal(r, q)
 
     def to_local(self, dofs: np.ndarray, values: np.ndarray) -> np.ndarray:
         """A vector of this mesh's DOFs from (input DOFs, values) entries (duplicates add;
@@ -269,13 +251,7 @@ class SaddleSystem:
 
     def reactions(self, lam: np.ndarray) -> np.ndarray:
         """Owned rows of D λ (unscaled λ of all multiplied rows)."""
-        blk = self.block
-        q0, q1, _, _ = self.dofmap.owned()
-        own = (blk.d_rows >= q0) & (blk.d_rows < q1)
-        out = np.zeros(self.op.nrows)
-        out[:q1 - q0] = np.bincount(blk.d_rows[own] - q0, weights=blk.d_vals[own] * lam[blk.d_cols[own]],
-                                    minlength=q1 - q0)
-        return out
+        return self.relation_set.reactions(lam)
 
     def free_rows(self) -> np.ndarray:
         """Mask of this rank's primal rows that are not eliminated."""
@@ -306,9 +282,7 @@ class SaddleSystem:
 
     def multipliers(self, x_full) -> np.ndarray:
         """Unscaled λ of every multiplied row from a full saddle vector."""
-        if not self.block.nrows:
-            return np.zeros(0)
-        return x_full.lam * self.block.col_scale
+        return self.relation_set.multipliers(x_full.lam)
 
     def unpack(self, x_full: np.ndarray, t: float, f_int: np.ndarray | None = None,
                f_ext: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, np.ndarray]]:
@@ -316,10 +290,7 @@ class SaddleSystem:
         every relation."""
         q = self.primal_of(x_full)
         lam = self.multipliers(x_full)
-        out = {}
-        per_row = self.block.row_values(lam) if self.block.nrows else lam
-        for k, r in enumerate(self.multiplied):
-            out[r.name] = per_row[self.block.row_first[k]:self.block.row_first[k + 1]]
+        out = self.relation_set.per_relation(lam)
         if self.eliminated:
             out.update(self._eliminated_multipliers(x_full, t, f_int, f_ext))
         return q, out

@@ -33,7 +33,7 @@ def test_operator_blocks_are_what_the_relations_say():
     rigid = np.column_stack([np.tile([1.0, 0.0], len(pts)), np.tile([0.0, 1.0], len(pts)),
                              np.column_stack([-pts[:, 1], pts[:, 0]]).ravel()])
     assert np.abs(K @ rigid).max() <= 1e-11 * np.abs(K).max()
-    blk = system.block
+    blk = system.relation_set
     for k, rel in enumerate(system.multiplied):
         rows = il[blk.first_row[k]:blk.first_row[k + 1]]
         A = np.zeros((rel.nrows, len(iq)))

@@ -68,7 +68,7 @@ def brute_saddle(system: SaddleSystem, factor: float = 1.0) -> np.ndarray:
     iq, il = system.iq, system.dofmap.saddle_of_mult
     S = np.zeros((system.dofmap.size, system.dofmap.size))
     S[np.ix_(iq, iq)] = brute_stiffness(system.whole, factor)
-    blk = system.block
+    blk = system.relation_set
     for k, rel in enumerate(system.multiplied):
         rows = il[blk.first_row[k]:blk.first_row[k + 1]]
         scale = blk.row_scale[blk.first_row[k]:blk.first_row[k + 1]]
@@ -120,7 +120,7 @@ def structure(system: SaddleSystem) -> np.ndarray:
     nodes[np.repeat(mesh.cells, nen, axis=1).ravel(), np.tile(mesh.cells, nen).ravel()] = True
     out = np.zeros((system.dofmap.size, system.dofmap.size), dtype=bool)
     out[np.ix_(iq, iq)] = np.kron(nodes, np.ones((nc, nc), dtype=bool))
-    blk = system.block
+    blk = system.relation_set
     for k, rel in enumerate(system.multiplied):
         rows = il[blk.first_row[k]:blk.first_row[k + 1]]
         out[rows[rel.a_rows], iq[rel.a_dofs]] = True
