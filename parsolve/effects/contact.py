@@ -544,6 +544,11 @@ class Contact(Effect):
 
     # ------------------------------------------------------------------ Newton hooks
 
+    def attach(self, ctx) -> None:
+        """The system's DOF map from now on (the same numbers as the one built with the
+        effect: its lookups and reductions, shared)."""
+        self.values = ctx.dofs
+
     def begin_step(self, q: np.ndarray, active: dict) -> bool:
         """Start a step from the committed state: stick rows hold the tangential displacement
         of the step's start; True when the dual changed (values to copy into the system)."""

@@ -22,6 +22,7 @@ from parsolve.la.petsc import SaddleOperator
 from parsolve.la.relation_set import RelationSet
 from parsolve.mesh.regions import allgather_rows
 from parsolve.model import Model
+from parsolve.solvers.context import StepContext
 
 
 class SaddleSystem:
@@ -57,6 +58,13 @@ class SaddleSystem:
         self.op = SaddleOperator(comm, dm, pattern, self.relation_set)
         self.offset = dm.offset
         self._elimination_setup()
+        self.context = StepContext(
+            comm, dm, self.relation_set, self.eliminated, model.relations, self.composition,
+            model.effects, model.fields, mesh, model.scene, model.patterns, self.local_cells,
+            self.owned_cells, self.reported, model.initial_q, model.symmetric,
+            model.elasticity, model.nonlinear, model.transient)
+        for e in model.effects:   # once: the reductions their hooks need (Effect.attach)
+            e.attach(self.context)
         self.timings["setup"] = time.perf_counter() - t0
         self.assembled = False
 
@@ -131,6 +139,15 @@ class SaddleSystem:
         own = (sad >= self.offset) & (sad < self.offset + n)
         self.elim_own = own
         self.op.set_eliminated(sad)
+
+    @property
+    def n_eliminated(self) -> int:
+        """Eliminated DOFs (every rank's)."""
+        return int(self.elim_dofs.size)
+
+    def index_sets(self):
+        """The PETSc index sets of the primal and multiplier fields."""
+        return self.op.index_sets()
 
     def elim_values(self, t: float) -> np.ndarray:
         """Prescribed values of the eliminated DOFs at t (A q = b with one coefficient per row)."""
