@@ -80,7 +80,6 @@ def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log
     mat, vecs = None, None
     q_prev, t_prev = ctx.initial_q(), 0.0
     balance = Balance(comm, ctx, q_prev) if ctx.transient else None
-    stiffness_blocks = None
     for step, t in enumerate(scene.times):
         t1 = time.perf_counter()
         assembly = 0.0
@@ -91,13 +90,7 @@ def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log
             dt = t - t_prev
             if system.rate is None or not np.isclose(dt, system.rate.dt, rtol=1e-12, atol=0):
                 system.rate, mat = Rate(dt, theta, q_prev, np.zeros(0)), None
-            if theta != 1.0:
-                if stiffness_blocks is None:
-                    stiffness_blocks = [b for e in ctx.effects
-                                        for b in e.stiffness_blocks(ctx.cells)]
-                w = ctx.composition.theta_dofs(theta)
-                f_rhs = f_rhs - (1 - w) * ctx.composition.product(stiffness_blocks, q_prev)
-            f_rhs = f_rhs + ctx.composition.product(ctx.composition.mass_parts(), q_prev) / dt
+            f_rhs = ctx.composition.linear_step_loads(f_known, q_prev, dt, theta)
         if mat is None:
             t0 = time.perf_counter()
             mat = system.assemble()

@@ -14,6 +14,12 @@ from mpi4py import MPI
 from parsolve.io.slabs import OwnedRows
 
 
+def vector_field(fields):
+    """The field whose components are the axes of space (the displacement: its reactions
+    have moments), or None: known from the fields' own components, not from a name."""
+    return next((f for f in fields if not f.scalar), None)
+
+
 def resultant(relation, lam: np.ndarray, fields, points) -> np.ndarray:
     """Sum of the reactions D λ per node DOF column (every field's components), then, for a
     model with a displacement field, their moment about the origin (z in 2D; x, y, z in 3D).
@@ -22,9 +28,10 @@ def resultant(relation, lam: np.ndarray, fields, points) -> np.ndarray:
     dofs, force = relation.reaction(lam)
     ncomp = fields.ncomp
     out = np.bincount(dofs % ncomp, weights=force, minlength=ncomp)
-    if "u" not in fields:
+    mech = vector_field(fields)
+    if mech is None:
         return out
-    cols = fields.columns("u")
+    cols = fields.columns(mech.name)
     node, col = np.divmod(dofs, ncomp)
     dim = cols.size
     f = np.zeros((force.size, 3))
@@ -41,8 +48,8 @@ def resultant_labels(fields, dim: int) -> list[str]:
     the displacement; a scalar field by its name), then the moments."""
     labels = []
     for f in fields:
-        labels += list(f.components) if f.name == "u" else [f.name] * f.ncomp
-    if "u" in fields:
+        labels += [f.name] * f.ncomp if f.scalar else list(f.components)
+    if vector_field(fields) is not None:
         labels += ["mz"] if dim == 2 else ["mx", "my", "mz"]
     return labels
 

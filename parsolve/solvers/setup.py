@@ -19,7 +19,8 @@ def rigid_body_modes(comm: MPI.Comm, system: SaddleSystem) -> PETSc.NullSpace | 
     rigid-body modes of a displacement-only model, constants of a scalar field."""
     ctx = system.context
     mesh = ctx.mesh
-    if ctx.fields.names() != ["u"]:
+    fields = list(ctx.fields)
+    if len(fields) != 1 or fields[0].scalar:   # rigid-body modes of one vector field only
         return None if ctx.ncomp > 1 else PETSc.NullSpace().create(constant=True, comm=comm)
     coords = mesh.points[:mesh.n_owned]   # owned nodes first, in the global numbering's order
     vec = PETSc.Vec().createWithArray(coords.ravel().copy(), size=(coords.size, None),
