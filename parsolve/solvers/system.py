@@ -236,40 +236,6 @@ class SaddleSystem:
         """Enforce these relation rows (a collapsed group carries its enforced row)."""
         self.op.active = self.relation_set.select(active_rows)
 
-    def gap(self, t: float, q: np.ndarray) -> np.ndarray:
-        """b(t) - A q of every multiplier row, unscaled (the relation set's)."""
-        return self.relation_set.gap(t, q)
-
-    def primal_values(self, q: np.ndarray) -> np.ndarray:
-        """A q of every multiplied row (unscaled): one reduction (the relation set's)."""
-        return self.relation_set.primal_values(q)
-
-    def relation_primal(self, r, q: np.ndarray) -> np.ndarray:
-        """A q of one relation's rows (any relation of the model). Collective."""
-        return self.relation_set.relation_primal(r, q)
-
-    def to_local(self, dofs: np.ndarray, values: np.ndarray) -> np.ndarray:
-        """A vector of this mesh's DOFs from (input DOFs, values) entries (duplicates add;
-        entries of nodes not on this rank dropped)."""
-        return self.dofmap.local_vector(dofs, values)
-
-    def norm(self, v: np.ndarray) -> float:
-        """2-norm of a primal vector of this mesh's DOFs, each DOF once (owned rows)."""
-        return self.dofmap.norm(v)
-
-    def dot(self, u: np.ndarray, v: np.ndarray) -> float:
-        """u · v of two primal vectors of this mesh's DOFs, each DOF once (owned rows): the
-        same number on every rank."""
-        return self.dofmap.dot(u, v)
-
-    def max_abs(self, v: np.ndarray) -> float:
-        """max |v| over every rank (the same number on all)."""
-        return self.dofmap.max_abs(v)
-
-    def reactions(self, lam: np.ndarray) -> np.ndarray:
-        """Owned rows of D λ (unscaled λ of all multiplied rows)."""
-        return self.relation_set.reactions(lam)
-
     def free_rows(self) -> np.ndarray:
         """Mask of this rank's primal rows that are not eliminated."""
         q0, q1, _, _ = self.dofmap.owned()
@@ -285,14 +251,6 @@ class SaddleSystem:
         multiplier) from its owned rows (the DOF map's forward exchange)."""
         return self.dofmap.gather(x_owned)
 
-    def zero_saddle(self) -> HeldValues:
-        """A zero saddle vector, as ``gather`` returns them."""
-        return self.dofmap.zeros()
-
-    def primal_of(self, x_full: HeldValues) -> np.ndarray:
-        """The primal DOFs (this mesh's numbering) of what ``gather`` returned."""
-        return x_full.q
-
     def with_primal(self, x_full: HeldValues, q: np.ndarray) -> HeldValues:
         """A copy of ``x_full`` with its primal part replaced by q."""
         return x_full.with_q(q)
@@ -305,7 +263,7 @@ class SaddleSystem:
                f_ext: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """Primal vector (this mesh's DOFs, owned then ghosts) and unscaled multipliers of
         every relation."""
-        q = self.primal_of(x_full)
+        q = x_full.q
         lam = self.multipliers(x_full)
         out = self.relation_set.per_relation(lam)
         if self.eliminated:
@@ -320,7 +278,7 @@ class SaddleSystem:
         if f_int is None:
             row_vals = self.op.eliminated_rows(x_full)
         else:  # x_full holds λ; the primal part of the row is the internal force
-            row_vals = self.to_owned(f_int) - self.reactions(self.multipliers(x_full))
+            row_vals = self.to_owned(f_int) - self.relation_set.reactions(self.multipliers(x_full))
         sad = self.elim_saddle
         lam = np.zeros(self.elim_dofs.size)
         own = self.elim_own
