@@ -144,14 +144,6 @@ class DofMap:
         self._saddle = None
         self._held_keys = None
 
-    def with_multipliers(self, nmult: int) -> "DofMap":
-        """The same map with ``nmult`` multiplier rows (the lookups and the exchange plan are
-        shared: they do not depend on the multipliers)."""
-        other = object.__new__(DofMap)
-        other.__dict__.update(self.__dict__)
-        other._set_multipliers(nmult)
-        return other
-
     # ------------------------------------------------------------ sizes and ranges
 
     @property
@@ -204,12 +196,6 @@ class DofMap:
         owner = np.searchsorted(self.l_ranges, rows, side="right") - 1
         nq_owner = self.q_ranges[owner + 1] - self.q_ranges[owner]
         return rows - self.l_ranges[owner] + self.offsets[owner] + nq_owner
-
-    def new_to_saddle(self, new_dofs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(owner, saddle index) of primal DOFs given in the new numbering."""
-        new_dofs = np.asarray(new_dofs, dtype=np.int64)
-        owner = np.searchsorted(self.q_ranges, new_dofs, side="right") - 1
-        return owner, new_dofs - self.q_ranges[owner] + self.offsets[owner]
 
     def saddle_to_new(self, saddle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(new primal DOF, mask of the indices that are primal) of saddle indices."""

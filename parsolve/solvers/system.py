@@ -212,10 +212,7 @@ class SaddleSystem:
         """q at every eliminated DOF, from their owners (one reduction of their number): a
         relation row owned here may name an eliminated DOF of a node this rank does not hold,
         whose value its lifting needs."""
-        own = (self.elim_local >= 0) & (self.elim_local < self.dofmap.n_owned)
-        out = np.zeros(self.elim_dofs.size)
-        out[own] = q[self.elim_local[own]]
-        return self.dofmap.sum_ranks(out)
+        return self.dofmap.at_inputs(self.elim_dofs, q)
 
     def rhs_from(self, f_full: np.ndarray, target: np.ndarray, elim_values: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray]:
