@@ -4,14 +4,15 @@ see of a system (in the manner of Firedrake's ``_SNESContext`` / dolfinx's
 
 It holds the values side of the problem: the DOF map (local/owned vectors, ghost exchange,
 owned reductions), the relation set (stacked rows: A q, gaps, D λ, per-relation views), the
-effects composed on this rank's cells (forces, tangents, states, field values), the scene's
-data the steps need (times, patterns, the initial state), and the rows active now. Assembly,
+effects composed on this rank's cells (forces, tangents, states, field values) and the scene's
+data the steps need (times, patterns, the initial state); the rows active now stay with the
+active set (Newton hands them to the hooks and the outputs as per-relation views). Assembly,
 the right-hand side and unpacking stay with the system; nothing here reaches into it.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
@@ -42,8 +43,6 @@ class StepContext:
     elasticity: object = None    # the elasticity effect, if any (strains of a step)
     nonlinear: bool = False
     transient: bool = False
-    active: np.ndarray | None = None   # relation rows enforced now (set by the active set)
-    extra: dict = field(default_factory=dict)
 
     # ------------------------------------------------------------ relations
 
@@ -72,10 +71,6 @@ class StepContext:
     def multipliers_by_relation(self, lam: np.ndarray) -> dict[str, np.ndarray]:
         """Per multiplied relation, the unscaled λ of its rows."""
         return self.relations.per_relation(lam)
-
-    def active_views(self) -> dict[str, np.ndarray]:
-        """Per multiplied relation, its active rows (empty without an active set)."""
-        return self.views(self.active) if self.active is not None else {}
 
     # ------------------------------------------------------------ values and reductions
 

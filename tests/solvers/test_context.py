@@ -47,7 +47,6 @@ def test_reductions_and_relation_values(system):
     views = ctx.views(rows)
     assert list(views) == [r.name for r in ctx.multiplied]
     np.testing.assert_array_equal(np.concatenate(list(views.values())), rows)
-    assert ctx.active_views() == {}
     # the owned rows of a local vector: the same norm as the local vector
     assert float(np.sqrt(COMM.allreduce(float(ctx.owned_rows(q) @ ctx.owned_rows(q))))) == \
         pytest.approx(ctx.norm(q), rel=1e-15)
