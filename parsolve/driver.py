@@ -74,30 +74,23 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
 def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log) -> None:
     """Assemble and factorize once (again when a transient step size changes); one
     back-substitution per step."""
-    model = system.model
-    scene = model.scene
+    ctx = system.context
+    scene = ctx.scene
     solver = make_solver(comm, system, cli_options)
     mat, vecs = None, None
-    q_prev, t_prev = model.initial_q(), 0.0
-    balance = Balance(comm, system, q_prev) if model.transient else None
-    stiffness_blocks = None
+    q_prev, t_prev = ctx.initial_q(), 0.0
+    balance = Balance(comm, ctx, q_prev) if ctx.transient else None
     for step, t in enumerate(scene.times):
         t1 = time.perf_counter()
         assembly = 0.0
-        theta = scene.time.theta if model.transient else None
-        f_known = system.composition.known_loads(t, t_prev, theta)  # (θ-weighted)
+        theta = scene.time.theta if ctx.transient else None
+        f_known = ctx.composition.known_loads(t, t_prev, theta)  # (θ-weighted)
         f_rhs = f_known
-        if model.transient:
+        if ctx.transient:
             dt = t - t_prev
             if system.rate is None or not np.isclose(dt, system.rate.dt, rtol=1e-12, atol=0):
                 system.rate, mat = Rate(dt, theta, q_prev, np.zeros(0)), None
-            if theta != 1.0:
-                if stiffness_blocks is None:
-                    stiffness_blocks = [b for e in model.effects
-                                        for b in e.stiffness_blocks(system.local_cells)]
-                w = system.composition.theta_dofs(theta)
-                f_rhs = f_rhs - (1 - w) * system.composition.product(stiffness_blocks, q_prev)
-            f_rhs = f_rhs + system.composition.product(system.composition.mass_parts(), q_prev) / dt
+            f_rhs = ctx.composition.linear_step_loads(f_known, q_prev, dt, theta)
         if mat is None:
             t0 = time.perf_counter()
             mat = system.assemble()
@@ -105,13 +98,13 @@ def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log
             vecs = vecs or mat.createVecs()
             assembly = time.perf_counter() - t0
         x, rhs = vecs
-        rhs.array[:] = system.rhs_from(f_rhs, system.block.rhs(t), system.elim_values(t))[0]
+        rhs.array[:] = system.rhs_from(f_rhs, ctx.relations.rhs(t), system.elim_values(t))[0]
         if export_dir is not None and step == 0:
             export_system(comm, export_dir, mat, rhs, system)
         linear_its = solver.solve(rhs, x)
         t2 = time.perf_counter()
         q, multipliers = system.unpack(system.gather(x.array), t, f_ext=f_rhs)
-        fields, cell_fields, rel_out = step_outputs(comm, system, q, multipliers)
+        fields, cell_fields, rel_out = step_outputs(comm, ctx, q, multipliers)
         extra = balance.step(q, t - t_prev, f_known, multipliers) if balance else {}
         timings = {"assembly": assembly, **solver.take_timings()}
         timings["output"] = time.perf_counter() - t2
@@ -128,15 +121,15 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log) -> None:
     """Newton + active set at every step; the steps follow the scene or the automatic rule.
     A step that fails is cut in two and retried (bounded), fixed steps as automatic ones; the
     log and /steps/cuts say so."""
-    model = system.model
-    scene = model.scene
+    ctx = system.context
+    scene = ctx.scene
     t0 = time.perf_counter()
     system.assemble()
     solver = make_solver(comm, system, cli_options)
     newton = NewtonSolver(comm, system, solver, scene.nonlinear)
     schedule = StepSchedule(scene)
-    balance = Balance(comm, system, newton.q) if model.transient else None
-    watch = BranchWatch(model.nonlinear)
+    balance = Balance(comm, ctx, newton.q) if ctx.transient else None
+    watch = BranchWatch(ctx.nonlinear)
     step, setup = 0, time.perf_counter() - t0
     while (t := schedule.next()) is not None:
         t1 = time.perf_counter()
@@ -155,12 +148,12 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log) -> None:
         seconds = time.perf_counter() - t1
         t2 = time.perf_counter()
         multipliers = newton.multipliers(t, result.f_int)
-        fields, cell_fields, rel_out = step_outputs(comm, system, newton.q, multipliers, newton)
+        fields, cell_fields, rel_out = step_outputs(comm, ctx, newton.q, multipliers, newton)
         extra = balance.step(newton.q, t - t_prev, newton.f_ext, multipliers) if balance else {}
         pivots = solver.negative_pivots()  # the saddle's: one per enforced multiplier row
         if pivots is not None:
             pivots -= int(newton.active.active.sum())
-        warning = watch.check(system.norm(newton.q - snap[0]), pivots)
+        warning = watch.check(ctx.norm(newton.q - snap[0]), pivots)
         extra.update({"steps/cuts": schedule.cuts, "steps/branch_warning": int(warning is not None)})
         timings = solver.take_timings()
         timings["assembly"] = system.timings.get("assembly", 0.0) + (setup if step == 1 else 0.0)
@@ -171,7 +164,7 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log) -> None:
         interrupts.check(comm)
         cut_note = f"  (after {schedule.cuts} cut{'s' * (schedule.cuts > 1)})" if schedule.cuts else ""
         # (the largest strain increment sizes automatic steps only; every rank takes this branch)
-        schedule.done(t, _max_strain_increment(comm, system, newton.q - snap[0])
+        schedule.done(t, _max_strain_increment(comm, ctx, newton.q - snap[0])
                       if schedule.spec.automatic else 0.0)
         progress(log, comm, step, schedule.total, t, result.iterations, result.residual, seconds,
                  cut_note + reported(scene, rel_out))
@@ -283,17 +276,17 @@ class StepSchedule:
         return True
 
 
-def _max_strain_increment(comm, system: SaddleSystem, dq: np.ndarray) -> float:
-    mech = system.model.elasticity
+def _max_strain_increment(comm, ctx, dq: np.ndarray) -> float:
+    mech = ctx.elasticity
     if mech is None:
         return comm.allreduce(0.0, op=MPI.MAX)
-    mesh = system.model.mesh
-    owned = system.owned_cells
+    mesh = ctx.mesh
+    owned = ctx.owned_cells
     if owned.size == 0:
         return comm.allreduce(0.0, op=MPI.MAX)
     from parsolve.fem.kernels import strains
 
-    u = system.composition.values(dq)["u"]
+    u = ctx.values(dq)["u"]
     eps = strains(mech.geometry(owned).strain_operator(),
                   u[mesh.cells[owned]].reshape(len(owned), -1))
     return comm.allreduce(float(np.abs(eps).max()), op=MPI.MAX)

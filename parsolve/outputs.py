@@ -14,6 +14,12 @@ from mpi4py import MPI
 from parsolve.io.slabs import OwnedRows
 
 
+def vector_field(fields):
+    """The field whose components are the axes of space (the displacement: its reactions
+    have moments), or None: known from the fields' own components, not from a name."""
+    return next((f for f in fields if not f.scalar), None)
+
+
 def resultant(relation, lam: np.ndarray, fields, points) -> np.ndarray:
     """Sum of the reactions D λ per node DOF column (every field's components), then, for a
     model with a displacement field, their moment about the origin (z in 2D; x, y, z in 3D).
@@ -22,9 +28,10 @@ def resultant(relation, lam: np.ndarray, fields, points) -> np.ndarray:
     dofs, force = relation.reaction(lam)
     ncomp = fields.ncomp
     out = np.bincount(dofs % ncomp, weights=force, minlength=ncomp)
-    if "u" not in fields:
+    mech = vector_field(fields)
+    if mech is None:
         return out
-    cols = fields.columns("u")
+    cols = fields.columns(mech.name)
     node, col = np.divmod(dofs, ncomp)
     dim = cols.size
     f = np.zeros((force.size, 3))
@@ -41,28 +48,27 @@ def resultant_labels(fields, dim: int) -> list[str]:
     the displacement; a scalar field by its name), then the moments."""
     labels = []
     for f in fields:
-        labels += list(f.components) if f.name == "u" else [f.name] * f.ncomp
-    if "u" in fields:
+        labels += [f.name] * f.ncomp if f.scalar else list(f.components)
+    if vector_field(fields) is not None:
         labels += ["mz"] if dim == 2 else ["mx", "my", "mz"]
     return labels
 
 
-def step_outputs(comm: MPI.Comm, system, q: np.ndarray, multipliers: dict, newton=None):
-    """(fields, cell fields, relations) of a step; ``newton`` carries the material states."""
-    model = system.model
-    mesh = model.mesh
-    values = system.composition.values(q)
+def step_outputs(comm: MPI.Comm, ctx, q: np.ndarray, multipliers: dict, newton=None):
+    """(fields, cell fields, relations) of a step; ``ctx``: the step context
+    (``parsolve.solvers.context``); ``newton`` carries the material states."""
+    values = ctx.values(q)
     # owned nodes first: this rank's rows, in increasing input id
-    n_owned = mesh.n_owned
-    fields = {f.output: OwnedRows(values[f.name][:n_owned]) for f in model.fields}
+    n_owned = ctx.mesh.n_owned
+    fields = {f.output: OwnedRows(values[f.name][:n_owned]) for f in ctx.fields}
     # every local cell: the sums on owned nodes are then complete, no exchange
-    computed, keep = system.local_cells, system.reported
+    computed, keep = ctx.cells, ctx.reported
     cell_fields = {}
-    for k, effect in enumerate(model.effects):
+    for k, effect in enumerate(ctx.effects):
         extra = None
         if newton is not None and newton.extras[k] is not None:
             extra = (newton.extras[k], newton.states[k])
-        nodal, cells = effect.outputs(computed, values, extra, system.local_cells)
+        nodal, cells = effect.outputs(computed, values, extra, ctx.cells)
         for name, (sums, weights) in nodal.items():  # each rank its owned nodes' averages
             sums, weights = sums[:n_owned], weights[:n_owned]
             fields[name] = OwnedRows(sums / np.maximum(weights, 1e-300)[:, None])
@@ -71,18 +77,16 @@ def step_outputs(comm: MPI.Comm, system, q: np.ndarray, multipliers: dict, newto
             cell_fields[name] = OwnedRows(value[keep])
     rel_out = {}
     active = newton.active.active if newton is not None else None
-    for r in model.relations:
+    for r in ctx.all_relations:
         lam = multipliers[r.name]
-        rel_out[r.name] = {"multiplier": lam, "primal": system.relation_primal(r, q),
-                           "resultant": resultant(r, lam, model.fields, system.rdofs.points_of)}
+        rel_out[r.name] = {"multiplier": lam, "primal": ctx.relation_primal(r, q),
+                           "resultant": resultant(r, lam, ctx.fields, ctx.dofs.input_points)}
+    views = ctx.views(active) if active is not None else {}
+    for r in ctx.all_relations:
         if r.sense != "=":
-            k = system.multiplied.index(r)
-            first = system.block.row_first[k]
-            rel_out[r.name]["active"] = active[first:first + r.nrows].astype(np.int8)
+            rel_out[r.name]["active"] = views[r.name].astype(np.int8)
     if active is not None:  # switched relations' outputs: solubility states, contact
-        views = {r.name: active[system.block.row_first[k]:system.block.row_first[k + 1]]
-                 for k, r in enumerate(system.multiplied)}
-        for effect in model.effects:
+        for effect in ctx.effects:
             nodal, per_relation = effect.step_outputs(q, multipliers, views)
             fields.update(nodal)
             for name, values in per_relation.items():
@@ -95,19 +99,18 @@ class Balance:
     supply since the start from the known loads (sources, boundary fluxes) and from the
     relations' reactions; error = storage − initial storage − supplied, per field and in all."""
 
-    def __init__(self, comm, system, q0: np.ndarray):
-        self.comm, self.system, self.q0 = comm, system, q0
-        fields = system.model.fields
-        self.names = sorted({fi for fi, _, _ in system.composition.mass_parts()})
-        col = system.owned_input_dofs % fields.ncomp
-        self.owned = {n: system.owned_input_dofs[np.isin(col, fields.columns(n))] for n in self.names}
+    def __init__(self, comm, ctx, q0: np.ndarray):
+        self.comm, self.ctx, self.q0 = comm, ctx, q0
+        fields = ctx.fields
+        self.names = sorted({fi for fi, _, _ in ctx.composition.mass_parts()})
+        self.owned = {n: ctx.dofs.field_dofs(fields.columns(n)) for n in self.names}
         self.ncomp = fields.ncomp
         self.cols = {n: fields.columns(n) for n in self.names}
         self.initial = None
         self.supplied = {n: 0.0 for n in self.names}
 
     def storage(self, q: np.ndarray) -> dict[str, float]:
-        m = self.system.composition.product(self.system.composition.mass_parts(), q)
+        m = self.ctx.composition.product(self.ctx.composition.mass_parts(), q)
         return {n: self.comm.allreduce(float(m[self.owned[n]].sum())) for n in self.names}
 
     def step(self, q: np.ndarray, dt: float, f_known: np.ndarray, multipliers: dict) -> dict:
@@ -147,7 +150,7 @@ class Balance:
     def _reactions(self, name: str, multipliers: dict) -> float:
         """Σ of the reactions D λ of every relation on a field's equations."""
         total = 0.0
-        for r in self.system.model.relations:
+        for r in self.ctx.all_relations:
             dofs, force = r.reaction(multipliers[r.name])
             total += float(force[np.isin(dofs % self.ncomp, self.cols[name])].sum())
         return total

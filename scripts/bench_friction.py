@@ -35,7 +35,7 @@ from bench_scenes import G, LAM, sheared_box_scene, wedge_mesh, wedge_scene
 from parsolve.contact import friction as fr
 from parsolve.contact import references
 from parsolve.contact.pairing import pair_nodes
-from parsolve.contact.part_values import PartValues
+from parsolve.la.dofmap import DofMap
 from parsolve.contact.rows import friction_dual, normal_rows, tangent_rows
 from parsolve.driver import run
 from parsolve.effects.contact_penalty import PenaltyContact
@@ -193,12 +193,13 @@ def formulations_table(work: Path, quick: bool, smoke: bool = False) -> tuple[li
 def bare_penalty(pairing, mu: float, eps: float, dim: int, npoints: int) -> PenaltyContact:
     """The penalty effect's force and tangent kernels on a bare pairing (no mesh, no scene):
     the attributes PenaltyContact.forces and .node_tangents read, set by hand (``values``:
-    the PartValues of a one-rank part holding all ``npoints`` nodes, owned, input order —
+    the DofMap of a one-rank part holding all ``npoints`` nodes, owned, input order —
     what build_model gives at 1 rank)."""
     eff = object.__new__(PenaltyContact)
     eff.pairing, eff.nrows, eff.trows = pairing, normal_rows(pairing), tangent_rows(pairing)
-    part = SimpleNamespace(global_nodes=np.arange(npoints, dtype=np.int64), n_owned=npoints)
-    eff.values = PartValues(part, dim, MPI.COMM_SELF)
+    part = SimpleNamespace(global_nodes=np.arange(npoints, dtype=np.int64), n_owned=npoints,
+                           num_points=npoints)
+    eff.values = DofMap(MPI.COMM_SELF, part, dim)
     eff.eps_n = eff.eps_t = np.full(len(pairing), eps)
     eff.touch, eff.touching = 0.0, np.zeros(len(pairing), bool)   # the closed rule: none here
 

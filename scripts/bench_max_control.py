@@ -77,7 +77,7 @@ def run(level: int, steps: int, per_row_copies: bool, cuts: bool = True) -> dict
     seconds = time.perf_counter() - t1
     return {"level": level, "layout": "per-row copies" if per_row_copies else "one column",
             "dofs": model.mesh.num_points * 2, "cells": model.mesh.num_cells,
-            "nnz": int(info["nz_used"]), "block": int(system.block.d_vals.size + system.block.a_vals.size),
+            "nnz": int(info["nz_used"]), "block": int(system.relation_set.d_vals.size + system.relation_set.a_vals.size),
             "setup": setup, "iterations": its, "per_iteration": seconds / max(its, 1),
             "steps": steps, "cuts": steps - len([x for x in scene.times if x <= reached + 1e-12]),
             "reached": reached, "status": status}

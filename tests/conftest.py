@@ -97,14 +97,14 @@ def run(shared_tmp):
 
 def saddle_of_input_dofs(comm, system) -> np.ndarray:
     """The saddle index of every input DOF of the whole mesh (each from its owner; a rank's
-    ``system.saddle_of_input`` covers its local DOFs only)."""
+    ``system.dofmap.saddle_of_local`` covers its local DOFs only)."""
     from parsolve.mesh.regions import allgather_rows
 
     mesh, nc = system.model.mesh, system.model.ncomp
-    own = system.owned_input_dofs
+    own = system.dofmap.owned_dofs
     node, comp = np.divmod(own, nc)
     pairs = allgather_rows(comm, np.column_stack([mesh.global_nodes[node].astype(np.int64) * nc
-                                                  + comp, system.saddle_of_input[own]]))
+                                                  + comp, system.dofmap.saddle_of_local[own]]))
     out = np.empty(mesh.num_global_points * nc, dtype=np.int64)
     out[pairs[:, 0]] = pairs[:, 1]
     return out

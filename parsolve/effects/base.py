@@ -89,6 +89,11 @@ class Effect:
         return {}, {}
 
     # ------------------------------------------------ relations that change within a step
+    def attach(self, ctx) -> None:
+        """Called once by the system when it is built, with its step context
+        (``parsolve.solvers.context.StepContext``: the DOF map's owned reductions, the relation
+        set): what the value hooks below need beyond their arguments. Default: nothing."""
+
     # An effect whose relations change between Newton iterations (contact: friction states
     # and slip senses) overrides these three; Newton calls them only for such effects. Values
     # change in place, never the sparsity (``meta["refresh"]`` marks the relations to copy).

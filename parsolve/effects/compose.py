@@ -139,6 +139,20 @@ class Composition:
             parts += self._parts(self.mass_parts(), 1.0 / rate.dt)
         return BlockMatrices(self.fields.ncomp, parts)
 
+    def linear_step_loads(self, f_known: np.ndarray, q_prev: np.ndarray, dt: float,
+                          theta: float) -> np.ndarray:
+        """The right-hand side of a linear θ-step from q_n (see the module doc): the
+        θ-weighted known loads, minus (1 - θ) K q_n on the equations of fields with a
+        capacity, plus M q_n / Δt."""
+        f_rhs = f_known
+        if theta != 1.0:
+            if getattr(self, "_linear_blocks", None) is None:   # K of the linear effects, once
+                self._linear_blocks = [b for e in self.model.effects
+                                       for b in e.stiffness_blocks(self.cells)]
+            w = self.theta_dofs(theta)
+            f_rhs = f_rhs - (1 - w) * self.product(self._linear_blocks, q_prev)
+        return f_rhs + self.product(self.mass_parts(), q_prev) / dt
+
     def product(self, blocks, q: np.ndarray) -> np.ndarray:
         """Σ K_e q_e of the given blocks as a full vector (rows of this rank's cells)."""
         vals = self.values(q)

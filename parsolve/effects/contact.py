@@ -38,7 +38,7 @@ the step's starting point would pull it back, open it again, and cycle).
 Decisions are made on every rank from the same row values and λ: the ranks agree. On a
 distributed mesh (each rank its part) the surfaces are gathered once (their nodes' input ids
 and coordinates: the surfaces' size), every rank pairs them as the replicated mesh does, and
-the rows stay in input DOFs; per iteration only row values (``PartValues``: owned entries and
+the rows stay in input DOFs; per iteration only row values (``DofMap``: owned entries and
 one reduction of the rows' size) and the multipliers every rank holds are used.
 
 Held, tied and shared nodes: a contact node that a Dirichlet condition also holds, a periodic
@@ -103,7 +103,7 @@ from parsolve.contact import obstacles
 from parsolve.contact.mortar import mortar_pairing
 from parsolve.contact.mortar3d import mortar_pairing_3d
 from parsolve.contact.pairing import check_surfaces, facet_spans, in_spans, pair_nodes, pair_on
-from parsolve.contact.part_values import PartValues
+from parsolve.la.dofmap import DofMap
 from parsolve.contact.rows import friction_dual, node_rows, normal_rows, normal_values, \
     slip_vectors, span_rows, tangent_rows
 from parsolve.contact.surfaces import Surfaces, canonical_facets
@@ -222,8 +222,9 @@ class Contact(Effect):
         if "u" not in fields:
             raise InputError("contact needs a displacement field (a [[materials]] section)",
                              source, key)
-        # rows over input DOFs; their values from this rank's vector (part_values)
-        self.values = PartValues(mesh, fields.ncomp, getattr(regions, "comm", None))
+        # rows over input DOFs; their values from this rank's vector (the DOF map's owned
+        # reductions)
+        self.values = DofMap(getattr(regions, "comm", None), mesh, fields.ncomp)
         self.span: Spans | None = None     # finite sliding (set by _pair)
         self._facet_now = None              # finite sliding: the facets faced now (compact)
         self._facet_committed = None        # ... at the last converged step
@@ -550,6 +551,11 @@ class Contact(Effect):
         active[self.tangent.name][:] = np.stack([stick, across], axis=1).ravel()
 
     # ------------------------------------------------------------------ Newton hooks
+
+    def attach(self, ctx) -> None:
+        """The system's DOF map from now on (the same numbers as the one built with the
+        effect: its lookups and reductions, shared)."""
+        self.values = ctx.dofs
 
     def begin_step(self, q: np.ndarray, active: dict) -> bool:
         """Start a step from the committed state: stick rows hold the tangential displacement

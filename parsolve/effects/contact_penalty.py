@@ -78,7 +78,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from parsolve.contact.friction import OPEN, SLIP, STICK
-from parsolve.contact.part_values import PartValues
+from parsolve.la.dofmap import DofMap
 from parsolve.effects import contact
 from parsolve.effects.base import Effect
 from parsolve.effects.compose import NodeBlocks, node_places
@@ -145,7 +145,7 @@ def build(spec: BaselineSpec, mesh, regions, fields, scene) -> Effect:
     return cls(spec, mesh, regions, fields, scene)
 
 
-def slave_areas(values: PartValues, mesh, slave: np.ndarray, thickness: float) -> np.ndarray:
+def slave_areas(values: DofMap, mesh, slave: np.ndarray, thickness: float) -> np.ndarray:
     """``nodal_areas`` of the paired slave nodes (input ids), every rank the same. On a part
     each rank computes them on its local facets and keeps its owned nodes' (every cell through
     an owned node is local, so a boundary facet through it is one of the whole mesh and all of

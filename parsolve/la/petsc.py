@@ -1,6 +1,6 @@
 """The distributed saddle operator [[K, -D], [A, 0]] as one PETSc MPIAIJ matrix.
 
-Each rank owns its primal rows then its multiplier rows (see ``layout``). The rank's CSR is
+Each rank owns its primal rows then its multiplier rows (see ``dofmap``). The rank's CSR is
 built once, directly in PETSc's own split format, and PETSc works on these arrays without
 copying them (``createAIJWithArrays``: ``MatCreateSeqAIJWithArrays`` on one rank,
 ``MatCreateMPIAIJWithSplitArrays`` on several): the value array ``data`` holds first the
@@ -24,9 +24,9 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from parsolve.la.layout import Layout
+from parsolve.la.dofmap import DofMap
 from parsolve.la.pattern import NodePattern
-from parsolve.la.saddle import RelationBlock
+from parsolve.la.relation_set import RelationSet
 
 
 def _dedupe(rows: np.ndarray, cols: np.ndarray, ncols: int):
@@ -70,9 +70,9 @@ def _ranges(rowptr: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarra
 class SaddleOperator:
     """Owned rows of the saddle matrix, their fixed pattern, and the PETSc Mat built on them."""
 
-    def __init__(self, comm: MPI.Comm, layout: Layout, pattern: NodePattern, block: RelationBlock):
+    def __init__(self, comm: MPI.Comm, layout: DofMap, pattern: NodePattern, block: RelationSet):
         self.comm = comm
-        self.layout = layout
+        self.layout = layout   # the DofMap
         self.block = block
         self.pattern = pattern
         q0, q1, l0, l1 = layout.owned(comm.rank)
@@ -318,11 +318,8 @@ class SaddleOperator:
         # eliminated DOF, and in relation rows
         nc, lay = self.layout.ncomp, self.layout
         # nodes with an eliminated DOF (new numbering), then the node pairs in their columns
-        prim = np.asarray(rows, dtype=np.int64)
-        owner = np.searchsorted(lay.offsets, prim, side="right") - 1
-        new_dof = prim - lay.offsets[owner] + lay.q_ranges[owner]
-        prim_rows = new_dof < lay.q_ranges[owner + 1]
-        node_flag = np.zeros(lay.part.node_ranges[-1] + 1, dtype=bool)
+        new_dof, prim_rows = lay.saddle_to_new(rows)
+        node_flag = np.zeros(lay.node_ranges[-1] + 1, dtype=bool)
         node_flag[new_dof[prim_rows] // nc] = True
         node_elim = node_flag[self.pattern.ucol]
         first = self.block_start[:, None, node_elim].astype(np.int64)
@@ -354,8 +351,8 @@ class SaddleOperator:
 
     def index_sets(self) -> tuple[PETSc.IS, PETSc.IS]:
         """Stride index sets of the primal and multiplier fields (each rank's blocks are contiguous)."""
-        q0, q1, l0, l1 = self.layout.owned(self.comm.rank)
-        start = int(self.layout.offsets[self.comm.rank])
+        q0, q1, l0, l1 = self.layout.owned()
+        start = self.layout.offset
         is_q = PETSc.IS().createStride(q1 - q0, first=start, step=1, comm=self.comm)
         is_l = PETSc.IS().createStride(l1 - l0, first=start + q1 - q0, step=1, comm=self.comm)
         is_q.setBlockSize(self.layout.ncomp)

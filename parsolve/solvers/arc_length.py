@@ -6,7 +6,7 @@ Unknowns: q and the load factor μ of a reference load pattern P:  f_int(q) = F 
 the constraint ||q - q_n||² = Δl² on each step. The saved "time" of a step is μ.
 
 q, P and the responses are vectors of the rank's local DOFs (owned and ghost): the arc's norm
-and every dot product count the owned rows once and add them over the ranks (``system.dot``),
+and every dot product count the owned rows once and add them over the ranks (``StepContext.dot``),
 so each rank takes the same root whatever the number of ranks.
 """
 
@@ -27,7 +27,7 @@ class ArcLength(NewtonSolver):
     def __init__(self, comm, system, linear, spec):
         super().__init__(comm, system, linear, spec)
         # this mesh's DOFs, like the known loads (on a part: its local DOFs)
-        self.P = system.model.patterns[spec.arc_pattern].vector()
+        self.P = self.ctx.patterns[spec.arc_pattern].vector()
         self.mu = 0.0
         self.prev = None  # previous step's increment (q, μ), to keep going forward
 
@@ -38,7 +38,7 @@ class ArcLength(NewtonSolver):
         rhs.array[:] = self.system.rhs_from(f_full, target, elim)[0]
         self.linear.solve(rhs, x)
         x_full = self.system.gather(x.array)
-        return self.system.primal_of(x_full), self.system.multipliers(x_full), x_full
+        return x_full.q, self.system.multipliers(x_full), x_full
 
     def _combined(self, x_r, x_p, dmu: float):
         """x_r + dμ x_p of two gathered saddle vectors (the multipliers the step reports:
@@ -68,23 +68,23 @@ class ArcLength(NewtonSolver):
     def _step(self, t: float, dl: float):
         system, spec = self.system, self.spec
         q0, mu0 = self.q.copy(), self.mu
-        blk = system.block
-        zero_t = np.zeros(blk.nrows)
-        zero_e = np.zeros(system.elim_dofs.size)
+        rset = self.rset
+        zero_t = np.zeros(rset.nrows)
+        zero_e = np.zeros(system.n_eliminated)
         free = system.free_rows()
         for it in range(spec.max_iterations + 1):
             f_int, kmat, trial, extras = self._evaluate(self.q)
-            f_ext = system.to_owned(system.composition.known_loads(t, t, None) + self.mu * self.P) \
-                + system.reactions(self.lam)
-            r = (f_ext - system.to_owned(f_int))[free]
+            f_ext = self.ctx.owned_rows(self.ctx.composition.known_loads(t, t, None) + self.mu * self.P) \
+                + self.rset.reactions(self.lam)
+            r = (f_ext - self.ctx.owned_rows(f_int))[free]
             # the forces in play, reactions of eliminated DOFs included
-            ref = max(self._norm(f_ext[free]), self._norm(system.to_owned(f_int)), 1e-300)
+            ref = max(self._norm(f_ext[free]), self._norm(self.ctx.owned_rows(f_int)), 1e-300)
             residual = self._norm(r) / ref
             if it > 0 and residual <= spec.rtol:
                 self.states, self.extras = trial, extras
                 # the loads the step balances: the reactions of eliminated DOFs are F + μ P
                 # minus their rows (``multipliers``)
-                self.f_ext = system.composition.known_loads(t, t, None) + self.mu * self.P
+                self.f_ext = self.ctx.composition.known_loads(t, t, None) + self.mu * self.P
                 self.prev = (self.q - q0, self.mu - mu0)
                 return it, residual, f_int
             if it == spec.max_iterations:
@@ -94,11 +94,11 @@ class ArcLength(NewtonSolver):
                 self.linear.set_operator(mat)
                 self._mat = mat
             # bordering: the response to the residual and to the reference load
-            target_r = system.gap(t, self.q)
+            target_r = self.rset.gap(t, self.q)
             elim_r = system.elim_values(t) - system.eliminated_values(self.q) \
-                if system.elim_dofs.size else zero_e
-            f_r = system.composition.known_loads(t, t, None) + self.mu * self.P - f_int
-            dq_r, lam_r, x_r = self._solve(f_r, target_r * blk.row_scale if blk.nrows else zero_t,
+                if system.n_eliminated else zero_e
+            f_r = self.ctx.composition.known_loads(t, t, None) + self.mu * self.P - f_int
+            dq_r, lam_r, x_r = self._solve(f_r, target_r * rset.row_scale if rset.nrows else zero_t,
                                            elim_r, mat)
             dq_p, lam_p, x_p = self._solve(self.P, zero_t, zero_e, mat)
             try:
@@ -115,9 +115,9 @@ class ArcLength(NewtonSolver):
 
     def _root(self, a: np.ndarray, b: np.ndarray, dl: float, predictor: bool) -> float:
         """dμ with ||a + dμ b|| = dl, the root that keeps going forward (Crisfield). The dot
-        products are the system's (owned rows once, summed over the ranks): the same on
+        products are the DOF map's (owned rows once, summed over the ranks): the same on
         every rank."""
-        dot = self.system.dot
+        dot = self.ctx.dot
         if predictor:
             dmu = dl / max(np.sqrt(dot(b, b)), 1e-300)
             if self.prev is not None and dot(self.prev[0], b) < 0:
@@ -137,7 +137,7 @@ def run_arc_length(comm, system, cli_options, writer, log) -> None:
     from parsolve.outputs import progress, step_outputs
     from parsolve.solvers.setup import make_solver
 
-    scene = system.model.scene
+    scene = system.context.scene
     system.assemble()
     solver = ArcLength(comm, system, make_solver(comm, system, cli_options), scene.nonlinear)
     nsteps = len(scene.times)
@@ -146,7 +146,7 @@ def run_arc_length(comm, system, cli_options, writer, log) -> None:
         iterations, residual, f_int = solver.step(scene.times[step])
         seconds = time.perf_counter() - t1
         multipliers = solver.multipliers(scene.times[step], f_int)
-        fields, cell_fields, rel_out = step_outputs(comm, system, solver.q, multipliers, solver)
+        fields, cell_fields, rel_out = step_outputs(comm, system.context, solver.q, multipliers, solver)
         writer.write_step(solver.mu, iterations, residual, fields, cell_fields, rel_out,
                           {"assembly": 0.0, "solve": seconds, "total": seconds})
         interrupts.check(comm)

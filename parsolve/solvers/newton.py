@@ -103,33 +103,32 @@ class NewtonSolver:
     def __init__(self, comm: MPI.Comm, system: SaddleSystem, linear: LinearSolver,
                  spec: NonlinearSpec):
         self.comm, self.system, self.linear, self.spec = comm, system, linear, spec
-        model = system.model
-        self.cells = system.local_cells
-        self.states = system.composition.init_states()
-        self.active = ActiveSet(system.multiplied, spec.max_active_set_changes)
-        self.ndof = model.mesh.num_points * model.ncomp
+        # what the steps see of the system (values, reductions, relations, effects): the
+        # system itself only assembles, builds right-hand sides and unpacks solutions
+        self.ctx = ctx = system.context
+        self.rset = ctx.relations   # the stacked relations: views, values, refresh
+        self.cells = ctx.cells
+        self.states = ctx.composition.init_states()
+        self.active = ActiveSet(ctx.multiplied, spec.max_active_set_changes)
+        self.ndof = ctx.ndof
         # bound of the relations' DOF numbers (input numbering: the whole mesh's)
-        self.ndof_keys = getattr(model.mesh, "num_global_points", model.mesh.num_points) * model.ncomp
-        self.q = model.initial_q()
-        self.lam = np.zeros(system.layout.nl)
-        self.x_full = system.zero_saddle()
-        self.extras = [None] * len(model.effects)   # e.g. stresses at the quadrature points
-        self.time = model.scene.time                # transient: θ-scheme from t_prev to t
+        self.ndof_keys = ctx.mesh.num_global_points * ctx.ncomp
+        self.q = ctx.initial_q()
+        self.lam = np.zeros(ctx.dofs.nl)
+        self.x_full = ctx.dofs.zeros()
+        self.extras = [None] * len(ctx.effects)     # e.g. stresses at the quadrature points
+        self.time = ctx.scene.time                  # transient: θ-scheme from t_prev to t
         self.t_prev = 0.0
         self.f_pure = np.zeros(self.ndof)           # f_int at the last converged state
         if self.time is not None and self.time.theta != 1.0:  # θ-scheme: f_int(q_0)
-            self.f_pure = system.composition.evaluate(self.q, self.states, False)[1]
+            self.f_pure = self.ctx.composition.evaluate(self.q, self.states, False)[1]
         self.residual_history: list[float] = []
         self._mat = None
         self._oriented = False
         # effects whose relations change between iterations (contact with friction): their
         # begin_step / refresh / end_step hooks, and where each relation's D and A entries
-        # sit in the stacked block (values are copied there in place: same sparsity)
-        self.hooks = [e for e in model.effects if e.refreshes]
-        sizes = [(r.shared_dual[0].size if r.collapsed else len(r.dual_coo()[2]), r.a_vals.size)
-                 for r in system.multiplied] if self.hooks else [(0, 0)]
-        self._d_seg = np.concatenate([[0], np.cumsum([d for d, _ in sizes])]).astype(np.int64)
-        self._a_seg = np.concatenate([[0], np.cumsum([a for _, a in sizes])]).astype(np.int64)
+        # sit in the relation set (values are copied there in place: same sparsity)
+        self.hooks = [e for e in ctx.effects if e.refreshes]
         self._rows = self._dependence_rows()
         self.left_out = np.zeros(self.active.sign.size, dtype=bool)
 
@@ -137,17 +136,17 @@ class NewtonSolver:
         """The multiplied rows as COO (row numbers of the active set) with the contact rows
         marked, and the eliminated DOFs: what ``_enforceable`` needs (None without contact)."""
         system = self.system
-        mult = system.multiplied
+        mult = self.ctx.multiplied
         if not any(r.meta.get("type") == "contact" for r in mult):
             return None
-        first = system.block.row_first
+        rset = self.rset
         keep = [k for k, r in enumerate(mult) if not r.collapsed]
-        rows = np.concatenate([mult[k].a_rows + first[k] for k in keep])
+        rows = np.concatenate([mult[k].a_rows + rset.rows_of(k).start for k in keep])
         dofs = np.concatenate([mult[k].a_dofs for k in keep])
-        candidate = np.zeros(int(first[-1]), dtype=bool)
+        candidate = np.zeros(rset.nrelrows, dtype=bool)
         for k, r in enumerate(mult):
-            candidate[first[k]:first[k + 1]] = r.meta.get("type") == "contact"
-        fixed = np.concatenate([r.a_dofs for r in system.eliminated] + [np.zeros(0, np.int64)])
+            candidate[rset.rows_of(k)] = r.meta.get("type") == "contact"
+        fixed = np.concatenate([r.a_dofs for r in self.ctx.eliminated] + [np.zeros(0, np.int64)])
         return rows, dofs, [mult[k] for k in keep], candidate, np.unique(fixed)
 
     def _enforceable(self, active: np.ndarray) -> np.ndarray:
@@ -159,7 +158,7 @@ class NewtonSolver:
         rows, dofs, rels, candidate, fixed = self._rows
         vals = np.concatenate([r.a_vals for r in rels])   # current (friction turns them)
         self.left_out = dependent_rows(rows, dofs, vals, active.size, active, candidate, fixed,
-                                       self.system.model.ncomp)
+                                       self.ctx.ncomp)
         return active & ~self.left_out
 
     def _close_contact(self) -> bool:
@@ -186,16 +185,16 @@ class NewtonSolver:
         if not self.left_out.any():
             return
         system = self.system
-        gap = system.primal_values(self.q) - np.concatenate([r.rhs(t) for r in system.multiplied])
+        gap = self.rset.primal_values(self.q) - self.rset.targets(t)
         # against the rows' values and the displacements (a row at rest on the plane has A q = 0)
-        scale = max(float(np.abs(system.primal_values(self.q)).max()), system.max_abs(self.q),
+        scale = max(float(np.abs(self.rset.primal_values(self.q)).max()), self.ctx.max_abs(self.q),
                     1e-300)
         bad = self.left_out & (self.active.sign * gap > 1e-9 * scale)
         if bad.any():
             row = int(np.flatnonzero(bad)[0])
-            k = int(np.searchsorted(system.block.row_first, row, side="right") - 1)
-            rel, local = system.multiplied[k], row - int(system.block.row_first[k])
-            node = int(rel.a_dofs[rel.a_rows == local][0]) // system.model.ncomp
+            k, local = self.rset.locate(row)
+            rel = self.ctx.multiplied[k]
+            node = int(rel.a_dofs[rel.a_rows == local][0]) // self.ctx.ncomp
             raise SolverError(f"contact row {local} of {rel.name!r} (node {node}) depends on "
                               "other relations (a held or tied node) that violate it by "
                               f"{abs(float(gap[row])):.3g}: they push it into the obstacle")
@@ -212,7 +211,7 @@ class NewtonSolver:
 
     def _evaluate(self, q: np.ndarray):
         """(f_int with the rate terms, tangent, trial states, extras); keeps f_int alone."""
-        total, pure, blocks, trial, extras = self.system.composition.evaluate(
+        total, pure, blocks, trial, extras = self.ctx.composition.evaluate(
             q, self.states, self.spec.matrix == "secant", self.system.rate)
         self._f_trial = pure
         return total, blocks, trial, extras
@@ -221,7 +220,7 @@ class NewtonSolver:
         """The known loads the step balances: F(t), or θ F(t) + (1 - θ) F(t_n) in a transient
         step."""
         theta = None if self.time is None else self.time.theta
-        return self.system.composition.known_loads(t, self.t_prev, theta)
+        return self.ctx.composition.known_loads(t, self.t_prev, theta)
 
     def _start_rate(self, t: float) -> None:
         if self.time is not None:
@@ -236,7 +235,7 @@ class NewtonSolver:
         a body at rest on a support): there the relative residual is round-off over
         round-off and never falls. Far below any physical force (a damaged, softened state
         still carries forces orders above it), so it does not accept a state off equilibrium."""
-        q = self.system.to_owned(self.q)
+        q = self.ctx.owned_rows(self.q)
         return ROUNDOFF * getattr(self.system, "kscale", 0.0) * self._norm(q)
 
     def _norm(self, v: np.ndarray) -> float:
@@ -263,15 +262,15 @@ class NewtonSolver:
                     kmat = self._loading_tangent(kmat)
                 self._predict_maximum_rows(t, kmat)
                 predictions = 1
-            f_ext = system.to_owned(f_known) + system.reactions(self.lam)
-            r = (f_ext - system.to_owned(f_int))[free]
+            f_ext = self.ctx.owned_rows(f_known) + self.rset.reactions(self.lam)
+            r = (f_ext - self.ctx.owned_rows(f_int))[free]
             # the forces in play, reactions of eliminated DOFs included; when there are none
             # (or only round-off), the residual is measured against the round-off floor
-            ref = max(self._norm(f_ext[free]), self._norm(system.to_owned(f_int)), 1e-300)
+            ref = max(self._norm(f_ext[free]), self._norm(self.ctx.owned_rows(f_int)), 1e-300)
             r_norm = self._norm(r)
             residual = r_norm / max(ref, self._roundoff_force() / spec.rtol)
             self.residual_history.append(residual)
-            small_step = dq_norm <= spec.stol * max(system.max_abs(self.q), 1e-300)
+            small_step = dq_norm <= spec.stol * max(self.ctx.max_abs(self.q), 1e-300)
             balanced = residual <= spec.rtol or small_step and r_norm < 1e-6 * ref
             if it > 0 and not changed and balanced:
                 self._check_left_out(t)
@@ -305,8 +304,8 @@ class NewtonSolver:
                     raise SolverError(f"Newton diverged at t = {t:.6g}, iteration {it} (relative "
                                       f"residuals ..., {history}): {exc}") from None
             x_full = system.gather(x.array)
-            dq = system.primal_of(x_full)
-            dq_norm = system.max_abs(dq)
+            dq = x_full.q
+            dq_norm = self.ctx.max_abs(dq)
             self.q = self.q + dq
             self.lam = system.multipliers(x_full)
             self.x_full = x_full
@@ -323,8 +322,7 @@ class NewtonSolver:
 
     def _views(self, x: np.ndarray) -> dict[str, np.ndarray]:
         """Per multiplied relation, its rows of x (relation rows; writable views)."""
-        first = self.system.block.row_first
-        return {r.name: x[first[k]:first[k + 1]] for k, r in enumerate(self.system.multiplied)}
+        return self.rset.views(x)
 
     def _begin_hooks(self) -> None:
         changed = False
@@ -336,7 +334,7 @@ class NewtonSolver:
     def _refresh_hooks(self) -> bool:
         """The effects' updates between iterations (e.g. friction states and slip senses);
         their relation values are copied into the system, whose pattern does not change."""
-        lam = self._views(self.system.block.row_values(self.lam) if self.lam.size else self.lam)
+        lam = self._views(self.rset.row_values(self.lam) if self.lam.size else self.lam)
         active = self._views(self.active.active)
         changed = False
         for e in self.hooks:
@@ -347,12 +345,8 @@ class NewtonSolver:
 
     def _sync_relations(self) -> None:
         """Copy the current A and D values of the relations marked ``meta["refresh"]`` into
-        the stacked block (unscaled; the scales of the first assembly stay)."""
-        blk = self.system.block
-        for k, r in enumerate(self.system.multiplied):
-            if r.meta.get("refresh"):
-                blk.d_vals[self._d_seg[k]:self._d_seg[k + 1]] = r.dual_coo()[2]
-                blk.a_vals[self._a_seg[k]:self._a_seg[k + 1]] = r.a_vals
+        the relation set (unscaled; the scales of the first assembly stay)."""
+        self.rset.refresh()
 
     def _unit_response(self, kmat, released: np.ndarray, f: np.ndarray) -> np.ndarray:
         """δq = K⁻¹ f with the tangent, the rows ``released`` switched off and the other
@@ -366,32 +360,33 @@ class NewtonSolver:
             self.linear.set_operator(mat)
             self._mat = mat
         x, rhs = self._vectors(mat)
-        rhs.array[:] = system.rhs_from(f, np.zeros(system.block.nrows),
-                                       np.zeros(system.elim_dofs.size))[0]
+        rhs.array[:] = system.rhs_from(f, np.zeros(self.rset.nrows),
+                                       np.zeros(system.n_eliminated))[0]
         self.linear.solve(rhs, x)
-        return system.primal_of(system.gather(x.array))
+        return system.gather(x.array).q
 
     def _dual_column(self, k: int, row: int | None = None) -> np.ndarray:
         """Column of D of relation k (its first row when every row shares one vector)."""
-        rel = self.system.multiplied[k]
+        rel = self.ctx.multiplied[k]
         if rel.shared_dual is not None:
-            return self.system.to_local(*rel.shared_dual)
+            return self.ctx.local_vector(*rel.shared_dual)
         dofs, rows, vals = rel.dual_coo()
         sel = rows == (0 if row is None else row)
-        return self.system.to_local(dofs[sel], vals[sel])
+        return self.ctx.local_vector(dofs[sel], vals[sel])
 
     def _orient(self, kmat) -> None:
         """o = -sign(A K⁻¹ D) of every free unilateral non-associated row, from the first
         tangent: the reaction must push the row back whichever way its dual points. A relation
         whose rows share one dual vector (a load pattern) costs one solve; rows with their own
         local duals take the sign of -A_k·D_k."""
-        system, blk = self.system, self.system.block
-        for k, r in enumerate(system.multiplied):
+        system = self.system
+        for k, r in enumerate(self.ctx.multiplied):
             if r.sense == "=" or r.associated or r.maximum or r.groups is not None:
                 continue  # a group's enforced row is chosen by value, whatever its sign
-            rows = np.arange(blk.row_first[k], blk.row_first[k + 1])
+            span = self.rset.rows_of(k)
+            rows = np.arange(span.start, span.stop)
             if r.meta.get("dual"):
-                rate = system.relation_primal(r, self._unit_response(kmat, rows,
+                rate = self.ctx.relation_primal(r, self._unit_response(kmat, rows,
                                                                      self._dual_column(k)))
             else:
                 rate = _row_dots(r, self.ndof_keys)
@@ -403,12 +398,12 @@ class NewtonSolver:
     def _enforced_rows(self) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
         """Per maximum group, its enforced row: (row, its relation row b index, A's DOFs and
         coefficients on that row)."""
-        system, blk = self.system, self.system.block
+        system = self.system
         out = []
         for g in self.active.groups:
             row = int(g[self.active.active[g]][0])
-            k = int(np.searchsorted(blk.row_first, row, side="right") - 1)
-            rel, local = system.multiplied[k], row - int(blk.row_first[k])
+            k, local = self.rset.locate(row)
+            rel = self.ctx.multiplied[k]
             sel = rel.a_rows == local
             out.append((row, k, np.asarray(rel.a_dofs)[sel], np.asarray(rel.a_vals)[sel]))
         return out
@@ -416,11 +411,11 @@ class NewtonSolver:
     def _enforced_cells(self) -> np.ndarray:
         """Positions (in this rank's cells) of the cells measured by the enforced rows of the
         maximum groups: the cells all of whose nodes carry an entry of such a row."""
-        system, model = self.system, self.system.model
-        marked = np.zeros(model.mesh.num_points, dtype=bool)
+        ctx = self.ctx
+        marked = np.zeros(ctx.mesh.num_points, dtype=bool)
         for _, _, dofs, _ in self._enforced_rows():   # (input DOFs: this rank's nodes of them)
-            marked |= system.to_local(dofs, np.ones(dofs.size)).reshape(-1, model.ncomp).any(axis=1)
-        return np.flatnonzero(marked[model.mesh.cells[self.cells]].all(axis=1))
+            marked |= ctx.local_vector(dofs, np.ones(dofs.size)).reshape(-1, ctx.ncomp).any(axis=1)
+        return np.flatnonzero(marked[ctx.mesh.cells[self.cells]].all(axis=1))
 
     def _loading_tangent(self, kmat):
         """The first tangent of a step for a maximum control: the enforced rows' cells on
@@ -434,15 +429,15 @@ class NewtonSolver:
         enforced cell's loading tangent is taken at q + δ, δ along its row with A δ = 1e-10 of
         the row's value; all other cells keep theirs. Not for a secant matrix: it does not tell
         loading from unloading (and a perturbed cell would break a symmetric tie)."""
-        system, blk = self.system, self.system.block
+        system = self.system
         delta = np.zeros(self.ndof)
         for row, k, dofs, a in self._enforced_rows():
-            rel, local = system.multiplied[k], row - blk.row_first[k]
+            rel, local = self.ctx.multiplied[k], self.rset.locate(row)[1]
             b = rel.rhs(self.t_prev)[local]
-            value = system.relation_primal(rel, self.q)[local]   # A q of the row (collective)
+            value = self.ctx.relation_primal(rel, self.q)[local]   # A q of the row (collective)
             size = 1e-10 * max(abs(float(value)), abs(float(b)), 1e-300)
-            delta += system.to_local(dofs, self.active.sign[row] * a * size / max(float(a @ a), 1e-300))
-        loading = system.composition.evaluate(self.q + delta, self.states, False, system.rate)[2]
+            delta += self.ctx.local_vector(dofs, self.active.sign[row] * a * size / max(float(a @ a), 1e-300))
+        loading = self.ctx.composition.evaluate(self.q + delta, self.states, False, system.rate)[2]
         return _CellReplaced(kmat, loading, self._enforced_cells())
 
     def _predict_maximum_rows(self, t: float, kmat) -> None:
@@ -451,14 +446,13 @@ class NewtonSolver:
         unit control load, rates r = A δq, then the smallest (b - A q) / |r| along the branch
         the enforced row follows (``_branch_reach``)."""
         system = self.system
-        blk = system.block
         groups = np.concatenate(self.active.groups)
         f = np.zeros(self.ndof)
         for g in self.active.groups:  # the control load of each group at unit intensity
-            f += self._dual_column(int(np.searchsorted(blk.row_first, g[0], side="right") - 1))
+            f += self._dual_column(self.rset.locate(int(g[0]))[0])
         dq = self._unit_response(kmat, groups, f)
-        rates = system.primal_values(dq)
-        gap = np.concatenate([r.rhs(t) for r in system.multiplied]) - system.primal_values(self.q)
+        rates = self.rset.primal_values(dq)
+        gap = self.rset.targets(t) - self.rset.primal_values(self.q)
         for g in self.active.groups:
             s = self.active.sign[g]
             current = g[self.active.active[g]][0]
@@ -477,11 +471,11 @@ class NewtonSolver:
 
     def _update_active(self, t: float) -> bool:
         system = self.system
-        gap = system.primal_values(self.q) - np.concatenate([r.rhs(t) for r in system.multiplied])
-        scale_gap = max(float(np.abs(gap).max()), float(np.abs(system.primal_values(self.q)).max()),
+        gap = self.rset.primal_values(self.q) - self.rset.targets(t)
+        scale_gap = max(float(np.abs(gap).max()), float(np.abs(self.rset.primal_values(self.q)).max()),
                         1e-300)
         scale_lam = max(float(np.abs(self.lam).max()), 1e-300)
-        lam = self.system.block.row_values(self.lam) if self.lam.size else self.lam
+        lam = self.rset.row_values(self.lam) if self.lam.size else self.lam
         return self.active.update(gap, lam, 1e-9 * scale_gap, 1e-9 * scale_lam, scale_gap)
 
     def multipliers(self, t: float, f_int: np.ndarray) -> dict[str, np.ndarray]:

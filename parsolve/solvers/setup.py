@@ -17,9 +17,11 @@ from parsolve.solvers.system import SaddleSystem
 def rigid_body_modes(comm: MPI.Comm, system: SaddleSystem) -> PETSc.NullSpace | None:
     """Near-null space of the primal block (for GAMG), on the owned nodes in new numbering:
     rigid-body modes of a displacement-only model, constants of a scalar field."""
-    mesh, model = system.model.mesh, system.model
-    if model.fields.names() != ["u"]:
-        return None if model.ncomp > 1 else PETSc.NullSpace().create(constant=True, comm=comm)
+    ctx = system.context
+    mesh = ctx.mesh
+    fields = list(ctx.fields)
+    if len(fields) != 1 or fields[0].scalar:   # rigid-body modes of one vector field only
+        return None if ctx.ncomp > 1 else PETSc.NullSpace().create(constant=True, comm=comm)
     coords = mesh.points[:mesh.n_owned]   # owned nodes first, in the global numbering's order
     vec = PETSc.Vec().createWithArray(coords.ravel().copy(), size=(coords.size, None),
                                       bsize=mesh.dim, comm=comm)
@@ -29,15 +31,16 @@ def rigid_body_modes(comm: MPI.Comm, system: SaddleSystem) -> PETSc.NullSpace | 
 def make_solver(comm: MPI.Comm, system: SaddleSystem, cli_options: dict[str, str]) -> LinearSolver:
     """Cholesky is chosen when every multiplied relation is associated and every effect's
     tangent symmetric; the solver still checks each operator (LinearSolver)."""
-    scene = system.model.scene
+    ctx = system.context
+    scene = ctx.scene
     secant = scene.nonlinear.matrix == "secant"
-    stiffness_symmetric = system.model.symmetric(secant)
-    symmetric = all(r.associated for r in system.multiplied) and stiffness_symmetric
-    has_mult = system.layout.nl > 0
+    stiffness_symmetric = ctx.symmetric(secant)
+    symmetric = all(r.associated for r in ctx.multiplied) and stiffness_symmetric
+    has_mult = ctx.dofs.nl > 0
     settings = opt.merge(preset_options(scene.solver.preset, symmetric, has_mult,
                                         stiffness_symmetric),
                          scene.solver.options, cli_options)
-    is_q, is_l = system.op.index_sets()
+    is_q, is_l = system.index_sets()
     modes = rigid_body_modes(comm, system) if scene.solver.preset == "iterative" else None
     if modes is not None and has_mult:  # fieldsplit hands it to the q block's matrix
         is_q.compose("nearnullspace", modes)
@@ -65,27 +68,25 @@ def export_system(comm, directory: str, mat: PETSc.Mat, rhs: PETSc.Vec, system: 
     comm.Barrier()
     scale = rhs.duplicate()
     scale.set(1.0)
-    q0, q1, l0, l1 = system.layout.owned(comm.rank)
-    if system.block.nrows:
-        scale.array[q1 - q0:] = system.block.col_scale[l0:l1]
+    ctx = system.context
+    q0, q1, l0, l1 = ctx.dofs.owned()
+    if ctx.relations.nrows:
+        scale.array[q1 - q0:] = ctx.relations.col_scale[l0:l1]
     viewer = PETSc.Viewer().createBinary(str(path / "system.dat"), "w", comm=comm)
     for obj in (mat, rhs, scale):
         obj.view(viewer)
     viewer.destroy()
     viewer = PETSc.Viewer().createBinary(str(path / "fields.dat"), "w", comm=comm)
-    for iset in list(system.op.index_sets()) + list(field_index_sets(comm, system).values()):
+    for iset in list(system.index_sets()) + list(field_index_sets(comm, system).values()):
         iset.view(viewer)
     viewer.destroy()
 
 
 def field_index_sets(comm, system: SaddleSystem) -> dict[str, PETSc.IS]:
     """One index set per field (its DOFs among this rank's rows), named after the field."""
-    q0, q1, _, _ = system.layout.owned(comm.rank)
-    start = int(system.layout.offsets[comm.rank])
-    nodes_local = np.arange(q0, q1, system.model.ncomp) - q0
-    out = {}
-    for f in system.model.fields:
-        idx = (nodes_local[:, None] + system.model.fields.columns(f.name)[None, :]).ravel() + start
+    ctx, out = system.context, {}
+    for f in ctx.fields:
+        idx = ctx.dofs.field_rows(ctx.fields.columns(f.name))
         iset = PETSc.IS().createGeneral(idx.astype(PETSc.IntType), comm=comm)
         iset.setName(f.name)
         out[f.name] = iset

@@ -16,14 +16,13 @@ from petsc4py import PETSc
 
 from parsolve.effects.compose import Composition, Rate
 from parsolve.fem.element_matrices import BlockMatrices, ElementMatrices, StiffnessTarget
-from parsolve.la.ghosts import GhostExchange, SaddleValues, value_keys
-from parsolve.la.layout import make_layout
-from parsolve.la.relation_dofs import RelationDofs
+from parsolve.la.dofmap import DofMap, HeldValues, held_keys
 from parsolve.la.pattern import node_pattern
 from parsolve.la.petsc import SaddleOperator
-from parsolve.la.saddle import stack_relations
+from parsolve.la.relation_set import RelationSet
 from parsolve.mesh.regions import allgather_rows
 from parsolve.model import Model
+from parsolve.solvers.context import StepContext
 
 
 class SaddleSystem:
@@ -42,10 +41,10 @@ class SaddleSystem:
         self.eliminated = [r for r in model.relations if r.eliminable()]
         self.multiplied = [r for r in model.relations if not r.eliminable()]
         nmult = sum(1 if r.collapsed else r.nrows for r in self.multiplied)
-        self.layout = lay = make_layout(self.part, ncomp, nmult)
-        # relations name input DOFs; they map to local ones here
+        self.dofmap = dm = DofMap(comm, mesh, ncomp, nmult)
+        # relations name input DOFs: the map finds their numbers (one reduction)
         self.unused = self.unused_dofs()
-        self.rdofs = RelationDofs(comm, mesh, ncomp, self._relation_dofs())
+        dm.index_inputs(self._relation_dofs())
         self.local_cells = self.part.local_cells(rank, mesh.cells)
         # the cells this rank reports, and which of its local cells they are (every output step)
         self.owned_cells = self.part.owned_cells(rank, mesh.cells)
@@ -55,20 +54,17 @@ class SaddleSystem:
         self.rate: Rate | None = None  # the rate terms of a transient step (set by the stepper)
         lo, hi = self.part.node_ranges[rank], self.part.node_ranges[rank + 1]
         self.pattern = pattern = self._pattern(lo, hi)
-        self.block = stack_relations(self.multiplied, self.rdofs.new_dof)
-        self.op = SaddleOperator(comm, lay, pattern, self.block)
-        ndof = mesh.num_points * ncomp
-        self.saddle_of_input = lay.q_index(lay.new_dof(np.arange(ndof)))
-        self.saddle_of_mult = lay.l_index(np.arange(nmult))
-        q0, q1, l0, l1 = lay.owned(rank)
-        self.owned_input_dofs = np.flatnonzero((lay.new_dof(np.arange(ndof)) >= q0)
-                                               & (lay.new_dof(np.arange(ndof)) < q1))
-        self.offset = int(lay.offsets[rank])
-        # relation entries on this rank's owned DOFs (A q = Σ over ranks of these)
-        self._owned_entries: dict[int, tuple] = {}
-        self._ghosts = self._ghost_exchange()
-        self._keys = value_keys(self.saddle_of_input, self.saddle_of_mult)
+        self.relation_set = RelationSet(self.multiplied, dm)
+        self.op = SaddleOperator(comm, dm, pattern, self.relation_set)
+        self.offset = dm.offset
         self._elimination_setup()
+        self.context = StepContext(
+            comm, dm, self.relation_set, self.eliminated, model.relations, self.composition,
+            model.effects, model.fields, mesh, model.scene, model.patterns, self.local_cells,
+            self.owned_cells, self.reported, model.initial_q, model.symmetric,
+            model.elasticity, model.nonlinear, model.transient)
+        for e in model.effects:   # once: the reductions their hooks need (Effect.attach)
+            e.attach(self.context)
         self.timings["setup"] = time.perf_counter() - t0
         self.assembled = False
 
@@ -121,13 +117,6 @@ class SaddleSystem:
                 out.append(np.asarray(r.dual[0]))
         return out
 
-    def _ghost_exchange(self) -> GhostExchange:
-        """Who sends this rank the values of its ghost nodes' DOFs."""
-        mesh, nc = self.model.mesh, self.model.ncomp
-        ghost_dofs = np.arange(mesh.n_owned * nc, mesh.num_points * nc)
-        owner = np.repeat(mesh.owner_of(np.arange(mesh.n_owned, mesh.num_points)), nc)
-        return GhostExchange(self.comm, self.saddle_of_input[ghost_dofs], owner, self.offset)
-
     def _elimination_setup(self) -> None:
         dofs, coefs = [], []
         for r in self.eliminated:
@@ -144,12 +133,21 @@ class SaddleSystem:
             coefs.append(np.ones(unused.size))
         self.elim_dofs = np.concatenate(dofs) if dofs else np.zeros(0, dtype=np.int64)
         self.elim_coefs = np.concatenate(coefs) if coefs else np.zeros(0)
-        self.elim_local = self.rdofs.local(self.elim_dofs)   # -1: not on this rank
-        self.elim_saddle = sad = self.layout.q_index(self.rdofs.new_dof(self.elim_dofs))
+        self.elim_local = self.dofmap.local_dofs(self.elim_dofs)   # -1: not on this rank
+        self.elim_saddle = sad = self.dofmap.input_saddle(self.elim_dofs)
         n = self.op.nrows
         own = (sad >= self.offset) & (sad < self.offset + n)
         self.elim_own = own
         self.op.set_eliminated(sad)
+
+    @property
+    def n_eliminated(self) -> int:
+        """Eliminated DOFs (every rank's)."""
+        return int(self.elim_dofs.size)
+
+    def index_sets(self):
+        """The PETSc index sets of the primal and multiplier fields."""
+        return self.op.index_sets()
 
     def elim_values(self, t: float) -> np.ndarray:
         """Prescribed values of the eliminated DOFs at t (A q = b with one coefficient per row)."""
@@ -167,9 +165,9 @@ class SaddleSystem:
         t0 = time.perf_counter()
         ke = self.composition.stiffness(self.rate) if elements is None else elements
         self._place_stiffness(ke)
-        if self.block.row_scale is None:
+        if not self.relation_set.scaled:
             self.kscale = self.op.diagonal_scale()
-            self.block.set_scales(self.kscale)
+            self.relation_set.set_scales(self.kscale)
         self.op.relation_values(self.kscale)
         self.op.eliminate(self.kscale)
         mat = self.op.petsc_matrix()
@@ -183,7 +181,7 @@ class SaddleSystem:
         and copied (a tangent with a few cells replaced)."""
         slot, npairs = self.pattern.pair_slot, self.pattern.nnzb
         if isinstance(ke, ElementMatrices):
-            nc = self.op.layout.ncomp
+            nc = self.dofmap.ncomp
             ke = BlockMatrices(nc, [(np.arange(nc), np.arange(nc), ke, 1.0)])
         if isinstance(ke, BlockMatrices):
             ke.reduce_into(slot, npairs, StiffnessTarget(self.op.data, self.op.block_start))
@@ -192,10 +190,7 @@ class SaddleSystem:
 
     def to_owned(self, full: np.ndarray) -> np.ndarray:
         """A primal vector of this mesh's DOFs → this rank's rows (multiplier rows zero)."""
-        out = np.zeros(self.op.nrows)
-        own = self.owned_input_dofs
-        out[self.saddle_of_input[own] - self.offset] = full[own]
-        return out
+        return self.dofmap.owned_rows(full)
 
     def rhs(self, t: float, f_int: np.ndarray | None = None, q: np.ndarray | None = None,
             f_ext: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -207,9 +202,7 @@ class SaddleSystem:
         f_full = self.composition.known_loads(t, t, None) if f_ext is None else f_ext
         if f_int is not None:
             f_full = f_full - f_int
-        target = self.block.rhs(t)
-        if q is not None and self.block.nrows:
-            target = target - self.primal_values(q)[self.block.rep_row] * self.block.row_scale
+        target = self.relation_set.scaled_residual(t, q)
         values = self.elim_values(t)
         if q is not None and self.elim_dofs.size:
             values = values - self.eliminated_values(q)
@@ -219,23 +212,18 @@ class SaddleSystem:
         """q at every eliminated DOF, from their owners (one reduction of their number): a
         relation row owned here may name an eliminated DOF of a node this rank does not hold,
         whose value its lifting needs."""
-        n_owned = self.model.mesh.n_owned * self.model.ncomp
-        own = (self.elim_local >= 0) & (self.elim_local < n_owned)
-        out = np.zeros(self.elim_dofs.size)
-        out[own] = q[self.elim_local[own]]
-        self.comm.Allreduce(MPI.IN_PLACE, out, op=MPI.SUM)
-        return out
+        return self.dofmap.at_inputs(self.elim_dofs, q)
 
     def rhs_from(self, f_full: np.ndarray, target: np.ndarray, elim_values: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray]:
         """Right-hand side from a force vector (this mesh's DOFs), scaled relation values of
         every multiplied row, and values of the eliminated DOFs."""
         b = self.to_owned(f_full)
-        q0, q1, l0, l1 = self.layout.owned(self.comm.rank)
+        q0, q1, l0, l1 = self.dofmap.owned()
         b[q1 - q0:] = (target * self.op.active)[l0:l1]
         # the eliminated DOFs' values only, not a whole saddle vector
-        x_e = SaddleValues(value_keys(self.elim_saddle, np.zeros(0, np.int64)),
-                           np.asarray(elim_values, dtype=float), np.zeros(0))
+        x_e = HeldValues(held_keys(self.elim_saddle), np.asarray(elim_values, dtype=float),
+                         np.zeros(0))
         if self.elim_dofs.size:
             b -= self.op.lifting(x_e)
             b[self.op.elim_rows - self.offset] = self.kscale * x_e[self.op.elim_rows]
@@ -243,78 +231,11 @@ class SaddleSystem:
 
     def set_active(self, active_rows: np.ndarray) -> None:
         """Enforce these relation rows (a collapsed group carries its enforced row)."""
-        self.op.active = self.block.select(active_rows)
-
-    def gap(self, t: float, q: np.ndarray) -> np.ndarray:
-        """b(t) - A q of every multiplier row, unscaled."""
-        if not self.multiplied:
-            return np.zeros(0)
-        b = np.concatenate([r.rhs(t) for r in self.multiplied])
-        return (b - self.primal_values(q))[self.block.rep_row]
-
-    def primal_values(self, q: np.ndarray) -> np.ndarray:
-        """A q of every multiplied row (unscaled), q a primal vector of this mesh's DOFs."""
-        if not self.multiplied:
-            return np.zeros(0)
-        out = np.concatenate([self._owned_primal(r, q) for r in self.multiplied])
-        self.comm.Allreduce(MPI.IN_PLACE, out, op=MPI.SUM)
-        return out
-
-    def relation_primal(self, r, q: np.ndarray) -> np.ndarray:
-        """A q of one relation's rows (any relation of the model). Collective."""
-        out = self._owned_primal(r, q)
-        self.comm.Allreduce(MPI.IN_PLACE, out, op=MPI.SUM)
-        return out
-
-    def _owned_primal(self, r, q: np.ndarray) -> np.ndarray:
-        """This rank's part of A q: the entries on its owned DOFs."""
-        key = id(r)
-        if key not in self._owned_entries:
-            local = self.rdofs.local(r.a_dofs)
-            own = (local >= 0) & (local < self.model.mesh.n_owned * self.model.ncomp)
-            self._owned_entries[key] = (np.flatnonzero(own), local[own])
-        sel, local = self._owned_entries[key]
-        # (float even with no entry here: numpy's bincount of nothing is int64)
-        return np.bincount(r.a_rows[sel], weights=r.a_vals[sel] * q[local],
-                           minlength=r.nrows).astype(float, copy=False)
-
-    def to_local(self, dofs: np.ndarray, values: np.ndarray) -> np.ndarray:
-        """A vector of this mesh's DOFs from (input DOFs, values) entries (duplicates add;
-        entries of nodes not on this rank dropped)."""
-        local = self.rdofs.local(dofs)
-        on = local >= 0
-        return np.bincount(local[on], weights=np.asarray(values, dtype=float)[on],
-                           minlength=self.model.mesh.num_points * self.model.ncomp
-                           ).astype(float, copy=False)
-
-    def norm(self, v: np.ndarray) -> float:
-        """2-norm of a primal vector of this mesh's DOFs, each DOF once (owned rows)."""
-        own = v[self.owned_input_dofs]
-        return float(np.sqrt(self.comm.allreduce(float(own @ own))))
-
-    def dot(self, u: np.ndarray, v: np.ndarray) -> float:
-        """u · v of two primal vectors of this mesh's DOFs, each DOF once (owned rows): the
-        same number on every rank."""
-        own = self.owned_input_dofs
-        return float(self.comm.allreduce(float(u[own] @ v[own])))
-
-    def max_abs(self, v: np.ndarray) -> float:
-        """max |v| over every rank (the same number on all)."""
-        return self.comm.allreduce(float(np.abs(v).max()) if v.size else 0.0, op=MPI.MAX)
-
-    def reactions(self, lam: np.ndarray) -> np.ndarray:
-        """Owned rows of D λ (unscaled λ of all multiplied rows)."""
-        blk = self.block
-        q0, q1, _, _ = self.layout.owned(self.comm.rank)
-        own = (blk.d_rows >= q0) & (blk.d_rows < q1)
-        out = np.zeros(self.op.nrows)
-        out[:q1 - q0] = np.bincount(blk.d_rows[own] - q0, weights=blk.d_vals[own] * lam[blk.d_cols[own]],
-                                    minlength=q1 - q0)
-        return out
+        self.op.active = self.relation_set.select(active_rows)
 
     def free_rows(self) -> np.ndarray:
         """Mask of this rank's primal rows that are not eliminated."""
-        q0, q1, _, _ = self.layout.owned(self.comm.rank)
+        q0, q1, _, _ = self.dofmap.owned()
         mask = np.zeros(self.op.nrows, dtype=bool)
         mask[:q1 - q0] = True
         mask[self.op.elim_rows - self.offset] = False
@@ -322,52 +243,26 @@ class SaddleSystem:
 
     # ------------------------------------------------------------ back to fields
 
-    def gather(self, x_owned: np.ndarray) -> SaddleValues:
-        """What this rank needs of the saddle vector (its DOFs, ghosts included, and every
-        multiplier) from its owned rows (buffer collectives: no pickling)."""
-        mesh, nc = self.model.mesh, self.model.ncomp
-        nq = mesh.n_owned * nc
-        q = np.empty(mesh.num_points * nc)
-        q[:nq] = x_owned[:nq]          # owned DOFs first in both numberings
-        q[nq:] = self._ghosts.fetch(x_owned)
-        counts = getattr(self, "_lam_counts", None)
-        if counts is None:
-            counts = self._lam_counts = np.array(self.comm.allgather(int(x_owned.size - nq)))
-        lam = np.empty(int(counts.sum()))
-        self.comm.Allgatherv(np.ascontiguousarray(x_owned[nq:], dtype=float), [lam, counts])
-        return SaddleValues(self._keys, q, lam)
+    def gather(self, x_owned: np.ndarray) -> HeldValues:
+        """What this rank holds of the saddle vector (its DOFs, ghosts included, and every
+        multiplier) from its owned rows (the DOF map's forward exchange)."""
+        return self.dofmap.gather(x_owned)
 
-    def zero_saddle(self) -> SaddleValues:
-        """A zero saddle vector, as ``gather`` returns them."""
-        return SaddleValues(self._keys, np.zeros(self.model.mesh.num_points * self.model.ncomp),
-                            np.zeros(self.layout.nl))
-
-    def primal_of(self, x_full: SaddleValues) -> np.ndarray:
-        """The primal DOFs (this mesh's numbering) of what ``gather`` returned."""
-        return x_full.q
-
-    def with_primal(self, x_full: SaddleValues, q: np.ndarray) -> SaddleValues:
+    def with_primal(self, x_full: HeldValues, q: np.ndarray) -> HeldValues:
         """A copy of ``x_full`` with its primal part replaced by q."""
-        x = x_full.copy()
-        x.q = q.copy()
-        return x
+        return x_full.with_q(q)
 
     def multipliers(self, x_full) -> np.ndarray:
         """Unscaled λ of every multiplied row from a full saddle vector."""
-        if not self.block.nrows:
-            return np.zeros(0)
-        return x_full.lam * self.block.col_scale
+        return self.relation_set.multipliers(x_full.lam)
 
     def unpack(self, x_full: np.ndarray, t: float, f_int: np.ndarray | None = None,
                f_ext: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """Primal vector (this mesh's DOFs, owned then ghosts) and unscaled multipliers of
         every relation."""
-        q = self.primal_of(x_full)
+        q = x_full.q
         lam = self.multipliers(x_full)
-        out = {}
-        per_row = self.block.row_values(lam) if self.block.nrows else lam
-        for k, r in enumerate(self.multiplied):
-            out[r.name] = per_row[self.block.row_first[k]:self.block.row_first[k + 1]]
+        out = self.relation_set.per_relation(lam)
         if self.eliminated:
             out.update(self._eliminated_multipliers(x_full, t, f_int, f_ext))
         return q, out
@@ -380,12 +275,12 @@ class SaddleSystem:
         if f_int is None:
             row_vals = self.op.eliminated_rows(x_full)
         else:  # x_full holds λ; the primal part of the row is the internal force
-            row_vals = self.to_owned(f_int) - self.reactions(self.multipliers(x_full))
+            row_vals = self.to_owned(f_int) - self.relation_set.reactions(self.multipliers(x_full))
         sad = self.elim_saddle
         lam = np.zeros(self.elim_dofs.size)
         own = self.elim_own
         lam[own] = (f_full[self.elim_local[own]] - row_vals[sad[own] - self.offset]) / self.elim_coefs[own]
-        self.comm.Allreduce(MPI.IN_PLACE, lam, op=MPI.SUM)
+        self.dofmap.sum_ranks(lam)
         out, start = {}, 0
         for r in self.eliminated:
             out[r.name] = lam[start:start + r.nrows]

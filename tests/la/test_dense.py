@@ -26,14 +26,14 @@ def test_operator_blocks_are_what_the_relations_say():
     system, solver, mat, rhs, x = solve_in_process(SCENE.format(cell="triangle", preset="direct",
                                                                 eliminate="false"))
     M = dense(mat)
-    iq, il = saddle_of_input_dofs(MPI.COMM_WORLD, system), system.saddle_of_mult
+    iq, il = saddle_of_input_dofs(MPI.COMM_WORLD, system), system.dofmap.saddle_of_mult
     K = M[np.ix_(iq, iq)]
     assert np.abs(K - K.T).max() <= 1e-12 * np.abs(K).max()
     pts = whole_points(MPI.COMM_WORLD, system.model.mesh)
     rigid = np.column_stack([np.tile([1.0, 0.0], len(pts)), np.tile([0.0, 1.0], len(pts)),
                              np.column_stack([-pts[:, 1], pts[:, 0]]).ravel()])
     assert np.abs(K @ rigid).max() <= 1e-11 * np.abs(K).max()
-    blk = system.block
+    blk = system.relation_set
     for k, rel in enumerate(system.multiplied):
         rows = il[blk.first_row[k]:blk.first_row[k + 1]]
         A = np.zeros((rel.nrows, len(iq)))
@@ -55,7 +55,7 @@ def test_operator_does_not_depend_on_rank_count():
 
     def in_input_order(system, mat, comm):
         M = dense(mat, comm)
-        order = np.concatenate([saddle_of_input_dofs(comm, system), system.saddle_of_mult])
+        order = np.concatenate([saddle_of_input_dofs(comm, system), system.dofmap.saddle_of_mult])
         return M[np.ix_(order, order)]
 
     Mp = in_input_order(par[0], par[2], MPI.COMM_WORLD)

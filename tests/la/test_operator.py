@@ -65,10 +65,10 @@ def brute_stiffness(model, factor: float = 1.0) -> np.ndarray:
 
 def brute_saddle(system: SaddleSystem, factor: float = 1.0) -> np.ndarray:
     """The whole saddle matrix before elimination, in the saddle numbering."""
-    iq, il = system.iq, system.saddle_of_mult
-    S = np.zeros((system.layout.size, system.layout.size))
+    iq, il = system.iq, system.dofmap.saddle_of_mult
+    S = np.zeros((system.dofmap.size, system.dofmap.size))
     S[np.ix_(iq, iq)] = brute_stiffness(system.whole, factor)
-    blk = system.block
+    blk = system.relation_set
     for k, rel in enumerate(system.multiplied):
         rows = il[blk.first_row[k]:blk.first_row[k + 1]]
         scale = blk.row_scale[blk.first_row[k]:blk.first_row[k + 1]]
@@ -114,13 +114,13 @@ def test_operator_is_the_dense_assembly(cell):
 def structure(system: SaddleSystem) -> np.ndarray:
     """Where the saddle matrix has entries, from the cells and the relations' coefficients."""
     mesh, nc = system.whole.mesh, system.model.ncomp
-    iq, il = system.iq, system.saddle_of_mult
+    iq, il = system.iq, system.dofmap.saddle_of_mult
     nodes = np.zeros((mesh.num_points, mesh.num_points), dtype=bool)
     nen = mesh.cells.shape[1]
     nodes[np.repeat(mesh.cells, nen, axis=1).ravel(), np.tile(mesh.cells, nen).ravel()] = True
-    out = np.zeros((system.layout.size, system.layout.size), dtype=bool)
+    out = np.zeros((system.dofmap.size, system.dofmap.size), dtype=bool)
     out[np.ix_(iq, iq)] = np.kron(nodes, np.ones((nc, nc), dtype=bool))
-    blk = system.block
+    blk = system.relation_set
     for k, rel in enumerate(system.multiplied):
         rows = il[blk.first_row[k]:blk.first_row[k + 1]]
         out[rows[rel.a_rows], iq[rel.a_dofs]] = True
@@ -259,6 +259,6 @@ eliminate = {eliminate}
 """
     eliminated = system_of(box.format(eliminate="true"))
     multiplied = system_of(box.format(eliminate="false"))
-    assert eliminated.layout.nl == 0 and multiplied.layout.nl > 0
+    assert eliminated.dofmap.nl == 0 and multiplied.dofmap.nl > 0
     assert eliminated.assemble().getBlockSize() == 3
     assert multiplied.assemble().getBlockSize() == 1

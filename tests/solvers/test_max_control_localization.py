@@ -68,13 +68,13 @@ def test_plate_full_steps_through_the_peak():
     tangent (positive with the unloading one: the branch the first tangent used to take)."""
     comm = MPI.COMM_WORLD
     scene, model, system, newton, rel, free = plate_newton(2, 10)
-    mine = system.owned_input_dofs[free[system.owned_input_dofs]]
+    mine = system.dofmap.owned_dofs[free[system.dofmap.owned_dofs]]
     lams, iterations = [], []
     for t in scene.times:
         states = newton.states
         iterations.append(newton.step(t).iterations)
         b = 1.2e-3 * t
-        values = system.relation_primal(rel, newton.q)
+        values = system.context.relation_primal(rel, newton.q)
         assert np.flatnonzero(newton.active.active).tolist() == [368]
         np.testing.assert_allclose(values[368], b, rtol=1e-9)
         assert values.max() <= b * (1 + 1e-7)
@@ -82,7 +82,7 @@ def test_plate_full_steps_through_the_peak():
         f_int = system.composition.evaluate(newton.q, states, False)[1]
         dofs, pattern = rel.shared_dual
         force = model.external_load(t)
-        force += system.to_local(dofs, pattern * lam)   # (input DOFs to this rank's)
+        force += system.context.local_vector(dofs, pattern * lam)   # (input DOFs to this rank's)
         r2, f2 = comm.allreduce(np.array([np.sum((force - f_int)[mine] ** 2),
                                           np.sum(f_int[mine] ** 2)]))
         assert np.sqrt(r2 / f2) < 1e-8
@@ -97,8 +97,8 @@ def test_plate_full_steps_through_the_peak():
     kmat = newton._evaluate(newton.q)[1]
     group = newton.active.groups[0]
     f = newton._dual_column(0)
-    unloading = system.primal_values(newton._unit_response(kmat, group, f))[368]
-    loading = system.primal_values(newton._unit_response(newton._loading_tangent(kmat),
+    unloading = system.context.relations.primal_values(newton._unit_response(kmat, group, f))[368]
+    loading = system.context.relations.primal_values(newton._unit_response(newton._loading_tangent(kmat),
                                                          group, f))[368]
     assert unloading > 0 > loading
     input_cells = model.mesh.global_cells[system.local_cells]

@@ -74,7 +74,7 @@ def test_full_step_at_the_onset_of_localization():
         states = newton.states
         newton.step(t)
         b = 1.2e-3 * t
-        values = system.relation_primal(rel, newton.q)
+        values = system.context.relation_primal(rel, newton.q)
         enforced = np.flatnonzero(newton.active.active)
         assert enforced.tolist() == [368]
         np.testing.assert_allclose(values[enforced], b, rtol=1e-9)
@@ -84,8 +84,8 @@ def test_full_step_at_the_onset_of_localization():
         f_int = system.composition.evaluate(newton.q, states, False)[1]
         dofs, pattern = rel.shared_dual
         force = model.external_load(t)
-        force += system.to_local(dofs, pattern * lam)   # (input DOFs to this rank's)
-        mine = system.owned_input_dofs[free[system.owned_input_dofs]]
+        force += system.context.local_vector(dofs, pattern * lam)   # (input DOFs to this rank's)
+        mine = system.dofmap.owned_dofs[free[system.dofmap.owned_dofs]]
         r2, f2 = comm.allreduce(np.array([np.sum((force - f_int)[mine] ** 2),
                                           np.sum(f_int[mine] ** 2)]))
         assert np.sqrt(r2 / f2) < 1e-8
@@ -94,7 +94,7 @@ def test_full_step_at_the_onset_of_localization():
     np.testing.assert_allclose(lams[1], 2 * lams[0], rtol=1e-10)
     newton.step(scene.times[5])  # the onset of localization in one full step
     assert np.flatnonzero(newton.active.active).tolist() == [368]
-    np.testing.assert_allclose(system.relation_primal(rel, newton.q)[368], 1.2e-3 * scene.times[5], rtol=1e-9)
+    np.testing.assert_allclose(system.context.relation_primal(rel, newton.q)[368], 1.2e-3 * scene.times[5], rtol=1e-9)
 
 
 def test_refined_plate_follows_localization_with_cut_steps(run):

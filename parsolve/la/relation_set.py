@@ -1,0 +1,209 @@
+"""The relation set: every multiplied (not eliminated) relation stacked into global multiplier
+rows, in the DOF map's numbering, scaled — the one owner of the stacked layout.
+
+Relations are rescaled so that their rows and columns are commensurate with the stiffness
+(E = 2e11 next to unit coefficients would otherwise wreck pivoting): row k of A is multiplied by
+``row_scale[k]`` and column k of D by ``col_scale[k]``, so the solved multiplier is
+``λ / col_scale`` and the primal equation's right-hand side ``b · row_scale``. An associated
+relation gets equal scales, which keeps the operator symmetric.
+
+A relation's rows ("relation rows", what the active set decides) map to multiplier rows one to
+one, except for a collapsed maximum group (``Relation.collapsed``): all its rows share one
+multiplier row and one dual column, which carries the coefficients of the enforced row
+(``select``); the other rows' A entries are kept in the pattern at zero.
+
+Relations refreshed between iterations (``meta["refresh"]``: friction turning its rows,
+contact pairings) keep their sparsity: ``refresh`` copies their current A and D values into
+the stacked arrays in place.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from parsolve.la.dofmap import DofMap
+from parsolve.relations import Relation
+
+
+def _cat(parts, dtype) -> np.ndarray:
+    return np.concatenate(parts).astype(dtype) if parts else np.zeros(0, dtype)
+
+
+class RelationSet:
+    """The stacked relations of a system (see the module doc). The COO arrays (``a_rows``,
+    ``a_cols``, ``a_vals``, ``d_rows``, ``d_cols``, ``d_vals``; rows/columns in multiplier rows
+    and new primal DOFs, values unscaled, D itself: the matrix holds -D) are read by the
+    operator (``la.petsc``) only."""
+
+    def __init__(self, relations: list[Relation], dofmap: DofMap):
+        self.relations, self.dofmap = relations, dofmap
+        new_dof = dofmap.input_new_dof
+        sizes = [r.nrows for r in relations]
+        mult_sizes = [1 if r.collapsed else r.nrows for r in relations]
+        self.row_first = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        self.first_row = first = np.concatenate([[0], np.cumsum(mult_sizes)]).astype(np.int64)
+        ar, ac, av, dr, dc, dv, arel, mult = [], [], [], [], [], [], [], []
+        for k, rel in enumerate(relations):
+            local = np.zeros(rel.nrows, dtype=np.int64) if rel.collapsed else np.arange(rel.nrows)
+            mult.append(local + first[k])
+            ar.append(local[rel.a_rows] + first[k])
+            arel.append(rel.a_rows + self.row_first[k])
+            ac.append(new_dof(rel.a_dofs))
+            av.append(rel.a_vals)
+            if rel.collapsed:  # one copy of the shared vector
+                dofs, vals = rel.shared_dual
+                rows = np.zeros(dofs.size, dtype=np.int64)
+            else:
+                dofs, rows, vals = rel.dual_coo()
+            dr.append(new_dof(dofs))
+            dc.append(np.asarray(rows, dtype=np.int64) + first[k])
+            dv.append(np.asarray(vals, dtype=float))
+        self.a_rows, self.a_cols, self.a_vals = _cat(ar, np.int64), _cat(ac, np.int64), _cat(av, float)
+        self.d_rows, self.d_cols, self.d_vals = _cat(dr, np.int64), _cat(dc, np.int64), _cat(dv, float)
+        self.a_relrow = _cat(arel, np.int64)            # relation row of each A entry
+        self.mult_of_row = _cat(mult, np.int64)         # multiplier row of each relation row
+        self.rep_row = np.zeros(int(first[-1]), dtype=np.int64)   # row each multiplier enforces
+        self.rep_row[self.mult_of_row[::-1]] = np.arange(self.mult_of_row.size)[::-1]  # first
+        self._d_seg = np.concatenate([[0], np.cumsum([len(d) for d in dv])]).astype(np.int64)
+        self._a_seg = np.concatenate([[0], np.cumsum([len(a) for a in av])]).astype(np.int64)
+        self.row_scale: np.ndarray | None = None
+        self.col_scale: np.ndarray | None = None
+        self._owned_entries: dict[int, tuple] = {}      # per relation: its owned A entries
+
+    # ------------------------------------------------------------ sizes and views
+
+    @property
+    def nrows(self) -> int:
+        """Multiplier rows."""
+        return int(self.first_row[-1])
+
+    @property
+    def nrelrows(self) -> int:
+        """Relation rows (what the active set decides)."""
+        return int(self.row_first[-1])
+
+    def __len__(self) -> int:
+        return len(self.relations)
+
+    def rows_of(self, k: int) -> slice:
+        """The relation rows of relation k."""
+        return slice(int(self.row_first[k]), int(self.row_first[k + 1]))
+
+    def views(self, x: np.ndarray) -> dict[str, np.ndarray]:
+        """Per relation, its rows of a per-relation-row array x (writable views)."""
+        return {r.name: x[self.rows_of(k)] for k, r in enumerate(self.relations)}
+
+    def locate(self, row: int) -> tuple[int, int]:
+        """(relation, its local row) of a relation row."""
+        k = int(np.searchsorted(self.row_first, row, side="right") - 1)
+        return k, int(row - self.row_first[k])
+
+    @property
+    def a_on(self) -> np.ndarray:
+        """A entries of the rows enforced now (all but a collapsed group's other rows)."""
+        return self.rep_row[self.a_rows] == self.a_relrow
+
+    # ------------------------------------------------------------ values
+
+    def targets(self, t: float) -> np.ndarray:
+        """Unscaled b(t) of every relation row."""
+        return np.concatenate([r.rhs(t) for r in self.relations]) if self.relations else np.zeros(0)
+
+    def rhs(self, t: float) -> np.ndarray:
+        """Scaled b(t) of every multiplier row."""
+        return self.targets(t)[self.rep_row] * self.row_scale
+
+    def _owned_part(self, r: Relation, q: np.ndarray) -> np.ndarray:
+        key = id(r)
+        if key not in self._owned_entries:
+            self._owned_entries[key] = self.dofmap.owned_dof_entries(r.a_dofs)
+        sel, local = self._owned_entries[key]
+        return self.dofmap.owned_part(sel, local, r.a_rows, r.a_vals, r.nrows, q)
+
+    def primal_values(self, q: np.ndarray) -> np.ndarray:
+        """A q of every relation row (unscaled), q a local primal vector: one reduction.
+        Collective."""
+        if not self.relations:
+            return np.zeros(0)
+        return self.dofmap.sum_ranks(np.concatenate([self._owned_part(r, q) for r in self.relations]))
+
+    def relation_primal(self, r: Relation, q: np.ndarray) -> np.ndarray:
+        """A q of one relation's rows (any relation of the model). Collective."""
+        return self.dofmap.sum_ranks(self._owned_part(r, q))
+
+    def gap(self, t: float, q: np.ndarray) -> np.ndarray:
+        """b(t) - A q of every multiplier row, unscaled. Collective."""
+        if not self.relations:
+            return np.zeros(0)
+        return (self.targets(t) - self.primal_values(q))[self.rep_row]
+
+    def scaled_residual(self, t: float, q: np.ndarray | None) -> np.ndarray:
+        """Scaled b(t) - A q of every multiplier row (b(t) alone without q). Collective."""
+        target = self.rhs(t)
+        if q is not None and self.nrows:
+            target = target - self.primal_values(q)[self.rep_row] * self.row_scale
+        return target
+
+    def reactions(self, lam: np.ndarray) -> np.ndarray:
+        """Owned saddle rows of D λ (unscaled λ of every multiplier row; multiplier rows 0)."""
+        q0, q1, _, _ = self.dofmap.owned()
+        own = (self.d_rows >= q0) & (self.d_rows < q1)
+        out = np.zeros(self.dofmap.nrows)
+        out[:q1 - q0] = np.bincount(self.d_rows[own] - q0,
+                                    weights=self.d_vals[own] * lam[self.d_cols[own]],
+                                    minlength=q1 - q0)
+        return out
+
+    def multipliers(self, lam_scaled: np.ndarray) -> np.ndarray:
+        """Unscaled λ of every multiplier row from the solved (scaled) ones."""
+        return lam_scaled * self.col_scale if self.nrows else np.zeros(0)
+
+    def per_relation(self, lam: np.ndarray) -> dict[str, np.ndarray]:
+        """Unscaled λ of every relation row, by relation (a collapsed group: on its enforced
+        row, 0 on the others)."""
+        per_row = self.row_values(lam) if self.nrows else lam
+        return {r.name: per_row[self.rows_of(k)] for k, r in enumerate(self.relations)}
+
+    def row_values(self, per_mult: np.ndarray) -> np.ndarray:
+        """Per relation row: a multiplier row's value on the row it enforces, 0 on the others."""
+        out = per_mult[self.mult_of_row]
+        return np.where(self.rep_row[self.mult_of_row] == np.arange(out.size), out, 0.0)
+
+    # ------------------------------------------------------------ updates in place
+
+    def select(self, active_rows: np.ndarray) -> np.ndarray:
+        """The enforced relation rows → which row each collapsed group carries, and the mask of
+        multiplier rows enforced."""
+        on = np.zeros(self.nrows, dtype=bool)
+        np.logical_or.at(on, self.mult_of_row, active_rows)
+        rows = np.flatnonzero(active_rows)
+        self.rep_row[self.mult_of_row[rows]] = rows
+        return on
+
+    def refresh(self) -> None:
+        """Copy the current A and D values of the relations marked ``meta["refresh"]`` into
+        the stacked arrays (unscaled; the scales of the first assembly stay; same sparsity)."""
+        for k, r in enumerate(self.relations):
+            if r.meta.get("refresh"):
+                self.d_vals[self._d_seg[k]:self._d_seg[k + 1]] = r.dual_coo()[2]
+                self.a_vals[self._a_seg[k]:self._a_seg[k + 1]] = r.a_vals
+
+    def set_scales(self, kscale: float) -> None:
+        """Scale each row of A and column of D to the size of the stiffness diagonal."""
+        n = self.nrows
+        amax = np.zeros(n)
+        np.maximum.at(amax, self.a_rows, np.abs(self.a_vals))
+        dmax = np.zeros(n)
+        np.maximum.at(dmax, self.d_cols, np.abs(self.d_vals))
+        amax[amax == 0] = 1.0
+        dmax[dmax == 0] = 1.0
+        self.row_scale = kscale / amax
+        self.col_scale = kscale / dmax
+        for k, rel in enumerate(self.relations):
+            if rel.associated:  # same scale on both sides keeps the operator symmetric
+                sl = slice(self.first_row[k], self.first_row[k + 1])
+                self.col_scale[sl] = self.row_scale[sl]
+
+    @property
+    def scaled(self) -> bool:
+        return self.row_scale is not None

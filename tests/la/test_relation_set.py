@@ -1,0 +1,125 @@
+"""The relation set on the ranks' parts of a small mesh, against the relations' own dense
+products on the whole mesh (``Relation.primal``, ``Relation.reaction``): stacking and the
+collapsed group's one multiplier row, A q in one reduction, gaps, D λ on the owned rows,
+scales, per-relation views and the in-place refresh of refreshed relations (1, 2, 3 ranks)."""
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from parsolve.la.dofmap import DofMap
+from parsolve.la.relation_set import RelationSet
+from parsolve.mesh.distribute import distribute
+from parsolve.mesh.generators import rectangle
+from parsolve.mesh.regions import allgather_rows
+from parsolve.relations import Relation
+
+COMM = MPI.COMM_WORLD
+NC, NPTS = 2, 45
+
+
+def value(input_dofs) -> np.ndarray:
+    return 0.5 + 3.0 * np.asarray(input_dofs, dtype=float)
+
+
+def relations() -> list[Relation]:
+    tie = Relation("tie", 3, [0, 1, 1, 2, 2], [0, 89, 10, 40, 42], [1.0, 2.0, -1.0, 1.0, 1.0],
+                   [1.0, 2.0, 3.0])                                   # associated
+    push = Relation("push", 2, [0, 1], [7, 60], [1.0, 1.0], [0.5, -0.5], sense=">=",
+                    dual=(np.array([7, 61, 60]), np.array([0, 0, 1]), np.array([1.0, 4.0, -2.0])),
+                    meta={"refresh": True})                           # non-associated
+    peak = Relation("peak", 3, [0, 1, 2], [3, 33, 63], [1.0, 1.0, 1.0], [9.0, 9.0, 9.0],
+                    sense="<=", maximum=True,
+                    shared_dual=(np.array([80, 81]), np.array([1.0, 1.0])))   # collapsed
+    return [tie, push, peak]
+
+
+@pytest.fixture()
+def rset():
+    whole = rectangle(2.0, 1.0, 8, 4, cell="quad")
+    local = distribute(COMM, whole if COMM.rank == 0 else None, "bisection")
+    rels = relations()
+    dm = DofMap(COMM, local, NC, 3 + 2 + 1)
+    dm.index_inputs([r.a_dofs for r in rels] + [r.dual_coo()[0] for r in rels])
+    q = value((local.global_nodes.astype(np.int64)[:, None] * NC + np.arange(NC)).ravel())
+    return RelationSet(rels, dm), q
+
+
+def test_stacking(rset):
+    rs, _ = rset
+    assert rs.nrows == 6 and rs.nrelrows == 8 and len(rs) == 3
+    np.testing.assert_array_equal(rs.mult_of_row, [0, 1, 2, 3, 4, 5, 5, 5])
+    np.testing.assert_array_equal(rs.rep_row, [0, 1, 2, 3, 4, 5])   # a group: its first row
+    assert rs.locate(6) == (2, 1) and rs.rows_of(1) == slice(3, 5)
+    views = rs.views(np.arange(8.0))
+    assert list(views) == ["tie", "push", "peak"]
+    np.testing.assert_array_equal(views["peak"], [5.0, 6.0, 7.0])
+
+
+def test_primal_values_and_gaps(rset):
+    rs, q = rset
+    every = value(np.arange(NPTS * NC))
+    expected = np.concatenate([r.primal(every) for r in rs.relations])
+    np.testing.assert_allclose(rs.primal_values(q), expected, rtol=1e-15)
+    np.testing.assert_allclose(rs.relation_primal(rs.relations[1], q), expected[3:5], rtol=1e-15)
+    b = np.concatenate([r.rhs(0.5) for r in rs.relations])
+    np.testing.assert_allclose(rs.gap(0.5, q), (b - expected)[rs.rep_row], rtol=1e-15)
+    # the enforced row of the group moves to its third row: its gap follows
+    active = np.array([True] * 5 + [False, False, True])
+    on = rs.select(active)
+    assert on.all() and rs.rep_row[5] == 7
+    np.testing.assert_allclose(rs.gap(0.5, q)[5], b[7] - expected[7], rtol=1e-15)
+    np.testing.assert_array_equal(rs.row_values(np.arange(6.0)), [0, 1, 2, 3, 4, 0, 0, 5])
+    np.testing.assert_array_equal(rs.per_relation(np.arange(6.0))["peak"], [0.0, 0.0, 5.0])
+
+
+def test_reactions_on_the_owned_rows(rset):
+    rs, _ = rset
+    dm = rs.dofmap
+    lam = np.array([1.0, -2.0, 0.5, 3.0, 7.0, 2.0])
+    owned = rs.reactions(lam)
+    assert owned.size == dm.nrows and not owned[dm.n_owned:].any()
+    # back to input DOFs: each owned row once, from every rank
+    local = dm.mesh
+    ids = (local.global_nodes[:local.n_owned].astype(np.int64)[:, None] * NC + np.arange(NC)).ravel()
+    rows = dm.saddle_of_local[:dm.n_owned] - dm.offset
+    pairs = allgather_rows(COMM, np.column_stack([ids.astype(float), owned[rows]]))
+    got = np.zeros(NPTS * NC)
+    got[pairs[:, 0].astype(np.int64)] = pairs[:, 1]
+    expected = np.zeros(NPTS * NC)
+    per_row = [lam[0:3], lam[3:5], np.array([lam[5], 0.0, 0.0])]
+    for r, lr in zip(rs.relations, per_row):
+        dofs, force = r.reaction(lr)
+        np.add.at(expected, dofs, force)
+    np.testing.assert_allclose(got, expected, rtol=1e-15, atol=0)
+
+
+def test_scales_and_right_hand_side(rset):
+    rs, q = rset
+    rs.set_scales(10.0)
+    np.testing.assert_allclose(rs.row_scale, [10.0, 5.0, 10.0, 10.0, 10.0, 10.0])
+    # associated: the column scale is the row's; the others from |D|
+    np.testing.assert_allclose(rs.col_scale, [10.0, 5.0, 10.0, 2.5, 5.0, 10.0])
+    b = np.concatenate([r.rhs(1.0) for r in rs.relations])[rs.rep_row]
+    np.testing.assert_allclose(rs.rhs(1.0), b * rs.row_scale, rtol=1e-15)
+    every = value(np.arange(NPTS * NC))
+    aq = np.concatenate([r.primal(every) for r in rs.relations])[rs.rep_row]
+    np.testing.assert_allclose(rs.scaled_residual(1.0, q), (b - aq) * rs.row_scale, rtol=1e-14)
+    np.testing.assert_allclose(rs.multipliers(np.ones(6)), rs.col_scale)
+
+
+def test_refresh_in_place(rset):
+    """A q reads the relations' current values; the stacked copy the operator reads follows
+    them only on refresh (the relations marked ``refresh``)."""
+    rs, q = rset
+    push, tie = rs.relations[1], rs.relations[0]
+    push.a_vals[:] = [2.0, -1.0]                       # a turned row: same sparsity
+    push.dual[2][:] = [1.0, 1.0, 1.0]
+    tie.a_vals[0] = 5.0                                # not marked: never copied
+    every = value(np.arange(NPTS * NC))
+    np.testing.assert_allclose(rs.primal_values(q)[3:5], push.primal(every), rtol=1e-15)
+    np.testing.assert_array_equal(rs.a_vals[5:7], [1.0, 1.0])
+    rs.refresh()
+    np.testing.assert_array_equal(rs.a_vals[5:7], [2.0, -1.0])
+    np.testing.assert_array_equal(rs.d_vals[5:8], [1.0, 1.0, 1.0])
+    assert rs.a_vals[0] == 1.0
