@@ -277,16 +277,10 @@ class StepSchedule:
 
 
 def _max_strain_increment(comm, ctx, dq: np.ndarray) -> float:
-    mech = ctx.elasticity
-    if mech is None:
-        return comm.allreduce(0.0, op=MPI.MAX)
-    mesh = ctx.mesh
-    owned = ctx.owned_cells
-    if owned.size == 0:
-        return comm.allreduce(0.0, op=MPI.MAX)
-    from parsolve.fem.kernels import strains
-
-    u = ctx.values(dq)["u"]
-    eps = strains(mech.geometry(owned).strain_operator(),
-                  u[mesh.cells[owned]].reshape(len(owned), -1))
-    return comm.allreduce(float(np.abs(eps).max()), op=MPI.MAX)
+    """The largest increment of the step over the effects (``Effect.increment_size``: the
+    elasticity's largest strain increment), on every rank."""
+    cells = ctx.owned_cells
+    values = ctx.values(dq) if cells.size else {}
+    local = max((e.increment_size(cells, values) for e in ctx.effects if cells.size),
+                default=0.0)
+    return comm.allreduce(float(local), op=MPI.MAX)

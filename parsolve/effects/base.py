@@ -64,6 +64,11 @@ class Effect:
     def init_state(self, cells: np.ndarray):
         return None
 
+    def increment_size(self, cells: np.ndarray, values: dict[str, np.ndarray]) -> float:
+        """How large a step's increment ``values`` {field: (npoints, ncomp)} is on these cells,
+        for the adaptive steps (elasticity: the largest strain increment). 0: no limit."""
+        return 0.0
+
     def evaluate(self, cells: np.ndarray, values: dict[str, np.ndarray], state, secant: bool):
         """Internal forces per field {field: (nc, nen, ncomp)}, tangent blocks, trial state and
         extras (e.g. stresses at quadrature points) at the node values ``values``

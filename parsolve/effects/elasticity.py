@@ -118,6 +118,13 @@ class Elasticity(Effect):
     def output_names(self) -> list[str]:
         return ["stress", "damage", "plastic_strain"]
 
+    def increment_size(self, cells: np.ndarray, values: dict[str, np.ndarray]) -> float:
+        """The largest strain component of the increment ``values`` on these cells."""
+        u = values["u"]
+        eps = kernels.strains(self.geometry(cells).strain_operator(),
+                              u[self.mesh.cells[cells]].reshape(len(cells), -1))
+        return float(np.abs(eps).max()) if eps.size else 0.0
+
     def stiffness_blocks(self, cells: np.ndarray):
         return [("u", "u", self.stiffness(cells))]
 

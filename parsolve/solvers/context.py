@@ -40,7 +40,6 @@ class StepContext:
     reported: np.ndarray         # which of its local cells they are
     initial_q: Callable[[], np.ndarray]   # the initial primal vector (a new array per call)
     symmetric: Callable[[bool], bool]     # whether the effects' tangents are symmetric
-    elasticity: object = None    # the elasticity effect, if any (strains of a step)
     nonlinear: bool = False
     transient: bool = False
 

@@ -62,7 +62,7 @@ class SaddleSystem:
             comm, dm, self.relation_set, self.eliminated, model.relations, self.composition,
             model.effects, model.fields, mesh, model.scene, model.patterns, self.local_cells,
             self.owned_cells, self.reported, model.initial_q, model.symmetric,
-            model.elasticity, model.nonlinear, model.transient)
+            model.nonlinear, model.transient)
         for e in model.effects:   # once: the reductions their hooks need (Effect.attach)
             e.attach(self.context)
         self.timings["setup"] = time.perf_counter() - t0
