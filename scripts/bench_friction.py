@@ -31,7 +31,8 @@ from mpi4py import MPI
 
 import bench_harness as bh
 from bench_pairing import surface_2d, surface_3d  # (reused surfaces)
-from bench_scenes import G, LAM, sheared_box_scene, wedge_mesh, wedge_scene
+from bench_scenes import (G, LAM, friction_3d_scene, ironing_2d_scene, ironing_3d_scene,
+                          sheared_box_scene, wedge_mesh, wedge_scene)
 from parsolve.contact import friction as fr
 from parsolve.contact import references
 from parsolve.contact.pairing import pair_nodes
@@ -39,6 +40,7 @@ from parsolve.contact.part_values import PartValues
 from parsolve.contact.rows import friction_dual, normal_rows, tangent_rows
 from parsolve.driver import run
 from parsolve.effects.contact_penalty import PenaltyContact
+from parsolve.errors import InputError
 from parsolve.model import build_model
 from parsolve.scene import load_scene
 
@@ -66,7 +68,10 @@ def add_keys(text: str, lines: str) -> str:
 def solve(text: str, work: Path, name: str) -> tuple[dict, float]:
     path = work / f"{name}.toml"
     path.write_text(text)
-    model = build_model(load_scene(path), MPI.COMM_WORLD)
+    try:
+        model = build_model(load_scene(path), MPI.COMM_WORLD)
+    except InputError as exc:   # e.g. a baseline that does not take a deformable master
+        return {"status": f"input error: {exc}"}, 0.0
     t0 = time.perf_counter()
     try:
         run(MPI.COMM_WORLD, model, str(work / f"{name}.h5"), {}, None, log=lambda *a: None)
@@ -105,6 +110,25 @@ def case_block(work: Path):
         u, u_ref = res["fields/displacement"][keep], first["fields/displacement"]
         return float(np.abs(u - u_ref).max() / np.abs(u_ref).max())
     return "block 2D (8×4 quad)", text, ["base"], MU, error, 0.125
+
+
+def _against_first(res, first):
+    """No analytic field: the displacements against the relations form's at its steps."""
+    keep = [int(np.argmin(np.abs(res["steps/time"] - t))) for t in first["steps/time"]]
+    u, u_ref = res["fields/displacement"][keep], first["fields/displacement"]
+    return float(np.abs(u - u_ref).max() / np.abs(u_ref).max())
+
+
+def case_friction_3d(work: Path):
+    """configs/contact_friction_3d.toml as shipped (no analytic field)."""
+    return ("box 3D oblique shift (6×6×2 hex)", friction_3d_scene(1), ["base"], MU,
+            _against_first, 1.0 / 6)
+
+
+def case_ironing(work: Path):
+    """configs/contact_ironing_2d.toml (finite sliding on a deformable slab)."""
+    return ("ironing 2D (32×8 + 4×2 quad)", ironing_2d_scene(work, 1), ["ironing"], MU,
+            _against_first, 0.125)
 
 
 def case_wedge(work: Path):
@@ -159,7 +183,7 @@ def formulations_table(work: Path, quick: bool, smoke: bool = False) -> tuple[li
         cases = [case_wedge(work), case_box(work, 3)]
     else:
         cases = [case_block(work), case_wedge(work), case_hertz(work),
-                 case_box(work, 6 if quick else 12)]
+                 case_box(work, 6 if quick else 12), case_friction_3d(work), case_ironing(work)]
     rows, records = [], []
     for label, text, names, mu, error, h in cases:
         big = 100 * 100 * E / h
@@ -177,7 +201,7 @@ def formulations_table(work: Path, quick: bool, smoke: bool = False) -> tuple[li
             rec = dict(case=label, form=form, steps=its.size, its_mean=float(its.mean()) if its.size else 0,
                        its_max=int(its.max()) if its.size else 0, its_total=int(its.sum()),
                        seconds=seconds, penetration=pen / umax, cone=cone, error=err, cuts=cuts,
-                       status="ok" if ok else res["status"][:60])
+                       status="ok" if ok else res["status"][:60], reason=res["status"])
             records.append(rec)
             row = (f"| {label} | {form} | {rec['steps']} | {rec['its_mean']:.1f} | {rec['its_max']} | "
                    f"{rec['its_total']} | {seconds:.2f} | {rec['penetration']:.1e} | "
@@ -188,6 +212,22 @@ def formulations_table(work: Path, quick: bool, smoke: bool = False) -> tuple[li
             "time (s) | penetration / max|u| | cone violation | error | failed (cut) steps "
             "| status |", "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
     return head + rows, records
+
+
+def baselines_summary(records: list[dict]) -> list[str]:
+    """One line per case: which baselines converge, and why the others do not."""
+    lines = []
+    for case in dict.fromkeys(r["case"] for r in records):
+        recs = [r for r in records if r["case"] == case and r["form"] != "relations"]
+        ok = [r["form"] for r in recs if r["status"] == "ok"]
+        cut = [f"{r['form']} after {r['cuts']} cut steps" for r in recs
+               if r["status"] == "ok" and r["cuts"]]
+        bad = [r for r in recs if r["status"] != "ok"]
+        line = f"- {case}: " + (", ".join(ok) + " converge" if ok else "no baseline converges")
+        line += f" ({'; '.join(cut)})" if cut else ""
+        line += "".join(f"; {r['form']}: {' '.join(r['reason'].split())}" for r in bad)
+        lines.append(line + ".")
+    return lines
 
 
 def bare_penalty(pairing, mu: float, eps: float, dim: int, npoints: int) -> PenaltyContact:
@@ -258,6 +298,185 @@ def update_times(quick: bool, smoke: bool = False) -> tuple[list[str], list[tupl
     return head + rows, data
 
 
+# ----------------------------------------------------------------------------- refinement
+
+
+class PhaseClock:
+    """Seconds spent in some functions during a run, in process: each is wrapped for the run
+    and put back after (the benchmark's instrumentation; parsolve itself records
+    /timings/factorization, solve and contact per step). A phase counts its outermost call."""
+
+    def __init__(self):
+        self.seconds: dict[str, float] = {}
+        self._undo: list[tuple] = []
+        self._depth: dict[str, int] = {}
+
+    def wrap(self, owner, attr: str, phase: str) -> None:
+        if not hasattr(owner, attr):   # (a pairing function another version may not have)
+            return
+        orig = owner.__dict__.get(attr, getattr(owner, attr))
+        func = orig.__func__ if isinstance(orig, staticmethod) else orig
+        self.seconds.setdefault(phase, 0.0)
+
+        def timed(*args, **kw):
+            self._depth[phase] = self._depth.get(phase, 0) + 1
+            t0 = time.perf_counter()
+            try:
+                return func(*args, **kw)
+            finally:
+                self._depth[phase] -= 1
+                if self._depth[phase] == 0:
+                    self.seconds[phase] += time.perf_counter() - t0
+        setattr(owner, attr, staticmethod(timed) if isinstance(orig, staticmethod) else timed)
+        self._undo.append((owner, attr, orig))
+
+    def restore(self) -> None:
+        for owner, attr, orig in reversed(self._undo):
+            setattr(owner, attr, orig)
+        self._undo.clear()
+
+
+def _pairing_and_assembly(clock: PhaseClock) -> None:
+    """Pairing: the contact effect's pairing functions (the finite sliding's re-pairing at
+    each step and iteration runs inside the Newton's contact hooks; the first pairing, in
+    build_model, is not timed). Assembly: the element kernels (f_int and tangent of every
+    effect) and the saddle operator's assembly."""
+    from parsolve.effects import contact as contact_effect
+    from parsolve.solvers.newton import NewtonSolver
+    from parsolve.solvers.system import SaddleSystem
+
+    for name in ("pair_nodes", "pair_on", "mortar_pairing", "mortar_pairing_3d"):
+        clock.wrap(contact_effect, name, "pairing")
+    clock.wrap(NewtonSolver, "_evaluate", "assembly")
+    clock.wrap(SaddleSystem, "assemble", "assembly")
+
+
+FACTOR_EVENTS = ("MatLUFactorSym", "MatLUFactorNum", "MatCholFctrSym", "MatCholFctrNum")
+
+
+def _events() -> dict[str, tuple[int, float]]:
+    """(count, seconds) of PETSc's factorization log events so far (this process)."""
+    from petsc4py import PETSc
+
+    out = {}
+    for name in FACTOR_EVENTS:
+        info = PETSc.Log.Event(name).getPerfInfo()
+        out[name] = (int(info["count"]), float(info["time"]))
+    return out
+
+
+def instrumented(text: str, work: Path, name: str, extra=None) -> dict:
+    """One run in process with the phases timed; ``extra(clock)``: more wrappers."""
+    clock = PhaseClock()
+    _pairing_and_assembly(clock)
+    if extra is not None:
+        extra(clock)
+    ev0 = _events()
+    try:
+        res, seconds = solve(text, work, name)
+    finally:
+        clock.restore()
+    ev1 = _events()
+    d = {k: (ev1[k][0] - ev0[k][0], ev1[k][1] - ev0[k][1]) for k in FACTOR_EVENTS}
+    its = np.asarray(res.get("steps/iterations", np.zeros(0, int)))
+
+    def timing(key):
+        return float(np.sum(res[f"timings/{key}"])) if f"timings/{key}" in res else np.nan
+    contact = timing("contact")
+    return dict(status=res["status"], iterations=its, cuts=int(np.sum(res.get("steps/cuts", 0))),
+                wall=seconds, pairing=clock.seconds["pairing"],
+                refresh=contact - clock.seconds["pairing"], assembly=clock.seconds["assembly"],
+                factorization=timing("factorization"), solve=timing("solve"),
+                analyses=d["MatLUFactorSym"][0] + d["MatCholFctrSym"][0],
+                numeric=d["MatLUFactorNum"][0] + d["MatCholFctrNum"][0],
+                analysis_s=d["MatLUFactorSym"][1] + d["MatCholFctrSym"][1],
+                numeric_s=d["MatLUFactorNum"][1] + d["MatCholFctrNum"][1],
+                u=res.get("fields/displacement"), res=res)
+
+
+def refinement_cases(work: Path, factors: list[int]) -> list[tuple[str, int, str]]:
+    """(scene, refinement in cells, scene text): the shipped 3D friction and ironing scenes,
+    their surface's cells × factor along each direction (cells × factor²); the 3D ironing
+    when configs/ has it."""
+    cases = [("3D friction (contact_friction_3d)", f * f, friction_3d_scene(f)) for f in factors]
+    cases += [("ironing 2D (contact_ironing_2d)", f * f, ironing_2d_scene(work, f)) for f in factors]
+    for f in factors:
+        text = ironing_3d_scene(f)
+        if text is not None:
+            cases.append(("ironing 3D (contact_ironing_3d)", f * f, text))
+    return cases
+
+
+def refinement_tables(work: Path, factors: list[int]) -> tuple[list[str], list[str], list[dict]]:
+    """Global iterations per step against refinement, and the time split per iteration."""
+    its_rows, split_rows, records = [], [], []
+    for label, cells, text in refinement_cases(work, factors):
+        r = instrumented(text, work, f"refine_{len(records)}")
+        r.update(case=label, cells=cells)
+        records.append(r)
+        its = r["iterations"]
+        ok = r["status"] == "complete"
+        status = "ok" if ok else " ".join(r["status"].split())
+        its_rows.append(f"| {label} | {cells}× | {its.size} | {its.max() if its.size else '-'} | "
+                        f"{its.mean() if its.size else float('nan'):.1f} | {int(its.sum())} | "
+                        f"{r['cuts']} | {' '.join(map(str, its))} | {r['wall']:.2f} | {status} |")
+        n = max(r["numeric"], 1)   # linear solves: Newton iterations, failed attempts included
+        phases = [r[k] for k in ("pairing", "refresh", "assembly", "factorization", "solve")]
+        other = r["wall"] - sum(p for p in phases if np.isfinite(p))
+        split_rows.append(f"| {label} | {cells}× | {r['numeric']} | "
+                          + " | ".join(f"{1e3 * p / n:.2f}" for p in phases + [other])
+                          + f" | {1e3 * r['wall'] / n:.2f} |")
+        print(its_rows[-1], flush=True)
+        print(split_rows[-1], flush=True)
+    its_head = ["| scene | cells | steps | max iterations / step | mean | total | failed (cut) "
+                "steps | per step | time (s) | status |",
+                "|---|---:|---:|---:|---:|---:|---:|---|---:|---|"]
+    split_head = ["| scene | cells | linear solves | pairing | contact refresh | assembly | "
+                  "factorization | solve | other | total (ms / iteration) |",
+                  "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    return its_head + its_rows, split_head + split_rows, records
+
+
+def _reanalyse(clock: PhaseClock) -> None:
+    """For comparison: the KSP reset before every factorization whose operator changed, so
+    that MUMPS analyses again (what a solver rebuilt at each iteration would pay)."""
+    from parsolve.solvers.linear import LinearSolver
+
+    orig = LinearSolver._prepare
+
+    def prepare(self):
+        mat = self.ksp.getOperators()[0]
+        if self._state is not None and mat.stateGet() != self._state:
+            self._restart(mat)
+        return orig(self)
+    LinearSolver._prepare = prepare
+    clock._undo.append((LinearSolver, "_prepare", orig))
+
+
+def mumps_table(work: Path, factors: list[int]) -> list[str]:
+    """The analysis (symbolic factorization) kept across iterations, as parsolve does, against
+    redone at every iteration: counts from PETSc's log events, times."""
+    rows = []
+    for f in factors:
+        text = friction_3d_scene(f)
+        kept = instrumented(text, work, f"mumps_kept_{f}")
+        redone = instrumented(text, work, f"mumps_redone_{f}", _reanalyse)
+        same = (float(np.abs(kept["u"] - redone["u"]).max() / np.abs(kept["u"]).max())
+                if kept["u"] is not None and redone["u"] is not None
+                and kept["u"].shape == redone["u"].shape else np.nan)
+        for how, r in (("kept (parsolve)", kept), ("redone each iteration", redone)):
+            n = max(r["numeric"], 1)
+            rows.append(f"| 3D friction {f * f}× | {how} | {r['numeric']} | {r['analyses']} | "
+                        f"{r['analysis_s']:.3f} | {r['numeric_s']:.3f} | "
+                        f"{1e3 * r['factorization'] / n:.2f} | {r['wall']:.2f} | "
+                        f"{same:.1e} |")
+            print(rows[-1], flush=True)
+    head = ["| scene | MUMPS analysis | factorizations | analyses | analysis (s) | numeric "
+            "factorization (s) | factorization ms / iteration | time (s) | max |Δu| / max |u| "
+            "between the two |", "|---|---|---:|---:|---:|---:|---:|---:|---:|"]
+    return head + rows
+
+
 def picture(records: list[dict], data: list[tuple], path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
@@ -292,24 +511,62 @@ def picture(records: list[dict], data: list[tuple], path: Path) -> None:
 
 
 def main(argv=None) -> int:
+    from petsc4py import PETSc
+
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="smaller 3D box and surfaces; no files")
     bh.add_smoke(ap)
     args = ap.parse_args(argv)
     quick, smoke = args.quick or args.smoke, args.smoke
+    PETSc.Log.begin()   # the factorization events' counts (MUMPS analysis reuse)
+    load0 = bh.machine_info()["loadavg_start"]
+    refine = [1] if smoke else [1, 2] if quick else [1, 2, 4]
     with tempfile.TemporaryDirectory() as tmp:
         table, records = formulations_table(Path(tmp), quick, smoke)
+        its_table, split_table, _ = refinement_tables(Path(tmp), refine)
+        mumps = mumps_table(Path(tmp), [1] if smoke else [2] if quick else [2, 4])
     upd, data = update_times(quick, smoke)
+    load1 = bh.machine_info()["loadavg_start"]
     text = ("# Frictional contact: relations (the paper's) against penalty and augmented Lagrangian\n\n"
-            "`scripts/bench_friction.py`, one process, direct solver (MUMPS). penalty: default "
+            f"`scripts/bench_friction.py`{' --smoke' if smoke else ''}, one process, direct "
+            f"solver (MUMPS), {bh.utc_now()} UTC, {bh.load_line(load0, load1)} "
+            f"({bh.machine_info()['cpus']} cores shared with other jobs: times are indicative). "
+            "penalty: default "
             "100 E/h per unit area; penalty ×100: 10⁴ E/h; AL: Uzawa augmentations on the default "
             "penalty, tolerance 1e-6. Iterations: global Newton iterations per saved step (AL: "
             "augmentations included); failed steps were cut in two and retried by the driver (the iterations of failed attempts are not recorded in the result file and not counted here; the time includes them). "
             "Penetration: largest −gap over the largest |u|; cone violation: max(|Rt| − μRn) / "
-            "max μRn; error: block, the displacements against the relations form's (no analytic field; "
+            "max μRn; error: block, 3D oblique box and ironing, the displacements against the relations form's (no analytic field; "
             "N = pN and, sliding, T = μN hold to round-off in every formulation); wedge and box, the displacement field against the exact one (max norm, "
             "relative); Hertz, the peak nodal pressure against p0.\n\n"
-            + "\n".join(table) + "\n\n## Contact detection and update as the surface grows\n\n"
+            + "\n".join(table) + "\n\nBaselines, case by case:\n\n"
+            + "\n".join(baselines_summary(records))
+            + "\n\n## Global iterations against refinement\n\n"
+            "The relations form on the shipped scenes refined in cells: configs/contact_friction_3d.toml "
+            "with nx, ny × 1, 2, 4 (nz = 2 kept: the contact surface refined, cells × 1, 4, 16); "
+            "configs/contact_ironing_2d.toml on a generated equivalent of its .msh "
+            "(`bench_scenes.base_and_die_mesh`, byte-identical to the shipped file at 1×), the "
+            "slab's and the die's quads × 1, 2, 4 along x and y; configs/contact_ironing_3d.toml "
+            "the same way when it exists (a mesh file: 1× only). Per step: the global iterations "
+            "of each saved step.\n\n" + "\n".join(its_table)
+            + "\n\n## Time per iteration\n\n"
+            "Milliseconds per linear solve (one per Newton iteration, failed attempts included), same runs. "
+            "pairing: the contact effect's pairing functions inside the Newton (finite sliding's "
+            "re-pairing at each step and iteration; the first pairing, at set-up, is not counted); "
+            "contact refresh: the effects' begin_step / refresh hooks (`/timings/contact`) less "
+            "their pairing; assembly: element kernels (f_int and tangent) and the saddle "
+            "operator's assembly; factorization and solve: `/timings/factorization`, `solve` "
+            "(MUMPS); other: the rest of the run (active set, residuals, output).\n\n"
+            + "\n".join(split_table)
+            + "\n\n## MUMPS analysis across iterations\n\n"
+            "Counts of PETSc's log events MatLUFactorSym / MatCholFctrSym (analyses) and "
+            "MatLUFactorNum / MatCholFctrNum (numeric factorizations) over a run of the 3D "
+            "friction scene. parsolve keeps one KSP and one operator whose pattern never "
+            "changes (values rewritten in place), so PCSetUp sees SAME_NONZERO_PATTERN and "
+            "factors numerically only: one analysis per run. 'redone each iteration': the KSP "
+            "reset before every factorization, for comparison. factorization ms / iteration: "
+            "`/timings/factorization` over the factorizations.\n\n" + "\n".join(mumps)
+            + "\n\n## Contact detection and update as the surface grows\n\n"
             "Curved surfaces of `bench_pairing.py` (linear facets), best of 3. 'relations refresh': "
             "one friction_update + the frictional dual's values (what the relations form does "
             "between iterations); 'penalty': the nodal forces and consistent tangents (what the "

@@ -207,9 +207,16 @@ class LinearSolver:
         self.residual = residual
         return self.ksp.getIterationNumber()
 
+    def add_time(self, phase: str, seconds: float) -> None:
+        """Seconds of another phase of the step, recorded beside factorization and solve (the
+        Newton's contact hooks: /timings/contact)."""
+        self.timings[phase] = self.timings.get(phase, 0.0) + seconds
+
     def take_timings(self) -> dict[str, float]:
-        """Factorization and solve seconds since the last call."""
-        out, self.timings = self.timings, {"factorization": 0.0, "solve": 0.0}
+        """Seconds per phase since the last call (factorization, solve and any ``add_time``
+        phase: once recorded, a phase stays in every later step's timings, at 0 if it did not
+        run, as the result file's per-step datasets need)."""
+        out, self.timings = self.timings, dict.fromkeys(self.timings, 0.0)
         return out
 
     def negative_pivots(self) -> int | None:
