@@ -7,14 +7,27 @@ Cases (the scenes of tests/effects/test_contact.py, from scripts/bench_scenes.py
   wedge   the V-wedge of docs/contact.md §7, stick and slip side by side: exact field
   hertz   configs/contact_hertz_cylinder.toml (frictionless): Hertz's p0 and half-width
   box3d   the exact 3D sheared box (oblique shift, stick then slip), refined to 12×12×4 hex
+  3D box  configs/contact_friction_3d.toml as shipped (no analytic field)
+  ironing configs/contact_ironing_2d.toml (finite sliding; the baselines take rigid obstacles
+          only: their input error is the table's answer)
 Per run: global (Newton) iterations per step, wall time of the run, penetration, cone
-violation, error against the analytic solution, failed (cut) steps. Then contact detection
-(pairing) and the per-iteration contact update as the surface grows: the relations form's
-friction refresh (states + dual values) against the penalty's nodal forces and tangents.
+violation, error against the analytic solution, failed (cut) steps; one line per case on the
+baselines (converged, or why not). Then, for the relations form:
+  - global iterations per step against refinement (cells 1×, 4×, 16×) of the 3D friction and
+    ironing scenes (configs/contact_ironing_3d.toml too when it exists; --smoke: 1× only);
+  - the time per iteration split into pairing, contact refresh (/timings/contact: the Newton's
+    begin_step / refresh hooks), assembly, factorization, solve (in process: parsolve's
+    functions wrapped for the run, PETSc's log events);
+  - MUMPS' analysis across iterations (PETSc log events MatLUFactorSym / MatLUFactorNum): kept
+    (parsolve) against redone at each iteration, on the 3D friction scene at 4× and 16×;
+and contact detection (pairing) and the per-iteration contact update as the surface grows: the
+relations form's friction refresh (states + dual values) against the penalty's nodal forces and
+tangents.
 
     .venv/bin/python scripts/bench_friction.py [--quick | --smoke]
         → table, scripts/results/bench_friction.md and bench_friction.png
-        (--quick: printed only; --smoke: two small cases, files in a temporary folder)
+        (--quick: smaller sizes, printed only; --smoke: the small cases and 1× scenes, files
+        in a temporary folder, ~25 s)
 """
 
 from __future__ import annotations
@@ -71,7 +84,7 @@ def solve(text: str, work: Path, name: str) -> tuple[dict, float]:
     try:
         model = build_model(load_scene(path), MPI.COMM_WORLD)
     except InputError as exc:   # e.g. a baseline that does not take a deformable master
-        return {"status": f"input error: {exc}"}, 0.0
+        return {"status": f"input error: {exc}".replace(f"{work}/", "")}, 0.0
     t0 = time.perf_counter()
     try:
         run(MPI.COMM_WORLD, model, str(work / f"{name}.h5"), {}, None, log=lambda *a: None)
@@ -79,7 +92,7 @@ def solve(text: str, work: Path, name: str) -> tuple[dict, float]:
         print(f"  {name}: {exc}", flush=True)
     seconds = time.perf_counter() - t0
     with h5py.File(work / f"{name}.h5", "r") as f:
-        res = {"status": f.attrs["status"]}
+        res = {"status": str(f.attrs["status"]).replace(f"{work}/", "")}   # (no scratch path)
         f.visititems(lambda k, o: res.__setitem__(k, o[()]) if isinstance(o, h5py.Dataset) else None)
     return res, seconds
 
@@ -209,7 +222,7 @@ def formulations_table(work: Path, quick: bool, smoke: bool = False) -> tuple[li
             print(row, flush=True)
             rows.append(row)
     head = ["| case | formulation | steps saved | iterations / step (mean) | max | total | "
-            "time (s) | penetration / max|u| | cone violation | error | failed (cut) steps "
+            "time (s) | penetration / max \\|u\\| | cone violation | error | failed (cut) steps "
             "| status |", "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
     return head + rows, records
 
@@ -311,7 +324,10 @@ class PhaseClock:
         self._undo: list[tuple] = []
         self._depth: dict[str, int] = {}
 
-    def wrap(self, owner, attr: str, phase: str) -> None:
+    def wrap(self, owner, attr: str, phase: str, inside: str | None = None,
+             timer=time.perf_counter) -> None:
+        """Time ``owner.attr`` as ``phase`` (only its calls made within phase ``inside``;
+        ``timer``: time.process_time for the CPU seconds of this process)."""
         if not hasattr(owner, attr):   # (a pairing function another version may not have)
             return
         orig = owner.__dict__.get(attr, getattr(owner, attr))
@@ -319,14 +335,16 @@ class PhaseClock:
         self.seconds.setdefault(phase, 0.0)
 
         def timed(*args, **kw):
+            if inside is not None and not self._depth.get(inside, 0):
+                return func(*args, **kw)
             self._depth[phase] = self._depth.get(phase, 0) + 1
-            t0 = time.perf_counter()
+            t0 = timer()
             try:
                 return func(*args, **kw)
             finally:
                 self._depth[phase] -= 1
                 if self._depth[phase] == 0:
-                    self.seconds[phase] += time.perf_counter() - t0
+                    self.seconds[phase] += timer() - t0
         setattr(owner, attr, staticmethod(timed) if isinstance(orig, staticmethod) else timed)
         self._undo.append((owner, attr, orig))
 
@@ -337,18 +355,20 @@ class PhaseClock:
 
 
 def _pairing_and_assembly(clock: PhaseClock) -> None:
-    """Pairing: the contact effect's pairing functions (the finite sliding's re-pairing at
-    each step and iteration runs inside the Newton's contact hooks; the first pairing, in
-    build_model, is not timed). Assembly: the element kernels (f_int and tangent of every
+    """Pairing: the contact effect's pairing functions called from the Newton's contact hooks
+    (the finite sliding's re-pairing at each step and iteration; not the first pairing, in
+    build_model, nor any pairing for the output). Assembly: the element kernels (f_int and tangent of every
     effect) and the saddle operator's assembly."""
     from parsolve.effects import contact as contact_effect
     from parsolve.solvers.newton import NewtonSolver
     from parsolve.solvers.system import SaddleSystem
 
+    clock.wrap(NewtonSolver, "_begin_hooks", "hooks")
+    clock.wrap(NewtonSolver, "_refresh_hooks", "hooks")
     for name in ("pair_nodes", "pair_on", "mortar_pairing", "mortar_pairing_3d"):
-        clock.wrap(contact_effect, name, "pairing")
-    clock.wrap(NewtonSolver, "_evaluate", "assembly")
-    clock.wrap(SaddleSystem, "assemble", "assembly")
+        clock.wrap(contact_effect, name, "pairing", inside="hooks")
+    clock.wrap(NewtonSolver, "_evaluate", "kernels")
+    clock.wrap(SaddleSystem, "assemble", "operator")
 
 
 FACTOR_EVENTS = ("MatLUFactorSym", "MatLUFactorNum", "MatCholFctrSym", "MatCholFctrNum")
@@ -371,26 +391,32 @@ def instrumented(text: str, work: Path, name: str, extra=None) -> dict:
     _pairing_and_assembly(clock)
     if extra is not None:
         extra(clock)
-    ev0 = _events()
+    from parsolve.solvers.linear import LinearSolver   # (after ``extra``: its version timed)
+    clock.wrap(LinearSolver, "_prepare", "factorization_cpu", timer=time.process_time)
+    ev0, cpu0 = _events(), time.process_time()
     try:
         res, seconds = solve(text, work, name)
     finally:
         clock.restore()
+    cpu = time.process_time() - cpu0
     ev1 = _events()
     d = {k: (ev1[k][0] - ev0[k][0], ev1[k][1] - ev0[k][1]) for k in FACTOR_EVENTS}
     its = np.asarray(res.get("steps/iterations", np.zeros(0, int)))
 
     def timing(key):
         return float(np.sum(res[f"timings/{key}"])) if f"timings/{key}" in res else np.nan
-    contact = timing("contact")
+    # the hooks' time as parsolve records it (/timings/contact), else as timed here
+    contact = timing("contact") if "timings/contact" in res else clock.seconds["hooks"]
     return dict(status=res["status"], iterations=its, cuts=int(np.sum(res.get("steps/cuts", 0))),
-                wall=seconds, pairing=clock.seconds["pairing"],
-                refresh=contact - clock.seconds["pairing"], assembly=clock.seconds["assembly"],
+                wall=seconds, cpu=cpu, pairing=clock.seconds["pairing"],
+                refresh=contact - clock.seconds["pairing"], kernels=clock.seconds["kernels"],
+                operator=clock.seconds["operator"],
                 factorization=timing("factorization"), solve=timing("solve"),
                 analyses=d["MatLUFactorSym"][0] + d["MatCholFctrSym"][0],
                 numeric=d["MatLUFactorNum"][0] + d["MatCholFctrNum"][0],
                 analysis_s=d["MatLUFactorSym"][1] + d["MatCholFctrSym"][1],
                 numeric_s=d["MatLUFactorNum"][1] + d["MatCholFctrNum"][1],
+                factorization_cpu=clock.seconds["factorization_cpu"],
                 u=res.get("fields/displacement"), res=res)
 
 
@@ -419,9 +445,11 @@ def refinement_tables(work: Path, factors: list[int]) -> tuple[list[str], list[s
         status = "ok" if ok else " ".join(r["status"].split())
         its_rows.append(f"| {label} | {cells}× | {its.size} | {its.max() if its.size else '-'} | "
                         f"{its.mean() if its.size else float('nan'):.1f} | {int(its.sum())} | "
-                        f"{r['cuts']} | {' '.join(map(str, its))} | {r['wall']:.2f} | {status} |")
+                        f"{r['cuts']} | {' '.join(map(str, its))} | {r['wall']:.2f} | {r['cpu']:.2f} | "
+                        f"{status} |")
         n = max(r["numeric"], 1)   # linear solves: Newton iterations, failed attempts included
-        phases = [r[k] for k in ("pairing", "refresh", "assembly", "factorization", "solve")]
+        phases = [r[k] for k in ("pairing", "refresh", "kernels", "operator", "factorization",
+                                 "solve")]
         other = r["wall"] - sum(p for p in phases if np.isfinite(p))
         split_rows.append(f"| {label} | {cells}× | {r['numeric']} | "
                           + " | ".join(f"{1e3 * p / n:.2f}" for p in phases + [other])
@@ -429,11 +457,11 @@ def refinement_tables(work: Path, factors: list[int]) -> tuple[list[str], list[s
         print(its_rows[-1], flush=True)
         print(split_rows[-1], flush=True)
     its_head = ["| scene | cells | steps | max iterations / step | mean | total | failed (cut) "
-                "steps | per step | time (s) | status |",
-                "|---|---:|---:|---:|---:|---:|---:|---|---:|---|"]
-    split_head = ["| scene | cells | linear solves | pairing | contact refresh | assembly | "
-                  "factorization | solve | other | total (ms / iteration) |",
-                  "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+                "steps | per step | time (s) | CPU (s) | status |",
+                "|---|---:|---:|---:|---:|---:|---:|---|---:|---:|---|"]
+    split_head = ["| scene | cells | linear solves | pairing | contact refresh | assembly: "
+                  "kernels | assembly: operator | factorization | solve | other | total "
+                  "(ms / iteration) |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     return its_head + its_rows, split_head + split_rows, records
 
 
@@ -455,7 +483,9 @@ def _reanalyse(clock: PhaseClock) -> None:
 
 def mumps_table(work: Path, factors: list[int]) -> list[str]:
     """The analysis (symbolic factorization) kept across iterations, as parsolve does, against
-    redone at every iteration: counts from PETSc's log events, times."""
+    redone at every iteration: counts and times from PETSc's log events, and this process's
+    CPU seconds in the factorizations (less sensitive than clock time to the other jobs of a
+    shared machine). The saving: one analysis per factorization but the first."""
     rows = []
     for f in factors:
         text = friction_3d_scene(f)
@@ -467,13 +497,19 @@ def mumps_table(work: Path, factors: list[int]) -> list[str]:
         for how, r in (("kept (parsolve)", kept), ("redone each iteration", redone)):
             n = max(r["numeric"], 1)
             rows.append(f"| 3D friction {f * f}× | {how} | {r['numeric']} | {r['analyses']} | "
-                        f"{r['analysis_s']:.3f} | {r['numeric_s']:.3f} | "
-                        f"{1e3 * r['factorization'] / n:.2f} | {r['wall']:.2f} | "
-                        f"{same:.1e} |")
+                        f"{1e3 * r['analysis_s'] / max(r['analyses'], 1):.2f} | "
+                        f"{1e3 * r['numeric_s'] / n:.2f} | {1e3 * r['factorization'] / n:.2f} | "
+                        f"{1e3 * r['factorization_cpu'] / n:.2f} | {r['wall']:.2f} | {same:.1e} |")
             print(rows[-1], flush=True)
-    head = ["| scene | MUMPS analysis | factorizations | analyses | analysis (s) | numeric "
-            "factorization (s) | factorization ms / iteration | time (s) | max |Δu| / max |u| "
-            "between the two |", "|---|---|---:|---:|---:|---:|---:|---:|---:|"]
+        # what the reuse saves, in CPU (the clock times follow the machine's other jobs)
+        c_kept, c_redone = (r["factorization_cpu"] / max(r["numeric"], 1) for r in (kept, redone))
+        rows.append(f"| 3D friction {f * f}× | saved by the reuse | | | | | | "
+                    f"{1e3 * (c_redone - c_kept):.2f} per iteration "
+                    f"({100 * (1 - c_kept / max(c_redone, 1e-300)):.0f} %) | | |")
+    head = ["| scene | MUMPS analysis | factorizations | analyses | ms / analysis | ms / numeric "
+            "factorization | factorization ms / iteration | factorization CPU ms / iteration | "
+            "time (s) | max \\|Δu\\| / max \\|u\\| between the two |",
+            "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     return head + rows
 
 
@@ -550,12 +586,13 @@ def main(argv=None) -> int:
             "the same way when it exists (a mesh file: 1× only). Per step: the global iterations "
             "of each saved step.\n\n" + "\n".join(its_table)
             + "\n\n## Time per iteration\n\n"
-            "Milliseconds per linear solve (one per Newton iteration, failed attempts included), same runs. "
+            "Milliseconds (clock) per linear solve (one per Newton iteration, failed attempts included), same runs "
+            "(clock times on a loaded machine: compare the CPU column above for the whole run). "
             "pairing: the contact effect's pairing functions inside the Newton (finite sliding's "
             "re-pairing at each step and iteration; the first pairing, at set-up, is not counted); "
             "contact refresh: the effects' begin_step / refresh hooks (`/timings/contact`) less "
-            "their pairing; assembly: element kernels (f_int and tangent) and the saddle "
-            "operator's assembly; factorization and solve: `/timings/factorization`, `solve` "
+            "their pairing; assembly: the element kernels (f_int and tangent of every effect) "
+            "and the saddle operator's assembly from them; factorization and solve: `/timings/factorization`, `solve` "
             "(MUMPS); other: the rest of the run (active set, residuals, output).\n\n"
             + "\n".join(split_table)
             + "\n\n## MUMPS analysis across iterations\n\n"
@@ -564,8 +601,11 @@ def main(argv=None) -> int:
             "friction scene. parsolve keeps one KSP and one operator whose pattern never "
             "changes (values rewritten in place), so PCSetUp sees SAME_NONZERO_PATTERN and "
             "factors numerically only: one analysis per run. 'redone each iteration': the KSP "
-            "reset before every factorization, for comparison. factorization ms / iteration: "
-            "`/timings/factorization` over the factorizations.\n\n" + "\n".join(mumps)
+            "reset before every factorization, for comparison (the same answer: last column). "
+            "ms / analysis, ms / numeric factorization: the events' clock times; factorization "
+            "ms / iteration: `/timings/factorization` over the factorizations (the analysis, the "
+            "numeric factorization and MUMPS' copy of the matrix); CPU: this process's CPU "
+            "seconds in them, the measure to compare on a shared machine.\n\n" + "\n".join(mumps)
             + "\n\n## Contact detection and update as the surface grows\n\n"
             "Curved surfaces of `bench_pairing.py` (linear facets), best of 3. 'relations refresh': "
             "one friction_update + the frictional dual's values (what the relations form does "

@@ -93,6 +93,12 @@ class LinearSolver:
     allowed only if the operator is numerically symmetric: a non-symmetric one switches the
     factorization to LU (and says so in ``notes``), since MUMPS' Cholesky reads one triangle
     and would factor another matrix. Factorization (PCSetUp) and solve are timed apart.
+
+    One KSP for the run, on one operator whose values are rewritten in place (same pattern):
+    PCSetUp sees SAME_NONZERO_PATTERN and MUMPS factors numerically only, its analysis
+    (ordering, symbolic factorization) done once per run (tests/solvers/test_linear_reuse.py;
+    scripts/results/bench_friction.md measures what it saves). PETSc analyses again by itself
+    when the pattern changes (the matrix's nonzero state); a failed set-up resets the KSP.
     """
 
     def __init__(self, comm: MPI.Comm, prefix: str, settings: dict[str, str],
