@@ -19,12 +19,13 @@ baselines (converged, or why not). Then, for the relations form:
     begin_step / refresh hooks), assembly, factorization, solve (in process: parsolve's
     functions wrapped for the run, PETSc's log events);
   - MUMPS' analysis across iterations (PETSc log events MatLUFactorSym / MatLUFactorNum): kept
-    (parsolve) against redone at each iteration, on the 3D friction scene at 4× and 16×;
+    (parsolve) against redone at each iteration, on the 3D friction scene at 4× and 16×
+    (--max-cells 4: 4× only);
 and contact detection (pairing) and the per-iteration contact update as the surface grows: the
 relations form's friction refresh (states + dual values) against the penalty's nodal forces and
 tangents.
 
-    .venv/bin/python scripts/bench_friction.py [--quick | --smoke]
+    .venv/bin/python scripts/bench_friction.py [--quick | --smoke] [--max-cells 1|4|16]
         → table, scripts/results/bench_friction.md and bench_friction.png
         (--quick: smaller sizes, printed only; --smoke: the small cases and 1× scenes, files
         in a temporary folder, ~25 s)
@@ -551,16 +552,20 @@ def main(argv=None) -> int:
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="smaller 3D box and surfaces; no files")
+    ap.add_argument("--max-cells", type=int, default=16, choices=(1, 4, 16),
+                    help="largest refinement in cells of the refinement and MUMPS tables "
+                         "(default 16: 1×, 4×, 16×; 4 on a loaded machine)")
     bh.add_smoke(ap)
     args = ap.parse_args(argv)
     quick, smoke = args.quick or args.smoke, args.smoke
     PETSc.Log.begin()   # the factorization events' counts (MUMPS analysis reuse)
     load0 = bh.machine_info()["loadavg_start"]
-    refine = [1] if smoke else [1, 2] if quick else [1, 2, 4]
+    top = {1: 1, 4: 2, 16: 4}[1 if smoke else min(args.max_cells, 4 if quick else 16)]
+    refine = [f for f in (1, 2, 4) if f <= top]
     with tempfile.TemporaryDirectory() as tmp:
         table, records = formulations_table(Path(tmp), quick, smoke)
         its_table, split_table, _ = refinement_tables(Path(tmp), refine)
-        mumps = mumps_table(Path(tmp), [1] if smoke else [2] if quick else [2, 4])
+        mumps = mumps_table(Path(tmp), [f for f in refine if f > 1] or [1])
     upd, data = update_times(quick, smoke)
     load1 = bh.machine_info()["loadavg_start"]
     text = ("# Frictional contact: relations (the paper's) against penalty and augmented Lagrangian\n\n"
@@ -579,10 +584,12 @@ def main(argv=None) -> int:
             + "\n".join(baselines_summary(records))
             + "\n\n## Global iterations against refinement\n\n"
             "The relations form on the shipped scenes refined in cells: configs/contact_friction_3d.toml "
-            "with nx, ny × 1, 2, 4 (nz = 2 kept: the contact surface refined, cells × 1, 4, 16); "
+            f"with nx, ny × {', '.join(map(str, refine))} (nz = 2 kept: the contact surface "
+            f"refined, cells × {', '.join(str(f * f) for f in refine)}"
+            f"{'' if top == 4 or smoke else '; this run: --max-cells ' + str(top * top) + ', the larger sizes not run'}); "
             "configs/contact_ironing_2d.toml on a generated equivalent of its .msh "
             "(`bench_scenes.base_and_die_mesh`, byte-identical to the shipped file at 1×), the "
-            "slab's and the die's quads × 1, 2, 4 along x and y; configs/contact_ironing_3d.toml "
+            "slab's and the die's quads × the same factors along x and y; configs/contact_ironing_3d.toml "
             "the same way when it exists (a mesh file: 1× only). Per step: the global iterations "
             "of each saved step.\n\n" + "\n".join(its_table)
             + "\n\n## Time per iteration\n\n"
