@@ -7,19 +7,34 @@ Cases (the scenes of tests/effects/test_contact.py, from scripts/bench_scenes.py
   wedge   the V-wedge of docs/contact.md §7, stick and slip side by side: exact field
   hertz   configs/contact_hertz_cylinder.toml (frictionless): Hertz's p0 and half-width
   box3d   the exact 3D sheared box (oblique shift, stick then slip), refined to 12×12×4 hex
+  3D box  configs/contact_friction_3d.toml as shipped (no analytic field)
+  ironing configs/contact_ironing_2d.toml (finite sliding; the baselines take rigid obstacles
+          only: their input error is the table's answer)
 Per run: global (Newton) iterations per step, wall time of the run, penetration, cone
-violation, error against the analytic solution, failed (cut) steps. Then contact detection
-(pairing) and the per-iteration contact update as the surface grows: the relations form's
-friction refresh (states + dual values) against the penalty's nodal forces and tangents.
+violation, error against the analytic solution, failed (cut) steps; one line per case on the
+baselines (converged, or why not). Then, for the relations form:
+  - global iterations per step against refinement (cells 1×, 4×, 16×) of the 3D friction and
+    ironing scenes (configs/contact_ironing_3d.toml too when it exists; --smoke: 1× only);
+  - the time per iteration split into pairing, contact refresh (/timings/contact: the Newton's
+    begin_step / refresh hooks), assembly, factorization, solve (in process: parsolve's
+    functions wrapped for the run, PETSc's log events);
+  - MUMPS' analysis across iterations (PETSc log events MatLUFactorSym / MatLUFactorNum): kept
+    (parsolve) against redone at each iteration, on the 3D friction scene at 4× and 16×
+    (--max-cells 4: 4× only);
+and contact detection (pairing) and the per-iteration contact update as the surface grows: the
+relations form's friction refresh (states + dual values) against the penalty's nodal forces and
+tangents.
 
-    .venv/bin/python scripts/bench_friction.py [--quick | --smoke]
+    .venv/bin/python scripts/bench_friction.py [--quick | --smoke] [--max-cells 1|4|16]
         → table, scripts/results/bench_friction.md and bench_friction.png
-        (--quick: printed only; --smoke: two small cases, files in a temporary folder)
+        (--quick: smaller sizes, printed only; --smoke: the small cases and 1× scenes, files
+        in a temporary folder, ~25 s)
 """
 
 from __future__ import annotations
 
 import argparse
+import re
 import tempfile
 import time
 from pathlib import Path
@@ -31,7 +46,8 @@ from mpi4py import MPI
 
 import bench_harness as bh
 from bench_pairing import surface_2d, surface_3d  # (reused surfaces)
-from bench_scenes import G, LAM, sheared_box_scene, wedge_mesh, wedge_scene
+from bench_scenes import (G, LAM, friction_3d_scene, ironing_2d_scene, ironing_3d_scene,
+                          sheared_box_scene, wedge_mesh, wedge_scene)
 from parsolve.contact import friction as fr
 from parsolve.contact import references
 from parsolve.contact.pairing import pair_nodes
@@ -39,6 +55,7 @@ from parsolve.la.dofmap import DofMap
 from parsolve.contact.rows import friction_dual, normal_rows, tangent_rows
 from parsolve.driver import run
 from parsolve.effects.contact_penalty import PenaltyContact
+from parsolve.errors import InputError
 from parsolve.model import build_model
 from parsolve.scene import load_scene
 
@@ -66,7 +83,10 @@ def add_keys(text: str, lines: str) -> str:
 def solve(text: str, work: Path, name: str) -> tuple[dict, float]:
     path = work / f"{name}.toml"
     path.write_text(text)
-    model = build_model(load_scene(path), MPI.COMM_WORLD)
+    try:
+        model = build_model(load_scene(path), MPI.COMM_WORLD)
+    except InputError as exc:   # e.g. a baseline that does not take a deformable master
+        return {"status": f"input error: {exc}".replace(f"{work}/", "")}, 0.0
     t0 = time.perf_counter()
     try:
         run(MPI.COMM_WORLD, model, str(work / f"{name}.h5"), {}, None, log=lambda *a: None)
@@ -74,7 +94,7 @@ def solve(text: str, work: Path, name: str) -> tuple[dict, float]:
         print(f"  {name}: {exc}", flush=True)
     seconds = time.perf_counter() - t0
     with h5py.File(work / f"{name}.h5", "r") as f:
-        res = {"status": f.attrs["status"]}
+        res = {"status": str(f.attrs["status"]).replace(f"{work}/", "")}   # (no scratch path)
         f.visititems(lambda k, o: res.__setitem__(k, o[()]) if isinstance(o, h5py.Dataset) else None)
     return res, seconds
 
@@ -107,6 +127,25 @@ def case_block(work: Path):
     return "block 2D (8×4 quad)", text, ["base"], MU, error, 0.125
 
 
+def _against_first(res, first):
+    """No analytic field: the displacements against the relations form's at its steps."""
+    keep = [int(np.argmin(np.abs(res["steps/time"] - t))) for t in first["steps/time"]]
+    u, u_ref = res["fields/displacement"][keep], first["fields/displacement"]
+    return float(np.abs(u - u_ref).max() / np.abs(u_ref).max())
+
+
+def case_friction_3d(work: Path):
+    """configs/contact_friction_3d.toml as shipped (no analytic field)."""
+    return ("box 3D oblique shift (6×6×2 hex)", friction_3d_scene(1), ["base"], MU,
+            _against_first, 1.0 / 6)
+
+
+def case_ironing(work: Path):
+    """configs/contact_ironing_2d.toml (finite sliding on a deformable slab)."""
+    return ("ironing 2D (32×8 + 4×2 quad)", ironing_2d_scene(work, 1), ["ironing"], MU,
+            _against_first, 0.125)
+
+
 def case_wedge(work: Path):
     beta, kappa = np.pi / 4, -1e-3
     ref = references.wedge_stick_slip(LAM, G, beta, kappa)
@@ -118,7 +157,7 @@ def case_wedge(work: Path):
         pts = res["mesh/points"]
         exact = np.array([t * ref.displacement(pts) for t in res["steps/time"]])
         return float(np.abs(res["fields/displacement"] - exact).max() / np.abs(exact).max())
-    return "V-wedge 2D (stick|slip, exact)", text, ["one", "two"], ref.mu, error, 0.25
+    return "V-wedge 2D (stick and slip, exact)", text, ["one", "two"], ref.mu, error, 0.25
 
 
 def case_hertz(work: Path):
@@ -159,7 +198,7 @@ def formulations_table(work: Path, quick: bool, smoke: bool = False) -> tuple[li
         cases = [case_wedge(work), case_box(work, 3)]
     else:
         cases = [case_block(work), case_wedge(work), case_hertz(work),
-                 case_box(work, 6 if quick else 12)]
+                 case_box(work, 6 if quick else 12), case_friction_3d(work), case_ironing(work)]
     rows, records = [], []
     for label, text, names, mu, error, h in cases:
         big = 100 * 100 * E / h
@@ -177,7 +216,7 @@ def formulations_table(work: Path, quick: bool, smoke: bool = False) -> tuple[li
             rec = dict(case=label, form=form, steps=its.size, its_mean=float(its.mean()) if its.size else 0,
                        its_max=int(its.max()) if its.size else 0, its_total=int(its.sum()),
                        seconds=seconds, penetration=pen / umax, cone=cone, error=err, cuts=cuts,
-                       status="ok" if ok else res["status"][:60])
+                       status="ok" if ok else res["status"][:60], reason=res["status"])
             records.append(rec)
             row = (f"| {label} | {form} | {rec['steps']} | {rec['its_mean']:.1f} | {rec['its_max']} | "
                    f"{rec['its_total']} | {seconds:.2f} | {rec['penetration']:.1e} | "
@@ -185,9 +224,29 @@ def formulations_table(work: Path, quick: bool, smoke: bool = False) -> tuple[li
             print(row, flush=True)
             rows.append(row)
     head = ["| case | formulation | steps saved | iterations / step (mean) | max | total | "
-            "time (s) | penetration / max|u| | cone violation | error | failed (cut) steps "
+            "time (s) | penetration / max \\|u\\| | cone violation | error | failed (cut) steps "
             "| status |", "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
     return head + rows, records
+
+
+def baselines_summary(records: list[dict]) -> list[str]:
+    """One line per case: which baselines converge, and why the others do not."""
+    lines = []
+    for case in dict.fromkeys(r["case"] for r in records):
+        recs = [r for r in records if r["case"] == case and r["form"] != "relations"]
+        ok = [r["form"] for r in recs if r["status"] == "ok"]
+        cut = [f"{r['form']} after {r['cuts']} cut steps" for r in recs
+               if r["status"] == "ok" and r["cuts"]]
+        bad = [r for r in recs if r["status"] != "ok"]
+        line = f"- {case}: " + (", ".join(ok) + " converge" if ok else "no baseline converges")
+        line += f" ({'; '.join(cut)})" if cut else ""
+        # the same reason once (the scene file's name apart), with the formulations it stops
+        why = {r["form"]: re.sub(r"^(input error: )\S+\.toml: ", r"\1", " ".join(r["reason"].split()))
+               for r in bad}
+        line += "".join(f"; {', '.join(f for f in why if why[f] == w)}: {w}"
+                        for w in dict.fromkeys(why.values()))
+        lines.append(line + ".")
+    return lines
 
 
 def bare_penalty(pairing, mu: float, eps: float, dim: int, npoints: int) -> PenaltyContact:
@@ -259,6 +318,208 @@ def update_times(quick: bool, smoke: bool = False) -> tuple[list[str], list[tupl
     return head + rows, data
 
 
+# ----------------------------------------------------------------------------- refinement
+
+
+class PhaseClock:
+    """Seconds spent in some functions during a run, in process: each is wrapped for the run
+    and put back after (the benchmark's instrumentation; parsolve itself records
+    /timings/factorization, solve and contact per step). A phase counts its outermost call."""
+
+    def __init__(self):
+        self.seconds: dict[str, float] = {}
+        self._undo: list[tuple] = []
+        self._depth: dict[str, int] = {}
+
+    def wrap(self, owner, attr: str, phase: str, inside: str | None = None,
+             timer=time.perf_counter) -> None:
+        """Time ``owner.attr`` as ``phase`` (only its calls made within phase ``inside``;
+        ``timer``: time.process_time for the CPU seconds of this process)."""
+        if not hasattr(owner, attr):   # (a pairing function another version may not have)
+            return
+        orig = owner.__dict__.get(attr, getattr(owner, attr))
+        func = orig.__func__ if isinstance(orig, staticmethod) else orig
+        self.seconds.setdefault(phase, 0.0)
+
+        def timed(*args, **kw):
+            if inside is not None and not self._depth.get(inside, 0):
+                return func(*args, **kw)
+            self._depth[phase] = self._depth.get(phase, 0) + 1
+            t0 = timer()
+            try:
+                return func(*args, **kw)
+            finally:
+                self._depth[phase] -= 1
+                if self._depth[phase] == 0:
+                    self.seconds[phase] += timer() - t0
+        setattr(owner, attr, staticmethod(timed) if isinstance(orig, staticmethod) else timed)
+        self._undo.append((owner, attr, orig))
+
+    def restore(self) -> None:
+        for owner, attr, orig in reversed(self._undo):
+            setattr(owner, attr, orig)
+        self._undo.clear()
+
+
+def _pairing_and_assembly(clock: PhaseClock) -> None:
+    """Pairing: the contact effect's pairing functions called from the Newton's contact hooks
+    (the finite sliding's re-pairing at each step and iteration; not the first pairing, in
+    build_model, nor any pairing for the output). Assembly: the element kernels (f_int and tangent of every
+    effect) and the saddle operator's assembly."""
+    from parsolve.effects import contact as contact_effect
+    from parsolve.solvers.newton import NewtonSolver
+    from parsolve.solvers.system import SaddleSystem
+
+    clock.wrap(NewtonSolver, "_begin_hooks", "hooks")
+    clock.wrap(NewtonSolver, "_refresh_hooks", "hooks")
+    for name in ("pair_nodes", "pair_on", "mortar_pairing", "mortar_pairing_3d"):
+        clock.wrap(contact_effect, name, "pairing", inside="hooks")
+    clock.wrap(NewtonSolver, "_evaluate", "kernels")
+    clock.wrap(SaddleSystem, "assemble", "operator")
+
+
+FACTOR_EVENTS = ("MatLUFactorSym", "MatLUFactorNum", "MatCholFctrSym", "MatCholFctrNum")
+
+
+def _events() -> dict[str, tuple[int, float]]:
+    """(count, seconds) of PETSc's factorization log events so far (this process)."""
+    from petsc4py import PETSc
+
+    out = {}
+    for name in FACTOR_EVENTS:
+        info = PETSc.Log.Event(name).getPerfInfo()
+        out[name] = (int(info["count"]), float(info["time"]))
+    return out
+
+
+def instrumented(text: str, work: Path, name: str, extra=None) -> dict:
+    """One run in process with the phases timed; ``extra(clock)``: more wrappers."""
+    clock = PhaseClock()
+    _pairing_and_assembly(clock)
+    if extra is not None:
+        extra(clock)
+    from parsolve.solvers.linear import LinearSolver   # (after ``extra``: its version timed)
+    clock.wrap(LinearSolver, "_prepare", "factorization_cpu", timer=time.process_time)
+    ev0, cpu0 = _events(), time.process_time()
+    try:
+        res, seconds = solve(text, work, name)
+    finally:
+        clock.restore()
+    cpu = time.process_time() - cpu0
+    ev1 = _events()
+    d = {k: (ev1[k][0] - ev0[k][0], ev1[k][1] - ev0[k][1]) for k in FACTOR_EVENTS}
+    its = np.asarray(res.get("steps/iterations", np.zeros(0, int)))
+
+    def timing(key):
+        return float(np.sum(res[f"timings/{key}"])) if f"timings/{key}" in res else np.nan
+    # the hooks' time as parsolve records it (/timings/contact), else as timed here
+    contact = timing("contact") if "timings/contact" in res else clock.seconds["hooks"]
+    return dict(status=res["status"], iterations=its, cuts=int(np.sum(res.get("steps/cuts", 0))),
+                wall=seconds, cpu=cpu, pairing=clock.seconds["pairing"],
+                refresh=contact - clock.seconds["pairing"], kernels=clock.seconds["kernels"],
+                operator=clock.seconds["operator"],
+                factorization=timing("factorization"), solve=timing("solve"),
+                analyses=d["MatLUFactorSym"][0] + d["MatCholFctrSym"][0],
+                numeric=d["MatLUFactorNum"][0] + d["MatCholFctrNum"][0],
+                analysis_s=d["MatLUFactorSym"][1] + d["MatCholFctrSym"][1],
+                numeric_s=d["MatLUFactorNum"][1] + d["MatCholFctrNum"][1],
+                factorization_cpu=clock.seconds["factorization_cpu"],
+                u=res.get("fields/displacement"), res=res)
+
+
+def refinement_cases(work: Path, factors: list[int]) -> list[tuple[str, int, str]]:
+    """(scene, refinement in cells, scene text): the shipped 3D friction and ironing scenes,
+    their surface's cells × factor along each direction (cells × factor²); the 3D ironing
+    when configs/ has it."""
+    cases = [("3D friction (contact_friction_3d)", f * f, friction_3d_scene(f)) for f in factors]
+    cases += [("ironing 2D (contact_ironing_2d)", f * f, ironing_2d_scene(work, f)) for f in factors]
+    for f in factors:
+        text = ironing_3d_scene(f)
+        if text is not None:
+            cases.append(("ironing 3D (contact_ironing_3d)", f * f, text))
+    return cases
+
+
+def refinement_tables(work: Path, factors: list[int]) -> tuple[list[str], list[str], list[dict]]:
+    """Global iterations per step against refinement, and the time split per iteration."""
+    its_rows, split_rows, records = [], [], []
+    for label, cells, text in refinement_cases(work, factors):
+        r = instrumented(text, work, f"refine_{len(records)}")
+        r.update(case=label, cells=cells)
+        records.append(r)
+        its = r["iterations"]
+        ok = r["status"] == "complete"
+        status = "ok" if ok else " ".join(r["status"].split())
+        its_rows.append(f"| {label} | {cells}× | {its.size} | {its.max() if its.size else '-'} | "
+                        f"{its.mean() if its.size else float('nan'):.1f} | {int(its.sum())} | "
+                        f"{r['cuts']} | {' '.join(map(str, its))} | {r['wall']:.2f} | {r['cpu']:.2f} | "
+                        f"{status} |")
+        n = max(r["numeric"], 1)   # linear solves: Newton iterations, failed attempts included
+        phases = [r[k] for k in ("pairing", "refresh", "kernels", "operator", "factorization",
+                                 "solve")]
+        other = r["wall"] - sum(p for p in phases if np.isfinite(p))
+        split_rows.append(f"| {label} | {cells}× | {r['numeric']} | "
+                          + " | ".join(f"{1e3 * p / n:.2f}" for p in phases + [other])
+                          + f" | {1e3 * r['wall'] / n:.2f} |")
+        print(its_rows[-1], flush=True)
+        print(split_rows[-1], flush=True)
+    its_head = ["| scene | cells | steps | max iterations / step | mean | total | failed (cut) "
+                "steps | per step | time (s) | CPU (s) | status |",
+                "|---|---:|---:|---:|---:|---:|---:|---|---:|---:|---|"]
+    split_head = ["| scene | cells | linear solves | pairing | contact refresh | assembly: "
+                  "kernels | assembly: operator | factorization | solve | other | total "
+                  "(ms / iteration) |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    return its_head + its_rows, split_head + split_rows, records
+
+
+def _reanalyse(clock: PhaseClock) -> None:
+    """For comparison: the KSP reset before every factorization whose operator changed, so
+    that MUMPS analyses again (what a solver rebuilt at each iteration would pay)."""
+    from parsolve.solvers.linear import LinearSolver
+
+    orig = LinearSolver._prepare
+
+    def prepare(self):
+        mat = self.ksp.getOperators()[0]
+        if self._state is not None and mat.stateGet() != self._state:
+            self._restart(mat)
+        return orig(self)
+    LinearSolver._prepare = prepare
+    clock._undo.append((LinearSolver, "_prepare", orig))
+
+
+def mumps_table(work: Path, factors: list[int]) -> list[str]:
+    """The analysis (symbolic factorization) kept across iterations, as parsolve does, against
+    redone at every iteration: counts and times from PETSc's log events, and this process's
+    CPU seconds in the factorizations (less sensitive than clock time to the other jobs of a
+    shared machine). The saving: one analysis per factorization but the first."""
+    rows = []
+    for f in factors:
+        text = friction_3d_scene(f)
+        kept = instrumented(text, work, f"mumps_kept_{f}")
+        redone = instrumented(text, work, f"mumps_redone_{f}", _reanalyse)
+        same = (float(np.abs(kept["u"] - redone["u"]).max() / np.abs(kept["u"]).max())
+                if kept["u"] is not None and redone["u"] is not None
+                and kept["u"].shape == redone["u"].shape else np.nan)
+        for how, r in (("kept (parsolve)", kept), ("redone each iteration", redone)):
+            n = max(r["numeric"], 1)
+            rows.append(f"| 3D friction {f * f}× | {how} | {r['numeric']} | {r['analyses']} | "
+                        f"{1e3 * r['analysis_s'] / max(r['analyses'], 1):.2f} | "
+                        f"{1e3 * r['numeric_s'] / n:.2f} | {1e3 * r['factorization'] / n:.2f} | "
+                        f"{1e3 * r['factorization_cpu'] / n:.2f} | {r['wall']:.2f} | {same:.1e} |")
+            print(rows[-1], flush=True)
+        # what the reuse saves, in CPU (the clock times follow the machine's other jobs)
+        c_kept, c_redone = (r["factorization_cpu"] / max(r["numeric"], 1) for r in (kept, redone))
+        rows.append(f"| 3D friction {f * f}× | saved by the reuse | | | | | | "
+                    f"{1e3 * (c_redone - c_kept):.2f} per iteration "
+                    f"({100 * (1 - c_kept / max(c_redone, 1e-300)):.0f} %) | | |")
+    head = ["| scene | MUMPS analysis | factorizations | analyses | ms / analysis | ms / numeric "
+            "factorization | factorization ms / iteration | factorization CPU ms / iteration | "
+            "time (s) | max \\|Δu\\| / max \\|u\\| between the two |",
+            "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    return head + rows
+
+
 def picture(records: list[dict], data: list[tuple], path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
@@ -293,24 +554,72 @@ def picture(records: list[dict], data: list[tuple], path: Path) -> None:
 
 
 def main(argv=None) -> int:
+    from petsc4py import PETSc
+
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="smaller 3D box and surfaces; no files")
+    ap.add_argument("--max-cells", type=int, default=16, choices=(1, 4, 16),
+                    help="largest refinement in cells of the refinement and MUMPS tables "
+                         "(default 16: 1×, 4×, 16×; 4 on a loaded machine)")
     bh.add_smoke(ap)
     args = ap.parse_args(argv)
     quick, smoke = args.quick or args.smoke, args.smoke
+    PETSc.Log.begin()   # the factorization events' counts (MUMPS analysis reuse)
+    load0 = bh.machine_info()["loadavg_start"]
+    top = {1: 1, 4: 2, 16: 4}[1 if smoke else min(args.max_cells, 4 if quick else 16)]
+    refine = [f for f in (1, 2, 4) if f <= top]
     with tempfile.TemporaryDirectory() as tmp:
         table, records = formulations_table(Path(tmp), quick, smoke)
+        its_table, split_table, _ = refinement_tables(Path(tmp), refine)
+        mumps = mumps_table(Path(tmp), [f for f in refine if f > 1] or [1])
     upd, data = update_times(quick, smoke)
+    load1 = bh.machine_info()["loadavg_start"]
     text = ("# Frictional contact: relations (the paper's) against penalty and augmented Lagrangian\n\n"
-            "`scripts/bench_friction.py`, one process, direct solver (MUMPS). penalty: default "
+            f"`scripts/bench_friction.py`{' --smoke' if smoke else ''}, one process, direct "
+            f"solver (MUMPS), {bh.utc_now()} UTC, {bh.load_line(load0, load1)} "
+            f"({bh.machine_info()['cpus']} cores shared with other jobs: times are indicative). "
+            "penalty: default "
             "100 E/h per unit area; penalty ×100: 10⁴ E/h; AL: Uzawa augmentations on the default "
             "penalty, tolerance 1e-6. Iterations: global Newton iterations per saved step (AL: "
             "augmentations included); failed steps were cut in two and retried by the driver (the iterations of failed attempts are not recorded in the result file and not counted here; the time includes them). "
             "Penetration: largest −gap over the largest |u|; cone violation: max(|Rt| − μRn) / "
-            "max μRn; error: block, the displacements against the relations form's (no analytic field; "
+            "max μRn; error: block, 3D oblique box and ironing, the displacements against the relations form's (no analytic field; "
             "N = pN and, sliding, T = μN hold to round-off in every formulation); wedge and box, the displacement field against the exact one (max norm, "
             "relative); Hertz, the peak nodal pressure against p0.\n\n"
-            + "\n".join(table) + "\n\n## Contact detection and update as the surface grows\n\n"
+            + "\n".join(table) + "\n\nBaselines, case by case:\n\n"
+            + "\n".join(baselines_summary(records))
+            + "\n\n## Global iterations against refinement\n\n"
+            "The relations form on the shipped scenes refined in cells: configs/contact_friction_3d.toml "
+            f"with nx, ny × {', '.join(map(str, refine))} (nz = 2 kept: the contact surface "
+            f"refined, cells × {', '.join(str(f * f) for f in refine)}"
+            f"{'' if top == 4 or smoke else '; this run: --max-cells ' + str(top * top) + ', the larger sizes not run'}); "
+            "configs/contact_ironing_2d.toml on a generated equivalent of its .msh "
+            "(`bench_scenes.base_and_die_mesh`, byte-identical to the shipped file at 1×), the "
+            "slab's and the die's quads × the same factors along x and y; configs/contact_ironing_3d.toml "
+            "the same way when it exists (a mesh file: 1× only). Per step: the global iterations "
+            "of each saved step.\n\n" + "\n".join(its_table)
+            + "\n\n## Time per iteration\n\n"
+            "Milliseconds (clock) per linear solve (one per Newton iteration, failed attempts included), same runs "
+            "(clock times on a loaded machine: compare the CPU column above for the whole run). "
+            "pairing: the contact effect's pairing functions inside the Newton (finite sliding's "
+            "re-pairing at each step and iteration; the first pairing, at set-up, is not counted); "
+            "contact refresh: the effects' begin_step / refresh hooks (`/timings/contact`) less "
+            "their pairing; assembly: the element kernels (f_int and tangent of every effect) "
+            "and the saddle operator's assembly from them; factorization and solve: `/timings/factorization`, `solve` "
+            "(MUMPS); other: the rest of the run (active set, residuals, output).\n\n"
+            + "\n".join(split_table)
+            + "\n\n## MUMPS analysis across iterations\n\n"
+            "Counts of PETSc's log events MatLUFactorSym / MatCholFctrSym (analyses) and "
+            "MatLUFactorNum / MatCholFctrNum (numeric factorizations) over a run of the 3D "
+            "friction scene. parsolve keeps one KSP and one operator whose pattern never "
+            "changes (values rewritten in place), so PCSetUp sees SAME_NONZERO_PATTERN and "
+            "factors numerically only: one analysis per run. 'redone each iteration': the KSP "
+            "reset before every factorization, for comparison (the same answer: last column). "
+            "ms / analysis, ms / numeric factorization: the events' clock times; factorization "
+            "ms / iteration: `/timings/factorization` over the factorizations (the analysis, the "
+            "numeric factorization and MUMPS' copy of the matrix); CPU: this process's CPU "
+            "seconds in them, the measure to compare on a shared machine.\n\n" + "\n".join(mumps)
+            + "\n\n## Contact detection and update as the surface grows\n\n"
             "Curved surfaces of `bench_pairing.py` (linear facets), best of 3. 'relations refresh': "
             "one friction_update + the frictional dual's values (what the relations form does "
             "between iterations); 'penalty': the nodal forces and consistent tangents (what the "

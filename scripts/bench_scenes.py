@@ -159,3 +159,99 @@ friction = {ref.mu!r}
 [steps]
 count = 3
 """
+
+
+# ----------------------------------------------------------------------------- refined scenes
+# (scripts/bench_friction.py's iterations against refinement: the shipped scenes, their cell
+# counts multiplied by ``factor`` along each surface direction, so the cells by factor²)
+
+def _shipped(name: str) -> dict:
+    import tomllib
+    from pathlib import Path
+
+    with open(Path(__file__).resolve().parents[1] / "configs" / name, "rb") as f:
+        scene = tomllib.load(f)
+    scene.pop("output", None)   # the benchmark names its own result file
+    return scene
+
+
+def _dumps(scene: dict) -> str:
+    from parsolve.batch.toml_write import dumps
+
+    return dumps(scene)
+
+
+def friction_3d_scene(factor: int) -> str:
+    """configs/contact_friction_3d.toml with nx, ny × factor (nz kept: the contact surface
+    refined, factor² the cells, the 0.25 thickness still two layers)."""
+    scene = _shipped("contact_friction_3d.toml")
+    scene["mesh"]["nx"] *= factor
+    scene["mesh"]["ny"] *= factor
+    return _dumps(scene)
+
+
+IRONING_SLAB, IRONING_DIE = (4.0, 1.0, 32, 8), (0.5, 0.25, 4, 2, 0.5)   # contact_ironing_2d.msh
+
+
+def base_and_die_mesh(path, base_box, die_box) -> None:
+    """Gmsh 2.2 file: cells base ([0, lx] × [0, ly], nx × ny quads) and die (its lx, ly, nx,
+    ny and left end x0, on top of the base), facet groups base_top/bottom/left/right and
+    die_top/bottom; the interface nodes distinct. The generator of the shipped
+    configs/contact_ironing_2d.msh (tests/effects/test_contact_sliding.py, base_and_die): at
+    the shipped counts, the same points, cells and groups in the same order."""
+    import meshio
+
+    from parsolve.mesh.generators import rectangle
+
+    lx, ly, nx, ny = base_box
+    base = rectangle(lx, ly, nx, ny)
+    dlx, dly, dnx, dny, x0 = die_box
+    die = rectangle(dlx, dly, dnx, dny, origin=(x0, ly))
+    off = base.num_points
+    points = np.vstack([base.points, die.points])
+    lines = [(f"base_{s}", base.facet_groups[s]) for s in ("top", "bottom", "left", "right")]
+    lines += [(f"die_{s}", die.facet_groups[s] + off) for s in ("top", "bottom")]
+    blocks = [("quad", base.cells), ("quad", die.cells + off)] + [("line", f) for _, f in lines]
+    tags = [1, 2] + [10 + i for i in range(len(lines))]
+    phys = [np.full(len(b[1]), tag) for b, tag in zip(blocks, tags)]
+    field = {"base": np.array([1, 2]), "die": np.array([2, 2])}
+    field.update({name: np.array([10 + i, 1]) for i, (name, _) in enumerate(lines)})
+    mesh = meshio.Mesh(np.column_stack([points, np.zeros(len(points))]), blocks,
+                       cell_data={"gmsh:physical": phys, "gmsh:geometrical": phys},
+                       field_data=field)
+    meshio.write(str(path), mesh, file_format="gmsh22", binary=False)
+
+
+def ironing_2d_scene(folder, factor: int) -> str:
+    """configs/contact_ironing_2d.toml on a generated equivalent of its mesh, the slab's and
+    the die's quads × factor along x and y (written into ``folder``)."""
+    from pathlib import Path
+
+    (lx, ly, nx, ny), (dlx, dly, dnx, dny, x0) = IRONING_SLAB, IRONING_DIE
+    mesh = Path(folder) / f"ironing_2d_{factor}.msh"
+    base_and_die_mesh(mesh, (lx, ly, nx * factor, ny * factor),
+                      (dlx, dly, dnx * factor, dny * factor, x0))
+    scene = _shipped("contact_ironing_2d.toml")
+    scene["mesh"] = {"file": str(mesh)}
+    return _dumps(scene)
+
+
+def ironing_3d_scene(factor: int) -> str | None:
+    """configs/contact_ironing_3d.toml if it exists (else None): a generated mesh with nx, ny
+    × factor (nz kept); a mesh file only at factor 1 (None otherwise: no generator to refine)."""
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "configs" / "contact_ironing_3d.toml"
+    if not path.exists():
+        return None
+    scene = _shipped(path.name)
+    mesh = scene["mesh"]
+    if "file" in mesh:
+        if factor != 1:
+            return None
+        mesh["file"] = str(path.parent / mesh["file"])
+    else:
+        for key in ("nx", "ny"):
+            if key in mesh:
+                mesh[key] *= factor
+    return _dumps(scene)

@@ -93,6 +93,12 @@ class LinearSolver:
     allowed only if the operator is numerically symmetric: a non-symmetric one switches the
     factorization to LU (and says so in ``notes``), since MUMPS' Cholesky reads one triangle
     and would factor another matrix. Factorization (PCSetUp) and solve are timed apart.
+
+    One KSP for the run, on one operator whose values are rewritten in place (same pattern):
+    PCSetUp sees SAME_NONZERO_PATTERN and MUMPS factors numerically only, its analysis
+    (ordering, symbolic factorization) done once per run (tests/solvers/test_linear_reuse.py;
+    scripts/results/bench_friction.md measures what it saves). PETSc analyses again by itself
+    when the pattern changes (the matrix's nonzero state); a failed set-up resets the KSP.
     """
 
     def __init__(self, comm: MPI.Comm, prefix: str, settings: dict[str, str],
@@ -207,9 +213,16 @@ class LinearSolver:
         self.residual = residual
         return self.ksp.getIterationNumber()
 
+    def add_time(self, phase: str, seconds: float) -> None:
+        """Seconds of another phase of the step, recorded beside factorization and solve (the
+        Newton's contact hooks: /timings/contact)."""
+        self.timings[phase] = self.timings.get(phase, 0.0) + seconds
+
     def take_timings(self) -> dict[str, float]:
-        """Factorization and solve seconds since the last call."""
-        out, self.timings = self.timings, {"factorization": 0.0, "solve": 0.0}
+        """Seconds per phase since the last call (factorization, solve and any ``add_time``
+        phase: once recorded, a phase stays in every later step's timings, at 0 if it did not
+        run, as the result file's per-step datasets need)."""
+        out, self.timings = self.timings, dict.fromkeys(self.timings, 0.0)
         return out
 
     def negative_pivots(self) -> int | None:

@@ -12,6 +12,7 @@ play, the last increment is small, and the active set did not change.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -244,8 +245,10 @@ class NewtonSolver:
     def step(self, t: float) -> StepResult:
         system, spec = self.system, self.spec
         free = system.free_rows()
-        if self.hooks:
+        if self.hooks:   # contact hooks timed apart: /timings/contact
+            t0 = time.perf_counter()
             self._begin_hooks()
+            self.linear.add_time("contact", time.perf_counter() - t0)
         self.active.start_step()
         self._start_rate(t)
         f_known = self.external(t)
@@ -311,7 +314,9 @@ class NewtonSolver:
             self.x_full = x_full
             changed = self._update_active(t) if self.active.unilateral else False
             if self.hooks:
+                t0 = time.perf_counter()
                 changed = self._refresh_hooks() or changed
+                self.linear.add_time("contact", time.perf_counter() - t0)
         history = ", ".join(f"{r:.1e}" for r in self.residual_history[-6:])
         trend = "diverged" if len(self.residual_history) > 2 and \
             self.residual_history[-1] > self.residual_history[1] else "did not converge"
