@@ -172,7 +172,8 @@ class SaddleSystem:
         self.op.eliminate(self.kscale)
         mat = self.op.petsc_matrix()
         self.assembled = True
-        self.timings["assembly"] = time.perf_counter() - t0
+        # summed over a step's assemblies (one per Newton iteration); the driver takes it per step
+        self.timings["assembly"] = self.timings.get("assembly", 0.0) + time.perf_counter() - t0
         return mat
 
     def _place_stiffness(self, ke) -> None:

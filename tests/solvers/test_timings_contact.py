@@ -17,6 +17,8 @@ def test_contact_hooks_timed_per_step(run):
     contact = res["timings/contact"]
     assert np.all(contact > 0.0)   # every step begins and refreshes its friction states
     assert np.all(contact <= res["timings/total"])
+    # every assembly of a step is counted (not the last one alone), and no more than the step
+    assert np.all(res["timings/assembly"] > 0) and np.all(res["timings/assembly"] <= res["timings/total"])
 
 
 def test_no_contact_no_contact_timing(run):
