@@ -74,8 +74,8 @@ Scene schema::
     #                                mortar3d on triangle and quad faces in 3D)
     closed = 1e-9                  # initial gaps ≤ this (relative to the mesh size) start closed
     #                                (a floating body needs no larger one: see above)
-    sliding = "finite"             # "small" (default: paired once) or "finite" (2D, master
-    #                                region, node_to_segment: see below)
+    sliding = "finite"             # "small" (default: paired once) or "finite" (master
+    #                                region, node_to_segment; 2D and 3D: see below)
 
 Finite sliding (``sliding = "finite"``): the slaves are paired again on the current (displaced)
 configuration at each step's start and after each solve, until the rows stop changing (their
@@ -87,7 +87,16 @@ where a facet is not the current one: the operator's pattern never changes, and 
 slides out of its span stops the run (exit 3, naming ``search_radius``). The stick rows hold
 the master's material point faced at the step's start, on whatever facet it now is; the slip
 output is the total over the steps. Small strain: the bodies' stiffness is the initial one,
-the contact geometry the current one.
+the contact geometry the current one. In 3D (node-to-face: triangle, quad, triangle6 faces)
+the two stick rows per slave run along the slip direction s and across it over the span, and
+hold both components of the slip since the step's start; the tangent basis (t1, t2 = n × t1)
+is not the facet's own but the initial t1 projected on the current tangent plane, so that the
+slip direction, written in it, does not jump when a slave crosses to a facet numbered from
+another corner (``reference_frame``). Limits: a slave at a concave edge or kink of the
+deformed master (an indentation's rim), held to one facet, may cross it into the next by
+~1e-6 of the press (one row per slave; exact again once it slides on); the 3D friction
+iterations per step are those of the direction iteration plus the re-pairing (9–48 in the
+tests; steps are cut where 60 do not suffice).
 """
 
 from __future__ import annotations
