@@ -181,6 +181,7 @@ def test_block_dragged_over_five_faces_translates_rigidly(run, shared_tmp):
 R, SPAN = 1.0, 0.8
 CYL_BASE = (L, SPAN, H, NX, 8, 2)
 SHOE = (0.25, 0.3, 0.125, 2, 3, 1, (0.25, 0.25, H))
+SHOE_PRESS = 0.01
 
 
 def on_cylinder(points):
@@ -193,17 +194,19 @@ def on_cylinder(points):
 
 
 def test_shoe_along_a_cylinder_stays_out_and_in_the_cone(run, shared_tmp):
-    """A shoe (its bottom on the same cylinder, nodes between the master's) pressed down and
+    """A shoe (its bottom on the same cylinder, nodes between the master's) pressed down by 0.01 and
     dragged by five faces along the axis of a deformable cylinder (tetrahedra: triangle master
-    faces whose normals turn by 0.3 rad across the shoe): every step of the drag, no slave
-    inside the deformed master (gaps paired again on the deformed configuration ≥ −1e-12 of
-    the press; while pressed, −1e-3 at a concave edge of the indentation),
+    faces whose normals turn by 0.3 rad across the shoe): every step, no slave inside the
+    deformed master (gaps paired again on the deformed configuration ≥ −1e-12 of the press),
     every node in the cone, the reactions balanced; in full slip Σ|Rt| = μ Σ Rn."""
     mesh = write_mesh(shared_tmp / "cylinder.msh", CYL_BASE, SHOE, "tetra", on_cylinder)
+    # pressed by 0.01 (0.005 leaves the shoe's rims barely closed: lift-off cycles at the
+    # first drag step); the first two drag steps shorter (the stick-slip turn)
     text = scene(mesh, [drag("drag", "x", TRAVEL, "drag"), drag("side", "y", 0.0, "drag"),
-                        drag("press", "z", -DELTA, "press")], 12,
+                        drag("press", "z", -SHOE_PRESS, "press")], 12,
                  {"press": {"times": [0.0, 1.0 / 6.0, 1.0], "values": [0.0, 1.0, 1.0]},
-                  "drag": {"times": [0.0, 1.0 / 6.0, 1.0], "values": [0.0, 0.0, 1.0]}},
+                  "drag": {"times": [0.0, 1.0 / 6.0, 1.0 / 3.0, 1.0],
+                           "values": [0.0, 0.0, 0.1, 1.0]}},
                  materials=[{"E": 1000.0, "nu": 0.3}])
     res = run(text, name="cylinder_shoe")
     full = check_contact(res, "slide", ("ground", "drag", "side", "press"))
@@ -216,11 +219,7 @@ def test_shoe_along_a_cylinder_stays_out_and_in_the_cone(run, shared_tmp):
         worst.append(gap.min())
         spread = max(spread, np.arccos(np.clip(normal[:, 2], -1, 1)).max())
     worst = np.array(worst)
-    # exact while the shoe slides (the rows' fixed point); while it is pressed (the first
-    # two steps), a node in the kink of the indentation, held to one face, crosses the edge
-    # into the next one by ~1e-6 (node-to-face at a concave edge: docs/contact.md §8)
-    assert np.all(worst[2:] >= -1e-12 * DELTA), worst
-    assert np.all(worst >= -1e-3 * DELTA), worst
+    assert np.all(worst >= -1e-12 * SHOE_PRESS), worst
     assert spread > 0.1                                     # the normals turn: a curved master
     slip = res["fields/slide_slip"][-1][res["fields/slide_state"][0, :, 0] >= 0]
     assert np.abs(slip[:, 0]).min() > 3 * FACE
@@ -265,3 +264,68 @@ def test_ironing_3d(run):
     print("drag / (mu press), global frame:", (drag_force / (MU * press))[full].round(4))
     print("smallest true gap per step:", worst)
     same_on_one_process(run, res, IRONING, "ironing_3d")
+
+
+# ------------------------------------------------------------------ building blocks
+
+
+def test_repeated_spans_give_each_row_its_slave_s_span():
+    """Two tangential rows per slave (3D) span the slave's own nodes, in the same order."""
+    from parsolve.effects.contact import repeat_spans
+
+    ptr, nodes = np.array([0, 3, 3, 5]), np.array([4, 7, 9, 1, 2])
+    new_ptr, new_nodes = repeat_spans(ptr, nodes, 2)
+    assert new_ptr.tolist() == [0, 3, 6, 6, 6, 8, 10]
+    assert new_nodes.tolist() == [4, 7, 9, 4, 7, 9, 1, 2, 1, 2]
+
+
+def test_tangent_basis_does_not_depend_on_the_face_numbering():
+    """A slave over two faces of one flat plane, one numbered from another corner: the faces'
+    own frames differ (t1 along each face's first edge), the finite-sliding frame (the
+    initial t1 projected on the tangent plane) is the same, orthonormal and right-handed; on
+    a tilted face it is the reference projected on that face's plane."""
+    from parsolve.effects.contact import reference_frame
+
+    points = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0, 0], [2, 1, 0],
+                       [0.5, 0.5, 0.1], [1.5, 0.5, 0.1]], dtype=float)
+    faces = np.array([[0, 1, 2, 3], [5, 2, 1, 4]])          # the second from another corner
+    p = pair_nodes(points, np.array([6, 7]), faces, "quad", 0.5)
+    assert p.facet.tolist() == [0, 1]
+    assert not np.allclose(p.tangents[0], p.tangents[1])     # the faces' own frames
+    reference = np.tile(p.tangents[0, 0], (2, 1))
+    reference_frame(p, reference)
+    np.testing.assert_allclose(p.tangents[1], p.tangents[0], atol=1e-15)
+    np.testing.assert_allclose(p.tangents[0], [[1, 0, 0], [0, 1, 0]], atol=1e-15)
+    tilted = p.subset(np.array([0]))
+    tilted.normal = np.array([[0.0, -np.sin(0.2), np.cos(0.2)]])
+    reference_frame(tilted, reference[:1])
+    t1, t2 = tilted.tangents[0]
+    np.testing.assert_allclose(t1, [1, 0, 0], atol=1e-15)     # x lies in that plane
+    np.testing.assert_allclose(np.cross(t1, t2), tilted.normal[0], atol=1e-15)
+
+
+def test_finite_sliding_3d_input(shared_tmp):
+    """3D finite sliding is accepted with a master region; an obstacle or the mortar rows are
+    refused naming the file and the key (exit 2)."""
+    from parsolve.errors import InputError
+    from parsolve.scene import load_scene
+
+    assert load_scene(IRONING).effect_specs["contact"][0].sliding == "finite"
+    from helpers.scene import DROP, shipped
+
+    base = shipped(IRONING.name)
+    contact = base["contact"][0]
+    for edit, words in (({"master": DROP, "obstacle": {"plane": {"origin": [0.0, 0.0, 0.5],
+                                                                  "normal": [0.0, 0.0, 1.0]}}},
+                         "master region"),
+                        ({"discretization": "mortar"}, "node_to_segment")):
+        entry = {k: v for k, v in (contact | edit).items() if v is not DROP}
+        path = shared_tmp / "bad_finite_3d.toml"
+        if MPI.COMM_WORLD.rank == 0:
+            path.write_text(build(base, mesh={"file": str(IRONING.with_suffix(".msh"))},
+                                  contact=[entry]))
+        MPI.COMM_WORLD.Barrier()
+        with pytest.raises(InputError) as err:
+            load_scene(path)
+        assert err.value.key == "contact[0].sliding" and str(path) in str(err.value)
+        assert words in err.value.message
