@@ -92,11 +92,12 @@ the two stick rows per slave run along the slip direction s and across it over t
 hold both components of the slip since the step's start; the tangent basis (t1, t2 = n × t1)
 is not the facet's own but the initial t1 projected on the current tangent plane, so that the
 slip direction, written in it, does not jump when a slave crosses to a facet numbered from
-another corner (``reference_frame``). Limits: a slave at a concave edge or kink of the
-deformed master (an indentation's rim), held to one facet, may cross it into the next by
-~1e-6 of the press (one row per slave; exact again once it slides on); the 3D friction
-iterations per step are those of the direction iteration plus the re-pairing (9–48 in the
-tests; steps are cut where 60 do not suffice).
+another corner (``reference_frame``). A 3D slave that passed its facet's edge into a concave
+crease of the deformed master (and so entered the next facet) goes to that facet. Limits: in
+2D a slave at a concave kink (an indentation's rim), held to one segment, may cross it into
+the next by ~1e-6 of the press (the 3D rule makes a 2D slave cycle between the two segments);
+the 3D friction iterations per step are the direction iteration's plus the re-pairing's
+(8–43 in the tests; a step that needs more than ``max_iterations`` is cut).
 """
 
 from __future__ import annotations
