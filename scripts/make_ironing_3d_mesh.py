@@ -20,7 +20,8 @@ from parsolve.mesh.generators import box
 
 SIDES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
 # configs/contact_ironing_3d.toml: the slab (lx, ly, lz, nx, ny, nz) and the die (the same,
-# then its origin), the die centred across the slab, its nodes off the slab's lines (no coincident points, no slave on an edge of the slab's faces: see docs/contact.md §8)
+# then its origin), the die centred across the slab, its nodes off the slab's lines (no
+# coincident points, no slave on an edge of the slab's faces at the start)
 SLAB = (2.0, 0.5, 0.5, 16, 4, 2)
 DIE = (0.25, 0.2, 0.125, 2, 3, 1, (0.3, 0.15, 0.5))
 

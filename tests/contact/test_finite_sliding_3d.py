@@ -260,7 +260,8 @@ def test_ironing_3d(run):
     drag_force = -res["relations/die_x/resultant"][:, 0]
     press = res["relations/die_z/resultant"][:, 2]
     print("iterations per step:", list(res["steps/iterations"]))
-    print("|sum Rt| / (mu N) in full slip:", (np.linalg.norm(t_force, axis=1) / (MU * n_force))[full])
+    ratio = np.linalg.norm(t_force, axis=1) / (MU * n_force)
+    print("|sum Rt| / (mu N) in full slip:", ratio[full])
     print("drag / (mu press), global frame:", (drag_force / (MU * press))[full].round(4))
     print("smallest true gap per step:", worst)
     same_on_one_process(run, res, IRONING, "ironing_3d")
