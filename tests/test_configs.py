@@ -104,6 +104,7 @@ TESTED = ["controlled_bar.toml", "kirsch.toml", "cantilever_3d.toml",
           # contact: tests/effects/test_contact.py; 3D: tests/effects/test_contact_3d_scene.py
           "contact_friction_3d.toml",
           "contact_ironing_2d.toml",  # finite sliding: tests/effects/test_contact_sliding.py
+          "contact_ironing_3d.toml",  # finite sliding 3D: tests/contact/test_finite_sliding_3d.py
           "periodic_shear_laminate.toml",  # periodic: tests/effects/test_periodic.py
           "springs_bar_supports.toml",  # springs: tests/effects/test_springs.py
           "thermal_expansion.toml",  # tests/effects/test_thermal_expansion.py

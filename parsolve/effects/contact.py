@@ -76,8 +76,8 @@ Scene schema::
     #                                mortar3d on triangle, quad, triangle6 faces in 3D)
     closed = 1e-9                  # initial gaps ≤ this (relative to the mesh size) start closed
     #                                (a floating body needs no larger one: see above)
-    sliding = "finite"             # "small" (default: paired once) or "finite" (2D, master
-    #                                region, node_to_segment: see below)
+    sliding = "finite"             # "small" (default: paired once) or "finite" (master
+    #                                region, node_to_segment; 2D and 3D: see below)
 
 Finite sliding (``sliding = "finite"``): the slaves are paired again on the current (displaced)
 configuration at each step's start and after each solve, until the rows stop changing (their
@@ -89,7 +89,18 @@ where a facet is not the current one: the operator's pattern never changes, and 
 slides out of its span stops the run (exit 3, naming ``search_radius``). The stick rows hold
 the master's material point faced at the step's start, on whatever facet it now is; the slip
 output is the total over the steps. Small strain: the bodies' stiffness is the initial one,
-the contact geometry the current one.
+the contact geometry the current one. In 3D (node-to-face: triangle, quad, triangle6 faces)
+the two stick rows per slave run along the slip direction s and across it over the span, and
+hold both components of the slip since the step's start; the tangent basis (t1, t2 = n × t1)
+is not the facet's own but the initial t1 projected on the current tangent plane, so that the
+slip direction, written in it, does not jump when a slave crosses to a facet numbered from
+another corner (``reference_frame``). A 3D slave that passed its facet's edge into a concave
+crease of the deformed master (and so entered the next facet) goes to that facet. Limits: in
+2D a slave at a concave kink (an indentation's rim), held to one segment, may cross it into
+the next by ~1e-6 of the press (the 3D rule makes a 2D slave cycle between the two segments);
+the 3D friction iterations per step are the direction iteration's plus the re-pairing's
+(9–44 in the tests; a step that needs more than ``max_iterations`` is cut), and on 3D
+ironing their path depends on the partition (the runs agree to the tolerance only).
 """
 
 from __future__ import annotations
@@ -156,6 +167,39 @@ class Spans:
     facet_ids: np.ndarray
     node_ptr: np.ndarray
     nodes: np.ndarray
+    reference: np.ndarray | None = None   # 3D: per slave, the vector its t1 follows
+    _repeated: tuple | None = None
+
+    def ptr_for(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """The spans (node_ptr, nodes) of n entries: one per slave, or (3D tangential rows)
+        two per slave, each the slave's span (the same entries for both rows)."""
+        if n == self.slave.size:
+            return self.node_ptr, self.nodes
+        if self._repeated is None:
+            self._repeated = repeat_spans(self.node_ptr, self.nodes, n // self.slave.size)
+        return self._repeated
+
+
+def repeat_spans(ptr: np.ndarray, nodes: np.ndarray, times: int) -> tuple[np.ndarray, np.ndarray]:
+    """CSR spans with each entry repeated ``times`` times in a row (entry i → times·i + j)."""
+    counts = np.repeat(np.diff(ptr), times)
+    new_ptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    owner = np.repeat(np.arange(counts.size, dtype=np.int64), counts)
+    offset = np.arange(new_ptr[-1], dtype=np.int64) - new_ptr[owner]
+    return new_ptr, nodes[ptr[owner // times] + offset]
+
+
+def reference_frame(p, reference: np.ndarray) -> None:
+    """Finite sliding in 3D: the tangents of the pairing p set, in place, from the normal and
+    a per-entry reference vector (t1 = the reference projected on the tangent plane, t2 =
+    n × t1) rather than from the facet's parametrisation: the basis the slip direction and
+    the slip are written in then does not jump when a slave crosses to a facet oriented
+    otherwise (a triangle's first edge, a quad numbered from another corner); on a flat
+    master it is the same on every facet, on a curved one it turns with the normal."""
+    n = p.normal
+    t1 = reference - np.einsum("mx,mx->m", reference, n)[:, None] * n
+    t1 /= np.linalg.norm(t1, axis=1)[:, None]
+    p.tangents[:] = np.stack([t1, np.cross(n, t1)], axis=1)
 
 
 def parse(t, dim: int) -> ContactSpec:
@@ -181,9 +225,9 @@ def parse(t, dim: int) -> ContactSpec:
     if discretization == "mortar" and master is None:
         raise t.error("discretization", "mortar needs a master region (not an obstacle)")
     sliding = t.get("sliding", str, "small", choices=SLIDINGS)
-    if sliding == "finite" and (master is None or dim != 2 or discretization != "node_to_segment"):
-        raise t.error("sliding", "finite sliding needs a master region, node_to_segment "
-                                 "discretization, in 2D")
+    if sliding == "finite" and (master is None or discretization != "node_to_segment"):
+        raise t.error("sliding", "finite sliding needs a master region and the "
+                                 "node_to_segment discretization (node-to-face in 3D)")
     t.done()
     return ContactSpec(name, slave, master, obstacle, mu, direction, radius, closed, t.path,
                        discretization, sliding)
@@ -340,14 +384,17 @@ class Contact(Effect):
             coords = surf.points[facets]
             radius = float(np.max(coords.max(axis=1) - coords.min(axis=1)))
         fptr, fids, nptr, nodes = facet_spans(surf.points, p.slave, facets, radius)
-        return Spans(surf, p.slave.copy(), facets, radius, fptr, fids, nptr, surf.ids[nodes])
+        # 3D: t1 follows the initial one (the pairing's own frame at the start, unchanged)
+        reference = p.tangents[:, 0].copy() if self.mesh.dim == 3 else None
+        return Spans(surf, p.slave.copy(), facets, radius, fptr, fids, nptr, surf.ids[nodes],
+                     reference)
 
     def _rows(self, vectors: np.ndarray, pairing=None):
         """Rows along one vector per entry: node_rows, or (finite sliding) over the spans."""
         p = self.pairing if pairing is None else pairing
         if self.span is None:
             return node_rows(p, vectors)
-        return span_rows(p, vectors, self.span.node_ptr, self.span.nodes)
+        return span_rows(p, vectors, *self.span.ptr_for(len(p)))
 
     def _dual_coef(self) -> np.ndarray:
         """Coefficients of Dn − μ Dt·s (the normal rows' dual is their negation)."""
@@ -382,10 +429,20 @@ class Contact(Effect):
             cur, inside = pair_on(x, sp.slave, sp.facets, self._facet_now, ft, KEEP_TOL)
             dist = np.abs(cur.gap)
             best = np.where(p.paired, np.abs(p.gap), np.inf)
+            # ... but a slave past its facet's edge (its point clipped: farther than its normal
+            # gap) that has entered the closest facet (a concave crease of the deformed master)
+            # goes there: on its facet's plane it would stay inside the next one. 3D only: in
+            # 2D (the die placed on an indented slab, frictionless) a slave then cycles
+            # between the two segments of a kink
+            past = np.linalg.norm(x[sp.slave] - cur.point, axis=1) > dist + 1e-9 * sp.radius
+            entered = p.paired & (p.gap < -1e-9 * sp.radius) & (p.facet != cur.facet) \
+                & (self.mesh.dim == 3)
             # ... and a slave beyond the master's free end stays on its last facet, at the end
-            keep = inside & (dist <= best + 1e-9 * sp.radius) | ~p.paired
+            keep = inside & (dist <= best + 1e-9 * sp.radius) & ~(past & entered) | ~p.paired
             for name in p.__dataclass_fields__:
                 getattr(p, name)[keep] = getattr(cur, name)[keep]
+        if sp.reference is not None:
+            reference_frame(p, sp.reference)
         bad = ~in_spans(p.facet, sp.facet_ptr, sp.facet_ids)
         if bad.any():
             node = int(sp.surf.ids[sp.slave[np.flatnonzero(bad)[0]]])
@@ -395,13 +452,14 @@ class Contact(Effect):
         return p, x
 
     def _tangential_offset(self, x: np.ndarray, p) -> np.ndarray:
-        """t · (x_s − x_m0): the slave's tangential distance, on the current configuration x,
-        from the master's material point it faced at the step's start (``_start_point``):
-        its slip in the step, whatever facets it crossed."""
+        """t_j · (x_s − x_m0): the slave's tangential distance, on the current configuration
+        x, from the master's material point it faced at the step's start (``_start_point``):
+        its slip in the step, whatever facets it crossed; (n, dim − 1), in the tangent basis
+        of the current pairing p."""
         sp, el = self.span, element(self.mesh.facet_type)
         f0, xi0 = self._start_point
         xm0 = np.einsum("mk,mkx->mx", el.shape(xi0), x[sp.facets[f0]])
-        return np.einsum("mx,mx->m", p.tangents[:, 0], x[sp.slave] - xm0)
+        return np.einsum("mjx,mx->mj", p.tangents, x[sp.slave] - xm0)
 
     def _slide(self, q: np.ndarray, start: bool) -> bool:
         """Finite sliding: pair again on the current configuration and rewrite the rows'
@@ -410,28 +468,56 @@ class Contact(Effect):
         rows: the slip since the step's start, s_q + Dt·(q' − q) = 0, measured from the
         master's material point faced at the step's start (``start``: that point is set
         here). Both are exact at the fixed point the iterations reach (True while the rows
-        still change). Small strain: the bodies' stiffness is the initial one."""
+        still change). Small strain: the bodies' stiffness is the initial one.
+
+        3D (node-to-face): two stick rows per slave, along the slip direction s and across
+        it (``_tangent_coefs``, over the span), holding both components of the slip since
+        the step's start (``_stick_values``)."""
         sp = self.span
         p, x = self._repair(q)
         if start:
             self._start_point = (p.facet.copy(), p.xi.copy())
         self._facet_now = p.facet.copy()
-        self.du = self._tangential_offset(x, p)[:, None]
+        self.du = self._tangential_offset(x, p)
         p = sp.surf.to_input(p)
         nrows = self._rows(p.normal, p)
         p.gap = p.gap - self.values.rows(self.n_dofs, nrows.row, nrows.coef, nrows.nrows, q)
-        trows = self._rows(p.tangents[:, 0], p)
+        trows = self._span_tangent_rows(p)
         old = (self.nrows.coef, self.pairing.gap, self.trows.coef)
         self.pairing, self.nrows, self.trows = p, nrows, trows
         self.normal.a_vals[:] = nrows.coef
         self.normal.values[:] = normal_values(p)
-        if self.frictional:
+        if self.frictional and self.mesh.dim == 2:
             self.tangent.a_vals[:] = trows.coef
             self.tangent.values[:] = self._slip(q) - self.du[:, 0]
+        elif self.frictional:
+            self._q_slide = q.copy()
+            self.tangent.a_vals[:] = self._tangent_coefs()
+            self.tangent.values[:] = self._stick_values()
         size = sp.radius
         return not (np.allclose(old[0], nrows.coef, rtol=0, atol=TOL_ROWS)
                     and np.allclose(old[2], trows.coef, rtol=0, atol=TOL_ROWS)
                     and np.allclose(old[1], p.gap, rtol=0, atol=TOL_ROWS * size))
+
+    def _span_tangent_rows(self, p):
+        """Finite sliding: the rows along the tangents over the spans (2D: one per slave, along
+        t; 3D: two, along t1 and t2, the slip measure and the tangential relation's layout)."""
+        if self.mesh.dim == 2:
+            return self._rows(p.tangents[:, 0], p)
+        return self._rows(p.tangents.reshape(-1, 3), p.subset(np.repeat(np.arange(len(p)), 2)))
+
+    def _stick_values(self) -> np.ndarray:
+        """Values of the tangential rows (3D: along s and across it) that hold the slip at its
+        value at the step's start. Small sliding: the rows' values at that start. Finite
+        sliding: the rows at the last re-pairing's q less the slip since the start, measured
+        on the geometry (``_tangential_offset``: du in (t1, t2), whose components along s and
+        n × s are s·du and (−s₂, s₁)·du), so that a row linearised at q reads zero slip."""
+        if self.span is None:
+            return self.values.relation(self.tangent, self.q_start)
+        s, du = self.direction, self.du
+        slip = np.column_stack([np.einsum("mj,mj->m", s, du),
+                                s[:, 0] * du[:, 1] - s[:, 1] * du[:, 0]]).ravel()
+        return self.values.relation(self.tangent, self._q_slide) - slip
 
     def _check_facing(self, p, surf: Surfaces, regions, key: str) -> None:
         """Refuse an obstacle that no facet of the slave surface faces (outward normal of the
@@ -475,9 +561,9 @@ class Contact(Effect):
         if self.span is None:
             self.nrows = normal_rows(p)
             self.trows = tangent_rows(p)    # along the fixed tangents (slip measure, outputs)
-        else:                               # finite sliding (2D): over the spans
+        else:                               # finite sliding: over the spans
             self.nrows = self._rows(p.normal)
-            self.trows = self._rows(p.tangents[:, 0])
+            self.trows = self._span_tangent_rows(p)
         self.n_dofs = self.nrows.node * ncomp + u0 + self.nrows.comp
         self.t_dofs = self.trows.node * ncomp + u0 + self.trows.comp
 
@@ -489,7 +575,7 @@ class Contact(Effect):
             return self.trows.coef
         sv = slip_vectors(p, self.direction)
         vectors = np.stack([sv, np.cross(p.normal, sv)], axis=1).reshape(-1, 3)
-        return node_rows(p.subset(np.repeat(np.arange(len(p)), 2)), vectors).coef
+        return self._rows(vectors, p.subset(np.repeat(np.arange(len(p)), 2))).coef
 
     def _slip(self, q: np.ndarray) -> np.ndarray:
         """Tangential displacement of the slave relative to the master (rows of ``trows``)."""
@@ -536,7 +622,7 @@ class Contact(Effect):
         self.normal.dual[2][:] = -self._dual_coef()
         if self.mesh.dim == 3:
             self.tangent.a_vals[:] = self._tangent_coefs()
-            self.tangent.values[:] = self.values.relation(self.tangent, self.q_start)
+            self.tangent.values[:] = self._stick_values()
 
     def _tangent_active(self, active: dict) -> None:
         """Tangential rows enforced where the node sticks; in 3D with the "reaction" mode a
@@ -563,7 +649,7 @@ class Contact(Effect):
         self.node_state, self.direction = (a.copy() for a in self.committed)
         if self.span is not None:
             if self._committed_slip:   # the last step converged (its last refresh at this q)
-                self.slip_base += self.du[:, 0]
+                self.slip_base += self.du.ravel()
                 self._committed_slip = False
             self._facet_now = self._facet_committed   # a retried step starts from there too
             self._slide(q, start=True)
@@ -726,7 +812,7 @@ class Contact(Effect):
         # row is scaled by it: its gap, its slip, its multiplier's share of the resultants)
         share = 1.0 - np.where(np.isin(p.master, self.side_nodes), p.weights, 0.0).sum(axis=1)
         gap = np.where(closed, 0.0, (p.gap + self.values.relation(self.normal, q)) / share)
-        slip = self._slip(q) if self.span is None else self.slip_base + self.du[:, 0]
+        slip = self._slip(q) if self.span is None else self.slip_base + self.du.ravel()
         slip = (slip.reshape(share.size, -1) / share[:, None]).reshape(slip.shape)
         # over every node (0 elsewhere; state -1), or this rank's owned rows on a part
         nodal = self.values.nodal

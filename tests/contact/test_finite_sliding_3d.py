@@ -1,0 +1,340 @@
+"""Finite sliding in 3D (``[[contact]] sliding = "finite"``, node-to-face on quad and triangle
+master faces, small strain): the slaves are paired again on the current configuration at each
+step and after each solve, the stick rows hold the master material point faced at the step's
+start across faces, and the rows span the faces within ``search_radius`` (a fixed pattern).
+
+Three scenes, each checked on 1, 2 and 3 ranks; the block's results are those of one process
+(1e-10), the shoe's and the ironing's are not (see the tests):
+
+* a block dragged by five base faces through its top only (free elsewhere) over a deformable
+  base made periodic along the drag (a tie between its ends): the base's response to a load
+  moved by one face is the response shifted by one face, so in full slip two steps one face
+  apart differ by an exact rigid translation of the block and a shift of the base's field;
+* a shoe dragged along a cylinder's axis over its triangle faces (a curved master whose
+  normals turn across the shoe): no penetration, every node in the cone;
+* configs/contact_ironing_3d.toml: a die pressed into a slab and dragged along it (its runs on
+  2 and 3 ranks are checked, but not identical to one process's: see the test).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from conftest import CONFIGS, assert_same_results
+from helpers.scene import scene as build
+from parsolve.contact.friction import OPEN, SLIP
+from parsolve.contact.pairing import pair_nodes
+from parsolve.mesh.generators import box
+
+
+def _mesh_script():
+    """scripts/make_ironing_3d_mesh.py (the shipped mesh's generator) as a module."""
+    path = CONFIGS.parent / "scripts" / "make_ironing_3d_mesh.py"
+    spec = importlib.util.spec_from_file_location("make_ironing_3d_mesh", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+MESHES = _mesh_script()
+MU = 0.3
+
+
+def write_mesh(path, base_box, die_box, cell="hexahedron", warp=None):
+    if MPI.COMM_WORLD.rank == 0:
+        MESHES.two_boxes(path, base_box, die_box, cell, warp)
+    MPI.COMM_WORLD.Barrier()
+    return path
+
+
+def surfaces(base_box, die_box, cell):
+    """(slave node ids: the die's bottom, master faces: the base's top, outward) of the mesh
+    ``two_boxes`` writes (the base's points first)."""
+    base = box(*base_box, cell=cell)
+    die = box(*die_box[:6], cell=cell, origin=die_box[6])
+    return np.unique(die.facet_groups["zmin"]) + base.num_points, base.facet_groups["zmax"]
+
+
+def true_gaps(x, slaves, faces, facet_type, radius):
+    """The slaves' gaps and normals on the deformed configuration x, paired again here
+    (independent of the solver's rows)."""
+    p = pair_nodes(x, slaves, faces, facet_type, radius)
+    assert p.paired.all()
+    return p.gap, p.normal
+
+
+def drag(name, comp, value, evolution):
+    return {"name": name, "type": "dirichlet", "region": "die_zmax", "component": comp,
+            "value": value, "evolution": evolution}
+
+
+def scene(mesh, relations, steps, travel_evolution, **extra) -> str:
+    """A die (slave: its bottom) driven through its top on a base (master: its top faces)."""
+    return build(
+        mesh={"file": str(mesh)}, model={"hypothesis": "3d"},
+        relations=[{"name": "ground", "type": "dirichlet", "region": "base_zmin",
+                    "components": ["x", "y", "z"]}] + relations,
+        contact=[{"name": "slide", "slave": "die_zmin", "master": "base_zmax", "friction": MU,
+                  "search_radius": 0.7, "sliding": "finite"}],
+        evolutions=travel_evolution, steps={"count": steps}, nonlinear={"max_iterations": 60},
+        **extra)
+
+
+def check_contact(res, name, held, scale_n=None):
+    """Every step: global equilibrium (the held nodes' reactions, ``held`` relations, 1e-10),
+    normal reactions ≥ 0, every node in the Coulomb cone; the steps in full slip (every
+    closed node slides): each node on the cone and the friction μ times the normal force in
+    the contact frame (Σ|Rt| = μ Σ Rn, 1e-10). Returns the full-slip mask."""
+    n_force = res[f"relations/{name}_normal/normal_force"][:, 0]
+    scale = scale_n or n_force.max()
+    total = sum(res[f"relations/{r}/resultant"][:, :3] for r in held)
+    np.testing.assert_allclose(total, 0.0, atol=1e-10 * scale)
+    state = res[f"fields/{name}_state"][:, :, 0]
+    slave = state[0] >= 0
+    state = state[:, slave]
+    rn = res[f"fields/{name}_normal_reaction"][:, slave, 0]
+    rt = np.linalg.norm(res[f"fields/{name}_tangential_reaction"][:, slave], axis=2)
+    assert np.all(rn >= -1e-12 * scale)
+    assert np.all(rt <= MU * rn + 1e-10 * scale)
+    full = np.array([np.any(s == SLIP) and np.all(s[s != OPEN] == SLIP) for s in state])
+    slipping = full[:, None] & (state == SLIP)
+    np.testing.assert_allclose(rt[slipping], MU * rn[slipping], rtol=0, atol=1e-10 * scale)
+    np.testing.assert_allclose(rt[full].sum(axis=1), MU * n_force[full], rtol=1e-10)
+    return full
+
+
+def same_on_one_process(run, res, text, name, tol=1e-10):
+    if MPI.COMM_WORLD.size > 1:
+        assert_same_results(res, run(text, name=f"{name}_serial", comm=MPI.COMM_SELF), tol)
+
+
+# ------------------------------------------------------------------ the block on a ring base
+
+L, W, H, NX = 2.0, 0.5, 0.25, 16
+FACE = L / NX
+BASE = (L, W, H, NX, 2, 2)
+BLOCK = (0.25, W, 0.125, 2, 2, 1, (0.25, 0.0, H))
+DELTA, TRAVEL = 0.005, 0.625          # the travel: five faces, half a face per step
+
+
+def block_scene(mesh) -> str:
+    return scene(
+        mesh,
+        [{"name": "ring", "type": "periodic", "region": "left_end", "target": "right_end",
+          "translation": [L, 0.0, 0.0], "components": ["x", "y", "z"]},
+         drag("drag", "x", TRAVEL, "drag"), drag("side", "y", 0.0, "drag"),
+         drag("press", "z", -DELTA, "press")],
+        12,
+        {"press": {"times": [0.0, 1.0 / 6.0, 1.0], "values": [0.0, 1.0, 1.0]},
+         "drag": {"times": [0.0, 1.0 / 6.0, 1.0], "values": [0.0, 0.0, 1.0]}},
+        # ν = 0 and nothing across the drag: the field stays plane (u_y = 0, slip along x)
+        materials=[{"E": 1000.0, "nu": 0.0}],
+        # the ends without the held bottom edge (a tie between held DOFs constrains nothing)
+        regions={"left_end": "x < 1e-9 and z > 1e-9", "right_end": f"x > {L} - 1e-9 and z > 1e-9"})
+
+
+def test_block_dragged_over_five_faces_translates_rigidly(run, shared_tmp):
+    """A block driven through its top (x: the drag, z: the press, y held; free elsewhere) over
+    five faces of a deformable base whose ends are tied (a ring along x): in full slip, two
+    steps one face apart are the same state moved by one face: the block's displacement
+    differs by exactly (h, 0, 0), the base's is shifted by one face, the slip grows by the
+    same amount over every face (h less the base's own motion under the block); the
+    friction is μ times the normal force (1e-10) and the reactions balance (1e-10), every
+    step."""
+    mesh = write_mesh(shared_tmp / "ring_base.msh", BASE, BLOCK)
+    text = block_scene(mesh)
+    res = run(text, name="ring_block")
+    full = check_contact(res, "slide", ("ground", "drag", "side", "press", "ring"))
+    u = res["fields/displacement"]
+    n_base = (NX + 1) * 3 * 3
+    scale = np.abs(u).max()
+    np.testing.assert_allclose(u[:, :, 1], 0.0, atol=1e-12 * scale)      # the plane field
+    n_force = res["relations/slide_normal/normal_force"][:, 0]
+    t_force = res["relations/slide_normal/tangential_force"]
+    np.testing.assert_allclose(np.abs(t_force[full, 0]), MU * n_force[full], rtol=1e-10)
+    # the base's nodes (i, j, k), i fastest; node i of step k + 2 is node i − 1 of step k
+    base = u[:, :n_base].reshape(len(u), 3, 3, NX + 1, 3)
+    slip = res["fields/slide_slip"][:, n_base:]
+    slaves = res["fields/slide_state"][0, n_base:, 0] >= 0
+    assert np.flatnonzero(full).tolist() == list(range(2, 12))
+    for k in range(2, 10):
+        np.testing.assert_allclose(u[k + 2, n_base:] - u[k, n_base:], np.tile([FACE, 0, 0],
+                                   (len(u[0]) - n_base, 1)), rtol=0, atol=1e-10 * scale)
+        np.testing.assert_allclose(base[k + 2, :, :, 1:], base[k, :, :, :-1], rtol=0,
+                                   atol=1e-10 * scale)
+        # the slip (on the geometry: relative to the master's material point of each step's
+        # start, which the base's own field moves) grows by the same amount over every face
+        grown = slip[k + 2, slaves] - slip[k, slaves]
+        first = slip[4, slaves] - slip[2, slaves]
+        np.testing.assert_allclose(grown, first, rtol=0, atol=1e-10 * FACE)
+        np.testing.assert_allclose(np.abs(grown[:, 0]), FACE, rtol=0.01)
+        np.testing.assert_allclose(grown[:, 1], 0.0, rtol=0, atol=1e-10 * FACE)
+    assert np.abs(slip[-1, slaves, 0]).min() > 3 * FACE       # farther than three faces
+    print("iterations per step:", list(res["steps/iterations"]))
+    same_on_one_process(run, res, text, "ring_block")
+
+
+# ------------------------------------------------------------------ a shoe along a cylinder
+
+R, SPAN = 1.0, 0.8
+CYL_BASE = (L, SPAN, H, NX, 8, 2)
+SHOE = (0.25, 0.3, 0.125, 2, 3, 1, (0.25, 0.25, H))
+SHOE_PRESS = 0.01
+
+
+def on_cylinder(points):
+    """Box coordinates onto a cylinder of radius R along x whose top line is z = H over
+    y = SPAN / 2: (y, z) → angle (y − SPAN/2) / R, radius R + z − H."""
+    theta = (points[:, 1] - SPAN / 2) / R
+    r = R + points[:, 2] - H
+    return np.column_stack([points[:, 0], SPAN / 2 + r * np.sin(theta),
+                            H - R + r * np.cos(theta)])
+
+
+def test_shoe_along_a_cylinder_stays_out_and_in_the_cone(run, shared_tmp):
+    """A shoe (its bottom on the same cylinder, nodes between the master's) pressed down by 0.01 and
+    dragged by five faces along the axis of a deformable cylinder (tetrahedra: triangle master
+    faces whose normals turn by 0.3 rad across the shoe): every step, no slave inside the
+    deformed master (gaps paired again on the deformed configuration ≥ −1e-12 of the press),
+    every node in the cone, the reactions balanced; in full slip Σ|Rt| = μ Σ Rn."""
+    mesh = write_mesh(shared_tmp / "cylinder.msh", CYL_BASE, SHOE, "tetra", on_cylinder)
+    # pressed by 0.01 (0.005 leaves the shoe's rims barely closed: lift-off cycles at the
+    # first drag step); the first two drag steps shorter (the stick-slip turn)
+    text = scene(mesh, [drag("drag", "x", TRAVEL, "drag"), drag("side", "y", 0.0, "drag"),
+                        drag("press", "z", -SHOE_PRESS, "press")], 12,
+                 {"press": {"times": [0.0, 1.0 / 6.0, 1.0], "values": [0.0, 1.0, 1.0]},
+                  "drag": {"times": [0.0, 1.0 / 6.0, 1.0 / 3.0, 1.0],
+                           "values": [0.0, 0.0, 0.1, 1.0]}},
+                 materials=[{"E": 1000.0, "nu": 0.3}])
+    res = run(text, name="cylinder_shoe")
+    full = check_contact(res, "slide", ("ground", "drag", "side", "press"))
+    assert full[-1] and full.sum() >= 8
+    slaves, faces = surfaces(CYL_BASE, SHOE, "tetra")
+    x0 = res["mesh/points"]
+    worst, spread = [], 0.0
+    for u in res["fields/displacement"]:
+        gap, normal = true_gaps(x0 + u, slaves, faces, "triangle", 0.1)
+        worst.append(gap.min())
+        spread = max(spread, np.arccos(np.clip(normal[:, 2], -1, 1)).max())
+    worst = np.array(worst)
+    assert np.all(worst >= -1e-12 * SHOE_PRESS), worst
+    assert spread > 0.1                                     # the normals turn: a curved master
+    slip = res["fields/slide_slip"][-1][res["fields/slide_state"][0, :, 0] >= 0]
+    assert np.abs(slip[:, 0]).min() > 3 * FACE
+    print("iterations per step:", list(res["steps/iterations"]))
+    print("smallest true gap per step:", worst)
+    # NOT compared with one process: the 3D slip-direction iteration takes partition-dependent
+    # paths here too (iteration counts differ on 2 and 3 ranks; the tangential reactions by
+    # 4e-10 of the largest where they agree); the checks above hold on every number of ranks
+
+
+# ------------------------------------------------------------------ 3D ironing (shipped)
+
+IRONING = CONFIGS / "contact_ironing_3d.toml"
+
+
+def test_shipped_mesh_is_the_script_s(shared_tmp):
+    """configs/contact_ironing_3d.msh is what scripts/make_ironing_3d_mesh.py writes."""
+    out = shared_tmp / f"ironing_3d_{MPI.COMM_WORLD.rank}.msh"
+    MESHES.two_boxes(out)
+    assert out.read_text() == IRONING.with_suffix(".msh").read_text()
+
+
+def test_ironing_3d(run):
+    """configs/contact_ironing_3d.toml: a stiff die pressed by 0.01 into a slab and dragged by
+    0.5 (four of its faces) along it, μ = 0.3, the die free but for its top. Every step:
+    global equilibrium (1e-10), no penetration (the die's bottom nodes paired again with the
+    deformed slab's top: ≥ −1e-12 of the press), every node in the cone; in full slip the
+    drag is μ times the normal force in the contact frame (Σ|Rt| = μ Σ Rn, 1e-10), on 1, 2
+    and 3 ranks (each run checked, not compared with one process: see below)."""
+    res = run(IRONING, name="ironing_3d")
+    full = check_contact(res, "ironing", ("ground", "die_x", "die_y", "die_z"))
+    assert full[-1] and full.sum() >= 14
+    slaves, faces = surfaces(MESHES.SLAB, MESHES.DIE, "hexahedron")
+    x0 = res["mesh/points"]
+    worst = np.array([true_gaps(x0 + u, slaves, faces, "quad", 0.1)[0].min()
+                      for u in res["fields/displacement"]])
+    assert np.all(worst >= -1e-12 * 0.01), worst
+    n_force = res["relations/ironing_normal/normal_force"][:, 0]
+    t_force = res["relations/ironing_normal/tangential_force"]
+    drag_force = -res["relations/die_x/resultant"][:, 0]
+    press = res["relations/die_z/resultant"][:, 2]
+    print("iterations per step:", list(res["steps/iterations"]))
+    ratio = np.linalg.norm(t_force, axis=1) / (MU * n_force)
+    print("|sum Rt| / (mu N) in full slip:", ratio[full])
+    print("drag / (mu press), global frame:", (drag_force / (MU * press))[full].round(4))
+    print("smallest true gap per step:", worst)
+    # NOT compared with one process: on this scene the 3D slip-direction iteration takes
+    # partition-dependent paths (15 against 17 iterations at the third press step on 1 and 2
+    # ranks; the first drag step cut at 60 iterations on both, 93 against > 100 when 100 are
+    # allowed), so the results agree to the convergence tolerance only and the iteration
+    # counts differ; the checks above hold on every number of ranks
+
+
+# ------------------------------------------------------------------ building blocks
+
+
+def test_repeated_spans_give_each_row_its_slave_s_span():
+    """Two tangential rows per slave (3D) span the slave's own nodes, in the same order."""
+    from parsolve.effects.contact import repeat_spans
+
+    ptr, nodes = np.array([0, 3, 3, 5]), np.array([4, 7, 9, 1, 2])
+    new_ptr, new_nodes = repeat_spans(ptr, nodes, 2)
+    assert new_ptr.tolist() == [0, 3, 6, 6, 6, 8, 10]
+    assert new_nodes.tolist() == [4, 7, 9, 4, 7, 9, 1, 2, 1, 2]
+
+
+def test_tangent_basis_does_not_depend_on_the_face_numbering():
+    """A slave over two faces of one flat plane, one numbered from another corner: the faces'
+    own frames differ (t1 along each face's first edge), the finite-sliding frame (the
+    initial t1 projected on the tangent plane) is the same, orthonormal and right-handed; on
+    a tilted face it is the reference projected on that face's plane."""
+    from parsolve.effects.contact import reference_frame
+
+    points = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0, 0], [2, 1, 0],
+                       [0.5, 0.5, 0.1], [1.5, 0.5, 0.1]], dtype=float)
+    faces = np.array([[0, 1, 2, 3], [5, 2, 1, 4]])          # the second from another corner
+    p = pair_nodes(points, np.array([6, 7]), faces, "quad", 0.5)
+    assert p.facet.tolist() == [0, 1]
+    assert not np.allclose(p.tangents[0], p.tangents[1])     # the faces' own frames
+    reference = np.tile(p.tangents[0, 0], (2, 1))
+    reference_frame(p, reference)
+    np.testing.assert_allclose(p.tangents[1], p.tangents[0], atol=1e-15)
+    np.testing.assert_allclose(p.tangents[0], [[1, 0, 0], [0, 1, 0]], atol=1e-15)
+    tilted = p.subset(np.array([0]))
+    tilted.normal = np.array([[0.0, -np.sin(0.2), np.cos(0.2)]])
+    reference_frame(tilted, reference[:1])
+    t1, t2 = tilted.tangents[0]
+    np.testing.assert_allclose(t1, [1, 0, 0], atol=1e-15)     # x lies in that plane
+    np.testing.assert_allclose(np.cross(t1, t2), tilted.normal[0], atol=1e-15)
+
+
+def test_finite_sliding_3d_input(shared_tmp):
+    """3D finite sliding is accepted with a master region; an obstacle or the mortar rows are
+    refused naming the file and the key (exit 2)."""
+    from parsolve.errors import InputError
+    from parsolve.scene import load_scene
+
+    assert load_scene(IRONING).effect_specs["contact"][0].sliding == "finite"
+    from helpers.scene import DROP, shipped
+
+    base = shipped(IRONING.name)
+    contact = base["contact"][0]
+    for edit, words in (({"master": DROP, "obstacle": {"plane": {"origin": [0.0, 0.0, 0.5],
+                                                                  "normal": [0.0, 0.0, 1.0]}}},
+                         "master region"),
+                        ({"discretization": "mortar"}, "node_to_segment")):
+        entry = {k: v for k, v in (contact | edit).items() if v is not DROP}
+        path = shared_tmp / "bad_finite_3d.toml"
+        if MPI.COMM_WORLD.rank == 0:
+            path.write_text(build(base, mesh={"file": str(IRONING.with_suffix(".msh"))},
+                                  contact=[entry]))
+        MPI.COMM_WORLD.Barrier()
+        with pytest.raises(InputError) as err:
+            load_scene(path)
+        assert err.value.key == "contact[0].sliding" and str(path) in str(err.value)
+        assert words in err.value.message
