@@ -268,11 +268,10 @@ def test_ironing_3d(run):
     print("|sum Rt| / (mu N) in full slip:", ratio[full])
     print("drag / (mu press), global frame:", (drag_force / (MU * press))[full].round(4))
     print("smallest true gap per step:", worst)
-    # NOT compared with one process: on this scene the 3D slip-direction iteration takes
-    # partition-dependent paths (15 against 17 iterations at the third press step on 1 and 2
-    # ranks; the first drag step cut at 60 iterations on both, 93 against > 100 when 100 are
-    # allowed), so the results agree to the convergence tolerance only and the iteration
-    # counts differ; the checks above hold on every number of ranks
+    # Its fields are compared with one process in tests/solvers/test_rank_independence.py (its
+    # iteration counts excepted: the 3D slip-direction iteration takes partition-dependent
+    # paths here, 15 against 17 iterations at the third press step on 1 and 2 ranks); the
+    # checks above hold on every number of ranks
 
 
 # ------------------------------------------------------------------ building blocks
