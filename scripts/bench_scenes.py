@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from make_ironing_2d_mesh import DIE as IRONING_DIE, SLAB as IRONING_SLAB, base_and_die
+
 E, NU = 1000.0, 0.3
 LAM, G = E * NU / ((1 + NU) * (1 - 2 * NU)), E / (2 * (1 + NU))   # plane strain
 
@@ -190,46 +192,14 @@ def friction_3d_scene(factor: int) -> str:
     return _dumps(scene)
 
 
-IRONING_SLAB, IRONING_DIE = (4.0, 1.0, 32, 8), (0.5, 0.25, 4, 2, 0.5)   # contact_ironing_2d.msh
-
-
-def base_and_die_mesh(path, base_box, die_box) -> None:
-    """Gmsh 2.2 file: cells base ([0, lx] × [0, ly], nx × ny quads) and die (its lx, ly, nx,
-    ny and left end x0, on top of the base), facet groups base_top/bottom/left/right and
-    die_top/bottom; the interface nodes distinct. The generator of the shipped
-    configs/contact_ironing_2d.msh (tests/effects/test_contact_sliding.py, base_and_die): at
-    the shipped counts, the same points, cells and groups in the same order."""
-    import meshio
-
-    from parsolve.mesh.generators import rectangle
-
-    lx, ly, nx, ny = base_box
-    base = rectangle(lx, ly, nx, ny)
-    dlx, dly, dnx, dny, x0 = die_box
-    die = rectangle(dlx, dly, dnx, dny, origin=(x0, ly))
-    off = base.num_points
-    points = np.vstack([base.points, die.points])
-    lines = [(f"base_{s}", base.facet_groups[s]) for s in ("top", "bottom", "left", "right")]
-    lines += [(f"die_{s}", die.facet_groups[s] + off) for s in ("top", "bottom")]
-    blocks = [("quad", base.cells), ("quad", die.cells + off)] + [("line", f) for _, f in lines]
-    tags = [1, 2] + [10 + i for i in range(len(lines))]
-    phys = [np.full(len(b[1]), tag) for b, tag in zip(blocks, tags)]
-    field = {"base": np.array([1, 2]), "die": np.array([2, 2])}
-    field.update({name: np.array([10 + i, 1]) for i, (name, _) in enumerate(lines)})
-    mesh = meshio.Mesh(np.column_stack([points, np.zeros(len(points))]), blocks,
-                       cell_data={"gmsh:physical": phys, "gmsh:geometrical": phys},
-                       field_data=field)
-    meshio.write(str(path), mesh, file_format="gmsh22", binary=False)
-
-
 def ironing_2d_scene(folder, factor: int) -> str:
     """configs/contact_ironing_2d.toml on a generated equivalent of its mesh, the slab's and
     the die's quads × factor along x and y (written into ``folder``)."""
     from pathlib import Path
 
-    (lx, ly, nx, ny), (dlx, dly, dnx, dny, x0) = IRONING_SLAB, IRONING_DIE
+    (lx, ly, nx, ny), (dlx, dly, dnx, dny, x0) = IRONING_SLAB, IRONING_DIE   # the shipped mesh's
     mesh = Path(folder) / f"ironing_2d_{factor}.msh"
-    base_and_die_mesh(mesh, (lx, ly, nx * factor, ny * factor),
+    base_and_die(mesh, (lx, ly, nx * factor, ny * factor),
                       (dlx, dly, dnx * factor, dny * factor, x0))
     scene = _shipped("contact_ironing_2d.toml")
     scene["mesh"] = {"file": str(mesh)}

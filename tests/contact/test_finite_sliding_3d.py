@@ -18,29 +18,20 @@ Three scenes, each checked on 1, 2 and 3 ranks; the block's results are those of
 
 from __future__ import annotations
 
-import importlib.util
 
 import numpy as np
 import pytest
 from mpi4py import MPI
 
 from conftest import CONFIGS, assert_same_results
+from helpers.scripts import load_script
 from helpers.scene import scene as build
 from parsolve.contact.friction import OPEN, SLIP
 from parsolve.contact.pairing import pair_nodes
 from parsolve.mesh.generators import box
 
 
-def _mesh_script():
-    """scripts/make_ironing_3d_mesh.py (the shipped mesh's generator) as a module."""
-    path = CONFIGS.parent / "scripts" / "make_ironing_3d_mesh.py"
-    spec = importlib.util.spec_from_file_location("make_ironing_3d_mesh", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-MESHES = _mesh_script()
+MESHES = load_script("make_ironing_3d_mesh")   # the shipped mesh's generator
 MU = 0.3
 
 

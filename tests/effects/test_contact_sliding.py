@@ -11,17 +11,18 @@ facet each slave faces."""
 
 from __future__ import annotations
 
+
 import numpy as np
 import pytest
 from mpi4py import MPI
 
 from conftest import CONFIGS, assert_same_results
+from helpers.scripts import load_script
 from helpers.scene import scene as build, shipped
 from parsolve.contact.friction import OPEN, SLIP, STICK
 from parsolve.contact.pairing import pair_nodes
 from parsolve.errors import InputError
 from parsolve.scene import load_scene
-from parsolve.mesh.generators import rectangle
 
 E, NU = 1000.0, 0.3
 LAM, G = E * NU / ((1 + NU) * (1 - 2 * NU)), E / (2 * (1 + NU))   # plane strain
@@ -30,29 +31,12 @@ P = (LAM + 2 * G) * DELTA / HB          # the base's uniform pressure
 D_END = 0.55                            # the die's travel: 4.4 of its facets (0.125)
 
 
-def base_and_die(path, base_box=(1.0, HB, 6, 3), die_box=(2.0, 0.25, 16, 1, -0.75)) -> None:
-    """Gmsh 2.2 file: cells base ([0, lx] × [0, ly], nx × ny quads) and die (its lx, ly, nx,
-    ny and left end x0, on top of the base), facet groups base_top/bottom/left/right and
-    die_top/bottom; the interface nodes distinct."""
-    import meshio
+MESHES = load_script("make_ironing_2d_mesh")   # the shipped mesh's generator
 
-    lx, ly, nx, ny = base_box
-    base = rectangle(lx, ly, nx, ny)
-    dlx, dly, dnx, dny, x0 = die_box
-    die = rectangle(dlx, dly, dnx, dny, origin=(x0, ly))
-    off = base.num_points
-    points = np.vstack([base.points, die.points])
-    lines = [(f"base_{s}", base.facet_groups[s]) for s in ("top", "bottom", "left", "right")]
-    lines += [(f"die_{s}", die.facet_groups[s] + off) for s in ("top", "bottom")]
-    blocks = [("quad", base.cells), ("quad", die.cells + off)] + [("line", f) for _, f in lines]
-    tags = [1, 2] + [10 + i for i in range(len(lines))]
-    phys = [np.full(len(b[1]), tag) for b, tag in zip(blocks, tags)]
-    field = {"base": np.array([1, 2]), "die": np.array([2, 2])}
-    field.update({name: np.array([10 + i, 1]) for i, (name, _) in enumerate(lines)})
-    mesh = meshio.Mesh(np.column_stack([points, np.zeros(len(points))]), blocks,
-                       cell_data={"gmsh:physical": phys, "gmsh:geometrical": phys},
-                       field_data=field)
-    meshio.write(str(path), mesh, file_format="gmsh22", binary=False)
+
+def base_and_die(path, base_box=(1.0, HB, 6, 3), die_box=(2.0, 0.25, 16, 1, -0.75)) -> None:
+    """The base (nx × ny quads) and the die on top of it (scripts/make_ironing_2d_mesh.py)."""
+    MESHES.base_and_die(path, base_box, die_box)
 
 
 def scene(mesh, sliding: str = "finite", steps: int = 10, **contact) -> str:
@@ -144,12 +128,14 @@ def test_die_dragged_over_four_facets_is_exact(run, mesh):
 # ---------------------------------------------------------------------------- ironing
 
 IRONING = CONFIGS / "contact_ironing_2d.toml"
-SLAB, DIE = (4.0, 1.0, 32, 8), (0.5, 0.25, 4, 2, 0.5)   # configs/contact_ironing_2d.msh
+SLAB, DIE = MESHES.SLAB, MESHES.DIE   # configs/contact_ironing_2d.msh
 
 
-def write_ironing_mesh(path) -> None:
-    """The shipped mesh of configs/contact_ironing_2d.toml (regenerate with this)."""
-    base_and_die(path, SLAB, DIE)
+def test_shipped_mesh_is_the_script_s(shared_tmp):
+    """configs/contact_ironing_2d.msh is what scripts/make_ironing_2d_mesh.py writes."""
+    out = shared_tmp / f"ironing_2d_{MPI.COMM_WORLD.rank}.msh"
+    MESHES.base_and_die(out)
+    assert out.read_text() == IRONING.with_suffix(".msh").read_text()
 
 
 def true_gaps(pts: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -172,9 +158,6 @@ def test_ironing_2d(run):
     1e-10, no penetration (gaps of the deformed configuration paired again), every node in
     the Coulomb cone; in full slip the friction is μ times the normal force (contact frame,
     1e-10); the same results on the parts of 1, 2, 3 ranks as in one process."""
-    if MPI.COMM_WORLD.rank == 0 and not IRONING.with_suffix(".msh").exists():
-        write_ironing_mesh(IRONING.with_suffix(".msh"))
-    MPI.COMM_WORLD.Barrier()
     res = run(IRONING, name="ironing")
     mu = 0.3
     pts = res["mesh/points"]
@@ -239,8 +222,6 @@ def test_frictionless_ironing_is_the_die_placed_there(run, shared_tmp):
     travel = 1.5625
     moved = shared_tmp / "ironing_placed.msh"
     if MPI.COMM_WORLD.rank == 0:
-        if not IRONING.with_suffix(".msh").exists():
-            write_ironing_mesh(IRONING.with_suffix(".msh"))
         base_and_die(moved, SLAB, DIE[:4] + (DIE[4] + travel,))
     MPI.COMM_WORLD.Barrier()
     base = shipped(IRONING.name)
