@@ -594,7 +594,7 @@ def main(argv=None) -> int:
             f"refined, cells × {', '.join(str(f * f) for f in refine)}"
             f"{'' if top == 4 or smoke else '; this run: --max-cells ' + str(top * top) + ', the larger sizes not run'}); "
             "configs/contact_ironing_2d.toml on a generated equivalent of its .msh "
-            "(`bench_scenes.base_and_die_mesh`, byte-identical to the shipped file at 1×), the "
+            "(`scripts/make_ironing_2d_mesh.py`, the shipped file's generator at 1×), the "
             "slab's and the die's quads × the same factors along x and y; configs/contact_ironing_3d.toml "
             "the same way when it exists (a mesh file: 1× only). Per step: the global iterations "
             "of each saved step.\n\n" + "\n".join(its_table)

@@ -155,12 +155,19 @@ def dense(mat, comm=MPI.COMM_WORLD) -> np.ndarray:
 
 
 
-def assert_same_results(a: dict, b: dict, tol: float = 1e-10) -> None:
+# Shipped scenes whose global iteration counts depend on the partition, and the tolerance their
+# fields agree to across partitions: 3D finite sliding against a deformable master turns the
+# slip directions by a fixed point (settled at 1e-10 rad) whose path round-off decides
+# (docs/theory.md, finite sliding); measured 4e-11 to 1.4e-10 of the tangential reactions.
+PATH_DEPENDENT = {"contact_ironing_3d.toml": 1e-8}
+
+
+def assert_same_results(a: dict, b: dict, tol: float = 1e-10, ignore: tuple = ()) -> None:
     """Two result files hold the same datasets, equal to ``tol`` of the largest value of each
     kind of dataset (``stress``, ``multiplier``, ...), integers and active rows exactly; the
-    residuals (round-off over round-off) and timings apart."""
+    residuals (round-off over round-off), timings and the ``ignore`` keys apart."""
     assert a["attrs"]["status"] == b["attrs"]["status"] == "complete"
-    keys = [k for k in b if k not in ("attrs", "steps/residual")
+    keys = [k for k in b if k not in ("attrs", "steps/residual") + tuple(ignore)
             and not (k.startswith("balance") and k.endswith("error"))
             and not k.startswith("timings")]
     assert sorted(keys) == sorted(k for k in a if k in keys)

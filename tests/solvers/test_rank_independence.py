@@ -76,10 +76,7 @@ def test_cell_geometry_does_not_depend_on_the_batch():
 
 
 SHIPPED = sorted(p.name for p in __import__("conftest").CONFIGS.glob("*.toml"))
-# Scenes whose global iteration counts depend on the partition (the fields do not, to the
-# tolerance below): 3D finite sliding against a deformable master turns the slip directions by
-# a fixed point whose path round-off decides (docs/theory.md, finite sliding: limits)
-ITERATIONS_DEPEND_ON_PARTITION = {"contact_ironing_3d.toml"}
+# (conftest.PATH_DEPENDENT: scenes whose iteration counts depend on the partition)
 
 
 @pytest.mark.parametrize("name", SHIPPED)
@@ -97,7 +94,7 @@ def test_shipped_scene_does_not_depend_on_the_partition(name, shared_tmp):
     keys = [k for k in alone if k not in ("attrs", "steps/residual")  # round-off:
             and not (k.startswith("balance") and k.endswith("error"))  # residual, balance error
             and not k.startswith("timings")                           # clocks
-            and not (k == "steps/iterations" and name in ITERATIONS_DEPEND_ON_PARTITION)]
+            and not (k == "steps/iterations" and name in __import__("conftest").PATH_DEPENDENT)]
     # a multiplier that is zero in exact arithmetic is compared with the others' size
     family = {}
     for k in keys:
