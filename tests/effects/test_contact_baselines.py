@@ -5,7 +5,6 @@ it to its tolerance; bad input exits 2 naming the file and the key."""
 
 from __future__ import annotations
 
-import importlib.util
 import subprocess
 import sys
 
@@ -20,6 +19,7 @@ from parsolve.errors import InputError
 from parsolve.model import build_model
 from parsolve.scene import load_scene
 from helpers.contact import BASE as CONTACT_BASE, PLANE
+from helpers.scripts import load_script
 
 E, NU = 1000.0, 0.3
 BLOCK = (CONFIGS / "contact_block_friction.toml").read_text()
@@ -193,11 +193,7 @@ def test_hertz_cylinder_penalty_and_augmented_lagrangian(run):
 
 def bench_scenes():
     """scripts/bench_scenes.py: the benchmark's V-wedge (the scene that failed) as it runs."""
-    path = ROOT / "scripts" / "bench_scenes.py"
-    spec = importlib.util.spec_from_file_location("bench_scenes", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("bench_scenes")
 
 
 def wedge(run, shared_tmp, keys: str, name: str, **kw) -> tuple[dict, object, list]:
