@@ -48,6 +48,9 @@ class Relation:
     groups: np.ndarray | None = None  # per row: rows with one id form a group of which exactly
     #                                   one row, the extreme one, is enforced (contiguous rows)
     meta: dict = field(default_factory=dict)
+    # a zone of these rows may form from nothing (a contact): the active set closes the most
+    # violated first (solvers/active_set.py, ``_forming``)
+    forming: bool = False
 
     def __post_init__(self) -> None:
         if self.sense not in SENSES:

@@ -599,7 +599,7 @@ class Contact(Effect):
         if self.frictional:
             dual = (self.n_dofs, r.row, -self._dual_coef())
         normal = Relation(f"{name}_normal", r.nrows, r.row, self.n_dofs, r.coef,
-                          normal_values(p), CONSTANT, ">=", dual, eliminate=False)
+                          normal_values(p), CONSTANT, ">=", dual, eliminate=False, forming=True)
         finite = self.span is not None    # its rows' values change at each step
         normal.meta = {"type": "contact", "key": self.spec.key,
                        "refresh": self.frictional or finite}
@@ -609,7 +609,7 @@ class Contact(Effect):
             t = self.trows
             tangent = Relation(f"{name}_tangent", t.nrows, t.row, self.t_dofs,
                                self._tangent_coefs(), np.zeros(t.nrows), CONSTANT, "=", None,
-                               eliminate=False)
+                               eliminate=False, forming=True)
             tangent.meta = {"type": "contact", "key": self.spec.key,
                             "refresh": self.mesh.dim == 3 or finite}
             self.tangent = tangent

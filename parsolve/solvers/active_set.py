@@ -66,9 +66,9 @@ class ActiveSet:
         # +1 where a positive s·λ pushes the row back to its admissible side (associated rows);
         # non-associated rows get theirs from their own response (NewtonSolver.orient)
         self.orient = np.ones(self.sign.size)
-        # contact relations: a zone forming closes its most penetrating rows first (``_forming``)
-        self.contact = np.concatenate([np.full(r.nrows, (getattr(r, "meta", None) or {}).get(
-            "type") == "contact") for r in relations]) if relations else np.zeros(0, dtype=bool)
+        # rows that say a zone of them may form (contact): the most penetrating close first
+        self.contact = np.concatenate([np.full(r.nrows, getattr(r, "forming", False)) for r in relations]) \
+            if relations else np.zeros(0, dtype=bool)
         self.max_changes = max_changes
         self.changes = 0
         self.seen: set[bytes] = set()

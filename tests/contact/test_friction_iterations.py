@@ -156,6 +156,7 @@ def test_a_forming_zone_closes_its_deepest_rows_first():
         r = Relation(name, 4, np.arange(4), np.arange(4), np.ones(4), np.zeros(4), CONSTANT,
                      ">=", None, eliminate=False)
         r.meta = {"type": kind}
+        r.forming = kind == "contact"   # what the contact effect declares on its rows
         return r
 
     aset = ActiveSet([rel("c_normal", "contact"), rel("other", "user")])
