@@ -67,7 +67,7 @@ class ActiveSet:
         # non-associated rows get theirs from their own response (NewtonSolver.orient)
         self.orient = np.ones(self.sign.size)
         # rows that say a zone of them may form (contact): the most penetrating close first
-        self.contact = np.concatenate([np.full(r.nrows, getattr(r, "forming", False)) for r in relations]) \
+        self.forming = np.concatenate([np.full(r.nrows, r.forming) for r in relations]) \
             if relations else np.zeros(0, dtype=bool)
         self.max_changes = max_changes
         self.changes = 0
@@ -129,7 +129,7 @@ class ActiveSet:
         for k in range(len(self.names)):
             rows = slice(self.first[k], self.first[k + 1])
             v = violated[rows]
-            if not self.contact[rows].any() or int(v.sum()) <= int(self.active[rows].sum()):
+            if not self.forming[rows].any() or int(v.sum()) <= int(self.active[rows].sum()):
                 continue
             deepest = float(excess[rows][v].max())
             out[rows] = v & (excess[rows] >= FORMING * deepest)
