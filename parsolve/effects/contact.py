@@ -113,7 +113,9 @@ from parsolve.contact import friction as fr
 from parsolve.contact import obstacles
 from parsolve.contact.mortar import mortar_pairing
 from parsolve.contact.mortar3d import mortar_pairing_3d
-from parsolve.contact.pairing import check_surfaces, facet_spans, in_spans, pair_nodes, pair_on
+from parsolve.contact.pairing import check_surfaces, in_spans, pair_nodes, pair_on
+from parsolve.contact.sliding import Spans, fit_mortar, make_spans, outside_spans, \
+    reference_frame
 from parsolve.la.dofmap import DofMap
 from parsolve.contact.rows import friction_dual, node_rows, normal_rows, normal_values, \
     slip_vectors, span_rows, tangent_rows
@@ -122,7 +124,6 @@ from parsolve.effects.base import Effect
 from parsolve.effects.compose import NodeBlocks, node_places
 from parsolve.errors import InputError, SolverError
 from parsolve.evolution import CONSTANT
-from parsolve.fem.elements import element
 from parsolve.mesh.regions import gather_facets
 from parsolve.mesh.topology import FACETS, boundary_facets
 from parsolve.relations import Relation
@@ -154,54 +155,6 @@ class ContactSpec:
     sliding: str = "small"
 
 
-@dataclass
-class Spans:
-    """Finite sliding: the surfaces (compact numbering), the paired slaves' compact ids, the
-    master facets (compact) and, per paired slave, the facets and master nodes (input ids) of
-    its span (``pairing.facet_spans``), fixed for the run: the rows' sparsity."""
-    surf: Surfaces
-    slave: np.ndarray
-    facets: np.ndarray
-    radius: float
-    facet_ptr: np.ndarray
-    facet_ids: np.ndarray
-    node_ptr: np.ndarray
-    nodes: np.ndarray
-    reference: np.ndarray | None = None   # 3D: per slave, the vector its t1 follows
-    _repeated: tuple | None = None
-
-    def ptr_for(self, n: int) -> tuple[np.ndarray, np.ndarray]:
-        """The spans (node_ptr, nodes) of n entries: one per slave, or (3D tangential rows)
-        two per slave, each the slave's span (the same entries for both rows)."""
-        if n == self.slave.size:
-            return self.node_ptr, self.nodes
-        if self._repeated is None:
-            self._repeated = repeat_spans(self.node_ptr, self.nodes, n // self.slave.size)
-        return self._repeated
-
-
-def repeat_spans(ptr: np.ndarray, nodes: np.ndarray, times: int) -> tuple[np.ndarray, np.ndarray]:
-    """CSR spans with each entry repeated ``times`` times in a row (entry i → times·i + j)."""
-    counts = np.repeat(np.diff(ptr), times)
-    new_ptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-    owner = np.repeat(np.arange(counts.size, dtype=np.int64), counts)
-    offset = np.arange(new_ptr[-1], dtype=np.int64) - new_ptr[owner]
-    return new_ptr, nodes[ptr[owner // times] + offset]
-
-
-def reference_frame(p, reference: np.ndarray) -> None:
-    """Finite sliding in 3D: the tangents of the pairing p set, in place, from the normal and
-    a per-entry reference vector (t1 = the reference projected on the tangent plane, t2 =
-    n × t1) rather than from the facet's parametrisation: the basis the slip direction and
-    the slip are written in then does not jump when a slave crosses to a facet oriented
-    otherwise (a triangle's first edge, a quad numbered from another corner); on a flat
-    master it is the same on every facet, on a curved one it turns with the normal."""
-    n = p.normal
-    t1 = reference - np.einsum("mx,mx->m", reference, n)[:, None] * n
-    t1 /= np.linalg.norm(t1, axis=1)[:, None]
-    p.tangents[:] = np.stack([t1, np.cross(n, t1)], axis=1)
-
-
 def parse(t, dim: int) -> ContactSpec:
     name = t.get("name", str)
     if not NAME_PATTERN.fullmatch(name):   # it names relations and HDF5 groups and fields
@@ -225,9 +178,9 @@ def parse(t, dim: int) -> ContactSpec:
     if discretization == "mortar" and master is None:
         raise t.error("discretization", "mortar needs a master region (not an obstacle)")
     sliding = t.get("sliding", str, "small", choices=SLIDINGS)
-    if sliding == "finite" and (master is None or discretization != "node_to_segment"):
-        raise t.error("sliding", "finite sliding needs a master region and the "
-                                 "node_to_segment discretization (node-to-face in 3D)")
+    if sliding == "finite" and master is None:
+        raise t.error("sliding", "finite sliding needs a master region (against an obstacle "
+                                 "the projection is made on the current geometry already)")
     t.done()
     return ContactSpec(name, slave, master, obstacle, mu, direction, radius, closed, t.path,
                        discretization, sliding)
@@ -273,8 +226,10 @@ class Contact(Effect):
         self._facet_now = None              # finite sliding: the facets faced now (compact)
         self._facet_committed = None        # ... at the last converged step
         self._committed_slip = False
+        self._compact = None                # finite sliding, mortar: the rows now (compact)
         self._check_slave(regions)
         self.pairing = self._pair(regions)
+        self._compact_committed = self._compact
         if len(self.pairing) == 0:
             raise InputError("no slave node faces the master surface within the search radius",
                              source, f"{key}.slave")
@@ -348,12 +303,17 @@ class Contact(Effect):
                 except ValueError as exc:   # 3D faces that are not triangle, quad, triangle6
                     raise InputError(str(exc), self.source, f"{key}.discretization") from None
                 self.side_nodes = np.unique(sfacets)
-                return surf.to_input(mortar.pairing.only_paired())
+                p = mortar.pairing.only_paired()
+                if spec.sliding == "finite":
+                    self.span = make_spans(surf, p, surf.compact(facets), spec.search_radius,
+                                           surf.compact(sfacets))
+                    self._compact = p
+                return surf.to_input(p)
             surf = Surfaces.of([(slave, slave_pts), (facets, facet_pts)])
             p = pair_nodes(surf.points, surf.compact(slave), surf.compact(facets),
                            mesh.facet_type, spec.search_radius).only_paired()
             if spec.sliding == "finite":
-                self.span = self._spans(surf, p, surf.compact(facets))
+                self.span = make_spans(surf, p, surf.compact(facets), spec.search_radius)
             return surf.to_input(p)
         surf = Surfaces.of([(slave, slave_pts)])
         pts, nodes = surf.points, surf.compact(slave)
@@ -375,19 +335,6 @@ class Contact(Effect):
         if spec.search_radius is not None:
             p.paired &= p.gap <= spec.search_radius
         return surf.to_input(p.only_paired())
-
-    def _spans(self, surf: Surfaces, p, facets: np.ndarray) -> Spans:
-        """Finite sliding: each paired slave's span, the facets within the search radius
-        (default: one facet extent, as the pairing's) of its initial position."""
-        radius = self.spec.search_radius
-        if radius is None:
-            coords = surf.points[facets]
-            radius = float(np.max(coords.max(axis=1) - coords.min(axis=1)))
-        fptr, fids, nptr, nodes = facet_spans(surf.points, p.slave, facets, radius)
-        # 3D: t1 follows the initial one (the pairing's own frame at the start, unchanged)
-        reference = p.tangents[:, 0].copy() if self.mesh.dim == 3 else None
-        return Spans(surf, p.slave.copy(), facets, radius, fptr, fids, nptr, surf.ids[nodes],
-                     reference)
 
     def _rows(self, vectors: np.ndarray, pairing=None):
         """Rows along one vector per entry: node_rows, or (finite sliding) over the spans."""
@@ -424,6 +371,8 @@ class Contact(Effect):
         start)."""
         sp, ft = self.span, self.mesh.facet_type
         x = self._current_points(q)
+        if sp.slave_facets is not None:
+            return self._repair_mortar(x), x
         p = pair_nodes(x, sp.slave, sp.facets, ft, sp.radius)
         if self._facet_now is not None:
             cur, inside = pair_on(x, sp.slave, sp.facets, self._facet_now, ft, KEEP_TOL)
@@ -443,23 +392,42 @@ class Contact(Effect):
                 getattr(p, name)[keep] = getattr(cur, name)[keep]
         if sp.reference is not None:
             reference_frame(p, sp.reference)
-        bad = ~in_spans(p.facet, sp.facet_ptr, sp.facet_ids)
+        self._check_spans(~in_spans(p.facet, sp.facet_ptr, sp.facet_ids))
+        return p, x
+
+    def _repair_mortar(self, x: np.ndarray):
+        """Finite sliding, mortar: the rows made again on the current configuration x, on the
+        fixed set of slaves (``sliding.fit_mortar``: a slave no master facet covers any more
+        keeps its last row)."""
+        sp, spec = self.span, self.spec
+        rows_of = mortar_pairing if self.mesh.dim == 2 else mortar_pairing_3d
+        new = rows_of(x, sp.slave_facets, sp.facets, self.mesh.facet_type, spec.search_radius)
+        p = fit_mortar(new.pairing, self._compact, x)
+        if sp.reference is not None:
+            reference_frame(p, sp.reference)
+        compact_nodes = sp.surf.compact(sp.nodes)
+        self._check_spans(outside_spans(p, sp.node_ptr, compact_nodes))
+        self._compact = p
+        return p
+
+    def _check_spans(self, bad: np.ndarray) -> None:
+        """SolverError naming the key when a slave left its span."""
         if bad.any():
+            sp = self.span
             node = int(sp.surf.ids[sp.slave[np.flatnonzero(bad)[0]]])
             raise SolverError(f"{self.source}: {self.spec.key}.search_radius: slave node {node} "
                               f"left the master facets within {sp.radius:.6g} of its start "
                               f"({int(bad.sum())} such node(s)): give a larger search_radius")
-        return p, x
 
     def _tangential_offset(self, x: np.ndarray, p) -> np.ndarray:
         """t_j · (x_s − x_m0): the slave's tangential distance, on the current configuration
-        x, from the master's material point it faced at the step's start (``_start_point``):
+        x, from the master's material point it faced at the step's start (``_start_point``: its
+        master nodes and weights, a facet's shape functions or a mortar row's):
         its slip in the step, whatever facets it crossed; (n, dim − 1), in the tangent basis
         of the current pairing p."""
-        sp, el = self.span, element(self.mesh.facet_type)
-        f0, xi0 = self._start_point
-        xm0 = np.einsum("mk,mkx->mx", el.shape(xi0), x[sp.facets[f0]])
-        return np.einsum("mjx,mx->mj", p.tangents, x[sp.slave] - xm0)
+        master0, weights0 = self._start_point
+        xm0 = np.einsum("mk,mkx->mx", weights0, x[master0])
+        return np.einsum("mjx,mx->mj", p.tangents, x[self.span.slave] - xm0)
 
     def _slide(self, q: np.ndarray, start: bool) -> bool:
         """Finite sliding: pair again on the current configuration and rewrite the rows'
@@ -476,7 +444,7 @@ class Contact(Effect):
         sp = self.span
         p, x = self._repair(q)
         if start:
-            self._start_point = (p.facet.copy(), p.xi.copy())
+            self._start_point = (p.master.copy(), p.weights.copy())
         self._facet_now = p.facet.copy()
         self.du = self._tangential_offset(x, p)
         p = sp.surf.to_input(p)
@@ -652,6 +620,7 @@ class Contact(Effect):
                 self.slip_base += self.du.ravel()
                 self._committed_slip = False
             self._facet_now = self._facet_committed   # a retried step starts from there too
+            self._compact = self._compact_committed
             self._slide(q, start=True)
         # the normal rows in contact at the last converged step (initially: the closed gaps);
         # the same as the active set's after a converged step, and right after a failed one
@@ -790,6 +759,7 @@ class Contact(Effect):
         self.turning.commit()
         self._committed_slip = self.span is not None
         self._facet_committed = self._facet_now
+        self._compact_committed = self._compact
         self.committed = (self.node_state.copy(), self.direction.copy())
 
     # ------------------------------------------------------------------ outputs

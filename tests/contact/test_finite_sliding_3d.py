@@ -63,14 +63,16 @@ def drag(name, comp, value, evolution):
             "value": value, "evolution": evolution}
 
 
-def scene(mesh, relations, steps, travel_evolution, **extra) -> str:
+def scene(mesh, relations, steps, travel_evolution, discretization="node_to_segment",
+          **extra) -> str:
     """A die (slave: its bottom) driven through its top on a base (master: its top faces)."""
     return build(
         mesh={"file": str(mesh)}, model={"hypothesis": "3d"},
         relations=[{"name": "ground", "type": "dirichlet", "region": "base_zmin",
                     "components": ["x", "y", "z"]}] + relations,
         contact=[{"name": "slide", "slave": "die_zmin", "master": "base_zmax", "friction": MU,
-                  "search_radius": 0.7, "sliding": "finite"}],
+                  "search_radius": 0.7, "sliding": "finite",
+                  "discretization": discretization}],
         evolutions=travel_evolution, steps={"count": steps}, nonlinear={"max_iterations": 60},
         **extra)
 
@@ -112,7 +114,7 @@ BLOCK = (0.25, W, 0.125, 2, 2, 1, (0.25, 0.0, H))
 DELTA, TRAVEL = 0.005, 0.625          # the travel: five faces, half a face per step
 
 
-def block_scene(mesh) -> str:
+def block_scene(mesh, discretization="node_to_segment") -> str:
     return scene(
         mesh,
         [{"name": "ring", "type": "periodic", "region": "left_end", "target": "right_end",
@@ -122,23 +124,26 @@ def block_scene(mesh) -> str:
         12,
         {"press": {"times": [0.0, 1.0 / 6.0, 1.0], "values": [0.0, 1.0, 1.0]},
          "drag": {"times": [0.0, 1.0 / 6.0, 1.0], "values": [0.0, 0.0, 1.0]}},
+        discretization,
         # ν = 0 and nothing across the drag: the field stays plane (u_y = 0, slip along x)
         materials=[{"E": 1000.0, "nu": 0.0}],
         # the ends without the held bottom edge (a tie between held DOFs constrains nothing)
         regions={"left_end": "x < 1e-9 and z > 1e-9", "right_end": f"x > {L} - 1e-9 and z > 1e-9"})
 
 
-def test_block_dragged_over_five_faces_translates_rigidly(run, shared_tmp):
+@pytest.mark.parametrize("discretization", ["node_to_segment", "mortar"])
+def test_block_dragged_over_five_faces_translates_rigidly(run, shared_tmp, discretization):
     """A block driven through its top (x: the drag, z: the press, y held; free elsewhere) over
     five faces of a deformable base whose ends are tied (a ring along x): in full slip, two
     steps one face apart are the same state moved by one face: the block's displacement
     differs by exactly (h, 0, 0), the base's is shifted by one face, the slip grows by the
     same amount over every face (h less the base's own motion under the block); the
     friction is μ times the normal force (1e-10) and the reactions balance (1e-10), every
-    step."""
+    step. Node-to-face and mortar rows alike (mortar: the rows integrated again on the current
+    configuration over the base faces each block face now overlaps)."""
     mesh = write_mesh(shared_tmp / "ring_base.msh", BASE, BLOCK)
-    text = block_scene(mesh)
-    res = run(text, name="ring_block")
+    text = block_scene(mesh, discretization)
+    res = run(text, name=f"ring_block_{discretization}")
     full = check_contact(res, "slide", ("ground", "drag", "side", "press", "ring"))
     u = res["fields/displacement"]
     n_base = (NX + 1) * 3 * 3
@@ -166,7 +171,7 @@ def test_block_dragged_over_five_faces_translates_rigidly(run, shared_tmp):
         np.testing.assert_allclose(grown[:, 1], 0.0, rtol=0, atol=1e-10 * FACE)
     assert np.abs(slip[-1, slaves, 0]).min() > 3 * FACE       # farther than three faces
     print("iterations per step:", list(res["steps/iterations"]))
-    same_on_one_process(run, res, text, "ring_block")
+    same_on_one_process(run, res, text, f"ring_block_{discretization}")
 
 
 # ------------------------------------------------------------------ a shoe along a cylinder
@@ -270,7 +275,7 @@ def test_ironing_3d(run):
 
 def test_repeated_spans_give_each_row_its_slave_s_span():
     """Two tangential rows per slave (3D) span the slave's own nodes, in the same order."""
-    from parsolve.effects.contact import repeat_spans
+    from parsolve.contact.sliding import repeat_spans
 
     ptr, nodes = np.array([0, 3, 3, 5]), np.array([4, 7, 9, 1, 2])
     new_ptr, new_nodes = repeat_spans(ptr, nodes, 2)
@@ -283,7 +288,7 @@ def test_tangent_basis_does_not_depend_on_the_face_numbering():
     own frames differ (t1 along each face's first edge), the finite-sliding frame (the
     initial t1 projected on the tangent plane) is the same, orthonormal and right-handed; on
     a tilted face it is the reference projected on that face's plane."""
-    from parsolve.effects.contact import reference_frame
+    from parsolve.contact.sliding import reference_frame
 
     points = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0, 0], [2, 1, 0],
                        [0.5, 0.5, 0.1], [1.5, 0.5, 0.1]], dtype=float)

@@ -86,8 +86,11 @@ def mesh(shared_tmp):
     return path
 
 
-def test_die_dragged_over_four_facets_is_exact(run, mesh):
-    res = run(scene(mesh), name="sliding_die")
+@pytest.mark.parametrize("discretization", ["node_to_segment", "mortar"])
+def test_die_dragged_over_four_facets_is_exact(run, mesh, discretization):
+    """Node-to-segment and mortar rows alike (mortar: each row re-integrated on the current
+    configuration over the die's facets it now overlaps)."""
+    res = run(scene(mesh, discretization=discretization), name=f"sliding_die_{discretization}")
     pts = res["mesh/points"]
     base = pts[:, 1] <= HB + 1e-12
     base &= np.arange(len(pts)) < 7 * 4        # the base's nodes come first (7 × 4)
@@ -194,10 +197,10 @@ def test_ironing_2d(run):
 @pytest.mark.parametrize("edit, words", [
     ({"sliding": "finite"}, None),
     ({"sliding": "large"}, "must be one of"),
-    ({"sliding": "finite", "discretization": "mortar"}, "finite sliding needs"),
+    ({"sliding": "finite", "discretization": "mortar"}, None),
 ])
 def test_bad_sliding_names_file_and_key(shared_tmp, mesh, edit, words):
-    """``sliding``: "small" (default) or "finite" (2D, a master region, node-to-segment);
+    """``sliding``: "small" (default) or "finite" (a master region, either discretization);
     anything else: exit 2 naming the file and the key."""
     text = scene(mesh, **edit)
     path = shared_tmp / "bad_sliding.toml"

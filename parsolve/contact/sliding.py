@@ -1,0 +1,148 @@
+"""Finite sliding: the fixed spans the rows live on, and the pairings made again on the current
+configuration fitted to them.
+
+A finite-sliding row couples its slave node to a fixed superset of master nodes, its *span*
+(``rows.span_rows``): the nodes of every master facet the slave may face while it stays within
+the search radius of its start, zeros where a node is not in the current pairing. The rows'
+sparsity is then fixed for the run, and pairing again is a value update.
+
+Node-to-segment (node-to-face) pairs a slave with one facet: its span is the master nodes of
+the facets near its start (``pairing.facet_spans``). A mortar row integrates over the slave
+facets around its node: its span adds the slave facets' reach to the radius, and keeps the
+nodes of its initial row (a triangle6 midside's row holds its edge's corners).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from parsolve.contact.pairing import Pairing, facet_spans
+from parsolve.contact.surfaces import Surfaces
+
+
+@dataclass
+class Spans:
+    """The surfaces (compact numbering), the paired slaves' compact ids, the master facets
+    (compact) and, per paired slave, the facets and master nodes (input ids) of its span,
+    fixed for the run: the rows' sparsity. Mortar: the slave facets (compact) too."""
+    surf: Surfaces
+    slave: np.ndarray
+    facets: np.ndarray
+    radius: float
+    facet_ptr: np.ndarray
+    facet_ids: np.ndarray
+    node_ptr: np.ndarray
+    nodes: np.ndarray
+    reference: np.ndarray | None = None   # 3D: per slave, the vector its t1 follows
+    slave_facets: np.ndarray | None = None   # mortar only
+    _repeated: tuple | None = None
+
+    def ptr_for(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """The spans (node_ptr, nodes) of n entries: one per slave, or (3D tangential rows)
+        two per slave, each the slave's span (the same entries for both rows)."""
+        if n == self.slave.size:
+            return self.node_ptr, self.nodes
+        if self._repeated is None:
+            self._repeated = repeat_spans(self.node_ptr, self.nodes, n // self.slave.size)
+        return self._repeated
+
+
+def make_spans(surf: Surfaces, p: Pairing, facets: np.ndarray, radius: float | None,
+               slave_facets: np.ndarray | None = None) -> Spans:
+    """The spans of the paired slaves of p (compact numbering): the master facets within
+    ``radius`` (default: one facet extent, as the pairing's) of each slave's start; mortar
+    (``slave_facets`` given): within the radius plus the slave facets' extent, and the
+    nodes of the slave's initial row besides."""
+    coords = surf.points[facets]
+    if radius is None:
+        radius = float(np.max(coords.max(axis=1) - coords.min(axis=1)))
+    reach = radius
+    if slave_facets is not None:
+        sc = surf.points[slave_facets]
+        reach += float(np.max(sc.max(axis=1) - sc.min(axis=1)))
+    fptr, fids, nptr, nodes = facet_spans(surf.points, p.slave, facets, reach)
+    if slave_facets is not None:
+        nptr, nodes = union_spans(nptr, nodes, p.master)
+    # 3D: t1 follows the initial one (the pairing's own frame at the start, unchanged)
+    reference = p.tangents[:, 0].copy() if p.dim == 3 else None
+    return Spans(surf, p.slave.copy(), facets, radius, fptr, fids, nptr, surf.ids[nodes],
+                 reference, slave_facets)
+
+
+def union_spans(ptr: np.ndarray, nodes: np.ndarray, extra: np.ndarray) -> tuple[np.ndarray,
+                                                                                np.ndarray]:
+    """CSR spans (increasing nodes per entry) with each entry's ``extra[i]`` nodes added."""
+    n = ptr.size - 1
+    owner = np.concatenate([np.repeat(np.arange(n, dtype=np.int64), np.diff(ptr)),
+                            np.repeat(np.arange(n, dtype=np.int64), extra.shape[1])])
+    pairs = np.unique(np.column_stack([owner, np.concatenate([nodes, extra.ravel()])]), axis=0)
+    new_ptr = np.concatenate([[0], np.cumsum(np.bincount(pairs[:, 0], minlength=n))])
+    return new_ptr.astype(np.int64), pairs[:, 1].copy()
+
+
+def repeat_spans(ptr: np.ndarray, nodes: np.ndarray, times: int) -> tuple[np.ndarray, np.ndarray]:
+    """CSR spans with each entry repeated ``times`` times in a row (entry i → times·i + j)."""
+    counts = np.repeat(np.diff(ptr), times)
+    new_ptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    owner = np.repeat(np.arange(counts.size, dtype=np.int64), counts)
+    offset = np.arange(new_ptr[-1], dtype=np.int64) - new_ptr[owner]
+    return new_ptr, nodes[ptr[owner // times] + offset]
+
+
+def outside_spans(p: Pairing, ptr: np.ndarray, nodes: np.ndarray) -> np.ndarray:
+    """True where an entry of p (compact numbering, as the spans' ``nodes``) has a master node
+    of nonzero weight outside its span (``nodes[ptr[i]:ptr[i+1]]``, increasing)."""
+    n, k = p.master.shape
+    owner = np.repeat(np.arange(n, dtype=np.int64), np.diff(ptr))
+    big = int(max(nodes.max(initial=0), p.master.max(initial=0))) + 1
+    key = owner * big + nodes
+    cur = (np.arange(n, dtype=np.int64)[:, None] * big + p.master).ravel()
+    if key.size == 0:
+        return np.any(p.weights != 0.0, axis=1)
+    pos = np.minimum(np.searchsorted(key, cur), key.size - 1)
+    missing = (key[pos] != cur) & (p.weights.ravel() != 0.0)
+    return missing.reshape(n, k).any(axis=1)
+
+
+def fit_mortar(new: Pairing, last: Pairing, x: np.ndarray) -> Pairing:
+    """The mortar rows made on the current configuration x, on the slaves of ``last`` (the
+    fixed set of rows, compact numbering): a slave that the new rows no longer hold (its
+    facets uncovered: past the master's end) keeps its last row, its master combination and
+    normal, with its point and gap measured on x (as a node-to-segment slave past the master's
+    end stays on its last facet). Slaves the new rows hold beyond the set are left out."""
+    at = np.minimum(np.searchsorted(new.slave, last.slave), max(len(new) - 1, 0))
+    found = (new.slave[at] == last.slave) if len(new) else np.zeros(len(last), dtype=bool)
+    width = max(new.master.shape[1], last.master.shape[1])
+    out = last.subset(np.arange(len(last)))
+    out.master, out.weights = _pad(last.master, last.weights, width)
+    master, weights = _pad(new.master, new.weights, width)
+    out.master[found], out.weights[found] = master[at[found]], weights[at[found]]
+    for name in ("normal", "tangents", "xi", "facet"):
+        getattr(out, name)[found] = getattr(new, name)[at[found]]
+    out.point = np.einsum("mk,mkx->mx", out.weights, x[out.master])
+    out.gap = np.einsum("mx,mx->m", out.normal, x[out.slave] - out.point)
+    return out
+
+
+def _pad(master: np.ndarray, weights: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """Rows padded to ``width`` entries with zero weights on their first master node."""
+    extra = width - master.shape[1]
+    if extra == 0:
+        return master.copy(), weights.copy()
+    return (np.concatenate([master, np.repeat(master[:, :1], extra, axis=1)], axis=1),
+            np.concatenate([weights, np.zeros((weights.shape[0], extra))], axis=1))
+
+
+def reference_frame(p: Pairing, reference: np.ndarray) -> None:
+    """Finite sliding in 3D: the tangents of the pairing p set, in place, from the normal and
+    a per-entry reference vector (t1 = the reference projected on the tangent plane, t2 =
+    n × t1) rather than from the facet's parametrisation: the basis the slip direction and
+    the slip are written in then does not jump when a slave crosses to a facet oriented
+    otherwise (a triangle's first edge, a quad numbered from another corner); on a flat
+    master it is the same on every facet, on a curved one it turns with the normal."""
+    n = p.normal
+    t1 = reference - np.einsum("mx,mx->m", reference, n)[:, None] * n
+    t1 /= np.linalg.norm(t1, axis=1)[:, None]
+    p.tangents[:] = np.stack([t1, np.cross(n, t1)], axis=1)
