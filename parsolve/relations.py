@@ -51,6 +51,12 @@ class Relation:
     # a zone of these rows may form from nothing (a contact): the active set closes the most
     # violated first (solvers/active_set.py, ``_forming``)
     forming: bool = False
+    # per row, c >= 0, in the Newton matrix only: an enforced row with c > 0 reads
+    # A Δq − c λ = b − A q in the solve (a stiffness AᵀA / c along the row, once λ is
+    # eliminated) and its multiplier is discarded after the solve. It linearises a force the
+    # relation does not carry (friction's cross stiffness across the slip direction, whose
+    # rows couple slave and master nodes outside the stiffness pattern); None: all 0
+    compliance: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.sense not in SENSES:

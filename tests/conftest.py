@@ -155,13 +155,6 @@ def dense(mat, comm=MPI.COMM_WORLD) -> np.ndarray:
 
 
 
-# Shipped scenes whose global iteration counts depend on the partition, and the tolerance their
-# fields agree to across partitions: 3D finite sliding against a deformable master turns the
-# slip directions by a fixed point (settled at 1e-10 rad) whose path round-off decides
-# (docs/theory.md, finite sliding); measured 4e-11 to 1.4e-10 of the tangential reactions.
-PATH_DEPENDENT = {"contact_ironing_3d.toml": 1e-8}
-
-
 def assert_same_results(a: dict, b: dict, tol: float = 1e-10, ignore: tuple = ()) -> None:
     """Two result files hold the same datasets, equal to ``tol`` of the largest value of each
     kind of dataset (``stress``, ``multiplier``, ...), integers and active rows exactly; the

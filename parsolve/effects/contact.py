@@ -121,7 +121,6 @@ from parsolve.contact.rows import friction_dual, node_rows, normal_rows, normal_
     slip_vectors, span_rows, tangent_rows
 from parsolve.contact.surfaces import Surfaces, canonical_facets
 from parsolve.effects.base import Effect
-from parsolve.effects.compose import NodeBlocks, node_places
 from parsolve.errors import InputError, SolverError
 from parsolve.evolution import CONSTANT
 from parsolve.mesh.regions import gather_facets
@@ -242,7 +241,7 @@ class Contact(Effect):
         self.node_state = np.where(closed, fr.STICK, fr.OPEN).astype(np.int8)
         self.direction = np.ones((n, dm1)) / np.sqrt(dm1)
         self.committed = (self.node_state.copy(), self.direction.copy())
-        self.turning = fr.SlipNewton() if spec.obstacle is not None else fr.DirectionIteration()
+        self.turning = fr.SlipNewton()
         # finite sliding: the total slip of the converged steps (the output adds the step's)
         self.slip_base = np.zeros(n * dm1)
         self._build_rows()
@@ -577,7 +576,8 @@ class Contact(Effect):
             t = self.trows
             tangent = Relation(f"{name}_tangent", t.nrows, t.row, self.t_dofs,
                                self._tangent_coefs(), np.zeros(t.nrows), CONSTANT, "=", None,
-                               eliminate=False, forming=True)
+                               eliminate=False, forming=True,
+                               compliance=np.zeros(t.nrows) if self.mesh.dim == 3 else None)
             tangent.meta = {"type": "contact", "key": self.spec.key,
                             "refresh": self.mesh.dim == 3 or finite}
             self.tangent = tangent
@@ -592,17 +592,30 @@ class Contact(Effect):
             self.tangent.a_vals[:] = self._tangent_coefs()
             self.tangent.values[:] = self._stick_values()
 
-    def _tangent_active(self, active: dict) -> None:
+    def _tangent_active(self, active: dict, q: np.ndarray) -> None:
         """Tangential rows enforced where the node sticks; in 3D with the "reaction" mode a
-        sliding node that is held (``DirectionIteration.held``) keeps its row across s (its
-        reaction tells how s must turn); a freed one releases both."""
+        sliding node that is held (``SlipNewton.held``) keeps its row across s; a free one
+        releases both in the relations, and its row across s carries, in the Newton matrix
+        only, the cross stiffness κ (n × s)(n × s)ᵀ on the relative slip (the dual's
+        dependence on s, linearised): the row enforced with compliance 1/κ at the current
+        cross slip (right-hand side 0), its multiplier discarded after the solve
+        (``Relation.compliance``). Through the row, κ couples the slave to the master nodes
+        its row holds, whose pairs the stiffness pattern does not have."""
         stick = self.node_state == fr.STICK
         if self.mesh.dim == 2:
             active[self.tangent.name][:] = stick
             return
-        across = stick | (self.node_state == fr.SLIP) & (self.spec.direction == "reaction") \
-            & self.turning.held
+        sliding = (self.node_state == fr.SLIP) & (self.spec.direction == "reaction")
+        kappa = self.turning.kappa
+        free = sliding & ~self.turning.held & (kappa > 0.0)
+        across = stick | sliding & self.turning.held | free
         active[self.tangent.name][:] = np.stack([stick, across], axis=1).ravel()
+        soft = self.tangent.compliance.reshape(-1, 2)
+        soft[:] = 0.0
+        soft[free, 1] = 1.0 / kappa[free]
+        if free.any():   # (every rank the same arrays: all of them reduce, or none)
+            now = self.values.relation(self.tangent, q).reshape(-1, 2)
+            self.tangent.values.reshape(-1, 2)[free, 1] = now[free, 1]
 
     # ------------------------------------------------------------------ Newton hooks
 
@@ -633,7 +646,7 @@ class Contact(Effect):
         self._set_dual()
         if self.span is None:
             self.tangent.values[:] = self.values.relation(self.tangent, q)
-        self._tangent_active(active)
+        self._tangent_active(active, q)
         return True
 
     def forces(self, lam: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -686,7 +699,8 @@ class Contact(Effect):
         self.node_state, self.direction = state, direction
         if changed or moved:
             self._set_dual()
-            self._tangent_active(active)
+        if changed or moved or self.mesh.dim == 3:   # 3D: the cross rows' κ at this q
+            self._tangent_active(active, q)
         return changed or moved
 
     def _turn(self, state, direction, lam, rn, rt, du, motion: float) -> bool:
@@ -695,8 +709,6 @@ class Contact(Effect):
         True when one is not settled yet or changes mode. A settled update leaves s as solved
         (the outputs are those of the relations solved)."""
         sliding = (self.node_state == fr.SLIP) & (state == fr.SLIP)
-        if isinstance(self.turning, fr.DirectionIteration):
-            return self._turn_fixed_point(state, direction, lam, rn, du, sliding)
         murn = self.mu * np.maximum(rn, 0.0)
         # a slip below 1e-6 of the step's motion has no direction: such a node stays held
         s, residual, switched = self.turning.turn(sliding, self.direction, du, rt, murn,
@@ -709,51 +721,9 @@ class Contact(Effect):
             direction[sliding] = s[sliding]
         return unsettled
 
-    def _turn_fixed_point(self, state, direction, lam, rn, du, sliding) -> bool:
-        """Against a master body: the directions turned by ``fr.DirectionIteration`` (the
-        Newton-like fixed point with Anderson mixing; the cross stiffness would couple the
-        slave to the master nodes, outside the stiffness pattern)."""
-        it = self.turning
-        f = lam[self.tangent.name].reshape(-1, 2)[:, 1]       # the cross rows' multipliers
-        s = self.direction
-        across = np.column_stack([-s[:, 1], s[:, 0]])
-        w = np.einsum("mj,mj->m", du, across)
-        murn = self.mu * np.maximum(rn, 0.0)
-        gamma = np.maximum(np.einsum("mj,mj->m", du, s), 0.0)
-        reset = bool(np.any(state != self.node_state))
-        step, residual = it.turn(sliding, s, f, w, murn, gamma, reset)
-        direction[sliding] = fr.rotate(s[sliding], step[sliding])
-        it.held |= state != fr.SLIP      # a node that starts sliding is held first
-        return bool(np.any(np.abs(residual) > fr.TOL_ANGLE))
-
     def evaluate(self, cells: np.ndarray, values: dict, state, secant: bool):
-        """No forces of its own (the contact acts through its relations); in 3D with friction,
-        the Newton matrix gets the cross stiffness κ (n × s)(n × s)ᵀ of each free sliding
-        node (``fr.SlipNewton``: the dual's dependence on s, linearised) on the slave node's
-        diagonal block (against a master body, its coupling to the master nodes is left out:
-        a quasi-Newton step)."""
-        if not (self.frictional and self.mesh.dim == 3 and self.spec.direction == "reaction"
-                and isinstance(self.turning, fr.SlipNewton)):
-            return {}, [], state, None
-        p = self.pairing
-        if self.turning.kappa.size != len(p):   # before the first step: no stiffness yet
-            return {}, [], state, None
-        cell, local, which = self._slave_places(cells)
-        v = np.cross(p.normal[which], slip_vectors(p, self.direction)[which])
-        k = self.turning.kappa[which][:, None, None] * np.einsum("mi,mj->mij", v, v)
-        blocks = NodeBlocks(k.reshape(len(k), 9).T.copy(), cell, local)
-        return {}, [("u", "u", blocks)], state, None
-
-    def _slave_places(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(cell, local node, pairing entry) of the slave nodes this rank owns, through one of
-        its cells each; computed once per set of cells."""
-        cached = getattr(self, "_places", None)
-        if cached is None or cached[0] is not cells:
-            own, local = self.values.owned_nodes(self.pairing.slave)
-            cell, pos = node_places(self.mesh.cells[cells], local)
-            has = cell >= 0
-            self._places = (cells, (cell[has], pos[has], np.flatnonzero(own)[has]))
-        return self._places[1]
+        """No forces and no stiffness of its own: the contact acts through its relations."""
+        return {}, [], state, None
 
     def end_step(self) -> None:
         self.turning.commit()

@@ -13,8 +13,8 @@ multiplier row and one dual column, which carries the coefficients of the enforc
 (``select``); the other rows' A entries are kept in the pattern at zero.
 
 Relations refreshed between iterations (``meta["refresh"]``: friction turning its rows,
-contact pairings) keep their sparsity: ``refresh`` copies their current A and D values into
-the stacked arrays in place.
+contact pairings) keep their sparsity: ``refresh`` copies their current A and D values (and
+compliances, ``Relation.compliance``) into the stacked arrays in place.
 """
 
 from __future__ import annotations
@@ -66,6 +66,8 @@ class RelationSet:
         self.rep_row[self.mult_of_row[::-1]] = np.arange(self.mult_of_row.size)[::-1]  # first
         self._d_seg = np.concatenate([[0], np.cumsum([len(d) for d in dv])]).astype(np.int64)
         self._a_seg = np.concatenate([[0], np.cumsum([len(a) for a in av])]).astype(np.int64)
+        self.compliance = np.zeros(int(first[-1]))      # per multiplier row (Relation)
+        self._copy_compliance()
         self.row_scale: np.ndarray | None = None
         self.col_scale: np.ndarray | None = None
         self._owned_entries: dict[int, tuple] = {}      # per relation: its owned A entries
@@ -187,6 +189,12 @@ class RelationSet:
             if r.meta.get("refresh"):
                 self.d_vals[self._d_seg[k]:self._d_seg[k + 1]] = r.dual_coo()[2]
                 self.a_vals[self._a_seg[k]:self._a_seg[k + 1]] = r.a_vals
+        self._copy_compliance()
+
+    def _copy_compliance(self) -> None:
+        for k, r in enumerate(self.relations):
+            if r.compliance is not None and not r.collapsed:
+                self.compliance[self.first_row[k]:self.first_row[k + 1]] = r.compliance
 
     def set_scales(self, kscale: float) -> None:
         """Scale each row of A and column of D to the size of the stiffness diagonal."""

@@ -246,8 +246,14 @@ class SaddleSystem:
 
     def gather(self, x_owned: np.ndarray) -> HeldValues:
         """What this rank holds of the saddle vector (its DOFs, ghosts included, and every
-        multiplier) from its owned rows (the DOF map's forward exchange)."""
-        return self.dofmap.gather(x_owned)
+        multiplier) from its owned rows (the DOF map's forward exchange). The multipliers of
+        enforced compliant rows are discarded (``Relation.compliance``: a device of the Newton
+        matrix, not a force)."""
+        held = self.dofmap.gather(x_owned)
+        soft = self.relation_set.compliance > 0.0
+        if soft.any():
+            held.lam[soft & self.op.active.astype(bool)] = 0.0
+        return held
 
     def with_primal(self, x_full: HeldValues, q: np.ndarray) -> HeldValues:
         """A copy of ``x_full`` with its primal part replaced by q."""

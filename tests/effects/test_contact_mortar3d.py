@@ -237,7 +237,7 @@ max_iterations = 60
 """
 
 
-@pytest.mark.parametrize("cell, bound", [("hexahedron", 30), ("tetra", 40)])
+@pytest.mark.parametrize("cell, bound", [("hexahedron", 10), ("tetra", 10)])
 def test_mortar3d_friction_block_on_meshed_foundation(run, shared_tmp, cell, bound):
     """A block pressed by p = 10 on a deformable foundation meshed differently (4×4 against
     3×3, distorted) and pushed along (2, 1) by its top, Coulomb friction μ = 0.3 with mortar
@@ -245,8 +245,9 @@ def test_mortar3d_friction_block_on_meshed_foundation(run, shared_tmp, cell, bou
     flat horizontal interface are x and y), every node in its cone and on its boundary when
     sliding, no penetration; sticking first, every closed node sliding at the end with the
     tangential reactions' magnitudes summing to μN. Iterations per step measured: hexahedra
-    1-24, tetrahedra 14-30 (with a step cut): the growth of 3D friction iterations is issue 17's
-    own item, not the mortar rows'."""
+    1, 8, 7, 5, 4, 4; tetrahedra 7, 7, 6, 4, 4, 4 (the slip direction's Newton step with the
+    cross stiffness through the compliant cross rows; 1-24 and 14-30 with a step cut under
+    the fixed point it replaced)."""
     mesh = shared_tmp / f"mortar3d_friction_{cell}.msh"
     write_mesh(mesh, 3, 4, cell, seed=5)
     res = run(FRICTION3D.format(mesh=mesh), name=f"mortar3d_friction_{cell}")

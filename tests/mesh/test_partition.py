@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from conftest import CONFIGS, PATH_DEPENDENT, ROOT, assert_same_results, run_scene
+from conftest import CONFIGS, ROOT, assert_same_results, run_scene
 from parsolve.errors import InputError
 from parsolve.mesh.generators import box, plate_with_hole, rectangle
 from parsolve.mesh.mesh import Mesh
@@ -244,19 +244,11 @@ SHIPPED = sorted(p.name for p in CONFIGS.glob("*.toml"))
 # x5 a step to 5e-10 at step 12, 1.15e-9 on another CPU). Two partitions of such a run are only
 # as close as its convergence tolerance: the comparison is made to the scene's own rtol, a bound
 # round-off does not move. Every other shipped scene converges quadratically or is linear.
-# The scenes of conftest.PATH_DEPENDENT are compared to their own tolerance, iteration counts
-# apart.
 def tolerance(name: str) -> float:
     from parsolve.scene import load_scene
 
-    if name in PATH_DEPENDENT:
-        return PATH_DEPENDENT[name]
     nonlinear = load_scene(CONFIGS / name).nonlinear
     return nonlinear.rtol if nonlinear.matrix == "secant" else 1e-10
-
-
-def ignored(name: str) -> tuple:
-    return ("steps/iterations",) if name in PATH_DEPENDENT else ()
 
 
 @pytest.mark.parametrize("name", SHIPPED)
@@ -267,6 +259,6 @@ def test_shipped_scene_same_on_any_partition(name, shared_tmp, comm):
         pytest.skip("one rank: both partitioners give the one trivial part")
     scotch = run_scene(CONFIGS / name, shared_tmp / "scotch.h5", solver={"partitioner": "scotch"})
     rcb = run_scene(CONFIGS / name, shared_tmp / "rcb.h5", solver={"partitioner": "bisection"})
-    assert_same_results(scotch, rcb, tolerance(name), ignored(name))
+    assert_same_results(scotch, rcb, tolerance(name))
     alone = run_scene(CONFIGS / name, shared_tmp / f"alone{comm.rank}.h5", MPI.COMM_SELF)
-    assert_same_results(alone, scotch, tolerance(name), ignored(name))
+    assert_same_results(alone, scotch, tolerance(name))
