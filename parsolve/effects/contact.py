@@ -21,15 +21,15 @@ absorbs it, the friction force is ``Rt = −λt − μ Rn s`` (``friction.reacti
 
 The tangential rows: in 2D one row along t per node (s = ±1 only flips the dual). In 3D two
 rows per node along s and n × s (same entries as Dt₁, Dt₂: a direction change is a value
-update of A, D and the stick values). With ``direction = "reaction"`` (the default), against
-a rigid obstacle, the directions follow a generalised Newton step (``friction.SlipNewton``):
+update of A, D and the stick values). With ``direction = "reaction"`` (the default) the
+directions follow a generalised Newton step (``friction.SlipNewton``, docs/contact.md §4.1):
 a node that starts sliding is held (its row across s blocked) until it has a slip, then free
 (both rows released) with s along its slip and, in the Newton matrix only, the cross
-stiffness mu Rn / γ that linearises the dual's dependence on s (``evaluate``): 5–10
-iterations per step in the 3D tests, not growing with the surface, the same on any number of
-ranks. Against a master body (whose nodes that stiffness would couple outside the pattern) a
-held node's cross-row multiplier is the friction the direction lacks and the directions turn
-by Newton-like steps (``friction.DirectionIteration``, docs/contact.md §4.1). ``"displacement"``
+stiffness κ = mu Rn / γ that linearises the dual's dependence on s: its row across s enforced
+with the compliance 1/κ (``Relation.compliance``, its multiplier discarded), i.e. κ on the
+relative slip across s, slave and master nodes alike, in the rows' own pattern (4–13
+iterations per step in the 3D tests, obstacles and master bodies, finite sliding and mortar;
+not growing with the surface; the same on any number of ranks). ``"displacement"``
 releases both rows and takes s along the slip increment (the plain update): it does not
 converge in partial slip (kept for study).
 A node that closes while moving along the surface starts sliding that way (sticking it at
@@ -76,8 +76,8 @@ Scene schema::
     #                                mortar3d on triangle, quad, triangle6 faces in 3D)
     closed = 1e-9                  # initial gaps ≤ this (relative to the mesh size) start closed
     #                                (a floating body needs no larger one: see above)
-    sliding = "finite"             # "small" (default: paired once) or "finite" (master
-    #                                region, node_to_segment; 2D and 3D: see below)
+    sliding = "finite"             # "small" (default: paired once) or "finite" (a master
+    #                                region; node-to-segment or mortar, 2D and 3D: see below)
 
 Finite sliding (``sliding = "finite"``): the slaves are paired again on the current (displaced)
 configuration at each step's start and after each solve, until the rows stop changing (their
@@ -95,12 +95,14 @@ hold both components of the slip since the step's start; the tangent basis (t1, 
 is not the facet's own but the initial t1 projected on the current tangent plane, so that the
 slip direction, written in it, does not jump when a slave crosses to a facet numbered from
 another corner (``reference_frame``). A 3D slave that passed its facet's edge into a concave
-crease of the deformed master (and so entered the next facet) goes to that facet. Limits: in
-2D a slave at a concave kink (an indentation's rim), held to one segment, may cross it into
-the next by ~1e-6 of the press (the 3D rule makes a 2D slave cycle between the two segments);
-the 3D friction iterations per step are the direction iteration's plus the re-pairing's
-(9–44 in the tests; a step that needs more than ``max_iterations`` is cut), and on 3D
-ironing their path depends on the partition (the runs agree to the tolerance only).
+crease of the deformed master (and so entered the next facet) goes to that facet. Mortar
+rows (``contact.sliding``): integrated again on the current configuration, on the slaves
+paired at the start, each over the master nodes within the search radius plus its slave
+facets' reach (a slave no facet covers any more keeps its last row). Limits: in 2D a
+node-to-segment slave at a concave kink (an indentation's rim), held to one segment, may
+cross it into the next by ~1e-6 of the press (the 3D rule makes a 2D slave cycle between the
+two segments); mortar enforces weighted gaps, not the nodes' (a die's corner node enters a
+bent rim by a few % of the press).
 """
 
 from __future__ import annotations
@@ -178,8 +180,8 @@ def parse(t, dim: int) -> ContactSpec:
         raise t.error("discretization", "mortar needs a master region (not an obstacle)")
     sliding = t.get("sliding", str, "small", choices=SLIDINGS)
     if sliding == "finite" and master is None:
-        raise t.error("sliding", "finite sliding needs a master region (against an obstacle "
-                                 "the projection is made on the current geometry already)")
+        raise t.error("sliding", "finite sliding needs a master region (against a rigid "
+                                 "obstacle the pairing is made once: small sliding only)")
     t.done()
     return ContactSpec(name, slave, master, obstacle, mu, direction, radius, closed, t.path,
                        discretization, sliding)
