@@ -151,6 +151,8 @@ def span_rows(pairing: Pairing, vectors: np.ndarray, ptr: np.ndarray, nodes: np.
     another facet of its span is a value update of the same entries (no new sparsity).
     ValueError when a current facet node is outside its entry's span."""
     _check(pairing)
+    if pairing.master.shape[1] == 0:   # a rigid obstacle: the slave alone, spans empty
+        return node_rows(pairing, vectors)
     n, dim = vectors.shape
     counts = np.diff(ptr)
     owner = np.repeat(np.arange(n, dtype=np.int64), counts)

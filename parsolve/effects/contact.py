@@ -76,8 +76,8 @@ Scene schema::
     #                                mortar3d on triangle, quad, triangle6 faces in 3D)
     closed = 1e-9                  # initial gaps ≤ this (relative to the mesh size) start closed
     #                                (a floating body needs no larger one: see above)
-    sliding = "finite"             # "small" (default: paired once) or "finite" (a master
-    #                                region; node-to-segment or mortar, 2D and 3D: see below)
+    sliding = "finite"             # "small" (default: paired once) or "finite" (paired again
+    #                                each iteration; any master or obstacle, 2D and 3D: below)
 
 Finite sliding (``sliding = "finite"``): the slaves are paired again on the current (displaced)
 configuration at each step's start and after each solve, until the rows stop changing (their
@@ -102,7 +102,9 @@ facets' reach (a slave no facet covers any more keeps its last row). Limits: in 
 node-to-segment slave at a concave kink (an indentation's rim), held to one segment, may
 cross it into the next by ~1e-6 of the press (the 3D rule makes a 2D slave cycle between the
 two segments); mortar enforces weighted gaps, not the nodes' (a die's corner node enters a
-bent rim by a few % of the press).
+bent rim by a few % of the press). Against a rigid obstacle the slaves are projected again on
+it (rows on the slave alone, empty spans); the stick rows hold the obstacle's point faced at
+the step's start.
 """
 
 from __future__ import annotations
@@ -179,9 +181,6 @@ def parse(t, dim: int) -> ContactSpec:
     if discretization == "mortar" and master is None:
         raise t.error("discretization", "mortar needs a master region (not an obstacle)")
     sliding = t.get("sliding", str, "small", choices=SLIDINGS)
-    if sliding == "finite" and master is None:
-        raise t.error("sliding", "finite sliding needs a master region (against a rigid "
-                                 "obstacle the pairing is made once: small sliding only)")
     t.done()
     return ContactSpec(name, slave, master, obstacle, mu, direction, radius, closed, t.path,
                        discretization, sliding)
@@ -318,24 +317,35 @@ class Contact(Effect):
             return surf.to_input(p)
         surf = Surfaces.of([(slave, slave_pts)])
         pts, nodes = surf.points, surf.compact(slave)
-        kind, params = spec.obstacle
-        okey = f"{key}.obstacle.{kind}"
+        okey = f"{key}.obstacle.{spec.obstacle[0]}"
         try:
-            if kind == "plane":
-                p = obstacles.plane(pts, nodes, params["origin"], params["normal"], self.source, okey)
-            elif kind == "cylinder":
-                p = obstacles.cylinder(pts, nodes, params["centre"], params["radius"],
-                                       params.get("axis"), params["inside"], self.source, okey)
-            else:
-                p = obstacles.sphere(pts, nodes, params["centre"], params["radius"],
-                                     params["inside"], self.source, okey)
+            p = self._project(pts, nodes)
         except ValueError as exc:
             raise InputError(str(exc), self.source, okey) from None
         self._check_reach(p, okey)
         self._check_facing(p, surf, regions, okey)
         if spec.search_radius is not None:
             p.paired &= p.gap <= spec.search_radius
-        return surf.to_input(p.only_paired())
+        p = p.only_paired()
+        if spec.sliding == "finite":   # rows on the slave alone: the spans are empty
+            n = len(p)
+            ptr, none = np.zeros(n + 1, dtype=np.int64), np.zeros(0, dtype=np.int64)
+            reference = p.tangents[:, 0].copy() if self.mesh.dim == 3 else None
+            self.span = Spans(surf, p.slave.copy(), np.zeros((0, 0), dtype=np.int64),
+                              float(np.max(self.mesh.extent)), ptr, none, ptr, none, reference)
+        return surf.to_input(p)
+
+    def _project(self, points: np.ndarray, nodes: np.ndarray):
+        """The nodes (compact ids) projected on the rigid obstacle (``contact.obstacles``)."""
+        kind, params = self.spec.obstacle
+        src, okey = self.source, f"{self.spec.key}.obstacle.{kind}"
+        if kind == "plane":
+            return obstacles.plane(points, nodes, params["origin"], params["normal"], src, okey)
+        if kind == "cylinder":
+            return obstacles.cylinder(points, nodes, params["centre"], params["radius"],
+                                      params.get("axis"), params["inside"], src, okey)
+        return obstacles.sphere(points, nodes, params["centre"], params["radius"],
+                                params["inside"], src, okey)
 
     def _rows(self, vectors: np.ndarray, pairing=None):
         """Rows along one vector per entry: node_rows, or (finite sliding) over the spans."""
@@ -372,6 +382,11 @@ class Contact(Effect):
         start)."""
         sp, ft = self.span, self.mesh.facet_type
         x = self._current_points(q)
+        if self.spec.obstacle is not None:   # projected again on the obstacle
+            p = self._project(x, sp.slave)
+            if sp.reference is not None:
+                reference_frame(p, sp.reference)
+            return p, x
         if sp.slave_facets is not None:
             return self._repair_mortar(x), x
         p = pair_nodes(x, sp.slave, sp.facets, ft, sp.radius)
@@ -426,8 +441,9 @@ class Contact(Effect):
         master nodes and weights, a facet's shape functions or a mortar row's):
         its slip in the step, whatever facets it crossed; (n, dim − 1), in the tangent basis
         of the current pairing p."""
-        master0, weights0 = self._start_point
-        xm0 = np.einsum("mk,mkx->mx", weights0, x[master0])
+        master0, weights0, point0 = self._start_point
+        # (a rigid obstacle: the point faced at the start, fixed in space)
+        xm0 = np.einsum("mk,mkx->mx", weights0, x[master0]) if master0.shape[1] else point0
         return np.einsum("mjx,mx->mj", p.tangents, x[self.span.slave] - xm0)
 
     def _slide(self, q: np.ndarray, start: bool) -> bool:
@@ -445,7 +461,7 @@ class Contact(Effect):
         sp = self.span
         p, x = self._repair(q)
         if start:
-            self._start_point = (p.master.copy(), p.weights.copy())
+            self._start_point = (p.master.copy(), p.weights.copy(), p.point.copy())
         self._facet_now = p.facet.copy()
         self.du = self._tangential_offset(x, p)
         p = sp.surf.to_input(p)
