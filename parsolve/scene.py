@@ -743,12 +743,9 @@ def _axisymmetric_measure(mesh: MeshSpec, source: str):
 
 def _check_axisymmetric(scene: Scene) -> None:
     """What an axisymmetric scene cannot carry yet: the contact baselines (penalty areas are
-    plane) and mortar contact (its segment integrals are not weighted by 2π r)."""
+    plane)."""
     for spec in scene.effect_specs.get("contact", []):
         key = getattr(spec, "key", "contact")
-        if getattr(spec, "discretization", "node_to_segment") == "mortar":
-            raise InputError("mortar contact is not available with hypothesis 'axisymmetric' "
-                             "(use node_to_segment)", scene.source, key + ".discretization")
         if getattr(spec, "formulation", "relations") != "relations":   # a baseline
             raise InputError("the contact baselines are not available with hypothesis "
                              "'axisymmetric' (use formulation = \"relations\")", scene.source,

@@ -83,6 +83,7 @@ def mortar_pairing(
     facet_type: str,
     search_radius: float | None = None,
     min_cover: float = 1e-6,
+    radial: bool = False,
 ) -> Mortar:
     """Mortar rows of the slave facets against the master facets (2D: line or line3).
 
@@ -91,6 +92,9 @@ def mortar_pairing(
     master_facets (nm, k)    master facets, outward orientation of the master body
     search_radius            largest |gap| paired (default: the largest facet extent)
     min_cover                slave facets covered by less than this fraction are ignored
+    radial                   axisymmetric (x = r): the integrals weighted by r, i.e. over
+                             the surface of revolution (the 2π cancels in the normalised
+                             rows), the dual basis biorthogonal for that measure
     """
     points = np.asarray(points, dtype=float)
     sf = np.asarray(slave_facets, dtype=np.int64)
@@ -107,7 +111,7 @@ def mortar_pairing(
     e, f, lo, hi = e[keep], f[keep], lo[keep], hi[keep]
     if e.size == 0:
         return Mortar(empty_pairing(np.zeros(0, dtype=np.int64), 2, 0), np.zeros(0))
-    pieces = _integrate_pieces(el, xs_f[e], xm_f[f], lo, hi, QUADRATURE[facet_type])
+    pieces = _integrate_pieces(el, xs_f[e], xm_f[f], lo, hi, QUADRATURE[facet_type], radial)
     phi, jw, nm, gap = pieces
     # pieces whose slave and master are farther apart than the search radius are not paired
     near = np.abs(gap) <= radius * (1.0 + 1e-12)
@@ -183,10 +187,11 @@ def _overlap(xs: np.ndarray, xm: np.ndarray, facet_type: str) -> tuple[np.ndarra
     return np.clip(xi.min(axis=1), -1.0, 1.0), np.clip(xi.max(axis=1), -1.0, 1.0)
 
 
-def _integrate_pieces(el, xs, xm, lo, hi, nq: int):
+def _integrate_pieces(el, xs, xm, lo, hi, nq: int, radial: bool = False):
     """Per piece (slave facet xs clipped to [lo, hi] against master facet xm) and quadrature
-    point: slave shape functions φ (P, nq, k), |dx/dξ| × weight (P, nq), master shape
-    functions at the projection N (P, nq, k), and the normal gap at the piece's centre (P,)."""
+    point: slave shape functions φ (P, nq, k), |dx/dξ| × weight (P, nq) (× r when
+    ``radial``), master shape functions at the projection N (P, nq, k), and the normal gap at
+    the piece's centre (P,)."""
     gx, gw = np.polynomial.legendre.leggauss(nq)
     mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
     xi = mid[:, None] + half[:, None] * gx[None, :]           # (P, nq)
@@ -197,6 +202,8 @@ def _integrate_pieces(el, xs, xm, lo, hi, nq: int):
     dx = np.einsum("pgk,pkx->pgx", dphi, xs)
     jac = np.linalg.norm(dx, axis=2)
     jw = jac * half[:, None] * gw[None, :]
+    if radial:   # (2 points integrate φ_i φ_j r exactly on line facets, 5 on line3)
+        jw = jw * x[..., 0]
     normal = np.stack([dx[..., 1], -dx[..., 0]], axis=2) / jac[..., None]   # slave outward
     eta = _ray_on_master(el, x, normal, xm)
     nm = el.shape(eta.reshape(-1, 1)).reshape(P, nq, k)

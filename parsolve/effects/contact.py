@@ -212,8 +212,10 @@ class Contact(Effect):
     # a midside's row holds its edge's corners); the resultants count each row's slave share
     side_nodes = np.zeros(0, dtype=np.int64)
 
-    def __init__(self, spec: ContactSpec, mesh, regions, fields, source: str):
+    def __init__(self, spec: ContactSpec, mesh, regions, fields, source: str,
+                 radial: bool = False):
         self.spec, self.mesh, self.fields_, self.source = spec, mesh, fields, source
+        self.radial = radial    # axisymmetric: mortar integrals over the surface of revolution
         self.name = f"contact {spec.name}"
         key = spec.key
         if "u" not in fields:
@@ -296,10 +298,9 @@ class Contact(Effect):
                 # values, the friction dual and the outputs below stay as they are
                 sfacets, sfacet_pts = self._facets(regions(spec.slave, f"{key}.slave"))
                 surf = Surfaces.of([(facets, facet_pts), (sfacets, sfacet_pts)])
-                rows_of = mortar_pairing if mesh.dim == 2 else mortar_pairing_3d
                 try:
-                    mortar = rows_of(surf.points, surf.compact(sfacets), surf.compact(facets),
-                                     mesh.facet_type, spec.search_radius)
+                    mortar = self._mortar(surf.points, surf.compact(sfacets),
+                                          surf.compact(facets))
                 except ValueError as exc:   # 3D faces that are not triangle, quad, triangle6
                     raise InputError(str(exc), self.source, f"{key}.discretization") from None
                 self.side_nodes = np.unique(sfacets)
@@ -415,16 +416,21 @@ class Contact(Effect):
         """Finite sliding, mortar: the rows made again on the current configuration x, on the
         fixed set of slaves (``sliding.fit_mortar``: a slave no master facet covers any more
         keeps its last row)."""
-        sp, spec = self.span, self.spec
-        rows_of = mortar_pairing if self.mesh.dim == 2 else mortar_pairing_3d
-        new = rows_of(x, sp.slave_facets, sp.facets, self.mesh.facet_type, spec.search_radius)
-        p = fit_mortar(new.pairing, self._compact, x)
+        sp = self.span
+        p = fit_mortar(self._mortar(x, sp.slave_facets, sp.facets).pairing, self._compact, x)
         if sp.reference is not None:
             reference_frame(p, sp.reference)
         compact_nodes = sp.surf.compact(sp.nodes)
         self._check_spans(outside_spans(p, sp.node_ptr, compact_nodes))
         self._compact = p
         return p
+
+    def _mortar(self, points: np.ndarray, slave_facets: np.ndarray, facets: np.ndarray):
+        """The mortar rows of the surfaces (compact numbering) on the configuration points."""
+        ft, radius = self.mesh.facet_type, self.spec.search_radius
+        if self.mesh.dim == 3:
+            return mortar_pairing_3d(points, slave_facets, facets, ft, radius)
+        return mortar_pairing(points, slave_facets, facets, ft, radius, radial=self.radial)
 
     def _check_spans(self, bad: np.ndarray) -> None:
         """SolverError naming the key when a slave left its span."""

@@ -49,7 +49,8 @@ def _build_contact(spec, ctx):
     # formulation = "relations" (the paper's) or a baseline (penalty, augmented Lagrangian)
     if isinstance(spec, contact_penalty.BaselineSpec):
         return contact_penalty.build(spec, ctx.mesh, ctx.regions, ctx.fields, ctx.scene)
-    return contact.Contact(spec, ctx.mesh, ctx.regions, ctx.fields, ctx.scene.source)
+    return contact.Contact(spec, ctx.mesh, ctx.regions, ctx.fields, ctx.scene.source,
+                           radial=ctx.scene.hypothesis == "axisymmetric")
 
 
 EFFECTS: dict[str, Entry] = {

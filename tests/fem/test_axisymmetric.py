@@ -286,11 +286,10 @@ master = "left"
 """
 
 
-@pytest.mark.parametrize("extra, key", [('discretization = "mortar"', "contact[0].discretization"),
-                                        ('formulation = "penalty"', "contact[0].formulation")])
+@pytest.mark.parametrize("extra, key", [('formulation = "penalty"', "contact[0].formulation")])
 def test_contact_forms_refused(extra, key):
-    """Mortar rows and the penalty baselines are plane integrals: refused, exit 2 (node-to-
-    segment rows are per node, their multipliers the ring forces: accepted)."""
+    """The penalty baselines are plane integrals: refused, exit 2 (node-to-segment rows are
+    per node, their multipliers the ring forces; mortar rows are weighted by r: accepted)."""
     with pytest.raises(InputError) as err:
         _model(cylinder(4, "quad") + CONTACT + extra + "\n")
     assert err.value.key == key and err.value.source == "scene.toml"
