@@ -194,7 +194,7 @@ class Elasticity(Effect):
         constant: the stress at the nodes is the cell's (less the eigenstrains there)."""
         mesh = self.mesh
         if self.axisymmetric:
-            return self._stresses_axisymmetric(cells, u)
+            return self._stresses_axisymmetric(cells, u, values)
         rows = kernels.cell_rows(mesh.points, u, mesh.cells[cells])        # (nen, 2d, nc)
         g, vol = kernels.mean_gradient(rows, mesh.cell_type, thickness=self.thickness)
         eps = kernels.voigt_of_gradient(g)
@@ -212,10 +212,11 @@ class Elasticity(Effect):
         parts = [e.eigenstrain(cells, values) for e in self.eigenstrains if values is not None]
         return (sum(p[0] for p in parts), sum(p[1] for p in parts)) if parts else (0.0, 0.0)
 
-    def _stresses_axisymmetric(self, cells: np.ndarray, u: np.ndarray):
+    def _stresses_axisymmetric(self, cells: np.ndarray, u: np.ndarray, values: dict | None):
         """``_stresses`` of an axisymmetric model: the hoop strain u_r / r varies over every
         cell (no constant-strain cell), and the cell mean is weighted by 2π r, the volume. At
-        a node on the axis the hoop strain is its limit ε_rr (u_r vanishes there)."""
+        a node on the axis the hoop strain is its limit ε_rr (u_r vanishes there). The
+        eigenstrains (thermal expansion: its hoop component too) are subtracted."""
         mesh, d = self.mesh, self.mesh.dim
         rows = kernels.cell_rows(mesh.points, u, mesh.cells[cells])        # (nen, 2d, nc)
         g = kernels.gradient_at_nodes(rows, mesh.cell_type)                # (2, 2, nen, nc)
@@ -229,7 +230,8 @@ class Elasticity(Effect):
         mean[:3] = np.einsum("cqv,cq->vc", kernels.voigt_strain(geo.dNdx, ue), geo.wdet)
         mean[3] = np.einsum("cq,cq->c", (ue[:, :, 0] @ geo.N.T) / geo.r, geo.wdet)
         mean /= vol
-        return self._hooke(cells, at_nodes), self._hooke(cells, mean), vol
+        e_mean, e_nodes = self._eigenstrain(cells, values)
+        return self._hooke(cells, at_nodes - e_nodes), self._hooke(cells, mean - e_mean), vol
 
     def _hooke(self, cells: np.ndarray, eps: np.ndarray) -> np.ndarray:
         """σ = C ε with each cell's own Hooke matrix, cell-last: eps (nv, ..., nc)."""

@@ -91,6 +91,8 @@ def _stress_of_unit_strain(model, hypothesis: str) -> np.ndarray:
     E, nu = model.E, model.nu
     if hypothesis == "3d":
         return E / (1 - 2 * nu) * np.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
+    if hypothesis == "axisymmetric":   # (rr, zz, rz, θθ): the hoop strain held too
+        return E / (1 - 2 * nu) * np.array([1.0, 1.0, 0.0, 1.0])
     scale = E / (1 - 2 * nu) if hypothesis == "plane_strain" else E / (1 - nu)
     return scale * np.array([1.0, 1.0, 0.0])
 
@@ -112,9 +114,7 @@ class ThermalExpansion(Effect):
             if m.model != "elastic":
                 raise InputError(f"thermal expansion needs linear elastic materials, not "
                                  f"{m.model!r}", self.source, m.key + ".model")
-        if scene.hypothesis == "axisymmetric":   # the eigenstrain's hoop term is not written
-            raise InputError("thermal expansion is not available with the axisymmetric "
-                             "hypothesis", self.source, "model.hypothesis")
+        self.axisymmetric = scene.hypothesis == "axisymmetric"
         self.thickness = scene.thickness if mesh.dim == 2 else 1.0
         self.alpha = np.zeros(mesh.num_cells)
         for name, value, akey in spec.alpha:
@@ -147,7 +147,8 @@ class ThermalExpansion(Effect):
             combos = np.zeros((1, 2))
         S = [_stress_of_unit_strain(el.models[int(k)], el.hypothesis) for k, _ in combos]
         # M[j, i] = −α S_ij: the block's rows i from the geometric part's rows j
-        self.tensors = np.stack([-a * _voigt_tensor(s, d).T for (_, a), s in zip(combos, S)])
+        tensor = _axisymmetric_tensor if self.axisymmetric else (lambda s: _voigt_tensor(s, d).T)
+        self.tensors = np.stack([-a * tensor(s) for (_, a), s in zip(combos, S)])
         # the effective eigenstrain per unit α ΔT (Voigt), S = C m_eff: (1 + ν) in plane strain
         self.m_eff = np.stack([np.linalg.solve(el.C[int(k)], s) for (k, _), s in zip(combos, S)])
 
@@ -163,10 +164,18 @@ class ThermalExpansion(Effect):
         (material, α) pair) and blocked (``CellKernel``: a block of cells at a time)."""
         mesh = self.mesh
         N, degree = self._rule()
+        if self.axisymmetric:   # the stiffness rule, with N_a / r as a third direction
+            ct = mesh.cell_type
+            N = element(ct).shape(quadrature(ct, kernels.stiffness_degree(ct, self.thickness))[0])
+
+        def gradients(coords):
+            if self.axisymmetric:
+                return kernels.axisymmetric_gradients(coords, mesh.cell_type, self.thickness)
+            return kernels.gradients_cell_last(coords, mesh.cell_type, degree, self.thickness)
 
         def geometric(sel, out):
             coords = mesh.points[mesh.cells[cells[sel]]]
-            G, wdet = kernels.gradients_cell_last(coords, mesh.cell_type, degree, self.thickness)
+            G, wdet = gradients(coords)
             d, nq, nen, nc = G.shape
             if out is None or out.shape != (d, nen, nen, nc):
                 out = np.empty((d, nen, nen, nc))
@@ -176,7 +185,8 @@ class ThermalExpansion(Effect):
                     out[j] += (G[j, q] * wdet[q])[:, None, :] * N[q][None, :, None]
             return out
 
-        kernel = CellKernel(geometric, len(cells), mesh.dim, mesh.cells.shape[1])
+        rows = 3 if self.axisymmetric else mesh.dim
+        kernel = CellKernel(geometric, len(cells), rows, mesh.cells.shape[1])
         return ElementMatrices(tensors=self.tensors, cell_material=self.cell_combo[cells],
                                kernel=kernel)
 
@@ -201,6 +211,12 @@ class ThermalExpansion(Effect):
         mean = ((N @ te.T) * wdet).sum(axis=0) / wdet.sum(axis=0)                # (nc,)
         m = self.m_eff[self.cell_combo[cells]].T * self.alpha[cells]            # (nv, nc)
         return m * mean, m[:, None, :] * te.T[None]
+
+
+def _axisymmetric_tensor(s: np.ndarray) -> np.ndarray:
+    """Stress (rr, zz, rz, θθ) → M[j, i] over the directions j = ∂r, ∂z, 1/r (the hoop
+    strain u_r / r) and the components i = r, z."""
+    return np.array([[s[0], s[2]], [s[2], s[1]], [s[3], 0.0]])
 
 
 def _voigt_tensor(s: np.ndarray, d: int) -> np.ndarray:

@@ -292,7 +292,6 @@ BAD = {
     "nonlinear material": (bad(materials=[{"E": 200.0, "nu": 0.3, "model": "von_mises",
                                            "sigma_y": 1.0, "H": 10.0}],
                                hypothesis="plane_strain"), "materials[0].model"),
-    "axisymmetric": (bad("axisymmetric"), "model.hypothesis"),
     "misspelt key": (bad(thermal_expansion=[{"field": "T", "alpha": 1e-3, "referense": 20.0}]),
                      "thermal_expansion[0].referense"),
 }
