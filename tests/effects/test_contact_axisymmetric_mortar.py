@@ -54,14 +54,14 @@ def test_mortar_passes_the_axisymmetric_patch_test(run, mesh):
     res = run(text, name="axisym_mortar")
     pts = res["mesh/points"][:, :2]
     u = res["fields/displacement"][-1][:, :2]
-    np.testing.assert_allclose(u, exact(pts), rtol=0, atol=1e-12 * DELTA)
+    np.testing.assert_allclose(u, exact(pts), rtol=0, atol=1e-10 * DELTA)
     # the contact force is the uniform pressure over the disc, π r² p (forces for the ring)
     pressure = E * DELTA / (H1 + H2)
     force = res["relations/joint_normal/normal_force"][-1, 0]
     ring = res["relations/press/resultant"][-1, 1]
-    np.testing.assert_allclose(abs(ring), force, rtol=1e-12)
+    np.testing.assert_allclose(abs(ring), force, rtol=1e-10)
     print("contact force / (π p):", force / (np.pi * pressure))
-    np.testing.assert_allclose(force, np.pi * pressure, rtol=1e-12)
+    np.testing.assert_allclose(force, np.pi * pressure, rtol=1e-10)
     if MPI.COMM_WORLD.size > 1:
         assert_same_results(res, run(text, name="axisym_mortar_serial", comm=MPI.COMM_SELF))
 
