@@ -53,6 +53,28 @@ def on_circle(res, k: int):
     return bottom, obstacles.cylinder(x, bottom, [0.0, 0.0], R)
 
 
+def check_step(res, k: int, bottom: np.ndarray, p, mu: float, reaction: np.ndarray,
+               scale: float) -> np.ndarray:
+    """Step k against the obstacle's pairing p of the bottom nodes on the deformed
+    configuration: no node inside, the closed ones on it, the contact forces along the
+    current normals and tangents balancing the top's ``reaction``, the cone, |Rt| = μ Rn
+    where sliding. Returns the closed mask."""
+    state = res["fields/shoe_state"][k, bottom, 0]
+    closed = state != OPEN
+    assert closed.sum() >= 3
+    assert p.gap.min() >= -1e-12 * PRESS, p.gap.min()
+    np.testing.assert_allclose(p.gap[closed], 0.0, atol=1e-10 * PRESS)
+    rn = res["fields/shoe_normal_reaction"][k, bottom, 0]
+    rt = res["fields/shoe_tangential_reaction"][k, bottom].reshape(len(bottom), -1)
+    contact = (rn[:, None] * p.normal + np.einsum("mj,mjx->mx", rt, p.tangents)).sum(axis=0)
+    np.testing.assert_allclose(contact + reaction, 0.0, atol=1e-10 * scale)
+    size = np.linalg.norm(rt, axis=1)
+    assert np.all(size <= mu * rn + 1e-10 * scale)
+    slide = state == SLIP
+    np.testing.assert_allclose(size[slide], mu * rn[slide], atol=1e-10 * scale)
+    return closed
+
+
 @pytest.mark.parametrize("mu", [0.0, MU])
 def test_block_dragged_over_a_rigid_circle_stays_on_it(run, mu):
     text = scene("finite", mu)
@@ -60,21 +82,8 @@ def test_block_dragged_over_a_rigid_circle_stays_on_it(run, mu):
     scale = np.abs(res["relations/top_y/resultant"][:, 1]).max()
     for k in range(len(res["steps/time"])):
         bottom, p = on_circle(res, k)
-        state = res["fields/shoe_state"][k, bottom, 0]
-        closed = state != OPEN
-        assert closed.sum() >= 3
-        assert p.gap.min() >= -1e-12 * PRESS, p.gap.min()
-        np.testing.assert_allclose(p.gap[closed], 0.0, atol=1e-10 * PRESS)
-        rn = res["fields/shoe_normal_reaction"][k, bottom, 0]
-        rt = res["fields/shoe_tangential_reaction"][k, bottom, 0]
-        # the contact forces on the block along the current normals and tangents balance the
-        # reactions of its top
-        contact = (rn[:, None] * p.normal + rt[:, None] * p.tangents[:, 0]).sum(axis=0)
         top = res["relations/top_x/resultant"][k, :2] + res["relations/top_y/resultant"][k, :2]
-        np.testing.assert_allclose(contact + top, 0.0, atol=1e-10 * scale)
-        assert np.all(np.abs(rt) <= mu * rn + 1e-10 * scale)
-        slide = state == SLIP
-        np.testing.assert_allclose(np.abs(rt[slide]), mu * rn[slide], atol=1e-10 * scale)
+        closed = check_step(res, k, bottom, p, mu, top, scale)
     if mu > 0:
         assert np.all(res["fields/shoe_state"][-1, bottom, 0][closed] == SLIP)
     print("iterations per step:", list(res["steps/iterations"]))
@@ -124,19 +133,7 @@ def test_block_dragged_over_a_rigid_cylinder_3d(run):
     for k in range(len(res["steps/time"])):
         x = pts + res["fields/displacement"][k]
         p = obstacles.cylinder(x, bottom, [0.0, 0.0, 0.0], R, [0.0, 1.0, 0.0])
-        state = res["fields/shoe_state"][k, bottom, 0]
-        closed = state != OPEN
-        assert closed.sum() >= 3
-        assert p.gap.min() >= -1e-12 * PRESS, p.gap.min()
-        np.testing.assert_allclose(p.gap[closed], 0.0, atol=1e-10 * PRESS)
-        rn = res["fields/shoe_normal_reaction"][k, bottom, 0]
-        rt = res["fields/shoe_tangential_reaction"][k, bottom]
-        contact = (rn[:, None] * p.normal + np.einsum("mj,mjx->mx", rt, p.tangents)).sum(axis=0)
-        np.testing.assert_allclose(contact + reaction[k], 0.0, atol=1e-10 * scale)
-        size = np.linalg.norm(rt, axis=1)
-        assert np.all(size <= MU * rn + 1e-10 * scale)
-        slide = state == SLIP
-        np.testing.assert_allclose(size[slide], MU * rn[slide], atol=1e-10 * scale)
+        check_step(res, k, bottom, p, MU, reaction[k], scale)
     print("iterations per step:", list(res["steps/iterations"]))
     assert res["steps/iterations"].max() <= 12
     if MPI.COMM_WORLD.size > 1:
