@@ -36,7 +36,9 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
     output mode ("swmr", "parallel", "auto"; default: the scene's, else "swmr")."""
     scene = model.scene
     system = SaddleSystem(comm, model)
-    relations_meta = {r.name: (r.nrows, r.sense != "=") for r in model.relations}
+    # (a device of the Newton matrix, e.g. contact's geometric stiffness, is not a result)
+    relations_meta = {r.name: (r.nrows, r.sense != "=") for r in model.relations
+                      if not r.meta.get("device")}
     unknowns = {"unknowns": " ".join(f.output for f in model.fields),
                 "dofs": model.mesh.num_global_points * model.ncomp,
                 "resultant_components": " ".join(resultant_labels(model.fields, model.mesh.dim))}

@@ -77,12 +77,13 @@ def step_outputs(comm: MPI.Comm, ctx, q: np.ndarray, multipliers: dict, newton=N
             cell_fields[name] = OwnedRows(value[keep])
     rel_out = {}
     active = newton.active.active if newton is not None else None
-    for r in ctx.all_relations:
+    reported = [r for r in ctx.all_relations if not r.meta.get("device")]
+    for r in reported:
         lam = multipliers[r.name]
         rel_out[r.name] = {"multiplier": lam, "primal": ctx.relation_primal(r, q),
                            "resultant": resultant(r, lam, ctx.fields, ctx.dofs.input_points)}
     views = ctx.views(active) if active is not None else {}
-    for r in ctx.all_relations:
+    for r in reported:
         if r.sense != "=":
             rel_out[r.name]["active"] = views[r.name].astype(np.int8)
     if active is not None:  # switched relations' outputs: solubility states, contact

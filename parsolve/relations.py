@@ -52,10 +52,12 @@ class Relation:
     # violated first (solvers/active_set.py, ``_forming``)
     forming: bool = False
     # per row, c >= 0, in the Newton matrix only: an enforced row with c > 0 reads
-    # A Δq − c λ = b − A q in the solve (a stiffness AᵀA / c along the row, once λ is
-    # eliminated) and its multiplier is discarded after the solve. It linearises a force the
-    # relation does not carry (friction's cross stiffness across the slip direction, whose
-    # rows couple slave and master nodes outside the stiffness pattern); None: all 0
+    # A Δq − c λ = 0 in the solve (a stiffness −D A / c, i.e. AᵀA / c when associated, once
+    # λ is eliminated) and its multiplier is discarded after the solve. It linearises a force
+    # the relation does not carry, between nodes outside the stiffness pattern (friction's
+    # cross stiffness across the slip direction; the geometric stiffness of finite sliding,
+    # ``contact.geometry``); None: all 0. A relation of such rows alone is marked
+    # ``meta["device"]``: not a result (not written)
     compliance: np.ndarray | None = None
 
     def __post_init__(self) -> None:

@@ -153,7 +153,16 @@ def span_rows(pairing: Pairing, vectors: np.ndarray, ptr: np.ndarray, nodes: np.
     _check(pairing)
     if pairing.master.shape[1] == 0:   # a rigid obstacle: the slave alone, spans empty
         return node_rows(pairing, vectors)
-    n, dim = vectors.shape
+    return span_combination(pairing, vectors, -pairing.weights[:, :, None] * vectors[:, None, :],
+                            ptr, nodes)
+
+
+def span_combination(pairing: Pairing, slave: np.ndarray, master: np.ndarray, ptr: np.ndarray,
+                     nodes: np.ndarray) -> Rows:
+    """Rows in :func:`span_rows`' layout whose entry i holds the vector ``slave[i]`` (dim,) on
+    its slave node and ``master[i, a]`` on node a of its current facet (the span's other
+    nodes 0): any combination of the slave's and its facet's displacements."""
+    n, dim = slave.shape
     counts = np.diff(ptr)
     owner = np.repeat(np.arange(n, dtype=np.int64), counts)
     big = int(max(nodes.max(initial=0), pairing.master.max(initial=0))) + 1
@@ -162,8 +171,8 @@ def span_rows(pairing: Pairing, vectors: np.ndarray, ptr: np.ndarray, nodes: np.
     pos = np.minimum(np.searchsorted(key, cur), max(key.size - 1, 0))
     if key.size == 0 or np.any(key[pos] != cur):
         raise ValueError("a current master facet lies outside the entry's span")
-    w = np.zeros(nodes.size)
-    np.add.at(w, pos, pairing.weights.ravel())      # distinct nodes of one facet: no overlap
+    on_span = np.zeros((nodes.size, dim))
+    np.add.at(on_span, pos, master.reshape(-1, dim))   # distinct nodes of one facet: no overlap
     # per entry: the slave node first, then its span (entry i starts at ptr[i] + i)
     total = n + nodes.size
     first = ptr[:-1] + np.arange(n)
@@ -172,9 +181,9 @@ def span_rows(pairing: Pairing, vectors: np.ndarray, ptr: np.ndarray, nodes: np.
     node_all = np.empty(total, dtype=np.int64)
     node_all[first] = pairing.slave
     node_all[~is_slave] = nodes
-    weight = np.ones(total)
-    weight[~is_slave] = -w
+    coef = np.empty((total, dim))
+    coef[first] = slave
+    coef[~is_slave] = on_span
     row_of = np.repeat(np.arange(n, dtype=np.int64), counts + 1)
-    coef = weight[:, None] * vectors[row_of]         # (total, dim)
     return Rows(nrows=n, row=np.repeat(row_of, dim), node=np.repeat(node_all, dim),
                 comp=np.tile(np.arange(dim, dtype=np.int64), total), coef=coef.ravel(), width=0)

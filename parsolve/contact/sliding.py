@@ -14,7 +14,7 @@ nodes of its initial row (a triangle6 midside's row holds its edge's corners).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -37,16 +37,18 @@ class Spans:
     nodes: np.ndarray
     reference: np.ndarray | None = None   # 3D: per slave, the vector its t1 follows
     slave_facets: np.ndarray | None = None   # mortar only
-    _repeated: tuple | None = None
+    _repeated: dict = field(default_factory=dict)   # per repetition: the spans repeated
 
     def ptr_for(self, n: int) -> tuple[np.ndarray, np.ndarray]:
         """The spans (node_ptr, nodes) of n entries: one per slave, or (3D tangential rows)
-        two per slave, each the slave's span (the same entries for both rows)."""
+        several per slave (3D tangential rows: two; geometric rows: 2 (dim − 1)), each the
+        slave's span (the same entries for all its rows)."""
         if n == self.slave.size:
             return self.node_ptr, self.nodes
-        if self._repeated is None:
-            self._repeated = repeat_spans(self.node_ptr, self.nodes, n // self.slave.size)
-        return self._repeated
+        times = n // self.slave.size
+        if times not in self._repeated:
+            self._repeated[times] = repeat_spans(self.node_ptr, self.nodes, times)
+        return self._repeated[times]
 
 
 def make_spans(surf: Surfaces, p: Pairing, facets: np.ndarray, radius: float | None,
@@ -142,7 +144,11 @@ def reference_frame(p: Pairing, reference: np.ndarray) -> None:
     the slip are written in then does not jump when a slave crosses to a facet oriented
     otherwise (a triangle's first edge, a quad numbered from another corner); on a flat
     master it is the same on every facet, on a curved one it turns with the normal."""
-    n = p.normal
-    t1 = reference - np.einsum("mx,mx->m", reference, n)[:, None] * n
+    p.tangents[:] = frame_of(p.normal, reference)
+
+
+def frame_of(normal: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """The tangents (m, 2, 3) of ``reference_frame`` for unit normals (m, 3)."""
+    t1 = reference - np.einsum("mx,mx->m", reference, normal)[:, None] * normal
     t1 /= np.linalg.norm(t1, axis=1)[:, None]
-    p.tangents[:] = np.stack([t1, np.cross(n, t1)], axis=1)
+    return np.stack([t1, np.cross(normal, t1)], axis=1)

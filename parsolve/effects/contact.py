@@ -114,15 +114,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from parsolve.contact import friction as fr
+from parsolve.contact.geometry import facet_terms
 from parsolve.contact import obstacles
 from parsolve.contact.mortar import mortar_pairing
 from parsolve.contact.mortar3d import mortar_pairing_3d
 from parsolve.contact.pairing import check_surfaces, in_spans, pair_nodes, pair_on
-from parsolve.contact.sliding import Spans, fit_mortar, make_spans, outside_spans, \
+from parsolve.contact.sliding import Spans, fit_mortar, frame_of, make_spans, outside_spans, \
     reference_frame
 from parsolve.la.dofmap import DofMap
 from parsolve.contact.rows import friction_dual, node_rows, normal_rows, normal_values, \
-    slip_vectors, span_rows, tangent_rows
+    slip_vectors, span_combination, span_rows, tangent_rows
 from parsolve.contact.surfaces import Surfaces, canonical_facets
 from parsolve.effects.base import Effect
 from parsolve.errors import InputError, SolverError
@@ -235,8 +236,12 @@ class Contact(Effect):
         if len(self.pairing) == 0:
             raise InputError("no slave node faces the master surface within the search radius",
                              source, f"{key}.slave")
-        self.symmetric = spec.mu == 0.0
         p = self.pairing
+        # finite sliding against a deformable master's facets (node-to-segment / face): the
+        # force's dependence on the geometry in the Newton matrix (``contact.geometry``)
+        self.geometric = self.span is not None and spec.master is not None \
+            and spec.discretization == "node_to_segment"
+        self.symmetric = spec.mu == 0.0 and not self.geometric   # (its rows are not)
         n, dm1 = len(p), mesh.dim - 1
         size = float(np.max(mesh.extent))   # the whole mesh's (a part's own would differ)
         closed = p.gap <= spec.closed * size
@@ -247,6 +252,9 @@ class Contact(Effect):
         self.turning = fr.SlipNewton()
         # finite sliding: the total slip of the converged steps (the output adds the step's)
         self.slip_base = np.zeros(n * dm1)
+        # the multipliers (normal, tangential) of the last iterate and of the last converged
+        # step, for the geometric stiffness
+        self._lam_now = self._lam_committed = (np.zeros(n), np.zeros(n * dm1))
         self._build_rows()
 
     # ------------------------------------------------------------------ geometry
@@ -470,6 +478,7 @@ class Contact(Effect):
             self._start_point = (p.master.copy(), p.weights.copy(), p.point.copy())
         self._facet_now = p.facet.copy()
         self.du = self._tangential_offset(x, p)
+        self._geo = (x, p.slave.copy(), p.master.copy())   # compact ids (geometric stiffness)
         p = sp.surf.to_input(p)
         nrows = self._rows(p.normal, p)
         p.gap = p.gap - self.values.rows(self.n_dofs, nrows.row, nrows.coef, nrows.nrows, q)
@@ -606,7 +615,74 @@ class Contact(Effect):
                             "refresh": self.mesh.dim == 3 or finite}
             self.tangent = tangent
             out.append(tangent)
+        if self.geometric:
+            out.append(self._geometry_relation())
         return out
+
+    def _geometry_relation(self) -> Relation:
+        """2 (dim − 1) compliant rows per slave (``contact.geometry``: the facet's turns and
+        the projection's slides), over the spans, values set at each update
+        (``_set_geometry``)."""
+        p, dim = self.pairing, self.mesh.dim
+        m = 2 * (dim - 1) * len(p)
+        rows = span_combination(self._repeated(p), np.zeros((m, dim)),
+                                np.zeros((m, p.master.shape[1], dim)), *self.span.ptr_for(m))
+        dofs = rows.node * self.fields_.ncomp + self.fields_.offset["u"] + rows.comp
+        geometry = Relation(f"{self.spec.name}_geometry", m, rows.row, dofs, rows.coef,
+                            np.zeros(m), CONSTANT, "=", (dofs, rows.row, rows.coef.copy()),
+                            eliminate=False, compliance=np.ones(m))
+        geometry.meta = {"type": "contact_geometry", "key": self.spec.key, "refresh": True,
+                         "device": True}
+        self.geometry = geometry
+        return geometry
+
+    def _repeated(self, p):
+        """p's entries each 2 (dim − 1) times (the geometric rows of a slave)."""
+        return p.subset(np.repeat(np.arange(len(p)), 2 * (self.mesh.dim - 1)))
+
+    def _set_geometry(self, active: dict) -> None:
+        """The geometric stiffness's rows at the current pairing, from the last iterate's
+        multipliers (the force on the slave as a function of its facet's frame:
+        ``_force_of``), enforced where the normal row is."""
+        if not self.geometric:
+            return
+        x, slave, master = self._geo
+        p, dim = self.pairing, self.mesh.dim
+        closed = np.flatnonzero(active[self.normal.name])   # (the others: no force)
+        r, k = 2 * (dim - 1), master.shape[1]
+        w, u = np.zeros((2, len(p), r, 1 + k, dim))
+        w[closed], u[closed] = facet_terms(x[slave[closed]], x[master[closed]],
+                                           self.mesh.facet_type, self._force_of(closed))
+        m = len(p) * r
+        p_rows, ptr = self._repeated(p), self.span.ptr_for(m)
+        w, u = w.reshape(m, 1 + k, dim), u.reshape(m, 1 + k, dim)
+        self.geometry.a_vals[:] = span_combination(p_rows, w[:, 0], w[:, 1:], *ptr).coef
+        self.geometry.dual[2][:] = span_combination(p_rows, u[:, 0], u[:, 1:], *ptr).coef
+        active[self.geometry.name][:] = np.repeat(active[self.normal.name], 2 * (dim - 1))
+
+    def _force_of(self, slaves: np.ndarray):
+        """v(n, tangents, entries): the force D λ on the slaves ``slaves[entries]`` (λ the
+        last iterate's) in a facet frame:
+        −λn (n − μ s·t) from the normal row and its friction dual; from the stick rows −λt t
+        (2D) or −λs s·t − λc n × (s·t) (3D: rows along s and across it, in the reference
+        tangents projected on the facet, ``reference_frame``)."""
+        dm1 = self.mesh.dim - 1
+        lam_n, lam_t = self._lam_now[0][slaves], self._lam_now[1].reshape(-1, dm1)[slaves]
+        mu, s, reference = self.mu, self.direction[slaves], self.span.reference
+
+        def force_of(normal, tangents, entries):
+            ln = lam_n[entries, None]
+            v = -ln * normal
+            if not self.frictional:
+                return v
+            if reference is not None:
+                tangents = frame_of(normal, reference[slaves][entries])
+            sv = np.einsum("mj,mjx->mx", s[entries], tangents)
+            lt = lam_t[entries]
+            if dm1 == 1:
+                return v + mu * ln * sv - lt * tangents[:, 0]
+            return v + (mu * ln - lt[:, :1]) * sv - lt[:, 1:] * np.cross(normal, sv)
+        return force_of
 
     def _set_dual(self) -> None:
         """The slip direction s into the normal row's dual and (3D) the tangential rows, in
@@ -616,13 +692,13 @@ class Contact(Effect):
             self.tangent.a_vals[:] = self._tangent_coefs()
             self.tangent.values[:] = self._stick_values()
 
-    def _tangent_active(self, active: dict, q: np.ndarray) -> None:
+    def _tangent_active(self, active: dict) -> None:
         """Tangential rows enforced where the node sticks; in 3D with the "reaction" mode a
         sliding node that is held (``SlipNewton.held``) keeps its row across s; a free one
         releases both in the relations, and its row across s carries, in the Newton matrix
         only, the cross stiffness κ (n × s)(n × s)ᵀ on the relative slip (the dual's
-        dependence on s, linearised): the row enforced with compliance 1/κ at the current
-        cross slip (right-hand side 0), its multiplier discarded after the solve
+        dependence on s, linearised): the row enforced with compliance 1/κ on the increment
+        (right-hand side 0), its multiplier discarded after the solve
         (``Relation.compliance``). Through the row, κ couples the slave to the master nodes
         its row holds, whose pairs the stiffness pattern does not have."""
         stick = self.node_state == fr.STICK
@@ -637,9 +713,6 @@ class Contact(Effect):
         soft = self.tangent.compliance.reshape(-1, 2)
         soft[:] = 0.0
         soft[free, 1] = 1.0 / kappa[free]
-        if free.any():   # (every rank the same arrays: all of them reduce, or none)
-            now = self.values.relation(self.tangent, q).reshape(-1, 2)
-            self.tangent.values.reshape(-1, 2)[free, 1] = now[free, 1]
 
     # ------------------------------------------------------------------ Newton hooks
 
@@ -662,6 +735,8 @@ class Contact(Effect):
         # the normal rows in contact at the last converged step (initially: the closed gaps);
         # the same as the active set's after a converged step, and right after a failed one
         active[self.normal.name][:] = self.node_state != fr.OPEN
+        self._lam_now = self._lam_committed
+        self._set_geometry(active)
         if not self.frictional:
             return self.span is not None
         self.q_start = q.copy()
@@ -670,7 +745,7 @@ class Contact(Effect):
         self._set_dual()
         if self.span is None:
             self.tangent.values[:] = self.values.relation(self.tangent, q)
-        self._tangent_active(active, q)
+        self._tangent_active(active)
         return True
 
     def forces(self, lam: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -700,8 +775,12 @@ class Contact(Effect):
         True when a state or a slip direction changed (the dual and the tangential switches
         are then updated in place)."""
         moved = self.span is not None and self._slide(q, start=False)
+        if self.geometric:
+            self._lam_now = (lam[self.normal.name].copy(), lam[self.tangent.name].copy()
+                             if self.frictional else np.zeros(len(self.pairing)))
         if not self.frictional:
             self.node_state = np.where(active[self.normal.name], fr.STICK, fr.OPEN).astype(np.int8)
+            self._set_geometry(active)
             return moved
         rn, rt = self.forces(lam)
         closed = active[self.normal.name].astype(bool)
@@ -724,7 +803,8 @@ class Contact(Effect):
         if changed or moved:
             self._set_dual()
         if changed or moved or self.mesh.dim == 3:   # 3D: the cross rows' κ at this q
-            self._tangent_active(active, q)
+            self._tangent_active(active)
+        self._set_geometry(active)
         return changed or moved
 
     def _turn(self, state, direction, lam, rn, rt, du, motion: float) -> bool:
@@ -751,6 +831,7 @@ class Contact(Effect):
 
     def end_step(self) -> None:
         self.turning.commit()
+        self._lam_committed = self._lam_now
         self._committed_slip = self.span is not None
         self._facet_committed = self._facet_now
         self._compact_committed = self._compact

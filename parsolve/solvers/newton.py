@@ -158,7 +158,9 @@ class NewtonSolver:
             return active
         rows, dofs, rels, candidate, fixed = self._rows
         vals = np.concatenate([r.a_vals for r in rels])   # current (friction turns them)
-        self.left_out = dependent_rows(rows, dofs, vals, active.size, active, candidate, fixed,
+        # compliant rows constrain nothing (``Relation.compliance``): out of the analysis
+        hard = active & ~(self.rset.compliance[self.rset.mult_of_row] > 0.0)
+        self.left_out = dependent_rows(rows, dofs, vals, active.size, hard, candidate, fixed,
                                        self.ctx.ncomp)
         return active & ~self.left_out
 
@@ -344,8 +346,8 @@ class NewtonSolver:
         changed = False
         for e in self.hooks:
             changed = e.refresh(self.q, lam, active) or changed
-        if changed:
-            self._sync_relations()
+        # always: rows of the Newton matrix alone (compliant) change at every iterate
+        self._sync_relations()
         return changed
 
     def _sync_relations(self) -> None:

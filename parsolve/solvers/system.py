@@ -204,6 +204,8 @@ class SaddleSystem:
         if f_int is not None:
             f_full = f_full - f_int
         target = self.relation_set.scaled_residual(t, q)
+        # a compliant row's right-hand side is 0: a stiffness on the increment, not a target
+        target = np.where(self.relation_set.compliance > 0.0, 0.0, target)
         values = self.elim_values(t)
         if q is not None and self.elim_dofs.size:
             values = values - self.eliminated_values(q)

@@ -262,7 +262,9 @@ def test_ironing_3d(run):
     print("|sum Rt| / (mu N) in full slip:", ratio[full])
     print("drag / (mu press), global frame:", (drag_force / (MU * press))[full].round(4))
     print("smallest true gap per step:", worst)
-    assert res["steps/iterations"].max() <= 13       # measured: 6-13
+    # the geometric stiffness (contact.geometry): 5-8 per step (6-13 without: 279 → 153
+    # iterations over the run, the same fields to 1e-12)
+    assert res["steps/iterations"].max() <= 8
     # its fields and iteration counts are compared with one process in
     # tests/solvers/test_rank_independence.py
 
