@@ -22,6 +22,8 @@ G is computed, for any facet type, by central differences of the forces on the f
 geometry (``facet_terms``; tests/contact/test_geometry.py checks it against the closed form
 above) and compressed to its leading singular triplets: G = Σ σ U Vᵀ, u = σ U, w = V.
 A projection clipped to the facet's edge does not slide with the slave (its ξ is held there).
+Against a rigid cylinder or sphere the force on the slave turns with the obstacle's normal at
+its projection (rank dim − 1, on the slave's own block; a plane has none).
 """
 
 from __future__ import annotations
@@ -55,23 +57,34 @@ def facet_terms(xs: np.ndarray, coords: np.ndarray, facet_type: str, force_of,
                 step: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
     """The geometric stiffness G = ∂f/∂x (λ held) of ``facet_forces`` as r = 2 (dim − 1)
     rank-one terms per slave (the normal's dim − 1 turns, the projection's dim − 1 slides):
-    (w, u), each (m, r, 1 + k, dim), G = Σ u wᵀ. G by central differences (step × the
-    facet's size: differences of a few 1e-6 of the forces, to ~1e-10 of G: the Newton matrix
-    needs no more), all the perturbed geometries in one batch, then its r leading singular
-    triplets (u = σ U, w = V)."""
-    m, k, dim = coords.shape
-    nv = (1 + k) * dim
+    (w, u), each (m, r, 1 + k, dim), G = Σ u wᵀ (``local_terms``, the step × the facet's
+    size)."""
+    dim = xs.shape[1]
     size = np.linalg.norm(coords[:, -1] - coords[:, 0], axis=1)
-    h = step * np.maximum(size, 1e-300)
-    x = np.concatenate([xs[:, None, :], coords], axis=1).reshape(m, nv)
-    # batch (sign, coordinate, slave): x ± h e_j
+
+    def forces(y, entries):
+        return facet_forces(y[:, 0], y[:, 1:], facet_type, force_of, entries)
+    return local_terms(np.concatenate([xs[:, None, :], coords], axis=1), forces,
+                       2 * (dim - 1), step * size)
+
+
+def local_terms(x: np.ndarray, forces, rank: int, h: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """The Jacobian of ``forces(y, entries)`` (M, p, dim) on the local geometries x (m, p, dim)
+    (a slave and its facet's nodes; a slave alone against a curved obstacle) as ``rank``
+    rank-one terms (w, u), each (m, rank, p, dim). Central differences of step h (m,) (a few
+    1e-6 of the geometry: the forces' differences then give the Jacobian to ~1e-10, ample for
+    a Newton matrix), all perturbed geometries in one batch (``entries``: which of the m each
+    row is), then its leading singular triplets (u = σ U, w = V)."""
+    m, p, dim = x.shape
+    nv = p * dim
+    h = np.maximum(h, 1e-300)
+    # batch (sign, coordinate, entry): x ± h e_j
     shift = np.concatenate([np.eye(nv), -np.eye(nv)])[:, None, :] * h[None, :, None]
-    y = (x[None] + shift).reshape(-1, 1 + k, dim)
-    entries = np.tile(np.arange(m), 2 * nv)
-    f = facet_forces(y[:, 0], y[:, 1:], facet_type, force_of, entries).reshape(2, nv, m, nv)
+    y = (x.reshape(1, m, nv) + shift).reshape(-1, p, dim)
+    f = forces(y, np.tile(np.arange(m), 2 * nv)).reshape(2, nv, m, nv)
     jac = ((f[0] - f[1]) / (2.0 * h[None, :, None])).transpose(1, 2, 0)   # (m, f row, x col)
     left, sigma, right = np.linalg.svd(jac)
-    r = 2 * (dim - 1)
-    u = (left[:, :, :r] * sigma[:, None, :r]).transpose(0, 2, 1).reshape(m, r, 1 + k, dim)
-    w = right[:, :r, :].reshape(m, r, 1 + k, dim)
+    u = (left[:, :, :rank] * sigma[:, None, :rank]).transpose(0, 2, 1).reshape(m, rank, p, dim)
+    w = right[:, :rank, :].reshape(m, rank, p, dim)
     return w, u

@@ -163,6 +163,8 @@ def span_combination(pairing: Pairing, slave: np.ndarray, master: np.ndarray, pt
     its slave node and ``master[i, a]`` on node a of its current facet (the span's other
     nodes 0): any combination of the slave's and its facet's displacements."""
     n, dim = slave.shape
+    if pairing.master.shape[1] == 0:   # a rigid obstacle: the slave alone
+        return node_rows(pairing, slave)
     counts = np.diff(ptr)
     owner = np.repeat(np.arange(n, dtype=np.int64), counts)
     big = int(max(nodes.max(initial=0), pairing.master.max(initial=0))) + 1

@@ -114,7 +114,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from parsolve.contact import friction as fr
-from parsolve.contact.geometry import facet_terms
+from parsolve.contact.geometry import facet_terms, local_terms
 from parsolve.contact import obstacles
 from parsolve.contact.mortar import mortar_pairing
 from parsolve.contact.mortar3d import mortar_pairing_3d
@@ -237,10 +237,14 @@ class Contact(Effect):
             raise InputError("no slave node faces the master surface within the search radius",
                              source, f"{key}.slave")
         p = self.pairing
-        # finite sliding against a deformable master's facets (node-to-segment / face): the
-        # force's dependence on the geometry in the Newton matrix (``contact.geometry``)
-        self.geometric = self.span is not None and spec.master is not None \
-            and spec.discretization == "node_to_segment"
+        # finite sliding against a deformable master's facets (node-to-segment / face) or a
+        # curved obstacle: the force's dependence on the geometry in the Newton matrix
+        # (``contact.geometry``), in rows per slave: the facet's turns and the projection's
+        # slides, or the obstacle normal's turns
+        curved = spec.obstacle is not None and spec.obstacle[0] != "plane"
+        self.geometric = self.span is not None and (
+            curved or spec.master is not None and spec.discretization == "node_to_segment")
+        self.geometric_rank = (mesh.dim - 1) * (1 if curved else 2)
         self.symmetric = spec.mu == 0.0 and not self.geometric   # (its rows are not)
         n, dm1 = len(p), mesh.dim - 1
         size = float(np.max(mesh.extent))   # the whole mesh's (a part's own would differ)
@@ -620,11 +624,10 @@ class Contact(Effect):
         return out
 
     def _geometry_relation(self) -> Relation:
-        """2 (dim − 1) compliant rows per slave (``contact.geometry``: the facet's turns and
-        the projection's slides), over the spans, values set at each update
-        (``_set_geometry``)."""
+        """``geometric_rank`` compliant rows per slave (``contact.geometry``), over the spans,
+        values set at each update (``_set_geometry``)."""
         p, dim = self.pairing, self.mesh.dim
-        m = 2 * (dim - 1) * len(p)
+        m = self.geometric_rank * len(p)
         rows = span_combination(self._repeated(p), np.zeros((m, dim)),
                                 np.zeros((m, p.master.shape[1], dim)), *self.span.ptr_for(m))
         dofs = rows.node * self.fields_.ncomp + self.fields_.offset["u"] + rows.comp
@@ -637,8 +640,8 @@ class Contact(Effect):
         return geometry
 
     def _repeated(self, p):
-        """p's entries each 2 (dim − 1) times (the geometric rows of a slave)."""
-        return p.subset(np.repeat(np.arange(len(p)), 2 * (self.mesh.dim - 1)))
+        """p's entries each ``geometric_rank`` times (the geometric rows of a slave)."""
+        return p.subset(np.repeat(np.arange(len(p)), self.geometric_rank))
 
     def _set_geometry(self, active: dict) -> None:
         """The geometric stiffness's rows at the current pairing, from the last iterate's
@@ -649,16 +652,24 @@ class Contact(Effect):
         x, slave, master = self._geo
         p, dim = self.pairing, self.mesh.dim
         closed = np.flatnonzero(active[self.normal.name])   # (the others: no force)
-        r, k = 2 * (dim - 1), master.shape[1]
+        r, k = self.geometric_rank, master.shape[1]
         w, u = np.zeros((2, len(p), r, 1 + k, dim))
-        w[closed], u[closed] = facet_terms(x[slave[closed]], x[master[closed]],
-                                           self.mesh.facet_type, self._force_of(closed))
+        force_of = self._force_of(closed)
+        if k:
+            w[closed], u[closed] = facet_terms(x[slave[closed]], x[master[closed]],
+                                               self.mesh.facet_type, force_of)
+        else:   # the force turns with the obstacle's normal at the slave's projection
+            def forces(y, entries):
+                o = self._project(y[:, 0], np.arange(y.shape[0]))
+                return force_of(o.normal, o.tangents, entries)[:, None, :]
+            h = np.full(closed.size, 1e-6 * self.span.radius)
+            w[closed], u[closed] = local_terms(x[slave[closed]][:, None], forces, r, h)
         m = len(p) * r
         p_rows, ptr = self._repeated(p), self.span.ptr_for(m)
         w, u = w.reshape(m, 1 + k, dim), u.reshape(m, 1 + k, dim)
         self.geometry.a_vals[:] = span_combination(p_rows, w[:, 0], w[:, 1:], *ptr).coef
         self.geometry.dual[2][:] = span_combination(p_rows, u[:, 0], u[:, 1:], *ptr).coef
-        active[self.geometry.name][:] = np.repeat(active[self.normal.name], 2 * (dim - 1))
+        active[self.geometry.name][:] = np.repeat(active[self.normal.name], r)
 
     def _force_of(self, slaves: np.ndarray):
         """v(n, tangents, entries): the force D λ on the slaves ``slaves[entries]`` (λ the

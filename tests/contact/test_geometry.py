@@ -1,11 +1,12 @@
 """parsolve.contact.geometry: the geometric stiffness of a slave on its master facet (the
 force's dependence on the facet's frame and on the projection) against the closed form on a
-segment (2D) and, in 3D, against the full Jacobian of the forces (the rank claimed)."""
+segment (2D), in 3D against the full Jacobian of the forces (the rank claimed), and against a
+curved obstacle's closed form."""
 
 import numpy as np
 import pytest
 
-from parsolve.contact.geometry import facet_forces, facet_terms
+from parsolve.contact.geometry import facet_forces, facet_terms, local_terms
 
 
 def closed_form(x, along_n, along_t, clip):
@@ -95,3 +96,29 @@ def test_3d_facets_have_rank_four(ft):
             f.append(facet_forces(y[:, 0], y[:, 1:], ft, force_of, np.arange(m)).reshape(m, -1))
         full[:, :, j] = (f[0] - f[1]) / (2 * h)
     np.testing.assert_allclose(g, full, atol=1e-7 * np.abs(full).max())
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_curved_obstacle_is_the_normal_s_turn(dim):
+    """Against a circle (2D) or a sphere (3D) the normal force −λ n(x_s), n = (x_s − c)/ρ, turns
+    with the slave: G = −λ (I − n nᵀ) / ρ, of rank dim − 1 (to 1e-8 of G)."""
+    from parsolve.contact import obstacles
+
+    rng = np.random.default_rng(dim)
+    m, radius = 5, 2.0
+    xs = rng.normal(size=(m, dim))
+    xs *= ((radius + rng.uniform(-0.01, 0.01, size=m)) / np.linalg.norm(xs, axis=1))[:, None]
+    lam = rng.uniform(0.5, 2.0, size=m)
+    project = obstacles.cylinder if dim == 2 else obstacles.sphere
+
+    def forces(y, entries):
+        o = project(y[:, 0], np.arange(y.shape[0]), np.zeros(dim), radius, False) if dim == 3 \
+            else project(y[:, 0], np.arange(y.shape[0]), np.zeros(dim), radius, None, False)
+        return (-lam[entries, None] * o.normal)[:, None, :]
+
+    w, u = local_terms(xs[:, None], forces, dim - 1, np.full(m, 1e-6 * radius))
+    g = np.einsum("mra,mrb->mab", u.reshape(m, dim - 1, dim), w.reshape(m, dim - 1, dim))
+    rho = np.linalg.norm(xs, axis=1)
+    n = xs / rho[:, None]
+    exact = -lam[:, None, None] * (np.eye(dim) - n[:, :, None] * n[:, None, :]) / rho[:, None, None]
+    np.testing.assert_allclose(g, exact, atol=1e-8 * np.abs(exact).max())
