@@ -741,23 +741,10 @@ def _axisymmetric_measure(mesh: MeshSpec, source: str):
     return Axisymmetric(mesh_source=where)
 
 
-def _check_axisymmetric(scene: Scene) -> None:
-    """What an axisymmetric scene cannot carry yet: the contact baselines (penalty areas are
-    plane)."""
-    for spec in scene.effect_specs.get("contact", []):
-        key = getattr(spec, "key", "contact")
-        if getattr(spec, "formulation", "relations") != "relations":   # a baseline
-            raise InputError("the contact baselines are not available with hypothesis "
-                             "'axisymmetric' (use formulation = \"relations\")", scene.source,
-                             key + ".formulation")
-
-
 def _cross_check(scene: Scene) -> None:
     """References between sections: regions, evolutions, load patterns, relation names."""
     src = scene.source
     known = set(scene.regions) | {"all"}
-    if scene.hypothesis == "axisymmetric":
-        _check_axisymmetric(scene)
 
     def region(name: str | None, key: str) -> None:
         # file groups are only known once the mesh is read: checked again in model building

@@ -13,8 +13,9 @@ Cases (the scenes of tests/effects/test_contact.py, from scripts/bench_scenes.py
 Per run: global (Newton) iterations per step, wall time of the run, penetration, cone
 violation, error against the analytic solution, failed (cut) steps; one line per case on the
 baselines (converged, or why not). Then, for the relations form:
-  - global iterations per step against refinement (cells 1×, 4×, 16×) of the 3D friction and
-    ironing scenes (configs/contact_ironing_3d.toml too when it exists; --smoke: 1× only);
+  - global iterations per step against refinement (cells 1×, 4×, 16×) of the 3D friction,
+    Hertz (a contact zone forming from nothing, 160 to 640 surface cells) and ironing scenes
+    (configs/contact_ironing_3d.toml too when it exists; --smoke: 1× only);
   - the time per iteration split into pairing, contact refresh (/timings/contact: the Newton's
     begin_step / refresh hooks), assembly, factorization, solve (in process: parsolve's
     functions wrapped for the run, PETSc's log events);
@@ -46,8 +47,8 @@ from mpi4py import MPI
 
 import bench_harness as bh
 from bench_pairing import surface_2d, surface_3d  # (reused surfaces)
-from bench_scenes import (G, LAM, friction_3d_scene, ironing_2d_scene, ironing_3d_scene,
-                          sheared_box_scene, wedge_mesh, wedge_scene)
+from bench_scenes import (G, LAM, friction_3d_scene, hertz_scene, ironing_2d_scene,
+                          ironing_3d_scene, sheared_box_scene, wedge_mesh, wedge_scene)
 from parsolve.contact import friction as fr
 from parsolve.contact import references
 from parsolve.contact.pairing import pair_nodes
@@ -367,13 +368,16 @@ def _pairing_and_assembly(clock: PhaseClock) -> None:
     build_model, nor any pairing for the output). Assembly: the element kernels (f_int and tangent of every
     effect) and the saddle operator's assembly."""
     from parsolve.effects import contact as contact_effect
+    from parsolve.effects import contact_sliding
     from parsolve.solvers.newton import NewtonSolver
     from parsolve.solvers.system import SaddleSystem
 
     clock.wrap(NewtonSolver, "_begin_hooks", "hooks")
     clock.wrap(NewtonSolver, "_refresh_hooks", "hooks")
-    for name in ("pair_nodes", "pair_on", "mortar_pairing", "mortar_pairing_3d"):
-        clock.wrap(contact_effect, name, "pairing", inside="hooks")
+    for module in (contact_effect, contact_sliding):   # (the names each module calls)
+        for name in ("pair_nodes", "pair_on", "mortar_pairing", "mortar_pairing_3d"):
+            if hasattr(module, name):
+                clock.wrap(module, name, "pairing", inside="hooks")
     clock.wrap(NewtonSolver, "_evaluate", "kernels")
     clock.wrap(SaddleSystem, "assemble", "operator")
 
@@ -428,10 +432,13 @@ def instrumented(text: str, work: Path, name: str, extra=None) -> dict:
 
 
 def refinement_cases(work: Path, factors: list[int]) -> list[tuple[str, int, str]]:
-    """(scene, refinement in cells, scene text): the shipped 3D friction and ironing scenes,
-    their surface's cells × factor along each direction (cells × factor²); the 3D ironing
-    when configs/ has it."""
+    """(scene, refinement in cells, scene text): the shipped 3D friction, Hertz (a zone
+    forming from nothing: 160, 320, 640 surface cells) and ironing scenes, their surface's
+    cells × factor along each direction (cells × factor²); the 3D ironing when configs/ has
+    it."""
     cases = [("3D friction (contact_friction_3d)", f * f, friction_3d_scene(f)) for f in factors]
+    cases += [("Hertz 2D, zone from nothing (contact_hertz_cylinder)", f * f, hertz_scene(f))
+              for f in factors]
     cases += [("ironing 2D (contact_ironing_2d)", f * f, ironing_2d_scene(work, f)) for f in factors]
     for f in factors:
         text = ironing_3d_scene(f)
@@ -593,6 +600,8 @@ def main(argv=None) -> int:
             f"with nx, ny × {', '.join(map(str, refine))} (nz = 2 kept: the contact surface "
             f"refined, cells × {', '.join(str(f * f) for f in refine)}"
             f"{'' if top == 4 or smoke else '; this run: --max-cells ' + str(top * top) + ', the larger sizes not run'}); "
+            "configs/contact_hertz_cylinder.toml with nx, ny × the same factors (160 surface "
+            "cells at 1×: the contact zone forms from nothing in its one step); "
             "configs/contact_ironing_2d.toml on a generated equivalent of its .msh "
             "(`scripts/make_ironing_2d_mesh.py`, the shipped file's generator at 1×), the "
             "slab's and the die's quads × the same factors along x and y; configs/contact_ironing_3d.toml "

@@ -192,6 +192,15 @@ def friction_3d_scene(factor: int) -> str:
     return _dumps(scene)
 
 
+def hertz_scene(factor: int) -> str:
+    """configs/contact_hertz_cylinder.toml with nx, ny × factor: its contact zone forms from
+    nothing in one step on a surface of 160 × factor cells."""
+    scene = _shipped("contact_hertz_cylinder.toml")
+    scene["mesh"]["nx"] *= factor
+    scene["mesh"]["ny"] *= factor
+    return _dumps(scene)
+
+
 def ironing_2d_scene(folder, factor: int) -> str:
     """configs/contact_ironing_2d.toml on a generated equivalent of its mesh, the slab's and
     the die's quads × factor along x and y (written into ``folder``)."""

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mesh_files import write_bodies
 from parsolve.mesh.generators import box
 
 SIDES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
@@ -29,8 +30,6 @@ DIE = (0.25, 0.2, 0.125, 2, 3, 1, (0.3, 0.15, 0.5))
 def two_boxes(path, base_box=SLAB, die_box=DIE, cell: str = "hexahedron", warp=None) -> None:
     """Write the slab-and-die mesh (``base_box`` = (lx, ly, lz, nx, ny, nz), ``die_box`` the
     same and its origin) to ``path``."""
-    import meshio
-
     base = box(*base_box, cell=cell)
     die = box(*die_box[:6], cell=cell, origin=die_box[6])
     off = base.num_points
@@ -39,15 +38,8 @@ def two_boxes(path, base_box=SLAB, die_box=DIE, cell: str = "hexahedron", warp=N
     faces = [(f"base_{s}", base.facet_groups[s]) for s in SIDES]
     faces += [(f"die_{s}", die.facet_groups[s] + off) for s in SIDES]
     facet_type = "quad" if cell == "hexahedron" else "triangle"
-    blocks = [(cell, base.cells), (cell, die.cells + off)] + [(facet_type, f) for _, f in faces]
-    tags = [1, 2] + [10 + i for i in range(len(faces))]
-    phys = [np.full(len(b[1]), tag) for b, tag in zip(blocks, tags)]
-    field = {"base": np.array([1, 3]), "die": np.array([2, 3])}
-    field.update({name: np.array([10 + i, 2]) for i, (name, _) in enumerate(faces)})
-    mesh = meshio.Mesh(points, blocks, cell_data={"gmsh:physical": phys,
-                                                  "gmsh:geometrical": phys},
-                       field_data=field)
-    meshio.write(str(path), mesh, file_format="gmsh22", binary=False)
+    write_bodies(path, points, [("base", base.cells), ("die", die.cells + off)], faces, cell,
+                 facet_type)
 
 
 if __name__ == "__main__":

@@ -73,6 +73,16 @@ def make_spans(surf: Surfaces, p: Pairing, facets: np.ndarray, radius: float | N
                  reference, slave_facets)
 
 
+def obstacle_spans(surf: Surfaces, p: Pairing, size: float) -> Spans:
+    """Finite sliding against a rigid obstacle: rows on the slave alone, every span empty;
+    ``size`` (the mesh's) scales the rows' tolerances as a search radius does."""
+    n = len(p)
+    ptr, none = np.zeros(n + 1, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    reference = p.tangents[:, 0].copy() if p.dim == 3 else None
+    return Spans(surf, p.slave.copy(), np.zeros((0, 0), dtype=np.int64), size, ptr, none, ptr,
+                 none, reference)
+
+
 def union_spans(ptr: np.ndarray, nodes: np.ndarray, extra: np.ndarray) -> tuple[np.ndarray,
                                                                                 np.ndarray]:
     """CSR spans (increasing nodes per entry) with each entry's ``extra[i]`` nodes added."""

@@ -77,34 +77,8 @@ Scene schema::
     closed = 1e-9                  # initial gaps ≤ this (relative to the mesh size) start closed
     #                                (a floating body needs no larger one: see above)
     sliding = "finite"             # "small" (default: paired once) or "finite" (paired again
-    #                                each iteration; any master or obstacle, 2D and 3D: below)
-
-Finite sliding (``sliding = "finite"``): the slaves are paired again on the current (displaced)
-configuration at each step's start and after each solve, until the rows stop changing (their
-fixed point: the gap and the slip of the current geometry, exact at convergence); a slave
-keeps its facet while it stays in it (no flip at a kink), else takes the closest (ties: the
-canonical facet order of ``surfaces``). Each row spans, once for the run, the master nodes of
-every facet within ``search_radius`` of the slave's start (``pairing.facet_spans``), zeros
-where a facet is not the current one: the operator's pattern never changes, and a slave that
-slides out of its span stops the run (exit 3, naming ``search_radius``). The stick rows hold
-the master's material point faced at the step's start, on whatever facet it now is; the slip
-output is the total over the steps. Small strain: the bodies' stiffness is the initial one,
-the contact geometry the current one. In 3D (node-to-face: triangle, quad, triangle6 faces)
-the two stick rows per slave run along the slip direction s and across it over the span, and
-hold both components of the slip since the step's start; the tangent basis (t1, t2 = n × t1)
-is not the facet's own but the initial t1 projected on the current tangent plane, so that the
-slip direction, written in it, does not jump when a slave crosses to a facet numbered from
-another corner (``reference_frame``). A 3D slave that passed its facet's edge into a concave
-crease of the deformed master (and so entered the next facet) goes to that facet. Mortar
-rows (``contact.sliding``): integrated again on the current configuration, on the slaves
-paired at the start, each over the master nodes within the search radius plus its slave
-facets' reach (a slave no facet covers any more keeps its last row). Limits: in 2D a
-node-to-segment slave at a concave kink (an indentation's rim), held to one segment, may
-cross it into the next by ~1e-6 of the press (the 3D rule makes a 2D slave cycle between the
-two segments); mortar enforces weighted gaps, not the nodes' (a die's corner node enters a
-bent rim by a few % of the press). Against a rigid obstacle the slaves are projected again on
-it (rows on the slave alone, empty spans); the stick rows hold the obstacle's point faced at
-the step's start.
+    #                                each iteration; any master or obstacle, 2D and 3D:
+    #                                effects/contact_sliding.py)
 """
 
 from __future__ import annotations
@@ -114,19 +88,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from parsolve.contact import friction as fr
-from parsolve.contact.geometry import facet_terms, local_terms
 from parsolve.contact import obstacles
 from parsolve.contact.mortar import mortar_pairing
 from parsolve.contact.mortar3d import mortar_pairing_3d
-from parsolve.contact.pairing import check_surfaces, in_spans, pair_nodes, pair_on
-from parsolve.contact.sliding import Spans, fit_mortar, frame_of, make_spans, outside_spans, \
-    reference_frame
-from parsolve.la.dofmap import DofMap
+from parsolve.contact.pairing import check_surfaces, pair_nodes
 from parsolve.contact.rows import friction_dual, node_rows, normal_rows, normal_values, \
-    slip_vectors, span_combination, span_rows, tangent_rows
+    slip_vectors, span_rows, tangent_rows
+from parsolve.contact.sliding import Spans, make_spans, obstacle_spans
 from parsolve.contact.surfaces import Surfaces, canonical_facets
 from parsolve.effects.base import Effect
-from parsolve.errors import InputError, SolverError
+from parsolve.effects.contact_sliding import FiniteSliding
+from parsolve.errors import InputError
+from parsolve.la.dofmap import DofMap
 from parsolve.evolution import CONSTANT
 from parsolve.mesh.regions import gather_facets
 from parsolve.mesh.topology import FACETS, boundary_facets
@@ -136,12 +109,6 @@ from parsolve.scene import NAME_PATTERN
 OBSTACLES = ("plane", "cylinder", "sphere")
 DISCRETIZATIONS = ("node_to_segment", "mortar")
 SLIDINGS = ("small", "finite")
-TOL_ROWS = 1e-12   # finite sliding: the rows' fixed point (coefficients; gaps × search radius)
-# finite sliding: a slave keeps its facet while its projection is within this of the facet (in
-# reference coordinates, pair_nodes' own tolerance), clipped to the facet's end: at a kink of
-# the master (the corner of an indentation) the slave would otherwise flip between the two
-# facets, each solve sending it back over the vertex to the other
-KEEP_TOL = 1e-2
 
 
 @dataclass
@@ -204,7 +171,7 @@ def _obstacle(t, dim: int) -> tuple[str, dict]:
     return kinds[0], params
 
 
-class Contact(Effect):
+class Contact(FiniteSliding, Effect):
     """One contact surface (slave nodes against a master surface or a rigid obstacle)."""
 
     symmetric = True
@@ -230,9 +197,13 @@ class Contact(Effect):
         self._facet_committed = None        # ... at the last converged step
         self._committed_slip = False
         self._compact = None                # finite sliding, mortar: the rows now (compact)
+        self._covered = None                # finite sliding, node-to-segment: a facet has faced
+        #                                     the slave (``_with_uncovered``)
+        self._covered_committed = None
         self._check_slave(regions)
         self.pairing = self._pair(regions)
         self._compact_committed = self._compact
+        self._covered_committed = self._covered
         if len(self.pairing) == 0:
             raise InputError("no slave node faces the master surface within the search radius",
                              source, f"{key}.slave")
@@ -324,10 +295,10 @@ class Contact(Effect):
                 return surf.to_input(p)
             surf = Surfaces.of([(slave, slave_pts), (facets, facet_pts)])
             p = pair_nodes(surf.points, surf.compact(slave), surf.compact(facets),
-                           mesh.facet_type, spec.search_radius).only_paired()
-            if spec.sliding == "finite":
-                self.span = make_spans(surf, p, surf.compact(facets), spec.search_radius)
-            return surf.to_input(p)
+                           mesh.facet_type, spec.search_radius)
+            if spec.sliding == "finite":   # (with the slaves a facet will face later)
+                return surf.to_input(self._with_uncovered(surf, p, surf.compact(facets)))
+            return surf.to_input(p.only_paired())
         surf = Surfaces.of([(slave, slave_pts)])
         pts, nodes = surf.points, surf.compact(slave)
         okey = f"{key}.obstacle.{spec.obstacle[0]}"
@@ -341,11 +312,7 @@ class Contact(Effect):
             p.paired &= p.gap <= spec.search_radius
         p = p.only_paired()
         if spec.sliding == "finite":   # rows on the slave alone: the spans are empty
-            n = len(p)
-            ptr, none = np.zeros(n + 1, dtype=np.int64), np.zeros(0, dtype=np.int64)
-            reference = p.tangents[:, 0].copy() if self.mesh.dim == 3 else None
-            self.span = Spans(surf, p.slave.copy(), np.zeros((0, 0), dtype=np.int64),
-                              float(np.max(self.mesh.extent)), ptr, none, ptr, none, reference)
+            self.span = obstacle_spans(surf, p, float(np.max(self.mesh.extent)))
         return surf.to_input(p)
 
     def _project(self, points: np.ndarray, nodes: np.ndarray):
@@ -374,154 +341,12 @@ class Contact(Effect):
             return friction_dual(p, self.mu, self.direction).coef
         return self._rows(p.normal - self.mu * slip_vectors(p, self.direction)).coef
 
-    def _current_points(self, q: np.ndarray) -> np.ndarray:
-        """The surfaces' nodes in the current configuration X + u (every rank the same)."""
-        sp, f = self.span, self.fields_
-        dim = self.mesh.dim
-        m = sp.surf.ids.size
-        dofs = np.repeat(sp.surf.ids, dim) * f.ncomp + f.offset["u"] + np.tile(np.arange(dim), m)
-        u = self.values.rows(dofs, np.arange(m * dim), np.ones(m * dim), m * dim, q)
-        return sp.surf.points + u.reshape(m, dim)
-
-    def _repair(self, q: np.ndarray):
-        """Finite sliding: the slaves paired on the current configuration X + u (compact
-        numbering): the closest facet of the master (ties: the canonical facet order), except
-        that a slave keeps its current facet while its projection stays in it (within
-        ``KEEP_TOL``) and is as close (to 1e-9 of the search radius): a slave on a kink of the
-        master must not flip between its two facets from one iteration to the next; a slave
-        that no facet faces any more (past the master's free end) stays on its last facet,
-        clipped to the facet's end (as small sliding keeps its first pairing). SolverError
-        naming the key when a slave leaves its span (the facets within search_radius of its
-        start)."""
-        sp, ft = self.span, self.mesh.facet_type
-        x = self._current_points(q)
-        if self.spec.obstacle is not None:   # projected again on the obstacle
-            p = self._project(x, sp.slave)
-            if sp.reference is not None:
-                reference_frame(p, sp.reference)
-            return p, x
-        if sp.slave_facets is not None:
-            return self._repair_mortar(x), x
-        p = pair_nodes(x, sp.slave, sp.facets, ft, sp.radius)
-        if self._facet_now is not None:
-            cur, inside = pair_on(x, sp.slave, sp.facets, self._facet_now, ft, KEEP_TOL)
-            dist = np.abs(cur.gap)
-            best = np.where(p.paired, np.abs(p.gap), np.inf)
-            # ... but a slave past its facet's edge (its point clipped: farther than its normal
-            # gap) that has entered the closest facet (a concave crease of the deformed master)
-            # goes there: on its facet's plane it would stay inside the next one. 3D only: in
-            # 2D (the die placed on an indented slab, frictionless) a slave then cycles
-            # between the two segments of a kink
-            past = np.linalg.norm(x[sp.slave] - cur.point, axis=1) > dist + 1e-9 * sp.radius
-            entered = p.paired & (p.gap < -1e-9 * sp.radius) & (p.facet != cur.facet) \
-                & (self.mesh.dim == 3)
-            # ... and a slave beyond the master's free end stays on its last facet, at the end
-            keep = inside & (dist <= best + 1e-9 * sp.radius) & ~(past & entered) | ~p.paired
-            for name in p.__dataclass_fields__:
-                getattr(p, name)[keep] = getattr(cur, name)[keep]
-        if sp.reference is not None:
-            reference_frame(p, sp.reference)
-        self._check_spans(~in_spans(p.facet, sp.facet_ptr, sp.facet_ids))
-        return p, x
-
-    def _repair_mortar(self, x: np.ndarray):
-        """Finite sliding, mortar: the rows made again on the current configuration x, on the
-        fixed set of slaves (``sliding.fit_mortar``: a slave no master facet covers any more
-        keeps its last row)."""
-        sp = self.span
-        p = fit_mortar(self._mortar(x, sp.slave_facets, sp.facets).pairing, self._compact, x)
-        if sp.reference is not None:
-            reference_frame(p, sp.reference)
-        compact_nodes = sp.surf.compact(sp.nodes)
-        self._check_spans(outside_spans(p, sp.node_ptr, compact_nodes))
-        self._compact = p
-        return p
-
     def _mortar(self, points: np.ndarray, slave_facets: np.ndarray, facets: np.ndarray):
         """The mortar rows of the surfaces (compact numbering) on the configuration points."""
         ft, radius = self.mesh.facet_type, self.spec.search_radius
         if self.mesh.dim == 3:
             return mortar_pairing_3d(points, slave_facets, facets, ft, radius)
         return mortar_pairing(points, slave_facets, facets, ft, radius, radial=self.radial)
-
-    def _check_spans(self, bad: np.ndarray) -> None:
-        """SolverError naming the key when a slave left its span."""
-        if bad.any():
-            sp = self.span
-            node = int(sp.surf.ids[sp.slave[np.flatnonzero(bad)[0]]])
-            raise SolverError(f"{self.source}: {self.spec.key}.search_radius: slave node {node} "
-                              f"left the master facets within {sp.radius:.6g} of its start "
-                              f"({int(bad.sum())} such node(s)): give a larger search_radius")
-
-    def _tangential_offset(self, x: np.ndarray, p) -> np.ndarray:
-        """t_j · (x_s − x_m0): the slave's tangential distance, on the current configuration
-        x, from the master's material point it faced at the step's start (``_start_point``: its
-        master nodes and weights, a facet's shape functions or a mortar row's):
-        its slip in the step, whatever facets it crossed; (n, dim − 1), in the tangent basis
-        of the current pairing p."""
-        master0, weights0, point0 = self._start_point
-        # (a rigid obstacle: the point faced at the start, fixed in space)
-        xm0 = np.einsum("mk,mkx->mx", weights0, x[master0]) if master0.shape[1] else point0
-        return np.einsum("mjx,mx->mj", p.tangents, x[self.span.slave] - xm0)
-
-    def _slide(self, q: np.ndarray, start: bool) -> bool:
-        """Finite sliding: pair again on the current configuration and rewrite the rows'
-        values in place over the spans (the same entries). The normal rows: the gap
-        linearised at q, g = g_q + Dn·(q' − q) (the entry's gap is g_q − Dn·q); the stick
-        rows: the slip since the step's start, s_q + Dt·(q' − q) = 0, measured from the
-        master's material point faced at the step's start (``start``: that point is set
-        here). Both are exact at the fixed point the iterations reach (True while the rows
-        still change). Small strain: the bodies' stiffness is the initial one.
-
-        3D (node-to-face): two stick rows per slave, along the slip direction s and across
-        it (``_tangent_coefs``, over the span), holding both components of the slip since
-        the step's start (``_stick_values``)."""
-        sp = self.span
-        p, x = self._repair(q)
-        if start:
-            self._start_point = (p.master.copy(), p.weights.copy(), p.point.copy())
-        self._facet_now = p.facet.copy()
-        self.du = self._tangential_offset(x, p)
-        self._geo = (x, p.slave.copy(), p.master.copy())   # compact ids (geometric stiffness)
-        p = sp.surf.to_input(p)
-        nrows = self._rows(p.normal, p)
-        p.gap = p.gap - self.values.rows(self.n_dofs, nrows.row, nrows.coef, nrows.nrows, q)
-        trows = self._span_tangent_rows(p)
-        old = (self.nrows.coef, self.pairing.gap, self.trows.coef)
-        self.pairing, self.nrows, self.trows = p, nrows, trows
-        self.normal.a_vals[:] = nrows.coef
-        self.normal.values[:] = normal_values(p)
-        if self.frictional and self.mesh.dim == 2:
-            self.tangent.a_vals[:] = trows.coef
-            self.tangent.values[:] = self._slip(q) - self.du[:, 0]
-        elif self.frictional:
-            self._q_slide = q.copy()
-            self.tangent.a_vals[:] = self._tangent_coefs()
-            self.tangent.values[:] = self._stick_values()
-        size = sp.radius
-        return not (np.allclose(old[0], nrows.coef, rtol=0, atol=TOL_ROWS)
-                    and np.allclose(old[2], trows.coef, rtol=0, atol=TOL_ROWS)
-                    and np.allclose(old[1], p.gap, rtol=0, atol=TOL_ROWS * size))
-
-    def _span_tangent_rows(self, p):
-        """Finite sliding: the rows along the tangents over the spans (2D: one per slave, along
-        t; 3D: two, along t1 and t2, the slip measure and the tangential relation's layout)."""
-        if self.mesh.dim == 2:
-            return self._rows(p.tangents[:, 0], p)
-        return self._rows(p.tangents.reshape(-1, 3), p.subset(np.repeat(np.arange(len(p)), 2)))
-
-    def _stick_values(self) -> np.ndarray:
-        """Values of the tangential rows (3D: along s and across it) that hold the slip at its
-        value at the step's start. Small sliding: the rows' values at that start. Finite
-        sliding: the rows at the last re-pairing's q less the slip since the start, measured
-        on the geometry (``_tangential_offset``: du in (t1, t2), whose components along s and
-        n × s are s·du and (−s₂, s₁)·du), so that a row linearised at q reads zero slip."""
-        if self.span is None:
-            return self.values.relation(self.tangent, self.q_start)
-        s, du = self.direction, self.du
-        slip = np.column_stack([np.einsum("mj,mj->m", s, du),
-                                s[:, 0] * du[:, 1] - s[:, 1] * du[:, 0]]).ravel()
-        return self.values.relation(self.tangent, self._q_slide) - slip
 
     def _check_facing(self, p, surf: Surfaces, regions, key: str) -> None:
         """Refuse an obstacle that no facet of the slave surface faces (outward normal of the
@@ -623,78 +448,6 @@ class Contact(Effect):
             out.append(self._geometry_relation())
         return out
 
-    def _geometry_relation(self) -> Relation:
-        """``geometric_rank`` compliant rows per slave (``contact.geometry``), over the spans,
-        values set at each update (``_set_geometry``)."""
-        p, dim = self.pairing, self.mesh.dim
-        m = self.geometric_rank * len(p)
-        rows = span_combination(self._repeated(p), np.zeros((m, dim)),
-                                np.zeros((m, p.master.shape[1], dim)), *self.span.ptr_for(m))
-        dofs = rows.node * self.fields_.ncomp + self.fields_.offset["u"] + rows.comp
-        geometry = Relation(f"{self.spec.name}_geometry", m, rows.row, dofs, rows.coef,
-                            np.zeros(m), CONSTANT, "=", (dofs, rows.row, rows.coef.copy()),
-                            eliminate=False, compliance=np.ones(m))
-        geometry.meta = {"type": "contact_geometry", "key": self.spec.key, "refresh": True,
-                         "device": True}
-        self.geometry = geometry
-        return geometry
-
-    def _repeated(self, p):
-        """p's entries each ``geometric_rank`` times (the geometric rows of a slave)."""
-        return p.subset(np.repeat(np.arange(len(p)), self.geometric_rank))
-
-    def _set_geometry(self, active: dict) -> None:
-        """The geometric stiffness's rows at the current pairing, from the last iterate's
-        multipliers (the force on the slave as a function of its facet's frame:
-        ``_force_of``), enforced where the normal row is."""
-        if not self.geometric:
-            return
-        x, slave, master = self._geo
-        p, dim = self.pairing, self.mesh.dim
-        closed = np.flatnonzero(active[self.normal.name])   # (the others: no force)
-        r, k = self.geometric_rank, master.shape[1]
-        w, u = np.zeros((2, len(p), r, 1 + k, dim))
-        force_of = self._force_of(closed)
-        if k:
-            w[closed], u[closed] = facet_terms(x[slave[closed]], x[master[closed]],
-                                               self.mesh.facet_type, force_of)
-        else:   # the force turns with the obstacle's normal at the slave's projection
-            def forces(y, entries):
-                o = self._project(y[:, 0], np.arange(y.shape[0]))
-                return force_of(o.normal, o.tangents, entries)[:, None, :]
-            h = np.full(closed.size, 1e-6 * self.span.radius)
-            w[closed], u[closed] = local_terms(x[slave[closed]][:, None], forces, r, h)
-        m = len(p) * r
-        p_rows, ptr = self._repeated(p), self.span.ptr_for(m)
-        w, u = w.reshape(m, 1 + k, dim), u.reshape(m, 1 + k, dim)
-        self.geometry.a_vals[:] = span_combination(p_rows, w[:, 0], w[:, 1:], *ptr).coef
-        self.geometry.dual[2][:] = span_combination(p_rows, u[:, 0], u[:, 1:], *ptr).coef
-        active[self.geometry.name][:] = np.repeat(active[self.normal.name], r)
-
-    def _force_of(self, slaves: np.ndarray):
-        """v(n, tangents, entries): the force D λ on the slaves ``slaves[entries]`` (λ the
-        last iterate's) in a facet frame:
-        −λn (n − μ s·t) from the normal row and its friction dual; from the stick rows −λt t
-        (2D) or −λs s·t − λc n × (s·t) (3D: rows along s and across it, in the reference
-        tangents projected on the facet, ``reference_frame``)."""
-        dm1 = self.mesh.dim - 1
-        lam_n, lam_t = self._lam_now[0][slaves], self._lam_now[1].reshape(-1, dm1)[slaves]
-        mu, s, reference = self.mu, self.direction[slaves], self.span.reference
-
-        def force_of(normal, tangents, entries):
-            ln = lam_n[entries, None]
-            v = -ln * normal
-            if not self.frictional:
-                return v
-            if reference is not None:
-                tangents = frame_of(normal, reference[slaves][entries])
-            sv = np.einsum("mj,mjx->mx", s[entries], tangents)
-            lt = lam_t[entries]
-            if dm1 == 1:
-                return v + mu * ln * sv - lt * tangents[:, 0]
-            return v + (mu * ln - lt[:, :1]) * sv - lt[:, 1:] * np.cross(normal, sv)
-        return force_of
-
     def _set_dual(self) -> None:
         """The slip direction s into the normal row's dual and (3D) the tangential rows, in
         place (same entries); the stick rows keep the step's starting position."""
@@ -742,6 +495,7 @@ class Contact(Effect):
                 self._committed_slip = False
             self._facet_now = self._facet_committed   # a retried step starts from there too
             self._compact = self._compact_committed
+            self._covered = self._covered_committed
             self._slide(q, start=True)
         # the normal rows in contact at the last converged step (initially: the closed gaps);
         # the same as the active set's after a converged step, and right after a failed one
@@ -846,6 +600,7 @@ class Contact(Effect):
         self._committed_slip = self.span is not None
         self._facet_committed = self._facet_now
         self._compact_committed = self._compact
+        self._covered_committed = self._covered
         self.committed = (self.node_state.copy(), self.direction.copy())
 
     # ------------------------------------------------------------------ outputs
@@ -854,7 +609,8 @@ class Contact(Effect):
         """Per slave node (fields over all nodes, 0 elsewhere; state −1 elsewhere): normal and
         tangential reaction, gap (0 where the row is enforced), slip (total tangential
         displacement relative to the master, in the tangent basis), state; per surface: the
-        resultant normal and tangential forces (Σ Rn, Σ Rt in the tangent basis)."""
+        resultant normal and tangential forces (Σ Rn, Σ Rt in the tangent basis). A finite-
+        sliding slave that no facet has faced yet has the gap inf."""
         p, name = self.pairing, self.spec.name
         rn, rt = self.forces(lam)
         if self.frictional:
@@ -868,6 +624,8 @@ class Contact(Effect):
         # row is scaled by it: its gap, its slip, its multiplier's share of the resultants)
         share = 1.0 - np.where(np.isin(p.master, self.side_nodes), p.weights, 0.0).sum(axis=1)
         gap = np.where(closed, 0.0, (p.gap + self.values.relation(self.normal, q)) / share)
+        if self._covered is not None:   # no facet has faced it yet: no gap
+            gap[~self._covered] = np.inf
         slip = self._slip(q) if self.span is None else self.slip_base + self.du.ravel()
         slip = (slip.reshape(share.size, -1) / share[:, None]).reshape(slip.shape)
         # over every node (0 elsewhere; state -1), or this rank's owned rows on a part

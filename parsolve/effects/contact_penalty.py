@@ -145,7 +145,7 @@ def build(spec: BaselineSpec, mesh, regions, fields, scene) -> Effect:
     return cls(spec, mesh, regions, fields, scene)
 
 
-def slave_areas(values: DofMap, mesh, slave: np.ndarray, thickness: float) -> np.ndarray:
+def slave_areas(values: DofMap, mesh, slave: np.ndarray, thickness) -> np.ndarray:
     """``nodal_areas`` of the paired slave nodes (input ids), every rank the same. On a part
     each rank computes them on its local facets and keeps its owned nodes' (every cell through
     an owned node is local, so a boundary facet through it is one of the whole mesh and all of
@@ -157,9 +157,10 @@ def slave_areas(values: DofMap, mesh, slave: np.ndarray, thickness: float) -> np
     return values.node_sum(slave, area)
 
 
-def nodal_areas(mesh, nodes: np.ndarray, thickness: float) -> np.ndarray:
+def nodal_areas(mesh, nodes: np.ndarray, thickness) -> np.ndarray:
     """Tributary area of each node (n,): the consistent nodal force of a unit pressure on the
-    boundary facets all of whose nodes are in ``nodes`` (2D: length × thickness)."""
+    boundary facets all of whose nodes are in ``nodes`` (2D: length × thickness, or × 2π r
+    for the axisymmetric measure: the ring's area)."""
     mask = np.zeros(mesh.num_points, dtype=bool)
     mask[nodes] = True
     facets = facets_from_nodes(mesh, mask)[0]
@@ -168,6 +169,11 @@ def nodal_areas(mesh, nodes: np.ndarray, thickness: float) -> np.ndarray:
         fe = kernels.facet_load(mesh.points[facets], mesh.facet_type, np.ones(1), thickness)
         area = np.bincount(facets.ravel(), weights=fe.ravel(), minlength=mesh.num_points)
     return area[nodes]
+
+
+def positive(area: np.ndarray) -> np.ndarray:
+    """Zero areas (a node no whole slave facet holds) replaced by the mean of the others."""
+    return np.where(area > 0, area, area[area > 0].mean() if np.any(area > 0) else 1.0)
 
 
 class PenaltyContact(Effect):
@@ -195,9 +201,10 @@ class PenaltyContact(Effect):
         p = self.pairing
         dim = mesh.dim
         thickness = scene.thickness if dim == 2 else 1.0
-        area = slave_areas(self.values, mesh, p.slave, thickness)
-        area = np.where(area > 0, area, area[area > 0].mean() if np.any(area > 0) else 1.0)
-        self.h = float((area.mean() / thickness) ** (1.0 / (dim - 1)))
+        area = positive(slave_areas(self.values, mesh, p.slave, thickness))
+        # the facets' size, from their plane measure (the axisymmetric areas are rings')
+        self.h = float(positive(slave_areas(self.values, mesh, p.slave, 1.0)).mean()
+                       ** (1.0 / (dim - 1)))
         if spec.penalty is None:
             emax = max((m.params.get("E", 0.0) for m in scene.materials), default=0.0)
             if emax <= 0:

@@ -119,11 +119,19 @@ class Elasticity(Effect):
         return ["stress", "damage", "plastic_strain"]
 
     def increment_size(self, cells: np.ndarray, values: dict[str, np.ndarray]) -> float:
-        """The largest strain component of the increment ``values`` on these cells."""
+        """The largest strain component of the increment ``values`` on these cells (a block of
+        cells at a time: the strain operator B of a block, never every cell's)."""
+        if not len(cells):
+            return 0.0
         u = values["u"]
-        eps = kernels.strains(self.geometry(cells).strain_operator(),
-                              u[self.mesh.cells[cells]].reshape(len(cells), -1))
-        return float(np.abs(eps).max()) if eps.size else 0.0
+        ndof = self.mesh.cells.shape[1] * self.ncomp
+        one = self.geometry(cells[:1]).strain_operator()   # sizes (nq, nv) from one cell
+        largest = 0.0
+        for sl in cell_ranges(len(cells), block_cells(one.shape[1] * one.shape[2] * ndof * 8)):
+            eps = kernels.strains(self.geometry(cells[sl]).strain_operator(),
+                                  u[self.mesh.cells[cells[sl]]].reshape(-1, ndof))
+            largest = max(largest, float(np.abs(eps).max()))
+        return largest
 
     def stiffness_blocks(self, cells: np.ndarray):
         return [("u", "u", self.stiffness(cells))]

@@ -11,7 +11,9 @@ saddle vector [q, λ] is numbered and split across ranks.
   map finds their local DOFs by a sorted lookup, and (``index_inputs``, one reduction) their
   global numbers and coordinates.
 - **Exchanges.** Forward: owned values → ghosts (``gather``: the values a rank holds of a
-  saddle vector, ``HeldValues``); reverse: ghost contributions added to their owners.
+  saddle vector, ``HeldValues``). No reverse exchange: the cells through an owned node are
+  all local, so sums over them (nodal averages, loads, the operator's owned rows) are
+  complete on the owner.
 - **Owned reductions.** Norms, dots, max |v|, and A q of rows given as COO entries over input
   DOFs: each entry taken on the rank owning its DOF, summed over the ranks in one reduction of
   the rows' size (every rank then holds the same values, so decisions made from them agree).
@@ -105,12 +107,6 @@ class _Exchange:
         out = np.empty_like(got)
         out[self.order] = got
         return out
-
-    def reverse(self, ghost_values: np.ndarray, n_owned: int) -> np.ndarray:
-        """The ghosts' values sent back to their owners, summed per owned row (n_owned,)."""
-        got = self._move(np.asarray(ghost_values, dtype=float)[self.order], self.recv_counts,
-                         self.send_counts)
-        return np.bincount(self.asked_of_me, weights=got, minlength=n_owned).astype(float, copy=False)
 
 
 class DofMap:
@@ -331,13 +327,6 @@ class DofMap:
         q[:self.n_owned] = x_owned[:self.n_owned]   # owned DOFs first in both numberings
         q[self.n_owned:] = self._plan().forward(x_owned)
         return q
-
-    def reverse(self, local: np.ndarray) -> np.ndarray:
-        """Owned primal values plus the ghosts' contributions from the ranks holding them
-        (e.g. sums over local cells completed on the owned nodes). Collective."""
-        out = np.asarray(local[:self.n_owned], dtype=float).copy()
-        out += self._plan().reverse(local[self.n_owned:], self.n_owned)
-        return out
 
     def _keys(self) -> tuple[np.ndarray, np.ndarray]:
         if self._held_keys is None:

@@ -397,10 +397,16 @@ class NewtonSolver:
                                                                      self._dual_column(k)))
             else:
                 rate = _row_dots(r, self.ndof_keys)
-            if np.any(np.abs(rate) <= 1e-12 * max(float(np.abs(rate).max()), 1e-300)):
+            # a row with no entry yet (a contact slave that no facet faces) is never enforced
+            # until it has some: it takes the sense of the relation's other rows
+            empty = np.bincount(r.a_rows, weights=np.abs(r.a_vals), minlength=r.nrows) == 0.0
+            if np.any(~empty & (np.abs(rate) <= 1e-12 * max(float(np.abs(rate).max()), 1e-300))):
                 raise SolverError(f"relation {r.name!r}: its dual does not move its primal value "
                                   "(A K⁻¹ D = 0), so the sense of its reaction is undefined")
-            self.active.orient[rows] = -np.sign(rate)
+            sense = -np.sign(rate)
+            known = sense[~empty]
+            sense[empty] = known[0] if known.size and np.all(known == known[0]) else 1.0
+            self.active.orient[rows] = sense
 
     def _enforced_rows(self) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
         """Per maximum group, its enforced row: (row, its relation row b index, A's DOFs and

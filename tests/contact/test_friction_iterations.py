@@ -3,7 +3,7 @@ the slip direction by a generalised Newton step inside the paper's relations) on
 scene configs/contact_friction_3d.toml and on it refined 4× in cells, at most 10 per step; a
 2D contact zone forming from nothing (the Hertz scene at 160 and 320 surface cells), at most
 5. Each with its answer and, on several ranks, the same counts as on one. Iteration counts,
-not timings (scripts/measure_friction_iterations.py prints them up to 16× and 640 cells)."""
+not timings (scripts/bench_friction.py tabulates them up to 16× and 640 surface cells)."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ from mpi4py import MPI
 
 from conftest import CONFIGS
 from helpers.contact import coulomb_checks
+from helpers.scripts import load_script
 from parsolve.contact import friction as fr
 
 MU, P = 0.3, 10.0
@@ -108,9 +109,8 @@ def test_slip_newton_converges_quadratically_on_one_node(stiffness, length):
 
 
 def hertz_scene(factor: int) -> str:
-    text = (CONFIGS / "contact_hertz_cylinder.toml").read_text()
-    text = text.replace("[output]\nfile = ", "# file = ")
-    return text.replace("nx = 160\nny = 40", f"nx = {160 * factor}\nny = {40 * factor}")
+    """The benchmark's scene (scripts/bench_scenes.py): nx, ny × factor."""
+    return load_script("bench_scenes").hertz_scene(factor)
 
 
 @pytest.mark.parametrize("factor, measured", [(1, 3), (2, 4)])
@@ -118,8 +118,8 @@ def test_hertz_zone_forming_from_nothing_takes_at_most_5_iterations(run, factor,
     """configs/contact_hertz_cylinder.toml at 160 and 320 surface cells: the contact zone forms
     in one step from a single touching node. Closing only the rows penetrating by at least
     half the deepest (``active_set.FORMING``), then the wrong-sign rule: 3 and 4 iterations
-    (were 5 and 5 closing every penetrating node; 640 cells: 5, scripts/
-    measure_friction_iterations.py). The answer: the lift balances the contact force
+    (were 5 and 5 closing every penetrating node; 640 cells: scripts/bench_friction.py's
+    refinement table). The answer: the lift balances the contact force
     (1e-10), no pressure pulls, no node penetrates, open nodes carry nothing, the pressure is
     symmetric; on one rank the same iterations and displacements."""
     res = run(hertz_scene(factor), name=f"hertz_forming_{factor}")
@@ -152,14 +152,11 @@ def test_a_forming_zone_closes_its_deepest_rows_first():
     from parsolve.relations import Relation
     from parsolve.solvers.active_set import ActiveSet
 
-    def rel(name, kind):
-        r = Relation(name, 4, np.arange(4), np.arange(4), np.ones(4), np.zeros(4), CONSTANT,
-                     ">=", None, eliminate=False)
-        r.meta = {"type": kind}
-        r.forming = kind == "contact"   # what the contact effect declares on its rows
-        return r
+    def rel(name, forming):   # forming: what the contact effect declares on its rows
+        return Relation(name, 4, np.arange(4), np.arange(4), np.ones(4), np.zeros(4), CONSTANT,
+                        ">=", None, eliminate=False, forming=forming)
 
-    aset = ActiveSet([rel("c_normal", "contact"), rel("other", "user")])
+    aset = ActiveSet([rel("c_normal", True), rel("other", False)])
     gap = -np.array([1.0, 0.6, 0.4, 0.0, 1.0, 0.6, 0.4, 0.0])   # violations 1, 0.6, 0.4
     assert aset.update(gap, np.zeros(8), 1e-12, 1e-12)
     assert aset.active.tolist() == [True, True, False, False, True, True, True, False]

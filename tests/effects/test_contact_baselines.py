@@ -188,6 +188,41 @@ def test_hertz_cylinder_penalty_and_augmented_lagrangian(run):
     assert res["steps/iterations"][-1] > exact["steps/iterations"][-1]   # the augmentations
 
 
+AXISYM_SPHERE = (CONFIGS / "contact_axisym_sphere.toml").read_text().replace(
+    "nx = 80\nny = 80", "nx = 40\nny = 40")
+
+
+def test_axisymmetric_sphere_penalty_and_augmented_lagrangian(run):
+    """configs/contact_axisym_sphere.toml (40×40): with the axisymmetric hypothesis the
+    baselines' nodal areas are the rings' (2π r ds), so their whole-ring forces are the
+    relations form's: the penalty's penetration, its error and its total force's error fall
+    as 1/ε; the AL gives the relations form's displacements and forces
+    (1e-8, 1e-6)."""
+    assert "nx = 40" in AXISYM_SPHERE
+    after = "obstacle = { cylinder = { centre = [0.0, 10.0], radius = 10.0 } }"
+    exact = run(AXISYM_SPHERE.replace("[output]\nfile = ", "# file = "), name="axisym_relations")
+    u_ref = exact["fields/displacement"][-1]
+    force_ref = exact["fields/indent_normal_reaction"][-1, :, 0].sum()
+    penetration, error, force = [], [], []
+    for eps in (1e6, 1e7):
+        res = run(switched(AXISYM_SPHERE, after, f'formulation = "penalty"\npenalty = {eps:g}'),
+                  name=f"axisym_pen_{eps:g}")
+        penetration.append(-res["fields/indent_gap"][-1].min())
+        error.append(rel(res["fields/displacement"][-1], u_ref))
+        force.append(res["fields/indent_normal_reaction"][-1, :, 0].sum() / force_ref - 1.0)
+    np.testing.assert_allclose(penetration[0] / penetration[1], 10.0, rtol=0.1)
+    np.testing.assert_allclose(error[0] / error[1], 10.0, rtol=0.15)
+    print("penetration", penetration, "error", error, "force error", force)
+    np.testing.assert_allclose(force[0] / force[1], 10.0, rtol=0.05)   # measured -1.4e-3, -1.4e-4
+    assert abs(force[1]) < 1e-3
+    res = run(switched(AXISYM_SPHERE, after,
+                       'formulation = "augmented_lagrangian"\naugmentation_tolerance = 1e-9'),
+              name="axisym_al")
+    assert rel(res["fields/displacement"][-1], u_ref) < 1e-8
+    assert rel(res["fields/indent_normal_reaction"][-1, :, 0],
+               exact["fields/indent_normal_reaction"][-1, :, 0]) < 1e-6
+
+
 # ----------------------------------------------------------------------------- V-wedge
 
 

@@ -274,6 +274,51 @@ def test_frictionless_ironing_is_the_die_placed_there(run, shared_tmp):
     assert off > 1e-3
 
 
+@pytest.mark.parametrize("mu", [0.0, 0.3])
+def test_die_dragged_onto_the_slab_from_an_overhang_is_the_die_placed_there(run, shared_tmp,
+                                                                            mu):
+    """A slave that no facet faces at the start is kept (within the search radius of one) and
+    gets its row when a facet faces it: the shipped ironing's die starting at x = −0.2 (its
+    two left bottom nodes past the slab's end), lifted off by 0.001, dragged by 0.5 onto the
+    slab, then pressed by 0.01 (μ = 0 and 0.3), ends as a die placed at x = 0.3 and pressed:
+    the same displacements (the die's shifted by 0.5) and contact forces to 1e-9, every
+    bottom node of the die closed, none inside the slab. Those two nodes' gaps are reported
+    as inf while no facet faces them."""
+    base = shipped(IRONING.name)
+    meshes = {}
+    for name, x0 in (("overhang", -0.2), ("placed", 0.3)):
+        meshes[name] = shared_tmp / f"ironing_{name}.msh"
+        if MPI.COMM_WORLD.rank == 0:
+            base_and_die(meshes[name], SLAB, DIE[:4] + (x0,))
+    MPI.COMM_WORLD.Barrier()
+    evolutions = {"press": {"times": [0.0, 0.1, 0.6, 1.0], "values": [0.0, -0.1, -0.1, 1.0]},
+                  "drag": {"times": [0.0, 0.1, 0.6, 1.0], "values": [0.0, 0.0, 1.0, 1.0]}}
+
+    def ironing(mesh_file, drag: float) -> str:
+        relations = [r | {"value": drag} if r["name"] == "die_x" else r for r in base["relations"]]
+        return build(base, mesh={"file": str(mesh_file)}, relations=relations,
+                     evolutions=evolutions, steps={"count": 10},
+                     contact=[base["contact"][0] | {"friction": mu}])
+
+    dragged = run(ironing(meshes["overhang"], 0.5), name=f"ironing_overhang_{mu}")
+    placed = run(ironing(meshes["placed"], 0.0), name=f"ironing_overhang_placed_{mu}")
+    pts = dragged["mesh/points"]
+    die = np.arange(len(pts)) >= 33 * 9
+    bottom = die & np.isclose(pts[:, 1], SLAB[1])
+    gap0 = dragged["fields/ironing_gap"][0, bottom, 0]
+    assert np.isinf(gap0).sum() == 2 and np.all(np.isinf(gap0) == (pts[bottom, 0] < 0))
+    u_d, u_p = dragged["fields/displacement"][-1], placed["fields/displacement"][-1]
+    shift = np.where(die[:, None], [0.5, 0.0], 0.0)
+    np.testing.assert_allclose(u_d, u_p + shift, atol=1e-9 * np.abs(u_p).max(), rtol=0)
+    for field in ("normal_reaction", "tangential_reaction"):
+        f_d = dragged[f"fields/ironing_{field}"][-1, die, 0]
+        f_p = placed[f"fields/ironing_{field}"][-1, die, 0]
+        np.testing.assert_allclose(f_d, f_p, atol=1e-9 * np.abs(f_p).max(), rtol=0)
+    assert np.all(dragged["fields/ironing_state"][-1, bottom, 0] != OPEN)
+    assert true_gaps(pts, u_d).min() >= -1e-12 * 0.01
+    print("iterations per step:", list(dragged["steps/iterations"]))
+
+
 def test_slave_leaving_its_span_stops_the_run(run, mesh):
     """The rows span the facets within search_radius of each slave's start: the die dragged
     by 0.55 with a radius of 0.3 carries the slaves out of their spans, which stops the run

@@ -145,3 +145,23 @@ def test_stiffness_holds_no_element_arrays():
             if isinstance(v, np.ndarray) and v.size >= first.size // 8]
     assert held == []
     np.testing.assert_array_equal(mech.stiffness(cells).geometric, first)
+
+
+@pytest.mark.parametrize("budget", [None, 1])
+def test_increment_size_of_a_linear_field_over_cell_blocks(monkeypatch, budget):
+    """u = A x: every cell has ε = (A₀₀, A₁₁, A₀₁ + A₁₀), so the largest strain component is
+    max |ε| (1e-12), whatever the cell blocks (one block of every cell, or one cell a block)."""
+    from parsolve.effects.elasticity import Elasticity, MaterialSpec
+    from parsolve.fem import element_matrices
+    from parsolve.mesh.regions import RegionResolver
+
+    if budget is not None:   # one cell a block
+        monkeypatch.setattr(element_matrices, "BLOCK_BYTES", budget)
+    mesh = rectangle(2.0, 1.0, 6, 4, cell="quad")
+    mech = Elasticity(mesh, "plane_strain", 1.0,
+                      [MaterialSpec("all", "elastic", {"E": 100.0, "nu": 0.3}, "materials[0]")],
+                      RegionResolver(mesh, {}, "test"), "test")
+    A = np.array([[1e-3, 2e-3], [-1e-3, -7e-3]])
+    size = mech.increment_size(np.arange(mesh.num_cells), {"u": mesh.points @ A.T})
+    np.testing.assert_allclose(size, 7e-3, rtol=1e-12)
+    assert mech.increment_size(np.zeros(0, dtype=np.int64), {"u": mesh.points @ A.T}) == 0.0

@@ -66,14 +66,6 @@ def test_forward_exchange_and_held_values(parts):
     assert dm.zeros()[dm.saddle_of_mult].sum() == 0.0
 
 
-def test_reverse_exchange_counts_the_holders(parts):
-    _, local, dm = parts
-    counts = dm.reverse(np.ones(dm.n_local))
-    holders = np.bincount(allgather_rows(COMM, local.global_nodes.astype(np.int64)[:, None])[:, 0],
-                          minlength=45)
-    np.testing.assert_array_equal(counts, np.repeat(holders[local.global_nodes[:local.n_owned]], NC))
-
-
 def test_owned_reductions_equal_the_whole_meshs(parts):
     _, local, dm = parts
     q = value(input_dofs(local))
