@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from parsolve.contact.pairing import Pairing, facet_spans
+from parsolve.contact.pairing import Pairing, facet_spans, pair_on
 from parsolve.contact.surfaces import Surfaces
 
 
@@ -57,13 +57,7 @@ def make_spans(surf: Surfaces, p: Pairing, facets: np.ndarray, radius: float | N
     ``radius`` (default: one facet extent, as the pairing's) of each slave's start; mortar
     (``slave_facets`` given): within the radius plus the slave facets' extent, and the
     nodes of the slave's initial row besides."""
-    coords = surf.points[facets]
-    if radius is None:
-        radius = float(np.max(coords.max(axis=1) - coords.min(axis=1)))
-    reach = radius
-    if slave_facets is not None:
-        sc = surf.points[slave_facets]
-        reach += float(np.max(sc.max(axis=1) - sc.min(axis=1)))
+    radius, reach = span_reach(surf, facets, radius, slave_facets)
     fptr, fids, nptr, nodes = facet_spans(surf.points, p.slave, facets, reach)
     if slave_facets is not None:
         nptr, nodes = union_spans(nptr, nodes, p.master)
@@ -71,6 +65,46 @@ def make_spans(surf: Surfaces, p: Pairing, facets: np.ndarray, radius: float | N
     reference = p.tangents[:, 0].copy() if p.dim == 3 else None
     return Spans(surf, p.slave.copy(), facets, radius, fptr, fids, nptr, surf.ids[nodes],
                  reference, slave_facets)
+
+
+def span_reach(surf: Surfaces, facets: np.ndarray, radius: float | None,
+               slave_facets: np.ndarray | None = None) -> tuple[float, float]:
+    """(the search radius, default one facet extent; the spans' reach: the radius, plus the
+    slave facets' extent for mortar rows)."""
+    coords = surf.points[facets]
+    if radius is None:
+        radius = float(np.max(coords.max(axis=1) - coords.min(axis=1)))
+    reach = radius
+    if slave_facets is not None:
+        sc = surf.points[slave_facets]
+        reach += float(np.max(sc.max(axis=1) - sc.min(axis=1)))
+    return radius, reach
+
+
+def mortar_waiting(surf: Surfaces, p: Pairing, facets: np.ndarray, facet_type: str,
+                   radius: float | None, slave_facets: np.ndarray) -> Pairing:
+    """The slave-surface nodes that no mortar row holds at the start (p: the rows) but whose
+    span is not empty, as placeholder rows (compact numbering): one master node of their span
+    (weight 0), no normal, their point their own, the tangents of the first facet of their
+    span (what a 3D row's reference frame follows); sorted by slave like p."""
+    _, reach = span_reach(surf, facets, radius, slave_facets)
+    missing = np.setdiff1d(np.unique(slave_facets), p.slave)
+    fptr, fids, nptr, nodes = facet_spans(surf.points, missing, facets, reach)
+    has = np.diff(nptr) > 0
+    missing, first, facet = missing[has], nodes[nptr[:-1][has]], fids[fptr[:-1][has]]
+    n, k, dim = missing.size, p.master.shape[1], surf.points.shape[1]
+    tangents = pair_on(surf.points, missing, facets, facet, facet_type)[0].tangents
+    return Pairing(missing, np.ones(n, dtype=bool), np.full(n, -1, dtype=np.int64),
+                   np.zeros((n, dim - 1)), np.repeat(first[:, None], k, axis=1),
+                   np.zeros((n, k)), surf.points[missing].copy(), np.zeros((n, dim)),
+                   tangents, np.zeros(n))
+
+
+def merged(a: Pairing, b: Pairing) -> Pairing:
+    """The entries of a and b (same master width), sorted by slave."""
+    both = Pairing(*(np.concatenate([getattr(a, f), getattr(b, f)])
+                     for f in a.__dataclass_fields__))
+    return both.subset(np.argsort(both.slave, kind="stable"))
 
 
 def obstacle_spans(surf: Surfaces, p: Pairing, size: float) -> Spans:
@@ -118,27 +152,28 @@ def outside_spans(p: Pairing, ptr: np.ndarray, nodes: np.ndarray) -> np.ndarray:
     return missing.reshape(n, k).any(axis=1)
 
 
-def fit_mortar(new: Pairing, last: Pairing, x: np.ndarray) -> Pairing:
+def fit_mortar(new: Pairing, last: Pairing, x: np.ndarray) -> tuple[Pairing, np.ndarray]:
     """The mortar rows made on the current configuration x, on the slaves of ``last`` (the
     fixed set of rows, compact numbering): a slave that the new rows no longer hold (its
     facets uncovered: past the master's end) keeps its last row, its master combination and
     normal, with its point and gap measured on x (as a node-to-segment slave past the master's
-    end stays on its last facet). Slaves the new rows hold beyond the set are left out."""
+    end stays on its last facet). Slaves the new rows hold beyond the set are left out.
+    Returns (the rows, which of them the new rows hold)."""
     at = np.minimum(np.searchsorted(new.slave, last.slave), max(len(new) - 1, 0))
     found = (new.slave[at] == last.slave) if len(new) else np.zeros(len(last), dtype=bool)
     width = max(new.master.shape[1], last.master.shape[1])
     out = last.subset(np.arange(len(last)))
-    out.master, out.weights = _pad(last.master, last.weights, width)
-    master, weights = _pad(new.master, new.weights, width)
+    out.master, out.weights = pad(last.master, last.weights, width)
+    master, weights = pad(new.master, new.weights, width)
     out.master[found], out.weights[found] = master[at[found]], weights[at[found]]
     for name in ("normal", "tangents", "xi", "facet"):
         getattr(out, name)[found] = getattr(new, name)[at[found]]
     out.point = np.einsum("mk,mkx->mx", out.weights, x[out.master])
     out.gap = np.einsum("mx,mx->m", out.normal, x[out.slave] - out.point)
-    return out
+    return out, found
 
 
-def _pad(master: np.ndarray, weights: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:
+def pad(master: np.ndarray, weights: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:
     """Rows padded to ``width`` entries with zero weights on their first master node."""
     extra = width - master.shape[1]
     if extra == 0:

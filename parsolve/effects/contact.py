@@ -94,7 +94,7 @@ from parsolve.contact.mortar3d import mortar_pairing_3d
 from parsolve.contact.pairing import check_surfaces, pair_nodes
 from parsolve.contact.rows import friction_dual, node_rows, normal_rows, normal_values, \
     slip_vectors, span_rows, tangent_rows
-from parsolve.contact.sliding import Spans, make_spans, obstacle_spans
+from parsolve.contact.sliding import Spans, obstacle_spans
 from parsolve.contact.surfaces import Surfaces, canonical_facets
 from parsolve.effects.base import Effect
 from parsolve.effects.contact_sliding import FiniteSliding
@@ -288,10 +288,9 @@ class Contact(FiniteSliding, Effect):
                     raise InputError(str(exc), self.source, f"{key}.discretization") from None
                 self.side_nodes = np.unique(sfacets)
                 p = mortar.pairing.only_paired()
-                if spec.sliding == "finite":
-                    self.span = make_spans(surf, p, surf.compact(facets), spec.search_radius,
-                                           surf.compact(sfacets))
-                    self._compact = p
+                if spec.sliding == "finite":   # (with the slaves rows will hold later)
+                    p = self._mortar_with_uncovered(surf, p, surf.compact(facets),
+                                                    surf.compact(sfacets))
                 return surf.to_input(p)
             surf = Surfaces.of([(slave, slave_pts), (facets, facet_pts)])
             p = pair_nodes(surf.points, surf.compact(slave), surf.compact(facets),

@@ -10,7 +10,8 @@ every facet within ``search_radius`` of the slave's start (``pairing.facet_spans
 where a facet is not the current one: the operator's pattern never changes, and a slave that
 slides out of its span stops the run (exit 3, naming ``search_radius``). A slave that no
 facet faces at the start but that is within the search radius of one (a die's overhang) is
-kept, uncovered: a zero row (its gap inf in the outputs) until a facet faces it. The stick rows hold
+kept, uncovered: a zero row (its gap inf in the outputs) until a facet faces it (mortar:
+until the rows hold it). The stick rows hold
 the master's material point faced at the step's start, on whatever facet it now is; the slip
 output is the total over the steps. Small strain: the bodies' stiffness is the initial one,
 the contact geometry the current one. In 3D (node-to-face: triangle, quad, triangle6 faces)
@@ -43,8 +44,8 @@ import numpy as np
 from parsolve.contact.geometry import facet_terms, local_terms
 from parsolve.contact.pairing import in_spans, pair_nodes, pair_on
 from parsolve.contact.rows import normal_values, span_combination
-from parsolve.contact.sliding import fit_mortar, frame_of, make_spans, outside_spans, \
-    reference_frame
+from parsolve.contact.sliding import fit_mortar, frame_of, make_spans, merged, \
+    mortar_waiting, outside_spans, pad, reference_frame
 from parsolve.errors import SolverError
 from parsolve.evolution import CONSTANT
 from parsolve.relations import Relation
@@ -110,13 +111,7 @@ class FiniteSliding:
             keep = inside & (dist <= best + 1e-9 * sp.radius) & ~(past & entered) | ~p.paired
             for name in p.__dataclass_fields__:
                 getattr(p, name)[keep] = getattr(cur, name)[keep]
-        new = facing & ~self._covered
-        if new.any() and getattr(self, "_start_point", None) is not None:
-            # a slave faced for the first time: its slip in the step counts from there
-            for start, now in zip(self._start_point, (p.master, p.weights, p.point)):
-                start[new] = now[new]
-        self._covered = self._covered | facing
-        self._uncover(p)
+        self._cover(p, facing)
         if sp.reference is not None:
             reference_frame(p, sp.reference)
         self._check_spans(~in_spans(p.facet, sp.facet_ptr, sp.facet_ids))
@@ -139,6 +134,35 @@ class FiniteSliding:
         self._uncover(p)
         return p
 
+    def _mortar_with_uncovered(self, surf, p, facets: np.ndarray, slave_facets: np.ndarray):
+        """Finite sliding, mortar, at the start: the rows p (compact) and, uncovered, the slave
+        surface's nodes that no row holds yet but whose span is not empty
+        (``sliding.mortar_waiting``); the spans set."""
+        waiting = mortar_waiting(surf, p, facets, self.mesh.facet_type, self.spec.search_radius,
+                                 slave_facets)
+        p = merged(p, waiting)
+        self._covered = ~np.isin(p.slave, waiting.slave)
+        self._hold = p.subset(np.arange(len(p)))
+        self.span = make_spans(surf, p, facets, self.spec.search_radius, slave_facets)
+        self._uncover(p)
+        self._compact = p
+        return p
+
+    def _cover(self, p, facing: np.ndarray) -> None:
+        """The entries of the current rows p (compact) that a facet faces now (``facing``)
+        are covered from now on; those never faced yet get their placeholder (``_uncover``). A
+        slave faced for the first time counts its slip in the step from there."""
+        new = facing & ~self._covered
+        if new.any() and getattr(self, "_start_point", None) is not None:
+            master0, weights0, point0 = self._start_point
+            width = max(master0.shape[1], p.master.shape[1])
+            master0, weights0 = pad(master0, weights0, width)
+            master, weights = pad(p.master, p.weights, width)
+            master0[new], weights0[new], point0[new] = master[new], weights[new], p.point[new]
+            self._start_point = (master0, weights0, point0)
+        self._covered = self._covered | facing
+        self._uncover(p)
+
     def _uncover(self, p) -> None:
         """The entries of p (compact) that no facet has faced yet: on their nearest facet at
         the start (inside their span), with no row (normal, tangents and weights zero) and a
@@ -146,8 +170,12 @@ class FiniteSliding:
         if self._covered is None or self._covered.all():
             return
         out = ~self._covered
+        hold = self._hold
         for name in p.__dataclass_fields__:
-            getattr(p, name)[out] = getattr(self._hold, name)[out]
+            if name not in ("master", "weights"):
+                getattr(p, name)[out] = getattr(hold, name)[out]
+        master, _ = pad(hold.master, hold.weights, p.master.shape[1])   # (mortar: wider now)
+        p.master[out] = master[out]
         p.normal[out], p.tangents[out], p.weights[out] = 0.0, 0.0, 0.0
         p.gap[out] = UNCOVERED_GAP * self.span.radius
 
@@ -156,7 +184,9 @@ class FiniteSliding:
         fixed set of slaves (``sliding.fit_mortar``: a slave no master facet covers any more
         keeps its last row)."""
         sp = self.span
-        p = fit_mortar(self._mortar(x, sp.slave_facets, sp.facets).pairing, self._compact, x)
+        p, found = fit_mortar(self._mortar(x, sp.slave_facets, sp.facets).pairing,
+                              self._compact, x)
+        self._cover(p, found)
         if sp.reference is not None:
             reference_frame(p, sp.reference)
         compact_nodes = sp.surf.compact(sp.nodes)

@@ -25,7 +25,7 @@ from mpi4py import MPI
 
 from conftest import CONFIGS, assert_same_results
 from helpers.scripts import load_script
-from helpers.scene import scene as build
+from helpers.scene import DROP, scene as build
 from parsolve.contact.friction import OPEN, SLIP
 from parsolve.contact.pairing import pair_nodes
 from parsolve.mesh.generators import box
@@ -267,6 +267,51 @@ def test_ironing_3d(run):
     assert res["steps/iterations"].max() <= 8
     # its fields and iteration counts are compared with one process in
     # tests/solvers/test_rank_independence.py
+
+
+@pytest.mark.parametrize("discretization", ["node_to_segment", "mortar"])
+def test_die_dragged_onto_the_slab_from_an_overhang_is_the_die_placed_there(
+        run, shared_tmp, discretization):
+    """The shipped 3D ironing's die started at x = −0.15 (its bottom nodes at x = −0.15 and
+    −0.025 past the slab's end: no face faces them; with mortar rows, those at −0.15), lifted off by 0.001, dragged by 0.3 onto the
+    slab, then pressed by 0.01 (μ = 0.3): those nodes get their rows when a face faces them,
+    and the end is that of a die placed at x = 0.15 and pressed (the same displacements, the
+    die's shifted by 0.3, and contact forces to 1e-9; every bottom node closed)."""
+    from helpers.scene import shipped
+
+    base = shipped(IRONING.name)
+    die = MESHES.DIE
+    meshes = {name: write_mesh(shared_tmp / f"ironing3d_{name}.msh", MESHES.SLAB,
+                               die[:6] + ((x0,) + die[6][1:],))
+              for name, x0 in (("overhang", -0.15), ("placed", 0.15))}
+    evolutions = {"press": {"times": [0.0, 0.1, 0.6, 1.0], "values": [0.0, -0.1, -0.1, 1.0]},
+                  "drag": {"times": [0.0, 0.1, 0.6, 1.0], "values": [0.0, 0.0, 1.0, 1.0]}}
+
+    def ironing(name, travel):
+        relations = [r | {"value": travel} if r["name"] == "die_x" else r
+                     for r in base["relations"]]
+        return build(base, mesh={"file": str(meshes[name])}, relations=relations,
+                     evolutions=evolutions, steps={"count": 10, "times": DROP},
+                     contact=[base["contact"][0] | {"discretization": discretization}])
+
+    dragged = run(ironing("overhang", 0.3), name=f"ironing3d_overhang_{discretization}")
+    placed = run(ironing("placed", 0.0), name=f"ironing3d_placed_{discretization}")
+    slaves, _ = surfaces(MESHES.SLAB, die[:6] + ((-0.15,) + die[6][1:],), "hexahedron")
+    pts = dragged["mesh/points"]
+    gap0 = dragged["fields/ironing_gap"][0, slaves, 0]
+    # past the end: x < 0 (node-to-face), x = −0.15 (mortar: the others' faces overlap it)
+    past = pts[slaves, 0] < (-0.1 if discretization == "mortar" else 0.0)
+    assert np.all(np.isinf(gap0) == past) and past.any()
+    u_d, u_p = dragged["fields/displacement"][-1], placed["fields/displacement"][-1]
+    in_die = np.arange(len(u_d)) >= box(*MESHES.SLAB).num_points
+    shift = np.where(in_die[:, None], [0.3, 0.0, 0.0], 0.0)
+    np.testing.assert_allclose(u_d, u_p + shift, atol=1e-9 * np.abs(u_p).max(), rtol=0)
+    for field in ("normal_reaction", "tangential_reaction"):
+        f_d = dragged[f"fields/ironing_{field}"][-1, in_die]
+        f_p = placed[f"fields/ironing_{field}"][-1, in_die]
+        np.testing.assert_allclose(f_d, f_p, atol=1e-9 * np.abs(f_p).max(), rtol=0)
+    assert np.all(dragged["fields/ironing_state"][-1, slaves, 0] != OPEN)
+    print("iterations per step:", list(dragged["steps/iterations"]))
 
 
 def test_ironing_3d_with_mortar_rows(run):
