@@ -212,7 +212,10 @@ class FiniteSliding:
         master0, weights0, point0 = self._start_point
         # (a rigid obstacle: the point faced at the start, fixed in space)
         xm0 = np.einsum("mk,mkx->mx", weights0, x[master0]) if master0.shape[1] else point0
-        return np.einsum("mjx,mx->mj", p.tangents, x[self.span.slave] - xm0)
+        du = np.einsum("mjx,mx->mj", p.tangents, x[self.span.slave] - xm0)
+        if self._covered is not None:   # no facet has faced it: no slip yet
+            du[~self._covered] = 0.0
+        return du
 
     def _slide(self, q: np.ndarray, start: bool) -> bool:
         """Finite sliding: pair again on the current configuration and rewrite the rows'

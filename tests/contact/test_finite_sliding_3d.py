@@ -302,6 +302,7 @@ def test_die_dragged_onto_the_slab_from_an_overhang_is_the_die_placed_there(
     # past the end: x < 0 (node-to-face), x = −0.15 (mortar: the others' faces overlap it)
     past = pts[slaves, 0] < (-0.1 if discretization == "mortar" else 0.0)
     assert np.all(np.isinf(gap0) == past) and past.any()
+    assert np.all(dragged["fields/ironing_slip"][0, slaves][past] == 0.0)   # none yet
     u_d, u_p = dragged["fields/displacement"][-1], placed["fields/displacement"][-1]
     in_die = np.arange(len(u_d)) >= box(*MESHES.SLAB).num_points
     shift = np.where(in_die[:, None], [0.3, 0.0, 0.0], 0.0)
