@@ -101,11 +101,12 @@ def normal_values(pairing: Pairing, obstacle_displacement: np.ndarray | None = N
 def tangent_rows(pairing: Pairing) -> Rows:
     """Dt_j: (dim-1) rows per entry, row ``i * (dim-1) + j`` along tangent j of entry i."""
     n, dm1, dim = pairing.tangents.shape
-    rows = node_rows(_repeat(pairing, dm1), pairing.tangents.reshape(n * dm1, dim))
+    rows = node_rows(repeated(pairing, dm1), pairing.tangents.reshape(n * dm1, dim))
     return rows
 
 
-def _repeat(pairing: Pairing, times: int) -> Pairing:
+def repeated(pairing: Pairing, times: int) -> Pairing:
+    """Each entry ``times`` times in a row (the rows of one slave: 3D tangential, geometric)."""
     return pairing.subset(np.repeat(np.arange(len(pairing)), times))
 
 

@@ -61,10 +61,14 @@ def make_spans(surf: Surfaces, p: Pairing, facets: np.ndarray, radius: float | N
     fptr, fids, nptr, nodes = facet_spans(surf.points, p.slave, facets, reach)
     if slave_facets is not None:
         nptr, nodes = union_spans(nptr, nodes, p.master)
-    # 3D: t1 follows the initial one (the pairing's own frame at the start, unchanged)
-    reference = p.tangents[:, 0].copy() if p.dim == 3 else None
     return Spans(surf, p.slave.copy(), facets, radius, fptr, fids, nptr, surf.ids[nodes],
-                 reference, slave_facets)
+                 _reference(p), slave_facets)
+
+
+def _reference(p: Pairing) -> np.ndarray | None:
+    """3D: the vector each slave's t1 follows, its initial one (the pairing's own frame at
+    the start, unchanged)."""
+    return p.tangents[:, 0].copy() if p.dim == 3 else None
 
 
 def span_reach(surf: Surfaces, facets: np.ndarray, radius: float | None,
@@ -110,11 +114,9 @@ def merged(a: Pairing, b: Pairing) -> Pairing:
 def obstacle_spans(surf: Surfaces, p: Pairing, size: float) -> Spans:
     """Finite sliding against a rigid obstacle: rows on the slave alone, every span empty;
     ``size`` (the mesh's) scales the rows' tolerances as a search radius does."""
-    n = len(p)
-    ptr, none = np.zeros(n + 1, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    reference = p.tangents[:, 0].copy() if p.dim == 3 else None
+    ptr, none = np.zeros(len(p) + 1, dtype=np.int64), np.zeros(0, dtype=np.int64)
     return Spans(surf, p.slave.copy(), np.zeros((0, 0), dtype=np.int64), size, ptr, none, ptr,
-                 none, reference)
+                 none, _reference(p))
 
 
 def union_spans(ptr: np.ndarray, nodes: np.ndarray, extra: np.ndarray) -> tuple[np.ndarray,

@@ -93,7 +93,7 @@ from parsolve.contact.mortar import mortar_pairing
 from parsolve.contact.mortar3d import mortar_pairing_3d
 from parsolve.contact.pairing import check_surfaces, pair_nodes
 from parsolve.contact.rows import friction_dual, node_rows, normal_rows, normal_values, \
-    slip_vectors, span_rows, tangent_rows
+    repeated, slip_vectors, span_rows, tangent_rows
 from parsolve.contact.sliding import Spans, obstacle_spans
 from parsolve.contact.surfaces import Surfaces, canonical_facets
 from parsolve.effects.base import Effect
@@ -197,8 +197,8 @@ class Contact(FiniteSliding, Effect):
         self._facet_committed = None        # ... at the last converged step
         self._committed_slip = False
         self._compact = None                # finite sliding, mortar: the rows now (compact)
-        self._covered = None                # finite sliding, node-to-segment: a facet has faced
-        #                                     the slave (``_with_uncovered``)
+        self._covered = None                # finite sliding on a master region: a facet (mortar:
+        #                                     a row) has held the slave (``_with_uncovered``)
         self._covered_committed = None
         self._check_slave(regions)
         self.pairing = self._pair(regions)
@@ -403,7 +403,7 @@ class Contact(FiniteSliding, Effect):
             return self.trows.coef
         sv = slip_vectors(p, self.direction)
         vectors = np.stack([sv, np.cross(p.normal, sv)], axis=1).reshape(-1, 3)
-        return self._rows(vectors, p.subset(np.repeat(np.arange(len(p)), 2))).coef
+        return self._rows(vectors, repeated(p, 2)).coef
 
     def _slip(self, q: np.ndarray) -> np.ndarray:
         """Tangential displacement of the slave relative to the master (rows of ``trows``)."""
@@ -541,7 +541,7 @@ class Contact(FiniteSliding, Effect):
         moved = self.span is not None and self._slide(q, start=False)
         if self.geometric:
             self._lam_now = (lam[self.normal.name].copy(), lam[self.tangent.name].copy()
-                             if self.frictional else np.zeros(len(self.pairing)))
+                             if self.frictional else self._lam_now[1])
         if not self.frictional:
             self.node_state = np.where(active[self.normal.name], fr.STICK, fr.OPEN).astype(np.int8)
             self._set_geometry(active)

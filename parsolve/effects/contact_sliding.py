@@ -2,8 +2,8 @@
 that pair its slaves again on the current configuration and keep its rows, over fixed spans,
 the exact linearisation of the current geometry; and the geometric stiffness of those rows.
 
-The slaves are paired again on the current (displaced) configuration at each step's start and after each solve, until the rows stop changing (their
-fixed point: the gap and the slip of the current geometry, exact at convergence); a slave
+The slaves are paired again on the current (displaced) configuration at each step's start
+and after each solve, until the rows stop changing (their fixed point: the gap and the slip of the current geometry, exact at convergence); a slave
 keeps its facet while it stays in it (no flip at a kink), else takes the closest (ties: the
 canonical facet order of ``surfaces``). Each row spans, once for the run, the master nodes of
 every facet within ``search_radius`` of the slave's start (``pairing.facet_spans``), zeros
@@ -43,7 +43,7 @@ import numpy as np
 
 from parsolve.contact.geometry import facet_terms, local_terms
 from parsolve.contact.pairing import in_spans, pair_nodes, pair_on
-from parsolve.contact.rows import normal_values, span_combination
+from parsolve.contact.rows import normal_values, repeated, span_combination
 from parsolve.contact.sliding import fit_mortar, frame_of, make_spans, merged, \
     mortar_waiting, outside_spans, pad, reference_frame
 from parsolve.errors import SolverError
@@ -57,8 +57,9 @@ TOL_ROWS = 1e-12   # finite sliding: the rows' fixed point (coefficients; gaps �
 # facets, each solve sending it back over the vertex to the other
 KEEP_TOL = 1e-2
 # finite sliding: the gap of a slave no facet has faced yet, × the search radius (its row is
-# zero; the value keeps it open, and finite, as the scaled right-hand sides need)
-UNCOVERED_GAP = 1e6
+# zero, so any positive value keeps it open; not a large one, which would widen the active
+# set's gap tolerance, scaled to the largest |A q − b|)
+UNCOVERED_GAP = 1.0
 
 
 class FiniteSliding:
@@ -111,9 +112,9 @@ class FiniteSliding:
             keep = inside & (dist <= best + 1e-9 * sp.radius) & ~(past & entered) | ~p.paired
             for name in p.__dataclass_fields__:
                 getattr(p, name)[keep] = getattr(cur, name)[keep]
-        self._cover(p, facing)
         if sp.reference is not None:
             reference_frame(p, sp.reference)
+        self._cover(p, facing)   # (after the frame: an uncovered slave's tangents stay zero)
         self._check_spans(~in_spans(p.facet, sp.facet_ptr, sp.facet_ids))
         return p, x
 
@@ -186,9 +187,9 @@ class FiniteSliding:
         sp = self.span
         p, found = fit_mortar(self._mortar(x, sp.slave_facets, sp.facets).pairing,
                               self._compact, x)
-        self._cover(p, found)
         if sp.reference is not None:
             reference_frame(p, sp.reference)
+        self._cover(p, found)
         compact_nodes = sp.surf.compact(sp.nodes)
         self._check_spans(outside_spans(p, sp.node_ptr, compact_nodes))
         self._compact = p
@@ -212,10 +213,7 @@ class FiniteSliding:
         master0, weights0, point0 = self._start_point
         # (a rigid obstacle: the point faced at the start, fixed in space)
         xm0 = np.einsum("mk,mkx->mx", weights0, x[master0]) if master0.shape[1] else point0
-        du = np.einsum("mjx,mx->mj", p.tangents, x[self.span.slave] - xm0)
-        if self._covered is not None:   # no facet has faced it: no slip yet
-            du[~self._covered] = 0.0
-        return du
+        return np.einsum("mjx,mx->mj", p.tangents, x[self.span.slave] - xm0)
 
     def _slide(self, q: np.ndarray, start: bool) -> bool:
         """Finite sliding: pair again on the current configuration and rewrite the rows'
@@ -261,7 +259,7 @@ class FiniteSliding:
         t; 3D: two, along t1 and t2, the slip measure and the tangential relation's layout)."""
         if self.mesh.dim == 2:
             return self._rows(p.tangents[:, 0], p)
-        return self._rows(p.tangents.reshape(-1, 3), p.subset(np.repeat(np.arange(len(p)), 2)))
+        return self._rows(p.tangents.reshape(-1, 3), repeated(p, 2))
 
     def _stick_values(self) -> np.ndarray:
         """Values of the tangential rows (3D: along s and across it) that hold the slip at its
@@ -294,7 +292,7 @@ class FiniteSliding:
 
     def _repeated(self, p):
         """p's entries each ``geometric_rank`` times (the geometric rows of a slave)."""
-        return p.subset(np.repeat(np.arange(len(p)), self.geometric_rank))
+        return repeated(p, self.geometric_rank)
 
     def _set_geometry(self, active: dict) -> None:
         """The geometric stiffness's rows at the current pairing, from the last iterate's
@@ -307,7 +305,7 @@ class FiniteSliding:
         closed = np.flatnonzero(active[self.normal.name])   # (the others: no force)
         r, k = self.geometric_rank, master.shape[1]
         w, u = np.zeros((2, len(p), r, 1 + k, dim))
-        force_of = self._force_of(closed)
+        force_of = self._force_of(closed, active)
         if k:
             w[closed], u[closed] = facet_terms(x[slave[closed]], x[master[closed]],
                                                self.mesh.facet_type, force_of)
@@ -324,14 +322,17 @@ class FiniteSliding:
         self.geometry.dual[2][:] = span_combination(p_rows, u[:, 0], u[:, 1:], *ptr).coef
         active[self.geometry.name][:] = np.repeat(active[self.normal.name], r)
 
-    def _force_of(self, slaves: np.ndarray):
+    def _force_of(self, slaves: np.ndarray, active: dict):
         """v(n, tangents, entries): the force D λ on the slaves ``slaves[entries]`` (λ the
         last iterate's) in a facet frame:
         −λn (n − μ s·t) from the normal row and its friction dual; from the stick rows −λt t
         (2D) or −λs s·t − λc n × (s·t) (3D: rows along s and across it, in the reference
         tangents projected on the facet, ``reference_frame``)."""
         dm1 = self.mesh.dim - 1
-        lam_n, lam_t = self._lam_now[0][slaves], self._lam_now[1].reshape(-1, dm1)[slaves]
+        lam_n = self._lam_now[0][slaves]
+        if self.frictional:   # the stick rows that the next solve enforces (released: no force)
+            held = active[self.tangent.name].reshape(-1, dm1)[slaves]
+            lam_t = np.where(held, self._lam_now[1].reshape(-1, dm1)[slaves], 0.0)
         mu, s, reference = self.mu, self.direction[slaves], self.span.reference
 
         def force_of(normal, tangents, entries):

@@ -164,6 +164,19 @@ class NewtonSolver:
                                        self.ctx.ncomp)
         return active & ~self.left_out
 
+    def _empty_rows(self) -> np.ndarray:
+        """Per relation row of the active set: no A entry (a finite-sliding slave that no facet
+        faces yet): never enforced, whatever its value."""
+        rset = self.rset
+        empty = np.ones(rset.nrelrows, dtype=bool)
+        for k, r in enumerate(self.ctx.multiplied):
+            if not r.collapsed:
+                filled = np.bincount(r.a_rows, weights=np.abs(r.a_vals), minlength=r.nrows) > 0
+                empty[rset.rows_of(k)] = ~filled
+            else:
+                empty[rset.rows_of(k)] = False
+        return empty
+
     def _close_contact(self) -> bool:
         """Enforce every contact row that is not (True when there was one): the first solve of
         a step failed with rows open, which is a body held only by contact (nothing else, or
@@ -174,7 +187,7 @@ class NewtonSolver:
         Every rank decides from the same active set."""
         if self._rows is None:
             return False
-        closing = self._rows[3] & ~self.active.active
+        closing = self._rows[3] & ~self.active.active & ~self._empty_rows()
         if not closing.any():
             return False
         self.active.active[closing] = True
@@ -398,7 +411,8 @@ class NewtonSolver:
             else:
                 rate = _row_dots(r, self.ndof_keys)
             # a row with no entry yet (a contact slave that no facet faces) is never enforced
-            # until it has some: it takes the sense of the relation's other rows
+            # until it has some: it takes the sense of the relation's other rows, for good (the
+            # sense is decided once; a contact's normal rows all have the sense +1)
             empty = np.bincount(r.a_rows, weights=np.abs(r.a_vals), minlength=r.nrows) == 0.0
             if np.any(~empty & (np.abs(rate) <= 1e-12 * max(float(np.abs(rate).max()), 1e-300))):
                 raise SolverError(f"relation {r.name!r}: its dual does not move its primal value "

@@ -269,12 +269,13 @@ def test_ironing_3d(run):
     # tests/solvers/test_rank_independence.py
 
 
-@pytest.mark.parametrize("discretization", ["node_to_segment", "mortar"])
+@pytest.mark.parametrize("discretization, mu", [("node_to_segment", MU), ("mortar", MU),
+                                                ("node_to_segment", 0.0)])
 def test_die_dragged_onto_the_slab_from_an_overhang_is_the_die_placed_there(
-        run, shared_tmp, discretization):
+        run, shared_tmp, discretization, mu):
     """The shipped 3D ironing's die started at x = −0.15 (its bottom nodes at x = −0.15 and
     −0.025 past the slab's end: no face faces them; with mortar rows, those at −0.15), lifted off by 0.001, dragged by 0.3 onto the
-    slab, then pressed by 0.01 (μ = 0.3): those nodes get their rows when a face faces them,
+    slab, then pressed by 0.01 (μ = 0.3, and frictionless): those nodes get their rows when a face faces them,
     and the end is that of a die placed at x = 0.15 and pressed (the same displacements, the
     die's shifted by 0.3, and contact forces to 1e-9; every bottom node closed)."""
     from helpers.scene import shipped
@@ -292,10 +293,12 @@ def test_die_dragged_onto_the_slab_from_an_overhang_is_the_die_placed_there(
                      for r in base["relations"]]
         return build(base, mesh={"file": str(meshes[name])}, relations=relations,
                      evolutions=evolutions, steps={"count": 10, "times": DROP},
-                     contact=[base["contact"][0] | {"discretization": discretization}])
+                     contact=[base["contact"][0] | {"discretization": discretization,
+                                                    "friction": mu}])
 
-    dragged = run(ironing("overhang", 0.3), name=f"ironing3d_overhang_{discretization}")
-    placed = run(ironing("placed", 0.0), name=f"ironing3d_placed_{discretization}")
+    tag = f"{discretization}_{mu}"
+    dragged = run(ironing("overhang", 0.3), name=f"ironing3d_overhang_{tag}")
+    placed = run(ironing("placed", 0.0), name=f"ironing3d_placed_{tag}")
     slaves, _ = surfaces(MESHES.SLAB, die[:6] + ((-0.15,) + die[6][1:],), "hexahedron")
     pts = dragged["mesh/points"]
     gap0 = dragged["fields/ironing_gap"][0, slaves, 0]

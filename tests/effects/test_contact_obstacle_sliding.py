@@ -105,8 +105,10 @@ def test_small_sliding_floats_above_the_circle(run):
     assert p.gap[closed].max() > 0.01
 
 
-def test_block_dragged_over_a_rigid_cylinder_3d(run):
-    """The same in 3D (hexahedra 20 × 2 × 2, the circle a cylinder along y, μ = 0.3): no node
+@pytest.mark.parametrize("mu", [MU, 0.0])
+def test_block_dragged_over_a_rigid_cylinder_3d(run, mu):
+    """The same in 3D (hexahedra 20 × 2 × 2, the circle a cylinder along y, μ = 0.3 and
+    frictionless): no node
     inside the cylinder, the closed ones on it, the top's reactions balanced by the contact
     forces in the current frames (1e-10), the cone, |Rt| = μ Rn where sliding, at most 12
     iterations per step (measured 4-11, the most at the first press step), the same results
@@ -124,11 +126,11 @@ def test_block_dragged_over_a_rigid_cylinder_3d(run):
         model={"hypothesis": "3d"}, materials=[{"E": 1000.0, "nu": 0.3}],
         relations=[top("top_z", "z", -PRESS, "press"), top("top_x", "x", DRAG, "drag"),
                    top("top_y", "y", 0.0, "drag")],
-        contact=[{"name": "shoe", "slave": "zmin", "friction": MU, "sliding": "finite",
+        contact=[{"name": "shoe", "slave": "zmin", "friction": mu, "sliding": "finite",
                   "obstacle": {"cylinder": {"centre": [0.0, 0.0, 0.0], "radius": R,
                                             "axis": [0.0, 1.0, 0.0]}}}],
         evolutions=evolutions, steps={"count": 12})
-    res = run(text, name="cylinder_finite_3d")
+    res = run(text, name=f"cylinder_finite_3d_{mu}")
     pts = res["mesh/points"]
     bottom = np.flatnonzero(np.isclose(pts[:, 2], R))
     reaction = sum(res[f"relations/top_{c}/resultant"][:, :3] for c in "xyz")
@@ -136,9 +138,10 @@ def test_block_dragged_over_a_rigid_cylinder_3d(run):
     for k in range(len(res["steps/time"])):
         x = pts + res["fields/displacement"][k]
         p = obstacles.cylinder(x, bottom, [0.0, 0.0, 0.0], R, [0.0, 1.0, 0.0])
-        check_step(res, k, bottom, p, MU, reaction[k], scale)
+        check_step(res, k, bottom, p, mu, reaction[k], scale)
     print("iterations per step:", list(res["steps/iterations"]))
     assert res["steps/iterations"].max() <= 12
     assert res["steps/iterations"][4:].max() <= 5   # dragged: 4-5 (7-8 without curvature)
     if MPI.COMM_WORLD.size > 1:
-        assert_same_results(res, run(text, name="cylinder_finite_3d_serial", comm=MPI.COMM_SELF))
+        assert_same_results(res, run(text, name=f"cylinder_finite_3d_{mu}_serial",
+                                     comm=MPI.COMM_SELF))

@@ -286,13 +286,17 @@ master = "left"
 """
 
 
-@pytest.mark.parametrize("extra, key", [('formulation = "penalty"', "contact[0].formulation")])
-def test_contact_forms_refused(extra, key):
-    """The penalty baselines are plane integrals: refused, exit 2 (node-to-segment rows are
-    per node, their multipliers the ring forces; mortar rows are weighted by r: accepted)."""
+def test_penalty_baseline_takes_rigid_obstacles_as_in_plane_models():
+    """The penalty baselines' areas are the rings' (2π r ds): accepted against a rigid obstacle
+    (their answers: tests/effects/test_contact_baselines.py), refused against a master region
+    for the reason a plane model gives (a deformable master), exit 2 naming the key."""
     with pytest.raises(InputError) as err:
-        _model(cylinder(4, "quad") + CONTACT + extra + "\n")
-    assert err.value.key == key and err.value.source == "scene.toml"
+        _model(cylinder(4, "quad") + CONTACT + 'formulation = "penalty"\n')
+    assert err.value.key == "contact[0].master" and err.value.source == "scene.toml"
+    assert "rigid obstacles only" in str(err.value)
+    obstacle = CONTACT.replace('master = "left"',
+                               'obstacle = { plane = { origin = [5.0, 0.0], normal = [-1.0, 0.0] } }')
+    _model(cylinder(4, "quad") + obstacle + 'formulation = "penalty"\n')
 
 
 @pytest.mark.serial
