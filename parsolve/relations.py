@@ -82,6 +82,11 @@ class Relation:
         """b(t), one value per row."""
         return self.values * self.evolution(t)
 
+    def empty_rows(self) -> np.ndarray:
+        """Rows with no nonzero A entry (a finite-sliding contact slave that no facet faces
+        yet): never enforced while so."""
+        return np.bincount(self.a_rows, weights=np.abs(self.a_vals), minlength=self.nrows) == 0.0
+
     def single_dof(self) -> bool:
         """True when every row constrains one DOF alone (a Dirichlet-like relation)."""
         counts = np.bincount(self.a_rows, minlength=self.nrows)

@@ -170,11 +170,7 @@ class NewtonSolver:
         rset = self.rset
         empty = np.ones(rset.nrelrows, dtype=bool)
         for k, r in enumerate(self.ctx.multiplied):
-            if not r.collapsed:
-                filled = np.bincount(r.a_rows, weights=np.abs(r.a_vals), minlength=r.nrows) > 0
-                empty[rset.rows_of(k)] = ~filled
-            else:
-                empty[rset.rows_of(k)] = False
+            empty[rset.rows_of(k)] = False if r.collapsed else r.empty_rows()
         return empty
 
     def _close_contact(self) -> bool:
@@ -413,7 +409,7 @@ class NewtonSolver:
             # a row with no entry yet (a contact slave that no facet faces) is never enforced
             # until it has some: it takes the sense of the relation's other rows, for good (the
             # sense is decided once; a contact's normal rows all have the sense +1)
-            empty = np.bincount(r.a_rows, weights=np.abs(r.a_vals), minlength=r.nrows) == 0.0
+            empty = r.empty_rows()
             if np.any(~empty & (np.abs(rate) <= 1e-12 * max(float(np.abs(rate).max()), 1e-300))):
                 raise SolverError(f"relation {r.name!r}: its dual does not move its primal value "
                                   "(A K⁻¹ D = 0), so the sense of its reaction is undefined")
