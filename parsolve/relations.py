@@ -68,6 +68,16 @@ class Relation:
         self.a_vals = np.asarray(self.a_vals, dtype=float)
         self.values = np.broadcast_to(np.asarray(self.values, dtype=float), (self.nrows,)).copy()
 
+    def set_entries(self, a_rows: np.ndarray, a_dofs: np.ndarray, dual: bool) -> None:
+        """New entries for A (its rows and DOFs, values zero) and, with ``dual``, a dual of
+        the same layout (values zero): the same rows, another sparsity (finite sliding's
+        spans made again). The system must then build its operator again (``restructure``)."""
+        self.a_rows = np.asarray(a_rows, dtype=np.int64)
+        self.a_dofs = np.asarray(a_dofs, dtype=np.int64)
+        self.a_vals = np.zeros(self.a_rows.size)
+        if dual:
+            self.dual = (self.a_dofs, self.a_rows, np.zeros(self.a_rows.size))
+
     @property
     def associated(self) -> bool:
         return self.dual is None and self.shared_dual is None

@@ -59,6 +59,19 @@ class Rows:
         return self.node * ncomp + self.comp
 
 
+def rows_differ(a: Rows, b: Rows, tol: float) -> bool:
+    """Whether the rows a and b (the same rows, any entry layout: spans made again) differ by
+    more than tol in some coefficient, entries of the same (row, node, component) summed."""
+    if a.row.size == b.row.size and np.array_equal(a.row, b.row) \
+            and np.array_equal(a.node, b.node) and np.array_equal(a.comp, b.comp):
+        return not np.allclose(a.coef, b.coef, rtol=0, atol=tol)
+    keys = np.column_stack([np.concatenate([a.row, b.row]), np.concatenate([a.node, b.node]),
+                            np.concatenate([a.comp, b.comp])])
+    _, at = np.unique(keys, axis=0, return_inverse=True)
+    diff = np.bincount(at.ravel(), weights=np.concatenate([a.coef, -b.coef]))
+    return bool(np.any(np.abs(diff) > tol))
+
+
 def _check(pairing: Pairing) -> None:
     if not np.all(pairing.paired):
         raise ValueError("contact rows need paired entries only: use pairing.only_paired()")

@@ -1,10 +1,12 @@
-"""Finite sliding: the fixed spans the rows live on, and the pairings made again on the current
+"""Finite sliding: the spans the rows live on, and the pairings made again on the current
 configuration fitted to them.
 
-A finite-sliding row couples its slave node to a fixed superset of master nodes, its *span*
+A finite-sliding row couples its slave node to a superset of master nodes, its *span*
 (``rows.span_rows``): the nodes of every master facet the slave may face while it stays within
-the search radius of its start, zeros where a node is not in the current pairing. The rows'
-sparsity is then fixed for the run, and pairing again is a value update.
+the search radius of where the span was made, zeros where a node is not in the current
+pairing. Pairing again is then a value update of the same entries. When a slave is about to
+leave its span (or has left it) the spans are made again around the current configuration
+(``respan``): the rows' sparsity changes, and the system builds its operator again on it.
 
 Node-to-segment (node-to-face) pairs a slave with one facet: its span is the master nodes of
 the facets near its start (``pairing.facet_spans``). A mortar row integrates over the slave
@@ -26,7 +28,7 @@ from parsolve.contact.surfaces import Surfaces
 class Spans:
     """The surfaces (compact numbering), the paired slaves' compact ids, the master facets
     (compact) and, per paired slave, the facets and master nodes (input ids) of its span,
-    fixed for the run: the rows' sparsity. Mortar: the slave facets (compact) too."""
+    until made again (``respan``): the rows' sparsity. Mortar: the slave facets (compact) too."""
     surf: Surfaces
     slave: np.ndarray
     facets: np.ndarray
@@ -37,6 +39,10 @@ class Spans:
     nodes: np.ndarray
     reference: np.ndarray | None = None   # 3D: per slave, the vector its t1 follows
     slave_facets: np.ndarray | None = None   # mortar only
+    centre: np.ndarray | None = None   # per paired slave, where its span was made
+    # the length the rows' tolerances are relative to: the largest master facet (an
+    # obstacle: the mesh's size), not the radius, so that the answer does not depend on it
+    length: float = 1.0
     _repeated: dict = field(default_factory=dict)   # per repetition: the spans repeated
 
     def ptr_for(self, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -61,8 +67,33 @@ def make_spans(surf: Surfaces, p: Pairing, facets: np.ndarray, radius: float | N
     fptr, fids, nptr, nodes = facet_spans(surf.points, p.slave, facets, reach)
     if slave_facets is not None:
         nptr, nodes = union_spans(nptr, nodes, p.master)
+    coords = surf.points[facets]
+    length = float(np.max(coords.max(axis=1) - coords.min(axis=1)))
     return Spans(surf, p.slave.copy(), facets, radius, fptr, fids, nptr, surf.ids[nodes],
-                 _reference(p), slave_facets)
+                 _reference(p), slave_facets, surf.points[p.slave].copy(), length)
+
+
+def respan(sp: Spans, x: np.ndarray, p: Pairing) -> Spans:
+    """The spans of ``sp`` made again around the current configuration x (compact numbering,
+    as p, the current pairing of sp's slaves): the facets within the search radius (mortar:
+    plus the slave facets' reach) of each slave now, and the facet and master nodes of its
+    current row besides (a slave farther than the radius from every facet keeps what it
+    holds). The same slaves, radius and reference frame."""
+    _, reach = span_reach(sp.surf, sp.facets, sp.radius, sp.slave_facets)
+    fptr, fids, nptr, nodes = facet_spans(x, p.slave, sp.facets, reach)
+    fptr, fids = union_spans(fptr, fids, p.facet[:, None])
+    nptr, nodes = union_spans(nptr, nodes, p.master)
+    return Spans(sp.surf, sp.slave, sp.facets, sp.radius, fptr, fids, nptr, sp.surf.ids[nodes],
+                 sp.reference, sp.slave_facets, x[p.slave].copy(), sp.length)
+
+
+def drifted(sp: Spans, x: np.ndarray) -> bool:
+    """Whether a slave has moved, on the configuration x, farther than half the search radius
+    from where its span was made: the next step could carry it out (an empty span, a rigid
+    obstacle's, never needs making again)."""
+    if sp.nodes.size == 0 or sp.centre is None:
+        return False
+    return bool(np.max(np.linalg.norm(x[sp.slave] - sp.centre, axis=1)) > 0.5 * sp.radius)
 
 
 def _reference(p: Pairing) -> np.ndarray | None:
@@ -113,19 +144,21 @@ def merged(a: Pairing, b: Pairing) -> Pairing:
 
 def obstacle_spans(surf: Surfaces, p: Pairing, size: float) -> Spans:
     """Finite sliding against a rigid obstacle: rows on the slave alone, every span empty;
-    ``size`` (the mesh's) scales the rows' tolerances as a search radius does."""
+    ``size`` (the mesh's) scales the rows' tolerances."""
     ptr, none = np.zeros(len(p) + 1, dtype=np.int64), np.zeros(0, dtype=np.int64)
     return Spans(surf, p.slave.copy(), np.zeros((0, 0), dtype=np.int64), size, ptr, none, ptr,
-                 none, _reference(p))
+                 none, _reference(p), length=size)
 
 
 def union_spans(ptr: np.ndarray, nodes: np.ndarray, extra: np.ndarray) -> tuple[np.ndarray,
                                                                                 np.ndarray]:
-    """CSR spans (increasing nodes per entry) with each entry's ``extra[i]`` nodes added."""
+    """CSR spans (increasing nodes per entry) with each entry's ``extra[i]`` nodes added (a
+    negative one, no facet, is not)."""
     n = ptr.size - 1
     owner = np.concatenate([np.repeat(np.arange(n, dtype=np.int64), np.diff(ptr)),
                             np.repeat(np.arange(n, dtype=np.int64), extra.shape[1])])
-    pairs = np.unique(np.column_stack([owner, np.concatenate([nodes, extra.ravel()])]), axis=0)
+    values = np.concatenate([nodes, extra.ravel()])
+    pairs = np.unique(np.column_stack([owner, values])[values >= 0], axis=0).reshape(-1, 2)
     new_ptr = np.concatenate([[0], np.cumsum(np.bincount(pairs[:, 0], minlength=n))])
     return new_ptr.astype(np.int64), pairs[:, 1].copy()
 
@@ -141,16 +174,17 @@ def repeat_spans(ptr: np.ndarray, nodes: np.ndarray, times: int) -> tuple[np.nda
 
 def outside_spans(p: Pairing, ptr: np.ndarray, nodes: np.ndarray) -> np.ndarray:
     """True where an entry of p (compact numbering, as the spans' ``nodes``) has a master node
-    of nonzero weight outside its span (``nodes[ptr[i]:ptr[i+1]]``, increasing)."""
+    outside its span (``nodes[ptr[i]:ptr[i+1]]``, increasing), whatever its weight: the rows
+    over the span (``rows.span_combination``) hold every node of the entry."""
     n, k = p.master.shape
     owner = np.repeat(np.arange(n, dtype=np.int64), np.diff(ptr))
     big = int(max(nodes.max(initial=0), p.master.max(initial=0))) + 1
     key = owner * big + nodes
     cur = (np.arange(n, dtype=np.int64)[:, None] * big + p.master).ravel()
     if key.size == 0:
-        return np.any(p.weights != 0.0, axis=1)
+        return np.full(n, k > 0)
     pos = np.minimum(np.searchsorted(key, cur), key.size - 1)
-    missing = (key[pos] != cur) & (p.weights.ravel() != 0.0)
+    missing = key[pos] != cur
     return missing.reshape(n, k).any(axis=1)
 
 

@@ -101,7 +101,12 @@ class Effect:
 
     # An effect whose relations change between Newton iterations (contact: friction states
     # and slip senses) overrides these three; Newton calls them only for such effects. Values
-    # change in place, never the sparsity (``meta["refresh"]`` marks the relations to copy).
+    # change in place (``meta["refresh"]`` marks the relations to copy); when a hook changed
+    # their sparsity (``Relation.set_entries``: finite sliding's spans made again) it sets
+    # ``restructured``, and Newton has the system build its operator again.
+    restructured = False
+    # whether its hooks may ever do so (the result file then has /timings/pattern)
+    restructures = False
 
     def begin_step(self, q: np.ndarray, active: dict) -> bool:
         """Start a step from the committed state; True when relation values changed."""

@@ -70,7 +70,9 @@ Scene schema::
     direction = "reaction"         # 3D slip direction update: "reaction" (default) or
     #                                "displacement" (see below; 2D: the sense needs neither)
     search_radius = 0.1            # largest initial gap paired (default: one facet extent;
-    #                                obstacles: any gap)
+    #                                obstacles: any gap); finite sliding: the size of each
+    #                                slave's span of facets, made again (a new operator
+    #                                pattern) when it nears the span's edge
     discretization = "mortar"      # "node_to_segment" (default) or "mortar" (master region
     #                                only: dual mortar rows, parsolve.contact.mortar in 2D,
     #                                mortar3d on triangle, quad, triangle6 faces in 3D)
@@ -200,6 +202,7 @@ class Contact(FiniteSliding, Effect):
         self._covered = None                # finite sliding on a master region: a facet (mortar:
         #                                     a row) has held the slave (``_with_uncovered``)
         self._covered_committed = None
+        self._restructuring = False         # finite sliding: spans made again, rows not yet
         self._check_slave(regions)
         self.pairing = self._pair(regions)
         self._compact_committed = self._compact
@@ -217,6 +220,9 @@ class Contact(FiniteSliding, Effect):
             curved or spec.master is not None and spec.discretization == "node_to_segment")
         self.geometric_rank = (mesh.dim - 1) * (1 if curved else 2)
         self.symmetric = spec.mu == 0.0 and not self.geometric   # (its rows are not)
+        # finite sliding on a master region: its spans may be made again (a rigid obstacle's
+        # rows hold the slave alone)
+        self.restructures = self.span is not None and spec.master is not None
         n, dm1 = len(p), mesh.dim - 1
         size = float(np.max(mesh.extent))   # the whole mesh's (a part's own would differ)
         closed = p.gap <= spec.closed * size

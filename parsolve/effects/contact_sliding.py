@@ -1,18 +1,22 @@
 """Finite sliding of a contact (``sliding = "finite"``): the methods of ``effects.contact.Contact``
-that pair its slaves again on the current configuration and keep its rows, over fixed spans,
-the exact linearisation of the current geometry; and the geometric stiffness of those rows.
+that pair its slaves again on the current configuration and keep its rows, over spans made
+again as the slaves leave them, the exact linearisation of the current geometry; and the
+geometric stiffness of those rows.
 
 The slaves are paired again on the current (displaced) configuration at each step's start
-and after each solve, until the rows stop changing (their fixed point: the gap and the slip of the current geometry, exact at convergence); a slave
-keeps its facet while it stays in it (no flip at a kink), else takes the closest (ties: the
-canonical facet order of ``surfaces``). Each row spans, once for the run, the master nodes of
-every facet within ``search_radius`` of the slave's start (``pairing.facet_spans``), zeros
-where a facet is not the current one: the operator's pattern never changes, and a slave that
-slides out of its span stops the run (exit 3, naming ``search_radius``). A slave that no
-facet faces at the start but that is within the search radius of one (a die's overhang) is
-kept, uncovered: a zero row (its gap inf in the outputs) until a facet faces it (mortar:
-until the rows hold it). The stick rows hold
-the master's material point faced at the step's start, on whatever facet it now is; the slip
+and after each solve, until the rows stop changing (their fixed point: the gap and the slip
+of the current geometry, exact at convergence); a slave keeps its facet while it stays in it
+(no flip at a kink), else takes the closest (ties: the canonical facet order of
+``surfaces``). Each row spans the master nodes of every facet within ``search_radius`` of
+where its span was made (``pairing.facet_spans``), zeros where a facet is not the current
+one: re-pairing is a value update of the same entries. When a slave has moved farther than
+half the radius from there at a step's start, or has left its span at any iterate, the spans
+are made again around the current configuration (``sliding.respan``) and the system builds
+its operator again on the new pattern (``restructured``: preallocated as at the start; MUMPS
+analyses it again). A slave that no facet faces at the start but that is within the search
+radius of one (a die's overhang) is kept, uncovered: a zero row (its gap inf in the outputs)
+until a facet faces it (mortar: until the rows hold it). The stick rows hold the master's
+material point faced at the step's start, on whatever facet it now is; the slip
 output is the total over the steps. Small strain: the bodies' stiffness is the initial one,
 the contact geometry the current one. In 3D (node-to-face: triangle, quad, triangle6 faces)
 the two stick rows per slave run along the slip direction s and across it over the span, and
@@ -43,20 +47,21 @@ import numpy as np
 
 from parsolve.contact.geometry import facet_terms, local_terms
 from parsolve.contact.pairing import in_spans, pair_nodes, pair_on
-from parsolve.contact.rows import normal_values, repeated, span_combination
-from parsolve.contact.sliding import fit_mortar, frame_of, make_spans, merged, \
-    mortar_waiting, outside_spans, pad, reference_frame
-from parsolve.errors import SolverError
+from parsolve.contact.rows import normal_values, repeated, rows_differ, span_combination
+from parsolve.contact.sliding import drifted, fit_mortar, frame_of, make_spans, merged, \
+    mortar_waiting, outside_spans, pad, reference_frame, respan
 from parsolve.evolution import CONSTANT
 from parsolve.relations import Relation
 
-TOL_ROWS = 1e-12   # finite sliding: the rows' fixed point (coefficients; gaps × search radius)
+# finite sliding: the rows' fixed point: their coefficients to TOL_ROWS, their gaps to TOL_GAP ×
+# the largest master facet (the span's radius would make the iterations depend on it)
+TOL_ROWS, TOL_GAP = 1e-12, 1e-11
 # finite sliding: a slave keeps its facet while its projection is within this of the facet (in
 # reference coordinates, pair_nodes' own tolerance), clipped to the facet's end: at a kink of
 # the master (the corner of an indentation) the slave would otherwise flip between the two
 # facets, each solve sending it back over the vertex to the other
 KEEP_TOL = 1e-2
-# finite sliding: the gap of a slave no facet has faced yet, × the search radius (its row is
+# finite sliding: the gap of a slave no facet has faced yet, × the largest master facet (its row is
 # zero, so any positive value keeps it open; not a large one, which would widen the active
 # set's gap tolerance, scaled to the largest |A q − b|)
 UNCOVERED_GAP = 1.0
@@ -75,16 +80,16 @@ class FiniteSliding:
         u = self.values.rows(dofs, np.arange(m * dim), np.ones(m * dim), m * dim, q)
         return sp.surf.points + u.reshape(m, dim)
 
-    def _repair(self, q: np.ndarray):
+    def _repair(self, q: np.ndarray, start: bool = False):
         """Finite sliding: the slaves paired on the current configuration X + u (compact
         numbering): the closest facet of the master (ties: the canonical facet order), except
         that a slave keeps its current facet while its projection stays in it (within
-        ``KEEP_TOL``) and is as close (to 1e-9 of the search radius): a slave on a kink of the
+        ``KEEP_TOL``) and is as close (to 1e-9 of the largest master facet): a slave on a kink of the
         master must not flip between its two facets from one iteration to the next; a slave
         that no facet faces any more (past the master's free end) stays on its last facet,
-        clipped to the facet's end (as small sliding keeps its first pairing). SolverError
-        naming the key when a slave leaves its span (the facets within search_radius of its
-        start)."""
+        clipped to the facet's end (as small sliding keeps its first pairing). The spans are
+        made again when a slave leaves its span, or (``start``: a step's start) has drifted
+        farther than half the radius from where its span was made (``_respan_if``)."""
         sp, ft = self.span, self.mesh.facet_type
         x = self._current_points(q)
         if self.spec.obstacle is not None:   # projected again on the obstacle
@@ -93,7 +98,7 @@ class FiniteSliding:
                 reference_frame(p, sp.reference)
             return p, x
         if sp.slave_facets is not None:
-            return self._repair_mortar(x), x
+            return self._repair_mortar(x, start), x
         p = pair_nodes(x, sp.slave, sp.facets, ft, sp.radius)
         facing = p.paired.copy()
         if self._facet_now is not None:
@@ -105,17 +110,17 @@ class FiniteSliding:
             # goes there: on its facet's plane it would stay inside the next one. 3D only: in
             # 2D (the die placed on an indented slab, frictionless) a slave then cycles
             # between the two segments of a kink
-            past = np.linalg.norm(x[sp.slave] - cur.point, axis=1) > dist + 1e-9 * sp.radius
-            entered = p.paired & (p.gap < -1e-9 * sp.radius) & (p.facet != cur.facet) \
+            past = np.linalg.norm(x[sp.slave] - cur.point, axis=1) > dist + 1e-9 * sp.length
+            entered = p.paired & (p.gap < -1e-9 * sp.length) & (p.facet != cur.facet) \
                 & (self.mesh.dim == 3)
             # ... and a slave beyond the master's free end stays on its last facet, at the end
-            keep = inside & (dist <= best + 1e-9 * sp.radius) & ~(past & entered) | ~p.paired
+            keep = inside & (dist <= best + 1e-9 * sp.length) & ~(past & entered) | ~p.paired
             for name in p.__dataclass_fields__:
                 getattr(p, name)[keep] = getattr(cur, name)[keep]
         if sp.reference is not None:
             reference_frame(p, sp.reference)
         self._cover(p, facing)   # (after the frame: an uncovered slave's tangents stay zero)
-        self._check_spans(~in_spans(p.facet, sp.facet_ptr, sp.facet_ids))
+        self._respan_if(x, p, ~in_spans(p.facet, sp.facet_ptr, sp.facet_ids), start)
         return p, x
 
     def _with_uncovered(self, surf, p, facets: np.ndarray):
@@ -167,7 +172,7 @@ class FiniteSliding:
     def _uncover(self, p) -> None:
         """The entries of p (compact) that no facet has faced yet: on their nearest facet at
         the start (inside their span), with no row (normal, tangents and weights zero) and a
-        gap of ``UNCOVERED_GAP`` × the search radius (never closed)."""
+        gap of ``UNCOVERED_GAP`` × the largest master facet (never closed)."""
         if self._covered is None or self._covered.all():
             return
         out = ~self._covered
@@ -178,9 +183,9 @@ class FiniteSliding:
         master, _ = pad(hold.master, hold.weights, p.master.shape[1])   # (mortar: wider now)
         p.master[out] = master[out]
         p.normal[out], p.tangents[out], p.weights[out] = 0.0, 0.0, 0.0
-        p.gap[out] = UNCOVERED_GAP * self.span.radius
+        p.gap[out] = UNCOVERED_GAP * self.span.length
 
-    def _repair_mortar(self, x: np.ndarray):
+    def _repair_mortar(self, x: np.ndarray, start: bool = False):
         """Finite sliding, mortar: the rows made again on the current configuration x, on the
         fixed set of slaves (``sliding.fit_mortar``: a slave no master facet covers any more
         keeps its last row)."""
@@ -191,18 +196,18 @@ class FiniteSliding:
             reference_frame(p, sp.reference)
         self._cover(p, found)
         compact_nodes = sp.surf.compact(sp.nodes)
-        self._check_spans(outside_spans(p, sp.node_ptr, compact_nodes))
+        self._respan_if(x, p, outside_spans(p, sp.node_ptr, compact_nodes), start)
         self._compact = p
         return p
 
-    def _check_spans(self, bad: np.ndarray) -> None:
-        """SolverError naming the key when a slave left its span."""
-        if bad.any():
-            sp = self.span
-            node = int(sp.surf.ids[sp.slave[np.flatnonzero(bad)[0]]])
-            raise SolverError(f"{self.source}: {self.spec.key}.search_radius: slave node {node} "
-                              f"left the master facets within {sp.radius:.6g} of its start "
-                              f"({int(bad.sum())} such node(s)): give a larger search_radius")
+    def _respan_if(self, x: np.ndarray, p, outside: np.ndarray, start: bool) -> None:
+        """The spans made again around x (``sliding.respan``, p the current rows, compact)
+        when a slave's row reaches outside its span, or at a step's start when a slave has
+        drifted farther than half the radius from where its span was made (``drifted``: so
+        that a step seldom leaves it); ``restructured`` then tells the solver."""
+        if outside.any() or start and drifted(self.span, x):
+            self.span = respan(self.span, x, p)
+            self._restructuring = self.restructured = True
 
     def _tangential_offset(self, x: np.ndarray, p) -> np.ndarray:
         """t_j · (x_s − x_m0): the slave's tangential distance, on the current configuration
@@ -228,17 +233,18 @@ class FiniteSliding:
         it (``_tangent_coefs``, over the span), holding both components of the slip since
         the step's start (``_stick_values``)."""
         sp = self.span
-        p, x = self._repair(q)
+        p, x = self._repair(q, start)
         if start:
             self._start_point = (p.master.copy(), p.weights.copy(), p.point.copy())
         self._facet_now = p.facet.copy()
         self.du = self._tangential_offset(x, p)
         self._geo = (x, p.slave.copy(), p.master.copy())   # compact ids (geometric stiffness)
         p = sp.surf.to_input(p)
-        nrows = self._rows(p.normal, p)
+        nrows, trows = self._rows(p.normal, p), self._span_tangent_rows(p)
+        if self._restructuring:   # the rows' new entries (their values are set below and by the hooks)
+            self._set_entries(p, nrows, trows)
         p.gap = p.gap - self.values.rows(self.n_dofs, nrows.row, nrows.coef, nrows.nrows, q)
-        trows = self._span_tangent_rows(p)
-        old = (self.nrows.coef, self.pairing.gap, self.trows.coef)
+        old = (self.nrows, self.pairing.gap, self.trows)
         self.pairing, self.nrows, self.trows = p, nrows, trows
         self.normal.a_vals[:] = nrows.coef
         self.normal.values[:] = normal_values(p)
@@ -249,10 +255,9 @@ class FiniteSliding:
             self._q_slide = q.copy()
             self.tangent.a_vals[:] = self._tangent_coefs()
             self.tangent.values[:] = self._stick_values()
-        size = sp.radius
-        return not (np.allclose(old[0], nrows.coef, rtol=0, atol=TOL_ROWS)
-                    and np.allclose(old[2], trows.coef, rtol=0, atol=TOL_ROWS)
-                    and np.allclose(old[1], p.gap, rtol=0, atol=TOL_ROWS * size))
+        # (compared whatever their layout: spans made again change the entries, not the rows)
+        return (rows_differ(old[0], nrows, TOL_ROWS) or rows_differ(old[2], trows, TOL_ROWS)
+                or not np.allclose(old[1], p.gap, rtol=0, atol=TOL_GAP * sp.length))
 
     def _span_tangent_rows(self, p):
         """Finite sliding: the rows along the tangents over the spans (2D: one per slave, along
@@ -274,14 +279,35 @@ class FiniteSliding:
                                 s[:, 0] * du[:, 1] - s[:, 1] * du[:, 0]]).ravel()
         return self.values.relation(self.tangent, self._q_slide) - slip
 
+    def _set_entries(self, p, nrows, trows) -> None:
+        """The relations' entries (A's and D's rows and DOFs) over spans made again (p the
+        current pairing, input ids; nrows, trows its normal and tangential rows over them);
+        their values zero until ``_slide`` and the hooks set them."""
+        self._restructuring = False
+        f = self.fields_
+        self.n_dofs = nrows.node * f.ncomp + f.offset["u"] + nrows.comp
+        self.t_dofs = trows.node * f.ncomp + f.offset["u"] + trows.comp
+        zero_dual = self.normal.dual is not None
+        self.normal.set_entries(nrows.row, self.n_dofs, zero_dual)
+        if self.frictional:
+            self.tangent.set_entries(trows.row, self.t_dofs, False)
+        if self.geometric:
+            rows, dofs = self._geometry_entries(p)
+            self.geometry.set_entries(rows.row, dofs, True)
+
+    def _geometry_entries(self, p):
+        """The geometric rows' layout over the spans: (Rows, their DOFs), values zero."""
+        dim, m = self.mesh.dim, self.geometric_rank * len(p)
+        rows = span_combination(self._repeated(p), np.zeros((m, dim)),
+                                np.zeros((m, p.master.shape[1], dim)), *self.span.ptr_for(m))
+        return rows, rows.node * self.fields_.ncomp + self.fields_.offset["u"] + rows.comp
+
     def _geometry_relation(self) -> Relation:
         """``geometric_rank`` compliant rows per slave (``contact.geometry``), over the spans,
         values set at each update (``_set_geometry``)."""
-        p, dim = self.pairing, self.mesh.dim
+        p = self.pairing
         m = self.geometric_rank * len(p)
-        rows = span_combination(self._repeated(p), np.zeros((m, dim)),
-                                np.zeros((m, p.master.shape[1], dim)), *self.span.ptr_for(m))
-        dofs = rows.node * self.fields_.ncomp + self.fields_.offset["u"] + rows.comp
+        rows, dofs = self._geometry_entries(p)
         geometry = Relation(f"{self.spec.name}_geometry", m, rows.row, dofs, rows.coef,
                             np.zeros(m), CONSTANT, "=", (dofs, rows.row, rows.coef.copy()),
                             eliminate=False, compliance=np.ones(m))
@@ -313,7 +339,7 @@ class FiniteSliding:
             def forces(y, entries):
                 o = self._project(y[:, 0], np.arange(y.shape[0]))
                 return force_of(o.normal, o.tangents, entries)[:, None, :]
-            h = np.full(closed.size, 1e-6 * self.span.radius)
+            h = np.full(closed.size, 1e-6 * self.span.length)
             w[closed], u[closed] = local_terms(x[slave[closed]][:, None], forces, r, h)
         m = len(p) * r
         p_rows, ptr = self._repeated(p), self.span.ptr_for(m)

@@ -14,7 +14,9 @@ multiplier row and one dual column, which carries the coefficients of the enforc
 
 Relations refreshed between iterations (``meta["refresh"]``: friction turning its rows,
 contact pairings) keep their sparsity: ``refresh`` copies their current A and D values (and
-compliances, ``Relation.compliance``) into the stacked arrays in place.
+compliances, ``Relation.compliance``) into the stacked arrays in place. When a relation's
+sparsity changes (finite sliding's spans made again) ``restack`` stacks them again, with the
+same rows and scales.
 """
 
 from __future__ import annotations
@@ -37,6 +39,18 @@ class RelationSet:
 
     def __init__(self, relations: list[Relation], dofmap: DofMap):
         self.relations, self.dofmap = relations, dofmap
+        self._stack()
+        self.row_scale: np.ndarray | None = None
+        self.col_scale: np.ndarray | None = None
+
+    def restack(self) -> None:
+        """Stack the relations again after their sparsity changed (``Relation.set_entries``):
+        the same rows, so the multiplier layout and the scales stay; the DOF map must know
+        their DOFs (``DofMap.index_inputs``)."""
+        self._stack()
+
+    def _stack(self) -> None:
+        relations, dofmap = self.relations, self.dofmap
         new_dof = dofmap.input_new_dof
         sizes = [r.nrows for r in relations]
         mult_sizes = [1 if r.collapsed else r.nrows for r in relations]
@@ -68,8 +82,6 @@ class RelationSet:
         self._a_seg = np.concatenate([[0], np.cumsum([len(a) for a in av])]).astype(np.int64)
         self.compliance = np.zeros(int(first[-1]))      # per multiplier row (Relation)
         self._copy_compliance()
-        self.row_scale: np.ndarray | None = None
-        self.col_scale: np.ndarray | None = None
         self._owned_entries: dict[int, tuple] = {}      # per relation: its owned A entries
 
     # ------------------------------------------------------------ sizes and views

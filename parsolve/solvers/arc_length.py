@@ -90,9 +90,7 @@ class ArcLength(NewtonSolver):
             if it == spec.max_iterations:
                 break
             mat = system.assemble(kmat)
-            if self._mat is None:
-                self.linear.set_operator(mat)
-                self._mat = mat
+            self._use(mat)
             # bordering: the response to the residual and to the reference load
             target_r = self.rset.gap(t, self.q)
             elim_r = system.elim_values(t) - system.eliminated_values(self.q) \

@@ -97,8 +97,8 @@ class LinearSolver:
     One KSP for the run, on one operator whose values are rewritten in place (same pattern):
     PCSetUp sees SAME_NONZERO_PATTERN and MUMPS factors numerically only, its analysis
     (ordering, symbolic factorization) done once per run (tests/solvers/test_linear_reuse.py;
-    scripts/results/bench_friction.md measures what it saves). PETSc analyses again by itself
-    when the pattern changes (the matrix's nonzero state); a failed set-up resets the KSP.
+    scripts/results/bench_friction.md measures what it saves). A new operator (the system
+    built again on a new pattern) or a failed set-up resets the KSP.
     """
 
     def __init__(self, comm: MPI.Comm, prefix: str, settings: dict[str, str],
@@ -117,8 +117,16 @@ class LinearSolver:
         self.timings = {"factorization": 0.0, "solve": 0.0}
 
     def set_operator(self, mat: PETSc.Mat) -> None:
+        """Solve with this operator from now on. Another matrix than the last (a system built
+        again on a new pattern: ``SaddleSystem.restructure``) resets the KSP, so that its
+        preconditioner (MUMPS: the analysis too) is set up on it from scratch."""
         if self.near_null is not None:  # rigid-body modes for GAMG on the stiffness alone
             mat.setNearNullSpace(self.near_null)
+        previous = self.ksp.getOperators()[0] if self.configured else None
+        if previous is not None and previous.handle != mat.handle:
+            self._restart(mat)
+            self._state = None
+            return
         self.ksp.setOperators(mat)
         if not self.configured:
             self._configure()

@@ -125,6 +125,7 @@ class NewtonSolver:
             self.f_pure = self.ctx.composition.evaluate(self.q, self.states, False)[1]
         self.residual_history: list[float] = []
         self._mat = None
+        self.restructures = 0     # operators built again (finite sliding's spans made again)
         self._oriented = False
         # effects whose relations change between iterations (contact with friction): their
         # begin_step / refresh / end_step hooks, and where each relation's D and A entries
@@ -258,8 +259,12 @@ class NewtonSolver:
         free = system.free_rows()
         if self.hooks:   # contact hooks timed apart: /timings/contact
             t0 = time.perf_counter()
-            self._begin_hooks()
+            changed = self._begin_hooks()
             self.linear.add_time("contact", time.perf_counter() - t0)
+            if any(e.restructures for e in self.hooks):   # (every step: one dataset)
+                self.linear.add_time("pattern", 0.0)
+            if changed:
+                self._sync_relations()
         self.active.start_step()
         self._start_rate(t)
         f_known = self.external(t)
@@ -299,9 +304,7 @@ class NewtonSolver:
             for attempt in (0, 1):
                 system.set_active(self._enforceable(self.active.active))
                 mat = system.assemble(kmat)
-                if self._mat is None:
-                    self.linear.set_operator(mat)
-                    self._mat = mat
+                self._use(mat)
                 x, rhs = self._vectors(mat)
                 rhs.array[:] = system.rhs(t, f_int=f_int, q=self.q, f_ext=f_known)[0]
                 try:
@@ -328,6 +331,8 @@ class NewtonSolver:
                 t0 = time.perf_counter()
                 changed = self._refresh_hooks() or changed
                 self.linear.add_time("contact", time.perf_counter() - t0)
+                # always: rows of the Newton matrix alone (compliant) change at every iterate
+                self._sync_relations()
         history = ", ".join(f"{r:.1e}" for r in self.residual_history[-6:])
         trend = "diverged" if len(self.residual_history) > 2 and \
             self.residual_history[-1] > self.residual_history[1] else "did not converge"
@@ -340,12 +345,11 @@ class NewtonSolver:
         """Per multiplied relation, its rows of x (relation rows; writable views)."""
         return self.rset.views(x)
 
-    def _begin_hooks(self) -> None:
+    def _begin_hooks(self) -> bool:
         changed = False
         for e in self.hooks:
             changed = e.begin_step(self.q, self._views(self.active.active)) or changed
-        if changed:
-            self._sync_relations()
+        return changed
 
     def _refresh_hooks(self) -> bool:
         """The effects' updates between iterations (e.g. friction states and slip senses);
@@ -355,14 +359,31 @@ class NewtonSolver:
         changed = False
         for e in self.hooks:
             changed = e.refresh(self.q, lam, active) or changed
-        # always: rows of the Newton matrix alone (compliant) change at every iterate
-        self._sync_relations()
         return changed
 
     def _sync_relations(self) -> None:
         """Copy the current A and D values of the relations marked ``meta["refresh"]`` into
-        the relation set (unscaled; the scales of the first assembly stay)."""
-        self.rset.refresh()
+        the relation set (unscaled; the scales of the first assembly stay); when a hook
+        changed their sparsity (``Effect.restructured``), the system's operator is built
+        again on the new pattern (timed: /timings/pattern) and the rows of the dependence
+        analysis made again. Every rank decides alike (the same relations everywhere)."""
+        if not any(e.restructured for e in self.hooks):
+            self.rset.refresh()
+            return
+        t0 = time.perf_counter()
+        self.system.restructure()
+        self._rows = self._dependence_rows()
+        for e in self.hooks:
+            e.restructured = False
+        self.restructures += 1
+        self.linear.add_time("pattern", time.perf_counter() - t0)
+
+    def _use(self, mat) -> None:
+        """The linear solver on this operator: the system's matrix, new after a restructure
+        (the solver then sets itself up on its pattern again)."""
+        if mat is not self._mat:
+            self.linear.set_operator(mat)
+            self._mat = mat
 
     def _unit_response(self, kmat, released: np.ndarray, f: np.ndarray) -> np.ndarray:
         """δq = K⁻¹ f with the tangent, the rows ``released`` switched off and the other
@@ -372,9 +393,7 @@ class NewtonSolver:
         active[released] = False
         system.set_active(self._enforceable(active))
         mat = system.assemble(kmat)
-        if self._mat is None:
-            self.linear.set_operator(mat)
-            self._mat = mat
+        self._use(mat)
         x, rhs = self._vectors(mat)
         rhs.array[:] = system.rhs_from(f, np.zeros(self.rset.nrows),
                                        np.zeros(system.n_eliminated))[0]

@@ -93,6 +93,21 @@ class SaddleSystem:
             start += len(p)
         return pattern
 
+    def restructure(self) -> None:
+        """Build the operator again after a multiplied relation's sparsity changed
+        (``Relation.set_entries``: finite sliding's spans made again): the DOF map learns the
+        relations' DOFs (one reduction), the relation set is stacked again (the same rows,
+        multiplier layout and scales) and the operator's CSR is built anew on the new pattern,
+        exactly preallocated as at the start; the stiffness pattern is the same. The next
+        assembly makes a new PETSc matrix (the solver must be given it). Collective: every
+        rank holds the same relations."""
+        self.dofmap.index_inputs(self._relation_dofs())
+        self.relation_set.restack()
+        active = self.op.active
+        self.op = SaddleOperator(self.comm, self.dofmap, self.pattern, self.relation_set)
+        self.op.active = active
+        self.op.set_eliminated(self.elim_saddle)
+
     # ------------------------------------------------------------ elimination
 
     def unused_dofs(self) -> np.ndarray:

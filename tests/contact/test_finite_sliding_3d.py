@@ -1,7 +1,8 @@
 """Finite sliding in 3D (``[[contact]] sliding = "finite"``, node-to-face on quad and triangle
 master faces, small strain): the slaves are paired again on the current configuration at each
 step and after each solve, the stick rows hold the master material point faced at the step's
-start across faces, and the rows span the faces within ``search_radius`` (a fixed pattern).
+start across faces, and the rows span the faces within ``search_radius`` of where the span was
+made (made again, and the operator's pattern with it, when a slave nears its span's edge).
 
 Three scenes, each checked on 1, 2 and 3 ranks; the block's results are those of one process
 (1e-10), the shoe's and the ironing's are not (see the tests):
@@ -64,14 +65,14 @@ def drag(name, comp, value, evolution):
 
 
 def scene(mesh, relations, steps, travel_evolution, discretization="node_to_segment",
-          **extra) -> str:
+          radius=0.7, **extra) -> str:
     """A die (slave: its bottom) driven through its top on a base (master: its top faces)."""
     return build(
         mesh={"file": str(mesh)}, model={"hypothesis": "3d"},
         relations=[{"name": "ground", "type": "dirichlet", "region": "base_zmin",
                     "components": ["x", "y", "z"]}] + relations,
         contact=[{"name": "slide", "slave": "die_zmin", "master": "base_zmax", "friction": MU,
-                  "search_radius": 0.7, "sliding": "finite",
+                  "search_radius": radius, "sliding": "finite",
                   "discretization": discretization}],
         evolutions=travel_evolution, steps={"count": steps}, nonlinear={"max_iterations": 60},
         **extra)
@@ -114,7 +115,7 @@ BLOCK = (0.25, W, 0.125, 2, 2, 1, (0.25, 0.0, H))
 DELTA, TRAVEL = 0.005, 0.625          # the travel: five faces, half a face per step
 
 
-def block_scene(mesh, discretization="node_to_segment") -> str:
+def block_scene(mesh, discretization="node_to_segment", radius=0.7) -> str:
     return scene(
         mesh,
         [{"name": "ring", "type": "periodic", "region": "left_end", "target": "right_end",
@@ -124,7 +125,7 @@ def block_scene(mesh, discretization="node_to_segment") -> str:
         12,
         {"press": {"times": [0.0, 1.0 / 6.0, 1.0], "values": [0.0, 1.0, 1.0]},
          "drag": {"times": [0.0, 1.0 / 6.0, 1.0], "values": [0.0, 0.0, 1.0]}},
-        discretization,
+        discretization, radius,
         # ν = 0 and nothing across the drag: the field stays plane (u_y = 0, slip along x)
         materials=[{"E": 1000.0, "nu": 0.0}],
         # the ends without the held bottom edge (a tie between held DOFs constrains nothing)
@@ -172,6 +173,25 @@ def test_block_dragged_over_five_faces_translates_rigidly(run, shared_tmp, discr
     assert np.abs(slip[-1, slaves, 0]).min() > 3 * FACE       # farther than three faces
     print("iterations per step:", list(res["steps/iterations"]))
     same_on_one_process(run, res, text, f"ring_block_{discretization}")
+
+
+@pytest.mark.parametrize("discretization", ["node_to_segment", "mortar"])
+def test_block_spans_made_again_over_the_ring(run, shared_tmp, discretization):
+    """The block dragged over five faces with spans of 0.1 (less than a face, 0.125): its
+    slaves leave their spans every step or two, the spans are made again around the current
+    configuration and the operator built again on the new pattern (/timings/pattern). The
+    answers are those of spans that hold the run (2.5: the whole base): displacements and
+    contact forces to 1e-10 of their largest, the same states and iterations."""
+    mesh = write_mesh(shared_tmp / f"ring_base_{discretization}.msh", BASE, BLOCK)
+    ref = run(block_scene(mesh, discretization, radius=2.5), name=f"ring_span_ref_{discretization}")
+    res = run(block_scene(mesh, discretization, radius=0.1), name=f"ring_span_{discretization}")
+    assert np.all(ref["timings/pattern"] == 0.0)
+    assert np.count_nonzero(res["timings/pattern"]) >= 4
+    for key in ("displacement", "slide_normal_reaction", "slide_tangential_reaction"):
+        f, f_ref = res[f"fields/{key}"], ref[f"fields/{key}"]
+        np.testing.assert_allclose(f, f_ref, atol=1e-10 * np.abs(f_ref).max(), rtol=0)
+    np.testing.assert_array_equal(res["fields/slide_state"], ref["fields/slide_state"])
+    np.testing.assert_array_equal(res["steps/iterations"], ref["steps/iterations"])
 
 
 # ------------------------------------------------------------------ a shoe along a cylinder

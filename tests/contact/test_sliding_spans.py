@@ -1,6 +1,7 @@
 """Finite sliding's building blocks (parsolve.contact.pairing.facet_spans, in_spans, pair_on;
-parsolve.contact.rows.span_rows): the spans hold the facets within the radius of each slave,
-rows over a span are the node-to-segment rows with zeros on the other span nodes, and a
+parsolve.contact.rows.span_rows; parsolve.contact.sliding's spans): the spans hold the facets
+within the radius of each slave, rows over a span are the node-to-segment rows with zeros on
+the other span nodes, spans made again hold the facets around where the slaves are now, and a
 projection on a given facet is pair_nodes' when that facet is the closest."""
 
 from __future__ import annotations
@@ -10,6 +11,9 @@ import pytest
 
 from parsolve.contact.pairing import facet_spans, in_spans, pair_nodes, pair_on
 from parsolve.contact.rows import node_rows, span_rows
+from parsolve.contact.sliding import (drifted, make_spans, outside_spans, respan,
+                                      union_spans)
+from parsolve.contact.surfaces import Surfaces
 
 
 def wavy_master(n: int = 12) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -61,6 +65,43 @@ def test_span_rows_are_node_rows_with_zeros_elsewhere():
     outside.master = np.tile(facets[-1], (5, 1))      # the last facet: not in the first spans
     with pytest.raises(ValueError, match="outside the entry's span"):
         span_rows(outside, vectors, nptr, nodes)
+
+
+def test_spans_made_again_around_the_moved_slaves():
+    """Spans of radius 0.3 made at the start; the slaves moved by 0.1 along the master have
+    not drifted (≤ half the radius), by 0.2 they have. Made again on the moved configuration,
+    a span holds the facets within the radius of the slave there, its current facet and
+    master nodes besides, in input ids; it is centred there, and the current pairing is
+    inside it where the start's spans no longer hold it."""
+    points, facets, slaves = wavy_master()
+    surf = Surfaces(100 + np.arange(points.shape[0]), points)   # input ids ≠ compact
+    p = pair_nodes(points, slaves, facets, "line", 0.6)
+    sp = make_spans(surf, p, facets, 0.3)
+    assert not drifted(sp, points)
+    for shift, moved in ((0.1, False), (0.2, True), (0.6, True)):
+        x = points.copy()
+        x[slaves, 0] += shift
+        assert drifted(sp, x) == moved
+    q = pair_nodes(x, slaves, facets, "line", 0.6)
+    assert outside_spans(q, sp.node_ptr, surf.compact(sp.nodes)).any()
+    new = respan(sp, x, q)
+    fptr, fids, nptr, nodes = facet_spans(x, slaves, facets, 0.3)
+    np.testing.assert_array_equal(new.facet_ptr, fptr)   # the current facets are among them
+    np.testing.assert_array_equal(new.facet_ids, fids)
+    np.testing.assert_array_equal(new.node_ptr, nptr)
+    np.testing.assert_array_equal(new.nodes, surf.ids[nodes])
+    np.testing.assert_array_equal(new.centre, x[slaves])
+    assert not drifted(new, x)
+    assert not outside_spans(q, new.node_ptr, surf.compact(new.nodes)).any()
+    assert new.radius == sp.radius and new.slave is sp.slave
+
+
+def test_union_spans_adds_each_entry_s_nodes_but_no_facet():
+    ptr, nodes = np.array([0, 2, 2, 3]), np.array([4, 7, 1])
+    extra = np.array([[7, 2], [-1, -1], [1, 0]])      # entry 1: no facet (-1)
+    new_ptr, new_nodes = union_spans(ptr, nodes, extra)
+    np.testing.assert_array_equal(new_ptr, [0, 3, 3, 5])
+    np.testing.assert_array_equal(new_nodes, [2, 4, 7, 0, 1])
 
 
 def test_projection_on_a_given_facet():

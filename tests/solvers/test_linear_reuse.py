@@ -19,13 +19,13 @@ def _counts(kind: str) -> tuple[int, int]:
     return tuple(int(PETSc.Log.Event(name).getPerfInfo()["count"]) for name in EVENTS[kind])
 
 
+@pytest.mark.petsc_events
 @pytest.mark.parametrize("config, kind", [("contact_friction_3d.toml", "lu"),
                                           ("contact_hertz_cylinder.toml", "cholesky")])
 def test_one_analysis_per_run(run, config, kind):
     """Frictional 3D box (non-associated: LU), 8 steps; frictionless Hertz (symmetric:
     Cholesky): one analysis, as many numeric factorizations as global iterations (no step
     is cut in these runs)."""
-    PETSc.Log.begin()
     before = _counts(kind)
     res = run(scene(shipped(config), output=DROP))
     analyses, numeric = np.subtract(_counts(kind), before)
