@@ -158,11 +158,11 @@ def tangential_components(pairing: Pairing, u: np.ndarray) -> np.ndarray:
 
 
 def span_rows(pairing: Pairing, vectors: np.ndarray, ptr: np.ndarray, nodes: np.ndarray) -> Rows:
-    """Rows like :func:`node_rows` over a fixed superset of master nodes per entry (finite
-    sliding): entry i spans the slave node and the master nodes ``nodes[ptr[i]:ptr[i+1]]``
-    (increasing ids: every facet the slave may visit), the nodes of its current facet carry
-    -N_a v_i, the others 0. The layout depends on the span alone, so a slave moving to
-    another facet of its span is a value update of the same entries (no new sparsity).
+    """Rows like :func:`node_rows` over a superset of master nodes per entry (finite sliding):
+    entry i spans the slave node and the master nodes ``nodes[ptr[i]:ptr[i+1]]`` (increasing
+    ids: every facet the slave may visit), the nodes of its current facet carry -N_a v_i, the
+    others 0. The layout depends on the span alone, so a slave moving to another facet of its
+    span is a value update of the same entries (no new sparsity until the spans change).
     ValueError when a current facet node is outside its entry's span."""
     _check(pairing)
     if pairing.master.shape[1] == 0:   # a rigid obstacle: the slave alone, spans empty

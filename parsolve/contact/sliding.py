@@ -2,16 +2,17 @@
 configuration fitted to them.
 
 A finite-sliding row couples its slave node to a superset of master nodes, its *span*
-(``rows.span_rows``): the nodes of every master facet the slave may face while it stays within
-the search radius of where the span was made, zeros where a node is not in the current
-pairing. Pairing again is then a value update of the same entries. When a slave is about to
-leave its span (or has left it) the spans are made again around the current configuration
-(``respan``): the rows' sparsity changes, and the system builds its operator again on it.
+(``rows.span_rows``): the nodes of every master facet within the search radius of the slave
+when the span was made, zeros where a node is not in the current pairing. Pairing again is
+then a value update of the same entries. When a slave is about to leave its span (a facet
+within half the radius of it now is not in its span: ``near_edge``) or has left it, the spans
+are made again around the current configuration (``respan``): the rows' sparsity changes,
+and the system builds its operator again on it.
 
 Node-to-segment (node-to-face) pairs a slave with one facet: its span is the master nodes of
-the facets near its start (``pairing.facet_spans``). A mortar row integrates over the slave
-facets around its node: its span adds the slave facets' reach to the radius, and keeps the
-nodes of its initial row (a triangle6 midside's row holds its edge's corners).
+the facets near it (``pairing.facet_spans``). A mortar row integrates over the slave facets
+around its node: its span adds the slave facets' reach to the radius, and keeps the nodes of
+its current row (a triangle6 midside's row holds its edge's corners).
 """
 
 from __future__ import annotations
@@ -39,7 +40,6 @@ class Spans:
     nodes: np.ndarray
     reference: np.ndarray | None = None   # 3D: per slave, the vector its t1 follows
     slave_facets: np.ndarray | None = None   # mortar only
-    centre: np.ndarray | None = None   # per paired slave, where its span was made
     # the length the rows' tolerances are relative to: the largest master facet (an
     # obstacle: the mesh's size), not the radius, so that the answer does not depend on it
     length: float = 1.0
@@ -70,7 +70,7 @@ def make_spans(surf: Surfaces, p: Pairing, facets: np.ndarray, radius: float | N
     coords = surf.points[facets]
     length = float(np.max(coords.max(axis=1) - coords.min(axis=1)))
     return Spans(surf, p.slave.copy(), facets, radius, fptr, fids, nptr, surf.ids[nodes],
-                 _reference(p), slave_facets, surf.points[p.slave].copy(), length)
+                 _reference(p), slave_facets, length)
 
 
 def respan(sp: Spans, x: np.ndarray, p: Pairing) -> Spans:
@@ -84,16 +84,33 @@ def respan(sp: Spans, x: np.ndarray, p: Pairing) -> Spans:
     fptr, fids = union_spans(fptr, fids, p.facet[:, None])
     nptr, nodes = union_spans(nptr, nodes, p.master)
     return Spans(sp.surf, sp.slave, sp.facets, sp.radius, fptr, fids, nptr, sp.surf.ids[nodes],
-                 sp.reference, sp.slave_facets, x[p.slave].copy(), sp.length)
+                 sp.reference, sp.slave_facets, sp.length)
 
 
-def drifted(sp: Spans, x: np.ndarray) -> bool:
-    """Whether a slave has moved, on the configuration x, farther than half the search radius
-    from where its span was made: the next step could carry it out (an empty span, a rigid
-    obstacle's, never needs making again)."""
-    if sp.nodes.size == 0 or sp.centre is None:
+def near_edge(sp: Spans, x: np.ndarray) -> bool:
+    """Whether a slave is near its span's edge on the configuration x: a master facet within
+    half the search radius of it (mortar: plus its slave facets' reach), on the current
+    positions of both bodies, is not in its span (the next step could carry it out). False
+    for empty spans (a rigid obstacle's: nothing to make again)."""
+    if sp.nodes.size == 0:
         return False
-    return bool(np.max(np.linalg.norm(x[sp.slave] - sp.centre, axis=1)) > 0.5 * sp.radius)
+    _, reach = span_reach(sp.surf, sp.facets, 0.5 * sp.radius, sp.slave_facets)
+    fptr, fids, _, _ = facet_spans(x, sp.slave, sp.facets, reach)
+    return not bool(np.all(contains(sp.facet_ptr, sp.facet_ids, fptr, fids)))
+
+
+def contains(ptr: np.ndarray, ids: np.ndarray, sub_ptr: np.ndarray,
+             sub_ids: np.ndarray) -> np.ndarray:
+    """Per entry of the CSR lists ``sub`` (same entries as ``ptr``/``ids``, increasing ids
+    per entry), whether each of its ids is in the entry's list of ``ids``: (nnz of sub,)."""
+    n = ptr.size - 1
+    big = int(max(ids.max(initial=0), sub_ids.max(initial=0))) + 1
+    key = np.repeat(np.arange(n, dtype=np.int64), np.diff(ptr)) * big + ids
+    sub = np.repeat(np.arange(n, dtype=np.int64), np.diff(sub_ptr)) * big + sub_ids
+    if key.size == 0:
+        return np.zeros(sub.size, dtype=bool)
+    pos = np.minimum(np.searchsorted(key, sub), key.size - 1)
+    return key[pos] == sub
 
 
 def _reference(p: Pairing) -> np.ndarray | None:

@@ -570,7 +570,7 @@ class Contact(FiniteSliding, Effect):
         if turning:
             changed = self._turn(state, direction, lam, rn, rt, du, motion) or changed
         self.node_state, self.direction = state, direction
-        if changed or moved:
+        if changed or moved or self.restructured:   # (spans made again: the dual's new entries)
             self._set_dual()
         if changed or moved or self.mesh.dim == 3:   # 3D: the cross rows' κ at this q
             self._tangent_active(active)

@@ -8,10 +8,10 @@ and after each solve, until the rows stop changing (their fixed point: the gap a
 of the current geometry, exact at convergence); a slave keeps its facet while it stays in it
 (no flip at a kink), else takes the closest (ties: the canonical facet order of
 ``surfaces``). Each row spans the master nodes of every facet within ``search_radius`` of
-where its span was made (``pairing.facet_spans``), zeros where a facet is not the current
-one: re-pairing is a value update of the same entries. When a slave has moved farther than
-half the radius from there at a step's start, or has left its span at any iterate, the spans
-are made again around the current configuration (``sliding.respan``) and the system builds
+the slave when its span was made (``pairing.facet_spans``), zeros where a facet is not the
+current one: re-pairing is a value update of the same entries. When at a step's start a
+facet within half the radius of a slave is not in its span (``sliding.near_edge``), or a
+slave has left its span at an iterate, the spans are made again around the current configuration (``sliding.respan``) and the system builds
 its operator again on the new pattern (``restructured``: preallocated as at the start; MUMPS
 analyses it again). A slave that no facet faces at the start but that is within the search
 radius of one (a die's overhang) is kept, uncovered: a zero row (its gap inf in the outputs)
@@ -48,8 +48,8 @@ import numpy as np
 from parsolve.contact.geometry import facet_terms, local_terms
 from parsolve.contact.pairing import in_spans, pair_nodes, pair_on
 from parsolve.contact.rows import normal_values, repeated, rows_differ, span_combination
-from parsolve.contact.sliding import drifted, fit_mortar, frame_of, make_spans, merged, \
-    mortar_waiting, outside_spans, pad, reference_frame, respan
+from parsolve.contact.sliding import fit_mortar, frame_of, make_spans, merged, \
+    mortar_waiting, near_edge, outside_spans, pad, reference_frame, respan
 from parsolve.evolution import CONSTANT
 from parsolve.relations import Relation
 
@@ -88,8 +88,8 @@ class FiniteSliding:
         master must not flip between its two facets from one iteration to the next; a slave
         that no facet faces any more (past the master's free end) stays on its last facet,
         clipped to the facet's end (as small sliding keeps its first pairing). The spans are
-        made again when a slave leaves its span, or (``start``: a step's start) has drifted
-        farther than half the radius from where its span was made (``_respan_if``)."""
+        made again when a slave leaves its span, or (``start``: a step's start) nears its edge
+        (``_respan_if``)."""
         sp, ft = self.span, self.mesh.facet_type
         x = self._current_points(q)
         if self.spec.obstacle is not None:   # projected again on the obstacle
@@ -202,10 +202,11 @@ class FiniteSliding:
 
     def _respan_if(self, x: np.ndarray, p, outside: np.ndarray, start: bool) -> None:
         """The spans made again around x (``sliding.respan``, p the current rows, compact)
-        when a slave's row reaches outside its span, or at a step's start when a slave has
-        drifted farther than half the radius from where its span was made (``drifted``: so
-        that a step seldom leaves it); ``restructured`` then tells the solver."""
-        if outside.any() or start and drifted(self.span, x):
+        when a slave's row reaches outside its span, or at a step's start when a facet within
+        half the radius of a slave now is not in its span (``near_edge``, on the current
+        positions of both bodies: so that a step seldom leaves it); ``restructured`` then
+        tells the solver."""
+        if outside.any() or start and near_edge(self.span, x):
             self.span = respan(self.span, x, p)
             self._restructuring = self.restructured = True
 

@@ -45,9 +45,12 @@ class RelationSet:
 
     def restack(self) -> None:
         """Stack the relations again after their sparsity changed (``Relation.set_entries``):
-        the same rows, so the multiplier layout and the scales stay; the DOF map must know
-        their DOFs (``DofMap.index_inputs``)."""
+        the same rows, so the multiplier layout, the scales and the row each collapsed group
+        enforces (``set_active``'s choice) stay; the DOF map must know their DOFs
+        (``DofMap.index_inputs``)."""
+        rep_row = self.rep_row
         self._stack()
+        self.rep_row = rep_row
 
     def _stack(self) -> None:
         relations, dofmap = self.relations, self.dofmap

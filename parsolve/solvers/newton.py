@@ -125,11 +125,11 @@ class NewtonSolver:
             self.f_pure = self.ctx.composition.evaluate(self.q, self.states, False)[1]
         self.residual_history: list[float] = []
         self._mat = None
-        self.restructures = 0     # operators built again (finite sliding's spans made again)
         self._oriented = False
         # effects whose relations change between iterations (contact with friction): their
         # begin_step / refresh / end_step hooks, and where each relation's D and A entries
-        # sit in the relation set (values are copied there in place: same sparsity)
+        # sit in the relation set (values are copied there in place; a new sparsity, finite
+        # sliding's spans made again, has the system build its operator again)
         self.hooks = [e for e in ctx.effects if e.refreshes]
         self._rows = self._dependence_rows()
         self.left_out = np.zeros(self.active.sign.size, dtype=bool)
@@ -263,7 +263,7 @@ class NewtonSolver:
             self.linear.add_time("contact", time.perf_counter() - t0)
             if any(e.restructures for e in self.hooks):   # (every step: one dataset)
                 self.linear.add_time("pattern", 0.0)
-            if changed:
+            if changed or any(e.restructured for e in self.hooks):
                 self._sync_relations()
         self.active.start_step()
         self._start_rate(t)
@@ -353,7 +353,7 @@ class NewtonSolver:
 
     def _refresh_hooks(self) -> bool:
         """The effects' updates between iterations (e.g. friction states and slip senses);
-        their relation values are copied into the system, whose pattern does not change."""
+        their relation values are then copied into the system (``_sync_relations``)."""
         lam = self._views(self.rset.row_values(self.lam) if self.lam.size else self.lam)
         active = self._views(self.active.active)
         changed = False
@@ -375,7 +375,6 @@ class NewtonSolver:
         self._rows = self._dependence_rows()
         for e in self.hooks:
             e.restructured = False
-        self.restructures += 1
         self.linear.add_time("pattern", time.perf_counter() - t0)
 
     def _use(self, mat) -> None:

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from parsolve.contact.pairing import facet_spans, in_spans, pair_nodes, pair_on
-from parsolve.contact.rows import node_rows, span_rows
-from parsolve.contact.sliding import (drifted, make_spans, outside_spans, respan,
+from parsolve.contact.rows import Rows, node_rows, rows_differ, span_rows
+from parsolve.contact.sliding import (make_spans, near_edge, outside_spans, respan,
                                       union_spans)
 from parsolve.contact.surfaces import Surfaces
 
@@ -68,32 +68,58 @@ def test_span_rows_are_node_rows_with_zeros_elsewhere():
 
 
 def test_spans_made_again_around_the_moved_slaves():
-    """Spans of radius 0.3 made at the start; the slaves moved by 0.1 along the master have
-    not drifted (≤ half the radius), by 0.2 they have. Made again on the moved configuration,
-    a span holds the facets within the radius of the slave there, its current facet and
-    master nodes besides, in input ids; it is centred there, and the current pairing is
-    inside it where the start's spans no longer hold it."""
+    """Spans of radius 0.6 made at the start. A slave is near its span's edge when a facet
+    within half the radius of it is not in its span, on the current positions of both
+    bodies: the slaves moved along the master by 0.1 are not, by 0.4 they are, and the
+    slaves and the master moved together by 0.4 are not (nothing moved relative to the
+    other). Made again on the moved configuration, a span holds the facets within the radius
+    of the slave there and, besides, its current facet and master nodes (a slave lifted
+    above the radius keeps its facet), in input ids; the current pairing is inside it where
+    the start's spans no longer hold it."""
     points, facets, slaves = wavy_master()
+    master = np.setdiff1d(np.arange(points.shape[0]), slaves)
     surf = Surfaces(100 + np.arange(points.shape[0]), points)   # input ids ≠ compact
     p = pair_nodes(points, slaves, facets, "line", 0.6)
-    sp = make_spans(surf, p, facets, 0.3)
-    assert not drifted(sp, points)
-    for shift, moved in ((0.1, False), (0.2, True), (0.6, True)):
+    sp = make_spans(surf, p, facets, 0.6)
+    assert not near_edge(sp, points)
+    for shift, moved, together in ((0.1, False, False), (0.4, True, False),
+                                   (0.4, False, True)):
         x = points.copy()
         x[slaves, 0] += shift
-        assert drifted(sp, x) == moved
-    q = pair_nodes(x, slaves, facets, "line", 0.6)
+        if together:
+            x[master, 0] += shift
+        assert near_edge(sp, x) == moved
+    x = points.copy()
+    x[slaves, 0] += [1.0, 1.0, 1.0, 0.6, 0.2]   # (all still above the master)
+    x[slaves[0], 1] += 0.7             # above the radius: no facet near it but its own
+    q = pair_nodes(x, slaves, facets, "line", 1.0)
+    assert q.paired.all()
     assert outside_spans(q, sp.node_ptr, surf.compact(sp.nodes)).any()
     new = respan(sp, x, q)
-    fptr, fids, nptr, nodes = facet_spans(x, slaves, facets, 0.3)
-    np.testing.assert_array_equal(new.facet_ptr, fptr)   # the current facets are among them
-    np.testing.assert_array_equal(new.facet_ids, fids)
-    np.testing.assert_array_equal(new.node_ptr, nptr)
-    np.testing.assert_array_equal(new.nodes, surf.ids[nodes])
-    np.testing.assert_array_equal(new.centre, x[slaves])
-    assert not drifted(new, x)
+    fptr, fids, nptr, nodes = facet_spans(x, slaves, facets, 0.6)
+    assert fptr[1] == 0                                   # the lifted slave: nothing near
+    np.testing.assert_array_equal(new.facet_ids[new.facet_ptr[0]:new.facet_ptr[1]], q.facet[:1])
+    np.testing.assert_array_equal(new.facet_ptr[1:] - new.facet_ptr[1], fptr[1:])
+    np.testing.assert_array_equal(new.facet_ids[new.facet_ptr[1]:], fids)
+    np.testing.assert_array_equal(new.nodes[:new.node_ptr[1]], surf.ids[np.sort(q.master[0])])
+    np.testing.assert_array_equal(new.nodes[new.node_ptr[1]:], surf.ids[nodes])
+    assert not near_edge(new, x)
     assert not outside_spans(q, new.node_ptr, surf.compact(new.nodes)).any()
-    assert new.radius == sp.radius and new.slave is sp.slave
+    assert new.radius == sp.radius and new.slave is sp.slave and new.length == sp.length
+
+
+def test_rows_compared_whatever_their_layout():
+    """The same rows over two spans (one with zero entries on more nodes, in another order)
+    do not differ; a coefficient changed by more than the tolerance does."""
+    a = Rows(2, np.array([0, 0, 1]), np.array([3, 4, 3]), np.array([1, 1, 0]),
+             np.array([1.0, -0.5, 2.0]), 0)
+    b = Rows(2, np.array([1, 0, 0, 1, 0]), np.array([3, 4, 3, 7, 9]), np.array([0, 1, 1, 0, 1]),
+             np.array([2.0, -0.5, 1.0, 0.0, 0.0]), 0)
+    assert not rows_differ(a, b, 1e-12) and not rows_differ(a, a, 0.0)
+    b.coef[0] += 1e-9
+    assert rows_differ(a, b, 1e-12) and not rows_differ(a, b, 1e-8)
+    c = Rows(2, a.row, a.node, a.comp, a.coef + 1e-9, 0)       # the same layout
+    assert rows_differ(a, c, 1e-12) and not rows_differ(a, c, 1e-8)
 
 
 def test_union_spans_adds_each_entry_s_nodes_but_no_facet():
