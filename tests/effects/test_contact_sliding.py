@@ -240,6 +240,28 @@ def test_bad_sliding_names_file_and_key(shared_tmp, mesh, edit, words):
     assert words in err.value.message
 
 
+def test_spans_made_again_with_a_step_cut(run):
+    """The shipped ironing with six iterations at most per step: the step where the drag
+    starts (t = 0.2: seven) fails and is cut in two, its halves retried from the committed
+    state. With spans made again on the way (radius 0.2) or never (4.5, the whole slab): the
+    same cuts and iterations, the same answers (1e-10)."""
+    base = shipped(IRONING.name)
+
+    def ironing(radius: float) -> str:
+        return build(base, mesh={"file": str(IRONING.with_suffix(".msh"))},
+                     nonlinear={"max_iterations": 6},
+                     contact=[base["contact"][0] | {"search_radius": radius}])
+
+    ref, res = run(ironing(4.5), name="cut_ref"), run(ironing(0.2), name="cut_respan")
+    assert ref["steps/cuts"].sum() >= 1 and np.all(ref["timings/pattern"] == 0.0)
+    assert np.count_nonzero(res["timings/pattern"]) >= 2
+    for key in ("steps/cuts", "steps/time", "steps/iterations", "fields/ironing_state"):
+        np.testing.assert_array_equal(res[key], ref[key])
+    for key in ("displacement", "ironing_normal_reaction", "ironing_tangential_reaction"):
+        f, f_ref = res[f"fields/{key}"], ref[f"fields/{key}"]
+        np.testing.assert_allclose(f, f_ref, atol=1e-10 * np.abs(f_ref).max(), rtol=0)
+
+
 def test_frictionless_ironing_is_the_die_placed_there(run, shared_tmp):
     """Frictionless, the answer does not depend on the path: the die dragged by 1.5625 over
     twelve and a half facets of the deformed slab (finite sliding) ends where a die placed
@@ -277,10 +299,11 @@ def test_frictionless_ironing_is_the_die_placed_there(run, shared_tmp):
     assert off > 1e-3
 
 
-@pytest.mark.parametrize("mu, discretization", [(0.0, "node_to_segment"),
-                                                 (0.3, "node_to_segment"), (0.3, "mortar")])
+@pytest.mark.parametrize("mu, discretization, radius", [
+    (0.0, "node_to_segment", None), (0.3, "node_to_segment", None), (0.3, "mortar", None),
+    (0.3, "node_to_segment", 0.3), (0.3, "mortar", 0.3)])
 def test_die_dragged_onto_the_slab_from_an_overhang_is_the_die_placed_there(
-        run, shared_tmp, mu, discretization):
+        run, shared_tmp, mu, discretization, radius):
     """A slave that no facet faces at the start is kept (within the search radius of one) and
     gets its row when a facet faces it: the shipped ironing's die starting at x = −0.2 (its
     two left bottom nodes past the slab's end; with mortar rows, the leftmost one, the other's
@@ -288,7 +311,8 @@ def test_die_dragged_onto_the_slab_from_an_overhang_is_the_die_placed_there(
     pressed by 0.01 (μ = 0 and 0.3), ends as a die placed at x = 0.3 and pressed: the same
     displacements (the die's shifted by 0.5) and contact forces to 1e-9, every bottom node of
     the die closed, none inside the slab (mortar: no weighted gap below zero). Those nodes'
-    gaps are reported as inf while no facet faces them."""
+    gaps are reported as inf while no facet faces them. With a search radius of 0.3 rather
+    than the shipped 1.6 the spans are made again on the way (waiting slaves among them)."""
     mortar = discretization == "mortar"
     base = shipped(IRONING.name)
     meshes = {}
@@ -305,9 +329,10 @@ def test_die_dragged_onto_the_slab_from_an_overhang_is_the_die_placed_there(
         return build(base, mesh={"file": str(mesh_file)}, relations=relations,
                      evolutions=evolutions, steps={"count": 10},
                      contact=[base["contact"][0] | {"friction": mu,
-                                                    "discretization": discretization}])
+                                                    "discretization": discretization}
+                              | ({} if radius is None else {"search_radius": radius})])
 
-    tag = f"{mu}_{discretization}"
+    tag = f"{mu}_{discretization}_{radius}"
     dragged = run(ironing(meshes["overhang"], 0.5), name=f"ironing_overhang_{tag}")
     placed = run(ironing(meshes["placed"], 0.0), name=f"ironing_overhang_placed_{tag}")
     pts = dragged["mesh/points"]
@@ -328,6 +353,8 @@ def test_die_dragged_onto_the_slab_from_an_overhang_is_the_die_placed_there(
         assert dragged["fields/ironing_gap"][-1, bottom, 0].min() >= -1e-12 * 0.01
     else:
         assert true_gaps(pts, u_d).min() >= -1e-12 * 0.01
+    if radius is not None:
+        assert np.count_nonzero(dragged["timings/pattern"]) >= 1
     print("iterations per step:", list(dragged["steps/iterations"]))
 
 
