@@ -56,10 +56,11 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
         else:
             _run_linear(comm, system, cli_options, writer, export_dir, log)
     except SolverError as exc:
+        hints = [h for e in model.effects for h in e.failure_hints()]   # (the same everywhere)
         if "singular" in str(exc) or "inaccurate" in str(exc):
-            hints = unsupported(model)
-            if hints:
-                exc = SolverError(f"{exc}; likely cause: {'; '.join(hints)}")
+            hints += unsupported(model)
+        if hints:
+            exc = SolverError(f"{exc}; likely cause: {'; '.join(hints)}")
         status = f"failed: {exc}"
         raise exc from None
     except Interrupted as exc:

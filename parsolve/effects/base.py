@@ -120,6 +120,11 @@ class Effect:
     def end_step(self) -> None:
         """Commit the converged step's state."""
 
+    def failure_hints(self) -> list[str]:
+        """Sentences on what, in this effect, likely made the last step fail (the driver adds
+        them to a solver failure's message): none by default. Every rank says the same."""
+        return []
+
     @property
     def refreshes(self) -> bool:
         """Whether the effect overrides the within-step hooks (``refresh``)."""

@@ -203,6 +203,8 @@ class Contact(FiniteSliding, Effect):
         #                                     a row) has held the slave (``_with_uncovered``)
         self._covered_committed = None
         self._restructuring = False         # finite sliding: spans made again, rows not yet
+        self._returns = None                # node-to-segment finite sliding: per slave, its
+        self._left = None                   # returns to a facet it left within the step
         self._check_slave(regions)
         self.pairing = self._pair(regions)
         self._compact_committed = self._compact

@@ -200,6 +200,33 @@ class FiniteSliding:
         self._compact = p
         return p
 
+    def _count_returns(self, facet: np.ndarray, start: bool) -> None:
+        """Node-to-segment: per slave, how often it went back, within the step, to the facet
+        it left last (A → B → A): a slave cycling between two facets (a concave crease of
+        the master) is what keeps Newton from converging (``failure_hints``)."""
+        if start or self._returns is None or self._facet_now is None:
+            self._returns = np.zeros(facet.size, dtype=np.int64)
+            self._left = np.full(facet.size, -1, dtype=np.int64)
+            return
+        moved = (facet != self._facet_now) & (facet >= 0) & (self._facet_now >= 0)
+        self._returns += moved & (facet == self._left)
+        self._left[moved] = self._facet_now[moved]
+
+    def failure_hints(self) -> list[str]:
+        """A slave that cycled between two master facets in the failed step: node-to-segment
+        holds it on one of them, and it slides off into the other at each solve."""
+        if self.span is None or self.span.slave_facets is not None or self._returns is None:
+            return []
+        cycling = np.flatnonzero(self._returns >= 2)
+        if cycling.size == 0:
+            return []
+        nodes = self.span.surf.ids[self.span.slave[cycling]]
+        listed = ", ".join(str(int(n)) for n in nodes[:5]) + (", ..." if nodes.size > 5 else "")
+        return [f"{self.source}: {self.spec.key}: slave node(s) {listed} went back and forth "
+                "between two master facets (a concave crease of the deformed master: "
+                'node-to-segment holds a slave on one facet); discretization = "mortar" '
+                "handles it"]
+
     def _respan_if(self, x: np.ndarray, p, outside: np.ndarray, start: bool) -> None:
         """The spans made again around x (``sliding.respan``, p the current rows, compact)
         when a slave's row reaches outside its span, or at a step's start when a facet within
@@ -237,6 +264,7 @@ class FiniteSliding:
         p, x = self._repair(q, start)
         if start:
             self._start_point = (p.master.copy(), p.weights.copy(), p.point.copy())
+        self._count_returns(p.facet, start)
         self._facet_now = p.facet.copy()
         self.du = self._tangential_offset(x, p)
         self._geo = (x, p.slave.copy(), p.master.copy())   # compact ids (geometric stiffness)

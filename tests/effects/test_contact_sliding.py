@@ -23,7 +23,7 @@ from helpers.scripts import load_script
 from helpers.scene import scene as build, shipped
 from parsolve.contact.friction import OPEN, SLIP, STICK
 from parsolve.contact.pairing import pair_nodes
-from parsolve.errors import InputError
+from parsolve.errors import InputError, SolverError
 from parsolve.scene import load_scene
 from parsolve.solvers.system import SaddleSystem
 
@@ -260,6 +260,34 @@ def test_spans_made_again_with_a_step_cut(run):
     for key in ("displacement", "ironing_normal_reaction", "ironing_tangential_reaction"):
         f, f_ref = res[f"fields/{key}"], ref[f"fields/{key}"]
         np.testing.assert_allclose(f, f_ref, atol=1e-10 * np.abs(f_ref).max(), rtol=0)
+
+
+def test_a_slave_in_a_crease_is_named_when_node_to_segment_fails(run, shared_tmp):
+    """The hard case of docs/contact.md §8: the shipped ironing pressed five times deeper
+    (0.05), frictionless. The die's corner node ends in the concave crease the dent makes at
+    the die's edge; node-to-segment holds it on one of the crease's two facets, it slides
+    off into the other at each solve and Newton cannot converge (t ≈ 0.1): the failure names
+    that node and the way out. Mortar rows run the same press."""
+    base = shipped(IRONING.name)
+    relations = [r | {"value": -0.05} if r["name"] == "die_y" else r for r in base["relations"]]
+
+    def pressed(discretization: str) -> str:
+        return build(base, mesh={"file": str(IRONING.with_suffix(".msh"))}, relations=relations,
+                     steps={"count": 4, "end": 0.2}, nonlinear={"max_iterations": 12},
+                     contact=[base["contact"][0] | {"friction": 0.0,
+                                                    "discretization": discretization}])
+
+    res = run(pressed("mortar"), name="crease_mortar")
+    assert res["attrs"]["status"] == "complete"
+    with pytest.raises(SolverError) as err:
+        run(pressed("node_to_segment"), name="crease_nts")
+    pts = res["mesh/points"]
+    die_bottom = np.flatnonzero(np.isclose(pts[:, 1], SLAB[1]) & (np.arange(len(pts)) >= 33 * 9))
+    corner = die_bottom[np.argmin(pts[die_bottom, 0])]
+    message = str(err.value)
+    assert f".toml: contact[0]: slave node(s) {corner} went back and forth between two " \
+        "master facets" in message       # (the scene's file and key)
+    assert 'discretization = "mortar" handles it' in message
 
 
 def test_frictionless_ironing_is_the_die_placed_there(run, shared_tmp):
