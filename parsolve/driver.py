@@ -56,7 +56,7 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
         else:
             _run_linear(comm, system, cli_options, writer, export_dir, log)
     except SolverError as exc:
-        hints = [h for e in model.effects for h in e.failure_hints()]   # (the same everywhere)
+        hints = _failure_hints(model)
         if "singular" in str(exc) or "inaccurate" in str(exc):
             hints += unsupported(model)
         if hints:
@@ -72,6 +72,18 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
     finally:
         writer.close(status)
     return status
+
+
+def _failure_hints(model) -> list[str]:
+    """The effects' sentences on a failed step (the same on every rank); one that cannot
+    say must not hide the failure itself."""
+    hints = []
+    for e in model.effects:
+        try:
+            hints += e.failure_hints()
+        except Exception:   # (a diagnostic's own error: the solver's failure is the news)
+            continue
+    return hints
 
 
 def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log) -> None:

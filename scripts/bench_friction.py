@@ -697,7 +697,7 @@ def main(argv=None) -> int:
             "seconds in them, the measure to compare on a shared machine.\n\n" + "\n".join(mumps)
             + "\n\n## Finite sliding: the spans' size\n\n"
             "Each finite-sliding row spans the master nodes of the facets within `search_radius` "
-            "of where its span was made; when a slave nears its span's edge the spans are made "
+            "of the slave when its span was made; when a slave nears its span's edge the spans are made "
             "again around it and the operator built again on the new pattern (MUMPS analyses "
             "it once). A smaller radius: a smaller pattern (operator nonzeros: the smallest "
             "and largest over the run), made again more often (patterns made again: the "

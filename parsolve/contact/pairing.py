@@ -384,7 +384,7 @@ def facet_spans(points: np.ndarray, slave_nodes: np.ndarray, master_facets: np.n
                 radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per slave node, the master facets whose box inflated by ``radius`` contains it, and
     their nodes (finite sliding: the facets a slave may visit while it stays within radius
-    of where it started). Returns (facet_ptr, facets, node_ptr, nodes): CSR over the slave
+    of where it is: its span). Returns (facet_ptr, facets, node_ptr, nodes): CSR over the slave
     nodes, facets and nodes increasing within each slave (facet indices are rows of
     ``master_facets``, in its canonical order)."""
     xs = np.asarray(points, dtype=float)[slave_nodes]
@@ -403,16 +403,24 @@ def facet_spans(points: np.ndarray, slave_nodes: np.ndarray, master_facets: np.n
 
 
 def in_spans(facet: np.ndarray, facet_ptr: np.ndarray, facets: np.ndarray) -> np.ndarray:
-    """True where entry i's facet is one of ``facets[facet_ptr[i]:facet_ptr[i+1]]``."""
-    n = facet.size
-    owner = np.repeat(np.arange(n, dtype=np.int64), np.diff(facet_ptr))
-    big = int(max(facets.max(initial=0), facet.max(initial=0))) + 1
-    key = owner * big + facets
-    cur = np.arange(n, dtype=np.int64) * big + facet
+    """True where entry i's facet is one of ``facets[facet_ptr[i]:facet_ptr[i+1]]`` (False
+    for no facet, −1)."""
+    return contains(facet_ptr, facets, np.arange(facet.size + 1, dtype=np.int64), facet)
+
+
+def contains(ptr: np.ndarray, ids: np.ndarray, sub_ptr: np.ndarray,
+             sub_ids: np.ndarray) -> np.ndarray:
+    """For the CSR lists ``sub`` (the same entries as ``ptr``/``ids``; ids increasing within
+    each entry of ``ids``, any order in ``sub``): whether each of sub's ids is in its entry's
+    list of ``ids`` (nnz of sub,); False for a negative id."""
+    n = ptr.size - 1
+    big = int(max(ids.max(initial=0), sub_ids.max(initial=0))) + 1
+    key = np.repeat(np.arange(n, dtype=np.int64), np.diff(ptr)) * big + ids
+    sub = np.repeat(np.arange(n, dtype=np.int64), np.diff(sub_ptr)) * big + sub_ids
     if key.size == 0:
-        return np.zeros(n, dtype=bool)
-    pos = np.minimum(np.searchsorted(key, cur), key.size - 1)
-    return (facet >= 0) & (key[pos] == cur)
+        return np.zeros(sub.size, dtype=bool)
+    pos = np.minimum(np.searchsorted(key, sub), key.size - 1)
+    return (sub_ids >= 0) & (key[pos] == sub)
 
 
 def pair_on(points: np.ndarray, slave_nodes: np.ndarray, master_facets: np.ndarray,

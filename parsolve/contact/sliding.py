@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from parsolve.contact.pairing import Pairing, facet_spans, pair_on
+from parsolve.contact.pairing import Pairing, contains, facet_spans, pair_on
 from parsolve.contact.surfaces import Surfaces
 
 
@@ -97,20 +97,6 @@ def near_edge(sp: Spans, x: np.ndarray) -> bool:
     _, reach = span_reach(sp.surf, sp.facets, 0.5 * sp.radius, sp.slave_facets)
     fptr, fids, _, _ = facet_spans(x, sp.slave, sp.facets, reach)
     return not bool(np.all(contains(sp.facet_ptr, sp.facet_ids, fptr, fids)))
-
-
-def contains(ptr: np.ndarray, ids: np.ndarray, sub_ptr: np.ndarray,
-             sub_ids: np.ndarray) -> np.ndarray:
-    """Per entry of the CSR lists ``sub`` (same entries as ``ptr``/``ids``, increasing ids
-    per entry), whether each of its ids is in the entry's list of ``ids``: (nnz of sub,)."""
-    n = ptr.size - 1
-    big = int(max(ids.max(initial=0), sub_ids.max(initial=0))) + 1
-    key = np.repeat(np.arange(n, dtype=np.int64), np.diff(ptr)) * big + ids
-    sub = np.repeat(np.arange(n, dtype=np.int64), np.diff(sub_ptr)) * big + sub_ids
-    if key.size == 0:
-        return np.zeros(sub.size, dtype=bool)
-    pos = np.minimum(np.searchsorted(key, sub), key.size - 1)
-    return key[pos] == sub
 
 
 def _reference(p: Pairing) -> np.ndarray | None:

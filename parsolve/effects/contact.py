@@ -204,7 +204,8 @@ class Contact(FiniteSliding, Effect):
         self._covered_committed = None
         self._restructuring = False         # finite sliding: spans made again, rows not yet
         self._returns = None                # node-to-segment finite sliding: per slave, its
-        self._left = None                   # returns to a facet it left within the step
+        self._left = self._last_return = None   # returns to a facet it left within the step
+        self._repairings = 0
         self._check_slave(regions)
         self.pairing = self._pair(regions)
         self._compact_committed = self._compact

@@ -11,12 +11,13 @@ of the current geometry, exact at convergence); a slave keeps its facet while it
 the slave when its span was made (``pairing.facet_spans``), zeros where a facet is not the
 current one: re-pairing is a value update of the same entries. When at a step's start a
 facet within half the radius of a slave is not in its span (``sliding.near_edge``), or a
-slave has left its span at an iterate, the spans are made again around the current configuration (``sliding.respan``) and the system builds
-its operator again on the new pattern (``restructured``: preallocated as at the start; MUMPS
-analyses it again). A slave that no facet faces at the start but that is within the search
-radius of one (a die's overhang) is kept, uncovered: a zero row (its gap inf in the outputs)
-until a facet faces it (mortar: until the rows hold it). The stick rows hold the master's
-material point faced at the step's start, on whatever facet it now is; the slip
+slave has left its span at an iterate, the spans are made again around the current
+configuration (``sliding.respan``) and the system builds its operator again on the new
+pattern (``restructured``: preallocated as at the start; MUMPS analyses it again). A slave
+that no facet faces at the start but that is within the search radius of one (a die's
+overhang) is kept, uncovered: a zero row (its gap inf in the outputs) until a facet faces it
+(mortar: until the rows hold it). The stick rows hold the master's material point faced at
+the step's start, on whatever facet it now is; the slip
 output is the total over the steps. Small strain: the bodies' stiffness is the initial one,
 the contact geometry the current one. In 3D (node-to-face: triangle, quad, triangle6 faces)
 the two stick rows per slave run along the slip direction s and across it over the span, and
@@ -65,6 +66,9 @@ KEEP_TOL = 1e-2
 # zero, so any positive value keeps it open; not a large one, which would widen the active
 # set's gap tolerance, scaled to the largest |A q − b|)
 UNCOVERED_GAP = 1.0
+# a node-to-segment slave named in a failure: it went back to the facet it left within this
+# many re-pairings of the failed attempt's end (``failure_hints``)
+RECENT = 3
 
 
 class FiniteSliding:
@@ -120,7 +124,8 @@ class FiniteSliding:
         if sp.reference is not None:
             reference_frame(p, sp.reference)
         self._cover(p, facing)   # (after the frame: an uncovered slave's tangents stay zero)
-        self._respan_if(x, p, ~in_spans(p.facet, sp.facet_ptr, sp.facet_ids), start)
+        outside = ~in_spans(p.facet, sp.facet_ptr, sp.facet_ids) & (p.facet >= 0)
+        self._respan_if(x, p, outside, start)
         return p, x
 
     def _with_uncovered(self, surf, p, facets: np.ndarray):
@@ -201,31 +206,43 @@ class FiniteSliding:
         return p
 
     def _count_returns(self, facet: np.ndarray, start: bool) -> None:
-        """Node-to-segment: per slave, how often it went back, within the step, to the facet
-        it left last (A → B → A): a slave cycling between two facets (a concave crease of
-        the master) is what keeps Newton from converging (``failure_hints``)."""
+        """Node-to-segment/face: per slave, how often it went back, within the step, to the
+        facet it left last (A → B → A), and at which re-pairing it last did: a slave still
+        cycling between two facets at the end (a concave crease of the master) is what keeps
+        Newton from converging (``failure_hints``)."""
+        if self.spec.obstacle is not None or self.span.slave_facets is not None:
+            return
         if start or self._returns is None or self._facet_now is None:
             self._returns = np.zeros(facet.size, dtype=np.int64)
             self._left = np.full(facet.size, -1, dtype=np.int64)
+            self._last_return = np.full(facet.size, -RECENT - 1, dtype=np.int64)
+            self._repairings = 0
             return
+        self._repairings += 1
         moved = (facet != self._facet_now) & (facet >= 0) & (self._facet_now >= 0)
-        self._returns += moved & (facet == self._left)
+        back = moved & (facet == self._left)
+        self._returns += back
+        self._last_return[back] = self._repairings
         self._left[moved] = self._facet_now[moved]
 
     def failure_hints(self) -> list[str]:
-        """A slave that cycled between two master facets in the failed step: node-to-segment
-        holds it on one of them, and it slides off into the other at each solve."""
-        if self.span is None or self.span.slave_facets is not None or self._returns is None:
+        """The slaves that went back and forth between two master facets at least twice in
+        the failed attempt and still did in its last ``RECENT`` re-pairings: node-to-segment
+        holds each on one facet, and it slides off into the other at each solve."""
+        if self._returns is None:
             return []
-        cycling = np.flatnonzero(self._returns >= 2)
+        still = self._repairings - self._last_return <= RECENT
+        cycling = np.flatnonzero((self._returns >= 2) & still)
         if cycling.size == 0:
             return []
         nodes = self.span.surf.ids[self.span.slave[cycling]]
-        listed = ", ".join(str(int(n)) for n in nodes[:5]) + (", ..." if nodes.size > 5 else "")
-        return [f"{self.source}: {self.spec.key}: slave node(s) {listed} went back and forth "
-                "between two master facets (a concave crease of the deformed master: "
-                'node-to-segment holds a slave on one facet); discretization = "mortar" '
-                "handles it"]
+        listed = ", ".join(f"{int(n)} ({int(k)} times)" for n, k in
+                           zip(nodes[:5], self._returns[cycling][:5]))
+        listed += ", ..." * (nodes.size > 5)
+        return [f"{self.source}: {self.spec.key}: slave node(s) {listed}"
+                " went back and forth between two master facets until the end, as at a "
+                "concave crease of the deformed master (node-to-segment holds a slave on one "
+                'facet); discretization = "mortar" handles it']
 
     def _respan_if(self, x: np.ndarray, p, outside: np.ndarray, start: bool) -> None:
         """The spans made again around x (``sliding.respan``, p the current rows, compact)
@@ -270,7 +287,7 @@ class FiniteSliding:
         self._geo = (x, p.slave.copy(), p.master.copy())   # compact ids (geometric stiffness)
         p = sp.surf.to_input(p)
         nrows, trows = self._rows(p.normal, p), self._span_tangent_rows(p)
-        if self._restructuring:   # the rows' new entries (their values are set below and by the hooks)
+        if self._restructuring:   # the rows' new entries (values: set below and by the hooks)
             self._set_entries(p, nrows, trows)
         p.gap = p.gap - self.values.rows(self.n_dofs, nrows.row, nrows.coef, nrows.nrows, q)
         old = (self.nrows, self.pairing.gap, self.trows)

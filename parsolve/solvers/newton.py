@@ -263,6 +263,7 @@ class NewtonSolver:
             self.linear.add_time("contact", time.perf_counter() - t0)
             if any(e.restructures for e in self.hooks):   # (every step: one dataset)
                 self.linear.add_time("pattern", 0.0)
+            # (a restructure always changes values too; said for effects that would not)
             if changed or any(e.restructured for e in self.hooks):
                 self._sync_relations()
         self.active.start_step()

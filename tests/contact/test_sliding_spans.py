@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from parsolve.contact.pairing import facet_spans, in_spans, pair_nodes, pair_on
+from parsolve.contact.pairing import contains, facet_spans, in_spans, pair_nodes, pair_on
 from parsolve.contact.rows import Rows, node_rows, rows_differ, span_rows
 from parsolve.contact.sliding import (make_spans, near_edge, outside_spans, respan,
                                       union_spans)
@@ -120,6 +120,19 @@ def test_rows_compared_whatever_their_layout():
     assert rows_differ(a, b, 1e-12) and not rows_differ(a, b, 1e-8)
     c = Rows(2, a.row, a.node, a.comp, a.coef + 1e-9, 0)       # the same layout
     assert rows_differ(a, c, 1e-12) and not rows_differ(a, c, 1e-8)
+
+
+def test_contains_per_entry():
+    """Per entry, whether each of its ids is in that entry's list (not another entry's, even
+    where the keys would alias: −1 of entry 1 against the largest id of entry 0)."""
+    ptr, ids = np.array([0, 2, 2, 3]), np.array([1, 5, 0])
+    sub_ptr, sub = np.array([0, 2, 4, 6]), np.array([5, 0, -1, 1, 0, -1])
+    np.testing.assert_array_equal(contains(ptr, ids, sub_ptr, sub),
+                                  [True, False, False, False, True, False])
+    empty = np.zeros(0, dtype=np.int64)
+    np.testing.assert_array_equal(contains(np.zeros(4, int), empty, sub_ptr, sub), [False] * 6)
+    assert contains(ptr, ids, np.zeros(4, int), empty).size == 0
+    np.testing.assert_array_equal(in_spans(np.array([5, -1, 0]), ptr, ids), [True, False, True])
 
 
 def test_union_spans_adds_each_entry_s_nodes_but_no_facet():
