@@ -67,10 +67,8 @@ def make_spans(surf: Surfaces, p: Pairing, facets: np.ndarray, radius: float | N
     fptr, fids, nptr, nodes = facet_spans(surf.points, p.slave, facets, reach)
     if slave_facets is not None:
         nptr, nodes = union_spans(nptr, nodes, p.master)
-    coords = surf.points[facets]
-    length = float(np.max(coords.max(axis=1) - coords.min(axis=1)))
     return Spans(surf, p.slave.copy(), facets, radius, fptr, fids, nptr, surf.ids[nodes],
-                 _reference(p), slave_facets, length)
+                 _reference(p), slave_facets, extent(surf.points, facets))
 
 
 def respan(sp: Spans, x: np.ndarray, p: Pairing) -> Spans:
@@ -109,14 +107,18 @@ def span_reach(surf: Surfaces, facets: np.ndarray, radius: float | None,
                slave_facets: np.ndarray | None = None) -> tuple[float, float]:
     """(the search radius, default one facet extent; the spans' reach: the radius, plus the
     slave facets' extent for mortar rows)."""
-    coords = surf.points[facets]
     if radius is None:
-        radius = float(np.max(coords.max(axis=1) - coords.min(axis=1)))
+        radius = extent(surf.points, facets)
     reach = radius
     if slave_facets is not None:
-        sc = surf.points[slave_facets]
-        reach += float(np.max(sc.max(axis=1) - sc.min(axis=1)))
+        reach += extent(surf.points, slave_facets)
     return radius, reach
+
+
+def extent(points: np.ndarray, facets: np.ndarray) -> float:
+    """The largest extent of the facets (along any axis)."""
+    coords = points[facets]
+    return float(np.max(coords.max(axis=1) - coords.min(axis=1)))
 
 
 def mortar_waiting(surf: Surfaces, p: Pairing, facets: np.ndarray, facet_type: str,
@@ -180,15 +182,8 @@ def outside_spans(p: Pairing, ptr: np.ndarray, nodes: np.ndarray) -> np.ndarray:
     outside its span (``nodes[ptr[i]:ptr[i+1]]``, increasing), whatever its weight: the rows
     over the span (``rows.span_combination``) hold every node of the entry."""
     n, k = p.master.shape
-    owner = np.repeat(np.arange(n, dtype=np.int64), np.diff(ptr))
-    big = int(max(nodes.max(initial=0), p.master.max(initial=0))) + 1
-    key = owner * big + nodes
-    cur = (np.arange(n, dtype=np.int64)[:, None] * big + p.master).ravel()
-    if key.size == 0:
-        return np.full(n, k > 0)
-    pos = np.minimum(np.searchsorted(key, cur), key.size - 1)
-    missing = key[pos] != cur
-    return missing.reshape(n, k).any(axis=1)
+    inside = contains(ptr, nodes, np.arange(n + 1, dtype=np.int64) * k, p.master.ravel())
+    return ~inside.reshape(n, k).all(axis=1)
 
 
 def fit_mortar(new: Pairing, last: Pairing, x: np.ndarray) -> tuple[Pairing, np.ndarray]:

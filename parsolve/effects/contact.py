@@ -392,17 +392,18 @@ class Contact(FiniteSliding, Effect):
                 "travels that far")
 
     def _build_rows(self) -> None:
-        p, f = self.pairing, self.fields_
-        u0 = f.offset["u"]
-        ncomp = f.ncomp
+        p = self.pairing
         if self.span is None:
             self.nrows = normal_rows(p)
             self.trows = tangent_rows(p)    # along the fixed tangents (slip measure, outputs)
         else:                               # finite sliding: over the spans
             self.nrows = self._rows(p.normal)
             self.trows = self._span_tangent_rows(p)
-        self.n_dofs = self.nrows.node * ncomp + u0 + self.nrows.comp
-        self.t_dofs = self.trows.node * ncomp + u0 + self.trows.comp
+        self.n_dofs, self.t_dofs = self._row_dofs(self.nrows), self._row_dofs(self.trows)
+
+    def _row_dofs(self, rows) -> np.ndarray:
+        """The displacement DOFs (input numbering) of rows' entries."""
+        return rows.node * self.fields_.ncomp + self.fields_.offset["u"] + rows.comp
 
     def _tangent_coefs(self) -> np.ndarray:
         """Coefficients of the tangential relation's rows: 2D, along t; 3D, along the slip

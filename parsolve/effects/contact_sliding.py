@@ -330,9 +330,7 @@ class FiniteSliding:
         current pairing, input ids; nrows, trows its normal and tangential rows over them);
         their values zero until ``_slide`` and the hooks set them."""
         self._restructuring = False
-        f = self.fields_
-        self.n_dofs = nrows.node * f.ncomp + f.offset["u"] + nrows.comp
-        self.t_dofs = trows.node * f.ncomp + f.offset["u"] + trows.comp
+        self.n_dofs, self.t_dofs = self._row_dofs(nrows), self._row_dofs(trows)
         zero_dual = self.normal.dual is not None
         self.normal.set_entries(nrows.row, self.n_dofs, zero_dual)
         if self.frictional:
@@ -346,7 +344,7 @@ class FiniteSliding:
         dim, m = self.mesh.dim, self.geometric_rank * len(p)
         rows = span_combination(self._repeated(p), np.zeros((m, dim)),
                                 np.zeros((m, p.master.shape[1], dim)), *self.span.ptr_for(m))
-        return rows, rows.node * self.fields_.ncomp + self.fields_.offset["u"] + rows.comp
+        return rows, self._row_dofs(rows)
 
     def _geometry_relation(self) -> Relation:
         """``geometric_rank`` compliant rows per slave (``contact.geometry``), over the spans,
