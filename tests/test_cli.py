@@ -366,7 +366,8 @@ def test_marked_relations_report_their_resultant(tmp_path, cli):
     proc = cli("run", CONFIGS / "controlled_bar.toml", "-o", tmp_path / "bar.h5")
     assert proc.returncode == 0, proc.stderr
     lines = proc.stdout.splitlines()
-    assert lines[-2].strip() == "control: resultant 10000 0 -500"  # moment: -F · H/2
+    assert lines[-2].strip() == ("control: resultant fx 10000  fy 0  mz -500 (moments about the "
+                                 "origin)")  # moment: -F · H/2
 
 
 @pytest.mark.parametrize("mode", ["swmr", "parallel"])

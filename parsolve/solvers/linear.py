@@ -15,6 +15,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from parsolve import progress
 from parsolve.errors import SolverError
 from parsolve.solvers import options as opt
 
@@ -164,7 +165,7 @@ class LinearSolver:
         t0 = time.perf_counter()
         for attempt in range(4):
             try:
-                with opt.inserted(self.prefix, self.settings):
+                with opt.inserted(self.prefix, self.settings), progress.factorization(self._state is None):
                     self.ksp.setUp()
                     # KSPSetUp does not set the PC up again once it has solved: PCSetUp does,
                     # when the operator's values changed (the factorization, timed here)
@@ -219,6 +220,7 @@ class LinearSolver:
                               "nearly so (a body not held, dependent relations, or a tangent "
                               "that lost its stiffness)")
         self.residual = residual
+        progress.detail(f"linear solve: {self.ksp.getIterationNumber()} Krylov iterations, residual {residual:.2e}")
         return self.ksp.getIterationNumber()
 
     def add_time(self, phase: str, seconds: float) -> None:
