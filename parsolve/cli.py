@@ -358,6 +358,7 @@ def main(argv: list[str] | None = None) -> int:
         say(f"parsolve: solver failed: {exc}", sys.stderr)
         return 3
     finally:
+        progress.configure(progress.QUIET)   # (main called in a process that goes on)
         if lock is not None:
             lock.release()
 

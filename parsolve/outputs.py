@@ -97,7 +97,7 @@ def contact_totals(comm: MPI.Comm, name: str, fields: dict, rel_out: dict) -> di
 def contact_line(name: str, totals: dict) -> str:
     rt = totals["tangential"]
     return (f"{name}: ΣRn {totals['normal']:.6g}  ΣRt {' '.join(f'{v:.6g}' for v in rt)}  "
-            f"|ΣRt|/ΣRn {totals['ratio']:.4g}  rows open {totals['open']}, stick "
+            f"|ΣRt|/ΣRn {totals['ratio']:.6g}  rows open {totals['open']}, stick "
             f"{totals['stick']}, slip {totals['slip']}")
 
 
