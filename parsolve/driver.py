@@ -46,7 +46,7 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
                 "resultant_components": " ".join(resultant_labels(model.fields, model.mesh.dim))}
     mode = output_mode(output or scene.output_mode, comm, unknowns["dofs"])
     # the file's mesh and rows from every rank's owned part
-    written, owners = output_mesh(comm, model.mesh, system.part)
+    written, owners = timed("result file", output_mesh, comm, model.mesh, system.part)
     writer = result_writer(mode, comm, out, written, scene.text, petsc_version(), relations_meta,
                            attrs=unknowns, owners=owners)
     status = "complete"

@@ -234,11 +234,12 @@ def build_model(scene: Scene, comm=None) -> Model:
     regions = RegionResolver(mesh, scene.regions, scene.source, comm)
     # a check of a rank's part (cells without a material) fails there alone: every rank
     # raises it (the checks that decide for the whole mesh are collective)
-    effects, fields = agree(comm, build_effects, scene, mesh, regions)
+    effects, fields = progress.timed("effects", agree, comm, build_effects, scene, mesh, regions)
     patterns = agree(comm, load_patterns, mesh, scene.loads, regions, scene.evolutions,
                      scene.thickness, scene.source, fields)
-    relations = agree(comm, build_relations, scene.relations, regions, scene.evolutions,
-                      patterns, fields, scene.source, scene.solver.eliminate, scene.thickness)
+    relations = progress.timed("relations", agree, comm, build_relations, scene.relations,
+                               regions, scene.evolutions, patterns, fields, scene.source,
+                               scene.solver.eliminate, scene.thickness)
     names = {r.name for r in relations}
     for e in effects:
         for r in e.relations():

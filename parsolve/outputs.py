@@ -63,7 +63,7 @@ def labelled(labels: list[str], values) -> str:
 
 def resultant_line(name: str, labels: list[str], values) -> str:
     """A relation's resultant on the step's log line, with its components named."""
-    about = " (moments about the origin)" if any(c.startswith("m") for c in labels) else ""
+    about = " (moments about the origin)" if {"mx", "my", "mz"} & set(labels) else ""
     return f"{name}: resultant {labelled(labels, values)}{about}"
 
 

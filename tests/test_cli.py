@@ -466,8 +466,8 @@ def test_split_args_keeps_quiet_and_verbose_ours():
     assert petsc == ["-ksp_monitor", "-vec_type", "mpi", "-options_left"]
 
 
-PHASES = ["mesh read", "checks", "partition", "numbering", "pattern", "operator", "assembly",
-          "analysis+factorization"]
+PHASES = ["mesh read", "checks", "partition", "effects", "relations", "numbering", "pattern",
+          "operator", "result file", "assembly", "analysis+factorization"]
 
 
 def test_progress_phases_quiet_and_verbose(tmp_path, cli):
@@ -528,3 +528,14 @@ def test_contact_report_on_screen_matches_the_file(nranks, tmp_path):
                                    [rn[k], rt[k], abs(rt[k]) / rn[k]], rtol=1e-5)
         assert [int(c) for c in counts] == [int((state[k] == s).sum()) for s in range(3)]
     assert found[-1][2] == "0.3" and float(found[-1][0]) == pytest.approx(10.0)
+
+
+def test_resultant_lines_name_their_components():
+    from parsolve.outputs import resultant_line
+
+    assert resultant_line("clamp", ["x", "y", "z", "mx", "my", "mz"], [1.5, -2, 0, 3, 4e-7, 5]) == \
+        "clamp: resultant fx 1.5  fy -2  fz 0  mx 3  my 4e-07  mz 5 (moments about the origin)"
+    # a scalar field's reaction by its name; no moment without a displacement
+    assert resultant_line("inlet", ["h"], [0.25]) == "inlet: resultant h 0.25"
+    assert resultant_line("both", ["x", "y", "T", "mz"], [1, 2, 3, 4]) == \
+        "both: resultant fx 1  fy 2  T 3  mz 4 (moments about the origin)"
