@@ -13,8 +13,9 @@ test prints no phase lines unless it asks for them.
     progress.detail(f"newton {it}: residual {r:.3e}")
 
 The "still running" line comes from a timer thread: it shows while the phase runs Python code
-or a call that releases the GIL; a single C call that holds it (a MUMPS factorization through
-petsc4py) shows its line as soon as it returns, with the phase's own time line after it.
+or a call that releases the GIL. A single C call that holds it (a MUMPS factorization through
+petsc4py) keeps the thread from running: such a phase announces itself when it starts
+(``announce``), and the thread's late lines are dropped.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from typing import Callable, Iterator
 
 QUIET, NORMAL, VERBOSE = 0, 1, 2
 ALIVE = 10.0    # seconds before a running phase says it is alive
+LATE = 1.0      # an alive line more than this late is not printed
 
 
 class Reporter:
@@ -45,10 +47,13 @@ class Reporter:
                 self.write(line)
 
     @contextmanager
-    def phase(self, name: str, level: int = NORMAL) -> Iterator[None]:
+    def phase(self, name: str, level: int = NORMAL, announce: bool = False) -> Iterator[None]:
         """Time the block; one line when it ends ("  name  1.234 s"), lines while it runs
-        long; both at ``level``."""
+        long; all at ``level``. ``announce``: a line when it starts too (a phase that is one
+        long C call, which the timer thread cannot interrupt)."""
         indent = "  " * (self.depth + 1)
+        if announce:
+            self.say(f"{indent}{name} ...", level)
         t0 = time.perf_counter()
         done = threading.Event()
         watcher = None
@@ -69,7 +74,10 @@ class Reporter:
     def _watch(self, name: str, indent: str, t0: float, done: threading.Event, level: int) -> None:
         wait = self.alive
         while not done.wait(max(0.0, t0 + wait - time.perf_counter())):
-            self.say(f"{indent}{name}: still running ({time.perf_counter() - t0:.0f} s)", level)
+            now = time.perf_counter() - t0
+            # woken late: the GIL was held (a C call that has just returned), the news is stale
+            if now < wait + LATE:
+                self.say(f"{indent}{name}: still running ({now:.0f} s)", level)
             wait *= 2
 
 
@@ -103,7 +111,7 @@ def factorization(first: bool):
     """The phase of a factorization: its analysis comes with the first (a line at the normal
     level); the later ones (Newton iterations, steps) are detail."""
     return _current.phase("analysis+factorization" if first else "factorization",
-                          NORMAL if first else VERBOSE)
+                          NORMAL if first else VERBOSE, announce=first)
 
 
 def say(line: str) -> None:

@@ -49,6 +49,23 @@ def test_a_long_phase_says_it_is_alive():
     assert len(lines) == len(alive) + 1
 
 
+def test_an_announced_phase_and_the_first_factorization():
+    rep, lines = reporter(progress.NORMAL)
+    with rep.phase("analysis", announce=True):
+        pass
+    assert lines[0] == "  analysis ..." and lines[1].startswith("  analysis ") and len(lines) == 2
+    progress.configure(progress.NORMAL, 0, lines.append)
+    try:
+        with progress.factorization(first=True):
+            pass
+        with progress.factorization(first=False):   # later ones: -v only
+            pass
+    finally:
+        progress.configure(progress.QUIET)
+    assert lines[2] == "  analysis+factorization ..." and len(lines) == 4
+    assert lines[3].startswith("  analysis+factorization ") and lines[3].endswith(" s")
+
+
 def test_the_process_reporter_and_an_error_inside_a_phase():
     lines = []
     progress.configure(progress.VERBOSE, 0, lines.append)
