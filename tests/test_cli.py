@@ -510,12 +510,14 @@ def test_verbose_shows_each_newton_residual(tmp_path, cli):
         start = i + 1
 
 
+@pytest.mark.parametrize("formulation", ["relations", "penalty"])
 @pytest.mark.parametrize("nranks", [1, 2, 3])
-def test_contact_report_on_screen_matches_the_file(nranks, tmp_path):
+def test_contact_report_on_screen_matches_the_file(nranks, formulation, tmp_path):
     """``report = true`` on a contact: each step's ΣRn, ΣRt, |ΣRt|/ΣRn and open / stick / slip
-    counts, the same on any number of ranks as the file's states and forces."""
+    counts, the same on any number of ranks as the file's states and forces (the relations
+    form's surface totals; the penalty form's nodal reactions summed)."""
     scene = (CONFIGS / "contact_block_friction.toml").read_text().replace(
-        "friction = 0.3", "friction = 0.3\nreport = true")
+        "friction = 0.3", f"friction = 0.3\nreport = true\nformulation = \"{formulation}\"")
     (tmp_path / "block.toml").write_text(scene)
     proc = parsolve("run", "block.toml", "-o", "block.h5", cwd=tmp_path, mpi=nranks)
     assert proc.returncode == 0, proc.stderr
@@ -523,8 +525,12 @@ def test_contact_report_on_screen_matches_the_file(nranks, tmp_path):
                        r"stick (\d+), slip (\d+)$", proc.stdout, re.M)
     with h5py.File(tmp_path / "block.h5", "r") as f:
         state = f["fields/base_state"][()][..., 0]
-        rn = f["relations/base_normal/normal_force"][()][:, 0]
-        rt = f["relations/base_normal/tangential_force"][()][:, 0]
+        if formulation == "relations":
+            rn = f["relations/base_normal/normal_force"][()][:, 0]
+            rt = f["relations/base_normal/tangential_force"][()][:, 0]
+        else:
+            rn = f["fields/base_normal_reaction"][()][..., 0].sum(axis=1)
+            rt = f["fields/base_tangential_reaction"][()][..., 0].sum(axis=1)
     assert len(found) == len(state) == 10
     for k, (n, t, ratio, *counts) in enumerate(found):
         np.testing.assert_allclose([float(n), float(t), float(ratio)],
