@@ -57,10 +57,15 @@ def places(res: Result, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     cells = np.full(len(xs), -1)
     N = np.zeros((len(xs), res.cells.shape[1]))
     ref = element(res.cell_type)
+    # the cells whose boxes meet the segment's box, once: each point searches only those
+    coords = res.points[res.cells]
+    slack = 1e-9 * np.ptp(res.points, axis=0).max() + 1e-14
+    near = np.flatnonzero((coords.min(axis=1) - slack <= xs.max(axis=0)).all(axis=1)
+                          & (coords.max(axis=1) + slack >= xs.min(axis=0)).all(axis=1))
     for i, x in enumerate(xs):   # (sample points, not mesh entities: each search is vectorised)
-        found = locate(res.points, res.cells, res.cell_type, x)
+        found = locate(res.points, res.cells[near], res.cell_type, x)
         if found is not None:
-            cells[i], N[i] = found[0], ref.shape(found[1][None, :])[0]
+            cells[i], N[i] = near[found[0]], ref.shape(found[1][None, :])[0]
     return cells, N
 
 

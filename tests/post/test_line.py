@@ -82,3 +82,44 @@ def test_bad_line_input_exits_2(run, capsys, args, fragment):
     assert main([str(run.last)] + args) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and fragment in err, err
+
+
+G3 = np.array([[1e-3, 2e-3, -1e-3], [0.0, -2e-3, 1e-3], [3e-3, 0.0, 1e-3]])
+PATCH3 = """
+[mesh]
+generator = "box"
+lx = 2.0
+ly = 1.0
+lz = 1.0
+nx = 3
+ny = 2
+nz = 2
+cell = "{cell}"
+[model]
+hypothesis = "3d"
+[[materials]]
+E = 100.0
+nu = 0.25
+[regions]
+boundary = "x == 0 or x == 2 or y == 0 or y == 1 or z == 0 or z == 1"
+""" + "".join(f"""
+[[relations]]
+name = "boundary_{c}"
+type = "dirichlet"
+region = "boundary"
+components = ["{c}"]
+value = "{G3[i, 0]} * x + {G3[i, 1]} * y + {G3[i, 2]} * z"
+""" for i, c in enumerate("xyz"))
+
+
+@pytest.mark.parametrize("cell", ["tetra", "hexahedron"])
+def test_profile_in_3d_is_exact(run, shared_tmp, cell):
+    run(PATCH3.format(cell=cell), name=f"line3_{cell}")
+    table = shared_tmp / f"line3_{cell}{MPI.COMM_WORLD.rank}.csv"
+    assert main([str(run.last), "--line", "0.1,0.05,0.9", "1.9,0.97,0.12", "13", "--y",
+                 "field:displacement:x", "--y", "field:displacement:z", "--csv", str(table)]) == 0
+    rows = rows_of(table)
+    x = np.array([[float(r[a]) for a in "xyz"] for r in rows])
+    want = x @ G3.T
+    np.testing.assert_allclose([float(r["field:displacement:x"]) for r in rows], want[:, 0], atol=1e-13)
+    np.testing.assert_allclose([float(r["field:displacement:z"]) for r in rows], want[:, 2], atol=1e-13)
