@@ -129,9 +129,10 @@ def _is_option(word: str) -> bool:
 
 def split_args(argv: list[str]) -> tuple[list[str], list[str]]:
     """(parsolve's words, PETSc's words). PETSc options are single-dash words other than
-    exactly ``-o``, ``-h``, ``-q`` and ``-v`` (so ``-options_left``, ``-on_error_abort``, ``-options_file F``
-    reach PETSc intact), each with its value when the next word is not an option. A
-    double-dash word must be one of ours: ``--outptu`` is an error with a suggestion."""
+    exactly ``-o``, ``-h``, ``-q`` and ``-v`` (so ``-options_left``, ``-on_error_abort``,
+    ``-options_file F`` reach PETSc intact), each with its value when the next word is not an
+    option. A double-dash word must be one of ours: ``--outptu`` is an error with a
+    suggestion."""
     ours, petsc = [], []
     i = 0
     while i < len(argv):

@@ -191,7 +191,8 @@ def _distributed_mesh(scene: Scene, comm) -> LocalMesh:
     whole, error = None, None
     if comm.rank == 0:
         try:
-            whole = progress.timed("mesh read", build_mesh, scene)   # rank 0 alone: the whole on one rank
+            # rank 0 alone: the whole on one rank
+            whole = progress.timed("mesh read", build_mesh, scene)
         except InputError as exc:
             error = (exc.message, exc.source, exc.key)
     error = comm.bcast(error, root=0)

@@ -34,8 +34,8 @@ LATE = 1.0      # an alive line more than this late is not printed
 class Reporter:
     """Rank 0's lines at a level; other ranks' reporters say nothing."""
 
-    def __init__(self, level: int = NORMAL, rank: int = 0, write: Callable[[str], None] | None = None,
-                 alive: float = ALIVE):
+    def __init__(self, level: int = NORMAL, rank: int = 0,
+                 write: Callable[[str], None] | None = None, alive: float = ALIVE):
         self.level, self.rank, self.alive = level, rank, alive
         self.write = write or (lambda line: print(line, file=sys.stdout, flush=True))
         self.depth = 0          # nested phases are indented under their parent

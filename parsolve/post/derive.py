@@ -127,7 +127,8 @@ def projected_fields(mesh: tuple, cell_fields: dict, taken: list[str]) -> dict[s
     from parsolve.post.projection import nodal_names, project
 
     values = {n: v for n, v in cell_fields.items() if n != "taken"}
-    return {target: project(*mesh, values[n]) for n, target in nodal_names(list(values), taken).items()}
+    names = nodal_names(list(values), taken)
+    return {target: project(*mesh, values[n]) for n, target in names.items()}
 
 
 def derive(src: str, out: str, key: str = "--derive") -> dict[str, list[str]]:
