@@ -302,6 +302,10 @@ def main(argv: list[str] | None = None) -> int:
     from parsolve import progress
 
     progress.configure(args.level, comm.rank)
+    if args.level > progress.QUIET:   # the factorization's parts, from PETSc's event log
+        from parsolve.solvers import factor_log
+
+        factor_log.start()
     log = say if args.level > progress.QUIET else (lambda message: None)
     try:
         cli_options = parse_cli(petsc_args)

@@ -479,7 +479,13 @@ def test_progress_phases_quiet_and_verbose(tmp_path, cli):
     first = next(i for i, line in enumerate(lines) if line.startswith("step 1/10"))
     # the factorization (one long C call) announces itself when it starts
     assert lines[:first].count("  analysis+factorization ...") == 1
-    timed = [line for line in lines[:first] if not line.endswith(" ...")]
+    # its two parts from PETSc's event log, within the phase's own time
+    parts = re.fullmatch(r"    analysis (\d+\.\d{3}) s, numeric factorization (\d+\.\d{3}) s",
+                         lines[first - 1])
+    assert parts, lines[first - 1]
+    whole = float(lines[first - 2].split()[-2])
+    assert sum(float(p) for p in parts.groups()) <= whole + 2e-3
+    timed = [line for line in lines[:first - 1] if not line.endswith(" ...")]
     names = [re.fullmatch(r"  (\S.*?)\s+(\d+\.\d{3}) s", line) for line in timed]
     assert all(names), lines[:first]
     assert [m.group(1) for m in names] == PHASES

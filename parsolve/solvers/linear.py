@@ -17,6 +17,7 @@ from petsc4py import PETSc
 
 from parsolve import progress
 from parsolve.errors import SolverError
+from parsolve.solvers import factor_log
 from parsolve.solvers import options as opt
 
 
@@ -165,7 +166,7 @@ class LinearSolver:
         t0, first = time.perf_counter(), self._state is None
         for attempt in range(4):
             try:
-                with opt.inserted(self.prefix, self.settings), progress.factorization(first):
+                with opt.inserted(self.prefix, self.settings), factor_log.factorization(first):
                     self.ksp.setUp()
                     # KSPSetUp does not set the PC up again once it has solved: PCSetUp does,
                     # when the operator's values changed (the factorization, timed here)
