@@ -436,7 +436,7 @@ def test_help_lists_every_command_and_usage_lines(cli):
     assert post.stdout.startswith("usage: parsolve post RESULT.h5")
     assert "see parsolve/post/spec.py" not in post.stdout
     for form in ("relation:NAME:multiplier[:SEL]", "field:NAME:COMP@X,Y[,Z]", "max:field:NAME",
-                 "examples:", "--line 0.5,0 5,0 50"):
+                 "examples:", "--line 0,1 0,10 50"):
         assert form in post.stdout, form
 
 

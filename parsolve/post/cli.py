@@ -38,7 +38,7 @@ examples:
   parsolve post a.h5 b.h5 --x time --y field:displacement:x@1,0.05 \\
       --y relation:left_x:multiplier:sum --csv curves.csv
   parsolve post kirsch.h5 --derive kirsch_derived.h5   (then: --y max:field:von_mises)
-  parsolve post kirsch.h5 --line 0.5,0 5,0 50 --y cell_field:stress:yy --step all --csv lig.csv
+  parsolve post kirsch.h5 --line 0,1 0,10 50 --y field:stress:xx --step all --csv lig.csv
 """
 
 
