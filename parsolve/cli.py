@@ -306,7 +306,7 @@ def main(argv: list[str] | None = None) -> int:
         from parsolve.solvers import factor_log
 
         factor_log.start()
-    log = say if args.level > progress.QUIET else (lambda message: None)
+    log = say if args.level > progress.QUIET else (lambda *words: None)
     try:
         cli_options = parse_cli(petsc_args)
     except ValueError as exc:

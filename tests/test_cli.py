@@ -235,6 +235,9 @@ components = ["x", "y"]
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr.strip() == ("parsolve: warning: m.vtu: mesh.file: 1 point(s) are used by no "
                                    "cell (points 4): they are left out of the system")
+    # -q: the final line alone, the warning left out
+    quiet = cli("run", "scene.toml", "-o", "out.h5", "-q", cwd=tmp_path)
+    assert quiet.returncode == 0 and quiet.stderr == "" and quiet.stdout == "results: out.h5\n"
 
 
 def test_check_good_scene(cli):
