@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
-# The documentation: installs MkDocs if missing (Debian's package), regenerates the generated
-# pages (docs/reference/scene.md from the parser, docs/benchmarks.md from scripts/results/),
-# then builds the site with --strict (any warning, e.g. a broken link, fails).
+# The documentation: sets up .venv (scripts/setup.sh) and installs MkDocs if missing,
+# regenerates the generated pages (docs/reference/scene.md from the parser, docs/benchmarks.md
+# from scripts/results/) and the pictures (docs/img/scenes/, scripts/render_docs.py), then
+# builds the site with --strict (any warning, e.g. a broken link, fails) and checks every anchor.
 # Usage: bash scripts/docs.sh [SITE_DIR]     (default: a temporary folder, removed at the end)
 set -euo pipefail
 site="${1:-}"
@@ -20,6 +21,7 @@ fi
 PY=.venv/bin/python
 $PY scripts/docs_reference.py
 $PY scripts/docs_benchmarks.py
+$PY scripts/render_docs.py   # the pictures of the shipped scenes (docs/img/scenes/)
 if [ -z "$site" ]; then
   site=$(mktemp -d); trap 'rm -rf "$site"' EXIT
 fi
