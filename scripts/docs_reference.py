@@ -90,6 +90,7 @@ class ProbeData(dict):
     def __init__(self, path: str):
         super().__init__()
         self.path, self.absent, self.provisional, self.listed = path, set(), set(), False
+        self.asked: set[str] = set()      # keys whose presence the parser asked before reading
 
     def __contains__(self, key) -> bool:
         if dict.__contains__(self, key):
@@ -99,6 +100,7 @@ class ProbeData(dict):
         if PROBE.decide(("present", _section(self.path), key, _context(self.path)), 2):
             dict.__setitem__(self, key, 1.0)      # its value is made when a get asks its type
             self.provisional.add(key)
+            self.asked.add(key)
             return True
         self.absent.add(key)
         return False
@@ -110,6 +112,7 @@ class ProbeData(dict):
             if PROBE.decide(("entry", _section(self.path)), 2):
                 dict.__setitem__(self, NAME, 1.0)
                 self.provisional.add(NAME)
+                self.asked.add(NAME)
         return dict.__iter__(self)
 
     def keys(self):
@@ -161,7 +164,7 @@ def _patched(table_cls):
     def _asked(self, name: str, default):
         """A key read as required after the parser asked whether it is there may be left out
         (one of several, or a choice's alternative): its default is (none), not required."""
-        if default is ... and isinstance(self.data, ProbeData) and name in self.data.provisional:
+        if default is ... and isinstance(self.data, ProbeData) and name in self.data.asked:
             return None
         return default
 
