@@ -229,6 +229,16 @@ def _patched(table_cls):
     return original, {"get": get, "floats": floats, "tables": tables, "done": done}
 
 
+def _table_class(scene_mod):
+    """The one reading class: ``parsolve.schema.Table`` where the reading primitives live in
+    their own module, else the scene module's."""
+    try:
+        from parsolve import schema
+    except ImportError:
+        return scene_mod.Table
+    return getattr(schema, "Table", scene_mod.Table)
+
+
 def explore() -> tuple[dict, int]:
     """{section: {key: entry}} over every answer of every decision of ``parse_scene``, and
     the number of runs."""
@@ -236,7 +246,7 @@ def explore() -> tuple[dict, int]:
     from parsolve import scene as scene_mod
     from parsolve.errors import InputError
 
-    table_cls = scene_mod.Table
+    table_cls = _table_class(scene_mod)
     original, patched = _patched(table_cls)
     found: dict[str, dict[str, dict]] = {}
     tried: set[tuple] = set()
