@@ -10,6 +10,8 @@ committed too, so the pages show them without a build.
     python scripts/render_docs.py              # every picture (about 30 s on one core)
     python scripts/render_docs.py kirsch ...   # some of them
     python scripts/render_docs.py --out DIR    # elsewhere (the tests)
+    python scripts/render_docs.py --result kirsch.h5 --field fields/stress --component 0 \
+        --png kirsch.png                       # your own result (any parsolve result file)
 """
 from __future__ import annotations
 
@@ -240,7 +242,8 @@ def draw(grid, picture: Picture, scale: float, out: Path) -> None:
         prop.SetFontSize(14)
     title = vtk.vtkTextActor()
     deformed = f", displacements × {scale:.3g}" if scale else ""
-    title.SetInput(f"configs/{picture.scene}.toml{deformed}")
+    source = picture.scene if picture.scene.endswith(".h5") else f"configs/{picture.scene}.toml"
+    title.SetInput(f"{source}{deformed}")
     title.GetTextProperty().SetColor(0.0, 0.0, 0.0)
     title.GetTextProperty().SetFontSize(16)
     title.SetPosition(10, SIZE[1] - 28)
@@ -290,23 +293,60 @@ def draw(grid, picture: Picture, scale: float, out: Path) -> None:
 def render(picture: Picture, folder: Path, results: dict[str, Path], out_dir: Path) -> Path:
     if picture.scene not in results:
         results[picture.scene] = run_scene(picture.scene, folder)
-    result = results[picture.scene]
+    return draw_result(results[picture.scene], picture, out_dir / f"{picture.name}.png")
+
+
+def draw_result(result: Path, picture: Picture, out: Path) -> Path:
+    """One picture of a result file (h5py, or its XDMF through VTK's reader)."""
     if picture.xdmf:
         grid, u = read_xdmf(result.with_suffix(".xdmf"), picture)
     else:
         points, cells, values, u = read_h5(result, picture)
         grid = unstructured(points, cells, values)
     scale = warp(grid, u, picture.warp, picture.factor)
-    out = out_dir / f"{picture.name}.png"
     draw(grid, picture, scale, out)
     return out
+
+
+def own_result(args) -> int:
+    """--result: a picture of the user's own result file."""
+    import h5py
+
+    result = args.result
+    with h5py.File(result, "r") as f:
+        if args.field not in f:
+            known = [f"{g}/{n}" for g in ("fields", "cell_fields") for n in f.get(g, {})]
+            raise SystemExit(f"render_docs: {result}: no {args.field!r} (known: {', '.join(known)})")
+        ncomp = f[args.field].shape[2]
+    component = "magnitude" if args.component == "magnitude" else int(args.component)
+    if component != "magnitude" and not 0 <= component < ncomp:
+        raise SystemExit(f"render_docs: --component: {component} out of 0..{ncomp - 1}")
+    label = args.field.split("/", 1)[1] + (f" [{component}]" if ncomp > 1 else "")
+    picture = Picture(args.png.stem, result.name, args.field, component, label, step=args.step,
+                      warp=args.warp, view="iso" if args.iso else "xy")
+    out = draw_result(result, picture, args.png)
+    print(f"render_docs: {out}")
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("names", nargs="*", help="pictures to make (default: all)")
     parser.add_argument("--out", type=Path, default=IMAGES, help="folder of the PNGs")
+    own = parser.add_argument_group("your own result (instead of the docs' pictures)")
+    own.add_argument("--result", type=Path, help="a parsolve result file (RESULT.h5)")
+    own.add_argument("--field", default="fields/displacement",
+                     help="fields/NAME or cell_fields/NAME (default fields/displacement)")
+    own.add_argument("--component", default="magnitude", help="an index or 'magnitude'")
+    own.add_argument("--step", type=int, default=-1, help="saved step (default the last)")
+    own.add_argument("--warp", type=float, default=0.05,
+                     help="largest displacement drawn as this fraction of the size (0: none)")
+    own.add_argument("--iso", action="store_true", help="3D view (default: 2D, from +z)")
+    own.add_argument("--png", type=Path, default=Path("result.png"), help="the picture")
     args = parser.parse_args(argv)
+    os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+    if args.result is not None:
+        return own_result(args)
     known = {p.name: p for p in PICTURES}
     unknown = [n for n in args.names if n not in known]
     if unknown:

@@ -80,3 +80,24 @@ def test_a_picture_is_drawn_from_its_scenes_result(script, tmp_path):
     # a uniform field sits mid-bar: the lookup table's green (hue 1/3), not blue nor red
     r, g, b = np.median(colored, axis=0)
     assert g > 200 and r < 100 and b < 100, (r, g, b)
+
+
+@pytest.mark.serial
+def test_own_result_is_drawn_with_the_guides_command(script, tmp_path, monkeypatch, capsys):
+    """`render_docs.py --result RESULT.h5 ...` (the guide's §7): the laminate's σxy, uniform,
+    mid-bar green; a field the file lacks is refused naming the fields it has."""
+    from parsolve.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", str(ROOT / "configs" / "periodic_shear_laminate.toml"), "-o", "lam.h5"]) == 0
+    capsys.readouterr()
+    assert script["main"](["--result", "lam.h5", "--field", "fields/stress", "--component", "2",
+                           "--png", "lam.png"]) == 0
+    pixels = png_pixels(tmp_path / "lam.png")
+    model = pixels[int(0.2 * pixels.shape[0]):int(0.8 * pixels.shape[0]), :, :3].reshape(-1, 3)
+    colored = model[model.max(axis=1) - model.min(axis=1) > 100]
+    r, g, b = np.median(colored, axis=0)
+    assert g > 200 and r < 100 and b < 100, (r, g, b)
+    with pytest.raises(SystemExit, match=r"no 'fields/pressure' \(known: fields/displacement"):
+        script["main"](["--result", "lam.h5", "--field", "fields/pressure", "--png", "x.png"])
+    assert not (tmp_path / "x.png").exists()
