@@ -102,3 +102,15 @@ def test_readme_docs_command_builds_the_site_from_a_fresh_copy(tmp_path):
     # the generated pages of the copy are those committed here (nothing drifted in the build)
     for page in GENERATED:
         assert (clone / page.relative_to(ROOT)).read_text() == page.read_text(), page
+
+
+def test_pages_speak_as_a_reference():
+    """No tracker numbers, branch notes or changelog asides in the pages (the generated
+    benchmark page included: its sources are scripts/results/*.md)."""
+    stale = re.compile(r"\bissue \d+|\bthis branch\b|\bmain at\b|\(it was [^)]*\)|\bnow runs\b|"
+                       r"bench_distributed", re.I)
+    found = []
+    for page in PAGES:
+        for m in stale.finditer(page.read_text()):
+            found.append(f"{page.relative_to(ROOT)}: {m.group(0)!r}")
+    assert not found, found
