@@ -8,7 +8,7 @@ Problems:
   box   : 3D elasticity on a unit cube of N³ Q1 hexahedra (x = 0 clamped, traction on x = 1),
           3 (N+1)³ DOFs (N = 20: 28k DOFs; N = 33: 118k DOFs, whose factorization takes
           minutes per run: `--box 33 --orderings` measures its partitions alone);
-  square: bench_solve's problem, where issue 8 measured QAMD's 2.2× (unit square, N × N quads
+  square: bench_solve's problem, where bench_solve measured QAMD's 2.2× (unit square, N × N quads
           split into P1 triangles, N = 707: 1M DOFs).
 One fresh process per (problem, ranks) under `scripts/mpirun.sh -n RANKS` (2, 3 and 4 ranks,
 4 oversubscribed on 2 cores; 1 rank = the input numbering, no partition, for reference), both
@@ -418,7 +418,7 @@ def report(out: dict, full: bool) -> int:
         "# Partition benchmark: coordinate bisection (RCB) vs PT-Scotch",
         "",
         "Kirsch plate (`configs/kirsch.toml`, P2 triangles, refined k× per direction), "
-        "bench_solve's unit square (P1 triangles, where issue 8 measured QAMD's 2.2×) and a 3D "
+        "bench_solve's unit square (P1 triangles, where bench_solve measured QAMD's 2.2×) and a 3D "
         "box of Q1 hexahedra (box 33: partitions only, `--orderings` empty); one fresh process per (problem, ranks), both partitioners in it; "
         "4 ranks are oversubscribed on 2 cores; np=1 is the input numbering (no partition). "
         "Partition = the run's (PT-Scotch: cell checks and dual graph by blocks + MPIAdj rows + "

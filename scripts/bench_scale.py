@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Scale benchmark (issue 8): memory per rank and time per phase against DOLFINx 0.5 at 1 and 2
+"""Scale benchmark: memory per rank and time per phase against DOLFINx 0.5 at 1 and 2
 ranks, weak scaling at 1, 2 and 4 ranks, and a model of 64 ranks × 50M DOFs fitted on them.
 
 Problems: a clamped block under an end traction (E = 1, ν = 0.3; u = 0 on x = 0, traction −1
@@ -1093,7 +1093,7 @@ def markdown(out: dict) -> str:
         ASSUMPTIONS.format(grow=" and ".join(
             f"{TARGET[1] / dofs_of(c, max(out['sizes'][c])):,.0f}× ({c})" for c in out["cases"])),
         "",
-        "## Targets of issue 16",
+        "## Targets",
         "",
         target_table(out),
         "",
@@ -1323,7 +1323,7 @@ def post_markdown(out: dict) -> str:
     table, verdicts = post_table(out)
     label = out.get("baseline_label") or out.get("baseline") or ""
     lines = [
-        "# Post-processing against DOLFINx 0.5 (issue 8: within 1.5× DOLFINx's time)",
+        "# Post-processing against DOLFINx 0.5 (target: within 1.5× DOLFINx's time)",
         "",
         "`scripts/bench_scale.py --phases post`: the problems of `bench_scale.md` (a clamped "
         "block under an end traction, one linear step), run as set-up, assembly, one solve and "

@@ -16,7 +16,7 @@ def test_generated_page_is_current(script, capsys):
 
 
 def test_reference_lists_every_section_of_the_shipped_scenes():
-    """Spot check of the recording: keys the parser reads in configs/ are on the page."""
+    """Spot check: keys the shipped scenes use are on the page."""
     page = (ROOT / "docs" / "reference" / "scene.md").read_text()
     for line in ("## `materials[]`", "| `E` | number |", "## `contact[]`", "| `friction` |",
                  "## `solubility`", "| `dual` |", "## `solver`"):

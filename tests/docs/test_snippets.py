@@ -1,5 +1,5 @@
 """Every ```toml block of the docs is a complete scene, and `parsolve check` accepts it; so
-are the scenes of tests/docs/scenes/ (written for the scene reference's keys no other uses).
+are the scenes of tests/docs/scenes/ (keys no shipped scene uses: the 3D baselines, arc length).
 
 The convention (docs/guide.md's header): a ```toml fence holds a whole scene; excerpts, study
 and job files are plain text blocks. Each scene is written to its own folder and checked in
