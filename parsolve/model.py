@@ -239,6 +239,8 @@ def build_model(scene: Scene, comm=None) -> Model:
     patterns = agree(comm, load_patterns, mesh, scene, regions, fields)
     relations = agree(comm, build_relations, scene.relations, regions, scene.evolutions,
                       patterns, fields, scene.source, scene.solver.eliminate, scene.thickness)
+    for e in effects:   # the effects' own patterns (their names are their scene keys)
+        patterns.update(e.patterns())
     names = {r.name for r in relations}
     for e in effects:
         for r in e.relations():
