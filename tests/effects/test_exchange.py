@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
+from conftest import CONFIGS
+
 WALL = """
 [mesh]
 generator = "rectangle"
@@ -53,41 +55,12 @@ def test_wall_to_a_varying_ambient(cell, run):
                                2.0 * (tip - ambient[:, 0]) * 0.2, rtol=1e-10)
 
 
-FIN = """
-[mesh]
-generator = "rectangle"
-lx = 1.0
-ly = 0.01
-nx = {nx}
-ny = 1
-cell = "triangle6"
-[model]
-dimension = 2
-[regions]
-faces = "y == 0 or y == 0.01"
-[[diffusion]]
-field = "T"
-[[diffusion.materials]]
-conductivity = 1.0
-[[exchange]]
-field = "T"
-region = "faces"
-coefficient = 0.01
-ambient = 20.0
-[[relations]]
-name = "base"
-type = "dirichlet"
-region = "left"
-value = 100.0
-evolution = "constant"
-"""
-
-
 def test_fin_cooled_by_convection(run):
-    """A thin fin (Biot h w / k = 1e-4), base at 100, exchange on both faces, insulated tip:
-    (T - T∞)/(T_b - T∞) = cosh(m (L - x)) / cosh(m L), m² = 2 h / (k w); the heat leaving the
-    base k w m tanh(m L) (T_b - T∞). Within 2e-4 (the fin's own 2D effect is O(Biot))."""
-    res = run(FIN.format(nx=20))
+    """The shipped fin (configs/fin_convection.toml): thin (Biot h w / k = 1e-4), base at
+    100, exchange on both faces, insulated tip: (T - T∞)/(T_b - T∞) = cosh(m (L - x)) /
+    cosh(m L), m² = 2 h / (k w); the heat the base gives k w m tanh(m L) (T_b - T∞). Within
+    2e-4 (the fin's own 2D effect is O(Biot))."""
+    res = run(CONFIGS / "fin_convection.toml")
     x = res["mesh/points"][:, 0]
     m = np.sqrt(2 * 0.01 / (1.0 * 0.01))
     exact = 20 + 80 * np.cosh(m * (1 - x)) / np.cosh(m)

@@ -5,7 +5,8 @@ edges follow the circles; the displacement to the element's order."""
 import numpy as np
 import pytest
 
-from tests.helpers.curved import quarter_annulus
+from conftest import CONFIGS, rel_err
+from helpers.curved import quarter_annulus
 
 A, B, P, E, NU = 1.0, 2.0, 10.0, 1000.0, 0.3
 
@@ -82,3 +83,20 @@ def test_pressure_as_expression_of_time(run, shared_tmp):
     timed = run(text.replace(f"pressure = {P}", '"pressure" = "10 * t"') + "[steps]\ncount = 2\n")
     np.testing.assert_allclose(timed["fields/displacement"], ramp["fields/displacement"],
                                rtol=1e-12, atol=1e-15)
+
+
+def test_shipped_thick_cylinder(run):
+    """configs/thick_cylinder_pressure.toml (E = 210e3, 8 × 16 curved cells): u_r within 2e-4
+    of Lamé's; each symmetry plane carries p a (the bore's pressure projected on it) exactly,
+    whatever the curved edges' discretisation (∫ n ds over an edge is its chord turned)."""
+    res = run(CONFIGS / "thick_cylinder_pressure.toml")
+    e, nu, p, a, b = 210e3, 0.3, 10.0, 1.0, 2.0
+    c = p * a * a / (b * b - a * a)
+    pts = res["mesh/points"]
+    r = np.hypot(pts[:, 0], pts[:, 1])
+    ur = np.einsum("ni,ni->n", res["fields/displacement"][-1], pts / r[:, None])
+    assert rel_err(ur, (1 + nu) / e * ((1 - 2 * nu) * c * r + c * b * b / r)) < 2e-4
+    np.testing.assert_allclose(res["relations/x_symmetry/resultant"][-1][:2], [0.0, -p * a],
+                               atol=1e-9 * p)
+    np.testing.assert_allclose(res["relations/y_symmetry/resultant"][-1][:2], [-p * a, 0.0],
+                               atol=1e-9 * p)
