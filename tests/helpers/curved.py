@@ -27,3 +27,24 @@ def quarter_annulus(path, a: float, b: float, nr: int, nt: int) -> None:
             "gmsh:physical": phys, "gmsh:geometrical": phys}, field_data=field),
             file_format="gmsh22", binary=False)
     MPI.COMM_WORLD.Barrier()
+
+
+def quarter_tube(path, a: float, b: float, height: float, nr: int, nt: int, nz: int) -> None:
+    """A quarter of a thick tube a ≤ r ≤ b, 0 ≤ z ≤ height of ten-node tetrahedra whose nodes
+    lie on the exact cylinders, facet groups "inner" and "outer" (six-node triangles)."""
+    import meshio
+
+    from parsolve.mesh.generators import box
+
+    if MPI.COMM_WORLD.rank == 0:
+        flat = box(b - a, np.pi / 2, height, nr, nt, nz, cell="tetra10", origin=(a, 0.0, 0.0))
+        r, theta, z = flat.points.T
+        points = np.column_stack([r * np.cos(theta), r * np.sin(theta), z])
+        groups = [("inner", flat.facet_groups["xmin"]), ("outer", flat.facet_groups["xmax"])]
+        blocks = [("tetra10", flat.cells)] + [("triangle6", f) for _, f in groups]
+        phys = [np.full(len(c), tag) for (_, c), tag in zip(blocks, [1, 10, 11])]
+        field = {"tube": np.array([1, 3]), "inner": np.array([10, 2]), "outer": np.array([11, 2])}
+        meshio.write(str(path), meshio.Mesh(points, blocks, cell_data={
+            "gmsh:physical": phys, "gmsh:geometrical": phys}, field_data=field),
+            file_format="gmsh22", binary=False)
+    MPI.COMM_WORLD.Barrier()
