@@ -23,7 +23,8 @@ from parsolve.effects.base import Effect
 from parsolve.errors import InputError
 from parsolve.evolution import CONSTANT
 from parsolve.fem.integrals import facet_rule, facet_term, mass
-from parsolve.loads.base import LoadPattern, LoadSpec, TimedPart, Where, need_facets, values_at
+from parsolve.loads.base import (Instant, LoadPattern, LoadSpec, TimedPart, Where,
+                                 need_facets, values_at)
 from parsolve.loads.traction import facet_forces
 from parsolve.mesh.topology import FACETS, match_facets
 
@@ -81,14 +82,14 @@ class Exchange(Effect):
         rule = facet_rule(mesh.points[region.facets], mesh.facet_type, thickness)
         self.values = spec.coefficient * mass(rule)          # (nf, nfn, nfn)
         self._term = (None, None)
-        first = self._ambient(scene.times[0] if scene.times else 0.0)   # errors now
+        first = self._ambient(Instant(scene.times[0] if scene.times else 0.0))   # errors now
         self.part = TimedPart(self._ambient) if self.load.timed else first
 
-    def _ambient(self, t: float) -> np.ndarray:
-        """h ∫ N T∞ ds at time t (a full vector)."""
+    def _ambient(self, at: Instant) -> np.ndarray:
+        """h ∫ N T∞ ds at an instant (a full vector)."""
         h = self.spec.coefficient
         return facet_forces(self.load, self.where, lambda rule: h * values_at(
-            self.load, rule.points, t, self.where.source))
+            self.load, rule.points, at, self.where.source))
 
     def stiffness_blocks(self, cells: np.ndarray):
         if self._term[0] is not cells:

@@ -71,17 +71,17 @@ def uses_time(expr: str) -> bool:
 
 @dataclass
 class TimedPart:
-    """A part assembled at each instant (``assemble(t)``: a full vector)."""
+    """A part assembled at each instant (``assemble(at)``: a full vector)."""
 
-    assemble: Callable[[float], np.ndarray]
+    assemble: Callable[[Instant], np.ndarray]
     cache: dict = field(default_factory=dict)
 
-    def __call__(self, t: float) -> np.ndarray:
-        if t not in self.cache:
+    def __call__(self, at: Instant) -> np.ndarray:
+        if at not in self.cache:
             if len(self.cache) >= 2:
                 self.cache.pop(next(iter(self.cache)))
-            self.cache[t] = self.assemble(t)
-        return self.cache[t]
+            self.cache[at] = self.assemble(at)
+        return self.cache[at]
 
 
 @dataclass
@@ -100,8 +100,8 @@ class LoadPattern:
 
     def at(self, t) -> np.ndarray:
         """The pattern at an instant (a time or an ``Instant``)."""
-        now = instant(t).t
-        return np.sum([(v(now) if isinstance(v, TimedPart) else v) * evol(now)
+        now = instant(t)
+        return np.sum([(v(now) if isinstance(v, TimedPart) else v) * evol(now.t)
                        for v, evol in self.parts], axis=0)
 
 
@@ -139,13 +139,13 @@ def field_dofs(fields, name: str, nodes: np.ndarray) -> np.ndarray:
     return fields.dofs(name, nodes.ravel()).reshape(nodes.shape[0], width)
 
 
-def values_at(spec: LoadSpec, points: np.ndarray, t: float, source: str) -> np.ndarray:
+def values_at(spec: LoadSpec, points: np.ndarray, at: Instant, source: str) -> np.ndarray:
     """The load's values (..., ncomp) at ``points`` (..., gdim): numbers broadcast,
-    expressions evaluated at the points and the time."""
+    expressions evaluated at the points and the instant's time."""
     flat = points.reshape(-1, points.shape[-1])
     cols = [np.full(flat.shape[0], v) if not isinstance(v, str) else
             selectors.evaluate_value(v, flat, source, f"{spec.values_key}[{i}]"
-                                     if len(spec.vector) > 1 else spec.values_key, t)
+                                     if len(spec.vector) > 1 else spec.values_key, at.t)
             for i, v in enumerate(spec.vector)]
     return np.stack(cols, axis=-1).reshape(points.shape[:-1] + (len(cols),))
 

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from parsolve.fem.integrals import cell_rule, integrate
-from parsolve.loads.base import (LoadSpec, Where, blocks, field_dofs, need_cells, scatter,
-                                 values_at)
+from parsolve.loads.base import (Instant, LoadSpec, Where, blocks, field_dofs, need_cells,
+                                 scatter, values_at)
 
 
 def cell_forces(spec: LoadSpec, where: Where, value) -> np.ndarray:
@@ -24,7 +24,7 @@ def cell_forces(spec: LoadSpec, where: Where, value) -> np.ndarray:
     return out
 
 
-def assemble(spec: LoadSpec, where: Where, t: float) -> np.ndarray:
+def assemble(spec: LoadSpec, where: Where, at: Instant) -> np.ndarray:
     need_cells(spec, where)
-    return cell_forces(spec, where, lambda rule, cells: values_at(spec, rule.points, t,
+    return cell_forces(spec, where, lambda rule, cells: values_at(spec, rule.points, at,
                                                                   where.source))

@@ -3,7 +3,7 @@ measures are the whole mesh's)."""
 
 from __future__ import annotations
 
-from parsolve.loads.base import LoadPattern, TimedPart, Where
+from parsolve.loads.base import Instant, LoadPattern, TimedPart, Where
 from parsolve.loads.registry import LOADS
 
 
@@ -17,8 +17,8 @@ def load_patterns(mesh, scene, regions, fields) -> dict[str, LoadPattern]:
         region = regions(spec.region, spec.key + ".region")
         where = Where(mesh, region, fields, thickness, regions, scene)
         assemble = LOADS[spec.kind].assemble
-        first = assemble(spec, where, scene.times[0] if scene.times else 0.0)  # errors now
-        part = TimedPart(lambda t, s=spec, w=where, a=assemble: a(s, w, t)) if spec.timed \
+        first = assemble(spec, where, Instant(scene.times[0] if scene.times else 0.0))  # errors now
+        part = TimedPart(lambda at, s=spec, w=where, a=assemble: a(s, w, at)) if spec.timed \
             else first
         patterns.setdefault(spec.pattern, LoadPattern(spec.pattern)).parts.append(
             (part, scene.evolutions[spec.evolution]))

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from parsolve.errors import InputError
-from parsolve.loads.base import LoadSpec, Where, need_cells
+from parsolve.loads.base import Instant, LoadSpec, Where, need_cells
 from parsolve.loads.body import cell_forces
 
 
@@ -20,7 +20,7 @@ def densities(spec: LoadSpec, where: Where) -> np.ndarray:
     return rho
 
 
-def assemble(spec: LoadSpec, where: Where, t: float) -> np.ndarray:
+def assemble(spec: LoadSpec, where: Where, at: Instant) -> np.ndarray:
     need_cells(spec, where)
     rho = densities(spec, where)
     missing = where.regions.cell_count(where.region.cells[np.isnan(rho[where.region.cells])])

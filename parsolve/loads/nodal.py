@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from parsolve.loads.base import LoadSpec, Where, field_dofs, scatter, values_at
+from parsolve.loads.base import Instant, LoadSpec, Where, field_dofs, scatter, values_at
 
 
-def assemble(spec: LoadSpec, where: Where, t: float) -> np.ndarray:
+def assemble(spec: LoadSpec, where: Where, at: Instant) -> np.ndarray:
     nodes = where.region.nodes
-    values = values_at(spec, where.mesh.points[nodes], t, where.source)
+    values = values_at(spec, where.mesh.points[nodes], at, where.source)
     return scatter(where.ndof, field_dofs(where.fields, spec.field, nodes[:, None]), values)

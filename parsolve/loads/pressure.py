@@ -7,11 +7,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from parsolve.loads.base import LoadSpec, Where, need_facets, values_at
+from parsolve.loads.base import Instant, LoadSpec, Where, need_facets, values_at
 from parsolve.loads.traction import facet_forces
 
 
-def assemble(spec: LoadSpec, where: Where, t: float) -> np.ndarray:
+def assemble(spec: LoadSpec, where: Where, at: Instant) -> np.ndarray:
     need_facets(spec, where)
-    return facet_forces(spec, where, lambda rule: -values_at(spec, rule.points, t, where.source)
+    return facet_forces(spec, where, lambda rule: -values_at(spec, rule.points, at, where.source)
                         * rule.normals)

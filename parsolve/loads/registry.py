@@ -38,7 +38,7 @@ LOADS: dict[str, LoadEntry] = {
     "pressure": LoadEntry(pressure.assemble, "one", "vector", True, None,
                           description="pressure against the outward normal of a boundary region"),
     "gravity": LoadEntry(gravity.assemble, "dim", "vector", False, "all",
-                         description="acceleration; the body force is ρ g with the materials' density"),
+                         description="acceleration: the body force ρ g, ρ the materials' density"),
     # a scalar field's loads under their own names
     "flux": LoadEntry(traction.assemble, "field", "scalar", True, None, "traction",
                       "flux into the domain per unit area of a boundary region"),

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from parsolve.fem.integrals import facet_rule, integrate
-from parsolve.loads.base import (LoadSpec, Where, blocks, field_dofs, need_facets, scatter,
-                                 values_at)
+from parsolve.loads.base import (Instant, LoadSpec, Where, blocks, field_dofs, need_facets,
+                                 scatter, values_at)
 
 
 def facet_forces(spec: LoadSpec, where: Where, value) -> np.ndarray:
@@ -23,6 +23,6 @@ def facet_forces(spec: LoadSpec, where: Where, value) -> np.ndarray:
     return out
 
 
-def assemble(spec: LoadSpec, where: Where, t: float) -> np.ndarray:
+def assemble(spec: LoadSpec, where: Where, at: Instant) -> np.ndarray:
     need_facets(spec, where)
-    return facet_forces(spec, where, lambda rule: values_at(spec, rule.points, t, where.source))
+    return facet_forces(spec, where, lambda rule: values_at(spec, rule.points, at, where.source))
