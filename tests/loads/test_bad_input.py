@@ -49,7 +49,18 @@ CASES = {
     "body on no cell": ('body = [1.0, 0.0]\nregion = "dot"', "loads[0].region", "no cell"),
     "no density": ("gravity = [0.0, -9.81]", "loads[0].gravity", "no density"),
     "bad density": ("gravity = [0.0, -9.81]", "materials[0].density", "must be positive"),
+    "timed direction": ('traction = ["t", 0.0]', "loads[0].traction", "cannot name t"),
 }
+
+CONTROL = """
+[[relations]]
+name = "opening"
+type = "mean"
+region = "right"
+component = "x"
+value = 1e-3
+dual = "pull"
+"""
 
 
 @pytest.mark.parametrize("case", sorted(CASES))
@@ -64,6 +75,8 @@ def test_bad_load_exits_2(case, tmp_path, capfd, monkeypatch):
         text = text.replace("density = 1.0\n", "")
     if case == "bad density":
         text = text.replace("density = 1.0", "density = -1.0")
+    if case == "timed direction":   # the pattern is a relation's dual: one fixed vector
+        text += CONTROL
     (tmp_path / "scene.toml").write_text(text)
     monkeypatch.chdir(tmp_path)
     capfd.readouterr()
