@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from conftest import CONFIGS, rel_err
-from helpers.curved import quarter_annulus, quarter_tube
+from helpers.curved import quarter_annulus, quarter_tube, sphere_octant
 
 A, B, P, E, NU = 1.0, 2.0, 10.0, 1000.0, 0.3
 
@@ -148,3 +148,53 @@ def test_lame_tube_in_3d(run, shared_tmp):
         r, ur = radial(res)
         errors.append(np.abs(ur - cylinder(r)).max() / cylinder(A))
     assert errors[1] < 3e-4 and errors[0] / errors[1] > 4.5, errors
+
+
+SHELL = """
+[mesh]
+file = "{mesh}"
+[model]
+hypothesis = "3d"
+[regions]
+bore = "x*x + y*y + z*z < 1.0001"
+xplane = "x == 0"
+yplane = "y == 0"
+zplane = "z == 0"
+[[materials]]
+E = {E}
+nu = {NU}
+[[loads]]
+region = "bore"
+pressure = {P}
+[[relations]]
+name = "x"
+type = "dirichlet"
+region = "xplane"
+components = ["x"]
+[[relations]]
+name = "y"
+type = "dirichlet"
+region = "yplane"
+components = ["y"]
+[[relations]]
+name = "z"
+type = "dirichlet"
+region = "zplane"
+components = ["z"]
+"""
+
+
+def test_lame_thick_sphere_in_3d(run, shared_tmp):
+    """An eighth of the thick sphere in ten-node tetrahedra on the exact spheres: the pressure
+    on the curved bore gives Lamé's u_r within 6e-3 on 8² × 4 prism layers (measured 5.4e-3),
+    the error divided by more than 5 from 4² × 2 (measured 3.3e-2: 6.1)."""
+    errors = []
+    for n, layers in ((4, 2), (8, 4)):
+        mesh = shared_tmp / f"shell{n}.msh"
+        sphere_octant(mesh, A, B, n, layers)
+        res = run(SHELL.format(mesh=mesh, E=E, NU=NU, P=P))
+        pts = res["mesh/points"]
+        r = np.linalg.norm(pts, axis=1)
+        ur = np.einsum("ni,ni->n", res["fields/displacement"][-1], pts / r[:, None])
+        errors.append(np.abs(ur - sphere(r)).max() / sphere(A))
+    assert errors[1] < 6e-3 and errors[0] / errors[1] > 5.0, errors
