@@ -59,6 +59,10 @@ COMMON_KEYS = {
 
 
 def names_for(ncomp: int) -> tuple[str, ...]:
-    """The keys a load on a field of ``ncomp`` components may give, in the registry's order."""
+    """The keys a load on a field of ``ncomp`` components may give: the field kind's own in
+    the registry's order, then those of any field (a scalar field's: flux, source,
+    total_flux, nodal)."""
     want = "scalar" if ncomp == 1 else "vector"
-    return tuple(k for k, e in LOADS.items() if e.on in (want, "any"))
+    own = [k for k, e in LOADS.items() if e.on == want]
+    return tuple(own + [k for k, e in LOADS.items() if e.on == "any"]) if want == "scalar" \
+        else tuple(k for k, e in LOADS.items() if e.on in (want, "any"))
