@@ -136,3 +136,46 @@ flux = "3 * t * (1 + y)"''')
     res = run(text)
     t = res["steps/time"]
     np.testing.assert_allclose(res["relations/hot/resultant"][:, 0], -3 * t * 0.22, rtol=1e-10)
+
+
+THETA = """
+[mesh]
+generator = "rectangle"
+lx = 1.0
+ly = 0.1
+nx = 5
+ny = 1
+cell = "triangle6"
+[model]
+dimension = 2
+[time]
+scheme = "theta"
+theta = {theta}
+mass = "consistent"
+[[diffusion]]
+field = "T"
+initial = "x * x / 2"
+[[diffusion.materials]]
+conductivity = 1.0
+capacity = 1.0
+[[exchange]]
+field = "T"
+region = "right"
+coefficient = 4.0
+ambient = "t + 0.5 + 1 / 4"
+[steps]
+count = 4
+end = 0.6
+"""
+
+
+@pytest.mark.parametrize("theta", [0.5, 0.75, 1.0])
+def test_theta_scheme_exact_for_a_solution_linear_in_time(theta, run):
+    """T = t + x²/2 solves T_t = T_xx with an insulated x = 0 and, at x = 1, the exchange
+    -T_x = h (T - T∞) for T∞(t) = t + 1/2 + 1/h: quadratic in space (six-node triangles hold
+    it) and linear in time (every θ-scheme integrates it exactly), so each step is exact to
+    round-off only if the facet term and its load are both weighted by θ at t and t_n."""
+    res = run(THETA.format(theta=theta))
+    x, t = res["mesh/points"][:, 0], res["steps/time"]
+    np.testing.assert_allclose(res["fields/T"][..., 0], t[:, None] + x[None, :] ** 2 / 2,
+                               atol=1e-11)
