@@ -212,3 +212,45 @@ def test_moving_load_reactions(run):
     rb = first / L
     np.testing.assert_allclose(res["relations/b/resultant"][:, 1], rb, rtol=1e-10)
     np.testing.assert_allclose(res["relations/a/resultant"][:, 1], total - rb, rtol=1e-10)
+
+
+BLOCK = """
+[mesh]
+generator = "box"
+lx = 2.0
+ly = 1.0
+lz = 0.5
+nx = 3
+ny = 2
+nz = 2
+cell = "{cell}"
+[model]
+hypothesis = "3d"
+[[materials]]
+E = 1.0
+nu = 0.3
+density = 2.0
+[[loads]]
+name = "top"
+region = "zmax"
+pressure = "3 + x"
+[[loads]]
+name = "closed"
+region = "all"
+pressure = 5.0
+[[loads]]
+name = "weight"
+gravity = [0.0, 0.0, -10.0]
+"""
+
+
+@pytest.mark.parametrize("cell", ["hexahedron", "tetra", "tetra10"])
+def test_resultants_in_3d(cell):
+    """On a 2 × 1 × 0.5 block: p = 3 + x on the top pushes down by ∫ p = 8; a uniform pressure
+    on the whole closed surface has no resultant; ρ g × volume = 2 × 10 × 1 downwards."""
+    model = model_of(BLOCK.format(cell=cell))
+    n = model.mesh.n_owned
+    for name, expected in (("top", [0, 0, -8.0]), ("closed", [0, 0, 0]),
+                           ("weight", [0, 0, -20.0])):
+        total = MPI.COMM_WORLD.allreduce(model.patterns[name].vector().reshape(-1, 3)[:n].sum(axis=0))
+        np.testing.assert_allclose(total, expected, atol=1e-13 * 20)
