@@ -96,7 +96,8 @@ def test_pure_bending_by_linear_traction(run):
     model = model_of(text)
     vec = model.patterns["moment"].vector().reshape(-1, 2)[:model.mesh.n_owned]
     y = model.mesh.points[:model.mesh.n_owned, 1]
-    fx, fy, moment = MPI.COMM_WORLD.allreduce(np.r_[vec.sum(axis=0), -((y - 0.25) * vec[:, 0]).sum()])
+    mine = np.r_[vec.sum(axis=0), -((y - 0.25) * vec[:, 0]).sum()]
+    fx, fy, moment = MPI.COMM_WORLD.allreduce(mine)
     np.testing.assert_allclose([fx, fy, moment], [0.0, 0.0, M], atol=1e-14 * M / 0.25, rtol=1e-13)
     res = run(text)
     pts, u = res["mesh/points"], res["fields/displacement"][-1]
@@ -138,7 +139,8 @@ def test_column_under_self_weight(run):
     quadratic, so exact at every node; the base carries the weight ρ g × volume."""
     text = COLUMN.format(lx=0.5, ly=3.0, nx=2, ny=4, nu=0.0, g="[0, -9.81]", fixed="bottom",
                          components='["y"]')
-    text += '[[relations]]\nname = "corner"\ntype = "dirichlet"\nregion = "corner"\ncomponents = ["x"]\n'
+    text += ('[[relations]]\nname = "corner"\ntype = "dirichlet"\nregion = "corner"\n'
+             'components = ["x"]\n')
     res = run(text)
     pts, u = res["mesh/points"], res["fields/displacement"][-1]
     y = pts[:, 1]
@@ -202,8 +204,8 @@ times = [0.5, 1.5, 2.0, 3.5]
 
 def test_moving_load_reactions(run):
     """q(x, t) = -5 (1 + (x - t)/2) per unit area on the top face of a simply supported beam:
-    at every step the supports carry (upwards) R_b = -∫ q x dx t/L and R_a = -∫ q dx t - R_b (linear
-    in x: the facet rule is exact)."""
+    at every step the supports carry (upwards) R_b = -∫ q x dx t/L and R_a = -∫ q dx t - R_b
+    (linear in x: the facet rule is exact)."""
     res = run(MOVING)
     t = res["steps/time"]
     L, thick = 4.0, 0.1
@@ -252,5 +254,6 @@ def test_resultants_in_3d(cell):
     n = model.mesh.n_owned
     for name, expected in (("top", [0, 0, -8.0]), ("closed", [0, 0, 0]),
                            ("weight", [0, 0, -20.0])):
-        total = MPI.COMM_WORLD.allreduce(model.patterns[name].vector().reshape(-1, 3)[:n].sum(axis=0))
+        mine = model.patterns[name].vector().reshape(-1, 3)[:n].sum(axis=0)
+        total = MPI.COMM_WORLD.allreduce(mine)
         np.testing.assert_allclose(total, expected, atol=1e-13 * 20)
