@@ -14,10 +14,11 @@ from parsolve.collective import agree
 from parsolve.effects.base import Effect
 from parsolve.effects.constraints import build_relations
 from parsolve.effects.elasticity import Elasticity
-from parsolve.effects.loads import LoadPattern, load_patterns
 from parsolve.effects.registry import EFFECTS
 from parsolve.errors import InputError
 from parsolve.fields import FieldSet
+from parsolve.loads.base import Instant, LoadPattern
+from parsolve.loads.build import load_patterns
 from parsolve.mesh import blocks, memory
 from parsolve.mesh.checks import check_mesh
 from parsolve.mesh.distribute import LocalMesh, distribute
@@ -74,8 +75,9 @@ class Model:
                 q[:, self.fields.columns(name)] = values
         return q.ravel()
 
-    def external_load(self, t: float) -> np.ndarray:
-        """Known loads at t (this rank's DOFs); patterns used as duals are not applied."""
+    def external_load(self, t: "float | Instant") -> np.ndarray:
+        """Known loads at an instant (a time, or t with the step's Δt and θ; this rank's
+        DOFs); patterns used as duals are not applied."""
         duals = {r.meta.get("dual") for r in self.relations} | set(self.reference_patterns)
         f = np.zeros(self.mesh.num_points * self.ncomp)
         for name, pattern in self.patterns.items():
@@ -236,11 +238,12 @@ def build_model(scene: Scene, comm=None) -> Model:
     # a check of a rank's part (cells without a material) fails there alone: every rank
     # raises it (the checks that decide for the whole mesh are collective)
     effects, fields = progress.timed("effects", agree, comm, build_effects, scene, mesh, regions)
-    patterns = agree(comm, load_patterns, mesh, scene.loads, regions, scene.evolutions,
-                     scene.thickness, scene.source, fields)
+    patterns = agree(comm, load_patterns, mesh, scene, regions, fields)
     relations = progress.timed("relations", agree, comm, build_relations, scene.relations,
                                regions, scene.evolutions, patterns, fields, scene.source,
                                scene.solver.eliminate, scene.thickness)
+    for e in effects:   # the effects' own patterns (their names are their scene keys)
+        patterns.update(e.patterns())
     names = {r.name for r in relations}
     for e in effects:
         for r in e.relations():

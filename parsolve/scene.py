@@ -6,10 +6,7 @@ scene is parsed identically on every rank, so an error is raised on all ranks to
 
 from __future__ import annotations
 
-import difflib
 import inspect
-import math
-import re
 import sys
 import tomllib
 from dataclasses import dataclass, field
@@ -17,8 +14,12 @@ from pathlib import Path
 from typing import Any
 
 from parsolve.errors import InputError
+from parsolve.schema import (MAX_MAGNITUDE, MIN_MAGNITUDE, NAME_PATTERN, Table,  # noqa: F401
+                             check_number)
 from parsolve.evolution import CONSTANT, RAMP, Evolution
 from parsolve.fem.axisymmetric import Axisymmetric
+from parsolve.loads.base import LoadSpec, uses_time
+from parsolve.loads.registry import LOADS, names_for
 
 HYPOTHESES = ("plane_stress", "plane_strain", "3d", "axisymmetric")
 COMPONENTS = {"x": 0, "y": 1, "z": 2, "ux": 0, "uy": 1, "uz": 2}
@@ -27,95 +28,7 @@ STRAIN_COMPONENTS = {"xx": (0, 0), "yy": (1, 1), "zz": (2, 2), "xy": (0, 1), "yz
 PRESETS = ("direct", "iterative")
 PARTITIONERS = ("scotch", "bisection")   # parsolve.mesh.partition.PARTITIONERS
 DEFAULT_PARTITIONER = "scotch"
-# Numbers beyond these magnitudes are not physical in any system of units, and their products
-# (stiffness = E × lengths^d, forces × lengths) overflow or underflow double precision.
-MAX_MAGNITUDE = 1e50
-MIN_MAGNITUDE = 1e-50
 MAX_STEPS = 1_000_000
-# Relation and load-pattern names become HDF5 group names: plain identifiers only.
-NAME_PATTERN = re.compile(r"[A-Za-z_][A-Za-z0-9_\-]{0,63}")
-
-
-def check_number(value: float, source: str, key: str) -> float:
-    """A finite number of sane magnitude (0 allowed), or an InputError naming the key."""
-    v = float(value)
-    if math.isnan(v):
-        raise InputError("not a number (nan)", source, key)
-    if math.isinf(v):
-        raise InputError(f"must be finite, got {v}", source, key)
-    if abs(v) > MAX_MAGNITUDE:
-        raise InputError(f"{v:g} is absurdly large (|value| must not exceed {MAX_MAGNITUDE:g}; "
-                         "products of such numbers overflow)", source, key)
-    if v != 0.0 and abs(v) < MIN_MAGNITUDE:
-        raise InputError(f"{v:g} is absurdly small (|value| must be 0 or at least "
-                         f"{MIN_MAGNITUDE:g})", source, key)
-    return v
-
-
-class Table:
-    """A TOML table with its dotted path: typed reads, and unknown keys reported at the end."""
-
-    def __init__(self, data: dict, path: str, source: str):
-        if not isinstance(data, dict):
-            raise InputError(f"expected a table, got {type(data).__name__}", source, path)
-        self.data, self.path, self.source, self.used = data, path, source, set()
-
-    def key(self, name: str) -> str:
-        return f"{self.path}.{name}" if self.path else name
-
-    def error(self, name: str, message: str) -> InputError:
-        return InputError(message, self.source, self.key(name))
-
-    def has(self, name: str) -> bool:
-        return name in self.data
-
-    def get(self, name: str, kind: type | tuple, default: Any = ..., choices=None) -> Any:
-        self.used.add(name)
-        if name not in self.data:
-            if default is ...:
-                close = difflib.get_close_matches(name, set(self.data) - self.used, n=1)
-                if close:  # a misspelt key: point at it rather than at the missing one
-                    raise self.error(close[0], f"unknown key (did you mean {name!r}?)")
-                raise self.error(name, "missing required key")
-            return default
-        value = self.data[name]
-        kinds = kind if isinstance(kind, tuple) else (kind,)
-        if float in kinds and int not in kinds and isinstance(value, int) and not isinstance(value, bool):
-            value = float(value)
-        if isinstance(value, bool) and bool not in kinds or not isinstance(value, kinds):
-            names = " or ".join(k.__name__ for k in kinds)
-            raise self.error(name, f"expected {names}, got {type(value).__name__} {value!r}")
-        if isinstance(value, float):  # every float the scene reads passes here
-            check_number(value, self.source, self.key(name))
-        if choices is not None and value not in choices:
-            raise self.error(name, f"must be one of {', '.join(map(str, choices))}; got {value!r}")
-        return value
-
-    def floats(self, name: str, length: int | None = None, default: Any = ...) -> list[float] | None:
-        value = self.get(name, list, default)
-        if value is None or value is default and default is not ...:
-            return value
-        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
-            raise self.error(name, f"expected a list of numbers, got {value!r}")
-        if length is not None and len(value) != length:
-            raise self.error(name, f"expected {length} numbers, got {len(value)}")
-        return [check_number(v, self.source, f"{self.key(name)}[{i}]") for i, v in enumerate(value)]
-
-    def table(self, name: str, default: Any = ...) -> "Table | None":
-        value = self.get(name, dict, default)
-        return value if value is None else Table(value, self.key(name), self.source)
-
-    def tables(self, name: str) -> list["Table"]:
-        value = self.get(name, list, [])
-        return [Table(v, f"{self.key(name)}[{i}]", self.source) for i, v in enumerate(value)]
-
-    def done(self) -> None:
-        unknown = sorted(set(self.data) - self.used)
-        if unknown:
-            close = difflib.get_close_matches(unknown[0], self.used, n=1)
-            hint = f" (did you mean {close[0]!r}?)" if close else \
-                f" (known: {', '.join(sorted(self.used))})"
-            raise self.error(unknown[0], "unknown key" + hint)
 
 
 @dataclass
@@ -132,17 +45,6 @@ class RegionSpec:
     kind: str          # "expr", "box", "point", "group"
     value: Any
     key: str
-
-
-@dataclass
-class LoadSpec:
-    pattern: str
-    region: str
-    kind: str          # "traction", "total_force", "body", "nodal"
-    vector: list[float]
-    evolution: str
-    key: str
-    field: str          # the field it loads
 
 
 @dataclass
@@ -448,29 +350,41 @@ def _name(t: Table, default: Any = ...) -> str:
     return name
 
 
-# a scalar field's loads under their own names: a boundary flux (into the domain, per unit
-# area), a volume source, a total flux spread uniformly over a boundary
-SCALAR_LOADS = {"flux": "traction", "source": "body", "total_flux": "total_force", "nodal": "nodal"}
-
-
 def _load(t: Table, dim: int, fields: dict[str, int], primary: str | None) -> LoadSpec:
+    """A [[loads]] entry: the common keys, then the value of the one load key it gives, read
+    as its registry entry says (``loads.registry``)."""
     pattern = _name(t, "loads")
     field = _field(t, fields, primary)
     ncomp = fields[field]
-    names = tuple(SCALAR_LOADS) if ncomp == 1 else \
-        ("traction", "total_force", "body", "nodal")
-    kinds = [k for k in names if t.has(k)]
-    if len(kinds) != 1:
+    names = names_for(ncomp)
+    given = [k for k in names if t.has(k)]
+    if len(given) != 1:
         raise t.error(names[0], f"give exactly one of {', '.join(names)}")
-    if ncomp == 1 and isinstance(t.data[kinds[0]], (int, float)) and not isinstance(t.data[kinds[0]], bool):
-        vector = [t.get(kinds[0], float)]
-    else:
-        vector = t.floats(kinds[0], ncomp)
-    kind = SCALAR_LOADS[kinds[0]] if names[0] == "flux" else kinds[0]
-    region = t.get("region", str, "all" if kind == "body" else ...)
-    evolution = t.get("evolution", str, "ramp")
+    key = given[0]
+    entry = LOADS[key]
+    vector = _load_values(t, key, entry, {"field": ncomp, "one": 1, "dim": dim}[entry.values])
+    region = t.get("region", str, ... if entry.region is None else entry.region)
+    timed = any(isinstance(v, str) and uses_time(v) for v in vector)
+    evolution = t.get("evolution", str, "constant" if timed else "ramp")
     t.done()
-    return LoadSpec(pattern, region, kind, vector, evolution, t.path, field)
+    return LoadSpec(pattern, region, entry.kind or key, vector, evolution, t.path, field, key)
+
+
+def _load_values(t: Table, key: str, entry, count: int) -> list:
+    """``count`` values: numbers (one may be given bare when one is wanted) or, where the
+    entry takes them, expressions of (x, y, z, t)."""
+    raw = t.data[key]
+    number = isinstance(raw, (int, float)) and not isinstance(raw, bool)
+    if count == 1 and (number or entry.expressions and isinstance(raw, str)):
+        return [t.get(key, (float, str) if entry.expressions else float)]
+    if not entry.expressions or not isinstance(raw, list) or \
+            not any(isinstance(v, str) for v in raw):
+        return t.floats(key, count)
+    t.used.add(key)
+    if len(raw) != count:
+        raise t.error(key, f"expected {count} values, got {len(raw)}")
+    sub = Table({f"{key}[{i}]": v for i, v in enumerate(raw)}, t.path, t.source)
+    return [sub.get(k, (float, str)) for k in sub.data]
 
 
 def _relation(t: Table, dim: int, fields: dict[str, int], primary: str | None) -> RelationSpec:
@@ -782,6 +696,20 @@ def _cross_check(scene: Scene) -> None:
         if r.dual is not None and r.dual not in patterns:
             raise InputError(f"dual names no load pattern: {r.dual!r} (patterns: "
                              f"{', '.join(sorted(patterns)) or 'none'})", src, r.key + ".dual")
+    _fixed_directions(scene)
+
+
+def _fixed_directions(scene: Scene) -> None:
+    """A pattern that is a direction (a relation's dual, the arc-length's reference) is one
+    vector: none of its loads may vary in time."""
+    directions = {r.dual: r.key + ".dual" for r in scene.relations if r.dual is not None}
+    if scene.nonlinear.method == "arc_length":
+        directions[scene.nonlinear.arc_pattern] = "nonlinear.arc_length.pattern"
+    for l in scene.loads:
+        if l.pattern in directions and l.timed:
+            raise InputError(f"pattern {l.pattern!r} is a direction ({directions[l.pattern]}): "
+                             "its values cannot name t (use an evolution)", scene.source,
+                             l.values_key)
 
 
 def _generator_group(scene: Scene, name: str) -> bool:

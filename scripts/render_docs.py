@@ -72,6 +72,8 @@ PICTURES = [
             "stress xy (uniform: periodic shear)", warp=0.15),
     Picture("axisym_thick_cylinder", "axisym_thick_cylinder", "fields/stress", 3,
             "hoop stress (theta theta)", warp=0.08),
+    Picture("thick_cylinder_pressure", "thick_cylinder_pressure", "fields/displacement",
+            "magnitude", "displacement magnitude (pressure on the curved bore)", warp=0.0),
 ]
 
 

@@ -109,7 +109,9 @@ TESTED = ["controlled_bar.toml", "kirsch.toml", "cantilever_3d.toml",
           "springs_bar_supports.toml",  # springs: tests/effects/test_springs.py
           "thermal_expansion.toml",  # tests/effects/test_thermal_expansion.py
           "axisym_thick_cylinder.toml", "contact_axisym_sphere.toml",
-          "contact_mortar_sphere_3d.toml"]  # tests/contact/test_mortar3d_hertz.py
+          "contact_mortar_sphere_3d.toml",  # tests/contact/test_mortar3d_hertz.py
+          "thick_cylinder_pressure.toml",  # tests/loads/test_pressure.py
+          "fin_convection.toml"]  # tests/effects/test_exchange.py
 
 
 def test_axisym_thick_cylinder(run):

@@ -140,3 +140,33 @@ def test_scene_files_that_are_not_text(tmp_path, content, words):
     with pytest.raises(InputError, match=re.escape(words)) as info:
         load_scene(path)
     assert info.value.source == str(path)
+
+
+@pytest.mark.parametrize("given, kind, vector, evolution", [
+    ("traction = [1.0, 0.0]", "traction", [1.0, 0.0], "ramp"),
+    ('traction = ["2 * y", 0.0]', "traction", ["2 * y", 0.0], "ramp"),
+    ('traction = ["2 * t", 1]', "traction", ["2 * t", 1.0], "constant"),
+    ("pressure = 3", "pressure", [3.0], "ramp"),
+    ('pressure = "1 + t * x"', "pressure", ["1 + t * x"], "constant"),
+    ('pressure = "1 + t * x"\nevolution = "cycle"', "pressure", ["1 + t * x"], "cycle"),
+    ("gravity = [0, -9.81]", "gravity", [0.0, -9.81], "ramp"),
+])
+def test_load_entries_read_by_their_registry_entry(given, kind, vector, evolution):
+    """Each load key is read as its entry says: numbers, expressions (a value naming t makes
+    the evolution default "constant"), one value for a pressure, dim values for gravity."""
+    load, = parse(BASE.replace("traction = [1.0, 0.0]", given)).loads
+    assert (load.kind, load.vector, load.evolution, load.given) == (kind, vector, evolution, kind)
+
+
+@pytest.mark.serial   # a subprocess: once, not once per rank
+def test_effects_do_not_import_the_scene():
+    """The scene reads the registries; no effect or load module imports the scene back."""
+    import subprocess
+    import sys
+
+    code = ("import sys, parsolve.effects.registry, parsolve.loads.registry; "
+            "print('parsolve.scene' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env={k: v for k, v in __import__("os").environ.items()
+                              if not k.startswith(("OMPI_", "PMIX_", "OPAL_"))})
+    assert out.returncode == 0 and out.stdout.strip() == "False", out.stderr

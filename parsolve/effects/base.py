@@ -34,6 +34,11 @@ class Effect:
         known loads (thermal expansion's reference state); empty: none."""
         return {}
 
+    def patterns(self) -> dict:
+        """Load patterns of its own {name: ``loads.base.LoadPattern``} (parts may vary in
+        time: an exchange condition's h ∫ N T∞(t)), applied with the scene's; none by default."""
+        return {}
+
     def node_pairs(self) -> np.ndarray:
         """(k, 2) local node pairs that need a stiffness slot no cell gives (springs between
         nodes that share no cell); the system adds them to its pattern and hands back their

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from parsolve.fem.element_matrices import BlockMatrices, apply
+from parsolve.loads.base import Instant
 
 
 @dataclass
@@ -101,10 +102,11 @@ class Composition:
         """The loads a step balances: F(t), or in a θ-scheme step θ F(t) + (1 - θ) F(t_n) on
         the equations of fields with a capacity (F(t) elsewhere); plus the effects' own
         constant loads."""
-        f = self.model.external_load(t)
-        if theta is not None and theta != 1.0:
+        scheme = 1.0 if theta is None else theta
+        f = self.model.external_load(Instant(t, t - t_prev, scheme))
+        if scheme != 1.0:
             w = self.theta_dofs(theta)
-            f = w * f + (1.0 - w) * self.model.external_load(t_prev)
+            f = w * f + (1.0 - w) * self.model.external_load(Instant(t_prev, t - t_prev, scheme))
         own = self.effect_loads()
         return f if own is None else f + own
 

@@ -107,7 +107,7 @@ from parsolve.evolution import CONSTANT
 from parsolve.mesh.regions import gather_facets
 from parsolve.mesh.topology import FACETS, boundary_facets
 from parsolve.relations import Relation
-from parsolve.scene import NAME_PATTERN
+from parsolve.schema import NAME_PATTERN
 
 OBSTACLES = ("plane", "cylinder", "sphere")
 DISCRETIZATIONS = ("node_to_segment", "mortar")

@@ -61,7 +61,7 @@ def parse(t, dim: int) -> DiffusionSpec:
             raise sub.error("conductivity", f"expected a number or a {dim}×{dim} tensor of numbers, "
                             f"got {raw!r}"[:200])
         if isinstance(raw, list):  # finite, of sane magnitude, like every number of a scene
-            from parsolve.scene import check_number
+            from parsolve.schema import check_number
 
             for i, row in enumerate(raw):
                 for j, v in enumerate(row):

@@ -31,6 +31,7 @@ class MaterialSpec:
     model: str
     params: dict
     key: str
+    density: float | None = None   # mass per unit volume (gravity loads)
 
 
 def parse(t, dim: int) -> MaterialSpec:
@@ -45,8 +46,11 @@ def parse(t, dim: int) -> MaterialSpec:
     problem = parameter_problem(declared, params)
     if problem is not None:
         raise t.error(*problem)
+    density = t.get("density", float, None)
+    if density is not None and density <= 0:
+        raise t.error("density", "must be positive")
     t.done()
-    return MaterialSpec(region, model, params, t.path)
+    return MaterialSpec(region, model, params, t.path, density)
 
 
 def declared_fields(spec: MaterialSpec, dim: int) -> dict[str, int]:

@@ -7,8 +7,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
-from parsolve.effects import (contact, contact_penalty, diffusion, elasticity, solubility,
-                              springs, thermal_expansion)
+from parsolve.effects import (contact, contact_penalty, diffusion, elasticity, exchange,
+                              solubility, springs, thermal_expansion)
 
 
 @dataclass(frozen=True)
@@ -74,6 +74,9 @@ EFFECTS: dict[str, Entry] = {
     # on parts (surfaces gathered once), the relations form and the penalty and augmented-
     # Lagrangian baselines alike
     "contact": Entry("contact", True, _parse_contact, _build_contact, coupling=True),
+    # h (T − T∞(t)) through a boundary region of a scalar field: a facet term and its load
+    "exchange": Entry("exchange", True, exchange.parse, exchange.build, coupling=True,
+                      regions=exchange.regions),
     "springs": Entry("springs", True, springs.parse,
                      lambda spec, ctx: springs.Springs(spec, ctx.mesh, ctx.regions, ctx.scene),
                      regions=springs.regions),

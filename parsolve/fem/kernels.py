@@ -105,17 +105,6 @@ def internal_forces(B: np.ndarray, wdet: np.ndarray, sigma: np.ndarray) -> np.nd
     return np.einsum("cqvd,cqv->cd", B, sigma * wdet[:, :, None])
 
 
-def body_load(coords: np.ndarray, cell_type: str, force: np.ndarray, thickness: float = 1.0):
-    """Element load vectors (nc, nen*dim) of a constant body force per unit volume."""
-    ref = element(cell_type)
-    xi, w = quadrature(cell_type, default_degree(cell_type, "load"))
-    N = ref.shape(xi)
-    _, det = physical_gradients(coords, ref.grad_shape(xi))
-    r = coords[:, :, 0] @ N.T if is_axisymmetric(thickness) else None
-    wn = scale(np.abs(det) * w, r, thickness) @ N          # (nc, nen): ∫ N_a
-    return (wn[:, :, None] * force[None, None, :]).reshape(len(coords), wn.shape[1] * len(force))
-
-
 def facet_load(coords: np.ndarray, facet_type: str, traction: np.ndarray,
                thickness: float = 1.0) -> np.ndarray:
     """Facet load vectors (nf, nfn*gdim) of a constant traction (force per unit area)."""
@@ -131,12 +120,6 @@ def facet_weights(coords: np.ndarray, facet_type: str, thickness: float = 1.0) -
     ds, _ = facet_measure_and_normal(coords, ref.grad_shape(xi))
     r = coords[:, :, 0] @ ref.shape(xi).T if is_axisymmetric(thickness) else None
     return scale(ds * w, r, thickness)
-
-
-def facet_measure(coords: np.ndarray, facet_type: str, thickness: float = 1.0) -> float:
-    """Total measure (length × thickness in 2D, area in 3D, the revolved area for an
-    axisymmetric model) of a set of facets."""
-    return float(facet_weights(coords, facet_type, thickness).sum())
 
 
 def cell_dofs(cells: np.ndarray, ncomp: int) -> np.ndarray:

@@ -30,10 +30,12 @@ class _Reject(Exception):
 class _Evaluator:
     """Walks a parsed expression; values are (kind, array) with kind 'num' or 'bool'."""
 
-    def __init__(self, points: np.ndarray, tol: float):
+    def __init__(self, points: np.ndarray, tol: float, t: float | None = None):
         self.tol = float(tol)
         self.points = points
         self.names = {name: points[:, d] for d, name in enumerate(_COORDS[: points.shape[1]])}
+        if t is not None:   # a value that varies in time (a load): t is the step's time
+            self.names["t"] = np.float64(t)
 
     def finite(self, value, node: ast.AST):
         """Every number an expression computes must be finite where it is evaluated:
@@ -182,6 +184,7 @@ def _evaluate(
     source: str | None = None,
     key: str | None = None,
     want: str = "bool",
+    t: float | None = None,
 ) -> np.ndarray:
     """Evaluate a coordinate condition at ``points`` (npoints, gdim): bool mask (npoints,).
 
@@ -205,7 +208,7 @@ def _evaluate(
         raise fail("cannot be parsed") from None
     try:
         with np.errstate(all="ignore"):  # non-finite values are reported, never warned about
-            kind, val = _Evaluator(points, tol).visit(tree)
+            kind, val = _Evaluator(points, tol, t).visit(tree)
     except _Reject as e:
         raise fail(e.args[0]) from None
     except RecursionError:
@@ -226,9 +229,10 @@ def evaluate(expr: str, points: np.ndarray, tol: float, source: str | None = Non
 
 
 def evaluate_value(expr: str, points: np.ndarray, source: str | None = None,
-                   key: str | None = None) -> np.ndarray:
-    """Evaluate a numeric expression of the coordinates (e.g. ``"1e-3 * x"``) at ``points``."""
-    return _evaluate(expr, points, 0.0, source, key, "num")
+                   key: str | None = None, t: float | None = None) -> np.ndarray:
+    """Evaluate a numeric expression of the coordinates (e.g. ``"1e-3 * x"``) at ``points``;
+    with ``t`` given, of the time too (``"-10 * (x - t)"``)."""
+    return _evaluate(expr, points, 0.0, source, key, "num", t)
 
 
 def _as_point(p, gdim: int, what: str, source: str | None, key: str | None) -> np.ndarray:

@@ -89,6 +89,25 @@ region = "upper"
 body = [0.0, -1.0]
 """, "upper"),
     "nodal": (ELASTIC, PULL, "top"),
+    "pressure_expression": (ELASTIC, """
+[[loads]]
+name = "squeeze"
+region = "top"
+pressure = "2 + x * t"
+""", "top"),
+    "gravity": (ELASTIC.replace("nu = 0.3", "nu = 0.3\ndensity = 0.5"), """
+[[loads]]
+name = "weight"
+region = "upper"
+gravity = [0.0, -9.81]
+""", "upper"),
+    "scalar_exchange": (SCALAR, """
+[[exchange]]
+field = "h"
+region = "top"
+coefficient = 3.0
+ambient = "5 + y * t"
+""", "top"),
     "nodal_point": (ELASTIC, """
 [[loads]]
 name = "poke"

@@ -1,0 +1,101 @@
+"""An exchange (Robin, convection) condition on a scalar field: the flux leaving a boundary
+region is h (T − T∞), with h a constant coefficient and T∞ (the ambient value) a number or an
+expression of (x, y, z, t). It adds the facet term h ∫ N Nᵀ to the field's operator and the
+load h ∫ N T∞ (assembled again at each instant when T∞ names t); with the θ-scheme both are
+weighted as the field's other terms, and a steady run solves with them alike.
+
+Scene schema (one table per condition)::
+
+    [[exchange]]
+    field = "T"                      # a scalar field (a [[diffusion]] one)
+    region = "right"                 # a boundary region
+    coefficient = 10.0               # h, per unit area
+    ambient = "20 + 5 * t"           # T∞: a number (constant) or an expression of x, y, z, t
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from parsolve.effects.base import Effect
+from parsolve.errors import InputError
+from parsolve.evolution import CONSTANT
+from parsolve.fem.integrals import facet_rule, facet_term, mass
+from parsolve.loads.base import (Instant, LoadPattern, LoadSpec, TimedPart, Where,
+                                 need_facets, values_at)
+from parsolve.loads.traction import facet_forces
+from parsolve.mesh.topology import FACETS, match_facets
+
+KEYS = {"field": ("string", "the scalar field exchanging"),
+        "region": ("string", "the boundary region it exchanges through"),
+        "coefficient": ("number", "h, the exchange coefficient per unit area (> 0)"),
+        "ambient": ("number or string", "T∞, a number or an expression of x, y, z, t")}
+
+
+@dataclass
+class ExchangeSpec:
+    field: str
+    region: str
+    coefficient: float
+    ambient: float | str
+    key: str
+
+
+def parse(t, dim: int) -> ExchangeSpec:
+    """An ``[[exchange]]`` table (a scene Table) → spec."""
+    spec = ExchangeSpec(t.get("field", str), t.get("region", str), t.get("coefficient", float),
+                        t.get("ambient", (float, str), 0.0), t.path)
+    if spec.coefficient <= 0:
+        raise t.error("coefficient", "must be positive")
+    t.done()
+    return spec
+
+
+def regions(spec: ExchangeSpec) -> list[tuple[str, str]]:
+    return [(spec.region, spec.key + ".region")]
+
+
+def build(spec: ExchangeSpec, ctx) -> "Exchange":
+    return Exchange(spec, ctx.mesh, ctx.regions, ctx.fields, ctx.scene)
+
+
+class Exchange(Effect):
+    name = "exchange"
+
+    def __init__(self, spec: ExchangeSpec, mesh, regions, fields, scene):
+        self.spec, self.mesh = spec, mesh
+        if spec.field not in fields or fields[spec.field].ncomp != 1:
+            raise InputError(f"{spec.field!r} is not a scalar field of the scene", scene.source,
+                             spec.key + ".field")
+        thickness = scene.thickness if mesh.dim == 2 else 1.0
+        region = regions(spec.region, spec.key + ".region")
+        self.load = LoadSpec("exchange", spec.region, "traction", [spec.ambient], "constant",
+                             spec.key, spec.field, "ambient")
+        self.where = Where(mesh, region, fields, thickness, regions, scene)
+        need_facets(self.load, self.where)
+        owner, lidx, _ = match_facets(mesh, region.facets)
+        self.owner = owner
+        nfn = region.facets.shape[1]   # (a rank may hold none of the region's facets)
+        self.local = np.asarray(FACETS[mesh.cell_type], dtype=np.int64)[lidx].reshape(-1, nfn)
+        rule = facet_rule(mesh.points[region.facets], mesh.facet_type, thickness)
+        self.values = spec.coefficient * mass(rule)          # (nf, nfn, nfn)
+        self._term = (None, None)
+        first = self._ambient(Instant(scene.times[0] if scene.times else 0.0))   # errors now
+        self.part = TimedPart(self._ambient) if self.load.timed else first
+
+    def _ambient(self, at: Instant) -> np.ndarray:
+        """h ∫ N T∞ ds at an instant (a full vector)."""
+        h = self.spec.coefficient
+        return facet_forces(self.load, self.where, lambda rule: h * values_at(
+            self.load, rule.points, at, self.where.source))
+
+    def stiffness_blocks(self, cells: np.ndarray):
+        if self._term[0] is not cells:
+            self._term = (cells, facet_term(cells, self.mesh.num_cells, self.owner, self.local,
+                                            self.values, self.mesh.cells.shape[1]))
+        return [(self.spec.field, self.spec.field, self._term[1])]
+
+    def patterns(self) -> dict[str, LoadPattern]:
+        return {self.spec.key: LoadPattern(self.spec.key, [(self.part, CONSTANT)])}

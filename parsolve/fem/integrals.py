@@ -1,0 +1,104 @@
+"""Integrals at quadrature points on boundary facets (curved second-order ones included) and on
+cells: the points, the weights (w |J| × the out-of-plane measure: thickness or 2π r) and the
+facets' unit normals, for loads whose value varies over the element (an expression of the
+coordinates, a pressure along the normal of a curved face) and for facet terms of an operator
+(an exchange condition's h ∫ N Nᵀ).
+
+The facet normal is the one of ``elements.facet_measure_and_normal``: outward for the facets
+of a region (``FACETS`` order on positively oriented cells), evaluated at each quadrature point
+of the facet's own geometry (a six-node triangle or three-node line follows the curve).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from parsolve.fem.axisymmetric import is_axisymmetric, scale
+from parsolve.fem.element_matrices import CellKernel, ElementMatrices
+from parsolve.fem.elements import (default_degree, element, facet_measure_and_normal,
+                                   physical_gradients, polynomial_order, quadrature)
+
+
+@dataclass
+class Rule:
+    """Quadrature on a set of facets or cells: shape functions N (nq, nen), weights (n, nq)
+    with the measure, points (n, nq, gdim) and, on facets, unit normals (n, nq, gdim)."""
+
+    N: np.ndarray
+    weights: np.ndarray
+    points: np.ndarray
+    normals: np.ndarray | None = None
+
+
+def _degree(cell_type: str) -> int:
+    """Exact for a polynomial value of the element's order on a curved facet, the 2π r
+    factor included (N of order p, n ds of order p - 1, r of order p, value of order p)."""
+    return 4 * polynomial_order(cell_type)
+
+
+def facet_rule(coords: np.ndarray, facet_type: str, thickness=1.0) -> Rule:
+    """The rule on facets ``coords`` (nf, nfn, gdim)."""
+    ref = element(facet_type)
+    xi, w = quadrature(facet_type, _degree(facet_type))
+    N = ref.shape(xi)
+    ds, normals = facet_measure_and_normal(coords, ref.grad_shape(xi))
+    points = np.einsum("qa,fad->fqd", N, coords)
+    r = points[:, :, 0] if is_axisymmetric(thickness) else None
+    return Rule(N, scale(ds * w, r, thickness), points, normals)
+
+
+def cell_rule(coords: np.ndarray, cell_type: str, thickness=1.0) -> Rule:
+    """The rule on cells ``coords`` (nc, nen, dim) (the load degree of the cell type)."""
+    ref = element(cell_type)
+    xi, w = quadrature(cell_type, default_degree(cell_type, "load") + 2)
+    N = ref.shape(xi)
+    _, det = physical_gradients(coords, ref.grad_shape(xi))
+    points = np.einsum("qa,cad->cqd", N, coords)
+    r = points[:, :, 0] if is_axisymmetric(thickness) else None
+    return Rule(N, scale(np.abs(det) * w, r, thickness), points)
+
+
+def integrate(rule: Rule, values: np.ndarray) -> np.ndarray:
+    """∫ N_a v over each facet or cell: (n, nen, ncomp) of values (n, nq, ncomp)."""
+    return np.einsum("qa,nq,nqc->nac", rule.N, rule.weights, values)
+
+
+def mass(rule: Rule) -> np.ndarray:
+    """∫ N_a N_b over each facet or cell: (n, nen, nen)."""
+    return np.einsum("qa,qb,nq->nab", rule.N, rule.N, rule.weights)
+
+
+def facet_term(cells: np.ndarray, num_cells: int, owner: np.ndarray, local: np.ndarray,
+               values: np.ndarray, nen: int) -> ElementMatrices:
+    """A facet term (a boundary integral between a field and itself, e.g. h ∫ N Nᵀ) as cell
+    element matrices over ``cells``, in the blocked form: facet f's (nfn, nfn) matrix
+    ``values[f]`` goes to nodes ``local[f]`` (positions in the cell) of mesh cell
+    ``owner[f]``. A boundary facet's nodes are its cell's, so the term needs no slot the cells
+    do not already give; facets whose cell is not among ``cells`` are another rank's."""
+    where = np.full(num_cells, -1, dtype=np.int64)
+    where[cells] = np.arange(len(cells))
+    at = where[owner]
+    keep = at >= 0
+    at, local, values = at[keep], local[keep], values[keep]
+
+    def compute(sel, out):
+        if isinstance(sel, slice):   # a block of consecutive cells (every assembly)
+            start, n = sel.start or 0, len(range(*sel.indices(len(cells))))
+            pos = at - start
+            hit = (pos >= 0) & (pos < n)
+        else:                        # a few cells by index (Newton's replaced cells)
+            n = len(sel)
+            block = np.full(len(cells), -1, dtype=np.int64)
+            block[sel] = np.arange(n)
+            pos = block[at]
+            hit = pos >= 0
+        V = np.zeros((1, nen, nen, n)) if out is None or out.shape[-1] != n else out
+        V.fill(0.0)
+        rows = local[hit]
+        np.add.at(V[0], (rows[:, :, None], rows[:, None, :], pos[hit][:, None, None]),
+                  values[hit])
+        return V
+
+    return ElementMatrices(kernel=CellKernel(compute, len(cells), 1, nen))

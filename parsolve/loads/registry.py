@@ -1,0 +1,68 @@
+"""The loads parsolve knows: each names its scene key, the values it takes, where it acts and
+how it is assembled (its module). A ``[[loads]]`` entry gives exactly one of these keys; adding
+a load kind is a module and one line here.
+
+Every entry reads the same common keys (``name``, ``field``, ``region``, ``evolution``) and its
+own value: ``field`` values (one per component of the loaded field), ``one`` value (a pressure)
+or ``dim`` values (an acceleration); ``expressions``: whether a value may be an expression of
+(x, y, z, t) (a string) besides a number."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+from parsolve.loads import body, gravity, nodal, pressure, total_force, traction
+
+
+@dataclass(frozen=True)
+class LoadEntry:
+    assemble: Callable          # (LoadSpec, Where, t) -> full force vector
+    values: str                 # "field", "one" or "dim"
+    on: str                     # "vector" (a vector field), "scalar" (a scalar one) or "any"
+    expressions: bool           # values may be expressions of (x, y, z, t)
+    region: str | None          # default region (None: required)
+    kind: str = ""              # the entry it is an alias of on a scalar field ("flux": traction)
+    description: str = ""
+
+
+LOADS: dict[str, LoadEntry] = {
+    "traction": LoadEntry(traction.assemble, "field", "vector", True, None,
+                          description="force per unit area on a boundary region"),
+    "total_force": LoadEntry(total_force.assemble, "field", "vector", False, None,
+                             description="resultant spread uniformly over a boundary region"),
+    "body": LoadEntry(body.assemble, "field", "vector", True, "all",
+                      description="force per unit volume on a region's cells"),
+    "nodal": LoadEntry(nodal.assemble, "field", "any", True, None,
+                       description="force on each node of a region"),
+    "pressure": LoadEntry(pressure.assemble, "one", "vector", True, None,
+                          description="pressure against the outward normal of a boundary region"),
+    "gravity": LoadEntry(gravity.assemble, "dim", "vector", False, "all",
+                         description="acceleration: the body force ρ g, ρ the materials' density"),
+    # a scalar field's loads under their own names
+    "flux": LoadEntry(traction.assemble, "field", "scalar", True, None, "traction",
+                      "flux into the domain per unit area of a boundary region"),
+    "source": LoadEntry(body.assemble, "field", "scalar", True, "all", "body",
+                        "source per unit volume on a region's cells"),
+    "total_flux": LoadEntry(total_force.assemble, "field", "scalar", False, None, "total_force",
+                            "total flux spread uniformly over a boundary region"),
+}
+
+# the keys every entry reads besides its own (type, description), for the scene reference
+COMMON_KEYS = {
+    "name": ("string", "the pattern the load belongs to (default \"loads\")"),
+    "field": ("string", "the field it loads (default: the displacement, else the only field)"),
+    "region": ("string", "where it acts"),
+    "evolution": ("string", "its factor in time (default \"ramp\"; \"constant\" for a value "
+                            "that names t)"),
+}
+
+
+def names_for(ncomp: int) -> tuple[str, ...]:
+    """The keys a load on a field of ``ncomp`` components may give: the field kind's own in
+    the registry's order, then those of any field (a scalar field's: flux, source,
+    total_flux, nodal)."""
+    want = "scalar" if ncomp == 1 else "vector"
+    own = [k for k, e in LOADS.items() if e.on == want]
+    return tuple(own + [k for k, e in LOADS.items() if e.on == "any"]) if want == "scalar" \
+        else tuple(k for k, e in LOADS.items() if e.on in (want, "any"))
