@@ -84,7 +84,7 @@ class Elasticity(Effect):
         self.thickness = thickness if mesh.dim == 2 else 1.0
         self.axisymmetric = is_axisymmetric(self.thickness)   # x = r, y = z; weights 2π r
         if self.axisymmetric:
-            self.thickness.check_mesh(mesh.points)
+            self.thickness.check_mesh(mesh.points[:mesh.n_owned], regions.comm)
         self.ncomp = mesh.dim
         self.models = []
         self.cell_model = np.full(mesh.num_cells, -1, dtype=np.int64)
