@@ -19,6 +19,7 @@ from parsolve.io.mesh_rows import output_mesh
 from parsolve.model import Model
 from parsolve.outputs import Balance, progress, resultant_labels, step_outputs
 from parsolve.solvers.arc_length import run_arc_length
+from parsolve.solvers.finite import check_finite
 from parsolve.solvers.newton import NewtonSolver
 from parsolve.solvers.setup import export_system, make_solver
 from parsolve.solvers.system import SaddleSystem
@@ -121,6 +122,8 @@ def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log
         q, multipliers = system.unpack(system.gather(x.array), t, f_ext=f_rhs)
         fields, cell_fields, rel_out = step_outputs(comm, ctx, q, multipliers)
         extra = balance.step(q, t - t_prev, f_known, multipliers) if balance else {}
+        check_finite(comm, step + 1, t, q, multipliers, solver.residual, fields, cell_fields,
+                     rel_out, extra)
         timings = {"assembly": assembly, **solver.take_timings()}
         timings["output"] = time.perf_counter() - t2
         timings["total"] = time.perf_counter() - t1
@@ -166,6 +169,8 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log) -> None:
         multipliers = newton.multipliers(t, result.f_int)
         fields, cell_fields, rel_out = step_outputs(comm, ctx, newton.q, multipliers, newton)
         extra = balance.step(newton.q, t - t_prev, newton.f_ext, multipliers) if balance else {}
+        check_finite(comm, step, t, newton.q, multipliers, result.residual, fields, cell_fields,
+                     rel_out, extra)
         pivots = solver.negative_pivots()  # the saddle's: one per enforced multiplier row
         if pivots is not None:
             pivots -= int(newton.active.active.sum())

@@ -18,6 +18,7 @@ import numpy as np
 
 from parsolve import interrupts
 from parsolve.errors import SolverError
+from parsolve.solvers.finite import check_finite
 from parsolve.solvers.newton import NewtonSolver
 
 
@@ -80,6 +81,10 @@ class ArcLength(NewtonSolver):
             # the forces in play, reactions of eliminated DOFs included
             ref = max(self._norm(f_ext[free]), self._norm(self.ctx.owned_rows(f_int)), 1e-300)
             residual = self._norm(r) / ref
+            if not np.isfinite(residual):   # (the same on every rank)
+                raise SolverError(f"arc-length: non-finite residual at load factor "
+                                  f"{self.mu:.6g}, iteration {it} (a diverged solve, or a "
+                                  "material that cannot be evaluated there)")
             if it > 0 and residual <= spec.rtol:
                 self.states, self.extras = trial, extras
                 # the loads the step balances: the reactions of eliminated DOFs are F + μ P
@@ -145,6 +150,8 @@ def run_arc_length(comm, system, cli_options, writer, log) -> None:
         seconds = time.perf_counter() - t1
         multipliers = solver.multipliers(scene.times[step], f_int)
         fields, cell_fields, rel_out = step_outputs(comm, system.context, solver.q, multipliers, solver)
+        check_finite(comm, step + 1, solver.mu, solver.q, multipliers, residual, fields,
+                     cell_fields, rel_out, {})
         writer.write_step(solver.mu, iterations, residual, fields, cell_fields, rel_out,
                           {"assembly": 0.0, "solve": seconds, "total": seconds})
         interrupts.check(comm)

@@ -290,6 +290,10 @@ class NewtonSolver:
             r_norm = self._norm(r)
             residual = r_norm / max(ref, self._roundoff_force() / spec.rtol)
             self.residual_history.append(residual)
+            if not np.isfinite(residual):   # (the same on every rank): a failed iteration
+                raise SolverError(f"non-finite residual at t = {t:.6g}, iteration {it} (a "
+                                  "diverged solve, or a material that cannot be evaluated "
+                                  "there)")
             small_step = dq_norm <= spec.stol * max(self.ctx.max_abs(self.q), 1e-300)
             balanced = residual <= spec.rtol or small_step and r_norm < 1e-6 * ref
             if it > 0 and not changed and balanced:
