@@ -20,6 +20,7 @@ from parsolve.model import Model
 from parsolve.outputs import Balance, progress, resultant_labels, step_outputs
 from parsolve.solvers.arc_length import run_arc_length
 from parsolve.solvers.finite import check_finite
+from parsolve.solvers.linear import DoesNotFit
 from parsolve.solvers.newton import NewtonSolver
 from parsolve.solvers.setup import export_system, make_solver
 from parsolve.solvers.system import SaddleSystem
@@ -158,7 +159,7 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log) -> None:
             result = newton.step(t)
         except SolverError as exc:
             newton.restore(snap)
-            if not schedule.cut(t):
+            if isinstance(exc, DoesNotFit) or not schedule.cut(t):
                 raise
             if comm.rank == 0:
                 log(f"step to t={t:.6g} failed ({exc}); retrying with half the step")

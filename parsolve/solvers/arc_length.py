@@ -19,6 +19,7 @@ import numpy as np
 from parsolve import interrupts
 from parsolve.errors import SolverError
 from parsolve.solvers.finite import check_finite
+from parsolve.solvers.linear import DoesNotFit
 from parsolve.solvers.newton import NewtonSolver
 
 
@@ -58,6 +59,8 @@ class ArcLength(NewtonSolver):
             try:
                 its, residual, f_int = self._step(t, dl)
                 return spent + its, residual, f_int
+            except DoesNotFit:
+                raise   # (a shorter arc needs the same factor)
             except SolverError as exc:
                 spent += getattr(exc, "iterations", self.spec.max_iterations)
                 self.q, self.mu, self.lam = saved[0].copy(), saved[1], saved[2].copy()

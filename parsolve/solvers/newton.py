@@ -24,7 +24,7 @@ from parsolve.effects.compose import Rate
 from parsolve.errors import SolverError
 from parsolve.scene import NonlinearSpec
 from parsolve.solvers.active_set import GROUP_TOL, ActiveSet
-from parsolve.solvers.linear import LinearSolver
+from parsolve.solvers.linear import DoesNotFit, LinearSolver
 from parsolve.solvers.system import SaddleSystem
 
 
@@ -318,7 +318,7 @@ class NewtonSolver:
                 except SolverError as exc:
                     if it == 0 and attempt == 0 and self._close_contact():
                         continue   # a body floating until contact: start it in contact
-                    if it == 0:
+                    if it == 0 or isinstance(exc, DoesNotFit):
                         raise
                     # singular at a later iterate only: the iterates diverged first (a
                     # softening material driven past full damage), which the cut step must know
