@@ -52,9 +52,9 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
     status = "complete"
     try:
         if scene.nonlinear.method == "arc_length":
-            run_arc_length(comm, system, cli_options, writer, log)
+            run_arc_length(comm, system, cli_options, writer, log, export_dir)
         elif needs_newton(model):
-            _run_newton(comm, system, cli_options, writer, log)
+            _run_newton(comm, system, cli_options, writer, log, export_dir)
         else:
             _run_linear(comm, system, cli_options, writer, export_dir, log)
     except SolverError as exc:
@@ -136,7 +136,7 @@ def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log
         q_prev, t_prev = q, t
 
 
-def _run_newton(comm, system: SaddleSystem, cli_options, writer, log) -> None:
+def _run_newton(comm, system: SaddleSystem, cli_options, writer, log, export_dir=None) -> None:
     """Newton + active set at every step; the steps follow the scene or the automatic rule.
     A step that fails is cut in two and retried (bounded), fixed steps as automatic ones; the
     log and /steps/cuts say so."""
@@ -147,6 +147,7 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log) -> None:
     system.timings.pop("assembly")   # (counted in the set-up, which step 1 carries)
     solver = make_solver(comm, system, cli_options)
     newton = NewtonSolver(comm, system, solver, scene.nonlinear)
+    newton.export_dir = export_dir
     schedule = StepSchedule(scene)
     balance = Balance(comm, ctx, newton.q) if ctx.transient else None
     watch = BranchWatch(ctx.nonlinear)

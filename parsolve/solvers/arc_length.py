@@ -38,6 +38,7 @@ class ArcLength(NewtonSolver):
         side."""
         x, rhs = self._vectors(mat)
         rhs.array[:] = self.system.rhs_from(f_full, target, elim)[0]
+        self._export(mat, rhs)
         self.linear.solve(rhs, x)
         x_full = self.system.gather(x.array)
         return x_full.q, self.system.multipliers(x_full), x_full
@@ -139,13 +140,14 @@ class ArcLength(NewtonSolver):
         return max(roots, key=lambda m: a_ref + m * b_ref)
 
 
-def run_arc_length(comm, system, cli_options, writer, log) -> None:
+def run_arc_length(comm, system, cli_options, writer, log, export_dir: str | None = None) -> None:
     from parsolve.outputs import progress, step_outputs
     from parsolve.solvers.setup import make_solver
 
     scene = system.context.scene
     system.assemble()
     solver = ArcLength(comm, system, make_solver(comm, system, cli_options), scene.nonlinear)
+    solver.export_dir = export_dir
     nsteps = len(scene.times)
     for step in range(nsteps):
         t1 = time.perf_counter()

@@ -25,6 +25,7 @@ from parsolve.errors import SolverError
 from parsolve.scene import NonlinearSpec
 from parsolve.solvers.active_set import GROUP_TOL, ActiveSet
 from parsolve.solvers.linear import DoesNotFit, LinearSolver
+from parsolve.solvers.setup import export_system
 from parsolve.solvers.system import SaddleSystem
 
 
@@ -133,6 +134,7 @@ class NewtonSolver:
         self.hooks = [e for e in ctx.effects if e.refreshes]
         self._rows = self._dependence_rows()
         self.left_out = np.zeros(self.active.sign.size, dtype=bool)
+        self.export_dir: str | None = None   # --export-system: the first system assembled
 
     def _dependence_rows(self) -> tuple | None:
         """The multiplied rows as COO (row numbers of the active set) with the contact rows
@@ -312,6 +314,7 @@ class NewtonSolver:
                 self._use(mat)
                 x, rhs = self._vectors(mat)
                 rhs.array[:] = system.rhs(t, f_int=f_int, q=self.q, f_ext=f_known)[0]
+                self._export(mat, rhs)
                 try:
                     self.linear.solve(rhs, x)
                     break
@@ -509,6 +512,12 @@ class NewtonSolver:
                 self.active.active[g] = False
                 self.active.active[best] = True
         self.active.start_step()
+
+    def _export(self, mat, rhs) -> None:
+        """--export-system DIR: the first system solved, once (collective)."""
+        if self.export_dir is not None:
+            export_system(self.comm, self.export_dir, mat, rhs, self.system)
+            self.export_dir = None
 
     def _vectors(self, mat):
         if not hasattr(self, "_xr"):
