@@ -70,7 +70,8 @@ def build(specs: list[MaterialSpec], ctx) -> "Elasticity":
                       scene.source)
 
 
-AFFINE = ("triangle", "tetra")   # constant gradients: one strain per cell
+AFFINE = ("triangle", "tetra")
+HISTORY = (("damage", "D"), ("plastic_strain", "p"))   # written cell means of the states   # constant gradients: one strain per cell
 POST_BLOCK_BYTES = 8 << 20       # work arrays of one block of the stress post-processing
 
 class Elasticity(Effect):
@@ -116,7 +117,9 @@ class Elasticity(Effect):
         return [Field("u", VECTOR_COMPONENTS[:self.mesh.dim], "displacement", displacement=True)]
 
     def output_names(self) -> list[str]:
-        return ["stress", "damage", "plastic_strain"]
+        """The stress, and the history variables its materials have (``internal_variables``)."""
+        keys = set().union(*(m.init_state(1) for m in self.models))
+        return ["stress"] + [name for name, key in HISTORY if key in keys]
 
     def increment_size(self, cells: np.ndarray, values: dict[str, np.ndarray]) -> float:
         """The largest strain component of the increment ``values`` on these cells (a block of
@@ -345,7 +348,7 @@ class Elasticity(Effect):
         """Cell means of the scalar history variables worth plotting (damage, plastic strain)."""
         nq = self.geometry(cells[:1]).nq if cells.size else 1
         out = {}
-        for name, key in (("damage", "D"), ("plastic_strain", "p")):
+        for name, key in HISTORY:
             if not any(key in st for st in states):
                 continue
             field = np.zeros(len(cells))
