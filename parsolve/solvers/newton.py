@@ -167,6 +167,13 @@ class NewtonSolver:
                                        self.ctx.ncomp)
         return active & ~self.left_out
 
+    @property
+    def enforced(self) -> np.ndarray:
+        """The active rows the last solve enforced: less the contact rows it left out (a held
+        or tied node's: multiplier zero, the rows it depends on carry its reaction), which a
+        step's outputs report as carrying nothing (state open), not as stuck."""
+        return self.active.active & ~self.left_out
+
     def _empty_rows(self) -> np.ndarray:
         """Per relation row of the active set: no A entry (a finite-sliding slave that no facet
         faces yet): never enforced, whatever its value."""
