@@ -21,6 +21,8 @@ from parsolve.model import Model
 from parsolve.outputs import Balance, contact_line, contact_totals, progress, resultant_labels, \
     resultant_line, step_outputs
 from parsolve.solvers.arc_length import run_arc_length
+from parsolve.solvers.finite import check_finite
+from parsolve.solvers.linear import DoesNotFit
 from parsolve.solvers.newton import NewtonSolver
 from parsolve.solvers.setup import export_system, make_solver
 from parsolve.solvers.system import SaddleSystem
@@ -52,9 +54,9 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
     status = "complete"
     try:
         if scene.nonlinear.method == "arc_length":
-            run_arc_length(comm, system, cli_options, writer, log)
+            run_arc_length(comm, system, cli_options, writer, log, export_dir)
         elif needs_newton(model):
-            _run_newton(comm, system, cli_options, writer, log)
+            _run_newton(comm, system, cli_options, writer, log, export_dir)
         else:
             _run_linear(comm, system, cli_options, writer, export_dir, log)
     except SolverError as exc:
@@ -123,6 +125,8 @@ def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log
         q, multipliers = system.unpack(system.gather(x.array), t, f_ext=f_rhs)
         fields, cell_fields, rel_out = step_outputs(comm, ctx, q, multipliers)
         extra = balance.step(q, t - t_prev, f_known, multipliers) if balance else {}
+        check_finite(comm, step + 1, t, q, multipliers, solver.residual, fields, cell_fields,
+                     rel_out, extra)
         timings = {"assembly": assembly, **solver.take_timings()}
         timings["output"] = time.perf_counter() - t2
         timings["total"] = time.perf_counter() - t1
@@ -134,7 +138,7 @@ def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log
         q_prev, t_prev = q, t
 
 
-def _run_newton(comm, system: SaddleSystem, cli_options, writer, log) -> None:
+def _run_newton(comm, system: SaddleSystem, cli_options, writer, log, export_dir=None) -> None:
     """Newton + active set at every step; the steps follow the scene or the automatic rule.
     A step that fails is cut in two and retried (bounded), fixed steps as automatic ones; the
     log and /steps/cuts say so."""
@@ -145,6 +149,7 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log) -> None:
     system.timings.pop("assembly")   # (counted in the set-up, which step 1 carries)
     solver = make_solver(comm, system, cli_options)
     newton = NewtonSolver(comm, system, solver, scene.nonlinear)
+    newton.export_dir = export_dir
     schedule = StepSchedule(scene)
     balance = Balance(comm, ctx, newton.q) if ctx.transient else None
     watch = BranchWatch(ctx.nonlinear)
@@ -157,7 +162,7 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log) -> None:
             result = newton.step(t)
         except SolverError as exc:
             newton.restore(snap)
-            if not schedule.cut(t):
+            if isinstance(exc, DoesNotFit) or not schedule.cut(t):
                 raise
             if comm.rank == 0:
                 log(f"step to t={t:.6g} failed ({exc}); retrying with half the step")
@@ -168,6 +173,8 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log) -> None:
         multipliers = newton.multipliers(t, result.f_int)
         fields, cell_fields, rel_out = step_outputs(comm, ctx, newton.q, multipliers, newton)
         extra = balance.step(newton.q, t - t_prev, newton.f_ext, multipliers) if balance else {}
+        check_finite(comm, step, t, newton.q, multipliers, result.residual, fields, cell_fields,
+                     rel_out, extra)
         pivots = solver.negative_pivots()  # the saddle's: one per enforced multiplier row
         if pivots is not None:
             pivots -= int(newton.active.active.sum())

@@ -123,7 +123,7 @@ def step_outputs(comm: MPI.Comm, ctx, q: np.ndarray, multipliers: dict, newton=N
             value = np.asarray(value, dtype=float)
             cell_fields[name] = OwnedRows(value[keep])
     rel_out = {}
-    active = newton.active.active if newton is not None else None
+    active = newton.enforced if newton is not None else None
     reported = [r for r in ctx.all_relations if not r.meta.get("device")]
     for r in reported:
         lam = multipliers[r.name]

@@ -624,7 +624,9 @@ def _solver(t: Table) -> SolverSpec:
     split = t.get("split", str, "primal", choices=("primal", "fields"))
     partitioner = t.get("partitioner", str, DEFAULT_PARTITIONER, choices=PARTITIONERS)
     if "mesh" in t.data:
-        t.used.add("mesh")   # whatever its value
+        t.used.add("mesh")   # whatever its value, but a number must be one (nan, inf refused)
+        if isinstance(t.data["mesh"], float):
+            check_number(t.data["mesh"], t.source, t.key("mesh"))
         _deprecated_mesh(t)
     options = _flatten(t.table("petsc", {}))
     t.done()

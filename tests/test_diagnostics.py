@@ -93,3 +93,53 @@ def test_the_bodies_no_relation_holds_are_named(run, shared_tmp, comm):
     with pytest.raises(SolverError) as err:
         run(BODY.format(path=path), name="floating")
     assert str(err.value).endswith("likely cause: " + "; ".join(expected)), str(err.value)
+
+
+BLOCK_ON_PLANE = """
+[mesh]
+generator = "rectangle"
+lx = 1.0
+ly = 0.5
+nx = 8
+ny = 4
+cell = "quad"
+[model]
+hypothesis = "plane_strain"
+[[materials]]
+E = 1000.0
+nu = 0.3
+[[loads]]
+name = "push"
+region = "top"
+traction = [{tx}, {ty}]
+evolution = "constant"
+[[contact]]
+name = "base"
+slave = "bottom"
+obstacle = {{ plane = {{ origin = [0.0, 0.0], normal = [0.0, 1.0] }} }}
+friction = 0.5
+[steps]
+count = 2
+"""
+
+
+@pytest.mark.parametrize("degrees, fails", [(30.0, True), (20.0, False)])
+def test_a_load_friction_cannot_carry_is_named(run, degrees, fails):
+    """A block on a rough plane (μ = 0.5) under a uniform load at an angle from the normal:
+    at 30° (tan 30° = 0.577 > μ) no equilibrium exists, the step is cut to its limit and the
+    failure names the friction capacity; at 20° (0.364 < μ) the block sticks, its friction
+    force the load's tangential part."""
+    from parsolve.errors import SolverError
+
+    a = np.radians(degrees)
+    text = BLOCK_ON_PLANE.format(tx=10 * np.sin(a), ty=-10 * np.cos(a))
+    if not fails:
+        res = run(text, name="friction_ok")
+        force = res["relations/base_normal/tangential_force"][-1, 0]
+        assert abs(force) == pytest.approx(10 * np.sin(a), rel=1e-10)
+        return
+    with pytest.raises(SolverError) as err:
+        run(text, name="friction_impossible")
+    message = str(err.value)
+    assert "contact[0]: every closed node of 'base' slides" in message, message
+    assert "the tangential load exceeds the friction capacity μN (μ = 0.5)" in message, message

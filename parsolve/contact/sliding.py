@@ -23,6 +23,7 @@ import numpy as np
 
 from parsolve.contact.pairing import Pairing, contains, facet_spans, pair_on
 from parsolve.contact.surfaces import Surfaces
+from parsolve.errors import SolverError
 
 
 @dataclass
@@ -192,7 +193,12 @@ def fit_mortar(new: Pairing, last: Pairing, x: np.ndarray) -> tuple[Pairing, np.
     facets uncovered: past the master's end) keeps its last row, its master combination and
     normal, with its point and gap measured on x (as a node-to-segment slave past the master's
     end stays on its last facet). Slaves the new rows hold beyond the set are left out.
-    Returns (the rows, which of them the new rows hold)."""
+    Returns (the rows, which of them the new rows hold). No new row at all: the iterate
+    carried the whole slave surface off the master (a diverging Newton iterate, not a state
+    to measure gaps on): a SolverError, which fails the iteration and cuts the step."""
+    if len(new) == 0:
+        raise SolverError("no mortar row left: the Newton iterate carried every slave of the "
+                          "contact off the master (the iterates diverged)")
     at = np.minimum(np.searchsorted(new.slave, last.slave), max(len(new) - 1, 0))
     found = (new.slave[at] == last.slave) if len(new) else np.zeros(len(last), dtype=bool)
     width = max(new.master.shape[1], last.master.shape[1])

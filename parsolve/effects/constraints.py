@@ -27,6 +27,7 @@ def build_relations(specs: list, regions, evolutions: dict, patterns: dict, fiel
         r.meta = {"type": spec.type, "key": spec.key, "dual": spec.dual}
         out.append(r)
     out = rel.drop_repeated_rows(out)
+    _check_repeated_ties(out, fields, source)
     out = _drop_held_ties(out, source)
     _check_duals(out, specs, source)
     dups = rel.duplicate_rows(out)
@@ -209,6 +210,39 @@ def _held_values(relations: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     dof, value, evol = np.concatenate(dof), np.concatenate(value), np.concatenate(evol)
     order = np.argsort(dof, kind="stable")
     return dof[order], value[order], evol[order]
+
+
+def _check_repeated_ties(relations: list, fields, source: str) -> None:
+    """The same pair of DOFs tied twice (one periodic relation given twice, or both ways:
+    region and target swapped) makes the system singular: refused, naming both relations.
+    Relations here are the whole set on every rank: the same answer everywhere."""
+    pairs, owner = [], []
+    for k, r in enumerate(relations):
+        if r.meta.get("type") != "periodic":
+            continue
+        ends = np.empty((r.nrows, 2), dtype=np.int64)   # the row's two DOFs, either order
+        ends[r.a_rows[r.a_vals > 0], 0] = r.a_dofs[r.a_vals > 0]
+        ends[r.a_rows[r.a_vals < 0], 1] = r.a_dofs[r.a_vals < 0]
+        pairs.append(np.sort(ends, axis=1))
+        owner.append(np.full(r.nrows, k))
+    if len(pairs) == 0:
+        return
+    pairs, owner = np.concatenate(pairs), np.concatenate(owner)
+    order = np.lexsort((owner, pairs[:, 1], pairs[:, 0]))
+    pairs, owner = pairs[order], owner[order]
+    again = np.flatnonzero((pairs[1:] == pairs[:-1]).all(axis=1))
+    if again.size == 0:
+        return
+    first, second = relations[owner[again[0]]], relations[owner[again[0] + 1]]
+    node_a, comp = divmod(int(pairs[again[0], 0]), fields.ncomp)
+    node_b = int(pairs[again[0], 1]) // fields.ncomp
+    field = next(f for f in fields if comp in fields.columns(f.name))
+    label = f"{field.name}.{field.components[comp - fields.offset[field.name]]}".rstrip(".")
+    both = f"relations {first.name!r} and {second.name!r} both tie" if first is not second \
+        else f"relation {first.name!r} ties twice"
+    raise InputError(f"repeated periodic tie: {both} {label} of nodes {node_a} and {node_b} "
+                     f"({again.size} such pairs; a tie given twice, or both ways); the system "
+                     "would be singular: give each tie once", source, second.meta["key"])
 
 
 def _drop_held_ties(relations: list, source: str) -> list:

@@ -431,6 +431,20 @@ class Contact(FiniteSliding, Effect):
     def frictional(self) -> bool:
         return self.spec.mu > 0.0
 
+    def failure_hints(self) -> list[str]:
+        """Besides finite sliding's: every closed node sliding at the failed attempt's last
+        iterate, with nothing else holding the body along the surface, is a tangential load
+        above what friction can carry (μ N): no equilibrium exists, the operator is singular
+        along the slide. (The node states are the whole surface's: the same on every rank.)"""
+        hints = super().failure_hints()
+        closed = self.node_state != fr.OPEN
+        if self.frictional and closed.any() and (self.node_state[closed] == fr.SLIP).all():
+            hints.append(f"{self.source}: {self.spec.key}: every closed node of {self.spec.name!r} "
+                         f"slides at the last iterate: with nothing else holding the body along the "
+                         f"surface, the tangential load exceeds the friction capacity μN (μ = "
+                         f"{self.mu:g}); hold it, lower the tangential load or raise the friction")
+        return hints
+
     # ------------------------------------------------------------------ relations
 
     def relations(self) -> list[Relation]:

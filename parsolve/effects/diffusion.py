@@ -98,7 +98,7 @@ class Diffusion(Effect):
         self.spec, self.mesh = spec, mesh
         self.thickness = thickness if mesh.dim == 2 else 1.0
         if is_axisymmetric(self.thickness):   # x = r: weights 2π r in conductivity and capacity
-            self.thickness.check_mesh(mesh.points)
+            self.thickness.check_mesh(mesh.points[:mesh.n_owned], regions.comm)
         self.cell_material = np.full(mesh.num_cells, -1, dtype=np.int64)
         for i, m in enumerate(spec.materials):
             region = regions(m.region, m.key + ".region")

@@ -74,7 +74,8 @@ def build(specs: list[MaterialSpec], ctx) -> "Elasticity":
                       scene.source)
 
 
-AFFINE = ("triangle", "tetra")   # constant gradients: one strain per cell
+AFFINE = ("triangle", "tetra")
+HISTORY = (("damage", "D"), ("plastic_strain", "p"))   # written cell means of the states   # constant gradients: one strain per cell
 POST_BLOCK_BYTES = 8 << 20       # work arrays of one block of the stress post-processing
 
 class Elasticity(Effect):
@@ -88,7 +89,7 @@ class Elasticity(Effect):
         self.thickness = thickness if mesh.dim == 2 else 1.0
         self.axisymmetric = is_axisymmetric(self.thickness)   # x = r, y = z; weights 2π r
         if self.axisymmetric:
-            self.thickness.check_mesh(mesh.points)
+            self.thickness.check_mesh(mesh.points[:mesh.n_owned], regions.comm)
         self.ncomp = mesh.dim
         self.models = []
         self.cell_model = np.full(mesh.num_cells, -1, dtype=np.int64)
@@ -120,7 +121,9 @@ class Elasticity(Effect):
         return [Field("u", VECTOR_COMPONENTS[:self.mesh.dim], "displacement", displacement=True)]
 
     def output_names(self) -> list[str]:
-        return ["stress", "damage", "plastic_strain"]
+        """The stress, and the history variables its materials have (``internal_variables``)."""
+        keys = set().union(*(m.init_state(1) for m in self.models))
+        return ["stress"] + [name for name, key in HISTORY if key in keys]
 
     def increment_size(self, cells: np.ndarray, values: dict[str, np.ndarray]) -> float:
         """The largest strain component of the increment ``values`` on these cells (a block of
@@ -349,7 +352,7 @@ class Elasticity(Effect):
         """Cell means of the scalar history variables worth plotting (damage, plastic strain)."""
         nq = self.geometry(cells[:1]).nq if cells.size else 1
         out = {}
-        for name, key in (("damage", "D"), ("plastic_strain", "p")):
+        for name, key in HISTORY:
             if not any(key in st for st in states):
                 continue
             field = np.zeros(len(cells))

@@ -107,6 +107,12 @@ class ThermalExpansion(Effect):
         if spec.field not in fields or not fields[spec.field].scalar:
             raise InputError(f"names no scalar diffusion field: {spec.field!r} (fields: "
                              f"{', '.join(fields.names())})", self.source, key)
+        first = next(s for s in scene.effect_specs.get("thermal_expansion", [spec])
+                     if s.field == spec.field)
+        if first.key != spec.key:   # (their eigenstrains would add: σ doubled)
+            raise InputError(f"a second thermal expansion of field {spec.field!r} (the first is "
+                             f"{first.key}): their eigenstrains would add; give one entry, with "
+                             "[[thermal_expansion.regions]] for α per region", self.source, key)
         if not scene.materials:
             raise InputError("thermal expansion acts on elasticity: give [[materials]]",
                              self.source, spec.key)

@@ -30,14 +30,19 @@ class Axisymmetric:
 
     mesh_source: tuple = (None, None)
 
-    def check_mesh(self, points: np.ndarray) -> None:
-        """InputError (naming the mesh) unless every node has r = x ≥ 0. A rank's part: the
-        caller agrees the error over the ranks."""
+    def check_mesh(self, points: np.ndarray, comm) -> None:
+        """InputError (naming the mesh) unless every node has r = x ≥ 0, raised on every rank
+        of ``comm``. ``points``: the rank's owned nodes (a bad node may be on one rank only;
+        the count and the lowest node are over every rank). Collective."""
         bad = np.flatnonzero(points[:, 0] < 0.0)
-        if bad.size:
-            p = points[bad[np.argmin(points[bad, 0])]]
+        # the lowest x, then y: the same node whatever the partition
+        first = bad[np.lexsort((points[bad, 1], points[bad, 0]))[:1]]
+        lowest = tuple(points[first[0], :2]) if bad.size else None
+        count = comm.allreduce(int(bad.size))
+        if count:
+            p = min((q for q in comm.allgather(lowest) if q is not None), key=lambda q: (q[0], q[1]))
             raise InputError(f"an axisymmetric model needs r = x >= 0 at every node: "
-                             f"{bad.size} nodes have x < 0 (the lowest at "
+                             f"{count} nodes have x < 0 (the lowest at "
                              f"({p[0]:.6g}, {p[1]:.6g}))", *self.mesh_source)
 
 

@@ -18,6 +18,8 @@ import numpy as np
 
 from parsolve import interrupts
 from parsolve.errors import SolverError
+from parsolve.solvers.finite import check_finite
+from parsolve.solvers.linear import DoesNotFit
 from parsolve.solvers.newton import NewtonSolver
 
 
@@ -36,6 +38,7 @@ class ArcLength(NewtonSolver):
         side."""
         x, rhs = self._vectors(mat)
         rhs.array[:] = self.system.rhs_from(f_full, target, elim)[0]
+        self._export(mat, rhs)
         self.linear.solve(rhs, x)
         x_full = self.system.gather(x.array)
         return x_full.q, self.system.multipliers(x_full), x_full
@@ -57,6 +60,8 @@ class ArcLength(NewtonSolver):
             try:
                 its, residual, f_int = self._step(t, dl)
                 return spent + its, residual, f_int
+            except DoesNotFit:
+                raise   # (a shorter arc needs the same factor)
             except SolverError as exc:
                 spent += getattr(exc, "iterations", self.spec.max_iterations)
                 self.q, self.mu, self.lam = saved[0].copy(), saved[1], saved[2].copy()
@@ -80,6 +85,10 @@ class ArcLength(NewtonSolver):
             # the forces in play, reactions of eliminated DOFs included
             ref = max(self._norm(f_ext[free]), self._norm(self.ctx.owned_rows(f_int)), 1e-300)
             residual = self._norm(r) / ref
+            if not np.isfinite(residual):   # (the same on every rank)
+                raise SolverError(f"arc-length: non-finite residual at load factor "
+                                  f"{self.mu:.6g}, iteration {it} (a diverged solve, or a "
+                                  "material that cannot be evaluated there)")
             if it > 0 and residual <= spec.rtol:
                 self.states, self.extras = trial, extras
                 # the loads the step balances: the reactions of eliminated DOFs are F + μ P
@@ -131,13 +140,14 @@ class ArcLength(NewtonSolver):
         return max(roots, key=lambda m: a_ref + m * b_ref)
 
 
-def run_arc_length(comm, system, cli_options, writer, log) -> None:
+def run_arc_length(comm, system, cli_options, writer, log, export_dir: str | None = None) -> None:
     from parsolve.outputs import progress, step_outputs
     from parsolve.solvers.setup import make_solver
 
     scene = system.context.scene
     system.assemble()
     solver = ArcLength(comm, system, make_solver(comm, system, cli_options), scene.nonlinear)
+    solver.export_dir = export_dir
     nsteps = len(scene.times)
     for step in range(nsteps):
         t1 = time.perf_counter()
@@ -145,6 +155,8 @@ def run_arc_length(comm, system, cli_options, writer, log) -> None:
         seconds = time.perf_counter() - t1
         multipliers = solver.multipliers(scene.times[step], f_int)
         fields, cell_fields, rel_out = step_outputs(comm, system.context, solver.q, multipliers, solver)
+        check_finite(comm, step + 1, solver.mu, solver.q, multipliers, residual, fields,
+                     cell_fields, rel_out, {})
         writer.write_step(solver.mu, iterations, residual, fields, cell_fields, rel_out,
                           {"assembly": 0.0, "solve": seconds, "total": seconds})
         interrupts.check(comm)

@@ -21,6 +21,11 @@ from parsolve.solvers import factor_log
 from parsolve.solvers import options as opt
 
 
+class DoesNotFit(SolverError):
+    """The factorization does not fit in memory: a smaller step or more workspace cannot
+    help (the step is not cut)."""
+
+
 def preset_options(preset: str, symmetric: bool, has_multipliers: bool,
                    stiffness_symmetric: bool | None = None) -> dict[str, str]:
     """PETSc options of a preset. ``symmetric``: the whole operator (every multiplied relation
@@ -79,8 +84,10 @@ SYMMETRY_TOL = 1e-11
 
 
 #: MUMPS errors that more workspace cures (INFOG(1) = -8, -9: integer / real work array too
-#: small, -11, -12, -13, -14, -15, -17, -19, -20: the same in other arrays or phases).
-WORKSPACE_ERRORS = (-8, -9, -11, -12, -13, -14, -15, -17, -19, -20)
+#: small, -11, -12, -14, -15, -17, -19, -20: the same in other arrays or phases). Not -13: an
+#: allocation the memory refused, which a larger margin only makes larger.
+WORKSPACE_ERRORS = (-8, -9, -11, -12, -14, -15, -17, -19, -20)
+OUT_OF_MEMORY = -13
 
 
 def reason_in_words(reason: int) -> str:
@@ -175,7 +182,11 @@ class LinearSolver:
             except PETSc.Error as exc:
                 info = self._mumps_info()
                 reason = self._reason(exc)
+                if info == OUT_OF_MEMORY:
+                    reason = self._does_not_fit()
                 self._restart(mat)
+                if info == OUT_OF_MEMORY:
+                    raise DoesNotFit(reason) from None
                 if info not in WORKSPACE_ERRORS or attempt == 3:
                     raise SolverError(f"solver set-up failed ({reason}); check the PETSc "
                                       "options of the scene and the command line") from None
@@ -191,6 +202,16 @@ class LinearSolver:
             return int(F.getMumpsInfog(1)) if F.getType() == "mumps" else 0
         except PETSc.Error:
             return 0
+
+    def _does_not_fit(self) -> str:
+        """INFOG(1) = -13: the sentence with what MUMPS asked for (INFOG(2): the failed
+        allocation's entries, in millions when negative) against what the machine has."""
+        entries = int(self.ksp.getPC().getFactorMatrix().getMumpsInfog(2))
+        need = (entries if entries > 0 else -entries * 1e6) * 8 / 1e9   # (double entries)
+        return (f"the factorization does not fit in memory: MUMPS needs {need:.3g} GB "
+                f"(one allocation of one process), {available_memory() / 1e9:.3g} GB available "
+                "(MUMPS error INFOG(1)=-13); more memory per process, more nodes, or the "
+                "iterative preset")
 
     @staticmethod
     def symmetric(mat: PETSc.Mat) -> bool:
@@ -280,6 +301,26 @@ class LinearSolver:
         except PETSc.Error:
             pass
         return f"PETSc error {exc.ierr}"
+
+
+def available_memory() -> float:
+    """Bytes this process may still take: the system's available memory (MemAvailable), or
+    less when an address-space limit (ulimit -v) is nearer."""
+    import resource
+
+    free = float("inf")
+    try:
+        with open("/proc/meminfo") as f:
+            free = next(int(line.split()[1]) * 1024 for line in f
+                        if line.startswith("MemAvailable:"))
+        with open("/proc/self/statm") as f:
+            used = int(f.read().split()[0]) * resource.getpagesize()
+    except (OSError, StopIteration, ValueError):
+        used = 0
+    limit = resource.getrlimit(resource.RLIMIT_AS)[0]
+    if limit != resource.RLIM_INFINITY:
+        free = min(free, max(limit - used, 0))
+    return free
 
 
 def true_residual(mat: PETSc.Mat, x: PETSc.Vec, rhs: PETSc.Vec) -> float:

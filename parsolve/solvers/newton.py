@@ -24,7 +24,8 @@ from parsolve.effects.compose import Rate
 from parsolve.errors import SolverError
 from parsolve.scene import NonlinearSpec
 from parsolve.solvers.active_set import GROUP_TOL, ActiveSet
-from parsolve.solvers.linear import LinearSolver
+from parsolve.solvers.linear import DoesNotFit, LinearSolver
+from parsolve.solvers.setup import export_system
 from parsolve.solvers.system import SaddleSystem
 
 
@@ -133,6 +134,7 @@ class NewtonSolver:
         self.hooks = [e for e in ctx.effects if e.refreshes]
         self._rows = self._dependence_rows()
         self.left_out = np.zeros(self.active.sign.size, dtype=bool)
+        self.export_dir: str | None = None   # --export-system: the first system assembled
 
     def _dependence_rows(self) -> tuple | None:
         """The multiplied rows as COO (row numbers of the active set) with the contact rows
@@ -164,6 +166,13 @@ class NewtonSolver:
         self.left_out = dependent_rows(rows, dofs, vals, active.size, hard, candidate, fixed,
                                        self.ctx.ncomp)
         return active & ~self.left_out
+
+    @property
+    def enforced(self) -> np.ndarray:
+        """The active rows the last solve enforced: less the contact rows it left out (a held
+        or tied node's: multiplier zero, the rows it depends on carry its reaction), which a
+        step's outputs report as carrying nothing (state open), not as stuck."""
+        return self.active.active & ~self.left_out
 
     def _empty_rows(self) -> np.ndarray:
         """Per relation row of the active set: no A entry (a finite-sliding slave that no facet
@@ -290,6 +299,10 @@ class NewtonSolver:
             r_norm = self._norm(r)
             residual = r_norm / max(ref, self._roundoff_force() / spec.rtol)
             self.residual_history.append(residual)
+            if not np.isfinite(residual):   # (the same on every rank): a failed iteration
+                raise SolverError(f"non-finite residual at t = {t:.6g}, iteration {it} (a "
+                                  "diverged solve, or a material that cannot be evaluated "
+                                  "there)")
             progress.detail(f"newton {it + 1}: residual {residual:.3e}")
             small_step = dq_norm <= spec.stol * max(self.ctx.max_abs(self.q), 1e-300)
             balanced = residual <= spec.rtol or small_step and r_norm < 1e-6 * ref
@@ -309,13 +322,14 @@ class NewtonSolver:
                 self._use(mat)
                 x, rhs = self._vectors(mat)
                 rhs.array[:] = system.rhs(t, f_int=f_int, q=self.q, f_ext=f_known)[0]
+                self._export(mat, rhs)
                 try:
                     self.linear.solve(rhs, x)
                     break
                 except SolverError as exc:
                     if it == 0 and attempt == 0 and self._close_contact():
                         continue   # a body floating until contact: start it in contact
-                    if it == 0:
+                    if it == 0 or isinstance(exc, DoesNotFit):
                         raise
                     # singular at a later iterate only: the iterates diverged first (a
                     # softening material driven past full damage), which the cut step must know
@@ -506,6 +520,12 @@ class NewtonSolver:
                 self.active.active[g] = False
                 self.active.active[best] = True
         self.active.start_step()
+
+    def _export(self, mat, rhs) -> None:
+        """--export-system DIR: the first system solved, once (collective)."""
+        if self.export_dir is not None:
+            export_system(self.comm, self.export_dir, mat, rhs, self.system)
+            self.export_dir = None
 
     def _vectors(self, mat):
         if not hasattr(self, "_xr"):

@@ -80,7 +80,11 @@ def check_quantities(study: Study, settings: list[Setting]) -> None:
     for s in settings:
         if s.level != 0:
             continue
-        model = scene_model(s.scene_text, study.scene)
+        try:
+            model = scene_model(s.scene_text, study.scene)
+        except InputError as exc:   # (a family's value the model refuses: the family's key)
+            raise InputError(f"the effective scene is invalid: {exc.oneline()}", study.source,
+                             _family_key(study, s.family, exc.key)) from None
         _check_options(study, model, s.family)
         for q, spec in specs:
             problem = spec_problem(spec, model)
@@ -98,9 +102,16 @@ def _check_options(study: Study, model, family: str) -> None:
         return
     if exc.source == "command line":
         raise InputError(f"{exc.key}: {exc.message}", study.source, "args")
+    raise InputError(f"{exc.oneline()} (scene of {family})", study.source,
+                     _family_key(study, family, exc.key))
+
+
+def _family_key(study: Study, family: str, key: str | None) -> str:
+    """The study's key to blame for an error at a scene's ``key``: the family's when it
+    changes that key (or a table above it), else the scene's."""
     fam = next(f for f in study.families if f.name == family)
-    varied = any(exc.key == k or exc.key.startswith(k + ".") for k in fam.changes) if exc.key else False
-    raise InputError(f"{exc.oneline()} (scene of {family})", study.source, fam.key if varied else "scene")
+    varied = any(key == k or key.startswith(k + ".") for k in fam.changes) if key else False
+    return fam.key if varied else "scene"
 
 
 def _relation_problem(spec, model) -> str | None:

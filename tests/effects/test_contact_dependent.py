@@ -216,3 +216,20 @@ def test_held_corner_pushed_into_the_plane_is_an_error(run):
     pushed = HOLD.replace("value = 0.0", "value = -0.01")
     with pytest.raises(SolverError, match=r"row 0 of 'base_normal' \(node 0\).*into the obstacle"):
         run(scene(pushed, [("base", "bottom")], 0.0), name="dep_pushed")
+
+
+@pytest.mark.parametrize("mu", [0.0, 0.3])
+def test_a_held_contact_node_is_written_open(run, mu):
+    """The held corner's contact row is left out (the hold carries its reaction): its state
+    is written open (0) with its normal reaction 0, never stick without a force; every other
+    node of the surface that the written state says is closed carries a normal reaction."""
+    rel, con, _, _ = CASES["held_corner"]
+    res = run(scene(rel, con, mu), name=f"held_state_{mu}")
+    x = res["mesh/points"]
+    corner = np.flatnonzero((np.abs(x[:, 0]) < 1e-12) & (np.abs(x[:, 1]) < 1e-12))
+    state = res["fields/base_state"][:, :, 0]
+    rn = res["fields/base_normal_reaction"][:, :, 0]
+    assert state[:, corner].tolist() == [[0]] * len(state) and not rn[:, corner].any()
+    closed = state > 0
+    assert closed.sum() >= len(state) * 7   # the rest of the bottom (8 nodes) is in contact
+    assert (rn[closed] > 1e-6 * rn.max()).all(), (state, rn)

@@ -165,3 +165,33 @@ def test_periodic_cube_in_simple_shear(run, cell):
     if cell == "hexahedron":
         np.testing.assert_allclose(lam_x[:, 2], Gg / 6, rtol=1e-12)
         np.testing.assert_allclose(np.sort(lam_y[:, 2]), [-Gg / 12, 0.0, Gg / 12], atol=1e-12)
+
+
+CELL = LAMINATE["relations"][-1]
+REPEATED_TIES = {  # a second relation -> the words of the refusal
+    "the same tie twice": (merge(CELL, {"name": "cell_again"}),
+                           "relations 'cell' and 'cell_again' both tie"),
+    "the tie both ways": (merge(CELL, {"name": "cell_back", "region": CELL["target"],
+                                       "target": CELL["region"], "translation": [-1.0, 0.0]}),
+                          "relations 'cell' and 'cell_back' both tie"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(REPEATED_TIES))
+def test_a_repeated_tie_is_an_input_error_naming_both(shared_tmp, case):
+    """A tie given twice or both ways: each pair of DOFs twice in the system, which would be
+    singular (MUMPS null pivots): refused before any solve, naming both relations."""
+    extra, words = REPEATED_TIES[case]
+    text = scene(LAMINATE, relations=LAMINATE["relations"] + [extra])
+    path = shared_tmp / "periodic_repeated.toml"
+    if MPI.COMM_WORLD.rank == 0:
+        path.write_text(text)
+    MPI.COMM_WORLD.Barrier()
+    with pytest.raises(InputError) as exc:
+        build_model(load_scene(path), MPI.COMM_WORLD)
+    assert exc.value.source == str(path) and exc.value.key == "relations[4]"
+    # the first pair: u.x of the lowest side node (0, 1/8), 7 on rows of 7 nodes, and (1, 1/8)
+    assert words in exc.value.message and "u.x of nodes 7 and 13" in exc.value.message, \
+        exc.value.message
+    n = len(CELL["components"]) * 7   # the left side's 7 nodes (ny = 8, corners left out)
+    assert f"({n} such pairs" in exc.value.message, exc.value.message

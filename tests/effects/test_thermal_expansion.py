@@ -294,6 +294,9 @@ BAD = {
                                hypothesis="plane_strain"), "materials[0].model"),
     "misspelt key": (bad(thermal_expansion=[{"field": "T", "alpha": 1e-3, "referense": 20.0}]),
                      "thermal_expansion[0].referense"),
+    # their eigenstrains would add (σ doubled): one entry per field
+    "two on one field": (bad(thermal_expansion=[EXPANSION, EXPANSION | {"alpha": 2e-5}]),
+                         "thermal_expansion[1].field"),
 }
 
 

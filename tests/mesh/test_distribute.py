@@ -219,3 +219,12 @@ def test_scene_key_mesh_is_deprecated(capsys, monkeypatch):
     assert err.count("\n") == 1
     assert err.startswith("parsolve: warning: s.toml: solver.mesh: deprecated and ignored")
     assert "refused in the next release" in err
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "-inf"])
+def test_scene_key_mesh_not_a_number_is_refused(value):
+    """The deprecated key takes any value, but a number the scene reads must be one."""
+    text = SPECS + f"[solver]\nmesh = {value}\n"
+    with pytest.raises(InputError) as err:
+        parse_scene(tomllib.loads(text), "s.toml")
+    assert err.value.source == "s.toml" and err.value.key == "solver.mesh", err.value.oneline()

@@ -36,6 +36,12 @@ CASES = [
      "no field 'temperature'"),
     (("relation:control:multiplier", "cell_field:strain:xx@0.5,0.05"), [], "quantities[0].spec",
      "no cell field 'strain'"),
+    # a cell field an elastic run never writes (damage: a damage material's state)
+    (("relation:control:multiplier", "cell_field:damage@0.5,0.05"), [], "quantities[0].spec",
+     "no cell field 'damage' (known: stress)"),
+    # a family's value the model refuses (not its scene parser): the family's key
+    (('[vary]\n"mesh.cell" = ["quad", "triangle"]', '[[families]]\nname = "none"\nset = { "mesh.nx" = 0 }'),
+     [], "families[0]", "mesh.nx: invalid generator parameters"),
     (("relation:control:multiplier", "field:displacement:x@5,0.05"), [], "quantities[0].spec",
      "is outside the mesh"),
     (("relation:control:multiplier", "field:displacement:x@0.5,0.05,0"), [], "quantities[0].spec",
