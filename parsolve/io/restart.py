@@ -1,0 +1,183 @@
+"""Restart: the whole state of the last finished step, kept beside the result, and a run that
+continues from it.
+
+The state (per rank: fields, multipliers, material history, active set, the step schedule,
+the effects' own state) is written after every finished step to ``RESULT.restart.h5`` beside
+``RESULT.h5``: one dataset ``state/<rank>`` (the rank's state, pickled) and the attributes
+``steps`` (the finished steps it follows), ``nprocs`` and ``scene``. It is replaced whole
+(written to a temporary name, then renamed), so a run killed at any point leaves the state of
+a step the result holds (the last one, or the one before when the kill came between the two
+writes). The result file itself keeps DESIGN's layout.
+
+A restarted run writes a new result file: the first ``steps`` steps of the old result copied
+row for row, then its own. The root attributes ``restart_of`` (the old result's path) and
+``restart_steps`` (the steps copied) record it. It needs the scene of the old result (only
+``[steps]`` may differ, to extend the run) and as many ranks (the state is per rank).
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from parsolve.errors import InputError
+from parsolve.io.slabs import OwnedRows
+
+KEY = "--restart"
+PER_STEP = ("fields", "cell_fields", "relations")
+
+
+def state_path(result: str | Path) -> Path:
+    """The restart state's file beside a result: RESULT.restart.h5."""
+    result = Path(result)
+    return result.with_name(result.stem + ".restart.h5")
+
+
+class Checkpoint:
+    """Writes the state of each finished step (collective: rank 0 writes every rank's)."""
+
+    def __init__(self, comm, result: str | Path, scene_text: str, first_step: int = 0):
+        self.comm, self.path, self.scene_text = comm, state_path(result), scene_text
+        self.steps = first_step
+        if comm.rank == 0:
+            self.path.unlink(missing_ok=True)   # a stale state never follows a new result
+
+    def save(self, state: dict) -> None:
+        """The state after one more finished step (the same call on every rank)."""
+        self.steps += 1
+        blobs = self.comm.gather(pickle.dumps(state, protocol=pickle.HIGHEST_PROTOCOL), root=0)
+        if self.comm.rank != 0:
+            return
+        tmp = self.path.with_name(self.path.name + ".tmp")
+        with h5py.File(tmp, "w") as f:
+            f.attrs.update(steps=self.steps, nprocs=self.comm.size, scene=self.scene_text)
+            for rank, blob in enumerate(blobs):
+                f[f"state/{rank}"] = np.frombuffer(blob, dtype=np.uint8)
+        os.replace(tmp, self.path)
+
+
+@dataclass
+class Restart:
+    """A result to continue: its path, the steps to copy and this rank's state."""
+
+    path: str
+    steps: int
+    time: float
+    state: dict
+
+    def copy_steps(self, writer, node_ids: np.ndarray, cell_ids: np.ndarray) -> None:
+        """Write the first ``steps`` steps of the old result through ``writer`` (collective:
+        every rank its owned rows, as a running step gives them)."""
+        with h5py.File(self.path, "r") as f:
+            for k in range(self.steps):
+                row = _step_rows(f, k)
+                fields = {n: OwnedRows(v[node_ids]) for n, v in row["fields"].items()}
+                cells = {n: OwnedRows(v[cell_ids]) for n, v in row["cell_fields"].items()}
+                writer.write_step(row["time"], row["iterations"], row["residual"], fields,
+                                  cells, row["relations"], row["timings"], extra=row["extra"])
+
+
+def _step_rows(f: h5py.File, k: int) -> dict:
+    """Every per-step dataset's row k, as ``write_step`` takes them."""
+    steps = f["steps"]
+    row = {"time": float(steps["time"][k]), "iterations": int(steps["iterations"][k]),
+           "residual": float(steps["residual"][k]), "extra": {}, "timings": {},
+           "fields": {}, "cell_fields": {}, "relations": {}}
+    for group in ("fields", "cell_fields"):
+        for name, ds in f.get(group, {}).items():
+            row[group][name] = ds[k]
+    for name, rel in f.get("relations", {}).items():
+        row["relations"][name] = {key: ds[k] for key, ds in rel.items()}
+    for name, ds in f.get("timings", {}).items():
+        row["timings"][name] = float(ds[k])
+
+    def extra(name, obj):
+        if isinstance(obj, h5py.Dataset) and obj.shape and obj.maxshape[0] is None:
+            row["extra"][name] = obj[k]
+    for group in f:
+        if group not in ("mesh", "timings", "restart", *PER_STEP):
+            f[group].visititems(lambda n, o, g=group: extra(f"{g}/{n}", o))
+    for name in ("steps/time", "steps/iterations", "steps/residual"):
+        row["extra"].pop(name, None)
+    return row
+
+
+def read_restart(comm, path: str, scene) -> Restart:
+    """The state to continue ``path`` from, for ``scene`` (collective; InputError naming
+    ``--restart`` on every rank when the result cannot be continued)."""
+    verdict, blobs, info = None, None, None
+    if comm.rank == 0:
+        try:
+            info, blobs = _read_state(path, scene, comm.size)
+        except InputError as exc:
+            verdict = exc.message
+    verdict = comm.bcast(verdict, root=0)
+    if verdict is not None:
+        raise InputError(verdict, path, KEY)
+    steps, t = comm.bcast(info, root=0)
+    blob = comm.scatter(blobs, root=0)
+    return Restart(path, steps, t, pickle.loads(blob))
+
+
+def _read_state(path: str, scene, nprocs: int) -> tuple[tuple[int, float], list[bytes]]:
+    sidecar = state_path(path)
+    try:
+        with h5py.File(path, "r") as f:
+            times = f["steps/time"][()]
+            text = str(f.attrs.get("scene", ""))
+    except (OSError, KeyError) as exc:
+        raise InputError(f"cannot read the result to restart ({exc})") from None
+    if not sidecar.exists():
+        raise InputError(f"no restart state beside it ({sidecar} is missing)")
+    try:
+        with h5py.File(sidecar, "r") as f:
+            steps, ranks = int(f.attrs["steps"]), int(f.attrs["nprocs"])
+            blobs = [f[f"state/{r}"][()].tobytes() for r in range(ranks)]
+    except (OSError, KeyError) as exc:
+        raise InputError(f"cannot read its restart state {sidecar} ({exc})") from None
+    if ranks != nprocs:
+        raise InputError(f"its restart state is for {ranks} ranks; run on {ranks} ranks "
+                         f"(this run has {nprocs})")
+    if steps > len(times) or steps < 1:
+        raise InputError(f"its restart state follows step {steps} but the result has "
+                         f"{len(times)} finished steps")
+    if _without_steps(text) != _without_steps(scene.text):
+        raise InputError("the scene differs from the result's beyond [steps] (a restart "
+                         "continues the same problem)")
+    return (steps, float(times[steps - 1])), blobs
+
+
+def _without_steps(text: str) -> dict:
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError:
+        return {"unreadable": text}
+    data.pop("steps", None)
+    data.pop("output", None)   # where results go is no part of the problem
+    return data
+
+
+# ------------------------------------------------------------------ reading results
+
+def read_result(path: str, groups=("fields", "cell_fields", "relations")) -> dict:
+    """A result's data of its finished steps as numpy arrays: times, iterations, residual,
+    status, attrs, points, and the per-step ``groups`` asked for (fields and cell_fields:
+    {name: array}; relations: {name: {key: array}})."""
+    with h5py.File(path, "r", swmr=True) as f:
+        n = len(f["steps/time"])
+        data = {"times": f["steps/time"][:n], "iterations": f["steps/iterations"][:n],
+                "residual": f["steps/residual"][:n], "attrs": dict(f.attrs),
+                "status": str(f.attrs.get("status", "")), "points": f["mesh/points"][()]}
+        for group in groups:
+            if group == "relations":
+                data[group] = {name: {key: ds[:n] for key, ds in rel.items()}
+                               for name, rel in f.get(group, {}).items()}
+            else:
+                data[group] = {name: ds[:n] for name, ds in f.get(group, {}).items()}
+    return data
