@@ -60,11 +60,17 @@ class Scene:
     def from_dict(cls, data: dict, source: str = "<dict>", base: str | Path = ".") -> "Scene":
         """A scene from Python dicts shaped as the TOML file (tables are dicts, arrays of
         tables lists of dicts); the result file stores it as TOML text."""
+        from parsolve.batch.toml_write import dumps
         from parsolve.scene import parse_scene
 
         if not isinstance(data, dict):
             raise InputError(f"a scene is a dict, not {type(data).__name__}", source)
-        return cls(parse_scene(data, source, to_toml(data), Path(base)))
+        scene = parse_scene(data, source, "", Path(base))   # (names a bad key first)
+        try:
+            scene.text = dumps(data)   # what the result file stores, as a file's text
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"not representable in TOML: {exc}", source) from None
+        return cls(scene)
 
     @property
     def source(self) -> str:
@@ -75,54 +81,6 @@ class Scene:
         if self.spec.output:
             return self.spec.output
         return (self.path.stem if self.path is not None else "scene") + ".h5"
-
-
-def to_toml(data: dict) -> str:
-    """TOML text of nested dicts/lists of numbers, strings and booleans (what tomllib reads
-    back as the same data)."""
-    lines: list[str] = []
-    _toml_table(data, [], lines)
-    return "\n".join(lines).lstrip("\n") + "\n"
-
-
-def _toml_table(data: dict, path: list[str], lines: list[str]) -> None:
-    tables = {k: v for k, v in data.items() if isinstance(v, dict)
-              or (isinstance(v, list) and v and all(isinstance(x, dict) for x in v))}
-    for key, value in data.items():
-        if key not in tables:
-            lines.append(f"{_toml_key(key)} = {_toml_value(value)}")
-    for key, value in tables.items():
-        sub = path + [_toml_key(key)]
-        if isinstance(value, dict):
-            lines.append(f"\n[{'.'.join(sub)}]")
-            _toml_table(value, sub, lines)
-        else:
-            for item in value:
-                lines.append(f"\n[[{'.'.join(sub)}]]")
-                _toml_table(item, sub, lines)
-
-
-def _toml_key(key) -> str:
-    key = str(key)
-    return key if key and all(c.isalnum() or c in "_-" for c in key) else _toml_value(key)
-
-
-def _toml_value(value) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, (int, np.integer)):
-        return str(int(value))
-    if isinstance(value, (float, np.floating)):
-        v = float(value)
-        return repr(v) if np.isfinite(v) else ("nan" if v != v else ("inf" if v > 0 else "-inf"))
-    if isinstance(value, str):
-        return '"' + value.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
-    if isinstance(value, (list, tuple, np.ndarray)):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    if isinstance(value, dict):
-        return "{" + ", ".join(f"{_toml_key(k)} = {_toml_value(v)}" for k, v in value.items()) + "}"
-    # the parser names the key of a value of the wrong type; str() keeps the text readable
-    return _toml_value(str(value))
 
 
 def load(source: "str | Path | dict | Scene") -> Scene:
