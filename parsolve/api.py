@@ -293,9 +293,11 @@ def _run_locked(scene, out, comm, cli_options, on_step, start, output_mode, expo
         with _signals(comm):
             driver.run(comm, model, out, cli_options, export_system, log=say,
                        output=output_mode, watch=watch, restart=start)
-    except (SolverError, Interrupted, OutputError) as exc:
+    except (SolverError, Interrupted, OutputError) as exc:   # (raised on every rank alike)
+        comm.Barrier()   # rank 0 has closed the file
         exc.result = _result_or_none(out)
         raise
+    comm.Barrier()
     return Result(out)
 
 

@@ -85,6 +85,8 @@ Scene schema::
 
 from __future__ import annotations
 
+import pickle
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -603,6 +605,23 @@ class Contact(FiniteSliding, Effect):
         """No forces and no stiffness of its own: the contact acts through its relations."""
         return {}, [], state, None
 
+    # what the model builds (not the state between steps a restart restores)
+    _BUILT = ("spec", "mesh", "fields_", "source", "radial", "name", "values", "normal",
+              "tangent")
+
+    def restart_state(self) -> dict:
+        """Everything but what the model builds: the committed node states and slip
+        directions, the slip Newton's, the slip so far, finite sliding's pairing and spans."""
+        return {k: v for k, v in vars(self).items() if k not in self._BUILT}
+
+    def load_restart_state(self, state: dict) -> None:
+        # spans made again since the start: the relations' entries and the operator anew
+        # (the same spans: the operator as built, for the same round-off)
+        respanned = self.restructures and pickle.dumps(self.span) != pickle.dumps(state["span"])
+        vars(self).update(state)
+        if respanned:
+            self._restructuring = self.restructured = True
+
     def end_step(self) -> None:
         self.turning.commit()
         self._lam_committed = self._lam_now
@@ -646,3 +665,4 @@ class Contact(FiniteSliding, Effect):
         extras = {"normal_force": np.array([(rn * share).sum()]),
                   "tangential_force": (rt * share[:, None]).sum(axis=0)}
         return fields, {self.normal.name: extras}
+
