@@ -227,7 +227,8 @@ class _Watched:
     """The result writer with a callback after each written step (same calls otherwise)."""
 
     def __init__(self, writer, on_step: Callable[[Step], None]):
-        self._writer, self._on_step, self._index = writer, on_step, 0
+        # (after a restart's copied steps: the index of the first new one)
+        self._writer, self._on_step, self._index = writer, on_step, len(writer.times)
 
     def __getattr__(self, name):
         return getattr(self._writer, name)
