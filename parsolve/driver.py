@@ -198,10 +198,10 @@ def _load_newton(restart: Restart, newton, schedule, watch, balance) -> int:
 
 
 def _balance_state(balance) -> dict | None:
+    """The conservation sums so far (transient runs), without what the model builds."""
     if balance is None:
         return None
-    return {k: getattr(balance, k) for k in ("initial", "previous", "supplied")
-            if hasattr(balance, k)}
+    return {k: v for k, v in vars(balance).items() if k not in ("comm", "ctx")}
 
 
 def _run_newton(comm, system: SaddleSystem, cli_options, writer, log,

@@ -74,7 +74,7 @@ class Restart:
     def copy_steps(self, writer, node_ids: np.ndarray, cell_ids: np.ndarray) -> None:
         """Write the first ``steps`` steps of the old result through ``writer`` (collective:
         every rank its owned rows, as a running step gives them)."""
-        with h5py.File(self.path, "r") as f:
+        with h5py.File(self.path, "r", swmr=True) as f:
             for k in range(self.steps):
                 row = _step_rows(f, k)
                 fields = {n: OwnedRows(v[node_ids]) for n, v in row["fields"].items()}
@@ -128,7 +128,7 @@ def read_restart(comm, path: str, scene) -> Restart:
 def _read_state(path: str, scene, nprocs: int) -> tuple[tuple[int, float], list[bytes]]:
     sidecar = state_path(path)
     try:
-        with h5py.File(path, "r") as f:
+        with h5py.File(path, "r", swmr=True) as f:   # (also a killed run's file)
             times = f["steps/time"][()]
             text = str(f.attrs.get("scene", ""))
     except (OSError, KeyError) as exc:
