@@ -36,15 +36,19 @@ def assert_continued(full: dict, restarted: dict, steps_copied: int) -> None:
     bit on one rank. On several, the direct solver's parallel analysis, made on another
     step's matrix, changes the round-off of the steps after the first restarted one: each
     value then within 1e-12 of its scale (a field's largest value; for reactions, the largest
-    reaction in the file — a reaction that is zero up to round-off has no scale of its own;
+    reaction in the file, for relation values the largest relation value or displacement — a
+    reaction or a held value that is zero up to round-off has no scale of its own;
     damage: within 1e-10, a softening law amplifies round-off near its threshold), and the
     residuals (round-off themselves) below the convergence tolerance alike."""
     assert restarted["attrs"]["restart_steps"] == steps_copied
     assert restarted["attrs"]["status"] == full["attrs"]["status"] == "complete"
     names = [n for n in full if n != "attrs" and not n.startswith(("timings/", "mesh/"))]
     assert any(n.startswith("fields/") for n in names)
-    force = max(float(np.abs(full[n]).max(initial=0.0)) for n in names
-                if n.endswith(("/multiplier", "/resultant")))
+
+    def largest(*ends) -> float:
+        return max([float(np.abs(full[n]).max(initial=0.0)) for n in names if n.endswith(ends)]
+                   + [0.0])
+    force, motion = largest("/multiplier", "/resultant"), largest("/primal", "/displacement")
     for name in names:
         a, b = np.asarray(full[name]), np.asarray(restarted[name])
         assert a.shape == b.shape, name
@@ -54,7 +58,7 @@ def assert_continued(full: dict, restarted: dict, steps_copied: int) -> None:
             assert b.max() < 1e-6, name
         else:
             scale = force if name.endswith(("/multiplier", "/resultant")) else \
-                float(np.abs(a).max(initial=0.0))
+                motion if name.endswith("/primal") else float(np.abs(a).max(initial=0.0))
             tol = 1e-10 if name.endswith("/damage") else 1e-12
             assert np.abs(a - b).max(initial=0.0) <= tol * max(scale, 1e-300), name
 
