@@ -86,6 +86,31 @@ def test_restart_continues_the_run(shared_tmp, name, count, k):
     _stop_and_restart(shared_tmp, name, count, k)
 
 
+class Stop(Exception):
+    pass
+
+
+def test_restart_of_automatic_steps(shared_tmp):
+    """Adaptive steps (the step size is state too): a run stopped by its callback after its
+    5th step (that step's state is not saved: the restart copies 4 and redoes the 5th)."""
+    data = tomllib.loads((CONFIGS / "plate_hole_control.toml").read_text())
+    data.pop("output", None)
+    data["steps"]["automatic"] = {"strain_increment": 8e-5, "max_steps": 60}
+    scene = parsolve.Scene.from_dict(data, base=CONFIGS)
+    parsolve.run(scene, shared_tmp / "full.h5", log=None)
+
+    def stop(step):
+        if step.index == 4:
+            raise Stop()
+    with pytest.raises(Stop):
+        parsolve.run(scene, shared_tmp / "first.h5", on_step=stop, log=None)
+    MPI.COMM_WORLD.Barrier()
+    parsolve.run(scene, shared_tmp / "rest.h5", restart=shared_tmp / "first.h5", log=None)
+    full = read_results(shared_tmp / "full.h5")
+    assert len(full["steps/time"]) > 8
+    assert_continued(full, read_results(shared_tmp / "rest.h5"), 4)
+
+
 def test_callbacks_of_a_restart_are_the_new_steps(shared_tmp):
     times = [0.25, 0.5, 0.75, 1.0]
     parsolve.run(_times_scene("controlled_bar.toml", times[:2]), shared_tmp / "a.h5", log=None)
