@@ -281,7 +281,6 @@ def run(scene: "Scene | str | Path | dict", output: str | Path | None = None,
 def _run_locked(scene, out, comm, cli_options, on_step, start, output_mode, export_system,
                 log, warn) -> "Result":
     from parsolve import driver
-    from parsolve.interrupts import interruptible
 
     model = check(scene, comm, cli_options)
     if start is not None:

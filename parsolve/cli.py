@@ -13,9 +13,7 @@ from __future__ import annotations
 
 import argparse
 import difflib
-import os
 import sys
-from pathlib import Path
 
 USAGE = ("parsolve {run,check,study,batch,post} SCENE [-o OUT.h5] [--export-system DIR] "
          "[--output-mode swmr|parallel|auto] [PETSc options]")
@@ -115,6 +113,9 @@ SUBCOMMANDS = ("study", "batch", "post")
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The exit status of one command. ``run`` and ``check`` are :mod:`parsolve.api`'s
+    ``run`` and ``check`` (its checks, in its order); here only the arguments, the messages
+    and the exit statuses."""
     argv = sys.argv[1:] if argv is None else argv
     if argv and argv[0] in SUBCOMMANDS:
         import importlib

@@ -3,7 +3,6 @@ the uninterrupted run's result (bit for bit on one rank, to round-off on several
 finished run is extended by a later end of [steps]."""
 
 import os
-import re
 import signal
 import subprocess
 import sys
@@ -16,7 +15,7 @@ import pytest
 from mpi4py import MPI
 
 import parsolve
-from conftest import CONFIGS, ROOT, read_results
+from conftest import CONFIGS, read_results
 from parsolve.errors import InputError
 from parsolve.batch.toml_write import dumps as to_toml
 from parsolve.io.restart import state_path
