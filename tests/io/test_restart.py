@@ -62,15 +62,17 @@ def assert_continued(full: dict, restarted: dict, steps_copied: int) -> None:
             assert np.abs(a - b).max(initial=0.0) <= tol * max(scale, 1e-300), name
 
 
-def _stop_and_restart(shared_tmp, name: str, count: int, k: int) -> None:
+def _stop_and_restart(shared_tmp, name: str, count: int, k: int, mode: str = "swmr") -> None:
     """The scene's ``count`` steps at once, and its first ``k`` then the rest by restart."""
     times = [(i + 1) / count for i in range(count)]
     comm = MPI.COMM_WORLD
-    parsolve.run(_times_scene(name, times), shared_tmp / "full.h5", comm, log=None)
-    first = parsolve.run(_times_scene(name, times[:k]), shared_tmp / "first.h5", comm, log=None)
+    parsolve.run(_times_scene(name, times), shared_tmp / "full.h5", comm, log=None,
+                 output_mode=mode)
+    first = parsolve.run(_times_scene(name, times[:k]), shared_tmp / "first.h5", comm,
+                         log=None, output_mode=mode)
     assert len(first.times) == k
     rest = parsolve.run(_times_scene(name, times), shared_tmp / "rest.h5", comm,
-                        restart=shared_tmp / "first.h5", log=None)
+                        restart=shared_tmp / "first.h5", log=None, output_mode=mode)
     assert np.array_equal(rest.times, times)
     assert_continued(read_results(shared_tmp / "full.h5"), read_results(shared_tmp / "rest.h5"), k)
 
@@ -83,6 +85,11 @@ def _stop_and_restart(shared_tmp, name: str, count: int, k: int) -> None:
 ])
 def test_restart_continues_the_run(shared_tmp, name, count, k):
     _stop_and_restart(shared_tmp, name, count, k)
+
+
+def test_restart_in_parallel_output_mode(shared_tmp):
+    """Every rank writes its own rows (MPI-IO), the copied steps' as the new ones."""
+    _stop_and_restart(shared_tmp, "contact_block_friction.toml", 10, 4, mode="parallel")
 
 
 class Stop(Exception):
