@@ -102,7 +102,7 @@ def _start(comm, model, system, out, writer, restart: Restart | None) -> Checkpo
         mesh = model.mesh
         cells = mesh.global_cells[system.part.owned_cells(comm.rank, mesh.cells)]
         restart.copy_steps(writer, mesh.global_nodes[:mesh.n_owned], cells)
-    return Checkpoint(comm, out, model.scene.text, restart.steps if restart else 0)
+    return Checkpoint(comm, out, restart.steps if restart else 0)
 
 
 def _failure_hints(model) -> list[str]:

@@ -2,23 +2,25 @@
 continues from it.
 
 The state (per rank: fields, multipliers, material history, active set, the step schedule,
-the effects' own state) is written after every finished step to ``RESULT.restart.h5`` beside
-``RESULT.h5``: one dataset ``state/<rank>`` (the rank's state, pickled) and the attributes
-``steps`` (the finished steps it follows), ``nprocs`` and ``scene``. It is replaced whole
-(written to a temporary name, then renamed), so a run killed at any point leaves the state of
-a step the result holds (the last one, or the one before when the kill came between the two
-writes). The result file itself keeps DESIGN's layout.
+the effects' own state) is written after every finished step into the folder
+``RESULT.restart/`` beside ``RESULT.h5``: each rank its own file (``<rank>.<slot>``, pickled;
+no rank gathers another's state), the steps alternating between two slots, each file
+written under a temporary name and renamed. A run killed at any point thus leaves on every
+rank the state of the last step all ranks finished saving (or of the one before), and that
+step's number in each file tells which. The result file itself keeps DESIGN's layout.
 
 A restarted run writes a new result file: the first ``steps`` steps of the old result copied
 row for row, then its own. The root attributes ``restart_of`` (the old result's path) and
 ``restart_steps`` (the steps copied) record it. It needs the scene of the old result (only
-``[steps]`` may differ, to extend the run) and as many ranks (the state is per rank).
+``[steps]`` and ``[output]`` may differ, to extend the run) and as many ranks (the state is
+per rank).
 """
 
 from __future__ import annotations
 
 import os
 import pickle
+import shutil
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,32 +36,34 @@ PER_STEP = ("fields", "cell_fields", "relations")
 
 
 def state_path(result: str | Path) -> Path:
-    """The restart state's file beside a result: RESULT.restart.h5."""
+    """The restart state's folder beside a result: RESULT.restart/."""
     result = Path(result)
-    return result.with_name(result.stem + ".restart.h5")
+    return result.with_name(result.stem + ".restart")
 
 
 class Checkpoint:
-    """Writes the state of each finished step (collective: rank 0 writes every rank's)."""
+    """Writes the state of each finished step, every rank its own (collective calls)."""
 
-    def __init__(self, comm, result: str | Path, scene_text: str, first_step: int = 0):
-        self.comm, self.path, self.scene_text = comm, state_path(result), scene_text
+    def __init__(self, comm, result: str | Path, first_step: int = 0):
+        self.comm, self.path = comm, state_path(result)
         self.steps = first_step
-        if comm.rank == 0:
-            self.path.unlink(missing_ok=True)   # a stale state never follows a new result
+        if comm.rank == 0:   # a stale state never follows a new result
+            if self.path.is_dir():
+                shutil.rmtree(self.path)
+            else:
+                self.path.unlink(missing_ok=True)
+            self.path.mkdir()
+        comm.Barrier()
 
     def save(self, state: dict) -> None:
         """The state after one more finished step (the same call on every rank)."""
         self.steps += 1
-        blobs = self.comm.gather(pickle.dumps(state, protocol=pickle.HIGHEST_PROTOCOL), root=0)
-        if self.comm.rank != 0:
-            return
-        tmp = self.path.with_name(self.path.name + ".tmp")
-        with h5py.File(tmp, "w") as f:
-            f.attrs.update(steps=self.steps, nprocs=self.comm.size, scene=self.scene_text)
-            for rank, blob in enumerate(blobs):
-                f[f"state/{rank}"] = np.frombuffer(blob, dtype=np.uint8)
-        os.replace(tmp, self.path)
+        target = self.path / f"{self.comm.rank}.{self.steps % 2}"
+        tmp = target.with_name(target.name + ".tmp")
+        with open(tmp, "wb") as f:
+            pickle.dump({"steps": self.steps, "nprocs": self.comm.size, "state": state}, f,
+                        protocol=pickle.HIGHEST_PROTOCOL)
+        os.replace(tmp, target)
 
 
 @dataclass
@@ -111,46 +115,59 @@ def _step_rows(f: h5py.File, k: int) -> dict:
 def read_restart(comm, path: str, scene) -> Restart:
     """The state to continue ``path`` from, for ``scene`` (collective; InputError naming
     ``--restart`` on every rank when the result cannot be continued)."""
-    verdict, blobs, info = None, None, None
+    verdict, times = None, None
     if comm.rank == 0:
         try:
-            info, blobs = _read_state(path, scene, comm.size)
+            times = _check_result(path, scene, comm.size)
         except InputError as exc:
             verdict = exc.message
     verdict = comm.bcast(verdict, root=0)
     if verdict is not None:
         raise InputError(verdict, path, KEY)
-    steps, t = comm.bcast(info, root=0)
-    blob = comm.scatter(blobs, root=0)
-    return Restart(path, steps, t, pickle.loads(blob))
+    times = comm.bcast(times, root=0)
+    mine = _saved_states(state_path(path), comm.rank)
+    # the last step every rank saved (a kill may have caught some ranks a step ahead)
+    common = set.intersection(*map(set, comm.allgather(sorted(mine))))
+    steps = max(common, default=0)
+    if steps < 1 or steps > len(times):
+        raise InputError(f"its restart state ({state_path(path)}) holds no step that every "
+                         f"rank saved and the result has", path, KEY)
+    return Restart(path, steps, float(times[steps - 1]), mine[steps])
 
 
-def _read_state(path: str, scene, nprocs: int) -> tuple[tuple[int, float], list[bytes]]:
-    sidecar = state_path(path)
+def _check_result(path: str, scene, nprocs: int) -> np.ndarray:
+    """The result's step times, once it is known to be a result of this scene whose state
+    is there for this many ranks."""
     try:
         with h5py.File(path, "r", swmr=True) as f:   # (also a killed run's file)
             times = f["steps/time"][()]
             text = str(f.attrs.get("scene", ""))
     except (OSError, KeyError) as exc:
         raise InputError(f"cannot read the result to restart ({exc})") from None
-    if not sidecar.exists():
-        raise InputError(f"no restart state beside it ({sidecar} is missing)")
-    try:
-        with h5py.File(sidecar, "r") as f:
-            steps, ranks = int(f.attrs["steps"]), int(f.attrs["nprocs"])
-            blobs = [f[f"state/{r}"][()].tobytes() for r in range(ranks)]
-    except (OSError, KeyError) as exc:
-        raise InputError(f"cannot read its restart state {sidecar} ({exc})") from None
+    folder = state_path(path)
+    if not folder.is_dir():
+        raise InputError(f"no restart state beside it ({folder} is missing)")
+    ranks = len({p.name.split(".")[0] for p in folder.iterdir() if not p.name.endswith(".tmp")})
     if ranks != nprocs:
         raise InputError(f"its restart state is for {ranks} ranks; run on {ranks} ranks "
                          f"(this run has {nprocs})")
-    if steps > len(times) or steps < 1:
-        raise InputError(f"its restart state follows step {steps} but the result has "
-                         f"{len(times)} finished steps")
     if _without_steps(text) != _without_steps(scene.text):
         raise InputError("the scene differs from the result's beyond [steps] (a restart "
                          "continues the same problem)")
-    return (steps, float(times[steps - 1])), blobs
+    return times
+
+
+def _saved_states(folder: Path, rank: int) -> dict[int, dict]:
+    """This rank's saved states by step (up to two)."""
+    out = {}
+    for slot in (0, 1):
+        try:
+            with open(folder / f"{rank}.{slot}", "rb") as f:
+                saved = pickle.load(f)
+        except (OSError, EOFError, pickle.UnpicklingError):
+            continue
+        out[saved["steps"]] = saved["state"]
+    return out
 
 
 def _without_steps(text: str) -> dict:
