@@ -13,12 +13,10 @@ from __future__ import annotations
 
 import argparse
 import difflib
-import os
 import sys
-from pathlib import Path
 
 USAGE = """parsolve run SCENE [-o OUT.h5] [--export-system DIR] [--output-mode swmr|parallel|auto]
-                    [-q | -v] [PETSc options]
+                    [--restart RESULT.h5] [-q | -v] [PETSc options]
        parsolve check SCENE [-q | -v] [PETSc options]
        parsolve {study,batch,post,mesh} ...   (parsolve COMMAND --help)
        parsolve --version"""
@@ -30,9 +28,9 @@ COMMANDS = {  # what ``parsolve --help`` lists, in order
     "post": "curves, line profiles, nodal fields and summaries of results (parsolve post --help)",
     "mesh": "mesh files: conversion, inspection (parsolve mesh --help)",
 }
-LONG_FLAGS = ("--output", "--export-system", "--output-mode", "--quiet", "--verbose", "--version",
+LONG_FLAGS = ("--output", "--export-system", "--output-mode", "--restart", "--quiet", "--verbose", "--version",
               "--help")
-VALUED = ("-o", "--output", "--export-system", "--output-mode")  # flags of ours that take the next word
+VALUED = ("-o", "--output", "--export-system", "--output-mode", "--restart")  # flags of ours that take the next word
 SHORT_FLAGS = ("-o", "-h", "-q", "-v")   # every other single-dash word is PETSc's
 
 
@@ -106,6 +104,9 @@ def _parser() -> argparse.ArgumentParser:
                      help="swmr (default): rank 0 writes, readers can follow the run; parallel: "
                           "every rank writes its rows (MPI-IO), no live reading; auto: parallel "
                           "on 2+ ranks from 1M DOFs")
+    run.add_argument("--restart", metavar="RESULT.h5",
+                     help="continue the result of an earlier run of this scene from its last "
+                          "finished step (a new result: its steps, then the new ones)")
     _verbosity(run)
     check = sub.add_parser("check", help=COMMANDS["check"], allow_abbrev=False,
                            prog="parsolve check",
@@ -175,101 +176,10 @@ def _abort_on_error(comm) -> None:
 SUBCOMMANDS = ("study", "batch", "post")
 
 
-def output_path(args, scene) -> tuple[str, str, str]:
-    """(path, source, key) of the result file: -o, else [output] file, else SCENE.h5."""
-    if args.output:
-        return args.output, "command line", "-o"
-    if scene.output:
-        return scene.output, scene.source, "output.file"
-    return Path(args.scene).stem + ".h5", scene.source, "output.file"
-
-
-def check_output(path: str, source: str, key: str, inputs: list[Path],
-                 export_dir: str | None = None) -> None:
-    """The result file (and the XDMF beside it) must be a writable file that is no input."""
-    from parsolve.errors import InputError
-
-    def fail(message: str, src: str = source, k: str = key) -> InputError:
-        return InputError(message, src, k)
-
-    out = Path(path)
-    targets = [out, out.with_suffix(".xdmf"), out.with_suffix(".xdmf.h5")]
-    for target in targets:
-        for inp in inputs:
-            if _same(target, inp):
-                raise fail(f"{target} would overwrite the input file {inp}")
-    if out.is_dir():
-        raise fail(f"{out} is a folder, not a result file")
-    parent = out.parent if str(out.parent) else Path(".")
-    if parent.exists() and not parent.is_dir():
-        raise fail(f"cannot write {out}: {parent} is a file, not a folder")
-    if not parent.exists():
-        raise fail(f"cannot write {out}: folder {parent} does not exist")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise fail(f"cannot write {out}: folder {parent} is read-only")
-    for target in targets:
-        if target.exists() and (target.is_dir() or not os.access(target, os.W_OK)):
-            raise fail(f"cannot write {target}: it is a folder or read-only")
-    if export_dir is not None:
-        d = Path(export_dir)
-        if d.exists() and not d.is_dir():
-            raise fail(f"--export-system {d} is a file, not a folder", "command line",
-                       "--export-system")
-
-
-def lock_output(comm, out: str, source: str, key: str):
-    """Rank 0 locks the result (parsolve.io.lock) and every rank learns the verdict: a result
-    another run is writing is an InputError, raised before any output is touched. Returns the
-    lock on rank 0 (None elsewhere)."""
-    from parsolve.errors import InputError
-    from parsolve.io.lock import OutputLock
-
-    lock, verdict = None, None
-    if comm.rank == 0:
-        lock = OutputLock(out)
-        try:
-            verdict = "ok" if lock.acquire() else "busy"
-        except OSError as exc:
-            verdict = f"cannot lock {lock.path}: {exc.strerror or exc}"
-        if verdict == "ok":
-            lock.reserve()
-    verdict = comm.bcast(verdict, root=0)
-    if verdict == "busy":
-        raise InputError(f"{out} is being written by another run (lock held on "
-                         f"{out}.lock)", source, key)
-    if verdict != "ok":
-        raise InputError(verdict, source, key)
-    return lock
-
-
-def _same(a: Path, b: Path) -> bool:
-    try:
-        return a.resolve() == b.resolve() or (a.exists() and b.exists() and a.samefile(b))
-    except OSError:
-        return False
-
-
-def _check_all_regions(model) -> None:
-    """Regions no effect uses are evaluated too: their selectors must be valid and finite."""
-    scene = model.scene
-    resolver = model.regions()
-    for name, spec in scene.regions.items():
-        resolver(name, spec.key)
-
-
-def _validate_options(comm, model, cli_options: dict[str, str]) -> None:
-    from parsolve.solvers import options as opt
-    from parsolve.solvers.linear import preset_options
-
-    scene = model.scene
-    multiplied = [r for r in model.relations if not r.eliminable()]
-    preset = preset_options(scene.solver.preset, all(r.associated for r in multiplied),
-                            bool(multiplied))
-    opt.validate(comm, scene.solver.prefix, preset, scene.solver.options, cli_options,
-                 scene.source)
-
-
 def main(argv: list[str] | None = None) -> int:
+    """The exit status of one command. ``run`` and ``check`` are :mod:`parsolve.api`'s
+    ``run`` and ``check`` (its checks, in its order); here only the arguments, the messages
+    and the exit statuses."""
     argv = sys.argv[1:] if argv is None else argv
     if argv and argv[0] in SUBCOMMANDS:
         import importlib
@@ -312,42 +222,29 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         say(f"parsolve: {exc}", sys.stderr)
         return 2
-    lock = None
-    try:
-        from parsolve.mesh import memory
-        from parsolve.model import build_model
-        from parsolve.scene import load_scene
+    from parsolve import api
 
-        scene = load_scene(args.scene)
-        if args.command == "run":
-            out, source, key = output_path(args, scene)
-            inputs = [Path(args.scene)] + ([scene.mesh.file] if scene.mesh.file else [])
-            check_output(out, source, key, inputs, args.export_system)
-            lock = lock_output(comm, out, source, key)
-        with memory.agreed_over(comm):
-            model = build_model(scene, comm)
-        _check_all_regions(model)
-        _validate_options(comm, model, cli_options)
-        for warning in model.mesh.warnings:
-            log(f"parsolve: warning: {warning}", sys.stderr)
+    try:
         if args.command == "check":
+            scene = api.Scene.from_file(args.scene)
+            model = api.check(scene, comm, cli_options)
+            for warning in model.mesh.warnings:
+                log(f"parsolve: warning: {warning}", sys.stderr)
             mesh = model.mesh
             say(f"{args.scene}: ok ({getattr(mesh, 'num_global_points', mesh.num_points)} nodes, "
                 f"{getattr(mesh, 'num_global_cells', mesh.num_cells)} "
                 f"{model.mesh.cell_type} cells, {len(model.relations)} relations, "
-                f"{len(scene.times)} steps; effects: {', '.join(scene.effects)})")
+                f"{len(scene.spec.times)} steps; effects: {', '.join(scene.spec.effects)})")
             return 0
-        from parsolve.driver import run
-
-        from parsolve.interrupts import interruptible
-
-        with interruptible(comm):
-            run(comm, model, out, cli_options, args.export_system, log=log,
-                output=args.output_mode)
-        for name in unused_options(scene.solver.prefix, {**scene.solver.options, **cli_options}):
+        scene = api.Scene.from_file(args.scene)
+        result = api.run(scene, args.output, comm, cli_options, restart=args.restart,
+                         output_mode=args.output_mode, export_system=args.export_system,
+                         log=log, warn=lambda message: log(message, sys.stderr))
+        solver = scene.spec.solver
+        for name in unused_options(solver.prefix, {**solver.options, **cli_options}):
             log(f"parsolve: warning: PETSc option {name} was not used by any solver object",
                 sys.stderr)
-        say(f"results: {out}")
+        say(f"results: {result.path}")
         return 0
     except Interrupted as exc:
         say(f"parsolve: interrupted by {exc.name}; the finished steps are in the result file",
@@ -364,8 +261,6 @@ def main(argv: list[str] | None = None) -> int:
         return 3
     finally:
         progress.configure(progress.QUIET)   # (main called in a process that goes on)
-        if lock is not None:
-            lock.release()
 
 
 if __name__ == "__main__":

@@ -11,12 +11,14 @@ import numpy as np
 from mpi4py import MPI
 
 from parsolve.diagnostics import unsupported
+from parsolve.effects.base import Effect
 from parsolve.effects.compose import Rate
 from parsolve import interrupts
 from parsolve.progress import timed
-from parsolve.errors import Interrupted, SolverError
+from parsolve.errors import InputError, Interrupted, SolverError
 from parsolve.io.hdf5 import output_mode, result_writer
 from parsolve.io.mesh_rows import output_mesh
+from parsolve.io.restart import Checkpoint, Restart
 from parsolve.model import Model
 from parsolve.outputs import Balance, contact_line, contact_totals, progress, resultant_labels, \
     resultant_line, step_outputs
@@ -35,9 +37,13 @@ def needs_newton(model: Model) -> bool:
 
 
 def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
-        export_dir: str | None = None, log=print, output: str | None = None) -> str:
+        export_dir: str | None = None, log=print, output: str | None = None,
+        watch=None, restart: Restart | None = None) -> str:
     """Solve every step and write the result file; returns the final status. ``output``: the
-    output mode ("swmr", "parallel", "auto"; default: the scene's, else "swmr")."""
+    output mode ("swmr", "parallel", "auto"; default: the scene's, else "swmr"); ``watch``:
+    wraps the writer (``parsolve.api``'s per-step callbacks); ``restart``: the finished run to
+    continue (``parsolve.io.restart``: its steps are copied, then the run goes on from its
+    state). Every finished step's state is saved for a later restart."""
     scene = model.scene
     system = SaddleSystem(comm, model)
     # (a device of the Newton matrix, e.g. contact's geometric stiffness, is not a result)
@@ -46,6 +52,8 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
     unknowns = {"unknowns": " ".join(f.output for f in model.fields),
                 "dofs": model.mesh.num_global_points * model.ncomp,
                 "resultant_components": " ".join(resultant_labels(model.fields, model.mesh.dim))}
+    if restart is not None:
+        unknowns.update(restart_of=str(restart.path), restart_steps=restart.steps)
     mode = output_mode(output or scene.output_mode, comm, unknowns["dofs"])
     # the file's mesh and rows from every rank's owned part
     written, owners = timed("result file", output_mesh, comm, model.mesh, system.part)
@@ -53,12 +61,14 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
                            attrs=unknowns, owners=owners)
     status = "complete"
     try:
+        checkpoint = _start(comm, model, system, out, writer, restart)
+        writer = watch(writer) if watch is not None else writer
         if scene.nonlinear.method == "arc_length":
             run_arc_length(comm, system, cli_options, writer, log, export_dir)
         elif needs_newton(model):
-            _run_newton(comm, system, cli_options, writer, log, export_dir)
+            _run_newton(comm, system, cli_options, writer, log, checkpoint, restart, export_dir)
         else:
-            _run_linear(comm, system, cli_options, writer, export_dir, log)
+            _run_linear(comm, system, cli_options, writer, export_dir, log, checkpoint, restart)
     except SolverError as exc:
         hints = _failure_hints(model)
         if "singular" in str(exc) or "inaccurate" in str(exc):
@@ -78,6 +88,27 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
     return status
 
 
+def check_restart(model: Model, restart: Restart) -> None:
+    """A restart this model can take (before any output is touched): InputError otherwise."""
+    if model.scene.nonlinear.method == "arc_length":
+        raise InputError("an arc-length run cannot be restarted", restart.path, "--restart")
+    unsaved = [type(e).__name__ for e in model.effects if e.refreshes
+               and type(e).restart_state is Effect.restart_state]
+    if unsaved:
+        raise InputError(f"restart does not keep the state of {', '.join(unsaved)}",
+                         restart.path, "--restart")
+
+
+def _start(comm, model, system, out, writer, restart: Restart | None) -> Checkpoint:
+    """The earlier steps of a restart copied into the new result; the checkpoint that keeps
+    every finished step's state from now on."""
+    if restart is not None:
+        mesh = model.mesh
+        cells = mesh.global_cells[system.part.owned_cells(comm.rank, mesh.cells)]
+        restart.copy_steps(writer, mesh.global_nodes[:mesh.n_owned], cells)
+    return Checkpoint(comm, out, restart.steps if restart else 0)
+
+
 def _failure_hints(model) -> list[str]:
     """The effects' sentences on a failed step (the same on every rank); one that cannot
     say must not hide the failure itself."""
@@ -90,7 +121,8 @@ def _failure_hints(model) -> list[str]:
     return hints
 
 
-def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log) -> None:
+def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log,
+                checkpoint: Checkpoint, restart: Restart | None = None) -> None:
     """Assemble and factorize once (again when a transient step size changes); one
     back-substitution per step."""
     ctx = system.context
@@ -99,7 +131,14 @@ def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log
     mat, vecs = None, None
     q_prev, t_prev = ctx.initial_q(), 0.0
     balance = Balance(comm, ctx, q_prev) if ctx.transient else None
+    first = 0
+    if restart is not None:
+        q_prev, t_prev, first = restart.state["q"], restart.state["t"], _first_step(scene, restart)
+        if balance is not None:
+            balance.__dict__.update(restart.state["balance"])
     for step, t in enumerate(scene.times):
+        if step < first:
+            continue
         t1 = time.perf_counter()
         assembly = 0.0
         theta = scene.time.theta if ctx.transient else None
@@ -136,9 +175,44 @@ def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log
                  f"  (linear its {linear_its})" + reported(ctx, rel_out, fields))
         _pass_notes(comm, solver, writer, log)
         q_prev, t_prev = q, t
+        checkpoint.save({"q": q, "t": t, "balance": _balance_state(balance)})
 
 
-def _run_newton(comm, system: SaddleSystem, cli_options, writer, log, export_dir=None) -> None:
+def _first_step(scene, restart: Restart) -> int:
+    """The first of the scene's steps after the restart's last time."""
+    times = np.asarray(scene.times, dtype=float)
+    return int(np.searchsorted(times, restart.time * (1 + 1e-12) + 1e-300, side="right"))
+
+
+def _plain(obj) -> dict:
+    """An object's attributes but the scene's (what a restart restores)."""
+    return {k: v for k, v in vars(obj).items() if k not in ("spec", "times")}
+
+
+def _load_newton(restart: Restart, newton, schedule, watch, balance) -> int:
+    """The Newton run's state at the restart's last step; returns the steps saved so far.
+    Fixed steps go on with the scene's first time after it (the scene may end later)."""
+    state = restart.state
+    newton.load_state(state["newton"])
+    schedule.__dict__.update(state["schedule"])
+    if not schedule.spec.automatic:
+        schedule.count = _first_step(schedule, restart)
+    watch.__dict__.update(state["watch"])
+    if balance is not None:
+        balance.__dict__.update(state["balance"])
+    return state["step"]
+
+
+def _balance_state(balance) -> dict | None:
+    """The conservation sums so far (transient runs), without what the model builds."""
+    if balance is None:
+        return None
+    return {k: v for k, v in vars(balance).items() if k not in ("comm", "ctx")}
+
+
+def _run_newton(comm, system: SaddleSystem, cli_options, writer, log,
+                checkpoint: Checkpoint, restart: Restart | None = None,
+                export_dir: str | None = None) -> None:
     """Newton + active set at every step; the steps follow the scene or the automatic rule.
     A step that fails is cut in two and retried (bounded), fixed steps as automatic ones; the
     log and /steps/cuts say so."""
@@ -154,6 +228,8 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log, export_dir
     balance = Balance(comm, ctx, newton.q) if ctx.transient else None
     watch = BranchWatch(ctx.nonlinear)
     step, setup = 0, time.perf_counter() - t0
+    if restart is not None:
+        step = _load_newton(restart, newton, schedule, watch, balance)
     while (t := schedule.next()) is not None:
         t1 = time.perf_counter()
         snap = newton.snapshot()
@@ -191,6 +267,8 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log, export_dir
         # (the largest strain increment sizes automatic steps only; every rank takes this branch)
         schedule.done(t, _max_strain_increment(comm, ctx, newton.q - snap[0])
                       if schedule.spec.automatic else 0.0)
+        checkpoint.save({"newton": newton.save_state(), "schedule": _plain(schedule),
+                         "watch": _plain(watch), "balance": _balance_state(balance), "step": step})
         progress(log, comm, step, schedule.total, t, result.iterations, result.residual, seconds,
                  cut_note + reported(ctx, rel_out, fields))
         if warning and comm.rank == 0:

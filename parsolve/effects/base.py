@@ -125,6 +125,14 @@ class Effect:
     def end_step(self) -> None:
         """Commit the converged step's state."""
 
+    def restart_state(self) -> dict:
+        """What a restart needs of the effect's own state between steps (the hooks' committed
+        state): none by default."""
+        return {}
+
+    def load_restart_state(self, state: dict) -> None:
+        """The state ``restart_state`` gave, in a new effect of the same model and ranks."""
+
     def failure_hints(self) -> list[str]:
         """Sentences on what, in this effect, likely made the last step fail (the driver adds
         them to a solver failure's message): none by default. Every rank says the same."""

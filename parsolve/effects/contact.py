@@ -620,6 +620,37 @@ class Contact(FiniteSliding, Effect):
         """No forces and no stiffness of its own: the contact acts through its relations."""
         return {}, [], state, None
 
+    # what the model builds (not the state between steps a restart restores)
+    _BUILT = ("spec", "mesh", "fields_", "source", "radial", "name", "values")
+    _ROW_VALUES = ("a_vals", "values", "compliance")   # a relation's values the hooks change
+
+    def restart_state(self) -> dict:
+        """Everything but what the model builds: the committed node states and slip
+        directions, the slip Newton's, the slip so far, finite sliding's pairing and spans;
+        of its relations (shared with the system), the values the hooks change."""
+        state = {k: v for k, v in vars(self).items()
+                 if k not in self._BUILT and not isinstance(v, Relation)}
+        state["relation_values"] = {
+            k: ({a: getattr(r, a) for a in self._ROW_VALUES}, r.dual[2] if r.dual else None)
+            for k, r in vars(self).items() if isinstance(r, Relation)}
+        return state
+
+    def load_restart_state(self, state: dict) -> None:
+        # spans made again since the start: the relations' entries and the operator anew
+        # (the same spans: the operator as built, for the same round-off)
+        state = dict(state)
+        respanned = self.restructures and not _equal(self.span, state["span"])
+        for k, (values, dual) in state.pop("relation_values").items():
+            r = getattr(self, k)
+            for a, v in values.items():
+                if v is not None and getattr(r, a).shape == v.shape:
+                    getattr(r, a)[...] = v   # in place: the relation set holds these arrays
+            if dual is not None and r.dual[2].shape == dual.shape:
+                r.dual[2][...] = dual
+        vars(self).update(state)
+        if respanned:
+            self._restructuring = self.restructured = True
+
     def end_step(self) -> None:
         self.turning.commit()
         self._lam_committed = self._lam_now
@@ -663,3 +694,17 @@ class Contact(FiniteSliding, Effect):
         extras = {"normal_force": np.array([(rn * share).sum()]),
                   "tangential_force": (rt * share[:, None]).sum(axis=0)}
         return fields, {self.normal.name: extras}
+
+
+def _equal(a, b) -> bool:
+    """Equal values: arrays element for element, objects attribute for attribute."""
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and np.array_equal(a, b)
+    if isinstance(a, dict) or hasattr(a, "__dict__"):
+        if type(a) is not type(b):
+            return False
+        a, b = (a, b) if isinstance(a, dict) else (vars(a), vars(b))
+        return a.keys() == b.keys() and all(_equal(a[k], b[k]) for k in a)
+    if isinstance(a, (list, tuple)):
+        return type(a) is type(b) and len(a) == len(b) and all(map(_equal, a, b))
+    return bool(a == b)

@@ -231,6 +231,25 @@ class NewtonSolver:
          self.f_pure) = (snap[0].copy(), snap[1].copy(), snap[2].copy(), *snap[3:])
         self.active.active = active.copy()
 
+    def save_state(self) -> dict:
+        """The converged state a restart continues from (``parsolve.io.restart``): the
+        snapshot, the active set's senses, and the hooks' effects' own state."""
+        return {"snapshot": self.snapshot(), "f_ext": getattr(self, "f_ext", None),
+                "orient": self.active.orient.copy(), "oriented": self._oriented,
+                "hooks": [e.restart_state() for e in self.hooks]}
+
+    def load_state(self, state: dict) -> None:
+        """The state ``save_state`` gave, in a new solver of the same model and ranks."""
+        self.restore(state["snapshot"])
+        if state["f_ext"] is not None:
+            self.f_ext = state["f_ext"]
+        self.active.orient[:] = state["orient"]
+        self._oriented = state["oriented"]
+        for e, saved in zip(self.hooks, state["hooks"]):
+            e.load_restart_state(saved)
+        if self.hooks:
+            self._sync_relations()
+
     def _evaluate(self, q: np.ndarray):
         """(f_int with the rate terms, tangent, trial states, extras); keeps f_int alone."""
         total, pure, blocks, trial, extras = self.ctx.composition.evaluate(
