@@ -108,7 +108,7 @@ def _abort_on_error(comm) -> None:
 
 
 # Commands that live in their own subpackage: ``parsolve.<name>.cli.main(argv) -> int``.
-SUBCOMMANDS = ("study", "batch", "post")
+SUBCOMMANDS = ("study", "batch", "post", "mesh")
 
 
 def output_path(args, scene) -> tuple[str, str, str]:

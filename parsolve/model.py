@@ -21,9 +21,11 @@ from parsolve.mesh import blocks, memory
 from parsolve.mesh.checks import check_mesh
 from parsolve.mesh.distribute import LocalMesh, distribute
 from parsolve.mesh.generators import GENERATORS, make_quadratic
-from parsolve.mesh.mesh import Mesh
+from parsolve.mesh.h5mesh import is_mesh_h5, open_mesh, read_whole
+from parsolve.mesh.mesh import CELL_INFO, Mesh
 from parsolve.mesh.reader import read_mesh
 from parsolve.mesh.regions import RegionResolver
+from parsolve.mesh.slices import distribute_slices
 from parsolve.relations import Relation
 from parsolve.scene import Scene
 
@@ -97,7 +99,7 @@ def build_mesh(scene: Scene) -> Mesh:
     spec = scene.mesh
     source, key = mesh_source(scene)
     if spec.file is not None:
-        mesh = read_mesh(source)
+        mesh = read_whole(source) if is_mesh_h5(source) else read_mesh(source)
         memory.check_whole_mesh(_points_after_order(mesh, spec.order), mesh.dim, source, key,
                                 f"a mesh of {mesh.num_cells} {mesh.cell_type} cells")
     else:
@@ -178,6 +180,35 @@ def _generator_key(exc: Exception) -> str:
 
 
 def _distributed_mesh(scene: Scene, comm) -> LocalMesh:
+    """Every rank's part of the scene's mesh: from slices of a parallel mesh file (no rank
+    holding the whole), else built whole on rank 0 (``_mesh_from_rank0``)."""
+    spec = scene.mesh
+    if spec.file is not None and is_mesh_h5(spec.file) and spec.order == 1:
+        part = _mesh_from_slices(scene, comm)
+    else:
+        return _mesh_from_rank0(scene, comm)
+    source, key = mesh_source(scene)
+    memory.check_fits(part.num_global_points, part.dim, scene.solver.preset, source, key,
+                      f"a mesh of {part.num_global_cells} {part.cell_type} cells")
+    return part
+
+
+def _mesh_from_slices(scene: Scene, comm) -> LocalMesh:
+    """Each rank reads a slice of the parallel mesh file's cells and points; they are checked,
+    partitioned and moved to their owners together (``mesh.slices``)."""
+    source, key = mesh_source(scene)
+    f = agree(comm, open_mesh, source)
+    try:
+        dim = CELL_INFO[f.cell_type][0]
+        if dim != scene.dim:
+            raise InputError(f"a {dim}D mesh ({f.cell_type}) cannot carry hypothesis "
+                             f"{scene.hypothesis!r}", scene.source, "model.hypothesis")
+        return distribute_slices(comm, f, scene.solver.partitioner, source, key)
+    finally:
+        f.close()
+
+
+def _mesh_from_rank0(scene: Scene, comm) -> LocalMesh:
     """Rank 0 builds and checks the whole mesh, then every rank gets its part (on 1 rank: the
     whole mesh itself, not a copy); an input error of rank 0's is raised on every rank. The
     solve's share of every rank is checked against the memory before anything is built when
