@@ -99,6 +99,27 @@ def fetch(comm, ids: np.ndarray, starts: np.ndarray, table: np.ndarray) -> np.nd
     return out
 
 
+class CellCoords:
+    """The coordinates of a slice's cells' nodes, (ncells, nodes, dim) by blocks of cells as
+    they are asked for (``checks.jacobian_range_of`` takes them a chunk at a time): the
+    array itself would be 3 times the cells' (doubles, 2 or 3 per node)."""
+
+    def __init__(self, node_points: np.ndarray, inverse: np.ndarray):
+        self.node_points, self.inverse = node_points, inverse
+        self.shape = inverse.shape + node_points.shape[1:]
+        _note(node_points, inverse)
+
+    def __getitem__(self, rows: slice) -> np.ndarray:
+        return self.node_points[self.inverse[rows]]
+
+    def centroids(self) -> np.ndarray:
+        out = np.empty((self.shape[0], self.shape[2]))
+        for start in range(0, self.shape[0], checks.JACOBIAN_CHUNK):
+            stop = start + checks.JACOBIAN_CHUNK
+            out[start:stop] = self[start:stop].mean(axis=1)
+        return out
+
+
 # ------------------------------------------------------------------ partition
 
 
@@ -176,17 +197,17 @@ def distribute_slices(comm, src: SliceSource, method: str, source: str, key: str
     cells, points = agree(comm, _read_slice, src, cs, ps, rank, source, key)
     _note(cells, points)
     nodes, inverse = np.unique(cells, return_inverse=True)
-    coords = fetch(comm, nodes, ps, points)[inverse].reshape(cells.shape + (src.dim,))
-    _note(coords)
+    inverse = inverse.reshape(cells.shape)
+    coords = CellCoords(fetch(comm, nodes, ps, points), inverse)
     block = blocks.CellBlock(cells, coords, int(cs[rank]), src.num_cells, src.cell_type, src.dim)
     blocks.check_jacobians(comm, block, source, key)
-    centroids = coords.mean(axis=1)
+    centroids = coords.centroids()
     block.coords = coords = None
     graph = blocks.facet_groups(comm, block, source, key, graph=size > 1)
     part, used = _cell_parts(comm, method, block, centroids, graph)
     del graph, centroids
     homes = _homes(comm, src, cells, part, ps, points, rank)
-    mine = _cells_to_owners(comm, src, cells, nodes, inverse, homes, cs[rank])
+    mine = _cells_to_owners(comm, src, cells, nodes, inverse.ravel(), homes, cs[rank])
     del cells, part, nodes, inverse
     mesh = _local_mesh(comm, src, mine, homes, source, key)
     mesh.partitioner = used
@@ -254,8 +275,13 @@ def _cells_to_owners(comm, src: SliceSource, cells, nodes, inverse, homes: _Home
     pairs = np.unique(np.repeat(np.arange(ncells, dtype=np.int64), cells.shape[1]) * size
                       + owner.ravel())
     cell, dest = np.divmod(pairs, size)
-    flags = src.cell_flags(start, start + ncells).astype(np.int64)
-    rows = np.column_stack([cell + start, cells[cell], flags[cell]])
+    flags = src.cell_flags(start, start + ncells)
+    # int32 while the ids fit: a cell of the ghost layer travels (and lands) in half the bytes
+    kind = index_dtype(max(src.num_cells, src.num_points))
+    rows = np.empty((cell.size, 1 + cells.shape[1] + flags.shape[1]), dtype=kind)
+    rows[:, 0] = cell + start
+    rows[:, 1:1 + cells.shape[1]] = cells[cell]
+    rows[:, 1 + cells.shape[1]:] = flags[cell]
     _note(rows)
     got, _ = exchange(comm, rows, dest)
     _note(got)
