@@ -199,7 +199,10 @@ def _distributed_mesh(scene: Scene, comm) -> LocalMesh:
             if dim != scene.dim:
                 raise InputError(f"a {dim}D mesh ({src.cell_type}) cannot carry hypothesis "
                                  f"{scene.hypothesis!r}", scene.source, "model.hypothesis")
-            part = distribute_slices(comm, src, scene.solver.partitioner, *mesh_source(scene))
+            source, key = mesh_source(scene)
+            memory.check_part(src.num_points, dim, source, "mesh.generator" if key == "mesh"
+                              else key, f"a mesh of {src.num_cells} {src.cell_type} cells")
+            part = distribute_slices(comm, src, scene.solver.partitioner, source, key)
         finally:
             getattr(src, "close", lambda: None)()
     if counted is None:   # the solve, each rank its share (every rank's machine: collective)
