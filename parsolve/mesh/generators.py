@@ -224,8 +224,11 @@ class GridSlices:
         return np.column_stack([a[i] for a, i in zip(self.axes, idx)]).reshape(-1, self.dim)
 
     def cells(self, start: int, stop: int) -> np.ndarray:
+        return self._cells_of(np.arange(start, stop, dtype=np.int64))
+
+    def _cells_of(self, ids: np.ndarray) -> np.ndarray:
         per, split = _SPLIT[self.cell_type]
-        grid, sub = np.divmod(np.arange(start, stop, dtype=np.int64), per)
+        grid, sub = np.divmod(ids, per)
         index = []
         for n in self.n:
             grid, i = np.divmod(grid, n)
@@ -256,15 +259,20 @@ class GridSlices:
         cells, and their places in the whole group (by cell, then local facet: the order of
         ``topology.facets_from_nodes``). Every facet with its nodes on a side is a boundary
         facet: the side is a plane of the box's boundary."""
-        start = self.num_cells * rank // size
-        cells = self.cells(start, self.num_cells * (rank + 1) // size)
+        axis, last = divmod(_SIDES[self.dim].index(name), 2)
+        ids = np.arange(self.num_cells * rank // size, self.num_cells * (rank + 1) // size,
+                        dtype=np.int64)
+        # only the cells of the layer along the side can have a facet on it
+        layer = ids // _SPLIT[self.cell_type][0] // int(np.prod(self.n[:axis])) % self.n[axis]
+        ids = ids[layer == (self.n[axis] - 1 if last else 0)]
+        cells = self._cells_of(ids)
         local = FACETS[self.cell_type]
         rows, keys = [], []
         for li, f in enumerate(local):
             nodes = cells[:, list(f)]
             on = self._side(name, nodes.ravel()).reshape(nodes.shape).all(axis=1)
             rows.append(nodes[on])
-            keys.append((np.flatnonzero(on) + start) * len(local) + li)
+            keys.append(ids[on] * len(local) + li)
         keys = np.concatenate(keys)
         order = np.argsort(keys, kind="stable")
         return np.concatenate(rows)[order], keys[order]
