@@ -32,7 +32,7 @@ from mpi4py import MPI
 
 from parsolve.collective import agree
 from parsolve.errors import InputError
-from parsolve.mesh import blocks, checks
+from parsolve.mesh import blocks, checks, topology
 from parsolve.mesh.distribute import COMPONENT_MARGIN, LocalMesh, index_dtype
 from parsolve.mesh.partition import MIN_CELLS_PER_PART, PARTITIONERS, block_starts, scotch_block
 
@@ -212,7 +212,8 @@ def distribute_slices(comm, src: SliceSource, method: str, source: str, key: str
     mesh = _local_mesh(comm, src, mine, homes, source, key)
     mesh.partitioner = used
     mesh.extent = _extent(comm, points, src.dim)
-    mesh.warnings = [f"{source}: {key}: {w}" for w in _unused_warning(comm, homes.unused)]
+    warnings = _unused_warning(comm, homes.unused) + _duplicate_warning(comm, points, homes, ps)
+    mesh.warnings = [f"{source}: {key}: {w}" for w in warnings]
     return mesh
 
 
@@ -395,3 +396,44 @@ def _unused_warning(comm, unused: np.ndarray) -> list[str]:
     return [f"{count} point(s) are used by no cell (points {shown}): they are left out "
             "of the system"]
 
+
+def _duplicate_warning(comm, points: np.ndarray, homes: _Homes, ps) -> list[str]:
+    """``checks.duplicate_warning``'s message: the used points rounded onto the same grid
+    (``checks.duplicate_points``' spacing), each grid cell's points met on the rank its hash
+    names."""
+    used = np.ones(points.shape[0], dtype=bool)
+    used[homes.unused - ps[comm.rank]] = False
+    ids = np.flatnonzero(used) + ps[comm.rank]
+    pts = points[used]
+    lo, hi = bounds(comm, pts)
+    if not np.all(np.isfinite(hi - lo)):
+        return []
+    extent = max(float((hi - lo).max()), 1e-300)
+    grid = np.rint((pts - lo) / (1e-10 * extent)).astype(np.int64)
+    mix = np.zeros(ids.size, dtype=np.uint64)
+    for a in range(grid.shape[1]):
+        mix = mix * np.uint64(1000003) + grid[:, a].astype(np.uint64)
+    dest = (mix % np.uint64(comm.size)).astype(np.int64)
+    rows = np.column_stack([grid, ids, pts.view(np.int64).reshape(ids.size, -1)])
+    got, _ = exchange(comm, rows, dest)
+    dim = grid.shape[1]
+    got = got[np.argsort(got[:, dim], kind="stable")]   # by input id, as duplicate_points
+    group, counts = topology._row_groups(got[:, :dim]) if got.size else (np.zeros(0, np.int64),
+                                                                          np.zeros(0, np.int64))
+    dup = np.flatnonzero(counts[group] > 1) if group.size else group
+    first_of = np.full(counts.size, -1, dtype=np.int64)
+    first_of[group[dup[::-1]]] = dup[::-1]         # the lowest id of each group
+    others = dup[first_of[group[dup]] != dup]
+    pairs = np.column_stack([got[first_of[group[others]], dim], got[others, dim]])
+    count = comm.allreduce(int(pairs.shape[0]))
+    if count == 0:
+        return []
+    mine = None
+    if pairs.size:   # this rank's first pair (lexicographic) and its first point's coordinates
+        k = np.lexsort(pairs.T[::-1])[0]
+        mine = (tuple(int(v) for v in pairs[k]),
+                got[first_of[group[others[k]]], dim + 1:].copy().view(float))
+    (a, b), at = min((c for c in comm.allgather(mine) if c is not None), key=lambda c: c[0])
+    where = ", ".join(f"{c:g}" for c in at)
+    return [f"{count} point(s) duplicate another (first: points {a} and {b} at ({where})): "
+            "the cells on either side are not connected there (a crack?)"]
