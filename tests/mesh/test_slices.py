@@ -220,3 +220,38 @@ def test_no_rank_holds_a_whole_mesh_array(comm, shared_tmp):
         else:
             assert largest <= (1.3 / comm.size + 0.05) * whole_bytes
     f.close()
+
+
+def test_slice_path_checks_each_ranks_share_of_the_mesh(comm, monkeypatch, shared_tmp):
+    """A parallel mesh file's size is known before anything is read: each rank's share of the
+    mesh (0.2 KB per DOF over the ranks, not the whole mesh on one rank) is checked first,
+    refused below it with a message naming the file, accepted above the solve's estimate."""
+    import tomllib
+
+    from parsolve.errors import InputError
+    from parsolve.mesh import memory
+    from parsolve.model import _distributed_mesh
+    from parsolve.scene import parse_scene
+
+    path = shared_tmp / "square.h5"
+    if comm.rank == 0:
+        write_mesh(rectangle(1.0, 1.0, 30, 30, cell="triangle"), str(path))
+    comm.Barrier()
+    text = (f'[mesh]\nfile = "{path}"\n[model]\nhypothesis = "plane_stress"\n[[materials]]\n'
+            'E = 1.0\nnu = 0.3\n[solver]\npreset = "iterative"\n')
+    dofs, n = 2 * 31**2, comm.size
+    share = n * (memory.BASE + dofs * memory.WHOLE_MESH_PER_DOF / n)   # n ranks, one machine
+    solve = n * memory.estimate_bytes(dofs, 2, "iterative", n)
+    assert share < solve
+    read = []
+    monkeypatch.setattr("parsolve.model.distribute_slices", lambda *a: read.append(a) or 1 / 0)
+    monkeypatch.setattr(memory, "available_bytes", lambda local=1: share * 0.99)
+    with memory.agreed_over(comm), pytest.raises(InputError) as info:
+        _distributed_mesh(parse_scene(tomllib.loads(text), "s.toml"), comm)
+    assert info.value.source == str(path) and info.value.key == "mesh.file"
+    assert "read by slices" in info.value.message and not read   # refused before reading
+    monkeypatch.undo()
+    monkeypatch.setattr(memory, "available_bytes", lambda local=1: solve * 1.01)
+    with memory.agreed_over(comm):
+        part = _distributed_mesh(parse_scene(tomllib.loads(text), "s.toml"), comm)
+    assert comm.allreduce(part.n_owned) == 31**2
