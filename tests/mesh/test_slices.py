@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from parsolve.errors import InputError
 from parsolve.mesh import slices
 from parsolve.mesh.checks import check_mesh
 from parsolve.mesh.distribute import _extract
