@@ -138,7 +138,8 @@ def morton_parts(comm, centroids: np.ndarray) -> np.ndarray:
     size, dim = comm.size, centroids.shape[1]
     lo, hi = bounds(comm, centroids)
     bits = 63 // dim
-    scale = (2.0**bits - 1) / np.maximum(hi - lo, 1e-300)
+    span = hi - lo   # 0 along a flat direction (a bar's cells on one line): no cut along it
+    scale = np.where(span > 0, (2.0**bits - 1) / np.where(span > 0, span, 1.0), 0.0)
     grid = np.clip((centroids - lo) * scale, 0, 2.0**bits - 1).astype(np.uint64)
     key = np.zeros(centroids.shape[0], dtype=np.uint64)
     for a in range(dim):

@@ -254,3 +254,19 @@ def test_slice_path_checks_each_ranks_share_of_the_mesh(comm, monkeypatch, share
     with memory.agreed_over(comm):
         part = _distributed_mesh(parse_scene(tomllib.loads(text), "s.toml"), comm)
     assert comm.allreduce(part.n_owned) == 31**2
+
+
+def test_morton_parts_of_cells_on_a_line(comm):
+    """Centroids with a flat direction (all at y = 0) are cut along the other one, without
+    invalid values."""
+    x = np.arange(comm.rank, 400, comm.size, dtype=float)
+    with np.errstate(all="raise"):
+        part = slices.morton_parts(comm, np.column_stack([x, np.zeros_like(x)]))
+    counts = comm.allreduce(np.bincount(part, minlength=comm.size))
+    assert counts.max() - counts.min() <= 1
+    # parts are intervals of x: every part's x range lies before the next one's
+    ranges = comm.allgather([(x[part == p].min(), x[part == p].max()) if np.any(part == p)
+                             else None for p in range(comm.size)])
+    lo = [min(r[p][0] for r in ranges if r[p]) for p in range(comm.size)]
+    hi = [max(r[p][1] for r in ranges if r[p]) for p in range(comm.size)]
+    assert all(hi[p] < lo[p + 1] for p in range(comm.size - 1))
