@@ -173,7 +173,7 @@ def _abort_on_error(comm) -> None:
 
 
 # Commands that live in their own subpackage: ``parsolve.<name>.cli.main(argv) -> int``.
-SUBCOMMANDS = ("study", "batch", "post")
+SUBCOMMANDS = ("study", "batch", "post", "mesh")
 
 
 def main(argv: list[str] | None = None) -> int:

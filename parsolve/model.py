@@ -22,10 +22,12 @@ from parsolve.loads.build import load_patterns
 from parsolve.mesh import blocks, memory
 from parsolve.mesh.checks import check_mesh
 from parsolve.mesh.distribute import LocalMesh, distribute
-from parsolve.mesh.generators import GENERATORS, make_quadratic
-from parsolve.mesh.mesh import Mesh
+from parsolve.mesh.generators import GENERATORS, SLICED, make_quadratic
+from parsolve.mesh.h5mesh import is_mesh_h5, open_mesh, read_whole
+from parsolve.mesh.mesh import CELL_INFO, Mesh
 from parsolve.mesh.reader import read_mesh
 from parsolve.mesh.regions import RegionResolver
+from parsolve.mesh.slices import distribute_slices
 from parsolve.relations import Relation
 from parsolve.scene import Scene
 
@@ -100,7 +102,7 @@ def build_mesh(scene: Scene) -> Mesh:
     spec = scene.mesh
     source, key = mesh_source(scene)
     if spec.file is not None:
-        mesh = read_mesh(source)
+        mesh = read_whole(source) if is_mesh_h5(source) else read_mesh(source)
         memory.check_whole_mesh(_points_after_order(mesh, spec.order), mesh.dim, source, key,
                                 f"a mesh of {mesh.num_cells} {mesh.cell_type} cells")
     else:
@@ -181,8 +183,9 @@ def _generator_key(exc: Exception) -> str:
 
 
 def _distributed_mesh(scene: Scene, comm) -> LocalMesh:
-    """Rank 0 builds and checks the whole mesh, then every rank gets its part (on 1 rank: the
-    whole mesh itself, not a copy); an input error of rank 0's is raised on every rank. The
+    """Every rank's part of the scene's mesh: from slices (a parallel mesh file, a structured
+    rectangle or box of linear cells: no rank holds the whole, ``mesh.slices``), else built
+    whole on rank 0 (Gmsh and other meshio files, the other generators, ``order = 2``). The
     solve's share of every rank is checked against the memory before anything is built when
     the mesh's size is known from a generator's parameters, else once the mesh is read."""
     counted = _generated_counts(scene)
@@ -190,6 +193,51 @@ def _distributed_mesh(scene: Scene, comm) -> LocalMesh:
         points, cells, dim = counted
         memory.check_fits(points, dim, scene.solver.preset, scene.source, "mesh.generator",
                           f"the {scene.mesh.generator} of {cells} cells and {points} nodes")
+    src = _slice_source(scene, comm)
+    if src is None:
+        part = _mesh_from_rank0(scene, comm)
+    else:
+        try:
+            dim = CELL_INFO[src.cell_type][0]
+            if dim != scene.dim:
+                raise InputError(f"a {dim}D mesh ({src.cell_type}) cannot carry hypothesis "
+                                 f"{scene.hypothesis!r}", scene.source, "model.hypothesis")
+            source, key = mesh_source(scene)
+            memory.check_part(src.num_points, dim, source, "mesh.generator" if key == "mesh"
+                              else key, f"a mesh of {src.num_cells} {src.cell_type} cells")
+            part = distribute_slices(comm, src, scene.solver.partitioner, source, key)
+        finally:
+            getattr(src, "close", lambda: None)()
+    if counted is None:   # the solve, each rank its share (every rank's machine: collective)
+        source, key = mesh_source(scene)
+        key = "mesh.generator" if key == "mesh" else key   # as build_mesh's memory check names it
+        memory.check_fits(part.num_global_points, part.dim, scene.solver.preset, source, key,
+                          f"a mesh of {part.num_global_cells} {part.cell_type} cells")
+    return part
+
+
+def _slice_source(scene: Scene, comm):
+    """The mesh as slices every rank reads its own of (``mesh.slices.SliceSource``), or None
+    for the rank-0 path. Collective (an input error is every rank's)."""
+    spec = scene.mesh
+    if spec.order != 1:
+        return None
+    if spec.file is not None:
+        return agree(comm, open_mesh, mesh_source(scene)[0]) if is_mesh_h5(spec.file) else None
+    slicer = SLICED.get(spec.generator)
+    if slicer is None or spec.params.get("cell") in ("triangle6", "tetra10"):
+        return None
+    try:
+        with np.errstate(over="raise", divide="raise", invalid="raise"):
+            return slicer(**spec.params)
+    except (TypeError, ValueError, FloatingPointError, OverflowError) as exc:
+        raise InputError(f"invalid generator parameters: {exc}", scene.source,
+                         _generator_key(exc)) from None
+
+
+def _mesh_from_rank0(scene: Scene, comm) -> LocalMesh:
+    """Rank 0 builds and checks the whole mesh, then every rank gets its part (on 1 rank: the
+    whole mesh itself, not a copy); an input error of rank 0's is raised on every rank."""
     whole, error = None, None
     if comm.rank == 0:
         try:
@@ -208,11 +256,6 @@ def _distributed_mesh(scene: Scene, comm) -> LocalMesh:
     del block
     part = progress.timed("partition", distribute, comm, whole, scene.solver.partitioner, graph)
     del whole
-    if counted is None:   # the solve, each rank its share (every rank's machine: collective)
-        source, key = mesh_source(scene)
-        key = "mesh.generator" if key == "mesh" else key   # as build_mesh's memory check names it
-        memory.check_fits(part.num_global_points, part.dim, scene.solver.preset, source, key,
-                          f"a mesh of {part.num_global_cells} {part.cell_type} cells")
     return part
 
 

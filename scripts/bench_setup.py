@@ -38,9 +38,17 @@ relation on the right side whose dual is a traction over that side, controlled_b
 relation) and "body" (the same relation with a body force over the whole domain as dual: a
 dense column and row).
 
+Section *mesh* (1, 2 and 4 ranks): the mesh stage alone (`model._distributed_mesh`: read or
+generate, check, partition, distribute) of a box of 6·n³ tetrahedra, three ways: a Gmsh file
+(`.msh`, read whole by rank 0), the same mesh converted to the parallel file (`.h5`, read by
+slices) and the generator (`box`, built by slices); wall seconds of the slowest rank and each
+rank's peak resident memory (VmHWM, the process's whole life: Python, numpy, PETSc and MPI
+included), rank 0's against the mean of the others.
+
 Usage (from the repository root):
     .venv/bin/python scripts/bench_setup.py                 # everything
     .venv/bin/python scripts/bench_setup.py --sections pattern first --quick
+    .venv/bin/python scripts/bench_setup.py --sections mesh --mesh-n 56   # 1.05M tetrahedra
     .venv/bin/python scripts/bench_setup.py --report      # table again from bench_results/setup.json
     .venv/bin/python scripts/bench_setup.py --sections compare --compare HEAD~3
     .venv/bin/python scripts/bench_setup.py --smoke      # CI: smallest sizes, files in a temp folder
@@ -443,6 +451,65 @@ def child_mumps(dim: int, n: int, control: str) -> list[dict]:
     return rows
 
 
+def mesh_files(n: int) -> dict[str, str]:
+    """A box of 6·n³ tetrahedra as a Gmsh file and as the parallel file (made once, kept in
+    the scratch folder), and the scene [mesh] lines of the three ways."""
+    import meshio
+
+    from parsolve.mesh.cli import convert
+    from parsolve.mesh.generators import box
+
+    folder = RESULTS / "meshes"
+    folder.mkdir(parents=True, exist_ok=True)
+    msh, h5 = folder / f"box_tetra_{n}.msh", folder / f"box_tetra_{n}.h5"
+    if not msh.exists():
+        whole = box(1.0, 1.0, 1.0, n, n, n, cell="tetra")
+        meshio.write(str(msh), meshio.Mesh(whole.points, [("tetra", whole.cells)]),
+                     file_format="gmsh22", binary=True)
+    if not h5.exists():
+        convert(str(msh), str(h5))
+    return {"msh": f'file = "{msh}"', "h5": f'file = "{h5}"',
+            "box": f'generator = "box"\nlx = 1.0\nly = 1.0\nlz = 1.0\nnx = {n}\nny = {n}\n'
+                   f'nz = {n}\ncell = "tetra"'}
+
+
+def child_mesh(way: str, n: int, mesh_lines: str) -> dict:
+    """The mesh stage of a 3D scene on this many ranks: time and every rank's peak memory."""
+    from mpi4py import MPI
+
+    from parsolve.model import _distributed_mesh
+    from parsolve.scene import parse_scene
+    import tomllib
+
+    comm = MPI.COMM_WORLD
+    text = (f"[mesh]\n{mesh_lines}\n[model]\nhypothesis = \"3d\"\n[[materials]]\n"
+            "E = 1.0\nnu = 0.3\n[solver]\npreset = \"iterative\"\n")
+    scene = parse_scene(tomllib.loads(text), "bench.toml")
+    comm.Barrier()
+    t0 = time.perf_counter()
+    part = _distributed_mesh(scene, comm)
+    seconds = slowest(comm, time.perf_counter() - t0)
+    hwm = comm.gather(bh.proc_memory()["hwm"], root=0)
+    return {"way": way, "n": n, "cells": part.num_global_cells, "nranks": comm.size,
+            "seconds": seconds, "hwm": hwm}
+
+
+def mesh_table(rows: list[dict]) -> str:
+    head = ["mesh", "cells", "ranks", "seconds", "vs 1 rank", "rank 0 peak MiB",
+            "others' mean MiB", "rank 0 / others"]
+    ones = {(r["way"], r["n"]): r["seconds"] for r in rows if r["nranks"] == 1}
+    out = []
+    for r in rows:
+        others = r["hwm"][1:]
+        mean = sum(others) / len(others) if others else None
+        one = ones.get((r["way"], r["n"]))
+        out.append([r["way"], str(r["cells"]), str(r["nranks"]), f"{r['seconds']:.2f}",
+                    f"{r['seconds'] / one:.2f}" if r["nranks"] > 1 and one else "",
+                    bh.mib(r["hwm"][0]), bh.mib(mean) if mean else "", f"{r['hwm'][0] / mean:.2f}"
+                    if mean else ""])
+    return bh.md_table(head, out)
+
+
 # ------------------------------------------------------------------------------------------------
 # driver
 
@@ -548,7 +615,7 @@ def machine() -> str:
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--sections", nargs="+", default=["pattern", "first", "mumps"],
-                   choices=["pattern", "first", "mumps", "compare"])
+                   choices=["pattern", "first", "mumps", "compare", "mesh"])
     p.add_argument("--compare", default=None, metavar="REF",
                    help="git ref of the assembly code to compare with (section compare)")
     p.add_argument("--compare-cases", nargs="+", default=None, metavar="CELL:N",
@@ -564,12 +631,16 @@ def main() -> None:
                    help="only rewrite the table from bench_results/setup.json")
     p.add_argument("--mumps-2d", type=int, default=300, help="quads per side of the 2D MUMPS case")
     p.add_argument("--mumps-3d", type=int, default=20, help="hexes per side of the 3D MUMPS case")
+    p.add_argument("--mesh-n", type=int, default=56, help="hexes per side of the mesh section's "
+                   "box (6·n³ tetrahedra; 56: 1.05M)")
     p.add_argument("--child", nargs="+", default=None, help=argparse.SUPPRESS)
     p.add_argument("--json", default=None, help=argparse.SUPPRESS)
     bh.add_smoke(p)
     a = p.parse_args()
     if a.smoke:   # smallest sizes of every default section; DOLFINx only if installed
         a.quick, a.n2d, a.n3d, a.repeats, a.mumps_2d, a.mumps_3d = True, [8], [3], 1, 8, 3
+        a.mesh_n = 4
+        a.sections = sorted(set(a.sections) | {"mesh"})
         a.no_peers = a.no_peers or not bh.peer_available("dolfinx")
     if a.child:
         kind, *rest = a.child
@@ -579,6 +650,8 @@ def main() -> None:
             out = child_first(rest[0], int(rest[1]), int(rest[2]))
         elif kind == "compare":
             out = child_compare(rest[0], int(rest[1]), int(rest[2]), rest[3])
+        elif kind == "mesh":
+            out = child_mesh(rest[0], int(rest[1]), rest[2])
         elif kind == "memory":
             out = child_memory(rest[0], int(rest[1]), rest[2], rest[3])
         else:
@@ -595,7 +668,7 @@ def main() -> None:
     RESULTS.mkdir(exist_ok=True)
     # sections not run now keep their last results; every row is saved as soon as it is measured
     results = json.loads(saved.read_text()) if saved.exists() else {}
-    for section in ("pattern", "first", "mumps", "compare"):
+    for section in ("pattern", "first", "mumps", "compare", "mesh"):
         if (section in a.sections and not a.report) or section not in results:
             results[section] = []
     results.setdefault("peers", [])
@@ -637,6 +710,17 @@ def main() -> None:
                     rows = spawn(["mumps", str(dim), str(sizes[dim]), control], nranks=nranks)
                     results["mumps"].extend(rows or [])
                     save()
+    if "mesh" in a.sections and not a.report:
+        lines = mesh_files(a.mesh_n)
+        for way in ("msh", "h5", "box"):
+            for nranks in (1, 2, 4):
+                row = spawn(["mesh", way, str(a.mesh_n), lines[way]], nranks=nranks)
+                if row:
+                    results["mesh"].append(row)
+                    save()
+                    print(f"[mesh] {way} {row['cells']} cells, {nranks} ranks: "
+                          f"{row['seconds']:.2f} s, peaks {[bh.mib(h) for h in row['hwm']]}",
+                          flush=True)
     write_report(results, time.time() - t_start)
 
 
@@ -740,6 +824,13 @@ def write_report(results: dict, seconds: float) -> None:
     peers = {tuple(p["key"]): p for p in results.get("peers", [])}
     COMMITTED.mkdir(exist_ok=True)
     intro = __doc__.split("\n\n", 1)[1].split("Usage")[0].strip()
+    if results.get("mesh"):
+        text = ["# parsolve mesh stage: rank 0's path against the slice path", "",
+                [b for b in intro.split("\n\n") if b.startswith("Section *mesh*")][0], "",
+                machine() + f" {seconds:.0f} s.", "", mesh_table(results["mesh"]), ""]
+        md = "\n".join(text)
+        (COMMITTED / "bench_setup_mesh.md").write_text(md)
+        print(md)
     if results["pattern"] or results["first"] or results["mumps"]:
         text = ["# parsolve set-up benchmark", "", intro, "", machine() + f" {seconds:.0f} s.", "",
                 *results.get("notes", [])]

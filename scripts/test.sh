@@ -27,7 +27,8 @@ echo "== pytest, 4 ranks (oversubscribed): partition independence, distributed m
 # every shipped scene at 4 ranks against 1 rank, on both partitioners; ranks holding none of
 # a load's or relation's region
 parallel 4 tests/solvers/test_rank_independence.py tests/mesh/test_distribute.py \
-  tests/mesh/test_partition.py tests/mesh/test_empty_parts.py tests/effects/test_empty_regions.py "$@"
+  tests/mesh/test_partition.py tests/mesh/test_empty_parts.py tests/effects/test_empty_regions.py \
+  tests/mesh/test_slices.py tests/mesh/test_mesh_cli.py "$@"
 echo "== docs: generated pages checked, mkdocs build --strict"
 bash scripts/docs.sh
 echo "== benchmarks, smoke (every scripts/bench_*.py at its smallest size)"

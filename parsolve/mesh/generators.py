@@ -15,7 +15,7 @@ import numpy as np
 
 from parsolve.errors import InputError
 from parsolve.mesh.mesh import Mesh
-from parsolve.mesh.topology import facets_from_nodes
+from parsolve.mesh.topology import FACETS, facets_from_nodes
 
 def _check_counts(**counts: int) -> None:
     # ValueError for bad arguments: the caller (scene -> model) adds source and key
@@ -90,19 +90,21 @@ def rectangle(
     """Structured mesh of [ox, ox+lx] x [oy, oy+ly] with nx x ny quads (or 2 triangles each).
 
     cell: "quad", "triangle" or "triangle6". Facet and node groups: "left", "right",
-    "bottom", "top".
+    "bottom", "top". Nodes i + j*(nx+1), quads i + j*nx (triangles 2 per quad).
     """
-    _check_cell(cell, ("quad", "triangle", "triangle6"))
+    return rectangle_slices(lx, ly, nx, ny, cell, origin, quadratic=True).whole()
+
+
+def rectangle_slices(lx: float, ly: float, nx: int, ny: int, cell: str = "quad",
+                     origin: Sequence[float] = (0.0, 0.0), quadratic: bool = False) -> GridSlices:
+    """``rectangle``'s mesh as a slice source (``quadratic``: triangle6 allowed, for
+    ``whole`` only)."""
+    _check_cell(cell, ("quad", "triangle", "triangle6") if quadratic else ("quad", "triangle"))
     _check_counts(nx=nx, ny=ny)
     _check_lengths(origin, lx=lx, ly=ly)
     nx, ny = int(nx), int(ny)
-    x = origin[0] + np.linspace(0.0, lx, nx + 1)
-    y = origin[1] + np.linspace(0.0, ly, ny + 1)
-    xx, yy = np.meshgrid(x, y, indexing="xy")  # node index i + j*(nx+1)
-    points = np.column_stack([xx.ravel(), yy.ravel()])
-    i, j = (a.ravel() for a in np.meshgrid(np.arange(nx + 1), np.arange(ny + 1), indexing="xy"))
-    masks = {"left": i == 0, "right": i == nx, "bottom": j == 0, "top": j == ny}
-    return _finish_2d(points, _grid_quads(nx, ny), cell, masks)
+    axes = [o + np.linspace(0.0, length, n + 1) for o, length, n in zip(origin, (lx, ly), (nx, ny))]
+    return GridSlices(axes, cell)
 
 
 # --------------------------------------------------------------------------------------
@@ -160,38 +162,138 @@ def box(
     """Structured mesh of a box with nx x ny x nz hexahedra (or 6 conforming tets each).
 
     cell: "hexahedron", "tetra" or "tetra10". Facet and node groups: "xmin", "xmax",
-    "ymin", "ymax", "zmin", "zmax".
+    "ymin", "ymax", "zmin", "zmax". Nodes i + j*(nx+1) + k*(nx+1)*(ny+1), hexahedra
+    i + j*nx + k*nx*ny (tetrahedra 6 per hexahedron, ``_KUHN``).
     """
-    _check_cell(cell, ("hexahedron", "tetra", "tetra10"))
+    return box_slices(lx, ly, lz, nx, ny, nz, cell, origin, quadratic=True).whole()
+
+
+def box_slices(lx: float, ly: float, lz: float, nx: int, ny: int, nz: int,
+               cell: str = "hexahedron", origin: Sequence[float] = (0.0, 0.0, 0.0),
+               quadratic: bool = False) -> GridSlices:
+    """``box``'s mesh as a slice source (``quadratic``: tetra10 allowed, for ``whole`` only)."""
+    _check_cell(cell, ("hexahedron", "tetra", "tetra10") if quadratic else ("hexahedron", "tetra"))
     _check_counts(nx=nx, ny=ny, nz=nz)
     _check_lengths(origin, lx=lx, ly=ly, lz=lz)
-    nx, ny, nz = int(nx), int(ny), int(nz)
-    axes = [
-        o + np.linspace(0.0, length, n + 1)
-        for o, length, n in zip(origin, (lx, ly, lz), (nx, ny, nz))
-    ]
-    # node index i + j*(nx+1) + k*(nx+1)*(ny+1): 'ij' indexing on (z, y, x) gives x fastest
-    zz, yy, xx = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
-    points = np.column_stack([xx.ravel(), yy.ravel(), zz.ravel()])
-    k, j, i = _grid_indices(nx, ny, nz)
-    sx, sy = nx + 1, (nx + 1) * (ny + 1)
-    n0 = i + j * sx + k * sy
-    offs = np.array([dx + dy * sx + dz * sy for dx, dy, dz in _HEX_OFFSETS], dtype=np.int64)
-    hexes = n0[:, None] + offs[None, :]
-    if cell == "hexahedron":
-        mesh = Mesh(points, "hexahedron", hexes)
-    else:
-        mesh = Mesh(points, "tetra", hexes[:, _KUHN].reshape(-1, 4))
-    pk, pj, pi = _grid_indices(nx + 1, ny + 1, nz + 1)
-    masks = {
-        "xmin": pi == 0, "xmax": pi == nx,
-        "ymin": pj == 0, "ymax": pj == ny,
-        "zmin": pk == 0, "zmax": pk == nz,
-    }  # fmt: skip
-    _side_groups(mesh, masks)
-    if cell == "tetra10":
-        mesh = make_quadratic(mesh)
-    return _nodes_from_facets(mesh)
+    counts = (int(nx), int(ny), int(nz))
+    axes = [o + np.linspace(0.0, length, n + 1)
+            for o, length, n in zip(origin, (lx, ly, lz), counts)]
+    return GridSlices(axes, cell)
+
+
+# --------------------------------------------------------------------------------------
+# structured grids by slices
+# --------------------------------------------------------------------------------------
+
+_SIDES = {2: ("left", "right", "bottom", "top"), 3: ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")}
+_SPLIT = {"quad": (1, None), "triangle": (2, np.array([[0, 1, 2], [0, 2, 3]])),
+          "hexahedron": (1, None), "tetra": (6, _KUHN)}   # cells per grid cell, their corners
+
+
+class GridSlices:
+    """A structured rectangle or box (nodes along each axis ``axes``) as a slice source of
+    ``mesh.slices``: any contiguous slice of its cells and points, the nodes of its sides and
+    the facets of its sides among a slice of cells, built from the index arithmetic alone
+    (nothing of the whole mesh's size); ``whole`` is the whole mesh."""
+
+    path = "<generator>"
+    cell_groups: tuple[str, ...] = ()
+
+    def __init__(self, axes: list[np.ndarray], cell: str):
+        self.axes, self.cell = axes, cell
+        self.dim = len(axes)
+        self.cell_type = {"triangle6": "triangle", "tetra10": "tetra"}.get(cell, cell)
+        self.n = [a.size - 1 for a in axes]
+        self.num_points = int(np.prod([a.size for a in axes]))
+        self.num_cells = int(np.prod(self.n)) * _SPLIT[self.cell_type][0]
+        self.node_groups = self.facet_groups = _SIDES[self.dim]
+        sizes = [a.size for a in axes]
+        corners = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)] if self.dim == 2 else _HEX_OFFSETS
+        self._offsets = np.array([_flat(c[:self.dim], sizes) for c in corners], dtype=np.int64)
+
+    def _node_index(self, ids: np.ndarray) -> list[np.ndarray]:
+        """(i, j[, k]) of node ids."""
+        out = []
+        for a in self.axes:
+            ids, i = np.divmod(ids, a.size)
+            out.append(i)
+        return out
+
+    def points(self, start: int, stop: int) -> np.ndarray:
+        idx = self._node_index(np.arange(start, stop, dtype=np.int64))
+        return np.column_stack([a[i] for a, i in zip(self.axes, idx)]).reshape(-1, self.dim)
+
+    def cells(self, start: int, stop: int) -> np.ndarray:
+        return self._cells_of(np.arange(start, stop, dtype=np.int64))
+
+    def _cells_of(self, ids: np.ndarray) -> np.ndarray:
+        per, split = _SPLIT[self.cell_type]
+        grid, sub = np.divmod(ids, per)
+        index = []
+        for n in self.n:
+            grid, i = np.divmod(grid, n)
+            index.append(i)
+        first = _flat(index, [a.size for a in self.axes])
+        corners = first[:, None] + self._offsets[None, :]
+        if split is None:
+            return corners
+        return np.take_along_axis(corners, split[sub], axis=1)
+
+    def _side(self, name: str, ids: np.ndarray) -> np.ndarray:
+        """Which node ids lie on the side ``name`` (its axis at its first or last node)."""
+        k = _SIDES[self.dim].index(name)
+        axis, last = divmod(k, 2)
+        i = self._node_index(ids)[axis]
+        return i == (self.n[axis] if last else 0)
+
+    def node_flags(self, start: int, stop: int) -> np.ndarray:
+        ids = np.arange(start, stop, dtype=np.int64)
+        return np.column_stack([self._side(name, ids) for name in self.node_groups]
+                               ).reshape(stop - start, len(self.node_groups))
+
+    def cell_flags(self, start: int, stop: int) -> np.ndarray:
+        return np.zeros((stop - start, 0), dtype=bool)
+
+    def facet_slice(self, name: str, rank: int, size: int) -> tuple[np.ndarray, np.ndarray]:
+        """The side's facets (outward, ``topology.FACETS``) among rank ``rank``'s slice of the
+        cells, and their places in the whole group (by cell, then local facet: the order of
+        ``topology.facets_from_nodes``). Every facet with its nodes on a side is a boundary
+        facet: the side is a plane of the box's boundary."""
+        axis, last = divmod(_SIDES[self.dim].index(name), 2)
+        ids = np.arange(self.num_cells * rank // size, self.num_cells * (rank + 1) // size,
+                        dtype=np.int64)
+        # only the cells of the layer along the side can have a facet on it
+        layer = ids // _SPLIT[self.cell_type][0] // int(np.prod(self.n[:axis])) % self.n[axis]
+        ids = ids[layer == (self.n[axis] - 1 if last else 0)]
+        cells = self._cells_of(ids)
+        local = FACETS[self.cell_type]
+        rows, keys = [], []
+        for li, f in enumerate(local):
+            nodes = cells[:, list(f)]
+            on = self._side(name, nodes.ravel()).reshape(nodes.shape).all(axis=1)
+            rows.append(nodes[on])
+            keys.append(ids[on] * len(local) + li)
+        keys = np.concatenate(keys)
+        order = np.argsort(keys, kind="stable")
+        return np.concatenate(rows)[order], keys[order]
+
+    def whole(self) -> Mesh:
+        """The whole mesh (one process), quadratic when asked (``make_quadratic``)."""
+        mesh = Mesh(self.points(0, self.num_points), self.cell_type, self.cells(0, self.num_cells))
+        for name in self.facet_groups:
+            mesh.facet_groups[name] = self.facet_slice(name, 0, 1)[0]
+        if self.cell != self.cell_type:
+            mesh = make_quadratic(mesh)
+        return _nodes_from_facets(mesh)
+
+
+def _flat(index, sizes) -> np.ndarray:
+    """Flat id of per-axis indices (x fastest)."""
+    out, stride = 0, 1
+    for i, size in zip(index, sizes):
+        out = out + np.asarray(i, dtype=np.int64) * stride
+        stride *= size
+    return out
 
 
 # --------------------------------------------------------------------------------------
@@ -511,6 +613,9 @@ GENERATOR_GROUPS: dict[str, tuple[str, ...]] = {
     "sphere_on_block": ("block", "sphere", "block_top", "block_bottom", "sphere_surface",
                         "sphere_top", "xmin", "ymin"),
 }
+
+# the generators that build any slice of their mesh (``mesh.slices``): linear cells
+SLICED: dict[str, Callable[..., GridSlices]] = {"rectangle": rectangle_slices, "box": box_slices}
 
 GENERATORS: dict[str, Callable[..., Mesh]] = {
     "rectangle": rectangle,

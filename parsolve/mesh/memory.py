@@ -16,9 +16,11 @@ factor grows like n^(4/3)), 3D iterative taken as 2D's × 2 (27 nonzeros per row
 The estimate is honest to about a factor of two; a scene is refused only when the estimate
 exceeds what the machine has available.
 
-The two shares are checked apart: rank 0 alone builds the whole mesh (``check_whole_mesh``,
-the 0.2 KB share, on rank 0's machine), then every rank holds its part of the solve
-(``check_fits``: the other share over the ranks; every machine's verdict, the worst for all).
+The two shares are checked apart: the mesh (the 0.2 KB share) — on the rank-0 path rank 0
+alone builds the whole mesh (``check_whole_mesh``, on rank 0's machine); on the slice path
+(parallel mesh files, generated rectangles and boxes) every rank holds its share of it
+(``check_part``) — then every rank holds its part of the solve (``check_fits``: the other
+share over the ranks; every machine's verdict, the worst for all).
 """
 
 from __future__ import annotations
@@ -136,6 +138,16 @@ def check_whole_mesh(points: int, dim: int, source: str | None, key: str | None,
     dofs = points * dim
     _verdict(whole_mesh_bytes(dofs), dofs, 1, 1, source, key, what + " built on one rank",
              collective=False)
+
+
+def check_part(points: int, dim: int, source: str | None, key: str | None, what: str) -> None:
+    """InputError when this machine's ranks' shares of the mesh (the slice path: each rank
+    a slice, then its part, of the whole mesh's 0.2 KB per DOF) do not fit. Collective
+    inside ``agreed_over``."""
+    nranks, local = _layout()
+    dofs = points * dim
+    _verdict(local * (BASE + dofs * WHOLE_MESH_PER_DOF / nranks), dofs, nranks, local, source,
+             key, what + " read by slices")
 
 
 def check_fits(points: int, dim: int, preset: str, source: str | None, key: str | None,
