@@ -34,6 +34,7 @@ from parsolve.collective import agree
 from parsolve.errors import InputError
 from parsolve.mesh import blocks, checks, topology
 from parsolve.mesh.distribute import COMPONENT_MARGIN, LocalMesh, index_dtype
+from parsolve import progress
 from parsolve.mesh.partition import MIN_CELLS_PER_PART, PARTITIONERS, block_starts, scotch_block
 
 # the largest mesh array this rank allocated on the slice path (bytes); tests reset it
@@ -195,22 +196,24 @@ def distribute_slices(comm, src: SliceSource, method: str, source: str, key: str
         raise ValueError(f"unknown partitioner {method!r} (expected one of {PARTITIONERS})")
     size, rank = comm.size, comm.rank
     cs, ps = block_starts(src.num_cells, size), block_starts(src.num_points, size)
-    cells, points = agree(comm, _read_slice, src, cs, ps, rank, source, key)
-    _note(cells, points)
-    nodes, inverse = np.unique(cells, return_inverse=True)
-    inverse = inverse.reshape(cells.shape)
-    coords = CellCoords(fetch(comm, nodes, ps, points), inverse)
+    with progress.phase("mesh read"):
+        cells, points = agree(comm, _read_slice, src, cs, ps, rank, source, key)
+        _note(cells, points)
+        nodes, inverse = np.unique(cells, return_inverse=True)
+        inverse = inverse.reshape(cells.shape)
+        coords = CellCoords(fetch(comm, nodes, ps, points), inverse)
     block = blocks.CellBlock(cells, coords, int(cs[rank]), src.num_cells, src.cell_type, src.dim)
-    blocks.check_jacobians(comm, block, source, key)
+    progress.timed("checks", blocks.check_jacobians, comm, block, source, key)
     centroids = coords.centroids()
     block.coords = coords = None
-    graph = blocks.facet_groups(comm, block, source, key, graph=size > 1)
-    part, used = _cell_parts(comm, method, block, centroids, graph)
-    del graph, centroids
-    homes = _homes(comm, src, cells, part, ps, points, rank)
-    mine = _cells_to_owners(comm, src, cells, nodes, inverse.ravel(), homes, cs[rank])
-    del cells, part, nodes, inverse
-    mesh = _local_mesh(comm, src, mine, homes, source, key)
+    with progress.phase("partition"):
+        graph = blocks.facet_groups(comm, block, source, key, graph=size > 1)
+        part, used = _cell_parts(comm, method, block, centroids, graph)
+        del graph, centroids
+        homes = _homes(comm, src, cells, part, ps, points, rank)
+        mine = _cells_to_owners(comm, src, cells, nodes, inverse.ravel(), homes, cs[rank])
+        del cells, part, nodes, inverse
+        mesh = _local_mesh(comm, src, mine, homes, source, key)
     mesh.partitioner = used
     mesh.extent = _extent(comm, points, src.dim)
     warnings = _unused_warning(comm, homes.unused) + _duplicate_warning(comm, points, homes, ps)
