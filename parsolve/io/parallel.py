@@ -18,8 +18,11 @@ Design decisions (MPI-IO and SWMR cannot be used on the same file at once):
   has no "file open for writing" flag that a crash would leave set. A crash *while* a step is
   being closed can still leave the file damaged (HDF5 without SWMR gives no guarantee there);
   that window is the few metadata writes at the step's close.
-* **A step counts only once** ``/steps/time`` **has it**: every other dataset of the step is
-  written and flushed before ``/steps/time`` is extended.
+* **A step counts only once** ``/steps/time`` **has it** (the commit marker): every other
+  dataset of the step is written and flushed (collectively) before ``/steps/time`` is
+  extended; after a crash the other datasets may hold one unfinished row more, which
+  ``post --recover`` cuts (a hard kill at any point of a step's write is tested:
+  :mod:`parsolve.io.faults`).
 * **SIGINT / SIGTERM are held while a step is written** (they act right after it), so every
   rank leaves a step's collective calls together; the status is then written by rank 0 alone,
   on the closed file (POSIX driver): closing needs no other rank.
@@ -51,7 +54,8 @@ from mpi4py import MPI
 
 from parsolve import __version__
 from parsolve.errors import OutputError
-from parsolve.io.hdf5 import ResultWriter, _create, known_datasets
+from parsolve.io import faults
+from parsolve.io.hdf5 import COMMIT, ResultWriter, _create, known_datasets
 from parsolve.interrupts import SIGNALS
 from parsolve.io.lock import free_reserve
 from parsolve.io.slabs import OwnedRows, Rows, split_owners
@@ -330,28 +334,35 @@ class ParallelResultWriter(ResultWriter):
                     if name not in self._known:
                         _create(f, name, shape, dtype)
             for name in self._layout:
-                if name != "steps/time":
+                if name != COMMIT:
                     f[name].resize(step + 1, axis=0)
 
         def small_rows():               # independent writes: no other rank waits
             if self.comm.rank == 0:
                 for name, value in small.items():
-                    if name != "steps/time":
+                    if name != COMMIT:
                         self._append(name, value)
 
         def step_time():                # last: the step now counts
-            ds = box["f"]["steps/time"]
+            ds = box["f"][COMMIT]
             ds.resize(step + 1, axis=0)
             if self.comm.rank == 0:
-                ds[step] = small["steps/time"]
+                ds[step] = small[COMMIT]
 
-        ok = self._together(doing, self._make_room)
-        ok = ok and self._together(doing, open_and_extend)
+        def act(action) -> bool:
+            ok = self._together(doing, action)
+            faults.passed(step + 1)
+            return ok
+
+        faults.step_begins(step + 1)
+        ok = act(self._make_room)
+        ok = ok and act(open_and_extend)
         for name in sorted(slabs):      # the same order on every rank
-            ok = ok and self._together(doing, lambda: self._append(name, slabs[name]))
+            ok = ok and act(lambda: self._append(name, slabs[name]))
         for action in (small_rows, lambda: box["f"].flush(), step_time):
-            ok = ok and self._together(doing, action)
+            ok = ok and act(action)
         self._close_step(box.get("f"), ok, doing)
+        faults.passed(step + 1)
         self._raise_if_failed()
 
     def _room_for_mesh(self) -> None:
