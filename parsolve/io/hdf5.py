@@ -102,12 +102,14 @@ def result_writer(mode: str, comm, path, mesh, scene_text: str, petsc_version: s
                         attrs=attrs, owners=owners)
 
 
-def _create(f: h5py.File, name: str, row_shape: tuple, dtype) -> None:
-    """An empty per-step dataset (0, *row_shape), growable along the steps."""
+def _create(f: h5py.File, name: str, row_shape: tuple, dtype, checksum: bool = True) -> None:
+    """An empty per-step dataset (0, *row_shape), growable along the steps; ``checksum``: with
+    a Fletcher32 checksum per chunk (a damaged chunk is a read error, not numbers)."""
     rows = STEP_CHUNK if not row_shape else 1
     chunks = (rows,) + tuple(max(int(s), 1) for s in row_shape)
     maxshape = (None,) + tuple(max(int(s), 1) for s in row_shape)
-    f.create_dataset(name, (0,) + tuple(row_shape), maxshape=maxshape, chunks=chunks, dtype=dtype)
+    f.create_dataset(name, (0,) + tuple(row_shape), maxshape=maxshape, chunks=chunks, dtype=dtype,
+                     fletcher32=checksum)
 
 
 

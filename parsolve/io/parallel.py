@@ -18,6 +18,8 @@ Design decisions (MPI-IO and SWMR cannot be used on the same file at once):
   has no "file open for writing" flag that a crash would leave set. A crash *while* a step is
   being closed can still leave the file damaged (HDF5 without SWMR gives no guarantee there);
   that window is the few metadata writes at the step's close.
+* **Checksums**: the field and cell-field datasets carry a Fletcher32 checksum per chunk, as
+  in the swmr mode; the small per-step datasets (written by rank 0 alone) do not (``_checked``).
 * **A step counts only once** ``/steps/time`` **has it** (the commit marker): every other
   dataset of the step is written and flushed (collectively) before ``/steps/time`` is
   extended; after a crash the other datasets may hold one unfinished row more, which
@@ -72,6 +74,14 @@ def _row_form(value: np.ndarray) -> np.ndarray:
     if value.dtype.kind not in "iu":
         value = value.astype(float)
     return value[:, None] if value.ndim == 1 else value
+
+
+def _checked(name: str) -> bool:
+    """Whether a per-step dataset carries a Fletcher32 checksum: the field slabs do (written
+    collectively); the small rows rank 0 writes alone do not — HDF5 (1.10) writes filtered
+    datasets collectively only, and a collective write would make a failure on rank 0 alone
+    a hang of the others."""
+    return name.startswith(("fields/", "cell_fields/"))
 
 
 @contextmanager
@@ -174,7 +184,7 @@ class ParallelResultWriter(ResultWriter):
                                      dtype=rows.dtype), None, kind, rows))
         if ok:
             known = known_datasets(self.relations).items()
-            ok = self._together(doing, lambda: [_create(f, name, shape, dtype)
+            ok = self._together(doing, lambda: [_create(f, name, shape, dtype, _checked(name))
                                                 for name, (shape, dtype) in known])
         for name, (shape, dtype) in known_datasets(self.relations).items():
             self._known[name] = (shape, np.dtype(dtype))
@@ -332,7 +342,7 @@ class ParallelResultWriter(ResultWriter):
             if step == 0:
                 for name, (shape, dtype) in self._layout.items():
                     if name not in self._known:
-                        _create(f, name, shape, dtype)
+                        _create(f, name, shape, dtype, _checked(name))
             for name in self._layout:
                 if name != COMMIT:
                     f[name].resize(step + 1, axis=0)

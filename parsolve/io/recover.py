@@ -33,25 +33,33 @@ def killed(path: str | Path) -> bool:
         with h5py.File(path, "r", swmr=True) as f:
             if f.attrs.get("status") != "running":
                 return False
-    except (OSError, ValueError):
+    except (OSError, ValueError, RuntimeError):
         return False
-    lock = lock_path(path)
+    return not being_written(path)
+
+
+def being_written(path: str | Path) -> bool:
+    """True while a run holds the lock beside ``path`` (parsolve.io.lock)."""
     try:
-        fd = os.open(lock, os.O_RDONLY)
+        fd = os.open(lock_path(path), os.O_RDONLY)
     except OSError:
-        return True
+        return False
     try:
         fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
-        return True
+        return False
     except BlockingIOError:
-        return False       # a run holds it: still running
+        return True       # a run holds it: still running
     finally:
         os.close(fd)
 
 
 def hint(path: str | Path) -> str:
     """What ``post`` adds to its message about a file it cannot read."""
-    if path is None or not killed(path):
+    if path is None:
+        return ""
+    if being_written(path):
+        return f"; a run is writing it now (lock held on {lock_path(path)})"
+    if not killed(path):
         return ""
     return (f"; the run writing it was killed (status running): `parsolve post {path} --recover` "
             "makes its finished steps readable")

@@ -39,6 +39,16 @@ def _curves(args) -> list:
     return curves
 
 
+def _derivable(src: str) -> None:
+    """--derive copies a finished result: one a run is still writing (between two steps a
+    parallel-output file opens) is refused."""
+    from parsolve.io.recover import being_written, lock_path
+
+    if being_written(src):
+        raise InputError(f"a run is writing it now (lock held on {lock_path(src)}): --derive "
+                         "reads a finished result; derive once the run has ended", src, "--derive")
+
+
 def run(args) -> None:
     from parsolve.post.result import Result
 
@@ -50,12 +60,18 @@ def run(args) -> None:
 
     for key in ("csv", "png", "derive"):
         check_output(getattr(args, key), f"--{key}", args.results)
+    for path in args.results:   # every input readable before anything is printed or written
+        Result(path).close()
+    if args.derive:
+        _derivable(args.results[0])
     if args.summary:
         from parsolve.post.summary import summary
 
-        for path in args.results:
+        texts = []
+        for path in args.results:   # all read (a damaged dataset found) before any is printed
             with Result(path) as res:
-                print(summary(res))
+                texts.append(summary(res))
+        print("\n".join(texts))
     if args.x:
         from parsolve.post.curves import write_csv, write_png
 
@@ -76,7 +92,6 @@ def run(args) -> None:
         src = args.results[0]
         if Path(args.derive).resolve() == Path(src).resolve():
             raise InputError("--derive writes a copy: the input is never overwritten", src, "--derive")
-        Result(src).close()  # a missing or invalid input is reported before anything is written
         names = derive(src, args.derive)
         print(f"{args.derive}: " + ", ".join(f"/{g}/{n}" for g, ns in names.items() for n in ns)
               + f"; {Path(args.derive).with_suffix('.xdmf')}")
@@ -98,4 +113,8 @@ def main(argv: list[str]) -> int:
         return 2
     except BrokenPipeError:  # | head
         return 0
+    except (OSError, RuntimeError) as exc:  # a file changed or damaged under us: one line
+        where = getattr(exc, "filename", None) or ", ".join(args.results)
+        print(f"parsolve post: {where}: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
     return 0

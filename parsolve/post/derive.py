@@ -16,6 +16,7 @@ Written into a copy of the result file (the input is never modified):
 
 from __future__ import annotations
 
+import os
 import shutil
 from pathlib import Path
 
@@ -23,8 +24,9 @@ import h5py
 import numpy as np
 
 from parsolve.fem import kernels
-from parsolve.io.xdmf import XdmfWriter
-from parsolve.post.result import Result
+from parsolve.errors import InputError
+from parsolve.io.xdmf import XdmfWriter, sidecar_path
+from parsolve.post.result import NAN, Result
 
 
 def full_tensor(sig: np.ndarray, dim: int, szz: np.ndarray | float = 0.0) -> np.ndarray:
@@ -111,6 +113,37 @@ def region_nodal_stress(model, u: np.ndarray, cell_stress: np.ndarray) -> dict[s
     return out
 
 
+def _write(src: str, out: Path, mesh, times: list, fields: dict, cell_fields: dict) -> None:
+    """The copy with the derived datasets, and its XDMF. Written under a temporary name and
+    renamed once whole: a failure (a full disk, a killed process aside) leaves nothing."""
+    tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
+    written = [tmp]
+    try:
+        shutil.copyfile(src, tmp)
+        with h5py.File(tmp, "r+") as f:
+            for group, data in (("cell_fields", cell_fields), ("fields", fields)):
+                for name, value in data.items():
+                    if f"{group}/{name}" in f:
+                        del f[f"{group}/{name}"]
+                    f[f"{group}/{name}"] = value
+                    if np.isnan(value).any():   # a node outside the region: no value, not damage
+                        f[f"{group}/{name}"].attrs[NAN] = "no value (a node outside the region)"
+            all_fields = {n: f[f"fields/{n}"].shape[2] for n in f["fields"]}
+            all_cells = {n: f[f"cell_fields/{n}"].shape[2] for n in f.get("cell_fields", {})}
+        tmp.replace(out)
+        written = [out, out.with_suffix(".xdmf"), sidecar_path(out)]
+        xdmf = XdmfWriter(out, mesh)
+        try:
+            for step, t in enumerate(times):
+                xdmf.append(step, t, all_fields, all_cells)
+        finally:
+            xdmf.close()
+    except BaseException:
+        for path in written:
+            path.unlink(missing_ok=True)
+        raise
+
+
 def derive(src: str, out: str, key: str = "--derive") -> dict[str, list[str]]:
     """Copy ``src`` to ``out`` with the derived datasets and an XDMF beside it. Returns the
     names written: {"fields": [...], "cell_fields": [...]}."""
@@ -125,20 +158,8 @@ def derive(src: str, out: str, key: str = "--derive") -> dict[str, list[str]]:
     cell_fields = {"strain": cell_strain(model, u), "von_mises": von_mises(T)[..., None],
                    "principal_stress": principal(T)}
     fields = region_nodal_stress(model, u, sig)
-    if Path(out).resolve() != Path(src).resolve():
-        shutil.copyfile(src, out)
-    with h5py.File(out, "r+") as f:
-        for group, data in (("cell_fields", cell_fields), ("fields", fields)):
-            for name, value in data.items():
-                if f"{group}/{name}" in f:
-                    del f[f"{group}/{name}"]
-                f[f"{group}/{name}"] = value
-        all_fields = {n: f[f"fields/{n}"].shape[2] for n in f["fields"]}
-        all_cells = {n: f[f"cell_fields/{n}"].shape[2] for n in f.get("cell_fields", {})}
-    xdmf = XdmfWriter(Path(out), model.mesh)
     try:
-        for step, t in enumerate(times):
-            xdmf.append(step, t, all_fields, all_cells)
-    finally:
-        xdmf.close()
+        _write(src, Path(out), model.mesh, times, fields, cell_fields)
+    except (OSError, RuntimeError) as exc:
+        raise InputError(f"cannot write ({' '.join(str(exc).split())})", out, key) from None
     return {"fields": sorted(fields), "cell_fields": sorted(cell_fields)}
