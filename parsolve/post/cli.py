@@ -61,7 +61,9 @@ def run(args) -> None:
     for key in ("csv", "png", "derive"):
         check_output(getattr(args, key), f"--{key}", args.results)
     for path in args.results:   # every input readable before anything is printed or written
-        Result(path).close()
+        with Result(path) as res:
+            if args.summary:    # a summary vouches for the whole file: every value read
+                res.verify()
     if args.derive:
         _derivable(args.results[0])
     if args.summary:
@@ -109,7 +111,8 @@ def main(argv: list[str]) -> int:
                 return 0
         run(args)
     except InputError as exc:
-        print(f"parsolve post: {exc.oneline()}{recover.hint(exc.source)}", file=sys.stderr)
+        more = "" if "lock held" in exc.message else recover.hint(exc.source)
+        print(f"parsolve post: {exc.oneline()}{more}", file=sys.stderr)
         return 2
     except BrokenPipeError:  # | head
         return 0

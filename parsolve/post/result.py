@@ -111,6 +111,20 @@ class Result:
             self.close()
             raise
 
+    def verify(self) -> None:
+        """Read every dataset (a step at a time): an InputError at the first damaged one."""
+        def visit(group: Group) -> None:
+            for name in group:
+                obj = group[name]
+                if isinstance(obj, Group):
+                    visit(obj)
+                elif obj.shape and obj.h5.chunks:
+                    for start in range(0, obj.shape[0], obj.h5.chunks[0]):
+                        obj[start:start + obj.h5.chunks[0]]
+                else:
+                    obj[()]
+        visit(self.file)
+
     def __enter__(self) -> "Result":
         return self
 
