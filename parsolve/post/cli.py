@@ -58,8 +58,14 @@ def run(args) -> None:
         raise InputError("--x and --y go together", args.results[0], "--x" if args.x else "--y")
     from parsolve.post.curves import check_output
 
+    from parsolve.batch.api import folder_problem
+
     for key in ("csv", "png", "derive"):
         check_output(getattr(args, key), f"--{key}", args.results)
+        if getattr(args, key):   # a folder that refuses files whatever its permissions say
+            problem = folder_problem(Path(getattr(args, key)).parent)
+            if problem:
+                raise InputError(problem, getattr(args, key), f"--{key}")
     for path in args.results:   # every input readable before anything is printed or written
         with Result(path) as res:
             if args.summary:    # a summary vouches for the whole file: every value read
