@@ -17,10 +17,23 @@ import os
 import sys
 from pathlib import Path
 
-USAGE = ("parsolve {run,check,study,batch,post} SCENE [-o OUT.h5] [--export-system DIR] "
-         "[--output-mode swmr|parallel|auto] [PETSc options]")
-LONG_FLAGS = ("--output", "--export-system", "--output-mode", "--help")
+USAGE = """parsolve run SCENE [-o OUT.h5] [--export-system DIR] [--output-mode swmr|parallel|auto]
+                    [-q | -v] [PETSc options]
+       parsolve check SCENE [-q | -v] [PETSc options]
+       parsolve {study,batch,post,mesh} ...   (parsolve COMMAND --help)
+       parsolve --version"""
+COMMANDS = {  # what ``parsolve --help`` lists, in order
+    "run": "run a scene: progress on rank 0, results in an HDF5 file (+ XDMF)",
+    "check": "validate a scene (mesh, regions, relations, PETSc options) without solving",
+    "study": "accuracy against cost over a grid of runs (parsolve study --help)",
+    "batch": "many runs, locally or as a SLURM job array (parsolve batch --help)",
+    "post": "curves, line profiles, nodal fields and summaries of results (parsolve post --help)",
+    "mesh": "mesh files: conversion, inspection (parsolve mesh --help)",
+}
+LONG_FLAGS = ("--output", "--export-system", "--output-mode", "--quiet", "--verbose", "--version",
+              "--help")
 VALUED = ("-o", "--output", "--export-system", "--output-mode")  # flags of ours that take the next word
+SHORT_FLAGS = ("-o", "-h", "-q", "-v")   # every other single-dash word is PETSc's
 
 
 class UsageError(Exception):
@@ -32,12 +45,59 @@ class _Parser(argparse.ArgumentParser):
         raise UsageError(message)
 
 
+class _Version(argparse.Action):
+    """``--version``: parsolve's, PETSc's and the MPI library's (imported only when asked)."""
+
+    def __init__(self, option_strings, dest, **kwargs):
+        super().__init__(option_strings, dest, nargs=0, help="print the versions and exit")
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(versions())
+        parser.exit(0)
+
+
+def versions() -> str:
+    """One line: parsolve, PETSc (petsc4py), MPI (the library mpi4py runs on)."""
+    import petsc4py
+
+    from parsolve import __version__
+    from parsolve.version import petsc_version
+
+    petsc4py.init([sys.argv[0]])
+    from mpi4py import MPI
+
+    mpi = MPI.Get_library_version().strip().splitlines()[0]
+    return (f"parsolve {__version__}; PETSc {petsc_version()} (petsc4py {petsc4py.__version__}); "
+            f"MPI {'.'.join(map(str, MPI.Get_version()))}: {mpi}")
+
+
+def _verbosity(p: argparse.ArgumentParser) -> None:
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("-q", "--quiet", dest="level", action="store_const", const=0,
+                   help="errors and the final line only")
+    g.add_argument("-v", "--verbose", dest="level", action="store_const", const=2,
+                   help="also each Newton iteration's residual and each linear solve's Krylov "
+                        "iterations")
+    p.set_defaults(level=1)
+
+
 def _parser() -> argparse.ArgumentParser:
+    listing = "\n".join(f"  {name:<8s}{text}" for name, text in COMMANDS.items())
     p = _Parser(prog="parsolve", usage=USAGE, allow_abbrev=False,
-                description="Parallel finite elements with (non-)associated relations.")
-    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    run = sub.add_parser("run", help="run a scene", allow_abbrev=False)
-    run.add_argument("scene")
+                formatter_class=argparse.RawDescriptionHelpFormatter,
+                description="Parallel finite elements with (non-)associated relations.\n\n"
+                            f"commands:\n{listing}",
+                epilog="Single-dash words other than -o, -h, -q, -v are PETSc options (with their\n"
+                       "value): -ksp_monitor, -log_view, -pc_type lu, ...; they win over the\n"
+                       "scene's [solver.options]. Exit status: 0 done, 2 invalid input, 3 the solver\n"
+                       "failed, 4 the results could not be written, 130/143 interrupted.")
+    p.add_argument("--version", action=_Version)
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser, metavar="COMMAND",
+                             help=argparse.SUPPRESS)   # (listed in the description)
+    run = sub.add_parser("run", help=COMMANDS["run"], allow_abbrev=False, prog="parsolve run",
+                         usage="parsolve run SCENE [-o OUT.h5] [--export-system DIR] "
+                               "[--output-mode swmr|parallel|auto] [-q | -v] [PETSc options]")
+    run.add_argument("scene", help="scene file (TOML)")
     run.add_argument("-o", "--output", help="result file (HDF5); default: the scene's [output] "
                                             "file, else SCENE.h5 in the current directory")
     run.add_argument("--export-system", metavar="DIR",
@@ -46,9 +106,12 @@ def _parser() -> argparse.ArgumentParser:
                      help="swmr (default): rank 0 writes, readers can follow the run; parallel: "
                           "every rank writes its rows (MPI-IO), no live reading; auto: parallel "
                           "on 2+ ranks from 1M DOFs")
-    check = sub.add_parser("check", help="validate a scene (mesh, regions, relations, PETSc "
-                                         "options) without solving", allow_abbrev=False)
-    check.add_argument("scene")
+    _verbosity(run)
+    check = sub.add_parser("check", help=COMMANDS["check"], allow_abbrev=False,
+                           prog="parsolve check",
+                           usage="parsolve check SCENE [-q | -v] [PETSc options]")
+    check.add_argument("scene", help="scene file (TOML)")
+    _verbosity(check)
     return p
 
 
@@ -66,9 +129,10 @@ def _is_option(word: str) -> bool:
 
 def split_args(argv: list[str]) -> tuple[list[str], list[str]]:
     """(parsolve's words, PETSc's words). PETSc options are single-dash words other than
-    exactly ``-o`` and ``-h`` (so ``-options_left``, ``-on_error_abort``, ``-options_file F``
-    reach PETSc intact), each with its value when the next word is not an option. A
-    double-dash word must be one of ours: ``--outptu`` is an error with a suggestion."""
+    exactly ``-o``, ``-h``, ``-q`` and ``-v`` (so ``-options_left``, ``-on_error_abort``,
+    ``-options_file F`` reach PETSc intact), each with its value when the next word is not an
+    option. A double-dash word must be one of ours: ``--outptu`` is an error with a
+    suggestion."""
     ours, petsc = [], []
     i = 0
     while i < len(argv):
@@ -81,7 +145,7 @@ def split_args(argv: list[str]) -> tuple[list[str], list[str]]:
                 hint = f" (did you mean {close[0]}?)" if close else \
                     f" (known: {', '.join(LONG_FLAGS)}; PETSc options take one dash)"
                 raise UsageError(f"unknown option {flag}{hint}")
-        if word in ("-o", "-h") or word.startswith("--") or not _is_option(word):
+        if word in SHORT_FLAGS or word.startswith("--") or not _is_option(word):
             ours.append(word)
             if word in VALUED and i < len(argv):
                 ours.append(argv[i])
@@ -243,6 +307,14 @@ def main(argv: list[str] | None = None) -> int:
     if usage_error is not None:
         say(f"parsolve: {usage_error}", sys.stderr)
         return 2
+    from parsolve import progress
+
+    progress.configure(args.level, comm.rank)
+    if args.level > progress.QUIET:   # the factorization's parts, from PETSc's event log
+        from parsolve.solvers import factor_log
+
+        factor_log.start()
+    log = say if args.level > progress.QUIET else (lambda *words: None)
     try:
         cli_options = parse_cli(petsc_args)
     except ValueError as exc:
@@ -265,7 +337,7 @@ def main(argv: list[str] | None = None) -> int:
         _check_all_regions(model)
         _validate_options(comm, model, cli_options)
         for warning in model.mesh.warnings:
-            say(f"parsolve: warning: {warning}", sys.stderr)
+            log(f"parsolve: warning: {warning}", sys.stderr)
         if args.command == "check":
             mesh = model.mesh
             say(f"{args.scene}: ok ({getattr(mesh, 'num_global_points', mesh.num_points)} nodes, "
@@ -278,10 +350,10 @@ def main(argv: list[str] | None = None) -> int:
         from parsolve.interrupts import interruptible
 
         with interruptible(comm):
-            run(comm, model, out, cli_options, args.export_system, log=say,
+            run(comm, model, out, cli_options, args.export_system, log=log,
                 output=args.output_mode)
         for name in unused_options(scene.solver.prefix, {**scene.solver.options, **cli_options}):
-            say(f"parsolve: warning: PETSc option {name} was not used by any solver object",
+            log(f"parsolve: warning: PETSc option {name} was not used by any solver object",
                 sys.stderr)
         say(f"results: {out}")
         return 0
@@ -299,6 +371,7 @@ def main(argv: list[str] | None = None) -> int:
         say(f"parsolve: solver failed: {exc}", sys.stderr)
         return 3
     finally:
+        progress.configure(progress.QUIET)   # (main called in a process that goes on)
         if lock is not None:
             lock.release()
 

@@ -13,11 +13,13 @@ from mpi4py import MPI
 from parsolve.diagnostics import unsupported
 from parsolve.effects.compose import Rate
 from parsolve import interrupts
+from parsolve.progress import timed
 from parsolve.errors import Interrupted, SolverError
 from parsolve.io.hdf5 import output_mode, result_writer
 from parsolve.io.mesh_rows import output_mesh
 from parsolve.model import Model
-from parsolve.outputs import Balance, progress, resultant_labels, step_outputs
+from parsolve.outputs import Balance, contact_line, contact_totals, progress, resultant_labels, \
+    resultant_line, step_outputs
 from parsolve.solvers.arc_length import run_arc_length
 from parsolve.solvers.newton import NewtonSolver
 from parsolve.solvers.setup import export_system, make_solver
@@ -44,7 +46,7 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
                 "resultant_components": " ".join(resultant_labels(model.fields, model.mesh.dim))}
     mode = output_mode(output or scene.output_mode, comm, unknowns["dofs"])
     # the file's mesh and rows from every rank's owned part
-    written, owners = output_mesh(comm, model.mesh, system.part)
+    written, owners = timed("result file", output_mesh, comm, model.mesh, system.part)
     writer = result_writer(mode, comm, out, written, scene.text, petsc_version(), relations_meta,
                            attrs=unknowns, owners=owners)
     status = "complete"
@@ -108,7 +110,7 @@ def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log
             f_rhs = ctx.composition.linear_step_loads(f_known, q_prev, dt, theta)
         if mat is None:
             t0 = time.perf_counter()
-            mat = system.assemble()
+            mat = timed("assembly", system.assemble)
             solver.set_operator(mat)
             vecs = vecs or mat.createVecs()
             assembly = time.perf_counter() - t0
@@ -127,7 +129,7 @@ def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log
         writer.write_step(t, 1, solver.residual, fields, cell_fields, rel_out, timings, extra=extra)
         interrupts.check(comm)
         progress(log, comm, step + 1, len(scene.times), t, 1, solver.residual, timings["total"],
-                 f"  (linear its {linear_its})" + reported(scene, rel_out))
+                 f"  (linear its {linear_its})" + reported(ctx, rel_out, fields))
         _pass_notes(comm, solver, writer, log)
         q_prev, t_prev = q, t
 
@@ -139,7 +141,7 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log) -> None:
     ctx = system.context
     scene = ctx.scene
     t0 = time.perf_counter()
-    system.assemble()
+    timed("assembly", system.assemble)
     system.timings.pop("assembly")   # (counted in the set-up, which step 1 carries)
     solver = make_solver(comm, system, cli_options)
     newton = NewtonSolver(comm, system, solver, scene.nonlinear)
@@ -183,7 +185,7 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log) -> None:
         schedule.done(t, _max_strain_increment(comm, ctx, newton.q - snap[0])
                       if schedule.spec.automatic else 0.0)
         progress(log, comm, step, schedule.total, t, result.iterations, result.residual, seconds,
-                 cut_note + reported(scene, rel_out))
+                 cut_note + reported(ctx, rel_out, fields))
         if warning and comm.rank == 0:
             log(f"warning: step {step}: {warning}")
             writer.note(f"step {step}: {warning}")
@@ -200,11 +202,16 @@ def _pass_notes(comm, solver, writer, log) -> None:
     solver.notes.clear()
 
 
-def reported(scene, rel_out: dict) -> str:
-    """The resultants of the relations the scene marks ``report = true``, for the log."""
-    names = [r.name for r in scene.relations if r.report]
-    return "".join(f"\n    {n}: resultant " + " ".join(f"{v:.6g}" for v in rel_out[n]["resultant"])
-                   for n in names)
+def reported(ctx, rel_out: dict, fields: dict) -> str:
+    """For the log: the resultants of the relations the scene marks ``report = true``, and
+    the totals of the contacts it marks so (collective: every rank calls it)."""
+    labels = resultant_labels(ctx.fields, ctx.mesh.dim)
+    lines = [resultant_line(r.name, labels, rel_out[r.name]["resultant"])
+             for r in ctx.scene.relations if r.report]
+    lines += [contact_line(e.spec.name, contact_totals(ctx.comm, e.spec.name, fields, rel_out))
+              for e in ctx.effects if getattr(getattr(e, "spec", None), "report", False)
+              and f"{e.spec.name}_state" in fields]
+    return "".join(f"\n    {line}" for line in lines)
 
 
 class BranchWatch:

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 from mpi4py import MPI
 
+from parsolve import progress
 from parsolve.collective import agree
 from parsolve.effects.base import Effect
 from parsolve.effects.constraints import build_relations
@@ -190,7 +191,8 @@ def _distributed_mesh(scene: Scene, comm) -> LocalMesh:
     whole, error = None, None
     if comm.rank == 0:
         try:
-            whole = build_mesh(scene)   # rank 0 alone: the whole on one rank
+            # rank 0 alone: the whole on one rank
+            whole = progress.timed("mesh read", build_mesh, scene)
         except InputError as exc:
             error = (exc.message, exc.source, exc.key)
     error = comm.bcast(error, root=0)
@@ -198,11 +200,11 @@ def _distributed_mesh(scene: Scene, comm) -> LocalMesh:
         raise InputError(*error)
     # the cells checked and the dual graph built by every rank on a block of cells
     block = blocks.scatter_blocks(comm, whole)
-    blocks.check_jacobians(comm, block, *mesh_source(scene))
+    progress.timed("checks", blocks.check_jacobians, comm, block, *mesh_source(scene))
     block.coords = None   # (the facets need the cells only: the coordinates go before them)
     graph = blocks.facet_groups(comm, block, *mesh_source(scene), graph=comm.size > 1)
     del block
-    part = distribute(comm, whole, scene.solver.partitioner, graph)
+    part = progress.timed("partition", distribute, comm, whole, scene.solver.partitioner, graph)
     del whole
     if counted is None:   # the solve, each rank its share (every rank's machine: collective)
         source, key = mesh_source(scene)
@@ -233,11 +235,12 @@ def build_model(scene: Scene, comm=None) -> Model:
     regions = RegionResolver(mesh, scene.regions, scene.source, comm)
     # a check of a rank's part (cells without a material) fails there alone: every rank
     # raises it (the checks that decide for the whole mesh are collective)
-    effects, fields = agree(comm, build_effects, scene, mesh, regions)
+    effects, fields = progress.timed("effects", agree, comm, build_effects, scene, mesh, regions)
     patterns = agree(comm, load_patterns, mesh, scene.loads, regions, scene.evolutions,
                      scene.thickness, scene.source, fields)
-    relations = agree(comm, build_relations, scene.relations, regions, scene.evolutions,
-                      patterns, fields, scene.source, scene.solver.eliminate, scene.thickness)
+    relations = progress.timed("relations", agree, comm, build_relations, scene.relations,
+                               regions, scene.evolutions, patterns, fields, scene.source,
+                               scene.solver.eliminate, scene.thickness)
     names = {r.name for r in relations}
     for e in effects:
         for r in e.relations():

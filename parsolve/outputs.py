@@ -54,6 +54,53 @@ def resultant_labels(fields, dim: int) -> list[str]:
     return labels
 
 
+def labelled(labels: list[str], values) -> str:
+    """``fx 10000  fy 0  mz -500``: a resultant's values by component (the displacement's
+    forces fx, fy, fz and the moments mx, my, mz; a scalar field's reaction by its name)."""
+    names = [f"f{c}" if c in ("x", "y", "z") else c for c in labels]
+    return "  ".join(f"{n} {v:.6g}" for n, v in zip(names, values))
+
+
+def resultant_line(name: str, labels: list[str], values) -> str:
+    """A relation's resultant on the step's log line, with its components named."""
+    about = " (moments about the origin)" if {"mx", "my", "mz"} & set(labels) else ""
+    return f"{name}: resultant {labelled(labels, values)}{about}"
+
+
+STATES = ("open", "stick", "slip")   # the values 0, 1, 2 of /fields/<contact>_state
+
+
+def contact_totals(comm: MPI.Comm, name: str, fields: dict, rel_out: dict) -> dict:
+    """One step's totals of contact ``name`` over the whole surface, the same on every rank
+    (collective): ΣRn, ΣRt (the vector in the tangent basis), |ΣRt|/ΣRn and the counts of
+    its open / stick / slip rows, from what the step writes (/relations/<name>_normal/
+    normal_force and tangential_force where the relations form has them, else the sums of
+    /fields/<name>_normal_reaction and _tangential_reaction; /fields/<name>_state)."""
+    extras = rel_out.get(f"{name}_normal", {})
+    state = fields[f"{name}_state"].values.ravel()
+    counts = np.bincount(state[state >= 0].astype(np.int64), minlength=len(STATES))[:len(STATES)]
+    local = [counts.astype(float)]
+    if "normal_force" not in extras:
+        local += [fields[f"{name}_normal_reaction"].values.sum(axis=0),
+                  fields[f"{name}_tangential_reaction"].values.sum(axis=0)]
+    total = comm.allreduce(np.concatenate(local), op=MPI.SUM)
+    counts = total[:len(STATES)].astype(int)
+    if "normal_force" in extras:
+        rn, rt = float(extras["normal_force"][0]), np.atleast_1d(extras["tangential_force"])
+    else:
+        rn, rt = float(total[len(STATES)]), total[len(STATES) + 1:]
+    norm_t = float(np.linalg.norm(rt))
+    return {"normal": rn, "tangential": rt, "ratio": norm_t / rn if rn > 0 else float("nan"),
+            **dict(zip(STATES, counts.tolist()))}
+
+
+def contact_line(name: str, totals: dict) -> str:
+    rt = totals["tangential"]
+    return (f"{name}: ΣRn {totals['normal']:.6g}  ΣRt {' '.join(f'{v:.6g}' for v in rt)}  "
+            f"|ΣRt|/ΣRn {totals['ratio']:.6g}  rows open {totals['open']}, stick "
+            f"{totals['stick']}, slip {totals['slip']}")
+
+
 def step_outputs(comm: MPI.Comm, ctx, q: np.ndarray, multipliers: dict, newton=None):
     """(fields, cell fields, relations) of a step; ``ctx``: the step context
     (``parsolve.solvers.context``); ``newton`` carries the material states."""

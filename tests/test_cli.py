@@ -7,6 +7,7 @@ PETSc's initialisation (-log_view, -options_left), mpirun, and the exit status a
 sees it."""
 
 import os
+import re
 import subprocess
 import sys
 from typing import NamedTuple
@@ -234,6 +235,9 @@ components = ["x", "y"]
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr.strip() == ("parsolve: warning: m.vtu: mesh.file: 1 point(s) are used by no "
                                    "cell (points 4): they are left out of the system")
+    # -q: the final line alone, the warning left out
+    quiet = cli("run", "scene.toml", "-o", "out.h5", "-q", cwd=tmp_path)
+    assert quiet.returncode == 0 and quiet.stderr == "" and quiet.stdout == "results: out.h5\n"
 
 
 def test_check_good_scene(cli):
@@ -366,7 +370,8 @@ def test_marked_relations_report_their_resultant(tmp_path, cli):
     proc = cli("run", CONFIGS / "controlled_bar.toml", "-o", tmp_path / "bar.h5")
     assert proc.returncode == 0, proc.stderr
     lines = proc.stdout.splitlines()
-    assert lines[-2].strip() == "control: resultant 10000 0 -500"  # moment: -F · H/2
+    assert lines[-2].strip() == ("control: resultant fx 10000  fy 0  mz -500 (moments about the "
+                                 "origin)")  # moment: -F · H/2
 
 
 @pytest.mark.parametrize("mode", ["swmr", "parallel"])
@@ -414,3 +419,141 @@ def test_distributed_input_errors_on_every_rank(case, tmp_path):
     assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
     assert source in lines[0] and key in lines[0], lines[0]
     assert not list(tmp_path.glob("*.h5"))
+
+
+# ---------------------------------------------------------------- the command line's surface
+
+def test_help_lists_every_command_and_usage_lines(cli):
+    top = cli("--help")
+    assert top.returncode == 0
+    for command in ("run", "check", "study", "batch", "post", "mesh"):
+        assert f"\n  {command} " in top.stdout, top.stdout
+    assert "--version" in top.stdout and "PETSc options" in top.stdout
+    run = cli("run", "--help")
+    assert run.returncode == 0
+    assert run.stdout.startswith("usage: parsolve run SCENE [-o OUT.h5]"), run.stdout
+    assert "-q, --quiet" in run.stdout and "-v, --verbose" in run.stdout
+    check = cli("check", "--help")
+    assert check.stdout.startswith("usage: parsolve check SCENE [-q | -v] [PETSc options]\n")
+    post = cli("post", "--help")
+    assert post.stdout.startswith("usage: parsolve post RESULT.h5")
+    assert "see parsolve/post/spec.py" not in post.stdout
+    for form in ("relation:NAME:multiplier[:SEL]", "field:NAME:COMP@X,Y[,Z]", "max:field:NAME",
+                 "examples:", "--line 0,1 0,10 50"):
+        assert form in post.stdout, form
+
+
+def test_version_names_parsolve_petsc_and_mpi():
+    from petsc4py import PETSc
+
+    import parsolve
+
+    proc = parsolve_process("--version")
+    assert proc.returncode == 0, proc.stderr
+    line, = proc.stdout.strip().splitlines()
+    petsc = ".".join(map(str, PETSc.Sys.getVersion()))
+    assert line.startswith(f"parsolve {parsolve.__version__}; PETSc {petsc} (petsc4py "), line
+    assert "; MPI 3." in line or "; MPI 4." in line, line
+
+
+def parsolve_process(*args, **kw):
+    return parsolve(*args, **kw)
+
+
+def test_split_args_keeps_quiet_and_verbose_ours():
+    from parsolve.cli import split_args
+
+    ours, petsc = split_args(["run", "s.toml", "-q", "-ksp_monitor", "-v", "-vec_type", "mpi",
+                              "--verbose", "-o", "x.h5", "-options_left"])
+    assert ours == ["run", "s.toml", "-q", "-v", "--verbose", "-o", "x.h5"]
+    assert petsc == ["-ksp_monitor", "-vec_type", "mpi", "-options_left"]
+
+
+PHASES = ["mesh read", "checks", "partition", "effects", "relations", "numbering", "pattern",
+          "operator", "result file", "assembly", "analysis+factorization"]
+
+
+def test_progress_phases_quiet_and_verbose(tmp_path, cli):
+    """Before step 1: one line per set-up phase with its time, in order; -q: the final line
+    alone; -v: each linear solve's Krylov iterations."""
+    normal = cli("run", CONFIGS / "controlled_bar.toml", "-o", tmp_path / "a.h5")
+    assert normal.returncode == 0, normal.stderr
+    lines = normal.stdout.splitlines()
+    first = next(i for i, line in enumerate(lines) if line.startswith("step 1/10"))
+    # the factorization (one long C call) announces itself when it starts
+    assert lines[:first].count("  analysis+factorization ...") == 1
+    # its two parts from PETSc's event log, within the phase's own time
+    parts = re.fullmatch(r"    analysis (\d+\.\d{3}) s, numeric factorization (\d+\.\d{3}) s",
+                         lines[first - 1])
+    assert parts, lines[first - 1]
+    whole = float(lines[first - 2].split()[-2])
+    assert sum(float(p) for p in parts.groups()) <= whole + 2e-3
+    timed = [line for line in lines[:first - 1] if not line.endswith(" ...")]
+    names = [re.fullmatch(r"  (\S.*?)\s+(\d+\.\d{3}) s", line) for line in timed]
+    assert all(names), lines[:first]
+    assert [m.group(1) for m in names] == PHASES
+    quiet = cli("run", CONFIGS / "controlled_bar.toml", "-o", tmp_path / "b.h5", "-q")
+    assert quiet.returncode == 0 and quiet.stdout == f"results: {tmp_path / 'b.h5'}\n", quiet.stdout
+    verbose = cli("run", CONFIGS / "controlled_bar.toml", "-o", tmp_path / "c.h5", "-v")
+    krylov = [line for line in verbose.stdout.splitlines() if "Krylov iterations" in line]
+    assert len(krylov) == 10 and krylov[0].strip().startswith("linear solve: 1 Krylov iterations")
+    check = cli("check", CONFIGS / "controlled_bar.toml", "-q")
+    assert check.returncode == 0 and check.stdout.startswith(f"{CONFIGS / 'controlled_bar.toml'}: ok")
+
+
+def test_verbose_shows_each_newton_residual(tmp_path, cli):
+    """The block on a rough plane: the Newton residuals of every step, the last one of a step
+    being the residual its progress line reports."""
+    proc = cli("run", CONFIGS / "contact_block_friction.toml", "-o", tmp_path / "b.h5", "-v")
+    assert proc.returncode == 0, proc.stderr
+    step_lines = [i for i, line in enumerate(proc.stdout.splitlines()) if line.startswith("step ")]
+    lines = proc.stdout.splitlines()
+    with h5py.File(tmp_path / "b.h5", "r") as f:
+        iterations, residual = f["steps/iterations"][()], f["steps/residual"][()]
+    start = 0
+    for k, i in enumerate(step_lines):
+        newton = [float(line.split("residual ")[1]) for line in lines[start:i]
+                  if line.strip().startswith("newton ")]
+        assert len(newton) >= 1
+        np.testing.assert_allclose(newton[-1], residual[k], rtol=1e-3)
+        start = i + 1
+
+
+@pytest.mark.parametrize("formulation", ["relations", "penalty"])
+@pytest.mark.parametrize("nranks", [1, 2, 3])
+def test_contact_report_on_screen_matches_the_file(nranks, formulation, tmp_path):
+    """``report = true`` on a contact: each step's ΣRn, ΣRt, |ΣRt|/ΣRn and open / stick / slip
+    counts, the same on any number of ranks as the file's states and forces (the relations
+    form's surface totals; the penalty form's nodal reactions summed)."""
+    scene = (CONFIGS / "contact_block_friction.toml").read_text().replace(
+        "friction = 0.3", f"friction = 0.3\nreport = true\nformulation = \"{formulation}\"")
+    (tmp_path / "block.toml").write_text(scene)
+    proc = parsolve("run", "block.toml", "-o", "block.h5", cwd=tmp_path, mpi=nranks)
+    assert proc.returncode == 0, proc.stderr
+    found = re.findall(r"^    base: ΣRn (\S+)  ΣRt (\S+)  \|ΣRt\|/ΣRn (\S+)  rows open (\d+), "
+                       r"stick (\d+), slip (\d+)$", proc.stdout, re.M)
+    with h5py.File(tmp_path / "block.h5", "r") as f:
+        state = f["fields/base_state"][()][..., 0]
+        if formulation == "relations":
+            rn = f["relations/base_normal/normal_force"][()][:, 0]
+            rt = f["relations/base_normal/tangential_force"][()][:, 0]
+        else:
+            rn = f["fields/base_normal_reaction"][()][..., 0].sum(axis=1)
+            rt = f["fields/base_tangential_reaction"][()][..., 0].sum(axis=1)
+    assert len(found) == len(state) == 10
+    for k, (n, t, ratio, *counts) in enumerate(found):
+        np.testing.assert_allclose([float(n), float(t), float(ratio)],
+                                   [rn[k], rt[k], abs(rt[k]) / rn[k]], rtol=1e-5)
+        assert [int(c) for c in counts] == [int((state[k] == s).sum()) for s in range(3)]
+    assert found[-1][2] == "0.3" and float(found[-1][0]) == pytest.approx(10.0)
+
+
+def test_resultant_lines_name_their_components():
+    from parsolve.outputs import resultant_line
+
+    assert resultant_line("clamp", ["x", "y", "z", "mx", "my", "mz"], [1.5, -2, 0, 3, 4e-7, 5]) == \
+        "clamp: resultant fx 1.5  fy -2  fz 0  mx 3  my 4e-07  mz 5 (moments about the origin)"
+    # a scalar field's reaction by its name; no moment without a displacement
+    assert resultant_line("inlet", ["h"], [0.25]) == "inlet: resultant h 0.25"
+    assert resultant_line("both", ["x", "y", "T", "mz"], [1, 2, 3, 4]) == \
+        "both: resultant fx 1  fy 2  T 3  mz 4 (moments about the origin)"

@@ -81,6 +81,7 @@ Scene schema::
     sliding = "finite"             # "small" (default: paired once) or "finite" (paired again
     #                                each iteration; any master or obstacle, 2D and 3D:
     #                                effects/contact_sliding.py)
+    report = true                  # each step's line: ΣRn, ΣRt, |ΣRt|/ΣRn, open/stick/slip rows
 """
 
 from __future__ import annotations
@@ -126,6 +127,7 @@ class ContactSpec:
     key: str
     discretization: str = "node_to_segment"
     sliding: str = "small"
+    report: bool = False        # ΣRn, ΣRt, |ΣRt|/ΣRn, open / stick / slip with each step's line
 
 
 def parse(t, dim: int) -> ContactSpec:
@@ -151,9 +153,10 @@ def parse(t, dim: int) -> ContactSpec:
     if discretization == "mortar" and master is None:
         raise t.error("discretization", "mortar needs a master region (not an obstacle)")
     sliding = t.get("sliding", str, "small", choices=SLIDINGS)
+    report = t.get("report", bool, False)
     t.done()
     return ContactSpec(name, slave, master, obstacle, mu, direction, radius, closed, t.path,
-                       discretization, sliding)
+                       discretization, sliding, report)
 
 
 def _obstacle(t, dim: int) -> tuple[str, dict]:

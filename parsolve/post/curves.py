@@ -34,29 +34,48 @@ def check_output(path: str | None, key: str, inputs: list[str]) -> None:
         raise InputError(f"folder {parent} is read-only", path, key)
 
 
-def write_csv(path: str, xspec: str, yspec: str, curves: list[tuple[str, np.ndarray, np.ndarray]]) -> None:
-    """One row per (file, step): file, step, x, y."""
+Curve = tuple[str, np.ndarray, list[np.ndarray], np.ndarray]   # label, x, ys, step numbers
+
+
+def with_rest(res, x: np.ndarray, ys: list[np.ndarray]) -> Curve:
+    """The file's curve (label, x, [y per spec], step numbers), led by the unloaded state
+    (step 0: every spec is 0 there, time and step included) when the scene starts from rest
+    (``scene_model.starts_from_rest``) and its first saved step is after t = 0."""
+    from parsolve.post.scene_model import starts_from_rest
+
+    steps = np.arange(1, len(x) + 1)
+    if len(res.times) and res.times[0] > 0 and starts_from_rest(res):
+        x = np.concatenate([[0.0], x])
+        ys = [np.concatenate([[0.0], y]) for y in ys]
+        steps = np.concatenate([[0], steps])
+    return res.stem, x, ys, steps
+
+
+def write_csv(path: str, xspec: str, yspecs: list[str], curves: list[Curve]) -> None:
+    """One row per (file, step): file, step (0: the unloaded state), x, then each y."""
     with open(path, "w", newline="") as fh:
         w = csv.writer(fh)
-        w.writerow(["file", "step", xspec, yspec])
-        for label, x, y in curves:
-            for k, (a, b) in enumerate(zip(x, y)):
-                w.writerow([label, k + 1, repr(float(a)), repr(float(b))])
+        w.writerow(["file", "step", xspec] + list(yspecs))
+        for label, x, ys, steps in curves:
+            for k in range(len(x)):
+                w.writerow([label, int(steps[k]), repr(float(x[k]))] + [repr(float(y[k])) for y in ys])
 
 
-def write_png(path: str, xspec: str, yspec: str, curves: list[tuple[str, np.ndarray, np.ndarray]]) -> None:
+def write_png(path: str, xspec: str, yspecs: list[str], curves: list[Curve]) -> None:
+    """One line per (file, y); the y axis is named by the spec when there is one."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6.4, 4.4))
-    for label, x, y in curves:
-        ax.plot(x, y, marker="o", ms=3, label=label)
+    for label, x, ys, _ in curves:
+        for spec, y in zip(yspecs, ys):
+            ax.plot(x, y, marker="o", ms=3, label=label if len(yspecs) == 1 else f"{label}: {spec}")
     ax.set_xlabel(xspec)
-    ax.set_ylabel(yspec)
+    ax.set_ylabel(yspecs[0] if len(yspecs) == 1 else "value")
     ax.grid(True, alpha=0.3)
-    ax.legend()
+    ax.legend(fontsize="small")
     fig.tight_layout()
     fig.savefig(Path(path), dpi=120)
     plt.close(fig)

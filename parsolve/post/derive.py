@@ -12,6 +12,10 @@ Written into a copy of the result file (the input is never modified):
     /fields/stress_<region>        nodal stress averaged over the cells of one material entry
                                    (its ``region`` name); NaN at nodes outside that region, so a
                                    node on an interface carries one value per side
+    /fields/<cell field>           every cell field (stored and derived: von_mises,
+                                   principal_stress, strain, damage, ...) projected onto the
+                                   nodes (lumped L², parsolve.post.projection); a name /fields
+                                   has already gets ``_projected``: /fields/stress_projected
 """
 
 from __future__ import annotations
@@ -126,8 +130,8 @@ def _write(src: str, out: Path, mesh, times: list, fields: dict, cell_fields: di
                     if f"{group}/{name}" in f:
                         del f[f"{group}/{name}"]
                     f[f"{group}/{name}"] = value
-                    if np.isnan(value).any():   # a node outside the region: no value, not damage
-                        f[f"{group}/{name}"].attrs[NAN] = "no value (a node outside the region)"
+                    if np.isnan(value).any():   # no value there (not damage): post.result.NAN
+                        f[f"{group}/{name}"].attrs[NAN] = "no value at some nodes"
             all_fields = {n: f[f"fields/{n}"].shape[2] for n in f["fields"]}
             all_cells = {n: f[f"cell_fields/{n}"].shape[2] for n in f.get("cell_fields", {})}
         tmp.replace(out)
@@ -144,6 +148,22 @@ def _write(src: str, out: Path, mesh, times: list, fields: dict, cell_fields: di
         raise
 
 
+def nodal_sources(res: Result, key: str) -> dict:
+    """The stored cell fields to project, and under "taken" the names /fields has."""
+    return {**{n: res.dataset(f"cell_fields/{n}", key) for n in res.names("cell_fields")},
+            "taken": res.names("fields")}
+
+
+def projected_fields(mesh: tuple, cell_fields: dict, taken: list[str]) -> dict[str, np.ndarray]:
+    """Every cell field (but "taken") as a nodal field by lumped L² projection
+    (parsolve.post.projection), named as ``projection.nodal_names`` says."""
+    from parsolve.post.projection import nodal_names, project
+
+    values = {n: v for n, v in cell_fields.items() if n != "taken"}
+    names = nodal_names(list(values), taken)
+    return {target: project(*mesh, values[n]) for n, target in names.items()}
+
+
 def derive(src: str, out: str, key: str = "--derive") -> dict[str, list[str]]:
     """Copy ``src`` to ``out`` with the derived datasets and an XDMF beside it. Returns the
     names written: {"fields": [...], "cell_fields": [...]}."""
@@ -154,10 +174,12 @@ def derive(src: str, out: str, key: str = "--derive") -> dict[str, list[str]]:
         u = res.dataset("fields/displacement", key)
         sig = res.dataset("cell_fields/stress", key)
         times = res.times.tolist()
+        stored, mesh = nodal_sources(res, key), (res.points, res.cells, res.cell_type)
     T = full_tensor(sig, model.mesh.dim, out_of_plane(model, sig))
     cell_fields = {"strain": cell_strain(model, u), "von_mises": von_mises(T)[..., None],
                    "principal_stress": principal(T)}
     fields = region_nodal_stress(model, u, sig)
+    fields.update(projected_fields(mesh, {**stored, **cell_fields}, stored["taken"] + list(fields)))
     try:
         _write(src, Path(out), model.mesh, times, fields, cell_fields)
     except (OSError, RuntimeError) as exc:

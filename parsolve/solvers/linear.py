@@ -15,7 +15,9 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from parsolve import progress
 from parsolve.errors import SolverError
+from parsolve.solvers import factor_log
 from parsolve.solvers import options as opt
 
 
@@ -161,10 +163,10 @@ class LinearSolver:
         if pc.getType() == "cholesky" and not self.symmetric(mat):
             pc.setType("lu")
             self.notes.append("the operator is not symmetric: LU instead of Cholesky")
-        t0 = time.perf_counter()
+        t0, first = time.perf_counter(), self._state is None
         for attempt in range(4):
             try:
-                with opt.inserted(self.prefix, self.settings):
+                with opt.inserted(self.prefix, self.settings), factor_log.factorization(first):
                     self.ksp.setUp()
                     # KSPSetUp does not set the PC up again once it has solved: PCSetUp does,
                     # when the operator's values changed (the factorization, timed here)
@@ -219,6 +221,8 @@ class LinearSolver:
                               "nearly so (a body not held, dependent relations, or a tangent "
                               "that lost its stiffness)")
         self.residual = residual
+        progress.detail(f"linear solve: {self.ksp.getIterationNumber()} Krylov iterations, "
+                        f"residual {residual:.2e}")
         return self.ksp.getIterationNumber()
 
     def add_time(self, phase: str, seconds: float) -> None:

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from mpi4py import MPI
 
-from parsolve import interrupts
+from parsolve import interrupts, progress
 from parsolve.contact.dependent import dependent_rows
 from parsolve.effects.compose import Rate
 from parsolve.errors import SolverError
@@ -290,6 +290,7 @@ class NewtonSolver:
             r_norm = self._norm(r)
             residual = r_norm / max(ref, self._roundoff_force() / spec.rtol)
             self.residual_history.append(residual)
+            progress.detail(f"newton {it + 1}: residual {residual:.3e}")
             small_step = dq_norm <= spec.stol * max(self.ctx.max_abs(self.q), 1e-300)
             balanced = residual <= spec.rtol or small_step and r_norm < 1e-6 * ref
             if it > 0 and not changed and balanced:

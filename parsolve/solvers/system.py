@@ -14,6 +14,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from parsolve import progress
 from parsolve.effects.compose import Composition, Rate
 from parsolve.fem.element_matrices import BlockMatrices, ElementMatrices, StiffnessTarget
 from parsolve.la.dofmap import DofMap, HeldValues, held_keys
@@ -41,7 +42,7 @@ class SaddleSystem:
         self.eliminated = [r for r in model.relations if r.eliminable()]
         self.multiplied = [r for r in model.relations if not r.eliminable()]
         nmult = sum(1 if r.collapsed else r.nrows for r in self.multiplied)
-        self.dofmap = dm = DofMap(comm, mesh, ncomp, nmult)
+        self.dofmap = dm = progress.timed("numbering", DofMap, comm, mesh, ncomp, nmult)
         # relations name input DOFs: the map finds their numbers (one reduction)
         self.unused = self.unused_dofs()
         dm.index_inputs(self._relation_dofs())
@@ -53,9 +54,9 @@ class SaddleSystem:
         self.composition = Composition(model, self.local_cells, lumped)
         self.rate: Rate | None = None  # the rate terms of a transient step (set by the stepper)
         lo, hi = self.part.node_ranges[rank], self.part.node_ranges[rank + 1]
-        self.pattern = pattern = self._pattern(lo, hi)
+        self.pattern = pattern = progress.timed("pattern", self._pattern, lo, hi)
         self.relation_set = RelationSet(self.multiplied, dm)
-        self.op = SaddleOperator(comm, dm, pattern, self.relation_set)
+        self.op = progress.timed("operator", SaddleOperator, comm, dm, pattern, self.relation_set)
         self.offset = dm.offset
         self._elimination_setup()
         self.context = StepContext(

@@ -178,9 +178,12 @@ def test_curves_of_several_files_to_csv_and_png(run, shared_tmp):
     assert main([str(first), str(run.last), "--x", "time", "--y", "field:displacement:x@0.5,0.5",
                  "--csv", str(table), "--png", str(png)]) == 0
     rows = list(csv.DictReader(table.open()))
-    assert [r["file"] for r in rows] == ["c1"] * 2 + ["c2"] * 4
+    # each curve starts at the unloaded state (step 0, t = 0: the scene starts from rest)
+    assert [r["file"] for r in rows] == ["c1"] * 3 + ["c2"] * 5
+    assert [int(r["step"]) for r in rows] == [0, 1, 2, 0, 1, 2, 3, 4]
     got = np.array([float(r["field:displacement:x@0.5,0.5"]) for r in rows])
     t = np.array([float(r["time"]) for r in rows])
+    np.testing.assert_allclose(t, [0, 0.5, 1, 0, 0.25, 0.5, 0.75, 1], atol=1e-15)
     np.testing.assert_allclose(got, t * exact([0.5, 0.5])[0], atol=1e-13)
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
@@ -192,10 +195,22 @@ def test_summary(run, capsys):
     assert "status complete, 10 steps" in text
     assert "control: 1 rows, multiplier [10000]" in text
     # the reaction of the clamped edge balances the end force, and its moment about the origin
-    assert "left_x: 4 rows" in text and "resultant [-10000, 0, 500]" in text
-    # |ux| = 1e-4 on the whole right edge (nodes 29, 59, 89, 119): any of them, by round-off
-    node = re.search(r"fields/displacement: max \|value\| x 0\.0001 \(node (\d+)\)", text)
-    assert node and int(node.group(1)) in (29, 59, 89, 119), text
+    assert "left_x: 4 rows" in text and "resultant [fx -10000, fy 0, mz 500]" in text
+    assert "resultants: forces, then moments about the origin" in text
+    # |ux| = 1e-4 on the whole right edge x = 1 (nodes 29, 59, 89, 119): any of them, by
+    # round-off, located by its coordinates and its number
+    node = re.search(r"fields/displacement: max \|value\| x 0\.0001 at \(1, ([0-9.e-]+)\), "
+                     r"node (\d+);", text)
+    assert node and int(node.group(2)) in (29, 59, 89, 119), text
+    with Result(run.last) as res:
+        np.testing.assert_allclose(res.points[int(node.group(2))], [1.0, float(node.group(1))],
+                                   rtol=1e-5)
+    # a cell field's extreme: the cell's centroid and number
+    cell = re.search(r"cell_fields/stress: max \|value\| xx 100000 at \(([0-9.e-]+), ([0-9.e-]+)\), "
+                     r"cell (\d+);", text)
+    with Result(run.last) as res:
+        centroid = res.points[res.cells[int(cell.group(3))]].mean(axis=0)
+    np.testing.assert_allclose(centroid, [float(cell.group(1)), float(cell.group(2))], rtol=1e-5)
 
 
 @pytest.mark.parametrize("args, message", [
