@@ -188,9 +188,16 @@ def lock_output(comm, out: str, source: str, key: str):
             verdict = "ok" if lock.acquire() else "busy"
         except OSError as exc:
             verdict = f"cannot lock {lock.path}: {exc.strerror or exc}"
-        if verdict == "ok":
-            lock.reserve()
+        if verdict == "ok" and not lock.reserve():
+            lock.release()          # no room even for the reserve: no result is started
+            verdict = "full"
     verdict = comm.bcast(verdict, root=0)
+    if verdict == "full":
+        from parsolve.io.lock import RESERVE_BYTES
+
+        raise OutputError(f"{out}: No space left on device (disk full): the "
+                          f"{RESERVE_BYTES >> 20} MiB kept beside the result to close it do not "
+                          f"fit in {Path(out).parent}; nothing written")
     if verdict == "busy":
         raise InputError(f"{out} is being written by another run (lock held on "
                          f"{out}.lock)", source, key)

@@ -8,6 +8,7 @@ resumable, with a manifest. ``parsolve study`` and ``parsolve batch`` both call 
 from __future__ import annotations
 
 import os
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -82,19 +83,32 @@ def execute(runs: list[Run], root: Path, executor: str = "local", parallel: int 
 
 def folder_problem(path: Path) -> str | None:
     """Why ``path`` cannot be (or become) a folder of runs, or None: it is a file, or the
-    nearest existing ancestor is a file or is read-only (mkdir would fail half way)."""
+    nearest existing ancestor is a file, is read-only or refuses a new entry (mkdir would fail
+    half way)."""
     path = Path(path).resolve()
     if path.exists():
         if not path.is_dir():
             return f"{path} is a file, not a folder"
-        return None if os.access(path, os.W_OK | os.X_OK) else f"folder {path} is read-only"
+        return _unwritable(path, f"folder {path}")
     for parent in path.parents:
         if parent.exists():
             if not parent.is_dir():
                 return f"cannot create {path}: {parent} is a file, not a folder"
-            if not os.access(parent, os.W_OK | os.X_OK):
-                return f"cannot create {path}: folder {parent} is read-only"
-            return None
+            problem = _unwritable(parent, f"folder {parent}")
+            return f"cannot create {path}: {problem}" if problem else None
+    return None
+
+
+def _unwritable(folder: Path, name: str) -> str | None:
+    """Why nothing can be created in ``folder``, or None. Tried with a probe folder made and
+    removed at once: the permission bits do not tell (root passes them; /proc, /sys and
+    read-only mounts refuse anyway)."""
+    if not os.access(folder, os.W_OK | os.X_OK):
+        return f"{name} is read-only"
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".parsolve-probe-", dir=folder))
+    except OSError as exc:
+        return f"{name} is not writable ({exc.strerror or exc})"
     return None
 
 

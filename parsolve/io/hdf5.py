@@ -23,10 +23,14 @@ Guarantees, and the rules a reader follows:
   calls ``refresh()`` on each dataset it reads to see new steps, ``/steps/time`` first. (A plain ``h5py.File(path, "r")`` works once the run has closed the file; after a
   hard kill, -9 or a node failure, only ``swmr=True`` opens it — or run
   ``parsolve post RESULT.h5 --recover``.)
-* **A step counts only once all its datasets are written.** Each step resizes and writes every
-  per-step dataset first, ``/steps/time`` last, then flushes. ``n = len(/steps/time)`` is the
-  number of finished steps; a reader takes ``[:n]`` of the other per-step datasets (after a crash
-  in the middle of a step they may hold one unfinished row more; a normal close trims it).
+* **A step counts only once all its datasets are written.** ``/steps/time`` is the commit
+  marker: each step resizes and writes every other per-step dataset, flushes them to the file,
+  and only then extends ``/steps/time`` and flushes again (one flush for all would write the
+  metadata in HDF5's order, the marker's maybe first). ``n = len(/steps/time)`` is the number
+  of finished steps; a reader takes ``[:n]`` of the other per-step datasets (after a crash in
+  the middle of a step they may hold one unfinished row more; a normal close and
+  ``post --recover`` trim it). A hard kill at any point of a step's write is tested
+  (:mod:`parsolve.io.faults`).
 * **Disk full.** Any OSError while writing raises :class:`parsolve.errors.OutputError` (on every
   rank) naming the path; nothing more is written to the file and the finished steps stay
   readable. The status attribute is *not* rewritten then (on a full disk that needs new space
@@ -49,10 +53,12 @@ import numpy as np
 
 from parsolve import __version__
 from parsolve.errors import OutputError
+from parsolve.io import faults
 from parsolve.io.lock import free_reserve
 from parsolve.io.slabs import OwnedRows, Rows, split_owners
 from parsolve.io.xdmf import XdmfWriter, sidecar_path
 
+COMMIT = "steps/time"  # the commit marker: a step counts once this dataset has its row
 STEP_CHUNK = 64  # rows per chunk of the one-number-per-step datasets (/steps/*, /timings/*)
 MODES = ("swmr", "parallel", "auto")
 AUTO_PARALLEL_DOFS = 1_000_000  # "auto": parallel output from this many DOFs on several nodes
@@ -96,12 +102,14 @@ def result_writer(mode: str, comm, path, mesh, scene_text: str, petsc_version: s
                         attrs=attrs, owners=owners)
 
 
-def _create(f: h5py.File, name: str, row_shape: tuple, dtype) -> None:
-    """An empty per-step dataset (0, *row_shape), growable along the steps."""
+def _create(f: h5py.File, name: str, row_shape: tuple, dtype, checksum: bool = True) -> None:
+    """An empty per-step dataset (0, *row_shape), growable along the steps; ``checksum``: with
+    a Fletcher32 checksum per chunk (a damaged chunk is a read error, not numbers)."""
     rows = STEP_CHUNK if not row_shape else 1
     chunks = (rows,) + tuple(max(int(s), 1) for s in row_shape)
     maxshape = (None,) + tuple(max(int(s), 1) for s in row_shape)
-    f.create_dataset(name, (0,) + tuple(row_shape), maxshape=maxshape, chunks=chunks, dtype=dtype)
+    f.create_dataset(name, (0,) + tuple(row_shape), maxshape=maxshape, chunks=chunks, dtype=dtype,
+                     fletcher32=checksum)
 
 
 
@@ -211,14 +219,21 @@ class ResultWriter:
                     extra) -> None:
         start = time.perf_counter()
         rows = self._rows(t, iterations, residual, fields, cell_fields, relations, timings, extra)
+        step = len(self.times) + 1
+        faults.step_begins(step)
         try:
             if not self._layout:
                 self._create_all(rows)
             for name, value in rows.items():
-                if name != "steps/time":
+                if name != COMMIT:
                     self._append(name, value)
-            self._append("steps/time", rows["steps/time"])  # last: the step now counts
+                    faults.passed(step)
+            self.file.flush()   # every other row on disk before the marker (one flush, in
+            faults.passed(step)  # any order of the metadata, would not guarantee that)
+            self._append(COMMIT, rows[COMMIT])  # last: the step now counts
+            faults.passed(step)
             self.file.flush()
+            faults.passed(step)
         except (OSError, RuntimeError) as exc:  # h5py reports some write errors as RuntimeError
             return self._fail(exc, f"writing step {len(self.times) + 1} to")
         self.times.append(t)

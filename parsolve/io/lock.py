@@ -9,11 +9,14 @@ mount option.)
 The lock file also holds a **reserve** (RESERVE_BYTES allocated with ``posix_fallocate``): when
 a write fails with a full disk, :func:`free_reserve` gives that space back so that HDF5 can
 still write the metadata of the closing file and the status; without it the close itself fails
-and leaves a file no reader opens.
+and leaves a file no reader opens (in the swmr mode HDF5 may even crash). A disk without room
+for the reserve is a full disk from the start: the run stops before any output file exists
+(exit 4, "No space left on device").
 """
 
 from __future__ import annotations
 
+import errno
 import fcntl
 import os
 from pathlib import Path
@@ -54,11 +57,17 @@ class OutputLock:
                 return True
             os.close(fd)
 
-    def reserve(self, nbytes: int = RESERVE_BYTES) -> None:
+    def reserve(self, nbytes: int = RESERVE_BYTES) -> bool:
+        """False when the disk has no room for the reserve: a run started there could not
+        close its result once the disk fills (HDF5 left without room crashes or leaves a
+        file no reader opens), so it does not start."""
         try:
             os.posix_fallocate(self.fd, 0, nbytes)
-        except OSError:
-            pass   # a disk already too full for the reserve: the run finds out at its first step
+        except OSError as exc:
+            if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+                return False
+            # another error (a file system without fallocate): the run goes without a reserve
+        return True
 
     def free_reserve(self) -> None:
         if self.fd is not None:

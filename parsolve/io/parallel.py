@@ -18,8 +18,13 @@ Design decisions (MPI-IO and SWMR cannot be used on the same file at once):
   has no "file open for writing" flag that a crash would leave set. A crash *while* a step is
   being closed can still leave the file damaged (HDF5 without SWMR gives no guarantee there);
   that window is the few metadata writes at the step's close.
-* **A step counts only once** ``/steps/time`` **has it**: every other dataset of the step is
-  written and flushed before ``/steps/time`` is extended.
+* **Checksums**: the field and cell-field datasets carry a Fletcher32 checksum per chunk, as
+  in the swmr mode; the small per-step datasets (written by rank 0 alone) do not (``_checked``).
+* **A step counts only once** ``/steps/time`` **has it** (the commit marker): every other
+  dataset of the step is written and flushed (collectively) before ``/steps/time`` is
+  extended; after a crash the other datasets may hold one unfinished row more, which
+  ``post --recover`` cuts (a hard kill at any point of a step's write is tested:
+  :mod:`parsolve.io.faults`).
 * **SIGINT / SIGTERM are held while a step is written** (they act right after it), so every
   rank leaves a step's collective calls together; the status is then written by rank 0 alone,
   on the closed file (POSIX driver): closing needs no other rank.
@@ -51,7 +56,8 @@ from mpi4py import MPI
 
 from parsolve import __version__
 from parsolve.errors import OutputError
-from parsolve.io.hdf5 import ResultWriter, _create, known_datasets
+from parsolve.io import faults
+from parsolve.io.hdf5 import COMMIT, ResultWriter, _create, known_datasets
 from parsolve.interrupts import SIGNALS
 from parsolve.io.lock import free_reserve
 from parsolve.io.slabs import OwnedRows, Rows, split_owners
@@ -68,6 +74,14 @@ def _row_form(value: np.ndarray) -> np.ndarray:
     if value.dtype.kind not in "iu":
         value = value.astype(float)
     return value[:, None] if value.ndim == 1 else value
+
+
+def _checked(name: str) -> bool:
+    """Whether a per-step dataset carries a Fletcher32 checksum: the field slabs do (written
+    collectively); the small rows rank 0 writes alone do not — HDF5 (1.10) writes filtered
+    datasets collectively only, and a collective write would make a failure on rank 0 alone
+    a hang of the others."""
+    return name.startswith(("fields/", "cell_fields/"))
 
 
 @contextmanager
@@ -170,7 +184,7 @@ class ParallelResultWriter(ResultWriter):
                                      dtype=rows.dtype), None, kind, rows))
         if ok:
             known = known_datasets(self.relations).items()
-            ok = self._together(doing, lambda: [_create(f, name, shape, dtype)
+            ok = self._together(doing, lambda: [_create(f, name, shape, dtype, _checked(name))
                                                 for name, (shape, dtype) in known])
         for name, (shape, dtype) in known_datasets(self.relations).items():
             self._known[name] = (shape, np.dtype(dtype))
@@ -328,30 +342,37 @@ class ParallelResultWriter(ResultWriter):
             if step == 0:
                 for name, (shape, dtype) in self._layout.items():
                     if name not in self._known:
-                        _create(f, name, shape, dtype)
+                        _create(f, name, shape, dtype, _checked(name))
             for name in self._layout:
-                if name != "steps/time":
+                if name != COMMIT:
                     f[name].resize(step + 1, axis=0)
 
         def small_rows():               # independent writes: no other rank waits
             if self.comm.rank == 0:
                 for name, value in small.items():
-                    if name != "steps/time":
+                    if name != COMMIT:
                         self._append(name, value)
 
         def step_time():                # last: the step now counts
-            ds = box["f"]["steps/time"]
+            ds = box["f"][COMMIT]
             ds.resize(step + 1, axis=0)
             if self.comm.rank == 0:
-                ds[step] = small["steps/time"]
+                ds[step] = small[COMMIT]
 
-        ok = self._together(doing, self._make_room)
-        ok = ok and self._together(doing, open_and_extend)
+        def act(action) -> bool:
+            ok = self._together(doing, action)
+            faults.passed(step + 1)
+            return ok
+
+        faults.step_begins(step + 1)
+        ok = act(self._make_room)
+        ok = ok and act(open_and_extend)
         for name in sorted(slabs):      # the same order on every rank
-            ok = ok and self._together(doing, lambda: self._append(name, slabs[name]))
+            ok = ok and act(lambda: self._append(name, slabs[name]))
         for action in (small_rows, lambda: box["f"].flush(), step_time):
-            ok = ok and self._together(doing, action)
+            ok = ok and act(action)
         self._close_step(box.get("f"), ok, doing)
+        faults.passed(step + 1)
         self._raise_if_failed()
 
     def _room_for_mesh(self) -> None:

@@ -89,6 +89,16 @@ def _curves(args) -> list:
     return curves
 
 
+def _derivable(src: str) -> None:
+    """--derive copies a finished result: one a run is still writing (between two steps a
+    parallel-output file opens) is refused."""
+    from parsolve.io.recover import being_written, lock_path
+
+    if being_written(src):
+        raise InputError(f"a run is writing it now (lock held on {lock_path(src)}): --derive "
+                         "reads a finished result; derive once the run has ended", src, "--derive")
+
+
 def _profiles(args) -> None:
     from parsolve.post import line
     from parsolve.post.result import Result
@@ -133,14 +143,28 @@ def run(args) -> None:
     _check(args)
     from parsolve.post.curves import check_output
 
+    from parsolve.batch.api import folder_problem
+
     for key in ("csv", "png", "derive"):
         check_output(getattr(args, key), f"--{key}", args.results)
+        if getattr(args, key):   # a folder that refuses files whatever its permissions say
+            problem = folder_problem(Path(getattr(args, key)).parent)
+            if problem:
+                raise InputError(problem, getattr(args, key), f"--{key}")
+    for path in args.results:   # every input readable before anything is printed or written
+        with Result(path) as res:
+            if args.summary:    # a summary vouches for the whole file: every value read
+                res.verify()
+    if args.derive:
+        _derivable(args.results[0])
     if args.summary:
         from parsolve.post.summary import summary
 
-        for path in args.results:
+        texts = []
+        for path in args.results:   # all read (a damaged dataset found) before any is printed
             with Result(path) as res:
-                print(summary(res))
+                texts.append(summary(res))
+        print("\n".join(texts))
     if args.x:
         from parsolve.post.curves import write_csv, write_png
 
@@ -165,7 +189,6 @@ def run(args) -> None:
         src = args.results[0]
         if Path(args.derive).resolve() == Path(src).resolve():
             raise InputError("--derive writes a copy: the input is never overwritten", src, "--derive")
-        Result(src).close()  # a missing or invalid input is reported before anything is written
         names = derive(src, args.derive)
         print(f"{args.derive}: " + ", ".join(f"/{g}/{n}" for g, ns in names.items() for n in ns)
               + f"; {Path(args.derive).with_suffix('.xdmf')}")
@@ -183,8 +206,13 @@ def main(argv: list[str]) -> int:
                 return 0
         run(args)
     except InputError as exc:
-        print(f"parsolve post: {exc.oneline()}{recover.hint(exc.source)}", file=sys.stderr)
+        more = "" if "lock held" in exc.message else recover.hint(exc.source)
+        print(f"parsolve post: {exc.oneline()}{more}", file=sys.stderr)
         return 2
     except BrokenPipeError:  # | head
         return 0
+    except (OSError, RuntimeError) as exc:  # a file changed or damaged under us: one line
+        where = getattr(exc, "filename", None) or ", ".join(args.results)
+        print(f"parsolve post: {where}: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
     return 0

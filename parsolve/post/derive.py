@@ -20,6 +20,7 @@ Written into a copy of the result file (the input is never modified):
 
 from __future__ import annotations
 
+import os
 import shutil
 from pathlib import Path
 
@@ -27,8 +28,9 @@ import h5py
 import numpy as np
 
 from parsolve.fem import kernels
-from parsolve.io.xdmf import XdmfWriter
-from parsolve.post.result import Result
+from parsolve.errors import InputError
+from parsolve.io.xdmf import XdmfWriter, sidecar_path
+from parsolve.post.result import NAN, Result
 
 
 def full_tensor(sig: np.ndarray, dim: int, szz: np.ndarray | float = 0.0) -> np.ndarray:
@@ -115,6 +117,37 @@ def region_nodal_stress(model, u: np.ndarray, cell_stress: np.ndarray) -> dict[s
     return out
 
 
+def _write(src: str, out: Path, mesh, times: list, fields: dict, cell_fields: dict) -> None:
+    """The copy with the derived datasets, and its XDMF. Written under a temporary name and
+    renamed once whole: a failure (a full disk, a killed process aside) leaves nothing."""
+    tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
+    written = [tmp]
+    try:
+        shutil.copyfile(src, tmp)
+        with h5py.File(tmp, "r+") as f:
+            for group, data in (("cell_fields", cell_fields), ("fields", fields)):
+                for name, value in data.items():
+                    if f"{group}/{name}" in f:
+                        del f[f"{group}/{name}"]
+                    f[f"{group}/{name}"] = value
+                    if np.isnan(value).any():   # no value there (not damage): post.result.NAN
+                        f[f"{group}/{name}"].attrs[NAN] = "no value at some nodes"
+            all_fields = {n: f[f"fields/{n}"].shape[2] for n in f["fields"]}
+            all_cells = {n: f[f"cell_fields/{n}"].shape[2] for n in f.get("cell_fields", {})}
+        tmp.replace(out)
+        written = [out, out.with_suffix(".xdmf"), sidecar_path(out)]
+        xdmf = XdmfWriter(out, mesh)
+        try:
+            for step, t in enumerate(times):
+                xdmf.append(step, t, all_fields, all_cells)
+        finally:
+            xdmf.close()
+    except BaseException:
+        for path in written:
+            path.unlink(missing_ok=True)
+        raise
+
+
 def nodal_sources(res: Result, key: str) -> dict:
     """The stored cell fields to project, and under "taken" the names /fields has."""
     return {**{n: res.dataset(f"cell_fields/{n}", key) for n in res.names("cell_fields")},
@@ -147,20 +180,8 @@ def derive(src: str, out: str, key: str = "--derive") -> dict[str, list[str]]:
                    "principal_stress": principal(T)}
     fields = region_nodal_stress(model, u, sig)
     fields.update(projected_fields(mesh, {**stored, **cell_fields}, stored["taken"] + list(fields)))
-    if Path(out).resolve() != Path(src).resolve():
-        shutil.copyfile(src, out)
-    with h5py.File(out, "r+") as f:
-        for group, data in (("cell_fields", cell_fields), ("fields", fields)):
-            for name, value in data.items():
-                if f"{group}/{name}" in f:
-                    del f[f"{group}/{name}"]
-                f[f"{group}/{name}"] = value
-        all_fields = {n: f[f"fields/{n}"].shape[2] for n in f["fields"]}
-        all_cells = {n: f[f"cell_fields/{n}"].shape[2] for n in f.get("cell_fields", {})}
-    xdmf = XdmfWriter(Path(out), model.mesh)
     try:
-        for step, t in enumerate(times):
-            xdmf.append(step, t, all_fields, all_cells)
-    finally:
-        xdmf.close()
+        _write(src, Path(out), model.mesh, times, fields, cell_fields)
+    except (OSError, RuntimeError) as exc:
+        raise InputError(f"cannot write ({' '.join(str(exc).split())})", out, key) from None
     return {"fields": sorted(fields), "cell_fields": sorted(cell_fields)}

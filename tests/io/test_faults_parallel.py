@@ -46,17 +46,44 @@ def launch(ranks: int, args: list[str], wait: bool = True, slow: bool = False):
     return subprocess.run(cmd, env=ENV, capture_output=True, text=True, timeout=120)
 
 
-@pytest.fixture
-def small_disk(tmp_path):
-    """A 3 MB file system (tmpfs), unmounted afterwards."""
-    where = tmp_path / "disk"
+def _mounted(where, size: str):
+    """A tmpfs of ``size`` at ``where`` (a new folder), unmounted afterwards."""
     where.mkdir()
-    mount = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=3m", "tmpfs", str(where)],
+    mount = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(where)],
                            capture_output=True, text=True)
     if mount.returncode != 0:
         pytest.skip(f"cannot mount a small tmpfs here: {mount.stderr.strip()}")
     yield where
     subprocess.run(["umount", "-l", str(where)], check=False)
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """A 3 MB file system (tmpfs)."""
+    yield from _mounted(tmp_path / "disk", "3m")
+
+
+@pytest.fixture
+def tiny_disk(tmp_path):
+    """A 512 kB file system: less than the lock's 1 MiB reserve."""
+    yield from _mounted(tmp_path / "tiny", "512k")
+
+
+@pytest.mark.parametrize("ranks", [1, 2, 3])
+@pytest.mark.parametrize("mode", ["parallel", "swmr"])
+def test_a_disk_without_room_for_the_reserve_starts_nothing(mode, ranks, tiny_disk, tmp_path):
+    """Exit 4 with "No space left on device" before any output: no 0-byte out.h5 (nor an
+    HDF5 crash when the disk fills later with no reserve to close the file), no lock left."""
+    scene, out = tmp_path / "big.toml", tiny_disk / "out.h5"
+    scene.write_text(BIG)
+    proc = launch(ranks, ["run", str(scene), "-o", str(out), "--output-mode", mode])
+    assert proc.returncode == 4, proc.stderr
+    ours = [line for line in proc.stderr.splitlines() if line.startswith("parsolve")]
+    assert ours == [f"parsolve: cannot write the results: {out}: No space left on device (disk "
+                    f"full): the 1 MiB kept beside the result to close it do not fit in "
+                    f"{tiny_disk}; nothing written"], proc.stderr
+    assert "Traceback" not in proc.stderr and proc.stdout == ""
+    assert list(tiny_disk.iterdir()) == []
 
 
 @pytest.mark.parametrize("ranks", [1, 2, 3])
