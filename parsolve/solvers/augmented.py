@@ -41,13 +41,14 @@ class AugmentedMatrix:
         self.is_l = PETSc.IS().createStride(self.nl, first=off + self.nq, step=1, comm=comm)
         self._handle = None
         self.pmat: PETSc.Mat | None = None
-        self._rows = self._product = None
+        self._rows = self._product = self._rows_a = self._cols = self._coupling = None
 
     def update(self, mat: PETSc.Mat, hard: np.ndarray, kscale: float) -> PETSc.Mat:
         """P for the operator ``mat``; ``hard``: mask of this rank's multiplier rows that are
         enforced and not compliant."""
         if mat.handle != self._handle:   # a new operator (a new pattern): start again
-            self._handle, self.pmat, self._rows, self._product = mat.handle, None, None, None
+            self._handle, self.pmat = mat.handle, None
+            self._rows = self._product = self._rows_a = self._cols = self._coupling = None
         self._rows = mat.createSubMatrix(self.is_l, self.is_q, submat=self._rows)
         weight = self._rows.createVecLeft()
         weight.array[:] = np.sqrt(self.gamma / kscale) * hard
@@ -61,7 +62,35 @@ class AugmentedMatrix:
             mat.copy(self.pmat, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
             self.pmat.axpy(1.0, extra, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
         extra.destroy()
+        self._fill_schur_diagonal(mat, kscale)
         return self.pmat
+
+    def _fill_schur_diagonal(self, mat: PETSc.Mat, kscale: float) -> None:
+        """A relation whose rows and dual share no DOF (a control: the strain of a cell driven by
+        a load on the end) has no diagonal in the sparse Schur approximation
+        A₁₁ - A diag(K + γ Aₕᵀ Aₕ)⁻¹ (-D), and Jacobi would divide by 0 (PETSc takes 1: a scale
+        off by k²). Such a row gets -k on P's diagonal: the true Schur entry aᵀ K⁻¹ d is a
+        global quantity, but a few rows whose scale is merely of the right order are a few
+        isolated eigenvalues, which cost GMRES an iteration each."""
+        diag = self.pmat.getDiagonal()
+        inv = diag.getSubVector(self.is_q)
+        inv.reciprocal()
+        self._cols = mat.createSubMatrix(self.is_q, self.is_l, submat=self._cols)
+        self._cols.diagonalScale(L=inv)
+        diag.restoreSubVector(self.is_q, inv)
+        self._rows_a = mat.createSubMatrix(self.is_l, self.is_q, submat=self._rows_a)
+        self._coupling = self._rows_a.matMult(self._cols, result=self._coupling)
+        coupling = self._coupling.getDiagonal().array
+        schur = diag.array[self.nq:] - coupling
+        empty = np.abs(schur) <= 1e-8 * kscale
+        if self.comm.allreduce(int(empty.sum())):
+            lam = diag.getSubVector(self.is_l)
+            lam.array[:] = np.where(empty, -kscale, 0.0)
+            add = diag.duplicate()
+            add.zeroEntries()
+            add.isaxpy(self.is_l, 1.0, lam)
+            diag.restoreSubVector(self.is_l, lam)
+            self.pmat.setDiagonal(add, addv=PETSc.InsertMode.ADD_VALUES)
 
     def _embedded(self, product: PETSc.Mat) -> PETSc.Mat:
         """The q-space matrix ``product`` as a matrix of the saddle layout (its rows the primal
