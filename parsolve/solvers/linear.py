@@ -314,10 +314,8 @@ class LinearSolver:
             if reason < 0:
                 return reason_in_words(reason)
             if pc.getType() == "fieldsplit":
-                return ("the fieldsplit preconditioner failed to set up; the iterative "
-                        "preset needs the stiffness block invertible once single-DOF conditions "
-                        "are eliminated: use preset = \"direct\" for a body held only by "
-                        "multiplied relations (or solver.eliminate = false)")
+                return ("the fieldsplit preconditioner failed to set up (a body the relations "
+                        "do not hold?); preset = \"direct\" says which pivots are null")
         except PETSc.Error:
             pass
         return f"PETSc error {exc.ierr}"
