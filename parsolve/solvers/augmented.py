@@ -22,7 +22,9 @@ from __future__ import annotations
 import numpy as np
 from petsc4py import PETSc
 
-#: γ of the augmentation, relative to the stiffness scale (bench_relations.md)
+#: γ of the augmentation, relative to the stiffness scale: 0.01-0.1 take the fewest Krylov
+#: iterations on the 3D friction box, 10 and more make the V-cycle's task harder
+#: (bench_relations.md); the option -<prefix>augmented_gamma sets another
 GAMMA = 0.1
 
 
@@ -32,8 +34,8 @@ class AugmentedMatrix:
     operator's and Aᵀ A of every multiplier row, hard or not) is fixed as long as the operator's
     is, so the preconditioner set up on it reuses its structure."""
 
-    def __init__(self, comm, layout, gamma: float = GAMMA):
-        self.comm, self.layout, self.gamma = comm, layout, gamma
+    def __init__(self, comm, layout):
+        self.comm, self.layout = comm, layout
         q0, q1, l0, l1 = layout.owned()
         self.nq, self.nl = q1 - q0, l1 - l0
         off = layout.offset
@@ -43,15 +45,16 @@ class AugmentedMatrix:
         self.pmat: PETSc.Mat | None = None
         self._rows = self._product = self._rows_a = self._cols = self._coupling = None
 
-    def update(self, mat: PETSc.Mat, hard: np.ndarray, kscale: float) -> PETSc.Mat:
+    def update(self, mat: PETSc.Mat, hard: np.ndarray, kscale: float,
+               gamma: float = GAMMA) -> PETSc.Mat:
         """P for the operator ``mat``; ``hard``: mask of this rank's multiplier rows that are
-        enforced and not compliant."""
+        enforced and not compliant; k: the stiffness scale."""
         if mat.handle != self._handle:   # a new operator (a new pattern): start again
             self._handle, self.pmat = mat.handle, None
             self._rows = self._product = self._rows_a = self._cols = self._coupling = None
         self._rows = mat.createSubMatrix(self.is_l, self.is_q, submat=self._rows)
         weight = self._rows.createVecLeft()
-        weight.array[:] = np.sqrt(self.gamma / kscale) * hard
+        weight.array[:] = np.sqrt(gamma / kscale) * hard
         self._rows.diagonalScale(L=weight)
         self._product = self._rows.transposeMatMult(self._rows, result=self._product)
         extra = self._embedded(self._product)

@@ -20,6 +20,7 @@ from petsc4py import PETSc
 
 from parsolve.errors import SolverError
 from parsolve.solvers import options as opt
+from parsolve.solvers.augmented import GAMMA
 
 
 #: The V-cycle of the iterative preset's q block. GAMG, its aggregation dropping connections
@@ -125,10 +126,11 @@ class LinearSolver:
     def __init__(self, comm: MPI.Comm, prefix: str, settings: dict[str, str],
                  is_q: PETSc.IS, is_l: PETSc.IS, near_null: PETSc.NullSpace | None = None,
                  splits: list[tuple[str, PETSc.IS]] | None = None,
-                 preconditioner: Callable[[PETSc.Mat], PETSc.Mat] | None = None):
+                 preconditioner: Callable[[PETSc.Mat, float], PETSc.Mat] | None = None):
         """``splits``: the fieldsplit blocks, named (default: "q" and "lambda");
-        ``preconditioner``: the preconditioning matrix of an operator (made again whenever the
-        operator's values change), else the operator itself."""
+        ``preconditioner``: the preconditioning matrix of an operator and γ (made again whenever
+        the operator's values change; γ from the option ``augmented_gamma`` under the prefix),
+        else the operator itself."""
         self.comm, self.prefix, self.settings = comm, prefix, settings
         self.ksp = PETSc.KSP().create(comm)
         self.ksp.setOptionsPrefix(prefix)
@@ -189,7 +191,9 @@ class LinearSolver:
             self.notes.append("the operator is not symmetric: LU instead of Cholesky")
         t0 = time.perf_counter()
         if self.preconditioner is not None:
-            self.pmat = self.preconditioner(mat)
+            with opt.inserted(self.prefix, self.settings):
+                gamma = PETSc.Options(self.prefix).getReal("augmented_gamma", GAMMA)
+            self.pmat = self.preconditioner(mat, gamma)
             self.ksp.setOperators(mat, self.pmat)
         for attempt in range(4):
             try:

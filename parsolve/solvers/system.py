@@ -193,14 +193,14 @@ class SaddleSystem:
         self.timings["assembly"] = self.timings.get("assembly", 0.0) + time.perf_counter() - t0
         return mat
 
-    def preconditioner(self, mat: PETSc.Mat) -> PETSc.Mat:
+    def preconditioner(self, mat: PETSc.Mat, gamma: float) -> PETSc.Mat:
         """The iterative preset's preconditioning matrix for the operator as last assembled:
-        γ Aᵀ A of its enforced hard rows added to the stiffness block (``solvers.augmented``)."""
+        γ/k Aᵀ A of its enforced hard rows added to the stiffness block (``solvers.augmented``)."""
         if self._augmented is None:
             self._augmented = AugmentedMatrix(self.comm, self.dofmap)
         _, _, l0, l1 = self.dofmap.owned()
         hard = self.op.active[l0:l1].astype(bool) & (self.relation_set.compliance[l0:l1] <= 0.0)
-        return self._augmented.update(mat, hard, self.kscale)
+        return self._augmented.update(mat, hard, self.kscale, gamma)
 
     def _place_stiffness(self, ke) -> None:
         """Node-pair sums of the element matrices into the operator's stiffness slots: summed

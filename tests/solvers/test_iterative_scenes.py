@@ -127,7 +127,7 @@ def test_augmented_matrix_entry_by_entry(comm):
     active[::3] = False   # some rows switched off, as an active set does
     system.op.active = active
     mat = system.assemble()
-    P = dense(system.preconditioner(mat), comm)
+    P = dense(system.preconditioner(mat, GAMMA), comm)
     expected = _augmented_expected(system, mat, GAMMA)
     scale = np.abs(expected).max()
     assert np.abs(P - expected).max() <= 1e-12 * scale
