@@ -1,0 +1,26 @@
+"""The preset of a scene that names none (``[solver] preset`` absent, or "auto"): MUMPS or the
+iterative preset, by the problem's size and kind, from scripts/results/bench_relations.md.
+
+A 2D problem takes MUMPS at every size this code meets: its fill grows like n log n and one
+factorization serves a whole Newton step's back-substitutions. A 3D one takes MUMPS below the
+measured crossover and the iterative preset above it: MUMPS' time grows like n², its memory
+like n^(4/3) (48 KB/DOF at 234k DOFs on the 3D friction box), while the iterative preset's grow
+like n (Krylov iterations per solve 38 → 47 → 59 from 1× to 64× the cells). Pure Python, no
+PETSc: the memory check (mesh.memory) asks it before any solver exists.
+"""
+
+from __future__ import annotations
+
+#: 3D DOFs from which the iterative preset is chosen: on the 3D friction box, MUMPS' run took
+#: 0.8× the iterative one's time at 2.9k DOFs and 1.6× at 20k (bench_relations.md)
+CROSSOVER_3D = 50_000
+
+
+def choose(dofs: int, dim: int) -> tuple[str, str]:
+    """(preset, the reason in words) for a problem of ``dofs`` unknowns in ``dim`` dimensions."""
+    if dim < 3:
+        return "direct", f"auto: {dim}D, {dofs:,} DOFs: MUMPS"
+    if dofs < CROSSOVER_3D:
+        return "direct", f"auto: 3D, {dofs:,} DOFs < {CROSSOVER_3D:,}: MUMPS is faster there"
+    return "iterative", (f"auto: 3D, {dofs:,} DOFs >= {CROSSOVER_3D:,}: Krylov + AMG is faster "
+                         "and smaller there")
