@@ -212,6 +212,16 @@ def main() -> None:
                             direct=d, iterative=i))
         rows.append(row(case, factor, d, i))
         print(bh.text_table(HEAD, rows[-1:]), flush=True)
+        # written after every case: a run stopped halfway leaves what it measured
+        text = report(rows, results, machine, load0)
+    if args.gamma and not bh.SMOKE:
+        grows = gamma_study(folder)
+        text = report(rows, results, machine, load0, grows)
+    print(text)
+
+
+def report(rows: list, results: list, machine: dict, load0, gamma_rows: list | None = None) -> str:
+    """The report (markdown) and the JSON of the runs so far, written."""
     cross = crossover(results)
     lines = ["# Relations on the iterative preset", "",
              f"{machine['date']}, {machine['cpu']}, {machine['cpus']} CPUs, one rank; "
@@ -223,16 +233,15 @@ def main() -> None:
              "MUMPS (the direct preset), each run in its own process (peak memory: VmHWM). "
              "Krylov iterations per linear solve of the whole run.", "",
              bh.md_table(HEAD, rows, first="---"), "", f"Crossover: {cross}.", ""]
-    if args.gamma and not bh.SMOKE:
-        grows = gamma_study(folder)
+    if gamma_rows:
         lines += ["## γ and the AMG", "", "Krylov iterations (min / mean / max) on the friction "
                   "box, 1× and 8×.", "",
-                  bh.md_table(["AMG", "γ", "1×", "8×"], grows, first="---"), ""]
+                  bh.md_table(["AMG", "γ", "1×", "8×"], gamma_rows, first="---"), ""]
     text = "\n".join(lines)
-    print(text)
     bh.publish("bench_relations.md", text)
     bh.write_json(bh.PUBLISHED / "bench_relations.json",
                   dict(machine=machine, results=results, crossover=cross))
+    return text
 
 
 if __name__ == "__main__":
