@@ -5,14 +5,15 @@ A 2D problem takes MUMPS at every size this code meets: its fill grows like n lo
 factorization serves a whole Newton step's back-substitutions. A 3D one takes MUMPS below the
 measured crossover and the iterative preset above it: MUMPS' time grows like n², its memory
 like n^(4/3) (48 KB/DOF at 234k DOFs on the 3D friction box), while the iterative preset's grow
-like n (Krylov iterations per solve 38 → 47 → 59 from 1× to 64× the cells). Pure Python, no
+about like n (Krylov iterations per solve 43 → 49 → 62 from 1× to 64× the cells). Pure Python, no
 PETSc: the memory check (mesh.memory) asks it before any solver exists.
 """
 
 from __future__ import annotations
 
-#: 3D DOFs from which the iterative preset is chosen: on the 3D friction box, MUMPS' run took
-#: 0.8× the iterative one's time at 2.9k DOFs and 1.6× at 20k (bench_relations.md)
+#: 3D DOFs from which the iterative preset is chosen: on the 3D friction box MUMPS took 0.6×
+#: the iterative preset's time at 2.5k DOFs and 1.5× (1.7× the memory) at 17k; the mortar
+#: sphere at 16.7k DOFs was still 2.5× faster with MUMPS (bench_relations.md): 50k is past both
 CROSSOVER_3D = 50_000
 
 
