@@ -1,8 +1,8 @@
 """The preset of a scene that names none (``[solver] preset`` absent, or "auto"): MUMPS or the
 iterative preset, by the problem's size and kind, from scripts/results/bench_relations.md.
 
-A 2D problem takes MUMPS at every size this code meets: its fill grows like n log n and one
-factorization serves a whole Newton step's back-substitutions. A 3D one takes MUMPS below the
+The kind is the dimension. A 2D problem takes MUMPS: its fill grows like n log n only (the 2D
+crossover was not measured). A 3D one takes MUMPS below the
 measured crossover and the iterative preset above it: MUMPS' time grows like n², its memory
 like n^(4/3) (48 KB/DOF at 234k DOFs on the 3D friction box), while the iterative preset's grow
 about like n (Krylov iterations per solve 43 → 49 → 62 from 1× to 64× the cells). Pure Python, no
