@@ -13,7 +13,8 @@ from __future__ import annotations
 
 #: 3D DOFs from which the iterative preset is chosen: on the 3D friction box MUMPS took 0.6×
 #: the iterative preset's time at 2.5k DOFs and 1.5× (1.7× the memory) at 17k; the mortar
-#: sphere at 16.7k DOFs was still 2.5× faster with MUMPS (bench_relations.md): 50k is past both
+#: sphere at 16.7k DOFs was 5.6× faster with MUMPS (120-498 Krylov iterations per solve:
+#: bench_relations.md): 50k, past the friction box's crossover, keeps the mortar on MUMPS longer
 CROSSOVER_3D = 50_000
 
 
