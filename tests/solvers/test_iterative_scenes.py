@@ -19,6 +19,9 @@ COARSER = {
 #: scenes whose run takes more than a few seconds: the nightly ("slow") run
 SLOW = {"contact_ironing_3d.toml"}
 SCENES = sorted(p.name for p in CONFIGS.glob("*.toml"))
+#: rows chosen among equals: before the bar localizes every cell has the same strain, to
+#: round-off, and the maximum control's enforced cell is any of them (the answers are the same)
+TIES = {"localization_bar.toml": ("relations/max_strain/active",)}
 
 
 def _params():
@@ -45,11 +48,12 @@ def _scale(results: dict, key: str, family: dict) -> float:
     return max(scale, 1e-300)
 
 
-def assert_same_answers(a: dict, b: dict, tol: float = 1e-8) -> None:
+def assert_same_answers(a: dict, b: dict, tol: float = 1e-8, ignore: tuple = ()) -> None:
     """``a`` (iterative) holds ``b``'s (direct) answers to ``tol`` of their scale, the same
-    iterations and the same active rows."""
+    iterations and the same active rows (``ignore``: keys not compared)."""
     assert a["attrs"]["status"] == b["attrs"]["status"] == "complete"
-    keys = [k for k in b if k not in ("attrs", "steps/residual") and not k.startswith("timings")
+    keys = [k for k in b if k not in ("attrs", "steps/residual") + ignore
+            and not k.startswith("timings")
             and not (k.startswith("balance") and k.endswith("error"))]
     assert sorted(keys) == sorted(k for k in a if k in keys)
     family: dict[str, float] = {}
@@ -70,7 +74,7 @@ def test_iterative_preset_gives_the_direct_answers(name, run):
     direct = run(source, name=f"{name}_direct", solver={"preset": "direct"})
     iterative = run(source, name=f"{name}_iterative", solver={"preset": "iterative"})
     np.testing.assert_array_equal(iterative["steps/iterations"], direct["steps/iterations"])
-    assert_same_answers(iterative, direct)
+    assert_same_answers(iterative, direct, ignore=TIES.get(name, ()))
 
 
 def test_frictional_contact_of_a_body_held_only_by_contact(run):
