@@ -60,6 +60,8 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
     writer = result_writer(mode, comm, out, written, scene.text, petsc_version(), relations_meta,
                            attrs=unknowns, owners=owners)
     status = "complete"
+    if scene.solver.chosen and comm.rank == 0:
+        log(f"solver: {scene.solver.preset} preset ({scene.solver.chosen})")
     try:
         checkpoint = _start(comm, model, system, out, writer, restart)
         writer = watch(writer) if watch is not None else writer

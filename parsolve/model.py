@@ -30,6 +30,7 @@ from parsolve.mesh.regions import RegionResolver
 from parsolve.mesh.slices import distribute_slices
 from parsolve.relations import Relation
 from parsolve.scene import Scene
+from parsolve.solvers.choice import choose
 
 
 @dataclass
@@ -296,4 +297,8 @@ def build_model(scene: Scene, comm=None) -> Model:
             relations.append(r)
             names.add(r.name)
     reference = (scene.nonlinear.arc_pattern,) if scene.nonlinear.method == "arc_length" else ()
-    return Model(scene, mesh, fields, effects, patterns, relations, reference, comm)
+    model = Model(scene, mesh, fields, effects, patterns, relations, reference, comm)
+    if scene.solver.preset == "auto":   # by size and kind, said once by the driver
+        scene.solver.preset, scene.solver.chosen = choose(
+            mesh.num_global_points * model.ncomp, mesh.dim)
+    return model

@@ -25,7 +25,7 @@ HYPOTHESES = ("plane_stress", "plane_strain", "3d", "axisymmetric")
 COMPONENTS = {"x": 0, "y": 1, "z": 2, "ux": 0, "uy": 1, "uz": 2}
 RELATION_TYPES = ("dirichlet", "equal", "mean", "linear", "strain", "periodic")
 STRAIN_COMPONENTS = {"xx": (0, 0), "yy": (1, 1), "zz": (2, 2), "xy": (0, 1), "yz": (1, 2), "xz": (0, 2)}
-PRESETS = ("direct", "iterative")
+PRESETS = ("direct", "iterative", "auto")
 PARTITIONERS = ("scotch", "bisection")   # parsolve.mesh.partition.PARTITIONERS
 DEFAULT_PARTITIONER = "scotch"
 MAX_STEPS = 1_000_000
@@ -116,6 +116,7 @@ class SolverSpec:
     eliminate: bool
     split: str = "primal"   # fieldsplit blocks: "primal" (q, lambda) or "fields" (one per field)
     partitioner: str = DEFAULT_PARTITIONER  # cells to ranks: "scotch" (PT-Scotch) or "bisection"
+    chosen: str = ""   # why an "auto" preset became the one it is (build_model: solvers.choice)
     # ([solver] mesh is deprecated: every run holds its part of the mesh, 1 rank included; the
     # key is accepted whatever its value, ignored with a warning (``_deprecated_mesh``), and
     # will be refused in the next release)
@@ -616,7 +617,7 @@ def _flatten(t: Table, prefix: str = "") -> dict[str, str]:
 
 
 def _solver(t: Table) -> SolverSpec:
-    preset = t.get("preset", str, "direct", choices=PRESETS)
+    preset = t.get("preset", str, "auto", choices=PRESETS)   # auto: solvers.choice
     prefix = t.get("prefix", str, "parsolve_")
     if not prefix or not prefix.endswith("_") or not prefix.replace("_", "").isalnum():
         raise t.error("prefix", "must be non-empty, alphanumeric and end with '_'")

@@ -75,6 +75,10 @@ def cell_counts(generator: str, params: dict, order: int = 1) -> tuple[int, int,
 def estimate_bytes(dofs: int, dim: int, preset: str, nranks: int = 1) -> float:
     """Peak resident memory of one rank during the solve, its part of the mesh (see the
     module's figures)."""
+    if preset == "auto":   # what the scene will get (solvers.choice)
+        from parsolve.solvers.choice import choose
+
+        preset = choose(dofs, dim)[0]
     if dim == 3 and preset == "direct":
         per_dof = DIRECT_3D[0] * (max(dofs, 1) / DIRECT_3D[1]) ** (1 / 3)
     else:

@@ -3,13 +3,16 @@
 ``direct``: MUMPS LU (LDLᵀ when every relation is associated, the operator being symmetric)
 with the QAMD ordering (PORD, the fallback here, is catastrophic with a dense control column)
 and null-pivot detection, so a singular system is an error instead of inf or NaN.
-``iterative``: FGMRES around a Schur fieldsplit (q block: CG + GAMG; Schur: selfp, GMRES +
-Jacobi); without multipliers, CG + GAMG on the stiffness alone.
+``iterative``: GMRES on the saddle operator, preconditioned by a Schur fieldsplit of a separate
+augmented matrix (``solvers.augmented``: one GAMG V-cycle on K + γ Aₕᵀ Aₕ, Jacobi on the
+sparse Schur approximation), which works when K alone is singular (a body held only by
+contact); without multipliers, CG (or GMRES) + GAMG on the stiffness alone.
 """
 
 from __future__ import annotations
 
 import time
+from typing import Callable
 
 import numpy as np
 from mpi4py import MPI
@@ -19,6 +22,15 @@ from parsolve import progress
 from parsolve.errors import SolverError
 from parsolve.solvers import factor_log
 from parsolve.solvers import options as opt
+from parsolve.solvers.augmented import GAMMA
+
+
+#: The V-cycle of the iterative preset's q block. GAMG, its aggregation dropping connections
+#: below 5 % of the diagonal: without, 250 Krylov iterations on a slender bar of ν = 0 (no
+#: coupling between x and y: localization_bar), 28 with. PETSc's ML (-fieldsplit_q_pc_type ml,
+#: where built in) takes ~15 % fewer on the 3D friction box (scripts/results/bench_relations.md)
+#: but crashed inside ML's aggregation after many solvers in one process: not the default.
+AMG = "gamg"
 
 
 class DoesNotFit(SolverError):
@@ -30,7 +42,8 @@ def preset_options(preset: str, symmetric: bool, has_multipliers: bool,
                    stiffness_symmetric: bool | None = None) -> dict[str, str]:
     """PETSc options of a preset. ``symmetric``: the whole operator (every multiplied relation
     associated, every effect's tangent symmetric); ``stiffness_symmetric``: the primal block K
-    alone (default: ``symmetric``), what the fieldsplit's inner q solver sees."""
+    alone (default: ``symmetric``; the iterative preset's V-cycle on the augmented stiffness
+    needs no symmetry, so it is not used there)."""
     if preset == "direct":
         return {
             "ksp_type": "preonly",
@@ -49,27 +62,36 @@ def preset_options(preset: str, symmetric: bool, has_multipliers: bool,
     # CG needs a symmetric operator: a coupling that makes K unsymmetric (thermal expansion's
     # (u, T) block, non-associated relations eliminated into K) takes GMRES instead
     krylov = "cg" if symmetric else "gmres"
-    inner = "cg" if (symmetric if stiffness_symmetric is None else stiffness_symmetric) else "gmres"
     if not has_multipliers:
         # rtol on the true residual (GMRES: right preconditioning, whose norm is the true one)
         side = {} if symmetric else {"ksp_pc_side": "right"}
-        return {"ksp_type": krylov, "pc_type": "gamg", "ksp_rtol": "1e-10",
+        # an unsymmetric K couples fields (thermal expansion's u and T) whose rows differ in
+        # scale by E / k: 1e-10 of the whole residual left T off by 1e-7 of its scale
+        rtol = "1e-10" if symmetric else "1e-13"
+        return {"ksp_type": krylov, "pc_type": "gamg", "ksp_rtol": rtol,
                 "ksp_norm_type": "unpreconditioned", **side,
                 "ksp_error_if_not_converged": "true"}
+    # the operator as it is (its answers are the direct preset's), preconditioned by the
+    # block upper triangle of the augmented matrix (solvers.augmented): one AMG V-cycle on
+    # K + γ Aₕᵀ Aₕ, Jacobi on the sparse Schur approximation A₁₁ - A diag(K + γ Aₕᵀ Aₕ)⁻¹ (-D);
+    # GMRES with right preconditioning, so that rtol bounds the true residual
     return {
-        "ksp_type": "fgmres",
-        "ksp_rtol": "1e-10",
-        "ksp_max_it": "500",
-        "ksp_gmres_restart": "100",
+        "ksp_type": "gmres",
+        "ksp_pc_side": "right",
+        "ksp_norm_type": "unpreconditioned",
+        # 1e-13: the answers are the direct preset's to 1e-8 and the Newton and active-set
+        # loops take the same iterations (a looser one shifts a switch near its threshold)
+        "ksp_rtol": "1e-13",
+        "ksp_max_it": "1000",
+        "ksp_gmres_restart": "200",
         "pc_type": "fieldsplit",
         "pc_fieldsplit_type": "schur",
-        "pc_fieldsplit_schur_fact_type": "full",
+        "pc_fieldsplit_schur_fact_type": "upper",
         "pc_fieldsplit_schur_precondition": "selfp",
-        "fieldsplit_q_ksp_type": inner,
-        "fieldsplit_q_ksp_rtol": "1e-4",
-        "fieldsplit_q_pc_type": "gamg",
-        "fieldsplit_lambda_ksp_type": "gmres",
-        "fieldsplit_lambda_ksp_rtol": "1e-4",
+        "fieldsplit_q_ksp_type": "preonly",
+        "fieldsplit_q_pc_type": AMG,
+        "fieldsplit_q_pc_gamg_threshold": "0.05",
+        "fieldsplit_lambda_ksp_type": "preonly",
         "fieldsplit_lambda_pc_type": "jacobi",
         "ksp_error_if_not_converged": "true",
     }
@@ -112,14 +134,20 @@ class LinearSolver:
 
     def __init__(self, comm: MPI.Comm, prefix: str, settings: dict[str, str],
                  is_q: PETSc.IS, is_l: PETSc.IS, near_null: PETSc.NullSpace | None = None,
-                 splits: list[tuple[str, PETSc.IS]] | None = None):
-        """``splits``: the fieldsplit blocks, named (default: "q" and "lambda")."""
+                 splits: list[tuple[str, PETSc.IS]] | None = None,
+                 preconditioner: Callable[[PETSc.Mat, float], PETSc.Mat] | None = None):
+        """``splits``: the fieldsplit blocks, named (default: "q" and "lambda");
+        ``preconditioner``: the preconditioning matrix of an operator and γ (made again whenever
+        the operator's values change; γ from the option ``augmented_gamma`` under the prefix),
+        else the operator itself."""
         self.comm, self.prefix, self.settings = comm, prefix, settings
         self.ksp = PETSc.KSP().create(comm)
         self.ksp.setOptionsPrefix(prefix)
         self.is_q, self.is_l = is_q, is_l
         self.splits = splits or [("q", is_q), ("lambda", is_l)]
         self.near_null = near_null
+        self.preconditioner = preconditioner
+        self.pmat: PETSc.Mat | None = None
         self.configured = False
         self._state = None
         self.notes: list[str] = []
@@ -153,7 +181,7 @@ class LinearSolver:
         """Forget a failed set-up, so that the next one really factorizes again."""
         pc_type = self.ksp.getPC().getType()
         self.ksp.reset()
-        self.ksp.setOperators(mat)
+        self.ksp.setOperators(mat, self.pmat if self.preconditioner else None)
         self._configure()
         if pc_type in ("lu", "cholesky"):  # keep an LU chosen by the symmetry check
             self.ksp.getPC().setType(pc_type)
@@ -171,6 +199,11 @@ class LinearSolver:
             pc.setType("lu")
             self.notes.append("the operator is not symmetric: LU instead of Cholesky")
         t0, first = time.perf_counter(), self._state is None
+        if self.preconditioner is not None:
+            with opt.inserted(self.prefix, self.settings):
+                gamma = PETSc.Options(self.prefix).getReal("augmented_gamma", GAMMA)
+            self.pmat = self.preconditioner(mat, gamma)
+            self.ksp.setOperators(mat, self.pmat)
         for attempt in range(4):
             try:
                 with opt.inserted(self.prefix, self.settings), factor_log.factorization(first):
@@ -221,12 +254,28 @@ class LinearSolver:
         """Solve; raise SolverError on failure (non-convergence, null pivots, non-finite)."""
         self._prepare()
         t0 = time.perf_counter()
+        norm = rhs.norm()
+        if norm == 0.0:   # the answer is 0: no Krylov method is asked to reach 0 relatively
+            self._check_factor()
+            x.zeroEntries()
+            self.residual = 0.0
+            self.timings["solve"] += time.perf_counter() - t0
+            return 0
+        # a Krylov method solves for b / ||b||: its absolute floors (GMRES' happy-breakdown
+        # tolerance 1e-30, atol 1e-50) would end it at x = 0 on a right-hand side of 1e-40
+        # (a Newton residual at round-off of a tiny load), which is no failure
+        scaled = self.ksp.getType() != "preonly"
+        if scaled:
+            rhs.scale(1.0 / norm)
         try:
             with opt.inserted(self.prefix, self.settings):
                 self.ksp.solve(rhs, x)
         except PETSc.Error as exc:
             raise SolverError(f"linear solve failed: {self._reason(exc)}") from None
         finally:
+            if scaled:
+                rhs.scale(norm)
+                x.scale(norm)
             self.timings["solve"] += time.perf_counter() - t0
         self._check_factor()
         if not np.isfinite(x.norm()):
@@ -294,10 +343,8 @@ class LinearSolver:
             if reason < 0:
                 return reason_in_words(reason)
             if pc.getType() == "fieldsplit":
-                return ("the fieldsplit preconditioner failed to set up; the iterative "
-                        "preset needs the stiffness block invertible once single-DOF conditions "
-                        "are eliminated: use preset = \"direct\" for a body held only by "
-                        "multiplied relations (or solver.eliminate = false)")
+                return ("the fieldsplit preconditioner failed to set up (a body the relations "
+                        "do not hold?); preset = \"direct\" says which pivots are null")
         except PETSc.Error:
             pass
         return f"PETSc error {exc.ierr}"

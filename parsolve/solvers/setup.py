@@ -54,8 +54,12 @@ def make_solver(comm: MPI.Comm, system: SaddleSystem, cli_options: dict[str, str
             settings = {k: v for k, v in settings.items()
                         if not k.startswith("pc_fieldsplit_schur")}
             settings["pc_fieldsplit_type"] = "multiplicative"
+    # the augmented preconditioning matrix of the iterative preset's Schur fieldsplit
+    augmented = (scene.solver.preset == "iterative" and has_mult and splits is None
+                 and settings.get("pc_type") == "fieldsplit")
     return LinearSolver(comm, scene.solver.prefix, settings, is_q, is_l,
-                        near_null=None if has_mult else modes, splits=splits)
+                        near_null=None if has_mult else modes, splits=splits,
+                        preconditioner=system.preconditioner if augmented else None)
 
 
 def export_system(comm, directory: str, mat: PETSc.Mat, rhs: PETSc.Vec, system: SaddleSystem) -> None:

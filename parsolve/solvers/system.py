@@ -23,6 +23,7 @@ from parsolve.la.petsc import SaddleOperator
 from parsolve.la.relation_set import RelationSet
 from parsolve.mesh.regions import allgather_rows
 from parsolve.model import Model
+from parsolve.solvers.augmented import AugmentedMatrix
 from parsolve.solvers.context import StepContext
 
 
@@ -68,6 +69,7 @@ class SaddleSystem:
             e.attach(self.context)
         self.timings["setup"] = time.perf_counter() - t0
         self.assembled = False
+        self._augmented: AugmentedMatrix | None = None
 
     def _pattern(self, lo: int, hi: int):
         """The stiffness pattern of the local cells and of the effects' extra node pairs
@@ -191,6 +193,15 @@ class SaddleSystem:
         # summed over a step's assemblies (one per Newton iteration); the driver takes it per step
         self.timings["assembly"] = self.timings.get("assembly", 0.0) + time.perf_counter() - t0
         return mat
+
+    def preconditioner(self, mat: PETSc.Mat, gamma: float) -> PETSc.Mat:
+        """The iterative preset's preconditioning matrix for the operator as last assembled:
+        γ/k Aᵀ A of its enforced hard rows added to the stiffness block (``solvers.augmented``)."""
+        if self._augmented is None:
+            self._augmented = AugmentedMatrix(self.comm, self.dofmap)
+        _, _, l0, l1 = self.dofmap.owned()
+        hard = self.op.active[l0:l1].astype(bool) & (self.relation_set.compliance[l0:l1] <= 0.0)
+        return self._augmented.update(mat, hard, self.kscale, gamma)
 
     def _place_stiffness(self, ke) -> None:
         """Node-pair sums of the element matrices into the operator's stiffness slots: summed

@@ -1,0 +1,251 @@
+"""Benchmark: the iterative preset on relations (contact, friction, mortar) against MUMPS, as
+the mesh is refined: Krylov iterations per linear solve, time and peak memory of the whole run,
+and the crossover size where the iterative preset becomes the faster one.
+
+Cases (each run in its own process, so that its peak memory is its own; one rank):
+  friction  configs/contact_friction_3d.toml (a box held only by contact, Coulomb friction,
+            non-associated dual), 2 steps, nx, ny, nz × f: 1×, 8×, 64× the cells (f = 1, 2, 4)
+  ironing   configs/contact_ironing_3d.toml (finite sliding, node-to-face rows between two
+            deformable bodies), 1× (its mesh file), 8× (both boxes' cells × 2 per direction),
+            the first 4 steps
+  mortar    configs/contact_mortar_sphere_3d.toml (3D mortar, two deformable bodies), 1× and
+            8× (n_fine, n_coarse, n_depth × 2)
+Per run: DOFs, global (Newton) iterations, linear solves, Krylov iterations per solve (min,
+mean, max; the iterative preset at its tolerance, rtol 1e-13), wall time, peak resident memory
+(VmHWM) of the process, and whether the answers equal the direct preset's (1e-8 of scale).
+
+    .venv/bin/python scripts/bench_relations.py [--smoke] [--gamma] [--max-factor 4]
+        → table, scripts/results/bench_relations.md and bench_relations.json
+        (--smoke: the 1× friction box only, files in a temporary folder; --gamma: the Krylov
+        iterations against γ and the AMG on the friction box 1×, 8×)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import bench_harness as bh
+from bench_scenes import _dumps, _shipped
+
+CHILD = "--child"
+
+
+# ------------------------------------------------------------------------------ scenes
+
+def friction_scene(factor: int) -> str:
+    scene = _shipped("contact_friction_3d.toml")
+    for key in ("nx", "ny", "nz"):
+        scene["mesh"][key] *= factor
+    scene["steps"]["count"] = 2
+    scene["steps"]["end"] = 0.25   # the first two steps of the shipped eight
+    return _dumps(scene)
+
+
+def mortar_scene(factor: int) -> str:
+    scene = _shipped("contact_mortar_sphere_3d.toml")
+    for key in ("n_fine", "n_coarse", "n_depth"):
+        scene["mesh"][key] *= factor
+    return _dumps(scene)
+
+
+def ironing_scene(folder: Path, factor: int) -> str:
+    from make_ironing_3d_mesh import DIE, SLAB, two_boxes
+
+    scene = _shipped("contact_ironing_3d.toml")
+    path = bh.ROOT / "configs" / scene["mesh"]["file"]
+    if factor > 1:
+        path = folder / f"ironing_3d_{factor}.msh"
+        slab = SLAB[:3] + tuple(n * factor for n in SLAB[3:])
+        die = DIE[:3] + tuple(n * factor for n in DIE[3:6]) + DIE[6:]
+        two_boxes(path, slab, die)
+    scene["mesh"]["file"] = str(path)
+    scene["steps"]["times"] = scene["steps"]["times"][:6]   # the press and the drag's start
+    return _dumps(scene)
+
+
+# ------------------------------------------------------------------------------ one run
+
+def child(scene_path: str, preset: str, out: str, options: str) -> None:
+    """Run a scene in this process; print one JSON line: DOFs, iterations, Krylov iterations of
+    every linear solve, wall time, peak memory."""
+    from mpi4py import MPI
+
+    from parsolve.driver import run
+    from parsolve.model import build_model
+    from parsolve.scene import load_scene
+    from parsolve.solvers import linear
+
+    krylov: list[int] = []
+    solve = linear.LinearSolver.solve
+
+    def counted(self, rhs, x):
+        its = solve(self, rhs, x)
+        krylov.append(int(its))
+        return its
+
+    linear.LinearSolver.solve = counted
+    scene = load_scene(Path(scene_path))
+    scene.solver.preset = preset
+    t0 = time.perf_counter()
+    model = build_model(scene, MPI.COMM_WORLD)
+    status = run(MPI.COMM_WORLD, model, out, json.loads(options), log=lambda *a: None)
+    wall = time.perf_counter() - t0
+    import h5py
+
+    with h5py.File(out, "r") as f:
+        iterations = int(f["steps/iterations"][()].sum())
+        dofs = int(f.attrs.get("dofs", model.mesh.num_global_points * model.ncomp))
+    print(json.dumps(dict(status=status, dofs=dofs, iterations=iterations, krylov=krylov,
+                          wall=wall, hwm=bh.proc_memory()["hwm"])))
+
+
+def one_run(folder: Path, name: str, text: str, preset: str, options: dict | None = None) -> dict:
+    scene = folder / f"{name}.toml"
+    scene.write_text(text)
+    out = folder / f"{name}_{preset}.h5"
+    cmd = [bh.VENV_PY, __file__, CHILD, str(scene), preset, str(out), json.dumps(options or {})]
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=bh.child_env(), cwd=bh.ROOT)
+    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
+    if proc.returncode or not lines:
+        return dict(status=f"failed: {(proc.stderr or proc.stdout).strip()[-300:]}", out=str(out))
+    return {**json.loads(lines[-1]), "out": str(out)}
+
+
+def same_answers(a: str, b: str) -> str:
+    """'yes' when the two result files hold the same answers to 1e-8 of their scale."""
+    sys.path.insert(0, str(bh.ROOT / "tests"))
+    try:
+        from conftest import read_results
+        from solvers.test_iterative_scenes import assert_same_answers
+    except ImportError:
+        return "?"
+    try:
+        ra, rb = read_results(Path(a)), read_results(Path(b))
+        assert (ra["steps/iterations"] == rb["steps/iterations"]).all()
+        assert_same_answers(ra, rb)
+        return "yes"
+    except (AssertionError, OSError, KeyError) as exc:
+        return f"no ({str(exc)[:40]})"
+
+
+# ------------------------------------------------------------------------------ tables
+
+def krylov_cells(r: dict) -> list[str]:
+    k = r.get("krylov") or []
+    if not k:
+        return ["-", "-", "-"]
+    return [str(min(k)), f"{sum(k) / len(k):.1f}", str(max(k))]
+
+
+def row(case: str, factor: int, d: dict, i: dict) -> list[str]:
+    ok = d.get("status") == "complete" and i.get("status") == "complete"
+    return [case, f"{factor}×", f"{d.get('dofs', i.get('dofs', 0)):,}",
+            str(i.get("iterations", "-")), str(len(i.get("krylov", []))), *krylov_cells(i),
+            bh.fmt(d.get("wall"), ".1f"), bh.fmt(i.get("wall"), ".1f"),
+            bh.mib(d.get("hwm")), bh.mib(i.get("hwm")),
+            same_answers(i["out"], d["out"]) if ok else
+            f"direct: {d.get('status', '')[:30]}; iterative: {i.get('status', '')[:30]}"]
+
+
+HEAD = ["case", "cells", "DOFs", "Newton its", "solves", "Krylov min", "mean", "max",
+        "MUMPS s", "iterative s", "MUMPS MiB", "iterative MiB", "same answers"]
+
+
+def crossover(results: list[dict]) -> str:
+    """Where the iterative run becomes faster than MUMPS, on the friction series."""
+    series = [(r["dofs"], r["direct"]["wall"], r["iterative"]["wall"]) for r in results
+              if r["case"] == "friction" and "wall" in r["direct"] and "wall" in r["iterative"]]
+    if not series:
+        return "no friction run completed"
+    faster = [n for n, d, i in series if i < d]
+    slower = [n for n, d, i in series if i >= d]
+    if faster and (not slower or min(faster) > max(slower)):
+        lo = max(slower) if slower else None
+        return (f"the iterative preset is faster from {min(faster):,} DOFs on"
+                + (f" (slower at {lo:,})" if lo else ""))
+    return "no crossover in the sizes run: " + ", ".join(
+        f"{n:,} DOFs {i / d:.2f}× MUMPS' time" for n, d, i in series)
+
+
+def gamma_study(folder: Path) -> list[list[str]]:
+    """Krylov iterations on the friction box against γ and the AMG (1×, 2×)."""
+    rows = []
+    for amg in ("gamg", "ml", "hypre"):
+        for gamma in ("0.01", "0.1", "1", "10"):
+            cells = [amg, gamma]
+            for factor in (1, 2):
+                r = one_run(folder, f"gamma_{factor}", friction_scene(factor), "iterative",
+                            {"fieldsplit_q_pc_type": amg, "augmented_gamma": gamma})
+                cells += [" / ".join(krylov_cells(r)) if r.get("krylov") else r["status"][:30]]
+            rows.append(cells)
+    return rows
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    bh.add_smoke(p)
+    p.add_argument("--max-factor", type=int, default=4, help="largest friction refinement f")
+    p.add_argument("--gamma", action="store_true", help="the γ and AMG study")
+    args = p.parse_args()
+    folder = bh.scratch("relations")
+    load0, machine = os.getloadavg(), bh.machine_info()
+    cases = [("friction", 1, friction_scene(1))]
+    if not bh.SMOKE:
+        f = 2
+        while f <= args.max_factor:
+            cases.append(("friction", f ** 3, friction_scene(f)))
+            f *= 2
+        cases += [("ironing", 1, ironing_scene(folder, 1)), ("ironing", 8, ironing_scene(folder, 2)),
+                  ("mortar", 1, mortar_scene(1)), ("mortar", 8, mortar_scene(2))]
+    results, rows = [], []
+    for case, factor, text in cases:
+        name = f"{case}_{factor}"
+        d = one_run(folder, name, text, "direct")
+        i = one_run(folder, name, text, "iterative")
+        results.append(dict(case=case, factor=factor, dofs=d.get("dofs", i.get("dofs", 0)),
+                            direct=d, iterative=i))
+        rows.append(row(case, factor, d, i))
+        print(bh.text_table(HEAD, rows[-1:]), flush=True)
+        # written after every case: a run stopped halfway leaves what it measured
+        text = report(rows, results, machine, load0)
+    if args.gamma and not bh.SMOKE:
+        grows = gamma_study(folder)
+        text = report(rows, results, machine, load0, grows)
+    print(text)
+
+
+def report(rows: list, results: list, machine: dict, load0, gamma_rows: list | None = None) -> str:
+    """The report (markdown) and the JSON of the runs so far, written."""
+    cross = crossover(results)
+    lines = ["# Relations on the iterative preset", "",
+             f"{machine['date']}, {machine['cpu']}, {machine['cpus']} CPUs, one rank; "
+             + bh.load_line(load0, os.getloadavg()) + " (the machine is shared: times are "
+             "noisy, iterations and memory are not).", "",
+             "The iterative preset (GMRES, rtol 1e-13, preconditioned by a Schur fieldsplit of "
+             "the augmented matrix K + γ Aₕᵀ Aₕ: one GAMG V-cycle on the primal block, Jacobi "
+             "on the sparse Schur approximation; `parsolve/solvers/augmented.py`) against "
+             "MUMPS (the direct preset), each run in its own process (peak memory: VmHWM). "
+             "Krylov iterations per linear solve of the whole run.", "",
+             bh.md_table(HEAD, rows, first="---"), "", f"Crossover: {cross}.", ""]
+    if gamma_rows:
+        lines += ["## γ and the AMG", "", "Krylov iterations (min / mean / max) on the friction "
+                  "box, 1× and 8×.", "",
+                  bh.md_table(["AMG", "γ", "1×", "8×"], gamma_rows, first="---"), ""]
+    text = "\n".join(lines)
+    bh.publish("bench_relations.md", text)
+    bh.write_json(bh.PUBLISHED / "bench_relations.json",
+                  dict(machine=machine, results=results, crossover=cross))
+    return text
+
+
+if __name__ == "__main__":
+    if len(sys.argv) > 1 and sys.argv[1] == CHILD:
+        child(*sys.argv[2:6])
+    else:
+        main()

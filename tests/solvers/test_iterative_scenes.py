@@ -1,0 +1,155 @@
+"""The iterative preset on every shipped scene: the direct preset's answers (1e-8 of the scale of
+each kind of result) and the same global (Newton, active-set) iterations, at 1, 2 and 3 ranks;
+its preconditioning matrix (solvers.augmented) entry by entry; right-hand sides of 0 and 1e-40.
+"""
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from conftest import CONFIGS, dense, solve_in_process
+from helpers.scene import scene, shipped
+
+#: every shipped scene, at its own size unless coarsened here (CI runs this at 1, 2, 3 ranks)
+COARSER = {
+    "contact_mortar_sphere_3d.toml": {"mesh": {"n_fine": 8, "n_coarse": 4, "n_depth": 5}},
+    "solubility_two_regions.toml": {"mesh": {"nx": 40}},
+    "solubility_grow_shrink.toml": {"mesh": {"nx": 40}},
+}
+#: scenes whose run takes more than a few seconds: the nightly ("slow") run
+SLOW = {"contact_ironing_3d.toml"}
+SCENES = sorted(p.name for p in CONFIGS.glob("*.toml"))
+#: rows chosen among equals: before the bar localizes every cell has the same strain, to
+#: round-off, and the maximum control's enforced cell is any of them (the answers are the same)
+TIES = {"localization_bar.toml": ("relations/max_strain/active",)}
+
+
+def _params():
+    for name in SCENES:
+        marks = [pytest.mark.slow] if name in SLOW else []
+        yield pytest.param(name, marks=marks, id=name.removesuffix(".toml"))
+
+
+def _source(name: str):
+    """The shipped file itself (a scene reading a mesh file), or its coarsened text."""
+    if name in COARSER:
+        return scene(shipped(name), **COARSER[name])
+    return CONFIGS / name
+
+
+def _scale(results: dict, key: str, family: dict) -> float:
+    """The scale a dataset is compared at: the largest value of its kind in the run (every
+    relation's multipliers together, ...); a flux by its field's too (the flux of a uniform
+    field is round-off, its scale the field's)."""
+    tail = key.rsplit("/", 1)[-1]
+    scale = family[tail]
+    if tail.endswith("_flux"):
+        scale = max(scale, family.get(tail.removesuffix("_flux"), 0.0))
+    return max(scale, 1e-300)
+
+
+def assert_same_answers(a: dict, b: dict, tol: float = 1e-8, ignore: tuple = ()) -> None:
+    """``a`` (iterative) holds ``b``'s (direct) answers to ``tol`` of their scale, the same
+    iterations and the same active rows (``ignore``: keys not compared)."""
+    assert a["attrs"]["status"] == b["attrs"]["status"] == "complete"
+    keys = [k for k in b if k not in ("attrs", "steps/residual") + ignore
+            and not k.startswith("timings")
+            and not (k.startswith("balance") and k.endswith("error"))]
+    assert sorted(keys) == sorted(k for k in a if k in keys)
+    family: dict[str, float] = {}
+    for k in keys:
+        tail = k.rsplit("/", 1)[-1]
+        family[tail] = max(family.get(tail, 0.0), float(np.abs(b[k]).max(initial=0.0)))
+    for key in keys:
+        if key.endswith("/active") or b[key].dtype.kind in "iub":
+            assert np.array_equal(a[key], b[key]), key
+        else:
+            err = np.abs(a[key] - b[key]).max(initial=0.0)
+            assert err <= tol * _scale(b, key, family) + 1e-13, (key, err)
+
+
+@pytest.mark.parametrize("name", _params())
+def test_iterative_preset_gives_the_direct_answers(name, run):
+    source = _source(name)
+    direct = run(source, name=f"{name}_direct", solver={"preset": "direct"})
+    iterative = run(source, name=f"{name}_iterative", solver={"preset": "iterative"})
+    np.testing.assert_array_equal(iterative["steps/iterations"], direct["steps/iterations"])
+    assert_same_answers(iterative, direct, ignore=TIES.get(name, ()))
+
+
+def test_frictional_contact_of_a_body_held_only_by_contact(run):
+    """The 3D friction box: K alone is singular (the top free in z, pressed on the plane), the
+    operator is not (contact holds it): the iterative preset converges and slides as the
+    direct one does, at every rank count (CI's contact scene on the iterative preset)."""
+    text = scene(shipped("contact_friction_3d.toml"), steps={"count": 4})
+    direct = run(text, name="friction_direct", solver={"preset": "direct"})
+    iterative = run(text, name="friction_iterative", solver={"preset": "iterative"})
+    np.testing.assert_array_equal(iterative["steps/iterations"], direct["steps/iterations"])
+    assert_same_answers(iterative, direct)
+    # the plane carries the whole pressure (p = 10 on 1 x 1), the friction at most mu N
+    normal = iterative["relations/base_normal/resultant"]
+    tangent = iterative["relations/base_tangent/resultant"]
+    np.testing.assert_allclose(normal[:, 2], 10.0, rtol=1e-10)
+    friction = np.hypot(*(normal + tangent)[:, :2].T)
+    assert np.all(friction <= 0.3 * 10.0 * (1 + 1e-9)) and friction[-1] > 2.5
+
+
+FRICTION = scene(shipped("contact_friction_3d.toml"), steps={"count": 1})
+
+
+def _augmented_expected(system, mat, gamma: float) -> np.ndarray:
+    """P from the dense operator: γ/k Aₕᵀ Aₕ on the stiffness block, -k on the diagonal of a
+    row with no sparse Schur diagonal."""
+    comm = system.comm
+    M = dense(mat, comm)
+    dm = system.dofmap
+    offsets = dm.offsets
+    ranks = range(comm.size)
+    q = np.concatenate([np.arange(offsets[r], offsets[r] + dm.owned(r)[1] - dm.owned(r)[0])
+                        for r in ranks])
+    lam = np.setdiff1d(np.arange(M.shape[0]), q)
+    active = system.op.active.astype(bool) & (system.relation_set.compliance <= 0.0)
+    # multiplier rows in saddle order are the relation rows in order (l ranges per rank)
+    hard = np.concatenate([active[dm.owned(r)[2]:dm.owned(r)[3]] for r in ranks])
+    A = M[np.ix_(lam, q)] * hard[:, None]
+    P = M.copy()
+    P[np.ix_(q, q)] += gamma / system.kscale * A.T @ A
+    schur = np.diag(P)[lam] - np.einsum("ki,ik->k", M[np.ix_(lam, q)] / np.diag(P)[q],
+                                        M[np.ix_(q, lam)])
+    empty = np.abs(schur) <= 1e-8 * system.kscale
+    P[lam[empty], lam[empty]] += -system.kscale
+    return P
+
+
+def test_augmented_matrix_entry_by_entry(comm):
+    """P of the friction box after a solve with some rows inactive: the operator plus
+    γ/k Aₕᵀ Aₕ of the enforced hard rows, nothing else."""
+    from parsolve.solvers.augmented import GAMMA
+
+    system, solver, mat, rhs, x = solve_in_process(FRICTION, comm, options={})
+    active = system.op.active.copy()
+    active[::3] = False   # some rows switched off, as an active set does
+    system.op.active = active
+    mat = system.assemble()
+    P = dense(system.preconditioner(mat, GAMMA), comm)
+    expected = _augmented_expected(system, mat, GAMMA)
+    scale = np.abs(expected).max()
+    assert np.abs(P - expected).max() <= 1e-12 * scale
+    # the augmentation is there (not the operator alone)
+    assert np.abs(P - dense(mat, comm)).max() > 1e-3 * scale
+
+
+@pytest.mark.parametrize("factor", [0.0, 1e-40, 1e-54])
+def test_tiny_right_hand_side_is_a_tiny_solution(comm, factor):
+    """A Krylov solve of b · 1e-40 is x · 1e-40 (not 0 from GMRES' absolute floors, not a
+    failure of the residual check); b = 0 is x = 0."""
+    text = scene(shipped("contact_friction_3d.toml"), solver={"preset": "iterative"})
+    system, solver, mat, rhs, x = solve_in_process(text, comm)
+    reference = x.array.copy()
+    rhs.scale(factor)
+    y = x.duplicate()
+    solver.solve(rhs, y)
+    scale = comm.allreduce(np.abs(reference).max(), op=MPI.MAX)
+    err = comm.allreduce(np.abs(y.array - factor * reference).max(initial=0.0), op=MPI.MAX)
+    assert err <= 1e-9 * factor * scale or (factor == 0.0 and err == 0.0)
+    assert solver.residual <= 1e-8
