@@ -488,7 +488,11 @@ def test_progress_phases_quiet_and_verbose(tmp_path, cli):
     assert parts, lines[first - 1]
     whole = float(lines[first - 2].split()[-2])
     assert sum(float(p) for p in parts.groups()) <= whole + 2e-3
-    timed = [line for line in lines[:first - 1] if not line.endswith(" ...")]
+    # the preset "auto" resolved to, said once among the phases
+    said = [line for line in lines[:first] if line.startswith("solver: ")]
+    assert said == ["solver: direct preset (auto: 2D, 240 DOFs: MUMPS)"], said
+    timed = [line for line in lines[:first - 1]
+             if not line.endswith(" ...") and not line.startswith("solver: ")]
     names = [re.fullmatch(r"  (\S.*?)\s+(\d+\.\d{3}) s", line) for line in timed]
     assert all(names), lines[:first]
     assert [m.group(1) for m in names] == PHASES
