@@ -8,7 +8,9 @@ Set in the environment of a run (tests/io/test_kill_points.py):
   STEP (counted from 1);
 * ``PARSOLVE_KILL_WRITE=STEP:@SECONDS`` — SECONDS after step STEP's write begins, SIGALRM with
   its default action ends the process wherever it is, inside an HDF5 call included (a Python
-  handler would only run between two calls).
+  handler would only run between two calls); a write that ends before then is killed at its
+  end (SIGKILL), so the kill always falls inside or right after step STEP, never after the
+  run has closed its file, whatever the machine's speed.
 
 Unset (the normal case) both calls below do nothing.
 """
@@ -49,4 +51,12 @@ def passed(step: int) -> None:
     global _count
     _count += 1
     if _STEP and step == _STEP and _count == _POINT:
+        os.kill(os.getpid(), signal.SIGKILL)
+
+
+def step_ends(step: int) -> None:
+    """Called once the write of saved step ``step`` is whole: a timed kill of that step that
+    has not fired yet fires now."""
+    if _STEP and step == _STEP and _SECONDS > 0:
+        signal.setitimer(signal.ITIMER_REAL, 0)
         os.kill(os.getpid(), signal.SIGKILL)

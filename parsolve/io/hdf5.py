@@ -234,6 +234,7 @@ class ResultWriter:
             faults.passed(step)
             self.file.flush()
             faults.passed(step)
+            faults.step_ends(step)
         except (OSError, RuntimeError) as exc:  # h5py reports some write errors as RuntimeError
             return self._fail(exc, f"writing step {len(self.times) + 1} to")
         self.times.append(t)

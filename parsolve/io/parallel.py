@@ -373,6 +373,7 @@ class ParallelResultWriter(ResultWriter):
             ok = ok and act(action)
         self._close_step(box.get("f"), ok, doing)
         faults.passed(step + 1)
+        faults.step_ends(step + 1)
         self._raise_if_failed()
 
     def _room_for_mesh(self) -> None:

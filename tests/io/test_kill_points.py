@@ -3,8 +3,8 @@
 linear solution u(t) = t / t1 u(t1), and ``post --summary`` reads the file.
 
 The writer kills itself (parsolve.io.faults, PARSOLVE_KILL_WRITE): a random time after step 2's
-write began (SIGALRM, default action: the process ends inside whatever HDF5 call it is in), or
-after the k-th write action of step 2 (SIGKILL). Points and delays are drawn from a seeded
+write began (SIGALRM, default action: the process ends inside whatever HDF5 call it is in; at
+the write's end if it ends first), or after the k-th write action of step 2 (SIGKILL). Points and delays are drawn from a seeded
 generator, a different draw for each mode and rank count."""
 
 import os
@@ -95,7 +95,7 @@ def test_a_kill_anywhere_in_a_step_leaves_a_whole_file(mode, ranks, tmp_path, ca
         return check_whole(out, capsys)
 
     timed = f"2:@{rng.uniform(0.0005, 0.02):.4f}"
-    assert 1 <= killed_run(timed) < STEPS
+    assert killed_run(timed) in (1, 2)   # inside step 2's write, or at its end
     points = write_points(tmp_path / f"k{timed.replace(':', '_').replace('@', 't')}.h5", mode)
     kills = [f"2:{k}" for k in rng.choice(np.arange(1, points + 1), DRAWS, replace=False)]
     finished = [killed_run(kill) for kill in kills]
