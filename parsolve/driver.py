@@ -23,6 +23,7 @@ from parsolve.model import Model
 from parsolve.outputs import Balance, contact_line, contact_totals, progress, resultant_labels, \
     resultant_line, step_outputs
 from parsolve.solvers.arc_length import run_arc_length
+from parsolve.solvers.diagnose import NamedFailure, name_failure
 from parsolve.solvers.finite import check_finite
 from parsolve.solvers.linear import DoesNotFit
 from parsolve.solvers.newton import NewtonSolver
@@ -75,7 +76,7 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
         hints = _failure_hints(model)
         if "singular" in str(exc) or "inaccurate" in str(exc):
             hints += unsupported(model)
-        if hints:
+        if hints and not isinstance(exc, NamedFailure):   # (its cause named already)
             exc = SolverError(f"{exc}; likely cause: {'; '.join(hints)}")
         status = f"failed: {exc}"
         raise exc from None
@@ -241,7 +242,7 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log,
         except SolverError as exc:
             newton.restore(snap)
             if isinstance(exc, DoesNotFit) or not schedule.cut(t):
-                raise
+                raise name_failure(exc, newton, t) from None
             if comm.rank == 0:
                 log(f"step to t={t:.6g} failed ({exc}); retrying with half the step")
             continue

@@ -1,0 +1,98 @@
+"""Failures named by their cause: what a step that failed for good says about the run.
+
+A control relation (one whose dual is a load pattern: the load intensity is its multiplier)
+can only reach values that some load gives. When the load cannot grow past a bound and the
+controlled quantity stops growing with it, no step reaches the next target, however small:
+the solve then fails at whatever breaks first (a singular operator once nothing holds the body,
+a maximum group's enforced row going back and forth), and that says nothing of the cause.
+The bound named here is friction's: every closed node of a frictional contact slides, so the
+tangential load is at the friction capacity μN and the body slides as a whole, which moves no
+strain. The controlled value reached, the target and the control load are the last converged
+state's (the same on every rank: relation values and multipliers are reduced over ranks, the
+contact states are the whole surface's).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from parsolve.contact import friction as fr
+from parsolve.errors import SolverError
+
+
+class NamedFailure(SolverError):
+    """A solver failure whose message names its cause and the way out (no further hints)."""
+
+
+@dataclass
+class Control:
+    name: str
+    maximum: bool
+    row: int          # the enforced row (relation rows of the stacked set)
+    sign: int         # +1 for "<=" and "=", -1 for ">="
+
+
+def _controls(newton) -> list[Control]:
+    """The control relations with a load as their dual: per maximum group its enforced row,
+    per single-row equality its row."""
+    rset, active = newton.rset, newton.active
+    out = []
+    for k, rel in enumerate(newton.ctx.multiplied):
+        if not rel.meta.get("dual"):
+            continue
+        rows = np.arange(rset.rows_of(k).start, rset.rows_of(k).stop)
+        if rel.maximum:
+            enforced = rows[active.active[rows]]
+            if enforced.size:
+                out.append(Control(rel.name, True, int(enforced[0]), int(active.sign[enforced[0]])))
+        elif rel.sense == "=" and rows.size == 1:
+            out.append(Control(rel.name, False, int(rows[0]), 1))
+    return out
+
+
+def _sliding_contacts(effects) -> list:
+    """Frictional contacts whose closed nodes all slide at the failed attempt's last iterate,
+    having begun to slide at the last converged state (some closed node sliding there): the
+    load along the surface had reached the friction capacity, not jumped past it at once (a
+    target out of reach from the first step on, which the load did not approach)."""
+    out = []
+    for e in effects:
+        state = getattr(e, "node_state", None)
+        committed = getattr(e, "committed", None)
+        if state is None or committed is None or not getattr(e, "frictional", False):
+            continue
+        closed = state != fr.OPEN
+        if closed.any() and (state[closed] == fr.SLIP).all() and (committed[0] == fr.SLIP).any():
+            out.append(e)
+    return out
+
+
+def name_failure(exc: SolverError, newton, t: float) -> SolverError:
+    """The final failure of the step to ``t`` (``newton`` back at the last converged state),
+    as a ``NamedFailure`` when a control can no longer reach its value; else ``exc``.
+    Collective (every rank calls it with the same failure)."""
+    controls = _controls(newton)
+    if not controls:
+        return exc
+    sliding = _sliding_contacts(newton.ctx.effects)
+    if not sliding:
+        return exc
+    rset = newton.rset
+    values = rset.primal_values(newton.q)
+    targets = rset.targets(t)
+    loads = rset.row_values(newton.lam) if newton.lam.size else np.zeros(values.size)
+    short = [c for c in controls if c.sign * (targets[c.row] - values[c.row]) > 0]
+    if not short:
+        return exc
+    c, contact = short[0], sliding[0]
+    kind = "maximum control" if c.maximum else "control"
+    reached, target, load = values[c.row], targets[c.row], loads[c.row]
+    return NamedFailure(
+        f"{kind} {c.name!r} can no longer reach its value: {target:.6g} at t = {t:.6g}, where it "
+        f"reached {reached:.6g} (t = {newton.t_prev:.6g}, control load {load:.6g}); every closed "
+        f"node of contact {contact.spec.name!r} slides, so the control load cannot grow past the "
+        f"friction capacity μN (μ = {contact.mu:g}) and the controlled quantity stops growing as "
+        f"the body slides; reduce the target (it reached {reached:.6g}) or control a quantity that grows "
+        f"as the body slides, such as a displacement (the last attempt: {exc})")
