@@ -20,10 +20,20 @@ import numpy as np
 
 from parsolve.contact import friction as fr
 from parsolve.errors import SolverError
+from parsolve.fem.materials.mazars import Mazars
 
 
 class NamedFailure(SolverError):
     """A solver failure whose message names its cause and the way out (no further hints)."""
+
+
+class GoingBack(SolverError):
+    """A maximum group's enforced row would go back, within a step, to a row it left
+    (``ActiveSet``): ``relation`` and its rows ``rows`` = (enforced now, the one left)."""
+
+    def __init__(self, message: str, relation: str, rows: tuple[int, int]):
+        super().__init__(message)
+        self.relation, self.rows = relation, rows
 
 
 @dataclass
@@ -76,6 +86,8 @@ def name_failure(exc: SolverError, newton, t: float) -> SolverError:
     controls = _controls(newton)
     if not controls:
         return exc
+    if isinstance(exc, GoingBack) and not _softens(newton.ctx.effects):
+        return _no_turn_back(exc, newton, t, controls)
     sliding = _sliding_contacts(newton.ctx.effects)
     if not sliding:
         return exc
@@ -96,3 +108,31 @@ def name_failure(exc: SolverError, newton, t: float) -> SolverError:
         f"friction capacity μN (μ = {contact.mu:g}) and the controlled quantity stops growing as "
         f"the body slides; reduce the target (it reached {reached:.6g}) or control a quantity that grows "
         f"as the body slides, such as a displacement (the last attempt: {exc})")
+
+
+def _softens(effects) -> bool:
+    """Whether a material of the model softens (damage), where a maximum group's enforced row
+    may change back and forth as damage localizes."""
+    return any(isinstance(m, Mazars) for e in effects for m in getattr(e, "models", []))
+
+
+def _no_turn_back(exc: GoingBack, newton, t: float, controls: list[Control]) -> SolverError:
+    """A maximum group turning back to a row it left, with nothing that softens: the largest
+    of the rows, as a function of the control load, is then the upper envelope of rows that
+    each grow or fall with it, and turning between two of them (the load that brings one to
+    the value takes the other beyond it) is the envelope's lowest point lying above the
+    target: no load gives the value."""
+    c = next((c for c in controls if c.name == exc.relation), None)
+    if c is None:
+        return exc
+    rset = newton.rset
+    reached = rset.primal_values(newton.q)[c.row]
+    target = rset.targets(t)[c.row]
+    a, b = exc.rows
+    return NamedFailure(
+        f"maximum control {c.name!r} can no longer reach its value: {target:.6g} at t = {t:.6g} "
+        f"(it reached {reached:.6g} at t = {newton.t_prev:.6g}); its rows {a} and {b} take "
+        f"turns as the largest (the control load that brings one to the value takes the other "
+        f"beyond it) and no material of the scene softens, so no control load gives that value: "
+        f"the other loads already take the largest beyond it; raise the target or control "
+        f"another quantity")

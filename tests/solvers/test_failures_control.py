@@ -96,3 +96,73 @@ def test_target_out_of_reach_from_the_start_is_not_named(shared_tmp):
     assert code == 3 and steps == 0
     assert "can no longer reach" not in status
     assert "likely cause" in status
+
+
+def test_turning_back_without_softening(shared_tmp):
+    """ν = 0.3, a small target: the pressure alone strains the top cells along x far beyond it
+    (0.004 against 3e-6). The maximum group turns back to a row it left; nothing softens, so
+    the failure names the control and the value it cannot reach, not damage localizing."""
+    code, status, f = _run(shared_tmp, _scene(0.3, VALUE / 10, nu=0.3))
+    with f:
+        steps = len(f["steps/time"])
+    assert code == 3 and steps == 0
+    head = "failed: maximum control 'max_strain' can no longer reach its value: "
+    assert status.startswith(head), status
+    assert "no material of the scene softens" in status and "localizes" not in status
+    assert "raise the target or control another quantity" in status
+    target, t = (float(x) for x in re.match(re.escape(head) + r"(\S+) at t = (\S+) ", status).groups())
+    assert target == pytest.approx(VALUE / 10 * t, rel=1e-5)
+
+
+def test_no_load_reaches_the_turning_target(shared_tmp):
+    """The claim of the test above, computed independently: the same block under the pressure
+    and the pull as a given load, ramped to 0.97 μN in either sense: the largest ε_xx of the
+    cells (from the cell stresses, plane strain) stays above the ramp's last target (t = 1),
+    so no load the block can carry gives any of its targets."""
+    base = shipped("contact_control_friction.toml")
+    nu, E = 0.3, 1000.0
+    for force in (2.9, -2.9):
+        loads = [base["loads"][0], {"name": "pull", "region": "top", "total_force": [force, 0.0]}]
+        text = scene(base, materials=[{"E": E, "nu": nu}], loads=loads, relations=[],
+                     steps={"count": 5})
+        code, status, f = _run(shared_tmp, text)
+        with f:
+            sigma = f["cell_fields/stress"][:]
+        assert code == 0, status
+        eps_xx = (1 + nu) / E * ((1 - nu) * sigma[..., 0] - nu * sigma[..., 1])
+        assert eps_xx.max(axis=1).min() > 1.5 * VALUE / 10
+
+
+@pytest.mark.parametrize("material, localizes", [("mazars", True), ("elastic", False)])
+def test_turning_back_names_localization_only_where_damage_is(shared_tmp, monkeypatch,
+                                                                material, localizes):
+    """A maximum group turning back from some iteration on (forced: the active set's own
+    check called on a row it left), in the localization bar with its damaged column, and in
+    the same bar all elastic: the first keeps the localization message, the second names
+    the control and the value it cannot reach."""
+    from parsolve.solvers.active_set import ActiveSet
+
+    update, calls = ActiveSet.update, {"n": 0}
+
+    def turning(self, *args, **kw):
+        calls["n"] += 1
+        if calls["n"] > 6 and self.group_rows.size:
+            left = self.group_rows[~self.active[self.group_rows]][0]
+            self._no_way_back(np.array([left]))
+        return update(self, *args, **kw)
+
+    monkeypatch.setattr(ActiveSet, "update", turning)
+    base = shipped("localization_bar.toml")
+    materials = base["materials"] if material == "mazars" else [base["materials"][0]]
+    code, status, f = _run(shared_tmp, scene(base, materials=materials, steps={"count": 12}))
+    with f:
+        steps = len(f["steps/time"])
+    assert code == 3 and steps >= 1
+    if localizes:
+        assert status.startswith("failed: maximum relation 'max_strain': the enforced row would "
+                                 "go back"), status
+        assert "where damage localizes" in status
+    else:
+        assert status.startswith("failed: maximum control 'max_strain' can no longer reach its "
+                                 "value"), status
+        assert "no material of the scene softens" in status and "localizes" not in status
