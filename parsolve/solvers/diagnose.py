@@ -10,6 +10,10 @@ tangential load is at the friction capacity μN and the body slides as a whole, 
 strain. The controlled value reached, the target and the control load are the last converged
 state's (the same on every rank: relation values and multipliers are reduced over ranks, the
 contact states are the whole surface's).
+
+A maximum group whose enforced row turns back, within a step, to a row it left is damage
+localizing where a material softens (``ActiveSet``'s own message says so); where none does,
+it is a target no control load gives, and the failure says that instead.
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ import numpy as np
 from parsolve.contact import friction as fr
 from parsolve.errors import SolverError
 from parsolve.fem.materials.mazars import Mazars
+from parsolve.solvers.linear import DoesNotFit
 
 
 class NamedFailure(SolverError):
@@ -82,7 +87,17 @@ def _sliding_contacts(effects) -> list:
 def name_failure(exc: SolverError, newton, t: float) -> SolverError:
     """The final failure of the step to ``t`` (``newton`` back at the last converged state),
     as a ``NamedFailure`` when a control can no longer reach its value; else ``exc``.
-    Collective (every rank calls it with the same failure)."""
+    Collective (every rank calls it with the same failure; the decisions before any reduction
+    are taken from data every rank holds alike)."""
+    if isinstance(exc, DoesNotFit):   # (memory: named already)
+        return exc
+    try:
+        return _named(exc, newton, t)
+    except Exception:   # (a diagnostic's own error: the solver's failure is the news)
+        return exc
+
+
+def _named(exc: SolverError, newton, t: float) -> SolverError:
     controls = _controls(newton)
     if not controls:
         return exc
@@ -106,8 +121,8 @@ def name_failure(exc: SolverError, newton, t: float) -> SolverError:
         f"reached {reached:.6g} (t = {newton.t_prev:.6g}, control load {load:.6g}); every closed "
         f"node of contact {contact.spec.name!r} slides, so the control load cannot grow past the "
         f"friction capacity μN (μ = {contact.mu:g}) and the controlled quantity stops growing as "
-        f"the body slides; reduce the target (it reached {reached:.6g}) or control a quantity that grows "
-        f"as the body slides, such as a displacement (the last attempt: {exc})")
+        f"the body slides; reduce the target (it reached {reached:.6g}) or control a quantity "
+        f"that grows as the body slides, such as a displacement (the last attempt: {exc})")
 
 
 def _softens(effects) -> bool:
