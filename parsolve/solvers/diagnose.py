@@ -21,6 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from mpi4py import MPI
 
 from parsolve.contact import friction as fr
 from parsolve.errors import SolverError
@@ -103,6 +104,8 @@ def _named(exc: SolverError, newton, t: float) -> SolverError:
         return exc
     if isinstance(exc, GoingBack) and not _softens(newton.ctx.effects):
         return _no_turn_back(exc, newton, t, controls)
+    if _softens(newton.ctx.effects):
+        return _past_capacity(exc, newton, t, controls)
     sliding = _sliding_contacts(newton.ctx.effects)
     if not sliding:
         return exc
@@ -151,3 +154,48 @@ def _no_turn_back(exc: GoingBack, newton, t: float, controls: list[Control]) -> 
         f"beyond it) and no material of the scene softens, so no control load gives that value: "
         f"the other loads already take the largest beyond it; raise the target or control "
         f"another quantity")
+
+
+def _measures_softening(ctx, cells: np.ndarray) -> bool:
+    """Whether any of these cells (input ids) has a softening material, on any rank.
+    Collective."""
+    local = False
+    for e in ctx.effects:
+        models, cell_model = getattr(e, "models", None), getattr(e, "cell_model", None)
+        if models is None or cell_model is None:
+            continue
+        soft = [i for i, m in enumerate(models) if isinstance(m, Mazars)]
+        mine = e.mesh.global_cells[np.isin(cell_model, soft)]
+        local = local or bool(np.isin(cells, mine).any())
+    return bool(ctx.comm.allreduce(local, op=MPI.LOR))
+
+
+def _past_capacity(exc: SolverError, newton, t: float, controls: list[Control]) -> SolverError:
+    """A strain control whose cells do not soften, in a model where other cells do: the
+    measured strain grows only with the load, and the load cannot pass the peak the softening
+    cells set (past it they take the deformation and the measured cells unload), so a target
+    beyond the strain at the peak has no solution."""
+    ctx, rset = newton.ctx, newton.rset
+    measured = [c for c in controls
+                if ctx.multiplied[rset.locate(c.row)[0]].meta.get("cells") is not None]
+    elastic = [c for c in measured if not _measures_softening(
+        ctx, np.asarray(ctx.multiplied[rset.locate(c.row)[0]].meta["cells"], dtype=np.int64))]
+    if not elastic:
+        return exc
+    values = rset.primal_values(newton.q)
+    targets = rset.targets(t)
+    loads = rset.row_values(newton.lam) if newton.lam.size else np.zeros(values.size)
+    short = [c for c in elastic if c.sign * (targets[c.row] - values[c.row]) > 0]
+    if not short:
+        return exc
+    c = short[0]
+    kind = "maximum control" if c.maximum else "control"
+    reached, target, load = values[c.row], targets[c.row], loads[c.row]
+    return NamedFailure(
+        f"{kind} {c.name!r} can no longer reach its value: {target:.6g} at t = {t:.6g}, where it "
+        f"reached {reached:.6g} (t = {newton.t_prev:.6g}, control load {load:.6g}); the cells "
+        f"it measures do not soften, so their strain grows only with the load, and the load "
+        f"cannot pass the structure's capacity, which the softening cells elsewhere set (past "
+        f"the peak they take the deformation and the measured cells unload); reduce the target "
+        f"(it reached {reached:.6g}) or control a quantity that includes the softening cells "
+        f"(the last attempt: {exc})")

@@ -167,3 +167,35 @@ def test_turning_back_names_localization_only_where_damage_is(shared_tmp, monkey
         assert status.startswith("failed: maximum control 'max_strain' can no longer reach its "
                                  "value"), status
         assert "no material of the scene softens" in status and "localizes" not in status
+
+
+def test_maximum_control_of_cells_that_do_not_soften_past_the_peak(shared_tmp):
+    """The localization bar with its maximum strain control on the cells left of x = 0.4 (all
+    elastic; the damaged column is the 15th of 29): their strain is σ/E and the bar's stress
+    cannot pass the damaged column's peak E εd0, so no target beyond εd0 = 1e-4 is reached
+    (t = 1e-4 / 1.2e-3 = 1/12). The run fails naming the control and the capacity, the last
+    step at the peak: strain εd0, load E εd0 × 0.1 = 1e4."""
+    base = shipped("localization_bar.toml")
+    control = dict(base["relations"][3], region="left_part")
+    assert control["name"] == "max_strain" and control["value"] == 1.2e-3
+    text = scene(base, regions=dict(base["regions"], left_part="x < 0.4"),
+                 relations=base["relations"][:3] + [control])
+    code, status, f = _run(shared_tmp, text)
+    with f:
+        loads = f["relations/max_strain/multiplier"][:].sum(axis=1)
+        largest = f["relations/max_strain/primal"][:].max(axis=1)
+        times = f["steps/time"][:]
+    assert code == 3
+    head = "failed: maximum control 'max_strain' can no longer reach its value: "
+    assert status.startswith(head), status
+    assert "the cells it measures do not soften" in status
+    assert "control a quantity that includes the softening cells" in status
+    assert "likely cause" not in status
+    np.testing.assert_allclose(largest, 1.2e-3 * times, rtol=1e-9)
+    assert times[-1] == pytest.approx(1 / 12, rel=1e-9)
+    assert largest[-1] == pytest.approx(1e-4, rel=1e-9)
+    assert loads[-1] == pytest.approx(1e9 * 1e-4 * 0.1, rel=1e-9)
+    m = re.match(re.escape(head) + r"(\S+) at t = (\S+), where it reached (\S+) ", status)
+    target, t, reached = (float(x.rstrip(",")) for x in m.groups())
+    assert t > 1 / 12 and target == pytest.approx(1.2e-3 * t, rel=1e-5)
+    assert reached == pytest.approx(1e-4, rel=1e-5)
