@@ -5,9 +5,11 @@ can only reach values that some load gives. When the load cannot grow past a bou
 controlled quantity stops growing with it, no step reaches the next target, however small:
 the solve then fails at whatever breaks first (a singular operator once nothing holds the body,
 a maximum group's enforced row going back and forth), and that says nothing of the cause.
-The bound named here is friction's: every closed node of a frictional contact slides, so the
+Two bounds are named. Friction's: every closed node of a frictional contact slides, so the
 tangential load is at the friction capacity μN and the body slides as a whole, which moves no
-strain. The controlled value reached, the target and the control load are the last converged
+strain. The structure's capacity: a strain control measured on cells that do not soften, in a
+model where others do, grows only with the load, which cannot pass the peak the softening
+cells set. The controlled value reached, the target and the control load are the last converged
 state's (the same on every rank: relation values and multipliers are reduced over ranks, the
 contact states are the whole surface's).
 
