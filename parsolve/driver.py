@@ -23,6 +23,7 @@ from parsolve.model import Model
 from parsolve.outputs import Balance, contact_line, contact_totals, progress, resultant_labels, \
     resultant_line, step_outputs
 from parsolve.solvers.arc_length import run_arc_length
+from parsolve.solvers.diagnose import NamedFailure, name_failure
 from parsolve.solvers.finite import check_finite
 from parsolve.solvers.linear import DoesNotFit
 from parsolve.solvers.newton import NewtonSolver
@@ -75,7 +76,7 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
         hints = _failure_hints(model)
         if "singular" in str(exc) or "inaccurate" in str(exc):
             hints += unsupported(model)
-        if hints:
+        if hints and not isinstance(exc, NamedFailure):   # (its cause named already)
             exc = SolverError(f"{exc}; likely cause: {'; '.join(hints)}")
         status = f"failed: {exc}"
         raise exc from None
@@ -241,7 +242,7 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log,
         except SolverError as exc:
             newton.restore(snap)
             if isinstance(exc, DoesNotFit) or not schedule.cut(t):
-                raise
+                raise name_failure(exc, newton, t) from None
             if comm.rank == 0:
                 log(f"step to t={t:.6g} failed ({exc}); retrying with half the step")
             continue
@@ -256,7 +257,7 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log,
         pivots = solver.negative_pivots()  # the saddle's: one per enforced multiplier row
         if pivots is not None:
             pivots -= int(newton.active.active.sum())
-        warning = watch.check(ctx.norm(newton.q - snap[0]), pivots)
+        warning = watch.check(ctx.norm(newton.q - snap[0]), pivots, t - t_prev)
         extra.update({"steps/cuts": schedule.cuts, "steps/branch_warning": int(warning is not None)})
         timings = solver.take_timings()
         timings["assembly"] = system.timings.pop("assembly", 0.0) + (setup if step == 1 else 0.0)
@@ -303,26 +304,32 @@ def reported(ctx, rel_out: dict, fields: dict) -> str:
 
 class BranchWatch:
     """Warns when a softening run may have jumped to another equilibrium branch: the number of
-    negative pivots of an LDLᵀ factorization changed, or the step's increment is over ten
-    times the previous one's (which one a secant iteration lands on depends on round-off)."""
+    negative pivots of an LDLᵀ factorization changed, or the step's increment per unit of the
+    load parameter is over ten times the previous step's (which branch a secant iteration lands
+    on depends on round-off). Per unit of the parameter, so that the warning is the solution
+    path's, not the steps': a step cut four times leaves an intermediate step of 1/16 and a
+    rest of 15/16, whose plain increments differ 15× on one branch — and whether a step is cut
+    can depend on the partition."""
 
     def __init__(self, nonlinear: bool):
         self.nonlinear = nonlinear  # a linear scene's increments may legitimately jump
         self.pivots, self.previous = None, None
 
-    def check(self, dq, pivots: int | None) -> str | None:
-        """``dq``: the step's increment, or its norm (the same on every rank)."""
+    def check(self, dq, pivots: int | None, dt: float = 1.0) -> str | None:
+        """``dq``: the step's increment, or its norm (the same on every rank); ``dt``: the
+        step's size in the load parameter."""
         warning = None
         if pivots is not None and self.pivots is not None and pivots != self.pivots:
             warning = (f"the tangent's negative pivots went from {self.pivots} to {pivots}: "
                        "a limit point or a bifurcation was crossed")
         size = float(np.linalg.norm(dq)) if np.ndim(dq) else float(dq)
+        rate = size / dt if dt > 0 else size
         if self.nonlinear and self.previous is not None and self.previous > 0 \
-                and size > 10 * self.previous:
-            warning = (f"the increment is {size / self.previous:.0f}× the previous one: the run may "
-                       "have jumped to another equilibrium branch (smaller steps, or the tangent "
-                       "matrix, tell)")
-        self.pivots, self.previous = pivots, size
+                and rate > 10 * self.previous:
+            warning = (f"the increment is {rate / self.previous:.0f}× the previous one (per unit "
+                       "of the load parameter): the run may have jumped to another equilibrium "
+                       "branch (smaller steps, or the tangent matrix, tell)")
+        self.pivots, self.previous = pivots, rate
         return warning
 
 

@@ -113,6 +113,14 @@ def _create(f: h5py.File, name: str, row_shape: tuple, dtype, checksum: bool = T
 
 
 
+def create_mesh_dataset(f: h5py.File, name: str, shape: tuple, dtype, data=None) -> h5py.Dataset:
+    """A /mesh dataset: one chunk (the whole array, as a field's step is one) with a Fletcher32
+    checksum, so that a damaged mesh is a read error, as damaged step data is."""
+    chunks = tuple(max(int(s), 1) for s in shape)
+    return f.create_dataset(name, tuple(shape), dtype=dtype, data=data, chunks=chunks,
+                            fletcher32=True)
+
+
 def known_datasets(relations: dict) -> dict:
     """{name: (row shape, dtype)} of the per-step datasets known before any step: they exist
     even if no step finishes (a failure before the first step)."""
@@ -172,8 +180,9 @@ class ResultWriter:
         f = self.file = h5py.File(self.path, "w", libver="latest", rdcc_nbytes=0)
         f.attrs.update(parsolve_version=__version__, petsc_version=petsc_version,
                        nprocs=self.comm.size, status="running", scene=scene_text, **self.attrs)
-        f["mesh/points"] = self._points
-        f[f"mesh/cells/{self.mesh.cell_type}"] = self._cells
+        for name, data in (("mesh/points", self._points),
+                           (f"mesh/cells/{self.mesh.cell_type}", self._cells)):
+            create_mesh_dataset(f, name, data.shape, data.dtype, data)
         self._points = self._cells = None
         # What is known now exists even if no step finishes (a failure before the first step)
         for name, (shape, dtype) in known_datasets(self.relations).items():

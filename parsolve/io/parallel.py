@@ -18,8 +18,9 @@ Design decisions (MPI-IO and SWMR cannot be used on the same file at once):
   has no "file open for writing" flag that a crash would leave set. A crash *while* a step is
   being closed can still leave the file damaged (HDF5 without SWMR gives no guarantee there);
   that window is the few metadata writes at the step's close.
-* **Checksums**: the field and cell-field datasets carry a Fletcher32 checksum per chunk, as
-  in the swmr mode; the small per-step datasets (written by rank 0 alone) do not (``_checked``).
+* **Checksums**: ``/mesh`` and the field and cell-field datasets carry a Fletcher32 checksum
+  per chunk, as in the swmr mode (all written collectively); the small per-step datasets
+  (written by rank 0 alone) do not (``_checked``).
 * **A step counts only once** ``/steps/time`` **has it** (the commit marker): every other
   dataset of the step is written and flushed (collectively) before ``/steps/time`` is
   extended; after a crash the other datasets may hold one unfinished row more, which
@@ -57,7 +58,7 @@ from mpi4py import MPI
 from parsolve import __version__
 from parsolve.errors import OutputError
 from parsolve.io import faults
-from parsolve.io.hdf5 import COMMIT, ResultWriter, _create, known_datasets
+from parsolve.io.hdf5 import COMMIT, ResultWriter, _create, create_mesh_dataset, known_datasets
 from parsolve.interrupts import SIGNALS
 from parsolve.io.lock import free_reserve
 from parsolve.io.slabs import OwnedRows, Rows, split_owners
@@ -180,8 +181,8 @@ class ParallelResultWriter(ResultWriter):
             rows = self.rows[kind].local(data)
             if ok:
                 ok = self._together(doing, lambda: self._write_rows(
-                    f.create_dataset(name, (self.rows[kind].n,) + rows.shape[1:],
-                                     dtype=rows.dtype), None, kind, rows))
+                    create_mesh_dataset(f, name, (self.rows[kind].n,) + rows.shape[1:],
+                                        rows.dtype), None, kind, rows))
         if ok:
             known = known_datasets(self.relations).items()
             ok = self._together(doing, lambda: [_create(f, name, shape, dtype, _checked(name))

@@ -22,6 +22,7 @@ import numpy as np
 
 from parsolve.errors import SolverError
 from parsolve.relations import Relation
+from parsolve.solvers.diagnose import GoingBack
 
 
 #: Relative tolerance within which rows of a maximum group are tied (see ``ActiveSet.pick``).
@@ -142,10 +143,11 @@ class ActiveSet:
         row = int(back[0])
         k = int(np.searchsorted(self.first, row, side="right") - 1)
         now = int(np.flatnonzero(self.active & (self.group == self.group[row]))[0])
-        raise SolverError(f"maximum relation {self.names[k]!r}: the enforced row would go back "
-                          f"from row {now - self.first[k]} to row {row - self.first[k]}, which it "
-                          "left during this step (the most loaded element changes back and "
-                          "forth where damage localizes: the step is too large to follow it)")
+        raise GoingBack(f"maximum relation {self.names[k]!r}: the enforced row would go back "
+                        f"from row {now - self.first[k]} to row {row - self.first[k]}, which it "
+                        "left during this step (the most loaded element changes back and "
+                        "forth where damage localizes: the step is too large to follow it)",
+                        self.names[k], (now - self.first[k], row - self.first[k]))
 
     @staticmethod
     def pick(group: np.ndarray, score: np.ndarray, current: int, largest: bool, tol: float) -> int:

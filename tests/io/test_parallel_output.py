@@ -124,6 +124,35 @@ def test_parallel_mode_from_the_driver(run_mode):
     assert np.abs(u[0]).max() > 0
 
 
+@pytest.mark.parametrize("mode", ["swmr", "parallel"])
+def test_mesh_datasets_carry_a_checksum(run_mode, mode):
+    """/mesh/points and /mesh/cells/<type> carry a Fletcher32 checksum in both modes, as the
+    per-step field datasets do, and hold the generator's points and cells exactly; a bit
+    changed in either is a read error, not numbers."""
+    path, data = run_mode(SCENE_2D, mode, name=f"mesh_{mode}")
+    mesh = rectangle(2.0, 1.0, 8, 4, cell="triangle")
+    np.testing.assert_array_equal(data["mesh/points"], mesh.points)
+    np.testing.assert_array_equal(data["mesh/cells/triangle"], mesh.cells)
+    with h5py.File(path, "r") as f:
+        assert [f[n].fletcher32 for n in ("mesh/points", "mesh/cells/triangle",
+                                          "fields/displacement")] == [True] * 3
+        offsets = {n: f[n].id.get_chunk_info(0).byte_offset
+                   for n in ("mesh/points", "mesh/cells/triangle")}
+    MPI.COMM_WORLD.Barrier()
+    if MPI.COMM_WORLD.rank == 0:
+        for name, offset in offsets.items():
+            damaged = path.with_name(f"damaged_{mode}.h5")
+            damaged.write_bytes(path.read_bytes())
+            with open(damaged, "r+b") as fh:
+                fh.seek(offset + 8)
+                byte = fh.read(1)
+                fh.seek(offset + 8)
+                fh.write(bytes([byte[0] ^ 0x04]))
+            with h5py.File(damaged, "r") as f, pytest.raises(OSError):
+                f[name][()]
+    MPI.COMM_WORLD.Barrier()
+
+
 @pytest.mark.parametrize("text, dim", [(SCENE_2D, 2), (SCENE_3D, 3)], ids=["2d", "3d"])
 def test_xdmf_of_a_parallel_result_reads_in_meshio_and_vtk(text, dim, run_mode):
     path, data = run_mode(text, name=f"xdmf{dim}")

@@ -66,6 +66,27 @@ def flip(path):
         fh.write(bytes(b ^ 0x01 for b in data))
 
 
+def _flip_chunk(path, name: str, index: int) -> None:
+    """A few bytes of a dataset's chunk changed: only the checksum can tell."""
+    offset = _chunk_offset(path, name, index) + 16
+    with open(path, "r+b") as fh:
+        fh.seek(offset)
+        data = bytearray(fh.read(8))
+        fh.seek(offset)
+        fh.write(bytes(b ^ 0x01 for b in data))
+
+
+def flip_points(path):
+    """The mesh's coordinates changed by a bit in a few bytes (no value goes out of scale)."""
+    _flip_chunk(path, "mesh/points", 0)
+
+
+def flip_cells(path):
+    """The mesh's connectivity changed by a bit in a few bytes (integers: only the checksum
+    can tell)."""
+    _flip_chunk(path, "mesh/cells/triangle", 0)
+
+
 def nan(path):
     with h5py.File(path, "r+") as f:
         f["fields/displacement"][3, 7, 0] = np.nan
@@ -83,6 +104,8 @@ DAMAGES = [
     (delete, "cannot open result file"),
     (garble, ""),      # where the bytes land (data, or the chunk index) decides the words
     (flip, "/fields/displacement: damaged data"),
+    (flip_points, "/mesh/points: damaged data"),
+    (flip_cells, "/mesh/cells/triangle: damaged data"),
     (nan, "/fields/displacement: damaged data (1 non-finite or out-of-scale value(s), e.g. nan)"),
     (huge, "/fields/displacement: damaged data (1 non-finite or out-of-scale value(s), e.g. 1e+200)"),
 ]
