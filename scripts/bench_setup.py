@@ -521,7 +521,8 @@ def child_mesh(way: str, n: int, mesh_lines: str, repeats: int) -> dict:
         cpu.append(slowest(comm, time.process_time() - c0))
         seconds.append(slowest(comm, time.perf_counter() - t0))
     hwm = comm.gather(bh.proc_memory()["hwm"], root=0)
-    return {"way": way, "n": n, "cells": part.num_global_cells, "nranks": comm.size,
+    return {"way": way, "n": n, "cells": part.num_global_cells,
+            "points": part.num_global_points, "nranks": comm.size,
             "seconds": min(seconds), "all_seconds": seconds, "cpu": min(cpu), "hwm": hwm}
 
 
@@ -549,7 +550,7 @@ def child_dolfinx_mesh(n: int, xdmf: str, repeats: int) -> dict:
     cells = msh.topology.index_map(3).size_global
     dofs = space.dofmap.index_map.size_global * space.dofmap.index_map_bs
     hwm = comm.gather(bh.proc_memory()["hwm"], root=0)
-    return {"way": "dolfinx", "n": n, "cells": cells, "dofs": dofs, "nranks": comm.size,
+    return {"way": "dolfinx", "n": n, "cells": cells, "points": dofs // 3, "nranks": comm.size,
             "seconds": min(seconds), "all_seconds": seconds, "cpu": min(cpu), "hwm": hwm}
 
 
@@ -578,6 +579,38 @@ def mesh_table(rows: list[dict]) -> str:
                     both(r, one), both(r, theirs), bh.mib(r["hwm"][0]),
                     bh.mib(mean) if mean else "", f"{r['hwm'][0] / mean:.2f}" if mean else ""])
     return bh.md_table(head, out)
+
+
+MODEL_RANKS, MODEL_DOFS = 1024, 1e9
+
+
+def mesh_model(rows: list[dict]) -> str:
+    """Fits y = a + b·N + c·N/P (N: DOFs = 3 × nodes; ``bench_scale.fit``) of each way's time
+    (CPU s of the busiest rank, 1 and 2 ranks: 4 are oversubscribed on 2 cores) and peak
+    resident memory per rank (1, 2, 4 ranks), and their values at MODEL_RANKS × MODEL_DOFS."""
+    from bench_scale import at, fit
+
+    head = ["mesh", "quantity", "a", "b (whole)", "c (÷ P)", "worst fit error", "points",
+            f"model: {MODEL_RANKS} ranks × 10⁹ DOFs"]
+    out = []
+    for way in dict.fromkeys(r["way"] for r in rows):
+        mine = [r for r in rows if r["way"] == way and "points" in r]
+        if len({r["n"] for r in mine}) < 2:
+            continue
+        time_fit = fit([(3.0 * r["points"], r["nranks"], r.get("cpu")) for r in mine
+                        if r["nranks"] <= 2])
+        mem_fit = fit([(3.0 * r["points"], r["nranks"], float(max(r["hwm"]))) for r in mine])
+        if time_fit:
+            out.append([way, "CPU s", f"{time_fit['a']:.2f} s",
+                        f"{time_fit['b'] * 1e6:.2f} µs/DOF", f"{time_fit['c'] * 1e6:.2f} µs/DOF",
+                        f"{time_fit['worst']:.0%}", str(time_fit["points"]),
+                        f"{at(time_fit, MODEL_DOFS, MODEL_RANKS):,.1f} s"])
+        if mem_fit:
+            out.append([way, "peak / rank", f"{mem_fit['a'] / 2**20:.0f} MiB",
+                        f"{mem_fit['b']:.1f} B/DOF", f"{mem_fit['c']:.1f} B/DOF",
+                        f"{mem_fit['worst']:.0%}", str(mem_fit["points"]),
+                        f"{at(mem_fit, MODEL_DOFS, MODEL_RANKS) / 2**30:,.2f} GiB"])
+    return bh.md_table(head, out, first="---", rest="---:") if out else ""
 
 
 # ------------------------------------------------------------------------------------------------
@@ -701,8 +734,9 @@ def main() -> None:
                    help="only rewrite the table from bench_results/setup.json")
     p.add_argument("--mumps-2d", type=int, default=300, help="quads per side of the 2D MUMPS case")
     p.add_argument("--mumps-3d", type=int, default=20, help="hexes per side of the 3D MUMPS case")
-    p.add_argument("--mesh-n", type=int, default=56, help="hexes per side of the mesh section's "
-                   "box (6·n³ tetrahedra; 56: 1.05M)")
+    p.add_argument("--mesh-n", type=int, nargs="+", default=[32, 44, 56],
+                   help="hexes per side of the mesh section's boxes (6·n³ tetrahedra; 56: 1.05M); "
+                   "the .msh (rank 0's path, minutes) at the largest only")
     p.add_argument("--mesh-ways", nargs="+", default=["msh", "h5", "box", "dolfinx"],
                    choices=["msh", "h5", "box", "dolfinx"], help="the mesh section's ways")
     p.add_argument("--mesh-ranks", type=int, nargs="+", default=[1, 2, 4])
@@ -714,7 +748,7 @@ def main() -> None:
     a = p.parse_args()
     if a.smoke:   # smallest sizes of every default section; DOLFINx only if installed
         a.quick, a.n2d, a.n3d, a.repeats, a.mumps_2d, a.mumps_3d = True, [8], [3], 1, 8, 3
-        a.mesh_n, a.mesh_repeats = 4, 1
+        a.mesh_n, a.mesh_repeats = [4], 1
         a.sections = sorted(set(a.sections) | {"mesh"})
         a.no_peers = a.no_peers or not bh.peer_available("dolfinx")
     if a.child:
@@ -786,18 +820,19 @@ def main() -> None:
                     results["mumps"].extend(rows or [])
                     save()
     if "mesh" in a.sections and not a.report:
-        lines = mesh_files(a.mesh_n)
-        ways = [w for w in a.mesh_ways if w != "dolfinx" or not a.no_peers]
-        for way in ways:
-            for nranks in a.mesh_ranks:
-                row = spawn(["mesh", way, str(a.mesh_n), lines[way], str(a.mesh_repeats)],
-                            nranks=nranks)
+        for n in sorted(a.mesh_n):
+            lines = mesh_files(n)
+            ways = [w for w in a.mesh_ways if (w != "dolfinx" or not a.no_peers)
+                    and (w != "msh" or n == max(a.mesh_n))]
+            for way, nranks in ((w, r) for w in ways for r in a.mesh_ranks):
+                reps = 1 if way == "msh" else a.mesh_repeats
+                row = spawn(["mesh", way, str(n), lines[way], str(reps)], nranks=nranks)
                 if row:
                     results["mesh"].append(row)
                     save()
                     print(f"[mesh] {way} {row['cells']} cells, {nranks} ranks: "
-                          f"{row['seconds']:.2f} s, peaks {[bh.mib(h) for h in row['hwm']]}",
-                          flush=True)
+                          f"{row['seconds']:.2f} s (CPU {row['cpu']:.2f}), peaks "
+                          f"{[bh.mib(h) for h in row['hwm']]}", flush=True)
     write_report(results, time.time() - t_start)
 
 
@@ -904,7 +939,10 @@ def write_report(results: dict, seconds: float) -> None:
     if results.get("mesh"):
         text = ["# parsolve mesh stage: rank 0's path against the slice path", "",
                 [b for b in intro.split("\n\n") if b.startswith("Section *mesh*")][0], "",
-                machine() + f" {seconds:.0f} s.", "", mesh_table(results["mesh"]), ""]
+                machine() + f" {seconds:.0f} s.", "", mesh_table(results["mesh"]), "",
+                "Fits of y = a + b·N + c·N/P (N = DOFs = 3 × nodes; time on 1 and 2 ranks, "
+                "memory on 1, 2 and 4; least squares on the relative error, coefficients ≥ 0) "
+                "and the model they give:", "", mesh_model(results["mesh"]), ""]
         md = "\n".join(text)
         (COMMITTED / "bench_setup_mesh.md").write_text(md)
         print(md)
