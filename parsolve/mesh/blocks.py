@@ -120,12 +120,16 @@ def facet_groups(comm, block: CellBlock, source: str | None, key: str | None,
     owner = np.tile(np.arange(ncells, dtype=np.int64) + block.start, len(local))
     forward = checks.facet_direction(nodes)
     keys = _sorted_vertex_keys(nodes, CELL_INFO[block.cell_type][1])
+    del nodes   # (the arrays of every facet are the peak of the mesh stage: each goes early)
     if size > 1:   # every copy of a facet to one rank: the one its smallest corner names
         # as few int64 as the ids allow (the corners packed, the direction in the owner's
         # lowest bit): the rows that travel are 2 or 3 numbers instead of nv + 2
         packed = _packed(keys, comm.allreduce(int(keys.max(initial=0))) + 1)
         rows = np.column_stack([packed, owner * 2 + forward])
-        got, _ = exchange(comm, rows, keys[:, 0] % size if keys.size else np.zeros(0, np.int64))
+        dest = keys[:, 0] % size if keys.size else np.zeros(0, np.int64)
+        del packed, keys, owner, forward
+        got, _ = exchange(comm, rows, dest)
+        del rows, dest
         keys, owner, forward = got[:, :-1], got[:, -1] >> 1, got[:, -1] & 1
     group, counts = _row_groups(keys)
     many = owner[counts[group] > 2] if group.size else np.zeros(0, np.int64)
@@ -139,7 +143,7 @@ def facet_groups(comm, block: CellBlock, source: str | None, key: str | None,
         f"cells {checks._ids(cells)}"), source, key)
     if not graph:
         return None
-    del nodes, keys, forward
+    del keys, forward
     shared = np.flatnonzero(counts[group] == 2) if group.size else np.zeros(0, np.int64)
     pairs = owner[shared[np.argsort(group[shared], kind="stable")]].reshape(-1, 2)
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]  # a collapsed cell seeing itself twice
