@@ -39,11 +39,17 @@ relation) and "body" (the same relation with a body force over the whole domain 
 dense column and row).
 
 Section *mesh* (1, 2 and 4 ranks): the mesh stage alone (`model._distributed_mesh`: read or
-generate, check, partition, distribute) of a box of 6·n³ tetrahedra, three ways: a Gmsh file
-(`.msh`, read whole by rank 0), the same mesh converted to the parallel file (`.h5`, read by
-slices) and the generator (`box`, built by slices); wall seconds of the slowest rank and each
-rank's peak resident memory (VmHWM, the process's whole life: Python, numpy, PETSc and MPI
-included), rank 0's against the mean of the others.
+generate, check, partition, distribute, number the nodes) of a box of 6·n³ tetrahedra, three
+ways: a Gmsh file (`.msh`, read whole by rank 0), the same mesh converted to the parallel file
+(`.h5`, read by slices) and the generator (`box`, built by slices); and DOLFINx 0.5 in the same
+run on the same mesh written once as XDMF + HDF5 (`dolfinx`: `XDMFFile.read_mesh` -- read by
+slices, PT-Scotch on the distributed graph, distribution, ghost cells sharing a facet -- then
+`VectorFunctionSpace(P1)`, the DOF numbering; FFCx's JIT warmed up on a one-cell mesh first).
+Wall seconds of the slowest rank and CPU seconds of the busiest (best of the repeats; ranks
+waiting in MPI yield their core: `mpi_yield_when_idle`), against the same way at 1 rank and
+against DOLFINx at the same number of ranks; each rank's peak resident memory (VmHWM, the
+process's whole life: Python, numpy, PETSc and MPI included), rank 0's against the mean of the
+others.
 
 Usage (from the repository root):
     .venv/bin/python scripts/bench_setup.py                 # everything
@@ -462,52 +468,177 @@ def mesh_files(n: int) -> dict[str, str]:
     folder = RESULTS / "meshes"
     folder.mkdir(parents=True, exist_ok=True)
     msh, h5 = folder / f"box_tetra_{n}.msh", folder / f"box_tetra_{n}.h5"
-    if not msh.exists():
+    # DOLFINx's: it reads the data from the .h5 named as the .xdmf, whatever the XML says
+    xdmf = folder / f"box_tetra_{n}_dolfinx.xdmf"
+    if not msh.exists() or not xdmf.exists():
         whole = box(1.0, 1.0, 1.0, n, n, n, cell="tetra")
-        meshio.write(str(msh), meshio.Mesh(whole.points, [("tetra", whole.cells)]),
-                     file_format="gmsh22", binary=True)
+        mesh = meshio.Mesh(whole.points, [("tetra", whole.cells)])
+        meshio.write(str(msh), mesh, file_format="gmsh22", binary=True)
+        write_xdmf(xdmf, xdmf.with_suffix(".h5"), whole.points, whole.cells)
     if not h5.exists():
         convert(str(msh), str(h5))
-    return {"msh": f'file = "{msh}"', "h5": f'file = "{h5}"',
+    return {"msh": f'file = "{msh}"', "h5": f'file = "{h5}"', "dolfinx": str(xdmf),
             "box": f'generator = "box"\nlx = 1.0\nly = 1.0\nlz = 1.0\nnx = {n}\nny = {n}\n'
                    f'nz = {n}\ncell = "tetra"'}
 
 
-def child_mesh(way: str, n: int, mesh_lines: str) -> dict:
-    """The mesh stage of a 3D scene on this many ranks: time and every rank's peak memory."""
+def write_xdmf(xdmf: Path, data: Path, points, cells) -> None:
+    """A tetrahedral mesh as XDMF + HDF5 the way meshio and DOLFINx write it (grid "Grid")."""
+    import h5py
+
+    with h5py.File(data, "w") as f:
+        f["points"], f["cells"] = points, cells.astype("int64")
+    item = ('<DataItem DataType="{}" Dimensions="{} {}" Format="HDF" Precision="8">'
+            f'{data.name}:/{{}}</DataItem>')
+    xdmf.write_text(
+        '<Xdmf Version="3.0"><Domain><Grid Name="Grid"><Geometry GeometryType="XYZ">'
+        + item.format("Float", *points.shape, "points") + '</Geometry><Topology '
+        f'TopologyType="Tetrahedron" NumberOfElements="{len(cells)}" NodesPerElement="4">'
+        + item.format("Int", *cells.shape, "cells") + "</Topology></Grid></Domain></Xdmf>")
+
+
+def child_mesh(way: str, n: int, mesh_lines: str, repeats: int) -> dict:
+    """The mesh stage of a 3D scene on this many ranks: time (best of the repeats) and every
+    rank's peak memory."""
     from mpi4py import MPI
 
     from parsolve.model import _distributed_mesh
     from parsolve.scene import parse_scene
     import tomllib
 
+    if way == "dolfinx":
+        return child_dolfinx_mesh(n, mesh_lines, repeats)
     comm = MPI.COMM_WORLD
     text = (f"[mesh]\n{mesh_lines}\n[model]\nhypothesis = \"3d\"\n[[materials]]\n"
             "E = 1.0\nnu = 0.3\n[solver]\npreset = \"iterative\"\n")
     scene = parse_scene(tomllib.loads(text), "bench.toml")
-    comm.Barrier()
-    t0 = time.perf_counter()
-    part = _distributed_mesh(scene, comm)
-    seconds = slowest(comm, time.perf_counter() - t0)
+    seconds, cpu = [], []
+    for _ in range(repeats):
+        part = None
+        gc.collect()
+        comm.Barrier()
+        t0, c0 = time.perf_counter(), time.process_time()
+        part = _distributed_mesh(scene, comm)
+        cpu.append(slowest(comm, time.process_time() - c0))
+        seconds.append(slowest(comm, time.perf_counter() - t0))
     hwm = comm.gather(bh.proc_memory()["hwm"], root=0)
-    return {"way": way, "n": n, "cells": part.num_global_cells, "nranks": comm.size,
-            "seconds": seconds, "hwm": hwm}
+    return {"way": way, "n": n, "cells": part.num_global_cells,
+            "points": part.num_global_points, "nranks": comm.size,
+            "seconds": min(seconds), "all_seconds": seconds, "cpu": min(cpu), "hwm": hwm}
+
+
+def child_dolfinx_mesh(n: int, xdmf: str, repeats: int) -> dict:
+    """DOLFINx 0.5: ``XDMFFile.read_mesh`` + ``VectorFunctionSpace(P1)`` of the file, after the
+    JIT of the coordinate and P1 elements on a one-cell mesh (FFCx's cache filled: not timed)."""
+    from dolfinx import fem, io, mesh as dmesh
+    from mpi4py import MPI
+
+    comm = MPI.COMM_WORLD
+    warm = dmesh.create_unit_cube(comm, 1, 1, 1, dmesh.CellType.tetrahedron)
+    fem.VectorFunctionSpace(warm, ("Lagrange", 1))
+    del warm
+    seconds, cpu = [], []
+    for _ in range(repeats):
+        msh = space = None
+        gc.collect()
+        comm.Barrier()
+        t0, c0 = time.perf_counter(), time.process_time()
+        with io.XDMFFile(comm, xdmf, "r") as f:
+            msh = f.read_mesh(name="Grid")
+        space = fem.VectorFunctionSpace(msh, ("Lagrange", 1))
+        cpu.append(slowest(comm, time.process_time() - c0))
+        seconds.append(slowest(comm, time.perf_counter() - t0))
+    cells = msh.topology.index_map(3).size_global
+    dofs = space.dofmap.index_map.size_global * space.dofmap.index_map_bs
+    hwm = comm.gather(bh.proc_memory()["hwm"], root=0)
+    return {"way": "dolfinx", "n": n, "cells": cells, "points": dofs // 3, "nranks": comm.size,
+            "seconds": min(seconds), "all_seconds": seconds, "cpu": min(cpu), "hwm": hwm}
 
 
 def mesh_table(rows: list[dict]) -> str:
-    head = ["mesh", "cells", "ranks", "seconds", "vs 1 rank", "rank 0 peak MiB",
-            "others' mean MiB", "rank 0 / others"]
-    ones = {(r["way"], r["n"]): r["seconds"] for r in rows if r["nranks"] == 1}
+    """Wall seconds (CPU seconds of the busiest rank in brackets: on a shared machine the wall
+    time counts the other jobs too; Open MPI polls while it waits, so CPU counts the waits)."""
+    head = ["mesh", "cells", "ranks", "seconds (CPU)", "vs 1 rank", "vs DOLFINx",
+            "rank 0 peak MiB", "others' mean MiB", "rank 0 / others"]
+
+    def both(a: dict, b: dict | None) -> str:
+        if not b:
+            return ""
+        cpu = f" ({a['cpu'] / b['cpu']:.2f})" if "cpu" in a and "cpu" in b else ""
+        return f"{a['seconds'] / b['seconds']:.2f}{cpu}"
+
+    ones = {(r["way"], r["n"]): r for r in rows if r["nranks"] == 1}
+    peer = {(r["n"], r["nranks"]): r for r in rows if r["way"] == "dolfinx"}
     out = []
     for r in rows:
         others = r["hwm"][1:]
         mean = sum(others) / len(others) if others else None
-        one = ones.get((r["way"], r["n"]))
-        out.append([r["way"], str(r["cells"]), str(r["nranks"]), f"{r['seconds']:.2f}",
-                    f"{r['seconds'] / one:.2f}" if r["nranks"] > 1 and one else "",
-                    bh.mib(r["hwm"][0]), bh.mib(mean) if mean else "", f"{r['hwm'][0] / mean:.2f}"
-                    if mean else ""])
+        one = ones.get((r["way"], r["n"])) if r["nranks"] > 1 else None
+        theirs = peer.get((r["n"], r["nranks"])) if r["way"] != "dolfinx" else None
+        cpu = f" ({r['cpu']:.2f})" if "cpu" in r else ""
+        out.append([r["way"], str(r["cells"]), str(r["nranks"]), f"{r['seconds']:.2f}{cpu}",
+                    both(r, one), both(r, theirs), bh.mib(r["hwm"][0]),
+                    bh.mib(mean) if mean else "", f"{r['hwm'][0] / mean:.2f}" if mean else ""])
     return bh.md_table(head, out)
+
+
+MODEL_RANKS, MODEL_DOFS = 1024, 1e9
+
+
+def fit_split(points: list[tuple[float, float, float]]) -> dict | None:
+    """y = a + c·N/P, a, c ≥ 0 (no whole-mesh term: what the slice path is built to be),
+    least squares on the relative error, as ``bench_scale.fit``; points (N, P, y)."""
+    import numpy as np
+
+    pts = [(N, P, y) for N, P, y in points if y]
+    if len(pts) < 3:
+        return None
+    N, P, y = (np.array(v, dtype=float) for v in zip(*pts))
+    X = np.column_stack([np.ones_like(N), N / P])
+    best = None
+    for cols in ([0, 1], [1]):   # a dropped when it would be negative
+        sol, *_ = np.linalg.lstsq(X[:, cols] / y[:, None], np.ones_like(y), rcond=None)
+        coef = np.zeros(2)
+        coef[cols] = sol
+        err = float(np.sum((X @ coef / y - 1) ** 2))
+        if np.all(sol >= 0) and (best is None or err < best[0]):
+            best = (err, coef)
+    if best is None:
+        return None
+    coef = best[1]
+    return dict(a=float(coef[0]), b=0.0, c=float(coef[1]),
+                worst=float(np.max(np.abs(X @ coef / y - 1))), points=len(pts))
+
+
+def mesh_model(rows: list[dict]) -> str:
+    """Fits y = a + b·N + c·N/P (N: DOFs = 3 × nodes; ``bench_scale.fit``), and y = a + c·N/P
+    (``fit_split``), of each way's time (CPU s of the busiest rank: 4 ranks oversubscribe 2
+    cores, but a waiting rank yields its core, so its CPU seconds are still its work) and peak
+    resident memory per rank, on 1, 2 and 4 ranks, and their values at MODEL_RANKS ×
+    MODEL_DOFS."""
+    from bench_scale import at, fit
+
+    head = ["mesh", "quantity", "fit", "a", "b (whole)", "c (÷ P)", "worst fit error", "points",
+            f"model: {MODEL_RANKS} ranks × 10⁹ DOFs"]
+    out = []
+    for way in dict.fromkeys(r["way"] for r in rows):
+        mine = [r for r in rows if r["way"] == way and "points" in r]
+        if len({r["n"] for r in mine}) < 2:
+            continue
+        times = [(3.0 * r["points"], r["nranks"], r.get("cpu")) for r in mine]
+        peaks = [(3.0 * r["points"], r["nranks"], float(max(r["hwm"]))) for r in mine]
+        for kind, fitter in (("a + b·N + c·N/P", fit), ("a + c·N/P", fit_split)):
+            f = fitter(times)
+            if f:
+                out.append([way, "CPU s", kind, f"{f['a']:.2f} s", f"{f['b'] * 1e6:.2f} µs/DOF",
+                            f"{f['c'] * 1e6:.2f} µs/DOF", f"{f['worst']:.0%}", str(f["points"]),
+                            f"{at(f, MODEL_DOFS, MODEL_RANKS):,.1f} s"])
+            f = fitter(peaks)
+            if f:
+                out.append([way, "peak / rank", kind, f"{f['a'] / 2**20:.0f} MiB",
+                            f"{f['b']:.1f} B/DOF", f"{f['c']:.1f} B/DOF", f"{f['worst']:.0%}",
+                            str(f["points"]), f"{at(f, MODEL_DOFS, MODEL_RANKS) / 2**30:,.2f} GiB"])
+    return bh.md_table(head, out, first="---", rest="---:") if out else ""
 
 
 # ------------------------------------------------------------------------------------------------
@@ -521,6 +652,11 @@ def spawn(args: list[str], nranks: int = 1, timeout: float = 1800.0):
         if nranks > 1:
             cmd = ["bash", str(SCRIPTS / "mpirun.sh"), "-n", str(nranks), *cmd]
         env = bh.child_env()
+        if args[0] == "mesh":
+            # a rank waiting in MPI yields the core instead of polling it: at 2 ranks on 2
+            # shared cores (Open MPI polls unless oversubscribed) the CPU seconds then count
+            # the work, not the waits for a rank the other jobs descheduled
+            env["OMPI_MCA_mpi_yield_when_idle"] = "1"
         proc = subprocess.run(cmd, env=env, timeout=timeout, text=True, stdout=subprocess.PIPE,
                               stderr=subprocess.STDOUT)
         if proc.returncode != 0 or not out.exists():
@@ -631,15 +767,21 @@ def main() -> None:
                    help="only rewrite the table from bench_results/setup.json")
     p.add_argument("--mumps-2d", type=int, default=300, help="quads per side of the 2D MUMPS case")
     p.add_argument("--mumps-3d", type=int, default=20, help="hexes per side of the 3D MUMPS case")
-    p.add_argument("--mesh-n", type=int, default=56, help="hexes per side of the mesh section's "
-                   "box (6·n³ tetrahedra; 56: 1.05M)")
+    p.add_argument("--mesh-n", type=int, nargs="+", default=[32, 44, 56],
+                   help="hexes per side of the mesh section's boxes (6·n³ tetrahedra; 56: 1.05M); "
+                   "the .msh (rank 0's path, minutes) at the largest only")
+    p.add_argument("--mesh-ways", nargs="+", default=["msh", "h5", "box", "dolfinx"],
+                   choices=["msh", "h5", "box", "dolfinx"], help="the mesh section's ways")
+    p.add_argument("--mesh-ranks", type=int, nargs="+", default=[1, 2, 4])
+    p.add_argument("--mesh-repeats", type=int, default=2, help="the mesh section's repeats "
+                   "(best of)")
     p.add_argument("--child", nargs="+", default=None, help=argparse.SUPPRESS)
     p.add_argument("--json", default=None, help=argparse.SUPPRESS)
     bh.add_smoke(p)
     a = p.parse_args()
     if a.smoke:   # smallest sizes of every default section; DOLFINx only if installed
         a.quick, a.n2d, a.n3d, a.repeats, a.mumps_2d, a.mumps_3d = True, [8], [3], 1, 8, 3
-        a.mesh_n = 4
+        a.mesh_n, a.mesh_repeats = [4], 1
         a.sections = sorted(set(a.sections) | {"mesh"})
         a.no_peers = a.no_peers or not bh.peer_available("dolfinx")
     if a.child:
@@ -651,7 +793,7 @@ def main() -> None:
         elif kind == "compare":
             out = child_compare(rest[0], int(rest[1]), int(rest[2]), rest[3])
         elif kind == "mesh":
-            out = child_mesh(rest[0], int(rest[1]), rest[2])
+            out = child_mesh(rest[0], int(rest[1]), rest[2], int(rest[3]))
         elif kind == "memory":
             out = child_memory(rest[0], int(rest[1]), rest[2], rest[3])
         else:
@@ -711,16 +853,21 @@ def main() -> None:
                     results["mumps"].extend(rows or [])
                     save()
     if "mesh" in a.sections and not a.report:
-        lines = mesh_files(a.mesh_n)
-        for way in ("msh", "h5", "box"):
-            for nranks in (1, 2, 4):
-                row = spawn(["mesh", way, str(a.mesh_n), lines[way]], nranks=nranks)
+        t0 = time.time()
+        for n in sorted(a.mesh_n):
+            lines = mesh_files(n)
+            ways = [w for w in a.mesh_ways if (w != "dolfinx" or not a.no_peers)
+                    and (w != "msh" or n == max(a.mesh_n))]
+            for way, nranks in ((w, r) for w in ways for r in a.mesh_ranks):
+                reps = 1 if way == "msh" else a.mesh_repeats
+                row = spawn(["mesh", way, str(n), lines[way], str(reps)], nranks=nranks)
                 if row:
                     results["mesh"].append(row)
                     save()
+                    results["mesh_machine"] = machine() + f" Section mesh: {time.time() - t0:.0f} s."
                     print(f"[mesh] {way} {row['cells']} cells, {nranks} ranks: "
-                          f"{row['seconds']:.2f} s, peaks {[bh.mib(h) for h in row['hwm']]}",
-                          flush=True)
+                          f"{row['seconds']:.2f} s (CPU {row['cpu']:.2f}), peaks "
+                          f"{[bh.mib(h) for h in row['hwm']]}", flush=True)
     write_report(results, time.time() - t_start)
 
 
@@ -827,7 +974,10 @@ def write_report(results: dict, seconds: float) -> None:
     if results.get("mesh"):
         text = ["# parsolve mesh stage: rank 0's path against the slice path", "",
                 [b for b in intro.split("\n\n") if b.startswith("Section *mesh*")][0], "",
-                machine() + f" {seconds:.0f} s.", "", mesh_table(results["mesh"]), ""]
+                results.get("mesh_machine", machine()), "", mesh_table(results["mesh"]), "",
+                "Fits of y = a + b·N + c·N/P and of y = a + c·N/P (N = DOFs = 3 × nodes; CPU "
+                "seconds of the busiest rank and peak memory per rank on 1, 2 and 4 ranks; least "
+                "squares on the relative error, coefficients ≥ 0) and the model each gives:", "", mesh_model(results["mesh"]), ""]
         md = "\n".join(text)
         (COMMITTED / "bench_setup_mesh.md").write_text(md)
         print(md)

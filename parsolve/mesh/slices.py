@@ -33,6 +33,7 @@ from mpi4py import MPI
 from parsolve.collective import agree
 from parsolve.errors import InputError
 from parsolve.mesh import blocks, checks, topology
+from parsolve.mesh.blocks import exchange
 from parsolve.mesh.distribute import COMPONENT_MARGIN, LocalMesh, index_dtype
 from parsolve import progress
 from parsolve.mesh.partition import MIN_CELLS_PER_PART, PARTITIONERS, block_starts, scotch_block
@@ -67,31 +68,12 @@ class SliceSource(Protocol):
 # ------------------------------------------------------------------ all-to-all
 
 
-def exchange(comm, rows: np.ndarray, dest: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rows (any dtype, 2D) sent to rank ``dest`` of each; returns (the rows received in
-    (source rank, row order), how many from each rank). Two Alltoallv calls."""
-    size = comm.size
-    rows = np.asarray(rows)
-    order = np.argsort(dest, kind="stable")
-    send = np.ascontiguousarray(rows[order])
-    width = send.dtype.itemsize * (int(np.prod(send.shape[1:])) if send.ndim > 1 else 1)
-    counts = np.bincount(dest, minlength=size).astype(np.int64) if dest.size \
-        else np.zeros(size, np.int64)
-    recv_counts = np.empty(size, dtype=np.int64)
-    comm.Alltoall(counts, recv_counts)
-    recv = np.empty((int(recv_counts.sum()),) + send.shape[1:], dtype=send.dtype)
-    displ = lambda c: np.concatenate([[0], np.cumsum(c)[:-1]]) * width  # noqa: E731
-    comm.Alltoallv([send.view(np.uint8), counts * width, displ(counts), MPI.BYTE],
-                   [recv.view(np.uint8), recv_counts * width, displ(recv_counts), MPI.BYTE])
-    return recv, recv_counts
-
-
 def fetch(comm, ids: np.ndarray, starts: np.ndarray, table: np.ndarray) -> np.ndarray:
     """Rows ``table[id - starts[home]]`` of each of ``ids`` from its home rank (the block of
     ``starts`` it falls in), in the order of ``ids``. Collective."""
     ids = np.asarray(ids, dtype=np.int64)
     home = np.searchsorted(starts, ids, side="right") - 1
-    order = np.argsort(home, kind="stable")
+    order = blocks.rank_order(home, comm.size)
     asked, counts = exchange(comm, ids[order], home[order])
     reply = table[asked - starts[comm.rank]]
     back, _ = exchange(comm, reply, np.repeat(np.arange(comm.size), counts))

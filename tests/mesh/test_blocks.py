@@ -103,3 +103,37 @@ def test_the_errors_are_one_blocks(name, comm):
 
 WORDS = {"inverted": "is inverted", "collapsed": "is collapsed", "many": "cells 3, 5, 8, 9, 11, ... (6 in all)",
          "folded": "overlap a neighbour", "three": "shared by more than two cells"}
+
+
+def test_rank_order_is_the_stable_sort_of_the_ranks():
+    rng = np.random.default_rng(3)
+    for size in (1, 3, 70_000):
+        dest = rng.integers(0, size, 5000)
+        assert np.array_equal(blocks.rank_order(dest, size), np.argsort(dest, kind="stable"))
+
+
+@pytest.mark.parametrize("base", [7, 2**20, 2**31 + 5])
+def test_packed_keys_keep_equality_and_order(base):
+    rng = np.random.default_rng(4)
+    keys = rng.integers(0, base, (400, 3))
+    keys[200:] = keys[:200]                     # every row twice
+    keys[:50, 2] = base - 1                     # the largest id fits
+    packed = blocks._packed(keys, base)
+    assert packed.shape[1] == {7: 1, 2**20: 1, 2**31 + 5: 3}[base]
+    # the same lexicographic order, and equal rows exactly where the keys are equal
+    assert np.array_equal(np.lexsort(packed.T[::-1]), np.lexsort(keys.T[::-1]))
+    _, inv_p = np.unique(packed, axis=0, return_inverse=True)
+    _, inv_k = np.unique(keys, axis=0, return_inverse=True)
+    assert np.array_equal(inv_p, inv_k)
+
+
+def test_exchange_sends_each_row_to_its_rank(comm):
+    """Rows of any dtype to the rank each names; received in (source rank, row order)."""
+    size, rank = comm.size, comm.rank
+    rows = np.array([[rank, k, 2 * k] for k in range(7)], dtype=np.int32)
+    dest = (np.arange(7) * (rank + 1)) % size
+    got, counts = blocks.exchange(comm, rows, dest)
+    want = [[r, k, 2 * k] for r in range(size) for k in range(7) if (k * (r + 1)) % size == rank]
+    assert got.dtype == np.int32 and np.array_equal(got, np.array(want, np.int32).reshape(-1, 3))
+    assert counts.tolist() == [sum((k * (r + 1)) % size == rank for k in range(7))
+                               for r in range(size)]
