@@ -12,7 +12,7 @@ from mpi4py import MPI
 from parsolve import progress
 from parsolve.collective import agree
 from parsolve.effects.base import Effect
-from parsolve.effects.constraints import build_relations
+from parsolve.relation_kinds.build import build_relations
 from parsolve.effects.elasticity import Elasticity
 from parsolve.effects.registry import EFFECTS
 from parsolve.errors import InputError

@@ -17,6 +17,12 @@ from parsolve.fields import Field
 Blocks = list[tuple[str, str, ElementMatrices]]
 
 
+def displacement_field(fields) -> str | None:
+    """The name of the displacement among a model's fields (the field an effect acting on the
+    displacement addresses: springs, contact); None without one."""
+    return next((f.name for f in fields if f.displacement), None)
+
+
 class Effect:
     name = ""
     linear = True        # its internal forces are K q: no Newton loop needed for it

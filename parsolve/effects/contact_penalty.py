@@ -190,6 +190,7 @@ class PenaltyContact(Effect):
         # the relations form's set-up does the checks, the pairing and the rows: reused as is
         geo = contact.Contact(spec, mesh, regions, fields, scene.source)
         self.spec, self.mesh, self.fields_ = spec, mesh, fields
+        self.u = geo.u
         self.name = f"contact {spec.name} ({spec.formulation})"
         self.pairing, self.nrows, self.trows = geo.pairing, geo.nrows, geo.trows
         # input ids → this rank's nodes (a part: owned + ghosts); the element-like blocks go
@@ -230,7 +231,7 @@ class PenaltyContact(Effect):
     # ------------------------------------------------------------------ kinematics
 
     def _u(self, values: dict) -> np.ndarray:
-        return values["u"]
+        return values[self.u]
 
     def gaps(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(g (n,), g_T (n, dim-1)): linearised gap g0 + Dn·q and tangential displacement at
@@ -320,7 +321,7 @@ class PenaltyContact(Effect):
         k = self.node_tangents(f)[which]
         # (a rank may hold no slave node: k is (0, dim, dim))
         blocks = NodeBlocks(k.reshape(len(k), self.mesh.dim ** 2).T.copy(), cell[has], local[has])
-        return {"u": fe}, [("u", "u", blocks)], trial, None
+        return {self.u: fe}, [(self.u, self.u, blocks)], trial, None
 
     def _node_places(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(cell, local node) of one of the rank's cells holding each owned slave node
@@ -368,7 +369,7 @@ class AugmentedContact(PenaltyContact):
         of a node, or a 3D slip direction, changed since the tangent was made), True and
         nothing else; once it is, one augmentation λ_N ← p_N, λ_T ← t, True while it moves
         them by more than the tolerance."""
-        u = q.reshape(self.mesh.num_points, -1)[:, self.fields_.columns("u")]
+        u = q.reshape(self.mesh.num_points, -1)[:, self.fields_.columns(self.u)]
         f = self.forces(u, self._state, self.lam_n, self.lam_t)
         self._inner += 1
         if not self._settled(f, self._last) and self._inner < INNER_LIMIT:

@@ -44,7 +44,7 @@ import numpy as np
 
 from parsolve.effects.base import Effect
 from parsolve.effects.compose import node_places
-from parsolve.effects.constraints import partners
+from parsolve.relation_kinds.periodic import partners
 from parsolve.errors import InputError
 from parsolve.fem.element_matrices import CellKernel, ElementMatrices, place_rows
 
@@ -135,6 +135,7 @@ class Springs(Effect):
             raise InputError("springs act on the displacement: the scene needs [[materials]]",
                              scene.source, spec.key)
         self.spec, self.mesh, self.source = spec, mesh, scene.source
+        self.u = scene.primary   # the displacement (the field springs act on)
         self.k = np.asarray(spec.stiffness, dtype=float)
         self.pairs = self._pairs(regions)   # (n, 2) local nodes (-1: not on this part; b to
         #                                     the ground: -1 throughout)
@@ -283,19 +284,19 @@ class Springs(Effect):
         np.add.at(fe, (cell, local), np.concatenate([f, -f]))
 
     def stiffness_blocks(self, cells: np.ndarray):
-        return [("u", "u", self._matrices(cells))]
+        return [(self.u, self.u, self._matrices(cells))]
 
     def evaluate(self, cells: np.ndarray, values: dict, state, secant: bool):
         """K u of the springs on their host cells' nodes (a few entries, not a cell pass)."""
         m = self._matrices(cells)
         vals, row, col, cell = m.entries
         d = self.mesh.dim
-        u = values["u"][self.mesh.cells[cells][cell, col]]          # (n, d) column node's
+        u = values[self.u][self.mesh.cells[cells][cell, col]]          # (n, d) column node's
         force = np.einsum("ijn,nj->ni", vals.reshape(d, d, -1), u)
         fe = np.zeros((len(cells), self.mesh.cells.shape[1], d))
         np.add.at(fe, (cell, row), force)
-        self._loose_forces(cells, values["u"], fe)
-        return {"u": fe}, [("u", "u", m)], state, None
+        self._loose_forces(cells, values[self.u], fe)
+        return {self.u: fe}, [(self.u, self.u, m)], state, None
 
     def output_names(self) -> list[str]:
         return [f"{self.spec.name}_force"]
@@ -306,7 +307,7 @@ class Springs(Effect):
         weight 1 there, so that the ranks' contributions average to it."""
         npts, d = self.mesh.num_points, self.mesh.dim
         a, b = self.pairs[:, 0], self.pairs[:, 1]
-        u = values["u"]
+        u = values[self.u]
         ground = self.spec.target is None
         on = (a >= 0) if ground else (a >= 0) & (b >= 0)
         a, b = a[on], b[on]
