@@ -390,11 +390,11 @@ def _effect_specs(top: Table, dim: int) -> dict[str, list]:
     seen = set()
     for name, entry_specs in specs.items():
         for spec in _declaring(name, entry_specs):
-            for field_name in _registry()[name].fields(spec, dim):
-                if field_name in seen:
-                    raise InputError(f"field {field_name!r} is declared twice", top.source,
+            for declared in _registry()[name].fields(spec, dim):
+                if declared in seen:
+                    raise InputError(f"field {declared!r} is declared twice", top.source,
                                      spec.key + ".field")
-                seen.add(field_name)
+                seen.add(declared)
     return specs
 
 

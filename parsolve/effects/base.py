@@ -13,6 +13,7 @@ import numpy as np
 
 from parsolve.fem.element_matrices import ElementMatrices, apply
 from parsolve.fields import Field
+from parsolve.loads.base import Instant
 
 Blocks = list[tuple[str, str, ElementMatrices]]
 
@@ -80,10 +81,12 @@ class Effect:
         for the adaptive steps (elasticity: the largest strain increment). 0: no limit."""
         return 0.0
 
-    def evaluate(self, cells: np.ndarray, values: dict[str, np.ndarray], state, secant: bool):
+    def evaluate(self, cells: np.ndarray, values: dict[str, np.ndarray], state, secant: bool,
+                 at: Instant):
         """Internal forces per field {field: (nc, nen, ncomp)}, tangent blocks, trial state and
         extras (e.g. stresses at quadrature points) at the node values ``values``
-        {field: (npoints, ncomp)}. A linear effect: K q and K."""
+        {field: (npoints, ncomp)} and the step's instant ``at`` (t, Δt, θ: what an effect
+        that depends on time reads, as the loads do). A linear effect: K q and K."""
         blocks = self.stiffness_blocks(cells)
         forces = {}
         for fi, fj, m in blocks:
@@ -119,8 +122,9 @@ class Effect:
     # whether its hooks may ever do so (the result file then has /timings/pattern)
     restructures = False
 
-    def begin_step(self, q: np.ndarray, active: dict) -> bool:
-        """Start a step from the committed state; True when relation values changed."""
+    def begin_step(self, q: np.ndarray, active: dict, at: Instant) -> bool:
+        """Start a step from the committed state, toward the instant ``at`` (t, Δt, θ of the
+        step); True when relation values changed."""
         return False
 
     def refresh(self, q: np.ndarray, lam: dict, active: dict) -> bool:

@@ -67,6 +67,7 @@ class Composition:
         self.nodes = model.mesh.cells[cells]                 # (nc, nen)
         self.npoints = model.mesh.num_points
         self._mass, self._loads = None, None
+        self.now = Instant(0.0)   # the step's instant: every effect's evaluation reads it
         for e in model.effects:
             e.couple(model.effects)
 
@@ -97,6 +98,13 @@ class Composition:
                 cols[self.fields.columns(name)] = w
             self._theta = (theta, np.tile(cols, self.npoints))
         return self._theta[1]
+
+    def begin(self, t: float, t_prev: float, theta: float | None) -> Instant:
+        """The instant of the step from t_prev to t (θ: the transient scheme's, None in a
+        quasi-static run): the one evaluation context that the effects' ``evaluate`` and
+        ``begin_step`` receive, as the loads do."""
+        self.now = Instant(t, t - t_prev, 1.0 if theta is None else theta)
+        return self.now
 
     def known_loads(self, t: float, t_prev: float, theta: float | None) -> np.ndarray:
         """The loads a step balances: F(t), or in a θ-scheme step θ F(t) + (1 - θ) F(t_n) on
@@ -177,7 +185,7 @@ class Composition:
         parts, trial, extras = [], [], []
         theta = 1.0 if rate is None else self.theta_of(rate.theta)
         for e, st in zip(self.model.effects, states):
-            forces, blocks, new, extra = e.evaluate(self.cells, vals, st, secant)
+            forces, blocks, new, extra = e.evaluate(self.cells, vals, st, secant, self.now)
             self._scatter(forces, f_int)
             parts += self._parts(blocks, theta)
             trial.append(new)

@@ -512,7 +512,7 @@ class Contact(FiniteSliding, Effect):
         effect: its lookups and reductions, shared)."""
         self.values = ctx.dofs
 
-    def begin_step(self, q: np.ndarray, active: dict) -> bool:
+    def begin_step(self, q: np.ndarray, active: dict, at) -> bool:
         """Start a step from the committed state: stick rows hold the tangential displacement
         of the step's start; True when the dual changed (values to copy into the system)."""
         self.node_state, self.direction = (a.copy() for a in self.committed)
@@ -617,7 +617,7 @@ class Contact(FiniteSliding, Effect):
             direction[sliding] = s[sliding]
         return unsettled
 
-    def evaluate(self, cells: np.ndarray, values: dict, state, secant: bool):
+    def evaluate(self, cells: np.ndarray, values: dict, state, secant: bool, at):
         """No forces and no stiffness of its own: the contact acts through its relations."""
         return {}, [], state, None
 

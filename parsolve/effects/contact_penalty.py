@@ -304,7 +304,7 @@ class PenaltyContact(Effect):
         """(λ_N, λ_T): penalty, none normal, and the committed friction force."""
         return np.zeros(len(self.pairing)), state["t"]
 
-    def evaluate(self, cells: np.ndarray, values: dict, state, secant: bool):
+    def evaluate(self, cells: np.ndarray, values: dict, state, secant: bool, at):
         u = self._u(values)
         lam_n, lam_t = self.multipliers(state)
         f = self.forces(u, state, lam_n, lam_t)
@@ -357,7 +357,7 @@ class AugmentedContact(PenaltyContact):
             self._fresh = False
         return self.lam_n, self.lam_t
 
-    def begin_step(self, q: np.ndarray, active: dict) -> bool:
+    def begin_step(self, q: np.ndarray, active: dict, at) -> bool:
         self.augmentations, self._fresh, self._inner = 0, True, 0
         return False
 

@@ -286,7 +286,7 @@ class Springs(Effect):
     def stiffness_blocks(self, cells: np.ndarray):
         return [(self.u, self.u, self._matrices(cells))]
 
-    def evaluate(self, cells: np.ndarray, values: dict, state, secant: bool):
+    def evaluate(self, cells: np.ndarray, values: dict, state, secant: bool, at):
         """K u of the springs on their host cells' nodes (a few entries, not a cell pass)."""
         m = self._matrices(cells)
         vals, row, col, cell = m.entries

@@ -285,6 +285,7 @@ class NewtonSolver:
     def step(self, t: float) -> StepResult:
         system, spec = self.system, self.spec
         free = system.free_rows()
+        self.ctx.composition.begin(t, self.t_prev, None if self.time is None else self.time.theta)
         if self.hooks:   # contact hooks timed apart: /timings/contact
             t0 = time.perf_counter()
             changed = self._begin_hooks()
@@ -383,7 +384,8 @@ class NewtonSolver:
     def _begin_hooks(self) -> bool:
         changed = False
         for e in self.hooks:
-            changed = e.begin_step(self.q, self._views(self.active.active)) or changed
+            changed = e.begin_step(self.q, self._views(self.active.active),
+                                   self.ctx.composition.now) or changed
         return changed
 
     def _refresh_hooks(self) -> bool:

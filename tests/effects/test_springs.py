@@ -13,6 +13,7 @@ from mpi4py import MPI
 
 from conftest import CONFIGS, assert_same_results
 from parsolve.errors import InputError
+from parsolve.loads.base import Instant
 from parsolve.model import build_model
 from parsolve.scene import load_scene
 
@@ -276,7 +277,7 @@ def test_element_form_is_the_springs_blocks():
     for effect in (e for e in model.effects if isinstance(e, Springs)):
         m = effect.stiffness_blocks(cells)[0][2]
         m.kernel.block = 3
-        forces = effect.evaluate(cells, {"u": u}, None, False)[0]["u"]
+        forces = effect.evaluate(cells, {"u": u}, None, False, Instant(1.0))[0]["u"]
         np.testing.assert_allclose(apply(m, u[model.mesh.cells]), forces, rtol=1e-13, atol=1e-13)
         V = m.values                                    # (4, nen, nen, nc): symmetric blocks
         np.testing.assert_array_equal(V, V.reshape(2, 2, 4, 4, -1).transpose(1, 0, 3, 2, 4)
