@@ -69,6 +69,8 @@ class _CellReplaced:
         nc = self.base.ncomp
         slots = pair_slot[:, :, self.cells].ravel()
         for (ci, cj, m0, fac), (_, _, m1, _) in zip(self.base.parts, self.other.parts):
+            if hasattr(m0, "term"):   # a declared term (TermMatrices): on nodes, not cells
+                continue
             diff = (_cell_values(m1, self.cells) - _cell_values(m0, self.cells))
             diff = diff.reshape(len(diff), -1)
             idx = (np.asarray(ci)[:, None] * nc + np.asarray(cj)[None, :]).ravel()
