@@ -12,7 +12,7 @@ from mpi4py import MPI
 from parsolve import progress
 from parsolve.collective import agree
 from parsolve.effects.base import Effect
-from parsolve.effects.constraints import build_relations
+from parsolve.relation_kinds.build import build_relations
 from parsolve.effects.elasticity import Elasticity
 from parsolve.effects.registry import EFFECTS
 from parsolve.errors import InputError
@@ -59,16 +59,18 @@ class Model:
 
     @property
     def nonlinear(self) -> bool:
-        return any(not e.linear for e in self.effects)
+        """An effect, or a term one declares, is nonlinear: the Newton loop runs."""
+        return any(not e.linear or any(not t.linear for t in e.terms()) for e in self.effects)
 
     @property
     def transient(self) -> bool:
         return self.scene.time is not None
 
     def symmetric(self, secant: bool = False) -> bool:
-        """Every effect's tangent is symmetric (Mazars' only with the secant matrix)."""
-        return all(e.symmetric or secant and getattr(e, "symmetric_secant", False)
-                   for e in self.effects)
+        """Every effect's tangent is symmetric (Mazars' only with the secant matrix), and so
+        is every term the effects declare."""
+        return all((e.symmetric or secant and getattr(e, "symmetric_secant", False))
+                   and all(t.symmetric for t in e.terms()) for e in self.effects)
 
     def initial_q(self) -> np.ndarray:
         """The primal vector at t = 0 (this rank's DOFs): the effects' initial values, else 0."""

@@ -14,17 +14,16 @@ from pathlib import Path
 from typing import Any
 
 from parsolve.errors import InputError
-from parsolve.schema import (MAX_MAGNITUDE, MIN_MAGNITUDE, NAME_PATTERN, Table,  # noqa: F401
-                             check_number)
+from parsolve.schema import (MAX_MAGNITUDE, MIN_MAGNITUDE, NAME_PATTERN, Declared,  # noqa: F401
+                             Table, check_number, field_name, plain_name)
 from parsolve.evolution import CONSTANT, RAMP, Evolution
 from parsolve.fem.axisymmetric import Axisymmetric
 from parsolve.loads.base import LoadSpec, uses_time
 from parsolve.loads.registry import LOADS, names_for
+from parsolve.relation_kinds.base import RelationSpec
+from parsolve.relation_kinds.registry import RELATIONS
 
 HYPOTHESES = ("plane_stress", "plane_strain", "3d", "axisymmetric")
-COMPONENTS = {"x": 0, "y": 1, "z": 2, "ux": 0, "uy": 1, "uz": 2}
-RELATION_TYPES = ("dirichlet", "equal", "mean", "linear", "strain", "periodic")
-STRAIN_COMPONENTS = {"xx": (0, 0), "yy": (1, 1), "zz": (2, 2), "xy": (0, 1), "yz": (1, 2), "xz": (0, 2)}
 PRESETS = ("direct", "iterative", "auto")
 PARTITIONERS = ("scotch", "bisection")   # parsolve.mesh.partition.PARTITIONERS
 DEFAULT_PARTITIONER = "scotch"
@@ -45,37 +44,6 @@ class RegionSpec:
     kind: str          # "expr", "box", "point", "group"
     value: Any
     key: str
-
-
-@dataclass
-class TermSpec:
-    region: str
-    component: int
-    coefficient: float
-    mean: bool
-    field: str
-
-
-@dataclass
-class RelationSpec:
-    name: str
-    type: str
-    region: str | None
-    components: list[int]
-    value: float | str   # a string is an expression of x, y, z (Dirichlet only)
-    evolution: str
-    terms: list[TermSpec]
-    dual: str | None
-    sense: str
-    eliminate: bool | None
-    key: str
-    direction: list[float] | None = None   # strain: unit vector n of n·ε·n
-    per_cell: bool = False                 # strain: one row per cell of the region
-    maximum: bool = False                  # unilateral rows of which the largest is enforced
-    field: str = ""                        # the field the relation constrains (always given)
-    report: bool = False                   # print its resultant with each step's progress line
-    target: str | None = None              # periodic: the region tied to ``region``
-    translation: list[float] | None = None  # periodic: target node = region node + this
 
 
 @dataclass
@@ -157,6 +125,12 @@ class Scene:
         return _declared_fields(self.effect_specs, self.dim)
 
     @property
+    def primary(self) -> str | None:
+        """The field loads and relations address without a ``field`` key: the displacement
+        (None without elasticity)."""
+        return _primary_field(self.effect_specs, self.dim)
+
+    @property
     def materials(self) -> list:
         """The [[materials]] entries (the elasticity's specs; none without elasticity)."""
         specs = self.effect_specs
@@ -228,9 +202,9 @@ def parse_scene(data: dict, source: str, text: str = "", base: Path = Path("."))
             f"[{e.section}] ({name})" for name, e in _registry().items()) + ")", source,
             "materials")
     fields = _declared_fields(effect_specs, dim)
-    primary = _primary_field(effect_specs, dim)
-    loads = [_load(t, dim, fields, primary) for t in top.tables("loads")]
-    relations = [_relation(t, dim, fields, primary) for t in top.tables("relations")]
+    declared = Declared(dim, fields, _primary_field(effect_specs, dim))
+    loads = [_load(t, declared) for t in top.tables("loads")]
+    relations = [_relation(t, declared) for t in top.tables("relations")]
     time_spec = _time(top.table("time", None))
     if time_spec is not None and not top.has("steps"):
         raise InputError("a transient scene needs its time steps ([steps] times or count/end)",
@@ -313,50 +287,12 @@ def _evolutions(t: Table) -> dict[str, Evolution]:
     return evols
 
 
-def _field(t: Table, fields: dict[str, int], primary: str | None) -> str:
-    """The field a relation, term or load addresses: 'field', else the primary one (the
-    displacement), else the only one."""
-    if t.has("field") or primary is None and len(fields) != 1:
-        name = t.get("field", str)
-        if name not in fields:
-            raise t.error("field", f"unknown field {name!r} (fields: {', '.join(fields)})")
-        return name
-    return primary if primary is not None else next(iter(fields))
-
-
-def _field_component(t: Table, name: str, dim: int, field: str, fields: dict[str, int]) -> int:
-    """Component index within a field; a scalar field has one, unnamed (or "value")."""
-    if fields[field] == 1:
-        if t.has(name) and t.get(name, str) not in ("", "value", field):
-            raise t.error(name, f"field {field!r} is scalar: it has no component {t.data[name]!r}")
-        t.used.add(name)
-        return 0
-    return _component(t, name, dim)
-
-
-def _component(t: Table, name: str, dim: int) -> int:
-    comp = t.get(name, str)
-    if comp not in COMPONENTS or COMPONENTS[comp] >= dim:
-        allowed = [c for c, i in COMPONENTS.items() if i < dim and len(c) == 1]
-        raise t.error(name, f"unknown component {comp!r} for a {dim}D model (use {', '.join(allowed)})")
-    return COMPONENTS[comp]
-
-
-def _name(t: Table, default: Any = ...) -> str:
-    """A relation or load-pattern name: it becomes an HDF5 group name."""
-    name = t.get("name", str, default)
-    if not NAME_PATTERN.fullmatch(name):
-        raise t.error("name", f"{name!r} is not a plain name (a letter or '_', then letters, "
-                              "digits, '_' or '-'; at most 64 characters)")
-    return name
-
-
-def _load(t: Table, dim: int, fields: dict[str, int], primary: str | None) -> LoadSpec:
+def _load(t: Table, declared: Declared) -> LoadSpec:
     """A [[loads]] entry: the common keys, then the value of the one load key it gives, read
     as its registry entry says (``loads.registry``)."""
-    pattern = _name(t, "loads")
-    field = _field(t, fields, primary)
-    ncomp = fields[field]
+    pattern = plain_name(t, "loads")
+    field = field_name(t, declared)
+    ncomp, dim = declared.fields[field], declared.dim
     names = names_for(ncomp)
     given = [k for k in names if t.has(k)]
     if len(given) != 1:
@@ -388,97 +324,29 @@ def _load_values(t: Table, key: str, entry, count: int) -> list:
     return [sub.get(k, (float, str)) for k in sub.data]
 
 
-def _relation(t: Table, dim: int, fields: dict[str, int], primary: str | None) -> RelationSpec:
-    name = _name(t)
-    rtype = t.get("type", str, choices=RELATION_TYPES)
-    field = _field(t, fields, primary)
-    region, comps, terms, direction = None, [], [], None
-    if rtype in ("dirichlet", "periodic"):
-        region = t.get("region", str)
-        raw = t.get("components", list, None)
-        if rtype == "periodic" and raw is None and not t.has("component"):
-            comps = list(range(fields[field]))   # every component of the field by default
-        elif fields[field] == 1 and raw is None:
-            comps = [_field_component(t, "component", dim, field, fields)]
-        elif raw is None:
-            comps = [_component(t, "component", dim)]
-        else:
-            sub = Table({f"components[{i}]": c for i, c in enumerate(raw)}, t.path, t.source)
-            comps = [_field_component(sub, k, dim, field, fields) for k in sub.data]
-            if len(set(comps)) != len(comps):
-                raise t.error("components", "a component is listed twice")
-    elif rtype in ("equal", "mean"):
-        region = t.get("region", str)
-        comps = [_field_component(t, "component", dim, field, fields)]
-        terms = [TermSpec(region, comps[0], 1.0, True, field)]
-        minus = t.table("minus", None)
-        if minus is not None:
-            if rtype == "equal":
-                raise t.error("minus", "only a 'mean' relation takes 'minus'")
-            mfield = _field(minus, fields, primary) if minus.has("field") else field
-            terms.append(TermSpec(minus.get("region", str),
-                                  _field_component(minus, "component", dim, mfield, fields),
-                                  -1.0, True, mfield))
-            minus.done()
-    elif rtype == "strain":
-        if field != primary:
-            raise t.error("type", "a strain relation constrains the displacement field")
-        region = t.get("region", str)
-        direction = _strain_direction(t, dim)
-    else:
-        for sub in t.tables("terms"):
-            tfield = _field(sub, fields, primary) if sub.has("field") else field
-            terms.append(TermSpec(sub.get("region", str),
-                                  _field_component(sub, "component", dim, tfield, fields),
-                                  sub.get("coefficient", float, 1.0), sub.get("mean", bool, False),
-                                  tfield))
-            sub.done()
-        if not terms:
-            raise t.error("terms", "a linear relation needs at least one term")
-    target = t.get("target", str) if rtype == "periodic" else None
-    translation = t.floats("translation", dim) if rtype == "periodic" else None
-    value = t.get("value", (float, str) if rtype == "dirichlet" else float, 0.0)
-    evolution = t.get("evolution", str, "ramp")
-    dual = t.get("dual", str, None)
-    sense = t.get("sense", str, "=", choices=("=", "<=", ">="))
-    eliminate = t.get("eliminate", bool, None)
-    per_cell = t.get("per_cell", bool, False) if rtype == "strain" else False
-    maximum = t.get("maximum", bool, False)
-    report = t.get("report", bool, False)
-    if rtype in ("equal", "periodic") and t.has("value"):
-        raise t.error("value", f"an {rtype!r} relation has no value")
-    if maximum and sense == "=":
+def _relation(t: Table, declared: Declared) -> RelationSpec:
+    """A [[relations]] entry: the common keys, and its kind's own as its registry entry reads
+    them (``relation_kinds.registry``)."""
+    name = plain_name(t)
+    kind = t.get("type", str, choices=tuple(RELATIONS))
+    entry = RELATIONS[kind]
+    spec = RelationSpec(name, kind, t.path, field_name(t, declared))
+    entry.parse(t, spec, declared)
+    if entry.value is None and t.has("value"):
+        raise t.error("value", f"an {kind!r} relation has no value")
+    spec.value = t.get("value", entry.value, 0.0) if entry.value is not None else 0.0
+    spec.evolution = t.get("evolution", str, "ramp")
+    spec.dual = t.get("dual", str, None)
+    spec.sense = t.get("sense", str, "=", choices=("=", "<=", ">="))
+    spec.eliminate = t.get("eliminate", bool, None)
+    spec.maximum = t.get("maximum", bool, False)
+    spec.report = t.get("report", bool, False)
+    if spec.maximum and spec.sense == "=":
         raise t.error("maximum", "a maximum control needs a unilateral sense ('<=' or '>=')")
-    if maximum and not per_cell:
+    if spec.maximum and not spec.per_cell:
         raise t.error("maximum", "a maximum control needs several rows (per_cell = true)")
     t.done()
-    return RelationSpec(name, rtype, region, comps, value, evolution, terms, dual, sense,
-                        eliminate, t.path, direction, per_cell, maximum, field, report, target,
-                        translation)
-
-
-def _strain_direction(t: Table, dim: int) -> list[float]:
-    """n of the strain n·ε·n: from 'direction' (normalised) or a component name ('xx', ...)."""
-    if t.has("direction") == t.has("component"):
-        raise t.error("direction", "give exactly one of 'direction' or 'component'")
-    if t.has("direction"):
-        n = t.floats("direction", dim)
-        norm = sum(v * v for v in n) ** 0.5
-        if norm == 0:
-            raise t.error("direction", "must not be zero")
-        return [v / norm for v in n]
-    comp = t.get("component", str)
-    pair = STRAIN_COMPONENTS.get(comp)
-    if pair is None or max(pair) >= dim:
-        known = [c for c, p in STRAIN_COMPONENTS.items() if max(p) < dim]
-        raise t.error("component", f"unknown strain component {comp!r} (use {', '.join(known)})")
-    n = [0.0] * dim
-    if pair[0] == pair[1]:
-        n[pair[0]] = 1.0
-        return n
-    # shear: n·ε·n with n at 45° in the (i, j) plane is ε_ij + (ε_ii + ε_jj)/2; plain ε_ij is
-    # asked through a pair direction instead: keep it simple and refuse
-    raise t.error("component", "shear components are controlled through 'direction'")
+    return spec
 
 
 def _declared_fields(effect_specs: dict, dim: int) -> dict[str, int]:
@@ -522,11 +390,11 @@ def _effect_specs(top: Table, dim: int) -> dict[str, list]:
     seen = set()
     for name, entry_specs in specs.items():
         for spec in _declaring(name, entry_specs):
-            for field_name in _registry()[name].fields(spec, dim):
-                if field_name in seen:
-                    raise InputError(f"field {field_name!r} is declared twice", top.source,
+            for declared in _registry()[name].fields(spec, dim):
+                if declared in seen:
+                    raise InputError(f"field {declared!r} is declared twice", top.source,
                                      spec.key + ".field")
-                seen.add(field_name)
+                seen.add(declared)
     return specs
 
 
@@ -690,10 +558,8 @@ def _cross_check(scene: Scene) -> None:
         if r.name in names:
             raise InputError(f"duplicate relation name {r.name!r}", src, r.key + ".name")
         names.add(r.name)
-        region(r.region, r.key + ".region")
-        region(r.target, r.key + ".target")
-        for i, term in enumerate(r.terms):
-            region(term.region, f"{r.key}.terms[{i}].region")
+        for region_name, key in RELATIONS[r.type].regions(r):
+            region(region_name, key)
         if r.evolution not in scene.evolutions:
             raise InputError(f"unknown evolution {r.evolution!r}", src, r.key + ".evolution")
         if r.dual is not None and r.dual not in patterns:

@@ -1,5 +1,5 @@
 """The scene's reading primitives, shared by the scene reader and every registry entry's
-schema (effects, loads): a TOML table with its dotted path and typed reads, the number check
+schema (effects, loads, relations): a TOML table with its dotted path and typed reads, the number check
 every float passes, and the plain names that become HDF5 groups. Nothing here imports an
 effect or the scene, so that entries read their own keys without an import circle."""
 
@@ -8,6 +8,7 @@ from __future__ import annotations
 import difflib
 import math
 import re
+from dataclasses import dataclass
 from typing import Any
 
 from parsolve.errors import InputError
@@ -100,3 +101,59 @@ class Table:
             hint = f" (did you mean {close[0]!r}?)" if close else \
                 f" (known: {', '.join(sorted(self.used))})"
             raise self.error(unknown[0], "unknown key" + hint)
+
+
+# ------------------------------------------------ what loads and relations address
+
+COMPONENTS = {"x": 0, "y": 1, "z": 2, "ux": 0, "uy": 1, "uz": 2}
+
+
+@dataclass(frozen=True)
+class Declared:
+    """What a load or relation entry reads against: the model's dimension, the fields the
+    scene's effects declare {name: components} and the primary one (the displacement: the
+    field named by default), None when no effect has one."""
+
+    dim: int
+    fields: dict
+    primary: str | None
+
+
+def field_name(t: Table, declared: Declared) -> str:
+    """The field a relation, term or load addresses: 'field', else the primary one, else the
+    only one."""
+    fields, primary = declared.fields, declared.primary
+    if t.has("field") or primary is None and len(fields) != 1:
+        name = t.get("field", str)
+        if name not in fields:
+            raise t.error("field", f"unknown field {name!r} (fields: {', '.join(fields)})")
+        return name
+    return primary if primary is not None else next(iter(fields))
+
+
+def field_component(t: Table, name: str, declared: Declared, field: str) -> int:
+    """Component index within a field; a scalar field has one, unnamed (or "value")."""
+    if declared.fields[field] == 1:
+        if t.has(name) and t.get(name, str) not in ("", "value", field):
+            raise t.error(name, f"field {field!r} is scalar: it has no component {t.data[name]!r}")
+        t.used.add(name)
+        return 0
+    return component(t, name, declared.dim)
+
+
+def component(t: Table, name: str, dim: int) -> int:
+    """A vector component by name (x, y, z or ux, uy, uz) within ``dim``."""
+    comp = t.get(name, str)
+    if comp not in COMPONENTS or COMPONENTS[comp] >= dim:
+        allowed = [c for c, i in COMPONENTS.items() if i < dim and len(c) == 1]
+        raise t.error(name, f"unknown component {comp!r} for a {dim}D model (use {', '.join(allowed)})")
+    return COMPONENTS[comp]
+
+
+def plain_name(t: Table, default: Any = ...) -> str:
+    """A relation or load-pattern name: it becomes an HDF5 group name."""
+    name = t.get("name", str, default)
+    if not NAME_PATTERN.fullmatch(name):
+        raise t.error("name", f"{name!r} is not a plain name (a letter or '_', then letters, "
+                              "digits, '_' or '-'; at most 64 characters)")
+    return name

@@ -164,7 +164,8 @@ def test_effects_do_not_import_the_scene():
     import subprocess
     import sys
 
-    code = ("import sys, parsolve.effects.registry, parsolve.loads.registry; "
+    code = ("import sys, parsolve.effects.registry, parsolve.loads.registry, "
+            "parsolve.relation_kinds.registry, parsolve.relation_kinds.build; "
             "print('parsolve.scene' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          env={k: v for k, v in __import__("os").environ.items()

@@ -11,10 +11,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from parsolve.fem.element_matrices import ElementMatrices, apply
+from parsolve.fem.element_matrices import ElementMatrices, Term, TermMatrices, apply
 from parsolve.fields import Field
+from parsolve.loads.base import Instant
 
 Blocks = list[tuple[str, str, ElementMatrices]]
+
+
+def displacement_field(fields) -> str | None:
+    """The name of the displacement among a model's fields (the field an effect acting on the
+    displacement addresses: springs, contact); None without one."""
+    return next((f.name for f in fields if f.displacement), None)
 
 
 class Effect:
@@ -39,16 +46,12 @@ class Effect:
         time: an exchange condition's h ∫ N T∞(t)), applied with the scene's; none by default."""
         return {}
 
-    def node_pairs(self) -> np.ndarray:
-        """(k, 2) local node pairs that need a stiffness slot no cell gives (springs between
-        nodes that share no cell); the system adds them to its pattern and hands back their
-        slots (``set_pair_slots``). Empty by default."""
-        return np.zeros((0, 2), dtype=np.int64)
-
-    def set_pair_slots(self, slots: np.ndarray) -> None:
-        """The pattern slots of ``node_pairs``: (2, 2, k), slot of node pair (i, j) of pair
-        k (i, j: 0 its first node, 1 its second); the pattern's ``nnzb`` where the row is
-        owned by another rank. Called once, by the system, on every effect."""
+    def terms(self) -> list[Term]:
+        """The terms it contributes on tuples of nodes rather than through cells (springs,
+        a node's penalty block), declared once: the system adds them to its pattern and sets
+        their slots; their values come as ``TermMatrices`` among the blocks, their forces as
+        ``NodeForces``. None by default."""
+        return []
 
     def couple(self, effects: list["Effect"]) -> None:
         """Called once the model's effects are composed: a coupling effect finds the effects
@@ -74,15 +77,19 @@ class Effect:
         for the adaptive steps (elasticity: the largest strain increment). 0: no limit."""
         return 0.0
 
-    def evaluate(self, cells: np.ndarray, values: dict[str, np.ndarray], state, secant: bool):
-        """Internal forces per field {field: (nc, nen, ncomp)}, tangent blocks, trial state and
+    def evaluate(self, cells: np.ndarray, values: dict[str, np.ndarray], state, secant: bool,
+                 at: Instant):
+        """Internal forces per field {field: (nc, nen, ncomp) element forces, ``NodeForces`` of
+        its terms, or a list of these}, tangent blocks, trial state and
         extras (e.g. stresses at quadrature points) at the node values ``values``
-        {field: (npoints, ncomp)}. A linear effect: K q and K."""
+        {field: (npoints, ncomp)} and the step's instant ``at`` (t, Δt, θ: what an effect
+        that depends on time reads, as the loads do). A linear effect: K q and K."""
         blocks = self.stiffness_blocks(cells)
-        forces = {}
+        forces: dict[str, list] = {}
         for fi, fj, m in blocks:
-            fe = apply(m, values[fj][self.cells_nodes(cells)])
-            forces[fi] = forces[fi] + fe if fi in forces else fe
+            forces.setdefault(fi, []).append(
+                m.forces(values[fj]) if isinstance(m, TermMatrices)
+                else apply(m, values[fj][self.cells_nodes(cells)]))
         return forces, blocks, state, None
 
     def cells_nodes(self, cells: np.ndarray) -> np.ndarray:
@@ -113,8 +120,9 @@ class Effect:
     # whether its hooks may ever do so (the result file then has /timings/pattern)
     restructures = False
 
-    def begin_step(self, q: np.ndarray, active: dict) -> bool:
-        """Start a step from the committed state; True when relation values changed."""
+    def begin_step(self, q: np.ndarray, active: dict, at: Instant) -> bool:
+        """Start a step from the committed state, toward the instant ``at`` (t, Δt, θ of the
+        step); True when relation values changed."""
         return False
 
     def refresh(self, q: np.ndarray, lam: dict, active: dict) -> bool:

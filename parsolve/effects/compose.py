@@ -17,37 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from parsolve.fem.element_matrices import BlockMatrices, apply
+from parsolve.fem.element_matrices import BlockMatrices, NodeForces, TermMatrices, apply
 from parsolve.loads.base import Instant
-
-
-@dataclass
-class NodeBlocks:
-    """Blocks on single nodes (node springs, contact with a rigid obstacle), added through the
-    rank's cells: block k (d², k-th column) goes to the diagonal block of local node
-    ``local[k]`` of cell ``cell[k]`` (positions in the rank's cells), a slot of the stiffness
-    pattern the cells already made. Reduced like ``ElementMatrices``: a value update."""
-
-    values: np.ndarray   # (d², k)
-    cell: np.ndarray     # (k,)
-    local: np.ndarray    # (k,)
-
-    def reduce(self, pair_slot: np.ndarray, npairs: int) -> np.ndarray:
-        slots = pair_slot[self.local, self.local, self.cell]
-        return np.stack([np.bincount(slots, weights=v, minlength=npairs + 1)[:npairs]
-                         for v in self.values]) if len(self.values) else np.zeros((0, npairs))
-
-
-def node_places(cell_nodes: np.ndarray, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(cell, local position) of the first cell of ``cell_nodes`` (nc, nen) holding each of
-    ``nodes``; (-1, -1) where none does (a node of another rank's cells)."""
-    flat = cell_nodes.ravel()
-    present, first = np.unique(flat, return_index=True)
-    pos = np.minimum(np.searchsorted(present, nodes), max(present.size - 1, 0))
-    hit = present[pos] == nodes if present.size else np.zeros(len(nodes), dtype=bool)
-    where = np.where(hit, first[pos] if present.size else -1, -1)
-    nen = cell_nodes.shape[1]
-    return np.where(where >= 0, where // nen, -1), np.where(where >= 0, where % nen, -1)
 
 
 @dataclass
@@ -67,6 +38,7 @@ class Composition:
         self.nodes = model.mesh.cells[cells]                 # (nc, nen)
         self.npoints = model.mesh.num_points
         self._mass, self._loads = None, None
+        self.now = Instant(0.0)   # the step's instant: every effect's evaluation reads it
         for e in model.effects:
             e.couple(model.effects)
 
@@ -98,6 +70,13 @@ class Composition:
             self._theta = (theta, np.tile(cols, self.npoints))
         return self._theta[1]
 
+    def begin(self, t: float, t_prev: float, theta: float | None) -> Instant:
+        """The instant of the step from t_prev to t (θ: the transient scheme's, None in a
+        quasi-static run): the one evaluation context that the effects' ``evaluate`` and
+        ``begin_step`` receive, as the loads do."""
+        self.now = Instant(t, t - t_prev, 1.0 if theta is None else theta)
+        return self.now
+
     def known_loads(self, t: float, t_prev: float, theta: float | None) -> np.ndarray:
         """The loads a step balances: F(t), or in a θ-scheme step θ F(t) + (1 - θ) F(t_n) on
         the equations of fields with a capacity (F(t) elsewhere); plus the effects' own
@@ -120,11 +99,16 @@ class Composition:
                 self._scatter(p, self._loads)
         return None if self._loads is False else self._loads
 
-    def _scatter(self, forces: dict[str, np.ndarray], out: np.ndarray, factor: float = 1.0) -> None:
-        """Add element forces {field: (nc, nen, ncomp)} into a full vector."""
-        for name, fe in forces.items():
-            dofs = self.fields.dofs(name, self.nodes.ravel())
-            out += factor * np.bincount(dofs.ravel(), weights=fe.reshape(-1), minlength=out.size)
+    def _scatter(self, forces: dict, out: np.ndarray, factor: float = 1.0) -> None:
+        """Add forces {field: element forces (nc, nen, ncomp) of the cells, ``NodeForces`` of
+        a term, or a list of these} into a full vector."""
+        for name, parts in forces.items():
+            for fe in parts if isinstance(parts, list) else [parts]:
+                nodes = fe.nodes if isinstance(fe, NodeForces) else self.nodes
+                values = fe.values if isinstance(fe, NodeForces) else fe
+                dofs = self.fields.dofs(name, nodes.ravel())
+                out += factor * np.bincount(dofs.ravel(), weights=values.reshape(-1),
+                                            minlength=out.size)
 
     def mass_parts(self) -> list:
         if self._mass is None:
@@ -159,10 +143,10 @@ class Composition:
         """Σ K_e q_e of the given blocks as a full vector (rows of this rank's cells)."""
         vals = self.values(q)
         out = np.zeros(self.ndof)
-        forces = {}
+        forces: dict[str, list] = {}
         for fi, fj, m in blocks:
-            fe = apply(m, vals[fj][self.nodes])
-            forces[fi] = forces[fi] + fe if fi in forces else fe
+            forces.setdefault(fi, []).append(
+                m.forces(vals[fj]) if isinstance(m, TermMatrices) else apply(m, vals[fj][self.nodes]))
         self._scatter(forces, out)
         return out
 
@@ -177,7 +161,7 @@ class Composition:
         parts, trial, extras = [], [], []
         theta = 1.0 if rate is None else self.theta_of(rate.theta)
         for e, st in zip(self.model.effects, states):
-            forces, blocks, new, extra = e.evaluate(self.cells, vals, st, secant)
+            forces, blocks, new, extra = e.evaluate(self.cells, vals, st, secant, self.now)
             self._scatter(forces, f_int)
             parts += self._parts(blocks, theta)
             trial.append(new)

@@ -99,7 +99,7 @@ from parsolve.contact.rows import friction_dual, node_rows, normal_rows, normal_
     repeated, slip_vectors, span_rows, tangent_rows
 from parsolve.contact.sliding import Spans, obstacle_spans
 from parsolve.contact.surfaces import Surfaces, canonical_facets
-from parsolve.effects.base import Effect
+from parsolve.effects.base import Effect, displacement_field
 from parsolve.effects.contact_sliding import FiniteSliding
 from parsolve.errors import InputError
 from parsolve.la.dofmap import DofMap
@@ -191,7 +191,8 @@ class Contact(FiniteSliding, Effect):
         self.radial = radial    # axisymmetric: mortar integrals over the surface of revolution
         self.name = f"contact {spec.name}"
         key = spec.key
-        if "u" not in fields:
+        self.u = displacement_field(fields)
+        if self.u is None:
             raise InputError("contact needs a displacement field (a [[materials]] section)",
                              source, key)
         # rows over input DOFs; their values from this rank's vector (the DOF map's owned
@@ -406,7 +407,7 @@ class Contact(FiniteSliding, Effect):
 
     def _row_dofs(self, rows) -> np.ndarray:
         """The displacement DOFs (input numbering) of rows' entries."""
-        return rows.node * self.fields_.ncomp + self.fields_.offset["u"] + rows.comp
+        return rows.node * self.fields_.ncomp + self.fields_.offset[self.u] + rows.comp
 
     def _tangent_coefs(self) -> np.ndarray:
         """Coefficients of the tangential relation's rows: 2D, along t; 3D, along the slip
@@ -511,7 +512,7 @@ class Contact(FiniteSliding, Effect):
         effect: its lookups and reductions, shared)."""
         self.values = ctx.dofs
 
-    def begin_step(self, q: np.ndarray, active: dict) -> bool:
+    def begin_step(self, q: np.ndarray, active: dict, at) -> bool:
         """Start a step from the committed state: stick rows hold the tangential displacement
         of the step's start; True when the dual changed (values to copy into the system)."""
         self.node_state, self.direction = (a.copy() for a in self.committed)
@@ -616,7 +617,7 @@ class Contact(FiniteSliding, Effect):
             direction[sliding] = s[sliding]
         return unsettled
 
-    def evaluate(self, cells: np.ndarray, values: dict, state, secant: bool):
+    def evaluate(self, cells: np.ndarray, values: dict, state, secant: bool, at):
         """No forces and no stiffness of its own: the contact acts through its relations."""
         return {}, [], state, None
 

@@ -45,9 +45,9 @@ relations form, to the tolerance. A step that needs more than ``max_augmentation
 is cut like any failed step). The multipliers start each step from the last converged forces.
 
 **Contact elements and the sparsity:** against a rigid obstacle a pair couples one node with
-itself: its block is the node's diagonal block, already in the stiffness pattern; it is added
-through one of the rank's cells holding the node (``compose.NodeBlocks``), so re-assembly stays
-a value update of the fixed pattern. A deformable master surface (slave node + master facet
+itself: its block is the node's diagonal block, a term the effect declares on its owned slave
+nodes (``Effect.terms``, ``TermMatrices``), given its slots once, so re-assembly stays a value
+update of the fixed pattern. A deformable master surface (slave node + master facet
 nodes) needs node pairs that no cell holds: it is refused (exit 2) until the system's pattern
 takes contact elements (see the report of this work).
 
@@ -81,7 +81,7 @@ from parsolve.contact.friction import OPEN, SLIP, STICK
 from parsolve.la.dofmap import DofMap
 from parsolve.effects import contact
 from parsolve.effects.base import Effect
-from parsolve.effects.compose import NodeBlocks, node_places
+from parsolve.fem.element_matrices import NodeForces, Term, TermMatrices
 from parsolve.errors import InputError, SolverError
 from parsolve.fem import kernels
 from parsolve.mesh.topology import facets_from_nodes
@@ -190,6 +190,7 @@ class PenaltyContact(Effect):
         # the relations form's set-up does the checks, the pairing and the rows: reused as is
         geo = contact.Contact(spec, mesh, regions, fields, scene.source)
         self.spec, self.mesh, self.fields_ = spec, mesh, fields
+        self.u = geo.u
         self.name = f"contact {spec.name} ({spec.formulation})"
         self.pairing, self.nrows, self.trows = geo.pairing, geo.nrows, geo.trows
         # input ids → this rank's nodes (a part: owned + ghosts); the element-like blocks go
@@ -225,12 +226,14 @@ class PenaltyContact(Effect):
         self.touch = spec.closed * float(np.max(mesh.extent))   # the whole mesh's size, as there
         self.touching = p.gap <= self.touch
         self._last = None
-        self._places = (None, None)
+        # each owned slave node's diagonal block (its rows are this rank's)
+        self.term = Term(self.u, self.u, self.owned_local[:, None], symmetric=self.symmetric,
+                         linear=False)
 
     # ------------------------------------------------------------------ kinematics
 
     def _u(self, values: dict) -> np.ndarray:
-        return values["u"]
+        return values[self.u]
 
     def gaps(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(g (n,), g_T (n, dim-1)): linearised gap g0 + Dn·q and tangential displacement at
@@ -303,7 +306,7 @@ class PenaltyContact(Effect):
         """(λ_N, λ_T): penalty, none normal, and the committed friction force."""
         return np.zeros(len(self.pairing)), state["t"]
 
-    def evaluate(self, cells: np.ndarray, values: dict, state, secant: bool):
+    def evaluate(self, cells: np.ndarray, values: dict, state, secant: bool, at):
         u = self._u(values)
         lam_n, lam_t = self.multipliers(state)
         f = self.forces(u, state, lam_n, lam_t)
@@ -311,23 +314,15 @@ class PenaltyContact(Effect):
         trial = {"pN": f["pN"], "t": f["t"], "gT": f["gT"]}
         p = self.pairing
         node_force = -f["pN"][:, None] * p.normal + np.einsum("mjx,mj->mx", p.tangents, f["t"])
-        cell, local = self._node_places(cells)
-        has = cell >= 0
-        which = self.owned_slave[has]
-        nodes = self.mesh.cells[cells]
-        fe = np.zeros(nodes.shape + (self.mesh.dim,))
-        fe[cell[has], local[has]] = node_force[which]
+        which, d = self.owned_slave, self.mesh.dim
+        forces = NodeForces(self.term.nodes, node_force[which][:, None, :])
         k = self.node_tangents(f)[which]
         # (a rank may hold no slave node: k is (0, dim, dim))
-        blocks = NodeBlocks(k.reshape(len(k), self.mesh.dim ** 2).T.copy(), cell[has], local[has])
-        return {"u": fe}, [("u", "u", blocks)], trial, None
+        blocks = TermMatrices(self.term, k.reshape(len(k), d * d).T.reshape(d * d, 1, 1, -1))
+        return {self.u: forces}, [(self.u, self.u, blocks)], trial, None
 
-    def _node_places(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(cell, local node) of one of the rank's cells holding each owned slave node
-        (``owned_slave``; -1: none); computed once per set of cells."""
-        if self._places[0] is not cells:
-            self._places = (cells, node_places(self.mesh.cells[cells], self.owned_local))
-        return self._places[1]
+    def terms(self) -> list[Term]:
+        return [self.term]
 
     # ------------------------------------------------------------------ outputs
 
@@ -356,7 +351,7 @@ class AugmentedContact(PenaltyContact):
             self._fresh = False
         return self.lam_n, self.lam_t
 
-    def begin_step(self, q: np.ndarray, active: dict) -> bool:
+    def begin_step(self, q: np.ndarray, active: dict, at) -> bool:
         self.augmentations, self._fresh, self._inner = 0, True, 0
         return False
 
@@ -368,7 +363,7 @@ class AugmentedContact(PenaltyContact):
         of a node, or a 3D slip direction, changed since the tangent was made), True and
         nothing else; once it is, one augmentation λ_N ← p_N, λ_T ← t, True while it moves
         them by more than the tolerance."""
-        u = q.reshape(self.mesh.num_points, -1)[:, self.fields_.columns("u")]
+        u = q.reshape(self.mesh.num_points, -1)[:, self.fields_.columns(self.u)]
         f = self.forces(u, self._state, self.lam_n, self.lam_t)
         self._inner += 1
         if not self._settled(f, self._last) and self._inner < INNER_LIMIT:

@@ -80,7 +80,7 @@ class FiniteSliding:
         sp, f = self.span, self.fields_
         dim = self.mesh.dim
         m = sp.surf.ids.size
-        dofs = np.repeat(sp.surf.ids, dim) * f.ncomp + f.offset["u"] + np.tile(np.arange(dim), m)
+        dofs = np.repeat(sp.surf.ids, dim) * f.ncomp + f.offset[self.u] + np.tile(np.arange(dim), m)
         u = self.values.rows(dofs, np.arange(m * dim), np.ones(m * dim), m * dim, q)
         return sp.surf.points + u.reshape(m, dim)
 

@@ -146,7 +146,7 @@ class Elasticity(Effect):
     def init_state(self, cells: np.ndarray):
         return self.init_state_qp(cells)
 
-    def evaluate(self, cells, values, state, secant: bool):
+    def evaluate(self, cells, values, state, secant: bool, at):
         """Internal forces, tangent, trial state and stresses at the quadrature points."""
         fe, tangent, trial, sig = self.evaluate_u(cells, values["u"], state, secant)
         nen = self.mesh.cells.shape[1]

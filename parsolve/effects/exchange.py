@@ -22,11 +22,11 @@ import numpy as np
 from parsolve.effects.base import Effect
 from parsolve.errors import InputError
 from parsolve.evolution import CONSTANT
-from parsolve.fem.integrals import facet_rule, facet_term, mass
+from parsolve.fem.element_matrices import Term, TermMatrices
+from parsolve.fem.integrals import facet_rule, mass
 from parsolve.loads.base import (Instant, LoadPattern, LoadSpec, TimedPart, Where,
                                  need_facets, values_at)
 from parsolve.loads.traction import facet_forces
-from parsolve.mesh.topology import FACETS, match_facets
 
 KEYS = {"field": ("string", "the scalar field exchanging"),
         "region": ("string", "the boundary region it exchanges through"),
@@ -75,13 +75,11 @@ class Exchange(Effect):
                              spec.key, spec.field, "ambient")
         self.where = Where(mesh, region, fields, thickness, regions, scene)
         need_facets(self.load, self.where)
-        owner, lidx, _ = match_facets(mesh, region.facets)
-        self.owner = owner
-        nfn = region.facets.shape[1]   # (a rank may hold none of the region's facets)
-        self.local = np.asarray(FACETS[mesh.cell_type], dtype=np.int64)[lidx].reshape(-1, nfn)
+        # h ∫ N Nᵀ ds on each of this rank's facets of the region: a term on the facets' nodes
         rule = facet_rule(mesh.points[region.facets], mesh.facet_type, thickness)
-        self.values = spec.coefficient * mass(rule)          # (nf, nfn, nfn)
-        self._term = (None, None)
+        values = spec.coefficient * mass(rule)                # (nf, nfn, nfn)
+        self.term = Term(spec.field, spec.field, region.facets)
+        self.matrices = TermMatrices(self.term, values.transpose(1, 2, 0)[None])
         first = self._ambient(Instant(scene.times[0] if scene.times else 0.0))   # errors now
         self.part = TimedPart(self._ambient) if self.load.timed else first
 
@@ -91,11 +89,11 @@ class Exchange(Effect):
         return facet_forces(self.load, self.where, lambda rule: h * values_at(
             self.load, rule.points, at, self.where.source))
 
+    def terms(self) -> list[Term]:
+        return [self.term]
+
     def stiffness_blocks(self, cells: np.ndarray):
-        if self._term[0] is not cells:
-            self._term = (cells, facet_term(cells, self.mesh.num_cells, self.owner, self.local,
-                                            self.values, self.mesh.cells.shape[1]))
-        return [(self.spec.field, self.spec.field, self._term[1])]
+        return [(self.spec.field, self.spec.field, self.matrices)]
 
     def patterns(self) -> dict[str, LoadPattern]:
         return {self.spec.key: LoadPattern(self.spec.key, [(self.part, CONSTANT)])}

@@ -423,3 +423,61 @@ class BlockMatrices:
             idx = (np.asarray(ci)[:, None] * nc + np.asarray(cj)[None, :]).ravel()
             out[idx] += fac * m.reduce(pair_slot, npairs)
         return out
+
+
+# ------------------------------------------------ terms on tuples of nodes
+
+
+@dataclass
+class Term:
+    """A term an effect declares once, at set-up: its test and trial fields, its domain
+    (``nodes``: k tuples of m local nodes, a node to the ground, a pair of nodes, whether or
+    not a cell holds them together) and its nature. The system derives the stiffness pattern
+    from the cells and the declared terms, and gives each term its slots there (``slots``
+    (m, m, k): node pair (i, j) of tuple k; the pattern's ``nnzb`` where another rank owns
+    the row, which drops it): each rank declares the terms on its local nodes, and a row's
+    entries are its owner's."""
+
+    test: str
+    trial: str
+    nodes: np.ndarray            # (k, m) local nodes
+    symmetric: bool = True
+    linear: bool = True
+    slots: np.ndarray | None = None   # (m, m, k), set by the system
+
+    def __post_init__(self) -> None:
+        nodes = np.asarray(self.nodes, dtype=np.int64)
+        self.nodes = nodes if nodes.ndim == 2 else nodes.reshape(-1, 1)   # (k,): single nodes
+
+
+@dataclass
+class TermMatrices:
+    """The values of a declared term, (d_test·d_trial, m, m, k): reduced into the term's own
+    slots (the cells' ``pair_slot`` does not hold them), and applied to node values."""
+
+    term: Term
+    values: np.ndarray
+
+    def reduce(self, pair_slot: np.ndarray, npairs: int) -> np.ndarray:
+        slots = self.term.slots
+        if slots is None or self.values.shape[-1] == 0:   # (no system: no slots; none here)
+            return np.zeros((len(self.values), npairs))
+        return _bincount_rows(slots.astype(np.intp).ravel(),
+                              self.values.reshape(len(self.values), -1), npairs)
+
+    def forces(self, x: np.ndarray) -> "NodeForces":
+        """K x at the term's nodes from node values x (npoints, d_trial)."""
+        nodes = self.term.nodes
+        k, m = nodes.shape
+        dj = x.shape[1]
+        V = self.values.reshape(len(self.values) // dj, dj, m, m, k)
+        return NodeForces(nodes, np.einsum("ijabk,kbj->kai", V, x[nodes]))
+
+
+@dataclass
+class NodeForces:
+    """Forces at tuples of local nodes, (k, m, d) at ``nodes`` (k, m): what a term's effect
+    returns where a cell effect returns (nc, nen, d) element forces."""
+
+    nodes: np.ndarray
+    values: np.ndarray

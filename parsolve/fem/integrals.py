@@ -2,7 +2,7 @@
 cells: the points, the weights (w |J| × the out-of-plane measure: thickness or 2π r) and the
 facets' unit normals, for loads whose value varies over the element (an expression of the
 coordinates, a pressure along the normal of a curved face) and for facet terms of an operator
-(an exchange condition's h ∫ N Nᵀ).
+(an exchange condition's h ∫ N Nᵀ, a term on the facets' nodes).
 
 The facet normal is the one of ``elements.facet_measure_and_normal``: outward for the facets
 of a region (``FACETS`` order on positively oriented cells), evaluated at each quadrature point
@@ -16,7 +16,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from parsolve.fem.axisymmetric import is_axisymmetric, scale
-from parsolve.fem.element_matrices import CellKernel, ElementMatrices
 from parsolve.fem.elements import (default_degree, element, facet_measure_and_normal,
                                    physical_gradients, polynomial_order, quadrature)
 
@@ -68,37 +67,3 @@ def integrate(rule: Rule, values: np.ndarray) -> np.ndarray:
 def mass(rule: Rule) -> np.ndarray:
     """∫ N_a N_b over each facet or cell: (n, nen, nen)."""
     return np.einsum("qa,qb,nq->nab", rule.N, rule.N, rule.weights)
-
-
-def facet_term(cells: np.ndarray, num_cells: int, owner: np.ndarray, local: np.ndarray,
-               values: np.ndarray, nen: int) -> ElementMatrices:
-    """A facet term (a boundary integral between a field and itself, e.g. h ∫ N Nᵀ) as cell
-    element matrices over ``cells``, in the blocked form: facet f's (nfn, nfn) matrix
-    ``values[f]`` goes to nodes ``local[f]`` (positions in the cell) of mesh cell
-    ``owner[f]``. A boundary facet's nodes are its cell's, so the term needs no slot the cells
-    do not already give; facets whose cell is not among ``cells`` are another rank's."""
-    where = np.full(num_cells, -1, dtype=np.int64)
-    where[cells] = np.arange(len(cells))
-    at = where[owner]
-    keep = at >= 0
-    at, local, values = at[keep], local[keep], values[keep]
-
-    def compute(sel, out):
-        if isinstance(sel, slice):   # a block of consecutive cells (every assembly)
-            start, n = sel.start or 0, len(range(*sel.indices(len(cells))))
-            pos = at - start
-            hit = (pos >= 0) & (pos < n)
-        else:                        # a few cells by index (Newton's replaced cells)
-            n = len(sel)
-            block = np.full(len(cells), -1, dtype=np.int64)
-            block[sel] = np.arange(n)
-            pos = block[at]
-            hit = pos >= 0
-        V = np.zeros((1, nen, nen, n)) if out is None or out.shape[-1] != n else out
-        V.fill(0.0)
-        rows = local[hit]
-        np.add.at(V[0], (rows[:, :, None], rows[:, None, :], pos[hit][:, None, None]),
-                  values[hit])
-        return V
-
-    return ElementMatrices(kernel=CellKernel(compute, len(cells), 1, nen))

@@ -77,6 +77,7 @@ class ArcLength(NewtonSolver):
         zero_t = np.zeros(rset.nrows)
         zero_e = np.zeros(system.n_eliminated)
         free = system.free_rows()
+        self.ctx.composition.begin(t, t, None)
         for it in range(spec.max_iterations + 1):
             f_int, kmat, trial, extras = self._evaluate(self.q)
             f_ext = self.ctx.owned_rows(self.ctx.composition.known_loads(t, t, None) + self.mu * self.P) \

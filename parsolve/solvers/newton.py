@@ -69,6 +69,8 @@ class _CellReplaced:
         nc = self.base.ncomp
         slots = pair_slot[:, :, self.cells].ravel()
         for (ci, cj, m0, fac), (_, _, m1, _) in zip(self.base.parts, self.other.parts):
+            if hasattr(m0, "term"):   # a declared term (TermMatrices): on nodes, not cells
+                continue
             diff = (_cell_values(m1, self.cells) - _cell_values(m0, self.cells))
             diff = diff.reshape(len(diff), -1)
             idx = (np.asarray(ci)[:, None] * nc + np.asarray(cj)[None, :]).ravel()
@@ -285,6 +287,7 @@ class NewtonSolver:
     def step(self, t: float) -> StepResult:
         system, spec = self.system, self.spec
         free = system.free_rows()
+        self.ctx.composition.begin(t, self.t_prev, None if self.time is None else self.time.theta)
         if self.hooks:   # contact hooks timed apart: /timings/contact
             t0 = time.perf_counter()
             changed = self._begin_hooks()
@@ -383,7 +386,8 @@ class NewtonSolver:
     def _begin_hooks(self) -> bool:
         changed = False
         for e in self.hooks:
-            changed = e.begin_step(self.q, self._views(self.active.active)) or changed
+            changed = e.begin_step(self.q, self._views(self.active.active),
+                                   self.ctx.composition.now) or changed
         return changed
 
     def _refresh_hooks(self) -> bool:

@@ -72,28 +72,27 @@ class SaddleSystem:
         self._augmented: AugmentedMatrix | None = None
 
     def _pattern(self, lo: int, hi: int):
-        """The stiffness pattern of the local cells and of the effects' extra node pairs
-        (``Effect.node_pairs``), each padded into a pseudo-cell [a, b, b, ...] after the cells
-        (a repeated node is a diagonal entry); the cells' reductions get the cells' slots
-        only, each effect its pairs' slots."""
+        """The stiffness pattern of the local cells and of the effects' declared terms
+        (``Effect.terms``: tuples of m nodes, each padded into a pseudo-cell [a, b, b, ...]
+        after the cells, a repeated node a diagonal entry); the cells' reductions get the
+        cells' slots only, each term its own (``Term.slots``)."""
         model = self.model
         cells = model.mesh.cells[self.local_cells]
-        extra = [np.asarray(e.node_pairs(), dtype=np.int64).reshape(-1, 2) for e in model.effects]
-        pairs = np.concatenate(extra) if extra else np.zeros((0, 2), dtype=np.int64)
+        terms = [term for e in model.effects for term in e.terms()]
         nnodes = int(self.part.node_ranges[-1])
-        if pairs.size == 0:
+        if not terms:
             return node_pattern(self.part.new_of_old[cells], lo, hi, model.ncomp, nnodes)
-        pseudo = np.repeat(pairs[:, 1:], cells.shape[1], axis=1)
-        pseudo[:, 0] = pairs[:, 0]
-        pattern = node_pattern(self.part.new_of_old[np.concatenate([cells, pseudo])], lo, hi,
+        nen = cells.shape[1]
+        pseudo = [np.concatenate([t.nodes, np.repeat(t.nodes[:, -1:], nen - t.nodes.shape[1],
+                                                     axis=1)], axis=1) for t in terms]
+        pattern = node_pattern(self.part.new_of_old[np.concatenate([cells] + pseudo)], lo, hi,
                                model.ncomp, nnodes)
-        nc = len(cells)
-        slots = pattern.pair_slot[:2, :2, nc:]
-        pattern.pair_slot = np.ascontiguousarray(pattern.pair_slot[:, :, :nc])
-        start = 0
-        for e, p in zip(model.effects, extra):
-            e.set_pair_slots(np.ascontiguousarray(slots[:, :, start:start + len(p)]))
-            start += len(p)
+        start = len(cells)
+        for t in terms:
+            k, m = t.nodes.shape
+            t.slots = np.ascontiguousarray(pattern.pair_slot[:m, :m, start:start + k])
+            start += k
+        pattern.pair_slot = np.ascontiguousarray(pattern.pair_slot[:, :, :len(cells)])
         return pattern
 
     def restructure(self) -> None:

@@ -74,8 +74,11 @@ def test_every_key_has_a_meaning_and_every_meaning_a_key(accepted):
 
 def literal_keys() -> set[str]:
     """Literal names of Table reads (get, floats, table, tables, has) in the parsing modules:
-    parsolve/scene.py, every module under parsolve/effects/ and any schema module."""
-    modules = [ROOT / "parsolve" / "scene.py", *sorted((ROOT / "parsolve" / "effects").rglob("*.py"))]
+    parsolve/scene.py, every module under parsolve/effects/, loads/ and relation_kinds/ (the
+    registries' entries) and any schema module."""
+    modules = [ROOT / "parsolve" / "scene.py"]
+    for package in ("effects", "loads", "relation_kinds"):
+        modules += sorted((ROOT / "parsolve" / package).rglob("*.py"))
     modules += [p for p in [ROOT / "parsolve" / "schema.py"] if p.exists()]
     keys = set()
     for path in modules:

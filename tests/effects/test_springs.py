@@ -13,6 +13,7 @@ from mpi4py import MPI
 
 from conftest import CONFIGS, assert_same_results
 from parsolve.errors import InputError
+from parsolve.loads.base import Instant
 from parsolve.model import build_model
 from parsolve.scene import load_scene
 
@@ -263,25 +264,47 @@ stiffness = [1.0, 1.0]
     check_error(shared_tmp, text, "springs[0]", "[[materials]]")
 
 
-def test_element_form_is_the_springs_blocks():
-    """What a θ-scheme step or a maximum control asks of the blocks (every cell's element
-    matrices, element products) agrees with the springs' own forces; a few cells per block
-    of the kernel, to go through several blocks."""
+def test_the_springs_are_one_declared_term():
+    """The springs are a term on node tuples (a node to the ground, or a pair): symmetric
+    [[K, −K], [−K, K]] blocks whose product with any u is K (u_a − u_b) on a and its opposite
+    on b (K u_a to the ground), the springs' own law; the element product a θ-scheme step
+    asks of the blocks (``Composition.product``) is the same."""
+    from parsolve.effects.compose import Composition
     from parsolve.effects.springs import Springs
-    from parsolve.fem.element_matrices import apply
+    from parsolve.fem.element_matrices import TermMatrices
 
     model = build_model(load_scene(CONFIGS / "springs_bar_supports.toml"))
     cells = np.arange(model.mesh.num_cells)
     u = np.random.default_rng(3).normal(size=(model.mesh.num_points, 2))
-    for effect in (e for e in model.effects if isinstance(e, Springs)):
-        m = effect.stiffness_blocks(cells)[0][2]
-        m.kernel.block = 3
-        forces = effect.evaluate(cells, {"u": u}, None, False)[0]["u"]
-        np.testing.assert_allclose(apply(m, u[model.mesh.cells]), forces, rtol=1e-13, atol=1e-13)
-        V = m.values                                    # (4, nen, nen, nc): symmetric blocks
-        np.testing.assert_array_equal(V, V.reshape(2, 2, 4, 4, -1).transpose(1, 0, 3, 2, 4)
+    springs = [e for e in model.effects if isinstance(e, Springs)]
+    assert springs
+    for effect in springs:
+        (fi, fj, m), = effect.stiffness_blocks(cells)
+        assert isinstance(m, TermMatrices) and m.term in effect.terms() and fi == fj == "u"
+        k = effect.k
+        a, b = effect.pairs[:, 0], effect.pairs[:, 1]
+        expected = np.zeros_like(u)
+        if effect.spec.target is None:
+            np.add.at(expected, a, k * u[a])
+        else:
+            np.add.at(expected, a, k * (u[a] - u[b]))
+            np.add.at(expected, b, k * (u[b] - u[a]))
+        forces, = effect.evaluate(cells, {"u": u}, None, False, Instant(1.0))[0]["u"]
+        got = np.zeros_like(u)
+        np.add.at(got, forces.nodes.ravel(), forces.values.reshape(-1, 2))
+        np.testing.assert_allclose(got, expected, rtol=1e-14, atol=1e-14)
+        V = m.values                                    # (4, m, m, k): symmetric blocks
+        mm = V.shape[1]
+        np.testing.assert_array_equal(V, V.reshape(2, 2, mm, mm, -1).transpose(1, 0, 3, 2, 4)
                                       .reshape(V.shape))
-        assert np.count_nonzero(V.any(axis=0)) == (2 if effect.spec.target is None else 8)
+    composition = Composition(model, cells)
+    blocks = [b for e in springs for b in e.stiffness_blocks(cells)]
+    product = composition.product(blocks, u.ravel()).reshape(u.shape)
+    total = np.zeros_like(u)
+    for effect in springs:
+        forces, = effect.evaluate(cells, {"u": u}, None, False, Instant(1.0))[0]["u"]
+        np.add.at(total, forces.nodes.ravel(), forces.values.reshape(-1, 2))
+    np.testing.assert_allclose(product, total, rtol=1e-14, atol=1e-14)
 
 
 TWO_BODIES = """
