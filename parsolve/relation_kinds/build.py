@@ -26,7 +26,7 @@ def build_relations(specs: list, regions, evolutions: dict, patterns: dict, fiel
         if spec.dual is not None:
             r.shared_dual = regions.relation_vector(patterns[spec.dual].vector(), ncomp)
         r.eliminate = spec.eliminate if spec.eliminate is not None else (eliminate and None)
-        r.meta = {"type": spec.type, "key": spec.key, "dual": spec.dual}
+        r.meta = {**r.meta, "type": spec.type, "key": spec.key, "dual": spec.dual}
         out.append(r)
     out = rel.drop_repeated_rows(out)
     _check_repeated_ties(out, fields, source)

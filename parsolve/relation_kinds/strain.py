@@ -77,9 +77,11 @@ def build(spec: RelationSpec, where: Where, evolution) -> rel.Relation:
     dofs, coefs, vol = strain_rows(regions.mesh, region.cells, spec.direction, where.thickness,
                                    fields=fields, field=spec.field)
     # (the owned cells' rows of every rank, in input ids)
-    _, dofs, coefs, vol = regions.owned_cell_rows(region.cells, fields.ncomp, dofs, coefs,
-                                                        vol)
+    cells, dofs, coefs, vol = regions.owned_cell_rows(region.cells, fields.ncomp, dofs, coefs,
+                                                      vol)
     if not spec.per_cell:
         coefs = (coefs * (vol / vol.sum())[:, None]).reshape(1, -1)
         dofs = dofs.reshape(1, -1)
-    return rel.rows(spec.name, dofs, coefs, spec.value, evolution, spec.sense)
+    r = rel.rows(spec.name, dofs, coefs, spec.value, evolution, spec.sense)
+    r.meta["cells"] = cells   # the cells of the rows (input ids), for the failure's diagnosis
+    return r
