@@ -27,6 +27,7 @@ from parsolve.solvers.diagnose import NamedFailure, name_failure
 from parsolve.solvers.finite import check_finite
 from parsolve.solvers.linear import DoesNotFit
 from parsolve.solvers.newton import NewtonSolver
+from parsolve.solvers.problem import SaddleProblem
 from parsolve.solvers.setup import export_system, make_solver
 from parsolve.solvers.system import SaddleSystem
 from parsolve.version import petsc_version
@@ -192,11 +193,11 @@ def _plain(obj) -> dict:
     return {k: v for k, v in vars(obj).items() if k not in ("spec", "times")}
 
 
-def _load_newton(restart: Restart, newton, schedule, watch, balance) -> int:
+def _load_newton(restart: Restart, problem, schedule, watch, balance) -> int:
     """The Newton run's state at the restart's last step; returns the steps saved so far.
     Fixed steps go on with the scene's first time after it (the scene may end later)."""
     state = restart.state
-    newton.load_state(state["newton"])
+    problem.load_state(state["newton"])
     schedule.__dict__.update(state["schedule"])
     if not schedule.spec.automatic:
         schedule.count = _first_step(schedule, restart)
@@ -225,39 +226,40 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log,
     timed("assembly", system.assemble)
     system.timings.pop("assembly")   # (counted in the set-up, which step 1 carries)
     solver = make_solver(comm, system, cli_options)
-    newton = NewtonSolver(comm, system, solver, scene.nonlinear)
-    newton.export_dir = export_dir
+    problem = SaddleProblem(comm, system, solver, scene.nonlinear)
+    problem.export_dir = export_dir
+    newton = NewtonSolver(problem, scene.nonlinear)
     schedule = StepSchedule(scene)
-    balance = Balance(comm, ctx, newton.q) if ctx.transient else None
+    balance = Balance(comm, ctx, problem.q) if ctx.transient else None
     watch = BranchWatch(ctx.nonlinear)
     step, setup = 0, time.perf_counter() - t0
     if restart is not None:
-        step = _load_newton(restart, newton, schedule, watch, balance)
+        step = _load_newton(restart, problem, schedule, watch, balance)
     while (t := schedule.next()) is not None:
         t1 = time.perf_counter()
-        snap = newton.snapshot()
-        t_prev = newton.t_prev
+        snap = problem.snapshot()
+        t_prev = problem.t_prev
         try:
             result = newton.step(t)
         except SolverError as exc:
-            newton.restore(snap)
+            problem.restore(snap)
             if isinstance(exc, DoesNotFit) or not schedule.cut(t):
-                raise name_failure(exc, newton, t) from None
+                raise name_failure(exc, problem, t) from None
             if comm.rank == 0:
                 log(f"step to t={t:.6g} failed ({exc}); retrying with half the step")
             continue
         step += 1
         seconds = time.perf_counter() - t1
         t2 = time.perf_counter()
-        multipliers = newton.multipliers(t, result.f_int)
-        fields, cell_fields, rel_out = step_outputs(comm, ctx, newton.q, multipliers, newton)
-        extra = balance.step(newton.q, t - t_prev, newton.f_ext, multipliers) if balance else {}
-        check_finite(comm, step, t, newton.q, multipliers, result.residual, fields, cell_fields,
+        multipliers = problem.multipliers(t, result.f_int)
+        fields, cell_fields, rel_out = step_outputs(comm, ctx, problem.q, multipliers, problem)
+        extra = balance.step(problem.q, t - t_prev, problem.f_ext, multipliers) if balance else {}
+        check_finite(comm, step, t, problem.q, multipliers, result.residual, fields, cell_fields,
                      rel_out, extra)
         pivots = solver.negative_pivots()  # the saddle's: one per enforced multiplier row
         if pivots is not None:
-            pivots -= int(newton.active.active.sum())
-        warning = watch.check(ctx.norm(newton.q - snap[0]), pivots, t - t_prev)
+            pivots -= int(problem.active.active.sum())
+        warning = watch.check(ctx.norm(problem.q - snap[0]), pivots, t - t_prev)
         extra.update({"steps/cuts": schedule.cuts, "steps/branch_warning": int(warning is not None)})
         timings = solver.take_timings()
         timings["assembly"] = system.timings.pop("assembly", 0.0) + (setup if step == 1 else 0.0)
@@ -268,9 +270,9 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log,
         interrupts.check(comm)
         cut_note = f"  (after {schedule.cuts} cut{'s' * (schedule.cuts > 1)})" if schedule.cuts else ""
         # (the largest strain increment sizes automatic steps only; every rank takes this branch)
-        schedule.done(t, _max_strain_increment(comm, ctx, newton.q - snap[0])
+        schedule.done(t, _max_strain_increment(comm, ctx, problem.q - snap[0])
                       if schedule.spec.automatic else 0.0)
-        checkpoint.save({"newton": newton.save_state(), "schedule": _plain(schedule),
+        checkpoint.save({"newton": problem.save_state(), "schedule": _plain(schedule),
                          "watch": _plain(watch), "balance": _balance_state(balance), "step": step})
         progress(log, comm, step, schedule.total, t, result.iterations, result.residual, seconds,
                  cut_note + reported(ctx, rel_out, fields))

@@ -372,16 +372,17 @@ def _pairing_and_assembly(clock: PhaseClock) -> None:
     effect) and the saddle operator's assembly."""
     from parsolve.effects import contact as contact_effect
     from parsolve.effects import contact_sliding
-    from parsolve.solvers.newton import NewtonSolver
+    from parsolve.solvers.policies import RelationPolicies
+    from parsolve.solvers.problem import SaddleProblem
     from parsolve.solvers.system import SaddleSystem
 
-    clock.wrap(NewtonSolver, "_begin_hooks", "hooks")
-    clock.wrap(NewtonSolver, "_refresh_hooks", "hooks")
+    clock.wrap(RelationPolicies, "begin_hooks", "hooks")
+    clock.wrap(RelationPolicies, "refresh_hooks", "hooks")
     for module in (contact_effect, contact_sliding):   # (the names each module calls)
         for name in ("pair_nodes", "pair_on", "mortar_pairing", "mortar_pairing_3d"):
             if hasattr(module, name):
                 clock.wrap(module, name, "pairing", inside="hooks")
-    clock.wrap(NewtonSolver, "_evaluate", "kernels")
+    clock.wrap(SaddleProblem, "form", "kernels")
     clock.wrap(SaddleSystem, "assemble", "operator")
 
 

@@ -8,7 +8,7 @@ Reports the operator's nonzeros, the relation block's, set-up + first assembly, 
 per global iteration (also per 1000 DOFs: flat when the cost grows no faster than the mesh).
 Steps follow ``parsolve run``: a step that fails is cut in two and retried (the driver's
 StepSchedule); ``--no-cuts`` takes the scene's steps as they are. Before the first tangent of
-a step put the enforced cell on its loading branch (``NewtonSolver._loading_tangent``), the
+a step put the enforced cell on its loading branch (``RelationPolicies.loading_tangent``), the
 plate refined 8× stopped at t = 0.182 after 4 cuts (null pivots) and the 2× plate needed cuts.
 
     .venv/bin/python scripts/bench_max_control.py [--steps 30] [--levels 1 2 4 8 16] [--no-cuts]
@@ -43,6 +43,7 @@ def run(level: int, steps: int, per_row_copies: bool, cuts: bool = True) -> dict
     from parsolve.model import build_model
     from parsolve.scene import parse_scene
     from parsolve.solvers.newton import NewtonSolver
+    from parsolve.solvers.problem import SaddleProblem
     from parsolve.solvers.system import SaddleSystem
 
     text = scene_text(level, steps)
@@ -57,17 +58,18 @@ def run(level: int, steps: int, per_row_copies: bool, cuts: bool = True) -> dict
     mat = system.assemble()
     setup = time.perf_counter() - t0
     info = mat.getInfo()
-    newton = NewtonSolver(MPI.COMM_WORLD, system, make_solver(MPI.COMM_WORLD, system, {}),
-                          scene.nonlinear)
+    problem = SaddleProblem(MPI.COMM_WORLD, system, make_solver(MPI.COMM_WORLD, system, {}),
+                            scene.nonlinear)
+    newton = NewtonSolver(problem, scene.nonlinear)
     schedule = StepSchedule(scene)
     its, steps, t1, status, reached = 0, 0, time.perf_counter(), "complete", 0.0
     while (t := schedule.next()) is not None:
-        snap = newton.snapshot()
+        snap = problem.snapshot()
         try:
             its += newton.step(t).iterations
         except SolverError as exc:  # the driver's rule: cut and retry, then report
             its += max(len(newton.residual_history) - 1, 0)  # the failed attempt's solves
-            newton.restore(snap)
+            problem.restore(snap)
             if cuts and schedule.cut(t):
                 continue
             status = f"failed at t = {t:.4g}: {str(exc).split(' (')[0][:110]}"

@@ -65,7 +65,7 @@ class ActiveSet:
         self.active = self.sign == 0              # equalities are always enforced
         self.active[self.group_rows[starts]] = True  # a group is always enforced somewhere
         # +1 where a positive s·λ pushes the row back to its admissible side (associated rows);
-        # non-associated rows get theirs from their own response (NewtonSolver.orient)
+        # non-associated rows get theirs from their own response (``RelationPolicies.orient``)
         self.orient = np.ones(self.sign.size)
         # rows that say a zone of them may form (contact): the most penetrating close first
         self.forming = np.concatenate([np.full(r.nrows, r.forming) for r in relations]) \

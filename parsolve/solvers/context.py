@@ -1,13 +1,13 @@
-"""The step context: what Newton, arc-length, the outputs, the driver and the effects' hooks
-see of a system (in the manner of Firedrake's ``_SNESContext`` / dolfinx's
-``NonlinearProblem``), built once by the system.
+"""The step context: what the nonlinear problem (``solvers.problem``), the outputs, the driver
+and the effects' hooks see of a system, built once by the system.
 
 It holds the values side of the problem: the DOF map (local/owned vectors, ghost exchange,
 owned reductions), the relation set (stacked rows: A q, gaps, D λ, per-relation views), the
 effects composed on this rank's cells (forces, tangents, states, field values) and the scene's
 data the steps need (times, patterns, the initial state); the rows active now stay with the
-active set (Newton hands them to the hooks and the outputs as per-relation views). Assembly,
-the right-hand side and unpacking stay with the system; nothing here reaches into it.
+active set (the problem's policies hand them to the hooks and the outputs as per-relation
+views). Assembly, the right-hand side and unpacking stay with the system; nothing here reaches
+into it.
 """
 
 from __future__ import annotations

@@ -52,12 +52,12 @@ class Control:
     sign: int         # +1 for "<=" and "=", -1 for ">="
 
 
-def _controls(newton) -> list[Control]:
+def _controls(problem) -> list[Control]:
     """The control relations with a load as their dual: per maximum group its enforced row,
     per single-row equality its row."""
-    rset, active = newton.rset, newton.active
+    rset, active = problem.rset, problem.active
     out = []
-    for k, rel in enumerate(newton.ctx.multiplied):
+    for k, rel in enumerate(problem.ctx.multiplied):
         if not rel.meta.get("dual"):
             continue
         rows = np.arange(rset.rows_of(k).start, rset.rows_of(k).stop)
@@ -87,34 +87,34 @@ def _sliding_contacts(effects) -> list:
     return out
 
 
-def name_failure(exc: SolverError, newton, t: float) -> SolverError:
-    """The final failure of the step to ``t`` (``newton`` back at the last converged state),
+def name_failure(exc: SolverError, problem, t: float) -> SolverError:
+    """The final failure of the step to ``t`` (``problem`` back at the last converged state),
     as a ``NamedFailure`` when a control can no longer reach its value; else ``exc``.
     Collective (every rank calls it with the same failure; the decisions before any reduction
     are taken from data every rank holds alike)."""
     if isinstance(exc, DoesNotFit):   # (memory: named already)
         return exc
     try:
-        return _named(exc, newton, t)
+        return _named(exc, problem, t)
     except Exception:   # (a diagnostic's own error: the solver's failure is the news)
         return exc
 
 
-def _named(exc: SolverError, newton, t: float) -> SolverError:
-    controls = _controls(newton)
+def _named(exc: SolverError, problem, t: float) -> SolverError:
+    controls = _controls(problem)
     if not controls:
         return exc
-    if isinstance(exc, GoingBack) and not _softens(newton.ctx.effects):
-        return _no_turn_back(exc, newton, t, controls)
-    if _softens(newton.ctx.effects):
-        return _past_capacity(exc, newton, t, controls)
-    sliding = _sliding_contacts(newton.ctx.effects)
+    if isinstance(exc, GoingBack) and not _softens(problem.ctx.effects):
+        return _no_turn_back(exc, problem, t, controls)
+    if _softens(problem.ctx.effects):
+        return _past_capacity(exc, problem, t, controls)
+    sliding = _sliding_contacts(problem.ctx.effects)
     if not sliding:
         return exc
-    rset = newton.rset
-    values = rset.primal_values(newton.q)
+    rset = problem.rset
+    values = rset.primal_values(problem.q)
     targets = rset.targets(t)
-    loads = rset.row_values(newton.lam) if newton.lam.size else np.zeros(values.size)
+    loads = rset.row_values(problem.lam) if problem.lam.size else np.zeros(values.size)
     short = [c for c in controls if c.sign * (targets[c.row] - values[c.row]) > 0]
     if not short:
         return exc
@@ -123,7 +123,7 @@ def _named(exc: SolverError, newton, t: float) -> SolverError:
     reached, target, load = values[c.row], targets[c.row], loads[c.row]
     return NamedFailure(
         f"{kind} {c.name!r} can no longer reach its value: {target:.6g} at t = {t:.6g}, where it "
-        f"reached {reached:.6g} (t = {newton.t_prev:.6g}, control load {load:.6g}); every closed "
+        f"reached {reached:.6g} (t = {problem.t_prev:.6g}, control load {load:.6g}); every closed "
         f"node of contact {contact.spec.name!r} slides, so the control load cannot grow past the "
         f"friction capacity μN (μ = {contact.mu:g}) and the controlled quantity stops growing as "
         f"the body slides; reduce the target (it reached {reached:.6g}) or control a quantity "
@@ -136,7 +136,7 @@ def _softens(effects) -> bool:
     return any(isinstance(m, Mazars) for e in effects for m in getattr(e, "models", []))
 
 
-def _no_turn_back(exc: GoingBack, newton, t: float, controls: list[Control]) -> SolverError:
+def _no_turn_back(exc: GoingBack, problem, t: float, controls: list[Control]) -> SolverError:
     """A maximum group turning back to a row it left, with nothing that softens: the largest
     of the rows, as a function of the control load, is then the upper envelope of rows that
     each grow or fall with it, and turning between two of them (the load that brings one to
@@ -145,13 +145,13 @@ def _no_turn_back(exc: GoingBack, newton, t: float, controls: list[Control]) -> 
     c = next((c for c in controls if c.name == exc.relation), None)
     if c is None:
         return exc
-    rset = newton.rset
-    reached = rset.primal_values(newton.q)[c.row]
+    rset = problem.rset
+    reached = rset.primal_values(problem.q)[c.row]
     target = rset.targets(t)[c.row]
     a, b = exc.rows
     return NamedFailure(
         f"maximum control {c.name!r} can no longer reach its value: {target:.6g} at t = {t:.6g} "
-        f"(it reached {reached:.6g} at t = {newton.t_prev:.6g}); its rows {a} and {b} take "
+        f"(it reached {reached:.6g} at t = {problem.t_prev:.6g}); its rows {a} and {b} take "
         f"turns as the largest (the control load that brings one to the value takes the other "
         f"beyond it) and no material of the scene softens, so no control load gives that value: "
         f"the other loads already take the largest beyond it; raise the target or control "
@@ -172,21 +172,21 @@ def _measures_softening(ctx, cells: np.ndarray) -> bool:
     return bool(ctx.comm.allreduce(local, op=MPI.LOR))
 
 
-def _past_capacity(exc: SolverError, newton, t: float, controls: list[Control]) -> SolverError:
+def _past_capacity(exc: SolverError, problem, t: float, controls: list[Control]) -> SolverError:
     """A strain control whose cells do not soften, in a model where other cells do: the
     measured strain grows only with the load, and the load cannot pass the peak the softening
     cells set (past it they take the deformation and the measured cells unload), so a target
     beyond the strain at the peak has no solution."""
-    ctx, rset = newton.ctx, newton.rset
+    ctx, rset = problem.ctx, problem.rset
     measured = [c for c in controls
                 if ctx.multiplied[rset.locate(c.row)[0]].meta.get("cells") is not None]
     elastic = [c for c in measured if not _measures_softening(
         ctx, np.asarray(ctx.multiplied[rset.locate(c.row)[0]].meta["cells"], dtype=np.int64))]
     if not elastic:
         return exc
-    values = rset.primal_values(newton.q)
+    values = rset.primal_values(problem.q)
     targets = rset.targets(t)
-    loads = rset.row_values(newton.lam) if newton.lam.size else np.zeros(values.size)
+    loads = rset.row_values(problem.lam) if problem.lam.size else np.zeros(values.size)
     short = [c for c in elastic if c.sign * (targets[c.row] - values[c.row]) > 0]
     if not short:
         return exc
@@ -195,7 +195,7 @@ def _past_capacity(exc: SolverError, newton, t: float, controls: list[Control]) 
     reached, target, load = values[c.row], targets[c.row], loads[c.row]
     return NamedFailure(
         f"{kind} {c.name!r} can no longer reach its value: {target:.6g} at t = {t:.6g}, where it "
-        f"reached {reached:.6g} (t = {newton.t_prev:.6g}, control load {load:.6g}); the cells "
+        f"reached {reached:.6g} (t = {problem.t_prev:.6g}, control load {load:.6g}); the cells "
         f"it measures do not soften, so their strain grows only with the load, and the load "
         f"cannot pass the structure's capacity, which the softening cells elsewhere set (past "
         f"the peak they take the deformation and the measured cells unload); reduce the target "

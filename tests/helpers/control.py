@@ -144,6 +144,7 @@ def plate_newton(refine: int, steps: int):
     from parsolve.model import build_model
     from parsolve.scene import parse_scene
     from parsolve.solvers.newton import NewtonSolver
+    from parsolve.solvers.problem import SaddleProblem
     from parsolve.solvers.system import SaddleSystem
 
     comm = MPI.COMM_WORLD
@@ -151,7 +152,8 @@ def plate_newton(refine: int, steps: int):
     scene = parse_scene(tomllib.loads(text), "plate.toml", text)
     model = build_model(scene, comm)
     system = SaddleSystem(comm, model)
-    newton = NewtonSolver(comm, system, make_solver(comm, system, {}), scene.nonlinear)
+    problem = SaddleProblem(comm, system, make_solver(comm, system, {}), scene.nonlinear)
+    newton = NewtonSolver(problem, scene.nonlinear)
     (rel,) = [r for r in system.multiplied if r.maximum]
     free = np.ones(model.mesh.num_points * model.ncomp, dtype=bool)
     free[system.elim_local[system.elim_local >= 0]] = False   # (local DOFs of this rank)

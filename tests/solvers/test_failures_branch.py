@@ -67,7 +67,7 @@ def test_a_cut_step_is_no_branch_jump(shared_tmp, monkeypatch):
     step, failed = NewtonSolver.step, {"n": 0}
 
     def failing(self, t):
-        if np.isclose(self.t_prev, CUT_AFTER / COUNT) and failed["n"] < CUTS:
+        if np.isclose(self.problem.t_prev, CUT_AFTER / COUNT) and failed["n"] < CUTS:
             failed["n"] += 1
             raise SolverError("injected: this attempt fails")
         return step(self, t)

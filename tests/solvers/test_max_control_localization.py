@@ -18,7 +18,7 @@ from mpi4py import MPI
 
 from helpers.control import plate_newton
 from parsolve.fem.element_matrices import BlockMatrices, ElementMatrices
-from parsolve.solvers.newton import _branch_reach, _CellReplaced
+from parsolve.solvers.policies import _branch_reach, _CellReplaced
 
 
 def test_branch_reach_rising_and_past_the_peak():
@@ -68,18 +68,19 @@ def test_plate_full_steps_through_the_peak():
     tangent (positive with the unloading one: the branch the first tangent used to take)."""
     comm = MPI.COMM_WORLD
     scene, model, system, newton, rel, free = plate_newton(2, 10)
+    problem, policies = newton.problem, newton.problem.policies
     mine = system.dofmap.owned_dofs[free[system.dofmap.owned_dofs]]
     lams, iterations = [], []
     for t in scene.times:
-        states = newton.states
+        states = problem.states
         iterations.append(newton.step(t).iterations)
         b = 1.2e-3 * t
-        values = system.context.relation_primal(rel, newton.q)
-        assert np.flatnonzero(newton.active.active).tolist() == [368]
+        values = system.context.relation_primal(rel, problem.q)
+        assert np.flatnonzero(problem.active.active).tolist() == [368]
         np.testing.assert_allclose(values[368], b, rtol=1e-9)
         assert values.max() <= b * (1 + 1e-7)
-        lam = float(newton.lam[0])
-        f_int = system.composition.evaluate(newton.q, states, False)[1]
+        lam = float(problem.lam[0])
+        f_int = system.composition.evaluate(problem.q, states, False)[1]
         dofs, pattern = rel.shared_dual
         force = model.external_load(t)
         force += system.context.local_vector(dofs, pattern * lam)   # (input DOFs to this rank's)
@@ -94,12 +95,12 @@ def test_plate_full_steps_through_the_peak():
     assert max(iterations) <= 8
 
     # the branch past the peak: the enforced row's rate with either first tangent
-    kmat = newton._evaluate(newton.q)[1]
-    group = newton.active.groups[0]
-    f = newton._dual_column(0)
-    unloading = system.context.relations.primal_values(newton._unit_response(kmat, group, f))[368]
-    loading = system.context.relations.primal_values(newton._unit_response(newton._loading_tangent(kmat),
+    kmat = problem.form().kmat
+    group = problem.active.groups[0]
+    f = policies.dual_column(0)
+    unloading = system.context.relations.primal_values(policies.unit_response(kmat, group, f))[368]
+    loading = system.context.relations.primal_values(policies.unit_response(policies.loading_tangent(kmat, problem.q, problem.states, problem.t_prev),
                                                          group, f))[368]
     assert unloading > 0 > loading
     input_cells = model.mesh.global_cells[system.local_cells]
-    np.testing.assert_array_equal(newton._enforced_cells(), np.flatnonzero(input_cells == 368))
+    np.testing.assert_array_equal(policies.enforced_cells(), np.flatnonzero(input_cells == 368))

@@ -69,19 +69,20 @@ def test_full_step_at_the_onset_of_localization():
     have gone back; see test_max_control_localization.py)."""
     comm = MPI.COMM_WORLD
     scene, model, system, newton, rel, free = plate_newton(2, 6)
+    problem = newton.problem
     lams = []
     for t in scene.times[:5]:
-        states = newton.states
+        states = problem.states
         newton.step(t)
         b = 1.2e-3 * t
-        values = system.context.relation_primal(rel, newton.q)
-        enforced = np.flatnonzero(newton.active.active)
+        values = system.context.relation_primal(rel, problem.q)
+        enforced = np.flatnonzero(problem.active.active)
         assert enforced.tolist() == [368]
         np.testing.assert_allclose(values[enforced], b, rtol=1e-9)
         assert values.max() <= b * (1 + 1e-7)
-        lam = float(newton.lam[0])
+        lam = float(problem.lam[0])
         # f_int from this rank's cells is exact on the DOFs it owns
-        f_int = system.composition.evaluate(newton.q, states, False)[1]
+        f_int = system.composition.evaluate(problem.q, states, False)[1]
         dofs, pattern = rel.shared_dual
         force = model.external_load(t)
         force += system.context.local_vector(dofs, pattern * lam)   # (input DOFs to this rank's)
@@ -93,8 +94,8 @@ def test_full_step_at_the_onset_of_localization():
     # steps 1 and 2 are elastic (no damage below eps_d0 = 1e-4): the load doubles exactly
     np.testing.assert_allclose(lams[1], 2 * lams[0], rtol=1e-10)
     newton.step(scene.times[5])  # the onset of localization in one full step
-    assert np.flatnonzero(newton.active.active).tolist() == [368]
-    np.testing.assert_allclose(system.context.relation_primal(rel, newton.q)[368], 1.2e-3 * scene.times[5], rtol=1e-9)
+    assert np.flatnonzero(problem.active.active).tolist() == [368]
+    np.testing.assert_allclose(system.context.relation_primal(rel, problem.q)[368], 1.2e-3 * scene.times[5], rtol=1e-9)
 
 
 def test_refined_plate_follows_localization_with_cut_steps(run):

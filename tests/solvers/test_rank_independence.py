@@ -22,15 +22,17 @@ def tangent_after(comm, text: str, steps: int) -> np.ndarray:
     from parsolve.model import build_model
     from parsolve.scene import parse_scene
     from parsolve.solvers.newton import NewtonSolver
+    from parsolve.solvers.problem import SaddleProblem
     from parsolve.solvers.system import SaddleSystem
 
     scene = parse_scene(tomllib.loads(text), "bar.toml", text)
     system = SaddleSystem(comm, build_model(scene, comm))
     system.assemble()
-    newton = NewtonSolver(comm, system, make_solver(comm, system, {}), scene.nonlinear)
+    problem = SaddleProblem(comm, system, make_solver(comm, system, {}), scene.nonlinear)
+    newton = NewtonSolver(problem, scene.nonlinear)
     for t in scene.times[:steps]:
         newton.step(t)
-    _, kmat, _, _ = newton._evaluate(newton.q)
+    kmat = problem.form().kmat
     M = dense(system.assemble(kmat), comm)
     return M[np.ix_(*(2 * (saddle_of_input_dofs(comm, system),)))]
 

@@ -11,7 +11,7 @@ import numpy as np
 
 from helpers.control import VON_MISES
 from helpers.scene import scene
-from parsolve.solvers.newton import ROUNDOFF
+from parsolve.solvers.problem import ROUNDOFF
 
 # the von Mises box of test_control, both ends moved by 1e-3 along x: a rigid translation
 _BOX = tomllib.loads(VON_MISES)

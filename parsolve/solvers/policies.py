@@ -1,0 +1,405 @@
+"""The relation policies of a nonlinear step, in one place: what decides which relation rows
+the next solve enforces, and with which sense their reactions push.
+
+- **active set** (``ActiveSet``): unilateral rows switched by their gaps and multipliers;
+- **orientation**: o = -sign(A K⁻¹ D) of a unilateral non-associated row, from the first
+  tangent (its reaction must push the row back whichever way its dual points);
+- **dependent rows**: contact rows that depend on the other enforced rows (a held, tied or
+  shared node) are left out of the solve, and checked after it;
+- **contact closing**: a first solve that fails with contact rows open starts the body in
+  contact;
+- **maximum control**: at the start of a step, the row of each maximum group that reaches its
+  value first under the group's control load, on the enforced cell's loading tangent;
+- **effects' hooks**: the effects whose relations change between iterations (friction,
+  finite sliding) update them, and their values are copied into the relation set.
+
+The problem (``solvers.problem``) owns one ``RelationPolicies`` and hands it the state; the
+policies' own solves (a unit response) go through the problem's ``respond`` callback.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Callable
+
+import numpy as np
+
+from parsolve.contact.dependent import dependent_rows
+from parsolve.errors import SolverError
+from parsolve.solvers.active_set import GROUP_TOL, ActiveSet
+
+#: (tangent, active rows, load) → δq = K⁻¹ f with those rows enforced at zero
+Respond = Callable[[object, np.ndarray, np.ndarray], np.ndarray]
+
+
+def _row_dots(r, ndof: int) -> np.ndarray:
+    """A_k · D_k of every row of a relation (sparse: entries matched by (row, dof) key)."""
+    dofs, drows, vals = r.dual_coo()
+    keys, inv = np.unique(np.asarray(drows, dtype=np.int64) * ndof + dofs, return_inverse=True)
+    d = np.bincount(inv, weights=vals)
+    ka = r.a_rows * ndof + r.a_dofs
+    if keys.size == 0:
+        return np.zeros(r.nrows)
+    pos = np.minimum(np.searchsorted(keys, ka), keys.size - 1)
+    hit = keys[pos] == ka
+    return np.bincount(r.a_rows[hit], weights=r.a_vals[hit] * d[pos[hit]], minlength=r.nrows)
+
+
+class _CellReplaced:
+    """Tangent blocks with the element matrices of a few cells taken from another evaluation
+    (same effects, same parts): reduced like ``BlockMatrices`` plus the few cells' difference."""
+
+    def __init__(self, base, other, cells: np.ndarray):
+        self.base, self.other, self.cells = base, other, cells
+
+    def reduce(self, pair_slot: np.ndarray, npairs: int) -> np.ndarray:
+        out = self.base.reduce(pair_slot, npairs)
+        if self.cells.size == 0:
+            return out
+        nc = self.base.ncomp
+        slots = pair_slot[:, :, self.cells].ravel()
+        for (ci, cj, m0, fac), (_, _, m1, _) in zip(self.base.parts, self.other.parts):
+            if hasattr(m0, "term"):   # a declared term (TermMatrices): on nodes, not cells
+                continue
+            diff = (_cell_values(m1, self.cells) - _cell_values(m0, self.cells))
+            diff = diff.reshape(len(diff), -1)
+            idx = (np.asarray(ci)[:, None] * nc + np.asarray(cj)[None, :]).ravel()
+            out[idx] += fac * np.stack([np.bincount(slots, weights=v, minlength=npairs + 1)[:npairs]
+                                        for v in diff])
+        return out
+
+
+def _cell_values(m, cells: np.ndarray) -> np.ndarray:
+    """Element matrices (d², nen, nen, len(cells)) of some cells, whatever the form."""
+    if m.kernel is not None and not m.factored:   # blocked full values: just these cells
+        return m.kernel.compute(cells, None)
+    if m.values is not None:
+        return m.values[..., cells]
+    return np.einsum("ckm,kabc->mabc", m.tensors[m.cell_material[cells]], m.geometric[..., cells])
+
+
+def _branch_reach(rate: np.ndarray, room: np.ndarray, current: int) -> np.ndarray:
+    """Control load at which each row of a maximum group reaches its value, along the branch
+    the enforced row ``current`` follows (rate: d(s A q)/dλ with the enforced row loading;
+    room: s (b - A q)). Rising branch (the enforced row's rate > 0, before its peak): rows
+    with r > 0 reach it at room / r. Past the enforced row's peak (rate < 0), its value grows
+    only as the load falls, while the other rows unload: the rows with r < 0 reach it at
+    room / -r. Rows that never reach it on that branch: +inf."""
+    tol = 1e-9 * max(float(np.abs(rate).max()), 1e-300)
+    side = -1.0 if rate[current] < -tol else 1.0
+    r = side * rate
+    return np.where(r > tol, room / np.where(r > tol, r, 1.0), np.inf)
+
+
+class RelationPolicies:
+    """Active set, orientation, dependent rows, contact closing, maximum-control predictor and
+    the effects' refresh hooks of a system's multiplied relations. Every rank holds the same
+    relations and decides alike."""
+
+    def __init__(self, system, max_changes: int, respond: Respond):
+        self.system = system   # its rate (a transient step) and its restructure
+        self.ctx = ctx = system.context
+        self.rset = ctx.relations
+        self.respond = respond
+        self.active = ActiveSet(ctx.multiplied, max_changes)
+        # bound of the relations' DOF numbers (input numbering: the whole mesh's)
+        self.ndof_keys = ctx.mesh.num_global_points * ctx.ncomp
+        self.oriented = False
+        # effects whose relations change between iterations (contact with friction): their
+        # begin_step / refresh / end_step hooks; a new sparsity (finite sliding's spans made
+        # again) has the system build its operator again
+        self.hooks = [e for e in ctx.effects if e.refreshes]
+        self._rows = self._dependence_rows()
+        self.left_out = np.zeros(self.active.sign.size, dtype=bool)
+
+    # ------------------------------------------------------------ dependent rows
+
+    def _dependence_rows(self) -> tuple | None:
+        """The multiplied rows as COO (row numbers of the active set) with the contact rows
+        marked, and the eliminated DOFs: what ``enforceable`` needs (None without contact)."""
+        mult = self.ctx.multiplied
+        if not any(r.meta.get("type") == "contact" for r in mult):
+            return None
+        rset = self.rset
+        keep = [k for k, r in enumerate(mult) if not r.collapsed]
+        rows = np.concatenate([mult[k].a_rows + rset.rows_of(k).start for k in keep])
+        dofs = np.concatenate([mult[k].a_dofs for k in keep])
+        candidate = np.zeros(rset.nrelrows, dtype=bool)
+        for k, r in enumerate(mult):
+            candidate[rset.rows_of(k)] = r.meta.get("type") == "contact"
+        fixed = np.concatenate([r.a_dofs for r in self.ctx.eliminated] + [np.zeros(0, np.int64)])
+        return rows, dofs, [mult[k] for k in keep], candidate, np.unique(fixed)
+
+    def enforceable(self, active: np.ndarray) -> np.ndarray:
+        """The active rows less the contact rows that depend on the others (a held, tied or
+        shared contact node: ``parsolve.contact.dependent``), which the solve leaves out (their
+        multipliers zero): the same displacements, and no null pivot."""
+        if self._rows is None:
+            return active
+        rows, dofs, rels, candidate, fixed = self._rows
+        vals = np.concatenate([r.a_vals for r in rels])   # current (friction turns them)
+        # compliant rows constrain nothing (``Relation.compliance``): out of the analysis
+        hard = active & ~(self.rset.compliance[self.rset.mult_of_row] > 0.0)
+        self.left_out = dependent_rows(rows, dofs, vals, active.size, hard, candidate, fixed,
+                                       self.ctx.ncomp)
+        return active & ~self.left_out
+
+    @property
+    def enforced(self) -> np.ndarray:
+        """The active rows the last solve enforced: less the contact rows it left out (a held
+        or tied node's: multiplier zero, the rows it depends on carry its reaction), which a
+        step's outputs report as carrying nothing (state open), not as stuck."""
+        return self.active.active & ~self.left_out
+
+    def _empty_rows(self) -> np.ndarray:
+        """Per relation row of the active set: no A entry (a finite-sliding slave that no facet
+        faces yet): never enforced, whatever its value."""
+        rset = self.rset
+        empty = np.ones(rset.nrelrows, dtype=bool)
+        for k, r in enumerate(self.ctx.multiplied):
+            empty[rset.rows_of(k)] = False if r.collapsed else r.empty_rows()
+        return empty
+
+    def close_contact(self) -> bool:
+        """Enforce every contact row that is not (True when there was one): the first solve of
+        a step failed with rows open, which is a body held only by contact (nothing else, or
+        soft supports, in the contact direction: a singular or ill-conditioned operator).
+        Started in contact, the body is held; the active set then opens the rows that pull
+        (a frictional node closing this way sticks or slides as any closing node). No
+        tolerance to guess (``closed``) and the same answer: the set is decided as always.
+        Every rank decides from the same active set."""
+        if self._rows is None:
+            return False
+        closing = self._rows[3] & ~self.active.active & ~self._empty_rows()
+        if not closing.any():
+            return False
+        self.active.active[closing] = True
+        self.active.held |= closing
+        self.active.seen.add(self.active.active.tobytes())
+        return True
+
+    def check_left_out(self, t: float, q: np.ndarray) -> None:
+        """A left-out row is decided by the rows it depends on: fail when they violate it (a
+        node held inside the obstacle), rather than return a penetrating answer."""
+        if not self.left_out.any():
+            return
+        values = self.rset.primal_values(q)
+        gap = values - self.rset.targets(t)
+        # against the rows' values and the displacements (a row at rest on the plane has A q = 0)
+        scale = max(float(np.abs(values).max()), self.ctx.max_abs(q), 1e-300)
+        bad = self.left_out & (self.active.sign * gap > 1e-9 * scale)
+        if bad.any():
+            row = int(np.flatnonzero(bad)[0])
+            k, local = self.rset.locate(row)
+            rel = self.ctx.multiplied[k]
+            node = int(rel.a_dofs[rel.a_rows == local][0]) // self.ctx.ncomp
+            raise SolverError(f"contact row {local} of {rel.name!r} (node {node}) depends on "
+                              "other relations (a held or tied node) that violate it by "
+                              f"{abs(float(gap[row])):.3g}: they push it into the obstacle")
+
+    # ------------------------------------------------------------ active set
+
+    def start_step(self) -> None:
+        self.active.start_step()
+
+    def update_active(self, t: float, q: np.ndarray, lam: np.ndarray) -> bool:
+        """The active set after a solve (True when it changed); no change without unilateral
+        rows."""
+        if not self.active.unilateral:
+            return False
+        values = self.rset.primal_values(q)
+        gap = values - self.rset.targets(t)
+        scale_gap = max(float(np.abs(gap).max()), float(np.abs(values).max()), 1e-300)
+        scale_lam = max(float(np.abs(lam).max()), 1e-300)
+        lam = self.rset.row_values(lam) if lam.size else lam
+        return self.active.update(gap, lam, 1e-9 * scale_gap, 1e-9 * scale_lam, scale_gap)
+
+    # ------------------------------------------------------------ first tangent of a step
+
+    def first_tangent(self, t: float, kmat, q: np.ndarray, states: list, t_prev: float,
+                      secant: bool) -> tuple[object, int]:
+        """The policies that need the step's first tangent: orientation (once per run) and
+        the maximum-control predictor (every step). Returns the tangent the first solve uses
+        and the predictor's solves (counted as iterations)."""
+        if not self.oriented:
+            self.orient(kmat)
+            self.oriented = True
+        if not self.active.groups:
+            return kmat, 0
+        if not secant:
+            kmat = self.loading_tangent(kmat, q, states, t_prev)
+        self.predict_maximum_rows(t, kmat, q)
+        return kmat, 1
+
+    def unit_response(self, kmat, released: np.ndarray, f: np.ndarray) -> np.ndarray:
+        """δq = K⁻¹ f with the tangent, the rows ``released`` switched off and the other
+        active rows enforced at zero (homogeneous): how the structure answers a unit load."""
+        active = self.active.active.copy()
+        active[released] = False
+        return self.respond(kmat, self.enforceable(active), f)
+
+    def dual_column(self, k: int, row: int | None = None) -> np.ndarray:
+        """Column of D of relation k (its first row when every row shares one vector)."""
+        rel = self.ctx.multiplied[k]
+        if rel.shared_dual is not None:
+            return self.ctx.local_vector(*rel.shared_dual)
+        dofs, rows, vals = rel.dual_coo()
+        sel = rows == (0 if row is None else row)
+        return self.ctx.local_vector(dofs[sel], vals[sel])
+
+    def orient(self, kmat) -> None:
+        """o = -sign(A K⁻¹ D) of every free unilateral non-associated row, from the first
+        tangent: the reaction must push the row back whichever way its dual points. A relation
+        whose rows share one dual vector (a load pattern) costs one solve; rows with their own
+        local duals take the sign of -A_k·D_k."""
+        for k, r in enumerate(self.ctx.multiplied):
+            if r.sense == "=" or r.associated or r.maximum or r.groups is not None:
+                continue  # a group's enforced row is chosen by value, whatever its sign
+            span = self.rset.rows_of(k)
+            rows = np.arange(span.start, span.stop)
+            if r.meta.get("dual"):
+                rate = self.ctx.relation_primal(r, self.unit_response(kmat, rows,
+                                                                      self.dual_column(k)))
+            else:
+                rate = _row_dots(r, self.ndof_keys)
+            # a row with no entry yet (a contact slave that no facet faces) is never enforced
+            # until it has some: it takes the sense of the relation's other rows, for good (the
+            # sense is decided once; a contact's normal rows all have the sense +1)
+            empty = r.empty_rows()
+            if np.any(~empty & (np.abs(rate) <= 1e-12 * max(float(np.abs(rate).max()), 1e-300))):
+                raise SolverError(f"relation {r.name!r}: its dual does not move its primal value "
+                                  "(A K⁻¹ D = 0), so the sense of its reaction is undefined")
+            sense = -np.sign(rate)
+            known = sense[~empty]
+            sense[empty] = known[0] if known.size and np.all(known == known[0]) else 1.0
+            self.active.orient[rows] = sense
+
+    def enforced_rows(self) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
+        """Per maximum group, its enforced row: (row, its relation, A's DOFs and coefficients
+        on that row)."""
+        out = []
+        for g in self.active.groups:
+            row = int(g[self.active.active[g]][0])
+            k, local = self.rset.locate(row)
+            rel = self.ctx.multiplied[k]
+            sel = rel.a_rows == local
+            out.append((row, k, np.asarray(rel.a_dofs)[sel], np.asarray(rel.a_vals)[sel]))
+        return out
+
+    def enforced_cells(self) -> np.ndarray:
+        """Positions (in this rank's cells) of the cells measured by the enforced rows of the
+        maximum groups: the cells all of whose nodes carry an entry of such a row."""
+        ctx = self.ctx
+        marked = np.zeros(ctx.mesh.num_points, dtype=bool)
+        for _, _, dofs, _ in self.enforced_rows():   # (input DOFs: this rank's nodes of them)
+            marked |= ctx.local_vector(dofs, np.ones(dofs.size)).reshape(-1, ctx.ncomp).any(axis=1)
+        return np.flatnonzero(marked[ctx.mesh.cells[ctx.cells]].all(axis=1))
+
+    def loading_tangent(self, kmat, q: np.ndarray, states: list, t_prev: float):
+        """The first tangent of a step for a maximum control: the enforced rows' cells on
+        their loading branch, every other cell as it is at the converged state (unloading).
+
+        At a converged state no material point is loading (its history equals its current
+        value), so the first tangent is the unloading one everywhere and the control load can
+        only grow: past the peak, where the enforced cell softens and its neighbours must
+        unload, the first iterate loaded every cell of the band, and the next tangent, softening
+        in all of them, was nearly singular (the plate refined 8× ran into null pivots). The
+        enforced cell's loading tangent is taken at q + δ, δ along its row with A δ = 1e-10 of
+        the row's value; all other cells keep theirs. Not for a secant matrix: it does not tell
+        loading from unloading (and a perturbed cell would break a symmetric tie)."""
+        ctx = self.ctx
+        delta = np.zeros(ctx.ndof)
+        for row, k, dofs, a in self.enforced_rows():
+            rel, local = ctx.multiplied[k], self.rset.locate(row)[1]
+            b = rel.rhs(t_prev)[local]
+            value = ctx.relation_primal(rel, q)[local]   # A q of the row (collective)
+            size = 1e-10 * max(abs(float(value)), abs(float(b)), 1e-300)
+            delta += ctx.local_vector(dofs, self.active.sign[row] * a * size / max(float(a @ a), 1e-300))
+        loading = ctx.composition.evaluate(q + delta, states, False, self.system.rate)[2]
+        return _CellReplaced(kmat, loading, self.enforced_cells())
+
+    def predict_maximum_rows(self, t: float, kmat, q: np.ndarray) -> None:
+        """For each maximum relation, enforce the row that reaches its value first under the
+        relation's own control load: one solve with the tangent (``loading_tangent``) and a
+        unit control load, rates r = A δq, then the smallest (b - A q) / |r| along the branch
+        the enforced row follows (``_branch_reach``)."""
+        groups = np.concatenate(self.active.groups)
+        f = np.zeros(self.ctx.ndof)
+        for g in self.active.groups:  # the control load of each group at unit intensity
+            f += self.dual_column(self.rset.locate(int(g[0]))[0])
+        dq = self.unit_response(kmat, groups, f)
+        rates = self.rset.primal_values(dq)
+        gap = self.rset.targets(t) - self.rset.primal_values(q)
+        for g in self.active.groups:
+            s = self.active.sign[g]
+            current = g[self.active.active[g]][0]
+            reach = _branch_reach(s * rates[g], s * gap[g], int(current - g[0]))
+            if np.isfinite(reach).any():
+                tol = GROUP_TOL * float(np.abs(reach[np.isfinite(reach)]).min())
+                best = self.active.pick(g, reach, current, False, tol)
+                self.active.active[g] = False
+                self.active.active[best] = True
+        self.active.start_step()
+
+    # ------------------------------------------------------------ effects' hooks
+
+    def begin_hooks(self, q: np.ndarray) -> bool:
+        """The hooks' effects at the start of a step (True when a relation changed)."""
+        changed = False
+        for e in self.hooks:
+            changed = e.begin_step(q, self.rset.views(self.active.active),
+                                   self.ctx.composition.now) or changed
+        return changed
+
+    def refresh_hooks(self, q: np.ndarray, lam: np.ndarray) -> bool:
+        """The effects' updates between iterations (e.g. friction states and slip senses);
+        their relation values are then copied into the system (``sync_relations``)."""
+        lam = self.rset.views(self.rset.row_values(lam) if lam.size else lam)
+        active = self.rset.views(self.active.active)
+        changed = False
+        for e in self.hooks:
+            changed = e.refresh(q, lam, active) or changed
+        return changed
+
+    def end_hooks(self) -> None:
+        for e in self.hooks:
+            e.end_step()
+
+    @property
+    def restructures(self) -> bool:
+        """Whether a hook's effect may change its relations' sparsity (every step: one
+        /timings/pattern dataset)."""
+        return any(e.restructures for e in self.hooks)
+
+    @property
+    def restructured(self) -> bool:
+        return any(e.restructured for e in self.hooks)
+
+    def sync_relations(self) -> float | None:
+        """Copy the current A and D values of the relations marked ``meta["refresh"]`` into
+        the relation set (unscaled; the scales of the first assembly stay); when a hook
+        changed their sparsity (``Effect.restructured``), the system's operator is built
+        again on the new pattern and the rows of the dependence analysis made again. Returns
+        the seconds of that restructure (/timings/pattern), None when there was none. Every
+        rank decides alike (the same relations everywhere)."""
+        if not self.restructured:
+            self.rset.refresh()
+            return None
+        t0 = time.perf_counter()
+        self.system.restructure()
+        self._rows = self._dependence_rows()
+        for e in self.hooks:
+            e.restructured = False
+        return time.perf_counter() - t0
+
+    # ------------------------------------------------------------ restart
+
+    def save_state(self) -> dict:
+        return {"orient": self.active.orient.copy(), "oriented": self.oriented,
+                "hooks": [e.restart_state() for e in self.hooks]}
+
+    def load_state(self, state: dict) -> None:
+        self.active.orient[:] = state["orient"]
+        self.oriented = state["oriented"]
+        for e, saved in zip(self.hooks, state["hooks"]):
+            e.load_restart_state(saved)

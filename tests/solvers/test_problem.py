@@ -1,0 +1,219 @@
+"""The nonlinear problem (``solvers.problem``) through its callbacks, the relation policies
+(``solvers.policies``) on their own, and the two drivers over one problem (Newton,
+arc-length), with numbers from closed forms: a bar of E = 1e3, ν = 0, length 1, height 0.1,
+clamped on the left and pulled by a traction p on the right (u = p x / E, exact on quads)."""
+
+from __future__ import annotations
+
+import tomllib
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from helpers.control import closed_form, without_control, BAR as LOCALIZATION_BAR
+from parsolve.driver import make_solver
+from parsolve.model import build_model
+from parsolve.scene import parse_scene
+from parsolve.solvers.arc_length import ArcLength
+from parsolve.solvers.newton import NewtonSolver
+from parsolve.solvers.problem import SaddleProblem
+from parsolve.solvers.system import SaddleSystem
+
+BAR = """
+[mesh]
+generator = "rectangle"
+lx = 1.0
+ly = 0.1
+nx = 10
+ny = 2
+cell = "quad"
+[model]
+hypothesis = "plane_stress"
+[regions]
+corner = {{ point = [0.0, 0.0] }}
+[[materials]]
+E = 1e3
+nu = 0.0
+[[loads]]
+name = "pull"
+region = "right"
+traction = [0.3, 0.0]
+[[loads]]
+name = "stop_force"
+region = "right"
+traction = [{dual}, 0.0]
+[[relations]]
+name = "clamp"
+type = "dirichlet"
+region = "left"
+components = ["x"]
+[[relations]]
+name = "corner"
+type = "dirichlet"
+region = "corner"
+components = ["y"]
+{stop}
+[steps]
+count = 4
+"""
+
+# the end of the bar stopped at 1e-4 by a reaction along the load pattern "stop_force"
+STOP = """[[relations]]
+name = "stop"
+type = "mean"
+region = "right"
+component = "x"
+value = 1e-4
+sense = "<="
+evolution = "constant"
+dual = "stop_force"
+"""
+
+
+def problem_of(text: str, comm=MPI.COMM_WORLD) -> tuple:
+    """(scene, system, problem) as the driver builds them."""
+    scene = parse_scene(tomllib.loads(text), "scene.toml", text)
+    system = SaddleSystem(comm, build_model(scene, comm))
+    system.assemble()
+    return scene, system, SaddleProblem(comm, system, make_solver(comm, system, {}),
+                                        scene.nonlinear)
+
+
+def test_residual_of_a_linear_bar_before_and_after_the_step():
+    """At q = 0 the residual is the whole load (relative 1 exactly); one Newton solve through
+    the callbacks gives u_end = p L / E = 3e-4; at the converged state the residual is below
+    1e-10 of the forces in play, after one iteration."""
+    scene, system, problem = problem_of(BAR.format(dual=0.0, stop=""))
+    f_known = problem.begin(1.0)
+    lin = problem.form()
+    r_norm, ref = problem.norms(f_known, lin.f_int)
+    assert r_norm == pytest.approx(ref, rel=1e-14) and ref > 0
+    x = problem.solve(problem.jacobian(lin.kmat), problem.rhs(1.0, lin.f_int, f_known))
+    assert problem.ctx.max_abs(x.q) == pytest.approx(3e-4, rel=1e-12)
+
+    _, _, problem = problem_of(BAR.format(dual=0.0, stop=""))
+    result = NewtonSolver(problem, scene.nonlinear).step(1.0)
+    assert result.iterations == 1
+    r_norm, ref = problem.norms(problem.external(1.0), problem.form().f_int)
+    assert r_norm <= 1e-10 * ref
+    assert problem.size() == pytest.approx(3e-4, rel=1e-12)
+    clamp = problem.multipliers(1.0, result.f_int)["clamp"]   # the load, 0.3 · 0.1
+    assert abs(float(clamp.sum())) == pytest.approx(0.03, rel=1e-10)
+
+
+def test_restore_then_the_same_step_again_gives_the_same_numbers():
+    """The stop bar: reached at t = 1/3, λ = (0.01 - 0.03 t) / (0.1 dual) after. A step taken,
+    undone (``restore``) and taken again ends bitwise where it ended the first time."""
+    scene, _, problem = problem_of(BAR.format(dual=-1.0, stop=STOP))
+    newton = NewtonSolver(problem, scene.nonlinear)
+    newton.step(0.25)
+    snap = problem.snapshot()
+    first = newton.step(0.5)
+    q, lam, active = problem.q.copy(), problem.lam.copy(), problem.active.active.copy()
+    stop = problem.multipliers(0.5, first.f_int)["stop"]
+    np.testing.assert_allclose(stop, [(0.01 - 0.015) / -0.1], rtol=1e-10)
+    problem.restore(snap)
+    np.testing.assert_array_equal(problem.q, snap[0])
+    assert not problem.active.active[-1]        # the stop open again, as at t = 0.25
+    again = newton.step(0.5)
+    assert again.iterations == first.iterations
+    np.testing.assert_array_equal(problem.q, q)
+    np.testing.assert_array_equal(problem.lam, lam)
+    np.testing.assert_array_equal(problem.active.active, active)
+
+
+@pytest.mark.parametrize("dual", [-1.0, 2.0])
+def test_orientation_from_the_unit_response(dual):
+    """A K⁻¹ D of the stop: the mean end displacement under the traction ``dual`` alone,
+    dual · L / E; the orientation is its opposite sign (the reaction pushes the end back)."""
+    _, _, problem = problem_of(BAR.format(dual=dual, stop=STOP))
+    policies = problem.policies
+    kmat = problem.form().kmat
+    k = [r.name for r in problem.ctx.multiplied].index("stop")
+    rows = np.arange(problem.rset.rows_of(k).start, problem.rset.rows_of(k).stop)
+    dq = policies.unit_response(kmat, rows, policies.dual_column(k))
+    rate = problem.ctx.relation_primal(problem.ctx.multiplied[k], dq)
+    np.testing.assert_allclose(rate, [dual * 1e-3], rtol=1e-10)
+    assert problem.first_tangent(0.25, problem.form()) == 0   # no maximum group: no predictor
+    np.testing.assert_array_equal(policies.active.orient[rows], [-np.sign(dual)])
+
+
+BLOCK = """
+[mesh]
+generator = "rectangle"
+lx = 1.0
+ly = 0.5
+nx = 4
+ny = 2
+cell = "quad"
+[model]
+hypothesis = "plane_strain"
+[[materials]]
+E = 1000.0
+nu = 0.3
+[[loads]]
+name = "press"
+region = "top"
+traction = [0.0, -2.0]
+[[relations]]
+name = "hold_x"
+type = "dirichlet"
+region = "left"
+components = ["x"]
+[[contact]]
+name = "base"
+slave = "bottom"
+obstacle = { plane = { origin = [0.0, -0.01], normal = [0.0, 1.0] } }
+[steps]
+count = 1
+"""
+
+
+def test_a_block_held_only_by_contact_starts_closed():
+    """A block 0.01 above a plane, held in x, pressed down by 2 per unit length: nothing holds
+    it in y but the contact, so the first solve fails with the rows open. ``close_contact``
+    closes the five bottom rows once (then has nothing to close); Newton does so itself, and
+    the contact rows carry the load, 2 · 1 = 2, with the block on the plane."""
+    scene, _, problem = problem_of(BLOCK)
+    policies = problem.policies
+    assert not problem.active.active.any()
+    assert policies.close_contact() and problem.active.active.sum() == 5
+    assert not policies.close_contact()
+
+    scene, _, problem = problem_of(BLOCK)
+    result = NewtonSolver(problem, scene.nonlinear).step(1.0)
+    assert problem.enforced.sum() == 5
+    reaction = problem.multipliers(1.0, result.f_int)["base_normal"]
+    np.testing.assert_allclose(reaction, [-0.25, -0.5, -0.5, -0.5, -0.25], rtol=1e-10)
+    gap = problem.rset.primal_values(problem.q) - problem.rset.targets(1.0)
+    assert np.abs(gap).max() <= 1e-12
+
+
+def test_arc_length_over_the_problem_follows_the_softening_bar():
+    """Crisfield's arc-length as a driver over the problem: the localization bar with three
+    columns (``test_distributed_arc_length``) through its limit point, every step's load
+    factor on the closed form of the damaged column's strain (1e-8), up then down."""
+    text = without_control(LOCALIZATION_BAR)
+    for old, new in (("nx = 29", "nx = 3"),
+                     ('middle = "x > 14/29 and x < 15/29"', 'middle = "x > 1/3 and x < 2/3"'),
+                     ('matrix = "secant"', 'matrix = "tangent"'), ("count = 24", "count = 20"),
+                     ("[nonlinear]\n", '[nonlinear]\nmethod = "arc_length"\nmax_iterations = 30'
+                                       '\narc_length = { pattern = "pull", length = 3e-5 }\n')):
+        text = text.replace(old, new)
+    scene, system, problem = problem_of(text)
+    arc = ArcLength(problem, scene.nonlinear)
+    ctx, comm = problem.ctx, MPI.COMM_WORLD
+    x = ctx.mesh.points[:ctx.mesh.n_owned, 0]
+    mus, strains = [], []
+    for t in scene.times:
+        arc.step(t)
+        u = ctx.values(problem.q)[next(iter(ctx.fields)).name][:ctx.mesh.n_owned, 0]
+        sums = comm.allreduce(np.array([u[np.isclose(x, 1 / 3)].sum(), np.isclose(x, 1 / 3).sum(),
+                                        u[np.isclose(x, 2 / 3)].sum(), np.isclose(x, 2 / 3).sum()]))
+        strains.append((sums[2] / sums[3] - sums[0] / sums[1]) * 3.0)
+        mus.append(arc.mu)
+    mus = np.array(mus)
+    np.testing.assert_allclose(mus, closed_form(np.array(strains))[1], rtol=1e-8)
+    peak = int(np.argmax(mus))
+    assert 0 < peak < len(mus) - 1 and mus[-1] < 0.1 * mus[peak]
