@@ -7,10 +7,11 @@ Relations are rescaled so that their rows and columns are commensurate with the 
 ``λ / col_scale`` and the primal equation's right-hand side ``b · row_scale``. An associated
 relation gets equal scales, which keeps the operator symmetric.
 
-Multiplier rows are numbered by owner: a row belongs to the rank owning the DOF of its first A
-entry (a contact row's slave node, a tie's first node; a row with no A entry, its first D entry;
-with neither, ranks in turn), so the row of A and the column of D live with the nodes they act
-on. Rank r's rows come after those of the ranks before it, in stacking order (relation by
+Multiplier rows are numbered by owner: a row belongs to the rank owning most of the DOFs its A
+row and D column name (ties: the lowest rank; a row with no entry: ranks in turn), so that the
+row of A and the column of D live, as far as they can, with the nodes they act on. A contact
+row on a rigid obstacle goes with its slave node; a row tying a slave node to a span of master
+nodes (finite sliding, mortar) with the master nodes, which are most of its entries. Rank r's rows come after those of the ranks before it, in stacking order (relation by
 relation); the DOF map is given each rank's count (``DofMap.set_multipliers``). On one rank
 this is the stacking order itself.
 
@@ -107,10 +108,14 @@ class RelationSet:
         and the DOF map told each rank's count. Every rank computes the same."""
         dofmap = self.dofmap
         nranks = dofmap.q_ranges.size - 1
+        rows = np.concatenate([stacked_a, stacked_d])
+        dof_owner = dofmap.owner_of_dofs(np.concatenate([self.a_cols, self.d_rows]))
         owner = np.arange(n, dtype=np.int64) % nranks           # rows with no entry: in turn
-        for rows, dofs in ((stacked_d, self.d_rows), (stacked_a, self.a_cols)):  # A decides
-            first_rows, first_entry = np.unique(rows, return_index=True)
-            owner[first_rows] = dofmap.owner_of_dofs(dofs[first_entry])
+        keys, count = np.unique(rows * nranks + dof_owner, return_counts=True)
+        row, rank = np.divmod(keys, nranks)
+        best = np.lexsort((rank, -count, row))                  # most entries, then lowest rank
+        first = np.flatnonzero(np.diff(np.concatenate([[-1], row[best]])) != 0)
+        owner[row[best[first]]] = rank[best[first]]
         order = np.argsort(owner, kind="stable")
         position = np.empty(n, dtype=np.int64)
         position[order] = np.arange(n)
