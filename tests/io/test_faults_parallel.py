@@ -44,7 +44,7 @@ def launch(ranks: int, args: list[str], wait: bool = True, slow: bool = False):
     if not wait:
         return subprocess.Popen(cmd, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                 text=True, start_new_session=True)
-    return subprocess.run(cmd, env=ENV, capture_output=True, text=True, timeout=120)
+    return subprocess.run(cmd, env=ENV, capture_output=True, text=True, timeout=600)
 
 
 def _mounted(where, size: str):
@@ -212,7 +212,7 @@ def test_post_recovers_a_killed_runs_file(ranks, tmp_path):
     mpirun = _children(proc.pid)
     for pid in _children(mpirun[0]):      # the ranks (in a process group of their own)
         os.kill(pid, signal.SIGKILL)
-    proc.communicate(timeout=60)
+    proc.communicate(timeout=300)
     with pytest.raises(OSError):
         h5py.File(out, "r")
     post = [sys.executable, "-m", "parsolve", "post", str(out)]
