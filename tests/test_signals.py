@@ -33,7 +33,7 @@ def test_signal_stops_the_run_and_keeps_finished_steps(sig, code, tmp_path):
         except (OSError, KeyError):
             pass
     proc.send_signal(sig)
-    _, err = proc.communicate(timeout=60)
+    _, err = proc.communicate(timeout=300)
     assert proc.returncode == code, err
     assert "interrupted" in err and "Traceback" not in err
     with h5py.File(out, "r") as f:
@@ -89,7 +89,7 @@ def test_sigterm_under_mpirun_stops_every_rank(ranks, target, tmp_path):
     assert len(ranks_pids) == ranks
     pid = {"wrapper": proc.pid, "mpirun": mpirun[0], "rank": ranks_pids[-1]}[target]
     os.kill(pid, signal.SIGTERM)
-    _, err = proc.communicate(timeout=60)
+    _, err = proc.communicate(timeout=300)
     assert proc.returncode == (1 if target == "mpirun" else 143), err
     assert "interrupted by SIGTERM" in err and "Traceback" not in err
     with h5py.File(out, "r") as f:

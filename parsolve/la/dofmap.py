@@ -3,7 +3,9 @@ saddle vector [q, λ] is numbered and split across ranks.
 
 - **Saddle numbering.** Rank r owns a contiguous block of the global vector: first its primal
   DOFs (its owned nodes × ncomp, node-major, in the partition's contiguous node numbering
-  ``new_node * ncomp + c``), then its share of the multipliers (near-equal blocks).
+  ``new_node * ncomp + c``), then its multipliers: the rows the relation set gives it, those
+  whose first DOF it owns (``set_multipliers``; ``la.relation_set``), so that a row of A and
+  its column of D live with the nodes they act on.
 - **Local DOFs.** A rank holds its owned nodes then its ghost nodes (``LocalMesh``); local DOF
   ``local_node * ncomp + c``. Ghosts' owners follow from the node ranges. On 1 rank there are
   no ghosts and every number below is the input's: the same code.
@@ -112,11 +114,11 @@ class _Exchange:
 class DofMap:
     """The saddle numbering of a rank and everything that depends on it (see the module doc).
 
-    ``mesh``: this rank's ``LocalMesh`` (owned nodes first, then ghosts); ``nmult``: the number
-    of multiplier rows (0: a primal map, e.g. for an effect built before the system);
+    ``mesh``: this rank's ``LocalMesh`` (owned nodes first, then ghosts); no multiplier rows
+    until ``set_multipliers`` (a primal map, e.g. for an effect built before the system);
     ``comm`` None: this process alone."""
 
-    def __init__(self, comm, mesh, ncomp: int, nmult: int = 0):
+    def __init__(self, comm, mesh, ncomp: int):
         comm = MPI.COMM_SELF if comm is None else comm
         self.comm, self.mesh, self.ncomp = comm, mesh, int(ncomp)
         self.rank = comm.rank
@@ -129,12 +131,16 @@ class DofMap:
         self._order, self._sorted = order, np.asarray(mesh.global_nodes)[order]
         self._exchange: _Exchange | None = None
         self._inputs: tuple | None = None
-        self._set_multipliers(nmult)
+        self.set_multipliers(np.zeros(self.node_ranges.size - 1, dtype=np.int64))
 
-    def _set_multipliers(self, nmult: int) -> None:
-        nranks = self.node_ranges.size - 1
+    def set_multipliers(self, counts: np.ndarray) -> None:
+        """Give rank r ``counts[r]`` multiplier rows, numbered after those of the ranks
+        before it (the same counts on every rank)."""
+        counts = np.asarray(counts, dtype=np.int64)
+        if counts.size != self.node_ranges.size - 1:
+            raise ValueError(f"{counts.size} multiplier counts for {self.node_ranges.size - 1} ranks")
         self.q_ranges = self.node_ranges * self.ncomp
-        self.l_ranges = np.array([(nmult * r) // nranks for r in range(nranks + 1)], dtype=np.int64)
+        self.l_ranges = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         sizes = np.diff(self.q_ranges) + np.diff(self.l_ranges)
         self.offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         self._saddle = None
@@ -183,7 +189,7 @@ class DofMap:
     def q_index(self, new_dofs: np.ndarray) -> np.ndarray:
         """Saddle index of primal DOFs given in the new numbering."""
         new_dofs = np.asarray(new_dofs, dtype=np.int64)
-        owner = np.searchsorted(self.q_ranges, new_dofs, side="right") - 1
+        owner = self.owner_of_dofs(new_dofs)
         return new_dofs - self.q_ranges[owner] + self.offsets[owner]
 
     def l_index(self, rows: np.ndarray) -> np.ndarray:
@@ -211,6 +217,11 @@ class DofMap:
     def saddle_of_mult(self) -> np.ndarray:
         """Saddle index of every multiplier row (the relations' size)."""
         return self.l_index(np.arange(self.nl))
+
+    def owner_of_dofs(self, new_dofs: np.ndarray) -> np.ndarray:
+        """The rank owning each primal DOF given in the new numbering."""
+        return np.searchsorted(self.q_ranges, np.asarray(new_dofs, dtype=np.int64),
+                               side="right") - 1
 
     @property
     def owned_dofs(self) -> np.ndarray:

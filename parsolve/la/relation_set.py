@@ -7,6 +7,14 @@ Relations are rescaled so that their rows and columns are commensurate with the 
 ``λ / col_scale`` and the primal equation's right-hand side ``b · row_scale``. An associated
 relation gets equal scales, which keeps the operator symmetric.
 
+Multiplier rows are numbered by owner: a row belongs to the rank owning most of the DOFs its A
+row and D column name (ties: the lowest rank; a row with no entry: ranks in turn), so that the
+row of A and the column of D live, as far as they can, with the nodes they act on. A contact
+row on a rigid obstacle goes with its slave node; a row tying a slave node to a span of master
+nodes (finite sliding, mortar) with the master nodes, which are most of its entries. Rank r's rows come after those of the ranks before it, in stacking order (relation by
+relation); the DOF map is given each rank's count (``DofMap.set_multipliers``). On one rank
+this is the stacking order itself.
+
 A relation's rows ("relation rows", what the active set decides) map to multiplier rows one to
 one, except for a collapsed maximum group (``Relation.collapsed``): all its rows share one
 multiplier row and one dual column, which carries the coefficients of the enforced row
@@ -16,7 +24,7 @@ Relations refreshed between iterations (``meta["refresh"]``: friction turning it
 contact pairings) keep their sparsity: ``refresh`` copies their current A and D values (and
 compliances, ``Relation.compliance``) into the stacked arrays in place. When a relation's
 sparsity changes (finite sliding's spans made again) ``restack`` stacks them again, with the
-same rows and scales.
+same rows, owners and scales.
 """
 
 from __future__ import annotations
@@ -39,6 +47,7 @@ class RelationSet:
 
     def __init__(self, relations: list[Relation], dofmap: DofMap):
         self.relations, self.dofmap = relations, dofmap
+        self.position: np.ndarray | None = None   # multiplier row of each stacked row
         self._stack()
         self.row_scale: np.ndarray | None = None
         self.col_scale: np.ndarray | None = None
@@ -46,7 +55,8 @@ class RelationSet:
     def restack(self) -> None:
         """Stack the relations again after their sparsity changed (``Relation.set_entries``):
         the same rows, so the multiplier layout, the scales and the row each collapsed group
-        enforces (``set_active``'s choice) stay; the DOF map must know their DOFs
+        enforces (``set_active``'s choice) stay, and so do their owners (a slave node's
+        row stays with its rank while its masters change); the DOF map must know their DOFs
         (``DofMap.index_inputs``)."""
         rep_row = self.rep_row
         self._stack()
@@ -58,7 +68,7 @@ class RelationSet:
         sizes = [r.nrows for r in relations]
         mult_sizes = [1 if r.collapsed else r.nrows for r in relations]
         self.row_first = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-        self.first_row = first = np.concatenate([[0], np.cumsum(mult_sizes)]).astype(np.int64)
+        first = np.concatenate([[0], np.cumsum(mult_sizes)]).astype(np.int64)
         ar, ac, av, dr, dc, dv, arel, mult = [], [], [], [], [], [], [], []
         for k, rel in enumerate(relations):
             local = np.zeros(rel.nrows, dtype=np.int64) if rel.collapsed else np.arange(rel.nrows)
@@ -75,10 +85,16 @@ class RelationSet:
             dr.append(new_dof(dofs))
             dc.append(np.asarray(rows, dtype=np.int64) + first[k])
             dv.append(np.asarray(vals, dtype=float))
-        self.a_rows, self.a_cols, self.a_vals = _cat(ar, np.int64), _cat(ac, np.int64), _cat(av, float)
-        self.d_rows, self.d_cols, self.d_vals = _cat(dr, np.int64), _cat(dc, np.int64), _cat(dv, float)
+        stacked_a, stacked_d = _cat(ar, np.int64), _cat(dc, np.int64)
+        self.a_cols, self.a_vals = _cat(ac, np.int64), _cat(av, float)
+        self.d_rows, self.d_vals = _cat(dr, np.int64), _cat(dv, float)
+        if self.position is None:   # the owners, once: restacking keeps them
+            self.position = self._by_owner(stacked_a, stacked_d, int(first[-1]))
+        pos = self.position
+        self.a_rows, self.d_cols = pos[stacked_a], pos[stacked_d]
+        self.mult_rows = [pos[first[k]:first[k + 1]] for k in range(len(relations))]
         self.a_relrow = _cat(arel, np.int64)            # relation row of each A entry
-        self.mult_of_row = _cat(mult, np.int64)         # multiplier row of each relation row
+        self.mult_of_row = pos[_cat(mult, np.int64)]    # multiplier row of each relation row
         self.rep_row = np.zeros(int(first[-1]), dtype=np.int64)   # row each multiplier enforces
         self.rep_row[self.mult_of_row[::-1]] = np.arange(self.mult_of_row.size)[::-1]  # first
         self._d_seg = np.concatenate([[0], np.cumsum([len(d) for d in dv])]).astype(np.int64)
@@ -87,12 +103,31 @@ class RelationSet:
         self._copy_compliance()
         self._owned_entries: dict[int, tuple] = {}      # per relation: its owned A entries
 
+    def _by_owner(self, stacked_a: np.ndarray, stacked_d: np.ndarray, n: int) -> np.ndarray:
+        """The multiplier row of each stacked row, rows grouped by owner (see the module doc),
+        and the DOF map told each rank's count. Every rank computes the same."""
+        dofmap = self.dofmap
+        nranks = dofmap.q_ranges.size - 1
+        rows = np.concatenate([stacked_a, stacked_d])
+        dof_owner = dofmap.owner_of_dofs(np.concatenate([self.a_cols, self.d_rows]))
+        owner = np.arange(n, dtype=np.int64) % nranks           # rows with no entry: in turn
+        keys, count = np.unique(rows * nranks + dof_owner, return_counts=True)
+        row, rank = np.divmod(keys, nranks)
+        best = np.lexsort((rank, -count, row))                  # most entries, then lowest rank
+        first = np.flatnonzero(np.diff(np.concatenate([[-1], row[best]])) != 0)
+        owner[row[best[first]]] = rank[best[first]]
+        order = np.argsort(owner, kind="stable")
+        position = np.empty(n, dtype=np.int64)
+        position[order] = np.arange(n)
+        dofmap.set_multipliers(np.bincount(owner, minlength=nranks))
+        return position
+
     # ------------------------------------------------------------ sizes and views
 
     @property
     def nrows(self) -> int:
         """Multiplier rows."""
-        return int(self.first_row[-1])
+        return int(self.rep_row.size)
 
     @property
     def nrelrows(self) -> int:
@@ -209,7 +244,7 @@ class RelationSet:
     def _copy_compliance(self) -> None:
         for k, r in enumerate(self.relations):
             if r.compliance is not None and not r.collapsed:
-                self.compliance[self.first_row[k]:self.first_row[k + 1]] = r.compliance
+                self.compliance[self.mult_rows[k]] = r.compliance
 
     def set_scales(self, kscale: float) -> None:
         """Scale each row of A and column of D to the size of the stiffness diagonal."""
@@ -224,8 +259,8 @@ class RelationSet:
         self.col_scale = kscale / dmax
         for k, rel in enumerate(self.relations):
             if rel.associated:  # same scale on both sides keeps the operator symmetric
-                sl = slice(self.first_row[k], self.first_row[k + 1])
-                self.col_scale[sl] = self.row_scale[sl]
+                rows = self.mult_rows[k]
+                self.col_scale[rows] = self.row_scale[rows]
 
     @property
     def scaled(self) -> bool:

@@ -42,8 +42,8 @@ class SaddleSystem:
         self.part = mesh.partition()
         self.eliminated = [r for r in model.relations if r.eliminable()]
         self.multiplied = [r for r in model.relations if not r.eliminable()]
-        nmult = sum(1 if r.collapsed else r.nrows for r in self.multiplied)
-        self.dofmap = dm = progress.timed("numbering", DofMap, comm, mesh, ncomp, nmult)
+        # the multiplier rows are given their owners by the relation set (below)
+        self.dofmap = dm = progress.timed("numbering", DofMap, comm, mesh, ncomp)
         # relations name input DOFs: the map finds their numbers (one reduction)
         self.unused = self.unused_dofs()
         dm.index_inputs(self._relation_dofs())

@@ -2,6 +2,7 @@
 (a small tmpfs) with ``--output-mode parallel``, and two runs writing the same result."""
 
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -43,7 +44,7 @@ def launch(ranks: int, args: list[str], wait: bool = True, slow: bool = False):
     if not wait:
         return subprocess.Popen(cmd, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                 text=True, start_new_session=True)
-    return subprocess.run(cmd, env=ENV, capture_output=True, text=True, timeout=120)
+    return subprocess.run(cmd, env=ENV, capture_output=True, text=True, timeout=600)
 
 
 def _mounted(where, size: str):
@@ -115,6 +116,16 @@ def _children(pid: int) -> list[int]:
     return [int(p) for p in out.split()]
 
 
+def _descendants(pid: int) -> list[int]:
+    """pid and every process below it (mpirun's ranks included)."""
+    out, todo = [], [pid]
+    while todo:
+        p = todo.pop()
+        out.append(p)
+        todo.extend(_children(p))
+    return out
+
+
 def _locked(path) -> bool:
     import fcntl
 
@@ -147,7 +158,16 @@ def test_a_second_run_on_the_same_output_is_refused(ranks, tmp_path):
         time.sleep(0.1)
     assert first.poll() is None
     inode = out.stat().st_ino
-    second = launch(ranks, ["run", str(scene), "-o", str(out)])
+    # the first run stopped (its lock held) while the second starts and checks: on a loaded
+    # machine the first could otherwise finish before the second has even imported parsolve
+    stopped = _descendants(first.pid)
+    for pid in stopped:
+        os.kill(pid, signal.SIGSTOP)
+    try:
+        second = launch(ranks, ["run", str(scene), "-o", str(out)])
+    finally:
+        for pid in stopped:
+            os.kill(pid, signal.SIGCONT)
     assert second.returncode == 2, second.stderr
     assert second.stderr.splitlines()[0] == (f"parsolve: command line: -o: {out} is being "
                                              f"written by another run (lock held on {out}.lock)")
@@ -192,7 +212,7 @@ def test_post_recovers_a_killed_runs_file(ranks, tmp_path):
     mpirun = _children(proc.pid)
     for pid in _children(mpirun[0]):      # the ranks (in a process group of their own)
         os.kill(pid, signal.SIGKILL)
-    proc.communicate(timeout=60)
+    proc.communicate(timeout=300)
     with pytest.raises(OSError):
         h5py.File(out, "r")
     post = [sys.executable, "-m", "parsolve", "post", str(out)]

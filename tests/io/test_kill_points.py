@@ -34,7 +34,7 @@ SEED = int(os.environ.get("KILL_SEED", "32"))   # the loops of many runs vary it
 def run(ranks: int, args: list[str], kill: str | None = None) -> subprocess.CompletedProcess:
     env = dict(ENV, PARSOLVE_KILL_WRITE=kill) if kill else ENV
     cmd = MPIRUN + [str(ranks), sys.executable, "-m", "parsolve"] + args
-    return subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=180)
+    return subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
 
 
 def per_step_lengths(path) -> dict[str, int]:

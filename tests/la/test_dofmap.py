@@ -14,6 +14,8 @@ from parsolve.mesh.regions import allgather_rows
 
 COMM = MPI.COMM_WORLD
 NC, NMULT = 2, 7
+#: multiplier rows per rank (uneven on purpose: the relation set gives each rank its rows)
+COUNTS = {1: [7], 2: [5, 2], 3: [0, 4, 3], 4: [2, 0, 4, 1]}
 
 
 def value(input_dofs: np.ndarray) -> np.ndarray:
@@ -25,7 +27,9 @@ def value(input_dofs: np.ndarray) -> np.ndarray:
 def parts():
     whole = rectangle(2.0, 1.0, 8, 4, cell="quad")           # 45 nodes
     local = distribute(COMM, whole if COMM.rank == 0 else None, "bisection")
-    return whole, local, DofMap(COMM, local, NC, NMULT)
+    dm = DofMap(COMM, local, NC)
+    dm.set_multipliers(COUNTS[COMM.size])
+    return whole, local, dm
 
 
 def input_dofs(local) -> np.ndarray:
@@ -36,7 +40,7 @@ def test_ranges_and_one_numbering(parts):
     whole, local, dm = parts
     n = COMM.size
     assert dm.nq == 45 * NC and dm.nl == NMULT and dm.size == 45 * NC + NMULT
-    np.testing.assert_array_equal(dm.l_ranges, [(NMULT * r) // n for r in range(n + 1)])
+    np.testing.assert_array_equal(dm.l_ranges, np.concatenate([[0], np.cumsum(COUNTS[n])]))
     np.testing.assert_array_equal(np.diff(dm.offsets), np.diff(dm.q_ranges) + np.diff(dm.l_ranges))
     assert dm.nrows == dm.n_owned + np.diff(dm.l_ranges)[COMM.rank]
     # owned primal rows then the multiplier share: together, every saddle index once

@@ -70,9 +70,9 @@ def brute_saddle(system: SaddleSystem, factor: float = 1.0) -> np.ndarray:
     S[np.ix_(iq, iq)] = brute_stiffness(system.whole, factor)
     blk = system.relation_set
     for k, rel in enumerate(system.multiplied):
-        rows = il[blk.first_row[k]:blk.first_row[k + 1]]
-        scale = blk.row_scale[blk.first_row[k]:blk.first_row[k + 1]]
-        cscale = blk.col_scale[blk.first_row[k]:blk.first_row[k + 1]]
+        rows = il[blk.mult_rows[k]]
+        scale = blk.row_scale[blk.mult_rows[k]]
+        cscale = blk.col_scale[blk.mult_rows[k]]
         np.add.at(S, (rows[rel.a_rows], iq[rel.a_dofs]), rel.a_vals * scale[rel.a_rows])
         dofs, drows, dvals = rel.dual_coo()
         np.add.at(S, (iq[dofs], rows[drows]), -dvals * cscale[drows])
@@ -122,7 +122,7 @@ def structure(system: SaddleSystem) -> np.ndarray:
     out[np.ix_(iq, iq)] = np.kron(nodes, np.ones((nc, nc), dtype=bool))
     blk = system.relation_set
     for k, rel in enumerate(system.multiplied):
-        rows = il[blk.first_row[k]:blk.first_row[k + 1]]
+        rows = il[blk.mult_rows[k]]
         out[rows[rel.a_rows], iq[rel.a_dofs]] = True
         dofs, drows, _ = rel.dual_coo()
         out[iq[dofs], rows[drows]] = True

@@ -39,7 +39,7 @@ def rset():
     whole = rectangle(2.0, 1.0, 8, 4, cell="quad")
     local = distribute(COMM, whole if COMM.rank == 0 else None, "bisection")
     rels = relations()
-    dm = DofMap(COMM, local, NC, 3 + 2 + 1)
+    dm = DofMap(COMM, local, NC)
     dm.index_inputs([r.a_dofs for r in rels] + [r.dual_coo()[0] for r in rels])
     q = value((local.global_nodes.astype(np.int64)[:, None] * NC + np.arange(NC)).ravel())
     return RelationSet(rels, dm), q
@@ -48,8 +48,10 @@ def rset():
 def test_stacking(rset):
     rs, _ = rset
     assert rs.nrows == 6 and rs.nrelrows == 8 and len(rs) == 3
-    np.testing.assert_array_equal(rs.mult_of_row, [0, 1, 2, 3, 4, 5, 5, 5])
-    np.testing.assert_array_equal(rs.rep_row, [0, 1, 2, 3, 4, 5])   # a group: its first row
+    pos = rs.position    # multiplier rows in stacking order (numbered by owner)
+    np.testing.assert_array_equal(np.sort(pos), np.arange(6))
+    np.testing.assert_array_equal(rs.mult_of_row, pos[[0, 1, 2, 3, 4, 5, 5, 5]])
+    np.testing.assert_array_equal(rs.rep_row[pos], [0, 1, 2, 3, 4, 5])   # a group: its first row
     assert rs.locate(6) == (2, 1) and rs.rows_of(1) == slice(3, 5)
     views = rs.views(np.arange(8.0))
     assert list(views) == ["tie", "push", "peak"]
@@ -67,17 +69,22 @@ def test_primal_values_and_gaps(rset):
     # the enforced row of the group moves to its third row: its gap follows
     active = np.array([True] * 5 + [False, False, True])
     on = rs.select(active)
-    assert on.all() and rs.rep_row[5] == 7
-    np.testing.assert_allclose(rs.gap(0.5, q)[5], b[7] - expected[7], rtol=1e-15)
-    np.testing.assert_array_equal(rs.row_values(np.arange(6.0)), [0, 1, 2, 3, 4, 0, 0, 5])
-    np.testing.assert_array_equal(rs.per_relation(np.arange(6.0))["peak"], [0.0, 0.0, 5.0])
+    pos = rs.position
+    assert on.all() and rs.rep_row[pos[5]] == 7
+    np.testing.assert_allclose(rs.gap(0.5, q)[pos[5]], b[7] - expected[7], rtol=1e-15)
+    lam = np.empty(6)
+    lam[pos] = np.arange(6.0)   # the stacked rows' values, in multiplier numbering
+    np.testing.assert_array_equal(rs.row_values(lam), [0, 1, 2, 3, 4, 0, 0, 5])
+    np.testing.assert_array_equal(rs.per_relation(lam)["peak"], [0.0, 0.0, 5.0])
 
 
 def test_reactions_on_the_owned_rows(rset):
     rs, _ = rset
     dm = rs.dofmap
-    lam = np.array([1.0, -2.0, 0.5, 3.0, 7.0, 2.0])
-    owned = rs.reactions(lam)
+    lam = np.array([1.0, -2.0, 0.5, 3.0, 7.0, 2.0])   # stacking order
+    numbered = np.empty(6)
+    numbered[rs.position] = lam
+    owned = rs.reactions(numbered)
     assert owned.size == dm.nrows and not owned[dm.n_owned:].any()
     # back to input DOFs: each owned row once, from every rank
     local = dm.mesh
@@ -97,9 +104,10 @@ def test_reactions_on_the_owned_rows(rset):
 def test_scales_and_right_hand_side(rset):
     rs, q = rset
     rs.set_scales(10.0)
-    np.testing.assert_allclose(rs.row_scale, [10.0, 5.0, 10.0, 10.0, 10.0, 10.0])
+    pos = rs.position
+    np.testing.assert_allclose(rs.row_scale[pos], [10.0, 5.0, 10.0, 10.0, 10.0, 10.0])
     # associated: the column scale is the row's; the others from |D|
-    np.testing.assert_allclose(rs.col_scale, [10.0, 5.0, 10.0, 2.5, 5.0, 10.0])
+    np.testing.assert_allclose(rs.col_scale[pos], [10.0, 5.0, 10.0, 2.5, 5.0, 10.0])
     b = np.concatenate([r.rhs(1.0) for r in rs.relations])[rs.rep_row]
     np.testing.assert_allclose(rs.rhs(1.0), b * rs.row_scale, rtol=1e-15)
     every = value(np.arange(NPTS * NC))
@@ -123,3 +131,29 @@ def test_refresh_in_place(rset):
     np.testing.assert_array_equal(rs.a_vals[5:7], [2.0, -1.0])
     np.testing.assert_array_equal(rs.d_vals[5:8], [1.0, 1.0, 1.0])
     assert rs.a_vals[0] == 1.0
+
+
+def test_rows_live_with_most_of_their_dofs(rset):
+    """A multiplier row is owned by the rank owning most of the DOFs its A row and D column
+    name (ties: the lowest rank), each rank's rows after the lower ranks' in stacking order;
+    the DOF map's ranges are those counts."""
+    rs, _ = rset
+    dm = rs.dofmap
+    # the DOFs of each stacked row: tie (3 rows), push (2), peak (one collapsed row)
+    named = [[0, 0], [89, 10, 89, 10], [40, 42, 40, 42], [7, 7, 61], [60, 60],
+             [3, 33, 63, 80, 81]]
+    nodes = np.unique(np.concatenate(named)) // NC
+    own, _ = dm.owned_nodes(nodes)
+    node_owner = dm.sum_ranks(np.where(own, COMM.rank, 0).astype(np.int64))
+    owner = []
+    for dofs in named:
+        count = np.bincount(node_owner[np.searchsorted(nodes, np.array(dofs) // NC)],
+                            minlength=COMM.size)
+        owner.append(int(np.argmax(count)))          # the first of the largest: lowest rank
+    owner = np.array(owner)
+    expected = np.argsort(np.argsort(owner, kind="stable"), kind="stable")
+    np.testing.assert_array_equal(rs.position, expected)
+    np.testing.assert_array_equal(np.diff(dm.l_ranges), np.bincount(owner, minlength=COMM.size))
+    l0, l1 = dm.l_ranges[COMM.rank], dm.l_ranges[COMM.rank + 1]
+    mine = np.flatnonzero((rs.position >= l0) & (rs.position < l1))
+    np.testing.assert_array_equal(mine, np.flatnonzero(owner == COMM.rank))
