@@ -269,15 +269,19 @@ class NewtonSolver:
                 raise SolverError(f"time step to t = {t:.6g} is not positive")
             self.system.rate = Rate(t - self.t_prev, self.time.theta, self.q.copy(), self.f_pure)
 
-    def _roundoff_force(self) -> float:
+    def _roundoff_force(self, q_start: float) -> float:
         """The force residual that is zero to round-off: what evaluating K q can resolve,
-        ROUNDOFF · k · |q| (k: the mean stiffness diagonal). It is the absolute floor under
-        the relative criterion, which has no scale when every force vanishes (a rigid motion,
-        a body at rest on a support): there the relative residual is round-off over
-        round-off and never falls. Far below any physical force (a damaged, softened state
-        still carries forces orders above it), so it does not accept a state off equilibrium."""
-        q = self.ctx.owned_rows(self.q)
-        return ROUNDOFF * getattr(self.system, "kscale", 0.0) * self._norm(q)
+        ROUNDOFF · k · max(|q|, |q_start|) (k: the mean stiffness diagonal; q_start: the state
+        the step started from, whose round-off the step's first correction carries). It is the
+        absolute floor under the relative criterion, which has no scale when every force
+        vanishes (a rigid motion, a body at rest on a support, a step unloaded to q = 0): there
+        the relative residual is round-off over round-off and never falls (with |q| alone, a
+        step whose answer is q = 0 shrinks q by the linear solve's accuracy per iteration and
+        stops only when q underflows to 0: 12-13 iterations, on right-hand sides down to
+        1e-162). Far below any physical force (a damaged, softened state still carries forces
+        orders above it), so it does not accept a state off equilibrium."""
+        q = self._norm(self.ctx.owned_rows(self.q))
+        return ROUNDOFF * getattr(self.system, "kscale", 0.0) * max(q, q_start)
 
     def _norm(self, v: np.ndarray) -> float:
         return float(np.sqrt(self.comm.allreduce(float(v @ v))))
@@ -298,6 +302,7 @@ class NewtonSolver:
         self._start_rate(t)
         f_known = self.external(t)
         changed, dq_norm, predictions = True, np.inf, 0
+        q_start = self._norm(self.ctx.owned_rows(self.q))
         self.residual_history = []
         for it in range(spec.max_iterations + 1):
             interrupts.check(self.comm)   # every rank at the same iteration (see interrupts)
@@ -316,7 +321,7 @@ class NewtonSolver:
             # (or only round-off), the residual is measured against the round-off floor
             ref = max(self._norm(f_ext[free]), self._norm(self.ctx.owned_rows(f_int)), 1e-300)
             r_norm = self._norm(r)
-            residual = r_norm / max(ref, self._roundoff_force() / spec.rtol)
+            residual = r_norm / max(ref, self._roundoff_force(q_start) / spec.rtol)
             self.residual_history.append(residual)
             if not np.isfinite(residual):   # (the same on every rank): a failed iteration
                 raise SolverError(f"non-finite residual at t = {t:.6g}, iteration {it} (a "
