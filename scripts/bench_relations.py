@@ -16,8 +16,13 @@ mean, max; the iterative preset at its tolerance, rtol 1e-13), wall time, peak r
 
     .venv/bin/python scripts/bench_relations.py [--smoke] [--gamma] [--max-factor 4]
         → table, scripts/results/bench_relations.md and bench_relations.json
-        (--smoke: the 1× friction box only, files in a temporary folder; --gamma: the Krylov
-        iterations against γ and the AMG on the friction box 1×, 8×)
+        (--smoke: the 1× friction box and its 2-rank scale run only, files in a temporary
+        folder; --gamma: the Krylov iterations against γ and the AMG on the friction box 1×, 8×)
+    nice -n 5 .venv/bin/python scripts/bench_relations.py --scale 4,8 --ranks 2
+        → the scale runs only: the friction box refined f× per direction on 2 ranks against
+        plain elasticity (its base clamped, CG + GAMG) on the same mesh: time per Newton
+        iteration, Krylov iterations, peak memory summed over the ranks
+        (scripts/results/bench_relations_scale.md)
 """
 
 from __future__ import annotations
@@ -44,6 +49,19 @@ def friction_scene(factor: int) -> str:
         scene["mesh"][key] *= factor
     scene["steps"]["count"] = 2
     scene["steps"]["end"] = 0.25   # the first two steps of the shipped eight
+    return _dumps(scene)
+
+
+def elastic_scene(factor: int) -> str:
+    """The friction box's mesh and load, plain elasticity: its base clamped instead of in
+    contact (CG + GAMG on the stiffness alone: the reference of the scale runs)."""
+    scene = _shipped("contact_friction_3d.toml")
+    for key in ("nx", "ny", "nz"):
+        scene["mesh"][key] *= factor
+    scene.pop("contact")
+    scene["relations"].append({"name": "base", "type": "dirichlet", "region": "zmin"})
+    scene["steps"]["count"] = 2
+    scene["steps"]["end"] = 0.25
     return _dumps(scene)
 
 
@@ -101,15 +119,19 @@ def child(scene_path: str, preset: str, out: str, options: str) -> None:
     with h5py.File(out, "r") as f:
         iterations = int(f["steps/iterations"][()].sum())
         dofs = int(f.attrs.get("dofs", model.mesh.num_global_points * model.ncomp))
-    print(json.dumps(dict(status=status, dofs=dofs, iterations=iterations, krylov=krylov,
-                          wall=wall, hwm=bh.proc_memory()["hwm"])))
+    hwm = MPI.COMM_WORLD.allreduce(bh.proc_memory()["hwm"])   # summed over the ranks
+    if MPI.COMM_WORLD.rank == 0:
+        print(json.dumps(dict(status=status, dofs=dofs, iterations=iterations, krylov=krylov,
+                              wall=wall, hwm=hwm, ranks=MPI.COMM_WORLD.size)))
 
 
-def one_run(folder: Path, name: str, text: str, preset: str, options: dict | None = None) -> dict:
+def one_run(folder: Path, name: str, text: str, preset: str, options: dict | None = None,
+            ranks: int = 1) -> dict:
     scene = folder / f"{name}.toml"
     scene.write_text(text)
     out = folder / f"{name}_{preset}.h5"
-    cmd = [bh.VENV_PY, __file__, CHILD, str(scene), preset, str(out), json.dumps(options or {})]
+    args = [__file__, CHILD, str(scene), preset, str(out), json.dumps(options or {})]
+    cmd = bh.mpirun(ranks, args) if ranks > 1 else [bh.VENV_PY, *args]
     proc = subprocess.run(cmd, capture_output=True, text=True, env=bh.child_env(), cwd=bh.ROOT)
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
     if proc.returncode or not lines:
@@ -187,12 +209,53 @@ def gamma_study(folder: Path) -> list[list[str]]:
     return rows
 
 
+SCALE_HEAD = ["problem", "refinement", "DOFs", "ranks", "Newton its", "Krylov mean / max",
+              "s per Newton it", "peak MiB (all ranks)", "KB/DOF", "ratio to elasticity"]
+
+
+def scale_study(folder: Path, factors: list[int], ranks: int) -> list[list[str]]:
+    """The friction box (iterative preset) against plain elasticity (CG + GAMG) on the same
+    mesh and ranks: time per Newton iteration, peak memory summed over the ranks."""
+    rows = []
+    for f in factors:
+        runs = {"friction": one_run(folder, f"scale_friction_{f}", friction_scene(f),
+                                    "iterative", ranks=ranks),
+                "elasticity": one_run(folder, f"scale_elastic_{f}", elastic_scene(f),
+                                      "iterative", ranks=ranks)}
+        base = runs["elasticity"]
+        for name, r in runs.items():
+            if r.get("status") != "complete":
+                rows.append([name, f"{f}³×", "-", str(ranks), r["status"][:60], *["-"] * 5])
+                continue
+            k = r["krylov"] or [0]
+            per_it = r["wall"] / max(r["iterations"], 1)
+            ratio = "-"
+            if name == "friction" and base.get("status") == "complete":
+                ratio = (f"time {per_it / (base['wall'] / max(base['iterations'], 1)):.2f}×, "
+                         f"memory {r['hwm'] / base['hwm']:.2f}×")
+            rows.append([name, f"{f}³×", f"{r['dofs']:,}", str(ranks), str(r["iterations"]),
+                         f"{sum(k) / len(k):.1f} / {max(k)}", f"{per_it:.2f}", bh.mib(r["hwm"]),
+                         f"{r['hwm'] / r['dofs'] / 1e3:.1f}", ratio])
+        print(bh.text_table(SCALE_HEAD, rows[-2:]), flush=True)
+    return rows
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     bh.add_smoke(p)
     p.add_argument("--max-factor", type=int, default=4, help="largest friction refinement f")
     p.add_argument("--gamma", action="store_true", help="the γ and AMG study")
+    p.add_argument("--scale", type=str, default="",
+                   help="the scale runs only: friction box refinements f (comma-separated) on "
+                        "--ranks ranks, against plain elasticity with GAMG (scale table)")
+    p.add_argument("--ranks", type=int, default=2, help="ranks of the scale runs")
     args = p.parse_args()
+    if args.scale or bh.SMOKE:
+        factors = [1] if bh.SMOKE else [int(f) for f in args.scale.split(",")]
+        rows = scale_study(bh.scratch("relations_scale"), factors, args.ranks)
+        publish_scale(rows, args.ranks)
+        if args.scale:
+            return
     folder = bh.scratch("relations")
     load0, machine = os.getloadavg(), bh.machine_info()
     cases = [("friction", 1, friction_scene(1))]
@@ -218,6 +281,18 @@ def main() -> None:
         grows = gamma_study(folder)
         text = report(rows, results, machine, load0, grows)
     print(text)
+
+
+def publish_scale(rows: list, ranks: int) -> None:
+    machine = bh.machine_info()
+    text = "\n".join([
+        "# Relations at scale: the friction box against plain elasticity", "",
+        f"{machine['date']}, {machine['cpu']}, {machine['cpus']} CPUs, {ranks} ranks, the "
+        "machine shared (times noisy). The 3D friction box (`contact_friction_3d.toml`, its "
+        "first two steps) refined f× per direction on the iterative preset, against the same "
+        "box with its base clamped (CG + GAMG); peak memory: VmHWM summed over the ranks.", "",
+        bh.md_table(SCALE_HEAD, rows, first="---"), ""])
+    bh.publish("bench_relations_scale.md", text)
 
 
 def report(rows: list, results: list, machine: dict, load0, gamma_rows: list | None = None) -> str:

@@ -127,12 +127,13 @@ def test_frictional_contact_of_a_body_held_only_by_contact(run):
     assert np.all(friction <= 0.3 * 10.0 * (1 + 1e-9)) and friction[-1] > 2.5
 
 
-FRICTION = scene(shipped("contact_friction_3d.toml"), steps={"count": 1})
+from parsolve.solvers.augmented import GAMMA_COUPLED  # noqa: E402
 
 
-def _augmented_expected(system, mat, gamma: float) -> np.ndarray:
-    """P from the dense operator: γ/k Aₕᵀ Aₕ on the stiffness block, -k on the diagonal of a
-    row with no sparse Schur diagonal."""
+def _augmented_expected(system, mat, gamma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """From the dense operator M: T (the hard rows' equations, times γ/k Aₕᵀ, added to the
+    force balance), T M, and P = T M with -k on the diagonal of a row with no sparse Schur
+    diagonal."""
     comm = system.comm
     M = dense(mat, comm)
     dm = system.dofmap
@@ -144,32 +145,52 @@ def _augmented_expected(system, mat, gamma: float) -> np.ndarray:
     active = system.op.active.astype(bool) & (system.relation_set.compliance <= 0.0)
     # multiplier rows in saddle order are the relation rows in order (l ranges per rank)
     hard = np.concatenate([active[dm.owned(r)[2]:dm.owned(r)[3]] for r in ranks])
-    A = M[np.ix_(lam, q)] * hard[:, None]
-    P = M.copy()
-    P[np.ix_(q, q)] += gamma / system.kscale * A.T @ A
+    rows = M[np.ix_(lam, q)]
+    # a row of one node (at most 3 entries) enters T at γ; one tying several nodes P alone
+    nodal = np.count_nonzero(rows, axis=1) <= 3
+    T = np.eye(M.shape[0])
+    T[np.ix_(q, lam)] = (gamma / system.kscale * (hard & nodal))[None, :] * rows.T
+    TM = T @ M   # (C's hard rows included: nothing to add when they are 0, as they must be)
+    P = TM.copy()
+    coupled = rows * (hard & ~nodal)[:, None]
+    P[np.ix_(q, q)] += min(gamma, GAMMA_COUPLED) / system.kscale * coupled.T @ coupled
     schur = np.diag(P)[lam] - np.einsum("ki,ik->k", M[np.ix_(lam, q)] / np.diag(P)[q],
                                         M[np.ix_(q, lam)])
     empty = np.abs(schur) <= 1e-8 * system.kscale
     P[lam[empty], lam[empty]] += -system.kscale
-    return P
+    return T, TM, P
 
 
-def test_augmented_matrix_entry_by_entry(comm):
-    """P of the friction box after a solve with some rows inactive: the operator plus
-    γ/k Aₕᵀ Aₕ of the enforced hard rows, nothing else."""
+def test_augmented_form_entry_by_entry(comm):
+    """The friction box after a solve with some rows inactive: the KSP's operator is T M (the
+    operator plus γ/k Aₕᵀ Aₕ of the enforced hard rows, nothing else), its right-hand side
+    T b, from dense products; the KSP's answer solves M x = b."""
     from parsolve.solvers.augmented import GAMMA
 
-    system, solver, mat, rhs, x = solve_in_process(FRICTION, comm, options={})
+    text = scene(shipped("contact_friction_3d.toml"), steps={"count": 1},
+                 solver={"preset": "iterative"})
+    system, solver, mat, rhs, x = solve_in_process(text, comm, options={})
     active = system.op.active.copy()
     active[::3] = False   # some rows switched off, as an active set does
     system.op.active = active
     mat = system.assemble()
-    P = dense(system.preconditioner(mat, GAMMA), comm)
-    expected = _augmented_expected(system, mat, GAMMA)
-    scale = np.abs(expected).max()
-    assert np.abs(P - expected).max() <= 1e-12 * scale
+    form = system.preconditioner(mat, GAMMA)
+    T, TM, P = _augmented_expected(system, mat, GAMMA)
+    scale = np.abs(TM).max()
+    assert np.abs(dense(form.operator, comm) - TM).max() <= 1e-12 * scale
+    assert np.abs(dense(form.pmat, comm) - P).max() <= 1e-12 * scale
     # the augmentation is there (not the operator alone)
-    assert np.abs(P - dense(mat, comm)).max() > 1e-3 * scale
+    assert np.abs(TM - dense(mat, comm)).max() > 1e-3 * scale
+    b = comm.allgather(rhs.array.copy())
+    transformed = rhs.copy()
+    form.transform(transformed)
+    b, tb = np.concatenate(b), np.concatenate(comm.allgather(transformed.array))
+    assert np.abs(tb - T @ b).max() <= 1e-12 * np.abs(T @ b).max()
+    # T M x = T b has M x = b's answer
+    solver.solve(rhs, x)
+    xs = np.concatenate(comm.allgather(x.array))
+    reference = np.linalg.solve(dense(mat, comm), b)
+    assert np.abs(xs - reference).max() <= 1e-9 * np.abs(reference).max()
 
 
 @pytest.mark.parametrize("factor", [0.0, 1e-40, 1e-54])
