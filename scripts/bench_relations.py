@@ -112,17 +112,22 @@ def child(scene_path: str, preset: str, out: str, options: str) -> None:
     scene.solver.preset = preset
     t0 = time.perf_counter()
     model = build_model(scene, MPI.COMM_WORLD)
+    dofs = model.mesh.num_global_points * model.ncomp   # (collective: before the run)
     status = run(MPI.COMM_WORLD, model, out, json.loads(options), log=lambda *a: None)
     wall = time.perf_counter() - t0
     import h5py
 
+    # no collective after the run: petsc4py's garbage cleanup (collective) may run on one rank
+    # while another waits in an mpi4py call (a 2-rank child hung so). Every rank prints its
+    # own peak memory; rank 0 the rest; the parent sums.
+    if MPI.COMM_WORLD.rank:
+        print(json.dumps(dict(rank=MPI.COMM_WORLD.rank, hwm=bh.proc_memory()["hwm"])))
+        return
     with h5py.File(out, "r") as f:
         iterations = int(f["steps/iterations"][()].sum())
-        dofs = int(f.attrs.get("dofs", model.mesh.num_global_points * model.ncomp))
-    hwm = MPI.COMM_WORLD.allreduce(bh.proc_memory()["hwm"])   # summed over the ranks
-    if MPI.COMM_WORLD.rank == 0:
-        print(json.dumps(dict(status=status, dofs=dofs, iterations=iterations, krylov=krylov,
-                              wall=wall, hwm=hwm, ranks=MPI.COMM_WORLD.size)))
+        dofs = int(f.attrs.get("dofs", dofs))
+    print(json.dumps(dict(status=status, dofs=dofs, iterations=iterations, krylov=krylov,
+                          wall=wall, hwm=bh.proc_memory()["hwm"], ranks=MPI.COMM_WORLD.size)))
 
 
 def one_run(folder: Path, name: str, text: str, preset: str, options: dict | None = None,
@@ -133,10 +138,12 @@ def one_run(folder: Path, name: str, text: str, preset: str, options: dict | Non
     args = [__file__, CHILD, str(scene), preset, str(out), json.dumps(options or {})]
     cmd = bh.mpirun(ranks, args) if ranks > 1 else [bh.VENV_PY, *args]
     proc = subprocess.run(cmd, capture_output=True, text=True, env=bh.child_env(), cwd=bh.ROOT)
-    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
-    if proc.returncode or not lines:
+    lines = [json.loads(ln) for ln in proc.stdout.splitlines() if ln.startswith("{")]
+    main_line = [ln for ln in lines if "status" in ln]
+    if proc.returncode or not main_line:
         return dict(status=f"failed: {(proc.stderr or proc.stdout).strip()[-300:]}", out=str(out))
-    return {**json.loads(lines[-1]), "out": str(out)}
+    hwm = sum(ln["hwm"] for ln in lines)   # summed over the ranks
+    return {**main_line[-1], "hwm": hwm, "out": str(out)}
 
 
 def same_answers(a: str, b: str) -> str:
