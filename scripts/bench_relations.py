@@ -130,6 +130,19 @@ def child(scene_path: str, preset: str, out: str, options: str) -> None:
                           wall=wall, hwm=bh.proc_memory()["hwm"], ranks=MPI.COMM_WORLD.size)))
 
 
+def json_objects(text: str) -> list[dict]:
+    """The JSON objects printed in ``text`` (the ranks' lines may run into each other)."""
+    decoder, out, i = json.JSONDecoder(), [], text.find("{")
+    while i >= 0:
+        try:
+            obj, end = decoder.raw_decode(text, i)
+            out.append(obj)
+            i = text.find("{", end)
+        except json.JSONDecodeError:
+            i = text.find("{", i + 1)
+    return out
+
+
 def one_run(folder: Path, name: str, text: str, preset: str, options: dict | None = None,
             ranks: int = 1) -> dict:
     scene = folder / f"{name}.toml"
@@ -138,7 +151,7 @@ def one_run(folder: Path, name: str, text: str, preset: str, options: dict | Non
     args = [__file__, CHILD, str(scene), preset, str(out), json.dumps(options or {})]
     cmd = bh.mpirun(ranks, args) if ranks > 1 else [bh.VENV_PY, *args]
     proc = subprocess.run(cmd, capture_output=True, text=True, env=bh.child_env(), cwd=bh.ROOT)
-    lines = [json.loads(ln) for ln in proc.stdout.splitlines() if ln.startswith("{")]
+    lines = json_objects(proc.stdout)
     main_line = [ln for ln in lines if "status" in ln]
     if proc.returncode or not main_line:
         return dict(status=f"failed: {(proc.stderr or proc.stdout).strip()[-300:]}", out=str(out))

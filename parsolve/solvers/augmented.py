@@ -32,6 +32,7 @@ entry is the mean stiffness diagonal k (``RelationSet.set_scales``), so γ/k · 
 from __future__ import annotations
 
 import numpy as np
+from mpi4py import MPI
 from petsc4py import PETSc
 
 #: γ of the augmentation, relative to the stiffness scale: the fewest Krylov iterations on the
@@ -75,7 +76,9 @@ class AugmentedMatrix:
         that are enforced and not compliant; k: the stiffness scale; γ: that of the rows of one
         node (T's). A hard row that ties several nodes (more entries than NODAL_SPAN) stays out
         of T and enters P alone, at min(γ, GAMMA_COUPLED)."""
-        if mat.handle != self._handle:   # a new operator (a new pattern): start again
+        # a new operator (a new pattern): start again, on every rank alike (the products
+        # below are collective: a rank that made them anew while another reused them hung)
+        if self.comm.allreduce(int(mat.handle != self._handle), op=MPI.MAX):
             self._handle, self.operator, self.pmat = mat.handle, None, None
             self._rows = self._scaled = self._rows_a = self._cols = self._coupling = None
             self._products = {}
