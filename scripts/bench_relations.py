@@ -59,7 +59,8 @@ def elastic_scene(factor: int) -> str:
     for key in ("nx", "ny", "nz"):
         scene["mesh"][key] *= factor
     scene.pop("contact")
-    scene["relations"].append({"name": "base", "type": "dirichlet", "region": "zmin"})
+    scene["relations"] += [{"name": f"base_{c}", "type": "dirichlet", "region": "zmin",
+                            "component": c} for c in "xyz"]
     scene["steps"]["count"] = 2
     scene["steps"]["end"] = 0.25
     return _dumps(scene)
