@@ -11,13 +11,18 @@ Cases (each run in its own process, so that its peak memory is its own; one rank
   mortar    configs/contact_mortar_sphere_3d.toml (3D mortar, two deformable bodies), 1× and
             8× (n_fine, n_coarse, n_depth × 2)
 Per run: DOFs, global (Newton) iterations, linear solves, Krylov iterations per solve (min,
-mean, max; the iterative preset at its tolerance, rtol 1e-13), wall time, peak resident memory
+mean, max; the iterative preset at its tolerance, rtol 2.5e-14), wall time, peak resident memory
 (VmHWM) of the process, and whether the answers equal the direct preset's (1e-8 of scale).
 
     .venv/bin/python scripts/bench_relations.py [--smoke] [--gamma] [--max-factor 4]
         → table, scripts/results/bench_relations.md and bench_relations.json
-        (--smoke: the 1× friction box only, files in a temporary folder; --gamma: the Krylov
-        iterations against γ and the AMG on the friction box 1×, 8×)
+        (--smoke: the 1× friction box and its 2-rank scale run only, files in a temporary
+        folder; --gamma: the Krylov iterations against γ and the AMG on the friction box 1×, 8×)
+    nice -n 5 .venv/bin/python scripts/bench_relations.py --scale 4,8 --ranks 2
+        → the scale runs only: the friction box refined f× per direction on 2 ranks against
+        plain elasticity (its base clamped, CG + GAMG) on the same mesh: time per Newton
+        iteration, Krylov iterations, peak memory summed over the ranks
+        (scripts/results/bench_relations_scale.md)
 """
 
 from __future__ import annotations
@@ -44,6 +49,20 @@ def friction_scene(factor: int) -> str:
         scene["mesh"][key] *= factor
     scene["steps"]["count"] = 2
     scene["steps"]["end"] = 0.25   # the first two steps of the shipped eight
+    return _dumps(scene)
+
+
+def elastic_scene(factor: int) -> str:
+    """The friction box's mesh and load, plain elasticity: its base clamped instead of in
+    contact (CG + GAMG on the stiffness alone: the reference of the scale runs)."""
+    scene = _shipped("contact_friction_3d.toml")
+    for key in ("nx", "ny", "nz"):
+        scene["mesh"][key] *= factor
+    scene.pop("contact")
+    scene["relations"] += [{"name": f"base_{c}", "type": "dirichlet", "region": "zmin",
+                            "component": c} for c in "xyz"]
+    scene["steps"]["count"] = 2
+    scene["steps"]["end"] = 0.25
     return _dumps(scene)
 
 
@@ -94,27 +113,51 @@ def child(scene_path: str, preset: str, out: str, options: str) -> None:
     scene.solver.preset = preset
     t0 = time.perf_counter()
     model = build_model(scene, MPI.COMM_WORLD)
+    dofs = model.mesh.num_global_points * model.ncomp   # (collective: before the run)
     status = run(MPI.COMM_WORLD, model, out, json.loads(options), log=lambda *a: None)
     wall = time.perf_counter() - t0
     import h5py
 
+    # no collective after the run: petsc4py's garbage cleanup (collective) may run on one rank
+    # while another waits in an mpi4py call (a 2-rank child hung so). Every rank prints its
+    # own peak memory; rank 0 the rest; the parent sums.
+    if MPI.COMM_WORLD.rank:
+        print(json.dumps(dict(rank=MPI.COMM_WORLD.rank, hwm=bh.proc_memory()["hwm"])))
+        return
     with h5py.File(out, "r") as f:
         iterations = int(f["steps/iterations"][()].sum())
-        dofs = int(f.attrs.get("dofs", model.mesh.num_global_points * model.ncomp))
+        dofs = int(f.attrs.get("dofs", dofs))
     print(json.dumps(dict(status=status, dofs=dofs, iterations=iterations, krylov=krylov,
-                          wall=wall, hwm=bh.proc_memory()["hwm"])))
+                          wall=wall, hwm=bh.proc_memory()["hwm"], ranks=MPI.COMM_WORLD.size)))
 
 
-def one_run(folder: Path, name: str, text: str, preset: str, options: dict | None = None) -> dict:
+def json_objects(text: str) -> list[dict]:
+    """The JSON objects printed in ``text`` (the ranks' lines may run into each other)."""
+    decoder, out, i = json.JSONDecoder(), [], text.find("{")
+    while i >= 0:
+        try:
+            obj, end = decoder.raw_decode(text, i)
+            out.append(obj)
+            i = text.find("{", end)
+        except json.JSONDecodeError:
+            i = text.find("{", i + 1)
+    return out
+
+
+def one_run(folder: Path, name: str, text: str, preset: str, options: dict | None = None,
+            ranks: int = 1) -> dict:
     scene = folder / f"{name}.toml"
     scene.write_text(text)
     out = folder / f"{name}_{preset}.h5"
-    cmd = [bh.VENV_PY, __file__, CHILD, str(scene), preset, str(out), json.dumps(options or {})]
+    args = [__file__, CHILD, str(scene), preset, str(out), json.dumps(options or {})]
+    cmd = bh.mpirun(ranks, args) if ranks > 1 else [bh.VENV_PY, *args]
     proc = subprocess.run(cmd, capture_output=True, text=True, env=bh.child_env(), cwd=bh.ROOT)
-    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
-    if proc.returncode or not lines:
+    lines = json_objects(proc.stdout)
+    main_line = [ln for ln in lines if "status" in ln]
+    if proc.returncode or not main_line:
         return dict(status=f"failed: {(proc.stderr or proc.stdout).strip()[-300:]}", out=str(out))
-    return {**json.loads(lines[-1]), "out": str(out)}
+    hwm = sum(ln["hwm"] for ln in lines)   # summed over the ranks
+    return {**main_line[-1], "hwm": hwm, "out": str(out)}
 
 
 def same_answers(a: str, b: str) -> str:
@@ -187,12 +230,55 @@ def gamma_study(folder: Path) -> list[list[str]]:
     return rows
 
 
+SCALE_HEAD = ["problem", "refinement", "DOFs", "ranks", "Newton its", "Krylov mean / max",
+              "s per Newton it", "peak MiB (all ranks)", "KB/DOF", "ratio to elasticity"]
+
+
+def scale_study(folder: Path, factors: list[int], ranks: int) -> list[list[str]]:
+    """The friction box (iterative preset) against plain elasticity (CG + GAMG) on the same
+    mesh and ranks: time per Newton iteration, peak memory summed over the ranks."""
+    rows = []
+    for f in factors:
+        runs = {"friction": one_run(folder, f"scale_friction_{f}", friction_scene(f),
+                                    "iterative", ranks=ranks),
+                "elasticity": one_run(folder, f"scale_elastic_{f}", elastic_scene(f),
+                                      "iterative", ranks=ranks)}
+        base = runs["elasticity"]
+        for name, r in runs.items():
+            if r.get("status") != "complete":
+                rows.append([name, f"{f}³×", "-", str(ranks), r["status"][:60], *["-"] * 5])
+                continue
+            k = r["krylov"] or [0]
+            per_it = r["wall"] / max(r["iterations"], 1)
+            ratio = "-"
+            if name == "friction" and base.get("status") == "complete":
+                ratio = (f"time {per_it / (base['wall'] / max(base['iterations'], 1)):.2f}×, "
+                         f"memory {r['hwm'] / base['hwm']:.2f}×")
+            rows.append([name, f"{f}³×", f"{r['dofs']:,}", str(ranks), str(r["iterations"]),
+                         f"{sum(k) / len(k):.1f} / {max(k)}", f"{per_it:.2f}", bh.mib(r["hwm"]),
+                         f"{r['hwm'] / r['dofs'] / 1e3:.1f}", ratio])
+        print(bh.text_table(SCALE_HEAD, rows[-2:]), flush=True)
+    return rows
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     bh.add_smoke(p)
     p.add_argument("--max-factor", type=int, default=4, help="largest friction refinement f")
     p.add_argument("--gamma", action="store_true", help="the γ and AMG study")
+    p.add_argument("--scale", type=str, default="",
+                   help="the scale runs only: friction box refinements f (comma-separated) on "
+                        "--ranks ranks, against plain elasticity with GAMG (scale table)")
+    p.add_argument("--ranks", type=int, default=2, help="ranks of the scale runs")
+    p.add_argument("--cases", type=str, default="friction,ironing,mortar",
+                   help="the series to run (comma-separated)")
     args = p.parse_args()
+    if args.scale or bh.SMOKE:
+        factors = [1] if bh.SMOKE else [int(f) for f in args.scale.split(",")]
+        rows = scale_study(bh.scratch("relations_scale"), factors, args.ranks)
+        publish_scale(rows, args.ranks)
+        if args.scale:
+            return
     folder = bh.scratch("relations")
     load0, machine = os.getloadavg(), bh.machine_info()
     cases = [("friction", 1, friction_scene(1))]
@@ -203,6 +289,7 @@ def main() -> None:
             f *= 2
         cases += [("ironing", 1, ironing_scene(folder, 1)), ("ironing", 8, ironing_scene(folder, 2)),
                   ("mortar", 1, mortar_scene(1)), ("mortar", 8, mortar_scene(2))]
+        cases = [c for c in cases if c[0] in args.cases.split(",")]
     results, rows = [], []
     for case, factor, text in cases:
         name = f"{case}_{factor}"
@@ -220,6 +307,18 @@ def main() -> None:
     print(text)
 
 
+def publish_scale(rows: list, ranks: int) -> None:
+    machine = bh.machine_info()
+    text = "\n".join([
+        "# Relations at scale: the friction box against plain elasticity", "",
+        f"{machine['date']}, {machine['cpu']}, {machine['cpus']} CPUs, {ranks} ranks, the "
+        "machine shared (times noisy). The 3D friction box (`contact_friction_3d.toml`, its "
+        "first two steps) refined f× per direction on the iterative preset, against the same "
+        "box with its base clamped (CG + GAMG); peak memory: VmHWM summed over the ranks.", "",
+        bh.md_table(SCALE_HEAD, rows, first="---"), ""])
+    bh.publish("bench_relations_scale.md", text)
+
+
 def report(rows: list, results: list, machine: dict, load0, gamma_rows: list | None = None) -> str:
     """The report (markdown) and the JSON of the runs so far, written."""
     cross = crossover(results)
@@ -227,8 +326,9 @@ def report(rows: list, results: list, machine: dict, load0, gamma_rows: list | N
              f"{machine['date']}, {machine['cpu']}, {machine['cpus']} CPUs, one rank; "
              + bh.load_line(load0, os.getloadavg()) + " (the machine is shared: times are "
              "noisy, iterations and memory are not).", "",
-             "The iterative preset (GMRES, rtol 1e-13, preconditioned by a Schur fieldsplit of "
-             "the augmented matrix K + γ Aₕᵀ Aₕ: one GAMG V-cycle on the primal block, Jacobi "
+             "The iterative preset (GMRES, rtol 2.5e-14, on the augmented Lagrangian form "
+             "T M x = T b, γ = 3 on the rows of one node, preconditioned by its Schur fieldsplit: "
+             "one GAMG V-cycle with four Chebyshev steps per level on K + γ/k Aₕᵀ Aₕ, Jacobi "
              "on the sparse Schur approximation; `parsolve/solvers/augmented.py`) against "
              "MUMPS (the direct preset), each run in its own process (peak memory: VmHWM). "
              "Krylov iterations per linear solve of the whole run.", "",

@@ -5,8 +5,8 @@ The kind is the dimension. A 2D problem takes MUMPS: its fill grows like n log n
 crossover was not measured). A 3D one takes MUMPS below the
 measured crossover and the iterative preset above it: MUMPS' time grows like n², its memory
 like n^(4/3) (48 KB/DOF at 234k DOFs on the 3D friction box), while the iterative preset's grow
-about like n (Krylov iterations per solve 43 → 49 → 62 from 1× to 64× the cells). Pure Python, no
-PETSc: the memory check (mesh.memory) asks it before any solver exists.
+about like n (Krylov iterations per solve 20 → 24 → 32 from 1× to 64× the cells, rtol 1e-13).
+Pure Python, no PETSc: the memory check (mesh.memory) asks it before any solver exists.
 """
 
 from __future__ import annotations

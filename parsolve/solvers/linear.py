@@ -3,10 +3,11 @@
 ``direct``: MUMPS LU (LDLᵀ when every relation is associated, the operator being symmetric)
 with the QAMD ordering (PORD, the fallback here, is catastrophic with a dense control column)
 and null-pivot detection, so a singular system is an error instead of inf or NaN.
-``iterative``: GMRES on the saddle operator, preconditioned by a Schur fieldsplit of a separate
-augmented matrix (``solvers.augmented``: one GAMG V-cycle on K + γ Aₕᵀ Aₕ, Jacobi on the
-sparse Schur approximation), which works when K alone is singular (a body held only by
-contact); without multipliers, CG (or GMRES) + GAMG on the stiffness alone.
+``iterative``: GMRES on the saddle system's augmented Lagrangian form (``solvers.augmented``:
+γ/k Aₕᵀ times the hard rows added to the force balance; the same answer), preconditioned by a
+Schur fieldsplit (one GAMG V-cycle on K + γ/k Aₕᵀ Aₕ, Jacobi on the sparse Schur
+approximation), which works when K alone is singular (a body held only by contact); without
+multipliers, CG (or GMRES) + GAMG on the stiffness alone.
 """
 
 from __future__ import annotations
@@ -71,17 +72,20 @@ def preset_options(preset: str, symmetric: bool, has_multipliers: bool,
         return {"ksp_type": krylov, "pc_type": "gamg", "ksp_rtol": rtol,
                 "ksp_norm_type": "unpreconditioned", **side,
                 "ksp_error_if_not_converged": "true"}
-    # the operator as it is (its answers are the direct preset's), preconditioned by the
-    # block upper triangle of the augmented matrix (solvers.augmented): one AMG V-cycle on
-    # K + γ Aₕᵀ Aₕ, Jacobi on the sparse Schur approximation A₁₁ - A diag(K + γ Aₕᵀ Aₕ)⁻¹ (-D);
-    # GMRES with right preconditioning, so that rtol bounds the true residual
+    # the augmented Lagrangian form T M x = T b (solvers.augmented; the answers are the direct
+    # preset's), preconditioned by its block upper triangle: one AMG V-cycle on
+    # K + γ/k Aₕᵀ Aₕ, Jacobi on the sparse Schur approximation A₁₁ - A diag(K + γ Aₕᵀ Aₕ)⁻¹ (-D);
+    # GMRES with right preconditioning, so that rtol bounds the true residual of T M x = T b
+    # (the solve checks M x = b's after)
     return {
         "ksp_type": "gmres",
         "ksp_pc_side": "right",
         "ksp_norm_type": "unpreconditioned",
-        # 1e-13: the answers are the direct preset's to 1e-8 and the Newton and active-set
-        # loops take the same iterations (a looser one shifts a switch near its threshold)
-        "ksp_rtol": "1e-13",
+        # 1e-13 of M x = b: the answers are the direct preset's to 1e-8 and the Newton and
+        # active-set loops take the same iterations (a looser one shifts a switch near its
+        # threshold: solubility_well_mixed at t = 3). GMRES measures T (b - M x), and
+        # |T⁻¹| <= 1 + γ (solvers.augmented), hence 1e-13 / (1 + 3)
+        "ksp_rtol": "2.5e-14",
         "ksp_max_it": "1000",
         "ksp_gmres_restart": "200",
         "pc_type": "fieldsplit",
@@ -91,6 +95,9 @@ def preset_options(preset: str, symmetric: bool, has_multipliers: bool,
         "fieldsplit_q_ksp_type": "preonly",
         "fieldsplit_q_pc_type": AMG,
         "fieldsplit_q_pc_gamg_threshold": "0.05",
+        # four Chebyshev steps per level (PETSc's default: 2): 25 -> 20 Krylov iterations per
+        # solve on the 3D friction box at 1x, fewer V-cycles for twice the smoothing
+        "fieldsplit_q_mg_levels_ksp_max_it": "4",
         "fieldsplit_lambda_ksp_type": "preonly",
         "fieldsplit_lambda_pc_type": "jacobi",
         "ksp_error_if_not_converged": "true",
@@ -137,9 +144,10 @@ class LinearSolver:
                  splits: list[tuple[str, PETSc.IS]] | None = None,
                  preconditioner: Callable[[PETSc.Mat, float], PETSc.Mat] | None = None):
         """``splits``: the fieldsplit blocks, named (default: "q" and "lambda");
-        ``preconditioner``: the preconditioning matrix of an operator and γ (made again whenever
-        the operator's values change; γ from the option ``augmented_gamma`` under the prefix),
-        else the operator itself."""
+        ``preconditioner``: the augmented Lagrangian form of an operator and γ (made again
+        whenever the operator's values change; γ from the option ``augmented_gamma`` under the
+        prefix): the KSP solves its ``operator`` with its ``pmat`` and right-hand sides through
+        its ``transform``; else the operator itself."""
         self.comm, self.prefix, self.settings = comm, prefix, settings
         self.ksp = PETSc.KSP().create(comm)
         self.ksp.setOptionsPrefix(prefix)
@@ -148,6 +156,8 @@ class LinearSolver:
         self.near_null = near_null
         self.preconditioner = preconditioner
         self.pmat: PETSc.Mat | None = None
+        self.operator: PETSc.Mat | None = None   # M (the KSP's may be T M: solvers.augmented)
+        self._transform: Callable[[PETSc.Vec], None] | None = None
         self.configured = False
         self._state = None
         self.notes: list[str] = []
@@ -159,7 +169,8 @@ class LinearSolver:
         preconditioner (MUMPS: the analysis too) is set up on it from scratch."""
         if self.near_null is not None:  # rigid-body modes for GAMG on the stiffness alone
             mat.setNearNullSpace(self.near_null)
-        previous = self.ksp.getOperators()[0] if self.configured else None
+        previous = self.operator if self.configured else None
+        self.operator = mat
         if previous is not None and previous.handle != mat.handle:
             self._restart(mat)
             self._state = None
@@ -190,7 +201,7 @@ class LinearSolver:
         """Check symmetry and factorize when the operator changed since the last solve. A
         factorization that runs out of MUMPS workspace (delayed pivots of a saddle point
         system) is redone with twice the margin, up to three times."""
-        mat = self.ksp.getOperators()[0]
+        mat = self.operator
         state = mat.stateGet()
         if state == self._state:
             return
@@ -202,8 +213,9 @@ class LinearSolver:
         if self.preconditioner is not None:
             with opt.inserted(self.prefix, self.settings):
                 gamma = PETSc.Options(self.prefix).getReal("augmented_gamma", GAMMA)
-            self.pmat = self.preconditioner(mat, gamma)
-            self.ksp.setOperators(mat, self.pmat)
+            form = self.preconditioner(mat, gamma)
+            self.pmat, self._transform = form.pmat, form.transform
+            self.ksp.setOperators(form.operator, self.pmat)
         for attempt in range(4):
             try:
                 with opt.inserted(self.prefix, self.settings), factor_log.factorization(first):
@@ -267,12 +279,19 @@ class LinearSolver:
         scaled = self.ksp.getType() != "preonly"
         if scaled:
             rhs.scale(1.0 / norm)
+        given = None
+        if self._transform is not None:   # T b (the KSP's operator is T M)
+            given = rhs.copy()
+            self._transform(rhs)
         try:
             with opt.inserted(self.prefix, self.settings):
                 self.ksp.solve(rhs, x)
         except PETSc.Error as exc:
             raise SolverError(f"linear solve failed: {self._reason(exc)}") from None
         finally:
+            if given is not None:
+                given.copy(rhs)
+                given.destroy()
             if scaled:
                 rhs.scale(norm)
                 x.scale(norm)
@@ -284,7 +303,7 @@ class LinearSolver:
         if reason < 0:
             raise SolverError(f"linear solver diverged: {reason_in_words(reason)} after "
                               f"{self.ksp.getIterationNumber()} iterations")
-        residual = true_residual(self.ksp.getOperators()[0], x, rhs)
+        residual = true_residual(self.operator, x, rhs)
         if residual > self.residual_limit:
             raise SolverError(f"linear solve inaccurate: true relative residual {residual:.1e} "
                               f"(limit {self.residual_limit:.0e}); the system is singular or "

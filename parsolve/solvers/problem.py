@@ -10,7 +10,7 @@ material states, a transient step's f_int(q_n)), its relation policies
     form()                 f_int, tangent and trial states at the current q
     norms(f_known, f_int)  ‖F + D λ - f_int‖ on the free rows and the forces in play
     jacobian(kmat)         [[K_t, -D], [A, 0]] with the rows the policies enforce
-    preconditioner(mat, γ) the iterative preset's separate preconditioning matrix
+    preconditioner(mat, γ) the iterative preset's augmented form: operator, P, rhs transform
     rhs(t, f_int, f_known) the Newton right-hand side: F - f_int, b(t) - A q
     solve(mat, rhs)        the saddle increment (Δq, λ)
     update(t, x)           q += Δq, λ; the active set and the effects' hooks (changed?)
@@ -67,6 +67,7 @@ class SaddleProblem:
         self.extras = [None] * len(ctx.effects)
         self.time = ctx.scene.time                  # transient: θ-scheme from t_prev to t
         self.t_prev = 0.0
+        self.q_start = 0.0                          # |q| where the step started (begin)
         self.f_pure = np.zeros(ctx.ndof)            # f_int at the last converged state
         if self.time is not None and self.time.theta != 1.0:  # θ-scheme: f_int(q_0)
             self.f_pure = ctx.composition.evaluate(self.q, self.states, False)[1]
@@ -135,6 +136,7 @@ class SaddleProblem:
         terms); returns the known loads it balances."""
         # the step's instant, which every effect's evaluation and hook reads
         self.ctx.composition.begin(t, self.t_prev, None if self.time is None else self.time.theta)
+        self.q_start = self._norm(self.ctx.owned_rows(self.q))   # (roundoff_force)
         pol = self.policies
         if pol.hooks:   # contact hooks timed apart: /timings/contact
             t0 = time.perf_counter()
@@ -178,13 +180,17 @@ class SaddleProblem:
 
     def roundoff_force(self) -> float:
         """The force residual that is zero to round-off: what evaluating K q can resolve,
-        ROUNDOFF · k · |q| (k: the mean stiffness diagonal). It is the absolute floor under
-        the relative criterion, which has no scale when every force vanishes (a rigid motion,
-        a body at rest on a support): there the relative residual is round-off over
-        round-off and never falls. Far below any physical force (a damaged, softened state
-        still carries forces orders above it), so it does not accept a state off equilibrium."""
-        q = self.ctx.owned_rows(self.q)
-        return ROUNDOFF * getattr(self.system, "kscale", 0.0) * self._norm(q)
+        ROUNDOFF · k · max(|q|, |q_start|) (k: the mean stiffness diagonal; q_start: the state
+        the step started from, whose round-off the step's first correction carries). It is the
+        absolute floor under the relative criterion, which has no scale when every force
+        vanishes (a rigid motion, a body at rest on a support, a step unloaded to q = 0): there
+        the relative residual is round-off over round-off and never falls (with |q| alone, a
+        step whose answer is q = 0 shrinks q by the linear solve's accuracy per iteration and
+        stops only when q underflows to 0: 12-13 iterations, on right-hand sides down to
+        1e-162). Far below any physical force (a damaged, softened state still carries forces
+        orders above it), so it does not accept a state off equilibrium."""
+        q = self._norm(self.ctx.owned_rows(self.q))
+        return ROUNDOFF * getattr(self.system, "kscale", 0.0) * max(q, self.q_start)
 
     def _norm(self, v: np.ndarray) -> float:
         return float(np.sqrt(self.comm.allreduce(float(v @ v))))
@@ -199,8 +205,9 @@ class SaddleProblem:
         return self.system.assemble(kmat)
 
     def preconditioner(self, mat, gamma: float):
-        """The iterative preset's preconditioning matrix of the operator as last assembled
-        (``SaddleSystem.preconditioner``: γ/k Aᵀ A of its enforced hard rows added to K)."""
+        """The iterative preset's augmented Lagrangian form of the operator as last assembled
+        (``SaddleSystem.preconditioner``: its operator T M, preconditioning matrix and
+        right-hand side transform; γ/k Aᵀ A of its enforced hard rows added to K)."""
         return self.system.preconditioner(mat, gamma)
 
     def rhs(self, t: float, f_int: np.ndarray, f_known: np.ndarray) -> np.ndarray:

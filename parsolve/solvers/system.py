@@ -193,9 +193,10 @@ class SaddleSystem:
         self.timings["assembly"] = self.timings.get("assembly", 0.0) + time.perf_counter() - t0
         return mat
 
-    def preconditioner(self, mat: PETSc.Mat, gamma: float) -> PETSc.Mat:
-        """The iterative preset's preconditioning matrix for the operator as last assembled:
-        γ/k Aᵀ A of its enforced hard rows added to the stiffness block (``solvers.augmented``)."""
+    def preconditioner(self, mat: PETSc.Mat, gamma: float) -> AugmentedMatrix:
+        """The iterative preset's augmented Lagrangian form of the operator as last assembled
+        (its operator T M, preconditioning matrix and right-hand side transform): γ/k Aᵀ A of
+        its enforced hard rows added to the stiffness block (``solvers.augmented``)."""
         if self._augmented is None:
             self._augmented = AugmentedMatrix(self.comm, self.dofmap)
         _, _, l0, l1 = self.dofmap.owned()
