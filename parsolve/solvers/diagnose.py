@@ -111,16 +111,10 @@ def _named(exc: SolverError, problem, t: float) -> SolverError:
     sliding = _sliding_contacts(problem.ctx.effects)
     if not sliding:
         return exc
-    rset = problem.rset
-    values = rset.primal_values(problem.q)
-    targets = rset.targets(t)
-    loads = rset.row_values(problem.lam) if problem.lam.size else np.zeros(values.size)
-    short = [c for c in controls if c.sign * (targets[c.row] - values[c.row]) > 0]
-    if not short:
+    short = _short_of(problem, t, controls)
+    if short is None:
         return exc
-    c, contact = short[0], sliding[0]
-    kind = "maximum control" if c.maximum else "control"
-    reached, target, load = values[c.row], targets[c.row], loads[c.row]
+    (c, kind, reached, target, load), contact = short, sliding[0]
     return NamedFailure(
         f"{kind} {c.name!r} can no longer reach its value: {target:.6g} at t = {t:.6g}, where it "
         f"reached {reached:.6g} (t = {problem.t_prev:.6g}, control load {load:.6g}); every closed "
@@ -128,6 +122,21 @@ def _named(exc: SolverError, problem, t: float) -> SolverError:
         f"friction capacity μN (μ = {contact.mu:g}) and the controlled quantity stops growing as "
         f"the body slides; reduce the target (it reached {reached:.6g}) or control a quantity "
         f"that grows as the body slides, such as a displacement (the last attempt: {exc})")
+
+
+def _short_of(problem, t: float, controls: list[Control]) -> tuple | None:
+    """The first control whose value at t lies beyond what the last converged state reached:
+    (control, its kind in words, reached, target, control load), or None. Collective."""
+    rset = problem.rset
+    values = rset.primal_values(problem.q)
+    targets = rset.targets(t)
+    loads = rset.row_values(problem.lam) if problem.lam.size else np.zeros(values.size)
+    short = [c for c in controls if c.sign * (targets[c.row] - values[c.row]) > 0]
+    if not short:
+        return None
+    c = short[0]
+    kind = "maximum control" if c.maximum else "control"
+    return c, kind, values[c.row], targets[c.row], loads[c.row]
 
 
 def _softens(effects) -> bool:
@@ -184,15 +193,10 @@ def _past_capacity(exc: SolverError, problem, t: float, controls: list[Control])
         ctx, np.asarray(ctx.multiplied[rset.locate(c.row)[0]].meta["cells"], dtype=np.int64))]
     if not elastic:
         return exc
-    values = rset.primal_values(problem.q)
-    targets = rset.targets(t)
-    loads = rset.row_values(problem.lam) if problem.lam.size else np.zeros(values.size)
-    short = [c for c in elastic if c.sign * (targets[c.row] - values[c.row]) > 0]
-    if not short:
+    short = _short_of(problem, t, elastic)
+    if short is None:
         return exc
-    c = short[0]
-    kind = "maximum control" if c.maximum else "control"
-    reached, target, load = values[c.row], targets[c.row], loads[c.row]
+    c, kind, reached, target, load = short
     return NamedFailure(
         f"{kind} {c.name!r} can no longer reach its value: {target:.6g} at t = {t:.6g}, where it "
         f"reached {reached:.6g} (t = {problem.t_prev:.6g}, control load {load:.6g}); the cells "
