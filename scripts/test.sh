@@ -23,12 +23,13 @@ for n in 2 3; do
   echo "== pytest, $n ranks (tests marked serial are skipped)"
   parallel "$n" tests "$@"
 done
-echo "== pytest, 4 ranks (oversubscribed): partition independence, distributed mesh, empty regions"
+echo "== pytest, 4 ranks (oversubscribed): partition independence, distributed mesh, empty regions, relation owners"
 # every shipped scene at 4 ranks against 1 rank, on both partitioners; ranks holding none of
 # a load's or relation's region
 parallel 4 tests/solvers/test_rank_independence.py tests/mesh/test_distribute.py \
   tests/mesh/test_partition.py tests/mesh/test_empty_parts.py tests/effects/test_empty_regions.py \
-  tests/mesh/test_slices.py tests/mesh/test_mesh_cli.py "$@"
+  tests/mesh/test_slices.py tests/mesh/test_mesh_cli.py tests/la/test_relation_owners.py \
+  tests/la/test_relation_set.py "$@"
 echo "== docs: generated pages checked, mkdocs build --strict"
 bash scripts/docs.sh
 echo "== benchmarks, smoke (every scripts/bench_*.py at its smallest size)"
