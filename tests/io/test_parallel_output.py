@@ -316,7 +316,7 @@ def test_sigterm_stops_a_parallel_run(ranks, tmp_path):
     assert len(pids) == max(ranks, 1)
     for pid in pids:
         os.kill(pid, signal.SIGTERM)
-    _, err = proc.communicate(timeout=60)
+    _, err = proc.communicate(timeout=300)
     assert proc.returncode == 143, err
     assert "interrupted by SIGTERM" in err and "Traceback" not in err
     with h5py.File(out, "r") as f:

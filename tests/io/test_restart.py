@@ -189,7 +189,7 @@ def test_a_stopped_run_restarted_from_the_command_line(tmp_path, sig):
         except (OSError, KeyError):
             pass
     proc.send_signal(sig)
-    proc.wait(timeout=60)
+    proc.wait(timeout=300)
     assert proc.returncode == (143 if sig == signal.SIGTERM else -9)
     with h5py.File(stopped, "r", swmr=True) as f:
         finished = len(f["steps/time"])

@@ -61,9 +61,10 @@ def test_controlled_bar_reduced(tmp_path):
     err = {(r["family"], r["level"]): float(r["error(force)"]) for r in table}
     assert max(v for (f, _), v in err.items() if f.startswith("direct")) < 1e-12
     assert max(v for (f, _), v in err.items() if f == "iterative rtol 1e-10") < 1e-8
-    # the force's error follows the tolerance within the control row's conditioning (1.7e-5
-    # with the augmented Schur preconditioner, whose GMRES bounds the true residual)
-    assert max(v for (f, _), v in err.items() if f == "iterative rtol 1e-6") < 5e-5
+    # the force's error follows the tolerance within the control row's conditioning: 1.5e-4
+    # with GMRES on the augmented Lagrangian form T M x = T b (solvers.augmented), whose rtol
+    # bounds T (b - M x), |T⁻¹| <= 1 + γ = 4 (1.7e-5 when GMRES ran on M x = b itself)
+    assert max(v for (f, _), v in err.items() if f == "iterative rtol 1e-6") < 5e-4
 
 
 @pytest.mark.slow
