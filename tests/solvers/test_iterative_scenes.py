@@ -27,6 +27,11 @@ TIES = {"localization_bar.toml": ("relations/max_strain/active",
 #: a flux is a gradient: the field's solver error ε shows in it as ε / h. The fin is one cell of
 #: 0.01 across (1 / h = 100): measured at 2 ranks, T to 1e-8 of its scale, T_flux to 2.7e-8
 GRADIENT = {"fin_convection.toml": 100.0}
+#: Scenes solved by secant iterations (a linear rate), which end about their tolerance from
+#: equilibrium: a solve's round-off may take one more iteration where the direct run's last
+#: residual lay just under it (localization_bar at 3 ranks, step 13: 4 against 3), with
+#: the same answers
+SECANT = {"localization_bar.toml"}
 
 
 def _params():
@@ -81,8 +86,13 @@ def test_iterative_preset_gives_the_direct_answers(name, run):
     source = _source(name)
     direct = run(source, name=f"{name}_direct", solver={"preset": "direct"})
     iterative = run(source, name=f"{name}_iterative", solver={"preset": "iterative"})
-    np.testing.assert_array_equal(iterative["steps/iterations"], direct["steps/iterations"])
-    assert_same_answers(iterative, direct, ignore=TIES.get(name, ()),
+    extra = iterative["steps/iterations"] - direct["steps/iterations"]
+    if name in SECANT:
+        assert extra.min() >= 0 and extra.max() <= 1 and extra.sum() <= 1, extra
+    else:
+        np.testing.assert_array_equal(extra, 0)
+    counted = ("steps/iterations",) if name in SECANT else ()   # (compared just above)
+    assert_same_answers(iterative, direct, ignore=TIES.get(name, ()) + counted,
                         gradient=GRADIENT.get(name, 1.0))
     for key in (k for k in TIES.get(name, ()) if k.endswith("/multiplier")):
         total = direct[key].sum(axis=1)
