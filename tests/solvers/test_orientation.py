@@ -5,51 +5,7 @@ alone. A stop on the end of a bar, u_end <= 1e-4, whose reaction is a load patte
 import numpy as np
 import pytest
 
-BAR = """
-[mesh]
-generator = "rectangle"
-lx = 1.0
-ly = 0.1
-nx = 10
-ny = 2
-cell = "quad"
-[model]
-hypothesis = "plane_stress"
-[regions]
-corner = {{ point = [0.0, 0.0] }}
-[[materials]]
-E = 1e3
-nu = 0.0
-[[loads]]
-name = "pull"
-region = "right"
-traction = [{pull}, 0.0]
-[[loads]]
-name = "stop_force"
-region = "right"
-traction = [{dual}, 0.0]
-[[relations]]
-name = "clamp"
-type = "dirichlet"
-region = "left"
-components = ["x"]
-[[relations]]
-name = "corner"
-type = "dirichlet"
-region = "corner"
-components = ["y"]
-[[relations]]
-name = "stop"
-type = "mean"
-region = "right"
-component = "x"
-value = {value}
-sense = "{sense}"
-evolution = "constant"
-dual = "stop_force"
-[steps]
-count = 4
-"""
+from helpers.stop_bar import stop_bar
 
 
 def stop_intensity(t, dual):
@@ -68,7 +24,7 @@ CASES = {  # pull, dual, value, sense
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_stop_holds_whichever_way_the_dual_points(case, run):
     pull, dual, value, sense = CASES[case]
-    res = run(BAR.format(pull=pull, dual=dual, value=value, sense=sense), name="stop")
+    res = run(stop_bar(pull, dual, value, sense), name="stop")
     t = res["steps/time"]
     u_end = res["relations/stop/primal"][:, 0]
     np.testing.assert_allclose(u_end, np.sign(pull) * np.minimum(3e-4 * t, 1e-4), rtol=1e-10)
@@ -79,8 +35,8 @@ def test_stop_holds_whichever_way_the_dual_points(case, run):
 
 
 def test_mirror_images_give_mirrored_answers(run):
-    a = run(BAR.format(pull=0.3, dual=-1.0, value=1e-4, sense="<="), name="a")
-    b = run(BAR.format(pull=-0.3, dual=1.0, value=-1e-4, sense=">="), name="b")
+    a = run(stop_bar(0.3, -1.0, 1e-4, "<="), name="a")
+    b = run(stop_bar(-0.3, 1.0, -1e-4, ">="), name="b")
     np.testing.assert_array_equal(a["relations/stop/active"], b["relations/stop/active"])
     # equal and opposite in exact arithmetic; in floating point to the round-off of a solve
     # (MUMPS on several ranks adds contributions in the order messages arrive: the

@@ -12,6 +12,7 @@ import pytest
 from mpi4py import MPI
 
 from helpers.control import closed_form, without_control, BAR as LOCALIZATION_BAR
+from helpers.stop_bar import stop_bar
 from parsolve.driver import make_solver
 from parsolve.model import build_model
 from parsolve.scene import parse_scene
@@ -20,55 +21,7 @@ from parsolve.solvers.newton import NewtonSolver
 from parsolve.solvers.problem import SaddleProblem
 from parsolve.solvers.system import SaddleSystem
 
-BAR = """
-[mesh]
-generator = "rectangle"
-lx = 1.0
-ly = 0.1
-nx = 10
-ny = 2
-cell = "quad"
-[model]
-hypothesis = "plane_stress"
-[regions]
-corner = {{ point = [0.0, 0.0] }}
-[[materials]]
-E = 1e3
-nu = 0.0
-[[loads]]
-name = "pull"
-region = "right"
-traction = [0.3, 0.0]
-[[loads]]
-name = "stop_force"
-region = "right"
-traction = [{dual}, 0.0]
-[[relations]]
-name = "clamp"
-type = "dirichlet"
-region = "left"
-components = ["x"]
-[[relations]]
-name = "corner"
-type = "dirichlet"
-region = "corner"
-components = ["y"]
-{stop}
-[steps]
-count = 4
-"""
 
-# the end of the bar stopped at 1e-4 by a reaction along the load pattern "stop_force"
-STOP = """[[relations]]
-name = "stop"
-type = "mean"
-region = "right"
-component = "x"
-value = 1e-4
-sense = "<="
-evolution = "constant"
-dual = "stop_force"
-"""
 
 
 def problem_of(text: str, comm=MPI.COMM_WORLD) -> tuple:
@@ -84,7 +37,7 @@ def test_residual_of_a_linear_bar_before_and_after_the_step():
     """At q = 0 the residual is the whole load (relative 1 exactly); one Newton solve through
     the callbacks gives u_end = p L / E = 3e-4; at the converged state the residual is below
     1e-10 of the forces in play, after one iteration."""
-    scene, system, problem = problem_of(BAR.format(dual=0.0, stop=""))
+    scene, system, problem = problem_of(stop_bar())
     f_known = problem.begin(1.0)
     lin = problem.form()
     r_norm, ref = problem.norms(f_known, lin.f_int)
@@ -92,7 +45,7 @@ def test_residual_of_a_linear_bar_before_and_after_the_step():
     x = problem.solve(problem.jacobian(lin.kmat), problem.rhs(1.0, lin.f_int, f_known))
     assert problem.ctx.max_abs(x.q) == pytest.approx(3e-4, rel=1e-12)
 
-    _, _, problem = problem_of(BAR.format(dual=0.0, stop=""))
+    _, _, problem = problem_of(stop_bar())
     result = NewtonSolver(problem, scene.nonlinear).step(1.0)
     assert result.iterations == 1
     r_norm, ref = problem.norms(problem.external(1.0), problem.form().f_int)
@@ -105,7 +58,7 @@ def test_residual_of_a_linear_bar_before_and_after_the_step():
 def test_restore_then_the_same_step_again_gives_the_same_numbers():
     """The stop bar: reached at t = 1/3, λ = (0.01 - 0.03 t) / (0.1 dual) after. A step taken,
     undone (``restore``) and taken again ends bitwise where it ended the first time."""
-    scene, _, problem = problem_of(BAR.format(dual=-1.0, stop=STOP))
+    scene, _, problem = problem_of(stop_bar(dual=-1.0, value=1e-4))
     newton = NewtonSolver(problem, scene.nonlinear)
     newton.step(0.25)
     snap = problem.snapshot()
@@ -127,7 +80,7 @@ def test_restore_then_the_same_step_again_gives_the_same_numbers():
 def test_orientation_from_the_unit_response(dual):
     """A K⁻¹ D of the stop: the mean end displacement under the traction ``dual`` alone,
     dual · L / E; the orientation is its opposite sign (the reaction pushes the end back)."""
-    _, _, problem = problem_of(BAR.format(dual=dual, stop=STOP))
+    _, _, problem = problem_of(stop_bar(dual=dual, value=1e-4))
     policies = problem.policies
     kmat = problem.form().kmat
     k = [r.name for r in problem.ctx.multiplied].index("stop")
