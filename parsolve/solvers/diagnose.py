@@ -30,6 +30,10 @@ from parsolve.errors import SolverError
 from parsolve.fem.materials.mazars import Mazars
 from parsolve.solvers.linear import DoesNotFit
 
+# a control's rate under its own load below this fraction of the terms that add up to it is
+# a cancellation (round-off: 1e-16 relative), not a small stiffness
+UNMOVED = 1e-9
+
 
 class NamedFailure(SolverError):
     """A solver failure whose message names its cause and the way out (no further hints)."""
@@ -108,6 +112,13 @@ def _named(exc: SolverError, problem, t: float) -> SolverError:
         return _no_turn_back(exc, problem, t, controls)
     if _softens(problem.ctx.effects):
         return _past_capacity(exc, problem, t, controls)
+    singles = [c for c in controls if not c.maximum]
+    if singles:
+        named = _unmoved(exc, problem, t, singles)
+        if named is None and problem.t_prev == 0.0:
+            named = _beyond_friction_from_start(exc, problem, t, singles)
+        if named is not None:
+            return named
     sliding = _sliding_contacts(problem.ctx.effects)
     if not sliding:
         return exc
@@ -205,3 +216,115 @@ def _past_capacity(exc: SolverError, problem, t: float, controls: list[Control])
         f"the peak they take the deformation and the measured cells unload); reduce the target "
         f"(it reached {reached:.6g}) or control a quantity that includes the softening cells "
         f"(the last attempt: {exc})")
+
+
+def _probe_rows(problem, first: bool) -> np.ndarray:
+    """The rows a probe of the last converged state enforces: its active set; at the first
+    step (nothing converged yet) the contact rows closed and stuck too, as the step's first
+    solve starts them once open rows fail (``close_contact``)."""
+    active = problem.active.active.copy()
+    if first:
+        for k, rel in enumerate(problem.ctx.multiplied):
+            if rel.meta.get("type") == "contact":
+                active[problem.rset.rows_of(k)] = True
+    return active
+
+
+def _response(problem, kmat, mask: np.ndarray, c: Control) -> tuple[float, float]:
+    """How the controlled quantity answers a unit of its own load, the control released and
+    the rows ``mask`` enforced at zero: (A δq, Σ|a_i δq_i|: the terms that add up to it).
+    Collective."""
+    rset, pol = problem.rset, problem.policies
+    k, local = rset.locate(c.row)
+    rel = problem.ctx.multiplied[k]
+    mask = mask.copy()
+    mask[c.row] = False
+    dq = problem.respond(kmat, pol.enforceable(mask), pol.dual_column(k, local))
+    rate = float(rset.primal_values(dq)[c.row])
+    terms = float(rset.dofmap.rows(rel.a_dofs, rel.a_rows, np.abs(rel.a_vals), rel.nrows,
+                                   np.abs(dq))[local])
+    return rate, terms
+
+
+def _frictional(effects) -> list:
+    return [e for e in effects if getattr(e, "frictional", False)
+            and getattr(e, "node_state", None) is not None]
+
+
+def _unmoved(exc: SolverError, problem, t: float, controls: list[Control]) -> SolverError | None:
+    """A single-row control whose quantity its own load does not move (A K⁻¹ G = 0: the
+    saddle operator is singular with any tangent that holds the body, e.g. a mean normal
+    strain driven by a shear load, which changes it by symmetry not at all, or a
+    displacement the load does not reach): no intensity of the load gives another value.
+    Probed at the last converged state with one solve (its terms cancel to round-off)."""
+    first = problem.t_prev == 0.0
+    mask = _probe_rows(problem, first)
+    kmat = problem.form().kmat
+    stuck = first and _frictional(problem.ctx.effects)
+    for c in controls:
+        rate, terms = _response(problem, kmat, mask, c)
+        if abs(rate) > UNMOVED * terms and terms > 0.0:
+            continue
+        rset = problem.rset
+        reached = rset.primal_values(problem.q)[c.row]
+        target = rset.targets(t)[c.row]
+        dual = problem.ctx.multiplied[rset.locate(c.row)[0]].meta["dual"]
+        where = " (the contact closed and stuck, as at the start)" if stuck else ""
+        return NamedFailure(
+            f"control {c.name!r} is not moved by its load {dual!r}: a unit of {dual!r} changes "
+            f"the controlled quantity by {rate:.3g}, terms of {terms:.3g} that cancel{where}, "
+            f"so no intensity of {dual!r} gives the value {target:.6g} at t = {t:.6g} (it is "
+            f"{reached:.6g} at t = {problem.t_prev:.6g}); control a quantity that {dual!r} "
+            f"moves, or drive this one with a load that moves it (the control's 'dual') (the "
+            f"last attempt: {exc})")
+    return None
+
+
+def _stuck_solution(problem, t: float, kmat, mask: np.ndarray) -> np.ndarray:
+    """Per relation row, the total multipliers of the step to t solved with the rows ``mask``
+    enforced (one linear solve from the last converged state). Collective."""
+    system = problem.system
+    system.set_active(problem.policies.enforceable(mask))
+    mat = system.assemble(kmat)
+    f_int = problem.form().f_int
+    rhs = problem.rhs(t, f_int, problem.external(t))
+    x = problem.solve(mat, rhs, export=False)
+    return problem.rset.row_values(problem.unscaled(x))
+
+
+def _beyond_friction_from_start(exc: SolverError, problem, t: float,
+                                controls: list[Control]) -> SolverError | None:
+    """The first step of a single-row control over a frictional contact whose closed nodes
+    all slide at the failed attempt's last iterate: solved with the contact closed and stuck,
+    the target takes a tangential reaction beyond the friction capacity μN. No state carries
+    more than μN along the surface (|Σ rt| ≤ Σ μ rn), and sliding as a whole the body takes no
+    more load: the target is out of reach from the start."""
+    sliding = [e for e in _frictional(problem.ctx.effects)
+               if (e.node_state != fr.OPEN).any()
+               and (e.node_state[e.node_state != fr.OPEN] == fr.SLIP).all()]
+    if not sliding:
+        return None
+    rset, mult = problem.rset, problem.ctx.multiplied
+    mask = _probe_rows(problem, True)
+    for c in controls:
+        mask[c.row] = True
+    rows = _stuck_solution(problem, t, problem.form().kmat, mask)
+    lam = {rel.name: rows[rset.rows_of(k)] for k, rel in enumerate(mult)}
+    c = controls[0]
+    for e in sliding:
+        rn, rt = e.forces(lam)
+        normal, tangential = float(rn.sum()), float(np.linalg.norm(rt.sum(axis=0)))
+        capacity = e.mu * normal
+        if normal <= 0.0 or tangential <= capacity * (1 + 1e-9):
+            continue
+        target = rset.targets(t)[c.row]
+        return NamedFailure(
+            f"control {c.name!r} cannot reach its value from the first step: {target:.6g} at "
+            f"t = {t:.6g}; with contact {e.spec.name!r} closed and stuck, that value takes a "
+            f"control load of {rows[c.row]:.6g} and a tangential reaction of {tangential:.6g}, "
+            f"beyond the friction capacity μN = {capacity:.6g} (μ = {e.mu:g}, N = "
+            f"{normal:.6g}): every closed node slides and the body slides as a whole, which "
+            f"the control load cannot pass, so the value lies beyond what the load gives; "
+            f"reduce the target (its first steps) or raise the friction (the last attempt: "
+            f"{exc})")
+    return None
