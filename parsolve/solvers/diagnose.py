@@ -255,8 +255,9 @@ def _unmoved(exc: SolverError, problem, t: float, controls: list[Control]) -> So
     """A single-row control whose quantity its own load does not move (A K⁻¹ G = 0: the
     saddle operator is singular with any tangent that holds the body, e.g. a mean normal
     strain driven by a shear load, which changes it by symmetry not at all, or a
-    displacement the load does not reach): no intensity of the load gives another value.
-    Probed at the last converged state with one solve (its terms cancel to round-off)."""
+    displacement the load does not reach): Newton from there cannot move it, and where the
+    load acts linearly no intensity of it gives another value. Probed at the last converged
+    state with one solve (its terms cancel to round-off)."""
     first = problem.t_prev == 0.0
     mask = _probe_rows(problem, first)
     kmat = problem.form().kmat
@@ -269,14 +270,14 @@ def _unmoved(exc: SolverError, problem, t: float, controls: list[Control]) -> So
         reached = rset.primal_values(problem.q)[c.row]
         target = rset.targets(t)[c.row]
         dual = problem.ctx.multiplied[rset.locate(c.row)[0]].meta["dual"]
-        where = " (the contact closed and stuck, as at the start)" if stuck else ""
+        where = f"t = {problem.t_prev:.6g}" + (", the contact closed and stuck" if stuck else "")
         return NamedFailure(
-            f"control {c.name!r} is not moved by its load {dual!r}: a unit of {dual!r} changes "
-            f"the controlled quantity by {rate:.3g}, terms of {terms:.3g} that cancel{where}, "
-            f"so no intensity of {dual!r} gives the value {target:.6g} at t = {t:.6g} (it is "
-            f"{reached:.6g} at t = {problem.t_prev:.6g}); control a quantity that {dual!r} "
-            f"moves, or drive this one with a load that moves it (the control's 'dual') (the "
-            f"last attempt: {exc})")
+            f"control {c.name!r} is not moved by its load {dual!r} at the step's start ({where}): "
+            f"a unit of {dual!r} changes the controlled quantity by {rate:.3g}, terms of "
+            f"{terms:.3g} that cancel, so the controlled system is singular there and the value "
+            f"{target:.6g} at t = {t:.6g} (it is {reached:.6g}) is not reached from it; control "
+            f"a quantity that {dual!r} moves, or drive this one with a load that moves it (the "
+            f"control's 'dual') (the last attempt: {exc})")
     return None
 
 
