@@ -30,8 +30,9 @@ from parsolve.errors import SolverError
 from parsolve.fem.materials.mazars import Mazars
 from parsolve.solvers.linear import DoesNotFit
 
-# a control's rate under its own load below this fraction of the terms that add up to it is
-# a cancellation (round-off: 1e-16 relative), not a small stiffness
+# a control's rate under its own load below this fraction of what the load's displacements
+# could give through the control's coefficients (Σ|a| max|δq|) is round-off (1e-16 relative),
+# not a small stiffness
 UNMOVED = 1e-9
 
 
@@ -230,20 +231,32 @@ def _probe_rows(problem, first: bool) -> np.ndarray:
     return active
 
 
-def _response(problem, kmat, mask: np.ndarray, c: Control) -> tuple[float, float]:
+def _response(problem, kmat, mask: np.ndarray, c: Control) -> tuple[float, float, float]:
     """How the controlled quantity answers a unit of its own load, the control released and
-    the rows ``mask`` enforced at zero: (A δq, Σ|a_i δq_i|: the terms that add up to it).
-    Collective."""
+    the rows ``mask`` enforced at zero: ``_rate``'s. Collective."""
     rset, pol = problem.rset, problem.policies
     k, local = rset.locate(c.row)
     rel = problem.ctx.multiplied[k]
     mask = mask.copy()
     mask[c.row] = False
     dq = problem.respond(kmat, pol.enforceable(mask), pol.dual_column(k, local))
-    rate = float(rset.primal_values(dq)[c.row])
-    terms = float(rset.dofmap.rows(rel.a_dofs, rel.a_rows, np.abs(rel.a_vals), rel.nrows,
-                                   np.abs(dq))[local])
-    return rate, terms
+    return _rate(problem.ctx, rel, local, dq)
+
+
+def _rate(ctx, rel, local: int, dq: np.ndarray) -> tuple[float, float, float]:
+    """(A δq of the row, max |δq|, Σ|a| max |δq|: what the row could measure of δq).
+    Collective."""
+    dofmap = ctx.relations.dofmap
+    rate = float(dofmap.rows(rel.a_dofs, rel.a_rows, rel.a_vals, rel.nrows, dq)[local])
+    largest = ctx.max_abs(dq)
+    coefs = dofmap.rows(rel.a_dofs, rel.a_rows, np.abs(rel.a_vals), rel.nrows,
+                        np.ones_like(dq))[local]
+    return rate, largest, float(coefs) * largest
+
+
+def _unmoved_message(dual: str, rate: float, largest: float) -> str:
+    return (f"a unit of {dual!r} displaces the body by up to {largest:.3g} and changes the "
+            f"controlled quantity by {rate:.3g} (round-off)")
 
 
 def _frictional(effects) -> list:
@@ -263,8 +276,8 @@ def _unmoved(exc: SolverError, problem, t: float, controls: list[Control]) -> So
     kmat = problem.form().kmat
     stuck = first and _frictional(problem.ctx.effects)
     for c in controls:
-        rate, terms = _response(problem, kmat, mask, c)
-        if abs(rate) > UNMOVED * terms and terms > 0.0:
+        rate, largest, reach = _response(problem, kmat, mask, c)
+        if abs(rate) > UNMOVED * reach:
             continue
         rset = problem.rset
         reached = rset.primal_values(problem.q)[c.row]
@@ -273,8 +286,8 @@ def _unmoved(exc: SolverError, problem, t: float, controls: list[Control]) -> So
         where = f"t = {problem.t_prev:.6g}" + (", the contact closed and stuck" if stuck else "")
         return NamedFailure(
             f"control {c.name!r} is not moved by its load {dual!r} at the step's start ({where}): "
-            f"a unit of {dual!r} changes the controlled quantity by {rate:.3g}, terms of "
-            f"{terms:.3g} that cancel, so the controlled system is singular there and the value "
+            f"{_unmoved_message(dual, rate, largest)}, so the controlled system is "
+            f"singular there and the value "
             f"{target:.6g} at t = {t:.6g} (it is {reached:.6g}) is not reached from it; control "
             f"a quantity that {dual!r} moves, or drive this one with a load that moves it (the "
             f"control's 'dual') (the last attempt: {exc})")
@@ -329,3 +342,68 @@ def _beyond_friction_from_start(exc: SolverError, problem, t: float,
             f"reduce the target (its first steps) or raise the friction (the last attempt: "
             f"{exc})")
     return None
+
+
+def name_linear_failure(exc: SolverError, system, solver, t: float) -> SolverError:
+    """A linear run's failed solve at ``t`` (``system`` and its linear ``solver``), as a
+    ``NamedFailure`` when a single-row control is not moved by its own load; else ``exc``.
+    Collective."""
+    if isinstance(exc, DoesNotFit):
+        return exc
+    try:
+        return _linear_unmoved(exc, system, solver, t) or exc
+    except Exception:   # (a diagnostic's own error: the solver's failure is the news)
+        return exc
+
+
+def _linear_solve(system, solver, mask: np.ndarray, f: np.ndarray, t: float | None):
+    """q of the linear system with the rows ``mask`` enforced, loaded by ``f``, the
+    relations' values and eliminated DOFs' at t (homogeneous without t). Collective."""
+    rset = system.context.relations
+    system.set_active(mask)
+    mat = system.assemble()
+    solver.set_operator(mat)
+    x, b = mat.createVecs()
+    target = np.zeros(rset.nrows) if t is None else rset.rhs(t)
+    elim = np.zeros(system.n_eliminated) if t is None else system.elim_values(t)
+    b.array[:] = system.rhs_from(f, target, elim)[0]
+    solver.solve(b, x)
+    return system.gather(x.array).q
+
+
+def _linear_unmoved(exc: SolverError, system, solver, t: float) -> SolverError | None:
+    """In a linear model a control's quantity is A q = A q₀ + λ A K⁻¹ G (q₀: the other loads'
+    answer): when A K⁻¹ G = 0 its load does not move it, the saddle operator is singular, and
+    no intensity gives a value other than A q₀."""
+    ctx = system.context
+    rset = ctx.relations
+    for k, rel in enumerate(ctx.multiplied):
+        if not rel.meta.get("dual") or rel.maximum or rel.sense != "=" or rel.nrows != 1:
+            continue
+        row = rset.rows_of(k).start
+        mask = np.ones(rset.nrelrows, dtype=bool)
+        mask[row] = False
+        dq = _linear_solve(system, solver, mask, _dual_column(ctx, rel), None)
+        rate, largest, reach = _rate(ctx, rel, 0, dq)
+        if abs(rate) > UNMOVED * reach:
+            continue
+        theta = None if ctx.scene.time is None else ctx.scene.time.theta
+        q0 = _linear_solve(system, solver, mask, ctx.composition.known_loads(t, 0.0, theta), t)
+        alone = float(rset.primal_values(q0)[row])
+        target = float(rset.targets(t)[row])
+        dual = rel.meta["dual"]
+        return NamedFailure(
+            f"control {rel.name!r} is not moved by its load {dual!r}: "
+            f"{_unmoved_message(dual, rate, largest)}; the model is linear, so the quantity is {alone:.6g} whatever the intensity of {dual!r} (the "
+            f"other loads' answer) and its value {target:.6g} at t = {t:.6g} is out of reach; "
+            f"control a quantity that {dual!r} moves, or drive this one with a load that moves "
+            f"it (the control's 'dual') (the solve: {exc})")
+    return None
+
+
+def _dual_column(ctx, rel) -> np.ndarray:
+    """The load pattern of a single-row control: its dual column as a local primal vector."""
+    if rel.shared_dual is not None:
+        return ctx.local_vector(*rel.shared_dual)
+    dofs, rows, vals = rel.dual_coo()
+    return ctx.local_vector(dofs[rows == 0], vals[rows == 0])

@@ -16,7 +16,9 @@ the first step, each on a singular solve, and the failure (exit 3) names the cau
 
 Both claims are checked independently with load-controlled runs (the pull a given force,
 below μN in either sense): from the cell stresses, the mean ε_xx stays zero while the cells
-strain, and the mean n·ε·n stays far below the first target."""
+strain, and the mean n·ε·n stays far below the first target. In a linear model (the controlled
+bar, its control on a displacement its load does not move) the failure says that no intensity
+of the load gives the target."""
 
 import re
 
@@ -73,12 +75,12 @@ def test_control_its_load_does_not_move(shared_tmp):
         steps = len(f["steps/time"])
     assert code == 3 and steps == 0
     head = ("failed: control 'drive' is not moved by its load 'pull' at the step's start (t = 0, "
-            "the contact closed and stuck): a unit of 'pull' changes ")
+            "the contact closed and stuck): a unit of 'pull' displaces the body by up to ")
     assert status.startswith(head), status
-    rate, terms = (float(x) for x in re.match(
-        re.escape(head) + r"the controlled quantity by (\S+), terms of (\S+) that cancel",
+    largest, rate = (float(x) for x in re.match(
+        re.escape(head) + r"(\S+) and changes the controlled quantity by (\S+) \(round-off\)",
         status).groups())
-    assert abs(rate) < 1e-12 * terms and terms > 1e-4
+    assert abs(rate) < 1e-12 * largest and largest > 1e-3
     assert "control a quantity that 'pull' moves" in status
     assert "likely cause" not in status
     # independently: stuck (every node, up to a pull of about 1), the pull strains the cells
@@ -115,3 +117,40 @@ def test_control_beyond_friction_from_the_first_step(shared_tmp):
         eps = _loaded_strains(shared_tmp, force)
         value = ((eps[:, 0] + eps[:, 1]) / 2 + eps[:, 2]).mean()
         assert value < -1e-3 < 0.002 / COUNT
+
+
+def test_linear_control_its_load_does_not_move(shared_tmp):
+    """configs/controlled_bar.toml (ν = 0, pulled along x by its control's load) with the
+    control on the mean u_y of the right edge: the pull moves no point along y, so the saddle
+    operator is singular; the model is linear, so no intensity gives the target."""
+    base = shipped("controlled_bar.toml")
+    control = dict(base["relations"][2], component="y")
+    assert control["name"] == "control" and control["value"] == 1e-4
+    text = scene(base, relations=base["relations"][:2] + [control])
+    code, status, f = _run(shared_tmp, text)
+    with f:
+        steps = len(f["steps/time"])
+    assert code == 3 and steps == 0
+    head = ("failed: control 'control' is not moved by its load 'pull': a unit of 'pull' "
+            "displaces the body by up to ")
+    assert status.startswith(head), status
+    m = re.match(re.escape(head) + r"(\S+) and changes the controlled quantity by (\S+) "
+                 r"\(round-off\); the model is linear, so the quantity is (\S+) whatever the "
+                 r"intensity of 'pull' \(the other loads' answer\) and its value (\S+) at "
+                 r"t = (\S+) is out of reach", status)
+    largest, rate, alone, target, t = (float(x) for x in m.groups())
+    # a unit force on the 1 × 0.1 bar: u_x = L / (E A) = 1e-8 at its end
+    assert largest == pytest.approx(1e-8, rel=1e-9)
+    assert abs(rate) < 1e-12 * largest and alone == 0.0
+    assert t == pytest.approx(0.1) and target == pytest.approx(1e-5)
+    # independently: the bar pulled by given forces, either sense: the right edge's u_y is 0
+    for force in (1e4, -1e4):
+        loads = [dict(base["loads"][0], total_force=[force, 0.0])]
+        code, status, f = _run(shared_tmp, scene(base, loads=loads,
+                                                 relations=base["relations"][:2]), "loaded")
+        with f:
+            u = f["fields/displacement"][-1]
+            right = np.isclose(f["mesh/points"][:, 0], 1.0)
+        assert code == 0, status
+        assert abs(u[right, 0].mean()) == pytest.approx(abs(force) * 1e-8, rel=1e-9)
+        assert np.abs(u[right, 1]).max() < 1e-12 * abs(force) * 1e-8
