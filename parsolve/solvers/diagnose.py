@@ -114,12 +114,11 @@ def _named(exc: SolverError, problem, t: float) -> SolverError:
     if _softens(problem.ctx.effects):
         return _past_capacity(exc, problem, t, controls)
     singles = [c for c in controls if not c.maximum]
-    if singles:
-        named = _unmoved(exc, problem, t, singles)
-        if named is None and problem.t_prev == 0.0:
-            named = _beyond_friction_from_start(exc, problem, t, singles)
-        if named is not None:
-            return named
+    named = _unmoved(exc, problem, t, singles) if singles else None
+    if named is None and problem.t_prev == 0.0:
+        named = _beyond_friction_from_start(exc, problem, t, controls)
+    if named is not None:
+        return named
     sliding = _sliding_contacts(problem.ctx.effects)
     if not sliding:
         return exc
@@ -294,37 +293,72 @@ def _unmoved(exc: SolverError, problem, t: float, controls: list[Control]) -> So
     return None
 
 
-def _stuck_solution(problem, t: float, kmat, mask: np.ndarray) -> np.ndarray:
-    """Per relation row, the total multipliers of the step to t solved with the rows ``mask``
-    enforced (one linear solve from the last converged state). Collective."""
+def _stuck_solve(problem, kmat, mask: np.ndarray, rhs: np.ndarray) -> tuple:
+    """(Δq, λ per relation row) of one linear solve of the operator with the rows ``mask``
+    enforced, from the last converged state. Collective."""
     system = problem.system
     system.set_active(problem.policies.enforceable(mask))
-    mat = system.assemble(kmat)
-    f_int = problem.form().f_int
-    rhs = problem.rhs(t, f_int, problem.external(t))
-    x = problem.solve(mat, rhs, export=False)
-    return problem.rset.row_values(problem.unscaled(x))
+    x = problem.solve(system.assemble(kmat), rhs, export=False)
+    return x.q, problem.rset.row_values(problem.unscaled(x))
+
+
+def _stuck_bounds(values: np.ndarray, rates: np.ndarray, targets: np.ndarray,
+                  sign: np.ndarray) -> tuple[int, float, int, float]:
+    """The control loads that keep every row of a maximum group on its side of the value,
+    the rows being values + load · rates: (the row setting the lowest, the lowest, the row
+    setting the highest, the highest); -1 and ±inf where no row bounds that end."""
+    room, slope = sign * (targets - values), sign * rates   # slope · load ≤ room, every row
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ends = room / slope
+    up, down = np.flatnonzero(slope > 0), np.flatnonzero(slope < 0)
+    hi = int(up[np.argmin(ends[up])]) if up.size else -1
+    lo = int(down[np.argmax(ends[down])]) if down.size else -1
+    if ((slope == 0) & (room < 0)).any():   # a row beyond the value that no load moves
+        return lo, np.inf, hi, -np.inf
+    return lo, (ends[lo] if lo >= 0 else -np.inf), hi, (ends[hi] if hi >= 0 else np.inf)
 
 
 def _beyond_friction_from_start(exc: SolverError, problem, t: float,
                                 controls: list[Control]) -> SolverError | None:
-    """The first step of a single-row control over a frictional contact whose closed nodes
-    all slide at the failed attempt's last iterate: solved with the contact closed and stuck,
-    the target takes a tangential reaction beyond the friction capacity μN. No state carries
-    more than μN along the surface (|Σ rt| ≤ Σ μ rn), and sliding as a whole the body takes no
-    more load: the target is out of reach from the start."""
+    """The first step of a control (a maximum group: all its rows) over a frictional
+    contact whose closed nodes all slide at the failed attempt's last iterate. With the
+    contact closed and stuck the model is linear: the controlled rows are their values under
+    the other loads plus the control load times their rates (two solves), which gives the
+    control load the target takes and the contact reactions with it. Their tangential sum
+    beyond the friction capacity μN is a load the contact cannot carry (no state carries
+    more than μN along the surface: |Σ rt| ≤ Σ μ rn), and sliding as a whole the body takes
+    no more: the target is out of reach from the start."""
     sliding = [e for e in _frictional(problem.ctx.effects)
                if (e.node_state != fr.OPEN).any()
                and (e.node_state[e.node_state != fr.OPEN] == fr.SLIP).all()]
     if not sliding:
         return None
     rset, mult = problem.rset, problem.ctx.multiplied
-    mask = _probe_rows(problem, True)
-    for c in controls:
-        mask[c.row] = True
-    rows = _stuck_solution(problem, t, problem.form().kmat, mask)
-    lam = {rel.name: rows[rset.rows_of(k)] for k, rel in enumerate(mult)}
     c = controls[0]
+    k, local = rset.locate(c.row)
+    rows = np.arange(rset.rows_of(k).start, rset.rows_of(k).stop) if c.maximum \
+        else np.array([c.row])
+    mask = _probe_rows(problem, True)
+    mask[rows] = False
+    lin = problem.form()
+    dq1, lam1 = _stuck_solve(problem, lin.kmat, mask,
+                             problem.rhs_of(problem.policies.dual_column(k, local)))
+    dq0, lam0 = _stuck_solve(problem, lin.kmat, mask,
+                             problem.rhs(t, lin.f_int, problem.external(t)))
+    values = rset.primal_values(problem.q + dq0)[rows]
+    rates = rset.primal_values(dq1)[rows]
+    targets, sign = rset.targets(t)[rows], problem.active.sign[rows]
+    if c.maximum:
+        lo, low, hi, high = _stuck_bounds(values, rates, targets, sign)
+        if low > high:
+            return _stuck_apart(exc, problem, t, c, sliding[0], lam0, (lo, low, hi, high))
+        load = float(high if abs(high) < abs(low) else low)
+    else:
+        load = float((targets[0] - values[0]) / rates[0])
+    if not np.isfinite(load):
+        return None
+    total = lam0 + load * lam1
+    lam = {rel.name: total[rset.rows_of(j)] for j, rel in enumerate(mult)}
     for e in sliding:
         rn, rt = e.forces(lam)
         normal, tangential = float(rn.sum()), float(np.linalg.norm(rt.sum(axis=0)))
@@ -332,16 +366,36 @@ def _beyond_friction_from_start(exc: SolverError, problem, t: float,
         if normal <= 0.0 or tangential <= capacity * (1 + 1e-9):
             continue
         target = rset.targets(t)[c.row]
+        kind = "maximum control" if c.maximum else "control"
         return NamedFailure(
-            f"control {c.name!r} cannot reach its value from the first step: {target:.6g} at "
+            f"{kind} {c.name!r} cannot reach its value from the first step: {target:.6g} at "
             f"t = {t:.6g}; with contact {e.spec.name!r} closed and stuck, that value takes a "
-            f"control load of {rows[c.row]:.6g} and a tangential reaction of {tangential:.6g}, "
+            f"control load of {load:.6g} and a tangential reaction of {tangential:.6g}, "
             f"beyond the friction capacity μN = {capacity:.6g} (μ = {e.mu:g}, N = "
             f"{normal:.6g}): every closed node slides and the body slides as a whole, which "
             f"the control load cannot pass, so the value lies beyond what the load gives; "
-            f"reduce the target (its first steps) or raise the friction (the last attempt: "
-            f"{exc})")
+            f"bring the target nearer {values[0] if not c.maximum else values.max():.6g} (the "
+            f"other loads alone) or raise the friction (the last attempt: {exc})")
     return None
+
+
+def _stuck_apart(exc: SolverError, problem, t: float, c: Control, contact, lam0: np.ndarray,
+                 bounds: tuple) -> SolverError:
+    """A maximum group whose rows, the contact stuck, ask for control loads that exclude
+    each other; sliding, the contact carries no more than μN."""
+    rset = problem.rset
+    lo, low, hi, high = bounds
+    rn, _ = contact.forces({rel.name: lam0[rset.rows_of(j)]
+                            for j, rel in enumerate(problem.ctx.multiplied)})
+    target = rset.targets(t)[c.row]
+    return NamedFailure(
+        f"maximum control {c.name!r} cannot reach its value from the first step: {target:.6g} "
+        f"at t = {t:.6g}; with contact {contact.spec.name!r} closed and stuck, its row {lo} "
+        f"stays on its side of that value only for control loads of at least {low:.6g} and "
+        f"its row {hi} only for at most {high:.6g} (the load that brings one there takes the "
+        f"other beyond it), and sliding the contact carries no more than μN = "
+        f"{contact.mu * float(rn.sum()):.6g} (μ = {contact.mu:g}); raise the target or control "
+        f"another quantity (the last attempt: {exc})")
 
 
 def name_linear_failure(exc: SolverError, system, solver, t: float) -> SolverError:
