@@ -16,6 +16,15 @@ contact states are the whole surface's).
 A maximum group whose enforced row turns back, within a step, to a row it left is damage
 localizing where a material softens (``ActiveSet``'s own message says so); where none does,
 it is a target no control load gives, and the failure says that instead.
+
+Two causes hold from the start, each probed with linear solves of the last converged state:
+- a single-row control that its own load does not move (A K⁻¹ G = 0, e.g. a mean normal strain
+  driven by a shear load, or a displacement the load does not reach): the controlled operator
+  is singular; in a linear model no intensity of the load gives another value (the linear
+  path's failure comes here too, ``name_linear_failure``);
+- at the first step over a frictional contact that the failed attempt left sliding as a whole:
+  with the contact stuck the model is linear, and the control load the target takes (a maximum
+  group: the loads its rows allow) is one the contact cannot carry, beyond μN.
 """
 
 from __future__ import annotations
@@ -448,10 +457,11 @@ def _linear_unmoved(exc: SolverError, system, solver, t: float) -> SolverError |
         dual = rel.meta["dual"]
         return NamedFailure(
             f"control {rel.name!r} is not moved by its load {dual!r}: "
-            f"{_unmoved_message(dual, rate, largest)}; the model is linear, so the quantity is {alone:.6g} whatever the intensity of {dual!r} (the "
-            f"other loads' answer) and its value {target:.6g} at t = {t:.6g} is out of reach; "
-            f"control a quantity that {dual!r} moves, or drive this one with a load that moves "
-            f"it (the control's 'dual') (the solve: {exc})")
+            f"{_unmoved_message(dual, rate, largest)}; the model is linear, so the quantity is "
+            f"{alone:.6g} whatever the intensity of {dual!r} (the other loads' answer) and its "
+            f"value {target:.6g} at t = {t:.6g} is out of reach; control a quantity that "
+            f"{dual!r} moves, or drive this one with a load that moves it (the control's "
+            f"'dual') (the solve: {exc})")
     return None
 
 
