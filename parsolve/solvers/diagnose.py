@@ -118,16 +118,18 @@ def _named(exc: SolverError, problem, t: float) -> SolverError:
     controls = _controls(problem)
     if not controls:
         return exc
+    singles = [c for c in controls if not c.maximum]
+    named = _unmoved(exc, problem, t, singles) if singles else None
+    if named is not None:
+        return named
     if isinstance(exc, GoingBack) and not _softens(problem.ctx.effects):
         return _no_turn_back(exc, problem, t, controls)
     if _softens(problem.ctx.effects):
         return _past_capacity(exc, problem, t, controls)
-    singles = [c for c in controls if not c.maximum]
-    named = _unmoved(exc, problem, t, singles) if singles else None
-    if named is None and problem.t_prev == 0.0:
+    if problem.t_prev == 0.0:
         named = _beyond_friction_from_start(exc, problem, t, controls)
-    if named is not None:
-        return named
+        if named is not None:
+            return named
     sliding = _sliding_contacts(problem.ctx.effects)
     if not sliding:
         return exc

@@ -155,3 +155,37 @@ def test_linear_control_its_load_does_not_move(shared_tmp):
         assert code == 0, status
         assert abs(u[right, 0].mean()) == pytest.approx(abs(force) * 1e-8, rel=1e-9)
         assert np.abs(u[right, 1]).max() < 1e-12 * abs(force) * 1e-8
+
+
+def test_softening_control_its_load_does_not_move(shared_tmp):
+    """configs/localization_bar.toml (secant Newton, a damaging column; ν = 0) with a control
+    on the mean u_y of the right edge instead of its maximum strain: the pull moves no point
+    along y, the first step fails on a singular solve, and the failure says so (the Newton
+    path: probed at the step's start)."""
+    base = shipped("localization_bar.toml")
+    control = {"name": "drive", "type": "mean", "region": "right", "component": "y",
+               "value": 1e-4, "dual": "pull"}
+    code, status, f = _run(shared_tmp, scene(base, relations=base["relations"][:3] + [control]))
+    with f:
+        steps = len(f["steps/time"])
+    assert code == 3 and steps == 0
+    head = ("failed: control 'drive' is not moved by its load 'pull' at the step's start "
+            "(t = 0): a unit of 'pull' displaces the body by up to ")
+    assert status.startswith(head), status
+    largest, rate = (float(x) for x in re.match(
+        re.escape(head) + r"(\S+) and changes the controlled quantity by (\S+) \(round-off\)",
+        status).groups())
+    assert largest == pytest.approx(1e-8, rel=1e-9)   # L / (E A), undamaged
+    assert abs(rate) < 1e-12 * largest
+    assert "likely cause" not in status
+    # independently: pulled by a given force up to half the peak E εd0 A = 1e4, the right
+    # edge moves along x by F L / (E A) and not at all along y
+    loads = [dict(base["loads"][0], total_force=[5e3, 0.0])]
+    code, status, f = _run(shared_tmp, scene(base, loads=loads,
+                                             relations=base["relations"][:3]), "loaded")
+    with f:
+        u = f["fields/displacement"][-1]
+        right = np.isclose(f["mesh/points"][:, 0], 1.0)
+    assert code == 0, status
+    assert u[right, 0].mean() == pytest.approx(5e3 * 1e-8, rel=1e-9)
+    assert np.abs(u[right, 1]).max() < 1e-12 * 5e3 * 1e-8
