@@ -286,7 +286,10 @@ def _unmoved(exc: SolverError, problem, t: float, controls: list[Control]) -> So
     kmat = problem.form().kmat
     stuck = first and _frictional(problem.ctx.effects)
     for c in controls:
-        rate, largest, reach = _response(problem, kmat, mask, c)
+        try:
+            rate, largest, reach = _response(problem, kmat, mask, c)
+        except SolverError:   # (nothing else holds the body: the probe cannot say)
+            return None
         if abs(rate) > UNMOVED * reach:
             continue
         rset = problem.rset
@@ -296,11 +299,10 @@ def _unmoved(exc: SolverError, problem, t: float, controls: list[Control]) -> So
         where = f"t = {problem.t_prev:.6g}" + (", the contact closed and stuck" if stuck else "")
         return NamedFailure(
             f"control {c.name!r} is not moved by its load {dual!r} at the step's start ({where}): "
-            f"{_unmoved_message(dual, rate, largest)}, so the controlled system is "
-            f"singular there and the value "
-            f"{target:.6g} at t = {t:.6g} (it is {reached:.6g}) is not reached from it; control "
-            f"a quantity that {dual!r} moves, or drive this one with a load that moves it (the "
-            f"control's 'dual') (the last attempt: {exc})")
+            f"{_unmoved_message(dual, rate, largest)}, so the controlled system is singular "
+            f"there and the value {target:.6g} at t = {t:.6g} (it is {reached:.6g}) is not "
+            f"reached from it; control a quantity that {dual!r} moves, or drive this one with a "
+            f"load that moves it (the control's 'dual') (the last attempt: {exc})")
     return None
 
 

@@ -189,3 +189,31 @@ def test_softening_control_its_load_does_not_move(shared_tmp):
     assert code == 0, status
     assert u[right, 0].mean() == pytest.approx(5e3 * 1e-8, rel=1e-9)
     assert np.abs(u[right, 1]).max() < 1e-12 * 5e3 * 1e-8
+
+
+def test_single_row_control_past_the_friction_capacity(shared_tmp):
+    """ν = 0.3: the pressure strains the block less along (1, 1)/√2 (-0.0026), so the mean
+    n·ε·n reaches its first targets with the block stuck; its load rises with the ramp to μN,
+    where the block slides as a whole and the quantity grows no more. The failure names the
+    control, the value reached and μN (the steps kept: the load under μN, each on target)."""
+    text = _scene([_control(direction=[1.0, 1.0], value=0.002)],
+                  materials=[{"E": E, "nu": 0.3}])
+    code, status, f = _run(shared_tmp, text)
+    with f:
+        loads = f["relations/drive/multiplier"][:, 0]
+        values = f["relations/drive/primal"][:, 0]
+        times = f["steps/time"][:]
+    assert code == 3 and len(times) > 5
+    head = "failed: control 'drive' can no longer reach its value: "
+    assert status.startswith(head), status
+    assert "every closed node of contact 'base' slides" in status
+    assert "friction capacity μN (μ = 0.3)" in status and "likely cause" not in status
+    m = re.match(re.escape(head) + r"(\S+) at t = (\S+), where it reached (\S+) "
+                 r"\(t = (\S+), control load (\S+)\)", status)
+    target, t, reached, t_prev, load = (float(x.rstrip(",;")) for x in m.groups())
+    np.testing.assert_allclose(values, 0.002 * times, rtol=1e-9)
+    assert np.all(np.diff(loads) > 0) and loads[-1] <= MU * PRESSURE * (1 + 1e-9)
+    assert loads[-1] > 0.99 * MU * PRESSURE
+    assert load == pytest.approx(loads[-1], rel=1e-5)
+    assert reached == pytest.approx(values[-1], rel=1e-5) and t_prev == pytest.approx(times[-1])
+    assert target == pytest.approx(0.002 * t, rel=1e-5) and target > reached
