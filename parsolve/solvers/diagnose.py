@@ -441,9 +441,12 @@ def _linear_solve(system, solver, mask: np.ndarray, f: np.ndarray, t: float | No
 def _linear_unmoved(exc: SolverError, system, solver, t: float) -> SolverError | None:
     """In a linear model a control's quantity is A q = A q₀ + λ A K⁻¹ G (q₀: the other loads'
     answer): when A K⁻¹ G = 0 its load does not move it, the saddle operator is singular, and
-    no intensity gives a value other than A q₀."""
+    no intensity gives a value other than A q₀. (Not for a transient run, whose q₀ carries
+    the step's rate terms.)"""
     ctx = system.context
     rset = ctx.relations
+    if ctx.transient:
+        return None
     for k, rel in enumerate(ctx.multiplied):
         if not rel.meta.get("dual") or rel.maximum or rel.sense != "=" or rel.nrows != 1:
             continue
@@ -454,8 +457,7 @@ def _linear_unmoved(exc: SolverError, system, solver, t: float) -> SolverError |
         rate, largest, reach = _rate(ctx, rel, 0, dq)
         if abs(rate) > UNMOVED * reach:
             continue
-        theta = None if ctx.scene.time is None else ctx.scene.time.theta
-        q0 = _linear_solve(system, solver, mask, ctx.composition.known_loads(t, 0.0, theta), t)
+        q0 = _linear_solve(system, solver, mask, ctx.composition.known_loads(t, 0.0, None), t)
         alone = float(rset.primal_values(q0)[row])
         target = float(rset.targets(t)[row])
         dual = rel.meta["dual"]
