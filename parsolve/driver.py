@@ -23,7 +23,7 @@ from parsolve.model import Model
 from parsolve.outputs import Balance, contact_line, contact_totals, progress, resultant_labels, \
     resultant_line, step_outputs
 from parsolve.solvers.arc_length import run_arc_length
-from parsolve.solvers.diagnose import NamedFailure, name_failure
+from parsolve.solvers.diagnose import NamedFailure, name_failure, name_linear_failure
 from parsolve.solvers.finite import check_finite
 from parsolve.solvers.linear import DoesNotFit
 from parsolve.solvers.newton import NewtonSolver
@@ -153,17 +153,20 @@ def _run_linear(comm, system: SaddleSystem, cli_options, writer, export_dir, log
             if system.rate is None or not np.isclose(dt, system.rate.dt, rtol=1e-12, atol=0):
                 system.rate, mat = Rate(dt, theta, q_prev, np.zeros(0)), None
             f_rhs = ctx.composition.linear_step_loads(f_known, q_prev, dt, theta)
-        if mat is None:
-            t0 = time.perf_counter()
-            mat = timed("assembly", system.assemble)
-            solver.set_operator(mat)
-            vecs = vecs or mat.createVecs()
-            assembly = time.perf_counter() - t0
-        x, rhs = vecs
-        rhs.array[:] = system.rhs_from(f_rhs, ctx.relations.rhs(t), system.elim_values(t))[0]
-        if export_dir is not None and step == 0:
-            export_system(comm, export_dir, mat, rhs, system)
-        linear_its = solver.solve(rhs, x)
+        try:
+            if mat is None:
+                t0 = time.perf_counter()
+                mat = timed("assembly", system.assemble)
+                solver.set_operator(mat)
+                vecs = vecs or mat.createVecs()
+                assembly = time.perf_counter() - t0
+            x, rhs = vecs
+            rhs.array[:] = system.rhs_from(f_rhs, ctx.relations.rhs(t), system.elim_values(t))[0]
+            if export_dir is not None and step == 0:
+                export_system(comm, export_dir, mat, rhs, system)
+            linear_its = solver.solve(rhs, x)
+        except SolverError as exc:
+            raise name_linear_failure(exc, system, solver, t) from None
         t2 = time.perf_counter()
         q, multipliers = system.unpack(system.gather(x.array), t, f_ext=f_rhs)
         fields, cell_fields, rel_out = step_outputs(comm, ctx, q, multipliers)

@@ -16,6 +16,15 @@ contact states are the whole surface's).
 A maximum group whose enforced row turns back, within a step, to a row it left is damage
 localizing where a material softens (``ActiveSet``'s own message says so); where none does,
 it is a target no control load gives, and the failure says that instead.
+
+Two causes hold from the start, each probed with linear solves of the last converged state:
+- a single-row control that its own load does not move (A K⁻¹ G = 0, e.g. a mean normal strain
+  driven by a shear load, or a displacement the load does not reach): the controlled operator
+  is singular; in a linear model no intensity of the load gives another value (the linear
+  path's failure comes here too, ``name_linear_failure``);
+- at the first step over a frictional contact that the failed attempt left sliding as a whole:
+  with the contact stuck the model is linear, and the control load the target takes (a maximum
+  group: the loads its rows allow) is one the contact cannot carry, beyond μN.
 """
 
 from __future__ import annotations
@@ -29,6 +38,11 @@ from parsolve.contact import friction as fr
 from parsolve.errors import SolverError
 from parsolve.fem.materials.mazars import Mazars
 from parsolve.solvers.linear import DoesNotFit
+
+# a control's rate under its own load below this fraction of what the load's displacements
+# could give through the control's coefficients (Σ|a| max|δq|) is round-off (1e-16 relative),
+# not a small stiffness
+UNMOVED = 1e-9
 
 
 class NamedFailure(SolverError):
@@ -104,10 +118,18 @@ def _named(exc: SolverError, problem, t: float) -> SolverError:
     controls = _controls(problem)
     if not controls:
         return exc
+    singles = [c for c in controls if not c.maximum]
+    named = _unmoved(exc, problem, t, singles) if singles else None
+    if named is not None:
+        return named
     if isinstance(exc, GoingBack) and not _softens(problem.ctx.effects):
         return _no_turn_back(exc, problem, t, controls)
     if _softens(problem.ctx.effects):
         return _past_capacity(exc, problem, t, controls)
+    if problem.t_prev == 0.0:
+        named = _beyond_friction_from_start(exc, problem, t, controls)
+        if named is not None:
+            return named
     sliding = _sliding_contacts(problem.ctx.effects)
     if not sliding:
         return exc
@@ -205,3 +227,253 @@ def _past_capacity(exc: SolverError, problem, t: float, controls: list[Control])
         f"the peak they take the deformation and the measured cells unload); reduce the target "
         f"(it reached {reached:.6g}) or control a quantity that includes the softening cells "
         f"(the last attempt: {exc})")
+
+
+def _probe_rows(problem, first: bool) -> np.ndarray:
+    """The rows a probe of the last converged state enforces: its active set; at the first
+    step (nothing converged yet) the contact rows closed and stuck too, as the step's first
+    solve starts them once open rows fail (``close_contact``)."""
+    active = problem.active.active.copy()
+    if first:
+        for k, rel in enumerate(problem.ctx.multiplied):
+            if rel.meta.get("type") == "contact":
+                active[problem.rset.rows_of(k)] = True
+    return active
+
+
+def _response(problem, kmat, mask: np.ndarray, c: Control) -> tuple[float, float, float]:
+    """How the controlled quantity answers a unit of its own load, the control released and
+    the rows ``mask`` enforced at zero: ``_rate``'s. Collective."""
+    rset, pol = problem.rset, problem.policies
+    k, local = rset.locate(c.row)
+    rel = problem.ctx.multiplied[k]
+    mask = mask.copy()
+    mask[c.row] = False
+    dq = problem.respond(kmat, pol.enforceable(mask), pol.dual_column(k, local))
+    return _rate(problem.ctx, rel, local, dq)
+
+
+def _rate(ctx, rel, local: int, dq: np.ndarray) -> tuple[float, float, float]:
+    """(A δq of the row, max |δq|, Σ|a| max |δq|: what the row could measure of δq).
+    Collective."""
+    dofmap = ctx.relations.dofmap
+    rate = float(dofmap.rows(rel.a_dofs, rel.a_rows, rel.a_vals, rel.nrows, dq)[local])
+    largest = ctx.max_abs(dq)
+    coefs = dofmap.rows(rel.a_dofs, rel.a_rows, np.abs(rel.a_vals), rel.nrows,
+                        np.ones_like(dq))[local]
+    return rate, largest, float(coefs) * largest
+
+
+def _unmoved_message(dual: str, rate: float, largest: float) -> str:
+    return (f"a unit of {dual!r} displaces the body by up to {largest:.3g} and changes the "
+            f"controlled quantity by {rate:.3g} (round-off)")
+
+
+def _frictional(effects) -> list:
+    return [e for e in effects if getattr(e, "frictional", False)
+            and getattr(e, "node_state", None) is not None]
+
+
+def _unmoved(exc: SolverError, problem, t: float, controls: list[Control]) -> SolverError | None:
+    """A single-row control whose quantity its own load does not move (A K⁻¹ G = 0: the
+    saddle operator is singular with any tangent that holds the body, e.g. a mean normal
+    strain driven by a shear load, which changes it by symmetry not at all, or a
+    displacement the load does not reach): Newton from there cannot move it, and where the
+    load acts linearly no intensity of it gives another value. Probed at the last converged
+    state with one solve (its terms cancel to round-off)."""
+    first = problem.t_prev == 0.0
+    mask = _probe_rows(problem, first)
+    kmat = problem.form().kmat
+    stuck = first and _frictional(problem.ctx.effects)
+    for c in controls:
+        try:
+            rate, largest, reach = _response(problem, kmat, mask, c)
+        except SolverError:   # (nothing else holds the body: the probe cannot say)
+            return None
+        if abs(rate) > UNMOVED * reach:
+            continue
+        rset = problem.rset
+        reached = rset.primal_values(problem.q)[c.row]
+        target = rset.targets(t)[c.row]
+        dual = problem.ctx.multiplied[rset.locate(c.row)[0]].meta["dual"]
+        where = f"t = {problem.t_prev:.6g}" + (", the contact closed and stuck" if stuck else "")
+        return NamedFailure(
+            f"control {c.name!r} is not moved by its load {dual!r} at the step's start ({where}): "
+            f"{_unmoved_message(dual, rate, largest)}, so the controlled system is singular "
+            f"there and the value {target:.6g} at t = {t:.6g} (it is {reached:.6g}) is not "
+            f"reached from it; control a quantity that {dual!r} moves, or drive this one with a "
+            f"load that moves it (the control's 'dual') (the last attempt: {exc})")
+    return None
+
+
+def _stuck_solve(problem, kmat, mask: np.ndarray, rhs: np.ndarray) -> tuple:
+    """(Δq, λ per relation row) of one linear solve of the operator with the rows ``mask``
+    enforced, from the last converged state. Collective."""
+    system = problem.system
+    system.set_active(problem.policies.enforceable(mask))
+    x = problem.solve(system.assemble(kmat), rhs, export=False)
+    return x.q, problem.rset.row_values(problem.unscaled(x))
+
+
+def _stuck_bounds(values: np.ndarray, rates: np.ndarray, targets: np.ndarray,
+                  sign: np.ndarray) -> tuple[int, float, int, float]:
+    """The control loads that keep every row of a maximum group on its side of the value,
+    the rows being values + load · rates: (the row setting the lowest, the lowest, the row
+    setting the highest, the highest); -1 and ±inf where no row bounds that end."""
+    room, slope = sign * (targets - values), sign * rates   # slope · load ≤ room, every row
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ends = room / slope
+    up, down = np.flatnonzero(slope > 0), np.flatnonzero(slope < 0)
+    hi = int(up[np.argmin(ends[up])]) if up.size else -1
+    lo = int(down[np.argmax(ends[down])]) if down.size else -1
+    if ((slope == 0) & (room < 0)).any():   # a row beyond the value that no load moves
+        return lo, np.inf, hi, -np.inf
+    return lo, (ends[lo] if lo >= 0 else -np.inf), hi, (ends[hi] if hi >= 0 else np.inf)
+
+
+def _beyond_friction_from_start(exc: SolverError, problem, t: float,
+                                controls: list[Control]) -> SolverError | None:
+    """The first step of a control (a maximum group: all its rows) over a frictional
+    contact whose closed nodes all slide at the failed attempt's last iterate. With the
+    contact closed and stuck the model is linear: the controlled rows are their values under
+    the other loads plus the control load times their rates (two solves), which gives the
+    control load the target takes and the contact reactions with it. Their tangential sum
+    beyond the friction capacity μN is a load the contact cannot carry (no state carries
+    more than μN along the surface: |Σ rt| ≤ Σ μ rn), and sliding as a whole the body takes
+    no more: the target is out of reach from the start."""
+    sliding = [e for e in _frictional(problem.ctx.effects)
+               if (e.node_state != fr.OPEN).any()
+               and (e.node_state[e.node_state != fr.OPEN] == fr.SLIP).all()]
+    if not sliding:
+        return None
+    rset, mult = problem.rset, problem.ctx.multiplied
+    c = controls[0]
+    k, local = rset.locate(c.row)
+    rows = np.arange(rset.rows_of(k).start, rset.rows_of(k).stop) if c.maximum \
+        else np.array([c.row])
+    mask = _probe_rows(problem, True)
+    mask[rows] = False
+    lin = problem.form()
+    dq1, lam1 = _stuck_solve(problem, lin.kmat, mask,
+                             problem.rhs_of(problem.policies.dual_column(k, local)))
+    dq0, lam0 = _stuck_solve(problem, lin.kmat, mask,
+                             problem.rhs(t, lin.f_int, problem.external(t)))
+    values = rset.primal_values(problem.q + dq0)[rows]
+    rates = rset.primal_values(dq1)[rows]
+    targets, sign = rset.targets(t)[rows], problem.active.sign[rows]
+    if c.maximum:
+        lo, low, hi, high = _stuck_bounds(values, rates, targets, sign)
+        if low > high:
+            return _stuck_apart(exc, problem, t, c, sliding[0], lam0, (lo, low, hi, high))
+        load = float(high if abs(high) < abs(low) else low)
+    else:
+        load = float((targets[0] - values[0]) / rates[0])
+    if not np.isfinite(load):
+        return None
+    total = lam0 + load * lam1
+    lam = {rel.name: total[rset.rows_of(j)] for j, rel in enumerate(mult)}
+    for e in sliding:
+        rn, rt = e.forces(lam)
+        normal, tangential = float(rn.sum()), float(np.linalg.norm(rt.sum(axis=0)))
+        capacity = e.mu * normal
+        if normal <= 0.0 or tangential <= capacity * (1 + 1e-9):
+            continue
+        target = rset.targets(t)[c.row]
+        kind = "maximum control" if c.maximum else "control"
+        return NamedFailure(
+            f"{kind} {c.name!r} cannot reach its value from the first step: {target:.6g} at "
+            f"t = {t:.6g}; with contact {e.spec.name!r} closed and stuck, that value takes a "
+            f"control load of {load:.6g} and a tangential reaction of {tangential:.6g}, "
+            f"beyond the friction capacity μN = {capacity:.6g} (μ = {e.mu:g}, N = "
+            f"{normal:.6g}): every closed node slides and the body slides as a whole, which "
+            f"the control load cannot pass, so the value lies beyond what the load gives; "
+            f"bring the target nearer {values[0] if not c.maximum else values.max():.6g} (the "
+            f"other loads alone) or raise the friction (the last attempt: {exc})")
+    return None
+
+
+def _stuck_apart(exc: SolverError, problem, t: float, c: Control, contact, lam0: np.ndarray,
+                 bounds: tuple) -> SolverError:
+    """A maximum group whose rows, the contact stuck, ask for control loads that exclude
+    each other; sliding, the contact carries no more than μN."""
+    rset = problem.rset
+    lo, low, hi, high = bounds
+    rn, _ = contact.forces({rel.name: lam0[rset.rows_of(j)]
+                            for j, rel in enumerate(problem.ctx.multiplied)})
+    target = rset.targets(t)[c.row]
+    return NamedFailure(
+        f"maximum control {c.name!r} cannot reach its value from the first step: {target:.6g} "
+        f"at t = {t:.6g}; with contact {contact.spec.name!r} closed and stuck, its row {lo} "
+        f"stays on its side of that value only for control loads of at least {low:.6g} and "
+        f"its row {hi} only for at most {high:.6g} (the load that brings one there takes the "
+        f"other beyond it), and sliding the contact carries no more than μN = "
+        f"{contact.mu * float(rn.sum()):.6g} (μ = {contact.mu:g}); raise the target or control "
+        f"another quantity (the last attempt: {exc})")
+
+
+def name_linear_failure(exc: SolverError, system, solver, t: float) -> SolverError:
+    """A linear run's failed solve at ``t`` (``system`` and its linear ``solver``), as a
+    ``NamedFailure`` when a single-row control is not moved by its own load; else ``exc``.
+    Collective."""
+    if isinstance(exc, DoesNotFit):
+        return exc
+    try:
+        return _linear_unmoved(exc, system, solver, t) or exc
+    except Exception:   # (a diagnostic's own error: the solver's failure is the news)
+        return exc
+
+
+def _linear_solve(system, solver, mask: np.ndarray, f: np.ndarray, t: float | None):
+    """q of the linear system with the rows ``mask`` enforced, loaded by ``f``, the
+    relations' values and eliminated DOFs' at t (homogeneous without t). Collective."""
+    rset = system.context.relations
+    system.set_active(mask)
+    mat = system.assemble()
+    solver.set_operator(mat)
+    x, b = mat.createVecs()
+    target = np.zeros(rset.nrows) if t is None else rset.rhs(t)
+    elim = np.zeros(system.n_eliminated) if t is None else system.elim_values(t)
+    b.array[:] = system.rhs_from(f, target, elim)[0]
+    solver.solve(b, x)
+    return system.gather(x.array).q
+
+
+def _linear_unmoved(exc: SolverError, system, solver, t: float) -> SolverError | None:
+    """In a linear model a control's quantity is A q = A q₀ + λ A K⁻¹ G (q₀: the other loads'
+    answer): when A K⁻¹ G = 0 its load does not move it, the saddle operator is singular, and
+    no intensity gives a value other than A q₀. (Not for a transient run, whose q₀ carries
+    the step's rate terms.)"""
+    ctx = system.context
+    rset = ctx.relations
+    if ctx.transient:
+        return None
+    for k, rel in enumerate(ctx.multiplied):
+        if not rel.meta.get("dual") or rel.maximum or rel.sense != "=" or rel.nrows != 1:
+            continue
+        row = rset.rows_of(k).start
+        mask = np.ones(rset.nrelrows, dtype=bool)
+        mask[row] = False
+        dq = _linear_solve(system, solver, mask, _dual_column(ctx, rel), None)
+        rate, largest, reach = _rate(ctx, rel, 0, dq)
+        if abs(rate) > UNMOVED * reach:
+            continue
+        q0 = _linear_solve(system, solver, mask, ctx.composition.known_loads(t, 0.0, None), t)
+        alone = float(rset.primal_values(q0)[row])
+        target = float(rset.targets(t)[row])
+        dual = rel.meta["dual"]
+        return NamedFailure(
+            f"control {rel.name!r} is not moved by its load {dual!r}: "
+            f"{_unmoved_message(dual, rate, largest)}; the model is linear, so the quantity is "
+            f"{alone:.6g} whatever the intensity of {dual!r} (the other loads' answer) and its "
+            f"value {target:.6g} at t = {t:.6g} is out of reach; control a quantity that "
+            f"{dual!r} moves, or drive this one with a load that moves it (the control's "
+            f"'dual') (the solve: {exc})")
+    return None
+
+
+def _dual_column(ctx, rel) -> np.ndarray:
+    """The load pattern of a single-row control: its dual column as a local primal vector."""
+    if rel.shared_dual is not None:
+        return ctx.local_vector(*rel.shared_dual)
+    dofs, rows, vals = rel.dual_coo()
+    return ctx.local_vector(dofs[rows == 0], vals[rows == 0])

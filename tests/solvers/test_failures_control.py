@@ -9,8 +9,7 @@ target beyond the largest strain at μN has no solution. The run then fails (exi
 — the control, the value it could not reach, the value reached, μN — instead of the solve's
 null pivot or friction's "tangential load exceeds the friction capacity" (the load is the
 control's unknown here, not the scene's). The steps reached are kept, their load just under μN.
-A target out of reach from the first step (the load never approached μN) keeps the solver's
-own message and hints: nothing says the capacity was reached."""
+A target out of reach from the first step says so, with the loads it takes, the block stuck."""
 
 import re
 
@@ -87,15 +86,30 @@ def test_reachable_maximum_control_completes(shared_tmp):
     assert loads[-1] < 0.3 * PRESSURE
 
 
-def test_target_out_of_reach_from_the_start_is_not_named(shared_tmp):
-    """ν = 0.3: the pressure alone strains the top beyond the first targets; the block never
-    began to slide at a converged state, so the failure keeps the solver's message and hints."""
+def test_target_out_of_reach_from_the_start(shared_tmp):
+    """ν = 0.3: the pressure alone strains the top cells along x beyond the first targets
+    (0.004 against 0.002 at most), and the pull strains the cells each side of the middle
+    in opposite senses: with the block stuck, the two rows that bound the load ask for loads
+    of opposite signs, each far beyond μN = 3. The failure names the two rows and their
+    loads (test_no_load_reaches_the_turning_target checks that no load in ±0.97 μN gives
+    the target)."""
     code, status, f = _run(shared_tmp, _scene(0.3, VALUE, nu=0.3))
     with f:
         steps = len(f["steps/time"])
     assert code == 3 and steps == 0
-    assert "can no longer reach" not in status
-    assert "likely cause" in status
+    head = "failed: maximum control 'max_strain' cannot reach its value from the first step: "
+    assert status.startswith(head), status
+    m = re.match(re.escape(head) + r"(\S+) at t = (\S+); with contact 'base' closed and stuck, "
+                 r"its row (\d+) stays on its side of that value only for control loads of at "
+                 r"least (\S+) and its row (\d+) only for at most (\S+) \(the load that brings "
+                 r"one there takes the other beyond it\), and sliding the contact carries no "
+                 r"more than μN = (\S+) \(μ = 0.3\)", status)
+    target, t, lo, low, hi, high, capacity = (float(x) for x in m.groups())
+    assert target == pytest.approx(VALUE * t, rel=1e-5) and t <= 0.1
+    assert capacity == pytest.approx(0.3 * PRESSURE, rel=1e-6)
+    assert low > capacity and high < -capacity and lo != hi
+    assert "raise the target or control another quantity" in status
+    assert "likely cause" not in status
 
 
 def test_turning_back_without_softening(shared_tmp):
@@ -116,10 +130,11 @@ def test_turning_back_without_softening(shared_tmp):
 
 
 def test_no_load_reaches_the_turning_target(shared_tmp):
-    """The claim of the test above, computed independently: the same block under the pressure
-    and the pull as a given load, ramped to 0.97 μN in either sense: the largest ε_xx of the
-    cells (from the cell stresses, plane strain) stays above the ramp's last target (t = 1),
-    so no load the block can carry gives any of its targets."""
+    """The claim of the test above and of test_target_out_of_reach_from_the_start, computed
+    independently: the same block under the pressure and the pull as a given load, ramped to
+    0.97 μN in either sense: the largest ε_xx of the cells (from the cell stresses, plane
+    strain) stays above 1.5 × the small ramp's last target (t = 1), above 0.002, the large
+    ramp's first step's, so no load the block can carry gives any of those targets."""
     base = shipped("contact_control_friction.toml")
     nu, E = 0.3, 1000.0
     for force in (2.9, -2.9):
