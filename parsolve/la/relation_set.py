@@ -13,7 +13,9 @@ row of A and the column of D live, as far as they can, with the nodes they act o
 row on a rigid obstacle goes with its slave node; a row tying a slave node to a span of master
 nodes (finite sliding, mortar) with the master nodes, which are most of its entries. Rank r's rows come after those of the ranks before it, in stacking order (relation by
 relation); the DOF map is given each rank's count (``DofMap.set_multipliers``). On one rank
-this is the stacking order itself.
+this is the stacking order itself. A rank holds, besides its own rows, the ghost rows whose A
+row or D column has an entry on one of its local DOFs (given to the DOF map at every
+stacking): their multipliers are what its reactions D λ and its eliminated rows read.
 
 A relation's rows ("relation rows", what the active set decides) map to multiplier rows one to
 one, except for a collapsed maximum group (``Relation.collapsed``): all its rows share one
@@ -89,9 +91,10 @@ class RelationSet:
         self.a_cols, self.a_vals = _cat(ac, np.int64), _cat(av, float)
         self.d_rows, self.d_vals = _cat(dr, np.int64), _cat(dv, float)
         if self.position is None:   # the owners, once: restacking keeps them
-            self.position = self._by_owner(stacked_a, stacked_d, int(first[-1]))
+            self.position, self._counts = self._by_owner(stacked_a, stacked_d, int(first[-1]))
         pos = self.position
         self.a_rows, self.d_cols = pos[stacked_a], pos[stacked_d]
+        self._hold()
         self.mult_rows = [pos[first[k]:first[k + 1]] for k in range(len(relations))]
         self.a_relrow = _cat(arel, np.int64)            # relation row of each A entry
         self.mult_of_row = pos[_cat(mult, np.int64)]    # multiplier row of each relation row
@@ -119,8 +122,21 @@ class RelationSet:
         order = np.argsort(owner, kind="stable")
         position = np.empty(n, dtype=np.int64)
         position[order] = np.arange(n)
-        dofmap.set_multipliers(np.bincount(owner, minlength=nranks))
-        return position
+        return position, np.bincount(owner, minlength=nranks)
+
+    def _hold(self) -> None:
+        """The DOF map told each rank's rows and this rank's ghost rows (an entry of their A
+        row or D column on one of its local DOFs); the held place of the D entries on its
+        owned DOFs (what ``reactions`` reads)."""
+        dofmap = self.dofmap
+        local = np.sort(dofmap.new_dof(np.arange(dofmap.n_local)))
+        touched = np.concatenate([self.a_rows[np.isin(self.a_cols, local)],
+                                  self.d_cols[np.isin(self.d_rows, local)]])
+        dofmap.set_multipliers(self._counts, touched)
+        q0, q1, _, _ = dofmap.owned()
+        own = (self.d_rows >= q0) & (self.d_rows < q1)
+        self._d_own = np.flatnonzero(own)
+        self._d_held = dofmap.held_index(self.d_cols[own])
 
     # ------------------------------------------------------------ sizes and views
 
@@ -197,23 +213,32 @@ class RelationSet:
         return target
 
     def reactions(self, lam: np.ndarray) -> np.ndarray:
-        """Owned saddle rows of D λ (unscaled λ of every multiplier row; multiplier rows 0)."""
+        """Owned saddle rows of D λ (unscaled λ of this rank's owned multiplier rows; the
+        ghost rows' fetched from their owners; multiplier rows 0). Collective."""
         q0, q1, _, _ = self.dofmap.owned()
-        own = (self.d_rows >= q0) & (self.d_rows < q1)
+        held = self.dofmap.forward_multipliers(lam)
+        own = self._d_own
         out = np.zeros(self.dofmap.nrows)
         out[:q1 - q0] = np.bincount(self.d_rows[own] - q0,
-                                    weights=self.d_vals[own] * lam[self.d_cols[own]],
+                                    weights=self.d_vals[own] * held[self._d_held],
                                     minlength=q1 - q0)
         return out
 
     def multipliers(self, lam_scaled: np.ndarray) -> np.ndarray:
-        """Unscaled λ of every multiplier row from the solved (scaled) ones."""
-        return lam_scaled * self.col_scale if self.nrows else np.zeros(0)
+        """Unscaled λ of this rank's owned multiplier rows from the solved (scaled) held ones
+        (owned rows first)."""
+        _, _, l0, l1 = self.dofmap.owned()
+        return lam_scaled[:l1 - l0] * self.col_scale[l0:l1] if self.nrows else np.zeros(0)
+
+    def every_row(self, lam: np.ndarray) -> np.ndarray:
+        """Per relation row, unscaled λ (``row_values``) from this rank's owned multipliers:
+        every row's, gathered on every rank (``DofMap.every_multiplier``). Collective."""
+        return self.row_values(self.dofmap.every_multiplier(lam)) if self.nrows else np.zeros(0)
 
     def per_relation(self, lam: np.ndarray) -> dict[str, np.ndarray]:
         """Unscaled λ of every relation row, by relation (a collapsed group: on its enforced
-        row, 0 on the others)."""
-        per_row = self.row_values(lam) if self.nrows else lam
+        row, 0 on the others), from this rank's owned multipliers. Collective."""
+        per_row = self.every_row(lam)
         return {r.name: per_row[self.rows_of(k)] for k, r in enumerate(self.relations)}
 
     def row_values(self, per_mult: np.ndarray) -> np.ndarray:
