@@ -32,6 +32,7 @@ same rows, owners and scales.
 from __future__ import annotations
 
 import numpy as np
+from mpi4py import MPI
 
 from parsolve.la.dofmap import DofMap
 from parsolve.relations import Relation
@@ -41,11 +42,21 @@ def _cat(parts, dtype) -> np.ndarray:
     return np.concatenate(parts).astype(dtype) if parts else np.zeros(0, dtype)
 
 
+def _segments(keep: np.ndarray, sizes: list[int]) -> list[tuple[slice, np.ndarray]]:
+    """Per relation, (its run among the kept entries, their places in its own entries):
+    ``keep`` sorted indices into the relations' entries stacked in order."""
+    bounds = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    at = np.searchsorted(keep, bounds)
+    return [(slice(int(at[k]), int(at[k + 1])), keep[at[k]:at[k + 1]] - bounds[k])
+            for k in range(len(sizes))]
+
+
 class RelationSet:
     """The stacked relations of a system (see the module doc). The COO arrays (``a_rows``,
-    ``a_cols``, ``a_vals``, ``d_rows``, ``d_cols``, ``d_vals``; rows/columns in multiplier rows
-    and new primal DOFs, values unscaled, D itself: the matrix holds -D) are read by the
-    operator (``la.petsc``) only."""
+    ``a_cols``, ``a_vals``, ``d_rows``, ``d_cols``, ``d_vals``; rows/columns in global
+    multiplier rows and new primal DOFs, values unscaled, D itself: the matrix holds -D) hold
+    this rank's operator rows only: the A entries of the multiplier rows it owns and the D
+    entries on the primal DOFs it owns. They are read by the operator (``la.petsc``)."""
 
     def __init__(self, relations: list[Relation], dofmap: DofMap):
         self.relations, self.dofmap = relations, dofmap
@@ -94,14 +105,13 @@ class RelationSet:
             self.position, self._counts = self._by_owner(stacked_a, stacked_d, int(first[-1]))
         pos = self.position
         self.a_rows, self.d_cols = pos[stacked_a], pos[stacked_d]
-        self._hold()
-        self.mult_rows = [pos[first[k]:first[k + 1]] for k in range(len(relations))]
         self.a_relrow = _cat(arel, np.int64)            # relation row of each A entry
+        self._hold()
+        self._keep_own([len(a) for a in av], [len(d) for d in dv])
+        self.mult_rows = [pos[first[k]:first[k + 1]] for k in range(len(relations))]
         self.mult_of_row = pos[_cat(mult, np.int64)]    # multiplier row of each relation row
         self.rep_row = np.zeros(int(first[-1]), dtype=np.int64)   # row each multiplier enforces
         self.rep_row[self.mult_of_row[::-1]] = np.arange(self.mult_of_row.size)[::-1]  # first
-        self._d_seg = np.concatenate([[0], np.cumsum([len(d) for d in dv])]).astype(np.int64)
-        self._a_seg = np.concatenate([[0], np.cumsum([len(a) for a in av])]).astype(np.int64)
         self.compliance = np.zeros(int(first[-1]))      # per multiplier row (Relation)
         self._copy_compliance()
         self._owned_entries: dict[int, tuple] = {}      # per relation: its owned A entries
@@ -133,10 +143,21 @@ class RelationSet:
         touched = np.concatenate([self.a_rows[np.isin(self.a_cols, local)],
                                   self.d_cols[np.isin(self.d_rows, local)]])
         dofmap.set_multipliers(self._counts, touched)
-        q0, q1, _, _ = dofmap.owned()
-        own = (self.d_rows >= q0) & (self.d_rows < q1)
-        self._d_own = np.flatnonzero(own)
-        self._d_held = dofmap.held_index(self.d_cols[own])
+
+    def _keep_own(self, a_sizes: list[int], d_sizes: list[int]) -> None:
+        """Keep the entries of this rank's operator rows only: A entries of the multiplier
+        rows it owns (whole rows), D entries on the primal DOFs it owns; per relation, where
+        its kept entries come from (``refresh`` copies them)."""
+        q0, q1, l0, l1 = self.dofmap.owned()
+        keep_a = np.flatnonzero((self.a_rows >= l0) & (self.a_rows < l1))
+        keep_d = np.flatnonzero((self.d_rows >= q0) & (self.d_rows < q1))
+        for name in ("a_rows", "a_cols", "a_vals", "a_relrow"):
+            setattr(self, name, getattr(self, name)[keep_a])
+        for name in ("d_rows", "d_cols", "d_vals"):
+            setattr(self, name, getattr(self, name)[keep_d])
+        self._a_from = _segments(keep_a, a_sizes)
+        self._d_from = _segments(keep_d, d_sizes)
+        self._d_held = self.dofmap.held_index(self.d_cols)
 
     # ------------------------------------------------------------ sizes and views
 
@@ -217,10 +238,8 @@ class RelationSet:
         ghost rows' fetched from their owners; multiplier rows 0). Collective."""
         q0, q1, _, _ = self.dofmap.owned()
         held = self.dofmap.forward_multipliers(lam)
-        own = self._d_own
         out = np.zeros(self.dofmap.nrows)
-        out[:q1 - q0] = np.bincount(self.d_rows[own] - q0,
-                                    weights=self.d_vals[own] * held[self._d_held],
+        out[:q1 - q0] = np.bincount(self.d_rows - q0, weights=self.d_vals * held[self._d_held],
                                     minlength=q1 - q0)
         return out
 
@@ -262,8 +281,10 @@ class RelationSet:
         the stacked arrays (unscaled; the scales of the first assembly stay; same sparsity)."""
         for k, r in enumerate(self.relations):
             if r.meta.get("refresh"):
-                self.d_vals[self._d_seg[k]:self._d_seg[k + 1]] = r.dual_coo()[2]
-                self.a_vals[self._a_seg[k]:self._a_seg[k + 1]] = r.a_vals
+                at, src = self._d_from[k]
+                self.d_vals[at] = np.asarray(r.dual_coo()[2])[src]
+                at, src = self._a_from[k]
+                self.a_vals[at] = r.a_vals[src]
         self._copy_compliance()
 
     def _copy_compliance(self) -> None:
@@ -272,12 +293,15 @@ class RelationSet:
                 self.compliance[self.mult_rows[k]] = r.compliance
 
     def set_scales(self, kscale: float) -> None:
-        """Scale each row of A and column of D to the size of the stiffness diagonal."""
+        """Scale each row of A and column of D to the size of the stiffness diagonal (the
+        largest |entry| of a row or column over the ranks holding its entries: one reduction
+        of the multipliers' number). Collective."""
         n = self.nrows
-        amax = np.zeros(n)
-        np.maximum.at(amax, self.a_rows, np.abs(self.a_vals))
-        dmax = np.zeros(n)
-        np.maximum.at(dmax, self.d_cols, np.abs(self.d_vals))
+        amax = np.zeros((2, n))
+        np.maximum.at(amax[0], self.a_rows, np.abs(self.a_vals))
+        np.maximum.at(amax[1], self.d_cols, np.abs(self.d_vals))
+        self.dofmap.comm.Allreduce(MPI.IN_PLACE, amax, op=MPI.MAX)
+        amax, dmax = amax
         amax[amax == 0] = 1.0
         dmax[dmax == 0] = 1.0
         self.row_scale = kscale / amax
