@@ -13,9 +13,10 @@ saddle vector [q, λ] is numbered and split across ranks.
   map finds their local DOFs by a sorted lookup, and (``index_inputs``, one reduction) their
   global numbers and coordinates.
 - **Held multipliers.** Like its primal DOFs, a rank holds its owned multiplier rows then
-  ghost rows: the other ranks' rows whose A row or D column has an entry on one of its local
-  DOFs (``set_multipliers``; a global row such as a control column is held by every rank its
-  entries touch, owned by one). Held order: owned rows, then ghosts by global number.
+  ghost rows: the other ranks' rows whose multipliers its own rows read (``set_multipliers``;
+  the relation set gives those whose D column has an entry on one of its owned DOFs, so a
+  global row such as a control column is held by every rank its load touches, owned by one).
+  Held order: owned rows, then ghosts by global number.
 - **Exchanges.** Forward: owned values → ghosts, of primal DOFs and of multipliers alike
   (``gather``: the values a rank holds of a saddle vector, ``HeldValues``; two plans, made
   once). No reverse exchange: the cells through an owned node are all local, so sums over

@@ -13,9 +13,11 @@ row of A and the column of D live, as far as they can, with the nodes they act o
 row on a rigid obstacle goes with its slave node; a row tying a slave node to a span of master
 nodes (finite sliding, mortar) with the master nodes, which are most of its entries. Rank r's rows come after those of the ranks before it, in stacking order (relation by
 relation); the DOF map is given each rank's count (``DofMap.set_multipliers``). On one rank
-this is the stacking order itself. A rank holds, besides its own rows, the ghost rows whose A
-row or D column has an entry on one of its local DOFs (given to the DOF map at every
-stacking): their multipliers are what its reactions D λ and its eliminated rows read.
+this is the stacking order itself. Each rank keeps the entries of its own operator rows only
+(the A entries of the multiplier rows it owns, the D entries on the primal DOFs it owns) and
+holds, besides its own multipliers, the ghost rows whose D column has an entry on one of its
+owned DOFs: what its reactions D λ and its eliminated rows read (given to the DOF map at every
+stacking).
 
 A relation's rows ("relation rows", what the active set decides) map to multiplier rows one to
 one, except for a collapsed maximum group (``Relation.collapsed``): all its rows share one
@@ -42,13 +44,13 @@ def _cat(parts, dtype) -> np.ndarray:
     return np.concatenate(parts).astype(dtype) if parts else np.zeros(0, dtype)
 
 
-def _segments(keep: np.ndarray, sizes: list[int]) -> list[tuple[slice, np.ndarray]]:
-    """Per relation, (its run among the kept entries, their places in its own entries):
-    ``keep`` sorted indices into the relations' entries stacked in order."""
+def _segments(keep: np.ndarray, sizes: list[int], wanted: list[bool]) -> dict:
+    """Per wanted relation k, (its run among the kept entries, their places in its own
+    entries): ``keep`` sorted indices into the relations' entries stacked in order."""
     bounds = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
     at = np.searchsorted(keep, bounds)
-    return [(slice(int(at[k]), int(at[k + 1])), keep[at[k]:at[k + 1]] - bounds[k])
-            for k in range(len(sizes))]
+    return {k: (slice(int(at[k]), int(at[k + 1])), keep[at[k]:at[k + 1]] - bounds[k])
+            for k in range(len(sizes)) if wanted[k]}
 
 
 class RelationSet:
@@ -106,7 +108,6 @@ class RelationSet:
         pos = self.position
         self.a_rows, self.d_cols = pos[stacked_a], pos[stacked_d]
         self.a_relrow = _cat(arel, np.int64)            # relation row of each A entry
-        self._hold()
         self._keep_own([len(a) for a in av], [len(d) for d in dv])
         self.mult_rows = [pos[first[k]:first[k + 1]] for k in range(len(relations))]
         self.mult_of_row = pos[_cat(mult, np.int64)]    # multiplier row of each relation row
@@ -118,7 +119,7 @@ class RelationSet:
 
     def _by_owner(self, stacked_a: np.ndarray, stacked_d: np.ndarray, n: int) -> np.ndarray:
         """The multiplier row of each stacked row, rows grouped by owner (see the module doc),
-        and the DOF map told each rank's count. Every rank computes the same."""
+        and each rank's count. Every rank computes the same."""
         dofmap = self.dofmap
         nranks = dofmap.q_ranges.size - 1
         rows = np.concatenate([stacked_a, stacked_d])
@@ -134,30 +135,26 @@ class RelationSet:
         position[order] = np.arange(n)
         return position, np.bincount(owner, minlength=nranks)
 
-    def _hold(self) -> None:
-        """The DOF map told each rank's rows and this rank's ghost rows (an entry of their A
-        row or D column on one of its local DOFs); the held place of the D entries on its
-        owned DOFs (what ``reactions`` reads)."""
-        dofmap = self.dofmap
-        local = np.sort(dofmap.new_dof(np.arange(dofmap.n_local)))
-        touched = np.concatenate([self.a_rows[np.isin(self.a_cols, local)],
-                                  self.d_cols[np.isin(self.d_rows, local)]])
-        dofmap.set_multipliers(self._counts, touched)
-
     def _keep_own(self, a_sizes: list[int], d_sizes: list[int]) -> None:
         """Keep the entries of this rank's operator rows only: A entries of the multiplier
-        rows it owns (whole rows), D entries on the primal DOFs it owns; per relation, where
-        its kept entries come from (``refresh`` copies them)."""
-        q0, q1, l0, l1 = self.dofmap.owned()
+        rows it owns (whole rows), D entries on the primal DOFs it owns; per refreshed
+        relation, where its kept entries come from (``refresh`` copies them). The DOF map is
+        told each rank's rows and this rank's ghost rows: those whose D column has an entry on
+        one of its owned DOFs, the multipliers its reactions and eliminated rows read."""
+        dofmap = self.dofmap
+        dofmap.set_multipliers(self._counts)
+        q0, q1, l0, l1 = dofmap.owned()
         keep_a = np.flatnonzero((self.a_rows >= l0) & (self.a_rows < l1))
         keep_d = np.flatnonzero((self.d_rows >= q0) & (self.d_rows < q1))
         for name in ("a_rows", "a_cols", "a_vals", "a_relrow"):
             setattr(self, name, getattr(self, name)[keep_a])
         for name in ("d_rows", "d_cols", "d_vals"):
             setattr(self, name, getattr(self, name)[keep_d])
-        self._a_from = _segments(keep_a, a_sizes)
-        self._d_from = _segments(keep_d, d_sizes)
-        self._d_held = self.dofmap.held_index(self.d_cols)
+        refreshed = [bool(r.meta.get("refresh")) for r in self.relations]
+        self._a_from = _segments(keep_a, a_sizes, refreshed)
+        self._d_from = _segments(keep_d, d_sizes, refreshed)
+        dofmap.set_multipliers(self._counts, self.d_cols)
+        self._d_held = dofmap.held_index(self.d_cols)
 
     # ------------------------------------------------------------ sizes and views
 
