@@ -29,7 +29,7 @@ echo "== pytest, 4 ranks (oversubscribed): partition independence, distributed m
 parallel 4 tests/solvers/test_rank_independence.py tests/mesh/test_distribute.py \
   tests/mesh/test_partition.py tests/mesh/test_empty_parts.py tests/effects/test_empty_regions.py \
   tests/mesh/test_slices.py tests/mesh/test_mesh_cli.py tests/la/test_relation_owners.py \
-  tests/la/test_relation_set.py "$@"
+  tests/la/test_relation_set.py tests/la/test_relation_memory.py "$@"
 echo "== docs: generated pages checked, mkdocs build --strict"
 bash scripts/docs.sh
 echo "== benchmarks, smoke (every scripts/bench_*.py at its smallest size)"

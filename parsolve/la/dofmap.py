@@ -12,10 +12,15 @@ saddle vector [q, λ] is numbered and split across ranks.
 - **Input ids.** Relations and contact rows name input DOFs (``input_node * ncomp + c``): the
   map finds their local DOFs by a sorted lookup, and (``index_inputs``, one reduction) their
   global numbers and coordinates.
-- **Exchanges.** Forward: owned values → ghosts (``gather``: the values a rank holds of a
-  saddle vector, ``HeldValues``). No reverse exchange: the cells through an owned node are
-  all local, so sums over them (nodal averages, loads, the operator's owned rows) are
-  complete on the owner.
+- **Held multipliers.** Like its primal DOFs, a rank holds its owned multiplier rows then
+  ghost rows: the other ranks' rows whose multipliers its own rows read (``set_multipliers``;
+  the relation set gives those whose D column has an entry on one of its owned DOFs, so a
+  global row such as a control column is held by every rank its load touches, owned by one).
+  Held order: owned rows, then ghosts by global number.
+- **Exchanges.** Forward: owned values → ghosts, of primal DOFs and of multipliers alike
+  (``gather``: the values a rank holds of a saddle vector, ``HeldValues``; two plans, made
+  once). No reverse exchange: the cells through an owned node are all local, so sums over
+  them (nodal averages, loads, the operator's owned rows) are complete on the owner.
 - **Owned reductions.** Norms, dots, max |v|, and A q of rows given as COO entries over input
   DOFs: each entry taken on the rank owning its DOF, summed over the ranks in one reduction of
   the rows' size (every rank then holds the same values, so decisions made from them agree).
@@ -35,8 +40,9 @@ def _displacements(counts: np.ndarray) -> np.ndarray:
 
 class HeldValues:
     """What a rank holds of a saddle vector: its local primal DOFs (``q``, local order: owned
-    then ghosts) and every multiplier (``lam``, scaled, global order); ``x[saddle indices]``
-    answers for those indices as the whole vector would, without being as long as it."""
+    then ghosts) and its held multipliers (``lam``, scaled, held order: owned rows then
+    ghosts, ``DofMap.l_held``); ``x[saddle indices]`` answers for those indices as the whole
+    vector would, without being as long as it."""
 
     def __init__(self, keys: tuple[np.ndarray, np.ndarray], q: np.ndarray, lam: np.ndarray):
         self.q, self.lam = q, lam
@@ -133,9 +139,10 @@ class DofMap:
         self._inputs: tuple | None = None
         self.set_multipliers(np.zeros(self.node_ranges.size - 1, dtype=np.int64))
 
-    def set_multipliers(self, counts: np.ndarray) -> None:
+    def set_multipliers(self, counts: np.ndarray, ghosts: np.ndarray | None = None) -> None:
         """Give rank r ``counts[r]`` multiplier rows, numbered after those of the ranks
-        before it (the same counts on every rank)."""
+        before it (the same counts on every rank); ``ghosts``: the other ranks' rows this
+        rank holds besides its own (global multiplier numbers; its own are dropped)."""
         counts = np.asarray(counts, dtype=np.int64)
         if counts.size != self.node_ranges.size - 1:
             raise ValueError(f"{counts.size} multiplier counts for {self.node_ranges.size - 1} ranks")
@@ -143,8 +150,14 @@ class DofMap:
         self.l_ranges = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         sizes = np.diff(self.q_ranges) + np.diff(self.l_ranges)
         self.offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        l0, l1 = self.l_ranges[self.rank], self.l_ranges[self.rank + 1]
+        ghosts = np.unique(np.zeros(0, dtype=np.int64) if ghosts is None
+                           else np.asarray(ghosts, dtype=np.int64))
+        self.l_ghosts = ghosts[(ghosts < l0) | (ghosts >= l1)]
+        self.l_held = np.concatenate([np.arange(l0, l1), self.l_ghosts])
         self._saddle = None
         self._held_keys = None
+        self._mult_exchange: _Exchange | None = None
 
     # ------------------------------------------------------------ sizes and ranges
 
@@ -215,8 +228,27 @@ class DofMap:
 
     @property
     def saddle_of_mult(self) -> np.ndarray:
-        """Saddle index of every multiplier row (the relations' size)."""
+        """Saddle index of every multiplier row (the relations' size; built on demand, for
+        dense checks of small systems)."""
         return self.l_index(np.arange(self.nl))
+
+    @property
+    def n_held(self) -> int:
+        """Multiplier rows this rank holds (owned and ghosts)."""
+        return int(self.l_held.size)
+
+    def held_index(self, rows: np.ndarray) -> np.ndarray:
+        """Place among the held multipliers (``l_held``) of global multiplier rows this rank
+        holds."""
+        rows = np.asarray(rows, dtype=np.int64)
+        l0, l1 = self.l_ranges[self.rank], self.l_ranges[self.rank + 1]
+        own = (rows >= l0) & (rows < l1)
+        ghost = np.searchsorted(self.l_ghosts, rows)
+        found = self.l_ghosts[np.minimum(ghost, max(self.l_ghosts.size - 1, 0))] == rows \
+            if self.l_ghosts.size else np.zeros(rows.shape, dtype=bool)
+        if not np.all(own | found):
+            raise IndexError(f"multiplier rows not held by this rank: {rows[~(own | found)][:5]}")
+        return np.where(own, rows - l0, l1 - l0 + ghost)
 
     def owner_of_dofs(self, new_dofs: np.ndarray) -> np.ndarray:
         """The rank owning each primal DOF given in the new numbering."""
@@ -341,22 +373,41 @@ class DofMap:
 
     def _keys(self) -> tuple[np.ndarray, np.ndarray]:
         if self._held_keys is None:
-            self._held_keys = held_keys(np.concatenate([self.saddle_of_local, self.saddle_of_mult]))
+            self._held_keys = held_keys(np.concatenate([self.saddle_of_local,
+                                                        self.l_index(self.l_held)]))
         return self._held_keys
+
+    def forward_multipliers(self, owned: np.ndarray) -> np.ndarray:
+        """The held multipliers (owned then ghosts) from this rank's owned ones: ghosts'
+        values fetched from their owners. Collective."""
+        if self._mult_exchange is None:   # planned once, on first use (collective)
+            owner = np.searchsorted(self.l_ranges, self.l_ghosts, side="right") - 1
+            self._mult_exchange = _Exchange(self.comm, self.l_ghosts, owner,
+                                            int(self.l_ranges[self.rank]))
+        owned = np.asarray(owned, dtype=float)
+        return np.concatenate([owned, self._mult_exchange.forward(owned)])
 
     def gather(self, x_owned: np.ndarray) -> HeldValues:
         """What this rank holds of a saddle vector from its owned rows: its local primal DOFs
-        (ghosts fetched) and every multiplier (a relation's size). Collective."""
+        and its held multipliers, ghosts of both fetched from their owners. Collective."""
         q = self.forward(x_owned)
-        lam = np.empty(self.nl)
-        counts = np.diff(self.l_ranges)
-        self.comm.Allgatherv(np.ascontiguousarray(x_owned[self.n_owned:], dtype=float),
-                             [lam, counts])
-        return HeldValues(self._keys(), q, lam)
+        return HeldValues(self._keys(), q, self.forward_multipliers(x_owned[self.n_owned:]))
 
     def zeros(self) -> HeldValues:
         """A zero saddle vector as ``gather`` returns them."""
-        return HeldValues(self._keys(), np.zeros(self.n_local), np.zeros(self.nl))
+        return HeldValues(self._keys(), np.zeros(self.n_local), np.zeros(self.n_held))
+
+    def every_multiplier(self, owned: np.ndarray) -> np.ndarray:
+        """Every multiplier (global order) from this rank's owned ones (or its held ones,
+        which start with them): the owners' rows, gathered on
+        every rank (an array of the relations' size). Collective. Only for what still
+        decides on every row of every relation alike on each rank (the active set, the
+        contact effects' hooks and outputs); the solve's own path reads held rows."""
+        out = np.empty(self.nl)
+        l0, l1 = self.l_ranges[self.rank], self.l_ranges[self.rank + 1]
+        self.comm.Allgatherv(np.ascontiguousarray(owned[:l1 - l0], dtype=float),
+                             [out, np.diff(self.l_ranges)])
+        return out
 
     # ------------------------------------------------------------ owned reductions
 

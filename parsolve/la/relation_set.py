@@ -13,7 +13,11 @@ row of A and the column of D live, as far as they can, with the nodes they act o
 row on a rigid obstacle goes with its slave node; a row tying a slave node to a span of master
 nodes (finite sliding, mortar) with the master nodes, which are most of its entries. Rank r's rows come after those of the ranks before it, in stacking order (relation by
 relation); the DOF map is given each rank's count (``DofMap.set_multipliers``). On one rank
-this is the stacking order itself.
+this is the stacking order itself. Each rank keeps the entries of its own operator rows only
+(the A entries of the multiplier rows it owns, the D entries on the primal DOFs it owns) and
+holds, besides its own multipliers, the ghost rows whose D column has an entry on one of its
+owned DOFs: what its reactions D λ and its eliminated rows read (given to the DOF map at every
+stacking).
 
 A relation's rows ("relation rows", what the active set decides) map to multiplier rows one to
 one, except for a collapsed maximum group (``Relation.collapsed``): all its rows share one
@@ -30,6 +34,7 @@ same rows, owners and scales.
 from __future__ import annotations
 
 import numpy as np
+from mpi4py import MPI
 
 from parsolve.la.dofmap import DofMap
 from parsolve.relations import Relation
@@ -39,11 +44,21 @@ def _cat(parts, dtype) -> np.ndarray:
     return np.concatenate(parts).astype(dtype) if parts else np.zeros(0, dtype)
 
 
+def _segments(keep: np.ndarray, sizes: list[int], wanted: list[bool]) -> dict:
+    """Per wanted relation k, (its run among the kept entries, their places in its own
+    entries): ``keep`` sorted indices into the relations' entries stacked in order."""
+    bounds = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    at = np.searchsorted(keep, bounds)
+    return {k: (slice(int(at[k]), int(at[k + 1])), keep[at[k]:at[k + 1]] - bounds[k])
+            for k in range(len(sizes)) if wanted[k]}
+
+
 class RelationSet:
     """The stacked relations of a system (see the module doc). The COO arrays (``a_rows``,
-    ``a_cols``, ``a_vals``, ``d_rows``, ``d_cols``, ``d_vals``; rows/columns in multiplier rows
-    and new primal DOFs, values unscaled, D itself: the matrix holds -D) are read by the
-    operator (``la.petsc``) only."""
+    ``a_cols``, ``a_vals``, ``d_rows``, ``d_cols``, ``d_vals``; rows/columns in global
+    multiplier rows and new primal DOFs, values unscaled, D itself: the matrix holds -D) hold
+    this rank's operator rows only: the A entries of the multiplier rows it owns and the D
+    entries on the primal DOFs it owns. They are read by the operator (``la.petsc``)."""
 
     def __init__(self, relations: list[Relation], dofmap: DofMap):
         self.relations, self.dofmap = relations, dofmap
@@ -89,23 +104,22 @@ class RelationSet:
         self.a_cols, self.a_vals = _cat(ac, np.int64), _cat(av, float)
         self.d_rows, self.d_vals = _cat(dr, np.int64), _cat(dv, float)
         if self.position is None:   # the owners, once: restacking keeps them
-            self.position = self._by_owner(stacked_a, stacked_d, int(first[-1]))
+            self.position, self._counts = self._by_owner(stacked_a, stacked_d, int(first[-1]))
         pos = self.position
         self.a_rows, self.d_cols = pos[stacked_a], pos[stacked_d]
-        self.mult_rows = [pos[first[k]:first[k + 1]] for k in range(len(relations))]
         self.a_relrow = _cat(arel, np.int64)            # relation row of each A entry
+        self._keep_own([len(a) for a in av], [len(d) for d in dv])
+        self.mult_rows = [pos[first[k]:first[k + 1]] for k in range(len(relations))]
         self.mult_of_row = pos[_cat(mult, np.int64)]    # multiplier row of each relation row
         self.rep_row = np.zeros(int(first[-1]), dtype=np.int64)   # row each multiplier enforces
         self.rep_row[self.mult_of_row[::-1]] = np.arange(self.mult_of_row.size)[::-1]  # first
-        self._d_seg = np.concatenate([[0], np.cumsum([len(d) for d in dv])]).astype(np.int64)
-        self._a_seg = np.concatenate([[0], np.cumsum([len(a) for a in av])]).astype(np.int64)
         self.compliance = np.zeros(int(first[-1]))      # per multiplier row (Relation)
         self._copy_compliance()
         self._owned_entries: dict[int, tuple] = {}      # per relation: its owned A entries
 
     def _by_owner(self, stacked_a: np.ndarray, stacked_d: np.ndarray, n: int) -> np.ndarray:
         """The multiplier row of each stacked row, rows grouped by owner (see the module doc),
-        and the DOF map told each rank's count. Every rank computes the same."""
+        and each rank's count. Every rank computes the same."""
         dofmap = self.dofmap
         nranks = dofmap.q_ranges.size - 1
         rows = np.concatenate([stacked_a, stacked_d])
@@ -119,8 +133,28 @@ class RelationSet:
         order = np.argsort(owner, kind="stable")
         position = np.empty(n, dtype=np.int64)
         position[order] = np.arange(n)
-        dofmap.set_multipliers(np.bincount(owner, minlength=nranks))
-        return position
+        return position, np.bincount(owner, minlength=nranks)
+
+    def _keep_own(self, a_sizes: list[int], d_sizes: list[int]) -> None:
+        """Keep the entries of this rank's operator rows only: A entries of the multiplier
+        rows it owns (whole rows), D entries on the primal DOFs it owns; per refreshed
+        relation, where its kept entries come from (``refresh`` copies them). The DOF map is
+        told each rank's rows and this rank's ghost rows: those whose D column has an entry on
+        one of its owned DOFs, the multipliers its reactions and eliminated rows read."""
+        dofmap = self.dofmap
+        dofmap.set_multipliers(self._counts)
+        q0, q1, l0, l1 = dofmap.owned()
+        keep_a = np.flatnonzero((self.a_rows >= l0) & (self.a_rows < l1))
+        keep_d = np.flatnonzero((self.d_rows >= q0) & (self.d_rows < q1))
+        for name in ("a_rows", "a_cols", "a_vals", "a_relrow"):
+            setattr(self, name, getattr(self, name)[keep_a])
+        for name in ("d_rows", "d_cols", "d_vals"):
+            setattr(self, name, getattr(self, name)[keep_d])
+        refreshed = [bool(r.meta.get("refresh")) for r in self.relations]
+        self._a_from = _segments(keep_a, a_sizes, refreshed)
+        self._d_from = _segments(keep_d, d_sizes, refreshed)
+        dofmap.set_multipliers(self._counts, self.d_cols)
+        self._d_held = dofmap.held_index(self.d_cols)
 
     # ------------------------------------------------------------ sizes and views
 
@@ -197,23 +231,30 @@ class RelationSet:
         return target
 
     def reactions(self, lam: np.ndarray) -> np.ndarray:
-        """Owned saddle rows of D λ (unscaled λ of every multiplier row; multiplier rows 0)."""
+        """Owned saddle rows of D λ (unscaled λ of this rank's owned multiplier rows; the
+        ghost rows' fetched from their owners; multiplier rows 0). Collective."""
         q0, q1, _, _ = self.dofmap.owned()
-        own = (self.d_rows >= q0) & (self.d_rows < q1)
+        held = self.dofmap.forward_multipliers(lam)
         out = np.zeros(self.dofmap.nrows)
-        out[:q1 - q0] = np.bincount(self.d_rows[own] - q0,
-                                    weights=self.d_vals[own] * lam[self.d_cols[own]],
+        out[:q1 - q0] = np.bincount(self.d_rows - q0, weights=self.d_vals * held[self._d_held],
                                     minlength=q1 - q0)
         return out
 
     def multipliers(self, lam_scaled: np.ndarray) -> np.ndarray:
-        """Unscaled λ of every multiplier row from the solved (scaled) ones."""
-        return lam_scaled * self.col_scale if self.nrows else np.zeros(0)
+        """Unscaled λ of this rank's owned multiplier rows from the solved (scaled) held ones
+        (owned rows first)."""
+        _, _, l0, l1 = self.dofmap.owned()
+        return lam_scaled[:l1 - l0] * self.col_scale[l0:l1] if self.nrows else np.zeros(0)
+
+    def every_row(self, lam: np.ndarray) -> np.ndarray:
+        """Per relation row, unscaled λ (``row_values``) from this rank's owned multipliers:
+        every row's, gathered on every rank (``DofMap.every_multiplier``). Collective."""
+        return self.row_values(self.dofmap.every_multiplier(lam)) if self.nrows else np.zeros(0)
 
     def per_relation(self, lam: np.ndarray) -> dict[str, np.ndarray]:
         """Unscaled λ of every relation row, by relation (a collapsed group: on its enforced
-        row, 0 on the others)."""
-        per_row = self.row_values(lam) if self.nrows else lam
+        row, 0 on the others), from this rank's owned multipliers. Collective."""
+        per_row = self.every_row(lam)
         return {r.name: per_row[self.rows_of(k)] for k, r in enumerate(self.relations)}
 
     def row_values(self, per_mult: np.ndarray) -> np.ndarray:
@@ -237,8 +278,10 @@ class RelationSet:
         the stacked arrays (unscaled; the scales of the first assembly stay; same sparsity)."""
         for k, r in enumerate(self.relations):
             if r.meta.get("refresh"):
-                self.d_vals[self._d_seg[k]:self._d_seg[k + 1]] = r.dual_coo()[2]
-                self.a_vals[self._a_seg[k]:self._a_seg[k + 1]] = r.a_vals
+                at, src = self._d_from[k]
+                self.d_vals[at] = np.asarray(r.dual_coo()[2])[src]
+                at, src = self._a_from[k]
+                self.a_vals[at] = r.a_vals[src]
         self._copy_compliance()
 
     def _copy_compliance(self) -> None:
@@ -247,12 +290,15 @@ class RelationSet:
                 self.compliance[self.mult_rows[k]] = r.compliance
 
     def set_scales(self, kscale: float) -> None:
-        """Scale each row of A and column of D to the size of the stiffness diagonal."""
+        """Scale each row of A and column of D to the size of the stiffness diagonal (the
+        largest |entry| of a row or column over the ranks holding its entries: one reduction
+        of the multipliers' number). Collective."""
         n = self.nrows
-        amax = np.zeros(n)
-        np.maximum.at(amax, self.a_rows, np.abs(self.a_vals))
-        dmax = np.zeros(n)
-        np.maximum.at(dmax, self.d_cols, np.abs(self.d_vals))
+        amax = np.zeros((2, n))
+        np.maximum.at(amax[0], self.a_rows, np.abs(self.a_vals))
+        np.maximum.at(amax[1], self.d_cols, np.abs(self.d_vals))
+        self.dofmap.comm.Allreduce(MPI.IN_PLACE, amax, op=MPI.MAX)
+        amax, dmax = amax
         amax[amax == 0] = 1.0
         dmax[dmax == 0] = 1.0
         self.row_scale = kscale / amax

@@ -152,7 +152,7 @@ def _short_of(problem, t: float, controls: list[Control]) -> tuple | None:
     rset = problem.rset
     values = rset.primal_values(problem.q)
     targets = rset.targets(t)
-    loads = rset.row_values(problem.lam) if problem.lam.size else np.zeros(values.size)
+    loads = rset.every_row(problem.lam)
     short = [c for c in controls if c.sign * (targets[c.row] - values[c.row]) > 0]
     if not short:
         return None

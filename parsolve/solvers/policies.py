@@ -203,15 +203,15 @@ class RelationPolicies:
         self.active.start_step()
 
     def update_active(self, t: float, q: np.ndarray, lam: np.ndarray) -> bool:
-        """The active set after a solve (True when it changed); no change without unilateral
-        rows."""
+        """The active set after a solve (True when it changed; ``lam``: unscaled λ per
+        relation row, ``RelationSet.every_row``); no change without unilateral rows."""
         if not self.active.unilateral:
             return False
         values = self.rset.primal_values(q)
         gap = values - self.rset.targets(t)
         scale_gap = max(float(np.abs(gap).max()), float(np.abs(values).max()), 1e-300)
-        scale_lam = max(float(np.abs(lam).max()), 1e-300)
-        lam = self.rset.row_values(lam) if lam.size else lam
+        # (a collapsed group's multiplier is on its enforced row: the same largest |λ|)
+        scale_lam = max(float(np.abs(lam).max(initial=0.0)), 1e-300)
         return self.active.update(gap, lam, 1e-9 * scale_gap, 1e-9 * scale_lam, scale_gap)
 
     # ------------------------------------------------------------ first tangent of a step
@@ -352,9 +352,10 @@ class RelationPolicies:
         return changed
 
     def refresh_hooks(self, q: np.ndarray, lam: np.ndarray) -> bool:
-        """The effects' updates between iterations (e.g. friction states and slip senses);
-        their relation values are then copied into the system (``sync_relations``)."""
-        lam = self.rset.views(self.rset.row_values(lam) if lam.size else lam)
+        """The effects' updates between iterations (e.g. friction states and slip senses;
+        ``lam``: unscaled λ per relation row); their relation values are then copied into the
+        system (``sync_relations``)."""
+        lam = self.rset.views(lam)
         active = self.rset.views(self.active.active)
         changed = False
         for e in self.hooks:

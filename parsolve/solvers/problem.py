@@ -62,7 +62,8 @@ class SaddleProblem:
         self.states = ctx.composition.init_states()
         self.policies = RelationPolicies(system, spec.max_active_set_changes, self.respond)
         self.q = ctx.initial_q()
-        self.lam = np.zeros(ctx.dofs.nl)
+        _, _, l0, l1 = ctx.dofs.owned()
+        self.lam = np.zeros(l1 - l0)                # this rank's owned multipliers, unscaled
         self.x_full = ctx.dofs.zeros()
         self.extras = [None] * len(ctx.effects)
         self.time = ctx.scene.time                  # transient: θ-scheme from t_prev to t
@@ -249,7 +250,7 @@ class SaddleProblem:
         return self.solve(mat, self.rhs_of(f), export=False).q
 
     def unscaled(self, x: HeldValues) -> np.ndarray:
-        """Unscaled λ of every multiplied row of a saddle vector."""
+        """Unscaled λ of this rank's owned multiplier rows of a saddle vector."""
         return self.system.multipliers(x)
 
     def update(self, t: float, x: HeldValues) -> tuple[float, bool]:
@@ -260,10 +261,13 @@ class SaddleProblem:
         self.lam = self.unscaled(x)
         self.x_full = x
         pol = self.policies
-        changed = pol.update_active(t, self.q, self.lam)
+        # every relation row's λ: what the active set and the hooks decide on, alike on
+        # every rank (only when one of them runs)
+        rows = self.rset.every_row(self.lam) if pol.active.unilateral or pol.hooks else None
+        changed = pol.update_active(t, self.q, rows)
         if pol.hooks:
             t0 = time.perf_counter()
-            changed = pol.refresh_hooks(self.q, self.lam) or changed
+            changed = pol.refresh_hooks(self.q, rows) or changed
             self.linear.add_time("contact", time.perf_counter() - t0)
             # always: rows of the Newton matrix alone (compliant) change at every iterate
             self._sync()

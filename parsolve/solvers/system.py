@@ -274,14 +274,15 @@ class SaddleSystem:
     # ------------------------------------------------------------ back to fields
 
     def gather(self, x_owned: np.ndarray) -> HeldValues:
-        """What this rank holds of the saddle vector (its DOFs, ghosts included, and every
-        multiplier) from its owned rows (the DOF map's forward exchange). The multipliers of
+        """What this rank holds of the saddle vector (its DOFs and multipliers, ghosts
+        included) from its owned rows (the DOF map's forward exchanges). The multipliers of
         enforced compliant rows are discarded (``Relation.compliance``: a device of the Newton
         matrix, not a force)."""
         held = self.dofmap.gather(x_owned)
-        soft = self.relation_set.compliance > 0.0
+        rows = self.dofmap.l_held
+        soft = self.relation_set.compliance[rows] > 0.0
         if soft.any():
-            held.lam[soft & self.op.active.astype(bool)] = 0.0
+            held.lam[soft & self.op.active[rows].astype(bool)] = 0.0
         return held
 
     def with_primal(self, x_full: HeldValues, q: np.ndarray) -> HeldValues:
@@ -289,13 +290,13 @@ class SaddleSystem:
         return x_full.with_q(q)
 
     def multipliers(self, x_full) -> np.ndarray:
-        """Unscaled λ of every multiplied row from a full saddle vector."""
+        """Unscaled λ of this rank's owned multiplier rows from a held saddle vector."""
         return self.relation_set.multipliers(x_full.lam)
 
     def unpack(self, x_full: np.ndarray, t: float, f_int: np.ndarray | None = None,
                f_ext: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """Primal vector (this mesh's DOFs, owned then ghosts) and unscaled multipliers of
-        every relation."""
+        every relation. Collective."""
         q = x_full.q
         lam = self.multipliers(x_full)
         out = self.relation_set.per_relation(lam)

@@ -45,7 +45,7 @@ def test_ranges_and_one_numbering(parts):
     assert dm.nrows == dm.n_owned + np.diff(dm.l_ranges)[COMM.rank]
     # owned primal rows then the multiplier share: together, every saddle index once
     mine = np.concatenate([dm.saddle_of_local[dm.owned_dofs],
-                           dm.saddle_of_mult[dm.l_ranges[COMM.rank]:dm.l_ranges[COMM.rank + 1]]])
+                           dm.l_index(np.arange(dm.l_ranges[COMM.rank], dm.l_ranges[COMM.rank + 1]))])
     np.testing.assert_array_equal(np.sort(mine), dm.offset + np.arange(dm.nrows))
     every = allgather_rows(COMM, mine[:, None])[:, 0]
     np.testing.assert_array_equal(np.sort(every), np.arange(dm.size))
@@ -54,20 +54,41 @@ def test_ranges_and_one_numbering(parts):
         np.testing.assert_array_equal(dm.saddle_of_local, np.arange(90))
 
 
+def ghost_rows(rank: int) -> np.ndarray:
+    """Multiplier rows a rank holds besides its own (some of them its own: dropped)."""
+    return np.array([(3 * rank + k) % NMULT for k in range(3)] + [NMULT - 1])
+
+
 def test_forward_exchange_and_held_values(parts):
     _, local, dm = parts
+    counts = COUNTS[COMM.size]
+    dm.set_multipliers(counts, ghost_rows(COMM.rank))
     x_owned = np.zeros(dm.nrows)
     x_owned[:dm.n_owned] = value(input_dofs(local)[:dm.n_owned])
     l0, l1 = dm.l_ranges[COMM.rank], dm.l_ranges[COMM.rank + 1]
     x_owned[dm.n_owned:] = 1000.0 + np.arange(l0, l1)
     held = dm.gather(x_owned)
     np.testing.assert_array_equal(held.q, value(input_dofs(local)))   # ghosts: their owners'
-    np.testing.assert_array_equal(held.lam, 1000.0 + np.arange(NMULT))
+    # held: the owned rows, then the others' rows asked for, each its owner's value
+    ghosts = np.setdiff1d(ghost_rows(COMM.rank), np.arange(l0, l1))
+    np.testing.assert_array_equal(dm.l_held, np.concatenate([np.arange(l0, l1), ghosts]))
+    np.testing.assert_array_equal(held.lam, 1000.0 + dm.l_held)
+    np.testing.assert_array_equal(dm.held_index(dm.l_held[::-1]), np.arange(dm.n_held)[::-1])
     np.testing.assert_array_equal(held[dm.saddle_of_local], held.q)
-    np.testing.assert_array_equal(held[dm.saddle_of_mult], held.lam)
-    with pytest.raises(IndexError):
-        held[np.array([dm.size + 5])]
-    assert dm.zeros()[dm.saddle_of_mult].sum() == 0.0
+    np.testing.assert_array_equal(held[dm.l_index(dm.l_held)], held.lam)
+    missing = np.setdiff1d(np.arange(NMULT), dm.l_held)
+    for bad in (np.array([dm.size + 5]), dm.l_index(missing[:1])):
+        if bad.size:
+            with pytest.raises(IndexError):
+                held[bad]
+    if missing.size:
+        with pytest.raises(IndexError):
+            dm.held_index(missing)
+    assert dm.zeros().lam.size == dm.n_held and not dm.zeros()[dm.l_index(dm.l_held)].any()
+    # every multiplier, from the owners' rows: the same array on every rank
+    np.testing.assert_array_equal(dm.every_multiplier(held.lam), 1000.0 + np.arange(NMULT))
+    dm.set_multipliers(counts)
+    assert dm.n_held == l1 - l0
 
 
 def test_owned_reductions_equal_the_whole_meshs(parts):

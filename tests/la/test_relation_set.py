@@ -75,7 +75,8 @@ def test_primal_values_and_gaps(rset):
     lam = np.empty(6)
     lam[pos] = np.arange(6.0)   # the stacked rows' values, in multiplier numbering
     np.testing.assert_array_equal(rs.row_values(lam), [0, 1, 2, 3, 4, 0, 0, 5])
-    np.testing.assert_array_equal(rs.per_relation(lam)["peak"], [0.0, 0.0, 5.0])
+    _, _, l0, l1 = rs.dofmap.owned()   # (from this rank's owned rows, gathered)
+    np.testing.assert_array_equal(rs.per_relation(lam[l0:l1])["peak"], [0.0, 0.0, 5.0])
 
 
 def test_reactions_on_the_owned_rows(rset):
@@ -84,7 +85,8 @@ def test_reactions_on_the_owned_rows(rset):
     lam = np.array([1.0, -2.0, 0.5, 3.0, 7.0, 2.0])   # stacking order
     numbered = np.empty(6)
     numbered[rs.position] = lam
-    owned = rs.reactions(numbered)
+    _, _, l0, l1 = dm.owned()   # each rank its owned rows: the ghosts' from their owners
+    owned = rs.reactions(numbered[l0:l1])
     assert owned.size == dm.nrows and not owned[dm.n_owned:].any()
     # back to input DOFs: each owned row once, from every rank
     local = dm.mesh
@@ -113,7 +115,9 @@ def test_scales_and_right_hand_side(rset):
     every = value(np.arange(NPTS * NC))
     aq = np.concatenate([r.primal(every) for r in rs.relations])[rs.rep_row]
     np.testing.assert_allclose(rs.scaled_residual(1.0, q), (b - aq) * rs.row_scale, rtol=1e-14)
-    np.testing.assert_allclose(rs.multipliers(np.ones(6)), rs.col_scale)
+    _, _, l0, l1 = rs.dofmap.owned()   # the owned rows, from the held ones (owned first)
+    held = np.ones(rs.dofmap.n_held)
+    np.testing.assert_allclose(rs.multipliers(held), rs.col_scale[l0:l1])
 
 
 def test_refresh_in_place(rset):
@@ -126,11 +130,39 @@ def test_refresh_in_place(rset):
     tie.a_vals[0] = 5.0                                # not marked: never copied
     every = value(np.arange(NPTS * NC))
     np.testing.assert_allclose(rs.primal_values(q)[3:5], push.primal(every), rtol=1e-15)
-    np.testing.assert_array_equal(rs.a_vals[5:7], [1.0, 1.0])
+    a, d = stacked(rs)
+    np.testing.assert_array_equal(a[(a[:, 0] >= 3) & (a[:, 0] < 5), 2], [1.0, 1.0])
     rs.refresh()
-    np.testing.assert_array_equal(rs.a_vals[5:7], [2.0, -1.0])
-    np.testing.assert_array_equal(rs.d_vals[5:8], [1.0, 1.0, 1.0])
-    assert rs.a_vals[0] == 1.0
+    a, d = stacked(rs)
+    np.testing.assert_array_equal(a[(a[:, 0] >= 3) & (a[:, 0] < 5), 2], [2.0, -1.0])
+    pushed = np.isin(d[:, 0], rs.position[3:5])
+    np.testing.assert_array_equal(d[pushed, 2], [1.0, 1.0, 1.0])
+    assert a[0, 0] == 0 and a[0, 2] == 1.0
+
+
+def stacked(rs) -> tuple[np.ndarray, np.ndarray]:
+    """Every rank's kept entries, gathered and sorted: A as (relation row, new DOF, value), D
+    as (multiplier row, new DOF, value)."""
+    a = allgather_rows(COMM, np.column_stack([rs.a_relrow, rs.a_cols, rs.a_vals]).astype(float))
+    d = allgather_rows(COMM, np.column_stack([rs.d_cols, rs.d_rows, rs.d_vals]).astype(float))
+    return a[np.lexsort(a.T[::-1])], d[np.lexsort(d.T[::-1])]
+
+
+def test_each_rank_keeps_its_operator_rows_only(rset):
+    """A entries of the multiplier rows a rank owns, D entries on the primal DOFs it owns:
+    each entry of the relations on one rank, none twice (tie 5 + push 2 + peak 3 A entries;
+    tie's Aᵀ 5 + push's 3 + the peak's one shared column 2 D entries)."""
+    rs, _ = rset
+    q0, q1, l0, l1 = rs.dofmap.owned()
+    assert np.all((rs.a_rows >= l0) & (rs.a_rows < l1))
+    assert np.all((rs.d_rows >= q0) & (rs.d_rows < q1))
+    a, d = stacked(rs)
+    assert a.shape[0] == 10 and d.shape[0] == 10
+    new = rs.dofmap.input_new_dof
+    rels = rs.relations
+    want_a = np.concatenate([np.column_stack([r.a_rows + rs.rows_of(k).start, new(r.a_dofs),
+                                              r.a_vals]) for k, r in enumerate(rels)])
+    np.testing.assert_array_equal(a, want_a[np.lexsort(want_a.T[::-1])])
 
 
 def test_rows_live_with_most_of_their_dofs(rset):
