@@ -312,7 +312,7 @@ def _stuck_solve(problem, kmat, mask: np.ndarray, rhs: np.ndarray) -> tuple:
     system = problem.system
     system.set_active(problem.policies.enforceable(mask))
     x = problem.solve(system.assemble(kmat), rhs, export=False)
-    return x.q, problem.rset.row_values(problem.unscaled(x))
+    return x.q, problem.rset.every_row(problem.unscaled(x))
 
 
 def _stuck_bounds(values: np.ndarray, rates: np.ndarray, targets: np.ndarray,
