@@ -51,8 +51,7 @@ class SaddleSystem:
         # the cells this rank reports, and which of its local cells they are (every output step)
         self.owned_cells = self.part.owned_cells(rank, mesh.cells)
         self.reported = np.isin(self.local_cells, self.owned_cells, assume_unique=True)
-        lumped = model.scene.time is None or model.scene.time.mass == "lumped"
-        self.composition = Composition(model, self.local_cells, lumped)
+        self.composition = Composition(model, self.local_cells)
         self.rate: Rate | None = None  # the rate terms of a transient step (set by the stepper)
         lo, hi = self.part.node_ranges[rank], self.part.node_ranges[rank + 1]
         self.pattern = pattern = progress.timed("pattern", self._pattern, lo, hi)
@@ -72,27 +71,32 @@ class SaddleSystem:
         self._augmented: AugmentedMatrix | None = None
 
     def _pattern(self, lo: int, hi: int):
-        """The stiffness pattern of the local cells and of the effects' declared terms
-        (``Effect.terms``: tuples of m nodes, each padded into a pseudo-cell [a, b, b, ...]
-        after the cells, a repeated node a diagonal entry); the cells' reductions get the
-        cells' slots only, each term its own (``Term.slots``)."""
+        """The stiffness pattern of the effects' declared terms (``Effect.terms``): the local
+        cells (the domain of the cell terms), then the node terms' tuples of m nodes, each
+        padded into a pseudo-cell [a, b, b, ...] after the cells (a repeated node a diagonal
+        entry). The cells' reductions get the cells' slots; a node term, and a cell term on a
+        region, its own (``Term.slots``)."""
         model = self.model
         cells = model.mesh.cells[self.local_cells]
         terms = [term for e in model.effects for term in e.terms()]
+        tuples = [t for t in terms if not t.on_cells]
         nnodes = int(self.part.node_ranges[-1])
-        if not terms:
-            return node_pattern(self.part.new_of_old[cells], lo, hi, model.ncomp, nnodes)
         nen = cells.shape[1]
         pseudo = [np.concatenate([t.nodes, np.repeat(t.nodes[:, -1:], nen - t.nodes.shape[1],
-                                                     axis=1)], axis=1) for t in terms]
+                                                     axis=1)], axis=1) for t in tuples]
         pattern = node_pattern(self.part.new_of_old[np.concatenate([cells] + pseudo)], lo, hi,
                                model.ncomp, nnodes)
         start = len(cells)
-        for t in terms:
+        for t in tuples:
             k, m = t.nodes.shape
             t.slots = np.ascontiguousarray(pattern.pair_slot[:m, :m, start:start + k])
             start += k
-        pattern.pair_slot = np.ascontiguousarray(pattern.pair_slot[:, :, :len(cells)])
+        if tuples:
+            pattern.pair_slot = np.ascontiguousarray(pattern.pair_slot[:, :, :len(cells)])
+        for t in terms:
+            at = t.positions(self.local_cells) if t.on_cells else None
+            if at is not None:
+                t.slots = pattern.pair_slot[:, :, at].astype(np.intp)
         return pattern
 
     def restructure(self) -> None:
