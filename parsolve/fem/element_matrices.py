@@ -466,7 +466,7 @@ def cell_values(m: ElementMatrices, cells: np.ndarray) -> np.ndarray:
 # ------------------------------------------------ declared terms
 
 
-@dataclass
+@dataclass(eq=False)   # a term is itself (hashable): equal values do not make two terms one
 class Term:
     """A term an effect declares once, at set-up: its test and trial fields, its domain and
     its nature. The domain is either cells (``nodes`` None: the cells of a region, ``cells``

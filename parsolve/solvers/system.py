@@ -91,6 +91,8 @@ class SaddleSystem:
             k, m = t.nodes.shape
             t.slots = np.ascontiguousarray(pattern.pair_slot[:m, :m, start:start + k])
             start += k
+        # the node tuples the pattern holds (``restructure``: a term whose domain moved)
+        self._domains = [(t, t.nodes.copy()) for t in tuples]
         if tuples:
             pattern.pair_slot = np.ascontiguousarray(pattern.pair_slot[:, :, :len(cells)])
         for t in terms:
@@ -100,19 +102,34 @@ class SaddleSystem:
         return pattern
 
     def restructure(self) -> None:
-        """Build the operator again after a multiplied relation's sparsity changed
-        (``Relation.set_entries``: finite sliding's spans made again): the DOF map learns the
+        """Build the operator again after a sparsity changed: a multiplied relation's
+        (``Relation.set_entries``: finite sliding's spans made again) or a declared term's
+        domain (``Term.nodes`` given anew: node tuples that moved). The DOF map learns the
         relations' DOFs (one reduction), the relation set is stacked again (the same rows,
-        multiplier layout and scales) and the operator's CSR is built anew on the new pattern,
-        exactly preallocated as at the start; the stiffness pattern is the same. The next
-        assembly makes a new PETSc matrix (the solver must be given it). Collective: every
-        rank holds the same relations."""
+        multiplier layout and scales); the stiffness pattern is derived again from the cells
+        and the declared terms when a term moved on any rank, and the operator's CSR is built
+        anew on it, exactly preallocated as at the start. The next assembly makes a new PETSc
+        matrix (the solver must be given it). Collective: every rank holds the same
+        relations."""
         self.dofmap.index_inputs(self._relation_dofs())
         self.relation_set.restack()
+        if self.comm.allreduce(self._terms_moved(), op=MPI.LOR):
+            rank = self.comm.rank
+            lo, hi = self.part.node_ranges[rank], self.part.node_ranges[rank + 1]
+            self.pattern = self._pattern(lo, hi)
         active = self.op.active
         self.op = SaddleOperator(self.comm, self.dofmap, self.pattern, self.relation_set)
         self.op.active = active
         self.op.set_eliminated(self.elim_saddle)
+
+    def _terms_moved(self) -> bool:
+        """Whether this rank's node terms are not those the pattern was derived from (a term
+        added or gone, or its node tuples changed)."""
+        terms = [t for e in self.model.effects for t in e.terms() if not t.on_cells]
+        if len(terms) != len(self._domains) or \
+                any(t is not held for t, (held, _) in zip(terms, self._domains)):
+            return True
+        return any(not np.array_equal(t.nodes, nodes) for t, nodes in self._domains)
 
     # ------------------------------------------------------------ elimination
 
