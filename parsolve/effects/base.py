@@ -136,8 +136,10 @@ class Effect:
     # change in place (``meta["refresh"]`` marks the relations to copy); when a hook changed
     # their sparsity (``Relation.set_entries``: finite sliding's spans made again) or the
     # domain of a term it declares (``Term.nodes`` given anew: node tuples that moved, e.g. a
-    # pairing's) it sets ``restructured``, and Newton has the system build its operator
-    # again (its stiffness pattern derived again from the declared terms, preallocated).
+    # pairing's) it sets ``restructured`` -- on every rank alike, whether or not the rank
+    # holds what moved: the restructure is collective -- and Newton has the system build its
+    # operator again (its stiffness pattern derived again from the declared terms,
+    # preallocated).
     restructured = False
     # whether its hooks may ever do so (the result file then has /timings/pattern)
     restructures = False
