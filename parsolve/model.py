@@ -69,8 +69,10 @@ class Model:
     def symmetric(self, secant: bool = False) -> bool:
         """Every effect's tangent is symmetric (Mazars' only with the secant matrix), and so
         is every term the effects declare."""
-        return all((e.symmetric or secant and getattr(e, "symmetric_secant", False))
-                   and all(t.symmetric for t in e.terms()) for e in self.effects)
+        def holds(symmetric: bool, e) -> bool:
+            return symmetric or secant and getattr(e, "symmetric_secant", False)
+        return all(holds(e.symmetric, e) and all(holds(t.symmetric, e) for t in e.terms())
+                   for e in self.effects)
 
     def initial_q(self) -> np.ndarray:
         """The primal vector at t = 0 (this rank's DOFs): the effects' initial values, else 0."""

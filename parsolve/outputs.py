@@ -150,7 +150,7 @@ class Balance:
     def __init__(self, comm, ctx, q0: np.ndarray):
         self.comm, self.ctx, self.q0 = comm, ctx, q0
         fields = ctx.fields
-        self.names = sorted({fi for fi, _, _ in ctx.composition.mass_parts()})
+        self.names = sorted(ctx.composition.rate_fields())
         self.owned = {n: ctx.dofs.field_dofs(fields.columns(n)) for n in self.names}
         self.ncomp = fields.ncomp
         self.cols = {n: fields.columns(n) for n in self.names}

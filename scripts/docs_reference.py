@@ -12,8 +12,8 @@ the run that found the decision, until every answer of every decision was tried 
 of the same table it is read (a model's parameters, a generator's sizes). A key the parser
 reads is found however rare it is in the shipped scenes; a new registry entry's keys appear
 without a line here. The meanings come from ``docs/reference/meanings.toml`` (section → key →
-one sentence); tests/docs/test_reference.py fails on a key without one, or one the parser no
-longer reads.
+one sentence) and from the registries (a relation kind's description); tests/docs/
+test_reference.py fails on a key without one, or one the parser no longer reads.
 
     python scripts/docs_reference.py            # writes docs/reference/scene.md
     python scripts/docs_reference.py --check    # exit 1 if the committed page differs
@@ -311,8 +311,22 @@ def _condition(section: str, key: str, found: dict) -> str:
     return "; ".join(parts)
 
 
+def registry_meanings() -> dict[str, dict[str, str]]:
+    """Meanings the registries give of their own entries: a relation's ``type`` from each
+    kind's description (``parsolve.relation_kinds.registry``), so that a kind is described
+    where it is added."""
+    from parsolve.relation_kinds.registry import RELATIONS
+
+    kinds = "; ".join(f"`{name}`: {entry.description}" for name, entry in RELATIONS.items())
+    return {"relations[]": {"type": f"The relation's kind. {kinds}."}}
+
+
 def meanings() -> dict[str, dict[str, str]]:
-    return tomllib.loads(MEANINGS.read_text()) if MEANINGS.exists() else {}
+    """docs/reference/meanings.toml, with the registries' own meanings."""
+    out = tomllib.loads(MEANINGS.read_text()) if MEANINGS.exists() else {}
+    for section, keys in registry_meanings().items():
+        out.setdefault(section, {}).update(keys)
+    return out
 
 
 def render() -> str:

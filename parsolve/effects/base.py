@@ -3,19 +3,25 @@ contributes, and its nature (linear, symmetric, transient). The driver composes 
 scene lists and nothing else (see ``compose``); adding an effect is a class and a registry
 line (``registry``), nothing in the core.
 
-Element matrices come per (row field, column field) pair as ``ElementMatrices`` over the local
-cells, cell-last, with the field's components (d² rows for a d-component field pair).
+What an effect puts into the operator is one kind of thing: the terms it declares
+(``terms``: test field, trial field, domain -- cells of a region or tuples of nodes -- and
+nature), whose values it gives as ``ElementMatrices`` over the domain's cells, cell-last, in
+bounded cell blocks, or ``TermMatrices`` on the node tuples: ``term_values`` for a linear
+term (and a rate term's capacity), ``evaluate`` for the tangent of a nonlinear one.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from parsolve.fem.element_matrices import ElementMatrices, Term, TermMatrices, apply
+from parsolve.fem.element_matrices import (ElementMatrices, NodeForces, Term, TermMatrices,
+                                           apply)
 from parsolve.fields import Field
 from parsolve.loads.base import Instant
 
-Blocks = list[tuple[str, str, ElementMatrices]]
+Matrices = ElementMatrices | TermMatrices
+#: the values of declared terms: (term, its element arrays)
+TermValues = list[tuple[Term, Matrices]]
 
 
 def displacement_field(fields) -> str | None:
@@ -32,10 +38,6 @@ class Effect:
     def fields(self) -> list[Field]:
         return []
 
-    def stiffness_blocks(self, cells: np.ndarray) -> Blocks:
-        """Linear operator blocks (a linear effect's K; a nonlinear one's initial tangent)."""
-        return []
-
     def loads(self, cells: np.ndarray) -> dict[str, np.ndarray]:
         """Constant element loads {field: (nc, nen, ncomp)} of its own, added to every step's
         known loads (thermal expansion's reference state); empty: none."""
@@ -47,19 +49,22 @@ class Effect:
         return {}
 
     def terms(self) -> list[Term]:
-        """The terms it contributes on tuples of nodes rather than through cells (springs,
-        a node's penalty block), declared once: the system adds them to its pattern and sets
-        their slots; their values come as ``TermMatrices`` among the blocks, their forces as
-        ``NodeForces``. None by default."""
+        """Every term it contributes to the operator, declared once (the same objects at
+        every call): stiffness terms on cells (elasticity, conduction, a coupling), capacity
+        terms (``rate``) and terms on tuples of nodes (springs, a node's penalty block, a
+        boundary exchange). The system derives its pattern from them and gives each its slots.
+        None by default."""
         return []
+
+    def term_values(self, term: Term, cells: np.ndarray) -> Matrices | None:
+        """The values of one of its declared terms on ``cells`` (the local cells of a cell
+        term's domain): a linear term's, a nonlinear one's initial tangent, a rate term's
+        capacity. None: nothing until ``evaluate`` gives its tangent."""
+        return None
 
     def couple(self, effects: list["Effect"]) -> None:
         """Called once the model's effects are composed: a coupling effect finds the effects
         it acts on (thermal expansion: the elasticity). Nothing by default."""
-
-    def mass_blocks(self, cells: np.ndarray, lumped: bool) -> Blocks:
-        """Capacity blocks of a transient run (empty: the effect has no rate term)."""
-        return []
 
     def output_names(self) -> list[str]:
         """The /fields and /cell_fields names its outputs take (besides its fields')."""
@@ -79,18 +84,33 @@ class Effect:
 
     def evaluate(self, cells: np.ndarray, values: dict[str, np.ndarray], state, secant: bool,
                  at: Instant):
-        """Internal forces per field {field: (nc, nen, ncomp) element forces, ``NodeForces`` of
-        its terms, or a list of these}, tangent blocks, trial state and
-        extras (e.g. stresses at quadrature points) at the node values ``values``
+        """Internal forces per field {field: (nc, nen, ncomp) element forces of the cells,
+        ``NodeForces`` of a node term or a region's cells, or a list of these}, the tangent's
+        ``TermValues`` (its stiffness terms; rate terms are the composition's), trial state
+        and extras (e.g. stresses at quadrature points) at the node values ``values``
         {field: (npoints, ncomp)} and the step's instant ``at`` (t, Δt, θ: what an effect
         that depends on time reads, as the loads do). A linear effect: K q and K."""
-        blocks = self.stiffness_blocks(cells)
+        tangent = self.linear_values(cells)
         forces: dict[str, list] = {}
-        for fi, fj, m in blocks:
-            forces.setdefault(fi, []).append(
-                m.forces(values[fj]) if isinstance(m, TermMatrices)
-                else apply(m, values[fj][self.cells_nodes(cells)]))
-        return forces, blocks, state, None
+        for term, m in tangent:
+            forces.setdefault(term.test, []).append(
+                term_forces(term, m, values[term.trial], self.cells_nodes(cells)))
+        return forces, tangent, state, None
+
+    def linear_values(self, cells: np.ndarray, rate: bool = False) -> TermValues:
+        """The values of its stiffness terms (``rate``: its capacity terms) on these cells,
+        where it has any."""
+        out = []
+        for term in self.terms():
+            if term.rate != rate:
+                continue
+            at = term.positions(cells) if term.on_cells else None
+            m = self.term_values(term, cells if at is None else cells[at])
+            if m is not None:
+                if at is not None:
+                    m.positions = at
+                out.append((term, m))
+        return out
 
     def cells_nodes(self, cells: np.ndarray) -> np.ndarray:
         return self.mesh.cells[cells]
@@ -114,8 +134,12 @@ class Effect:
     # An effect whose relations change between Newton iterations (contact: friction states
     # and slip senses) overrides these three; Newton calls them only for such effects. Values
     # change in place (``meta["refresh"]`` marks the relations to copy); when a hook changed
-    # their sparsity (``Relation.set_entries``: finite sliding's spans made again) it sets
-    # ``restructured``, and Newton has the system build its operator again.
+    # their sparsity (``Relation.set_entries``: finite sliding's spans made again) or the
+    # domain of a term it declares (``Term.nodes`` given anew: node tuples that moved, e.g. a
+    # pairing's) it sets ``restructured`` -- on every rank alike, whether or not the rank
+    # holds what moved: the restructure is collective -- and Newton has the system build its
+    # operator again (its stiffness pattern derived again from the declared terms,
+    # preallocated).
     restructured = False
     # whether its hooks may ever do so (the result file then has /timings/pattern)
     restructures = False
@@ -156,3 +180,14 @@ class Effect:
         the multipliers and active rows of every relation by name: ({field name: (npoints,
         k)}, {relation name: {dataset: value}})."""
         return {}, {}
+
+
+def term_forces(term: Term, m: Matrices, x: np.ndarray, nodes: np.ndarray):
+    """K x of a term's values from node values x (npoints, d_trial): ``NodeForces`` at the
+    term's nodes (or a region's cells' nodes), or (nc, nen, d_test) element forces of every
+    cell (``nodes``: those cells' nodes)."""
+    if isinstance(m, TermMatrices):
+        return m.forces(x)
+    if m.positions is None:
+        return apply(m, x[nodes])
+    return NodeForces(nodes[m.positions], apply(m, x[nodes[m.positions]]))

@@ -1,5 +1,6 @@
-"""The effects of a model composed on one rank's local cells: the operator blocks they fill,
-the internal forces they return, their states, and the rate terms of a transient step.
+"""The effects of a model composed on one rank's local cells: the values of the terms they
+declare (``Effect.terms``: stiffness and capacity alike), the internal forces they return,
+their states, and the rate terms of a transient step.
 
 A transient step from t_n to t = t_n + Δt (θ-scheme; θ = 1 is backward Euler) solves
 
@@ -17,7 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from parsolve.fem.element_matrices import BlockMatrices, NodeForces, TermMatrices, apply
+from parsolve.effects.base import TermValues, term_forces
+from parsolve.fem.element_matrices import BlockMatrices, NodeForces
 from parsolve.loads.base import Instant
 
 
@@ -32,8 +34,8 @@ class Rate:
 
 
 class Composition:
-    def __init__(self, model, cells: np.ndarray, lumped: bool = True):
-        self.model, self.cells, self.lumped = model, cells, lumped
+    def __init__(self, model, cells: np.ndarray):
+        self.model, self.cells = model, cells
         self.fields = model.fields
         self.nodes = model.mesh.cells[cells]                 # (nc, nen)
         self.npoints = model.mesh.num_points
@@ -51,14 +53,23 @@ class Composition:
         nodal = q.reshape(self.npoints, self.fields.ncomp)
         return {f.name: nodal[:, self.fields.columns(f.name)] for f in self.fields}
 
-    def _parts(self, blocks, factor) -> list:
-        """``factor``: a number, or a dict of the row field's factor."""
-        return [(self.fields.columns(fi), self.fields.columns(fj), m,
-                 factor[fi] if isinstance(factor, dict) else factor) for fi, fj, m in blocks]
+    def _parts(self, values: TermValues, factor) -> list:
+        """The (row components, column components, matrices, factor) parts of a
+        ``BlockMatrices`` from term values; ``factor``: a number, or a dict of the test
+        field's factor."""
+        for t, m in values:   # a cell term on a region: its cells' own slots
+            if t.on_cells and t.cells is not None:
+                m.positions, m.slots = t.positions(self.cells), t.slots
+        return [(self.fields.columns(t.test), self.fields.columns(t.trial), m,
+                 factor[t.test] if isinstance(factor, dict) else factor) for t, m in values]
+
+    def rate_fields(self) -> set[str]:
+        """The fields with a capacity: the test fields of the declared rate terms."""
+        return {t.test for e in self.model.effects for t in e.terms() if t.rate}
 
     def theta_of(self, theta: float) -> dict[str, float]:
         """θ of each field's equations: θ where the field has a capacity, 1 elsewhere."""
-        rate = {fi for fi, _, _ in self.mass_parts()}
+        rate = self.rate_fields()
         return {f.name: theta if f.name in rate else 1.0 for f in self.fields}
 
     def theta_dofs(self, theta: float) -> np.ndarray:
@@ -110,17 +121,20 @@ class Composition:
                 out += factor * np.bincount(dofs.ravel(), weights=values.reshape(-1),
                                             minlength=out.size)
 
-    def mass_parts(self) -> list:
+    def _linear(self, rate: bool = False) -> TermValues:
+        """The values of the effects' stiffness terms (``rate``: capacity terms) on the cells."""
+        return [v for e in self.model.effects for v in e.linear_values(self.cells, rate)]
+
+    def mass_parts(self) -> TermValues:
+        """The capacity terms' values (built once)."""
         if self._mass is None:
-            self._mass = [p for e in self.model.effects for p in e.mass_blocks(self.cells, self.lumped)]
+            self._mass = self._linear(rate=True)
         return self._mass
 
     def stiffness(self, rate: Rate | None = None) -> BlockMatrices:
-        """θ K + M / Δt of the linear effects (K alone without a rate)."""
+        """θ K + M / Δt of the declared terms' linear values (K alone without a rate)."""
         theta = 1.0 if rate is None else self.theta_of(rate.theta)
-        parts = []
-        for e in self.model.effects:
-            parts += self._parts(e.stiffness_blocks(self.cells), theta)
+        parts = self._parts(self._linear(), theta)
         if rate is not None:
             parts += self._parts(self.mass_parts(), 1.0 / rate.dt)
         return BlockMatrices(self.fields.ncomp, parts)
@@ -132,21 +146,19 @@ class Composition:
         capacity, plus M q_n / Δt."""
         f_rhs = f_known
         if theta != 1.0:
-            if getattr(self, "_linear_blocks", None) is None:   # K of the linear effects, once
-                self._linear_blocks = [b for e in self.model.effects
-                                       for b in e.stiffness_blocks(self.cells)]
+            if getattr(self, "_linear_values", None) is None:   # K of the linear terms, once
+                self._linear_values = self._linear()
             w = self.theta_dofs(theta)
-            f_rhs = f_rhs - (1 - w) * self.product(self._linear_blocks, q_prev)
+            f_rhs = f_rhs - (1 - w) * self.product(self._linear_values, q_prev)
         return f_rhs + self.product(self.mass_parts(), q_prev) / dt
 
-    def product(self, blocks, q: np.ndarray) -> np.ndarray:
-        """Σ K_e q_e of the given blocks as a full vector (rows of this rank's cells)."""
+    def product(self, values: TermValues, q: np.ndarray) -> np.ndarray:
+        """Σ K_e q_e of the given term values as a full vector (rows of this rank's cells)."""
         vals = self.values(q)
         out = np.zeros(self.ndof)
         forces: dict[str, list] = {}
-        for fi, fj, m in blocks:
-            forces.setdefault(fi, []).append(
-                m.forces(vals[fj]) if isinstance(m, TermMatrices) else apply(m, vals[fj][self.nodes]))
+        for t, m in values:
+            forces.setdefault(t.test, []).append(term_forces(t, m, vals[t.trial], self.nodes))
         self._scatter(forces, out)
         return out
 
@@ -155,15 +167,16 @@ class Composition:
 
     def evaluate(self, q: np.ndarray, states: list, secant: bool, rate: Rate | None = None):
         """(f_int with the rate terms, f_int alone, tangent BlockMatrices, trial states, extras),
-        forces as full vectors (rows of this rank's cells)."""
+        forces as full vectors (rows of this rank's cells); the tangent from the term values
+        each effect's ``evaluate`` returns."""
         vals = self.values(q)
         f_int = np.zeros(self.ndof)
         parts, trial, extras = [], [], []
         theta = 1.0 if rate is None else self.theta_of(rate.theta)
         for e, st in zip(self.model.effects, states):
-            forces, blocks, new, extra = e.evaluate(self.cells, vals, st, secant, self.now)
+            forces, tangent, new, extra = e.evaluate(self.cells, vals, st, secant, self.now)
             self._scatter(forces, f_int)
-            parts += self._parts(blocks, theta)
+            parts += self._parts(tangent, theta)
             trial.append(new)
             extras.append(extra)
         total = f_int

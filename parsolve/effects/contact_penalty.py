@@ -319,7 +319,7 @@ class PenaltyContact(Effect):
         k = self.node_tangents(f)[which]
         # (a rank may hold no slave node: k is (0, dim, dim))
         blocks = TermMatrices(self.term, k.reshape(len(k), d * d).T.reshape(d * d, 1, 1, -1))
-        return {self.u: forces}, [(self.u, self.u, blocks)], trial, None
+        return {self.u: forces}, [(self.term, blocks)], trial, None
 
     def terms(self) -> list[Term]:
         return [self.term]

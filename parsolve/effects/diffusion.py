@@ -24,7 +24,7 @@ from parsolve.effects.base import Effect
 from parsolve.errors import InputError
 from parsolve.fem import diffusion as kern
 from parsolve.fem.axisymmetric import is_axisymmetric
-from parsolve.fem.element_matrices import ElementMatrices
+from parsolve.fem.element_matrices import ElementMatrices, Term
 from parsolve.fields import Field
 from parsolve.mesh import selectors
 
@@ -94,8 +94,12 @@ def _tensor(sub, raw, dim: int) -> np.ndarray:
 class Diffusion(Effect):
     name = "diffusion"
 
-    def __init__(self, spec: DiffusionSpec, mesh, regions, thickness: float, source: str):
-        self.spec, self.mesh = spec, mesh
+    def __init__(self, spec: DiffusionSpec, mesh, regions, thickness: float, source: str,
+                 lumped: bool = True):
+        self.spec, self.mesh, self.lumped = spec, mesh, lumped
+        # ∫ ∇v · k ∇h (conduction) and ∫ c v h (capacity: lumped or consistent)
+        self.conduction = Term(spec.field, spec.field)
+        self.capacity_term = Term(spec.field, spec.field, rate=True)
         self.thickness = thickness if mesh.dim == 2 else 1.0
         if is_axisymmetric(self.thickness):   # x = r: weights 2π r in conductivity and capacity
             self.thickness.check_mesh(mesh.points[:mesh.n_owned], regions.comm)
@@ -133,17 +137,19 @@ class Diffusion(Effect):
     def _coords(self, cells: np.ndarray) -> np.ndarray:
         return self.mesh.points[self.mesh.cells[cells]]
 
-    def stiffness_blocks(self, cells: np.ndarray):
-        m = kern.conductivity_blocks(self.mesh.points, self.mesh.cells[cells], self.mesh.cell_type,
-                                     self.tensors, self.cell_material[cells], self.thickness)
-        return [(self.field, self.field, m)]
+    def terms(self) -> list[Term]:
+        return [self.conduction, self.capacity_term]
 
-    def mass_blocks(self, cells: np.ndarray, lumped: bool):
+    def term_values(self, term: Term, cells: np.ndarray) -> ElementMatrices:
+        if term is self.conduction:
+            return kern.conductivity_blocks(self.mesh.points, self.mesh.cells[cells],
+                                            self.mesh.cell_type, self.tensors,
+                                            self.cell_material[cells], self.thickness)
         c = self.capacity[self.cell_material[cells]]
         coords, ct = self._coords(cells), self.mesh.cell_type
-        values = kern.lumped_as_matrices(kern.lumped_mass(coords, ct, c, self.thickness)) if lumped \
-            else kern.mass(coords, ct, c, self.thickness)
-        return [(self.field, self.field, ElementMatrices(values=values))]
+        values = kern.lumped_as_matrices(kern.lumped_mass(coords, ct, c, self.thickness)) \
+            if self.lumped else kern.mass(coords, ct, c, self.thickness)
+        return ElementMatrices(values=values)
 
     def outputs(self, owned, values, extra, local_cells):
         """Flux -k ∇h: cell means and volume-weighted nodal averages."""

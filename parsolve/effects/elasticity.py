@@ -12,7 +12,8 @@ from parsolve.effects.base import Effect
 from parsolve.errors import InputError
 from parsolve.fem import kernels
 from parsolve.fem.axisymmetric import is_axisymmetric
-from parsolve.fem.element_matrices import CellKernel, ElementMatrices, block_cells, cell_ranges
+from parsolve.fem.element_matrices import (CellKernel, ElementMatrices, Term, block_cells,
+                                           cell_ranges)
 from parsolve.fem.elements import element
 from parsolve.fem.materials.base import REQUIRED, parameter_problem
 from parsolve.fem.materials.elastic import Elastic
@@ -116,6 +117,8 @@ class Elasticity(Effect):
         # effects imposing a strain on the material (thermal expansion): the stresses are
         # C (ε − Σ ε*), each giving ``eigenstrain(cells, values)`` = (cell means, at nodes)
         self.eigenstrains: list = []
+        # ∫ ε(v) : C ε(u) over every cell: the stiffness, or a nonlinear material's tangent
+        self.term = Term("u", "u", symmetric=self.symmetric, linear=self.linear)
 
     def fields(self) -> list[Field]:
         return [Field("u", VECTOR_COMPONENTS[:self.mesh.dim], "displacement", displacement=True)]
@@ -140,8 +143,12 @@ class Elasticity(Effect):
             largest = max(largest, float(np.abs(eps).max()))
         return largest
 
-    def stiffness_blocks(self, cells: np.ndarray):
-        return [("u", "u", self.stiffness(cells))]
+    def terms(self) -> list[Term]:
+        return [self.term]
+
+    def term_values(self, term: Term, cells: np.ndarray) -> ElementMatrices:
+        """The elastic stiffness (a nonlinear material's initial tangent)."""
+        return self.stiffness(cells)
 
     def init_state(self, cells: np.ndarray):
         return self.init_state_qp(cells)
@@ -150,7 +157,7 @@ class Elasticity(Effect):
         """Internal forces, tangent, trial state and stresses at the quadrature points."""
         fe, tangent, trial, sig = self.evaluate_u(cells, values["u"], state, secant)
         nen = self.mesh.cells.shape[1]
-        return {"u": fe.reshape(len(cells), nen, self.ncomp)}, [("u", "u", tangent)], trial, sig
+        return {"u": fe.reshape(len(cells), nen, self.ncomp)}, [(self.term, tangent)], trial, sig
 
     def outputs(self, owned, values, extra, local_cells):
         """Nodal stress (volume-weighted average) and cell stress; with a nonlinear run

@@ -92,8 +92,8 @@ class Exchange(Effect):
     def terms(self) -> list[Term]:
         return [self.term]
 
-    def stiffness_blocks(self, cells: np.ndarray):
-        return [(self.spec.field, self.spec.field, self.matrices)]
+    def term_values(self, term: Term, cells: np.ndarray) -> TermMatrices:
+        return self.matrices
 
     def patterns(self) -> dict[str, LoadPattern]:
         return {self.spec.key: LoadPattern(self.spec.key, [(self.part, CONSTANT)])}

@@ -30,7 +30,9 @@ class Entry:
 
 
 def _build_diffusion(spec, ctx):
-    return diffusion.Diffusion(spec, ctx.mesh, ctx.regions, ctx.scene.thickness, ctx.scene.source)
+    time = ctx.scene.time
+    return diffusion.Diffusion(spec, ctx.mesh, ctx.regions, ctx.scene.thickness, ctx.scene.source,
+                               lumped=time is None or time.mass == "lumped")
 
 
 def _build_solubility(spec, ctx):

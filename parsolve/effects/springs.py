@@ -164,8 +164,8 @@ class Springs(Effect):
     def terms(self) -> list[Term]:
         return [self.term]
 
-    def stiffness_blocks(self, cells: np.ndarray):
-        return [(self.u, self.u, self.matrices)]
+    def term_values(self, term: Term, cells: np.ndarray) -> TermMatrices:
+        return self.matrices
 
     def output_names(self) -> list[str]:
         return [f"{self.spec.name}_force"]

@@ -48,11 +48,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from parsolve.effects.base import Effect
+from parsolve.effects.base import Effect, displacement_field
 from parsolve.effects.elasticity import Elasticity
 from parsolve.errors import InputError
 from parsolve.fem import kernels
-from parsolve.fem.element_matrices import CellKernel, ElementMatrices, apply
+from parsolve.fem.element_matrices import CellKernel, ElementMatrices, Term, apply
 from parsolve.fem.elements import default_degree, element, quadrature
 
 
@@ -130,6 +130,9 @@ class ThermalExpansion(Effect):
                                  akey.rsplit(".", 1)[0] + ".region")
             self.alpha[region.cells] = value
         self.elasticity: Elasticity | None = None
+        # −∫ ε(v) : C α m N T over every cell: the displacement's equations on the temperature
+        self.u = displacement_field(fields)
+        self.term = Term(self.u, spec.field, symmetric=False)
 
     @property
     def field(self) -> str:
@@ -142,7 +145,6 @@ class ThermalExpansion(Effect):
         its Hooke matrices make the block, its stresses subtract this eigenstrain. Per cell
         one (material, α) pair: the factored block's tensors."""
         self.elasticity = el = next(e for e in effects if isinstance(e, Elasticity))
-        self.u = el.fields()[0].name
         if self not in el.eigenstrains:
             el.eigenstrains.append(self)
         d = self.mesh.dim
@@ -196,8 +198,11 @@ class ThermalExpansion(Effect):
         return ElementMatrices(tensors=self.tensors, cell_material=self.cell_combo[cells],
                                kernel=kernel)
 
-    def stiffness_blocks(self, cells: np.ndarray):
-        return [(self.u, self.field, self.coupling(cells))]
+    def terms(self) -> list[Term]:
+        return [self.term]
+
+    def term_values(self, term: Term, cells: np.ndarray) -> ElementMatrices:
+        return self.coupling(cells)
 
     def loads(self, cells: np.ndarray) -> dict[str, np.ndarray]:
         """The reference state's load B_uT T_ref (no thermal strain at T = T_ref)."""

@@ -72,6 +72,10 @@ class ElementMatrices:
         (without) block by block, instead of ``geometric`` / ``values``."""
         self._values, self._geometric, self.kernel = values, geometric, kernel
         self.tensors, self.cell_material = tensors, cell_material
+        # a term on a region's cells: which of the composition's cells these are, and their
+        # slots (``Term.slots``); None: every cell, whose slots the reductions are given
+        self.positions: np.ndarray | None = None
+        self.slots: np.ndarray | None = None
 
     @property
     def factored(self) -> bool:
@@ -403,7 +407,7 @@ class BlockMatrices:
             ci, cj = np.asarray(ci), np.asarray(cj)
             first = ~written[np.ix_(ci, cj)].ravel()
             if hasattr(m, "reduce_into"):
-                m.reduce_into(pair_slot, npairs, target, ci, cj, fac, first=first)
+                m.reduce_into(_own_slots(m, pair_slot), npairs, target, ci, cj, fac, first=first)
             else:   # small forms with only ``reduce`` (node blocks, springs: few pairs)
                 place_rows(m.reduce(pair_slot, npairs), target, ci, cj, fac, first)
             written[np.ix_(ci, cj)] = True
@@ -417,37 +421,92 @@ class BlockMatrices:
             ci, cj, m, fac = self.parts[0]
             if len(ci) == len(cj) == nc and np.all(ci == np.arange(nc)) \
                     and np.all(cj == np.arange(nc)) and fac == 1.0:
-                return m.reduce(pair_slot, npairs)
+                return m.reduce(_own_slots(m, pair_slot), npairs)
         out = np.zeros((nc * nc, npairs))
         for ci, cj, m, fac in self.parts:
             idx = (np.asarray(ci)[:, None] * nc + np.asarray(cj)[None, :]).ravel()
-            out[idx] += fac * m.reduce(pair_slot, npairs)
+            out[idx] += fac * m.reduce(_own_slots(m, pair_slot), npairs)
+        return out
+
+    def reduce_replaced(self, other: "BlockMatrices", cells: np.ndarray, pair_slot: np.ndarray,
+                        npairs: int) -> np.ndarray:
+        """``reduce`` with the element matrices of a few of the composition's cells ``cells``
+        taken from ``other`` (the same terms evaluated otherwise: a loading tangent): the
+        reduction plus those cells' difference. Node terms have no cells: left as they are."""
+        out = self.reduce(pair_slot, npairs)
+        nc = self.ncomp
+        for (ci, cj, m0, fac), (_, _, m1, _) in zip(self.parts, other.parts):
+            if not isinstance(m0, ElementMatrices) or cells.size == 0:
+                continue
+            at = cells if m0.positions is None else np.flatnonzero(np.isin(m0.positions, cells))
+            if at.size == 0:
+                continue
+            slots = _own_slots(m0, pair_slot)[:, :, at].astype(np.intp).ravel()
+            diff = cell_values(m1, at) - cell_values(m0, at)
+            idx = (np.asarray(ci)[:, None] * nc + np.asarray(cj)[None, :]).ravel()
+            out[idx] += fac * _bincount_rows(slots, diff.reshape(len(diff), -1), npairs)
         return out
 
 
-# ------------------------------------------------ terms on tuples of nodes
+def _own_slots(m, pair_slot: np.ndarray) -> np.ndarray:
+    """The slots a part reduces into: its own (a term on a region's cells) or the cells'."""
+    slots = getattr(m, "slots", None)
+    return pair_slot if slots is None or isinstance(m, TermMatrices) else slots
 
 
-@dataclass
+def cell_values(m: ElementMatrices, cells: np.ndarray) -> np.ndarray:
+    """Element matrices (d², nen, nen, len(cells)) of some of its cells, whatever the form."""
+    if m.kernel is not None and not m.factored:   # blocked full values: just these cells
+        return m.kernel.compute(cells, None)
+    if m.values is not None:
+        return m.values[..., cells]
+    return np.einsum("ckm,kabc->mabc", m.tensors[m.cell_material[cells]], m.geometric[..., cells])
+
+
+# ------------------------------------------------ declared terms
+
+
+@dataclass(eq=False)   # a term is itself (hashable): equal values do not make two terms one
 class Term:
-    """A term an effect declares once, at set-up: its test and trial fields, its domain
-    (``nodes``: k tuples of m local nodes, a node to the ground, a pair of nodes, whether or
-    not a cell holds them together) and its nature. The system derives the stiffness pattern
-    from the cells and the declared terms, and gives each term its slots there (``slots``
-    (m, m, k): node pair (i, j) of tuple k; the pattern's ``nnzb`` where another rank owns
-    the row, which drops it): each rank declares the terms on its local nodes, and a row's
-    entries are its owner's."""
+    """A term an effect declares once, at set-up: its test and trial fields, its domain and
+    its nature. The domain is either cells (``nodes`` None: the cells of a region, ``cells``
+    its mesh cell numbers, or every cell with ``cells`` None) or tuples of nodes (``nodes``:
+    k tuples of m local nodes, a node to the ground, a pair of nodes, a boundary facet's
+    nodes, whether or not a cell holds them together). ``rate``: a capacity term (M, weighed
+    by 1/Δt in a transient step) rather than a stiffness.
+
+    The system derives the stiffness pattern from the cells and the declared terms, and gives
+    each term its slots there (``slots`` (m, m, k): node pair (i, j) of tuple or cell k; the
+    pattern's ``nnzb`` where another rank owns the row, which drops it; None for a term on
+    every cell, whose slots are the cells' own): each rank declares the terms on its local
+    nodes, and a row's entries are its owner's. Its values come as ``ElementMatrices`` (cell
+    terms, in bounded cell blocks) or ``TermMatrices`` (node tuples), paired with the term."""
 
     test: str
     trial: str
-    nodes: np.ndarray            # (k, m) local nodes
+    nodes: np.ndarray | None = None   # (k, m) local nodes; None: a cell term
     symmetric: bool = True
     linear: bool = True
+    rate: bool = False
+    cells: np.ndarray | None = None   # a cell term's region (mesh cells); None: every cell
     slots: np.ndarray | None = None   # (m, m, k), set by the system
 
     def __post_init__(self) -> None:
+        if self.nodes is None:
+            return
         nodes = np.asarray(self.nodes, dtype=np.int64)
         self.nodes = nodes if nodes.ndim == 2 else nodes.reshape(-1, 1)   # (k,): single nodes
+
+    @property
+    def on_cells(self) -> bool:
+        return self.nodes is None
+
+    def positions(self, cells: np.ndarray) -> np.ndarray | None:
+        """Which of ``cells`` (a composition's local cells) the cell term covers: their
+        positions, or None for every one (a term on every cell)."""
+        if self.cells is None:
+            return None
+        return np.flatnonzero(np.isin(cells, self.cells))
 
 
 @dataclass

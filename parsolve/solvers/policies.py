@@ -47,35 +47,13 @@ def _row_dots(r, ndof: int) -> np.ndarray:
 
 class _CellReplaced:
     """Tangent blocks with the element matrices of a few cells taken from another evaluation
-    (same effects, same parts): reduced like ``BlockMatrices`` plus the few cells' difference."""
+    (same effects, same terms): reduced like ``BlockMatrices`` plus the few cells' difference."""
 
     def __init__(self, base, other, cells: np.ndarray):
         self.base, self.other, self.cells = base, other, cells
 
     def reduce(self, pair_slot: np.ndarray, npairs: int) -> np.ndarray:
-        out = self.base.reduce(pair_slot, npairs)
-        if self.cells.size == 0:
-            return out
-        nc = self.base.ncomp
-        slots = pair_slot[:, :, self.cells].ravel()
-        for (ci, cj, m0, fac), (_, _, m1, _) in zip(self.base.parts, self.other.parts):
-            if hasattr(m0, "term"):   # a declared term (TermMatrices): on nodes, not cells
-                continue
-            diff = (_cell_values(m1, self.cells) - _cell_values(m0, self.cells))
-            diff = diff.reshape(len(diff), -1)
-            idx = (np.asarray(ci)[:, None] * nc + np.asarray(cj)[None, :]).ravel()
-            out[idx] += fac * np.stack([np.bincount(slots, weights=v, minlength=npairs + 1)[:npairs]
-                                        for v in diff])
-        return out
-
-
-def _cell_values(m, cells: np.ndarray) -> np.ndarray:
-    """Element matrices (d², nen, nen, len(cells)) of some cells, whatever the form."""
-    if m.kernel is not None and not m.factored:   # blocked full values: just these cells
-        return m.kernel.compute(cells, None)
-    if m.values is not None:
-        return m.values[..., cells]
-    return np.einsum("ckm,kabc->mabc", m.tensors[m.cell_material[cells]], m.geometric[..., cells])
+        return self.base.reduce_replaced(self.other, self.cells, pair_slot, npairs)
 
 
 def _branch_reach(rate: np.ndarray, room: np.ndarray, current: int) -> np.ndarray:

@@ -51,8 +51,7 @@ class SaddleSystem:
         # the cells this rank reports, and which of its local cells they are (every output step)
         self.owned_cells = self.part.owned_cells(rank, mesh.cells)
         self.reported = np.isin(self.local_cells, self.owned_cells, assume_unique=True)
-        lumped = model.scene.time is None or model.scene.time.mass == "lumped"
-        self.composition = Composition(model, self.local_cells, lumped)
+        self.composition = Composition(model, self.local_cells)
         self.rate: Rate | None = None  # the rate terms of a transient step (set by the stepper)
         lo, hi = self.part.node_ranges[rank], self.part.node_ranges[rank + 1]
         self.pattern = pattern = progress.timed("pattern", self._pattern, lo, hi)
@@ -72,43 +71,65 @@ class SaddleSystem:
         self._augmented: AugmentedMatrix | None = None
 
     def _pattern(self, lo: int, hi: int):
-        """The stiffness pattern of the local cells and of the effects' declared terms
-        (``Effect.terms``: tuples of m nodes, each padded into a pseudo-cell [a, b, b, ...]
-        after the cells, a repeated node a diagonal entry); the cells' reductions get the
-        cells' slots only, each term its own (``Term.slots``)."""
+        """The stiffness pattern of the effects' declared terms (``Effect.terms``): the local
+        cells (the domain of the cell terms), then the node terms' tuples of m nodes, each
+        padded into a pseudo-cell [a, b, b, ...] after the cells (a repeated node a diagonal
+        entry). The cells' reductions get the cells' slots; a node term, and a cell term on a
+        region, its own (``Term.slots``)."""
         model = self.model
         cells = model.mesh.cells[self.local_cells]
         terms = [term for e in model.effects for term in e.terms()]
+        tuples = [t for t in terms if not t.on_cells]
         nnodes = int(self.part.node_ranges[-1])
-        if not terms:
-            return node_pattern(self.part.new_of_old[cells], lo, hi, model.ncomp, nnodes)
         nen = cells.shape[1]
         pseudo = [np.concatenate([t.nodes, np.repeat(t.nodes[:, -1:], nen - t.nodes.shape[1],
-                                                     axis=1)], axis=1) for t in terms]
+                                                     axis=1)], axis=1) for t in tuples]
         pattern = node_pattern(self.part.new_of_old[np.concatenate([cells] + pseudo)], lo, hi,
                                model.ncomp, nnodes)
         start = len(cells)
-        for t in terms:
+        for t in tuples:
             k, m = t.nodes.shape
             t.slots = np.ascontiguousarray(pattern.pair_slot[:m, :m, start:start + k])
             start += k
-        pattern.pair_slot = np.ascontiguousarray(pattern.pair_slot[:, :, :len(cells)])
+        # the node tuples the pattern holds (``restructure``: a term whose domain moved)
+        self._domains = [(t, t.nodes.copy()) for t in tuples]
+        if tuples:
+            pattern.pair_slot = np.ascontiguousarray(pattern.pair_slot[:, :, :len(cells)])
+        for t in terms:
+            at = t.positions(self.local_cells) if t.on_cells else None
+            if at is not None:
+                t.slots = pattern.pair_slot[:, :, at].astype(np.intp)
         return pattern
 
     def restructure(self) -> None:
-        """Build the operator again after a multiplied relation's sparsity changed
-        (``Relation.set_entries``: finite sliding's spans made again): the DOF map learns the
+        """Build the operator again after a sparsity changed: a multiplied relation's
+        (``Relation.set_entries``: finite sliding's spans made again) or a declared term's
+        domain (``Term.nodes`` given anew: node tuples that moved). The DOF map learns the
         relations' DOFs (one reduction), the relation set is stacked again (the same rows,
-        multiplier layout and scales) and the operator's CSR is built anew on the new pattern,
-        exactly preallocated as at the start; the stiffness pattern is the same. The next
-        assembly makes a new PETSc matrix (the solver must be given it). Collective: every
-        rank holds the same relations."""
+        multiplier layout and scales); the stiffness pattern is derived again from the cells
+        and the declared terms when a term moved on any rank, and the operator's CSR is built
+        anew on it, exactly preallocated as at the start. The next assembly makes a new PETSc
+        matrix (the solver must be given it). Collective: every rank holds the same
+        relations."""
         self.dofmap.index_inputs(self._relation_dofs())
         self.relation_set.restack()
+        if self.comm.allreduce(self._terms_moved(), op=MPI.LOR):
+            rank = self.comm.rank
+            lo, hi = self.part.node_ranges[rank], self.part.node_ranges[rank + 1]
+            self.pattern = self._pattern(lo, hi)
         active = self.op.active
         self.op = SaddleOperator(self.comm, self.dofmap, self.pattern, self.relation_set)
         self.op.active = active
         self.op.set_eliminated(self.elim_saddle)
+
+    def _terms_moved(self) -> bool:
+        """Whether this rank's node terms are not those the pattern was derived from (a term
+        added or gone, or its node tuples changed)."""
+        terms = [t for e in self.model.effects for t in e.terms() if not t.on_cells]
+        if len(terms) != len(self._domains) or \
+                any(t is not held for t, (held, _) in zip(terms, self._domains)):
+            return True
+        return any(not np.array_equal(t.nodes, nodes) for t, nodes in self._domains)
 
     # ------------------------------------------------------------ elimination
 

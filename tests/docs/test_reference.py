@@ -62,8 +62,8 @@ def test_the_issues_missing_keys_are_found(accepted):
         assert key in accepted[section], (section, key)
 
 
-def test_every_key_has_a_meaning_and_every_meaning_a_key(accepted):
-    meanings = tomllib.loads(MEANINGS.read_text())
+def test_every_key_has_a_meaning_and_every_meaning_a_key(accepted, generator):
+    meanings = generator["meanings"]()   # the file's and the registries' own
     without = [f"{s}.{k}" for s, keys in accepted.items() for k in keys
                if not meanings.get(s, {}).get(k, "").strip()]
     assert not without, f"add their meaning to {MEANINGS.relative_to(ROOT)}: {without}"
@@ -140,3 +140,17 @@ def test_the_page_gives_types_defaults_and_conditions():
                 "| `lz` |", "generator = `box`",
                 "| `sphere` | table | (none) |"):
         assert row in text, row
+
+
+def test_a_relation_kinds_description_is_its_meaning(generator, monkeypatch):
+    """The meaning of a relation's ``type`` is read from the relation kinds' registry: every
+    kind with its own description, a new kind's too, and none written by hand."""
+    from parsolve.relation_kinds import registry
+
+    assert "type" not in tomllib.loads(MEANINGS.read_text()).get("relations[]", {})
+    text = generator["meanings"]()["relations[]"]["type"]
+    for name, entry in registry.RELATIONS.items():
+        assert entry.description and f"`{name}`: {entry.description}" in text
+    monkeypatch.setitem(registry.RELATIONS, "probe_kind",
+                        replace(registry.RELATIONS["equal"], description="a probe's rows"))
+    assert "`probe_kind`: a probe's rows" in generator["meanings"]()["relations[]"]["type"]

@@ -279,8 +279,9 @@ def test_the_springs_are_one_declared_term():
     springs = [e for e in model.effects if isinstance(e, Springs)]
     assert springs
     for effect in springs:
-        (fi, fj, m), = effect.stiffness_blocks(cells)
-        assert isinstance(m, TermMatrices) and m.term in effect.terms() and fi == fj == "u"
+        (term, m), = effect.linear_values(cells)
+        assert isinstance(m, TermMatrices) and m.term is term and term in effect.terms()
+        assert term.test == term.trial == "u" and not term.on_cells
         k = effect.k
         a, b = effect.pairs[:, 0], effect.pairs[:, 1]
         expected = np.zeros_like(u)
@@ -298,7 +299,7 @@ def test_the_springs_are_one_declared_term():
         np.testing.assert_array_equal(V, V.reshape(2, 2, mm, mm, -1).transpose(1, 0, 3, 2, 4)
                                       .reshape(V.shape))
     composition = Composition(model, cells)
-    blocks = [b for e in springs for b in e.stiffness_blocks(cells)]
+    blocks = [v for e in springs for v in e.linear_values(cells)]
     product = composition.product(blocks, u.ravel()).reshape(u.shape)
     total = np.zeros_like(u)
     for effect in springs:

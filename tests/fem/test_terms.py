@@ -65,3 +65,40 @@ def test_single_nodes_and_an_empty_term():
     assert m.forces(x).values.shape == (0, 2, 2)
     empty.slots = np.zeros((2, 2, 0), dtype=np.intp)
     np.testing.assert_array_equal(m.reduce(None, 7), np.zeros((4, 7)))
+
+
+def test_a_region_cell_term_reduced_with_a_few_cells_replaced():
+    """A cell term on a region (its cells' positions and slots): ``reduce`` sums its cells
+    into their slots, and ``reduce_replaced`` (a loading tangent on a few of the composition's
+    cells) equals the reduction of the values with those cells swapped, whichever of the
+    replaced cells the region holds; a term on every cell beside it is replaced too."""
+    from parsolve.fem.element_matrices import BlockMatrices, ElementMatrices
+
+    rng = np.random.default_rng(11)
+    ncells, nen, npairs = 9, 3, 14
+    pair_slot = rng.integers(0, npairs + 1, size=(nen, nen, ncells))   # npairs: dropped
+    region = np.array([1, 2, 5, 8])
+    replaced = np.array([2, 4, 8])                  # 2, 8 in the region; 4 only in "every"
+    v_all, w_all = rng.normal(size=(2, 1, nen, nen, ncells))
+    v_reg, w_reg = rng.normal(size=(2, 1, nen, nen, region.size))
+
+    def blocks(every, reg):
+        m = ElementMatrices(values=reg)
+        m.positions, m.slots = region, pair_slot[:, :, region]
+        return BlockMatrices(1, [([0], [0], ElementMatrices(values=every), 1.0),
+                                 ([0], [0], m, 2.0)])
+
+    def brute(every, reg):
+        out = np.zeros(npairs + 1)
+        np.add.at(out, pair_slot.ravel(), every[0].ravel())
+        np.add.at(out, pair_slot[:, :, region].ravel(), 2.0 * reg[0].ravel())
+        return out[None, :npairs]
+
+    base, other = blocks(v_all, v_reg), blocks(w_all, w_reg)
+    np.testing.assert_allclose(base.reduce(pair_slot, npairs), brute(v_all, v_reg), atol=1e-13)
+    swap_all, swap_reg = v_all.copy(), v_reg.copy()
+    swap_all[..., replaced] = w_all[..., replaced]
+    at = np.flatnonzero(np.isin(region, replaced))
+    swap_reg[..., at] = w_reg[..., at]
+    np.testing.assert_allclose(base.reduce_replaced(other, replaced, pair_slot, npairs),
+                               brute(swap_all, swap_reg), atol=1e-13)

@@ -1,0 +1,125 @@
+"""A stiffness pattern that changes between steps: a declared term whose node tuples move to
+nodes no cell joins (``Term.nodes`` given anew), the system restructured, derives its pattern
+again from the declared terms and preallocates it (new node pairs, the old ones gone), and
+the assembled operator is the brute-force dense sum of the cells and the tuples where they
+are now; on 1, 2 and 3 ranks."""
+
+from __future__ import annotations
+
+import tomllib
+
+import numpy as np
+from mpi4py import MPI
+
+from conftest import saddle_of_input_dofs
+from helpers.saddle import SCENE
+
+from parsolve.effects.base import Effect
+from parsolve.fem.element_matrices import Term, TermMatrices
+from parsolve.mesh.regions import allgather_rows
+from parsolve.model import build_model
+from parsolve.scene import parse_scene
+from parsolve.solvers.system import SaddleSystem
+
+COMM = MPI.COMM_WORLD
+K = 40.0
+TEXT = SCENE.format(cell="quad", preset="direct", eliminate="false")
+
+
+def ties(mesh, choice: int) -> np.ndarray:
+    """(1, 2) local nodes: this rank's owned node of smallest input id, tied to the owned node
+    of the ``choice``-th largest id among those no cell shares with it (rows of both owned
+    here: the owner declares the whole tie)."""
+    owned = np.arange(mesh.n_owned)
+    if owned.size < 4:
+        return np.zeros((0, 2), dtype=np.int64)
+    ids = mesh.global_nodes[owned]
+    a = owned[np.argmin(ids)]
+    near = np.unique(mesh.cells[np.any(mesh.cells == a, axis=1)])
+    far = owned[~np.isin(owned, near)]
+    far = far[np.argsort(-mesh.global_nodes[far])]
+    return np.array([[a, far[choice]]])
+
+
+class Ties(Effect):
+    """Springs K (u_a − u_b) between node tuples that move (a pairing's, say)."""
+
+    name = "ties"
+
+    def __init__(self, mesh):
+        self.mesh = mesh
+        self.term = Term("u", "u", ties(mesh, 0))
+
+    def terms(self) -> list[Term]:
+        return [self.term]
+
+    def term_values(self, term: Term, cells: np.ndarray) -> TermMatrices:
+        k = len(term.nodes)
+        block = K * np.array([[1.0, -1.0], [-1.0, 1.0]])
+        values = np.zeros((2, 2, 2, 2, k))
+        values[0, 0] = values[1, 1] = block[:, :, None]   # per component, none across
+        return TermMatrices(term, values.reshape(4, 2, 2, k))
+
+
+def brute_ties(mesh, nodes: np.ndarray, npoints: int) -> np.ndarray:
+    """Dense springs of every rank's tuples (input numbering)."""
+    pairs = allgather_rows(COMM, mesh.global_nodes[nodes].astype(np.int64).reshape(-1, 2))
+    out = np.zeros((npoints * 2, npoints * 2))
+    for a, b in pairs:
+        for c in range(2):
+            i, j = a * 2 + c, b * 2 + c
+            out[i, i] += K
+            out[j, j] += K
+            out[i, j] -= K
+            out[j, i] -= K
+    return out
+
+
+def stiffness_block(system: SaddleSystem) -> np.ndarray:
+    mat = system.assemble()
+    rows = mat.convert("dense").getDenseArray().copy()
+    S = np.concatenate(COMM.allgather(rows), axis=0)
+    iq = saddle_of_input_dofs(COMM, system)
+    return S[np.ix_(iq, iq)]
+
+
+def model():
+    return build_model(parse_scene(tomllib.loads(TEXT), "t.toml", TEXT), COMM)
+
+
+def test_a_term_that_moves_gets_a_new_preallocated_pattern():
+    bare = stiffness_block(SaddleSystem(COMM, model()))
+    m = model()
+    effect = Ties(m.mesh)
+    m.effects.append(effect)
+    system = SaddleSystem(COMM, m)
+    npoints = m.mesh.num_global_points
+    first = brute_ties(m.mesh, effect.term.nodes, npoints)
+    assert np.abs(first).max() == K   # every rank with nodes ties two
+    np.testing.assert_allclose(stiffness_block(system) - bare, first, atol=1e-12 * np.abs(bare).max())
+
+    pattern, mat = system.pattern, system.op.petsc_matrix()
+    effect.term.nodes = ties(m.mesh, 1)             # the tie moves to another far node
+    system.restructure()
+    assert system.pattern is not pattern and system.op.petsc_matrix() is not mat
+    moved = brute_ties(m.mesh, effect.term.nodes, npoints)
+    got = stiffness_block(system)
+    np.testing.assert_allclose(got - bare, moved, atol=1e-12 * np.abs(bare).max())
+    gone = (first != 0) & (moved == 0) & (bare == 0)   # where the tie was: nothing left
+    assert gone.any() and np.all(got[gone] == 0.0)
+    # the pattern is the one a system built with the tie there from the start derives: the
+    # old node pairs out of it, the new ones in
+    fresh_model = model()
+    fresh = Ties(fresh_model.mesh)
+    fresh.term = Term("u", "u", ties(fresh_model.mesh, 1))
+    fresh_model.effects.append(fresh)
+    start = SaddleSystem(COMM, fresh_model)
+    assert system.pattern.nnzb == start.pattern.nnzb
+    np.testing.assert_array_equal(system.pattern.ucol, start.pattern.ucol)
+    np.testing.assert_array_equal(system.pattern.nb, start.pattern.nb)
+    np.testing.assert_allclose(got, stiffness_block(start), rtol=0, atol=0)
+
+    # nothing moved: the pattern stays
+    pattern = system.pattern
+    system.restructure()
+    assert system.pattern is pattern
