@@ -31,7 +31,7 @@ from parsolve.mesh import checks
 from parsolve.mesh.mesh import CELL_INFO, Mesh
 from parsolve.mesh.partition import block_starts
 from parsolve.mesh.topology import (FACETS, NUM_VERTICES, _pack, _row_groups,
-                                    _sorted_vertex_keys)
+                                    _sorted_vertex_keys, sorted_row_groups)
 
 
 @dataclass
@@ -119,23 +119,27 @@ def facet_groups(comm, block: CellBlock, source: str | None, key: str | None,
     facet (its cell and direction, to be matched with another block's) or a count (a facet
     matched here, which another block's copy would make a facet of three cells)."""
     keys, owner, forward = _facet_keys(comm, block)
-    group, counts = _row_groups(keys)
-    pairs, folded = _pairs_of_two(group, counts, owner, forward)
+    order, group, counts = sorted_row_groups(keys)   # (group: of the sorted facets)
+    folded = _folded_here(order, group, counts, owner, forward)
     if comm.size > 1:
-        cross, cross_folded, bad = _match_across(comm, keys, group, counts, owner, forward)
+        cross, cross_folded, bad = _match_across(comm, keys, order, group, counts, owner,
+                                                 forward)
         folded = np.concatenate([folded, cross_folded])
     else:
-        cross, bad = np.zeros((0, 2), np.int64), keys[counts[group] > 2]
-    del forward, group, counts
+        cross, bad = np.zeros((0, 2), np.int64), keys[order[counts[group] > 2]]
+    del forward
     _raise_cells(comm, _owners_of_keys(keys, owner, bad), lambda cells: (
         f"a facet is shared by more than two cells (cells {checks._ids(cells)}): not a valid "
         "volume mesh"), source, key)
-    del keys, owner
+    del keys
     _raise_cells(comm, folded, lambda cells: (
         f"{cells.size} cells overlap a neighbour (inverted or folded over a shared facet): "
         f"cells {checks._ids(cells)}"), source, key)
     if not graph:
         return None
+    pairs = owner[order[counts[group] == 2]].reshape(-1, 2)
+    del order, group, counts, owner
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]   # (a collapsed cell seeing itself twice)
     return _graph_rows(comm, block, pairs, cross)
 
 
@@ -154,36 +158,31 @@ def _facet_keys(comm, block: CellBlock) -> tuple[np.ndarray, np.ndarray, np.ndar
     return packed, owner, forward
 
 
-def _pairs_of_two(group, counts, owner, forward) -> tuple[np.ndarray, np.ndarray]:
-    """(the cell pairs of this block's facets of exactly two copies here, the cells of those
-    pairs folded over each other)."""
-    two = np.flatnonzero(counts[group] == 2)
-    two = two[np.argsort(group[two], kind="stable")]
-    pairs = owner[two].reshape(-1, 2)
+def _folded_here(order, group, counts, owner, forward) -> np.ndarray:
+    """The cells of this block's facets of exactly two copies here that run through them the
+    same way (folded over each other)."""
+    two = order[counts[group] == 2]
     fwd = forward[two].reshape(-1, 2).sum(axis=1)
-    folded = pairs[fwd != 1].ravel()
-    return pairs[pairs[:, 0] != pairs[:, 1]], folded   # (a collapsed cell seeing itself twice)
+    return owner[two].reshape(-1, 2)[fwd != 1].ravel()
 
 
-def _match_across(comm, keys, group, counts, owner, forward):
+def _match_across(comm, keys, order, group, counts, owner, forward):
     """One row per facet key of this block to the rank the key names: (key, cell * 2 +
     direction) for a facet single here, (key, -copies) for the others. There: the keys of
     more than two copies in all (``bad``, every rank's), and the pairs of two singles — cell
     pairs across blocks — and their folded cells."""
-    first = np.empty(counts.size, dtype=np.int64)
-    first[group] = np.arange(group.size)
+    first = order[np.r_[0, np.cumsum(counts)[:-1]]] if counts.size else order
     single = counts == 1
     rows = np.column_stack([keys[first], np.where(single, owner[first] * 2 + forward[first],
                                                   -counts)])
     del first
     got, _ = exchange(comm, rows, rows[:, 0] % comm.size)
     del rows
-    g, c = _row_groups(got[:, :-1])
-    last = got[:, -1]
+    o, g, c = sorted_row_groups(got[:, :-1])
+    last = got[o, -1]
     copies = np.bincount(g, weights=np.where(last >= 0, 1, -last), minlength=c.size)
-    bad = got[copies[g] > 2, :-1]
-    two = np.flatnonzero((c[g] == 2) & (copies[g] == 2))
-    two = two[np.argsort(g[two], kind="stable")]
+    bad = got[o[copies[g] > 2], :-1]
+    two = (c[g] == 2) & (copies[g] == 2)
     cells = (last[two] >> 1).reshape(-1, 2)
     fwd = (last[two] & 1).reshape(-1, 2).sum(axis=1)
     bad = np.concatenate(comm.allgather(bad)) if comm.allreduce(bad.shape[0]) else bad

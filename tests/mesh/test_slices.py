@@ -310,3 +310,17 @@ def test_scotch_on_aggregates_gives_balanced_connected_parts(comm, monkeypatch):
         assert edge_cut(ptr, idx, whole) <= 2.0 * edge_cut(ptr, idx, fine)
         rng = np.random.default_rng(0)
         assert edge_cut(ptr, idx, whole) < 0.2 * edge_cut(ptr, idx, rng.integers(0, comm.size, n))
+
+
+@pytest.mark.parametrize("dim", [1, 2, 3])
+def test_spread_interleaves_every_bit(dim):
+    """The shift-and-mask spread puts bit b of a key at bit b·dim, for every bit a key has
+    (63 // dim), as a loop over the bits does."""
+    rng = np.random.default_rng(dim)
+    bits = 63 // dim
+    v = rng.integers(0, 2**bits, 10_000, dtype=np.uint64)
+    v[:2] = [0, 2**bits - 1]
+    want = np.zeros_like(v)
+    for b in range(bits):
+        want |= ((v >> np.uint64(b)) & np.uint64(1)) << np.uint64(b * dim)
+    assert np.array_equal(slices._spread(v, dim), want)
