@@ -12,7 +12,8 @@ from mpi4py import MPI
 from parsolve.mesh import slices
 from parsolve.mesh.checks import check_mesh
 from parsolve.mesh.distribute import _extract
-from parsolve.mesh.generators import box, box_slices, plate_with_hole, rectangle, rectangle_slices
+from parsolve.mesh.generators import (box, box_slices, plate_slices, plate_with_hole, rectangle,
+                                      rectangle_slices)
 from parsolve.mesh.h5mesh import open_mesh, read_whole, write_mesh
 from parsolve.mesh.partition import Partition
 from parsolve.mesh.reader import read_mesh
@@ -123,16 +124,20 @@ GRIDS = {
                                                                 "origin": (1.0, -2.0)}),
     "box_hexahedron": (box_slices, (1.0, 2.0, 1.0, 3, 4, 2), {"cell": "hexahedron"}),
     "box_tetra": (box_slices, (1.0, 1.0, 2.0, 2, 3, 4), {"cell": "tetra"}),
+    "plate_quad": (plate_slices, (5.0, 4.0, 1.0, 5, 7), {"cell": "quad", "grading": 3.0}),
+    "plate_triangle": (plate_slices, (4.0, 4.0, 1.5, 6, 4), {"cell": "triangle"}),
 }
+WHOLE = {rectangle_slices: rectangle, box_slices: box, plate_slices: plate_with_hole}
 
 
 @pytest.mark.parametrize("method", ["scotch", "bisection"])
 @pytest.mark.parametrize("name", sorted(GRIDS))
 def test_generated_slices_are_the_whole_generators_parts(name, method, comm):
     """Each rank generating its own slice gives the part the rank-0 path cuts out of the
-    whole generated mesh (``rectangle``/``box``, which build the same numbering)."""
+    whole generated mesh (``rectangle``/``box``/``plate_with_hole``, which build the same
+    numbering)."""
     slicer, args, kw = GRIDS[name]
-    whole = (rectangle if slicer is rectangle_slices else box)(*args, **kw)
+    whole = WHOLE[slicer](*args, **kw)
     local = slices.distribute_slices(comm, slicer(*args, **kw), method, "scene.toml", "mesh")
     want = expected_part(comm, whole, local)
     for key in ("points", "cells", "global_nodes", "global_cells", "node_new"):
