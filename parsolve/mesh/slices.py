@@ -2,13 +2,14 @@
 
 Every rank starts from a contiguous slice of the cells and of the points (rows
 ``partition.block_starts``) of a mesh source — the parallel mesh file (``h5mesh``) or a
-structured generator building its slab (``generators.rectangle_slices``/``box_slices``) — its
+structured generator building its slab (``generators.SLICED``: rectangle, box, plate) — its
 **home** slice: a node's home is the rank whose point slice holds it. Then:
 
 1. the coordinates of the slice cells' nodes are fetched from their homes (all-to-all), and the
    cells are checked and their block of the dual graph built as on the rank-0 path
    (``blocks.check_jacobians``, ``blocks.facet_groups``: the slice is the block);
-2. PT-Scotch partitions the distributed graph (``partition.scotch_block``); without it, or on
+2. PT-Scotch partitions the distributed graph (``partition.scotch_block``; from 4096 cells per
+   part, the graph of aggregates of 16 cells: ``_scotch_parts``); without it, or on
    request, the cells are cut along a space-filling curve (Morton order of the centroids, the
    cuts found by a distributed bisection of the keys: ``morton_parts``);
 3. each node's owner (the lowest part among its cells) and global number (owners' blocks, input
