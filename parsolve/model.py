@@ -189,8 +189,8 @@ def _generator_key(exc: Exception) -> str:
 
 def _distributed_mesh(scene: Scene, comm) -> LocalMesh:
     """Every rank's part of the scene's mesh: from slices (a parallel mesh file, a structured
-    rectangle or box of linear cells: no rank holds the whole, ``mesh.slices``), else built
-    whole on rank 0 (Gmsh and other meshio files, the other generators, ``order = 2``). The
+    rectangle, box or plate of linear cells: no rank holds the whole, ``mesh.slices``), else
+    built whole on rank 0 (Gmsh and other meshio files, the other generators, ``order = 2``). The
     solve's share of every rank is checked against the memory before anything is built when
     the mesh's size is known from a generator's parameters, else once the mesh is read."""
     counted = _generated_counts(scene)

@@ -31,7 +31,7 @@ from parsolve.mesh import checks
 from parsolve.mesh.mesh import CELL_INFO, Mesh
 from parsolve.mesh.partition import block_starts
 from parsolve.mesh.topology import (FACETS, NUM_VERTICES, _pack, _row_groups,
-                                    _sorted_vertex_keys)
+                                    _sorted_vertex_keys, sorted_row_groups)
 
 
 @dataclass
@@ -111,8 +111,41 @@ def facet_groups(comm, block: CellBlock, source: str | None, key: str | None,
     rank partitions nothing). Two positively oriented cells sharing a facet run through it in
     opposite directions; the same direction means one is folded over the other (an inverted
     cell in a file whose node order was flipped on reading, or a cell given twice). A facet
-    of 3 cells or more is not a volume mesh. Collective."""
-    size = comm.size
+    of 3 cells or more is not a volume mesh. Collective.
+
+    The block's facets are matched within the block first: most of a contiguous slice's
+    facets are shared by two of its own cells, and those pairs are rows of this block's graph
+    at once. Only one row per facet key crosses ranks, to the rank the key names: a single
+    facet (its cell and direction, to be matched with another block's) or a count (a facet
+    matched here, which another block's copy would make a facet of three cells)."""
+    keys, owner, forward = _facet_keys(comm, block)
+    order, group, counts = sorted_row_groups(keys)   # (group: of the sorted facets)
+    folded = _folded_here(order, group, counts, owner, forward)
+    if comm.size > 1:
+        cross, cross_folded, bad = _match_across(comm, keys, order, group, counts, owner,
+                                                 forward)
+        folded = np.concatenate([folded, cross_folded])
+    else:
+        cross, bad = np.zeros((0, 2), np.int64), keys[order[counts[group] > 2]]
+    del forward
+    _raise_cells(comm, _owners_of_keys(keys, owner, bad), lambda cells: (
+        f"a facet is shared by more than two cells (cells {checks._ids(cells)}): not a valid "
+        "volume mesh"), source, key)
+    del keys
+    _raise_cells(comm, folded, lambda cells: (
+        f"{cells.size} cells overlap a neighbour (inverted or folded over a shared facet): "
+        f"cells {checks._ids(cells)}"), source, key)
+    if not graph:
+        return None
+    pairs = owner[order[counts[group] == 2]].reshape(-1, 2)
+    del order, group, counts, owner
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]   # (a collapsed cell seeing itself twice)
+    return _graph_rows(comm, block, pairs, cross)
+
+
+def _facet_keys(comm, block: CellBlock) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(every facet's sorted corners packed into as few int64 as fit, the same packing on
+    every rank; its cell; its direction), facet-major."""
     nv = NUM_VERTICES[CELL_INFO[block.cell_type][1]]
     local = FACETS[block.cell_type]
     ncells = block.cells.shape[0]
@@ -121,42 +154,67 @@ def facet_groups(comm, block: CellBlock, source: str | None, key: str | None,
     forward = checks.facet_direction(nodes)
     keys = _sorted_vertex_keys(nodes, CELL_INFO[block.cell_type][1])
     del nodes   # (the arrays of every facet are the peak of the mesh stage: each goes early)
-    if size > 1:   # every copy of a facet to one rank: the one its smallest corner names
-        # as few int64 as the ids allow (the corners packed, the direction in the owner's
-        # lowest bit): the rows that travel are 2 or 3 numbers instead of nv + 2
-        packed = _packed(keys, comm.allreduce(int(keys.max(initial=0))) + 1)
-        rows = np.column_stack([packed, owner * 2 + forward])
-        dest = keys[:, 0] % size if keys.size else np.zeros(0, np.int64)
-        del packed, keys, owner, forward
-        got, _ = exchange(comm, rows, dest)
-        del rows, dest
-        keys, owner, forward = got[:, :-1], got[:, -1] >> 1, got[:, -1] & 1
-    group, counts = _row_groups(keys)
-    many = owner[counts[group] > 2] if group.size else np.zeros(0, np.int64)
-    _raise_cells(comm, many, lambda cells: (
-        f"a facet is shared by more than two cells (cells {checks._ids(cells)}): not a valid "
-        "volume mesh"), source, key)
-    fwd = np.bincount(group, weights=forward, minlength=counts.size)
-    folded = owner[(counts[group] == 2) & (fwd[group] != 1)] if group.size else many
-    _raise_cells(comm, folded, lambda cells: (
-        f"{cells.size} cells overlap a neighbour (inverted or folded over a shared facet): "
-        f"cells {checks._ids(cells)}"), source, key)
-    if not graph:
-        return None
-    del keys, forward
-    shared = np.flatnonzero(counts[group] == 2) if group.size else np.zeros(0, np.int64)
-    pairs = owner[shared[np.argsort(group[shared], kind="stable")]].reshape(-1, 2)
-    pairs = pairs[pairs[:, 0] != pairs[:, 1]]  # a collapsed cell seeing itself twice
-    both = np.concatenate([pairs, pairs[:, ::-1]])
+    packed = _packed(keys, comm.allreduce(int(keys.max(initial=0))) + 1)
+    return packed, owner, forward
+
+
+def _folded_here(order, group, counts, owner, forward) -> np.ndarray:
+    """The cells of this block's facets of exactly two copies here that run through them the
+    same way (folded over each other)."""
+    two = order[counts[group] == 2]
+    fwd = forward[two].reshape(-1, 2).sum(axis=1)
+    return owner[two].reshape(-1, 2)[fwd != 1].ravel()
+
+
+def _match_across(comm, keys, order, group, counts, owner, forward):
+    """One row per facet key of this block to the rank the key names: (key, cell * 2 +
+    direction) for a facet single here, (key, -copies) for the others. There: the keys of
+    more than two copies in all (``bad``, every rank's), and the pairs of two singles — cell
+    pairs across blocks — and their folded cells."""
+    first = order[np.r_[0, np.cumsum(counts)[:-1]]] if counts.size else order
+    single = counts == 1
+    rows = np.column_stack([keys[first], np.where(single, owner[first] * 2 + forward[first],
+                                                  -counts)])
+    del first
+    got, _ = exchange(comm, rows, rows[:, 0] % comm.size)
+    del rows
+    o, g, c = sorted_row_groups(got[:, :-1])
+    last = got[o, -1]
+    copies = np.bincount(g, weights=np.where(last >= 0, 1, -last), minlength=c.size)
+    bad = got[o[copies[g] > 2], :-1]
+    two = (c[g] == 2) & (copies[g] == 2)
+    cells = (last[two] >> 1).reshape(-1, 2)
+    fwd = (last[two] & 1).reshape(-1, 2).sum(axis=1)
+    bad = np.concatenate(comm.allgather(bad)) if comm.allreduce(bad.shape[0]) else bad
+    return cells, cells[fwd != 1].ravel(), bad
+
+
+def _owners_of_keys(keys, owner, bad) -> np.ndarray:
+    """The cells of this block whose facet's key is one of ``bad`` (every rank's alike)."""
+    if bad.shape[0] == 0:
+        return np.zeros(0, np.int64)
+    g, _ = _row_groups(np.concatenate([keys, bad]))
+    hit = np.zeros(g.max() + 1, dtype=bool)
+    hit[g[keys.shape[0]:]] = True
+    return owner[hit[g[:keys.shape[0]]]]
+
+
+def _graph_rows(comm, block: CellBlock, pairs, cross) -> tuple[np.ndarray, np.ndarray]:
+    """This block's CSR rows from the pairs found here and the pairs across blocks (sent to
+    both cells' blocks), sorted, without repeats (two cells sharing two facets, which only a
+    folded mesh has)."""
+    size = comm.size
     starts = block_starts(block.num_cells, size)
-    back = exchange(comm, both, np.searchsorted(starts, both[:, 0], side="right") - 1)[0] \
-        if size > 1 else both
-    # one key per (row, neighbour), sorted, no repeats (two cells sharing two facets, which
-    # only a folded mesh has)
+    rows = [pairs, pairs[:, ::-1]]
+    if size > 1:   # each pair across blocks to both cells' blocks, that cell first
+        both = np.concatenate([cross, cross[:, ::-1]])
+        rows.append(exchange(comm, both, np.searchsorted(starts, both[:, 0], side="right")
+                             - 1)[0])
+    rows = np.concatenate(rows)
     n = max(block.num_cells, 1)
-    key = np.unique((back[:, 0] - block.start) * n + back[:, 1])
+    key = np.unique((rows[:, 0] - block.start) * n + rows[:, 1])
     row, indices = key // n, key % n
-    indptr = np.concatenate([[0], np.cumsum(np.bincount(row, minlength=ncells))])
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(row, minlength=block.cells.shape[0]))])
     return indptr.astype(np.int64), indices.astype(np.int64)
 
 

@@ -239,10 +239,14 @@ class GridSlices:
             return corners
         return np.take_along_axis(corners, split[sub], axis=1)
 
+    def _side_axis(self, name: str) -> tuple[int, bool]:
+        """(the axis across the side ``name``, whether it is at that axis's last node)."""
+        axis, last = divmod(_SIDES[self.dim].index(name), 2)
+        return axis, bool(last)
+
     def _side(self, name: str, ids: np.ndarray) -> np.ndarray:
         """Which node ids lie on the side ``name`` (its axis at its first or last node)."""
-        k = _SIDES[self.dim].index(name)
-        axis, last = divmod(k, 2)
+        axis, last = self._side_axis(name)
         i = self._node_index(ids)[axis]
         return i == (self.n[axis] if last else 0)
 
@@ -259,7 +263,7 @@ class GridSlices:
         cells, and their places in the whole group (by cell, then local facet: the order of
         ``topology.facets_from_nodes``). Every facet with its nodes on a side is a boundary
         facet: the side is a plane of the box's boundary."""
-        axis, last = divmod(_SIDES[self.dim].index(name), 2)
+        axis, last = self._side_axis(name)
         ids = np.arange(self.num_cells * rank // size, self.num_cells * (rank + 1) // size,
                         dtype=np.int64)
         # only the cells of the layer along the side can have a facet on it
@@ -294,6 +298,49 @@ def _flat(index, sizes) -> np.ndarray:
         out = out + np.asarray(i, dtype=np.int64) * stride
         stride *= size
     return out
+
+
+class PlateSlices(GridSlices):
+    """``plate_with_hole``'s mesh as a slice source: the (radial, angular) grid of a
+    rectangle, its nodes mapped onto the plate node by node (``points``), its sides the
+    hole (k = 0), the symmetry lines (j = 0: bottom, j = n_angular: left) and the outer
+    edges (k = n_radial, split at the patches' seam j = n_angular // 2: right, top)."""
+
+    SIDE_AXES = {"hole": (0, False), "bottom": (1, False), "left": (1, True), "right": (0, True),
+              "top": (0, True)}
+
+    def __init__(self, width: float, height: float, radius: float, t: np.ndarray,
+                 n_angular: int, cell: str):
+        super().__init__([t, np.arange(n_angular + 1, dtype=float)], cell)
+        self.node_groups = self.facet_groups = ("hole", "left", "bottom", "right", "top")
+        self.seam = n_angular // 2                     # the lower patch's last column
+        jj = np.arange(n_angular + 1)
+        lower = jj <= self.seam
+        s = np.where(lower, jj / self.seam, (jj - self.seam) / (n_angular - self.seam))
+        theta = np.where(lower, s, 1.0 + s) * (np.pi / 4)
+        self.inner = radius * np.column_stack([np.cos(theta), np.sin(theta)])
+        self.outer = np.where(lower[:, None],
+                              np.column_stack([np.full_like(s, width), s * height]),
+                              np.column_stack([(1.0 - s) * width, np.full_like(s, height)]))
+        # symmetry lines exactly on the axes (cos(pi/2) is not exactly 0)
+        self.inner[0, 1] = 0.0
+        self.inner[-1, 0] = 0.0
+
+    def points(self, start: int, stop: int) -> np.ndarray:
+        k, j = self._node_index(np.arange(start, stop, dtype=np.int64))
+        t = self.axes[0][k][:, None]
+        return self.inner[j] + t * (self.outer[j] - self.inner[j])
+
+    def _side_axis(self, name: str) -> tuple[int, bool]:
+        return self.SIDE_AXES[name]
+
+    def _side(self, name: str, ids: np.ndarray) -> np.ndarray:
+        k, j = self._node_index(ids)
+        on = {"hole": k == 0, "bottom": j == 0, "left": j == self.n[1]}.get(name)
+        if on is None:   # the outer edges, each up to the seam
+            edge = k == self.n[0]
+            on = edge & (j <= self.seam if name == "right" else j >= self.seam)
+        return on
 
 
 # --------------------------------------------------------------------------------------
@@ -334,49 +381,30 @@ def plate_with_hole(
 
     cell: "quad", "triangle" or "triangle6" (midside nodes on the hole lie on the circle).
     Facet and node groups: "hole", "left" (x = 0), "bottom" (y = 0), "right" (x = width),
-    "top" (y = height).
+    "top" (y = height). Nodes k + j*(n_radial+1) (k radial, j angular), quads k + j*n_radial
+    (triangles 2 per quad).
     """
-    _check_cell(cell, ("quad", "triangle", "triangle6"))
+    mesh = plate_slices(width, height, radius, n_radial, n_angular, cell, grading,
+                        quadratic=True).whole()
+    if cell == "triangle6":
+        hole = np.zeros(mesh.num_points, dtype=bool)
+        hole[mesh.node_groups["hole"]] = True
+        _project_midnodes_to_circle(mesh, hole, radius)
+    return mesh
+
+
+def plate_slices(width: float, height: float, radius: float, n_radial: int, n_angular: int,
+                 cell: str = "quad", grading: float = 4.0, quadratic: bool = False) -> PlateSlices:
+    """``plate_with_hole``'s mesh as a slice source (``quadratic``: triangle6 allowed, for
+    ``whole`` only)."""
+    _check_cell(cell, ("quad", "triangle", "triangle6") if quadratic else ("quad", "triangle"))
     _check_counts(n_radial=n_radial, n_angular=n_angular)
     n_radial, n_angular = int(n_radial), int(n_angular)
     if n_angular < 2:
         raise ValueError("n_angular must be at least 2 (one element per patch)")
     if not 0 < radius < min(width, height):
         raise ValueError("radius must be positive and smaller than width and height")
-
-    na = n_angular // 2  # lower patch (right edge)
-    nb = n_angular - na  # upper patch (top edge)
-    jj = np.arange(n_angular + 1)
-    lower = jj <= na
-    s = np.where(lower, jj / na, (jj - na) / nb)  # patch parameter along the arc
-    theta = np.where(lower, s, 1.0 + s) * (np.pi / 4)
-    inner = radius * np.column_stack([np.cos(theta), np.sin(theta)])
-    outer = np.where(
-        lower[:, None],
-        np.column_stack([np.full_like(s, width), s * height]),
-        np.column_stack([(1.0 - s) * width, np.full_like(s, height)]),
-    )
-    # symmetry lines exactly on the axes (cos(pi/2) is not exactly 0)
-    inner[0, 1] = 0.0
-    inner[-1, 0] = 0.0
-
-    t = _graded(n_radial, grading)
-    # node index k + j*(n_radial+1): k radial (fastest), j angular; (radial, angular) is
-    # a right-handed frame, so the grid quads are counter-clockwise.
-    pts = inner[:, None, :] + t[None, :, None] * (outer - inner)[:, None, :]
-    points = pts.reshape(-1, 2)
-    k, j = (a.ravel() for a in np.meshgrid(np.arange(n_radial + 1), jj, indexing="xy"))
-    masks = {
-        "hole": k == 0,
-        "bottom": j == 0,
-        "left": j == n_angular,
-        "right": (k == n_radial) & lower[j],
-        "top": (k == n_radial) & (j >= na),
-    }
-    mesh = _finish_2d(points, _grid_quads(n_radial, n_angular), cell, masks)
-    if cell == "triangle6":
-        _project_midnodes_to_circle(mesh, masks["hole"], radius)
-    return mesh
+    return PlateSlices(width, height, radius, _graded(n_radial, grading), n_angular, cell)
 
 
 def _project_midnodes_to_circle(mesh: Mesh, hole: np.ndarray, radius: float) -> None:
@@ -615,7 +643,8 @@ GENERATOR_GROUPS: dict[str, tuple[str, ...]] = {
 }
 
 # the generators that build any slice of their mesh (``mesh.slices``): linear cells
-SLICED: dict[str, Callable[..., GridSlices]] = {"rectangle": rectangle_slices, "box": box_slices}
+SLICED: dict[str, Callable[..., GridSlices]] = {"rectangle": rectangle_slices, "box": box_slices,
+                                                "plate_with_hole": plate_slices}
 
 GENERATORS: dict[str, Callable[..., Mesh]] = {
     "rectangle": rectangle,

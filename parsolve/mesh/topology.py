@@ -77,9 +77,18 @@ def _row_groups(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     second one when they do not: a sort of one key (or a lexsort of two) is much faster than
     a lexsort of every column or ``np.unique(axis=0)``. Only the keys' order matters, not the
     order of equal rows, so the sort need not be stable."""
+    order, gid_sorted, counts = sorted_row_groups(keys)
+    inv = np.empty(keys.shape[0], dtype=np.int64)
+    inv[order] = gid_sorted
+    return inv, counts
+
+
+def sorted_row_groups(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``_row_groups`` in sorted order: (the order that sorts the rows, the group of each
+    sorted row, the group counts): the rows of a group are consecutive in the order."""
     n = keys.shape[0]
     if n == 0:
-        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+        return (np.zeros(0, dtype=np.int64),) * 3
     base = int(keys.max()) + 1
     width = keys.shape[1]
     fit = 1                                      # columns per int64
@@ -95,9 +104,7 @@ def _row_groups(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         sp = packed[order]
         new[1:] |= sp[1:] != sp[:-1]
     gid_sorted = np.cumsum(new) - 1
-    inv = np.empty(n, dtype=np.int64)
-    inv[order] = gid_sorted
-    return inv, np.bincount(gid_sorted)
+    return order, gid_sorted, np.bincount(gid_sorted)
 
 
 def _pack(keys: np.ndarray, columns, base: int) -> np.ndarray:
