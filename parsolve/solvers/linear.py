@@ -107,19 +107,6 @@ def preset_options(preset: str, symmetric: bool, has_multipliers: bool,
     }
 
 
-def parallel_defaults(ranks: int, settings: dict[str, str]) -> dict[str, str]:
-    """``settings`` with the AMG's Galerkin products P^T A P done "all at once" on more than
-    one rank (unless given): PETSc's default for a distributed matrix keeps A P and the
-    remote rows of every level for reuse, which made GAMG's set-up 2.3x larger per rank at 2
-    ranks than the whole set-up at 1 (3D elasticity, 234k DOFs: +156 MiB per rank against
-    +68 MiB; all at once: +45 MiB; scripts/results/bench_relations_gamg.md). One rank has no
-    such option (its sequential product keeps no such copies)."""
-    amg = "gamg" in (settings.get("pc_type"), settings.get("fieldsplit_q_pc_type"))
-    if ranks < 2 or not amg or "matptap_via" in settings:
-        return settings
-    return {**settings, "matptap_via": "allatonce"}
-
-
 REASONS = {getattr(PETSc.KSP.ConvergedReason, name): name.lower().replace("_", " ")
            for name in dir(PETSc.KSP.ConvergedReason) if name.isupper()}
 
@@ -164,8 +151,7 @@ class LinearSolver:
         whenever the operator's values change; γ from the option ``augmented_gamma`` under the
         prefix): the KSP solves its ``operator`` with its ``pmat`` and right-hand sides through
         its ``transform``; else the operator itself."""
-        self.comm, self.prefix = comm, prefix
-        self.settings = parallel_defaults(comm.size, settings)
+        self.comm, self.prefix, self.settings = comm, prefix, settings
         self.ksp = PETSc.KSP().create(comm)
         self.ksp.setOptionsPrefix(prefix)
         self.is_q, self.is_l = is_q, is_l

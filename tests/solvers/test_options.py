@@ -143,15 +143,3 @@ def test_product_options_reach_the_amg_unprefixed():
     assert "-ptaptest2_matptap_via" not in opt.unused_options(
         "ptaptest2_", {**settings, "matptap_via": good})
 
-
-def test_parallel_defaults_take_allatonce_products_on_several_ranks():
-    from parsolve.solvers.linear import parallel_defaults
-
-    saddle, plain = preset_options("iterative", True, True), preset_options("iterative", True, False)
-    assert parallel_defaults(1, saddle) == saddle
-    for settings in (saddle, plain):
-        assert parallel_defaults(2, settings) == {**settings, "matptap_via": "allatonce"}
-    given = {**plain, "matptap_via": "scalable"}
-    assert parallel_defaults(3, given) == given
-    direct = preset_options("direct", True, True)
-    assert parallel_defaults(2, direct) == direct
