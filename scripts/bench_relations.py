@@ -109,6 +109,16 @@ def child(scene_path: str, preset: str, out: str, options: str) -> None:
         return its
 
     linear.LinearSolver.solve = counted
+    setup = {"mib": 0.0, "s": 0.0}   # the largest set-up's resident memory added, all set-ups' time
+    prepare = linear.LinearSolver._prepare
+
+    def measured(self):
+        rss, t0 = bh.proc_memory()["rss"], time.perf_counter()
+        prepare(self)
+        setup["s"] += time.perf_counter() - t0
+        setup["mib"] = max(setup["mib"], (bh.proc_memory()["rss"] - rss) / bh.MiB)
+
+    linear.LinearSolver._prepare = measured
     scene = load_scene(Path(scene_path))
     scene.solver.preset = preset
     t0 = time.perf_counter()
@@ -122,13 +132,15 @@ def child(scene_path: str, preset: str, out: str, options: str) -> None:
     # while another waits in an mpi4py call (a 2-rank child hung so). Every rank prints its
     # own peak memory; rank 0 the rest; the parent sums.
     if MPI.COMM_WORLD.rank:
-        print(json.dumps(dict(rank=MPI.COMM_WORLD.rank, hwm=bh.proc_memory()["hwm"])))
+        print(json.dumps(dict(rank=MPI.COMM_WORLD.rank, hwm=bh.proc_memory()["hwm"],
+                              setup=setup)))
         return
     with h5py.File(out, "r") as f:
         iterations = int(f["steps/iterations"][()].sum())
         dofs = int(f.attrs.get("dofs", dofs))
     print(json.dumps(dict(status=status, dofs=dofs, iterations=iterations, krylov=krylov,
-                          wall=wall, hwm=bh.proc_memory()["hwm"], ranks=MPI.COMM_WORLD.size)))
+                          wall=wall, hwm=bh.proc_memory()["hwm"], ranks=MPI.COMM_WORLD.size,
+                          setup=setup)))
 
 
 def json_objects(text: str) -> list[dict]:
@@ -157,7 +169,9 @@ def one_run(folder: Path, name: str, text: str, preset: str, options: dict | Non
     if proc.returncode or not main_line:
         return dict(status=f"failed: {(proc.stderr or proc.stdout).strip()[-300:]}", out=str(out))
     hwm = [ln["hwm"] for ln in lines]
-    return {**main_line[-1], "hwm": sum(hwm), "hwm_rank": max(hwm), "out": str(out)}
+    setup = [ln.get("setup", {}).get("mib", 0.0) for ln in lines]
+    return {**main_line[-1], "hwm": sum(hwm), "hwm_rank": max(hwm), "setup_rank": max(setup),
+            "setup_sum": sum(setup), "out": str(out)}
 
 
 def same_answers(a: str, b: str) -> str:
@@ -265,6 +279,47 @@ def scale_study(folder: Path, factors: list[int], ranks: int,
     return rows
 
 
+GAMG_HEAD = ["ranks", "PtAP (-matptap_via)", "DOFs", "CG its", "set-up s",
+             "set-up MiB per rank", "set-up MiB (all ranks)", "peak MiB per rank",
+             "peak MiB (all ranks)", "peak / 1 rank's"]
+
+
+def gamg_study(folder: Path, factor: int) -> list[list[str]]:
+    """GAMG's set-up on the clamped box (plain elasticity, CG + GAMG, one step) on 1 and 2
+    ranks, with PETSc's three distributed Galerkin products P^T A P: the resident memory the
+    set-up adds per rank, its time, the run's peak against the 1-rank run's."""
+    runs = [(1, "")] + [(2, via) for via in ("", "scalable", "allatonce")]
+    rows, base = [], None
+    for ranks, via in runs:
+        r = one_run(folder, f"gamg_{factor}", elastic_scene(factor, 1), "iterative",
+                    {"matptap_via": via} if via else {}, ranks=ranks)
+        name = via or ("default (nonscalable)" if ranks > 1 else "sequential")
+        if r.get("status") != "complete":
+            rows.append([str(ranks), name, r["status"][:60], *["-"] * 7])
+            continue
+        base = base or r
+        k = r["krylov"] or [0]
+        rows.append([str(ranks), name, f"{r['dofs']:,}", str(max(k)),
+                     f"{r['setup']['s']:.1f}", f"{r['setup_rank']:.0f}",
+                     f"{r['setup_sum']:.0f}", bh.mib(r["hwm_rank"]), bh.mib(r["hwm"]),
+                     f"{r['hwm'] / base['hwm']:.2f}×"])
+        print(bh.text_table(GAMG_HEAD, rows[-1:]), flush=True)
+    return rows
+
+
+def publish_gamg(rows: list, factor: int) -> None:
+    machine = bh.machine_info()
+    text = "\n".join([
+        "# GAMG's set-up on 1 and 2 ranks", "",
+        f"{machine['date']}, {machine['cpu']}, {machine['cpus']} CPUs, the machine shared "
+        f"(times noisy). The friction box's mesh refined {factor}× per direction, its base "
+        "clamped (plain elasticity, CG + GAMG, one step); set-up memory: the resident memory "
+        "PCSetUp added (per rank: the largest); peak: VmHWM of the run. `-matptap_via` reaches "
+        "GAMG's Galerkin products under no options prefix (`solvers.options.UNPREFIXED`).", "",
+        bh.md_table(GAMG_HEAD, rows, first="---"), ""])
+    bh.publish("bench_relations_gamg.md", text)
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     bh.add_smoke(p)
@@ -277,7 +332,13 @@ def main() -> None:
     p.add_argument("--steps", type=int, default=2, help="load steps of the scale runs")
     p.add_argument("--cases", type=str, default="friction,ironing,mortar",
                    help="the series to run (comma-separated)")
+    p.add_argument("--gamg", type=int, default=0,
+                   help="the GAMG set-up table only: the clamped box refined f× on 1 and 2 "
+                        "ranks, PETSc's PtAP algorithms (bench_relations_gamg.md)")
     args = p.parse_args()
+    if args.gamg:
+        publish_gamg(gamg_study(bh.scratch("relations_gamg"), args.gamg), args.gamg)
+        return
     if args.scale or bh.SMOKE:
         factors = [1] if bh.SMOKE else [int(f) for f in args.scale.split(",")]
         rows = scale_study(bh.scratch("relations_scale"), factors, args.ranks, args.steps)
