@@ -31,9 +31,9 @@ from parsolve.solvers.augmented import GAMMA
 #: x and y do not couple, took 250 Krylov iterations: localization_bar). A threshold of 0.05
 #: coarsened the 3D friction box 4x per level instead of 26x, its first coarse operator as
 #: large as the fine one: 3.6x the flops per Newton iteration at 16.9k DOFs and a solve of 205
-#: iterations (scripts/results/bench_relations.md, the threshold table). PETSc's ML
-#: (-fieldsplit_q_pc_type ml, where built in) took ~15 % fewer on the 3D friction box at a
-#: threshold of 0.05 but crashed inside ML's aggregation after many solvers in one process: not the default.
+#: iterations (docs/performance.md, the threshold table). PETSc's ML (-fieldsplit_q_pc_type
+#: ml, where built in) took ~15 % fewer on the 3D friction box at a threshold of 0.05 but
+#: crashed inside ML's aggregation after many solvers in one process: not the default.
 AMG = "gamg"
 
 
