@@ -43,16 +43,16 @@ CHILD = "--child"
 
 # ------------------------------------------------------------------------------ scenes
 
-def friction_scene(factor: int) -> str:
+def friction_scene(factor: int, steps: int = 2) -> str:
     scene = _shipped("contact_friction_3d.toml")
     for key in ("nx", "ny", "nz"):
         scene["mesh"][key] *= factor
-    scene["steps"]["count"] = 2
-    scene["steps"]["end"] = 0.25   # the first two steps of the shipped eight
+    scene["steps"]["count"] = steps
+    scene["steps"]["end"] = 0.125 * steps   # the first steps of the shipped eight
     return _dumps(scene)
 
 
-def elastic_scene(factor: int) -> str:
+def elastic_scene(factor: int, steps: int = 2) -> str:
     """The friction box's mesh and load, plain elasticity: its base clamped instead of in
     contact (CG + GAMG on the stiffness alone: the reference of the scale runs)."""
     scene = _shipped("contact_friction_3d.toml")
@@ -61,8 +61,8 @@ def elastic_scene(factor: int) -> str:
     scene.pop("contact")
     scene["relations"] += [{"name": f"base_{c}", "type": "dirichlet", "region": "zmin",
                             "component": c} for c in "xyz"]
-    scene["steps"]["count"] = 2
-    scene["steps"]["end"] = 0.25
+    scene["steps"]["count"] = steps
+    scene["steps"]["end"] = 0.125 * steps
     return _dumps(scene)
 
 
@@ -109,6 +109,16 @@ def child(scene_path: str, preset: str, out: str, options: str) -> None:
         return its
 
     linear.LinearSolver.solve = counted
+    setup = {"mib": 0.0, "s": 0.0}   # the largest set-up's resident memory added, all set-ups' time
+    prepare = linear.LinearSolver._prepare
+
+    def measured(self):
+        rss, t0 = bh.proc_memory()["rss"], time.perf_counter()
+        prepare(self)
+        setup["s"] += time.perf_counter() - t0
+        setup["mib"] = max(setup["mib"], (bh.proc_memory()["rss"] - rss) / bh.MiB)
+
+    linear.LinearSolver._prepare = measured
     scene = load_scene(Path(scene_path))
     scene.solver.preset = preset
     t0 = time.perf_counter()
@@ -122,13 +132,15 @@ def child(scene_path: str, preset: str, out: str, options: str) -> None:
     # while another waits in an mpi4py call (a 2-rank child hung so). Every rank prints its
     # own peak memory; rank 0 the rest; the parent sums.
     if MPI.COMM_WORLD.rank:
-        print(json.dumps(dict(rank=MPI.COMM_WORLD.rank, hwm=bh.proc_memory()["hwm"])))
+        print(json.dumps(dict(rank=MPI.COMM_WORLD.rank, hwm=bh.proc_memory()["hwm"],
+                              setup=setup)))
         return
     with h5py.File(out, "r") as f:
         iterations = int(f["steps/iterations"][()].sum())
         dofs = int(f.attrs.get("dofs", dofs))
     print(json.dumps(dict(status=status, dofs=dofs, iterations=iterations, krylov=krylov,
-                          wall=wall, hwm=bh.proc_memory()["hwm"], ranks=MPI.COMM_WORLD.size)))
+                          wall=wall, hwm=bh.proc_memory()["hwm"], ranks=MPI.COMM_WORLD.size,
+                          setup=setup)))
 
 
 def json_objects(text: str) -> list[dict]:
@@ -156,8 +168,10 @@ def one_run(folder: Path, name: str, text: str, preset: str, options: dict | Non
     main_line = [ln for ln in lines if "status" in ln]
     if proc.returncode or not main_line:
         return dict(status=f"failed: {(proc.stderr or proc.stdout).strip()[-300:]}", out=str(out))
-    hwm = sum(ln["hwm"] for ln in lines)   # summed over the ranks
-    return {**main_line[-1], "hwm": hwm, "out": str(out)}
+    hwm = [ln["hwm"] for ln in lines]
+    setup = [ln.get("setup", {}).get("mib", 0.0) for ln in lines]
+    return {**main_line[-1], "hwm": sum(hwm), "hwm_rank": max(hwm), "setup_rank": max(setup),
+            "setup_sum": sum(setup), "out": str(out)}
 
 
 def same_answers(a: str, b: str) -> str:
@@ -231,22 +245,24 @@ def gamma_study(folder: Path) -> list[list[str]]:
 
 
 SCALE_HEAD = ["problem", "refinement", "DOFs", "ranks", "Newton its", "Krylov mean / max",
-              "s per Newton it", "peak MiB (all ranks)", "KB/DOF", "ratio to elasticity"]
+              "s per Newton it", "peak MiB per rank", "peak MiB (all ranks)", "KB/DOF",
+              "ratio to elasticity"]
 
 
-def scale_study(folder: Path, factors: list[int], ranks: int) -> list[list[str]]:
+def scale_study(folder: Path, factors: list[int], ranks: int,
+                steps: int = 2) -> list[list[str]]:
     """The friction box (iterative preset) against plain elasticity (CG + GAMG) on the same
     mesh and ranks: time per Newton iteration, peak memory summed over the ranks."""
     rows = []
     for f in factors:
-        runs = {"friction": one_run(folder, f"scale_friction_{f}", friction_scene(f),
+        runs = {"friction": one_run(folder, f"scale_friction_{f}", friction_scene(f, steps),
                                     "iterative", ranks=ranks),
-                "elasticity": one_run(folder, f"scale_elastic_{f}", elastic_scene(f),
+                "elasticity": one_run(folder, f"scale_elastic_{f}", elastic_scene(f, steps),
                                       "iterative", ranks=ranks)}
         base = runs["elasticity"]
         for name, r in runs.items():
             if r.get("status") != "complete":
-                rows.append([name, f"{f}³×", "-", str(ranks), r["status"][:60], *["-"] * 5])
+                rows.append([name, f"{f}³×", "-", str(ranks), r["status"][:60], *["-"] * 6])
                 continue
             k = r["krylov"] or [0]
             per_it = r["wall"] / max(r["iterations"], 1)
@@ -255,10 +271,53 @@ def scale_study(folder: Path, factors: list[int], ranks: int) -> list[list[str]]
                 ratio = (f"time {per_it / (base['wall'] / max(base['iterations'], 1)):.2f}×, "
                          f"memory {r['hwm'] / base['hwm']:.2f}×")
             rows.append([name, f"{f}³×", f"{r['dofs']:,}", str(ranks), str(r["iterations"]),
-                         f"{sum(k) / len(k):.1f} / {max(k)}", f"{per_it:.2f}", bh.mib(r["hwm"]),
+                         f"{sum(k) / len(k):.1f} / {max(k)}", f"{per_it:.2f}",
+                         bh.mib(r.get("hwm_rank")), bh.mib(r["hwm"]),
                          f"{r['hwm'] / r['dofs'] / 1e3:.1f}", ratio])
         print(bh.text_table(SCALE_HEAD, rows[-2:]), flush=True)
+        publish_scale(rows, ranks, steps)   # after every size: a stopped run keeps its rows
     return rows
+
+
+GAMG_HEAD = ["ranks", "PtAP (-matptap_via)", "DOFs", "CG its", "set-up s",
+             "set-up MiB per rank", "set-up MiB (all ranks)", "peak MiB per rank",
+             "peak MiB (all ranks)", "peak / 1 rank's"]
+
+
+def gamg_study(folder: Path, factor: int) -> list[list[str]]:
+    """GAMG's set-up on the clamped box (plain elasticity, CG + GAMG, one step) on 1 and 2
+    ranks, with PETSc's three distributed Galerkin products P^T A P: the resident memory the
+    set-up adds per rank, its time, the run's peak against the 1-rank run's."""
+    runs = [(1, "")] + [(2, via) for via in ("", "scalable", "allatonce")]
+    rows, base = [], None
+    for ranks, via in runs:
+        r = one_run(folder, f"gamg_{factor}", elastic_scene(factor, 1), "iterative",
+                    {"matptap_via": via} if via else {}, ranks=ranks)
+        name = via or ("default (nonscalable)" if ranks > 1 else "sequential")
+        if r.get("status") != "complete":
+            rows.append([str(ranks), name, r["status"][:60], *["-"] * 7])
+            continue
+        base = base or r
+        k = r["krylov"] or [0]
+        rows.append([str(ranks), name, f"{r['dofs']:,}", str(max(k)),
+                     f"{r['setup']['s']:.1f}", f"{r['setup_rank']:.0f}",
+                     f"{r['setup_sum']:.0f}", bh.mib(r["hwm_rank"]), bh.mib(r["hwm"]),
+                     f"{r['hwm'] / base['hwm']:.2f}×"])
+        print(bh.text_table(GAMG_HEAD, rows[-1:]), flush=True)
+    return rows
+
+
+def publish_gamg(rows: list, factor: int) -> None:
+    machine = bh.machine_info()
+    text = "\n".join([
+        "# GAMG's set-up on 1 and 2 ranks", "",
+        f"{machine['date']}, {machine['cpu']}, {machine['cpus']} CPUs, the machine shared "
+        f"(times noisy). The friction box's mesh refined {factor}× per direction, its base "
+        "clamped (plain elasticity, CG + GAMG, one step); set-up memory: the resident memory "
+        "PCSetUp added (per rank: the largest); peak: VmHWM of the run. `-matptap_via` reaches "
+        "GAMG's Galerkin products under no options prefix (`solvers.options.UNPREFIXED`).", "",
+        bh.md_table(GAMG_HEAD, rows, first="---"), ""])
+    bh.publish("bench_relations_gamg.md", text)
 
 
 def main() -> None:
@@ -270,13 +329,19 @@ def main() -> None:
                    help="the scale runs only: friction box refinements f (comma-separated) on "
                         "--ranks ranks, against plain elasticity with GAMG (scale table)")
     p.add_argument("--ranks", type=int, default=2, help="ranks of the scale runs")
+    p.add_argument("--steps", type=int, default=2, help="load steps of the scale runs")
     p.add_argument("--cases", type=str, default="friction,ironing,mortar",
                    help="the series to run (comma-separated)")
+    p.add_argument("--gamg", type=int, default=0,
+                   help="the GAMG set-up table only: the clamped box refined f× on 1 and 2 "
+                        "ranks, PETSc's PtAP algorithms (bench_relations_gamg.md)")
     args = p.parse_args()
+    if args.gamg:
+        publish_gamg(gamg_study(bh.scratch("relations_gamg"), args.gamg), args.gamg)
+        return
     if args.scale or bh.SMOKE:
         factors = [1] if bh.SMOKE else [int(f) for f in args.scale.split(",")]
-        rows = scale_study(bh.scratch("relations_scale"), factors, args.ranks)
-        publish_scale(rows, args.ranks)
+        rows = scale_study(bh.scratch("relations_scale"), factors, args.ranks, args.steps)
         if args.scale:
             return
     folder = bh.scratch("relations")
@@ -307,13 +372,13 @@ def main() -> None:
     print(text)
 
 
-def publish_scale(rows: list, ranks: int) -> None:
+def publish_scale(rows: list, ranks: int, steps: int) -> None:
     machine = bh.machine_info()
     text = "\n".join([
         "# Relations at scale: the friction box against plain elasticity", "",
         f"{machine['date']}, {machine['cpu']}, {machine['cpus']} CPUs, {ranks} ranks, the "
         "machine shared (times noisy). The 3D friction box (`contact_friction_3d.toml`, its "
-        "first two steps) refined f× per direction on the iterative preset, against the same "
+        f"first {steps} step{'s' if steps > 1 else ''}) refined f× per direction on the iterative preset, against the same "
         "box with its base clamped (CG + GAMG); peak memory: VmHWM summed over the ranks.", "",
         bh.md_table(SCALE_HEAD, rows, first="---"), ""])
     bh.publish("bench_relations_scale.md", text)
@@ -328,7 +393,8 @@ def report(rows: list, results: list, machine: dict, load0, gamma_rows: list | N
              "noisy, iterations and memory are not).", "",
              "The iterative preset (GMRES, rtol 2.5e-14, on the augmented Lagrangian form "
              "T M x = T b, γ = 3 on the rows of one node, preconditioned by its Schur fieldsplit: "
-             "one GAMG V-cycle with four Chebyshev steps per level on K + γ/k Aₕᵀ Aₕ, Jacobi "
+             "one GAMG V-cycle (aggregation graph threshold 0) with four Chebyshev steps per level "
+             "on K + γ/k Aₕᵀ Aₕ, Jacobi "
              "on the sparse Schur approximation; `parsolve/solvers/augmented.py`) against "
              "MUMPS (the direct preset), each run in its own process (peak memory: VmHWM). "
              "Krylov iterations per linear solve of the whole run.", "",

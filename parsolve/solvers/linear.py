@@ -26,11 +26,14 @@ from parsolve.solvers import options as opt
 from parsolve.solvers.augmented import GAMMA
 
 
-#: The V-cycle of the iterative preset's q block. GAMG, its aggregation dropping connections
-#: below 5 % of the diagonal: without, 250 Krylov iterations on a slender bar of ν = 0 (no
-#: coupling between x and y: localization_bar), 28 with. PETSc's ML (-fieldsplit_q_pc_type ml,
-#: where built in) takes ~15 % fewer on the 3D friction box (scripts/results/bench_relations.md)
-#: but crashed inside ML's aggregation after many solvers in one process: not the default.
+#: The V-cycle of the iterative preset's q block. GAMG, its aggregation graph keeping every
+#: nonzero connection (threshold 0: -1 keeps zeros too, and on a slender bar of ν = 0, whose
+#: x and y do not couple, took 250 Krylov iterations: localization_bar). A threshold of 0.05
+#: coarsened the 3D friction box 4x per level instead of 26x, its first coarse operator as
+#: large as the fine one: 3.6x the flops per Newton iteration at 16.9k DOFs and a solve of 205
+#: iterations (docs/performance.md, the threshold table). PETSc's ML (-fieldsplit_q_pc_type
+#: ml, where built in) took ~15 % fewer on the 3D friction box at a threshold of 0.05 but
+#: crashed inside ML's aggregation after many solvers in one process: not the default.
 AMG = "gamg"
 
 
@@ -94,7 +97,7 @@ def preset_options(preset: str, symmetric: bool, has_multipliers: bool,
         "pc_fieldsplit_schur_precondition": "selfp",
         "fieldsplit_q_ksp_type": "preonly",
         "fieldsplit_q_pc_type": AMG,
-        "fieldsplit_q_pc_gamg_threshold": "0.05",
+        "fieldsplit_q_pc_gamg_threshold": "0.0",
         # four Chebyshev steps per level (PETSc's default: 2): 25 -> 20 Krylov iterations per
         # solve on the 3D friction box at 1x, fewer V-cycles for twice the smoothing
         "fieldsplit_q_mg_levels_ksp_max_it": "4",

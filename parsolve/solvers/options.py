@@ -57,12 +57,24 @@ GLOBAL_OPTIONS = ("options_left", "options_file", "options_monitor", "options_vi
                   "version", "fp_trap", "no_signal_handler", "start_in_debugger", "history")
 
 
+#: Options PETSc reads under no prefix whatever the solver's: the matrix products of an AMG's
+#: set-up (its coarse operators P^T A P carry no options prefix). Inserted as they are named.
+UNPREFIXED = ("matptap_via", "matmatmult_via", "mattransposematmult_via", "mat_product_clear")
+
+
+def _database_key(prefix: str, key: str) -> str:
+    if key in UNPREFIXED:
+        return key
+    return key if key.startswith(prefix) else prefix + key
+
+
 @contextmanager
 def inserted(prefix: str, options: dict[str, str], record: bool = True) -> Iterator[None]:
-    """Put ``options`` under ``prefix`` in PETSc's database, and take them out afterwards
-    (noting first, unless ``record`` is false, which of them some object used)."""
+    """Put ``options`` under ``prefix`` in PETSc's database (those of UNPREFIXED under no
+    prefix), and take them out afterwards (noting first, unless ``record`` is false, which of
+    them some object used, by their prefixed names)."""
     db = PETSc.Options()
-    keys = [prefix + k if not k.startswith(prefix) else k for k in options]
+    keys = [_database_key(prefix, k) for k in options]
     saved = {k: db.getString(k) for k in keys if db.hasName(k)}
     for k, v in zip(keys, options.values()):
         db.setValue(k, v)
@@ -70,7 +82,7 @@ def inserted(prefix: str, options: dict[str, str], record: bool = True) -> Itera
         yield
     finally:
         if record:
-            _USED.update(k for k in keys if _was_used(k))
+            _USED.update(prefix + k if k in UNPREFIXED else k for k in keys if _was_used(k))
         for k in keys:
             db.delValue(k)
         for k, v in saved.items():

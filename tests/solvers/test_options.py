@@ -86,3 +86,60 @@ def test_iterative_preset_takes_gmres_for_an_unsymmetric_operator():
         saddle = preset_options("iterative", symmetric, True)
         assert saddle["ksp_type"] == "gmres" and saddle["ksp_pc_side"] == "right"
         assert saddle["fieldsplit_q_ksp_type"] == "preonly"
+
+
+def _laplacian_ksp(comm, prefix: str):
+    """CG + GAMG on a 1D Laplacian of 400 rows per rank (coarse levels made by P^T A P)."""
+    from petsc4py import PETSc
+
+    n = 400
+    A = PETSc.Mat().createAIJ(((n, None), (n, None)), nnz=(3, 2), comm=comm)
+    lo, hi = A.getOwnershipRange()
+    N = A.getSize()[0]
+    for i in range(lo, hi):
+        A.setValue(i, i, 2.0)
+        for j in (i - 1, i + 1):
+            if 0 <= j < N:
+                A.setValue(i, j, -1.0)
+    A.assemble()
+    ksp = PETSc.KSP().create(comm)
+    ksp.setOptionsPrefix(prefix)
+    ksp.setOperators(A)
+    return ksp, A
+
+
+def test_product_options_reach_the_amg_unprefixed():
+    """-matptap_via is read by the AMG's Galerkin products under no prefix: inserted under a
+    solver's prefix it would be ignored. A bad value inserted so makes GAMG's set-up fail (so
+    PETSc read it); a good one solves, and is recorded as used under the prefixed name."""
+    from petsc4py import PETSc
+
+    comm = MPI.COMM_WORLD
+    settings = {"ksp_type": "cg", "pc_type": "gamg", "pc_gamg_coarse_eq_limit": "10",
+                "ksp_rtol": "1e-10", "ksp_norm_type": "unpreconditioned"}
+    db = PETSc.Options()
+    with opt.inserted("ptaptest_", {**settings, "matptap_via": "nosuch"}):
+        assert db.getString("matptap_via") == "nosuch" and not db.hasName("ptaptest_matptap_via")
+        ksp, A = _laplacian_ksp(comm, "ptaptest_")
+        ksp.setFromOptions()
+        with pytest.raises(PETSc.Error):
+            ksp.setUp()
+        ksp.destroy()
+        A.destroy()
+    assert not db.hasName("matptap_via")
+    good = "allatonce" if comm.size > 1 else "scalable"   # (no all-at-once on one rank)
+    with opt.inserted("ptaptest2_", {**settings, "matptap_via": good}):
+        ksp, A = _laplacian_ksp(comm, "ptaptest2_")
+        ksp.setFromOptions()
+        b, x = A.createVecs()
+        b.set(1.0)
+        ksp.solve(b, x)
+        r = b.duplicate()
+        A.mult(x, r)
+        r.axpy(-1.0, b)
+        assert ksp.getConvergedReason() > 0 and r.norm() <= 1e-9 * b.norm()
+        ksp.destroy()
+        A.destroy()
+    assert "-ptaptest2_matptap_via" not in opt.unused_options(
+        "ptaptest2_", {**settings, "matptap_via": good})
+
