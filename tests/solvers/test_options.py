@@ -143,3 +143,27 @@ def test_product_options_reach_the_amg_unprefixed():
     assert "-ptaptest2_matptap_via" not in opt.unused_options(
         "ptaptest2_", {**settings, "matptap_via": good})
 
+
+def test_a_distributed_product_option_on_one_rank_is_left_out():
+    """-matptap_via allatonce (the memory-saving choice at several ranks) names no algorithm
+    of one process's product: there it is left out, the solve goes on, and it is reported
+    unused; at several ranks it is used."""
+    comm = MPI.COMM_WORLD
+    settings = {"ksp_type": "cg", "pc_type": "gamg", "pc_gamg_coarse_eq_limit": "10",
+                "ksp_rtol": "1e-10", "ksp_norm_type": "unpreconditioned",
+                "matptap_via": "allatonce"}
+    with opt.inserted("ptaptest3_", settings):
+        ksp, A = _laplacian_ksp(comm, "ptaptest3_")
+        ksp.setFromOptions()
+        b, x = A.createVecs()
+        b.set(1.0)
+        ksp.solve(b, x)
+        r = b.duplicate()
+        A.mult(x, r)
+        r.axpy(-1.0, b)
+        assert ksp.getConvergedReason() > 0 and r.norm() <= 1e-9 * b.norm()
+        ksp.destroy()
+        A.destroy()
+    unused = "-ptaptest3_matptap_via" in opt.unused_options("ptaptest3_", settings)
+    assert unused == (comm.size == 1)
+
