@@ -122,6 +122,14 @@ def saddle_of_input_dofs(comm, system) -> np.ndarray:
     return out
 
 
+def stiffness_block(comm, system) -> np.ndarray:
+    """The assembled K block of a system in input DOF numbering, whole on every rank."""
+    rows = system.assemble().convert("dense").getDenseArray().copy()
+    whole = np.concatenate(comm.allgather(rows), axis=0)
+    iq = saddle_of_input_dofs(comm, system)
+    return whole[np.ix_(iq, iq)]
+
+
 def whole_points(comm, mesh) -> np.ndarray:
     """The whole mesh's points in input order, from every rank's owned ones."""
     from parsolve.mesh.regions import allgather_rows

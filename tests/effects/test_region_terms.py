@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from conftest import saddle_of_input_dofs
+from conftest import stiffness_block
 from helpers.saddle import SCENE
 
 from parsolve.effects.base import Effect
@@ -60,15 +60,6 @@ def brute_foundation(model) -> np.ndarray:
     return out
 
 
-def stiffness_block(system: SaddleSystem) -> np.ndarray:
-    """The assembled K block in input numbering, whole on every rank."""
-    mat = system.assemble()
-    rows = mat.convert("dense").getDenseArray().copy()
-    S = np.concatenate(COMM.allgather(rows), axis=0)
-    iq = saddle_of_input_dofs(COMM, system)
-    return S[np.ix_(iq, iq)]
-
-
 @pytest.mark.parametrize("cell", ["quad", "triangle"])
 def test_a_cell_term_on_a_region(cell):
     text = SCENE.format(cell=cell, preset="direct", eliminate="false")
@@ -76,11 +67,11 @@ def test_a_cell_term_on_a_region(cell):
     def model():
         return build_model(parse_scene(tomllib.loads(text), "t.toml", text), COMM)
 
-    bare = stiffness_block(SaddleSystem(COMM, model()))
+    bare = stiffness_block(COMM, SaddleSystem(COMM, model()))
     with_bed = model()
     with_bed.effects.append(Foundation(with_bed.mesh))
     system = SaddleSystem(COMM, with_bed)
-    got = stiffness_block(system)
+    got = stiffness_block(COMM, system)
     whole = build_model(parse_scene(tomllib.loads(text), "t.toml", text))
     expected = brute_foundation(whole)
     assert np.abs(expected).max() > 0 and np.count_nonzero(expected.any(axis=1)) < len(expected)

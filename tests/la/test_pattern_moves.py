@@ -11,7 +11,7 @@ import tomllib
 import numpy as np
 from mpi4py import MPI
 
-from conftest import saddle_of_input_dofs
+from conftest import stiffness_block
 from helpers.saddle import SCENE
 
 from parsolve.effects.base import Effect
@@ -75,20 +75,12 @@ def brute_ties(mesh, nodes: np.ndarray, npoints: int) -> np.ndarray:
     return out
 
 
-def stiffness_block(system: SaddleSystem) -> np.ndarray:
-    mat = system.assemble()
-    rows = mat.convert("dense").getDenseArray().copy()
-    S = np.concatenate(COMM.allgather(rows), axis=0)
-    iq = saddle_of_input_dofs(COMM, system)
-    return S[np.ix_(iq, iq)]
-
-
 def model():
     return build_model(parse_scene(tomllib.loads(TEXT), "t.toml", TEXT), COMM)
 
 
 def test_a_term_that_moves_gets_a_new_preallocated_pattern():
-    bare = stiffness_block(SaddleSystem(COMM, model()))
+    bare = stiffness_block(COMM, SaddleSystem(COMM, model()))
     m = model()
     effect = Ties(m.mesh)
     m.effects.append(effect)
@@ -96,14 +88,15 @@ def test_a_term_that_moves_gets_a_new_preallocated_pattern():
     npoints = m.mesh.num_global_points
     first = brute_ties(m.mesh, effect.term.nodes, npoints)
     assert np.abs(first).max() == K   # every rank with nodes ties two
-    np.testing.assert_allclose(stiffness_block(system) - bare, first, atol=1e-12 * np.abs(bare).max())
+    np.testing.assert_allclose(stiffness_block(COMM, system) - bare, first,
+                               atol=1e-12 * np.abs(bare).max())
 
     pattern, mat = system.pattern, system.op.petsc_matrix()
     effect.term.nodes = ties(m.mesh, 1)             # the tie moves to another far node
     system.restructure()
     assert system.pattern is not pattern and system.op.petsc_matrix() is not mat
     moved = brute_ties(m.mesh, effect.term.nodes, npoints)
-    got = stiffness_block(system)
+    got = stiffness_block(COMM, system)
     np.testing.assert_allclose(got - bare, moved, atol=1e-12 * np.abs(bare).max())
     gone = (first != 0) & (moved == 0) & (bare == 0)   # where the tie was: nothing left
     assert gone.any() and np.all(got[gone] == 0.0)
@@ -117,7 +110,7 @@ def test_a_term_that_moves_gets_a_new_preallocated_pattern():
     assert system.pattern.nnzb == start.pattern.nnzb
     np.testing.assert_array_equal(system.pattern.ucol, start.pattern.ucol)
     np.testing.assert_array_equal(system.pattern.nb, start.pattern.nb)
-    np.testing.assert_allclose(got, stiffness_block(start), rtol=0, atol=0)
+    np.testing.assert_allclose(got, stiffness_block(COMM, start), rtol=0, atol=0)
 
     # nothing moved: the pattern stays
     pattern = system.pattern

@@ -69,6 +69,15 @@ def _loaded_strains(tmp, force: float) -> np.ndarray:
     return sigma / E
 
 
+def _unmoved(status: str, head: str) -> tuple[float, float]:
+    """(how far a unit of the load moves the body, how much it changes the controlled
+    quantity) from an "is not moved by its load" status starting with ``head``."""
+    assert status.startswith(head), status
+    m = re.match(re.escape(head) + r"(\S+) and changes the controlled quantity by (\S+) "
+                 r"\(round-off\)", status)
+    return float(m.group(1)), float(m.group(2))
+
+
 def test_control_its_load_does_not_move(shared_tmp):
     code, status, f = _run(shared_tmp, _scene([_control(component="xx", value=0.02)]))
     with f:
@@ -76,10 +85,7 @@ def test_control_its_load_does_not_move(shared_tmp):
     assert code == 3 and steps == 0
     head = ("failed: control 'drive' is not moved by its load 'pull' at the step's start (t = 0, "
             "the contact closed and stuck): a unit of 'pull' displaces the body by up to ")
-    assert status.startswith(head), status
-    largest, rate = (float(x) for x in re.match(
-        re.escape(head) + r"(\S+) and changes the controlled quantity by (\S+) \(round-off\)",
-        status).groups())
+    largest, rate = _unmoved(status, head)
     assert abs(rate) < 1e-12 * largest and largest > 1e-3
     assert "control a quantity that 'pull' moves" in status
     assert "likely cause" not in status
@@ -171,10 +177,7 @@ def test_softening_control_its_load_does_not_move(shared_tmp):
     assert code == 3 and steps == 0
     head = ("failed: control 'drive' is not moved by its load 'pull' at the step's start "
             "(t = 0): a unit of 'pull' displaces the body by up to ")
-    assert status.startswith(head), status
-    largest, rate = (float(x) for x in re.match(
-        re.escape(head) + r"(\S+) and changes the controlled quantity by (\S+) \(round-off\)",
-        status).groups())
+    largest, rate = _unmoved(status, head)
     assert largest == pytest.approx(1e-8, rel=1e-9)   # L / (E A), undamaged
     assert abs(rate) < 1e-12 * largest
     assert "likely cause" not in status

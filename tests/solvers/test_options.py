@@ -108,6 +108,21 @@ def _laplacian_ksp(comm, prefix: str):
     return ksp, A
 
 
+def _solves_laplacian(comm, prefix: str) -> None:
+    """A Laplacian solved with the options under ``prefix``, to 1e-9 of the right-hand side."""
+    ksp, A = _laplacian_ksp(comm, prefix)
+    ksp.setFromOptions()
+    b, x = A.createVecs()
+    b.set(1.0)
+    ksp.solve(b, x)
+    r = b.duplicate()
+    A.mult(x, r)
+    r.axpy(-1.0, b)
+    assert ksp.getConvergedReason() > 0 and r.norm() <= 1e-9 * b.norm()
+    ksp.destroy()
+    A.destroy()
+
+
 def test_product_options_reach_the_amg_unprefixed():
     """-matptap_via is read by the AMG's Galerkin products under no prefix: inserted under a
     solver's prefix it would be ignored. A bad value inserted so makes GAMG's set-up fail (so
@@ -129,17 +144,7 @@ def test_product_options_reach_the_amg_unprefixed():
     assert not db.hasName("matptap_via")
     good = "allatonce" if comm.size > 1 else "scalable"   # (no all-at-once on one rank)
     with opt.inserted("ptaptest2_", {**settings, "matptap_via": good}):
-        ksp, A = _laplacian_ksp(comm, "ptaptest2_")
-        ksp.setFromOptions()
-        b, x = A.createVecs()
-        b.set(1.0)
-        ksp.solve(b, x)
-        r = b.duplicate()
-        A.mult(x, r)
-        r.axpy(-1.0, b)
-        assert ksp.getConvergedReason() > 0 and r.norm() <= 1e-9 * b.norm()
-        ksp.destroy()
-        A.destroy()
+        _solves_laplacian(comm, "ptaptest2_")
     assert "-ptaptest2_matptap_via" not in opt.unused_options(
         "ptaptest2_", {**settings, "matptap_via": good})
 
@@ -153,17 +158,7 @@ def test_a_distributed_product_option_on_one_rank_is_left_out():
                 "ksp_rtol": "1e-10", "ksp_norm_type": "unpreconditioned",
                 "matptap_via": "allatonce"}
     with opt.inserted("ptaptest3_", settings):
-        ksp, A = _laplacian_ksp(comm, "ptaptest3_")
-        ksp.setFromOptions()
-        b, x = A.createVecs()
-        b.set(1.0)
-        ksp.solve(b, x)
-        r = b.duplicate()
-        A.mult(x, r)
-        r.axpy(-1.0, b)
-        assert ksp.getConvergedReason() > 0 and r.norm() <= 1e-9 * b.norm()
-        ksp.destroy()
-        A.destroy()
+        _solves_laplacian(comm, "ptaptest3_")
     unused = "-ptaptest3_matptap_via" in opt.unused_options("ptaptest3_", settings)
     assert unused == (comm.size == 1)
 
