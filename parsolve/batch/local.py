@@ -12,16 +12,20 @@ from typing import Callable
 
 from parsolve.batch import runner
 
+STOPS = (signal.SIGINT, signal.SIGTERM)
+
 
 def execute(folders: list[Path], parallel: int, log: Callable[[str], None]) -> None:
     """Run the prepared ``folders``; their outcomes are written into them."""
     pending = list(folders)
     running: dict[Path, tuple] = {}
     total, done = len(folders), 0
-    # SIGTERM (a job scheduler stopping the batch) stops the runs as Ctrl-C does; only the
-    # main thread may install handlers
+    # SIGTERM (a job scheduler stopping the batch) stops the runs as Ctrl-C does. SIGINT's
+    # handler is set too, as `parsolve run` sets its own: a process started in the background
+    # of a script inherits SIGINT ignored, and Python then installs no KeyboardInterrupt
+    # (`kill -INT` did nothing). Only the main thread may install handlers.
     main = threading.current_thread() is threading.main_thread()
-    old = signal.signal(signal.SIGTERM, _raise_interrupt) if main else None
+    old = {s: signal.signal(s, _raise_interrupt) for s in STOPS} if main else {}
     try:
         while pending or running:
             while pending and len(running) < max(1, parallel):
@@ -43,8 +47,8 @@ def execute(folders: list[Path], parallel: int, log: Callable[[str], None]) -> N
             runner.finish(folder, runner.exit_status(code), time.perf_counter() - t0)
         raise
     finally:
-        if main:
-            signal.signal(signal.SIGTERM, old)
+        for sig, handler in old.items():   # (None: a handler set outside Python)
+            signal.signal(sig, signal.SIG_DFL if handler is None else handler)
 
 
 def _raise_interrupt(signum, frame):

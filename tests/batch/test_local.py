@@ -101,12 +101,16 @@ def test_cli_local(tmp_path):
     assert proc.returncode == 0 and "2 complete" in proc.stdout
 
 
-def test_ctrl_c_stops_children(tmp_path):
-    # long runs (many steps), 2 at a time; SIGINT to the batch as a terminal's Ctrl-C would
+@pytest.mark.parametrize("inherited", [signal.SIG_DFL, signal.SIG_IGN], ids=["default", "ignored"])
+def test_ctrl_c_stops_children(tmp_path, inherited):
+    # long runs (many steps), 2 at a time; SIGINT to the batch as a terminal's Ctrl-C would.
+    # "ignored": the batch started from a script's background (`cmd &`), which inherits
+    # SIGINT ignored; `kill -INT` stops it all the same, as it does `parsolve run`
     path = jobs_file(tmp_path, 'parallel = 2\n[grid]\n"materials[0].E" = [1e9, 2e9, 3e9]\n'
                      '"steps.count" = [100000]\n')
     proc = subprocess.Popen([sys.executable, "-m", "parsolve", "batch", str(path)], env=clean_env(),
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, inherited))
     root = tmp_path / "runs"
     deadline = time.time() + 120
     while time.time() < deadline and len(list(root.glob("*/result.h5"))) < 2:
