@@ -139,7 +139,7 @@ def plate(level: int, steps: int) -> str:
 
 def newton_of(text: str, comm=MPI.COMM_WORLD) -> tuple:
     """(scene, model, system, problem, Newton solver) of a scene's text, as the driver builds
-    them, ready for its first step."""
+    them (the system assembled once, which scales its relations), ready for its first step."""
     from parsolve.driver import make_solver
     from parsolve.model import build_model
     from parsolve.scene import parse_scene
@@ -150,6 +150,7 @@ def newton_of(text: str, comm=MPI.COMM_WORLD) -> tuple:
     scene = parse_scene(tomllib.loads(text), "scene.toml", text)
     model = build_model(scene, comm)
     system = SaddleSystem(comm, model)
+    system.assemble()
     problem = SaddleProblem(comm, system, make_solver(comm, system, {}), scene.nonlinear)
     return scene, model, system, problem, NewtonSolver(problem, scene.nonlinear)
 
