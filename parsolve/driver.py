@@ -236,7 +236,7 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log,
     schedule = StepSchedule(scene)
     balance = Balance(comm, ctx, problem.q) if ctx.transient else None
     watch = BranchWatch(ctx.nonlinear)
-    stable = checked(problem)   # (the secant matrix's steps: solvers.stability)
+    stability = checked(problem)   # (a secant run without a maximum: solvers.stability)
     step, setup = 0, time.perf_counter() - t0
     if restart is not None:
         step = _load_newton(restart, problem, schedule, watch, balance)
@@ -261,7 +261,7 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log,
         extra = balance.step(problem.q, t - t_prev, problem.f_ext, multipliers) if balance else {}
         check_finite(comm, step, t, problem.q, multipliers, result.residual, fields, cell_fields,
                      rel_out, extra)
-        if stable:
+        if stability:
             check_stable(problem, snap[3], step, t, t_prev)
         pivots = solver.negative_pivots()  # the saddle's: one per enforced multiplier row
         if pivots is not None:

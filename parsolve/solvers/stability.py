@@ -47,7 +47,7 @@ def check_stable(problem, states: list, step: int, t: float, t_prev: float) -> N
     """NamedFailure when the converged state of step ``step`` (at ``t``, from ``t_prev``) is
     unstable (``unstable_modes``). Collective."""
     modes = unstable_modes(problem, states)
-    if modes <= 0:
+    if modes is None or modes <= 0:   # (None: the factorization cannot tell)
         return
     raise NamedFailure(
         f"the equilibrium at step {step} (t = {t:.6g}) is unstable: the consistent tangent, "
@@ -59,16 +59,16 @@ def check_stable(problem, states: list, step: int, t: float, t_prev: float) -> N
         "quantity of the band (a maximum strain control), or trace the path with arc-length")
 
 
-def unstable_modes(problem, states: list) -> int:
+def unstable_modes(problem, states: list) -> int | None:
     """Independent directions in which the converged state of ``problem`` is unstable: the
     negative eigenvalues of the symmetric part of the consistent tangent (evaluated at its q
     from the material ``states`` the step started from) on the space the enforced rows leave
-    free. Collective; the same on every rank."""
+    free; None when the factorization cannot tell. Collective; the same on every rank."""
     system = problem.system
     kmat = system.composition.evaluate(problem.q, states, False, system.rate)[2]
     held = _held_symmetric(system, problem.jacobian(kmat), SHIFT * system.kscale)
     negative = _negative_pivots(problem.comm, held)
-    return negative - int(system.op.active.sum())
+    return None if negative is None else negative - int(system.op.active.sum())
 
 
 def _held_symmetric(system, mat: PETSc.Mat, shift: float) -> PETSc.Mat:
@@ -81,7 +81,8 @@ def _held_symmetric(system, mat: PETSc.Mat, shift: float) -> PETSc.Mat:
     held = mat.copy()   # (the operator's own arrays: the solver's matrix gets D back below)
     op.data[op.d_final] = dual
     mat.assemble()
-    held.axpy(1.0, held.transpose(PETSc.Mat()), structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+    held.axpy(1.0, held.transpose(PETSc.Mat()),   # (a new matrix: transpose() is in place)
+              structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
     diagonal = held.createVecs()[0]
     q0, q1, _, _ = system.dofmap.owned()
     diagonal.array[:] = 0.0
@@ -90,8 +91,10 @@ def _held_symmetric(system, mat: PETSc.Mat, shift: float) -> PETSc.Mat:
     return held
 
 
-def _negative_pivots(comm: MPI.Comm, mat: PETSc.Mat) -> int:
-    """Negative pivots of MUMPS' LDLᵀ of a symmetric matrix (INFOG(12))."""
+def _negative_pivots(comm: MPI.Comm, mat: PETSc.Mat) -> int | None:
+    """Negative pivots of MUMPS' LDLᵀ of a symmetric matrix (INFOG(12)); None when it has
+    null pivots (INFOG(28): dependent rows, a cell with no stiffness left) or fails, where
+    the count says nothing (every rank alike: MUMPS' INFOG is global)."""
     mat.setOption(PETSc.Mat.Option.SYMMETRIC, True)
     ksp = PETSc.KSP().create(comm)
     try:
@@ -101,6 +104,11 @@ def _negative_pivots(comm: MPI.Comm, mat: PETSc.Mat) -> int:
         pc.setType("cholesky")
         pc.setFactorSolverType("mumps")
         pc.setUp()
-        return int(pc.getFactorMatrix().getMumpsInfog(12))
+        factor = pc.getFactorMatrix()
+        if factor.getMumpsInfog(28) > 0:
+            return None
+        return int(factor.getMumpsInfog(12))
+    except PETSc.Error:
+        return None
     finally:
         ksp.destroy()
