@@ -67,7 +67,7 @@ def unstable_modes(problem, states: list) -> int | None:
     system = problem.system
     kmat = system.composition.evaluate(problem.q, states, False, system.rate)[2]
     held = _held_symmetric(system, problem.jacobian(kmat), SHIFT * system.kscale)
-    negative = _negative_pivots(problem.comm, held)
+    negative = negative_pivots(problem.comm, held)
     return None if negative is None else negative - int(system.op.active.sum())
 
 
@@ -91,7 +91,7 @@ def _held_symmetric(system, mat: PETSc.Mat, shift: float) -> PETSc.Mat:
     return held
 
 
-def _negative_pivots(comm: MPI.Comm, mat: PETSc.Mat) -> int | None:
+def negative_pivots(comm: MPI.Comm, mat: PETSc.Mat) -> int | None:
     """Negative pivots of MUMPS' LDLᵀ of a symmetric matrix (INFOG(12)); None when it has
     null pivots (INFOG(28): dependent rows, a cell with no stiffness left) or fails, where
     the count says nothing (every rank alike: MUMPS' INFOG is global)."""
@@ -103,6 +103,8 @@ def _negative_pivots(comm: MPI.Comm, mat: PETSc.Mat) -> int | None:
         pc = ksp.getPC()
         pc.setType("cholesky")
         pc.setFactorSolverType("mumps")
+        pc.setFactorSetUpSolverType()
+        pc.getFactorMatrix().setMumpsIcntl(24, 1)   # (null pivots detected, INFOG(28))
         pc.setUp()
         factor = pc.getFactorMatrix()
         if factor.getMumpsInfog(28) > 0:

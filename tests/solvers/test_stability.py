@@ -20,7 +20,7 @@ from helpers.control import E, H, L, newton_of
 from helpers.scene import DROP, scene, shipped
 
 from parsolve.errors import SolverError
-from parsolve.solvers.stability import SHIFT, unstable_modes
+from parsolve.solvers.stability import SHIFT, negative_pivots, unstable_modes
 
 STEPS, PEAK = 24, 10            # ε = 1e-5 a step: εd0 = 1e-4 at step 10
 MAZARS = {"model": "mazars", "E": E, "nu": 0.0, "eps_d0": 1e-4, "At": 1.0, "Bt": 1e4,
@@ -94,3 +94,17 @@ def _dense_count(problem, states) -> int:
     z = vt[np.count_nonzero(sv > 1e-12 * sv.max()):].T
     ev = np.linalg.eigvalsh(z.T @ (0.5 * (k + k.T)) @ z)
     return int(np.count_nonzero(ev < -SHIFT * system.kscale))
+
+
+@pytest.mark.parametrize("diagonal, count", [([1.0, -1.0, -2.0, 3.0], 2),
+                                             ([1.0, -1.0, 0.0, 3.0], None)])
+def testnegative_pivots_or_none_when_singular(diagonal, count):
+    """The LDLᵀ's inertia of a diagonal matrix spread over the ranks; a null pivot: None."""
+    comm = MPI.COMM_WORLD
+    n = len(diagonal)
+    mat = PETSc.Mat().createAIJ((n, n), nnz=1, comm=comm)
+    lo, hi = mat.getOwnershipRange()
+    for i in range(lo, hi):
+        mat.setValue(i, i, diagonal[i])
+    mat.assemble()
+    assert negative_pivots(comm, mat) == count
