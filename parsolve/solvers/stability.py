@@ -25,6 +25,7 @@ and far below any softening branch's.
 
 from __future__ import annotations
 
+import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -46,6 +47,8 @@ def checked(problem) -> bool:
 def check_stable(problem, states: list, step: int, t: float, t_prev: float) -> None:
     """NamedFailure when the converged state of step ``step`` (at ``t``, from ``t_prev``) is
     unstable (``unstable_modes``). Collective."""
+    if not problem.comm.allreduce(changed(states, problem.states), op=MPI.LOR):
+        return   # (no point left its elastic range: the tangent is the secant, positive)
     modes = unstable_modes(problem, states)
     if modes is None or modes <= 0:   # (None: the factorization cannot tell)
         return
@@ -57,6 +60,18 @@ def check_stable(problem, states: list, step: int, t: float, t_prev: float) -> N
         "the partition changes, pulls it off, so the branch past here would depend on the rank "
         "count. Break the symmetry (a weaker region where the band is to form), control a "
         "quantity of the band (a maximum strain control), or trace the path with arc-length")
+
+
+def changed(before, after) -> bool:
+    """Whether a material state (nested lists and dicts of arrays) changed over the step on
+    this rank."""
+    if isinstance(before, dict):
+        return any(changed(before[k], after[k]) for k in before)
+    if isinstance(before, (list, tuple)):
+        return any(changed(a, b) for a, b in zip(before, after))
+    if isinstance(before, np.ndarray):
+        return not np.array_equal(before, after)
+    return before is not after and before != after
 
 
 def unstable_modes(problem, states: list) -> int | None:
