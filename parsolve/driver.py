@@ -29,6 +29,7 @@ from parsolve.solvers.linear import DoesNotFit
 from parsolve.solvers.newton import NewtonSolver
 from parsolve.solvers.problem import SaddleProblem
 from parsolve.solvers.setup import export_system, make_solver
+from parsolve.solvers.stability import check_stable, checked
 from parsolve.solvers.system import SaddleSystem
 from parsolve.version import petsc_version
 
@@ -235,6 +236,7 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log,
     schedule = StepSchedule(scene)
     balance = Balance(comm, ctx, problem.q) if ctx.transient else None
     watch = BranchWatch(ctx.nonlinear)
+    stability = checked(problem)   # (a secant run without a maximum: solvers.stability)
     step, setup = 0, time.perf_counter() - t0
     if restart is not None:
         step = _load_newton(restart, problem, schedule, watch, balance)
@@ -259,6 +261,8 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log,
         extra = balance.step(problem.q, t - t_prev, problem.f_ext, multipliers) if balance else {}
         check_finite(comm, step, t, problem.q, multipliers, result.residual, fields, cell_fields,
                      rel_out, extra)
+        if stability:
+            check_stable(problem, snap[3], step, t, t_prev)
         pivots = solver.negative_pivots()  # the saddle's: one per enforced multiplier row
         if pivots is not None:
             pivots -= int(problem.active.active.sum())

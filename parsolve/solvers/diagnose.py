@@ -37,6 +37,7 @@ from mpi4py import MPI
 from parsolve.contact import friction as fr
 from parsolve.errors import SolverError
 from parsolve.fem.materials.mazars import Mazars
+from parsolve.fem.materials.von_mises import VonMises
 from parsolve.solvers.linear import DoesNotFit
 
 # a control's rate under its own load below this fraction of what the load's displacements
@@ -124,6 +125,10 @@ def _named(exc: SolverError, problem, t: float) -> SolverError:
         return named
     if isinstance(exc, GoingBack) and not _softens(problem.ctx.effects):
         return _no_turn_back(exc, problem, t, controls)
+    if problem.t_prev > 0.0 and _perfectly_plastic(problem.ctx.effects):
+        named = _at_limit_load(exc, problem, t, controls)
+        if named is not None:
+            return named
     if _softens(problem.ctx.effects):
         return _past_capacity(exc, problem, t, controls)
     if problem.t_prev == 0.0:
@@ -187,6 +192,52 @@ def _no_turn_back(exc: GoingBack, problem, t: float, controls: list[Control]) ->
         f"beyond it) and no material of the scene softens, so no control load gives that value: "
         f"the other loads already take the largest beyond it; raise the target or control "
         f"another quantity")
+
+
+def _perfectly_plastic(effects) -> bool:
+    """Whether a material of the model is perfectly plastic (von Mises, H = 0)."""
+    return any(isinstance(m, VonMises) and m.H == 0.0
+               for e in effects for m in getattr(e, "models", []))
+
+
+def _at_limit_load(exc: SolverError, problem, t: float, controls: list[Control]
+                   ) -> SolverError | None:
+    """A control short of its value where, with the load the step's target takes (one solve
+    from the last converged state), the perfectly plastic cells form a mechanism: the tangent
+    there, the control released, is singular, while the converged state's is not. The body
+    then flows at constant load and cannot carry more than its limit load, and a quantity
+    that grows with the load only stops: the last converged control load is that limit, to
+    within the last cut of the step. Collective."""
+    short = _short_of(problem, t, controls)
+    if short is None:
+        return None
+    c, kind, reached, target, load = short
+    lin = problem.form()
+    mask = problem.active.active
+    try:
+        _response(problem, lin.kmat, mask, c)   # (the converged state holds the body)
+        problem.system.set_active(problem.policies.enforceable(mask))   # (the rhs's rows)
+        dq, _ = _stuck_solve(problem, lin.kmat, mask,
+                             problem.rhs(t, lin.f_int, problem.external(t)))
+    except SolverError:
+        return None
+    system = problem.system
+    kmat = system.composition.evaluate(problem.q + dq, problem.states, False, system.rate)[2]
+    try:
+        _response(problem, kmat, mask, c)
+        return None   # (the target's load leaves the body a stiffness: no mechanism)
+    except SolverError:
+        pass
+    return NamedFailure(
+        f"{kind} {c.name!r} can no longer reach its value: {target:.6g} at t = {t:.6g}, where it "
+        f"reached {reached:.6g} (t = {problem.t_prev:.6g}) with a control load of {load:.6g}; "
+        f"with the load the target takes, the perfectly plastic cells (von Mises, H = 0) form a "
+        f"mechanism (the tangent there, the control released, is singular): the body flows at "
+        f"constant load and carries no more than its limit load, {load:.6g} (the last converged "
+        f"control load, to within the last cut step), and the controlled quantity, which grows "
+        f"only with the load, stops at {reached:.6g}; bring the target below that, control a "
+        f"quantity that grows as the body flows (a displacement of the loaded part), or give the "
+        f"material hardening (H > 0) (the last attempt: {exc})")
 
 
 def _measures_softening(ctx, cells: np.ndarray) -> bool:

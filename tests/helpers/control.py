@@ -137,9 +137,9 @@ def plate(level: int, steps: int) -> str:
     return text.replace("count = 30", f"count = {steps}\nend = {steps / 30}")
 
 
-def plate_newton(refine: int, steps: int):
-    """The refined plate's (scene, model, system, Newton solver, maximum relation, mask of
-    the DOFs not eliminated), ready for its first step."""
+def newton_of(text: str, comm=MPI.COMM_WORLD) -> tuple:
+    """(scene, model, system, problem, Newton solver) of a scene's text, as the driver builds
+    them (the system assembled once, which scales its relations), ready for its first step."""
     from parsolve.driver import make_solver
     from parsolve.model import build_model
     from parsolve.scene import parse_scene
@@ -147,13 +147,18 @@ def plate_newton(refine: int, steps: int):
     from parsolve.solvers.problem import SaddleProblem
     from parsolve.solvers.system import SaddleSystem
 
-    comm = MPI.COMM_WORLD
-    text = plate(refine, steps)
-    scene = parse_scene(tomllib.loads(text), "plate.toml", text)
+    scene = parse_scene(tomllib.loads(text), "scene.toml", text)
     model = build_model(scene, comm)
     system = SaddleSystem(comm, model)
+    system.assemble()
     problem = SaddleProblem(comm, system, make_solver(comm, system, {}), scene.nonlinear)
-    newton = NewtonSolver(problem, scene.nonlinear)
+    return scene, model, system, problem, NewtonSolver(problem, scene.nonlinear)
+
+
+def plate_newton(refine: int, steps: int):
+    """The refined plate's (scene, model, system, Newton solver, maximum relation, mask of
+    the DOFs not eliminated), ready for its first step."""
+    scene, model, system, _, newton = newton_of(plate(refine, steps))
     (rel,) = [r for r in system.multiplied if r.maximum]
     free = np.ones(model.mesh.num_points * model.ncomp, dtype=bool)
     free[system.elim_local[system.elim_local >= 0]] = False   # (local DOFs of this rank)

@@ -5,32 +5,20 @@ clamped on the left and pulled by a traction p on the right (u = p x / E, exact 
 
 from __future__ import annotations
 
-import tomllib
-
 import numpy as np
 import pytest
 from mpi4py import MPI
 
-from helpers.control import closed_form, without_control, BAR as LOCALIZATION_BAR
+from helpers.control import closed_form, newton_of, without_control, BAR as LOCALIZATION_BAR
 from helpers.stop_bar import stop_bar
-from parsolve.driver import make_solver
-from parsolve.model import build_model
-from parsolve.scene import parse_scene
 from parsolve.solvers.arc_length import ArcLength
 from parsolve.solvers.newton import NewtonSolver
-from parsolve.solvers.problem import SaddleProblem
-from parsolve.solvers.system import SaddleSystem
-
-
 
 
 def problem_of(text: str, comm=MPI.COMM_WORLD) -> tuple:
     """(scene, system, problem) as the driver builds them."""
-    scene = parse_scene(tomllib.loads(text), "scene.toml", text)
-    system = SaddleSystem(comm, build_model(scene, comm))
-    system.assemble()
-    return scene, system, SaddleProblem(comm, system, make_solver(comm, system, {}),
-                                        scene.nonlinear)
+    scene, _, system, problem, _ = newton_of(text, comm)
+    return scene, system, problem
 
 
 def test_residual_of_a_linear_bar_before_and_after_the_step():

@@ -10,7 +10,7 @@ import pytest
 from mpi4py import MPI
 
 from conftest import dense, saddle_of_input_dofs
-from helpers.control import VON_MISES
+from helpers.control import VON_MISES, newton_of
 from helpers.scene import scene
 
 BAR = tomllib.loads(VON_MISES)   # nx = 5
@@ -18,18 +18,7 @@ BAR = tomllib.loads(VON_MISES)   # nx = 5
 
 def tangent_after(comm, text: str, steps: int) -> np.ndarray:
     """Dense consistent tangent (input DOF numbering) at the start of step ``steps + 1``."""
-    from parsolve.driver import make_solver
-    from parsolve.model import build_model
-    from parsolve.scene import parse_scene
-    from parsolve.solvers.newton import NewtonSolver
-    from parsolve.solvers.problem import SaddleProblem
-    from parsolve.solvers.system import SaddleSystem
-
-    scene = parse_scene(tomllib.loads(text), "bar.toml", text)
-    system = SaddleSystem(comm, build_model(scene, comm))
-    system.assemble()
-    problem = SaddleProblem(comm, system, make_solver(comm, system, {}), scene.nonlinear)
-    newton = NewtonSolver(problem, scene.nonlinear)
+    scene, _, system, problem, newton = newton_of(text, comm)
     for t in scene.times[:steps]:
         newton.step(t)
     kmat = problem.form().kmat
