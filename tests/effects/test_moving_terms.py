@@ -98,13 +98,6 @@ def moving_tie(monkeypatch):
     monkeypatch.setitem(registry.EFFECTS, "moving_tie", entry)
 
 
-# KNOWN BUG, left visible: at 3 ranks the whole run hangs in the first factorization after the
-# pattern is derived again (every rank in KSPSetUp), on main after the held multipliers and the
-# declared cell terms were merged together (each branch alone passed at 3 ranks). The system-
-# level test of the same move (tests/la/test_pattern_moves.py) passes at 3 ranks. No shipped
-# effect moves a node term yet.
-@pytest.mark.skipif(MPI.COMM_WORLD.size == 3, reason="known hang at 3 ranks after the pattern "
-                    "moves, in a whole run (see the comment)")
 def test_a_tie_that_moves_between_steps_answers_as_fixed_springs(moving_tie, run):
     moved = run(BLOCK.format(regions="", extra="[moving_tie]", times="[1.0, 2.0, 3.0]"))
     u = moved["fields/displacement"]
