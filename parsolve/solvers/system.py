@@ -82,6 +82,7 @@ class SaddleSystem:
         tuples = [t for t in terms if not t.on_cells]
         nnodes = int(self.part.node_ranges[-1])
         nen = cells.shape[1]
+        self._check_owners(tuples)
         pseudo = [np.concatenate([t.nodes, np.repeat(t.nodes[:, -1:], nen - t.nodes.shape[1],
                                                      axis=1)], axis=1) for t in tuples]
         pattern = node_pattern(self.part.new_of_old[np.concatenate([cells] + pseudo)], lo, hi,
@@ -100,6 +101,30 @@ class SaddleSystem:
             if at is not None:
                 t.slots = pattern.pair_slot[:, :, at].astype(np.intp)
         return pattern
+
+    def _check_owners(self, tuples: list) -> None:
+        """Each rank adds the rows it owns of the node tuples it declares: a tuple is whole
+        only if the owner of each of its nodes declares it too. A tuple some owner does not
+        declare (its nodes share no cell and lie on different ranks' parts) would lose that
+        node's rows silently, and leave the operator's pattern unsymmetric: refused on every
+        rank alike. Collective (one exchange of the tuples with their nodes' owners)."""
+        comm, ranges = self.comm, self.part.node_ranges
+        mine, out = set(), [[] for _ in range(comm.size)]
+        for i, t in enumerate(tuples):
+            nodes = np.sort(self.part.new_of_old[t.nodes], axis=1)
+            keys = np.column_stack([np.full(len(nodes), i), nodes])
+            mine.update(map(tuple, keys.tolist()))
+            owners = np.searchsorted(ranges, nodes, side="right") - 1
+            for r in np.unique(owners[owners != comm.rank]):
+                out[r].append(keys[np.any(owners == r, axis=1)])
+        got = comm.alltoall([np.concatenate(k) if k else None for k in out])
+        lost = sum(int(sum(tuple(k) not in mine for k in keys.tolist()))
+                   for keys in got if keys is not None)
+        lost = comm.allreduce(lost)
+        if lost:
+            raise RuntimeError(f"{lost} node tuples of declared terms join nodes whose owners do "
+                               "not all declare them (the rank owning a tuple's node must hold "
+                               "its other nodes and declare it too)")
 
     def restructure(self) -> None:
         """Build the operator again after a sparsity changed: a multiplied relation's
