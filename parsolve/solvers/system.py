@@ -78,7 +78,7 @@ class SaddleSystem:
         region, its own (``Term.slots``)."""
         model = self.model
         cells = model.mesh.cells[self.local_cells]
-        terms = [term for e in model.effects for term in e.terms()]
+        terms = [term for e in model.effects for term in e.terms() if not term.vector]
         tuples = [t for t in terms if not t.on_cells]
         nnodes = int(self.part.node_ranges[-1])
         nen = cells.shape[1]
@@ -150,7 +150,8 @@ class SaddleSystem:
     def _terms_moved(self) -> bool:
         """Whether this rank's node terms are not those the pattern was derived from (a term
         added or gone, or its node tuples changed)."""
-        terms = [t for e in self.model.effects for t in e.terms() if not t.on_cells]
+        terms = [t for e in self.model.effects for t in e.terms()
+                 if not t.on_cells and not t.vector]
         if len(terms) != len(self._domains) or \
                 any(t is not held for t, (held, _) in zip(terms, self._domains)):
             return True
