@@ -109,17 +109,15 @@ class SaddleSystem:
         node's rows silently, and leave the operator's pattern unsymmetric: refused on every
         rank alike. Collective (one exchange of the tuples with their nodes' owners)."""
         comm, ranges = self.comm, self.part.node_ranges
-        mine, out = set(), [[] for _ in range(comm.size)]
-        for i, t in enumerate(tuples):
-            nodes = np.sort(self.part.new_of_old[t.nodes], axis=1)
-            keys = np.column_stack([np.full(len(nodes), i), nodes])
-            mine.update(map(tuple, keys.tolist()))
+        mine, out = [], [[] for _ in range(comm.size)]
+        for i, t in enumerate(tuples):   # (every rank declares the same terms, in one order)
+            nodes = np.sort(self.part.new_of_old[t.nodes], axis=1)   # global, order-free
+            mine.append(_rows(nodes))
             owners = np.searchsorted(ranges, nodes, side="right") - 1
             for r in np.unique(owners[owners != comm.rank]):
-                out[r].append(keys[np.any(owners == r, axis=1)])
-        got = comm.alltoall([np.concatenate(k) if k else None for k in out])
-        lost = sum(int(sum(tuple(k) not in mine for k in keys.tolist()))
-                   for keys in got if keys is not None)
+                out[r].append((i, nodes[np.any(owners == r, axis=1)]))
+        lost = sum(int(np.count_nonzero(~np.isin(_rows(nodes), mine[i])))
+                   for got in comm.alltoall(out) for i, nodes in got)
         lost = comm.allreduce(lost)
         if lost:
             raise RuntimeError(f"{lost} node tuples of declared terms join nodes whose owners do "
@@ -370,3 +368,9 @@ class SaddleSystem:
             out[r.name] = lam[start:start + r.nrows]
             start += r.nrows
         return out
+
+
+def _rows(a: np.ndarray) -> np.ndarray:
+    """The rows of a 2D integer array as single comparable items (for ``np.isin``)."""
+    a = np.ascontiguousarray(a, dtype=np.int64)
+    return a.view(np.dtype((np.void, a.dtype.itemsize * a.shape[1]))).ravel()
