@@ -3,14 +3,13 @@ node of a block's top to the node of the same cell diagonally under it, and the 
 along the block at every step (``Term.nodes`` given anew in ``begin_step``, the effect
 ``restructured``): the system derives its pattern again, builds the operator anew and the
 solver sets itself up on it, and each step's answer is that of a run with fixed springs
-between the same nodes (``[[springs]]``: a pattern made once), at 1, 2, 3 and 4 ranks. The
-tie's nodes share a cell, so that the owner of either holds both whatever the partition (a
-tuple split otherwise is refused: ``test_a_tuple_its_nodes_owner_does_not_declare_is_refused``);
-pairs no cell joins, whose pattern entries are new, are tests/la/test_pattern_moves.py's.
+between the same nodes (``[[springs]]``: a pattern made once), at 1, 2, 3 and 4 ranks.
 
-(At 3 ranks this run once hung in the first factorization: the tie, then between nodes no
-cell joins, was split between ranks, the operator's pattern was unsymmetric on one rank only,
-and PETSc's symmetry test answered each rank for itself: LU on one, Cholesky on the others.)"""
+The tie's nodes share a cell, so that the owner of either holds both whatever the partition;
+a tuple some node's owner does not declare is refused, and pairs no cell joins (new pattern
+entries) are tests/la/test_pattern_moves.py's. The solver's choice of factorization rests on
+a symmetry test every rank answers alike: an unmirrored coupling on one rank once made that
+rank choose LU while the others chose Cholesky, and the run hung in MUMPS at 3 ranks."""
 
 import numpy as np
 import pytest
