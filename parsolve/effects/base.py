@@ -3,11 +3,13 @@ contributes, and its nature (linear, symmetric, transient). The driver composes 
 scene lists and nothing else (see ``compose``); adding an effect is a class and a registry
 line (``registry``), nothing in the core.
 
-What an effect puts into the operator is one kind of thing: the terms it declares
-(``terms``: test field, trial field, domain -- cells of a region or tuples of nodes -- and
-nature), whose values it gives as ``ElementMatrices`` over the domain's cells, cell-last, in
-bounded cell blocks, or ``TermMatrices`` on the node tuples: ``term_values`` for a linear
-term (and a rate term's capacity), ``evaluate`` for the tangent of a nonlinear one.
+What an effect puts into the operator and the loads is one kind of thing: the terms it
+declares (``terms``: test field, trial field, domain -- cells of a region or tuples of nodes
+-- and nature), whose values it gives as ``ElementMatrices`` over the domain's cells,
+cell-last, in bounded cell blocks, or ``TermMatrices`` on the node tuples: ``term_values``
+for a linear term (and a rate term's capacity), ``evaluate`` for the tangent of a nonlinear
+one. A term without a trial field is a vector term: a constant load on its test field, whose
+``term_values`` are element forces (nc, nen, d) of the domain's cells, or ``NodeForces``.
 """
 
 from __future__ import annotations
@@ -38,11 +40,6 @@ class Effect:
     def fields(self) -> list[Field]:
         return []
 
-    def loads(self, cells: np.ndarray) -> dict[str, np.ndarray]:
-        """Constant element loads {field: (nc, nen, ncomp)} of its own, added to every step's
-        known loads (thermal expansion's reference state); empty: none."""
-        return {}
-
     def patterns(self) -> dict:
         """Load patterns of its own {name: ``loads.base.LoadPattern``} (parts may vary in
         time: an exchange condition's h ∫ N T∞(t)), applied with the scene's; none by default."""
@@ -51,15 +48,17 @@ class Effect:
     def terms(self) -> list[Term]:
         """Every term it contributes to the operator, declared once (the same objects at
         every call): stiffness terms on cells (elasticity, conduction, a coupling), capacity
-        terms (``rate``) and terms on tuples of nodes (springs, a node's penalty block, a
-        boundary exchange). The system derives its pattern from them and gives each its slots.
-        None by default."""
+        terms (``rate``), terms on tuples of nodes (springs, a node's penalty block, a
+        boundary exchange) and vector terms (constant loads: thermal expansion's reference
+        state). The system derives its pattern from the matrix terms and gives each its slots;
+        the composition adds the vector terms to every step's known loads. None by default."""
         return []
 
     def term_values(self, term: Term, cells: np.ndarray) -> Matrices | None:
         """The values of one of its declared terms on ``cells`` (the local cells of a cell
         term's domain): a linear term's, a nonlinear one's initial tangent, a rate term's
-        capacity. None: nothing until ``evaluate`` gives its tangent."""
+        capacity, a vector term's forces. None: nothing until ``evaluate`` gives its
+        tangent."""
         return None
 
     def couple(self, effects: list["Effect"]) -> None:
@@ -102,7 +101,7 @@ class Effect:
         where it has any."""
         out = []
         for term in self.terms():
-            if term.rate != rate:
+            if term.rate != rate or term.vector:
                 continue
             at = term.positions(cells) if term.on_cells else None
             m = self.term_values(term, cells if at is None else cells[at])
@@ -110,6 +109,20 @@ class Effect:
                 if at is not None:
                     m.positions = at
                 out.append((term, m))
+        return out
+
+    def load_values(self, cells: np.ndarray) -> dict[str, list]:
+        """The forces of its vector terms {test field: [element forces (nc, nen, d) of these
+        cells, or ``NodeForces``]} (a term on a region: ``NodeForces`` of its cells)."""
+        out: dict[str, list] = {}
+        for term in self.terms():
+            if not term.vector:
+                continue
+            at = term.positions(cells) if term.on_cells else None
+            f = self.term_values(term, cells if at is None else cells[at])
+            if at is not None:
+                f = NodeForces(self.cells_nodes(cells[at]), f)
+            out.setdefault(term.test, []).append(f)
         return out
 
     def cells_nodes(self, cells: np.ndarray) -> np.ndarray:

@@ -90,8 +90,8 @@ class Composition:
 
     def known_loads(self, t: float, t_prev: float, theta: float | None) -> np.ndarray:
         """The loads a step balances: F(t), or in a θ-scheme step θ F(t) + (1 - θ) F(t_n) on
-        the equations of fields with a capacity (F(t) elsewhere); plus the effects' own
-        constant loads."""
+        the equations of fields with a capacity (F(t) elsewhere); plus the effects' vector
+        terms (constant loads)."""
         scheme = 1.0 if theta is None else theta
         f = self.model.external_load(Instant(t, t - t_prev, scheme))
         if scheme != 1.0:
@@ -101,10 +101,10 @@ class Composition:
         return f if own is None else f + own
 
     def effect_loads(self) -> np.ndarray | None:
-        """The effects' own constant loads (``Effect.loads``) as a full vector, built once
-        (None: no effect has any)."""
+        """The effects' vector terms (``Term.vector``: constant loads) as a full vector,
+        built once (None: no effect declares any)."""
         if self._loads is None:
-            parts = [p for e in self.model.effects if (p := e.loads(self.cells))]
+            parts = [p for e in self.model.effects if (p := e.load_values(self.cells))]
             self._loads = np.zeros(self.ndof) if parts else False
             for p in parts:
                 self._scatter(p, self._loads)

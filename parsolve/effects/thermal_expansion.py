@@ -7,7 +7,7 @@ off-diagonal operator block (u rows, T columns)
 
     B_uT[i a, b] = −∫ α ∂_j N_a S_ij N_b dΩ      (S = C m: the stress of a unit ε_th)
 
-and a constant load B_uT T_ref (the reference state), while the heat equations see nothing of
+and a constant load B_uT T_ref (the reference state: a vector term), while the heat equations see nothing of
 the displacements: the operator is block triangular in (u, T), hence unsymmetric
 (``symmetric = False``: the solver set-up then picks LU, not Cholesky).
 
@@ -133,6 +133,8 @@ class ThermalExpansion(Effect):
         # −∫ ε(v) : C α m N T over every cell: the displacement's equations on the temperature
         self.u = displacement_field(fields)
         self.term = Term(self.u, spec.field, symmetric=False)
+        # B_uT T_ref: the reference state's load on the displacement (no thermal strain there)
+        self.reference = Term(self.u, None)
 
     @property
     def field(self) -> str:
@@ -199,15 +201,14 @@ class ThermalExpansion(Effect):
                                kernel=kernel)
 
     def terms(self) -> list[Term]:
-        return [self.term]
+        return [self.term, self.reference]
 
-    def term_values(self, term: Term, cells: np.ndarray) -> ElementMatrices:
+    def term_values(self, term: Term, cells: np.ndarray) -> ElementMatrices | np.ndarray:
+        """B_uT of the cells; for the reference state's vector term its load B_uT T_ref."""
+        if term is self.reference:
+            ref = np.full((len(cells), self.mesh.cells.shape[1], 1), self.spec.reference)
+            return apply(self.coupling(cells), ref)
         return self.coupling(cells)
-
-    def loads(self, cells: np.ndarray) -> dict[str, np.ndarray]:
-        """The reference state's load B_uT T_ref (no thermal strain at T = T_ref)."""
-        ref = np.full((len(cells), self.mesh.cells.shape[1], 1), self.spec.reference)
-        return {self.u: apply(self.coupling(cells), ref)}
 
     # ------------------------------------------------------------ the eigenstrain (outputs)
 

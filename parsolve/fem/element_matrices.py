@@ -473,7 +473,8 @@ class Term:
     its mesh cell numbers, or every cell with ``cells`` None) or tuples of nodes (``nodes``:
     k tuples of m local nodes, a node to the ground, a pair of nodes, a boundary facet's
     nodes, whether or not a cell holds them together). ``rate``: a capacity term (M, weighed
-    by 1/Δt in a transient step) rather than a stiffness.
+    by 1/Δt in a transient step) rather than a stiffness. ``trial`` None: a vector term, a
+    constant load on the test field (values: element forces, no slots).
 
     The system derives the stiffness pattern from the cells and the declared terms, and gives
     each term its slots there (``slots`` (m, m, k): node pair (i, j) of tuple or cell k; the
@@ -483,7 +484,7 @@ class Term:
     terms, in bounded cell blocks) or ``TermMatrices`` (node tuples), paired with the term."""
 
     test: str
-    trial: str
+    trial: str | None                 # None: a vector term (a load)
     nodes: np.ndarray | None = None   # (k, m) local nodes; None: a cell term
     symmetric: bool = True
     linear: bool = True
@@ -500,6 +501,11 @@ class Term:
     @property
     def on_cells(self) -> bool:
         return self.nodes is None
+
+    @property
+    def vector(self) -> bool:
+        """A load on the test field, not an operator block: the pattern has nothing of it."""
+        return self.trial is None
 
     def positions(self, cells: np.ndarray) -> np.ndarray | None:
         """Which of ``cells`` (a composition's local cells) the cell term covers: their

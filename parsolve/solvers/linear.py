@@ -263,7 +263,12 @@ class LinearSolver:
 
     @staticmethod
     def symmetric(mat: PETSc.Mat) -> bool:
-        return bool(mat.isSymmetric(SYMMETRY_TOL * max(mat.norm(PETSc.NormType.INFINITY), 1e-300)))
+        """Whether the operator is symmetric, the same answer on every rank. PETSc's test of
+        a distributed AIJ matrix reduces its diagonal blocks' answer but returns each rank's
+        own for the off-diagonal block: a rank whose coupling to another was not mirrored
+        there chose LU while the others chose Cholesky, and MUMPS' collectives never met."""
+        tol = SYMMETRY_TOL * max(mat.norm(PETSc.NormType.INFINITY), 1e-300)
+        return bool(mat.getComm().tompi4py().allreduce(bool(mat.isSymmetric(tol)), op=MPI.LAND))
 
     def solve(self, rhs: PETSc.Vec, x: PETSc.Vec) -> int:
         """Solve; raise SolverError on failure (non-convergence, null pivots, non-finite)."""

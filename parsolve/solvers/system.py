@@ -78,10 +78,11 @@ class SaddleSystem:
         region, its own (``Term.slots``)."""
         model = self.model
         cells = model.mesh.cells[self.local_cells]
-        terms = [term for e in model.effects for term in e.terms()]
+        terms = [term for e in model.effects for term in e.terms() if not term.vector]
         tuples = [t for t in terms if not t.on_cells]
         nnodes = int(self.part.node_ranges[-1])
         nen = cells.shape[1]
+        self._check_owners(tuples)
         pseudo = [np.concatenate([t.nodes, np.repeat(t.nodes[:, -1:], nen - t.nodes.shape[1],
                                                      axis=1)], axis=1) for t in tuples]
         pattern = node_pattern(self.part.new_of_old[np.concatenate([cells] + pseudo)], lo, hi,
@@ -100,6 +101,28 @@ class SaddleSystem:
             if at is not None:
                 t.slots = pattern.pair_slot[:, :, at].astype(np.intp)
         return pattern
+
+    def _check_owners(self, tuples: list) -> None:
+        """Each rank adds the rows it owns of the node tuples it declares: a tuple is whole
+        only if the owner of each of its nodes declares it too. A tuple some owner does not
+        declare (its nodes share no cell and lie on different ranks' parts) would lose that
+        node's rows silently, and leave the operator's pattern unsymmetric: refused on every
+        rank alike. Collective (one exchange of the tuples with their nodes' owners)."""
+        comm, ranges = self.comm, self.part.node_ranges
+        mine, out = [], [[] for _ in range(comm.size)]
+        for i, t in enumerate(tuples):   # (every rank declares the same terms, in one order)
+            nodes = np.sort(self.part.new_of_old[t.nodes], axis=1)   # global, order-free
+            mine.append(_rows(nodes))
+            owners = np.searchsorted(ranges, nodes, side="right") - 1
+            for r in np.unique(owners[owners != comm.rank]):
+                out[r].append((i, nodes[np.any(owners == r, axis=1)]))
+        lost = sum(int(np.count_nonzero(~np.isin(_rows(nodes), mine[i])))
+                   for got in comm.alltoall(out) for i, nodes in got)
+        lost = comm.allreduce(lost)
+        if lost:
+            raise RuntimeError(f"{lost} node tuples of declared terms join nodes whose owners do "
+                               "not all declare them (the rank owning a tuple's node must hold "
+                               "its other nodes and declare it too)")
 
     def restructure(self) -> None:
         """Build the operator again after a sparsity changed: a multiplied relation's
@@ -125,7 +148,8 @@ class SaddleSystem:
     def _terms_moved(self) -> bool:
         """Whether this rank's node terms are not those the pattern was derived from (a term
         added or gone, or its node tuples changed)."""
-        terms = [t for e in self.model.effects for t in e.terms() if not t.on_cells]
+        terms = [t for e in self.model.effects for t in e.terms()
+                 if not t.on_cells and not t.vector]
         if len(terms) != len(self._domains) or \
                 any(t is not held for t, (held, _) in zip(terms, self._domains)):
             return True
@@ -344,3 +368,9 @@ class SaddleSystem:
             out[r.name] = lam[start:start + r.nrows]
             start += r.nrows
         return out
+
+
+def _rows(a: np.ndarray) -> np.ndarray:
+    """The rows of a 2D integer array as single comparable items (for ``np.isin``)."""
+    a = np.ascontiguousarray(a, dtype=np.int64)
+    return a.view(np.dtype((np.void, a.dtype.itemsize * a.shape[1]))).ravel()

@@ -9,6 +9,7 @@ from __future__ import annotations
 import tomllib
 
 import numpy as np
+import pytest
 from mpi4py import MPI
 
 from conftest import stiffness_block
@@ -116,3 +117,30 @@ def test_a_term_that_moves_gets_a_new_preallocated_pattern():
     pattern = system.pattern
     system.restructure()
     assert system.pattern is pattern
+
+
+def split_tie(system) -> np.ndarray:
+    """On rank 0 only: its owned node of smallest input id tied to its first ghost node
+    (another rank owns it, and declares nothing); no tuple elsewhere, nor on one rank."""
+    mesh = system.model.mesh
+    if COMM.rank != 0 or mesh.num_points == mesh.n_owned:
+        return np.zeros((0, 2), dtype=np.int64)
+    a = int(np.argmin(mesh.global_nodes[:mesh.n_owned]))
+    return np.array([[a, mesh.n_owned]])
+
+
+def test_a_tuple_its_nodes_owner_does_not_declare_is_refused():
+    m = model()
+    effect = Ties(m.mesh)
+    effect.term.nodes = np.zeros((0, 2), dtype=np.int64)
+    m.effects.append(effect)
+    system = SaddleSystem(COMM, m)
+    effect.term.nodes = split_tie(system)
+    if COMM.size == 1:   # (no rank to split it with: nothing to refuse)
+        system.restructure()
+        return
+    # refused on every rank alike, rank 0's row of the tie would be whole and the owner's
+    # row of the ghost node would lack it
+    with pytest.raises(RuntimeError, match="1 node tuples of declared terms join nodes whose "
+                       "owners do not all declare them"):
+        system.restructure()
