@@ -92,14 +92,13 @@ def rectangle(
     cell: "quad", "triangle" or "triangle6". Facet and node groups: "left", "right",
     "bottom", "top". Nodes i + j*(nx+1), quads i + j*nx (triangles 2 per quad).
     """
-    return rectangle_slices(lx, ly, nx, ny, cell, origin, quadratic=True).whole()
+    return rectangle_slices(lx, ly, nx, ny, cell, origin).whole()
 
 
 def rectangle_slices(lx: float, ly: float, nx: int, ny: int, cell: str = "quad",
-                     origin: Sequence[float] = (0.0, 0.0), quadratic: bool = False) -> GridSlices:
-    """``rectangle``'s mesh as a slice source (``quadratic``: triangle6 allowed, for
-    ``whole`` only)."""
-    _check_cell(cell, ("quad", "triangle", "triangle6") if quadratic else ("quad", "triangle"))
+                     origin: Sequence[float] = (0.0, 0.0)) -> GridSlices:
+    """``rectangle``'s mesh as a slice source."""
+    _check_cell(cell, ("quad", "triangle", "triangle6"))
     _check_counts(nx=nx, ny=ny)
     _check_lengths(origin, lx=lx, ly=ly)
     nx, ny = int(nx), int(ny)
@@ -165,14 +164,14 @@ def box(
     "ymin", "ymax", "zmin", "zmax". Nodes i + j*(nx+1) + k*(nx+1)*(ny+1), hexahedra
     i + j*nx + k*nx*ny (tetrahedra 6 per hexahedron, ``_KUHN``).
     """
-    return box_slices(lx, ly, lz, nx, ny, nz, cell, origin, quadratic=True).whole()
+    return box_slices(lx, ly, lz, nx, ny, nz, cell, origin).whole()
 
 
 def box_slices(lx: float, ly: float, lz: float, nx: int, ny: int, nz: int,
-               cell: str = "hexahedron", origin: Sequence[float] = (0.0, 0.0, 0.0),
-               quadratic: bool = False) -> GridSlices:
-    """``box``'s mesh as a slice source (``quadratic``: tetra10 allowed, for ``whole`` only)."""
-    _check_cell(cell, ("hexahedron", "tetra", "tetra10") if quadratic else ("hexahedron", "tetra"))
+               cell: str = "hexahedron", origin: Sequence[float] = (0.0, 0.0, 0.0)
+               ) -> GridSlices:
+    """``box``'s mesh as a slice source."""
+    _check_cell(cell, ("hexahedron", "tetra", "tetra10"))
     _check_counts(nx=nx, ny=ny, nz=nz)
     _check_lengths(origin, lx=lx, ly=ly, lz=lz)
     counts = (int(nx), int(ny), int(nz))
@@ -194,7 +193,9 @@ class GridSlices:
     """A structured rectangle or box (nodes along each axis ``axes``) as a slice source of
     ``mesh.slices``: any contiguous slice of its cells and points, the nodes of its sides and
     the facets of its sides among a slice of cells, built from the index arithmetic alone
-    (nothing of the whole mesh's size); ``whole`` is the whole mesh."""
+    (nothing of the whole mesh's size); ``whole`` is the whole mesh. Its cells are linear
+    (``cell_type``); a quadratic ``cell`` (triangle6, tetra10) has its midside nodes added by
+    ``midside.QuadraticSlices``, in its side groups."""
 
     path = "<generator>"
     cell_groups: tuple[str, ...] = ()
@@ -325,6 +326,17 @@ class PlateSlices(GridSlices):
         # symmetry lines exactly on the axes (cos(pi/2) is not exactly 0)
         self.inner[0, 1] = 0.0
         self.inner[-1, 0] = 0.0
+        self.radius = radius
+
+    def midside_points(self, lo: np.ndarray, hi: np.ndarray, mid: np.ndarray) -> np.ndarray:
+        """Midside nodes (of edges ``lo``-``hi``) of triangle6 cells on the circle when the edge
+        joins two hole nodes (``plate_with_hole``'s projection, row by row)."""
+        if self.cell != "triangle6":
+            return mid
+        on = (self._node_index(lo)[0] == 0) & (self._node_index(hi)[0] == 0)
+        p = mid[on]
+        mid[on] = self.radius * p / np.linalg.norm(p, axis=1)[:, None]
+        return mid
 
     def points(self, start: int, stop: int) -> np.ndarray:
         k, j = self._node_index(np.arange(start, stop, dtype=np.int64))
@@ -384,8 +396,7 @@ def plate_with_hole(
     "top" (y = height). Nodes k + j*(n_radial+1) (k radial, j angular), quads k + j*n_radial
     (triangles 2 per quad).
     """
-    mesh = plate_slices(width, height, radius, n_radial, n_angular, cell, grading,
-                        quadratic=True).whole()
+    mesh = plate_slices(width, height, radius, n_radial, n_angular, cell, grading).whole()
     if cell == "triangle6":
         hole = np.zeros(mesh.num_points, dtype=bool)
         hole[mesh.node_groups["hole"]] = True
@@ -394,10 +405,9 @@ def plate_with_hole(
 
 
 def plate_slices(width: float, height: float, radius: float, n_radial: int, n_angular: int,
-                 cell: str = "quad", grading: float = 4.0, quadratic: bool = False) -> PlateSlices:
-    """``plate_with_hole``'s mesh as a slice source (``quadratic``: triangle6 allowed, for
-    ``whole`` only)."""
-    _check_cell(cell, ("quad", "triangle", "triangle6") if quadratic else ("quad", "triangle"))
+                 cell: str = "quad", grading: float = 4.0) -> PlateSlices:
+    """``plate_with_hole``'s mesh as a slice source."""
+    _check_cell(cell, ("quad", "triangle", "triangle6"))
     _check_counts(n_radial=n_radial, n_angular=n_angular)
     n_radial, n_angular = int(n_radial), int(n_angular)
     if n_angular < 2:
