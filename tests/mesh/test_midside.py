@@ -102,9 +102,9 @@ def test_h5_file_of_linear_cells_upgraded(comm, shared_tmp):
 
 
 def test_quads_and_foreign_facets_are_refused(comm, shared_tmp):
-    """Quads cannot be made quadratic; a facet group whose edge is no mesh edge is named.
-    Both on every rank."""
-    with pytest.raises(InputError, match="simplex"):
+    """Quads have no midside nodes; a facet group whose edge is no mesh edge is named (the
+    file, on every rank)."""
+    with pytest.raises(ValueError, match="quad"):
         QuadraticSlices(comm, rectangle_slices(1.0, 1.0, 2, 2, cell="quad"), "s.toml", "mesh")
     whole = rectangle(1.0, 1.0, 3, 3, cell="triangle")
     whole.facet_groups["left"] = np.array([[0, 6]])   # not an edge

@@ -180,13 +180,23 @@ RUNS = {
     "box": dict(generator="box", params="lx = 4.0\nly = 1.0\nlz = 1.0\nnx = 12\nny = 3\nnz = 3\n"
                 'cell = "tetra"', hypothesis="3d", end="xmax", start="xmin",
                 force="[0.0, 0.0, -1.0]", components='["x", "y", "z"]'),
+    "box_order2": dict(generator="box", params="lx = 4.0\nly = 1.0\nlz = 1.0\nnx = 6\nny = 2\n"
+                       'nz = 2\ncell = "tetra"\norder = 2', hypothesis="3d", end="xmax",
+                       start="xmin", force="[0.0, 0.0, -1.0]", components='["x", "y", "z"]'),
+    "plate_triangle6": dict(generator="plate_with_hole", params="width = 4.0\nheight = 4.0\n"
+                            'radius = 1.0\nn_radial = 6\nn_angular = 8\ncell = "triangle6"',
+                            hypothesis="plane_stress", end="right", start="left",
+                            force="[1.0, 0.0]", components='["x", "y"]'),
 }
+CELLS = {"rectangle": "triangle", "box": "tetra", "box_order2": "tetra10",
+         "plate_triangle6": "triangle6"}
 
 
 @pytest.mark.parametrize("name", sorted(RUNS))
 def test_generated_scene_runs_as_the_whole_generation(name, comm, run, monkeypatch):
-    """A cantilever from the generator's slices and from the whole generation on rank 0: the
-    same parts, so the same fields (to the round-off of two parallel runs)."""
+    """A cantilever from the generator's slices and from the whole generation on rank 0 (its
+    quadratic cells, ``order = 2``, from the whole mesh's ``make_quadratic``): the same mesh
+    and the same fields (to the round-off of two parallel runs)."""
     import parsolve.model as model
 
     text = SCENE.format(**RUNS[name])
@@ -194,7 +204,7 @@ def test_generated_scene_runs_as_the_whole_generation(name, comm, run, monkeypat
     with monkeypatch.context() as m:
         m.setattr(model, "_slice_source", lambda scene, comm: None)
         whole = run(text, f"{name}_whole")
-    for key in ("mesh/points", f"mesh/cells/{'triangle' if name == 'rectangle' else 'tetra'}"):
+    for key in ("mesh/points", f"mesh/cells/{CELLS[name]}"):
         assert np.array_equal(sliced[key], whole[key])
     u, w = sliced["fields/displacement"], whole["fields/displacement"]
     assert np.abs(w).max() > 1e-3
