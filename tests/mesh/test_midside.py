@@ -9,7 +9,8 @@ from mpi4py import MPI
 from parsolve.errors import InputError
 from parsolve.mesh import slices
 from parsolve.mesh.generators import (box, box_slices, make_quadratic, plate_slices,
-                                      plate_with_hole, rectangle, rectangle_slices)
+                                      plate_with_hole, rectangle, rectangle_slices,
+                                      sphere_on_block, sphere_slices)
 from parsolve.mesh.h5mesh import open_mesh, write_mesh
 from parsolve.mesh.midside import QuadraticSlices
 from parsolve.mesh.partition import block_starts
@@ -27,6 +28,9 @@ SOURCES = {   # (slice source, the whole mesh it must give, quadratic cells' sid
     "plate_triangle_order2": (lambda: plate_slices(4.0, 4.0, 1.5, 6, 4, cell="triangle"),
                               lambda: make_quadratic(plate_with_hole(4.0, 4.0, 1.5, 6, 4,
                                                                      cell="triangle")), False),
+    "sphere_tetra_order2": (lambda: sphere_slices(10.0, 1.0, 1.5, 1.2, 0.3, 3, 2, 2, cell="tetra"),
+                            lambda: make_quadratic(sphere_on_block(10.0, 1.0, 1.5, 1.2, 0.3, 3, 2,
+                                                                   2, cell="tetra")), False),
 }
 
 

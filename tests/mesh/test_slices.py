@@ -13,7 +13,7 @@ from parsolve.mesh import slices
 from parsolve.mesh.checks import check_mesh
 from parsolve.mesh.distribute import _extract
 from parsolve.mesh.generators import (box, box_slices, plate_slices, plate_with_hole, rectangle,
-                                      rectangle_slices)
+                                      rectangle_slices, sphere_on_block, sphere_slices)
 from parsolve.mesh.h5mesh import open_mesh, read_whole, write_mesh
 from parsolve.mesh.partition import Partition
 from parsolve.mesh.reader import read_mesh
@@ -126,8 +126,12 @@ GRIDS = {
     "box_tetra": (box_slices, (1.0, 1.0, 2.0, 2, 3, 4), {"cell": "tetra"}),
     "plate_quad": (plate_slices, (5.0, 4.0, 1.0, 5, 7), {"cell": "quad", "grading": 3.0}),
     "plate_triangle": (plate_slices, (4.0, 4.0, 1.5, 6, 4), {"cell": "triangle"}),
+    "sphere_hexahedron": (sphere_slices, (10.0, 1.0, 1.5, 1.2, 0.3, 4, 3, 3), {}),
+    "sphere_tetra": (sphere_slices, (10.0, 1.0, 1.5, 1.2, 0.3, 3, 2, 2),
+                     {"cell": "tetra", "gap": 0.01, "profile": "sphere"}),
 }
-WHOLE = {rectangle_slices: rectangle, box_slices: box, plate_slices: plate_with_hole}
+WHOLE = {rectangle_slices: rectangle, box_slices: box, plate_slices: plate_with_hole,
+         sphere_slices: sphere_on_block}
 
 
 @pytest.mark.parametrize("method", ["scotch", "bisection"])
@@ -135,7 +139,7 @@ WHOLE = {rectangle_slices: rectangle, box_slices: box, plate_slices: plate_with_
 def test_generated_slices_are_the_whole_generators_parts(name, method, comm):
     """Each rank generating its own slice gives the part the rank-0 path cuts out of the
     whole generated mesh (``rectangle``/``box``/``plate_with_hole``, which build the same
-    numbering)."""
+    numbering; ``sphere_on_block``'s bodies with their cell groups)."""
     slicer, args, kw = GRIDS[name]
     whole = WHOLE[slicer](*args, **kw)
     local = slices.distribute_slices(comm, slicer(*args, **kw), method, "scene.toml", "mesh")
@@ -147,6 +151,9 @@ def test_generated_slices_are_the_whole_generators_parts(name, method, comm):
         assert sorted(got) == sorted(want[kind]) and got
         for group in got:
             assert np.array_equal(got[group], want[kind][group]), (kind, group)
+    assert sorted(local.cell_groups) == sorted(whole.cell_groups)
+    for group in local.cell_groups:
+        assert np.array_equal(local.cell_groups[group], want["cell_groups"][group]), group
 
 
 SCENE = """
