@@ -3,7 +3,9 @@ and P2 upgrade.
 
 All meshes are built with vectorised index arithmetic on a structured (i, j[, k]) grid,
 with positively oriented cells (positive Jacobian) in meshio/VTK node ordering.
-Generated meshes carry facet groups for their boundary sides (see each generator).
+Generated meshes carry facet groups for their boundary sides (see each generator). Each is a
+slice source (``SLICED``: any slice of its cells and points built alone, ``mesh.slices``);
+the generator functions return its whole mesh.
 """
 
 from __future__ import annotations

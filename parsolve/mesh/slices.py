@@ -2,7 +2,8 @@
 
 Every rank starts from a contiguous slice of the cells and of the points (rows
 ``partition.block_starts``) of a mesh source — the parallel mesh file (``h5mesh``) or a
-structured generator building its slab (``generators.SLICED``: rectangle, box, plate) — its
+generator building its slab (``generators.SLICED``), or either with midside nodes
+(``midside.QuadraticSlices``) — its
 **home** slice: a node's home is the rank whose point slice holds it. Then:
 
 1. the coordinates of the slice cells' nodes are fetched from their homes (all-to-all), and the
