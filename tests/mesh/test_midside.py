@@ -122,3 +122,19 @@ def test_quads_and_foreign_facets_are_refused(comm, shared_tmp):
     assert info.value.source == str(path)
     f.close()
     assert comm.allreduce(1, op=MPI.SUM) == comm.size
+
+
+def test_order_2_on_quads_names_the_key(comm):
+    """A scene asking ``order = 2`` of quads: exit-2 error naming the scene and mesh.order, on
+    every rank, nothing built."""
+    import tomllib
+
+    from parsolve.model import _distributed_mesh
+    from parsolve.scene import parse_scene
+
+    text = ('[mesh]\ngenerator = "rectangle"\nlx = 1.0\nly = 1.0\nnx = 4\nny = 4\n'
+            'cell = "quad"\norder = 2\n[model]\nhypothesis = "plane_stress"\n[[materials]]\n'
+            'E = 1.0\nnu = 0.3\n')
+    with pytest.raises(InputError, match="order = 2 needs a simplex mesh, not quad") as info:
+        _distributed_mesh(parse_scene(tomllib.loads(text), "s.toml"), comm)
+    assert (info.value.source, info.value.key) == ("s.toml", "mesh.order")
