@@ -49,9 +49,8 @@ class QuadraticSlices:
         n = src.num_points
         ps = block_starts(n, comm.size)
         cells, points, flags = agree(comm, _read, src, comm.rank, comm.size, source, key)
-        edges = np.sort(cells[:, EDGES[src.cell_type]], axis=2)     # (cells, edges, lo/hi)
-        keys, inverse = np.unique(edges[..., 0] * n + edges[..., 1], return_inverse=True)
-        del edges
+        keys, inverse = np.unique(_edge_keys(cells, EDGES[src.cell_type], n),
+                                  return_inverse=True)
         owned = _owned_edges(comm, keys, ps * n)
         counts = np.array(comm.allgather(owned.size), dtype=np.int64)
         first = n + int(counts[:comm.rank].sum())
@@ -100,6 +99,15 @@ def _read(src, rank: int, size: int, source: str, key: str):
     return cells, points, flags
 
 
+def _edge_keys(cells: np.ndarray, pairs: np.ndarray, n: int) -> np.ndarray:
+    """(cells, edges) keys lower · n + upper of the cells' edges, an edge column at a time
+    (no (cells, edges, 2) array)."""
+    keys = np.empty((cells.shape[0], len(pairs)), dtype=np.int64)
+    for e, (a, b) in enumerate(pairs):
+        keys[:, e] = np.minimum(cells[:, a], cells[:, b]) * n + np.maximum(cells[:, a], cells[:, b])
+    return keys
+
+
 def _facet_rows(src, rank: int, size: int, source: str) -> list:
     """Each facet group's (name, its edges' keys, corner rows, order) of this rank's rows."""
     out = []
@@ -110,8 +118,8 @@ def _facet_rows(src, rank: int, size: int, source: str) -> list:
         if facets.size and (facets.min() < 0 or facets.max() >= src.num_points):
             raise InputError(f"facet group {name!r} refers to points that do not exist",
                              source, "mesh.file")
-        ends = np.sort(facets[:, FACET_EDGES[src.cell_type]], axis=2)
-        out.append((name, (ends[..., 0] * src.num_points + ends[..., 1]).ravel(), facets, order))
+        keys = _edge_keys(facets, FACET_EDGES[src.cell_type], src.num_points)
+        out.append((name, keys.ravel(), facets, order))
     return out
 
 
@@ -159,13 +167,30 @@ def _midsides(comm, src, owned: np.ndarray, n: int, ps: np.ndarray, points: np.n
 
     lo, hi = np.divmod(owned, n)
     dim = points.shape[1]
-    table = np.column_stack([points.view(np.int64).reshape(-1, dim), flags.astype(np.int64)])
-    far = fetch(comm, hi, ps, table)
     start = ps[comm.rank]
+    columns = [points.view(np.int64).reshape(-1, dim)]
+    if midside_groups:
+        columns.append(_bits(flags))
+    far = fetch(comm, hi, ps, np.column_stack(columns))
     mid = 0.5 * (points[lo - start] + np.ascontiguousarray(far[:, :dim]).view(float))
-    both = flags[lo - start].astype(bool) & far[:, dim:].astype(bool)
     mid = getattr(src, "midside_points", lambda lo, hi, mid: mid)(lo, hi, mid)
-    return mid, both if midside_groups else np.zeros_like(both)
+    if not midside_groups:
+        return mid, np.zeros((owned.size, flags.shape[1]), dtype=bool)
+    return mid, _unbits(_bits(flags)[lo - start] & far[:, dim:], flags.shape[1])
+
+
+def _bits(flags: np.ndarray) -> np.ndarray:
+    """Rows of node flags as bits, 64 groups to an int64 column (at least one): a column or two
+    to send, not one per group."""
+    packed = np.packbits(flags.astype(bool), axis=1, bitorder="little")
+    out = np.zeros((flags.shape[0], max(-(-packed.shape[1] // 8), 1) * 8), dtype=np.uint8)
+    out[:, :packed.shape[1]] = packed
+    return out.view(np.int64)
+
+
+def _unbits(bits: np.ndarray, count: int) -> np.ndarray:
+    return np.unpackbits(np.ascontiguousarray(bits).view(np.uint8), axis=1, count=count,
+                         bitorder="little").astype(bool)
 
 
 def _to_slices(comm, ids: np.ndarray, points: np.ndarray, flags: np.ndarray,
@@ -175,8 +200,9 @@ def _to_slices(comm, ids: np.ndarray, points: np.ndarray, flags: np.ndarray,
     starts = block_starts(total, comm.size)
     dim = points.shape[1]
     rows = np.column_stack([ids, np.ascontiguousarray(points).view(np.int64).reshape(-1, dim),
-                            flags.astype(np.int64)])
+                            _bits(flags)])
     got, _ = exchange(comm, rows, np.searchsorted(starts, ids, side="right") - 1)
+    del rows
     got = got[np.argsort(got[:, 0], kind="stable")]
     return (np.ascontiguousarray(got[:, 1:1 + dim]).view(float).reshape(-1, dim),
-            got[:, 1 + dim:].astype(bool), starts)
+            _unbits(got[:, 1 + dim:], flags.shape[1]), starts)
