@@ -203,26 +203,19 @@ def _graph_rows(comm, block: CellBlock, pairs, cross) -> tuple[np.ndarray, np.nd
     """This block's CSR rows from the pairs found here and the pairs across blocks (sent to
     both cells' blocks), sorted, without repeats (two cells sharing two facets, which only a
     folded mesh has)."""
-    size, n = comm.size, max(block.num_cells, 1)
-    # each (row, column) as one int64 key (row - start) n + column, sorted in place: the
-    # graph's entries held once (the peak of the partition at several ranks)
-    keys = [(pairs[:, 0] - block.start) * n + pairs[:, 1],
-            (pairs[:, 1] - block.start) * n + pairs[:, 0]]
+    size = comm.size
+    starts = block_starts(block.num_cells, size)
+    rows = [pairs, pairs[:, ::-1]]
     if size > 1:   # each pair across blocks to both cells' blocks, that cell first
-        starts = block_starts(block.num_cells, size)
         both = np.concatenate([cross, cross[:, ::-1]])
-        got = exchange(comm, both, np.searchsorted(starts, both[:, 0], side="right") - 1)[0]
-        del both
-        keys.append((got[:, 0] - block.start) * n + got[:, 1])
-        del got
-    key = np.concatenate(keys)
-    del keys
-    key.sort()
-    if key.size:
-        key = key[np.r_[True, key[1:] != key[:-1]]]
-    indptr = np.concatenate([[0], np.cumsum(np.bincount(key // n,
-                                                        minlength=block.cells.shape[0]))])
-    return indptr.astype(np.int64), key % n
+        rows.append(exchange(comm, both, np.searchsorted(starts, both[:, 0], side="right")
+                             - 1)[0])
+    rows = np.concatenate(rows)
+    n = max(block.num_cells, 1)
+    key = np.unique((rows[:, 0] - block.start) * n + rows[:, 1])
+    row, indices = key // n, key % n
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(row, minlength=block.cells.shape[0]))])
+    return indptr.astype(np.int64), indices.astype(np.int64)
 
 
 def _packed(keys: np.ndarray, base: int) -> np.ndarray:

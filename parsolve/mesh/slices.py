@@ -214,13 +214,7 @@ def _aggregate_graph(comm, block: blocks.CellBlock, centroids: np.ndarray, graph
     cols[~here] = fetch(comm, idx[~here], block_starts(block.num_cells, comm.size), agg)
     apart = rows + starts[comm.rank] != cols
     total = int(starts[-1])
-    key = rows[apart]   # (row, column) as one int64, deduplicated in place: no more copies
-    key *= total
-    key += cols[apart]
-    del rows, cols, apart
-    key.sort()
-    if key.size:
-        key = key[np.r_[True, key[1:] != key[:-1]]]
+    key = np.unique(rows[apart] * total + cols[apart])
     indptr = np.concatenate([[0], np.cumsum(np.bincount(key // total, minlength=count))])
     return agg - starts[comm.rank], total, (indptr, key % total)
 
