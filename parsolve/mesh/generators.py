@@ -498,13 +498,13 @@ class BodySlices:
 
     def facet_slice(self, name: str, rank: int, size: int) -> tuple[np.ndarray, np.ndarray]:
         start, stop = self.num_cells * rank // size, self.num_cells * (rank + 1) // size
-        nf = len(FACETS[self.cell_type])
-        rows, keys = [np.zeros((0, len(FACETS[self.cell_type][0])), np.int64)], [np.zeros(0, np.int64)]
+        local = FACETS[self.cell_type]
+        rows, keys = [np.zeros((0, len(local[0])), np.int64)], [np.zeros(0, np.int64)]
         for b, body, lo, hi in self._pieces(self.cell_offsets, start, stop):
             if b in self.groups[name]:
                 f, k = body.facets_among(self.groups[name][b], lo, hi)
                 rows.append(f + self.point_offsets[b])
-                keys.append(k + self.cell_offsets[b] * nf)
+                keys.append(k + self.cell_offsets[b] * len(local))
         return np.concatenate(rows), np.concatenate(keys)
 
     def whole(self) -> Mesh:
