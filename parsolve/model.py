@@ -23,6 +23,7 @@ from parsolve.mesh import blocks, memory
 from parsolve.mesh.checks import check_mesh
 from parsolve.mesh.distribute import LocalMesh, distribute
 from parsolve.mesh.generators import GENERATORS, SLICED, make_quadratic
+from parsolve.mesh.midside import QuadraticSlices
 from parsolve.mesh.h5mesh import is_mesh_h5, open_mesh, read_whole
 from parsolve.mesh.mesh import CELL_INFO, Mesh
 from parsolve.mesh.reader import read_mesh
@@ -188,9 +189,10 @@ def _generator_key(exc: Exception) -> str:
 
 
 def _distributed_mesh(scene: Scene, comm) -> LocalMesh:
-    """Every rank's part of the scene's mesh: from slices (a parallel mesh file, a structured
-    rectangle, box or plate of linear cells: no rank holds the whole, ``mesh.slices``), else
-    built whole on rank 0 (Gmsh and other meshio files, the other generators, ``order = 2``). The
+    """Every rank's part of the scene's mesh: from slices (a parallel mesh file, a generator;
+    their quadratic cells and ``order = 2`` included: no rank holds the whole,
+    ``mesh.slices``, ``mesh.midside``), else built whole on rank 0 (Gmsh and other meshio
+    files). The
     solve's share of every rank is checked against the memory before anything is built when
     the mesh's size is known from a generator's parameters, else once the mesh is read."""
     counted = _generated_counts(scene)
@@ -208,8 +210,10 @@ def _distributed_mesh(scene: Scene, comm) -> LocalMesh:
                 raise InputError(f"a {dim}D mesh ({src.cell_type}) cannot carry hypothesis "
                                  f"{scene.hypothesis!r}", scene.source, "model.hypothesis")
             source, key = mesh_source(scene)
-            memory.check_part(src.num_points, dim, source, "mesh.generator" if key == "mesh"
+            points = _points_after_order(src, scene.mesh.order) if counted is None else counted[0]
+            memory.check_part(points, dim, source, "mesh.generator" if key == "mesh"
                               else key, f"a mesh of {src.num_cells} {src.cell_type} cells")
+            src = _quadratic(scene, comm, src)
             part = distribute_slices(comm, src, scene.solver.partitioner, source, key)
         finally:
             getattr(src, "close", lambda: None)()
@@ -225,12 +229,10 @@ def _slice_source(scene: Scene, comm):
     """The mesh as slices every rank reads its own of (``mesh.slices.SliceSource``), or None
     for the rank-0 path. Collective (an input error is every rank's)."""
     spec = scene.mesh
-    if spec.order != 1:
-        return None
     if spec.file is not None:
         return agree(comm, open_mesh, mesh_source(scene)[0]) if is_mesh_h5(spec.file) else None
     slicer = SLICED.get(spec.generator)
-    if slicer is None or spec.params.get("cell") in ("triangle6", "tetra10"):
+    if slicer is None:
         return None
     try:
         with np.errstate(over="raise", divide="raise", invalid="raise"):
@@ -238,6 +240,19 @@ def _slice_source(scene: Scene, comm):
     except (TypeError, ValueError, FloatingPointError, OverflowError) as exc:
         raise InputError(f"invalid generator parameters: {exc}", scene.source,
                          _generator_key(exc)) from None
+
+
+def _quadratic(scene: Scene, comm, src):
+    """``src`` with its midside nodes (``midside.QuadraticSlices``) for ``order = 2`` or a
+    generator's quadratic cells, else ``src`` itself. Collective."""
+    cell = getattr(src, "cell", src.cell_type)   # a generator's cell: triangle6, tetra10
+    if src.cell_type in ("triangle6", "tetra10") or (cell == src.cell_type
+                                                        and scene.mesh.order == 1):
+        return src
+    if src.cell_type not in ("triangle", "tetra"):
+        raise InputError(f"order = 2 needs a simplex mesh, not {src.cell_type}", scene.source,
+                         "mesh.order")
+    return QuadraticSlices(comm, src, *mesh_source(scene), midside_groups=cell != src.cell_type)
 
 
 def _mesh_from_rank0(scene: Scene, comm) -> LocalMesh:

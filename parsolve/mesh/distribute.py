@@ -1,13 +1,13 @@
 """The distributed mesh: each rank keeps only its part, with the input ids of what it holds.
 Every run goes through it, 1 rank included.
 
-Here rank 0 reads (or generates) the whole mesh — Gmsh and other meshio files, the generators
-that cannot build a slice, ``order = 2`` — every rank checks a block of its cells and builds
+Here rank 0 reads the whole mesh — Gmsh and other meshio files (``order = 2`` on them
+included) — every rank checks a block of its cells and builds
 that block's rows of the dual graph (``blocks``), its cells are partitioned (PT-Scotch through
 PETSc, every rank handing it its block of the graph; or coordinate bisection), and rank 0 sends
 every rank its part, one at a time; then it drops the whole mesh like the others never had it.
-Parallel mesh files and the generated rectangle, box and plate with a hole give the same parts
-without any rank holding the whole mesh (``slices``).
+Parallel mesh files and the generated meshes give the same parts without any rank holding the
+whole mesh (``slices``; their midside nodes: ``midside``).
 On 1 rank the part is the whole mesh, its arrays taken as they are (not copied: the mesh is
 never held twice). The rules are ``partition.from_cell_parts``':
 

@@ -3,7 +3,9 @@ and P2 upgrade.
 
 All meshes are built with vectorised index arithmetic on a structured (i, j[, k]) grid,
 with positively oriented cells (positive Jacobian) in meshio/VTK node ordering.
-Generated meshes carry facet groups for their boundary sides (see each generator).
+Generated meshes carry facet groups for their boundary sides (see each generator). Each is a
+slice source (``SLICED``: any slice of its cells and points built alone, ``mesh.slices``);
+the generator functions return its whole mesh.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import numpy as np
 
 from parsolve.errors import InputError
 from parsolve.mesh.mesh import Mesh
-from parsolve.mesh.topology import FACETS, facets_from_nodes
+from parsolve.mesh.topology import FACETS
 
 def _check_counts(**counts: int) -> None:
     # ValueError for bad arguments: the caller (scene -> model) adds source and key
@@ -37,41 +39,11 @@ def _check_cell(cell: str, allowed: tuple[str, ...]) -> None:
         raise ValueError(f"unsupported cell {cell!r} (expected one of {', '.join(allowed)})")
 
 
-def _grid_quads(nx: int, ny: int) -> np.ndarray:
-    """Counter-clockwise quads of a (nx+1) x (ny+1) node grid numbered i + j*(nx+1)."""
-    i, j = np.meshgrid(np.arange(nx), np.arange(ny), indexing="xy")  # cell index i + j*nx
-    n0 = (i + j * (nx + 1)).ravel()
-    return np.stack([n0, n0 + 1, n0 + nx + 2, n0 + nx + 1], axis=1).astype(np.int64)
-
-
-def _quads_to_triangles(quads: np.ndarray) -> np.ndarray:
-    # (0,1,2) and (0,2,3) keep the quad's counter-clockwise orientation
-    tri = np.stack([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]], axis=1)
-    return tri.reshape(-1, 3)
-
-
-def _side_groups(mesh: Mesh, masks: dict[str, np.ndarray]) -> None:
-    for name, mask in masks.items():
-        mesh.facet_groups[name] = facets_from_nodes(mesh, mask)[0]
-
-
 def _nodes_from_facets(mesh: Mesh) -> Mesh:
     # after the P2 upgrade so that side node groups include the midside nodes
     for name, facets in mesh.facet_groups.items():
         mesh.node_groups[name] = np.unique(facets)
     return mesh
-
-
-def _finish_2d(points, quads, cell, masks) -> Mesh:
-    """Build a 2D mesh from grid quads, split/upgrade as requested, add side groups."""
-    if cell == "quad":
-        mesh = Mesh(points, "quad", quads)
-    else:
-        mesh = Mesh(points, "triangle", _quads_to_triangles(quads))
-    _side_groups(mesh, masks)
-    if cell == "triangle6":
-        mesh = make_quadratic(mesh)
-    return _nodes_from_facets(mesh)
 
 
 # --------------------------------------------------------------------------------------
@@ -92,14 +64,13 @@ def rectangle(
     cell: "quad", "triangle" or "triangle6". Facet and node groups: "left", "right",
     "bottom", "top". Nodes i + j*(nx+1), quads i + j*nx (triangles 2 per quad).
     """
-    return rectangle_slices(lx, ly, nx, ny, cell, origin, quadratic=True).whole()
+    return rectangle_slices(lx, ly, nx, ny, cell, origin).whole()
 
 
 def rectangle_slices(lx: float, ly: float, nx: int, ny: int, cell: str = "quad",
-                     origin: Sequence[float] = (0.0, 0.0), quadratic: bool = False) -> GridSlices:
-    """``rectangle``'s mesh as a slice source (``quadratic``: triangle6 allowed, for
-    ``whole`` only)."""
-    _check_cell(cell, ("quad", "triangle", "triangle6") if quadratic else ("quad", "triangle"))
+                     origin: Sequence[float] = (0.0, 0.0)) -> GridSlices:
+    """``rectangle``'s mesh as a slice source."""
+    _check_cell(cell, ("quad", "triangle", "triangle6"))
     _check_counts(nx=nx, ny=ny)
     _check_lengths(origin, lx=lx, ly=ly)
     nx, ny = int(nx), int(ny)
@@ -143,12 +114,6 @@ def _kuhn_tets() -> np.ndarray:
 _KUHN = _kuhn_tets()
 
 
-def _grid_indices(nx: int, ny: int, nz: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(k, j, i) of the entries of an nx x ny x nz grid numbered i + j*nx + k*nx*ny."""
-    grids = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
-    return tuple(g.ravel() for g in grids)
-
-
 def box(
     lx: float,
     ly: float,
@@ -165,14 +130,14 @@ def box(
     "ymin", "ymax", "zmin", "zmax". Nodes i + j*(nx+1) + k*(nx+1)*(ny+1), hexahedra
     i + j*nx + k*nx*ny (tetrahedra 6 per hexahedron, ``_KUHN``).
     """
-    return box_slices(lx, ly, lz, nx, ny, nz, cell, origin, quadratic=True).whole()
+    return box_slices(lx, ly, lz, nx, ny, nz, cell, origin).whole()
 
 
 def box_slices(lx: float, ly: float, lz: float, nx: int, ny: int, nz: int,
-               cell: str = "hexahedron", origin: Sequence[float] = (0.0, 0.0, 0.0),
-               quadratic: bool = False) -> GridSlices:
-    """``box``'s mesh as a slice source (``quadratic``: tetra10 allowed, for ``whole`` only)."""
-    _check_cell(cell, ("hexahedron", "tetra", "tetra10") if quadratic else ("hexahedron", "tetra"))
+               cell: str = "hexahedron", origin: Sequence[float] = (0.0, 0.0, 0.0)
+               ) -> GridSlices:
+    """``box``'s mesh as a slice source."""
+    _check_cell(cell, ("hexahedron", "tetra", "tetra10"))
     _check_counts(nx=nx, ny=ny, nz=nz)
     _check_lengths(origin, lx=lx, ly=ly, lz=lz)
     counts = (int(nx), int(ny), int(nz))
@@ -194,7 +159,9 @@ class GridSlices:
     """A structured rectangle or box (nodes along each axis ``axes``) as a slice source of
     ``mesh.slices``: any contiguous slice of its cells and points, the nodes of its sides and
     the facets of its sides among a slice of cells, built from the index arithmetic alone
-    (nothing of the whole mesh's size); ``whole`` is the whole mesh."""
+    (nothing of the whole mesh's size); ``whole`` is the whole mesh. Its cells are linear
+    (``cell_type``); a quadratic ``cell`` (triangle6, tetra10) has its midside nodes added by
+    ``midside.QuadraticSlices``, in its side groups."""
 
     path = "<generator>"
     cell_groups: tuple[str, ...] = ()
@@ -263,9 +230,13 @@ class GridSlices:
         cells, and their places in the whole group (by cell, then local facet: the order of
         ``topology.facets_from_nodes``). Every facet with its nodes on a side is a boundary
         facet: the side is a plane of the box's boundary."""
+        return self.facets_among(name, self.num_cells * rank // size,
+                                 self.num_cells * (rank + 1) // size)
+
+    def facets_among(self, name: str, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+        """``facet_slice`` among the cells [start, stop)."""
         axis, last = self._side_axis(name)
-        ids = np.arange(self.num_cells * rank // size, self.num_cells * (rank + 1) // size,
-                        dtype=np.int64)
+        ids = np.arange(start, stop, dtype=np.int64)
         # only the cells of the layer along the side can have a facet on it
         layer = ids // _SPLIT[self.cell_type][0] // int(np.prod(self.n[:axis])) % self.n[axis]
         ids = ids[layer == (self.n[axis] - 1 if last else 0)]
@@ -325,6 +296,17 @@ class PlateSlices(GridSlices):
         # symmetry lines exactly on the axes (cos(pi/2) is not exactly 0)
         self.inner[0, 1] = 0.0
         self.inner[-1, 0] = 0.0
+        self.radius = radius
+
+    def midside_points(self, lo: np.ndarray, hi: np.ndarray, mid: np.ndarray) -> np.ndarray:
+        """Midside nodes (of edges ``lo``-``hi``) of triangle6 cells on the circle when the edge
+        joins two hole nodes (``plate_with_hole``'s projection, row by row)."""
+        if self.cell != "triangle6":
+            return mid
+        on = (self._node_index(lo)[0] == 0) & (self._node_index(hi)[0] == 0)
+        p = mid[on]
+        mid[on] = self.radius * p / np.linalg.norm(p, axis=1)[:, None]
+        return mid
 
     def points(self, start: int, stop: int) -> np.ndarray:
         k, j = self._node_index(np.arange(start, stop, dtype=np.int64))
@@ -384,8 +366,7 @@ def plate_with_hole(
     "top" (y = height). Nodes k + j*(n_radial+1) (k radial, j angular), quads k + j*n_radial
     (triangles 2 per quad).
     """
-    mesh = plate_slices(width, height, radius, n_radial, n_angular, cell, grading,
-                        quadratic=True).whole()
+    mesh = plate_slices(width, height, radius, n_radial, n_angular, cell, grading).whole()
     if cell == "triangle6":
         hole = np.zeros(mesh.num_points, dtype=bool)
         hole[mesh.node_groups["hole"]] = True
@@ -394,10 +375,9 @@ def plate_with_hole(
 
 
 def plate_slices(width: float, height: float, radius: float, n_radial: int, n_angular: int,
-                 cell: str = "quad", grading: float = 4.0, quadratic: bool = False) -> PlateSlices:
-    """``plate_with_hole``'s mesh as a slice source (``quadratic``: triangle6 allowed, for
-    ``whole`` only)."""
-    _check_cell(cell, ("quad", "triangle", "triangle6") if quadratic else ("quad", "triangle"))
+                 cell: str = "quad", grading: float = 4.0) -> PlateSlices:
+    """``plate_with_hole``'s mesh as a slice source."""
+    _check_cell(cell, ("quad", "triangle", "triangle6"))
     _check_counts(n_radial=n_radial, n_angular=n_angular)
     n_radial, n_angular = int(n_radial), int(n_angular)
     if n_angular < 2:
@@ -454,18 +434,88 @@ def _profile(r: np.ndarray, radius: float, profile: str) -> np.ndarray:
     return radius - np.sqrt(radius * radius - r * r)
 
 
-def _mapped_hexes(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Points and hexahedra of a mapped grid: node (i, j, k) at (x_i, y_j, z[k, j, i]), z
-    increasing with k (positive Jacobians: the map's matrix is triangular with a positive
-    diagonal). Node index i + j (nx+1) + k (nx+1)(ny+1), as ``box``."""
-    nz, ny, nx = (s - 1 for s in z.shape)
-    xx = np.broadcast_to(x[None, None, :], z.shape)
-    yy = np.broadcast_to(y[None, :, None], z.shape)
-    points = np.column_stack([xx.ravel(), yy.ravel(), z.ravel()])
-    k, j, i = _grid_indices(nx, ny, nz)
-    sx, sy = nx + 1, (nx + 1) * (ny + 1)
-    offs = np.array([dx + dy * sx + dz * sy for dx, dy, dz in _HEX_OFFSETS], dtype=np.int64)
-    return points, (i + j * sx + k * sy)[:, None] + offs[None, :]
+class SurfaceGrid(GridSlices):
+    """A box grid whose nodes' heights follow a surface: node (i, j, k) at (x_i, y_j,
+    face(x_i, y_j) + s_k (top − face(x_i, y_j))), s from 0 to 1 (the sphere body above its
+    contact face; positive Jacobians: the map's matrix is triangular, its diagonal positive)."""
+
+    def __init__(self, x: np.ndarray, s: np.ndarray, top: float, face: Callable, cell: str):
+        super().__init__([x, x, s], cell)
+        self.top, self.face = top, face
+
+    def points(self, start: int, stop: int) -> np.ndarray:
+        i, j, k = self._node_index(np.arange(start, stop, dtype=np.int64))
+        x, s = self.axes[0], self.axes[2]
+        face = self.face(np.hypot(x[i], x[j]))
+        return np.column_stack([x[i], x[j], face + s[k] * (self.top - face)]).reshape(-1, 3)
+
+
+class BodySlices:
+    """Grids side by side as one slice source (``mesh.slices``): the nodes and cells of each
+    after the former's, a cell group per body, and node and facet groups that are each a side
+    of some bodies (``groups``: name -> {body: side})."""
+
+    path = "<generator>"
+
+    def __init__(self, bodies: list[GridSlices], names: tuple[str, ...],
+                 groups: dict[str, dict[int, str]]):
+        self.bodies, self.cell_groups, self.groups = bodies, names, groups
+        self.node_groups = self.facet_groups = tuple(groups)
+        self.cell = self.cell_type = bodies[0].cell_type
+        self.dim = 3
+        self.point_offsets = np.cumsum([0] + [b.num_points for b in bodies])
+        self.cell_offsets = np.cumsum([0] + [b.num_cells for b in bodies])
+        self.num_points, self.num_cells = int(self.point_offsets[-1]), int(self.cell_offsets[-1])
+
+    def _pieces(self, offsets: np.ndarray, start: int, stop: int):
+        """(body, its first row, its row range) of the rows [start, stop)."""
+        for b, body in enumerate(self.bodies):
+            lo, hi = max(start, offsets[b]), min(stop, offsets[b + 1])
+            if lo < hi or (b == 0 and start == stop):
+                yield b, body, int(lo - offsets[b]), int(max(hi, lo) - offsets[b])
+
+    def points(self, start: int, stop: int) -> np.ndarray:
+        return np.vstack([body.points(lo, hi) for _, body, lo, hi
+                          in self._pieces(self.point_offsets, start, stop)])
+
+    def cells(self, start: int, stop: int) -> np.ndarray:
+        return np.vstack([body.cells(lo, hi) + self.point_offsets[b] for b, body, lo, hi
+                          in self._pieces(self.cell_offsets, start, stop)])
+
+    def node_flags(self, start: int, stop: int) -> np.ndarray:
+        out = np.zeros((stop - start, len(self.node_groups)), dtype=bool)
+        for b, body, lo, hi in self._pieces(self.point_offsets, start, stop):
+            ids = np.arange(lo, hi, dtype=np.int64)
+            rows = slice(lo + self.point_offsets[b] - start, hi + self.point_offsets[b] - start)
+            for g, sides in enumerate(self.groups.values()):
+                if b in sides:
+                    out[rows, g] = body._side(sides[b], ids)
+        return out
+
+    def cell_flags(self, start: int, stop: int) -> np.ndarray:
+        body = np.searchsorted(self.cell_offsets, np.arange(start, stop), side="right") - 1
+        return body[:, None] == np.arange(len(self.bodies))[None, :]
+
+    def facet_slice(self, name: str, rank: int, size: int) -> tuple[np.ndarray, np.ndarray]:
+        start, stop = self.num_cells * rank // size, self.num_cells * (rank + 1) // size
+        local = FACETS[self.cell_type]
+        rows, keys = [np.zeros((0, len(local[0])), np.int64)], [np.zeros(0, np.int64)]
+        for b, body, lo, hi in self._pieces(self.cell_offsets, start, stop):
+            if b in self.groups[name]:
+                f, k = body.facets_among(self.groups[name][b], lo, hi)
+                rows.append(f + self.point_offsets[b])
+                keys.append(k + self.cell_offsets[b] * len(local))
+        return np.concatenate(rows), np.concatenate(keys)
+
+    def whole(self) -> Mesh:
+        """The whole mesh (one process)."""
+        flags = self.cell_flags(0, self.num_cells)
+        mesh = Mesh(self.points(0, self.num_points), self.cell_type, self.cells(0, self.num_cells),
+                    cell_groups={n: np.flatnonzero(flags[:, k])
+                                 for k, n in enumerate(self.cell_groups)})
+        for name in self.facet_groups:
+            mesh.facet_groups[name] = self.facet_slice(name, 0, 1)[0]
+        return _nodes_from_facets(mesh)
 
 
 def _check_sphere_on_block(radius, width, depth, height, fine, gap, profile, cell) -> None:
@@ -522,39 +572,33 @@ def sphere_on_block(
     if n_fine_sphere is None:
         n_fine_sphere = max(1, (3 * int(n_fine) + 2) // 4)
     _check_counts(n_fine_sphere=n_fine_sphere)
+    return sphere_slices(radius, width, depth, height, fine, n_fine, n_coarse, n_depth,
+                         n_fine_sphere, gap, profile, cell).whole()
+
+
+def sphere_slices(radius: float, width: float, depth: float, height: float, fine: float,
+                  n_fine: int, n_coarse: int, n_depth: int, n_fine_sphere: int | None = None,
+                  gap: float = 0.0, profile: str = "paraboloid", cell: str = "hexahedron"
+                  ) -> BodySlices:
+    """``sphere_on_block``'s mesh as a slice source: the block's grid (nodes i + j (nx+1)
+    + k (nx+1)(ny+1), k up to its top z = 0), then the sphere body's (k up from its contact
+    face)."""
+    _check_counts(n_fine=n_fine, n_coarse=n_coarse, n_depth=n_depth)
+    if n_fine_sphere is None:
+        n_fine_sphere = max(1, (3 * int(n_fine) + 2) // 4)
+    _check_counts(n_fine_sphere=n_fine_sphere)
     _check_sphere_on_block(radius, width, depth, height, fine, gap, profile, cell)
     n_fine, n_coarse, n_depth, n_fine_sphere = map(int, (n_fine, n_coarse, n_depth, n_fine_sphere))
     # the block: fine at its top z = 0
     xb = _refined_line(fine, n_fine, width, n_coarse)
-    zb = -_expanding(fine / n_fine, depth, n_depth)[::-1]
-    pb, hb = _mapped_hexes(xb, xb, np.broadcast_to(zb[:, None, None], (n_depth + 1,) + (xb.size,) * 2))
+    block = GridSlices([xb, xb, -_expanding(fine / n_fine, depth, n_depth)[::-1]], cell)
     # the sphere body: each column from the contact face up to the top, fine at the face
     xs = _refined_line(fine, n_fine_sphere, width, n_coarse)
-    face = gap + _profile(np.hypot(xs[None, :], xs[:, None]), radius, profile)   # [j, i]
     s = _expanding(fine / n_fine_sphere / (height - gap), 1.0, n_depth)
-    ps, hs = _mapped_hexes(xs, xs, face[None] + s[:, None, None] * (height - face[None]))
-    points = np.vstack([pb, ps])
-    hexes = np.vstack([hb, hs + pb.shape[0]])
-    lower = np.arange(hexes.shape[0]) < hb.shape[0]
-    if cell == "hexahedron":
-        cells, per = hexes, 1
-    else:
-        cells, per = hexes[:, _KUHN].reshape(-1, 4), _KUHN.shape[0]
-    block = np.repeat(lower, per)
-    mesh = Mesh(points, cell, cells,
-                cell_groups={"block": np.flatnonzero(block), "sphere": np.flatnonzero(~block)})
-    nb = pb.shape[0]
-    k_block = np.repeat(np.arange(n_depth + 1), xb.size ** 2)
-    k_sphere = np.repeat(np.arange(n_depth + 1), xs.size ** 2)
-    _side_groups(mesh, {
-        "block_top": np.concatenate([k_block == n_depth, np.zeros(ps.shape[0], bool)]),
-        "block_bottom": np.concatenate([k_block == 0, np.zeros(ps.shape[0], bool)]),
-        "sphere_surface": np.concatenate([np.zeros(nb, bool), k_sphere == 0]),
-        "sphere_top": np.concatenate([np.zeros(nb, bool), k_sphere == n_depth]),
-        "xmin": points[:, 0] == 0.0,
-        "ymin": points[:, 1] == 0.0,
-    })
-    return _nodes_from_facets(mesh)
+    sphere = SurfaceGrid(xs, s, height, lambda r: gap + _profile(r, radius, profile), cell)
+    return BodySlices([block, sphere], ("block", "sphere"), {
+        "block_top": {0: "zmax"}, "block_bottom": {0: "zmin"}, "sphere_surface": {1: "zmin"},
+        "sphere_top": {1: "zmax"}, "xmin": {0: "xmin", 1: "xmin"}, "ymin": {0: "ymin", 1: "ymin"}})
 
 
 def sphere_on_block_counts(params: dict, order: int = 1) -> tuple[int, int, int]:
@@ -643,8 +687,8 @@ GENERATOR_GROUPS: dict[str, tuple[str, ...]] = {
 }
 
 # the generators that build any slice of their mesh (``mesh.slices``): linear cells
-SLICED: dict[str, Callable[..., GridSlices]] = {"rectangle": rectangle_slices, "box": box_slices,
-                                                "plate_with_hole": plate_slices}
+SLICED: dict[str, Callable] = {"rectangle": rectangle_slices, "box": box_slices,
+                               "plate_with_hole": plate_slices, "sphere_on_block": sphere_slices}
 
 GENERATORS: dict[str, Callable[..., Mesh]] = {
     "rectangle": rectangle,

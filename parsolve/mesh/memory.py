@@ -18,7 +18,7 @@ exceeds what the machine has available.
 
 The two shares are checked apart: the mesh (the 0.2 KB share) — on the rank-0 path rank 0
 alone builds the whole mesh (``check_whole_mesh``, on rank 0's machine); on the slice path
-(parallel mesh files, generated rectangles and boxes) every rank holds its share of it
+(parallel mesh files, generated meshes) every rank holds its share of it
 (``check_part``) — then every rank holds its part of the solve (``check_fits``: the other
 share over the ranks; every machine's verdict, the worst for all).
 """

@@ -2,7 +2,8 @@
 
 Every rank starts from a contiguous slice of the cells and of the points (rows
 ``partition.block_starts``) of a mesh source — the parallel mesh file (``h5mesh``) or a
-structured generator building its slab (``generators.SLICED``: rectangle, box, plate) — its
+generator building its slab (``generators.SLICED``), or either with midside nodes
+(``midside.QuadraticSlices``) — its
 **home** slice: a node's home is the rank whose point slice holds it. Then:
 
 1. the coordinates of the slice cells' nodes are fetched from their homes (all-to-all), and the
@@ -456,10 +457,13 @@ def _duplicate_warning(comm, points: np.ndarray, homes: _Homes, ps) -> list[str]
         return []
     extent = max(float((hi - lo).max()), 1e-300)
     grid = np.rint((pts - lo) / (1e-10 * extent)).astype(np.int64)
+    # a multiplicative hash, its high bits: a structured grid's rounded coordinates are all
+    # multiples of one spacing (of 4 for a 40-cell side), which their low bits would send to
+    # one rank
     mix = np.zeros(ids.size, dtype=np.uint64)
     for a in range(grid.shape[1]):
-        mix = mix * np.uint64(1000003) + grid[:, a].astype(np.uint64)
-    dest = (mix % np.uint64(comm.size)).astype(np.int64)
+        mix = (mix ^ grid[:, a].astype(np.uint64)) * np.uint64(0x9E3779B97F4A7C15)
+    dest = ((mix >> np.uint64(33)) % np.uint64(comm.size)).astype(np.int64)
     rows = np.column_stack([grid, ids, pts.view(np.int64).reshape(ids.size, -1)])
     got, _ = exchange(comm, rows, dest)
     dim = grid.shape[1]

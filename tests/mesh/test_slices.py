@@ -13,7 +13,7 @@ from parsolve.mesh import slices
 from parsolve.mesh.checks import check_mesh
 from parsolve.mesh.distribute import _extract
 from parsolve.mesh.generators import (box, box_slices, plate_slices, plate_with_hole, rectangle,
-                                      rectangle_slices)
+                                      rectangle_slices, sphere_on_block, sphere_slices)
 from parsolve.mesh.h5mesh import open_mesh, read_whole, write_mesh
 from parsolve.mesh.partition import Partition
 from parsolve.mesh.reader import read_mesh
@@ -126,8 +126,12 @@ GRIDS = {
     "box_tetra": (box_slices, (1.0, 1.0, 2.0, 2, 3, 4), {"cell": "tetra"}),
     "plate_quad": (plate_slices, (5.0, 4.0, 1.0, 5, 7), {"cell": "quad", "grading": 3.0}),
     "plate_triangle": (plate_slices, (4.0, 4.0, 1.5, 6, 4), {"cell": "triangle"}),
+    "sphere_hexahedron": (sphere_slices, (10.0, 1.0, 1.5, 1.2, 0.3, 4, 3, 3), {}),
+    "sphere_tetra": (sphere_slices, (10.0, 1.0, 1.5, 1.2, 0.3, 3, 2, 2),
+                     {"cell": "tetra", "gap": 0.01, "profile": "sphere"}),
 }
-WHOLE = {rectangle_slices: rectangle, box_slices: box, plate_slices: plate_with_hole}
+WHOLE = {rectangle_slices: rectangle, box_slices: box, plate_slices: plate_with_hole,
+         sphere_slices: sphere_on_block}
 
 
 @pytest.mark.parametrize("method", ["scotch", "bisection"])
@@ -135,7 +139,7 @@ WHOLE = {rectangle_slices: rectangle, box_slices: box, plate_slices: plate_with_
 def test_generated_slices_are_the_whole_generators_parts(name, method, comm):
     """Each rank generating its own slice gives the part the rank-0 path cuts out of the
     whole generated mesh (``rectangle``/``box``/``plate_with_hole``, which build the same
-    numbering)."""
+    numbering; ``sphere_on_block``'s bodies with their cell groups)."""
     slicer, args, kw = GRIDS[name]
     whole = WHOLE[slicer](*args, **kw)
     local = slices.distribute_slices(comm, slicer(*args, **kw), method, "scene.toml", "mesh")
@@ -147,6 +151,9 @@ def test_generated_slices_are_the_whole_generators_parts(name, method, comm):
         assert sorted(got) == sorted(want[kind]) and got
         for group in got:
             assert np.array_equal(got[group], want[kind][group]), (kind, group)
+    assert sorted(local.cell_groups) == sorted(whole.cell_groups)
+    for group in local.cell_groups:
+        assert np.array_equal(local.cell_groups[group], want["cell_groups"][group]), group
 
 
 SCENE = """
@@ -180,13 +187,23 @@ RUNS = {
     "box": dict(generator="box", params="lx = 4.0\nly = 1.0\nlz = 1.0\nnx = 12\nny = 3\nnz = 3\n"
                 'cell = "tetra"', hypothesis="3d", end="xmax", start="xmin",
                 force="[0.0, 0.0, -1.0]", components='["x", "y", "z"]'),
+    "box_order2": dict(generator="box", params="lx = 4.0\nly = 1.0\nlz = 1.0\nnx = 6\nny = 2\n"
+                       'nz = 2\ncell = "tetra"\norder = 2', hypothesis="3d", end="xmax",
+                       start="xmin", force="[0.0, 0.0, -1.0]", components='["x", "y", "z"]'),
+    "plate_triangle6": dict(generator="plate_with_hole", params="width = 4.0\nheight = 4.0\n"
+                            'radius = 1.0\nn_radial = 6\nn_angular = 8\ncell = "triangle6"',
+                            hypothesis="plane_stress", end="right", start="left",
+                            force="[1.0, 0.0]", components='["x", "y"]'),
 }
+CELLS = {"rectangle": "triangle", "box": "tetra", "box_order2": "tetra10",
+         "plate_triangle6": "triangle6"}
 
 
 @pytest.mark.parametrize("name", sorted(RUNS))
 def test_generated_scene_runs_as_the_whole_generation(name, comm, run, monkeypatch):
-    """A cantilever from the generator's slices and from the whole generation on rank 0: the
-    same parts, so the same fields (to the round-off of two parallel runs)."""
+    """A cantilever from the generator's slices and from the whole generation on rank 0 (its
+    quadratic cells, ``order = 2``, from the whole mesh's ``make_quadratic``): the same mesh
+    and the same fields (to the round-off of two parallel runs)."""
     import parsolve.model as model
 
     text = SCENE.format(**RUNS[name])
@@ -194,7 +211,7 @@ def test_generated_scene_runs_as_the_whole_generation(name, comm, run, monkeypat
     with monkeypatch.context() as m:
         m.setattr(model, "_slice_source", lambda scene, comm: None)
         whole = run(text, f"{name}_whole")
-    for key in ("mesh/points", f"mesh/cells/{'triangle' if name == 'rectangle' else 'tetra'}"):
+    for key in ("mesh/points", f"mesh/cells/{CELLS[name]}"):
         assert np.array_equal(sliced[key], whole[key])
     u, w = sliced["fields/displacement"], whole["fields/displacement"]
     assert np.abs(w).max() > 1e-3
