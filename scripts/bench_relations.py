@@ -103,9 +103,13 @@ def child(scene_path: str, preset: str, out: str, options: str) -> None:
     krylov: list[int] = []
     solve = linear.LinearSolver.solve
 
+    pieces: dict[str, float] = {}   # the matrices after the first solve (BENCH_PIECES set)
+
     def counted(self, rhs, x):
         its = solve(self, rhs, x)
         krylov.append(int(its))
+        if os.environ.get("BENCH_PIECES") and not pieces:
+            pieces.update(matrix_pieces(self))
         return its
 
     linear.LinearSolver.solve = counted
@@ -133,14 +137,55 @@ def child(scene_path: str, preset: str, out: str, options: str) -> None:
     # own peak memory; rank 0 the rest; the parent sums.
     if MPI.COMM_WORLD.rank:
         print(json.dumps(dict(rank=MPI.COMM_WORLD.rank, hwm=bh.proc_memory()["hwm"],
-                              setup=setup)))
+                              setup=setup, pieces=pieces)))
         return
     with h5py.File(out, "r") as f:
         iterations = int(f["steps/iterations"][()].sum())
         dofs = int(f.attrs.get("dofs", dofs))
     print(json.dumps(dict(status=status, dofs=dofs, iterations=iterations, krylov=krylov,
                           wall=wall, hwm=bh.proc_memory()["hwm"], ranks=MPI.COMM_WORLD.size,
-                          setup=setup)))
+                          setup=setup, pieces=pieces)))
+
+
+def matrix_pieces(solver) -> dict[str, float]:
+    """MiB on this rank of each matrix the first set-up of ``solver`` holds: the Newton matrix
+    M, the KSP's operator and preconditioning matrix (each counted once), the fieldsplit's
+    blocks, GAMG's coarse operators and interpolations; and the resident memory then."""
+    seen: set[int] = set()
+
+    def size(mat) -> float:
+        if mat is None or mat.handle in seen:
+            return 0.0
+        seen.add(mat.handle)
+        kind = mat.getType()
+        if kind == "nest":
+            m, n = mat.getNestSize()
+            return sum(size(mat.getNestSubMatrix(i, j)) for i in range(m) for j in range(n))
+        if "aij" not in kind:
+            return 0.0
+        return bh.mat_bytes(mat) / bh.MiB
+
+    out = {"M": size(solver.operator)}
+    ksp = solver.ksp
+    op, pmat = ksp.getOperators()
+    out["KSP operator"] = size(op)
+    out["KSP pmat"] = size(pmat)
+    pc = ksp.getPC()
+    if pc.getType() == "fieldsplit":
+        kq, kl = pc.getFieldSplitSubKSP()
+        out["fieldsplit q block"] = size(kq.getOperators()[1])
+        out["Schur pmat"] = size(kl.getOperators()[1])
+        mg = kq.getPC()
+    else:
+        mg = pc
+    if mg.getType() == "gamg":
+        levels = mg.getMGLevels()
+        out["GAMG coarse operators"] = sum(
+            size(mg.getMGSmoother(lv).getOperators()[0]) for lv in range(levels - 1))
+        out["GAMG interpolations"] = sum(size(mg.getMGInterpolation(lv))
+                                         for lv in range(1, levels))
+    out["RSS"] = bh.proc_memory()["rss"] / bh.MiB
+    return out
 
 
 def json_objects(text: str) -> list[dict]:
@@ -170,8 +215,12 @@ def one_run(folder: Path, name: str, text: str, preset: str, options: dict | Non
         return dict(status=f"failed: {(proc.stderr or proc.stdout).strip()[-300:]}", out=str(out))
     hwm = [ln["hwm"] for ln in lines]
     setup = [ln.get("setup", {}).get("mib", 0.0) for ln in lines]
+    pieces: dict[str, float] = {}
+    for ln in lines:
+        for key, mib in ln.get("pieces", {}).items():
+            pieces[key] = pieces.get(key, 0.0) + mib
     return {**main_line[-1], "hwm": sum(hwm), "hwm_rank": max(hwm), "setup_rank": max(setup),
-            "setup_sum": sum(setup), "out": str(out)}
+            "setup_sum": sum(setup), "out": str(out), "pieces": pieces}
 
 
 def same_answers(a: str, b: str) -> str:
