@@ -301,8 +301,10 @@ SCALE_HEAD = ["problem", "refinement", "DOFs", "ranks", "Newton its", "Krylov me
 def scale_study(folder: Path, factors: list[int], ranks: int,
                 steps: int = 2) -> list[list[str]]:
     """The friction box (iterative preset) against plain elasticity (CG + GAMG) on the same
-    mesh and ranks: time per Newton iteration, peak memory summed over the ranks."""
-    rows = []
+    mesh and ranks: time per Newton iteration, peak memory summed over the ranks; the matrices'
+    memory piece by piece (``matrix_pieces``)."""
+    os.environ["BENCH_PIECES"] = "1"   # (the children inherit it)
+    rows, pieces = [], []
     for f in factors:
         runs = {"friction": one_run(folder, f"scale_friction_{f}", friction_scene(f, steps),
                                     "iterative", ranks=ranks),
@@ -324,8 +326,23 @@ def scale_study(folder: Path, factors: list[int], ranks: int,
                          bh.mib(r.get("hwm_rank")), bh.mib(r["hwm"]),
                          f"{r['hwm'] / r['dofs'] / 1e3:.1f}", ratio])
         print(bh.text_table(SCALE_HEAD, rows[-2:]), flush=True)
-        publish_scale(rows, ranks, steps)   # after every size: a stopped run keeps its rows
-    return rows
+        pieces += [piece_row(name, f, r) for name, r in runs.items()]
+        publish_scale(rows, pieces, ranks, steps)   # after every size: a stopped run keeps
+    return rows                                     # its rows
+
+
+PIECES = ["M", "KSP operator", "KSP pmat", "fieldsplit q block", "Schur pmat",
+          "GAMG coarse operators", "GAMG interpolations", "RSS"]
+PIECES_HEAD = ["problem", "refinement", "Newton matrix M", "KSP operator", "KSP pmat (its own)",
+               "fieldsplit q block (its own)", "Schur pmat", "GAMG coarse operators",
+               "GAMG interpolations", "resident after the first solve", "peak"]
+
+
+def piece_row(name: str, f: int, r: dict) -> list[str]:
+    """MiB summed over the ranks of each matrix after the first solve (``matrix_pieces``)."""
+    got = r.get("pieces") or {}
+    return [name, f"{f}³×", *(f"{got[k]:.1f}" if k in got else "-" for k in PIECES),
+            bh.mib(r.get("hwm"))]
 
 
 GAMG_HEAD = ["ranks", "PtAP (-matptap_via)", "DOFs", "CG its", "set-up s",
@@ -421,7 +438,7 @@ def main() -> None:
     print(text)
 
 
-def publish_scale(rows: list, ranks: int, steps: int) -> None:
+def publish_scale(rows: list, pieces: list, ranks: int, steps: int) -> None:
     machine = bh.machine_info()
     text = "\n".join([
         "# Relations at scale: the friction box against plain elasticity", "",
@@ -429,7 +446,12 @@ def publish_scale(rows: list, ranks: int, steps: int) -> None:
         "machine shared (times noisy). The 3D friction box (`contact_friction_3d.toml`, its "
         f"first {steps} step{'s' if steps > 1 else ''}) refined f× per direction on the iterative preset, against the same "
         "box with its base clamped (CG + GAMG); peak memory: VmHWM summed over the ranks.", "",
-        bh.md_table(SCALE_HEAD, rows, first="---"), ""])
+        bh.md_table(SCALE_HEAD, rows, first="---"), "",
+        "The matrices piece by piece after the first linear solve (MiB summed over the ranks: "
+        "allocated nonzeros × (value + column index) + row offsets; a matrix shared by two "
+        "roles counted once, at its first; M is the Newton matrix, on the saddle operator's own "
+        "arrays), the resident memory then and the run's peak:", "",
+        bh.md_table(PIECES_HEAD, pieces, first="---"), ""])
     bh.publish("bench_relations_scale.md", text)
 
 
