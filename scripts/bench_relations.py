@@ -397,7 +397,8 @@ def main() -> None:
     p.add_argument("--ranks", type=int, default=2, help="ranks of the scale runs")
     p.add_argument("--steps", type=int, default=2, help="load steps of the scale runs")
     p.add_argument("--cases", type=str, default="friction,ironing,mortar",
-                   help="the series to run (comma-separated)")
+                   help="the series to run, or single sizes as case:factor (comma-separated: "
+                        "friction,ironing:1,mortar)")
     p.add_argument("--gamg", type=int, default=0,
                    help="the GAMG set-up table only: the clamped box refined f× on 1 and 2 "
                         "ranks, PETSc's PtAP algorithms (bench_relations_gamg.md)")
@@ -420,7 +421,8 @@ def main() -> None:
             f *= 2
         cases += [("ironing", 1, ironing_scene(folder, 1)), ("ironing", 8, ironing_scene(folder, 2)),
                   ("mortar", 1, mortar_scene(1)), ("mortar", 8, mortar_scene(2))]
-        cases = [c for c in cases if c[0] in args.cases.split(",")]
+        chosen = args.cases.split(",")   # a series ("mortar") or one size ("ironing:8")
+        cases = [c for c in cases if c[0] in chosen or f"{c[0]}:{c[1]}" in chosen]
     results, rows = [], []
     for case, factor, text in cases:
         name = f"{case}_{factor}"
