@@ -137,7 +137,8 @@ class AugmentedMatrix:
             k = mat.createSubMatrix(self.is_q, self.is_q)
             if self.comm.allreduce(int(not _within(k, extra)), op=MPI.MAX):
                 self._k, self._stiffness = k, extra.duplicate()
-                self._stiffness.axpy(1.0, k, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+                self._stiffness.axpy(1.0, k,
+                                     structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
             else:
                 self._stiffness = k
         if self._k is None:
