@@ -103,9 +103,13 @@ def child(scene_path: str, preset: str, out: str, options: str) -> None:
     krylov: list[int] = []
     solve = linear.LinearSolver.solve
 
+    pieces: dict[str, float] = {}   # the matrices after the first solve (BENCH_PIECES set)
+
     def counted(self, rhs, x):
         its = solve(self, rhs, x)
         krylov.append(int(its))
+        if os.environ.get("BENCH_PIECES") and not pieces:
+            pieces.update(matrix_pieces(self))
         return its
 
     linear.LinearSolver.solve = counted
@@ -133,14 +137,55 @@ def child(scene_path: str, preset: str, out: str, options: str) -> None:
     # own peak memory; rank 0 the rest; the parent sums.
     if MPI.COMM_WORLD.rank:
         print(json.dumps(dict(rank=MPI.COMM_WORLD.rank, hwm=bh.proc_memory()["hwm"],
-                              setup=setup)))
+                              setup=setup, pieces=pieces)))
         return
     with h5py.File(out, "r") as f:
         iterations = int(f["steps/iterations"][()].sum())
         dofs = int(f.attrs.get("dofs", dofs))
     print(json.dumps(dict(status=status, dofs=dofs, iterations=iterations, krylov=krylov,
                           wall=wall, hwm=bh.proc_memory()["hwm"], ranks=MPI.COMM_WORLD.size,
-                          setup=setup)))
+                          setup=setup, pieces=pieces)))
+
+
+def matrix_pieces(solver) -> dict[str, float]:
+    """MiB on this rank of each matrix the first set-up of ``solver`` holds: the Newton matrix
+    M, the KSP's operator and preconditioning matrix (each counted once), the fieldsplit's
+    blocks, GAMG's coarse operators and interpolations; and the resident memory then."""
+    seen: set[int] = set()
+
+    def size(mat) -> float:
+        if mat is None or mat.handle in seen:
+            return 0.0
+        seen.add(mat.handle)
+        kind = mat.getType()
+        if kind == "nest":
+            m, n = mat.getNestSize()
+            return sum(size(mat.getNestSubMatrix(i, j)) for i in range(m) for j in range(n))
+        if "aij" not in kind:
+            return 0.0
+        return bh.mat_bytes(mat) / bh.MiB
+
+    out = {"M": size(solver.operator)}
+    ksp = solver.ksp
+    op, pmat = ksp.getOperators()
+    out["KSP operator"] = size(op)
+    out["KSP pmat"] = size(pmat)
+    pc = ksp.getPC()
+    if pc.getType() == "fieldsplit":
+        kq, kl = pc.getFieldSplitSubKSP()
+        out["fieldsplit q block"] = size(kq.getOperators()[1])
+        out["Schur pmat"] = size(kl.getOperators()[1])
+        mg = kq.getPC()
+    else:
+        mg = pc
+    if mg.getType() == "gamg":
+        levels = mg.getMGLevels()
+        out["GAMG coarse operators"] = sum(
+            size(mg.getMGSmoother(lv).getOperators()[0]) for lv in range(levels - 1))
+        out["GAMG interpolations"] = sum(size(mg.getMGInterpolation(lv))
+                                         for lv in range(1, levels))
+    out["RSS"] = bh.proc_memory()["rss"] / bh.MiB
+    return out
 
 
 def json_objects(text: str) -> list[dict]:
@@ -170,8 +215,12 @@ def one_run(folder: Path, name: str, text: str, preset: str, options: dict | Non
         return dict(status=f"failed: {(proc.stderr or proc.stdout).strip()[-300:]}", out=str(out))
     hwm = [ln["hwm"] for ln in lines]
     setup = [ln.get("setup", {}).get("mib", 0.0) for ln in lines]
+    pieces: dict[str, float] = {}
+    for ln in lines:
+        for key, mib in ln.get("pieces", {}).items():
+            pieces[key] = pieces.get(key, 0.0) + mib
     return {**main_line[-1], "hwm": sum(hwm), "hwm_rank": max(hwm), "setup_rank": max(setup),
-            "setup_sum": sum(setup), "out": str(out)}
+            "setup_sum": sum(setup), "out": str(out), "pieces": pieces}
 
 
 def same_answers(a: str, b: str) -> str:
@@ -252,8 +301,10 @@ SCALE_HEAD = ["problem", "refinement", "DOFs", "ranks", "Newton its", "Krylov me
 def scale_study(folder: Path, factors: list[int], ranks: int,
                 steps: int = 2) -> list[list[str]]:
     """The friction box (iterative preset) against plain elasticity (CG + GAMG) on the same
-    mesh and ranks: time per Newton iteration, peak memory summed over the ranks."""
-    rows = []
+    mesh and ranks: time per Newton iteration, peak memory summed over the ranks; the matrices'
+    memory piece by piece (``matrix_pieces``)."""
+    os.environ["BENCH_PIECES"] = "1"   # (the children inherit it)
+    rows, pieces = [], []
     for f in factors:
         runs = {"friction": one_run(folder, f"scale_friction_{f}", friction_scene(f, steps),
                                     "iterative", ranks=ranks),
@@ -275,8 +326,23 @@ def scale_study(folder: Path, factors: list[int], ranks: int,
                          bh.mib(r.get("hwm_rank")), bh.mib(r["hwm"]),
                          f"{r['hwm'] / r['dofs'] / 1e3:.1f}", ratio])
         print(bh.text_table(SCALE_HEAD, rows[-2:]), flush=True)
-        publish_scale(rows, ranks, steps)   # after every size: a stopped run keeps its rows
-    return rows
+        pieces += [piece_row(name, f, r) for name, r in runs.items()]
+        publish_scale(rows, pieces, ranks, steps)   # after every size: a stopped run keeps
+    return rows                                     # its rows
+
+
+PIECES = ["M", "KSP operator", "KSP pmat", "fieldsplit q block", "Schur pmat",
+          "GAMG coarse operators", "GAMG interpolations", "RSS"]
+PIECES_HEAD = ["problem", "refinement", "Newton matrix M", "KSP operator", "KSP pmat (its own)",
+               "fieldsplit q block (its own)", "Schur pmat", "GAMG coarse operators",
+               "GAMG interpolations", "resident after the first solve", "peak"]
+
+
+def piece_row(name: str, f: int, r: dict) -> list[str]:
+    """MiB summed over the ranks of each matrix after the first solve (``matrix_pieces``)."""
+    got = r.get("pieces") or {}
+    return [name, f"{f}³×", *(f"{got[k]:.1f}" if k in got else "-" for k in PIECES),
+            bh.mib(r.get("hwm"))]
 
 
 GAMG_HEAD = ["ranks", "PtAP (-matptap_via)", "DOFs", "CG its", "set-up s",
@@ -331,7 +397,8 @@ def main() -> None:
     p.add_argument("--ranks", type=int, default=2, help="ranks of the scale runs")
     p.add_argument("--steps", type=int, default=2, help="load steps of the scale runs")
     p.add_argument("--cases", type=str, default="friction,ironing,mortar",
-                   help="the series to run (comma-separated)")
+                   help="the series to run, or single sizes as case:factor (comma-separated: "
+                        "friction,ironing:1,mortar)")
     p.add_argument("--gamg", type=int, default=0,
                    help="the GAMG set-up table only: the clamped box refined f× on 1 and 2 "
                         "ranks, PETSc's PtAP algorithms (bench_relations_gamg.md)")
@@ -354,7 +421,8 @@ def main() -> None:
             f *= 2
         cases += [("ironing", 1, ironing_scene(folder, 1)), ("ironing", 8, ironing_scene(folder, 2)),
                   ("mortar", 1, mortar_scene(1)), ("mortar", 8, mortar_scene(2))]
-        cases = [c for c in cases if c[0] in args.cases.split(",")]
+        chosen = args.cases.split(",")   # a series ("mortar") or one size ("ironing:8")
+        cases = [c for c in cases if c[0] in chosen or f"{c[0]}:{c[1]}" in chosen]
     results, rows = [], []
     for case, factor, text in cases:
         name = f"{case}_{factor}"
@@ -372,7 +440,7 @@ def main() -> None:
     print(text)
 
 
-def publish_scale(rows: list, ranks: int, steps: int) -> None:
+def publish_scale(rows: list, pieces: list, ranks: int, steps: int) -> None:
     machine = bh.machine_info()
     text = "\n".join([
         "# Relations at scale: the friction box against plain elasticity", "",
@@ -380,7 +448,12 @@ def publish_scale(rows: list, ranks: int, steps: int) -> None:
         "machine shared (times noisy). The 3D friction box (`contact_friction_3d.toml`, its "
         f"first {steps} step{'s' if steps > 1 else ''}) refined f× per direction on the iterative preset, against the same "
         "box with its base clamped (CG + GAMG); peak memory: VmHWM summed over the ranks.", "",
-        bh.md_table(SCALE_HEAD, rows, first="---"), ""])
+        bh.md_table(SCALE_HEAD, rows, first="---"), "",
+        "The matrices piece by piece after the first linear solve (MiB summed over the ranks: "
+        "allocated nonzeros × (value + column index) + row offsets; a matrix shared by two "
+        "roles counted once, at its first; M is the Newton matrix, on the saddle operator's own "
+        "arrays), the resident memory then and the run's peak:", "",
+        bh.md_table(PIECES_HEAD, pieces, first="---"), ""])
     bh.publish("bench_relations_scale.md", text)
 
 

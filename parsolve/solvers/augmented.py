@@ -48,12 +48,19 @@ NODAL_SPAN = 3
 
 
 class AugmentedMatrix:
-    """T M (``operator``) and its preconditioning matrix (``pmat``: T M, and -k on the diagonal
-    of a row with no sparse Schur diagonal: the same matrix when there is none) from the
-    operator's current values, made again on every call (one submatrix, one sparse product,
-    one merge: O(nnz)); ``transform`` makes T b. The pattern (the operator's and Aᵀ A of every
-    multiplier row, hard or not) is fixed as long as the operator's is, so the preconditioner
-    set up on it reuses its structure."""
+    """T M (``operator``) and its preconditioning matrix (``pmat``: T M, with γ_c/k Aᵀ A of the
+    coupled hard rows and -k on the diagonal of a row with no sparse Schur diagonal) from the
+    operator's current values, made again on every call (submatrices and sparse products of the
+    relation rows: O(nnz)); ``transform`` makes T b.
+
+    Neither is a copy of M beside it: both are block (nest) matrices [[K + γ/k Aₕᵀ Aₕ, -D],
+    [A, C]] on the saddle layout, sharing their blocks (P's own: the coupled rows' stiffness
+    block, and C with its fill), and the stiffness block is the one copy of K, the block the
+    Schur fieldsplit's V-cycle works on (handed over, not copied again). Its pattern is K's
+    when every entry of Aᵀ A falls in it (the rows of one node), else K's and Aᵀ A's (then K's
+    values pass through a submatrix kept beside it); it is fixed as long as the operator's is,
+    so the preconditioner set up on it
+    reuses its structure."""
 
     def __init__(self, comm, layout):
         self.comm, self.layout = comm, layout
@@ -61,14 +68,19 @@ class AugmentedMatrix:
         self.nq, self.nl = q1 - q0, l1 - l0
         off = layout.offset
         self.is_q = PETSc.IS().createStride(self.nq, first=off, step=1, comm=comm)
+        self.is_q.setBlockSize(layout.ncomp)
         self.is_l = PETSc.IS().createStride(self.nl, first=off + self.nq, step=1, comm=comm)
         self._handle = None
         self.operator: PETSc.Mat | None = None
         self.pmat: PETSc.Mat | None = None
         self._weight: PETSc.Vec | None = None
-        self._rows = self._scaled = self._rows_a = self._cols = self._coupling = None
+        self._reset()
+
+    def _reset(self) -> None:
+        self.operator = self.pmat = None
+        self._rows = self._scaled = self._cols = self._coupling = None
+        self._stiffness = self._k = self._dual = self._lam = self._plam = self._coupled = None
         self._products: dict[str, PETSc.Mat] = {}
-        self._coupled_extra: PETSc.Mat | None = None
 
     def update(self, mat: PETSc.Mat, hard: np.ndarray, kscale: float,
                gamma: float = GAMMA) -> "AugmentedMatrix":
@@ -79,44 +91,62 @@ class AugmentedMatrix:
         # a new operator (a new pattern): start again, on every rank alike (the products
         # below are collective: a rank that made them anew while another reused them hung)
         if self.comm.allreduce(int(mat.handle != self._handle), op=MPI.MAX):
-            self._handle, self.operator, self.pmat = mat.handle, None, None
-            self._rows = self._scaled = self._rows_a = self._cols = self._coupling = None
-            self._products = {}
+            self._handle = mat.handle
+            self._reset()
         self._rows = mat.createSubMatrix(self.is_l, self.is_q, submat=self._rows)
         nodal = np.diff(self._rows.getValuesCSR()[0]) <= NODAL_SPAN
         self._weight = self._rows.createVecLeft()
         self._weight.array[:] = np.sqrt(gamma / kscale) * (hard & nodal)
         self._scaled = self._gram("nodal", self._weight)
-        extra = self._embedded(self._products["nodal"])
-        if self.operator is None:
-            self.operator = mat.duplicate(copy=True)
-            self.operator.axpy(1.0, extra,
-                               structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-        else:
-            mat.copy(self.operator, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
-            self.operator.axpy(1.0, extra, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
-        extra.destroy()
-        coupled = self.comm.allreduce(int((~nodal).sum()))   # (fixed by the pattern)
-        fill = self._schur_fill(mat, kscale, coupled, hard & ~nodal,
-                                np.sqrt(min(gamma, GAMMA_COUPLED) / kscale))
-        if fill is None and not coupled:
-            self.pmat = self.operator
-            return self
-        if self.pmat is None or self.pmat is self.operator:
-            self.pmat = self.operator.duplicate(copy=True)
-            if coupled:
-                self.pmat.axpy(1.0, self._coupled_extra,
-                               structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-        else:
-            self.operator.copy(self.pmat, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
-            if coupled:
-                self.pmat.axpy(1.0, self._coupled_extra,
-                               structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
-        if coupled:
-            self._coupled_extra.destroy()
+        self._augment_stiffness(mat, self._products["nodal"])
+        self._dual = mat.createSubMatrix(self.is_q, self.is_l, submat=self._dual)
+        self._lam = mat.createSubMatrix(self.is_l, self.is_l, submat=self._lam)
+        same = PETSc.Mat.Structure.SAME_NONZERO_PATTERN
+        stiffness = self._stiffness
+        if self.comm.allreduce(int((~nodal).sum())):   # coupled rows (fixed by the pattern)
+            w = self._rows.createVecLeft()
+            w.array[:] = np.sqrt(min(gamma, GAMMA_COUPLED) / kscale) * (hard & ~nodal)
+            self._gram("coupled", w).destroy()
+            self._coupled = stiffness = self._stiffness.copy(
+                self._coupled, structure=same if self._coupled is not None else None)
+            stiffness.axpy(1.0, self._products["coupled"],
+                           structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+        self._plam = self._lam.copy(self._plam, structure=same if self._plam is not None else None)
+        fill = self._schur_fill(stiffness, kscale)
         if fill is not None:
-            self.pmat.setDiagonal(fill, addv=PETSc.InsertMode.ADD_VALUES)
+            self._plam.setDiagonal(fill, addv=PETSc.InsertMode.ADD_VALUES)
+        if self.pmat is None:
+            self.operator = self._nest(self._stiffness, self._lam)
+            self.pmat = self._nest(stiffness, self._plam)
+        for m in (self.operator, self.pmat):   # (their state: the preconditioner sees the
+            m.assemble()                       # blocks' new values)
         return self
+
+    def _nest(self, stiffness: PETSc.Mat, lam: PETSc.Mat) -> PETSc.Mat:
+        """[[stiffness, -D], [A, lam]] on the saddle layout, its blocks not copied."""
+        blocks = [[stiffness, self._dual], [self._rows, lam]]
+        index = [self.is_q, self.is_l]
+        return PETSc.Mat().createNest(blocks, isrows=index, iscols=index, comm=self.comm)
+
+    def _augment_stiffness(self, mat: PETSc.Mat, extra: PETSc.Mat) -> None:
+        """K + ``extra`` into the stiffness block. Its first build tries K's own pattern (the
+        submatrix of M, then the block itself); when ``extra`` has entries outside it on any
+        rank, the block takes both patterns and K's submatrix is kept beside it."""
+        subset = PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN
+        if self._stiffness is None:
+            k = mat.createSubMatrix(self.is_q, self.is_q)
+            if self.comm.allreduce(int(not _within(k, extra)), op=MPI.MAX):
+                self._k, self._stiffness = k, extra.duplicate()
+                self._stiffness.axpy(1.0, k,
+                                     structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+            else:
+                self._stiffness = k
+        if self._k is None:
+            mat.createSubMatrix(self.is_q, self.is_q, submat=self._stiffness)
+        else:
+            mat.createSubMatrix(self.is_q, self.is_q, submat=self._k)
+            self._k.copy(self._stiffness, structure=subset)
+        self._stiffness.axpy(1.0, extra, structure=subset)
 
     def _gram(self, name: str, weight: PETSc.Vec) -> PETSc.Mat:
         """(W A)ᵀ (W A) into the product kept under ``name`` (its pattern reused); W A."""
@@ -139,52 +169,43 @@ class AugmentedMatrix:
         weighted.destroy()
         add.destroy()
 
-    def _schur_fill(self, mat: PETSc.Mat, kscale: float, coupled: int, rows: np.ndarray,
-                    weight: float) -> PETSc.Vec | None:
+    def _schur_fill(self, stiffness: PETSc.Mat, kscale: float) -> PETSc.Vec | None:
         """A relation whose rows and dual share no DOF (a control: the strain of a cell driven by
         a load on the end) has no diagonal in the sparse Schur approximation
         A₁₁ - A diag(K + γ Aₕᵀ Aₕ)⁻¹ (-D), and Jacobi would divide by 0 (PETSc takes 1: a scale
-        off by k²). Such a row gets -k on P's diagonal (the vector to add, None when no row
-        needs it): the true Schur entry aᵀ K⁻¹ d is a global quantity, but a few rows whose
-        scale is merely of the right order are a few isolated eigenvalues, which cost GMRES an
-        iteration each. First, when the pattern has coupled rows (``coupled``), their part of
-        P (``rows``, weighted by ``weight``) is made, as ``_coupled_extra``."""
-        diag = self.operator.getDiagonal()
-        if coupled:
-            w = self._rows.createVecLeft()
-            w.array[:] = weight * rows
-            self._gram("coupled", w).destroy()
-            self._coupled_extra = self._embedded(self._products["coupled"])
-            diag.axpy(1.0, self._coupled_extra.getDiagonal())
-        inv = diag.getSubVector(self.is_q)
+        off by k²). Such a row gets -k on P's diagonal (the vector of the multiplier rows to
+        add, None when no row needs it): the true Schur entry aᵀ K⁻¹ d is a global quantity,
+        but a few rows whose scale is merely of the right order are a few isolated eigenvalues,
+        which cost GMRES an iteration each."""
+        inv = stiffness.getDiagonal()
         inv.reciprocal()
-        self._cols = mat.createSubMatrix(self.is_q, self.is_l, submat=self._cols)
+        self._cols = self._dual.copy(self._cols, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN
+                                     if self._cols is not None else None)
         self._cols.diagonalScale(L=inv)
-        diag.restoreSubVector(self.is_q, inv)
-        self._rows_a = mat.createSubMatrix(self.is_l, self.is_q, submat=self._rows_a)
-        self._coupling = self._rows_a.matMult(self._cols, result=self._coupling)
-        coupling = self._coupling.getDiagonal().array
-        schur = diag.array[self.nq:] - coupling
+        self._coupling = self._rows.matMult(self._cols, result=self._coupling)
+        schur = self._lam.getDiagonal().array - self._coupling.getDiagonal().array
         empty = np.abs(schur) <= 1e-8 * kscale
         if not self.comm.allreduce(int(empty.sum())):
             return None
-        lam = diag.getSubVector(self.is_l)
-        lam.array[:] = np.where(empty, -kscale, 0.0)
-        add = diag.duplicate()
-        add.zeroEntries()
-        add.isaxpy(self.is_l, 1.0, lam)
-        diag.restoreSubVector(self.is_l, lam)
+        add = self._lam.createVecLeft()
+        add.array[:] = np.where(empty, -kscale, 0.0)
         return add
 
-    def _embedded(self, product: PETSc.Mat) -> PETSc.Mat:
-        """The q-space matrix ``product`` as a matrix of the saddle layout (its rows the primal
-        rows of each rank, empty multiplier rows)."""
-        indptr, cols, vals = product.getValuesCSR()
-        cols = self.layout.q_index(np.asarray(cols, dtype=np.int64))
-        indptr = np.concatenate([indptr, np.full(self.nl, indptr[-1], dtype=indptr.dtype)])
-        n, size = self.nq + self.nl, self.layout.size
-        out = PETSc.Mat().createAIJ(size=((n, size), (n, size)), comm=self.comm,
-                                    csr=(indptr.astype(PETSc.IntType),
-                                         cols.astype(PETSc.IntType), vals))
-        out.assemble()
-        return out
+
+def _within(mat: PETSc.Mat, extra: PETSc.Mat) -> bool:
+    """Whether every entry of ``extra`` (same layout) is in the pattern of ``mat``, on this
+    rank: the rows of ``extra`` that have entries (a few, the constrained DOFs) taken out of
+    ``mat`` and compared."""
+    indptr, cols, _ = extra.getValuesCSR()
+    lengths = np.diff(indptr)
+    rows = np.flatnonzero(lengths)
+    r0, c0 = mat.getOwnershipRange(), mat.getOwnershipRangeColumn()
+    is_rows = PETSc.IS().createGeneral((rows + r0[0]).astype(PETSc.IntType), comm=mat.comm)
+    is_cols = PETSc.IS().createStride(c0[1] - c0[0], first=c0[0], step=1, comm=mat.comm)
+    part = mat.createSubMatrix(is_rows, is_cols)
+    p_ptr, p_cols, _ = part.getValuesCSR()
+    part.destroy()
+    width = np.int64(mat.getSize()[1])
+    have = np.repeat(np.arange(rows.size, dtype=np.int64), np.diff(p_ptr)) * width + p_cols
+    want = np.repeat(np.arange(rows.size, dtype=np.int64), lengths[rows]) * width + cols
+    return bool(np.isin(want, have).all())
