@@ -33,6 +33,8 @@ same rows, owners and scales.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 from mpi4py import MPI
 
@@ -246,16 +248,51 @@ class RelationSet:
         _, _, l0, l1 = self.dofmap.owned()
         return lam_scaled[:l1 - l0] * self.col_scale[l0:l1] if self.nrows else np.zeros(0)
 
+    @property
+    def owned_relrows(self) -> np.ndarray:
+        """Mask of the relation rows whose multiplier row this rank owns (a collapsed group's
+        rows, and the rows of a group the active set decides together, all on one rank)."""
+        _, _, l0, l1 = self.dofmap.owned()
+        return (self.mult_of_row >= l0) & (self.mult_of_row < l1)
+
+    def _owned_values(self, lam: np.ndarray, span: slice) -> np.ndarray:
+        """``row_values`` of the relation rows ``span`` from this rank's owned multipliers:
+        the rows whose multiplier it owns, 0 on the others."""
+        _, _, l0, l1 = self.dofmap.owned()
+        mult = self.mult_of_row[span]
+        rows = np.arange(span.start, span.start + mult.size)
+        sel = (mult >= l0) & (mult < l1) & (self.rep_row[mult] == rows)
+        out = np.zeros(mult.size)
+        out[sel] = lam[mult[sel] - l0]
+        return out
+
+    def owned_row_values(self, lam: np.ndarray) -> np.ndarray:
+        """Per relation row, unscaled λ (``row_values``) of the rows whose multiplier this
+        rank owns (``owned_relrows``), 0 on the others: what it decides on. No exchange."""
+        return self._owned_values(lam, slice(0, self.nrelrows))
+
+    def relation_values(self, k: int, lam: np.ndarray) -> np.ndarray:
+        """Unscaled λ of relation k's rows (``row_values``) from this rank's owned
+        multipliers, each row's from its owner: one reduction of the relation's size.
+        Collective."""
+        return self.dofmap.sum_ranks(self._owned_values(lam, self.rows_of(k)))
+
     def every_row(self, lam: np.ndarray) -> np.ndarray:
-        """Per relation row, unscaled λ (``row_values``) from this rank's owned multipliers:
-        every row's, gathered on every rank (``DofMap.every_multiplier``). Collective."""
-        return self.row_values(self.dofmap.every_multiplier(lam)) if self.nrows else np.zeros(0)
+        """Per relation row, unscaled λ from this rank's owned multipliers, every row's on
+        every rank: one reduction of the relation rows' size. Collective. Not on the
+        Newton iteration's path (the failure analysis and the written steps' outputs)."""
+        return self.dofmap.sum_ranks(self.owned_row_values(lam)) if self.nrows else np.zeros(0)
 
     def per_relation(self, lam: np.ndarray) -> dict[str, np.ndarray]:
         """Unscaled λ of every relation row, by relation (a collapsed group: on its enforced
         row, 0 on the others), from this rank's owned multipliers. Collective."""
         per_row = self.every_row(lam)
         return {r.name: per_row[self.rows_of(k)] for k, r in enumerate(self.relations)}
+
+    def by_relation(self, lam: np.ndarray) -> "RelationMultipliers":
+        """Per relation name, unscaled λ of its rows, each relation's fetched from the owners
+        when first read (``relation_values``)."""
+        return RelationMultipliers(self, lam)
 
     def row_values(self, per_mult: np.ndarray) -> np.ndarray:
         """Per relation row: a multiplier row's value on the row it enforces, 0 on the others."""
@@ -311,3 +348,26 @@ class RelationSet:
     @property
     def scaled(self) -> bool:
         return self.row_scale is not None
+
+
+class RelationMultipliers(Mapping):
+    """Unscaled λ of a relation's rows by its name, fetched from the rows' owners (one
+    reduction of the relation's size) the first time it is read: only the relations a reader
+    reads cross the ranks. Reading is collective: every rank reads the same names in the
+    same order (the readers decide alike on every rank)."""
+
+    def __init__(self, rset: RelationSet, lam: np.ndarray):
+        self._rset, self._lam = rset, lam
+        self._index = {r.name: k for k, r in enumerate(rset.relations)}
+        self._read: dict[str, np.ndarray] = {}
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name not in self._read:
+            self._read[name] = self._rset.relation_values(self._index[name], self._lam)
+        return self._read[name]
+
+    def __iter__(self):
+        return iter(self._index)
+
+    def __len__(self) -> int:
+        return len(self._index)

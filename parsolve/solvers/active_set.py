@@ -14,11 +14,19 @@ until whole cells are fully damaged and the tangent is singular); the step fails
 that reason, and the stepper cuts it. Any other set that comes back after having been left is
 cycling: the update then changes one row (or one group's row) at a time, the most violated,
 and gives up after a bounded number of changes.
+
+Across ranks, every rank holds the set (a mask of the relation rows) and the rows' gaps, and
+reads the multipliers of the rows it owns only (``owned``: those whose multiplier row it
+owns). What a multiplier decides — a row whose reaction pulls — is decided by the row's owner,
+and the rows so found (few: the changes) are exchanged, with their scores; the rest (violated
+rows, groups, cycling, the bound) is decided from the gaps, alike on every rank. A group is
+decided from gaps alone, so its rows need not share an owner.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from mpi4py import MPI
 
 from parsolve.errors import SolverError
 from parsolve.relations import Relation
@@ -34,7 +42,12 @@ FORMING = 0.5
 
 
 class ActiveSet:
-    def __init__(self, relations: list[Relation], max_changes: int = 30):
+    """The set of the rows of ``relations`` (concatenated) enforced now. ``owned``: the rows
+    whose multipliers this rank reads (default every row: one process); ``comm``: the ranks
+    deciding together (default this process alone)."""
+
+    def __init__(self, relations: list[Relation], max_changes: int = 30,
+                 owned: np.ndarray | None = None, comm: MPI.Comm | None = None):
         sizes = [r.nrows for r in relations]
         self.sign = np.concatenate([np.full(r.nrows, r.sign) for r in relations]) \
             if relations else np.zeros(0, dtype=np.int64)
@@ -70,6 +83,8 @@ class ActiveSet:
         # rows that say a zone of them may form (contact): the most penetrating close first
         self.forming = np.concatenate([np.full(r.nrows, r.forming) for r in relations]) \
             if relations else np.zeros(0, dtype=bool)
+        self.owned = np.ones(self.sign.size, dtype=bool) if owned is None else owned
+        self.comm = MPI.COMM_SELF if comm is None else comm
         self.max_changes = max_changes
         self.changes = 0
         self.seen: set[bytes] = set()
@@ -86,13 +101,16 @@ class ActiveSet:
 
     def update(self, gap: np.ndarray, lam: np.ndarray, tol_gap: float, tol_lam: float,
                scale: float | None = None) -> bool:
-        """Update from the current A q - b (gap) and multipliers; True when the set changed.
-        ``scale``: the size of the rows' values (A q, b), for the ties of maximum groups."""
+        """Update from the current A q - b (gap, every row) and multipliers (``lam``: read on
+        the ``owned`` rows only); True when the set changed. ``scale``: the size of the rows'
+        values (A q, b), for the ties of maximum groups. Collective."""
         scale = tol_gap / 1e-9 if scale is None else scale
         s = self.sign
         new = self.active.copy()
         violated = self.free & ~self.active & (s * gap > tol_gap)
-        wrong_sign = self.free & self.active & (s * self.orient * lam < -tol_lam)
+        pull = -s * self.orient * lam
+        wrong_sign, pull = self._everywhere(self.owned & self.free & self.active
+                                            & (pull > tol_lam), pull)
         violated = self._forming(violated, s * gap)
         new[violated] = True
         new[wrong_sign] = False
@@ -105,7 +123,7 @@ class ActiveSet:
         if np.array_equal(new, self.active):
             return False
         if new.tobytes() in self.seen:  # cycling: change only the worst row
-            new = self._one_change(gap, lam, violated, wrong_sign, best)
+            new = self._one_change(gap, pull, violated, wrong_sign, best)
         self.changes += 1
         if self.changes > self.max_changes:
             raise SolverError(f"active set did not settle after {self.max_changes} changes "
@@ -114,6 +132,24 @@ class ActiveSet:
         self.held |= new
         self.seen.add(new.tobytes())
         return True
+
+    def _everywhere(self, mine: np.ndarray, score: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The rows every rank found (``mine``: this rank's) and their scores (-inf on the
+        other rows), on every rank: the rows found are exchanged (as many as there are),
+        nothing else. Collective."""
+        if self.comm.size == 1:
+            return mine, np.where(mine, score, -np.inf)
+        rows = np.flatnonzero(mine).astype(np.int64)
+        counts = np.array(self.comm.allgather(rows.size), dtype=np.int64)
+        every = np.empty(int(counts.sum()), dtype=np.int64)
+        values = np.empty(every.size)
+        self.comm.Allgatherv(rows, [every, counts])
+        self.comm.Allgatherv(np.ascontiguousarray(score[rows], dtype=float), [values, counts])
+        found = np.zeros(mine.size, dtype=bool)
+        found[every] = True
+        out = np.full(mine.size, -np.inf)
+        out[every] = values
+        return found, out
 
     def _forming(self, violated: np.ndarray, excess: np.ndarray) -> np.ndarray:
         """The violated rows to close. A contact zone forming (more rows of a contact relation
@@ -173,7 +209,7 @@ class ActiveSet:
         lowest = np.repeat(np.minimum.reduceat(index, starts), sizes)
         return np.where(keep, active & tied, np.arange(n) == lowest)
 
-    def _one_change(self, gap, lam, violated, wrong_sign, best) -> np.ndarray:
+    def _one_change(self, gap, pull, violated, wrong_sign, best) -> np.ndarray:
         """The single most needed change: a violated row on, a wrong-sign row off, or a
         group's enforced row moved to its best row (scored by how far the best row exceeds
         the enforced one). Groups must be candidates: a fallback that cannot move them would
@@ -182,7 +218,7 @@ class ActiveSet:
         s = self.sign
         new = self.active.copy()
         score = np.where(violated, s * gap, -np.inf)
-        score_l = np.where(wrong_sign, -s * self.orient * lam, -np.inf)
+        score_l = np.where(wrong_sign, pull, -np.inf)
         score_g = np.full(s.size, -np.inf)
         if best is not None:
             rows = self.group_rows

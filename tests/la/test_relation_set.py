@@ -189,3 +189,27 @@ def test_rows_live_with_most_of_their_dofs(rset):
     l0, l1 = dm.l_ranges[COMM.rank], dm.l_ranges[COMM.rank + 1]
     mine = np.flatnonzero((rs.position >= l0) & (rs.position < l1))
     np.testing.assert_array_equal(mine, np.flatnonzero(owner == COMM.rank))
+
+
+def test_owned_reads_and_fetched_relations(rset):
+    """Each rank reads its owned rows' multipliers; a relation's rows fetched from their
+    owners (``relation_values``, ``by_relation``) are the row values of the whole vector."""
+    rs, _ = rset
+    lam = np.array([1.0, -2.0, 0.5, 3.0, 7.0, 2.0])   # stacking order
+    numbered = np.empty(6)
+    numbered[rs.position] = lam
+    _, _, l0, l1 = rs.dofmap.owned()
+    every = np.array([1.0, -2.0, 0.5, 3.0, 7.0, 2.0, 0.0, 0.0])   # per relation row
+    mine = rs.owned_relrows
+    np.testing.assert_array_equal(mine, (rs.mult_of_row >= l0) & (rs.mult_of_row < l1))
+    assert mine[5:].all() or not mine[5:].any()   # a collapsed group: one owner
+    # every row on exactly one rank
+    np.testing.assert_array_equal(COMM.allreduce(mine.astype(np.int64)), np.ones(8))
+    np.testing.assert_array_equal(rs.owned_row_values(numbered[l0:l1]), np.where(mine, every, 0.0))
+    np.testing.assert_array_equal(rs.every_row(numbered[l0:l1]), every)
+    np.testing.assert_array_equal(rs.relation_values(1, numbered[l0:l1]), [3.0, 7.0])
+    fetched = rs.by_relation(numbered[l0:l1])
+    assert list(fetched) == ["tie", "push", "peak"] and len(fetched) == 3
+    np.testing.assert_array_equal(fetched["peak"], [2.0, 0.0, 0.0])
+    np.testing.assert_array_equal(fetched["tie"], [1.0, -2.0, 0.5])
+    assert fetched["peak"] is fetched["peak"]   # fetched once

@@ -4,6 +4,7 @@ import itertools
 
 import numpy as np
 import pytest
+from mpi4py import MPI
 
 from parsolve.errors import SolverError
 from parsolve.relations import Relation
@@ -90,3 +91,48 @@ def test_cycling_is_bounded():
             gap = np.where(aset.active, 0.0, 1.0)
             lam = np.where(aset.active, -1.0, 0.0)
             aset.update(gap, lam, 1e-12, 1e-12)
+
+
+def _decide_apart(relations, rounds, max_changes=30):
+    """The sets an active set decides, every process reading all multipliers, against the
+    same on the ranks, each reading the rows it owns (rows dealt out in turn, the others' λ
+    garbage): the same sets, every round, on every rank."""
+    comm = MPI.COMM_WORLD
+    n = sum(r.nrows for r in relations)
+    whole = ActiveSet(relations, max_changes)
+    mine = np.arange(n) % comm.size == comm.rank
+    apart = ActiveSet(relations, max_changes, mine, comm)
+    whole.start_step()
+    apart.start_step()
+    for gap, lam in rounds(whole):
+        changed = whole.update(gap, lam, 1e-12, 1e-12)
+        seen = np.where(mine, lam, np.nan)   # only its own rows
+        assert apart.update(gap, seen, 1e-12, 1e-12) == changed
+        np.testing.assert_array_equal(apart.active, whole.active)
+        np.testing.assert_array_equal(comm.allgather(apart.active.tobytes()),
+                                      [apart.active.tobytes()] * comm.size)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_owned_rows_decide_as_the_whole(seed):
+    K, A, b, F, senses = problem(seed, n=8, m=7)
+    rels = relations_of(A, b, senses)
+
+    def rounds(aset):
+        for _ in range(20):
+            q, lam = solve(K, A, b, F, aset.active.astype(float))
+            yield A @ q - b, lam
+
+    _decide_apart(rels, rounds)
+
+
+def test_owned_rows_decide_the_single_change_as_the_whole():
+    """Cycling: the one change (the worst pulling row, found on its owner) is the same."""
+    rel = Relation("u", 5, np.arange(5), np.arange(5), np.ones(5), np.zeros(5), sense="<=")
+
+    def rounds(aset):
+        for k in range(4):   # every row closes, then all pull; then it cycles
+            yield np.where(aset.active, 0.0, 1.0), np.where(aset.active, -1.0 - np.arange(5), 0.0)
+
+    with pytest.raises(SolverError, match="did not settle"):
+        _decide_apart([rel], rounds, max_changes=3)
