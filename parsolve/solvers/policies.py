@@ -186,13 +186,15 @@ class RelationPolicies:
         multipliers, unscaled); no change without unilateral rows. Collective."""
         if not self.active.unilateral:
             return False
-        values = self.rset.primal_values(q)
+        # each rank the rows whose multiplier it owns: their values and multipliers
+        values = self.rset.owned_primal(q)
         gap = values - self.rset.targets(t)
-        scale_gap = max(float(np.abs(gap).max()), float(np.abs(values).max()), 1e-300)
-        # the largest |λ| over the ranks: one number (a collapsed group's multiplier is on
-        # its enforced row)
+        mine = self.active.owned
+        # the largest |A q - b|, |A q| and |λ| over the ranks: one number each (a collapsed
+        # group's multiplier is on its enforced row)
+        scale_gap = max(self.ctx.max_abs(np.concatenate([gap[mine], values[mine]])), 1e-300)
         scale_lam = max(self.ctx.max_abs(lam), 1e-300)
-        lam = self.rset.owned_row_values(lam)   # per relation row: the owned rows' values
+        lam = self.rset.owned_row_values(lam)
         return self.active.update(gap, lam, 1e-9 * scale_gap, 1e-9 * scale_lam, scale_gap)
 
     # ------------------------------------------------------------ first tangent of a step

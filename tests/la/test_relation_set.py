@@ -213,3 +213,34 @@ def test_owned_reads_and_fetched_relations(rset):
     np.testing.assert_array_equal(fetched["peak"], [2.0, 0.0, 0.0])
     np.testing.assert_array_equal(fetched["tie"], [1.0, -2.0, 0.5])
     assert fetched["peak"] is fetched["peak"]   # fetched once
+
+
+def test_owned_primal_sums_each_row_on_its_owner(rset):
+    """A q of the rows a rank owns, its entries summed from the ranks owning their DOFs (the
+    tie's rows cross ranks on a partition): the whole vector's values there, 0 elsewhere."""
+    rs, q = rset
+    every = value(np.arange(NPTS * NC))
+    expected = np.concatenate([r.primal(every) for r in rs.relations])
+    mine = rs.owned_relrows
+    got = rs.owned_primal(q)
+    np.testing.assert_allclose(got[mine], expected[mine], rtol=1e-15)
+    assert not got[~mine].any()
+    np.testing.assert_allclose(rs.owned_primal(2.0 * q)[mine], 2.0 * expected[mine], rtol=1e-15)
+
+
+def test_groups_are_owned_together():
+    """Each group the active set decides together (a maximum relation's rows, a relation's
+    groups) has one owner, whatever its rows' DOFs."""
+    whole = rectangle(2.0, 1.0, 8, 4, cell="quad")
+    local = distribute(COMM, whole if COMM.rank == 0 else None, "bisection")
+    far = [0, 89, 44, 60, 2, 88]   # DOFs at both ends of the strip
+    rels = [Relation("max", 3, [0, 1, 2], far[:3], [1.0, 1.0, 1.0], [0.0, 0.0, 0.0],
+                     sense="<=", maximum=True),
+            Relation("pairs", 4, [0, 1, 2, 3], far[2:], [1.0] * 4, [0.0] * 4, sense="<=",
+                     groups=np.array([0, 1, 0, 1]))]
+    dm = DofMap(COMM, local, NC)
+    dm.index_inputs([r.a_dofs for r in rels])
+    rs = RelationSet(rels, dm)
+    owner = np.searchsorted(dm.l_ranges, rs.mult_of_row, side="right") - 1
+    assert np.unique(owner[:3]).size == 1
+    assert owner[3] == owner[5] and owner[4] == owner[6]

@@ -93,21 +93,23 @@ def test_cycling_is_bounded():
             aset.update(gap, lam, 1e-12, 1e-12)
 
 
-def _decide_apart(relations, rounds, max_changes=30):
-    """The sets an active set decides, every process reading all multipliers, against the
-    same on the ranks, each reading the rows it owns (rows dealt out in turn, the others' λ
-    garbage): the same sets, every round, on every rank."""
+def _decide_apart(relations, rounds, max_changes=30, owner=None):
+    """The sets an active set decides, every process reading every row's gap and
+    multiplier, against the same on the ranks, each reading the rows it owns (``owner``;
+    default: rows dealt out in turn; the others' values NaN): the same sets, every round,
+    on every rank."""
     comm = MPI.COMM_WORLD
     n = sum(r.nrows for r in relations)
     whole = ActiveSet(relations, max_changes)
-    mine = np.arange(n) % comm.size == comm.rank
+    mine = (np.arange(n) if owner is None else owner) % comm.size == comm.rank
     apart = ActiveSet(relations, max_changes, mine, comm)
     whole.start_step()
     apart.start_step()
     for gap, lam in rounds(whole):
         changed = whole.update(gap, lam, 1e-12, 1e-12)
-        seen = np.where(mine, lam, np.nan)   # only its own rows
-        assert apart.update(gap, seen, 1e-12, 1e-12) == changed
+        # only its own rows
+        seen_gap, seen_lam = np.where(mine, gap, np.nan), np.where(mine, lam, np.nan)
+        assert apart.update(seen_gap, seen_lam, 1e-12, 1e-12) == changed
         np.testing.assert_array_equal(apart.active, whole.active)
         np.testing.assert_array_equal(comm.allgather(apart.active.tobytes()),
                                       [apart.active.tobytes()] * comm.size)
@@ -136,3 +138,33 @@ def test_owned_rows_decide_the_single_change_as_the_whole():
 
     with pytest.raises(SolverError, match="did not settle"):
         _decide_apart([rel], rounds, max_changes=3)
+
+
+def test_owned_rows_decide_a_forming_zone_and_groups_as_the_whole():
+    """A forming contact zone (its violated rows' count and deepest excess reduced over the
+    ranks) and maximum groups (each on one rank: their rows' owner) beside free rows."""
+    from parsolve.evolution import CONSTANT
+    contact = Relation("c", 6, np.arange(6), np.arange(6), np.ones(6), np.zeros(6), CONSTANT,
+                       ">=", None, eliminate=False, forming=True)
+    peak = Relation("peak", 3, np.arange(3), np.arange(3), np.ones(3), np.zeros(3),
+                    sense="<=", maximum=True)
+    pairs = Relation("pairs", 4, np.arange(4), np.arange(4), np.ones(4), np.zeros(4),
+                     sense="<=", groups=np.array([0, 0, 1, 1]))
+    # contact rows in turn; the peak's rows on one rank, each pair on one rank
+    owner = np.concatenate([np.arange(6), [1, 1, 1], [2, 2, 0, 0]])
+    gaps = [-np.array([1.0, 0.3, 0.8, 0.0, 0.55, 0.2]),     # forming: >= 0.5 of the deepest
+            -np.array([0.0, 0.3, 0.0, 0.1, 0.0, 0.2])]      # then every violated row
+    group_gaps = [np.array([0.1, 0.5, 0.2, 0.3, 0.1, -0.1, 0.2]),
+                  np.array([0.1, 0.2, 0.6, 0.1, 0.3, 0.2, -0.1])]
+
+    def rounds(aset):
+        for g, h in zip(gaps, group_gaps):
+            yield np.concatenate([g, h]), np.zeros(13)
+
+    _decide_apart([contact, peak, pairs], rounds, owner=owner)
+    whole = ActiveSet([contact, peak, pairs])
+    whole.start_step()
+    whole.update(np.concatenate([gaps[0], group_gaps[0]]), np.zeros(13), 1e-12, 1e-12)
+    np.testing.assert_array_equal(np.flatnonzero(whole.active), [0, 2, 4, 7, 9, 12])
+    whole.update(np.concatenate([gaps[1], group_gaps[1]]), np.zeros(13), 1e-12, 1e-12)
+    np.testing.assert_array_equal(np.flatnonzero(whole.active), [0, 1, 2, 3, 4, 5, 8, 10, 11])
