@@ -72,7 +72,8 @@ def _branch_reach(rate: np.ndarray, room: np.ndarray, current: int) -> np.ndarra
 class RelationPolicies:
     """Active set, orientation, dependent rows, contact closing, maximum-control predictor and
     the effects' refresh hooks of a system's multiplied relations. Every rank holds the same
-    relations and decides alike."""
+    relations; the active set decides each row on the rank owning its multiplier and
+    exchanges the changes (``ActiveSet``), the rest is decided alike on every rank."""
 
     def __init__(self, system, max_changes: int, respond: Respond):
         self.system = system   # its rate (a transient step) and its restructure
