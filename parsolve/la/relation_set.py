@@ -252,16 +252,18 @@ class RelationSet:
         return self.dofmap.sum_ranks(self._owned_part(r, q))
 
     def gap(self, t: float, q: np.ndarray) -> np.ndarray:
-        """b(t) - A q of every multiplier row, unscaled. Collective."""
+        """b(t) - A q of the multiplier rows, unscaled: this rank's owned rows' (the others:
+        not computed). Collective (``owned_primal``)."""
         if not self.relations:
             return np.zeros(0)
-        return (self.targets(t) - self.primal_values(q))[self.rep_row]
+        return (self.targets(t) - self.owned_primal(q))[self.rep_row]
 
     def scaled_residual(self, t: float, q: np.ndarray | None) -> np.ndarray:
-        """Scaled b(t) - A q of every multiplier row (b(t) alone without q). Collective."""
+        """Scaled b(t) - A q of the multiplier rows (b(t) alone without q): this rank's
+        owned rows' (the others: not computed). Collective (``owned_primal``)."""
         target = self.rhs(t)
         if q is not None and self.nrows:
-            target = target - self.primal_values(q)[self.rep_row] * self.row_scale
+            target = target - self.owned_primal(q)[self.rep_row] * self.row_scale
         return target
 
     def reactions(self, lam: np.ndarray) -> np.ndarray:
