@@ -397,18 +397,6 @@ class DofMap:
         """A zero saddle vector as ``gather`` returns them."""
         return HeldValues(self._keys(), np.zeros(self.n_local), np.zeros(self.n_held))
 
-    def every_multiplier(self, owned: np.ndarray) -> np.ndarray:
-        """Every multiplier (global order) from this rank's owned ones (or its held ones,
-        which start with them): the owners' rows, gathered on
-        every rank (an array of the relations' size). Collective. Only for what still
-        decides on every row of every relation alike on each rank (the active set, the
-        contact effects' hooks and outputs); the solve's own path reads held rows."""
-        out = np.empty(self.nl)
-        l0, l1 = self.l_ranges[self.rank], self.l_ranges[self.rank + 1]
-        self.comm.Allgatherv(np.ascontiguousarray(owned[:l1 - l0], dtype=float),
-                             [out, np.diff(self.l_ranges)])
-        return out
-
     # ------------------------------------------------------------ owned reductions
 
     def sum_ranks(self, values: np.ndarray) -> np.ndarray:

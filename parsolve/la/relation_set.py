@@ -11,7 +11,9 @@ Multiplier rows are numbered by owner: a row belongs to the rank owning most of 
 row and D column name (ties: the lowest rank; a row with no entry: ranks in turn), so that the
 row of A and the column of D live, as far as they can, with the nodes they act on. A contact
 row on a rigid obstacle goes with its slave node; a row tying a slave node to a span of master
-nodes (finite sliding, mortar) with the master nodes, which are most of its entries. Rank r's rows come after those of the ranks before it, in stacking order (relation by
+nodes (finite sliding, mortar) with the master nodes, which are most of its entries; the
+rows of a group the active set decides together (a maximum relation's, a relation's
+``groups``) with the owner of the group's first row. Rank r's rows come after those of the ranks before it, in stacking order (relation by
 relation); the DOF map is given each rank's count (``DofMap.set_multipliers``). On one rank
 this is the stacking order itself. Each rank keeps the entries of its own operator rows only
 (the A entries of the multiplier rows it owns, the D entries on the primal DOFs it owns) and
@@ -32,6 +34,8 @@ same rows, owners and scales.
 """
 
 from __future__ import annotations
+
+from collections.abc import Mapping
 
 import numpy as np
 from mpi4py import MPI
@@ -116,6 +120,7 @@ class RelationSet:
         self.compliance = np.zeros(int(first[-1]))      # per multiplier row (Relation)
         self._copy_compliance()
         self._owned_entries: dict[int, tuple] = {}      # per relation: its owned A entries
+        self._sums: _RowSums | None = None              # owned_primal's plan
 
     def _by_owner(self, stacked_a: np.ndarray, stacked_d: np.ndarray, n: int) -> np.ndarray:
         """The multiplier row of each stacked row, rows grouped by owner (see the module doc),
@@ -130,10 +135,25 @@ class RelationSet:
         best = np.lexsort((rank, -count, row))                  # most entries, then lowest rank
         first = np.flatnonzero(np.diff(np.concatenate([[-1], row[best]])) != 0)
         owner[row[best[first]]] = rank[best[first]]
+        self._groups_together(owner)
         order = np.argsort(owner, kind="stable")
         position = np.empty(n, dtype=np.int64)
         position[order] = np.arange(n)
         return position, np.bincount(owner, minlength=nranks)
+
+    def _groups_together(self, owner: np.ndarray) -> None:
+        """The rows of a group the active set decides together (a maximum relation's, a
+        relation's ``groups``) go with the group's first row's owner, in place (a collapsed
+        group is one multiplier row already)."""
+        start = 0
+        for r in self.relations:
+            size = 1 if r.collapsed else r.nrows
+            ids = np.zeros(r.nrows, dtype=np.int64) if r.maximum else r.groups
+            if ids is not None and not r.collapsed and r.nrows:
+                _, lead, inverse = np.unique(ids, return_index=True, return_inverse=True)
+                rows = start + np.arange(r.nrows)
+                owner[rows] = owner[rows[lead[inverse]]]
+            start += size
 
     def _keep_own(self, a_sizes: list[int], d_sizes: list[int]) -> None:
         """Keep the entries of this rank's operator rows only: A entries of the multiplier
@@ -213,21 +233,37 @@ class RelationSet:
             return np.zeros(0)
         return self.dofmap.sum_ranks(np.concatenate([self._owned_part(r, q) for r in self.relations]))
 
+    def owned_primal(self, q: np.ndarray) -> np.ndarray:
+        """A q of the relation rows whose multiplier this rank owns (``owned_relrows``; 0 on
+        the others), q a local primal vector: each entry taken on the rank owning its DOF
+        and its row's part sent to the row's owner (an exchange of the rows that cross the
+        ranks, planned once per stacking). Collective."""
+        if not self.relations:
+            return np.zeros(0)
+        parts = np.concatenate([self._owned_part(r, q) for r in self.relations])
+        if self.dofmap.comm.size == 1:
+            return parts
+        if self._sums is None:
+            self._sums = _RowSums(self, parts.size)
+        return self._sums.add(parts)
+
     def relation_primal(self, r: Relation, q: np.ndarray) -> np.ndarray:
         """A q of one relation's rows (any relation of the model). Collective."""
         return self.dofmap.sum_ranks(self._owned_part(r, q))
 
     def gap(self, t: float, q: np.ndarray) -> np.ndarray:
-        """b(t) - A q of every multiplier row, unscaled. Collective."""
+        """b(t) - A q of the multiplier rows, unscaled: this rank's owned rows' (the others:
+        not computed). Collective (``owned_primal``)."""
         if not self.relations:
             return np.zeros(0)
-        return (self.targets(t) - self.primal_values(q))[self.rep_row]
+        return (self.targets(t) - self.owned_primal(q))[self.rep_row]
 
     def scaled_residual(self, t: float, q: np.ndarray | None) -> np.ndarray:
-        """Scaled b(t) - A q of every multiplier row (b(t) alone without q). Collective."""
+        """Scaled b(t) - A q of the multiplier rows (b(t) alone without q): this rank's
+        owned rows' (the others: not computed). Collective (``owned_primal``)."""
         target = self.rhs(t)
         if q is not None and self.nrows:
-            target = target - self.primal_values(q)[self.rep_row] * self.row_scale
+            target = target - self.owned_primal(q)[self.rep_row] * self.row_scale
         return target
 
     def reactions(self, lam: np.ndarray) -> np.ndarray:
@@ -246,16 +282,51 @@ class RelationSet:
         _, _, l0, l1 = self.dofmap.owned()
         return lam_scaled[:l1 - l0] * self.col_scale[l0:l1] if self.nrows else np.zeros(0)
 
+    @property
+    def owned_relrows(self) -> np.ndarray:
+        """Mask of the relation rows whose multiplier row this rank owns (a collapsed group's
+        rows, and the rows of a group the active set decides together, all on one rank)."""
+        _, _, l0, l1 = self.dofmap.owned()
+        return (self.mult_of_row >= l0) & (self.mult_of_row < l1)
+
+    def _owned_values(self, lam: np.ndarray, span: slice) -> np.ndarray:
+        """``row_values`` of the relation rows ``span`` from this rank's owned multipliers:
+        the rows whose multiplier it owns, 0 on the others."""
+        _, _, l0, l1 = self.dofmap.owned()
+        mult = self.mult_of_row[span]
+        rows = np.arange(span.start, span.start + mult.size)
+        sel = (mult >= l0) & (mult < l1) & (self.rep_row[mult] == rows)
+        out = np.zeros(mult.size)
+        out[sel] = lam[mult[sel] - l0]
+        return out
+
+    def owned_row_values(self, lam: np.ndarray) -> np.ndarray:
+        """Per relation row, unscaled λ (``row_values``) of the rows whose multiplier this
+        rank owns (``owned_relrows``), 0 on the others: what it decides on. No exchange."""
+        return self._owned_values(lam, slice(0, self.nrelrows))
+
+    def relation_values(self, k: int, lam: np.ndarray) -> np.ndarray:
+        """Unscaled λ of relation k's rows (``row_values``) from this rank's owned
+        multipliers, each row's from its owner: one reduction of the relation's size.
+        Collective."""
+        return self.dofmap.sum_ranks(self._owned_values(lam, self.rows_of(k)))
+
     def every_row(self, lam: np.ndarray) -> np.ndarray:
-        """Per relation row, unscaled λ (``row_values``) from this rank's owned multipliers:
-        every row's, gathered on every rank (``DofMap.every_multiplier``). Collective."""
-        return self.row_values(self.dofmap.every_multiplier(lam)) if self.nrows else np.zeros(0)
+        """Per relation row, unscaled λ from this rank's owned multipliers, every row's on
+        every rank: one reduction of the relation rows' size. Collective. Not on the
+        Newton iteration's path (the failure analysis and the written steps' outputs)."""
+        return self.dofmap.sum_ranks(self.owned_row_values(lam)) if self.nrows else np.zeros(0)
 
     def per_relation(self, lam: np.ndarray) -> dict[str, np.ndarray]:
         """Unscaled λ of every relation row, by relation (a collapsed group: on its enforced
         row, 0 on the others), from this rank's owned multipliers. Collective."""
         per_row = self.every_row(lam)
         return {r.name: per_row[self.rows_of(k)] for k, r in enumerate(self.relations)}
+
+    def by_relation(self, lam: np.ndarray) -> "RelationMultipliers":
+        """Per relation name, unscaled λ of its rows, each relation's fetched from the owners
+        when first read (``relation_values``)."""
+        return RelationMultipliers(self, lam)
 
     def row_values(self, per_mult: np.ndarray) -> np.ndarray:
         """Per relation row: a multiplier row's value on the row it enforces, 0 on the others."""
@@ -311,3 +382,65 @@ class RelationSet:
     @property
     def scaled(self) -> bool:
         return self.row_scale is not None
+
+
+class _RowSums:
+    """The plan of ``owned_primal``: the relation rows this rank has entries of (on its owned
+    DOFs), sent to their rows' owners, who add them (two ``Alltoallv`` to plan, one of
+    values per use)."""
+
+    def __init__(self, rset: RelationSet, nrows: int):
+        dofmap = rset.dofmap
+        comm = self.comm = dofmap.comm
+        touched = []
+        for k, r in enumerate(rset.relations):
+            rset._owned_part(r, np.zeros(dofmap.n_local))   # (its owned entries, cached)
+            sel, _ = rset._owned_entries[id(r)]
+            touched.append(np.unique(r.a_rows[sel]) + rset.row_first[k])
+        rows = _cat(touched, np.int64)
+        owner = np.searchsorted(dofmap.l_ranges, rset.mult_of_row[rows], side="right") - 1
+        order = np.argsort(owner, kind="stable")
+        self.send_rows = rows[order]
+        self.send_counts = np.bincount(owner, minlength=comm.size).astype(np.int64)
+        self.recv_counts = np.empty_like(self.send_counts)
+        comm.Alltoall(self.send_counts, self.recv_counts)
+        self.recv_rows = np.empty(int(self.recv_counts.sum()), dtype=np.int64)
+        comm.Alltoallv([self.send_rows, self.send_counts, _displ(self.send_counts), MPI.INT64_T],
+                       [self.recv_rows, self.recv_counts, _displ(self.recv_counts), MPI.INT64_T])
+        self.nrows = nrows
+
+    def add(self, parts: np.ndarray) -> np.ndarray:
+        """The owned rows' sums of every rank's parts (``parts``: this rank's, per relation
+        row)."""
+        got = np.empty(self.recv_rows.size)
+        self.comm.Alltoallv([np.ascontiguousarray(parts[self.send_rows]), self.send_counts,
+                             _displ(self.send_counts), MPI.DOUBLE],
+                            [got, self.recv_counts, _displ(self.recv_counts), MPI.DOUBLE])
+        return np.bincount(self.recv_rows, weights=got, minlength=self.nrows)
+
+
+def _displ(counts: np.ndarray) -> np.ndarray:
+    return np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+
+
+class RelationMultipliers(Mapping):
+    """Unscaled λ of a relation's rows by its name, fetched from the rows' owners (one
+    reduction of the relation's size) the first time it is read: only the relations a reader
+    reads cross the ranks. Reading is collective: every rank reads the same names in the
+    same order (the readers decide alike on every rank)."""
+
+    def __init__(self, rset: RelationSet, lam: np.ndarray):
+        self._rset, self._lam = rset, lam
+        self._index = {r.name: k for k, r in enumerate(rset.relations)}
+        self._read: dict[str, np.ndarray] = {}
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name not in self._read:
+            self._read[name] = self._rset.relation_values(self._index[name], self._lam)
+        return self._read[name]
+
+    def __iter__(self):
+        return iter(self._index)
+
+    def __len__(self) -> int:
+        return len(self._index)

@@ -14,11 +14,19 @@ until whole cells are fully damaged and the tangent is singular); the step fails
 that reason, and the stepper cuts it. Any other set that comes back after having been left is
 cycling: the update then changes one row (or one group's row) at a time, the most violated,
 and gives up after a bounded number of changes.
+
+Across ranks, every rank holds the set (a mask of the relation rows) and the rows' gaps, and
+reads the multipliers of the rows it owns only (``owned``: those whose multiplier row it
+owns). What a multiplier decides — a row whose reaction pulls — is decided by the row's owner,
+and the rows so found (few: the changes) are exchanged, with their scores; the rest (violated
+rows, groups, cycling, the bound) is decided from the gaps, alike on every rank. A group is
+decided from gaps alone, so its rows need not share an owner.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from mpi4py import MPI
 
 from parsolve.errors import SolverError
 from parsolve.relations import Relation
@@ -34,7 +42,12 @@ FORMING = 0.5
 
 
 class ActiveSet:
-    def __init__(self, relations: list[Relation], max_changes: int = 30):
+    """The set of the rows of ``relations`` (concatenated) enforced now. ``owned``: the rows
+    whose multipliers this rank reads (default every row: one process); ``comm``: the ranks
+    deciding together (default this process alone)."""
+
+    def __init__(self, relations: list[Relation], max_changes: int = 30,
+                 owned: np.ndarray | None = None, comm: MPI.Comm | None = None):
         sizes = [r.nrows for r in relations]
         self.sign = np.concatenate([np.full(r.nrows, r.sign) for r in relations]) \
             if relations else np.zeros(0, dtype=np.int64)
@@ -70,6 +83,8 @@ class ActiveSet:
         # rows that say a zone of them may form (contact): the most penetrating close first
         self.forming = np.concatenate([np.full(r.nrows, r.forming) for r in relations]) \
             if relations else np.zeros(0, dtype=bool)
+        self.owned = np.ones(self.sign.size, dtype=bool) if owned is None else owned
+        self.comm = MPI.COMM_SELF if comm is None else comm
         self.max_changes = max_changes
         self.changes = 0
         self.seen: set[bytes] = set()
@@ -86,26 +101,30 @@ class ActiveSet:
 
     def update(self, gap: np.ndarray, lam: np.ndarray, tol_gap: float, tol_lam: float,
                scale: float | None = None) -> bool:
-        """Update from the current A q - b (gap) and multipliers; True when the set changed.
-        ``scale``: the size of the rows' values (A q, b), for the ties of maximum groups."""
+        """Update from the current A q - b (gap) and multipliers, both read on the ``owned``
+        rows only; True when the set changed. ``scale``: the size of the rows' values (A q,
+        b), for the ties of maximum groups. Collective."""
         scale = tol_gap / 1e-9 if scale is None else scale
         s = self.sign
+        mine = self.owned
         new = self.active.copy()
-        violated = self.free & ~self.active & (s * gap > tol_gap)
-        wrong_sign = self.free & self.active & (s * self.orient * lam < -tol_lam)
-        violated = self._forming(violated, s * gap)
+        excess = s * gap
+        violated = self._forming(mine & self.free & ~self.active & (excess > tol_gap), excess)
+        violated, excess = self._everywhere(violated, excess)
+        pull = -s * self.orient * lam
+        wrong_sign, pull = self._everywhere(mine & self.free & self.active & (pull > tol_lam), pull)
         new[violated] = True
         new[wrong_sign] = False
-        best = None
+        gain = None
         if self.group_rows.size:
             rows = self.group_rows
-            best = self.pick_groups(s[rows] * gap[rows], self.active[rows], self.tie[rows] * scale)
+            best, gain = self._groups(s[rows] * gap[rows], scale)
             self._no_way_back(rows[best & ~self.active[rows] & self.held[rows] & self.maximum[rows]])
             new[rows] = best
         if np.array_equal(new, self.active):
             return False
         if new.tobytes() in self.seen:  # cycling: change only the worst row
-            new = self._one_change(gap, lam, violated, wrong_sign, best)
+            new = self._one_change(excess, pull, gain)
         self.changes += 1
         if self.changes > self.max_changes:
             raise SolverError(f"active set did not settle after {self.max_changes} changes "
@@ -115,25 +134,63 @@ class ActiveSet:
         self.seen.add(new.tobytes())
         return True
 
+    def _groups(self, value: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
+        """Each group's row to enforce (``pick_groups``, decided by the group's owner from its
+        rows' values s (A q - b)) and, on the rows it moves to, how far they exceed the row
+        enforced now (-inf elsewhere), over ``group_rows``, on every rank. Collective."""
+        rows, starts = self.group_rows, self.group_starts
+        mine = self.owned[rows]
+        best = self.pick_groups(value, self.active[rows], self.tie[rows] * scale)
+        sizes = np.diff(np.concatenate([starts, [rows.size]]))
+        enforced = np.where(self.active[rows], value, -np.inf)
+        current = np.repeat(np.maximum.reduceat(enforced, starts), sizes)
+        _, gain = self._everywhere(mine & best & ~self.active[rows], value - current)
+        best, _ = self._everywhere(mine & best, value)
+        return best, gain
+
+    def _everywhere(self, mine: np.ndarray, score: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The rows every rank found (``mine``: this rank's) and their scores (-inf on the
+        other rows), on every rank: the rows found are exchanged (as many as there are),
+        nothing else. Collective."""
+        if self.comm.size == 1:
+            return mine, np.where(mine, score, -np.inf)
+        rows = np.flatnonzero(mine).astype(np.int64)
+        counts = np.array(self.comm.allgather(rows.size), dtype=np.int64)
+        every = np.empty(int(counts.sum()), dtype=np.int64)
+        values = np.empty(every.size)
+        self.comm.Allgatherv(rows, [every, counts])
+        self.comm.Allgatherv(np.ascontiguousarray(score[rows], dtype=float), [values, counts])
+        found = np.zeros(mine.size, dtype=bool)
+        found[every] = True
+        out = np.full(mine.size, -np.inf)
+        out[every] = values
+        return found, out
+
     def _forming(self, violated: np.ndarray, excess: np.ndarray) -> np.ndarray:
-        """The violated rows to close. A contact zone forming (more rows of a contact relation
-        violated than enforced: a body meeting another, all its penetrating nodes found by
-        a solve that did not know the contact) closes only the rows penetrating by at least
-        FORMING × the deepest: closing every penetrating node makes a zone about 1.5× too
-        wide (the first solve moves the body as if nothing were there), which the wrong-sign
-        rule then shrinks by halving its excess per iteration (a number of iterations that
-        grows with the surface's refinement). The zone then grows, if it must, by the plain
-        rule (every violated row) from the next iteration on."""
-        if not violated.any():
+        """The violated rows to close (``violated``: this rank's). A contact zone forming
+        (more rows of a contact relation violated than enforced: a body meeting another, all
+        its penetrating nodes found by a solve that did not know the contact) closes only the
+        rows penetrating by at least FORMING × the deepest: closing every penetrating node
+        makes a zone about 1.5× too wide (the first solve moves the body as if nothing were
+        there), which the wrong-sign rule then shrinks by halving its excess per iteration (a
+        number of iterations that grows with the surface's refinement). The zone then grows,
+        if it must, by the plain rule (every violated row) from the next iteration on. Per
+        forming relation, its violated rows' count and deepest excess are reduced over the
+        ranks. Collective."""
+        spans = [slice(self.first[k], self.first[k + 1]) for k in range(len(self.names))]
+        spans = [rows for rows in spans if self.forming[rows].any()]
+        if not spans:
             return violated
+        count = np.array([float(violated[rows].sum()) for rows in spans])
+        deepest = np.array([float(excess[rows][violated[rows]].max(initial=-np.inf))
+                            for rows in spans])
+        if self.comm.size > 1:
+            self.comm.Allreduce(MPI.IN_PLACE, count, op=MPI.SUM)
+            self.comm.Allreduce(MPI.IN_PLACE, deepest, op=MPI.MAX)
         out = violated.copy()
-        for k in range(len(self.names)):
-            rows = slice(self.first[k], self.first[k + 1])
-            v = violated[rows]
-            if not self.forming[rows].any() or int(v.sum()) <= int(self.active[rows].sum()):
-                continue
-            deepest = float(excess[rows][v].max())
-            out[rows] = v & (excess[rows] >= FORMING * deepest)
+        for rows, n, depth in zip(spans, count, deepest):
+            if n > int(self.active[rows].sum()):
+                out[rows] = violated[rows] & (excess[rows] >= FORMING * depth)
         return out
 
     def _no_way_back(self, back: np.ndarray) -> None:
@@ -173,24 +230,19 @@ class ActiveSet:
         lowest = np.repeat(np.minimum.reduceat(index, starts), sizes)
         return np.where(keep, active & tied, np.arange(n) == lowest)
 
-    def _one_change(self, gap, lam, violated, wrong_sign, best) -> np.ndarray:
-        """The single most needed change: a violated row on, a wrong-sign row off, or a
-        group's enforced row moved to its best row (scored by how far the best row exceeds
-        the enforced one). Groups must be candidates: a fallback that cannot move them would
-        report a change at every iteration without making one, until the bound of changes
-        fails the step whatever its residual."""
-        s = self.sign
+    def _one_change(self, score: np.ndarray, score_l: np.ndarray,
+                    gain: np.ndarray | None) -> np.ndarray:
+        """The single most needed change: a violated row on (``score``: s (A q - b) of the
+        violated rows, -inf elsewhere), a wrong-sign row off (``score_l``: -s o λ of those
+        rows), or a group's enforced row moved to its best row (``gain``, over
+        ``group_rows``: how far the best row exceeds the enforced one). Groups must be
+        candidates: a fallback that cannot move them would report a change at every
+        iteration without making one, until the bound of changes fails the step whatever its
+        residual. Every rank the same (the scores are exchanged)."""
         new = self.active.copy()
-        score = np.where(violated, s * gap, -np.inf)
-        score_l = np.where(wrong_sign, -s * self.orient * lam, -np.inf)
-        score_g = np.full(s.size, -np.inf)
-        if best is not None:
-            rows = self.group_rows
-            value = s[rows] * gap[rows]
-            sizes = np.diff(np.concatenate([self.group_starts, [rows.size]]))
-            enforced = np.where(self.active[rows], value, -np.inf)
-            current = np.repeat(np.maximum.reduceat(enforced, self.group_starts), sizes)
-            score_g[rows] = np.where(best & ~self.active[rows], value - current, -np.inf)
+        score_g = np.full(self.sign.size, -np.inf)
+        if gain is not None:
+            score_g[self.group_rows] = gain
         tops = [score.max(initial=-np.inf), score_l.max(initial=-np.inf),
                 score_g.max(initial=-np.inf)]
         kind = int(np.argmax(tops))

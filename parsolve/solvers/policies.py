@@ -72,14 +72,16 @@ def _branch_reach(rate: np.ndarray, room: np.ndarray, current: int) -> np.ndarra
 class RelationPolicies:
     """Active set, orientation, dependent rows, contact closing, maximum-control predictor and
     the effects' refresh hooks of a system's multiplied relations. Every rank holds the same
-    relations and decides alike."""
+    relations; the active set decides each row on the rank owning its multiplier and
+    exchanges the changes (``ActiveSet``), the rest is decided alike on every rank."""
 
     def __init__(self, system, max_changes: int, respond: Respond):
         self.system = system   # its rate (a transient step) and its restructure
         self.ctx = ctx = system.context
         self.rset = ctx.relations
         self.respond = respond
-        self.active = ActiveSet(ctx.multiplied, max_changes)
+        # each rank reads the multipliers it owns; the rows' owners keep after a restack
+        self.active = ActiveSet(ctx.multiplied, max_changes, self.rset.owned_relrows, ctx.comm)
         # bound of the relations' DOF numbers (input numbering: the whole mesh's)
         self.ndof_keys = ctx.mesh.num_global_points * ctx.ncomp
         self.oriented = False
@@ -181,15 +183,19 @@ class RelationPolicies:
         self.active.start_step()
 
     def update_active(self, t: float, q: np.ndarray, lam: np.ndarray) -> bool:
-        """The active set after a solve (True when it changed; ``lam``: unscaled λ per
-        relation row, ``RelationSet.every_row``); no change without unilateral rows."""
+        """The active set after a solve (True when it changed; ``lam``: this rank's owned
+        multipliers, unscaled); no change without unilateral rows. Collective."""
         if not self.active.unilateral:
             return False
-        values = self.rset.primal_values(q)
+        # each rank the rows whose multiplier it owns: their values and multipliers
+        values = self.rset.owned_primal(q)
         gap = values - self.rset.targets(t)
-        scale_gap = max(float(np.abs(gap).max()), float(np.abs(values).max()), 1e-300)
-        # (a collapsed group's multiplier is on its enforced row: the same largest |λ|)
-        scale_lam = max(float(np.abs(lam).max(initial=0.0)), 1e-300)
+        mine = self.active.owned
+        # the largest |A q - b|, |A q| and |λ| over the ranks: one number each (a collapsed
+        # group's multiplier is on its enforced row)
+        scale_gap = max(self.ctx.max_abs(np.concatenate([gap[mine], values[mine]])), 1e-300)
+        scale_lam = max(self.ctx.max_abs(lam), 1e-300)
+        lam = self.rset.owned_row_values(lam)
         return self.active.update(gap, lam, 1e-9 * scale_gap, 1e-9 * scale_lam, scale_gap)
 
     # ------------------------------------------------------------ first tangent of a step
@@ -331,9 +337,11 @@ class RelationPolicies:
 
     def refresh_hooks(self, q: np.ndarray, lam: np.ndarray) -> bool:
         """The effects' updates between iterations (e.g. friction states and slip senses;
-        ``lam``: unscaled λ per relation row); their relation values are then copied into the
-        system (``sync_relations``)."""
-        lam = self.rset.views(lam)
+        ``lam``: this rank's owned multipliers, unscaled: an effect reads a relation's rows,
+        fetched from their owners, only if it needs them — friction and geometric stiffness
+        do, a frictionless contact does not); their relation values are then copied into the
+        system (``sync_relations``). Collective."""
+        lam = self.rset.by_relation(lam)
         active = self.rset.views(self.active.active)
         changed = False
         for e in self.hooks:

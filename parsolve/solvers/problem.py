@@ -261,13 +261,12 @@ class SaddleProblem:
         self.lam = self.unscaled(x)
         self.x_full = x
         pol = self.policies
-        # every relation row's λ: what the active set and the hooks decide on, alike on
-        # every rank (only when one of them runs)
-        rows = self.rset.every_row(self.lam) if pol.active.unilateral or pol.hooks else None
-        changed = pol.update_active(t, self.q, rows)
+        # each rank reads the multipliers it owns (the active set exchanges what they
+        # decide; a hook fetches the relations it reads)
+        changed = pol.update_active(t, self.q, self.lam)
         if pol.hooks:
             t0 = time.perf_counter()
-            changed = pol.refresh_hooks(self.q, rows) or changed
+            changed = pol.refresh_hooks(self.q, self.lam) or changed
             self.linear.add_time("contact", time.perf_counter() - t0)
             # always: rows of the Newton matrix alone (compliant) change at every iterate
             self._sync()

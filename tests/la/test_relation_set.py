@@ -65,13 +65,17 @@ def test_primal_values_and_gaps(rset):
     np.testing.assert_allclose(rs.primal_values(q), expected, rtol=1e-15)
     np.testing.assert_allclose(rs.relation_primal(rs.relations[1], q), expected[3:5], rtol=1e-15)
     b = np.concatenate([r.rhs(0.5) for r in rs.relations])
-    np.testing.assert_allclose(rs.gap(0.5, q), (b - expected)[rs.rep_row], rtol=1e-15)
+    _, _, l0, l1 = rs.dofmap.owned()   # (gaps: of the owned rows)
+    np.testing.assert_allclose(rs.gap(0.5, q)[l0:l1], (b - expected)[rs.rep_row][l0:l1],
+                               rtol=1e-15)
     # the enforced row of the group moves to its third row: its gap follows
     active = np.array([True] * 5 + [False, False, True])
     on = rs.select(active)
     pos = rs.position
     assert on.all() and rs.rep_row[pos[5]] == 7
-    np.testing.assert_allclose(rs.gap(0.5, q)[pos[5]], b[7] - expected[7], rtol=1e-15)
+    gap = rs.gap(0.5, q)   # (collective)
+    if l0 <= pos[5] < l1:
+        np.testing.assert_allclose(gap[pos[5]], b[7] - expected[7], rtol=1e-15)
     lam = np.empty(6)
     lam[pos] = np.arange(6.0)   # the stacked rows' values, in multiplier numbering
     np.testing.assert_array_equal(rs.row_values(lam), [0, 1, 2, 3, 4, 0, 0, 5])
@@ -114,8 +118,9 @@ def test_scales_and_right_hand_side(rset):
     np.testing.assert_allclose(rs.rhs(1.0), b * rs.row_scale, rtol=1e-15)
     every = value(np.arange(NPTS * NC))
     aq = np.concatenate([r.primal(every) for r in rs.relations])[rs.rep_row]
-    np.testing.assert_allclose(rs.scaled_residual(1.0, q), (b - aq) * rs.row_scale, rtol=1e-14)
-    _, _, l0, l1 = rs.dofmap.owned()   # the owned rows, from the held ones (owned first)
+    _, _, l0, l1 = rs.dofmap.owned()   # the owned rows (the residual), from the held ones
+    np.testing.assert_allclose(rs.scaled_residual(1.0, q)[l0:l1],
+                               ((b - aq) * rs.row_scale)[l0:l1], rtol=1e-14)
     held = np.ones(rs.dofmap.n_held)
     np.testing.assert_allclose(rs.multipliers(held), rs.col_scale[l0:l1])
 
@@ -189,3 +194,58 @@ def test_rows_live_with_most_of_their_dofs(rset):
     l0, l1 = dm.l_ranges[COMM.rank], dm.l_ranges[COMM.rank + 1]
     mine = np.flatnonzero((rs.position >= l0) & (rs.position < l1))
     np.testing.assert_array_equal(mine, np.flatnonzero(owner == COMM.rank))
+
+
+def test_owned_reads_and_fetched_relations(rset):
+    """Each rank reads its owned rows' multipliers; a relation's rows fetched from their
+    owners (``relation_values``, ``by_relation``) are the row values of the whole vector."""
+    rs, _ = rset
+    lam = np.array([1.0, -2.0, 0.5, 3.0, 7.0, 2.0])   # stacking order
+    numbered = np.empty(6)
+    numbered[rs.position] = lam
+    _, _, l0, l1 = rs.dofmap.owned()
+    every = np.array([1.0, -2.0, 0.5, 3.0, 7.0, 2.0, 0.0, 0.0])   # per relation row
+    mine = rs.owned_relrows
+    np.testing.assert_array_equal(mine, (rs.mult_of_row >= l0) & (rs.mult_of_row < l1))
+    assert mine[5:].all() or not mine[5:].any()   # a collapsed group: one owner
+    # every row on exactly one rank
+    np.testing.assert_array_equal(COMM.allreduce(mine.astype(np.int64)), np.ones(8))
+    np.testing.assert_array_equal(rs.owned_row_values(numbered[l0:l1]), np.where(mine, every, 0.0))
+    np.testing.assert_array_equal(rs.every_row(numbered[l0:l1]), every)
+    np.testing.assert_array_equal(rs.relation_values(1, numbered[l0:l1]), [3.0, 7.0])
+    fetched = rs.by_relation(numbered[l0:l1])
+    assert list(fetched) == ["tie", "push", "peak"] and len(fetched) == 3
+    np.testing.assert_array_equal(fetched["peak"], [2.0, 0.0, 0.0])
+    np.testing.assert_array_equal(fetched["tie"], [1.0, -2.0, 0.5])
+    assert fetched["peak"] is fetched["peak"]   # fetched once
+
+
+def test_owned_primal_sums_each_row_on_its_owner(rset):
+    """A q of the rows a rank owns, its entries summed from the ranks owning their DOFs (the
+    tie's rows cross ranks on a partition): the whole vector's values there, 0 elsewhere."""
+    rs, q = rset
+    every = value(np.arange(NPTS * NC))
+    expected = np.concatenate([r.primal(every) for r in rs.relations])
+    mine = rs.owned_relrows
+    got = rs.owned_primal(q)
+    np.testing.assert_allclose(got[mine], expected[mine], rtol=1e-15)
+    assert not got[~mine].any()
+    np.testing.assert_allclose(rs.owned_primal(2.0 * q)[mine], 2.0 * expected[mine], rtol=1e-15)
+
+
+def test_groups_are_owned_together():
+    """Each group the active set decides together (a maximum relation's rows, a relation's
+    groups) has one owner, whatever its rows' DOFs."""
+    whole = rectangle(2.0, 1.0, 8, 4, cell="quad")
+    local = distribute(COMM, whole if COMM.rank == 0 else None, "bisection")
+    far = [0, 89, 44, 60, 2, 88]   # DOFs at both ends of the strip
+    rels = [Relation("max", 3, [0, 1, 2], far[:3], [1.0, 1.0, 1.0], [0.0, 0.0, 0.0],
+                     sense="<=", maximum=True),
+            Relation("pairs", 4, [0, 1, 2, 3], far[2:], [1.0] * 4, [0.0] * 4, sense="<=",
+                     groups=np.array([0, 1, 0, 1]))]
+    dm = DofMap(COMM, local, NC)
+    dm.index_inputs([r.a_dofs for r in rels])
+    rs = RelationSet(rels, dm)
+    owner = np.searchsorted(dm.l_ranges, rs.mult_of_row, side="right") - 1
+    assert np.unique(owner[:3]).size == 1
+    assert owner[3] == owner[5] and owner[4] == owner[6]

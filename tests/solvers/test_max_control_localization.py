@@ -79,7 +79,7 @@ def test_plate_full_steps_through_the_peak():
         assert np.flatnonzero(problem.active.active).tolist() == [368]
         np.testing.assert_allclose(values[368], b, rtol=1e-9)
         assert values.max() <= b * (1 + 1e-7)
-        lam = float(problem.ctx.dofs.every_multiplier(problem.lam)[0])   # (its owner's)
+        lam = float(problem.rset.per_relation(problem.lam)[rel.name].sum())   # (enforced row)
         f_int = system.composition.evaluate(problem.q, states, False)[1]
         dofs, pattern = rel.shared_dual
         force = model.external_load(t)

@@ -80,7 +80,7 @@ def test_full_step_at_the_onset_of_localization():
         assert enforced.tolist() == [368]
         np.testing.assert_allclose(values[enforced], b, rtol=1e-9)
         assert values.max() <= b * (1 + 1e-7)
-        lam = float(problem.ctx.dofs.every_multiplier(problem.lam)[0])   # (its owner's)
+        lam = float(problem.rset.per_relation(problem.lam)[rel.name].sum())   # (enforced row)
         # f_int from this rank's cells is exact on the DOFs it owns
         f_int = system.composition.evaluate(problem.q, states, False)[1]
         dofs, pattern = rel.shared_dual
