@@ -19,10 +19,11 @@ from parsolve.errors import InputError
 from parsolve.fields import FieldSet
 from parsolve.loads.base import Instant, LoadPattern
 from parsolve.loads.build import load_patterns
-from parsolve.mesh import blocks, memory
+from parsolve.mesh import blocks, gmsh, memory
 from parsolve.mesh.checks import check_mesh
 from parsolve.mesh.distribute import LocalMesh, distribute
 from parsolve.mesh.generators import GENERATORS, SLICED, make_quadratic
+from parsolve.mesh.gmshmesh import open_gmsh
 from parsolve.mesh.midside import QuadraticSlices
 from parsolve.mesh.h5mesh import is_mesh_h5, open_mesh, read_whole
 from parsolve.mesh.mesh import CELL_INFO, Mesh
@@ -191,8 +192,8 @@ def _generator_key(exc: Exception) -> str:
 def _distributed_mesh(scene: Scene, comm) -> LocalMesh:
     """Every rank's part of the scene's mesh: from slices (a parallel mesh file, a generator;
     their quadratic cells and ``order = 2`` included: no rank holds the whole,
-    ``mesh.slices``, ``mesh.midside``), else built whole on rank 0 (Gmsh and other meshio
-    files). The
+    ``mesh.slices``, ``mesh.midside``; a Gmsh MSH 4.1 file: ``mesh.gmshmesh``), else built
+    whole on rank 0 (Gmsh 2.2 / 4.0 and other meshio files). The
     solve's share of every rank is checked against the memory before anything is built when
     the mesh's size is known from a generator's parameters, else once the mesh is read."""
     counted = _generated_counts(scene)
@@ -230,7 +231,10 @@ def _slice_source(scene: Scene, comm):
     for the rank-0 path. Collective (an input error is every rank's)."""
     spec = scene.mesh
     if spec.file is not None:
-        return agree(comm, open_mesh, mesh_source(scene)[0]) if is_mesh_h5(spec.file) else None
+        path = mesh_source(scene)[0]
+        if is_mesh_h5(spec.file):
+            return agree(comm, open_mesh, path)
+        return open_gmsh(comm, path) if agree(comm, gmsh.ours, path) else None
     slicer = SLICED.get(spec.generator)
     if slicer is None:
         return None

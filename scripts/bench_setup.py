@@ -51,10 +51,20 @@ against DOLFINx at the same number of ranks; each rank's peak resident memory (V
 process's whole life: Python, numpy, PETSc and MPI included), rank 0's against the mean of the
 others.
 
+Section *gmsh* (a Gmsh MSH 4.1 file of the same box, binary, written once by meshio):
+`parsolve mesh convert` of it to the parallel file, by meshio (the file read whole, then
+written; `gmsh`'s reader switched off) and by parsolve's reader (`mesh.gmshmesh.convert`:
+streamed by chunks), each in a fresh process: seconds, peak resident memory and its growth
+over the process before the conversion; then the mesh stage as in section *mesh* at 1, 2 and 4
+ranks from the .msh given directly: `msh41` read by slices (`mesh.gmshmesh.GmshSlices`: rank 0
+scans the block headers, every rank reads its rows), `meshio41` the same file read whole by
+meshio on rank 0, `h5` its converted file.
+
 Usage (from the repository root):
     .venv/bin/python scripts/bench_setup.py                 # everything
     .venv/bin/python scripts/bench_setup.py --sections pattern first --quick
     .venv/bin/python scripts/bench_setup.py --sections mesh --mesh-n 56   # 1.05M tetrahedra
+    .venv/bin/python scripts/bench_setup.py --sections gmsh --gmsh-n 56 --mesh-folder /tmp/m
     .venv/bin/python scripts/bench_setup.py --report      # table again from bench_results/setup.json
     .venv/bin/python scripts/bench_setup.py --sections compare --compare HEAD~3
     .venv/bin/python scripts/bench_setup.py --smoke      # CI: smallest sizes, files in a temp folder
@@ -457,6 +467,59 @@ def child_mumps(dim: int, n: int, control: str) -> list[dict]:
     return rows
 
 
+MESH_FOLDER = {"path": RESULTS / "meshes"}   # --mesh-folder
+
+
+def gmsh_files(n: int) -> dict[str, str]:
+    """A box of 6·n³ tetrahedra as a Gmsh MSH 4.1 binary file and its parallel file (made
+    once), and the scene [mesh] lines of section gmsh's ways."""
+    import meshio
+
+    from parsolve.mesh.cli import convert
+    from parsolve.mesh.generators import box
+
+    folder = MESH_FOLDER["path"]
+    folder.mkdir(parents=True, exist_ok=True)
+    msh, h5 = folder / f"box_tetra_{n}_41.msh", folder / f"box_tetra_{n}_41.h5"
+    if not msh.exists():
+        whole = box(1.0, 1.0, 1.0, n, n, n, cell="tetra")
+        meshio.write(str(msh), meshio.Mesh(whole.points, [("tetra", whole.cells)]),
+                     file_format="gmsh", binary=True)
+    if not h5.exists():
+        convert(str(msh), str(h5))
+    return {"msh": str(msh), "msh41": f'file = "{msh}"', "meshio41": f'file = "{msh}"',
+            "h5": f'file = "{h5}"'}
+
+
+def child_convert(way: str, msh: str, out: str) -> dict:
+    """``parsolve mesh convert`` of ``msh`` in this fresh process (``way`` meshio: parsolve's
+    Gmsh reader switched off): seconds, CPU seconds, peak memory and the peak before."""
+    import h5py  # noqa: F401 - both ways' imports before the baseline
+    import meshio  # noqa: F401
+
+    from parsolve.mesh import cli, gmsh
+
+    if way == "meshio":
+        gmsh.ours = lambda path: False
+    gc.collect()
+    before = bh.proc_memory()
+    t0, c0 = time.perf_counter(), time.process_time()
+    line = cli.convert(msh, out, force=True)
+    seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
+    return {"way": way, "summary": line, "cells": int(line.split(": ")[1].split()[0]),
+            "seconds": seconds, "cpu": cpu, "hwm": bh.proc_memory()["hwm"],
+            "before": before["rss"], "size": os.path.getsize(msh)}
+
+
+def convert_table(rows: list[dict]) -> str:
+    head = ["convert by", "cells", ".msh MiB", "seconds (CPU)", "peak MiB",
+            "peak − process before MiB", "B per cell"]
+    out = [[r["way"], str(r["cells"]), bh.mib(r["size"]), f"{r['seconds']:.2f} ({r['cpu']:.2f})",
+            bh.mib(r["hwm"]), bh.mib(r["hwm"] - r["before"]),
+            f"{(r['hwm'] - r['before']) / max(r['cells'], 1):.0f}"] for r in rows]
+    return bh.md_table(head, out)
+
+
 def mesh_files(n: int) -> dict[str, str]:
     """A box of 6·n³ tetrahedra as a Gmsh file and as the parallel file (made once, kept in
     the scratch folder), and the scene [mesh] lines of the three ways."""
@@ -465,7 +528,7 @@ def mesh_files(n: int) -> dict[str, str]:
     from parsolve.mesh.cli import convert
     from parsolve.mesh.generators import box
 
-    folder = RESULTS / "meshes"
+    folder = MESH_FOLDER["path"]
     folder.mkdir(parents=True, exist_ok=True)
     msh, h5 = folder / f"box_tetra_{n}.msh", folder / f"box_tetra_{n}.h5"
     # DOLFINx's: it reads the data from the .h5 named as the .xdmf, whatever the XML says
@@ -508,6 +571,10 @@ def child_mesh(way: str, n: int, mesh_lines: str, repeats: int) -> dict:
 
     if way == "dolfinx":
         return child_dolfinx_mesh(n, mesh_lines, repeats)
+    if way == "meshio41":   # the MSH 4.1 file read whole by meshio on rank 0
+        from parsolve.mesh import gmsh
+
+        gmsh.ours = lambda path: False
     comm = MPI.COMM_WORLD
     text = (f"[mesh]\n{mesh_lines}\n[model]\nhypothesis = \"3d\"\n[[materials]]\n"
             "E = 1.0\nnu = 0.3\n[solver]\npreset = \"iterative\"\n")
@@ -751,7 +818,7 @@ def machine() -> str:
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--sections", nargs="+", default=["pattern", "first", "mumps"],
-                   choices=["pattern", "first", "mumps", "compare", "mesh"])
+                   choices=["pattern", "first", "mumps", "compare", "mesh", "gmsh"])
     p.add_argument("--compare", default=None, metavar="REF",
                    help="git ref of the assembly code to compare with (section compare)")
     p.add_argument("--compare-cases", nargs="+", default=None, metavar="CELL:N",
@@ -775,14 +842,19 @@ def main() -> None:
     p.add_argument("--mesh-ranks", type=int, nargs="+", default=[1, 2, 4])
     p.add_argument("--mesh-repeats", type=int, default=2, help="the mesh section's repeats "
                    "(best of)")
+    p.add_argument("--gmsh-n", type=int, nargs="+", default=[56],
+                   help="hexes per side of section gmsh's box (56: 1.05M tetrahedra)")
+    p.add_argument("--mesh-folder", default=None,
+                   help="where the mesh sections' files are written once (default: "
+                   "bench_results/meshes)")
     p.add_argument("--child", nargs="+", default=None, help=argparse.SUPPRESS)
     p.add_argument("--json", default=None, help=argparse.SUPPRESS)
     bh.add_smoke(p)
     a = p.parse_args()
     if a.smoke:   # smallest sizes of every default section; DOLFINx only if installed
         a.quick, a.n2d, a.n3d, a.repeats, a.mumps_2d, a.mumps_3d = True, [8], [3], 1, 8, 3
-        a.mesh_n, a.mesh_repeats = [4], 1
-        a.sections = sorted(set(a.sections) | {"mesh"})
+        a.mesh_n, a.gmsh_n, a.mesh_repeats = [4], [4], 1
+        a.sections = sorted(set(a.sections) | {"mesh", "gmsh"})
         a.no_peers = a.no_peers or not bh.peer_available("dolfinx")
     if a.child:
         kind, *rest = a.child
@@ -794,6 +866,8 @@ def main() -> None:
             out = child_compare(rest[0], int(rest[1]), int(rest[2]), rest[3])
         elif kind == "mesh":
             out = child_mesh(rest[0], int(rest[1]), rest[2], int(rest[3]))
+        elif kind == "convert":
+            out = child_convert(rest[0], rest[1], rest[2])
         elif kind == "memory":
             out = child_memory(rest[0], int(rest[1]), rest[2], rest[3])
         else:
@@ -803,6 +877,8 @@ def main() -> None:
             Path(a.json).write_text(json.dumps(out))
         return
 
+    if a.mesh_folder:
+        MESH_FOLDER["path"] = Path(a.mesh_folder)
     s2, s3 = (QUICK_2D, QUICK_3D) if a.quick else (SIZES_2D, SIZES_3D)
     s2, s3 = a.n2d or s2, a.n3d or s3
     cases = [(c, n, 2) for c in ("triangle", "quad") for n in s2] + [("hexahedron", n, 3) for n in s3]
@@ -810,8 +886,9 @@ def main() -> None:
     RESULTS.mkdir(exist_ok=True)
     # sections not run now keep their last results; every row is saved as soon as it is measured
     results = json.loads(saved.read_text()) if saved.exists() else {}
-    for section in ("pattern", "first", "mumps", "compare", "mesh"):
-        if (section in a.sections and not a.report) or section not in results:
+    for section in ("pattern", "first", "mumps", "compare", "mesh", "gmsh", "gmsh_convert"):
+        run_now = section.split("_")[0] in a.sections and not a.report
+        if run_now or section not in results:
             results[section] = []
     results.setdefault("peers", [])
 
@@ -868,7 +945,35 @@ def main() -> None:
                     print(f"[mesh] {way} {row['cells']} cells, {nranks} ranks: "
                           f"{row['seconds']:.2f} s (CPU {row['cpu']:.2f}), peaks "
                           f"{[bh.mib(h) for h in row['hwm']]}", flush=True)
+    if "gmsh" in a.sections and not a.report:
+        run_gmsh(results, a, save)
     write_report(results, time.time() - t_start)
+
+
+def run_gmsh(results: dict, a, save) -> None:
+    """Section gmsh: convert by meshio and by parsolve's reader, then the mesh stage from the
+    .msh read by slices, by meshio on rank 0, and from its .h5."""
+    t0 = time.time()
+    for n in sorted(a.gmsh_n):
+        files = gmsh_files(n)
+        for way in ("meshio", "parsolve"):
+            out = Path(files["msh"]).with_name(f"convert_{way}.h5")
+            row = spawn(["convert", way, files["msh"], str(out)])
+            out.unlink(missing_ok=True)
+            if row:
+                results["gmsh_convert"].append(row)
+                save()
+                print(f"[gmsh] convert by {way}: {row['seconds']:.2f} s, peak "
+                      f"{bh.mib(row['hwm'])} MiB", flush=True)
+        for way, nranks in ((w, r) for w in ("msh41", "meshio41", "h5") for r in a.mesh_ranks):
+            row = spawn(["mesh", way, str(n), files[way], str(a.mesh_repeats)], nranks=nranks)
+            if row:
+                results["gmsh"].append(row)
+                results["gmsh_machine"] = machine() + f" Section gmsh: {time.time() - t0:.0f} s."
+                save()
+                print(f"[gmsh] {way} {row['cells']} cells, {nranks} ranks: {row['seconds']:.2f} "
+                      f"s (CPU {row['cpu']:.2f}), peaks {[bh.mib(h) for h in row['hwm']]}",
+                      flush=True)
 
 
 def run_compare(results: dict, ref: str, cases: list, repeats: int | None, peers: bool,
@@ -980,6 +1085,16 @@ def write_report(results: dict, seconds: float) -> None:
                 "squares on the relative error, coefficients ≥ 0) and the model each gives:", "", mesh_model(results["mesh"]), ""]
         md = "\n".join(text)
         (COMMITTED / "bench_setup_mesh.md").write_text(md)
+        print(md)
+    if results.get("gmsh") or results.get("gmsh_convert"):
+        text = ["# parsolve mesh stage from a Gmsh file: meshio against parsolve's reader", "",
+                [b for b in intro.split("\n\n") if b.startswith("Section *gmsh*")][0], "",
+                results.get("gmsh_machine", machine()), "", "## Convert to the parallel file", "",
+                convert_table(results.get("gmsh_convert", [])), "",
+                "## The mesh stage from the .msh given directly", "",
+                mesh_table(results.get("gmsh", [])), ""]
+        md = "\n".join(text)
+        (COMMITTED / "bench_setup_gmsh.md").write_text(md)
         print(md)
     if results["pattern"] or results["first"] or results["mumps"]:
         text = ["# parsolve set-up benchmark", "", intro, "", machine() + f" {seconds:.0f} s.", "",

@@ -120,14 +120,18 @@ def facet_groups(comm, block: CellBlock, source: str | None, key: str | None,
     matched here, which another block's copy would make a facet of three cells)."""
     keys, owner, forward = _facet_keys(comm, block)
     order, group, counts = sorted_row_groups(keys)   # (group: of the sorted facets)
-    folded = _folded_here(order, group, counts, owner, forward)
+    # the facets of two copies here, pair by pair (masks of the groups' size: no
+    # facet-long array of counts)
+    two = order[(counts == 2)[group]]
+    many = order[(counts > 2)[group]]
+    del group
+    folded = _folded_here(two, owner, forward)
     if comm.size > 1:
-        cross, cross_folded, bad = _match_across(comm, keys, order, group, counts, owner,
-                                                 forward)
+        cross, cross_folded, bad = _match_across(comm, keys, order, counts, owner, forward)
         folded = np.concatenate([folded, cross_folded])
     else:
-        cross, bad = np.zeros((0, 2), np.int64), keys[order[counts[group] > 2]]
-    del forward
+        cross, bad = np.zeros((0, 2), np.int64), keys[many]
+    del forward, order, many
     _raise_cells(comm, _owners_of_keys(keys, owner, bad), lambda cells: (
         f"a facet is shared by more than two cells (cells {checks._ids(cells)}): not a valid "
         "volume mesh"), source, key)
@@ -137,36 +141,46 @@ def facet_groups(comm, block: CellBlock, source: str | None, key: str | None,
         f"cells {checks._ids(cells)}"), source, key)
     if not graph:
         return None
-    pairs = owner[order[counts[group] == 2]].reshape(-1, 2)
-    del order, group, counts, owner
+    pairs = owner[two].reshape(-1, 2)
+    del two, counts, owner
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]   # (a collapsed cell seeing itself twice)
     return _graph_rows(comm, block, pairs, cross)
 
 
 def _facet_keys(comm, block: CellBlock) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(every facet's sorted corners packed into as few int64 as fit, the same packing on
-    every rank; its cell; its direction), facet-major."""
-    nv = NUM_VERTICES[CELL_INFO[block.cell_type][1]]
+    every rank; its cell; its direction), facet-major. Built one local facet at a time:
+    the corners of every facet at once (and their sorted copy) were the mesh stage's peak."""
+    ftype = CELL_INFO[block.cell_type][1]
+    nv = NUM_VERTICES[ftype]
     local = FACETS[block.cell_type]
     ncells = block.cells.shape[0]
-    nodes = np.concatenate([block.cells[:, list(f[:nv])] for f in local], axis=0)
+    corners = sorted({int(i) for f in local for i in f[:nv]})
+    top = int(block.cells[:, corners].max(initial=0)) if ncells else 0
+    base = comm.allreduce(top) + 1   # the largest corner id of any facet
+    packed, forward = None, np.empty(ncells * len(local), dtype=bool)
+    for k, f in enumerate(local):
+        nodes = block.cells[:, list(f[:nv])]
+        rows = slice(k * ncells, (k + 1) * ncells)
+        forward[rows] = checks.facet_direction(nodes)
+        keys = _packed(_sorted_vertex_keys(nodes, ftype), base)
+        if packed is None:
+            packed = np.empty((ncells * len(local), keys.shape[1]), dtype=np.int64)
+        packed[rows] = keys
+    if packed is None:   # (no local facets: not a supported cell)
+        packed = np.zeros((0, 1), np.int64)
     owner = np.tile(np.arange(ncells, dtype=np.int64) + block.start, len(local))
-    forward = checks.facet_direction(nodes)
-    keys = _sorted_vertex_keys(nodes, CELL_INFO[block.cell_type][1])
-    del nodes   # (the arrays of every facet are the peak of the mesh stage: each goes early)
-    packed = _packed(keys, comm.allreduce(int(keys.max(initial=0))) + 1)
     return packed, owner, forward
 
 
-def _folded_here(order, group, counts, owner, forward) -> np.ndarray:
-    """The cells of this block's facets of exactly two copies here that run through them the
-    same way (folded over each other)."""
-    two = order[counts[group] == 2]
-    fwd = forward[two].reshape(-1, 2).sum(axis=1)
-    return owner[two].reshape(-1, 2)[fwd != 1].ravel()
+def _folded_here(two, owner, forward) -> np.ndarray:
+    """The cells of this block's facets of exactly two copies here (``two``: their rows,
+    pair by pair) that run through them the same way (folded over each other)."""
+    fwd = forward[two].reshape(-1, 2)
+    return owner[two.reshape(-1, 2)[fwd[:, 0] == fwd[:, 1]]].ravel()
 
 
-def _match_across(comm, keys, order, group, counts, owner, forward):
+def _match_across(comm, keys, order, counts, owner, forward):
     """One row per facet key of this block to the rank the key names: (key, cell * 2 +
     direction) for a facet single here, (key, -copies) for the others. There: the keys of
     more than two copies in all (``bad``, every rank's), and the pairs of two singles — cell

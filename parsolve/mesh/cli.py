@@ -1,5 +1,6 @@
-"""``parsolve mesh convert IN OUT.h5``: any mesh file meshio reads (Gmsh with its physical
-groups) → the parallel mesh file (``mesh.h5mesh``), with exactly the regions reading IN gives.
+"""``parsolve mesh convert IN OUT.h5``: a Gmsh file (its physical groups; MSH 4.1 streamed by
+chunks, ``gmshmesh.convert``) or any mesh file meshio reads → the parallel mesh file
+(``mesh.h5mesh``), with exactly the regions reading IN gives.
 Exit 2 with one line naming the file and the key on bad input; the input is never overwritten."""
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ def _parser() -> argparse.ArgumentParser:
 
 def convert(source: str, target: str, force: bool = False) -> str:
     """Read ``source``, write ``target``; returns a one-line summary."""
+    from parsolve.mesh import gmsh, gmshmesh
     from parsolve.mesh.h5mesh import is_mesh_h5, read_whole, write_mesh
     from parsolve.mesh.reader import read_mesh
 
@@ -40,17 +42,21 @@ def convert(source: str, target: str, force: bool = False) -> str:
         raise InputError("the output is the input: it is never overwritten", target, "OUT")
     if out.exists() and not force:
         raise InputError("the output exists (give --force to replace it)", target, "OUT")
-    mesh = read_whole(source) if is_mesh_h5(source) else read_mesh(source)
     tmp = out.with_name(out.name + ".part")
     try:
-        write_mesh(mesh, str(tmp))
+        if gmsh.ours(source):   # streamed: never the whole file in memory
+            cell_type, cells, points, groups = gmshmesh.convert(source, str(tmp))
+        else:
+            mesh = read_whole(source) if is_mesh_h5(source) else read_mesh(source)
+            write_mesh(mesh, str(tmp))
+            cell_type, cells, points = mesh.cell_type, mesh.num_cells, mesh.num_points
+            groups = len(mesh.cell_groups) + len(mesh.facet_groups) + len(mesh.node_groups)
         os.replace(tmp, out)   # nothing half-written under the output's name
     except OSError as exc:
-        tmp.unlink(missing_ok=True)
         raise InputError(f"cannot write ({exc.strerror or exc})", target, "OUT") from None
-    groups = len(mesh.cell_groups) + len(mesh.facet_groups) + len(mesh.node_groups)
-    return (f"{target}: {mesh.num_cells} {mesh.cell_type} cells, {mesh.num_points} points, "
-            f"{groups} groups")
+    finally:
+        tmp.unlink(missing_ok=True)
+    return f"{target}: {cells} {cell_type} cells, {points} points, {groups} groups"
 
 
 def main(argv: list[str]) -> int:

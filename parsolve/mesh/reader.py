@@ -21,6 +21,7 @@ import os
 import numpy as np
 
 from parsolve.errors import InputError
+from parsolve.mesh import gmsh
 from parsolve.mesh.mesh import CELL_INFO, Mesh
 from parsolve.mesh.topology import orient_cells
 
@@ -40,14 +41,19 @@ def _dim_of(cell_type: str) -> int | None:
 
 
 def read_mesh(path: str) -> Mesh:
-    """Read a mesh file (any meshio format); errors are InputError with source=path."""
-    import meshio  # slow import: only when a file is actually read
-
+    """Read a mesh file (Gmsh MSH 4.1 by ``gmshmesh``, any other format by meshio); errors
+    are InputError with source=path."""
     path = os.fspath(path)
     if not os.path.exists(path):
         raise InputError("mesh file not found", source=path, key=_KEY)
     if not os.path.isfile(path):
         raise InputError("mesh path is not a file", source=path, key=_KEY)
+    if gmsh.ours(path):
+        from parsolve.mesh.gmshmesh import read_whole
+
+        return read_whole(path, _KEY)
+    import meshio  # slow import: only when a file is actually read
+
     # meshio prints its reasons and may even sys.exit() on unreadable files: capture
     # the output and turn every failure into a one-line InputError.
     out = io.StringIO()

@@ -1,0 +1,215 @@
+"""The Gmsh MSH 4.1 reader (``mesh.gmsh``, ``mesh.gmshmesh``): every rank's slices of points,
+cells (oriented), cell/node/facet groups equal meshio's whole reading cut at the same rows, for
+ASCII and binary files, node tags 1..N or scattered; ``parsolve mesh convert`` writes what
+meshio's reading would; a shipped scene gives the same answers from the .msh read by slices, by
+meshio on rank 0 and from the converted file; broken files exit 2 naming the file and the
+section."""
+
+import sys
+from pathlib import Path
+
+import meshio
+import numpy as np
+import pytest
+
+from conftest import CONFIGS
+from helpers.msh41 import blocks_of, write_msh41
+from parsolve.errors import InputError
+from parsolve.mesh import cli as mesh_cli
+from parsolve.mesh import gmsh
+from parsolve.mesh.generators import box, rectangle
+from parsolve.mesh.gmshmesh import open_gmsh
+from parsolve.mesh.h5mesh import read_whole
+from parsolve.mesh.partition import block_starts
+from parsolve.mesh.reader import mesh_from_meshio
+from parsolve.model import build_model
+from parsolve.scene import load_scene
+
+
+def shipped(name: str):
+    m = meshio.read(CONFIGS / f"{name}.msh")
+    names = {(int(v[1]), int(v[0])): k for k, v in m.field_data.items()}
+    return m.points, blocks_of(m), names
+
+
+def tets():
+    """tetra10 cells in two entities (the second with an unnamed first tag and a named
+    second one), facets with a named and an unnamed group, an edge and a corner (node
+    groups)."""
+    m = box(2.0, 1.0, 1.0, 3, 2, 2, "tetra10")
+    half = m.num_cells // 2
+    xmin, zmax = m.facet_groups["xmin"], m.facet_groups["zmax"]
+    blocks = [("tetra10", m.cells[:half], [1]), ("triangle6", xmin, [3]),
+              ("tetra10", m.cells[half:], [5, 2]), ("triangle6", zmax, [4]),
+              ("line3", np.array([[0, 2, 1]]), [7]), ("vertex", np.array([[0]]), [8])]
+    names = {(3, 1): "left", (3, 2): "right", (2, 3): "xmin", (1, 7): "edge", (0, 8): "corner"}
+    return m.points, blocks, names
+
+
+def flipped():
+    """Triangles, every other one clockwise (oriented on reading), two line facet groups."""
+    m = rectangle(2.0, 1.0, 4, 3, "triangle")
+    cells = m.cells.copy()
+    cells[::2] = cells[::2, ::-1]
+    blocks = [("triangle", cells, [1]), ("line", m.facet_groups["left"], [2]),
+              ("line", m.facet_groups["top"], [3])]
+    return m.points, blocks, {(2, 1): "plate", (1, 2): "left"}
+
+
+MESHES = {"ironing_2d": lambda: shipped("contact_ironing_2d"),
+          "ironing_3d": lambda: shipped("contact_ironing_3d"),
+          "cylinder_p2": lambda: shipped("thick_cylinder_p2"), "tets": tets, "flipped": flipped}
+
+
+def written(comm, tmp: Path, name: str, binary: bool, scattered: bool) -> Path:
+    path = tmp / f"{name}_{'bin' if binary else 'ascii'}{'_scattered' if scattered else ''}.msh"
+    if comm.rank == 0:
+        points, blocks, names = MESHES[name]()
+        tags = None   # scattered: a permutation of every third number from 7
+        if scattered:
+            tags = np.random.default_rng(1).permutation(len(points)) * 3 + 7
+        write_msh41(path, points, blocks, names, binary, node_tags=tags, node_blocks=3)
+    comm.Barrier()
+    return path
+
+
+def meshio_mesh(path: Path):
+    return mesh_from_meshio(meshio.read(path), str(path))
+
+
+@pytest.mark.parametrize("binary", [False, True])
+@pytest.mark.parametrize("scattered", [False, True])
+@pytest.mark.parametrize("name", sorted(MESHES))
+def test_slices_are_meshio_reading_cut(name, binary, scattered, comm, shared_tmp):
+    path = written(comm, shared_tmp, name, binary, scattered)
+    ref = meshio_mesh(path)
+    src = open_gmsh(comm, str(path))
+    size, rank = comm.size, comm.rank
+    cs, ps = block_starts(ref.num_cells, size), block_starts(ref.num_points, size)
+    c0, c1, p0, p1 = int(cs[rank]), int(cs[rank + 1]), int(ps[rank]), int(ps[rank + 1])
+    assert (src.cell_type, src.num_cells, src.num_points) == (ref.cell_type, ref.num_cells,
+                                                               ref.num_points)
+    np.testing.assert_array_equal(src.cells(c0, c1), ref.cells[c0:c1])
+    np.testing.assert_array_equal(src.points(p0, p1), ref.points[p0:p1])
+    assert src.cell_groups == tuple(sorted(ref.cell_groups))
+    assert src.node_groups == tuple(sorted(ref.node_groups))
+    assert src.facet_groups == tuple(sorted(ref.facet_groups))
+    flags = src.cell_flags(c0, c1)
+    for k, group in enumerate(src.cell_groups):
+        np.testing.assert_array_equal(np.flatnonzero(flags[:, k]) + c0,
+                                      ref.cell_groups[group][(ref.cell_groups[group] >= c0)
+                                                             & (ref.cell_groups[group] < c1)])
+    flags = src.node_flags(p0, p1)
+    for k, group in enumerate(src.node_groups):
+        ids = ref.node_groups[group]
+        np.testing.assert_array_equal(np.flatnonzero(flags[:, k]) + p0,
+                                      ids[(ids >= p0) & (ids < p1)])
+    for group in src.facet_groups:
+        facets, rows = src.facet_slice(group, rank, size)
+        whole = ref.facet_groups[group]
+        n = len(whole)
+        np.testing.assert_array_equal(rows, np.arange(n * rank // size, n * (rank + 1) // size))
+        np.testing.assert_array_equal(facets, whole[rows])
+
+
+def test_the_meshes_have_what_is_tested(comm, shared_tmp):
+    """The cases above cover groups of each kind, a flipped cell, an unnamed tag."""
+    ref = meshio_mesh(written(comm, shared_tmp, "tets", True, False))
+    assert sorted(ref.cell_groups) == ["5", "left", "right"]
+    assert sorted(ref.facet_groups) == ["4", "xmin"] and sorted(ref.node_groups) == ["corner",
+                                                                                     "edge"]
+    raw = meshio.read(written(comm, shared_tmp, "flipped", False, False))
+    assert not np.array_equal(raw.cells[0].data, meshio_mesh(
+        shared_tmp / "flipped_ascii.msh").cells)
+
+
+@pytest.mark.parametrize("binary", [False, True])
+@pytest.mark.parametrize("name", ["tets", "ironing_3d", "flipped"])
+def test_convert_writes_what_meshio_reads(name, binary, comm, shared_tmp):
+    path = written(comm, shared_tmp, name, binary, scattered=binary)
+    out = shared_tmp / f"{path.stem}.h5"
+    assert mesh_cli.main(["convert", str(path), str(out), "--force"]) == 0
+    ref, back = meshio_mesh(path), read_whole(str(out))
+    np.testing.assert_array_equal(back.points, ref.points)
+    np.testing.assert_array_equal(back.cells, ref.cells)
+    for kind in ("cell_groups", "facet_groups", "node_groups"):
+        a, b = getattr(ref, kind), getattr(back, kind)
+        assert sorted(a) == sorted(b), kind
+        for group in a:
+            np.testing.assert_array_equal(b[group], a[group], err_msg=f"{kind} {group}")
+
+
+def scene_with(tmp: Path, mesh_file: Path, tag: str, comm) -> Path:
+    text = (CONFIGS / "contact_ironing_2d.toml").read_text()
+    path = tmp / f"ironing_{tag}.toml"
+    if comm.rank == 0:
+        path.write_text(text.replace('file = "contact_ironing_2d.msh"', f'file = "{mesh_file}"'))
+    comm.Barrier()
+    return path
+
+
+def test_shipped_scene_same_answers_by_slices_meshio_and_converted(comm, shared_tmp, run,
+                                                                     monkeypatch):
+    """The 2D ironing from its MSH 4.1 file read by slices, the same file read by meshio on
+    rank 0, and its converted .h5: the mesh, steps and iterations to the bit; the fields to the
+    bit on one rank, to round-off on several (the reductions' order)."""
+    msh = written(comm, shared_tmp, "ironing_2d", True, True)
+    h5 = shared_tmp / "ironing41.h5"
+    assert mesh_cli.main(["convert", str(msh), str(h5), "--force"]) == 0
+    sliced = run(scene_with(shared_tmp, msh, "msh", comm), "sliced")
+    converted = run(scene_with(shared_tmp, h5, "h5", comm), "converted")
+    monkeypatch.setattr(gmsh, "ours", lambda path: False)   # meshio, whole on rank 0
+    whole = run(scene_with(shared_tmp, msh, "msh", comm), "meshio")
+    assert sliced["attrs"]["status"] == "complete"
+    keys = [k for k in sliced if k.startswith(("fields/", "cell_fields/", "relations/",
+                                               "mesh/", "steps/")) and k != "steps/residual"]
+    assert "fields/displacement" in keys and np.abs(sliced["fields/displacement"]).max() > 1e-3
+    for other in (converted, whole):
+        assert sorted(k for k in other if k in keys) == sorted(keys)
+        for key in keys:
+            if key.startswith(("mesh/", "steps/iterations")) or comm.size == 1:
+                np.testing.assert_array_equal(other[key], sliced[key], err_msg=key)
+            else:
+                scale = max(float(np.abs(sliced[key]).max(initial=0.0)), 1e-300)
+                np.testing.assert_allclose(other[key], sliced[key], rtol=0,
+                                           atol=1e-9 * scale + 1e-14, err_msg=key)
+
+
+def broken(comm, tmp: Path, how: str, binary: bool) -> Path:
+    src = written(comm, tmp, "tets", binary, False)
+    path = tmp / f"broken_{how}_{int(binary)}.msh"
+    if comm.rank == 0:
+        data = src.read_bytes()
+        if how == "truncated":
+            data = data[:data.index(b"$Elements") + (len(data) - data.index(b"$Elements")) // 2]
+        elif how == "version":
+            data = data.replace(b"4.1 ", b"5.0 ", 1)
+        else:   # no $Nodes section
+            data = data[:data.index(b"\n$Nodes\n") + 1] + data[data.index(b"$EndNodes\n") + 10:]
+        path.write_bytes(data)
+    comm.Barrier()
+    return path
+
+
+SECTION = {"truncated": "$Elements", "version": "$MeshFormat", "missing": "$Nodes"}
+
+
+@pytest.mark.parametrize("binary", [False, True])
+@pytest.mark.parametrize("how", sorted(SECTION))
+def test_broken_files_exit_2_naming_file_and_section(how, binary, comm, shared_tmp, capsys):
+    path = broken(comm, shared_tmp, how, binary)
+    out = shared_tmp / f"{path.stem}.h5"
+    assert mesh_cli.main(["convert", str(path), str(out)]) == 2
+    if comm.rank == 0:
+        line = capsys.readouterr().err.strip().splitlines()[-1]
+        assert f"{path}: {SECTION[how]}: " in line, line
+    comm.Barrier()
+    assert not out.exists() and not out.with_name(out.name + ".part").exists()
+    scene = load_scene(scene_with(shared_tmp, path, f"{how}_{int(binary)}", comm))
+    with pytest.raises(InputError) as err:   # the run: every rank the same one-line error
+        build_model(scene, comm)
+    assert (err.value.source, err.value.key) == (str(path), SECTION[how])
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(pytest.main([__file__]))
