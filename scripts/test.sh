@@ -14,7 +14,7 @@ $PY -m pytest -q tests "$@"
 # A failing test aborts the job (tests/conftest.py); a hang dumps tracebacks, then times out.
 parallel() {
   local n=$1; shift
-  timeout 1200 bash scripts/mpirun.sh -n "$n" bash -c '
+  timeout 2400 bash scripts/mpirun.sh -n "$n" bash -c '
     opts="-q --color=no -p no:cacheprovider -o faulthandler_timeout=300"
     if [ "${OMPI_COMM_WORLD_RANK:-0}" = 0 ]; then exec '"$PY"' -m pytest $opts "$@";
     else exec '"$PY"' -m pytest $opts "$@" > /dev/null; fi' _ "$@"
