@@ -3,7 +3,9 @@ Alart–Curnier type), selected by ``formulation`` in a ``[[contact]]`` section.
 measure the paper's formulation (relations, ``parsolve.effects.contact``) against the classical
 ones on the same scenes: same pairing, same rows, same linearised gap ``g = g0 + Dn·q``.
 
-Per paired slave node i (rigid obstacles only, see below), with ε_i = penalty × A_i (A_i: the
+Per paired slave node i (against a rigid obstacle, or node-to-segment / node-to-face
+against a deformable master's facet: its gap and tangential displacement are the rows'
+``v·u_s − Σ_a N_a v·u_a``), with ε_i = penalty × A_i (A_i: the
 node's tributary area, the consistent nodal force of a unit pressure on the slave facets; a
 slave given as a node group has as facets those all of whose nodes it holds, so a group that
 leaves out a neighbour, e.g. a wedge's apex, gives its end node half its area there):
@@ -23,9 +25,11 @@ leaves out a neighbour, e.g. a wedge's apex, gives its end node half its area th
   and face 1's end node then flipped its slip sense at every iteration: a 2D return mapping
   whose tangential penalty is far stiffer than the body there cycles under Newton once it
   starts on the wrong side);
-* internal force ``f = −p_N n + T t`` on the slave's DOFs (T: the tangents as columns) and its
-  consistent tangent: ``ε n nᵀ`` in contact, ``+ ε_T T Tᵀ`` in stick, and in slip
-  ``− μ ε (T ŝ) nᵀ + μ p_N ε_T/|t_tr| T (I − ŝ ŝᵀ) Tᵀ`` (ŝ = t_tr/|t_tr|): not symmetric.
+* internal force ``f = −p_N ∂g + ∂g_Tᵀ t`` on the pair's DOFs (∂g, ∂g_T: the rows'
+  coefficients; on the slave n and the tangents T as columns, on master node a −N_a times
+  them) and its consistent tangent: ``ε ∂g ∂gᵀ`` in contact, ``+ ε_T ∂g_Tᵀ ∂g_T`` in stick,
+  and in slip ``− μ ε (∂g_Tᵀ ŝ) ∂gᵀ + μ p_N ε_T/|t_tr| ∂g_Tᵀ (I − ŝ ŝᵀ) ∂g_T``
+  (ŝ = t_tr/|t_tr|): not symmetric.
 
 **Penalty:** λ_N = 0; λ_T = the committed friction force t_n of the last converged step (an
 elastic-plastic spring: the slip is what the return mapping takes out). The penetration is
@@ -44,21 +48,25 @@ sticking node has not moved during the step (λ_T = λ_T + ε_T Δg_T): the cons
 relations form, to the tolerance. A step that needs more than ``max_augmentations`` fails (and
 is cut like any failed step). The multipliers start each step from the last converged forces.
 
-**Contact elements and the sparsity:** against a rigid obstacle a pair couples one node with
-itself: its block is the node's diagonal block, a term the effect declares on its owned slave
-nodes (``Effect.terms``, ``TermMatrices``), given its slots once, so re-assembly stays a value
-update of the fixed pattern. A deformable master surface (slave node + master facet
-nodes) needs node pairs that no cell holds: it is refused (exit 2) until the system's pattern
-takes contact elements (see the report of this work).
+**Contact elements and the sparsity:** each pair is a node tuple, its slave node then its
+master facet's nodes (an obstacle's: the slave alone), a term the effect declares
+(``Effect.terms``, ``TermMatrices`` of its (m·dim)² blocks) in the partition's global node
+numbers (``Term.global_ids``): the system derives the pattern's contact entries from them and
+gives the term its slots once, so re-assembly stays a value update of that pattern. A
+deformable master takes node-to-segment (2D) or node-to-face (3D) pairs made once
+(``discretization = "node_to_segment"``, ``sliding = "small"``; mortar rows and finite sliding
+are refused, exit 2: the relations form has them).
 
 **On a distributed mesh** (each rank its part) the pairing is the relations form's, whole on
 every rank in input ids (the surfaces gathered once). The areas A_i come from each rank's
 facets through its owned slave nodes, summed over the ranks; the gaps g and g_T of every
-paired node from its owner's displacement, one reduction of the pairing's size per
+paired node from its owners' displacements, one reduction of the pairing's size per
 evaluation. The forces, the states and every decision of the augmented Lagrangian (settled,
 the augmentation's change and stop) are then computed from the same whole arrays on every
-rank: the ranks agree. Each owned slave node's block and force go in through one of the
-rank's cells (a ghost node's are its owner's); outputs are each rank's owned rows.
+rank: the ranks agree. A pair's tuple is declared on every rank that owns one of its nodes
+(a slave and its master facet may lie on different ranks' parts, the master's nodes on no part
+of the slave owner's): each adds the rows and forces of the nodes it owns, from the forces every
+rank holds, so nothing crosses ranks at assembly; outputs are each rank's owned rows.
 
 Scene keys (besides those of ``parsolve.effects.contact``)::
 
@@ -171,6 +179,17 @@ def nodal_areas(mesh, nodes: np.ndarray, thickness) -> np.ndarray:
     return area[nodes]
 
 
+def gap_gradients(p) -> tuple[np.ndarray, np.ndarray]:
+    """(∂g (n, m·dim), ∂g_T (n, m·dim, dim-1)) of each pair's gap and tangential displacement
+    on its tuple's DOFs (slave, then master facet nodes, node-major): the rows' coefficients
+    (``contact.rows``: v on the slave, −N_a v on master node a; an obstacle's: v alone)."""
+    n, dm1, dim = p.tangents.shape
+    w = np.concatenate([np.ones((n, 1)), -p.weights], axis=1)               # (n, m)
+    bn = (w[:, :, None] * p.normal[:, None, :]).reshape(n, -1)
+    bt = (w[:, None, :, None] * p.tangents[:, :, None, :]).reshape(n, dm1, -1)
+    return bn, np.swapaxes(bt, 1, 2)
+
+
 def positive(area: np.ndarray) -> np.ndarray:
     """Zero areas (a node no whole slave facet holds) replaced by the mean of the others."""
     return np.where(area > 0, area, area[area > 0].mean() if np.any(area > 0) else 1.0)
@@ -183,21 +202,20 @@ class PenaltyContact(Effect):
 
     def __init__(self, spec: BaselineSpec, mesh, regions, fields, scene):
         key = spec.key
-        if spec.master is not None:
-            raise InputError(f"formulation = {spec.formulation!r} supports rigid obstacles only "
-                             "(a deformable master needs contact elements in the stiffness "
-                             "pattern); use the relations form", scene.source, f"{key}.master")
+        if spec.master is not None and (spec.discretization != "node_to_segment"
+                                        or spec.sliding != "small"):
+            raise InputError(f"formulation = {spec.formulation!r} on a master region takes "
+                             "node_to_segment pairs made once (discretization = "
+                             "\"node_to_segment\", sliding = \"small\"); use the relations "
+                             "form", scene.source,
+                             f"{key}.{'discretization' if spec.discretization != 'node_to_segment' else 'sliding'}")
         # the relations form's set-up does the checks, the pairing and the rows: reused as is
         geo = contact.Contact(spec, mesh, regions, fields, scene.source)
         self.spec, self.mesh, self.fields_ = spec, mesh, fields
         self.u = geo.u
         self.name = f"contact {spec.name} ({spec.formulation})"
         self.pairing, self.nrows, self.trows = geo.pairing, geo.nrows, geo.trows
-        # input ids → this rank's nodes (a part: owned + ghosts); the element-like blocks go
-        # in through the owned slave nodes only (each node's force added once)
         self.values = geo.values
-        self.owned_slave = np.flatnonzero(self.values.owned_nodes(geo.pairing.slave)[0])
-        self.owned_local = self.values.owned_nodes(geo.pairing.slave)[1]
         self.symmetric = spec.mu == 0.0
         p = self.pairing
         dim = mesh.dim
@@ -226,9 +244,31 @@ class PenaltyContact(Effect):
         self.touch = spec.closed * float(np.max(mesh.extent))   # the whole mesh's size, as there
         self.touching = p.gap <= self.touch
         self._last = None
-        # each owned slave node's diagonal block (its rows are this rank's)
-        self.term = Term(self.u, self.u, self.owned_local[:, None], symmetric=self.symmetric,
-                         linear=False)
+        self.bn, self.bt = gap_gradients(p)
+        self.term, self.force_at = self._declare(p)
+
+    def _declare(self, p) -> tuple[Term, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """The contact elements: one node tuple per pair (its slave node, then its master
+        facet's nodes; an obstacle's pair is its slave alone), in the partition's global node
+        numbers, declared on every rank that owns one of its nodes (each adds its owned rows:
+        a pair split over ranks is whole, no entry crosses ranks at assembly, and the values
+        come from the pairing's forces that every rank holds). The global numbers: one
+        reduction of the pairing's size, once. Also (pair, place in its tuple, local node) of
+        the tuple nodes this rank owns: where its forces go."""
+        values, mesh = self.values, self.mesh
+        ids = np.concatenate([p.slave[:, None], p.master], axis=1)          # (n, m) input ids
+        local = values.local_nodes(ids)
+        here = local >= 0
+        new = np.where(here, mesh.node_new[np.where(here, local, 0)], 0).astype(float)
+        tuples = values.node_sum(ids.ravel(), new.ravel()).astype(np.int64).reshape(ids.shape)
+        lo, hi = values.node_ranges[values.rank], values.node_ranges[values.rank + 1]
+        owned = (tuples >= lo) & (tuples < hi)
+        pairs = np.flatnonzero(owned.any(axis=1))
+        self.declared = pairs
+        term = Term(self.u, self.u, tuples[pairs], symmetric=self.symmetric, linear=False,
+                    global_ids=True)
+        pair, place = np.nonzero(owned)
+        return term, (pair, place, local[pair, place])
 
     # ------------------------------------------------------------------ kinematics
 
@@ -270,9 +310,10 @@ class PenaltyContact(Effect):
         return {"g": g, "gT": gT, "pN": pN, "t": t, "t_tr": t_tr, "norm": norm, "state": status}
 
     def node_tangents(self, f: dict) -> np.ndarray:
-        """Consistent tangent (n, dim, dim) of each node's contact force."""
-        p, mu = self.pairing, self.spec.mu
-        n_vec, T = p.normal, np.swapaxes(p.tangents, 1, 2)          # (n, dim), (n, dim, dim-1)
+        """Consistent tangent (n, m·dim, m·dim) of each pair's contact forces on its tuple's
+        DOFs (slave first, then its master facet's nodes; an obstacle's: (n, dim, dim))."""
+        mu = self.spec.mu
+        n_vec, T = self.bn, self.bt                   # ∂g (n, m·dim), ∂g_T (n, m·dim, dim-1)
         closed, slip = f["state"] != OPEN, f["state"] == SLIP
         k = (self.eps_n * closed)[:, None, None] * np.einsum("mi,mj->mij", n_vec, n_vec)
         if mu == 0.0:
@@ -288,6 +329,13 @@ class PenaltyContact(Effect):
             c = mu * f["pN"] * self.eps_t / np.maximum(f["norm"], 1e-300) * slip
             k += c[:, None, None] * np.einsum("mik,mkl,mjl->mij", T, proj, T)
         return k
+
+    def tuple_forces(self, f: dict) -> np.ndarray:
+        """Each pair's internal forces on its tuple's nodes (n, m, dim): ``−p_N ∂g + ∂g_Tᵀ t``
+        (on the slave −p_N n + T t, on a master node −N_a of it)."""
+        n, md = self.bn.shape
+        force = -f["pN"][:, None] * self.bn + np.einsum("mxj,mj->mx", self.bt, f["t"])
+        return force.reshape(n, md // self.mesh.dim, self.mesh.dim)
 
     # ------------------------------------------------------------------ the Effect interface
 
@@ -312,14 +360,14 @@ class PenaltyContact(Effect):
         f = self.forces(u, state, lam_n, lam_t)
         self._last, self._state = f, state
         trial = {"pN": f["pN"], "t": f["t"], "gT": f["gT"]}
-        p = self.pairing
-        node_force = -f["pN"][:, None] * p.normal + np.einsum("mjx,mj->mx", p.tangents, f["t"])
-        which, d = self.owned_slave, self.mesh.dim
-        forces = NodeForces(self.term.nodes, node_force[which][:, None, :])
-        k = self.node_tangents(f)[which]
-        # (a rank may hold no slave node: k is (0, dim, dim))
-        blocks = TermMatrices(self.term, k.reshape(len(k), d * d).T.reshape(d * d, 1, 1, -1))
-        return {self.u: forces}, [(self.term, blocks)], trial, None
+        pair, place, local = self.force_at
+        forces = NodeForces(local[:, None], self.tuple_forces(f)[pair, place][:, None, :])
+        k = self.node_tangents(f)[self.declared]
+        # (n, m·d, m·d) → (d·d, m, m, n): entry (i, j) of node pair (a, b) at [i d + j, a, b]
+        d = self.mesh.dim
+        m = k.shape[1] // d
+        blocks = k.reshape(len(k), m, d, m, d).transpose(2, 4, 1, 3, 0).reshape(d * d, m, m, -1)
+        return {self.u: forces}, [(self.term, TermMatrices(self.term, blocks))], trial, None
 
     def terms(self) -> list[Term]:
         return [self.term]
