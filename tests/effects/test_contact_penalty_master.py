@@ -231,3 +231,89 @@ def test_narrow_punch_tends_to_the_multiplier_contact_as_one_over_the_penalty(
     print("penetration", depth, "error", error)
     np.testing.assert_allclose(depth[:-1] / depth[1:], 10.0, rtol=0.05)
     np.testing.assert_allclose(error[:-1] / error[1:], 10.0, rtol=0.05)
+
+
+# ----------------------------------------------------------------------------- parts, AL
+
+
+def test_narrow_punch_with_friction_on_parts_is_the_one_rank_run(run, shared_tmp):
+    """The narrow punch with friction on the ranks' parts (pairs split between them): the
+    one-rank run's results to 1e-10, states exactly, the same iterations."""
+    mesh = written(shared_tmp / f"narrow_{COMM.size}.msh", punch_2d, 0.5)
+    text = scene_2d(mesh, 'friction = 0.3\nformulation = "penalty"\npenalty = 1e6')
+    parts = run(text, name="narrow_parts")
+    whole = run(text, name="narrow_whole", comm=MPI.COMM_SELF)
+    assert_same_results(parts, whole)
+    np.testing.assert_array_equal(parts["steps/iterations"], whole["steps/iterations"])
+
+
+def test_augmented_lagrangian_on_a_deformable_master_gives_the_multiplier_answer(run,
+                                                                              shared_tmp):
+    """The augmented Lagrangian (the same contact elements, Uzawa multipliers) closes the
+    gap: the narrow punch with friction as the multiplier contact gives it, to its
+    tolerance (the states too)."""
+    mesh = written(shared_tmp / f"narrow_{COMM.size}.msh", punch_2d, 0.5)
+    exact = run(scene_2d(mesh, "friction = 0.3"), name="narrow_al_rel")
+    res = run(scene_2d(mesh, 'friction = 0.3\nformulation = "augmented_lagrangian"\n'
+                             "augmentation_tolerance = 1e-10"), name="narrow_al")
+    u_ref = exact["fields/displacement"]
+    assert rel(res["fields/displacement"], u_ref) < 1e-8
+    # (the corner node x = 0: held sideways on both bodies, its friction is the rollers' too,
+    # shared by the multiplier contact as its dependent rows make it)
+    free = exact["mesh/points"][:, 0] > 1e-9
+    for field in ("normal_reaction", "tangential_reaction"):
+        assert rel(res[f"fields/joint_{field}"][:, free],
+                   exact[f"fields/joint_{field}"][:, free]) < 1e-7, field
+    assert -res["fields/joint_gap"].min() < 1e-10 * np.abs(u_ref).max()
+    np.testing.assert_array_equal(res["fields/joint_state"], exact["fields/joint_state"])
+
+
+# ----------------------------------------------------------------------------- tangent
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_tangent_of_a_pair_is_the_derivative_of_its_forces(shared_tmp, dim):
+    """Each pair's consistent tangent on its slave and master nodes' DOFs (open, stick, slip;
+    in 3D the slip direction turning) against central differences of its tuple forces, at
+    random displacements of both bodies' contact nodes and a committed friction force."""
+    if dim == 2:
+        mesh = written(shared_tmp / f"narrow_{COMM.size}.msh", punch_2d, 0.5)
+        text = scene_2d(mesh, 'friction = 0.3\nformulation = "penalty"\npenalty = 1e4')
+    else:
+        mesh = written(shared_tmp / f"punch3d_{COMM.size}.msh", punch_3d)
+        text = SCENE_3D.format(mesh=mesh, p=-P, eps=1e4, rollers=ROLLERS).replace(
+            "formulation", "friction = 0.4\nformulation")
+    path = shared_tmp / f"tangent_{dim}.toml"
+    if COMM.rank == 0:
+        path.write_text(text)
+    COMM.Barrier()
+    effect = [e for e in build_model(load_scene(path), MPI.COMM_SELF).effects
+              if getattr(e, "pairing", None) is not None][0]
+    p = effect.pairing
+    n, dm1 = len(p), dim - 1
+    ids = np.concatenate([p.slave[:, None], p.master], axis=1)
+    rng = np.random.default_rng(7)
+    u = np.zeros((effect.mesh.num_points, dim))
+    u[np.unique(ids)] = rng.normal(size=(np.unique(ids).size, dim)) * 1e-5
+    # the slaves into the master or away from it, sliding far or little along it
+    u[p.slave, -1] += rng.uniform(-2e-3, 5e-4, n)
+    u[p.slave, :-1] += rng.normal(size=(n, dm1)) * np.where(np.arange(n) % 2, 1e-2, 1e-6)[:, None]
+    state = {"gT": rng.normal(size=(n, dm1)) * 1e-4}
+    lam_t = rng.normal(size=(n, dm1)) * 0.05
+
+    def forces(uu):
+        f = effect.forces(uu, state, np.zeros(n), lam_t)
+        return effect.tuple_forces(f).reshape(n, -1), f
+
+    info = forces(u)[1]
+    assert {OPEN, STICK, SLIP} <= set(info["state"].tolist()), info["state"]
+    k = effect.node_tangents(info)
+    h = 1e-8
+    fd = np.zeros_like(k)
+    for i in range(n):
+        for a, node in enumerate(ids[i]):
+            for c in range(dim):
+                du = np.zeros_like(u)
+                du[node, c] = h
+                fd[i, :, a * dim + c] = (forces(u + du)[0][i] - forces(u - du)[0][i]) / (2 * h)
+    np.testing.assert_allclose(k, fd, atol=1e-6 * np.abs(k).max())
