@@ -86,6 +86,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from parsolve.contact.friction import OPEN, SLIP, STICK
+from parsolve.contact.pairing import pair_nodes
+from parsolve.contact.rows import normal_rows, tangent_rows
+from parsolve.contact.surfaces import Surfaces
 from parsolve.la.dofmap import DofMap
 from parsolve.effects import contact
 from parsolve.effects.base import Effect
@@ -149,7 +152,8 @@ def with_baseline(spec: contact.ContactSpec, baseline: dict) -> contact.ContactS
 
 
 def build(spec: BaselineSpec, mesh, regions, fields, scene) -> Effect:
-    cls = AugmentedContact if spec.formulation == "augmented_lagrangian" else PenaltyContact
+    cls = AugmentedContact if spec.formulation == "augmented_lagrangian" else \
+        SlidingPenalty if spec.master is not None and spec.sliding == "finite" else PenaltyContact
     return cls(spec, mesh, regions, fields, scene)
 
 
@@ -179,6 +183,19 @@ def nodal_areas(mesh, nodes: np.ndarray, thickness) -> np.ndarray:
     return area[nodes]
 
 
+def check_master(spec: BaselineSpec, source: str) -> None:
+    """A baseline against a master region takes node-to-segment pairs; finite sliding by the
+    penalty only (the augmented Lagrangian's multipliers would have to follow the pairs)."""
+    if spec.discretization != "node_to_segment":
+        raise InputError(f"formulation = {spec.formulation!r} on a master region takes "
+                         "node_to_segment pairs (node-to-face in 3D); mortar rows are the "
+                         "relations form's", source, f"{spec.key}.discretization")
+    if spec.sliding != "small" and spec.formulation != "penalty":
+        raise InputError(f"formulation = {spec.formulation!r} on a master region takes "
+                         "pairs made once (sliding = \"small\"); finite sliding: the "
+                         "penalty or the relations form", source, f"{spec.key}.sliding")
+
+
 def gap_gradients(p) -> tuple[np.ndarray, np.ndarray]:
     """(∂g (n, m·dim), ∂g_T (n, m·dim, dim-1)) of each pair's gap and tangential displacement
     on its tuple's DOFs (slave, then master facet nodes, node-major): the rows' coefficients
@@ -202,15 +219,14 @@ class PenaltyContact(Effect):
 
     def __init__(self, spec: BaselineSpec, mesh, regions, fields, scene):
         key = spec.key
-        if spec.master is not None and (spec.discretization != "node_to_segment"
-                                        or spec.sliding != "small"):
-            raise InputError(f"formulation = {spec.formulation!r} on a master region takes "
-                             "node_to_segment pairs made once (discretization = "
-                             "\"node_to_segment\", sliding = \"small\"); use the relations "
-                             "form", scene.source,
-                             f"{key}.{'discretization' if spec.discretization != 'node_to_segment' else 'sliding'}")
+        if spec.master is not None:
+            check_master(spec, scene.source)
         # the relations form's set-up does the checks, the pairing and the rows: reused as is
-        geo = contact.Contact(spec, mesh, regions, fields, scene.source)
+        # (finite sliding: its pairs at the start made as small sliding's, then again at each
+        # step's start: ``SlidingPenalty``)
+        geo = contact.Contact(dataclasses.replace(spec, sliding="small"), mesh, regions,
+                              fields, scene.source)
+        self.geo = geo
         self.spec, self.mesh, self.fields_ = spec, mesh, fields
         self.u = geo.u
         self.name = f"contact {spec.name} ({spec.formulation})"
@@ -244,17 +260,18 @@ class PenaltyContact(Effect):
         self.touch = spec.closed * float(np.max(mesh.extent))   # the whole mesh's size, as there
         self.touching = p.gap <= self.touch
         self._last = None
-        self.bn, self.bt = gap_gradients(p)
-        self.term, self.force_at = self._declare(p)
+        self.term = Term(self.u, self.u, np.zeros((0, 1), dtype=np.int64),
+                         symmetric=self.symmetric, linear=False, global_ids=True)
+        self._declare(p)
 
-    def _declare(self, p) -> tuple[Term, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    def _declare(self, p) -> None:
         """The contact elements: one node tuple per pair (its slave node, then its master
         facet's nodes; an obstacle's pair is its slave alone), in the partition's global node
         numbers, declared on every rank that owns one of its nodes (each adds its owned rows:
         a pair split over ranks is whole, no entry crosses ranks at assembly, and the values
         come from the pairing's forces that every rank holds). The global numbers: one
-        reduction of the pairing's size, once. Also (pair, place in its tuple, local node) of
-        the tuple nodes this rank owns: where its forces go."""
+        reduction of the pairing's size. Also (pair, place in its tuple, local node) of the
+        tuple nodes this rank owns: where its forces go. The pairs' gradients ∂g, ∂g_T too."""
         values, mesh = self.values, self.mesh
         ids = np.concatenate([p.slave[:, None], p.master], axis=1)          # (n, m) input ids
         local = values.local_nodes(ids)
@@ -263,12 +280,12 @@ class PenaltyContact(Effect):
         tuples = values.node_sum(ids.ravel(), new.ravel()).astype(np.int64).reshape(ids.shape)
         lo, hi = values.node_ranges[values.rank], values.node_ranges[values.rank + 1]
         owned = (tuples >= lo) & (tuples < hi)
-        pairs = np.flatnonzero(owned.any(axis=1))
-        self.declared = pairs
-        term = Term(self.u, self.u, tuples[pairs], symmetric=self.symmetric, linear=False,
-                    global_ids=True)
+        self.declared = np.flatnonzero(owned.any(axis=1))
+        self.term.nodes = tuples[self.declared]
+        self.tuples = tuples
         pair, place = np.nonzero(owned)
-        return term, (pair, place, local[pair, place])
+        self.force_at = (pair, place, local[pair, place])
+        self.bn, self.bt = gap_gradients(p)
 
     # ------------------------------------------------------------------ kinematics
 
@@ -354,8 +371,13 @@ class PenaltyContact(Effect):
         """(λ_N, λ_T): penalty, none normal, and the committed friction force."""
         return np.zeros(len(self.pairing)), state["t"]
 
+    def step_state(self, state: dict) -> dict:
+        """The committed state the step starts from (finite sliding: on its new pairs)."""
+        return state
+
     def evaluate(self, cells: np.ndarray, values: dict, state, secant: bool, at):
         u = self._u(values)
+        state = self.step_state(state)
         lam_n, lam_t = self.multipliers(state)
         f = self.forces(u, state, lam_n, lam_t)
         self._last, self._state = f, state
@@ -443,3 +465,90 @@ class AugmentedContact(PenaltyContact):
         a = new["t_tr"][slip] / np.maximum(new["norm"][slip], 1e-300)[:, None]
         b = old["t_tr"][slip] / np.maximum(old["norm"][slip], 1e-300)[:, None]
         return bool(np.all(np.linalg.norm(a - b, axis=1) <= tol_angle))
+
+
+class SlidingPenalty(PenaltyContact):
+    """The penalty against a master region with finite sliding: the slaves are paired again
+    with the master's facets on the current configuration X + u at each step's start and
+    after each Newton iteration (a slave no facet faces keeps its pair), their rows
+    linearised there (``g = g(x) + Dn·(q − q(x))``: at convergence the gap is the actual
+    one), the committed friction force turned onto the new tangents and the tangential
+    displacement counted from the step's start q_n on the new rows. When a tuple changed
+    (a slave onto another facet) the term's nodes are given anew and the effect
+    ``restructured``: the system derives its pattern again; the iteration does not count as
+    converged. No geometric stiffness (the relations form's finite sliding has it)."""
+
+    restructures = True
+
+    def __init__(self, spec: BaselineSpec, mesh, regions, fields, scene):
+        super().__init__(spec, mesh, regions, fields, scene)
+        p = self.pairing
+        ids, pts = self.geo._slave_nodes(regions)
+        facets, facet_pts = self.geo._facets(regions(spec.master, f"{spec.key}.master"))
+        at = np.searchsorted(ids, p.slave)
+        self.surf = Surfaces.of([(p.slave, pts[at]), (facets, facet_pts)])
+        self.compact = (self.surf.compact(p.slave), self.surf.compact(facets))
+        self.reference = None   # (tangential displacement at q_n, committed → new tangents)
+        self.committed_tangents = p.tangents
+        self.q_start = None
+        self.repairs = 0        # pairings that moved a tuple (each a new pattern)
+
+    def _points(self, q: np.ndarray) -> np.ndarray:
+        """The surfaces' nodes at X + u (every rank the same; one reduction)."""
+        surf, f, dim = self.surf, self.fields_, self.mesh.dim
+        m = surf.ids.size
+        dofs = (np.repeat(surf.ids, dim) * f.ncomp + f.offset[self.u]
+                + np.tile(np.arange(dim), m))
+        u = self.values.rows(dofs, np.arange(m * dim), np.ones(m * dim), m * dim, q)
+        return surf.points + u.reshape(m, dim)
+
+    def _displacement(self, q: np.ndarray) -> np.ndarray:
+        return q.reshape(self.mesh.num_points, -1)[:, self.fields_.columns(self.u)]
+
+    def _repair(self, q: np.ndarray, start: bool = False) -> bool:
+        """Pairs made again at q (collective, every rank alike); True when a tuple moved."""
+        old = self.pairing
+        slave, facets = self.compact
+        new = self.surf.to_input(pair_nodes(self._points(q), slave, facets,
+                                            self.mesh.facet_type, self.spec.search_radius))
+        keep = ~new.paired   # faced by no facet: its last pair
+        for name in new.__dataclass_fields__:
+            getattr(new, name)[keep] = getattr(old, name)[keep]
+        self.nrows, self.trows = normal_rows(new), tangent_rows(new)
+        gap, _ = self.values.node_rows([self.nrows, self.trows], self._displacement(q))
+        # the actual gap at x where re-paired (a kept pair's: its linearised one)
+        actual = np.where(keep, old.gap + gap, new.gap)
+        new.gap = actual - gap
+        if start:
+            self.touching = actual <= self.touch
+        _, gT = self.values.node_rows([self.nrows, self.trows],
+                                      self._displacement(self.q_start))
+        turn = np.einsum("mkx,mjx->mjk", self.committed_tangents, new.tangents)
+        self.reference = (gT.reshape(len(new), -1), turn)
+        self.pairing = new
+        tuples = self.tuples
+        self._declare(new)
+        moved = not np.array_equal(tuples, self.tuples)
+        if moved:
+            self.restructured = True
+            self.repairs += 1
+        return moved
+
+    def begin_step(self, q: np.ndarray, active: dict, at) -> bool:
+        self.q_start = q.copy()
+        self._repair(q, start=True)
+        return False
+
+    def refresh(self, q: np.ndarray, lam: dict, active: dict) -> bool:
+        return self._repair(q)
+
+    def step_state(self, state: dict) -> dict:
+        """The committed friction force on the current tangents, the tangential displacement
+        from the step's start on the current rows."""
+        if self.reference is None:
+            return state
+        gT, turn = self.reference
+        return {**state, "gT": gT, "t": np.einsum("mjk,mk->mj", turn, state["t"])}
+
+    def end_step(self) -> None:
+        self.committed_tangents = self.pairing.tangents

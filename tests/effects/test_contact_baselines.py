@@ -343,8 +343,8 @@ BASE = CONTACT_BASE.replace("{contact}", 'slave = "bottom"\n{contact}')
      "contact[0].max_augmentations", "at least 1"),
     ('master = "top"\nformulation = "penalty"\ndiscretization = "mortar"',
      "contact[0].discretization", "node_to_segment"),
-    ('master = "top"\nformulation = "penalty"\nsliding = "finite"', "contact[0].sliding",
-     "made once"),
+    ('master = "top"\nformulation = "augmented_lagrangian"\nsliding = "finite"',
+     "contact[0].sliding", "made once"),
 ])
 def test_bad_input_names_file_and_key(shared_tmp, contact, key, words):
     path = shared_tmp / "bad_baseline.toml"
