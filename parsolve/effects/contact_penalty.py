@@ -53,9 +53,11 @@ master facet's nodes (an obstacle's: the slave alone), a term the effect declare
 (``Effect.terms``, ``TermMatrices`` of its (m·dim)² blocks) in the partition's global node
 numbers (``Term.global_ids``): the system derives the pattern's contact entries from them and
 gives the term its slots once, so re-assembly stays a value update of that pattern. A
-deformable master takes node-to-segment (2D) or node-to-face (3D) pairs made once
-(``discretization = "node_to_segment"``, ``sliding = "small"``; mortar rows and finite sliding
-are refused, exit 2: the relations form has them).
+deformable master takes node-to-segment (2D) or node-to-face (3D) pairs (mortar rows are
+refused, exit 2: the relations form has them), made once (``sliding = "small"``) or, by the
+penalty, again on the current configuration at each step's start and Newton iteration
+(``sliding = "finite"``, ``SlidingPenalty``: a tuple that moved is given anew, the effect
+``restructured``, the pattern derived again; the augmented Lagrangian refuses it).
 
 **On a distributed mesh** (each rank its part) the pairing is the relations form's, whole on
 every rank in input ids (the surfaces gathered once). The areas A_i come from each rank's
