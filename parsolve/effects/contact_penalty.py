@@ -554,3 +554,13 @@ class SlidingPenalty(PenaltyContact):
 
     def end_step(self) -> None:
         self.committed_tangents = self.pairing.tangents
+
+    def restart_state(self) -> dict:
+        """The pairs of the last converged step and their tangents (those of a slave no facet
+        faces any more, and the committed friction force's basis)."""
+        return {"pairing": self.pairing, "committed_tangents": self.committed_tangents}
+
+    def load_restart_state(self, state: dict) -> None:
+        # the tuples stay the pattern's: the next step's pairing moves them (restructured)
+        self.pairing = state["pairing"]
+        self.committed_tangents = state["committed_tangents"]

@@ -15,6 +15,8 @@ the partition's global node numbers, declared by every rank owning one of the tu
 
 from __future__ import annotations
 
+import tomllib
+
 import meshio
 import numpy as np
 import pytest
@@ -412,3 +414,34 @@ def test_finite_sliding_penalty_3d_node_to_face_tends_to_the_multiplier_contact(
     print("error", error)
     np.testing.assert_allclose(error[0] / error[1], 10.0, rtol=0.02)
     assert error[1] < 5e-5
+
+
+def test_finite_sliding_penalty_restarts_where_it_stopped(shared_tmp):
+    """The slide with friction stopped after 3 of its 6 steps and restarted: the results
+    those of the whole run (bitwise on one rank, 1e-12 on parts): the pairs and the committed
+    friction's tangents come back with the restart."""
+    import parsolve
+    from conftest import read_results
+
+    mesh = written(shared_tmp / f"narrow_{COMM.size}.msh", punch_2d, 0.5)
+    text = slide_scene(mesh, 'friction = 0.3\nformulation = "penalty"\npenalty = 1e6')
+    times = [(i + 1) / 6 for i in range(6)]
+
+    def scene(k: int):
+        return parsolve.Scene.from_dict(
+            {**tomllib.loads(text), "steps": {"times": times[:k]}}, source="slide.toml",
+            base=shared_tmp)
+
+    parsolve.run(scene(6), shared_tmp / "full.h5", COMM, log=None)
+    parsolve.run(scene(3), shared_tmp / "first.h5", COMM, log=None)
+    parsolve.run(scene(6), shared_tmp / "rest.h5", COMM, restart=shared_tmp / "first.h5",
+                 log=None)
+    full, rest = read_results(shared_tmp / "full.h5"), read_results(shared_tmp / "rest.h5")
+    for name in ("fields/displacement", "fields/joint_normal_reaction",
+                 "fields/joint_tangential_reaction", "fields/joint_state"):
+        a, b = full[name], rest[name]
+        assert a.shape == b.shape
+        if COMM.size == 1:
+            assert np.array_equal(a, b), name
+        else:
+            np.testing.assert_allclose(b, a, rtol=0, atol=1e-12 * np.abs(a).max())
