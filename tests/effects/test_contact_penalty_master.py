@@ -418,7 +418,7 @@ def test_finite_sliding_penalty_3d_node_to_face_tends_to_the_multiplier_contact(
 
 def test_finite_sliding_penalty_restarts_where_it_stopped(shared_tmp):
     """The slide with friction stopped after 3 of its 6 steps and restarted: the results
-    those of the whole run (bitwise on one rank, 1e-12 on parts): the pairs and the committed
+    those of the whole run (bitwise on one rank, 1e-10 on parts): the pairs and the committed
     friction's tangents come back with the restart."""
     import parsolve
     from conftest import read_results
@@ -444,4 +444,5 @@ def test_finite_sliding_penalty_restarts_where_it_stopped(shared_tmp):
         if COMM.size == 1:
             assert np.array_equal(a, b), name
         else:
-            np.testing.assert_allclose(b, a, rtol=0, atol=1e-12 * np.abs(a).max())
+            # (the penalty, 1e3 times the bodies' stiffness, scales the round-off up)
+            np.testing.assert_allclose(b, a, rtol=0, atol=1e-10 * np.abs(a).max())
