@@ -2,7 +2,9 @@
 nodes no cell joins (``Term.nodes`` given anew), the system restructured, derives its pattern
 again from the declared terms and preallocates it (new node pairs, the old ones gone), and
 the assembled operator is the brute-force dense sum of the cells and the tuples where they
-are now; on 1, 2 and 3 ranks."""
+are now; on 1, 2 and 3 ranks. Tuples in the partition's global node numbers (a contact
+pair whose slave and master facet lie on different ranks), declared by each rank owning one
+of their nodes, are assembled whole though a rank holds no part of their far end."""
 
 from __future__ import annotations
 
