@@ -228,7 +228,6 @@ class PenaltyContact(Effect):
         # step's start: ``SlidingPenalty``)
         geo = contact.Contact(dataclasses.replace(spec, sliding="small"), mesh, regions,
                               fields, scene.source)
-        self.geo = geo
         self.spec, self.mesh, self.fields_ = spec, mesh, fields
         self.u = geo.u
         self.name = f"contact {spec.name} ({spec.formulation})"
@@ -265,6 +264,10 @@ class PenaltyContact(Effect):
         self.term = Term(self.u, self.u, np.zeros((0, 1), dtype=np.int64),
                          symmetric=self.symmetric, linear=False, global_ids=True)
         self._declare(p)
+        self._surfaces(geo, regions)
+
+    def _surfaces(self, geo: contact.Contact, regions) -> None:
+        """What it keeps of the relations form's surfaces (finite sliding's): nothing."""
 
     def _declare(self, p) -> None:
         """The contact elements: one node tuple per pair (its slave node, then its master
@@ -484,16 +487,19 @@ class SlidingPenalty(PenaltyContact):
 
     def __init__(self, spec: BaselineSpec, mesh, regions, fields, scene):
         super().__init__(spec, mesh, regions, fields, scene)
-        p = self.pairing
-        ids, pts = self.geo._slave_nodes(regions)
-        facets, facet_pts = self.geo._facets(regions(spec.master, f"{spec.key}.master"))
+        self.reference = None   # (tangential displacement at q_n, committed → new tangents)
+        self.committed_tangents = self.pairing.tangents
+        self.q_start = None
+        self.repairs = 0        # pairings that moved a tuple (each a new pattern)
+
+    def _surfaces(self, geo: contact.Contact, regions) -> None:
+        """The paired slaves and the master's facets, their nodes compact (gathered once)."""
+        p, spec = self.pairing, self.spec
+        ids, pts = geo._slave_nodes(regions)
+        facets, facet_pts = geo._facets(regions(spec.master, f"{spec.key}.master"))
         at = np.searchsorted(ids, p.slave)
         self.surf = Surfaces.of([(p.slave, pts[at]), (facets, facet_pts)])
         self.compact = (self.surf.compact(p.slave), self.surf.compact(facets))
-        self.reference = None   # (tangential displacement at q_n, committed → new tangents)
-        self.committed_tangents = p.tangents
-        self.q_start = None
-        self.repairs = 0        # pairings that moved a tuple (each a new pattern)
 
     def _points(self, q: np.ndarray) -> np.ndarray:
         """The surfaces' nodes at X + u (every rank the same; one reduction)."""
