@@ -88,12 +88,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from parsolve.contact.friction import OPEN, SLIP, STICK
-from parsolve.contact.pairing import pair_nodes
+from parsolve.contact.pairing import pair_nodes, pair_on
 from parsolve.contact.rows import normal_rows, tangent_rows
 from parsolve.contact.surfaces import Surfaces
 from parsolve.la.dofmap import DofMap
 from parsolve.effects import contact
 from parsolve.effects.base import Effect
+from parsolve.effects.contact_sliding import KEEP_TOL
 from parsolve.fem.element_matrices import NodeForces, Term, TermMatrices
 from parsolve.errors import InputError, SolverError
 from parsolve.fem import kernels
@@ -475,7 +476,8 @@ class AugmentedContact(PenaltyContact):
 class SlidingPenalty(PenaltyContact):
     """The penalty against a master region with finite sliding: the slaves are paired again
     with the master's facets on the current configuration X + u at each step's start and
-    after each Newton iteration (a slave no facet faces keeps its pair), their rows
+    after each Newton iteration (a slave keeps its facet while it stays in it and as close,
+    or when no facet faces it, as the relations form's finite sliding), their rows
     linearised there (``g = g(x) + Dn·(q − q(x))``: at convergence the gap is the actual
     one), the committed friction force turned onto the new tangents and the tangential
     displacement counted from the step's start q_n on the new rows. When a tuple changed
@@ -500,6 +502,8 @@ class SlidingPenalty(PenaltyContact):
         at = np.searchsorted(ids, p.slave)
         self.surf = Surfaces.of([(p.slave, pts[at]), (facets, facet_pts)])
         self.compact = (self.surf.compact(p.slave), self.surf.compact(facets))
+        # the largest master facet: the closeness tolerance's length
+        self.length = float(np.linalg.norm(np.ptp(facet_pts, axis=1), axis=1).max())
 
     def _points(self, q: np.ndarray) -> np.ndarray:
         """The surfaces' nodes at X + u (every rank the same; one reduction)."""
@@ -515,17 +519,22 @@ class SlidingPenalty(PenaltyContact):
 
     def _repair(self, q: np.ndarray, start: bool = False) -> bool:
         """Pairs made again at q (collective, every rank alike); True when a tuple moved."""
-        old = self.pairing
         slave, facets = self.compact
-        new = self.surf.to_input(pair_nodes(self._points(q), slave, facets,
-                                            self.mesh.facet_type, self.spec.search_radius))
-        keep = ~new.paired   # faced by no facet: its last pair
+        ft, x = self.mesh.facet_type, self._points(q)
+        new = pair_nodes(x, slave, facets, ft, self.spec.search_radius)
+        # a slave keeps its facet while its projection stays in it and is as close (on a kink
+        # of the master it would flip between two facets from one iteration to the next), and
+        # when no facet faces it (past the master's end: clipped to its facet), as the
+        # relations form's finite sliding does
+        cur, inside = pair_on(x, slave, facets, self.pairing.facet, ft, KEEP_TOL)
+        best = np.where(new.paired, np.abs(new.gap), np.inf)
+        keep = inside & (np.abs(cur.gap) <= best + 1e-9 * self.length) | ~new.paired
         for name in new.__dataclass_fields__:
-            getattr(new, name)[keep] = getattr(old, name)[keep]
+            getattr(new, name)[keep] = getattr(cur, name)[keep]
+        new = self.surf.to_input(new)
         self.nrows, self.trows = normal_rows(new), tangent_rows(new)
         gap, _ = self.values.node_rows([self.nrows, self.trows], self._displacement(q))
-        # the actual gap at x where re-paired (a kept pair's: its linearised one)
-        actual = np.where(keep, old.gap + gap, new.gap)
+        actual = new.gap   # at x; the rows' offset: g = actual + Dn·(q' − q)
         new.gap = actual - gap
         if start:
             self.touching = actual <= self.touch
