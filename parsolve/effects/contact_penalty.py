@@ -3,7 +3,9 @@ Alart–Curnier type), selected by ``formulation`` in a ``[[contact]]`` section.
 measure the paper's formulation (relations, ``parsolve.effects.contact``) against the classical
 ones on the same scenes: same pairing, same rows, same linearised gap ``g = g0 + Dn·q``.
 
-Per paired slave node i (rigid obstacles only, see below), with ε_i = penalty × A_i (A_i: the
+Per paired slave node i (against a rigid obstacle, or node-to-segment / node-to-face
+against a deformable master's facet: its gap and tangential displacement are the rows'
+``v·u_s − Σ_a N_a v·u_a``), with ε_i = penalty × A_i (A_i: the
 node's tributary area, the consistent nodal force of a unit pressure on the slave facets; a
 slave given as a node group has as facets those all of whose nodes it holds, so a group that
 leaves out a neighbour, e.g. a wedge's apex, gives its end node half its area there):
@@ -23,9 +25,11 @@ leaves out a neighbour, e.g. a wedge's apex, gives its end node half its area th
   and face 1's end node then flipped its slip sense at every iteration: a 2D return mapping
   whose tangential penalty is far stiffer than the body there cycles under Newton once it
   starts on the wrong side);
-* internal force ``f = −p_N n + T t`` on the slave's DOFs (T: the tangents as columns) and its
-  consistent tangent: ``ε n nᵀ`` in contact, ``+ ε_T T Tᵀ`` in stick, and in slip
-  ``− μ ε (T ŝ) nᵀ + μ p_N ε_T/|t_tr| T (I − ŝ ŝᵀ) Tᵀ`` (ŝ = t_tr/|t_tr|): not symmetric.
+* internal force ``f = −p_N ∂g + ∂g_Tᵀ t`` on the pair's DOFs (∂g, ∂g_T: the rows'
+  coefficients; on the slave n and the tangents T as columns, on master node a −N_a times
+  them) and its consistent tangent: ``ε ∂g ∂gᵀ`` in contact, ``+ ε_T ∂g_Tᵀ ∂g_T`` in stick,
+  and in slip ``− μ ε (∂g_Tᵀ ŝ) ∂gᵀ + μ p_N ε_T/|t_tr| ∂g_Tᵀ (I − ŝ ŝᵀ) ∂g_T``
+  (ŝ = t_tr/|t_tr|): not symmetric.
 
 **Penalty:** λ_N = 0; λ_T = the committed friction force t_n of the last converged step (an
 elastic-plastic spring: the slip is what the return mapping takes out). The penetration is
@@ -44,21 +48,27 @@ sticking node has not moved during the step (λ_T = λ_T + ε_T Δg_T): the cons
 relations form, to the tolerance. A step that needs more than ``max_augmentations`` fails (and
 is cut like any failed step). The multipliers start each step from the last converged forces.
 
-**Contact elements and the sparsity:** against a rigid obstacle a pair couples one node with
-itself: its block is the node's diagonal block, a term the effect declares on its owned slave
-nodes (``Effect.terms``, ``TermMatrices``), given its slots once, so re-assembly stays a value
-update of the fixed pattern. A deformable master surface (slave node + master facet
-nodes) needs node pairs that no cell holds: it is refused (exit 2) until the system's pattern
-takes contact elements (see the report of this work).
+**Contact elements and the sparsity:** each pair is a node tuple, its slave node then its
+master facet's nodes (an obstacle's: the slave alone), a term the effect declares
+(``Effect.terms``, ``TermMatrices`` of its (m·dim)² blocks) in the partition's global node
+numbers (``Term.global_ids``): the system derives the pattern's contact entries from them and
+gives the term its slots once, so re-assembly stays a value update of that pattern. A
+deformable master takes node-to-segment (2D) or node-to-face (3D) pairs (mortar rows are
+refused, exit 2: the relations form has them), made once (``sliding = "small"``) or, by the
+penalty, again on the current configuration at each step's start and Newton iteration
+(``sliding = "finite"``, ``SlidingPenalty``: a tuple that moved is given anew, the effect
+``restructured``, the pattern derived again; the augmented Lagrangian refuses it).
 
 **On a distributed mesh** (each rank its part) the pairing is the relations form's, whole on
 every rank in input ids (the surfaces gathered once). The areas A_i come from each rank's
 facets through its owned slave nodes, summed over the ranks; the gaps g and g_T of every
-paired node from its owner's displacement, one reduction of the pairing's size per
+paired node from its owners' displacements, one reduction of the pairing's size per
 evaluation. The forces, the states and every decision of the augmented Lagrangian (settled,
 the augmentation's change and stop) are then computed from the same whole arrays on every
-rank: the ranks agree. Each owned slave node's block and force go in through one of the
-rank's cells (a ghost node's are its owner's); outputs are each rank's owned rows.
+rank: the ranks agree. A pair's tuple is declared on every rank that owns one of its nodes
+(a slave and its master facet may lie on different ranks' parts, the master's nodes on no part
+of the slave owner's): each adds the rows and forces of the nodes it owns, from the forces every
+rank holds, so nothing crosses ranks at assembly; outputs are each rank's owned rows.
 
 Scene keys (besides those of ``parsolve.effects.contact``)::
 
@@ -78,9 +88,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from parsolve.contact.friction import OPEN, SLIP, STICK
+from parsolve.contact.pairing import pair_nodes, pair_on
+from parsolve.contact.rows import normal_rows, tangent_rows
+from parsolve.contact.surfaces import Surfaces
 from parsolve.la.dofmap import DofMap
 from parsolve.effects import contact
 from parsolve.effects.base import Effect
+from parsolve.effects.contact_sliding import KEEP_TOL
 from parsolve.fem.element_matrices import NodeForces, Term, TermMatrices
 from parsolve.errors import InputError, SolverError
 from parsolve.fem import kernels
@@ -141,7 +155,8 @@ def with_baseline(spec: contact.ContactSpec, baseline: dict) -> contact.ContactS
 
 
 def build(spec: BaselineSpec, mesh, regions, fields, scene) -> Effect:
-    cls = AugmentedContact if spec.formulation == "augmented_lagrangian" else PenaltyContact
+    cls = AugmentedContact if spec.formulation == "augmented_lagrangian" else \
+        SlidingPenalty if spec.master is not None and spec.sliding == "finite" else PenaltyContact
     return cls(spec, mesh, regions, fields, scene)
 
 
@@ -171,6 +186,30 @@ def nodal_areas(mesh, nodes: np.ndarray, thickness) -> np.ndarray:
     return area[nodes]
 
 
+def check_master(spec: BaselineSpec, source: str) -> None:
+    """A baseline against a master region takes node-to-segment pairs; finite sliding by the
+    penalty only (the augmented Lagrangian's multipliers would have to follow the pairs)."""
+    if spec.discretization != "node_to_segment":
+        raise InputError(f"formulation = {spec.formulation!r} on a master region takes "
+                         "node_to_segment pairs (node-to-face in 3D); mortar rows are the "
+                         "relations form's", source, f"{spec.key}.discretization")
+    if spec.sliding != "small" and spec.formulation != "penalty":
+        raise InputError(f"formulation = {spec.formulation!r} on a master region takes "
+                         "pairs made once (sliding = \"small\"); finite sliding: the "
+                         "penalty or the relations form", source, f"{spec.key}.sliding")
+
+
+def gap_gradients(p) -> tuple[np.ndarray, np.ndarray]:
+    """(∂g (n, m·dim), ∂g_T (n, m·dim, dim-1)) of each pair's gap and tangential displacement
+    on its tuple's DOFs (slave, then master facet nodes, node-major): the rows' coefficients
+    (``contact.rows``: v on the slave, −N_a v on master node a; an obstacle's: v alone)."""
+    n, dm1, dim = p.tangents.shape
+    w = np.concatenate([np.ones((n, 1)), -p.weights], axis=1)               # (n, m)
+    bn = (w[:, :, None] * p.normal[:, None, :]).reshape(n, -1)
+    bt = (w[:, None, :, None] * p.tangents[:, :, None, :]).reshape(n, dm1, -1)
+    return bn, np.swapaxes(bt, 1, 2)
+
+
 def positive(area: np.ndarray) -> np.ndarray:
     """Zero areas (a node no whole slave facet holds) replaced by the mean of the others."""
     return np.where(area > 0, area, area[area > 0].mean() if np.any(area > 0) else 1.0)
@@ -184,20 +223,17 @@ class PenaltyContact(Effect):
     def __init__(self, spec: BaselineSpec, mesh, regions, fields, scene):
         key = spec.key
         if spec.master is not None:
-            raise InputError(f"formulation = {spec.formulation!r} supports rigid obstacles only "
-                             "(a deformable master needs contact elements in the stiffness "
-                             "pattern); use the relations form", scene.source, f"{key}.master")
+            check_master(spec, scene.source)
         # the relations form's set-up does the checks, the pairing and the rows: reused as is
-        geo = contact.Contact(spec, mesh, regions, fields, scene.source)
+        # (finite sliding: its pairs at the start made as small sliding's, then again at each
+        # step's start: ``SlidingPenalty``)
+        geo = contact.Contact(dataclasses.replace(spec, sliding="small"), mesh, regions,
+                              fields, scene.source)
         self.spec, self.mesh, self.fields_ = spec, mesh, fields
         self.u = geo.u
         self.name = f"contact {spec.name} ({spec.formulation})"
         self.pairing, self.nrows, self.trows = geo.pairing, geo.nrows, geo.trows
-        # input ids → this rank's nodes (a part: owned + ghosts); the element-like blocks go
-        # in through the owned slave nodes only (each node's force added once)
         self.values = geo.values
-        self.owned_slave = np.flatnonzero(self.values.owned_nodes(geo.pairing.slave)[0])
-        self.owned_local = self.values.owned_nodes(geo.pairing.slave)[1]
         self.symmetric = spec.mu == 0.0
         p = self.pairing
         dim = mesh.dim
@@ -226,9 +262,36 @@ class PenaltyContact(Effect):
         self.touch = spec.closed * float(np.max(mesh.extent))   # the whole mesh's size, as there
         self.touching = p.gap <= self.touch
         self._last = None
-        # each owned slave node's diagonal block (its rows are this rank's)
-        self.term = Term(self.u, self.u, self.owned_local[:, None], symmetric=self.symmetric,
-                         linear=False)
+        self.term = Term(self.u, self.u, np.zeros((0, 1), dtype=np.int64),
+                         symmetric=self.symmetric, linear=False, global_ids=True)
+        self._declare(p)
+        self._surfaces(geo, regions)
+
+    def _surfaces(self, geo: contact.Contact, regions) -> None:
+        """What it keeps of the relations form's surfaces (finite sliding's): nothing."""
+
+    def _declare(self, p) -> None:
+        """The contact elements: one node tuple per pair (its slave node, then its master
+        facet's nodes; an obstacle's pair is its slave alone), in the partition's global node
+        numbers, declared on every rank that owns one of its nodes (each adds its owned rows:
+        a pair split over ranks is whole, no entry crosses ranks at assembly, and the values
+        come from the pairing's forces that every rank holds). The global numbers: one
+        reduction of the pairing's size. Also (pair, place in its tuple, local node) of the
+        tuple nodes this rank owns: where its forces go. The pairs' gradients ∂g, ∂g_T too."""
+        values, mesh = self.values, self.mesh
+        ids = np.concatenate([p.slave[:, None], p.master], axis=1)          # (n, m) input ids
+        local = values.local_nodes(ids)
+        here = local >= 0
+        new = np.where(here, mesh.node_new[np.where(here, local, 0)], 0).astype(float)
+        tuples = values.node_sum(ids.ravel(), new.ravel()).astype(np.int64).reshape(ids.shape)
+        lo, hi = values.node_ranges[values.rank], values.node_ranges[values.rank + 1]
+        owned = (tuples >= lo) & (tuples < hi)
+        self.declared = np.flatnonzero(owned.any(axis=1))
+        self.term.nodes = tuples[self.declared]
+        self.tuples = tuples
+        pair, place = np.nonzero(owned)
+        self.force_at = (pair, place, local[pair, place])
+        self.bn, self.bt = gap_gradients(p)
 
     # ------------------------------------------------------------------ kinematics
 
@@ -270,9 +333,10 @@ class PenaltyContact(Effect):
         return {"g": g, "gT": gT, "pN": pN, "t": t, "t_tr": t_tr, "norm": norm, "state": status}
 
     def node_tangents(self, f: dict) -> np.ndarray:
-        """Consistent tangent (n, dim, dim) of each node's contact force."""
-        p, mu = self.pairing, self.spec.mu
-        n_vec, T = p.normal, np.swapaxes(p.tangents, 1, 2)          # (n, dim), (n, dim, dim-1)
+        """Consistent tangent (n, m·dim, m·dim) of each pair's contact forces on its tuple's
+        DOFs (slave first, then its master facet's nodes; an obstacle's: (n, dim, dim))."""
+        mu = self.spec.mu
+        n_vec, T = self.bn, self.bt                   # ∂g (n, m·dim), ∂g_T (n, m·dim, dim-1)
         closed, slip = f["state"] != OPEN, f["state"] == SLIP
         k = (self.eps_n * closed)[:, None, None] * np.einsum("mi,mj->mij", n_vec, n_vec)
         if mu == 0.0:
@@ -288,6 +352,13 @@ class PenaltyContact(Effect):
             c = mu * f["pN"] * self.eps_t / np.maximum(f["norm"], 1e-300) * slip
             k += c[:, None, None] * np.einsum("mik,mkl,mjl->mij", T, proj, T)
         return k
+
+    def tuple_forces(self, f: dict) -> np.ndarray:
+        """Each pair's internal forces on its tuple's nodes (n, m, dim): ``−p_N ∂g + ∂g_Tᵀ t``
+        (on the slave −p_N n + T t, on a master node −N_a of it)."""
+        n, md = self.bn.shape
+        force = -f["pN"][:, None] * self.bn + np.einsum("mxj,mj->mx", self.bt, f["t"])
+        return force.reshape(n, md // self.mesh.dim, self.mesh.dim)
 
     # ------------------------------------------------------------------ the Effect interface
 
@@ -306,20 +377,25 @@ class PenaltyContact(Effect):
         """(λ_N, λ_T): penalty, none normal, and the committed friction force."""
         return np.zeros(len(self.pairing)), state["t"]
 
+    def step_state(self, state: dict) -> dict:
+        """The committed state the step starts from (finite sliding: on its new pairs)."""
+        return state
+
     def evaluate(self, cells: np.ndarray, values: dict, state, secant: bool, at):
         u = self._u(values)
+        state = self.step_state(state)
         lam_n, lam_t = self.multipliers(state)
         f = self.forces(u, state, lam_n, lam_t)
         self._last, self._state = f, state
         trial = {"pN": f["pN"], "t": f["t"], "gT": f["gT"]}
-        p = self.pairing
-        node_force = -f["pN"][:, None] * p.normal + np.einsum("mjx,mj->mx", p.tangents, f["t"])
-        which, d = self.owned_slave, self.mesh.dim
-        forces = NodeForces(self.term.nodes, node_force[which][:, None, :])
-        k = self.node_tangents(f)[which]
-        # (a rank may hold no slave node: k is (0, dim, dim))
-        blocks = TermMatrices(self.term, k.reshape(len(k), d * d).T.reshape(d * d, 1, 1, -1))
-        return {self.u: forces}, [(self.term, blocks)], trial, None
+        pair, place, local = self.force_at
+        forces = NodeForces(local[:, None], self.tuple_forces(f)[pair, place][:, None, :])
+        k = self.node_tangents(f)[self.declared]
+        # (n, m·d, m·d) → (d·d, m, m, n): entry (i, j) of node pair (a, b) at [i d + j, a, b]
+        d = self.mesh.dim
+        m = k.shape[1] // d
+        blocks = k.reshape(len(k), m, d, m, d).transpose(2, 4, 1, 3, 0).reshape(d * d, m, m, -1)
+        return {self.u: forces}, [(self.term, TermMatrices(self.term, blocks))], trial, None
 
     def terms(self) -> list[Term]:
         return [self.term]
@@ -395,3 +471,111 @@ class AugmentedContact(PenaltyContact):
         a = new["t_tr"][slip] / np.maximum(new["norm"][slip], 1e-300)[:, None]
         b = old["t_tr"][slip] / np.maximum(old["norm"][slip], 1e-300)[:, None]
         return bool(np.all(np.linalg.norm(a - b, axis=1) <= tol_angle))
+
+
+class SlidingPenalty(PenaltyContact):
+    """The penalty against a master region with finite sliding: the slaves are paired again
+    with the master's facets on the current configuration X + u at each step's start and
+    after each Newton iteration (a slave keeps its facet while it stays in it and as close,
+    or when no facet faces it, as the relations form's finite sliding), their rows
+    linearised there (``g = g(x) + Dn·(q − q(x))``: at convergence the gap is the actual
+    one), the committed friction force turned onto the new tangents and the tangential
+    displacement counted from the step's start q_n on the new rows. When a tuple changed
+    (a slave onto another facet) the term's nodes are given anew and the effect
+    ``restructured``: the system derives its pattern again; the iteration does not count as
+    converged. No geometric stiffness (the relations form's finite sliding has it)."""
+
+    restructures = True
+
+    def __init__(self, spec: BaselineSpec, mesh, regions, fields, scene):
+        super().__init__(spec, mesh, regions, fields, scene)
+        self.reference = None   # (tangential displacement at q_n, committed → new tangents)
+        self.committed_tangents = self.pairing.tangents
+        self.q_start = None
+        self.repairs = 0        # pairings that moved a tuple (each a new pattern)
+
+    def _surfaces(self, geo: contact.Contact, regions) -> None:
+        """The paired slaves and the master's facets, their nodes compact (gathered once)."""
+        p, spec = self.pairing, self.spec
+        ids, pts = geo._slave_nodes(regions)
+        facets, facet_pts = geo._facets(regions(spec.master, f"{spec.key}.master"))
+        at = np.searchsorted(ids, p.slave)
+        self.surf = Surfaces.of([(p.slave, pts[at]), (facets, facet_pts)])
+        self.compact = (self.surf.compact(p.slave), self.surf.compact(facets))
+        # the largest master facet: the closeness tolerance's length
+        self.length = float(np.linalg.norm(np.ptp(facet_pts, axis=1), axis=1).max())
+
+    def _points(self, q: np.ndarray) -> np.ndarray:
+        """The surfaces' nodes at X + u (every rank the same; one reduction)."""
+        surf, f, dim = self.surf, self.fields_, self.mesh.dim
+        m = surf.ids.size
+        dofs = (np.repeat(surf.ids, dim) * f.ncomp + f.offset[self.u]
+                + np.tile(np.arange(dim), m))
+        u = self.values.rows(dofs, np.arange(m * dim), np.ones(m * dim), m * dim, q)
+        return surf.points + u.reshape(m, dim)
+
+    def _displacement(self, q: np.ndarray) -> np.ndarray:
+        return q.reshape(self.mesh.num_points, -1)[:, self.fields_.columns(self.u)]
+
+    def _repair(self, q: np.ndarray, start: bool = False) -> bool:
+        """Pairs made again at q (collective, every rank alike); True when a tuple moved."""
+        slave, facets = self.compact
+        ft, x = self.mesh.facet_type, self._points(q)
+        new = pair_nodes(x, slave, facets, ft, self.spec.search_radius)
+        # a slave keeps its facet while its projection stays in it and is as close (on a kink
+        # of the master it would flip between two facets from one iteration to the next), and
+        # when no facet faces it (past the master's end: clipped to its facet), as the
+        # relations form's finite sliding does
+        cur, inside = pair_on(x, slave, facets, self.pairing.facet, ft, KEEP_TOL)
+        best = np.where(new.paired, np.abs(new.gap), np.inf)
+        keep = inside & (np.abs(cur.gap) <= best + 1e-9 * self.length) | ~new.paired
+        for name in new.__dataclass_fields__:
+            getattr(new, name)[keep] = getattr(cur, name)[keep]
+        new = self.surf.to_input(new)
+        self.nrows, self.trows = normal_rows(new), tangent_rows(new)
+        gap, _ = self.values.node_rows([self.nrows, self.trows], self._displacement(q))
+        actual = new.gap   # at x; the rows' offset: g = actual + Dn·(q' − q)
+        new.gap = actual - gap
+        if start:
+            self.touching = actual <= self.touch
+        _, gT = self.values.node_rows([self.nrows, self.trows],
+                                      self._displacement(self.q_start))
+        turn = np.einsum("mkx,mjx->mjk", self.committed_tangents, new.tangents)
+        self.reference = (gT.reshape(len(new), -1), turn)
+        self.pairing = new
+        tuples = self.tuples
+        self._declare(new)
+        moved = not np.array_equal(tuples, self.tuples)
+        if moved:
+            self.restructured = True
+            self.repairs += 1
+        return moved
+
+    def begin_step(self, q: np.ndarray, active: dict, at) -> bool:
+        self.q_start = q.copy()
+        self._repair(q, start=True)
+        return False
+
+    def refresh(self, q: np.ndarray, lam: dict, active: dict) -> bool:
+        return self._repair(q)
+
+    def step_state(self, state: dict) -> dict:
+        """The committed friction force on the current tangents, the tangential displacement
+        from the step's start on the current rows."""
+        if self.reference is None:
+            return state
+        gT, turn = self.reference
+        return {**state, "gT": gT, "t": np.einsum("mjk,mk->mj", turn, state["t"])}
+
+    def end_step(self) -> None:
+        self.committed_tangents = self.pairing.tangents
+
+    def restart_state(self) -> dict:
+        """The pairs of the last converged step and their tangents (those of a slave no facet
+        faces any more, and the committed friction force's basis)."""
+        return {"pairing": self.pairing, "committed_tangents": self.committed_tangents}
+
+    def load_restart_state(self, state: dict) -> None:
+        # the tuples stay the pattern's: the next step's pairing moves them (restructured)
+        self.pairing = state["pairing"]
+        self.committed_tangents = state["committed_tangents"]

@@ -491,6 +491,10 @@ class Term:
     rate: bool = False
     cells: np.ndarray | None = None   # a cell term's region (mesh cells); None: every cell
     slots: np.ndarray | None = None   # (m, m, k), set by the system
+    # ``nodes`` are the partition's global node numbers, not local ones: tuples whose nodes
+    # need not be on this rank's part (a contact pair: a slave node and its master facet's);
+    # the rank declares those with a node it owns, and gives their forces itself
+    global_ids: bool = False
 
     def __post_init__(self) -> None:
         if self.nodes is None:
@@ -532,6 +536,8 @@ class TermMatrices:
 
     def forces(self, x: np.ndarray) -> "NodeForces":
         """K x at the term's nodes from node values x (npoints, d_trial)."""
+        if self.term.global_ids:
+            raise ValueError("a term on global node numbers gives its forces itself")
         nodes = self.term.nodes
         k, m = nodes.shape
         dj = x.shape[1]

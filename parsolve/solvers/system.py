@@ -83,9 +83,9 @@ class SaddleSystem:
         nnodes = int(self.part.node_ranges[-1])
         nen = cells.shape[1]
         self._check_owners(tuples)
-        pseudo = [np.concatenate([t.nodes, np.repeat(t.nodes[:, -1:], nen - t.nodes.shape[1],
-                                                     axis=1)], axis=1) for t in tuples]
-        pattern = node_pattern(self.part.new_of_old[np.concatenate([cells] + pseudo)], lo, hi,
+        pseudo = [np.concatenate([g, np.repeat(g[:, -1:], nen - g.shape[1], axis=1)], axis=1)
+                  for g in map(self._global_nodes, tuples)]
+        pattern = node_pattern(np.concatenate([self.part.new_of_old[cells]] + pseudo), lo, hi,
                                model.ncomp, nnodes)
         start = len(cells)
         for t in tuples:
@@ -102,6 +102,11 @@ class SaddleSystem:
                 t.slots = pattern.pair_slot[:, :, at].astype(np.intp)
         return pattern
 
+    def _global_nodes(self, term) -> np.ndarray:
+        """A node term's tuples in the partition's global node numbers (``Term.global_ids``:
+        given so, nodes that may lie on no part of this rank's)."""
+        return term.nodes if term.global_ids else self.part.new_of_old[term.nodes]
+
     def _check_owners(self, tuples: list) -> None:
         """Each rank adds the rows it owns of the node tuples it declares: a tuple is whole
         only if the owner of each of its nodes declares it too. A tuple some owner does not
@@ -111,7 +116,7 @@ class SaddleSystem:
         comm, ranges = self.comm, self.part.node_ranges
         mine, out = [], [[] for _ in range(comm.size)]
         for i, t in enumerate(tuples):   # (every rank declares the same terms, in one order)
-            nodes = np.sort(self.part.new_of_old[t.nodes], axis=1)   # global, order-free
+            nodes = np.sort(self._global_nodes(t), axis=1)   # global, order-free
             mine.append(_rows(nodes))
             owners = np.searchsorted(ranges, nodes, side="right") - 1
             for r in np.unique(owners[owners != comm.rank]):

@@ -341,7 +341,10 @@ BASE = CONTACT_BASE.replace("{contact}", 'slave = "bottom"\n{contact}')
      "contact[0].augmentation_tolerance", "(0, 1)"),
     (f'{PLANE}\nformulation = "augmented_lagrangian"\nmax_augmentations = 0',
      "contact[0].max_augmentations", "at least 1"),
-    ('master = "top"\nformulation = "penalty"', "contact[0].master", "rigid obstacles"),
+    ('master = "top"\nformulation = "penalty"\ndiscretization = "mortar"',
+     "contact[0].discretization", "node_to_segment"),
+    ('master = "top"\nformulation = "augmented_lagrangian"\nsliding = "finite"',
+     "contact[0].sliding", "made once"),
 ])
 def test_bad_input_names_file_and_key(shared_tmp, contact, key, words):
     path = shared_tmp / "bad_baseline.toml"

@@ -2,7 +2,9 @@
 nodes no cell joins (``Term.nodes`` given anew), the system restructured, derives its pattern
 again from the declared terms and preallocates it (new node pairs, the old ones gone), and
 the assembled operator is the brute-force dense sum of the cells and the tuples where they
-are now; on 1, 2 and 3 ranks."""
+are now; on 1, 2 and 3 ranks. Tuples in the partition's global node numbers (a contact
+pair whose slave and master facet lie on different ranks), declared by each rank owning one
+of their nodes, are assembled whole though a rank holds no part of their far end."""
 
 from __future__ import annotations
 
@@ -144,3 +146,61 @@ def test_a_tuple_its_nodes_owner_does_not_declare_is_refused():
     with pytest.raises(RuntimeError, match="1 node tuples of declared terms join nodes whose "
                        "owners do not all declare them"):
         system.restructure()
+
+
+def far_ties(mesh, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """Ties, in the partition's global node numbers, between the first node of every rank's
+    block and the last node of the next rank's block (of its own on one rank): nodes no cell
+    joins, each on no part of the other's owner. Every rank declares the ties one of whose
+    nodes it owns. (all ties (k, 2), this rank's)."""
+    ranges = np.asarray(mesh.node_ranges, dtype=np.int64)
+    first, last = ranges[:-1], ranges[1:] - 1
+    ties = np.column_stack([first, np.roll(last, -1)]) if size > 1 else \
+        np.array([[first[0], last[0]]])
+    lo, hi = ranges[COMM.rank], ranges[COMM.rank + 1]
+    mine = np.any((ties >= lo) & (ties < hi), axis=1)
+    return ties, ties[mine]
+
+
+def test_tuples_split_over_ranks_in_global_numbers_are_assembled_whole():
+    """A node term in global node numbers (``Term.global_ids``: a contact pair's slave and
+    master facet on different ranks) declared on each rank owning one of its nodes: the
+    assembled operator is the cells' plus the dense springs of every tie, rows of both ends
+    (each from its owner), on 1, 2 and 3 ranks; moved, the pattern follows."""
+    bare = stiffness_block(COMM, SaddleSystem(COMM, model()))
+    m = model()
+    ties, mine = far_ties(m.mesh, COMM.size)
+    effect = Ties(m.mesh)
+    effect.term = Term("u", "u", mine, global_ids=True)
+    m.effects.append(effect)
+    system = SaddleSystem(COMM, m)
+    npoints = m.mesh.num_global_points
+    # input ids of the ties' nodes: each owner's, gathered
+    own = m.mesh.node_new[:m.mesh.n_owned].astype(np.int64)
+    pairs = allgather_rows(COMM, np.column_stack([own, m.mesh.global_nodes[:m.mesh.n_owned]
+                                                  .astype(np.int64)]))
+    input_of = np.empty(npoints, dtype=np.int64)
+    input_of[pairs[:, 0]] = pairs[:, 1]
+    def dense(t):
+        out = np.zeros((npoints * 2, npoints * 2))
+        for a, b in input_of[t]:
+            for c in range(2):
+                i, j = a * 2 + c, b * 2 + c
+                out[i, i] += K
+                out[j, j] += K
+                out[i, j] -= K
+                out[j, i] -= K
+        return out
+
+    got = stiffness_block(COMM, system)
+    np.testing.assert_allclose(got - bare, dense(ties), atol=1e-12 * np.abs(bare).max())
+    if COMM.size > 1:   # a tie's far end is on no part of this rank's (not even a ghost)
+        assert np.any(~np.isin(mine, m.mesh.node_new))
+    # moved: each tie's second end one node back
+    moved = ties.copy()
+    moved[:, 1] -= 1
+    lo, hi = m.mesh.node_ranges[COMM.rank], m.mesh.node_ranges[COMM.rank + 1]
+    effect.term.nodes = moved[np.any((moved >= lo) & (moved < hi), axis=1)]
+    system.restructure()
+    np.testing.assert_allclose(stiffness_block(COMM, system) - bare, dense(moved),
+                               atol=1e-12 * np.abs(bare).max())
