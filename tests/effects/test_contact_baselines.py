@@ -238,7 +238,9 @@ def wedge(run, shared_tmp, keys: str, name: str, **kw) -> tuple[dict, object, li
     sc = bench_scenes()
     beta = np.pi / 4
     ref = references.wedge_stick_slip(sc.LAM, sc.G, beta, -1e-3)
-    mesh = shared_tmp / "wedge_baselines.msh"
+    # a mesh file per run: rank 0 rewriting one shared file raced with ranks still reading it
+    # for the previous run's model (a file of size 0 read once under load)
+    mesh = shared_tmp / f"{name}.msh"
     if MPI.COMM_WORLD.rank == 0:
         sc.wedge_mesh(mesh, beta)
     MPI.COMM_WORLD.Barrier()
