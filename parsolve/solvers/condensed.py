@@ -34,14 +34,15 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-#: why a system is not condensed (the largest code over the ranks wins), in words
+#: why a system is not condensed, in words; the largest code over the ranks wins (a row that
+#: ties several nodes is the plainest reason, a row across ranks the least)
 REASONS = {
-    1: "a relation row ties several nodes",
-    2: "a relation row's DOFs or dual lie on another rank",
-    3: "multiplier rows coupled to each other",
-    4: "a dual column off its row's node",
-    5: "dependent hard rows on a node",
-    6: "a node's dual does not hold its hard rows",
+    1: "a relation row's DOFs or dual lie on another rank",
+    2: "multiplier rows coupled to each other",
+    3: "a dual column off its row's node",
+    4: "dependent hard rows on a node",
+    5: "a node's dual does not hold its hard rows",
+    6: "a relation row ties several nodes",
 }
 #: a hard row's QR diagonal, relative to the node's largest entry, below which the rows are
 #: taken as dependent; E_c's condition number above which the dual does not hold them
@@ -72,7 +73,11 @@ def _clean_up() -> None:
 class CondensedPreconditioner:
     """``update(mat)`` condenses the operator's relation rows (None: done; else the reason
     why not, the same on every rank); ``apply`` is the PETSc python PC's application: M⁻¹
-    with S⁻¹ replaced by one AMG V-cycle (options under ``<prefix>condensed_``)."""
+    with S⁻¹ replaced by one AMG V-cycle (options under ``<prefix>condensed_``).
+
+    No block of M is copied: S = R M P with R = [G, 0] and P = [H; 0] (block diagonal, of the
+    saddle layout's primal rows), and the application's products with K, A and B are products
+    with M of vectors zero in the other field."""
 
     def __init__(self, comm: MPI.Comm, ncomp: int, is_q: PETSc.IS, is_l: PETSc.IS,
                  prefix: str):
@@ -81,15 +86,20 @@ class CondensedPreconditioner:
             atexit.register(_clean_up)
         if all(c is not comm for c in _COMMS):
             _COMMS.append(comm)
-        self.is_q, self.is_l = is_q, is_l
+        self.is_q = is_q
         self.nq, self.nl = is_q.getLocalSize(), is_l.getLocalSize()
+        # each rank's first saddle row and its primal rows' count (comm-size arrays)
+        sizes = np.array(comm.allgather((self.nq, self.nl)), dtype=np.int64)
+        self.starts = np.concatenate([[0], np.cumsum(sizes.sum(axis=1))])
+        self.nqs = sizes[:, 0]
+        self.start = int(self.starts[comm.rank])
+        self.q_start = int(self.nqs[:comm.rank].sum())   # in the primal numbering (S's)
         self._handle = None
-        self.S: PETSc.Mat | None = None
         self.amg: PETSc.PC | None = None
         self._reset()
 
     def _reset(self) -> None:
-        self.K = self.A = self.B = self.C = self.S = self.G = self.H = None
+        self.mat = self.S = self.R = self.P = None
 
     # ------------------------------------------------------------------ set-up
 
@@ -99,58 +109,65 @@ class CondensedPreconditioner:
         if self.comm.allreduce(int(mat.handle != self._handle), op=MPI.MAX):
             self._handle = mat.handle
             self._reset()
-        self.A = mat.createSubMatrix(self.is_l, self.is_q, submat=self.A)
-        self.B = mat.createSubMatrix(self.is_q, self.is_l, submat=self.B)
-        self.C = mat.createSubMatrix(self.is_l, self.is_l, submat=self.C)
-        code, rows = self._nodal_rows()
+        code, rows = self._nodal_rows(mat)
         if not code:
             code = self._node_blocks(*rows)
         code = self.comm.allreduce(code, op=MPI.MAX)
         if code:
             return REASONS[code]
-        self.K = mat.createSubMatrix(self.is_q, self.is_q, submat=self.K)
-        self._condensed_operator()
+        self.mat = mat
+        self._condensed_operator(mat)
         self._set_up_amg()
         return None
 
-    def _nodal_rows(self):
-        """(code, (node of each multiplier row or -1, C's diagonal)): code 0 when each row's
-        A entries lie on one owned node, its B column on the same node, and C is diagonal
-        (checked on the patterns, so the answer holds for the operator's life)."""
-        nc = self.nc
-        ia, ja, _ = self.A.getValuesCSR()
-        c0 = self.A.getOwnershipRangeColumn()[0]
-        cols = ja - c0
-        if cols.size and (cols.min() < 0 or cols.max() >= self.nq):
-            return 2, None
-        lens = np.diff(ia)
-        node = np.full(self.nl, -1, dtype=np.int64)
-        some = lens > 0
-        if cols.size:
-            first = np.minimum.reduceat(cols // nc, ia[:-1][some])
-            last = np.maximum.reduceat(cols // nc, ia[:-1][some])
-            if np.any(first != last):
-                return 1, None
-            node[some] = first
-        ib, jb, _ = self.B.getValuesCSR()
-        l0 = self.B.getOwnershipRangeColumn()[0]
-        lcols = jb - l0
-        if lcols.size and (lcols.min() < 0 or lcols.max() >= self.nl):
-            return 2, None
-        qnode = np.repeat(np.arange(self.nq) // nc, np.diff(ib))
-        if np.any(node[lcols] != qnode):
-            return 4, None
-        ic, jc, vc = self.C.getValuesCSR()
-        crow = np.repeat(np.arange(self.nl), np.diff(ic))
-        if np.any(jc - l0 != crow):
-            return 3, None
-        diag = np.zeros(self.nl)
-        diag[crow] = vc
-        if np.any((diag == 0.0) & (node < 0)):
-            return 6, None   # (a hard row with no DOF)
-        return 0, (node, diag)
+    def _blocks(self, mat: PETSc.Mat):
+        """M's local entries as (row, column, value) of A (column: the local primal DOF),
+        B (row: the local primal DOF, column: the local multiplier row) and C (local rows),
+        those in this rank's columns; code 1 when an entry of A, B or C lies in another's.""" 
+        indptr, cols, vals = mat.getValuesCSR()
+        rows = np.repeat(np.arange(indptr.size - 1), np.diff(indptr))
+        owner = np.searchsorted(self.starts, cols, side="right") - 1
+        on_l = cols - self.starts[owner] >= self.nqs[owner]     # a multiplier column
+        mine = owner == self.comm.rank
+        local = cols - self.start
+        in_l = rows >= self.nq
+        across = int(np.any((in_l | on_l) & ~mine))
+        a = in_l & ~on_l & mine
+        b = ~in_l & on_l & mine
+        c = in_l & on_l & mine
+        nq = self.nq
+        return across, ((rows[a] - nq, local[a], vals[a]), (rows[b], local[b] - nq, vals[b]),
+                        (rows[c] - nq, local[c] - nq, vals[c]))
 
-    def _node_blocks(self, node: np.ndarray, diag: np.ndarray) -> int:
+    def _nodal_rows(self, mat: PETSc.Mat):
+        """(code, (node of each multiplier row or -1, C's diagonal, A, B)): code 0 when each
+        row's A entries lie on one owned node, its B column on the same node, and C is
+        diagonal (checked on the patterns, so the answer holds for the operator's life)."""
+        nc = self.nc
+        across, parts = self._blocks(mat)
+        (ar, ac, _), (br, bc, _), (cr, cc, cv) = parts
+        node = np.full(self.nl, -1, dtype=np.int64)
+        lo = np.full(self.nl, np.iinfo(np.int64).max)
+        np.minimum.at(lo, ar, ac // nc)
+        hi = np.full(self.nl, -1)
+        np.maximum.at(hi, ar, ac // nc)
+        some = hi >= 0
+        if np.any(lo[some] != hi[some]):
+            return 6, None
+        node[some] = hi[some]
+        if np.any(node[bc] != br // nc):
+            return 3, None
+        if np.any(cc != cr):
+            return 2, None
+        if across:
+            return 1, None
+        diag = np.zeros(self.nl)
+        diag[cr] = cv
+        if np.any((diag == 0.0) & (node < 0)):
+            return 5, None   # (a hard row with no DOF)
+        return 0, (node, diag, parts[0], parts[1])
+
+    def _node_blocks(self, node: np.ndarray, diag: np.ndarray, arows, bcols) -> int:
         """The per-node stacks of the rows' nodes (``nodes``): the frames and maps of the module
         docstring; 0, or the code of why not."""
         nc = self.nc
@@ -164,20 +181,16 @@ class CondensedPreconditioner:
         h = h[np.argsort(node[h], kind="stable")]
         count = np.bincount(at[h], minlength=m)
         if count.size and count.max() > nc:
-            return 5
+            return 4
         start = np.concatenate([[0], np.cumsum(count)[:-1]])
         pos = np.full(self.nl, -1, dtype=np.int64)
         pos[h] = np.arange(h.size) - start[at[h]]
         self.hard, self.hard_at, self.hard_pos = h, at[h], pos[h]
         # dense ncomp-vectors of each row's A and B on its node
-        ia, ja, va = self.A.getValuesCSR()
-        arow = np.repeat(np.arange(self.nl), np.diff(ia))
         a = np.zeros((self.nl, nc))
-        np.add.at(a, (arow, (ja - self.A.getOwnershipRangeColumn()[0]) % nc), va)
-        ib, jb, vb = self.B.getValuesCSR()
-        bcol = jb - self.B.getOwnershipRangeColumn()[0]
+        np.add.at(a, (arows[0], arows[1] % nc), arows[2])
         b = np.zeros((self.nl, nc))
-        np.add.at(b, (bcol, np.repeat(np.arange(self.nq), np.diff(ib)) % nc), vb)
+        np.add.at(b, (bcols[1], bcols[0] % nc), bcols[2])
         # compliant and open rows folded: K_eff = K - B C⁻¹ A, per node
         soft = rows[~hard[rows]]
         self.w = np.where(hard, 0.0, 1.0 / np.where(hard, 1.0, diag))
@@ -194,14 +207,14 @@ class CondensedPreconditioner:
         rdiag = np.abs(np.diagonal(r, axis1=1, axis2=2))
         big = np.abs(an).max(axis=(1, 2), initial=0.0)[:, None]
         if np.any(keep & (rdiag <= RANK_TOL * big)):
-            return 5
+            return 4
         zc = keep[:, :, None] * np.eye(nc)            # (m, nc, nc) diag(constrained)
         zf = np.eye(nc) - zc
         qt = np.swapaxes(q, 1, 2)
         e = qt @ bn
         ec = zc @ e @ zc + zf
         if m and np.linalg.cond(ec).max() > COND_MAX:
-            return 6
+            return 5
         eci = np.linalg.inv(ec)
         ell = np.eye(nc) - (zf @ e @ zc) @ eci
         self.g = zf @ ell @ qt                         # rows of the free directions
@@ -211,32 +224,37 @@ class CondensedPreconditioner:
         self.dual = zc @ eci @ zc @ qt                 # → λ_h = E_c⁻¹ Q_cᵀ (r̂ - K_eff q)
         return 0
 
-    def _block_diagonal(self, blocks: np.ndarray, old: PETSc.Mat | None) -> PETSc.Mat:
-        """The owned-nodes block diagonal matrix: ``blocks`` on the condensed nodes, identity
-        elsewhere (its pattern the same every time: values rewritten in place)."""
-        nc, n = self.nc, self.nq // self.nc
+    def _embedding(self, blocks: np.ndarray, old: PETSc.Mat | None, rows: bool) -> PETSc.Mat:
+        """R = [G, 0] (``rows``: primal rows, saddle columns) or P = [H; 0] (saddle rows,
+        primal columns): ``blocks`` on the condensed nodes, identity on the other owned nodes
+        (the pattern the same every time: values rewritten in place)."""
+        nc, nq, n = self.nc, self.nq, self.nq // self.nc
         full = np.broadcast_to(np.eye(nc), (n, nc, nc)).copy()
         full[self.nodes] = blocks
-        c0 = self.K.getOwnershipRangeColumn()[0]
-        indptr = np.arange(0, self.nq * nc + 1, nc, dtype=PETSc.IntType)
-        indices = (c0 + np.repeat(np.arange(n) * nc, nc * nc)
-                   + np.tile(np.arange(nc), self.nq)).astype(PETSc.IntType)
+        lens = np.full(nq + (0 if rows else self.nl), 0, dtype=np.int64)
+        lens[:nq] = nc
+        indptr = np.concatenate([[0], np.cumsum(lens)]).astype(PETSc.IntType)
+        first = self.start if rows else self.q_start
+        indices = (first + np.repeat(np.arange(n) * nc, nc * nc)
+                   + np.tile(np.arange(nc), nq)).astype(PETSc.IntType)
         values = full.reshape(-1)
-        if old is None:
-            mat = PETSc.Mat().createAIJ(size=((self.nq, None), (self.nq, None)), bsize=nc,
-                                        csr=(indptr, indices, values), comm=self.comm)
-            return mat
-        old.setValuesCSR(indptr, indices, values)
-        old.assemble()
-        return old
+        if old is not None:
+            old.setValuesCSR(indptr, indices, values)
+            old.assemble()
+            return old
+        saddle = (nq + self.nl, None)
+        size = ((nq, None), saddle) if rows else (saddle, (nq, None))
+        return PETSc.Mat().createAIJ(size=size, csr=(indptr, indices, values), comm=self.comm)
 
-    def _condensed_operator(self) -> None:
-        """S = G K H, plus G (K_eff - K) H and k on the constrained slots' diagonal, per node."""
-        self.G = self._block_diagonal(self.g, self.G)
-        self.H = self._block_diagonal(self.h, self.H)
-        self.S = self.G.matMatMult(self.K, self.H, result=self.S)
-        d = self.K.getDiagonal()
-        self.kscale = self.comm.allreduce(float(np.abs(d.array).sum())) / max(d.getSize(), 1)
+    def _condensed_operator(self, mat: PETSc.Mat) -> None:
+        """S = R M P = G K H, plus G (K_eff - K) H and k on the constrained slots' diagonal,
+        per node."""
+        self.R = self._embedding(self.g, self.R, rows=True)
+        self.P = self._embedding(self.h, self.P, rows=False)
+        self.S = self.R.matMatMult(mat, self.P, result=self.S)
+        d = mat.getDiagonal()
+        total = self.comm.allreduce(float(np.abs(d.array[:self.nq]).sum()))
+        self.kscale = total / max(int(self.nqs.sum()), 1)
         d.destroy()
         nc = self.nc
         extra = self.g @ self.dk @ self.h + self.kscale * self.keep[:, :, None] * np.eye(nc)
@@ -244,8 +262,7 @@ class CondensedPreconditioner:
         lens[self.nodes] = nc
         lens = np.repeat(lens, nc)
         indptr = np.concatenate([[0], np.cumsum(lens)]).astype(PETSc.IntType)
-        c0 = self.S.getOwnershipRangeColumn()[0]
-        indices = (c0 + np.repeat(self.nodes * nc, nc * nc)
+        indices = (self.q_start + np.repeat(self.nodes * nc, nc * nc)
                    + np.tile(np.arange(nc), self.nodes.size * nc)).astype(PETSc.IntType)
         self.S.setValuesCSR(indptr, indices, extra.reshape(-1), addv=PETSc.InsertMode.ADD_VALUES)
         self.S.assemble()
@@ -273,6 +290,14 @@ class CondensedPreconditioner:
 
     def _set_up_amg(self) -> None:
         if self.amg is None:
+            # the solvers gone before this one (their KSPs, ML's hierarchies) destroyed now:
+            # PETSc defers their destruction to the end, and ML's set-up crashed (inside its
+            # aggregation) after a few dozen solvers in one process. Collective: every rank
+            # makes its first update here.
+            import gc
+
+            gc.collect()   # (solvers in reference cycles: freed, their objects deferred)
+            PETSc.garbage_cleanup(self.comm)
             self.amg = PETSc.PC().create(self.comm)
             self.amg.setOptionsPrefix(self.prefix + "condensed_")
             self.amg.setOperators(self.S, self.S)
@@ -280,6 +305,7 @@ class CondensedPreconditioner:
         else:
             self.amg.setOperators(self.S, self.S)
         self.amg.setUp()
+        self._work = [*self.mat.createVecs(), *self.S.createVecs()]
 
     # ------------------------------------------------------------------ application
 
@@ -291,44 +317,46 @@ class CondensedPreconditioner:
     def _nodal(self, blocks: np.ndarray, v: np.ndarray) -> np.ndarray:
         return np.einsum("nij,nj->ni", blocks, v.reshape(-1, self.nc)[self.nodes])
 
-    def _stiffness(self, x: PETSc.Vec, out: PETSc.Vec) -> None:
-        """out ← K_eff x."""
-        self.K.mult(x, out)
-        out.array.reshape(-1, self.nc)[self.nodes] += self._nodal(self.dk, x.array)
+    def _product(self, q: np.ndarray | None, lam: np.ndarray | None) -> tuple[np.ndarray,
+                                                                            np.ndarray]:
+        """M [q; λ] (either zero when None) as (primal rows, multiplier rows), with K_eff in
+        place of K (the folded rows' - B C⁻¹ A, per node) when q is given."""
+        u, v = self._work[0], self._work[1]
+        ua = u.array
+        ua[:self.nq] = 0.0 if q is None else q
+        ua[self.nq:] = 0.0 if lam is None else lam
+        self.mat.mult(u, v)
+        out_q, out_l = v.array[:self.nq].copy(), v.array[self.nq:].copy()
+        if q is not None:
+            out_q.reshape(-1, self.nc)[self.nodes] += self._nodal(self.dk, q)
+        return out_q, out_l
 
     def setUp(self, pc: PETSc.PC) -> None:
-        if not hasattr(self, "_vq"):
-            self._vq = [self.K.createVecLeft() for _ in range(4)]
-            self._vl = self.A.createVecLeft()
+        pass
 
     def apply(self, pc: PETSc.PC, x: PETSc.Vec, y: PETSc.Vec) -> None:
         """y ← the condensed M⁻¹ x (the module docstring's three eliminations)."""
         nq, nc = self.nq, self.nc
-        rhat, qv, t, f = self._vq
         xa = x.getArray(readonly=True)
         r_q, r_l = xa[:nq], xa[nq:]
-        self._vl.array[:] = self.w * r_l
-        self.B.mult(self._vl, rhat)
-        rhat.array[:] = r_q - rhat.array                         # r̂ = r_q - B C⁻¹ r_λ
+        rhat = r_q - self._product(None, self.w * r_l)[0]        # r̂ = r_q - B C⁻¹ r_λ
         padded = np.zeros((self.nodes.size, nc))
         padded[self.hard_at, self.hard_pos] = r_l[self.hard]
         qc = np.zeros(nq)
         qc.reshape(-1, nc)[self.nodes] = np.einsum("nij,nj->ni", self.lift, padded)
-        qv.array[:] = qc
-        self._stiffness(qv, t)
-        t.array[:] = rhat.array - t.array
-        f.array[:] = t.array                                    # G (r̂ - K_eff q_c)
-        f.array.reshape(-1, nc)[self.nodes] = self._nodal(self.g, t.array)
-        self.amg.apply(f, t)                                    # y_f ≈ S⁻¹ f
-        yf = t.array.reshape(-1, nc)
-        yf[self.nodes] = np.einsum("nij,nj->ni", self.h, yf[self.nodes])   # q_f = H y_f
-        qv.array[:] = qc + t.array
-        self._stiffness(qv, t)
-        t.array[:] = rhat.array - t.array
+        t = rhat - self._product(qc, None)[0]
+        f, yf = self._work[2], self._work[3]
+        fa = f.array
+        fa[:] = t                                               # G (r̂ - K_eff q_c)
+        fa.reshape(-1, nc)[self.nodes] = self._nodal(self.g, t)
+        self.amg.apply(f, yf)                                   # y_f ≈ S⁻¹ f
+        q = yf.array.copy()
+        q.reshape(-1, nc)[self.nodes] = self._nodal(self.h, q)  # q_f = H y_f
+        q += qc
+        kq, aq = self._product(q, None)
         lam = np.zeros(self.nl)
-        lam[self.hard] = self._nodal(self.dual, t.array)[self.hard_at, self.hard_pos]
-        self.A.mult(qv, self._vl)
-        lam += self.w * (r_l - self._vl.array)
+        lam[self.hard] = self._nodal(self.dual, rhat - kq)[self.hard_at, self.hard_pos]
+        lam += self.w * (r_l - aq)
         ya = y.getArray()
-        ya[:nq] = qv.array
+        ya[:nq] = q
         ya[nq:] = lam

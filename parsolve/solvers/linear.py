@@ -40,8 +40,9 @@ AMG = "gamg"
 
 def _condensed_amg() -> str:
     """The V-cycle on the condensed operator (solvers.condensed): PETSc's ML where it is built
-    in, else GAMG. On the 3D friction box ML took 4.9 / 6.2 Krylov iterations per solve (mean)
-    at 8× / 64× the cells, GAMG 12.5 / 21.6 (scripts/results/bench_relations.md)."""
+    in, else GAMG. On the 3D friction box ML took 6.0 / 7.2 Krylov iterations per solve (mean,
+    MIS aggregation) at 8× / 64× the cells, GAMG 12.5 / 21.6 (threshold 0, its rigid-body
+    modes in the nodal frames), hypre's BoomerAMG 15.6 at 8× (docs/performance.md)."""
     pc = PETSc.PC().create(PETSc.COMM_SELF)
     try:
         pc.setType("ml")
@@ -124,7 +125,11 @@ def preset_options(preset: str, symmetric: bool, has_multipliers: bool,
         # the condensed preconditioner's V-cycle on S (solvers.condensed), when every relation
         # row is nodal
         "condensed_pc_type": CONDENSED_AMG,
-        **({"condensed_pc_gamg_threshold": "0.0"} if CONDENSED_AMG == "gamg" else {}),
+        # ML's MIS aggregation: its default (uncoupled) crashed inside ML's allocation after a
+        # few dozen set-ups in one process (the test suite); MIS took 6.0 / 7.2 Krylov
+        # iterations per solve at 8× / 64× against uncoupled's 4.9 / 6.2
+        **({"condensed_pc_ml_CoarsenScheme": "MIS"} if CONDENSED_AMG == "ml" else
+           {"condensed_pc_gamg_threshold": "0.0"}),
         "ksp_error_if_not_converged": "true",
     }
 
