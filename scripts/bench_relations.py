@@ -257,7 +257,7 @@ def krylov_cells(r: dict) -> list[str]:
     return [str(min(k)), f"{sum(k) / len(k):.1f}", str(max(k))]
 
 
-def chosen(r: dict) -> str:
+def preconditioner_of(r: dict) -> str:
     """The iterative preset's preconditioner(s) in the run (solvers.linear's choice)."""
     names = {c.split(":")[0] for c in r.get("choices") or []}
     return " + ".join(sorted(names)) or "-"
@@ -273,7 +273,7 @@ def row(case: str, factor: int, d: dict, i: dict, a: dict | None = None) -> list
     if a.get("status") == "complete" and d.get("status") == "complete":
         same += " / " + same_answers(a["out"], d["out"])
     return [case, f"{factor}×", f"{d.get('dofs', i.get('dofs', 0)):,}",
-            str(i.get("iterations", "-")), str(len(i.get("krylov", []))), chosen(i),
+            str(i.get("iterations", "-")), str(len(i.get("krylov", []))), preconditioner_of(i),
             " / ".join(krylov_cells(i)), " / ".join(krylov_cells(a)) if a else "(same)",
             bh.fmt(d.get("wall"), ".1f"), bh.fmt(i.get("wall"), ".1f"),
             bh.fmt(a.get("wall"), ".1f") if a else "-",
@@ -454,7 +454,7 @@ def main() -> None:
         d = one_run(folder, name, text, "direct")
         i = one_run(folder, name, text, "iterative")
         a = None   # the augmented form beside the condensed one (the path it replaces)
-        if chosen(i).startswith("condensed") and not args.no_augmented:
+        if preconditioner_of(i).startswith("condensed") and not args.no_augmented:
             a = one_run(folder, f"{name}_augmented", text, "iterative", {"condensed": "false"})
         results.append(dict(case=case, factor=factor, dofs=d.get("dofs", i.get("dofs", 0)),
                             direct=d, iterative=i, augmented=a))
