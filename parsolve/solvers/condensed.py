@@ -99,7 +99,7 @@ class CondensedPreconditioner:
         self._reset()
 
     def _reset(self) -> None:
-        self.mat = self.S = self.R = self.P = None
+        self.mat = self.S = self.R = self.P = self._work = None
 
     # ------------------------------------------------------------------ set-up
 
@@ -305,7 +305,8 @@ class CondensedPreconditioner:
         else:
             self.amg.setOperators(self.S, self.S)
         self.amg.setUp()
-        self._work = [*self.mat.createVecs(), *self.S.createVecs()]
+        if self._work is None:   # (work vectors of the application, per pattern)
+            self._work = [*self.mat.createVecs(), *self.S.createVecs()]
 
     # ------------------------------------------------------------------ application
 
