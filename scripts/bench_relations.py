@@ -177,7 +177,7 @@ def matrix_pieces(solver) -> dict[str, float]:
     pc = ksp.getPC()
     if pc.getType() == "python" and solver.condensed is not None:   # (solvers.condensed)
         out["condensed S"] = size(solver.condensed.S)
-        out["condensed K"] = size(solver.condensed.K)
+        out["condensed R, P"] = size(solver.condensed.R) + size(solver.condensed.P)
         mg = solver.condensed.amg
     elif pc.getType() == "fieldsplit":
         kq, kl = pc.getFieldSplitSubKSP()
@@ -354,11 +354,12 @@ def scale_study(folder: Path, factors: list[int], ranks: int,
     return rows                                     # its rows
 
 
-PIECES = ["M", "KSP operator", "KSP pmat", "fieldsplit q block", "Schur pmat",
-          "GAMG coarse operators", "GAMG interpolations", "RSS"]
+PIECES = ["M", "KSP operator", "KSP pmat", "fieldsplit q block", "Schur pmat", "condensed S",
+          "condensed R, P", "GAMG coarse operators", "GAMG interpolations", "RSS"]
 PIECES_HEAD = ["problem", "refinement", "Newton matrix M", "KSP operator", "KSP pmat (its own)",
-               "fieldsplit q block (its own)", "Schur pmat", "GAMG coarse operators",
-               "GAMG interpolations", "resident after the first solve", "peak"]
+               "fieldsplit q block (its own)", "Schur pmat", "condensed S", "condensed R, P",
+               "AMG coarse operators", "AMG interpolations", "resident after the first solve",
+               "peak"]
 
 
 def piece_row(name: str, f: int, r: dict) -> list[str]:
