@@ -3,11 +3,14 @@
 ``direct``: MUMPS LU (LDLᵀ when every relation is associated, the operator being symmetric)
 with the QAMD ordering (PORD, the fallback here, is catastrophic with a dense control column)
 and null-pivot detection, so a singular system is an error instead of inf or NaN.
-``iterative``: GMRES on the saddle system's augmented Lagrangian form (``solvers.augmented``:
-γ/k Aₕᵀ times the hard rows added to the force balance; the same answer), preconditioned by a
-Schur fieldsplit (one GAMG V-cycle on K + γ/k Aₕᵀ Aₕ, Jacobi on the sparse Schur
-approximation), which works when K alone is singular (a body held only by contact); without
-multipliers, CG (or GMRES) + GAMG on the stiffness alone.
+``iterative``: GMRES on the saddle system. When every relation row is nodal (rigid-obstacle
+contact and friction, Dirichlet-type rows) it is preconditioned by the rows condensed node by
+node and one AMG V-cycle on the condensed primal operator (``solvers.condensed``); else on its
+augmented Lagrangian form (``solvers.augmented``: γ/k Aₕᵀ times the hard rows added to the
+force balance; the same answer), preconditioned by a Schur fieldsplit (one GAMG V-cycle on
+K + γ/k Aₕᵀ Aₕ, Jacobi on the sparse Schur approximation). Both work when K alone is singular
+(a body held only by contact). Without multipliers, CG (or GMRES) + GAMG on the stiffness
+alone.
 """
 
 from __future__ import annotations
