@@ -6,7 +6,6 @@ to the augmented form and says why."""
 
 import numpy as np
 import pytest
-from mpi4py import MPI
 from petsc4py import PETSc
 
 from conftest import dense, solve_in_process
@@ -26,13 +25,13 @@ def _variant(mat: PETSc.Mat, system) -> PETSc.Mat:
     open (its A row and B column zero, C = k), and the other rows' dual B scaled per
     component by (1, 1.3, 0.7): a non-associated dual on the rows' own nodes."""
     comm, dm, k = system.comm, system.dofmap, system.kscale
-    q0, q1, l0, l1 = dm.owned()
+    q0, q1, _, _ = dm.owned()
     nq, start = q1 - q0, dm.offset
     lam = np.concatenate([np.arange(dm.offsets[r] + dm.owned(r)[1] - dm.owned(r)[0],
                                     dm.offsets[r] + dm.owned(r)[1] - dm.owned(r)[0]
                                     + dm.owned(r)[3] - dm.owned(r)[2])
                           for r in range(comm.size)])
-    row_of = np.full(dm.offsets[-1] if hasattr(dm, "offsets") else 0, -1)
+    row_of = np.full(dm.offsets[-1], -1)
     row_of[lam] = np.arange(lam.size)   # a multiplier column → its relation row (global)
     indptr, cols, vals = mat.getValuesCSR()
     vals = vals.copy()
