@@ -105,9 +105,13 @@ def child(scene_path: str, preset: str, out: str, options: str) -> None:
 
     pieces: dict[str, float] = {}   # the matrices after the first solve (BENCH_PIECES set)
 
+    choices: list[str] = []   # the iterative preset's preconditioner, as chosen per operator
+
     def counted(self, rhs, x):
         its = solve(self, rhs, x)
         krylov.append(int(its))
+        if self.choice and self.choice not in choices:
+            choices.append(self.choice)
         if os.environ.get("BENCH_PIECES") and not pieces:
             pieces.update(matrix_pieces(self))
         return its
@@ -144,7 +148,7 @@ def child(scene_path: str, preset: str, out: str, options: str) -> None:
         dofs = int(f.attrs.get("dofs", dofs))
     print(json.dumps(dict(status=status, dofs=dofs, iterations=iterations, krylov=krylov,
                           wall=wall, hwm=bh.proc_memory()["hwm"], ranks=MPI.COMM_WORLD.size,
-                          setup=setup, pieces=pieces)))
+                          setup=setup, pieces=pieces, choices=choices)))
 
 
 def matrix_pieces(solver) -> dict[str, float]:
@@ -171,14 +175,18 @@ def matrix_pieces(solver) -> dict[str, float]:
     out["KSP operator"] = size(op)
     out["KSP pmat"] = size(pmat)
     pc = ksp.getPC()
-    if pc.getType() == "fieldsplit":
+    if pc.getType() == "python" and solver.condensed is not None:   # (solvers.condensed)
+        out["condensed S"] = size(solver.condensed.S)
+        out["condensed R, P"] = size(solver.condensed.R) + size(solver.condensed.P)
+        mg = solver.condensed.amg
+    elif pc.getType() == "fieldsplit":
         kq, kl = pc.getFieldSplitSubKSP()
         out["fieldsplit q block"] = size(kq.getOperators()[1])
         out["Schur pmat"] = size(kl.getOperators()[1])
         mg = kq.getPC()
     else:
         mg = pc
-    if mg.getType() == "gamg":
+    if mg.getType() in ("gamg", "ml"):
         levels = mg.getMGLevels()
         out["GAMG coarse operators"] = sum(
             size(mg.getMGSmoother(lv).getOperators()[0]) for lv in range(levels - 1))
@@ -249,18 +257,33 @@ def krylov_cells(r: dict) -> list[str]:
     return [str(min(k)), f"{sum(k) / len(k):.1f}", str(max(k))]
 
 
-def row(case: str, factor: int, d: dict, i: dict) -> list[str]:
+def preconditioner_of(r: dict) -> str:
+    """The iterative preset's preconditioner(s) in the run (solvers.linear's choice)."""
+    names = {c.split(":")[0] for c in r.get("choices") or []}
+    return " + ".join(sorted(names)) or "-"
+
+
+def row(case: str, factor: int, d: dict, i: dict, a: dict | None = None) -> list[str]:
+    """``i``: the iterative preset as it chooses; ``a``: the same forced onto the augmented
+    form (-condensed false; None: the preset chose it already)."""
     ok = d.get("status") == "complete" and i.get("status") == "complete"
+    a = a or {}
+    same = same_answers(i["out"], d["out"]) if ok else \
+        f"direct: {d.get('status', '')[:30]}; iterative: {i.get('status', '')[:30]}"
+    if a.get("status") == "complete" and d.get("status") == "complete":
+        same += " / " + same_answers(a["out"], d["out"])
     return [case, f"{factor}×", f"{d.get('dofs', i.get('dofs', 0)):,}",
-            str(i.get("iterations", "-")), str(len(i.get("krylov", []))), *krylov_cells(i),
+            str(i.get("iterations", "-")), str(len(i.get("krylov", []))), preconditioner_of(i),
+            " / ".join(krylov_cells(i)), " / ".join(krylov_cells(a)) if a else "(same)",
             bh.fmt(d.get("wall"), ".1f"), bh.fmt(i.get("wall"), ".1f"),
-            bh.mib(d.get("hwm")), bh.mib(i.get("hwm")),
-            same_answers(i["out"], d["out"]) if ok else
-            f"direct: {d.get('status', '')[:30]}; iterative: {i.get('status', '')[:30]}"]
+            bh.fmt(a.get("wall"), ".1f") if a else "-",
+            bh.mib(d.get("hwm")), bh.mib(i.get("hwm")), bh.mib(a.get("hwm")) if a else "-",
+            same]
 
 
-HEAD = ["case", "cells", "DOFs", "Newton its", "solves", "Krylov min", "mean", "max",
-        "MUMPS s", "iterative s", "MUMPS MiB", "iterative MiB", "same answers"]
+HEAD = ["case", "cells", "DOFs", "Newton its", "solves", "preconditioner",
+        "Krylov min / mean / max", "augmented Krylov", "MUMPS s", "iterative s", "augmented s",
+        "MUMPS MiB", "iterative MiB", "augmented MiB", "same answers (iterative / augmented)"]
 
 
 def crossover(results: list[dict]) -> str:
@@ -331,11 +354,12 @@ def scale_study(folder: Path, factors: list[int], ranks: int,
     return rows                                     # its rows
 
 
-PIECES = ["M", "KSP operator", "KSP pmat", "fieldsplit q block", "Schur pmat",
-          "GAMG coarse operators", "GAMG interpolations", "RSS"]
+PIECES = ["M", "KSP operator", "KSP pmat", "fieldsplit q block", "Schur pmat", "condensed S",
+          "condensed R, P", "GAMG coarse operators", "GAMG interpolations", "RSS"]
 PIECES_HEAD = ["problem", "refinement", "Newton matrix M", "KSP operator", "KSP pmat (its own)",
-               "fieldsplit q block (its own)", "Schur pmat", "GAMG coarse operators",
-               "GAMG interpolations", "resident after the first solve", "peak"]
+               "fieldsplit q block (its own)", "Schur pmat", "condensed S", "condensed R, P",
+               "AMG coarse operators", "AMG interpolations", "resident after the first solve",
+               "peak"]
 
 
 def piece_row(name: str, f: int, r: dict) -> list[str]:
@@ -399,6 +423,8 @@ def main() -> None:
     p.add_argument("--cases", type=str, default="friction,ironing,mortar",
                    help="the series to run, or single sizes as case:factor (comma-separated: "
                         "friction,ironing:1,mortar)")
+    p.add_argument("--no-augmented", action="store_true",
+                   help="no run forced onto the augmented form beside a condensed one")
     p.add_argument("--gamg", type=int, default=0,
                    help="the GAMG set-up table only: the clamped box refined f× on 1 and 2 "
                         "ranks, PETSc's PtAP algorithms (bench_relations_gamg.md)")
@@ -428,9 +454,12 @@ def main() -> None:
         name = f"{case}_{factor}"
         d = one_run(folder, name, text, "direct")
         i = one_run(folder, name, text, "iterative")
+        a = None   # the augmented form beside the condensed one (the path it replaces)
+        if preconditioner_of(i).startswith("condensed") and not args.no_augmented:
+            a = one_run(folder, f"{name}_augmented", text, "iterative", {"condensed": "false"})
         results.append(dict(case=case, factor=factor, dofs=d.get("dofs", i.get("dofs", 0)),
-                            direct=d, iterative=i))
-        rows.append(row(case, factor, d, i))
+                            direct=d, iterative=i, augmented=a))
+        rows.append(row(case, factor, d, i, a))
         print(bh.text_table(HEAD, rows[-1:]), flush=True)
         # written after every case: a run stopped halfway leaves what it measured
         text = report(rows, results, machine, load0)
@@ -464,13 +493,17 @@ def report(rows: list, results: list, machine: dict, load0, gamma_rows: list | N
              f"{machine['date']}, {machine['cpu']}, {machine['cpus']} CPUs, one rank; "
              + bh.load_line(load0, os.getloadavg()) + " (the machine is shared: times are "
              "noisy, iterations and memory are not).", "",
-             "The iterative preset (GMRES, rtol 2.5e-14, on the augmented Lagrangian form "
-             "T M x = T b, γ = 3 on the rows of one node, preconditioned by its Schur fieldsplit: "
-             "one GAMG V-cycle (aggregation graph threshold 0) with four Chebyshev steps per level "
-             "on K + γ/k Aₕᵀ Aₕ, Jacobi "
-             "on the sparse Schur approximation; `parsolve/solvers/augmented.py`) against "
-             "MUMPS (the direct preset), each run in its own process (peak memory: VmHWM). "
-             "Krylov iterations per linear solve of the whole run.", "",
+             "The iterative preset (GMRES, rtol 2.5e-14) against MUMPS (the direct preset), "
+             "each run in its own process (peak memory: VmHWM); Krylov iterations per linear "
+             "solve of the whole run. The preset chooses per operator: `condensed` when every "
+             "relation row is nodal (GMRES on M itself, preconditioned by the rows condensed "
+             "node by node and one ML V-cycle on the condensed primal operator; "
+             "`parsolve/solvers/condensed.py`), else `augmented` (GMRES on the augmented "
+             "Lagrangian form T M x = T b, γ = 3 on the rows of one node, its Schur fieldsplit: "
+             "one GAMG V-cycle, threshold 0, four Chebyshev steps per level, on "
+             "K + γ/k Aₕᵀ Aₕ, Jacobi on the sparse Schur approximation; "
+             "`parsolve/solvers/augmented.py`). Where it condenses, the same run forced onto "
+             "the augmented form (`-condensed false`) stands beside it.", "",
              bh.md_table(HEAD, rows, first="---"), "", f"Crossover: {cross}.", ""]
     if gamma_rows:
         lines += ["## γ and the AMG", "", "Krylov iterations (min / mean / max) on the friction "

@@ -3,11 +3,14 @@
 ``direct``: MUMPS LU (LDLᵀ when every relation is associated, the operator being symmetric)
 with the QAMD ordering (PORD, the fallback here, is catastrophic with a dense control column)
 and null-pivot detection, so a singular system is an error instead of inf or NaN.
-``iterative``: GMRES on the saddle system's augmented Lagrangian form (``solvers.augmented``:
-γ/k Aₕᵀ times the hard rows added to the force balance; the same answer), preconditioned by a
-Schur fieldsplit (one GAMG V-cycle on K + γ/k Aₕᵀ Aₕ, Jacobi on the sparse Schur
-approximation), which works when K alone is singular (a body held only by contact); without
-multipliers, CG (or GMRES) + GAMG on the stiffness alone.
+``iterative``: GMRES on the saddle system. When every relation row is nodal (rigid-obstacle
+contact and friction, Dirichlet-type rows) it is preconditioned by the rows condensed node by
+node and one AMG V-cycle on the condensed primal operator (``solvers.condensed``); else on its
+augmented Lagrangian form (``solvers.augmented``: γ/k Aₕᵀ times the hard rows added to the
+force balance; the same answer), preconditioned by a Schur fieldsplit (one GAMG V-cycle on
+K + γ/k Aₕᵀ Aₕ, Jacobi on the sparse Schur approximation). Both work when K alone is singular
+(a body held only by contact). Without multipliers, CG (or GMRES) + GAMG on the stiffness
+alone.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from parsolve.errors import SolverError
 from parsolve.solvers import factor_log
 from parsolve.solvers import options as opt
 from parsolve.solvers.augmented import GAMMA
+from parsolve.solvers.condensed import CondensedPreconditioner
 
 
 #: The V-cycle of the iterative preset's q block. GAMG, its aggregation graph keeping every
@@ -35,6 +39,24 @@ from parsolve.solvers.augmented import GAMMA
 #: ml, where built in) took ~15 % fewer on the 3D friction box at a threshold of 0.05 but
 #: crashed inside ML's aggregation after many solvers in one process: not the default.
 AMG = "gamg"
+
+
+def _condensed_amg() -> str:
+    """The V-cycle on the condensed operator (solvers.condensed): PETSc's ML where it is built
+    in, else GAMG. On the 3D friction box ML took 6.0 / 7.2 Krylov iterations per solve (mean,
+    MIS aggregation) at 8× / 64× the cells, GAMG 12.5 / 21.6 (threshold 0, its rigid-body
+    modes in the nodal frames), hypre's BoomerAMG 15.6 at 8× (docs/performance.md)."""
+    pc = PETSc.PC().create(PETSc.COMM_SELF)
+    try:
+        pc.setType("ml")
+        return "ml"
+    except PETSc.Error:
+        return "gamg"
+    finally:
+        pc.destroy()
+
+
+CONDENSED_AMG = _condensed_amg()
 
 
 class DoesNotFit(SolverError):
@@ -103,6 +125,14 @@ def preset_options(preset: str, symmetric: bool, has_multipliers: bool,
         "fieldsplit_q_mg_levels_ksp_max_it": "4",
         "fieldsplit_lambda_ksp_type": "preonly",
         "fieldsplit_lambda_pc_type": "jacobi",
+        # the condensed preconditioner's V-cycle on S (solvers.condensed), when every relation
+        # row is nodal
+        "condensed_pc_type": CONDENSED_AMG,
+        # ML's MIS aggregation: its default (uncoupled) crashed inside ML's allocation after a
+        # few dozen set-ups in one process (the test suite); MIS took 6.0 / 7.2 Krylov
+        # iterations per solve at 8× / 64× against uncoupled's 4.9 / 6.2
+        **({"condensed_pc_ml_CoarsenScheme": "MIS"} if CONDENSED_AMG == "ml" else
+           {"condensed_pc_gamg_threshold": "0.0"}),
         "ksp_error_if_not_converged": "true",
     }
 
@@ -163,6 +193,11 @@ class LinearSolver:
         self._transform: Callable[[PETSc.Vec], None] | None = None
         self.configured = False
         self._state = None
+        # the iterative preset's choice: the nodal rows condensed (``solvers.condensed``) when
+        # every relation row allows it, else the augmented form; said in the solve's line
+        self.condensed = (CondensedPreconditioner(comm, is_q.getBlockSize(), is_q, is_l, prefix)
+                          if preconditioner is not None else None)
+        self.choice: str | None = None
         self.notes: list[str] = []
         self.timings = {"factorization": 0.0, "solve": 0.0}
 
@@ -197,6 +232,7 @@ class LinearSolver:
         self.ksp.reset()
         self.ksp.setOperators(mat, self.pmat if self.preconditioner else None)
         self._configure()
+        self.choice = None
         if pc_type in ("lu", "cholesky"):  # keep an LU chosen by the symmetry check
             self.ksp.getPC().setType(pc_type)
 
@@ -214,11 +250,7 @@ class LinearSolver:
             self.notes.append("the operator is not symmetric: LU instead of Cholesky")
         t0, first = time.perf_counter(), self._state is None
         if self.preconditioner is not None:
-            with opt.inserted(self.prefix, self.settings):
-                gamma = PETSc.Options(self.prefix).getReal("augmented_gamma", GAMMA)
-            form = self.preconditioner(mat, gamma)
-            self.pmat, self._transform = form.pmat, form.transform
-            self.ksp.setOperators(form.operator, self.pmat)
+            self._precondition(mat)
         for attempt in range(4):
             try:
                 with opt.inserted(self.prefix, self.settings), factor_log.factorization(first):
@@ -243,6 +275,35 @@ class LinearSolver:
                 self.notes.append(f"MUMPS workspace too small: margin raised to {margin} %")
         self.timings["factorization"] += time.perf_counter() - t0
         self._state = mat.stateGet()
+
+    def _precondition(self, mat: PETSc.Mat) -> None:
+        """The iterative preset's preconditioner for this operator: the condensed nodal rows
+        (Krylov on M itself) when every relation row is nodal, else the augmented form (Krylov
+        on T M, its Schur fieldsplit). The PC's type follows the choice when it changes."""
+        with opt.inserted(self.prefix, self.settings):
+            options = PETSc.Options(self.prefix)
+            gamma = options.getReal("augmented_gamma", GAMMA)
+            why = (self.condensed.update(mat) if options.getBool("condensed", True)
+                   else "condensation turned off")
+        choice = "condensed" if why is None else f"augmented: {why}"
+        pc = self.ksp.getPC()
+        if (why is None) != (pc.getType() == "python"):
+            if why is None:
+                pc.setType("python")
+                pc.setPythonContext(self.condensed)
+            else:   # (back from the condensed PC: the fieldsplit configured again)
+                pc.setType("fieldsplit")
+                pc.setFieldSplitIS(*self.splits)
+                with opt.inserted(self.prefix, self.settings):
+                    pc.setFromOptions()
+        self.choice = choice
+        if why is None:
+            self.pmat, self._transform = mat, None
+            self.ksp.setOperators(mat, mat)
+            return
+        form = self.preconditioner(mat, gamma)
+        self.pmat, self._transform = form.pmat, form.transform
+        self.ksp.setOperators(form.operator, self.pmat)
 
     def _mumps_info(self) -> int:
         try:
@@ -318,7 +379,8 @@ class LinearSolver:
                               "nearly so (a body not held, dependent relations, or a tangent "
                               "that lost its stiffness)")
         self.residual = residual
-        progress.detail(f"linear solve: {self.ksp.getIterationNumber()} Krylov iterations, "
+        how = f" ({self.choice})" if self.choice else ""
+        progress.detail(f"linear solve{how}: {self.ksp.getIterationNumber()} Krylov iterations, "
                         f"residual {residual:.2e}")
         return self.ksp.getIterationNumber()
 

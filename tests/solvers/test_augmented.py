@@ -11,7 +11,9 @@ from solvers.test_iterative_scenes import _augmented_expected
 
 
 def _form(name: str, comm, **changes):
-    text = scene(shipped(name), solver={"preset": "iterative"}, **changes)
+    """The augmented form, turned on where the preset would condense (solvers.condensed)."""
+    text = scene(shipped(name), solver={"preset": "iterative", "petsc": {"condensed": "false"}},
+                 **changes)
     system, solver, mat, rhs, x = solve_in_process(text, comm, options={})
     return system, solver, mat, system._augmented
 

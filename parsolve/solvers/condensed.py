@@ -1,0 +1,363 @@
+"""The iterative preset's preconditioner for a saddle system whose relation rows are all nodal
+(each row's A entries on one node's DOFs, its dual column D on the same node, no multiplier
+coupled to another: rigid-obstacle contact and friction, Dirichlet-type rows): the rows are
+condensed node by node, and one algebraic multigrid V-cycle works on the condensed primal
+operator. Krylov (GMRES) runs on the saddle system M = [[K, B], [A, C]] itself (B = -D), so
+its answer is the direct preset's whatever the preconditioner's quality.
+
+With exact solves the preconditioner is M⁻¹, built in three eliminations:
+
+- A row with a diagonal C (a compliant row: friction's cross stiffness; an open row: C the
+  placeholder, A and B zero) gives λ = C⁻¹ (r_λ - A q): folded into the primal operator,
+  K_eff = K - B C⁻¹ A (per node, a ncomp × ncomp block), r̂ = r_q - B C⁻¹ r_λ.
+- The hard rows of a node (C = 0) A_n = Rᵀ Q_cᵀ (a QR of A_nᵀ, Q = [Q_c, Q_f] orthonormal):
+  the node's displacement in the frame Q, u = Q_c y_c + Q_f y_f, has y_c = R⁻ᵀ r_h. The
+  dual in the frame Qᵀ B_n = [E_c; E_f] (E_f ≠ 0 when the relation is not associated:
+  friction's sliding rows): the free rows, less E_f E_c⁻¹ times the constrained ones, hold no
+  multiplier: L = [[I, 0], [-E_f E_c⁻¹, I]].
+- The free displacement solves S y_f = G (r̂ - K_eff Q_c y_c), S = G K_eff H (G = Z L Qᵀ,
+  H = Q Z, Z the free directions, block diagonal; the constrained slots of S hold k on the
+  diagonal), then λ_h = E_c⁻¹ Q_cᵀ (r̂ - K_eff q).
+
+S has K's pattern, is symmetric when the relations are associated, and is an elastic
+stiffness with some nodal directions held: the AMG sees it with the rigid-body modes in the
+nodal frames (Hᵀ times them). Everything per node is batched numpy on (nodes, ncomp, ncomp)
+stacks (padded: a node with k hard rows has an identity beyond its k × k block); every row's
+node is owned by the rank that owns the row (checked: else the system is not condensable).
+"""
+
+from __future__ import annotations
+
+import atexit
+
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+#: why a system is not condensed, in words; the largest code over the ranks wins (a row that
+#: ties several nodes is the plainest reason, a row across ranks the least)
+REASONS = {
+    1: "a relation row's DOFs or dual lie on another rank",
+    2: "multiplier rows coupled to each other",
+    3: "a dual column off its row's node",
+    4: "dependent hard rows on a node",
+    5: "a node's dual does not hold its hard rows",
+    6: "a relation row ties several nodes",
+}
+#: a hard row's QR diagonal, relative to the node's largest entry, below which the rows are
+#: taken as dependent; E_c's condition number above which the dual does not hold them
+RANK_TOL = 1e-8
+COND_MAX = 1e12
+
+
+#: the communicators of the preconditioners made: their PETSc garbage is destroyed before
+#: Python exits (``_clean_up``)
+_COMMS: list = []
+
+
+def _clean_up() -> None:
+    """Destroy the deferred PETSc objects (the KSPs whose Python objects are gone) while
+    Python runs: PetscFinalize does it after Python's end, and the python PC's reset then
+    calls into a finished interpreter (a segmentation fault at exit). Collective, as
+    PetscFinalize's own clean-up is."""
+    import gc
+
+    gc.collect()   # (solvers in reference cycles: freed now, their KSPs deferred)
+    for comm in _COMMS:
+        try:
+            PETSc.garbage_cleanup(comm)
+        except Exception:   # (a communicator freed before the end)
+            pass
+
+
+class CondensedPreconditioner:
+    """``update(mat)`` condenses the operator's relation rows (None: done; else the reason
+    why not, the same on every rank); ``apply`` is the PETSc python PC's application: M⁻¹
+    with S⁻¹ replaced by one AMG V-cycle (options under ``<prefix>condensed_``).
+
+    No block of M is copied: S = R M P with R = [G, 0] and P = [H; 0] (block diagonal, of the
+    saddle layout's primal rows), and the application's products with K, A and B are products
+    with M of vectors zero in the other field."""
+
+    def __init__(self, comm: MPI.Comm, ncomp: int, is_q: PETSc.IS, is_l: PETSc.IS,
+                 prefix: str):
+        self.comm, self.nc, self.prefix = comm, int(ncomp), prefix
+        if not _COMMS:
+            atexit.register(_clean_up)
+        if all(c is not comm for c in _COMMS):
+            _COMMS.append(comm)
+        self.is_q = is_q
+        self.nq, self.nl = is_q.getLocalSize(), is_l.getLocalSize()
+        # each rank's first saddle row and its primal rows' count (comm-size arrays)
+        sizes = np.array(comm.allgather((self.nq, self.nl)), dtype=np.int64)
+        self.starts = np.concatenate([[0], np.cumsum(sizes.sum(axis=1))])
+        self.nqs = sizes[:, 0]
+        self.start = int(self.starts[comm.rank])
+        self.q_start = int(self.nqs[:comm.rank].sum())   # in the primal numbering (S's)
+        self._handle = None
+        self.amg: PETSc.PC | None = None
+        self._reset()
+
+    def _reset(self) -> None:
+        self.mat = self.S = self.R = self.P = self._work = None
+
+    # ------------------------------------------------------------------ set-up
+
+    def update(self, mat: PETSc.Mat) -> str | None:
+        """Condense ``mat``'s rows and set the AMG up on S; the reason in words when some rank
+        cannot (nothing is set up then)."""
+        if self.comm.allreduce(int(mat.handle != self._handle), op=MPI.MAX):
+            self._handle = mat.handle
+            self._reset()
+        code, rows = self._nodal_rows(mat)
+        if not code:
+            code = self._node_blocks(*rows)
+        code = self.comm.allreduce(code, op=MPI.MAX)
+        if code:
+            return REASONS[code]
+        self.mat = mat
+        self._condensed_operator(mat)
+        self._set_up_amg()
+        return None
+
+    def _blocks(self, mat: PETSc.Mat):
+        """M's local entries as (row, column, value) of A (column: the local primal DOF),
+        B (row: the local primal DOF, column: the local multiplier row) and C (local rows),
+        those in this rank's columns; code 1 when an entry of A, B or C lies in another's.""" 
+        indptr, cols, vals = mat.getValuesCSR()
+        rows = np.repeat(np.arange(indptr.size - 1), np.diff(indptr))
+        owner = np.searchsorted(self.starts, cols, side="right") - 1
+        on_l = cols - self.starts[owner] >= self.nqs[owner]     # a multiplier column
+        mine = owner == self.comm.rank
+        local = cols - self.start
+        in_l = rows >= self.nq
+        across = int(np.any((in_l | on_l) & ~mine))
+        a = in_l & ~on_l & mine
+        b = ~in_l & on_l & mine
+        c = in_l & on_l & mine
+        nq = self.nq
+        return across, ((rows[a] - nq, local[a], vals[a]), (rows[b], local[b] - nq, vals[b]),
+                        (rows[c] - nq, local[c] - nq, vals[c]))
+
+    def _nodal_rows(self, mat: PETSc.Mat):
+        """(code, (node of each multiplier row or -1, C's diagonal, A, B)): code 0 when each
+        row's A entries lie on one owned node, its B column on the same node, and C is
+        diagonal (checked on the patterns, so the answer holds for the operator's life)."""
+        nc = self.nc
+        across, parts = self._blocks(mat)
+        (ar, ac, _), (br, bc, _), (cr, cc, cv) = parts
+        node = np.full(self.nl, -1, dtype=np.int64)
+        lo = np.full(self.nl, np.iinfo(np.int64).max)
+        np.minimum.at(lo, ar, ac // nc)
+        hi = np.full(self.nl, -1)
+        np.maximum.at(hi, ar, ac // nc)
+        some = hi >= 0
+        if np.any(lo[some] != hi[some]):
+            return 6, None
+        node[some] = hi[some]
+        if np.any(node[bc] != br // nc):
+            return 3, None
+        if np.any(cc != cr):
+            return 2, None
+        if across:
+            return 1, None
+        diag = np.zeros(self.nl)
+        diag[cr] = cv
+        if np.any((diag == 0.0) & (node < 0)):
+            return 5, None   # (a hard row with no DOF)
+        return 0, (node, diag, parts[0], parts[1])
+
+    def _node_blocks(self, node: np.ndarray, diag: np.ndarray, arows, bcols) -> int:
+        """The per-node stacks of the rows' nodes (``nodes``): the frames and maps of the module
+        docstring; 0, or the code of why not."""
+        nc = self.nc
+        hard = diag == 0.0
+        rows = np.flatnonzero(node >= 0)
+        self.nodes = np.unique(node[rows])
+        m = self.nodes.size
+        at = np.searchsorted(self.nodes, node)          # (valid where node >= 0)
+        # the hard rows' place in their node's stack: sorted by node, counted in each
+        h = np.flatnonzero(hard)
+        h = h[np.argsort(node[h], kind="stable")]
+        count = np.bincount(at[h], minlength=m)
+        if count.size and count.max() > nc:
+            return 4
+        start = np.concatenate([[0], np.cumsum(count)[:-1]])
+        pos = np.full(self.nl, -1, dtype=np.int64)
+        pos[h] = np.arange(h.size) - start[at[h]]
+        self.hard, self.hard_at, self.hard_pos = h, at[h], pos[h]
+        # dense ncomp-vectors of each row's A and B on its node
+        a = np.zeros((self.nl, nc))
+        np.add.at(a, (arows[0], arows[1] % nc), arows[2])
+        b = np.zeros((self.nl, nc))
+        np.add.at(b, (bcols[1], bcols[0] % nc), bcols[2])
+        # compliant and open rows folded: K_eff = K - B C⁻¹ A, per node
+        soft = rows[~hard[rows]]
+        self.w = np.where(hard, 0.0, 1.0 / np.where(hard, 1.0, diag))
+        self.dk = np.zeros((m, nc, nc))
+        np.add.at(self.dk, at[soft], -self.w[soft, None, None] * b[soft, :, None] * a[soft, None, :])
+        # the hard rows: A_nᵀ (columns padded with zeros) = Q R
+        an = np.zeros((m, nc, nc))
+        bn = np.zeros((m, nc, nc))
+        an[self.hard_at, :, self.hard_pos] = a[h]
+        bn[self.hard_at, :, self.hard_pos] = b[h]
+        q, r = np.linalg.qr(an, mode="complete")
+        keep = np.arange(nc)[None, :] < count[:, None]          # (m, nc): constrained slots
+        self.keep = keep
+        rdiag = np.abs(np.diagonal(r, axis1=1, axis2=2))
+        big = np.abs(an).max(axis=(1, 2), initial=0.0)[:, None]
+        if np.any(keep & (rdiag <= RANK_TOL * big)):
+            return 4
+        zc = keep[:, :, None] * np.eye(nc)            # (m, nc, nc) diag(constrained)
+        zf = np.eye(nc) - zc
+        qt = np.swapaxes(q, 1, 2)
+        e = qt @ bn
+        ec = zc @ e @ zc + zf
+        if m and np.linalg.cond(ec).max() > COND_MAX:
+            return 5
+        eci = np.linalg.inv(ec)
+        ell = np.eye(nc) - (zf @ e @ zc) @ eci
+        self.g = zf @ ell @ qt                         # rows of the free directions
+        self.h = q @ zf                                # the free directions in the frame
+        rinv = np.linalg.inv(zc @ r @ zc + zf)
+        self.lift = q @ zc @ np.swapaxes(rinv, 1, 2) @ zc    # hard rows → Q_c R⁻ᵀ r_h
+        self.dual = zc @ eci @ zc @ qt                 # → λ_h = E_c⁻¹ Q_cᵀ (r̂ - K_eff q)
+        return 0
+
+    def _embedding(self, blocks: np.ndarray, old: PETSc.Mat | None, rows: bool) -> PETSc.Mat:
+        """R = [G, 0] (``rows``: primal rows, saddle columns) or P = [H; 0] (saddle rows,
+        primal columns): ``blocks`` on the condensed nodes, identity on the other owned nodes
+        (the pattern the same every time: values rewritten in place)."""
+        nc, nq, n = self.nc, self.nq, self.nq // self.nc
+        full = np.broadcast_to(np.eye(nc), (n, nc, nc)).copy()
+        full[self.nodes] = blocks
+        lens = np.full(nq + (0 if rows else self.nl), 0, dtype=np.int64)
+        lens[:nq] = nc
+        indptr = np.concatenate([[0], np.cumsum(lens)]).astype(PETSc.IntType)
+        first = self.start if rows else self.q_start
+        indices = (first + np.repeat(np.arange(n) * nc, nc * nc)
+                   + np.tile(np.arange(nc), nq)).astype(PETSc.IntType)
+        values = full.reshape(-1)
+        if old is not None:
+            old.setValuesCSR(indptr, indices, values)
+            old.assemble()
+            return old
+        saddle = (nq + self.nl, None)
+        size = ((nq, None), saddle) if rows else (saddle, (nq, None))
+        return PETSc.Mat().createAIJ(size=size, csr=(indptr, indices, values), comm=self.comm)
+
+    def _condensed_operator(self, mat: PETSc.Mat) -> None:
+        """S = R M P = G K H, plus G (K_eff - K) H and k on the constrained slots' diagonal,
+        per node."""
+        self.R = self._embedding(self.g, self.R, rows=True)
+        self.P = self._embedding(self.h, self.P, rows=False)
+        self.S = self.R.matMatMult(mat, self.P, result=self.S)
+        d = mat.getDiagonal()
+        total = self.comm.allreduce(float(np.abs(d.array[:self.nq]).sum()))
+        self.kscale = total / max(int(self.nqs.sum()), 1)
+        d.destroy()
+        nc = self.nc
+        extra = self.g @ self.dk @ self.h + self.kscale * self.keep[:, :, None] * np.eye(nc)
+        lens = np.zeros(self.nq // nc, dtype=np.int64)
+        lens[self.nodes] = nc
+        lens = np.repeat(lens, nc)
+        indptr = np.concatenate([[0], np.cumsum(lens)]).astype(PETSc.IntType)
+        indices = (self.q_start + np.repeat(self.nodes * nc, nc * nc)
+                   + np.tile(np.arange(nc), self.nodes.size * nc)).astype(PETSc.IntType)
+        self.S.setValuesCSR(indptr, indices, extra.reshape(-1), addv=PETSc.InsertMode.ADD_VALUES)
+        self.S.assemble()
+        if self.S.getBlockSize() != nc:
+            self.S.setBlockSize(nc)
+        self._near_null()
+
+    def _near_null(self) -> None:
+        """The rigid-body modes (the primal index set's near-null space) in the nodal frames,
+        Hᵀ v, orthonormalized."""
+        modes = self.is_q.query("nearnullspace")
+        if modes is None:
+            return
+        vecs = []
+        for v in modes.getVecs():
+            y = v.copy()
+            self._frame_t(y.array)
+            for u in vecs:
+                y.axpy(-y.dot(u), u)
+            y.scale(1.0 / y.norm())
+            vecs.append(y)
+        if not vecs:   # (a scalar field's constant: the AMG's own default)
+            return
+        self.S.setNearNullSpace(PETSc.NullSpace().create(vectors=vecs, comm=self.comm))
+
+    def _set_up_amg(self) -> None:
+        if self.amg is None:
+            # the solvers gone before this one (their KSPs, ML's hierarchies) destroyed now:
+            # PETSc defers their destruction to the end, and ML's set-up crashed (inside its
+            # aggregation) after a few dozen solvers in one process. Collective: every rank
+            # makes its first update here.
+            import gc
+
+            gc.collect()   # (solvers in reference cycles: freed, their objects deferred)
+            PETSc.garbage_cleanup(self.comm)
+            self.amg = PETSc.PC().create(self.comm)
+            self.amg.setOptionsPrefix(self.prefix + "condensed_")
+            self.amg.setOperators(self.S, self.S)
+            self.amg.setFromOptions()
+        else:
+            self.amg.setOperators(self.S, self.S)
+        self.amg.setUp()
+        if self._work is None:   # (work vectors of the application, per pattern)
+            self._work = [*self.mat.createVecs(), *self.S.createVecs()]
+
+    # ------------------------------------------------------------------ application
+
+    def _frame_t(self, y: np.ndarray) -> None:
+        """y ← Hᵀ y in place (owned nodes)."""
+        v = y.reshape(-1, self.nc)
+        v[self.nodes] = np.einsum("nji,nj->ni", self.h, v[self.nodes])
+
+    def _nodal(self, blocks: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return np.einsum("nij,nj->ni", blocks, v.reshape(-1, self.nc)[self.nodes])
+
+    def _product(self, q: np.ndarray | None, lam: np.ndarray | None) -> tuple[np.ndarray,
+                                                                            np.ndarray]:
+        """M [q; λ] (either zero when None) as (primal rows, multiplier rows), with K_eff in
+        place of K (the folded rows' - B C⁻¹ A, per node) when q is given."""
+        u, v = self._work[0], self._work[1]
+        ua = u.array
+        ua[:self.nq] = 0.0 if q is None else q
+        ua[self.nq:] = 0.0 if lam is None else lam
+        self.mat.mult(u, v)
+        out_q, out_l = v.array[:self.nq].copy(), v.array[self.nq:].copy()
+        if q is not None:
+            out_q.reshape(-1, self.nc)[self.nodes] += self._nodal(self.dk, q)
+        return out_q, out_l
+
+    def setUp(self, pc: PETSc.PC) -> None:
+        pass
+
+    def apply(self, pc: PETSc.PC, x: PETSc.Vec, y: PETSc.Vec) -> None:
+        """y ← the condensed M⁻¹ x (the module docstring's three eliminations)."""
+        nq, nc = self.nq, self.nc
+        xa = x.getArray(readonly=True)
+        r_q, r_l = xa[:nq], xa[nq:]
+        rhat = r_q - self._product(None, self.w * r_l)[0]        # r̂ = r_q - B C⁻¹ r_λ
+        padded = np.zeros((self.nodes.size, nc))
+        padded[self.hard_at, self.hard_pos] = r_l[self.hard]
+        qc = np.zeros(nq)
+        qc.reshape(-1, nc)[self.nodes] = np.einsum("nij,nj->ni", self.lift, padded)
+        t = rhat - self._product(qc, None)[0]
+        f, yf = self._work[2], self._work[3]
+        fa = f.array
+        fa[:] = t                                               # G (r̂ - K_eff q_c)
+        fa.reshape(-1, nc)[self.nodes] = self._nodal(self.g, t)
+        self.amg.apply(f, yf)                                   # y_f ≈ S⁻¹ f
+        q = yf.array.copy()
+        q.reshape(-1, nc)[self.nodes] = self._nodal(self.h, q)  # q_f = H y_f
+        q += qc
+        kq, aq = self._product(q, None)
+        lam = np.zeros(self.nl)
+        lam[self.hard] = self._nodal(self.dual, rhat - kq)[self.hard_at, self.hard_pos]
+        lam += self.w * (r_l - aq)
+        ya = y.getArray()
+        ya[:nq] = q
+        ya[nq:] = lam

@@ -1,0 +1,104 @@
+"""The condensed preconditioner (solvers.condensed): with an exact solve of the condensed
+operator it is M⁻¹ itself — hard rows, compliant rows and a non-associated dual included —
+and the iterative preset chooses it when every relation row is nodal, giving the direct
+solve's answer; a scene with rows that tie several nodes (controls, periodic ties) falls back
+to the augmented form and says why."""
+
+import numpy as np
+import pytest
+from petsc4py import PETSc
+
+from conftest import dense, solve_in_process
+from helpers.scene import scene, shipped
+from parsolve.solvers import options as opt
+from parsolve.solvers.condensed import CondensedPreconditioner
+
+
+def _friction(comm, petsc: dict | None = None):
+    text = scene(shipped("contact_friction_3d.toml"), steps={"count": 1},
+                 solver={"preset": "iterative", "petsc": petsc or {}})
+    return solve_in_process(text, comm, options={})
+
+
+def _variant(mat: PETSc.Mat, system) -> PETSc.Mat:
+    """M with every third multiplier row compliant (C = 0.5 k on its diagonal), every fifth
+    open (its A row and B column zero, C = k), and the other rows' dual B scaled per
+    component by (1, 1.3, 0.7): a non-associated dual on the rows' own nodes."""
+    comm, dm, k = system.comm, system.dofmap, system.kscale
+    q0, q1, _, _ = dm.owned()
+    nq, start = q1 - q0, dm.offset
+    lam = np.concatenate([np.arange(dm.offsets[r] + dm.owned(r)[1] - dm.owned(r)[0],
+                                    dm.offsets[r] + dm.owned(r)[1] - dm.owned(r)[0]
+                                    + dm.owned(r)[3] - dm.owned(r)[2])
+                          for r in range(comm.size)])
+    row_of = np.full(dm.offsets[-1], -1)
+    row_of[lam] = np.arange(lam.size)   # a multiplier column → its relation row (global)
+    indptr, cols, vals = mat.getValuesCSR()
+    vals = vals.copy()
+    rows = np.repeat(np.arange(indptr.size - 1), np.diff(indptr))
+    relation = row_of[cols]                       # -1: a primal column
+    soft, open_ = relation % 3 == 1, relation % 5 == 2
+    in_b = (rows < nq) & (relation >= 0)
+    vals[in_b] *= np.where(open_[in_b], 0.0, np.array([1.0, 1.3, 0.7])[rows[in_b] % 3])
+    mine = rows >= nq                             # this rank's multiplier rows
+    own = row_of[rows + start]
+    vals[mine & (relation < 0) & (own % 5 == 2)] = 0.0
+    diagonal = mine & (cols == rows + start)
+    vals[diagonal] = np.where(own[diagonal] % 5 == 2, k, np.where(own[diagonal] % 3 == 1, 0.5 * k,
+                                                                  0.0))
+    n = indptr.size - 1
+    return PETSc.Mat().createAIJ(size=((n, None), (n, None)), csr=(indptr, cols, vals), comm=comm)
+
+
+def test_exact_condensation_is_the_inverse(comm):
+    """With LU on the condensed operator S, the preconditioner applied to r is M⁻¹ r, on the
+    friction box's operator made to hold hard, compliant and open rows and a non-associated
+    dual (dense solve as the reference)."""
+    system, solver, mat, rhs, x = _friction(comm)
+    variant = _variant(mat, system)
+    is_q, is_l = system.index_sets()
+    pre = CondensedPreconditioner(comm, 3, is_q, is_l, "exact_")
+    with opt.inserted("exact_", {"condensed_pc_type": "lu",
+                                 "condensed_pc_factor_mat_solver_type": "mumps"}):
+        assert pre.update(variant) is None
+    assert pre.w.max() > 0 and pre.hard.size   # (both kinds of rows are there)
+    pre.setUp(None)
+    r = rhs.duplicate()
+    r.setRandom()
+    z = r.duplicate()
+    pre.apply(None, r, z)
+    M = dense(variant, comm)
+    reference = np.linalg.solve(M, np.concatenate(comm.allgather(r.array.copy())))
+    got = np.concatenate(comm.allgather(z.array.copy()))
+    assert np.abs(got - reference).max() <= 1e-9 * np.abs(reference).max()
+
+
+def test_preset_chooses_condensation_and_gives_the_direct_answer(comm):
+    """The friction box on the iterative preset: the condensed preconditioner is chosen, GMRES
+    converges in a few iterations, and x solves M x = b (dense solve) to 1e-10."""
+    system, solver, mat, rhs, x = _friction(comm)
+    assert solver.choice == "condensed"
+    assert solver.ksp.getPC().getType() == "python"
+    assert solver.ksp.getIterationNumber() <= 15
+    M = dense(mat, comm)
+    reference = np.linalg.solve(M, np.concatenate(comm.allgather(rhs.array.copy())))
+    xs = np.concatenate(comm.allgather(x.array.copy()))
+    assert np.abs(xs - reference).max() <= 1e-10 * np.abs(reference).max()
+
+
+@pytest.mark.parametrize("name, why", [
+    ("two_controls.toml", "a relation row ties several nodes"),
+    ("periodic_shear_laminate.toml", "a relation row ties several nodes")])
+def test_rows_of_several_nodes_fall_back_to_the_augmented_form(comm, name, why):
+    """A control (its column a load over a region) or a periodic tie (a row on two nodes)
+    cannot be condensed node by node: the augmented form's fieldsplit, and the reason."""
+    text = scene(shipped(name), solver={"preset": "iterative"})
+    system, solver, mat, rhs, x = solve_in_process(text, comm, options={})
+    assert solver.choice == f"augmented: {why}"
+    assert solver.ksp.getPC().getType() == "fieldsplit"
+
+
+def test_turned_off_by_option(comm):
+    """-condensed false: the augmented form on a system that could be condensed."""
+    system, solver, mat, rhs, x = _friction(comm, {"condensed": "false"})
+    assert solver.choice == "augmented: condensation turned off"
