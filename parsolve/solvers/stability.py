@@ -32,6 +32,14 @@ from petsc4py import PETSc
 from parsolve.solvers.diagnose import NamedFailure
 
 SHIFT = 1e-8   # δ: eigenvalues above -δ k are taken as zero (round-off at a peak)
+# the points of a step's tangent predictor whose stability is checked, nearest first: a
+# limit point just past the converged state (a snap-back's unstable stretch may be a few
+# percent of a step long) is seen at the smallest, one further on at the others. A step that
+# converged is checked inside only (its end, which may be a peak reached exactly, is
+# ``check_stable``'s)
+FRACTIONS = (1 / 64, 1 / 8, 1.0)
+INSIDE = (1 / 64, 1 / 8, 1 / 2)
+AHEAD = 1e-6   # where the predictor's tangent is taken, as a fraction of the step's predictor
 
 
 def checked(problem) -> bool:
@@ -62,6 +70,96 @@ def check_stable(problem, states: list, step: int, t: float, t_prev: float) -> N
         "quantity of the band (a maximum strain control), or trace the path with arc-length")
 
 
+def check_path(problem, q0: np.ndarray, states: list, t_prev: float, t: float) -> None:
+    """NamedFailure when the path from the converged state (``q0``, material ``states``, at
+    ``t_prev``) toward ``t`` is unstable just ahead (``modes_ahead``), though the step may have
+    converged: a secant iteration then lands on a distant stable branch (a bar ruptured past a
+    snap-back), or on none, as round-off, which the partition changes, decides. (Not in a
+    transient step, whose rate terms hold the path.) Collective."""
+    if problem.ctx.transient:
+        return
+    if not problem.comm.allreduce(changed(states, problem.states), op=MPI.LOR):
+        return   # (an elastic step: the path to it is the secant's, linear and stable)
+    if modes_ahead(problem, q0, states, t, INSIDE):
+        raise path_failure(t_prev)
+
+
+def path_failure(t_prev: float) -> NamedFailure:
+    """The failure of a path that turns back just past ``t_prev``: the same words whether the
+    step from there failed or jumped (``check_path``)."""
+    return NamedFailure(
+        f"the equilibrium path turns back just past t = {t_prev:.6g}: from the state reached "
+        "there, the consistent tangent with the relations held has negative eigenvalues along "
+        "the step's tangent predictor (a limit point: under a prescribed displacement a "
+        "snap-back, under a prescribed load the peak), so no equilibrium near that state "
+        "carries the path on, and a step from it fails or jumps to a distant branch, which one "
+        "depending on round-off and so on the rank count. Control a quantity that keeps "
+        "growing past the point (a maximum strain control, a crack opening), or trace the path "
+        "with arc-length")
+
+
+def modes_ahead(problem, q0: np.ndarray, states: list, t: float,
+                fractions: tuple = FRACTIONS) -> int | None:
+    """Negative eigenvalues (``unstable_modes``) at the first of the points q0 + s Δq (s in
+    ``fractions``) that has any, Δq the tangent predictor toward ``t`` (the consistent tangent at
+    q0, the enforced rows as they are); 0 when none has; None when the predictor or a count
+    cannot be had. Points where no material leaves its elastic range are stable (their
+    tangent is the secant) and cost no factorization. Collective."""
+    system, comm = problem.system, problem.comm
+    f_int, _, kmat = system.composition.evaluate(q0, states, False, system.rate)[:3]
+    dq = _predictor(problem, kmat, f_int, q0, t)
+    if dq is None:
+        return None
+    # the tangent just past q0 along it: a state reached exactly at a threshold (a peak at a
+    # step) is elastic at q0 itself, while its points that load go on softening
+    kmat = system.composition.evaluate(q0 + AHEAD * dq, states, False, system.rate)[2]
+    dq = _predictor(problem, kmat, f_int, q0, t)
+    if dq is None:
+        return None
+    for s in fractions:
+        q = q0 + s * dq
+        trial = system.composition.evaluate(q, states, False, system.rate)[3]
+        if not comm.allreduce(changed(states, trial), op=MPI.LOR):
+            continue
+        modes = unstable_modes(problem, states, q)
+        if modes is None:
+            return None
+        if modes > 0:
+            return modes
+    return 0
+
+
+def _predictor(problem, kmat, f_int: np.ndarray, q0: np.ndarray, t: float
+               ) -> np.ndarray | None:
+    """Δq of one Newton solve from q0 (internal forces ``f_int``) toward t with the tangent
+    ``kmat`` and the enforced rows as they are, by MUMPS' LU on its own (the run's solver keeps
+    its factor and its choices: the consistent tangent is not symmetric); None when it is
+    singular or fails. Collective."""
+    system = problem.system
+    mat = problem.jacobian(kmat)   # (first: the right-hand side's lifting is this operator's)
+    rhs = system.rhs(t, f_int=f_int, q=q0, f_ext=problem.external(t))[0]
+    ksp = PETSc.KSP().create(problem.comm)
+    try:
+        ksp.setOperators(mat)
+        ksp.setType("preonly")
+        pc = ksp.getPC()
+        pc.setType("lu")
+        pc.setFactorSolverType("mumps")
+        pc.setFactorSetUpSolverType()
+        pc.getFactorMatrix().setMumpsIcntl(24, 1)   # (null pivots detected, INFOG(28))
+        pc.setUp()
+        if pc.getFactorMatrix().getMumpsInfog(28) > 0:
+            return None
+        x, b = mat.createVecs()
+        b.array[:] = rhs
+        ksp.solve(b, x)
+        return system.gather(x.array).q
+    except PETSc.Error:
+        return None
+    finally:
+        ksp.destroy()
+
+
 def changed(before, after) -> bool:
     """Whether a material state (nested lists and dicts of arrays) changed over the step on
     this rank."""
@@ -74,13 +172,15 @@ def changed(before, after) -> bool:
     return before is not after and before != after
 
 
-def unstable_modes(problem, states: list) -> int | None:
+def unstable_modes(problem, states: list, q: np.ndarray | None = None) -> int | None:
     """Independent directions in which the converged state of ``problem`` is unstable: the
     negative eigenvalues of the symmetric part of the consistent tangent (evaluated at its q
     from the material ``states`` the step started from) on the space the enforced rows leave
-    free; None when the factorization cannot tell. Collective; the same on every rank."""
+    free; None when the factorization cannot tell. At ``q`` instead of the problem's when
+    given. Collective; the same on every rank."""
     system = problem.system
-    kmat = system.composition.evaluate(problem.q, states, False, system.rate)[2]
+    q = problem.q if q is None else q
+    kmat = system.composition.evaluate(q, states, False, system.rate)[2]
     held = _held_symmetric(system, problem.jacobian(kmat), SHIFT * system.kscale)
     negative = negative_pivots(problem.comm, held)
     return None if negative is None else negative - int(system.op.active.sum())
