@@ -160,6 +160,41 @@ def _predictor(problem, kmat, f_int: np.ndarray, q0: np.ndarray, t: float
         ksp.destroy()
 
 
+class ArcWatch:
+    """An arc-length run's bifurcations. Past a limit point the path it traces is unstable
+    under its dead load, which is no failure: the tangent gains one negative eigenvalue as the
+    load factor turns (within a step, possibly: the step's net load increment does not tell).
+    Several at once are a bifurcation, branches crossing the path (damage softening alike in
+    several places, a symmetric mode beside the limit point's): which branch the iteration
+    follows past it is round-off's, and so the partition's."""
+
+    def __init__(self, problem):
+        self.problem = problem
+        self.count: int | None = 0      # the unloaded state's: the elastic tangent, positive
+
+    def check(self, states: list, step: int, mu_prev: float, mu: float) -> None:
+        """NamedFailure when step ``step`` (load factor ``mu_prev`` to ``mu``, from the material
+        ``states``) crossed a bifurcation. Collective."""
+        problem = self.problem
+        if problem.comm.allreduce(changed(states, problem.states), op=MPI.LOR):
+            op = problem.system.op
+            rows = op.active   # (the arc keeps the rows the system has: put back)
+            count = unstable_modes(problem, states)
+            op.active = rows
+        else:
+            count = 0   # (no point left its elastic range: the secant, positive)
+        if count is not None and self.count is not None and abs(count - self.count) > 1:
+            raise NamedFailure(
+                f"arc-length passed a bifurcation at step {step} (load factor {mu_prev:.6g} to "
+                f"{mu:.6g}): the consistent tangent, with the relations held, went from "
+                f"{self.count} to {count} negative eigenvalues at once (a limit point changes "
+                "the count by one): branches cross the path there (e.g. damage softening alike "
+                "in several places), and which one the iteration follows depends on round-off, "
+                "so on the rank count. Break the symmetry (a weaker region where the band is to "
+                "form), or control a quantity of the band (a maximum strain control)")
+        self.count = count if count is not None else self.count
+
+
 def changed(before, after) -> bool:
     """Whether a material state (nested lists and dicts of arrays) changed over the step on
     this rank."""

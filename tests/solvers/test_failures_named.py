@@ -10,6 +10,9 @@ two and three, on Newton's non-convergence at t = 0.417318: three messages for o
 consistent tangent with the end held has a negative eigenvalue along the step's predictor just
 past the peak, which the run now says at every rank count, after the same 10 steps.
 
+An arc-length run that passes a bifurcation (several negative eigenvalues at once, where a
+limit point gives one) stops there, named (``ArcWatch``).
+
 A first step that fails after all its cuts says that no step converged, down to which time,
 what the last attempt failed on, and the way out."""
 
@@ -17,7 +20,8 @@ import numpy as np
 import pytest
 
 from conftest import read_results
-from helpers.control import BAR, displacement_control, end_delta, without_control
+from helpers.control import BAR, E, H, L, displacement_control, end_delta, without_control
+from test_distributed_arc_length import softening_bar
 
 from parsolve.errors import SolverError
 
@@ -64,3 +68,29 @@ def test_a_first_step_that_fails_for_good_says_why(run, case):
     res = read_results(run.last)
     assert res["attrs"]["status"] == f"failed: {message}"
     assert res["steps/time"].size == 0
+
+
+def test_arc_length_bifurcation_is_named(run):
+    """The 3-column softening bar of test_distributed_arc_length with every cell Mazars: the
+    bar stays homogeneous up to its peak, where each column may soften alone: with the end
+    load dead, each column's stretch is a direction of negative stiffness, 3 at once (a limit
+    point alone gives one). The run stops there, named, after the 8 elastic steps; the
+    3-column bar with one Mazars column passes its limit point (one at a time) and completes
+    (test_distributed_arc_length)."""
+    text = softening_bar()
+    first = text.index("[[materials]]")
+    text = text[:first] + text[text.index("[[materials]]", first + 1):].replace(
+        'region = "middle"\n', "")
+    with pytest.raises(SolverError) as info:
+        run(text, name="arc_bifurcation")
+    message = str(info.value)
+    res = read_results(run.last)
+    mu = res["steps/time"]
+    assert mu.size == 8 and np.all(np.diff(mu) > 0)
+    # elastic: equal load increments, the end at μ L / (E H)
+    np.testing.assert_allclose(np.diff(mu), mu[0], rtol=1e-9)
+    np.testing.assert_allclose(end_delta(res), mu * L / (E * H), rtol=1e-9)
+    assert message.startswith(f"arc-length passed a bifurcation at step 9 (load factor "
+                              f"{mu[-1]:.6g} to ")
+    assert "went from 0 to 3 negative eigenvalues at once" in message
+    assert res["attrs"]["status"] == f"failed: {message}"
