@@ -238,7 +238,7 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log,
     schedule = StepSchedule(scene)
     balance = Balance(comm, ctx, problem.q) if ctx.transient else None
     watch = BranchWatch(ctx.nonlinear)
-    stability = checked(problem)   # (a secant run without a maximum: solvers.stability)
+    stability = checked(problem)   # (a secant run: solvers.stability)
     step, setup = 0, time.perf_counter() - t0
     if restart is not None:
         step = _load_newton(restart, problem, schedule, watch, balance)
@@ -300,7 +300,7 @@ def _final_failure(exc: SolverError, problem, t: float, stability: bool, schedul
     out. Collective."""
     if isinstance(exc, DoesNotFit):
         return exc
-    if stability and not problem.ctx.transient and schedule.cuts \
+    if stability and not problem.ctx.transient and not problem.active.groups and schedule.cuts \
             and modes_ahead(problem, problem.q, problem.states, t):
         return path_failure(problem.t_prev)
     named = name_failure(exc, problem, t)

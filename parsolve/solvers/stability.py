@@ -29,6 +29,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from parsolve.solvers.active_set import GROUP_TOL
 from parsolve.solvers.diagnose import NamedFailure
 
 SHIFT = 1e-8   # δ: eigenvalues above -δ k are taken as zero (round-off at a peak)
@@ -40,16 +41,14 @@ SHIFT = 1e-8   # δ: eigenvalues above -δ k are taken as zero (round-off at a p
 FRACTIONS = (1 / 64, 1 / 8, 1.0)
 INSIDE = (1 / 64, 1 / 8, 1 / 2)
 AHEAD = 1e-6   # where the predictor's tangent is taken, as a fraction of the step's predictor
+PENALTY = 1e6  # a row at the maximum held: γ |a|² = PENALTY k (k the mean stiffness diagonal)
 
 
 def checked(problem) -> bool:
-    """Whether a Newton run's steps are checked: a nonlinear run with the secant matrix
-    (whose own factorization cannot tell), and no maximum control. A maximum group holds only
-    its largest row as an equality, where every row at the maximum is held one-sided (none may
-    pass it): the comparison solid would let the others pass, and reads the localization
-    bar's stable path (one column damaging, its three cells at the maximum) as unstable."""
+    """Whether a Newton run's steps are checked: a nonlinear run with the secant matrix, whose
+    own factorization cannot tell."""
     ctx = problem.ctx
-    return ctx.nonlinear and problem.spec.matrix == "secant" and not problem.active.groups
+    return ctx.nonlinear and problem.spec.matrix == "secant"
 
 
 def check_stable(problem, states: list, step: int, t: float, t_prev: float) -> None:
@@ -60,9 +59,11 @@ def check_stable(problem, states: list, step: int, t: float, t_prev: float) -> N
     modes = unstable_modes(problem, states)
     if modes is None or modes <= 0:   # (None: the factorization cannot tell)
         return
+    held = "the relations held" + (" (every row of a maximum control at its value among "
+                                   "them)" if problem.active.groups else "")
     raise NamedFailure(
         f"the equilibrium at step {step} (t = {t:.6g}) is unstable: the consistent tangent, "
-        f"with the relations held, has {modes} negative eigenvalue(s) (a bifurcation or a "
+        f"with {held}, has {modes} negative eigenvalue(s) (a bifurcation or a "
         f"limit point was passed after t = {t_prev:.6g}, e.g. damage softening alike in "
         "several places); the secant iteration follows such a branch until round-off, which "
         "the partition changes, pulls it off, so the branch past here would depend on the rank "
@@ -76,8 +77,8 @@ def check_path(problem, q0: np.ndarray, states: list, t_prev: float, t: float) -
     converged: a secant iteration then lands on a distant stable branch (a bar ruptured past a
     snap-back), or on none, as round-off, which the partition changes, decides. (Not in a
     transient step, whose rate terms hold the path.) Collective."""
-    if problem.ctx.transient:
-        return
+    if problem.ctx.transient or problem.active.groups:
+        return   # (a maximum control holds its path: it is what it is for)
     if not problem.comm.allreduce(changed(states, problem.states), op=MPI.LOR):
         return   # (an elastic step: the path to it is the secant's, linear and stable)
     if modes_ahead(problem, q0, states, t, INSIDE):
@@ -217,8 +218,53 @@ def unstable_modes(problem, states: list, q: np.ndarray | None = None) -> int | 
     q = problem.q if q is None else q
     kmat = system.composition.evaluate(q, states, False, system.rate)[2]
     held = _held_symmetric(system, problem.jacobian(kmat), SHIFT * system.kscale)
+    if problem.active.groups:
+        _hold_maximum_rows(problem, held, q)
     negative = negative_pivots(problem.comm, held)
     return None if negative is None else negative - int(system.op.active.sum())
+
+
+def at_maximum(problem, q: np.ndarray) -> np.ndarray:
+    """The rows of the maximum groups that are at their value at ``q`` (tied with the largest,
+    the active set's GROUP_TOL) but not enforced. Every rank alike."""
+    rset, active = problem.rset, problem.active
+    values, targets = rset.primal_values(q), rset.targets(problem.t_prev)
+    out = np.zeros(values.size, dtype=bool)
+    for g in active.groups:
+        scale = max(float(np.abs(targets[g]).max()), 1e-300)
+        sign = active.sign[g]
+        out[g] = sign * (targets[g] - values[g]) <= GROUP_TOL * scale
+    return out & ~active.active
+
+
+def _hold_maximum_rows(problem, held: PETSc.Mat, q: np.ndarray) -> None:
+    """Hold the rows of the maximum groups at their value besides the enforced one, as
+    equalities: γ a aᵀ on the primal block of 2 S per row a (γ |a|² = PENALTY k; the DOFs that
+    are held already left out). A maximum group enforces only its largest row, and the others
+    at the value may not pass it (held one-sided): the comparison solid that lets them pass
+    reads a stable localization (one column damaging, its three cells at the maximum) as
+    unstable; held both ways the count is at most the one-sided problem's (a quadratic form
+    negative on a subspace of the admissible directions is negative on them), so an unstable
+    count is one for sure. Every rank holds the relations whole: rank 0 adds them."""
+    rows = np.flatnonzero(at_maximum(problem, q))
+    system = problem.system
+    if problem.comm.rank == 0 and rows.size:
+        keep = [], []
+        for row in rows:
+            k, local = problem.rset.locate(int(row))
+            rel = problem.ctx.multiplied[k]
+            sel = (rel.a_rows == local) & ~np.isin(rel.a_dofs, system.elim_dofs)
+            dofs, vals = np.asarray(rel.a_dofs)[sel], np.asarray(rel.a_vals, dtype=float)[sel]
+            if not dofs.size:
+                continue
+            index = system.dofmap.input_saddle(dofs).astype(PETSc.IntType)
+            gamma = 2.0 * PENALTY * system.kscale / float(vals @ vals)
+            keep[0].append(index)
+            keep[1].append(gamma * np.outer(vals, vals))
+        held.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        for index, block in zip(*keep):
+            held.setValues(index, index, block, addv=PETSc.InsertMode.ADD_VALUES)
+    held.assemble()
 
 
 def _held_symmetric(system, mat: PETSc.Mat, shift: float) -> PETSc.Mat:
