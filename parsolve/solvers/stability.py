@@ -21,6 +21,12 @@ it is stable with the controlled quantity held. The shift δ k (k the mean stiff
 keeps a tangent that vanishes at the peak, where its eigenvalues are round-off and their signs
 the partition's, from counting: an eigenvalue counts when it is below -δ k, far from round-off
 and far below any softening branch's.
+
+A maximum control holds its other rows at the value one-sided; they are held here as
+equalities too (``_hold_maximum_rows``), which can only hide instabilities, never invent one.
+Beyond the converged states: the path just ahead of one (``check_path``: a snap-back, where
+no nearby equilibrium carries the path on, named alike whether the step from there fails or
+jumps), and an arc-length run's bifurcations (``ArcWatch``).
 """
 
 from __future__ import annotations
