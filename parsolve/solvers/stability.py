@@ -254,6 +254,8 @@ def _hold_maximum_rows(problem, held: PETSc.Mat, q: np.ndarray) -> None:
     count is one for sure. Every rank holds the relations whole: rank 0 adds them."""
     rows = np.flatnonzero(at_maximum(problem, q))
     system = problem.system
+    # (on every rank: logically collective, a reduction in a debugging PETSc)
+    held.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
     if problem.comm.rank == 0 and rows.size:
         keep = [], []
         for row in rows:
@@ -267,7 +269,6 @@ def _hold_maximum_rows(problem, held: PETSc.Mat, q: np.ndarray) -> None:
             gamma = 2.0 * PENALTY * system.kscale / float(vals @ vals)
             keep[0].append(index)
             keep[1].append(gamma * np.outer(vals, vals))
-        held.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         for index, block in zip(*keep):
             held.setValues(index, index, block, addv=PETSc.InsertMode.ADD_VALUES)
     held.assemble()
