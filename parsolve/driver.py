@@ -23,13 +23,15 @@ from parsolve.model import Model
 from parsolve.outputs import Balance, contact_line, contact_totals, progress, resultant_labels, \
     resultant_line, step_outputs
 from parsolve.solvers.arc_length import run_arc_length
-from parsolve.solvers.diagnose import NamedFailure, name_failure, name_linear_failure
+from parsolve.solvers.diagnose import GoingBack, NamedFailure, name_failure, \
+    name_linear_failure
 from parsolve.solvers.finite import check_finite
 from parsolve.solvers.linear import DoesNotFit
 from parsolve.solvers.newton import NewtonSolver
 from parsolve.solvers.problem import SaddleProblem
 from parsolve.solvers.setup import export_system, make_solver
-from parsolve.solvers.stability import check_stable, checked
+from parsolve.solvers.stability import check_path, check_stable, checked, modes_ahead, \
+    path_failure
 from parsolve.solvers.system import SaddleSystem
 from parsolve.version import petsc_version
 
@@ -236,7 +238,7 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log,
     schedule = StepSchedule(scene)
     balance = Balance(comm, ctx, problem.q) if ctx.transient else None
     watch = BranchWatch(ctx.nonlinear)
-    stability = checked(problem)   # (a secant run without a maximum: solvers.stability)
+    stability = checked(problem)   # (a secant run: solvers.stability)
     step, setup = 0, time.perf_counter() - t0
     if restart is not None:
         step = _load_newton(restart, problem, schedule, watch, balance)
@@ -249,7 +251,7 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log,
         except SolverError as exc:
             problem.restore(snap)
             if isinstance(exc, DoesNotFit) or not schedule.cut(t):
-                raise name_failure(exc, problem, t) from None
+                raise _final_failure(exc, problem, t, stability, schedule, step) from None
             if comm.rank == 0:
                 log(f"step to t={t:.6g} failed ({exc}); retrying with half the step")
             continue
@@ -263,6 +265,7 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log,
                      rel_out, extra)
         if stability:
             check_stable(problem, snap[3], step, t, t_prev)
+            check_path(problem, snap[0], snap[3], t_prev, t)
         pivots = solver.negative_pivots()  # the saddle's: one per enforced multiplier row
         if pivots is not None:
             pivots -= int(problem.active.active.sum())
@@ -287,6 +290,33 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log,
             log(f"warning: step {step}: {warning}")
             writer.note(f"step {step}: {warning}")
         _pass_notes(comm, solver, writer, log)
+
+
+def _final_failure(exc: SolverError, problem, t: float, stability: bool, schedule,
+                   step: int) -> SolverError:
+    """A step's failure for good (``problem`` back at the last converged state), named: a path
+    that turns back just ahead (a checked run: ``solvers.stability``), a control out of reach
+    (``name_failure``); else what the last attempt failed on, with the cuts tried and the way
+    out. Collective."""
+    if isinstance(exc, DoesNotFit):
+        return exc
+    if stability and not problem.ctx.transient and not problem.active.groups and schedule.cuts \
+            and modes_ahead(problem, problem.q, problem.states, t):
+        return path_failure(problem.t_prev)
+    named = name_failure(exc, problem, t)
+    if named is not exc or isinstance(exc, GoingBack):   # (the active set's words: named)
+        return named
+    cuts = f"after {schedule.cuts} cut{'s' * (schedule.cuts != 1)}"
+    if step == 0:
+        return SolverError(
+            f"no step converged: the first step failed down to t = {t:.6g} ({cuts}); the last "
+            f"attempt: {exc}; the way out: check that the supports hold the body and the loads' "
+            "sizes, then take smaller first steps ([steps] count, or automatic steps) or allow "
+            "more iterations ([nonlinear] max_iterations)")
+    return SolverError(
+        f"step {step + 1} from t = {problem.t_prev:.6g} failed down to t = {t:.6g} ({cuts}); "
+        f"the last attempt: {exc}; the way out: smaller steps ([steps] count, or automatic "
+        "steps), more iterations ([nonlinear] max_iterations), or the tangent matrix")
 
 
 def _pass_notes(comm, solver, writer, log) -> None:

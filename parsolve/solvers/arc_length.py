@@ -23,6 +23,7 @@ from parsolve.scene import NonlinearSpec
 from parsolve.solvers.finite import check_finite
 from parsolve.solvers.linear import DoesNotFit
 from parsolve.solvers.problem import SaddleProblem
+from parsolve.solvers.stability import ArcWatch
 
 
 class ArcLength:
@@ -142,9 +143,12 @@ def run_arc_length(comm, system, cli_options, writer, log, export_dir: str | Non
     problem = SaddleProblem(comm, system, make_solver(comm, system, cli_options), scene.nonlinear)
     problem.export_dir = export_dir
     solver = ArcLength(problem, scene.nonlinear)
+    # a softening run's bifurcations (a linear one has none: its tangent never changes)
+    watch = ArcWatch(problem) if system.context.nonlinear else None
     nsteps = len(scene.times)
     for step in range(nsteps):
         t1 = time.perf_counter()
+        states, mu_prev = problem.states, solver.mu
         iterations, residual, f_int = solver.step(scene.times[step])
         seconds = time.perf_counter() - t1
         multipliers = problem.multipliers(scene.times[step], f_int)
@@ -152,6 +156,8 @@ def run_arc_length(comm, system, cli_options, writer, log, export_dir: str | Non
                                                     problem)
         check_finite(comm, step + 1, solver.mu, problem.q, multipliers, residual, fields,
                      cell_fields, rel_out, {})
+        if watch is not None:
+            watch.check(states, step + 1, mu_prev, solver.mu)
         writer.write_step(solver.mu, iterations, residual, fields, cell_fields, rel_out,
                           {"assembly": 0.0, "solve": seconds, "total": seconds})
         interrupts.check(comm)

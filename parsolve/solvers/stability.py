@@ -21,6 +21,12 @@ it is stable with the controlled quantity held. The shift δ k (k the mean stiff
 keeps a tangent that vanishes at the peak, where its eigenvalues are round-off and their signs
 the partition's, from counting: an eigenvalue counts when it is below -δ k, far from round-off
 and far below any softening branch's.
+
+A maximum control holds its other rows at the value one-sided; they are held here as
+equalities too (``_hold_maximum_rows``), which can only hide instabilities, never invent one.
+Beyond the converged states: the path just ahead of one (``check_path``: a snap-back, where
+no nearby equilibrium carries the path on, named alike whether the step from there fails or
+jumps), and an arc-length run's bifurcations (``ArcWatch``).
 """
 
 from __future__ import annotations
@@ -29,19 +35,26 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from parsolve.solvers.active_set import GROUP_TOL
 from parsolve.solvers.diagnose import NamedFailure
 
 SHIFT = 1e-8   # δ: eigenvalues above -δ k are taken as zero (round-off at a peak)
+# the points of a step's tangent predictor whose stability is checked, nearest first: a
+# limit point just past the converged state (a snap-back's unstable stretch may be a few
+# percent of a step long) is seen at the smallest, one further on at the others. A step that
+# converged is checked inside only (its end, which may be a peak reached exactly, is
+# ``check_stable``'s)
+FRACTIONS = (1 / 64, 1 / 8, 1.0)
+INSIDE = (1 / 64, 1 / 8, 1 / 2)
+AHEAD = 1e-6   # where the predictor's tangent is taken, as a fraction of the step's predictor
+PENALTY = 1e6  # a row at the maximum held: γ |a|² = PENALTY k (k the mean stiffness diagonal)
 
 
 def checked(problem) -> bool:
-    """Whether a Newton run's steps are checked: a nonlinear run with the secant matrix
-    (whose own factorization cannot tell), and no maximum control. A maximum group holds only
-    its largest row as an equality, where every row at the maximum is held one-sided (none may
-    pass it): the comparison solid would let the others pass, and reads the localization
-    bar's stable path (one column damaging, its three cells at the maximum) as unstable."""
+    """Whether a Newton run's steps are checked: a nonlinear run with the secant matrix, whose
+    own factorization cannot tell."""
     ctx = problem.ctx
-    return ctx.nonlinear and problem.spec.matrix == "secant" and not problem.active.groups
+    return ctx.nonlinear and problem.spec.matrix == "secant"
 
 
 def check_stable(problem, states: list, step: int, t: float, t_prev: float) -> None:
@@ -52,14 +65,141 @@ def check_stable(problem, states: list, step: int, t: float, t_prev: float) -> N
     modes = unstable_modes(problem, states)
     if modes is None or modes <= 0:   # (None: the factorization cannot tell)
         return
+    held = "the relations held" + (" (every row of a maximum control at its value among "
+                                   "them)" if problem.active.groups else "")
     raise NamedFailure(
         f"the equilibrium at step {step} (t = {t:.6g}) is unstable: the consistent tangent, "
-        f"with the relations held, has {modes} negative eigenvalue(s) (a bifurcation or a "
+        f"with {held}, has {modes} negative eigenvalue(s) (a bifurcation or a "
         f"limit point was passed after t = {t_prev:.6g}, e.g. damage softening alike in "
         "several places); the secant iteration follows such a branch until round-off, which "
         "the partition changes, pulls it off, so the branch past here would depend on the rank "
         "count. Break the symmetry (a weaker region where the band is to form), control a "
         "quantity of the band (a maximum strain control), or trace the path with arc-length")
+
+
+def check_path(problem, q0: np.ndarray, states: list, t_prev: float, t: float) -> None:
+    """NamedFailure when the path from the converged state (``q0``, material ``states``, at
+    ``t_prev``) toward ``t`` is unstable just ahead (``modes_ahead``), though the step may have
+    converged: a secant iteration then lands on a distant stable branch (a bar ruptured past a
+    snap-back), or on none, as round-off, which the partition changes, decides. (Not in a
+    transient step, whose rate terms hold the path.) Collective."""
+    if problem.ctx.transient or problem.active.groups:
+        return   # (a maximum control holds its path: it is what it is for)
+    if not problem.comm.allreduce(changed(states, problem.states), op=MPI.LOR):
+        return   # (an elastic step: the path to it is the secant's, linear and stable)
+    if modes_ahead(problem, q0, states, t, INSIDE):
+        raise path_failure(t_prev)
+
+
+def path_failure(t_prev: float) -> NamedFailure:
+    """The failure of a path that turns back just past ``t_prev``: the same words whether the
+    step from there failed or jumped (``check_path``)."""
+    return NamedFailure(
+        f"the equilibrium path turns back just past t = {t_prev:.6g}: from the state reached "
+        "there, the consistent tangent with the relations held has negative eigenvalues along "
+        "the step's tangent predictor (a limit point: under a prescribed displacement a "
+        "snap-back, under a prescribed load the peak), so no equilibrium near that state "
+        "carries the path on, and a step from it fails or jumps to a distant branch, which one "
+        "depending on round-off and so on the rank count. Control a quantity that keeps "
+        "growing past the point (a maximum strain control, a crack opening), or trace the path "
+        "with arc-length")
+
+
+def modes_ahead(problem, q0: np.ndarray, states: list, t: float,
+                fractions: tuple = FRACTIONS) -> int | None:
+    """Negative eigenvalues (``unstable_modes``) at the first of the points q0 + s Δq (s in
+    ``fractions``) that has any, Δq the tangent predictor toward ``t`` (the consistent tangent at
+    q0, the enforced rows as they are); 0 when none has; None when the predictor or a count
+    cannot be had. Points where no material leaves its elastic range are stable (their
+    tangent is the secant) and cost no factorization. Collective."""
+    system, comm = problem.system, problem.comm
+    f_int, _, kmat = system.composition.evaluate(q0, states, False, system.rate)[:3]
+    dq = _predictor(problem, kmat, f_int, q0, t)
+    if dq is None:
+        return None
+    # the tangent just past q0 along it: a state reached exactly at a threshold (a peak at a
+    # step) is elastic at q0 itself, while its points that load go on softening
+    kmat = system.composition.evaluate(q0 + AHEAD * dq, states, False, system.rate)[2]
+    dq = _predictor(problem, kmat, f_int, q0, t)
+    if dq is None:
+        return None
+    for s in fractions:
+        q = q0 + s * dq
+        trial = system.composition.evaluate(q, states, False, system.rate)[3]
+        if not comm.allreduce(changed(states, trial), op=MPI.LOR):
+            continue
+        modes = unstable_modes(problem, states, q)
+        if modes is None:
+            return None
+        if modes > 0:
+            return modes
+    return 0
+
+
+def _predictor(problem, kmat, f_int: np.ndarray, q0: np.ndarray, t: float
+               ) -> np.ndarray | None:
+    """Δq of one Newton solve from q0 (internal forces ``f_int``) toward t with the tangent
+    ``kmat`` and the enforced rows as they are, by MUMPS' LU on its own (the run's solver keeps
+    its factor and its choices: the consistent tangent is not symmetric); None when it is
+    singular or fails. Collective."""
+    system = problem.system
+    mat = problem.jacobian(kmat)   # (first: the right-hand side's lifting is this operator's)
+    rhs = system.rhs(t, f_int=f_int, q=q0, f_ext=problem.external(t))[0]
+    ksp = PETSc.KSP().create(problem.comm)
+    try:
+        ksp.setOperators(mat)
+        ksp.setType("preonly")
+        pc = ksp.getPC()
+        pc.setType("lu")
+        pc.setFactorSolverType("mumps")
+        pc.setFactorSetUpSolverType()
+        pc.getFactorMatrix().setMumpsIcntl(24, 1)   # (null pivots detected, INFOG(28))
+        pc.setUp()
+        if pc.getFactorMatrix().getMumpsInfog(28) > 0:
+            return None
+        x, b = mat.createVecs()
+        b.array[:] = rhs
+        ksp.solve(b, x)
+        return system.gather(x.array).q
+    except PETSc.Error:
+        return None
+    finally:
+        ksp.destroy()
+
+
+class ArcWatch:
+    """An arc-length run's bifurcations. Past a limit point the path it traces is unstable
+    under its dead load, which is no failure: the tangent gains one negative eigenvalue as the
+    load factor turns (within a step, possibly: the step's net load increment does not tell).
+    Several at once are a bifurcation, branches crossing the path (damage softening alike in
+    several places, a symmetric mode beside the limit point's): which branch the iteration
+    follows past it is round-off's, and so the partition's."""
+
+    def __init__(self, problem):
+        self.problem = problem
+        self.count: int | None = 0      # the unloaded state's: the elastic tangent, positive
+
+    def check(self, states: list, step: int, mu_prev: float, mu: float) -> None:
+        """NamedFailure when step ``step`` (load factor ``mu_prev`` to ``mu``, from the material
+        ``states``) crossed a bifurcation. Collective."""
+        problem = self.problem
+        if problem.comm.allreduce(changed(states, problem.states), op=MPI.LOR):
+            op = problem.system.op
+            rows = op.active   # (the arc keeps the rows the system has: put back)
+            count = unstable_modes(problem, states)
+            op.active = rows
+        else:
+            count = 0   # (no point left its elastic range: the secant, positive)
+        if count is not None and self.count is not None and abs(count - self.count) > 1:
+            raise NamedFailure(
+                f"arc-length passed a bifurcation at step {step} (load factor {mu_prev:.6g} to "
+                f"{mu:.6g}): the consistent tangent, with the relations held, went from "
+                f"{self.count} to {count} negative eigenvalues at once (a limit point changes "
+                "the count by one): branches cross the path there (e.g. damage softening alike "
+                "in several places), and which one the iteration follows depends on round-off, "
+                "so on the rank count. Break the symmetry (a weaker region where the band is to "
+                "form), or control a quantity of the band (a maximum strain control)")
+        self.count = count if count is not None else self.count
 
 
 def changed(before, after) -> bool:
@@ -74,16 +214,64 @@ def changed(before, after) -> bool:
     return before is not after and before != after
 
 
-def unstable_modes(problem, states: list) -> int | None:
+def unstable_modes(problem, states: list, q: np.ndarray | None = None) -> int | None:
     """Independent directions in which the converged state of ``problem`` is unstable: the
     negative eigenvalues of the symmetric part of the consistent tangent (evaluated at its q
     from the material ``states`` the step started from) on the space the enforced rows leave
-    free; None when the factorization cannot tell. Collective; the same on every rank."""
+    free; None when the factorization cannot tell. At ``q`` instead of the problem's when
+    given. Collective; the same on every rank."""
     system = problem.system
-    kmat = system.composition.evaluate(problem.q, states, False, system.rate)[2]
+    q = problem.q if q is None else q
+    kmat = system.composition.evaluate(q, states, False, system.rate)[2]
     held = _held_symmetric(system, problem.jacobian(kmat), SHIFT * system.kscale)
+    if problem.active.groups:
+        _hold_maximum_rows(problem, held, q)
     negative = negative_pivots(problem.comm, held)
     return None if negative is None else negative - int(system.op.active.sum())
+
+
+def at_maximum(problem, q: np.ndarray) -> np.ndarray:
+    """The rows of the maximum groups that are at their value at ``q`` (tied with the largest,
+    the active set's GROUP_TOL) but not enforced. Every rank alike."""
+    rset, active = problem.rset, problem.active
+    values, targets = rset.primal_values(q), rset.targets(problem.t_prev)
+    out = np.zeros(values.size, dtype=bool)
+    for g in active.groups:
+        scale = max(float(np.abs(targets[g]).max()), 1e-300)
+        sign = active.sign[g]
+        out[g] = sign * (targets[g] - values[g]) <= GROUP_TOL * scale
+    return out & ~active.active
+
+
+def _hold_maximum_rows(problem, held: PETSc.Mat, q: np.ndarray) -> None:
+    """Hold the rows of the maximum groups at their value besides the enforced one, as
+    equalities: γ a aᵀ on the primal block of 2 S per row a (γ |a|² = PENALTY k; the DOFs that
+    are held already left out). A maximum group enforces only its largest row, and the others
+    at the value may not pass it (held one-sided): the comparison solid that lets them pass
+    reads a stable localization (one column damaging, its three cells at the maximum) as
+    unstable; held both ways the count is at most the one-sided problem's (a quadratic form
+    negative on a subspace of the admissible directions is negative on them), so an unstable
+    count is one for sure. Every rank holds the relations whole: rank 0 adds them."""
+    rows = np.flatnonzero(at_maximum(problem, q))
+    system = problem.system
+    # (on every rank: logically collective, a reduction in a debugging PETSc)
+    held.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+    if problem.comm.rank == 0 and rows.size:
+        keep = [], []
+        for row in rows:
+            k, local = problem.rset.locate(int(row))
+            rel = problem.ctx.multiplied[k]
+            sel = (rel.a_rows == local) & ~np.isin(rel.a_dofs, system.elim_dofs)
+            dofs, vals = np.asarray(rel.a_dofs)[sel], np.asarray(rel.a_vals, dtype=float)[sel]
+            if not dofs.size:
+                continue
+            index = system.dofmap.input_saddle(dofs).astype(PETSc.IntType)
+            gamma = 2.0 * PENALTY * system.kscale / float(vals @ vals)
+            keep[0].append(index)
+            keep[1].append(gamma * np.outer(vals, vals))
+        for index, block in zip(*keep):
+            held.setValues(index, index, block, addv=PETSc.InsertMode.ADD_VALUES)
+    held.assemble()
 
 
 def _held_symmetric(system, mat: PETSc.Mat, shift: float) -> PETSc.Mat:

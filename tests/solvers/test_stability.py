@@ -8,7 +8,12 @@ column may localize), and a secant iteration followed it until round-off pulled 
 step and onto a branch that depended on the partition: on main the run warned of a branch
 jump on one rank count and failed with null pivots on another. The consistent tangent with the
 relations held tells at step 11 on every rank count; the count is compared with a dense
-eigenvalue computation of the same tangent on the null space of the enforced rows."""
+eigenvalue computation of the same tangent on the null space of the enforced rows.
+
+A maximum control holds every row at its value, the enforced one as an equality and the others
+one-sided: the check holds them all (a count that is then at most the one-sided problem's, so
+an unstable count is unstable for sure). The localization bar with its maximum control is
+stable at every step by that count (test_control's closed form runs under the check)."""
 
 import numpy as np
 import pytest
@@ -16,11 +21,11 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from conftest import read_results
-from helpers.control import E, H, L, newton_of
+from helpers.control import BAR, E, H, L, newton_of
 from helpers.scene import DROP, scene, shipped
 
 from parsolve.errors import SolverError
-from parsolve.solvers.stability import SHIFT, negative_pivots, unstable_modes
+from parsolve.solvers.stability import SHIFT, at_maximum, negative_pivots, unstable_modes
 
 STEPS, PEAK = 24, 10            # ε = 1e-5 a step: εd0 = 1e-4 at step 10
 MAZARS = {"model": "mazars", "E": E, "nu": 0.0, "eps_d0": 1e-4, "At": 1.0, "Bt": 1e4,
@@ -64,6 +69,24 @@ def test_the_run_stops_at_the_first_unstable_step(run, control):
     assert np.abs(res["cell_fields/damage"]).max() < 1e-12   # (the peak: round-off)
 
 
+def test_a_maximum_control_holds_every_row_at_its_value():
+    """The localization bar under its maximum control, stepped through the Newton solver past
+    its peak (step 2, ε = 1e-4): from step 3 on, the damaged column's three cells are at the
+    maximum, one enforced. With the enforced row alone held, the other two could soften past
+    it: one negative eigenvalue, a stable localization read as unstable. With the two held as
+    well (one-sided in the run: they may not pass the value) none: the run goes on. Each count
+    equal to a dense eigenvalue computation on the null space of the rows held."""
+    _, _, system, problem, newton = newton_of(BAR)
+    counts = []
+    for step in range(1, 5):
+        states = problem.snapshot()[3]
+        newton.step(step / STEPS)
+        extra = np.flatnonzero(at_maximum(problem, problem.q))
+        counts.append((extra.size, unstable_modes(problem, states),
+                       _dense_count(problem, states, extra), _dense_count(problem, states)))
+    assert counts[2:] == [(2, 0, 0, 1), (2, 0, 0, 1)]
+
+
 def test_the_count_is_the_tangents_on_the_held_space():
     """Stepped through the Newton solver: 0 at the peak (the damaged cells' tangent vanishes
     there: eigenvalues of round-off, which the shift leaves out), 56 at the step after it, each
@@ -78,9 +101,10 @@ def test_the_count_is_the_tangents_on_the_held_space():
     assert counts == [(0, 0), (MODES, MODES)]
 
 
-def _dense_count(problem, states) -> int:
+def _dense_count(problem, states, extra=()) -> int:
     """Eigenvalues below -δ k of Zᵀ (K + Kᵀ)/2 Z, K the consistent tangent assembled, Z an
-    orthonormal basis of the null space of the enforced rows (numpy, on every rank)."""
+    orthonormal basis of the null space of the enforced rows and the relation rows ``extra``
+    (numpy, on every rank)."""
     comm, system = MPI.COMM_WORLD, problem.system
     kmat = system.composition.evaluate(problem.q, states, False, system.rate)[2]
     mat = problem.jacobian(kmat)
@@ -90,10 +114,23 @@ def _dense_count(problem, states) -> int:
     il = np.concatenate(comm.allgather(is_l.getIndices()))
     k, a = whole[np.ix_(iq, iq)], whole[np.ix_(il, iq)]
     a = a[np.abs(a).sum(axis=1) > 0]                    # the enforced rows
+    a = np.vstack([a] + [_primal_row(problem, row, iq) for row in extra])
     _, sv, vt = np.linalg.svd(a)
     z = vt[np.count_nonzero(sv > 1e-12 * sv.max()):].T
     ev = np.linalg.eigvalsh(z.T @ (0.5 * (k + k.T)) @ z)
     return int(np.count_nonzero(ev < -SHIFT * system.kscale))
+
+
+def _primal_row(problem, row: int, iq: np.ndarray) -> np.ndarray:
+    """Relation row ``row``'s A on the primal block's columns (its held DOFs left out)."""
+    k, local = problem.rset.locate(int(row))
+    rel, system = problem.ctx.multiplied[k], problem.system
+    sel = (rel.a_rows == local) & ~np.isin(rel.a_dofs, system.elim_dofs)
+    order = np.argsort(iq)
+    where = order[np.searchsorted(iq, system.dofmap.input_saddle(rel.a_dofs[sel]), sorter=order)]
+    out = np.zeros(iq.size)
+    np.add.at(out, where, rel.a_vals[sel])
+    return out[None, :]
 
 
 @pytest.mark.parametrize("diagonal, count", [([1.0, -1.0, -2.0, 3.0], 2),
