@@ -121,12 +121,18 @@ class RelationSet:
         self.whole_rows, self.own_rows = np.flatnonzero(whole), np.flatnonzero(~whole)
         self.mults_here = np.unique(self.mult_of_row)  # multiplier rows with a row held here
         nl = dofmap.nl
-        self.rep_row = np.zeros(nl, dtype=np.int64)     # row each multiplier enforces
-        self.rep_row[self.mult_of_row[::-1]] = np.arange(self.mult_of_row.size)[::-1]  # first
+        # per multiplier row held here (``mults_here``), the relation row it enforces
+        self.rep_row = np.zeros(self.mults_here.size, dtype=np.int64)
+        self.rep_row[self._here(self.mult_of_row[::-1])] = \
+            np.arange(self.mult_of_row.size)[::-1]    # (its first)
         self.compliance = np.zeros(nl)                  # per multiplier row (Relation)
         self._copy_compliance()
         self._owned_entries: dict[int, tuple] = {}      # per relation: its owned A entries
         self._sums: _RowSums | None = None              # owned_primal's plan
+
+    def _here(self, mults: np.ndarray) -> np.ndarray:
+        """Places in ``mults_here`` of multiplier rows held here."""
+        return np.searchsorted(self.mults_here, mults)
 
     def _by_owner(self, stacked_a: np.ndarray, stacked_d: np.ndarray, first: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray]:
@@ -211,7 +217,7 @@ class RelationSet:
     @property
     def nrows(self) -> int:
         """Multiplier rows."""
-        return int(self.rep_row.size)
+        return int(self.dofmap.nl)
 
     @property
     def nrelrows(self) -> int:
@@ -237,7 +243,7 @@ class RelationSet:
     @property
     def a_on(self) -> np.ndarray:
         """A entries of the rows enforced now (all but a collapsed group's other rows)."""
-        return self.rep_row[self.a_rows] == self.a_relrow
+        return self.rep_row[self._here(self.a_rows)] == self.a_relrow
 
     # ------------------------------------------------------------ values
 
@@ -249,7 +255,7 @@ class RelationSet:
         """Per multiplier row, the value of the relation row it enforces (of the multiplier
         rows with a relation row held here; 0 on the others)."""
         out = np.zeros(self.nrows)
-        out[self.mults_here] = per_row[self.rep_row[self.mults_here]]
+        out[self.mults_here] = per_row[self.rep_row]
         return out
 
     def rhs(self, t: float) -> np.ndarray:
@@ -341,7 +347,7 @@ class RelationSet:
         _, _, l0, l1 = self.dofmap.owned()
         mult = self.mult_of_row[span]
         rows = np.arange(span.start, span.start + mult.size)
-        sel = (mult >= l0) & (mult < l1) & (self.rep_row[mult] == rows)
+        sel = (mult >= l0) & (mult < l1) & (self.rep_row[self._here(mult)] == rows)
         out = np.zeros(mult.size)
         out[sel] = lam[mult[sel] - l0]
         return out
@@ -383,7 +389,8 @@ class RelationSet:
     def row_values(self, per_mult: np.ndarray) -> np.ndarray:
         """Per relation row: a multiplier row's value on the row it enforces, 0 on the others."""
         out = per_mult[self.mult_of_row]
-        return np.where(self.rep_row[self.mult_of_row] == np.arange(out.size), out, 0.0)
+        return np.where(self.rep_row[self._here(self.mult_of_row)] == np.arange(out.size), out,
+                        0.0)
 
     # ------------------------------------------------------------ updates in place
 
@@ -393,7 +400,7 @@ class RelationSet:
         on = np.zeros(self.nrows, dtype=bool)
         np.logical_or.at(on, self.mult_of_row, active_rows)
         rows = np.flatnonzero(active_rows)
-        self.rep_row[self.mult_of_row[rows]] = rows
+        self.rep_row[self._here(self.mult_of_row[rows])] = rows
         return on
 
     def refresh(self) -> None:
