@@ -96,7 +96,6 @@ class ActiveSet:
         # relations' rows over every rank (relation, then global row): what ranks exchange
         self.shared = np.concatenate([np.full(r.nrows, r.whole) for r in relations]) \
             if relations else np.zeros(0, dtype=bool)
-        self.shared_rows = np.flatnonzero(self.shared)
         totals = np.concatenate([[0], np.cumsum([r.total for r in relations])]).astype(np.int64)
         self.key = np.concatenate([totals[k] + r.row_ids() for k, r in enumerate(relations)]) \
             if relations else np.zeros(0, dtype=np.int64)
@@ -186,19 +185,21 @@ class ActiveSet:
         nothing else. Collective."""
         if self.comm.size == 1:
             return mine, np.where(mine, score, -np.inf)
-        # a relation built per rank: its rows are this rank's alone, nothing to tell
-        found = mine & ~self.shared
+        # a relation built per rank: its rows are this rank's alone, nothing to tell (the
+        # arrays: over every row, or over ``group_rows``)
+        shared = self.shared if mine.size == self.shared.size else self.shared[self.group_rows]
+        shared_rows = np.flatnonzero(shared)
+        found = mine & ~shared
         out = np.where(found, score, -np.inf)
-        at = np.searchsorted(self.shared_rows, np.flatnonzero(mine & self.shared))
-        rows = at.astype(np.int64)
+        rows = np.searchsorted(shared_rows, np.flatnonzero(mine & shared)).astype(np.int64)
         counts = np.array(self.comm.allgather(rows.size), dtype=np.int64)
         every = np.empty(int(counts.sum()), dtype=np.int64)
         values = np.empty(every.size)
         self.comm.Allgatherv(rows, [every, counts])
-        self.comm.Allgatherv(np.ascontiguousarray(score[self.shared_rows[rows]], dtype=float),
+        self.comm.Allgatherv(np.ascontiguousarray(score[shared_rows[rows]], dtype=float),
                              [values, counts])
-        found[self.shared_rows[every]] = True
-        out[self.shared_rows[every]] = values
+        found[shared_rows[every]] = True
+        out[shared_rows[every]] = values
         return found, out
 
     def _forming(self, violated: np.ndarray, excess: np.ndarray) -> np.ndarray:
