@@ -83,7 +83,9 @@ def unstable_modes(problem, states: list) -> int | None:
     kmat = system.composition.evaluate(problem.q, states, False, system.rate)[2]
     held = _held_symmetric(system, problem.jacobian(kmat), SHIFT * system.kscale)
     negative = negative_pivots(problem.comm, held)
-    return None if negative is None else negative - int(system.op.active.sum())
+    _, _, l0, l1 = system.dofmap.owned()   # (enforced rows: each counted by its owner)
+    enforced = problem.comm.allreduce(int(system.op.active[l0:l1].sum()))
+    return None if negative is None else negative - enforced
 
 
 def _held_symmetric(system, mat: PETSc.Mat, shift: float) -> PETSc.Mat:
