@@ -221,9 +221,8 @@ class Contact(FiniteSliding, Effect):
         if len(self.pairing) == 0:
             raise InputError("no slave node faces the master surface within the search radius",
                              source, f"{key}.slave")
-        self.ids = None     # rows built per rank: the whole pairing's entries of this rank
-        if spec.obstacle is not None and self.span is None:
-            self._own_entries()
+        # rows built per rank (``relations``): the whole pairing's entries of this rank
+        self.ids = None
         p = self.pairing
         # finite sliding against a deformable master's facets (node-to-segment / face) or a
         # curved obstacle: the force's dependence on the geometry in the Newton matrix
@@ -237,6 +236,12 @@ class Contact(FiniteSliding, Effect):
         # finite sliding on a master region: its spans may be made again (a rigid obstacle's
         # rows hold the slave alone)
         self.restructures = self.span is not None and spec.master is not None
+        self.turning = fr.SlipNewton()
+        self._start_entries()
+
+    def _start_entries(self) -> None:
+        """The pairing's entries' starting state and rows."""
+        p, spec, mesh = self.pairing, self.spec, self.mesh
         n, dm1 = len(p), mesh.dim - 1
         size = float(np.max(mesh.extent))   # the whole mesh's (a part's own would differ)
         closed = p.gap <= spec.closed * size
@@ -244,7 +249,6 @@ class Contact(FiniteSliding, Effect):
         self.node_state = np.where(closed, fr.STICK, fr.OPEN).astype(np.int8)
         self.direction = np.ones((n, dm1)) / np.sqrt(dm1)
         self.committed = (self.node_state.copy(), self.direction.copy())
-        self.turning = fr.SlipNewton()
         # finite sliding: the total slip of the converged steps (the output adds the step's)
         self.slip_base = np.zeros(n * dm1)
         # the multipliers (normal, tangential) of the last iterate and of the last converged
@@ -335,12 +339,14 @@ class Contact(FiniteSliding, Effect):
         return surf.to_input(p)
 
     def _own_entries(self) -> None:
-        """Keep the entries whose slave node this rank owns: a rigid obstacle's rows hold
-        their slave alone, so each rank builds and holds its own rows (``Relation.ids``: the
+        """Keep the entries whose slave node this rank owns (their state and rows made
+        again): a rigid obstacle's rows hold their slave alone, so each rank builds and holds
+        its own rows (``Relation.ids``: the
         entry's place in the whole pairing, the same on any partition)."""
         own, _ = self.values.owned_nodes(self.pairing.slave)
         self.ids, self.entries = np.flatnonzero(own), len(self.pairing)
         self.pairing = self.pairing.subset(self.ids)
+        self._start_entries()
 
     def _sum(self, x):
         """Σ over the ranks of a sum over this rank's rows (rows built per rank); else x."""
@@ -474,6 +480,10 @@ class Contact(FiniteSliding, Effect):
     # ------------------------------------------------------------------ relations
 
     def relations(self) -> list[Relation]:
+        """The relations form's relations: against a rigid obstacle (small sliding), this
+        rank's rows only (``_own_entries``; the penalty form reuses the whole pairing)."""
+        if self.ids is None and self.spec.obstacle is not None and self.span is None:
+            self._own_entries()
         p, name = self.pairing, self.spec.name
         r = self.nrows
         dual = None

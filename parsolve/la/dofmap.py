@@ -10,8 +10,9 @@ saddle vector [q, λ] is numbered and split across ranks.
   ``local_node * ncomp + c``. Ghosts' owners follow from the node ranges. On 1 rank there are
   no ghosts and every number below is the input's: the same code.
 - **Input ids.** Relations and contact rows name input DOFs (``input_node * ncomp + c``): the
-  map finds their local DOFs by a sorted lookup, and (``index_inputs``, one reduction) their
-  global numbers and coordinates.
+  map finds their local DOFs by a sorted lookup, and (``index_inputs``) their global numbers
+  and coordinates: this rank's nodes from its mesh, the others' (a whole relation's nodes
+  elsewhere) from their owners in one reduction.
 - **Held multipliers.** Like its primal DOFs, a rank holds its owned multiplier rows then
   ghost rows: the other ranks' rows whose multipliers its own rows read (``set_multipliers``;
   the relation set gives those whose D column has an entry on one of its owned DOFs, so a

@@ -7,14 +7,24 @@ Relations are rescaled so that their rows and columns are commensurate with the 
 ``λ / col_scale`` and the primal equation's right-hand side ``b · row_scale``. An associated
 relation gets equal scales, which keeps the operator symmetric.
 
-Multiplier rows are numbered by owner: a row belongs to the rank owning most of the DOFs its A
+A relation is whole (every row on every rank) or built per rank (``Relation.ids``: a rigid
+obstacle's contact rows, each built by the rank owning its slave node, numbered by its place in
+the whole relation). The relation rows a rank holds are its per-rank relations' rows and every
+whole relation's; the vectors per relation row (``mult_of_row``, ``position``, the active
+set's masks, targets, gaps) run over those, and the ones per multiplier row (``rep_row``)
+over the multiplier rows those rows have (``mults_here``). Still of the multipliers' number on
+every rank: the compliance and the row and column scales.
+
+Multiplier rows are numbered by owner: a per-rank relation's rows belong to the rank that built
+them; a whole relation's row to the rank owning most of the DOFs its A
 row and D column name (ties: the lowest rank; a row with no entry: ranks in turn), so that the
 row of A and the column of D live, as far as they can, with the nodes they act on. A contact
 row on a rigid obstacle goes with its slave node; a row tying a slave node to a span of master
 nodes (finite sliding, mortar) with the master nodes, which are most of its entries; the
 rows of a group the active set decides together (a maximum relation's, a relation's
 ``groups``) with the owner of the group's first row. Rank r's rows come after those of the ranks before it, in stacking order (relation by
-relation); the DOF map is given each rank's count (``DofMap.set_multipliers``). On one rank
+relation; the per-rank relations' counts gathered); the DOF map is given each rank's count
+(``DofMap.set_multipliers``). On one rank
 this is the stacking order itself. Each rank keeps the entries of its own operator rows only
 (the A entries of the multiplier rows it owns, the D entries on the primal DOFs it owns) and
 holds, besides its own multipliers, the ghost rows whose D column has an entry on one of its
