@@ -348,11 +348,11 @@ class Contact(FiniteSliding, Effect):
         self.pairing = self.pairing.subset(self.ids)
         self._start_entries()
 
-    def _sum(self, x):
+    def sum_ranks(self, x):
         """Σ over the ranks of a sum over this rank's rows (rows built per rank); else x."""
         return x if self.ids is None else self.values.comm.allreduce(x, op=MPI.SUM)
 
-    def _any(self, x: bool) -> bool:
+    def any_rank(self, x: bool) -> bool:
         """The same, of a decision."""
         return x if self.ids is None else self.values.comm.allreduce(bool(x), op=MPI.LOR)
 
@@ -470,7 +470,7 @@ class Contact(FiniteSliding, Effect):
         hints = super().failure_hints()
         closed = self.node_state != fr.OPEN
         sticking = (self.node_state == fr.STICK).any()
-        if self.frictional and self._any(closed.any()) and not self._any(sticking):
+        if self.frictional and self.any_rank(closed.any()) and not self.any_rank(sticking):
             hints.append(f"{self.source}: {self.spec.key}: every closed node of {self.spec.name!r} "
                          f"slides at the last iterate: with nothing else holding the body along the "
                          f"surface, the tangential load exceeds the friction capacity μN (μ = "
@@ -633,7 +633,7 @@ class Contact(FiniteSliding, Effect):
         direction[moving] = du[moving] / norm[moving, None]
         if turning:
             changed = self._turn(state, direction, lam, rn, rt, du, motion) or changed
-        changed = self._any(changed)   # (rows per rank: any rank's change, as on one rank)
+        changed = self.any_rank(changed)   # (rows per rank: any rank's change, as on one rank)
         self.node_state, self.direction = state, direction
         if changed or moved or self.restructured:   # (spans made again: the dual's new entries)
             self._set_dual()
@@ -656,7 +656,7 @@ class Contact(FiniteSliding, Effect):
         starting = (self.node_state == fr.STICK) & (state == fr.SLIP)
         excess = np.linalg.norm(rt, axis=1) - murn
         self.turning.begin_slip(starting & (excess > 0.0), excess, murn)
-        unsettled = self._any(bool(np.any(residual > fr.TOL_ANGLE) or np.any(switched)))
+        unsettled = self.any_rank(bool(np.any(residual > fr.TOL_ANGLE) or np.any(switched)))
         if unsettled:
             direction[sliding] = s[sliding]
         return unsettled
@@ -736,8 +736,8 @@ class Contact(FiniteSliding, Effect):
                   f"{name}_tangential_reaction": nodal(p.slave, rt),
                   f"{name}_gap": nodal(p.slave, gap), f"{name}_slip": nodal(p.slave, slip),
                   f"{name}_state": nodal(p.slave, state, fill=-1.0)}
-        extras = {"normal_force": np.array([self._sum((rn * share).sum())]),
-                  "tangential_force": self._sum((rt * share[:, None]).sum(axis=0))}
+        extras = {"normal_force": np.array([self.sum_ranks((rn * share).sum())]),
+                  "tangential_force": self.sum_ranks((rt * share[:, None]).sum(axis=0))}
         return fields, {self.normal.name: extras}
 
 
