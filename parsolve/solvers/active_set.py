@@ -115,10 +115,14 @@ class ActiveSet:
         self.changes = 0
         self.seen = _Seen(self.comm)
         self.held = self.active.copy()
+        self._unilateral = any(r.sign != 0 for r in relations)
+        self.forming_relations = [k for k, r in enumerate(relations) if r.forming]
 
     @property
     def unilateral(self) -> bool:
-        return bool(np.any(self.sign != 0))
+        """Whether some relation has unilateral rows (on any rank: a relation built per rank
+        may have none here)."""
+        return self._unilateral
 
     def start_step(self) -> None:
         self.changes = 0
@@ -213,8 +217,8 @@ class ActiveSet:
         if it must, by the plain rule (every violated row) from the next iteration on. Per
         forming relation, its violated rows' count and deepest excess are reduced over the
         ranks. Collective."""
-        spans = [slice(self.first[k], self.first[k + 1]) for k in range(len(self.names))]
-        spans = [rows for rows in spans if self.forming[rows].any()]
+        # (by relation: a relation built per rank may have no row here)
+        spans = [slice(self.first[k], self.first[k + 1]) for k in self.forming_relations]
         if not spans:
             return violated
         count = np.array([float(violated[rows].sum()) for rows in spans])
@@ -225,7 +229,7 @@ class ActiveSet:
             self.comm.Allreduce(MPI.IN_PLACE, count, op=MPI.SUM)
             self.comm.Allreduce(MPI.IN_PLACE, deepest, op=MPI.MAX)
             # a relation built per rank: its enforced rows on every rank
-            whole = np.array([bool(self.shared[rows].all()) for rows in spans])
+            whole = self.whole_relation[self.forming_relations]
             per_rank = np.where(whole, 0.0, enforced)
             self.comm.Allreduce(MPI.IN_PLACE, per_rank, op=MPI.SUM)
             enforced = np.where(whole, enforced, per_rank)
