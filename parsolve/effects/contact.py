@@ -729,7 +729,8 @@ class Contact(FiniteSliding, Effect):
         if self._covered is not None:   # no facet has faced it yet: no gap
             gap[~self._covered] = np.inf
         slip = self._slip(q) if self.span is None else self.slip_base + self.du.ravel()
-        slip = (slip.reshape(share.size, -1) / share[:, None]).reshape(slip.shape)
+        dm1 = self.mesh.dim - 1   # (a rank may hold no row: no -1 in the shape)
+        slip = slip.reshape(share.size, dm1) / share[:, None]
         # over every node (0 elsewhere; state -1), or this rank's owned rows on a part
         nodal = self.values.nodal
         fields = {f"{name}_normal_reaction": nodal(p.slave, rn),

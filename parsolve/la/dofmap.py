@@ -493,7 +493,9 @@ class DofMap:
     def nodal(self, nodes: np.ndarray, values: np.ndarray, fill: float = 0.0) -> OwnedRows:
         """A nodal output (k columns) with ``values`` at input ``nodes`` and ``fill``
         elsewhere: this rank's owned rows (owned nodes come first, in increasing input id)."""
-        values = np.asarray(values, dtype=float).reshape(len(nodes), -1)
+        values = np.asarray(values, dtype=float)
+        k = values.shape[1] if values.ndim == 2 else values.size // max(len(nodes), 1) or 1
+        values = values.reshape(len(nodes), k)   # (no node here: the columns as given)
         own, local = self.owned_nodes(nodes)
         out = np.full((self.n_owned_nodes, values.shape[1]), fill)
         out[local] = values[own]
