@@ -64,7 +64,7 @@ def _branch_reach(rate: np.ndarray, room: np.ndarray, current: int) -> np.ndarra
     with r > 0 reach it at room / r. Past the enforced row's peak (rate < 0), its value grows
     only as the load falls, while the other rows unload: the rows with r < 0 reach it at
     room / -r. Rows that never reach it on that branch: +inf."""
-    tol = 1e-9 * max(float(np.abs(rate).max()), 1e-300)
+    tol = 1e-9 * max(float(np.abs(rate).max(initial=0.0)), 1e-300)
     side = -1.0 if rate[current] < -tol else 1.0
     r = side * rate
     return np.where(r > tol, room / np.where(r > tol, r, 1.0), np.inf)
@@ -254,7 +254,7 @@ class RelationPolicies:
             # until it has some: it takes the sense of the relation's other rows, for good (the
             # sense is decided once; a contact's normal rows all have the sense +1)
             empty = r.empty_rows()
-            if np.any(~empty & (np.abs(rate) <= 1e-12 * max(float(np.abs(rate).max()), 1e-300))):
+            if np.any(~empty & (np.abs(rate) <= 1e-12 * max(float(np.abs(rate).max(initial=0.0)), 1e-300))):
                 raise SolverError(f"relation {r.name!r}: its dual does not move its primal value "
                                   "(A K⁻¹ D = 0), so the sense of its reaction is undefined")
             sense = -np.sign(rate)
