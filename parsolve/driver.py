@@ -52,7 +52,7 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
     scene = model.scene
     system = SaddleSystem(comm, model)
     # (a device of the Newton matrix, e.g. contact's geometric stiffness, is not a result)
-    relations_meta = {r.name: (r.nrows, r.sense != "=") for r in model.relations
+    relations_meta = {r.name: (r.total, r.sense != "=") for r in model.relations
                       if not r.meta.get("device")}
     unknowns = {"unknowns": " ".join(f.output for f in model.fields),
                 "dofs": model.mesh.num_global_points * model.ncomp,

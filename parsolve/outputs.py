@@ -125,14 +125,16 @@ def step_outputs(comm: MPI.Comm, ctx, q: np.ndarray, multipliers: dict, newton=N
     rel_out = {}
     active = newton.enforced if newton is not None else None
     reported = [r for r in ctx.all_relations if not r.meta.get("device")]
-    for r in reported:
+    for r in reported:   # (a relation built per rank: every row gathered, collective)
         lam = multipliers[r.name]
-        rel_out[r.name] = {"multiplier": lam, "primal": ctx.relation_primal(r, q),
-                           "resultant": resultant(r, lam, ctx.fields, ctx.dofs.input_points)}
+        total = resultant(r, lam, ctx.fields, ctx.dofs.input_points)
+        rel_out[r.name] = {"multiplier": every_row(comm, r, lam),
+                           "primal": every_row(comm, r, ctx.relation_primal(r, q)),
+                           "resultant": total if r.whole else comm.allreduce(total, op=MPI.SUM)}
     views = ctx.views(active) if active is not None else {}
     for r in reported:
         if r.sense != "=":
-            rel_out[r.name]["active"] = views[r.name].astype(np.int8)
+            rel_out[r.name]["active"] = every_row(comm, r, views[r.name]).astype(np.int8)
     if active is not None:  # switched relations' outputs: solubility states, contact
         for effect in ctx.effects:
             nodal, per_relation = effect.step_outputs(q, multipliers, views)
@@ -140,6 +142,18 @@ def step_outputs(comm: MPI.Comm, ctx, q: np.ndarray, multipliers: dict, newton=N
             for name, values in per_relation.items():
                 rel_out[name].update(values)
     return fields, cell_fields, rel_out
+
+
+def every_row(comm: MPI.Comm, relation, values: np.ndarray) -> np.ndarray:
+    """A relation's per-row values over every row from the rows held here: a relation built
+    per rank's gathered from each row's rank (one reduction of its size: the written
+    steps' outputs only); a whole relation's as they are. Collective."""
+    if relation.whole:
+        return values
+    out = np.zeros(relation.total)
+    out[relation.ids] = values
+    comm.Allreduce(MPI.IN_PLACE, out, op=MPI.SUM)
+    return out
 
 
 class Balance:
@@ -197,10 +211,16 @@ class Balance:
 
     def _reactions(self, name: str, multipliers: dict) -> float:
         """Σ of the reactions D λ of every relation on a field's equations."""
-        total = 0.0
+        total, own = 0.0, 0.0   # (a relation built per rank: its rows' sum over the ranks)
         for r in self.ctx.all_relations:
             dofs, force = r.reaction(multipliers[r.name])
-            total += float(force[np.isin(dofs % self.ncomp, self.cols[name])].sum())
+            part = float(force[np.isin(dofs % self.ncomp, self.cols[name])].sum())
+            if r.whole:
+                total += part
+            else:
+                own += part
+        if any(not r.whole for r in self.ctx.all_relations):
+            total += self.comm.allreduce(own)
         return total
 
 

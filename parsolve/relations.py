@@ -59,6 +59,11 @@ class Relation:
     # ``contact.geometry``); None: all 0. A relation of such rows alone is marked
     # ``meta["device"]``: not a result (not written)
     compliance: np.ndarray | None = None
+    # a relation built per rank (``rows_here``): the global number of each of its rows this
+    # rank holds (increasing; all owned here), and ``size`` its rows over every rank. None: a
+    # whole relation, every row on every rank (its row k is global row k)
+    ids: np.ndarray | None = None
+    size: int | None = None
 
     def __post_init__(self) -> None:
         if self.sense not in SENSES:
@@ -77,6 +82,20 @@ class Relation:
         self.a_vals = np.zeros(self.a_rows.size)
         if dual:
             self.dual = (self.a_dofs, self.a_rows, np.zeros(self.a_rows.size))
+
+    @property
+    def whole(self) -> bool:
+        """Every row on every rank (else: this rank's rows only, ``ids``)."""
+        return self.ids is None
+
+    @property
+    def total(self) -> int:
+        """Rows over every rank."""
+        return self.nrows if self.ids is None else int(self.size)
+
+    def row_ids(self) -> np.ndarray:
+        """Global number of each row held here."""
+        return np.arange(self.nrows, dtype=np.int64) if self.ids is None else self.ids
 
     @property
     def associated(self) -> bool:
@@ -205,6 +224,13 @@ def with_dual(relation: Relation, vector: np.ndarray) -> Relation:
     """The same primal part with every row's reaction along one given vector (non-associated)."""
     nz = np.flatnonzero(vector)
     relation.shared_dual = (nz, vector[nz])
+    return relation
+
+
+def rows_here(relation: Relation, ids: np.ndarray, size: int) -> Relation:
+    """A relation built per rank: its rows are the global rows ``ids`` (increasing) of a
+    relation of ``size`` rows over every rank, all owned by this rank (``Relation.ids``)."""
+    relation.ids, relation.size = np.asarray(ids, dtype=np.int64), int(size)
     return relation
 
 

@@ -133,6 +133,7 @@ def friction_update(
     tol_force: float = 1e-12,
     tol_slip: float = 1e-14,
     tol_angle: float = TOL_ANGLE,
+    rn_max: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray, bool]:
     """One friction active-set update between global iterations.
 
@@ -148,7 +149,8 @@ def friction_update(
     * SLIP otherwise: the direction is updated (``mode``, see :func:`slip_direction`); in 2D
       it cannot change this way (the slip is along +-s).
 
-    tol_force scales with max(Rn). Returns (state, direction, changed): changed when a state
+    tol_force scales with max(Rn) (``rn_max``: the whole surface's, when these are a part of
+    it). Returns (state, direction, changed): changed when a state
     changed or a direction turned by more than tol_angle (radians).
     """
     state = np.asarray(state, dtype=np.int8)
@@ -159,7 +161,9 @@ def friction_update(
     du = _vec(slip_increment, n)
     closed = np.asarray(closed, dtype=bool)
     mu = np.broadcast_to(np.asarray(mu, dtype=float), (n,))
-    scale = max(float(np.max(np.abs(rn))) if n else 0.0, 1e-300)
+    if rn_max is None:
+        rn_max = float(np.max(np.abs(rn))) if n else 0.0
+    scale = max(rn_max, 1e-300)
 
     new_state = np.where(closed, state, OPEN).astype(np.int8)
     new_state[closed & (state == OPEN)] = STICK
@@ -215,8 +219,9 @@ class SlipNewton:
     κ infinite) is *held* first: its row across s blocked (the limit κ → ∞), so that it
     slides along s and gets a γ; it is then free. A node whose slip stays at or below ``tol``
     (no direction to take from it) stays held and turns s towards −Rt (the plain update,
-    whose error factor ξ is then negligible). Deterministic arithmetic on the gathered
-    arrays: every rank takes the same decisions.
+    whose error factor ξ is then negligible). Deterministic arithmetic: every rank takes the
+    same decisions on the nodes it holds (``turn``'s ``comm``: the surface's nodes split over
+    the ranks, whose one surface number k is then taken over all).
     """
 
     def __init__(self):
@@ -241,7 +246,7 @@ class SlipNewton:
         self.committed = self.kappa.copy()
 
     def turn(self, sliding: np.ndarray, s: np.ndarray, du: np.ndarray, rt: np.ndarray,
-             murn: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+             murn: np.ndarray, tol: float, comm=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(new directions (n, 2), residual angles (n,), mode switched (n,)) of the nodes that
         slide before and after the iteration just solved (``sliding``; the others keep s),
         from its slip increments du (n, 2), friction forces rt (n, 2) and mu Rn (n,).
@@ -260,10 +265,15 @@ class SlipNewton:
         residual = np.where(sliding, np.abs(signed_angle(s, out)), 0.0)
         switched = free & self.held
         measured = switched & (self.excess > 0.0)
-        if self.k is None and np.any(measured):
+        if self.k is None:
             # the held solve slid them by γ under the force their stick reaction had beyond
-            # the cone: k ≈ excess / γ (a median: one number for the surface, robust)
-            self.k = float(np.median(self.excess[measured] / gamma[measured]))
+            # the cone: k ≈ excess / γ (a median: one number for the surface, robust; the
+            # surface's nodes gathered from the ranks sharing them)
+            ratios = self.excess[measured] / gamma[measured]
+            if comm is not None and comm.size > 1:
+                ratios = np.concatenate(comm.allgather(ratios))
+            if ratios.size:
+                self.k = float(np.median(ratios))
         self.held = ~free
         self.kappa = np.where(free, murn / np.where(free, gamma, 1.0), 0.0)
         self.excess[:] = 0.0

@@ -35,11 +35,14 @@ converge in partial slip (kept for study).
 A node that closes while moving along the surface starts sliding that way (sticking it at
 the step's starting point would pull it back, open it again, and cycle).
 
-Decisions are made on every rank from the same row values and λ: the ranks agree. On a
-distributed mesh (each rank its part) the surfaces are gathered once (their nodes' input ids
-and coordinates: the surfaces' size), every rank pairs them as the replicated mesh does, and
-the rows stay in input DOFs; per iteration only row values (``DofMap``: owned entries and
-one reduction of the rows' size) and the multipliers every rank holds are used.
+On a distributed mesh (each rank its part) the surfaces are gathered once (their nodes' input
+ids and coordinates: the surfaces' size), every rank pairs them as the replicated mesh does,
+and the rows stay in input DOFs. Against a rigid obstacle (small sliding) each rank then keeps
+the entries whose slave node it owns and builds their rows alone (``Relation.ids``: global
+row numbers, the same on any partition): node states, slip directions and decisions are
+its own, and only a change (any rank's) and the resultants cross the ranks. Otherwise every
+rank decides from the same row values (owned entries, one reduction of the rows' size) and λ
+(each relation's rows fetched from their owners): the ranks agree.
 
 Held, tied and shared nodes: a contact node that a Dirichlet condition also holds, a periodic
 tie between contact nodes, a node in two surfaces along one normal make the enforced rows
@@ -89,6 +92,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from mpi4py import MPI
 
 from parsolve.contact import friction as fr
 from parsolve.contact import obstacles
@@ -106,7 +110,7 @@ from parsolve.la.dofmap import DofMap
 from parsolve.evolution import CONSTANT
 from parsolve.mesh.regions import gather_facets
 from parsolve.mesh.topology import FACETS, boundary_facets
-from parsolve.relations import Relation
+from parsolve.relations import Relation, rows_here
 from parsolve.schema import NAME_PATTERN
 
 OBSTACLES = ("plane", "cylinder", "sphere")
@@ -217,6 +221,8 @@ class Contact(FiniteSliding, Effect):
         if len(self.pairing) == 0:
             raise InputError("no slave node faces the master surface within the search radius",
                              source, f"{key}.slave")
+        # rows built per rank (``relations``): the whole pairing's entries of this rank
+        self.ids = None
         p = self.pairing
         # finite sliding against a deformable master's facets (node-to-segment / face) or a
         # curved obstacle: the force's dependence on the geometry in the Newton matrix
@@ -230,6 +236,12 @@ class Contact(FiniteSliding, Effect):
         # finite sliding on a master region: its spans may be made again (a rigid obstacle's
         # rows hold the slave alone)
         self.restructures = self.span is not None and spec.master is not None
+        self.turning = fr.SlipNewton()
+        self._start_entries()
+
+    def _start_entries(self) -> None:
+        """The pairing's entries' starting state and rows."""
+        p, spec, mesh = self.pairing, self.spec, self.mesh
         n, dm1 = len(p), mesh.dim - 1
         size = float(np.max(mesh.extent))   # the whole mesh's (a part's own would differ)
         closed = p.gap <= spec.closed * size
@@ -237,7 +249,6 @@ class Contact(FiniteSliding, Effect):
         self.node_state = np.where(closed, fr.STICK, fr.OPEN).astype(np.int8)
         self.direction = np.ones((n, dm1)) / np.sqrt(dm1)
         self.committed = (self.node_state.copy(), self.direction.copy())
-        self.turning = fr.SlipNewton()
         # finite sliding: the total slip of the converged steps (the output adds the step's)
         self.slip_base = np.zeros(n * dm1)
         # the multipliers (normal, tangential) of the last iterate and of the last converged
@@ -326,6 +337,24 @@ class Contact(FiniteSliding, Effect):
         if spec.sliding == "finite":   # rows on the slave alone: the spans are empty
             self.span = obstacle_spans(surf, p, float(np.max(self.mesh.extent)))
         return surf.to_input(p)
+
+    def _own_entries(self) -> None:
+        """Keep the entries whose slave node this rank owns (their state and rows made
+        again): a rigid obstacle's rows hold their slave alone, so each rank builds and holds
+        its own rows (``Relation.ids``: the
+        entry's place in the whole pairing, the same on any partition)."""
+        own, _ = self.values.owned_nodes(self.pairing.slave)
+        self.ids, self.entries = np.flatnonzero(own), len(self.pairing)
+        self.pairing = self.pairing.subset(self.ids)
+        self._start_entries()
+
+    def sum_ranks(self, x):
+        """Σ over the ranks of a sum over this rank's rows (rows built per rank); else x."""
+        return x if self.ids is None else self.values.comm.allreduce(x, op=MPI.SUM)
+
+    def any_rank(self, x: bool) -> bool:
+        """The same, of a decision."""
+        return x if self.ids is None else self.values.comm.allreduce(bool(x), op=MPI.LOR)
 
     def _project(self, points: np.ndarray, nodes: np.ndarray):
         """The nodes (compact ids) projected on the rigid obstacle (``contact.obstacles``)."""
@@ -422,7 +451,8 @@ class Contact(FiniteSliding, Effect):
     def _slip(self, q: np.ndarray) -> np.ndarray:
         """Tangential displacement of the slave relative to the master (rows of ``trows``)."""
         t = self.trows
-        return self.values.rows(self.t_dofs, t.row, t.coef, t.nrows, q)
+        rows = self.values.rows if self.ids is None else self.values.rows_here
+        return rows(self.t_dofs, t.row, t.coef, t.nrows, q)
 
     @property
     def mu(self) -> float:
@@ -439,7 +469,8 @@ class Contact(FiniteSliding, Effect):
         along the slide. (The node states are the whole surface's: the same on every rank.)"""
         hints = super().failure_hints()
         closed = self.node_state != fr.OPEN
-        if self.frictional and closed.any() and (self.node_state[closed] == fr.SLIP).all():
+        sticking = (self.node_state == fr.STICK).any()
+        if self.frictional and self.any_rank(closed.any()) and not self.any_rank(sticking):
             hints.append(f"{self.source}: {self.spec.key}: every closed node of {self.spec.name!r} "
                          f"slides at the last iterate: with nothing else holding the body along the "
                          f"surface, the tangential load exceeds the friction capacity μN (μ = "
@@ -449,6 +480,10 @@ class Contact(FiniteSliding, Effect):
     # ------------------------------------------------------------------ relations
 
     def relations(self) -> list[Relation]:
+        """The relations form's relations: against a rigid obstacle (small sliding), this
+        rank's rows only (``_own_entries``; the penalty form reuses the whole pairing)."""
+        if self.ids is None and self.spec.obstacle is not None and self.span is None:
+            self._own_entries()
         p, name = self.pairing, self.spec.name
         r = self.nrows
         dual = None
@@ -460,6 +495,8 @@ class Contact(FiniteSliding, Effect):
         normal.meta = {"type": "contact", "key": self.spec.key,
                        "refresh": self.frictional or finite}
         self.normal = normal
+        if self.ids is not None:
+            rows_here(normal, self.ids, self.entries)
         out = [normal]
         if self.frictional:
             t = self.trows
@@ -471,6 +508,10 @@ class Contact(FiniteSliding, Effect):
                             "refresh": self.mesh.dim == 3 or finite}
             self.tangent = tangent
             out.append(tangent)
+            if self.ids is not None:
+                dm1 = self.mesh.dim - 1
+                rows_here(tangent, (self.ids[:, None] * dm1 + np.arange(dm1)).ravel(),
+                          self.entries * dm1)
         if self.geometric:
             out.append(self._geometry_relation())
         return out
@@ -581,7 +622,8 @@ class Contact(FiniteSliding, Effect):
         turning = self.mesh.dim == 3 and self.spec.direction == "reaction"
         state, direction, changed = fr.friction_update(
             self.node_state, self.direction, closed, rn, rt, du, self.mu, self.spec.direction,
-            tol_angle=np.inf if turning else fr.TOL_ANGLE)   # (turning: settled by _turn)
+            tol_angle=np.inf if turning else fr.TOL_ANGLE,   # (turning: settled by _turn)
+            rn_max=None if self.ids is None else self.values.max_abs(rn))
         # a node that closes while it moves along the surface slides that way: sticking it
         # at the step's starting point would pull it back (and may open it again: a cycle)
         norm = np.linalg.norm(du, axis=1)
@@ -591,6 +633,7 @@ class Contact(FiniteSliding, Effect):
         direction[moving] = du[moving] / norm[moving, None]
         if turning:
             changed = self._turn(state, direction, lam, rn, rt, du, motion) or changed
+        changed = self.any_rank(changed)   # (rows per rank: any rank's change, as on one rank)
         self.node_state, self.direction = state, direction
         if changed or moved or self.restructured:   # (spans made again: the dual's new entries)
             self._set_dual()
@@ -607,12 +650,13 @@ class Contact(FiniteSliding, Effect):
         sliding = (self.node_state == fr.SLIP) & (state == fr.SLIP)
         murn = self.mu * np.maximum(rn, 0.0)
         # a slip below 1e-6 of the step's motion has no direction: such a node stays held
-        s, residual, switched = self.turning.turn(sliding, self.direction, du, rt, murn,
-                                                  1e-6 * motion)
+        s, residual, switched = self.turning.turn(
+            sliding, self.direction, du, rt, murn, 1e-6 * motion,
+            None if self.ids is None else self.values.comm)
         starting = (self.node_state == fr.STICK) & (state == fr.SLIP)
         excess = np.linalg.norm(rt, axis=1) - murn
         self.turning.begin_slip(starting & (excess > 0.0), excess, murn)
-        unsettled = bool(np.any(residual > fr.TOL_ANGLE) or np.any(switched))
+        unsettled = self.any_rank(bool(np.any(residual > fr.TOL_ANGLE) or np.any(switched)))
         if unsettled:
             direction[sliding] = s[sliding]
         return unsettled
@@ -685,15 +729,16 @@ class Contact(FiniteSliding, Effect):
         if self._covered is not None:   # no facet has faced it yet: no gap
             gap[~self._covered] = np.inf
         slip = self._slip(q) if self.span is None else self.slip_base + self.du.ravel()
-        slip = (slip.reshape(share.size, -1) / share[:, None]).reshape(slip.shape)
+        dm1 = self.mesh.dim - 1   # (a rank may hold no row: no -1 in the shape)
+        slip = slip.reshape(share.size, dm1) / share[:, None]
         # over every node (0 elsewhere; state -1), or this rank's owned rows on a part
         nodal = self.values.nodal
         fields = {f"{name}_normal_reaction": nodal(p.slave, rn),
                   f"{name}_tangential_reaction": nodal(p.slave, rt),
                   f"{name}_gap": nodal(p.slave, gap), f"{name}_slip": nodal(p.slave, slip),
                   f"{name}_state": nodal(p.slave, state, fill=-1.0)}
-        extras = {"normal_force": np.array([(rn * share).sum()]),
-                  "tangential_force": (rt * share[:, None]).sum(axis=0)}
+        extras = {"normal_force": np.array([self.sum_ranks((rn * share).sum())]),
+                  "tangential_force": self.sum_ranks((rt * share[:, None]).sum(axis=0))}
         return fields, {self.normal.name: extras}
 
 

@@ -10,8 +10,9 @@ saddle vector [q, λ] is numbered and split across ranks.
   ``local_node * ncomp + c``. Ghosts' owners follow from the node ranges. On 1 rank there are
   no ghosts and every number below is the input's: the same code.
 - **Input ids.** Relations and contact rows name input DOFs (``input_node * ncomp + c``): the
-  map finds their local DOFs by a sorted lookup, and (``index_inputs``, one reduction) their
-  global numbers and coordinates.
+  map finds their local DOFs by a sorted lookup, and (``index_inputs``) their global numbers
+  and coordinates: this rank's nodes from its mesh, the others' (a whole relation's nodes
+  elsewhere) from their owners in one reduction.
 - **Held multipliers.** Like its primal DOFs, a rank holds its owned multiplier rows then
   ghost rows: the other ranks' rows whose multipliers its own rows read (``set_multipliers``;
   the relation set gives those whose D column has an entry on one of its owned DOFs, so a
@@ -306,19 +307,35 @@ class DofMap:
         return np.flatnonzero(own), local[own]
 
     def index_inputs(self, dofs: list[np.ndarray]) -> None:
-        """Global numbers and coordinates of the nodes of these input DOFs (every rank the
-        same; relations are kept whole on every rank): each node's owner contributes them,
-        one reduction of the nodes' number. Collective."""
+        """Global numbers and coordinates of the nodes of these input DOFs: this rank's nodes
+        (owned and ghosts) from its mesh; the others (a whole relation's nodes on other
+        ranks) from their owners, in one reduction of their number over the ranks. Each rank
+        may ask for different nodes (relations built per rank). Collective."""
         nc = self.ncomp
         nodes = np.unique(np.concatenate([np.asarray(d, dtype=np.int64) // nc for d in dofs])
                           if dofs else np.zeros(0, dtype=np.int64))
-        own, local = self.owned_nodes(nodes)
         mesh = self.mesh
-        packed = np.zeros((nodes.size, 1 + mesh.points.shape[1]))
-        packed[own, 0] = mesh.node_new[local] + 1
-        packed[own, 1:] = mesh.points[local]
-        self.comm.Allreduce(MPI.IN_PLACE, packed, op=MPI.SUM)
-        self._inputs = (nodes, packed[:, 0].astype(np.int64) - 1, packed[:, 1:])
+        dim = mesh.points.shape[1]
+        packed = np.zeros((nodes.size, 1 + dim))
+        local = self.local_nodes(nodes)
+        here = local >= 0
+        packed[here, 0] = mesh.node_new[local[here]]
+        packed[here, 1:] = mesh.points[local[here]]
+        asked = nodes[~here]
+        if self.comm.size > 1:
+            counts = np.array(self.comm.allgather(asked.size), dtype=np.int64)
+            every = np.empty(int(counts.sum()), dtype=np.int64)
+            self.comm.Allgatherv(asked, [every, counts])
+            own, at = self.owned_nodes(every)
+            answer = np.zeros((every.size, 1 + dim))
+            answer[own, 0] = mesh.node_new[at] + 1
+            answer[own, 1:] = mesh.points[at]
+            self.comm.Allreduce(MPI.IN_PLACE, answer, op=MPI.SUM)
+            start = int(counts[:self.rank].sum())
+            mine = answer[start:start + asked.size]
+            packed[~here, 0] = mine[:, 0] - 1
+            packed[~here, 1:] = mine[:, 1:]
+        self._inputs = (nodes, packed[:, 0].astype(np.int64), packed[:, 1:])
 
     def input_new_dof(self, dofs: np.ndarray) -> np.ndarray:
         """Input DOFs (of nodes given to ``index_inputs``) → the new primal numbering."""
@@ -433,9 +450,17 @@ class DofMap:
         sel, local = self.owned_dof_entries(dofs)
         return self.sum_ranks(self.owned_part(sel, local, rows, coefs, nrows, q))
 
+    def rows_here(self, dofs: np.ndarray, rows: np.ndarray, coefs: np.ndarray, nrows: int,
+                  q: np.ndarray) -> np.ndarray:
+        """A q of rows whose entries are all on this rank's owned DOFs (a relation built per
+        rank): no reduction."""
+        sel, local = self.owned_dof_entries(dofs)
+        return self.owned_part(sel, local, rows, coefs, nrows, q)
+
     def relation(self, r, q: np.ndarray) -> np.ndarray:
-        """A q of a relation's rows. Collective."""
-        return self.rows(r.a_dofs, r.a_rows, r.a_vals, r.nrows, q)
+        """A q of a relation's rows held here. Collective for a whole relation."""
+        rows = self.rows if r.whole else self.rows_here
+        return rows(r.a_dofs, r.a_rows, r.a_vals, r.nrows, q)
 
     def at_inputs(self, dofs: np.ndarray, q: np.ndarray) -> np.ndarray:
         """q at input DOFs, each from its owner (the same on every rank). Collective."""
@@ -468,7 +493,9 @@ class DofMap:
     def nodal(self, nodes: np.ndarray, values: np.ndarray, fill: float = 0.0) -> OwnedRows:
         """A nodal output (k columns) with ``values`` at input ``nodes`` and ``fill``
         elsewhere: this rank's owned rows (owned nodes come first, in increasing input id)."""
-        values = np.asarray(values, dtype=float).reshape(len(nodes), -1)
+        values = np.asarray(values, dtype=float)
+        k = values.shape[1] if values.ndim == 2 else values.size // max(len(nodes), 1) or 1
+        values = values.reshape(len(nodes), k)   # (no node here: the columns as given)
         own, local = self.owned_nodes(nodes)
         out = np.full((self.n_owned_nodes, values.shape[1]), fill)
         out[local] = values[own]

@@ -7,14 +7,24 @@ Relations are rescaled so that their rows and columns are commensurate with the 
 ``λ / col_scale`` and the primal equation's right-hand side ``b · row_scale``. An associated
 relation gets equal scales, which keeps the operator symmetric.
 
-Multiplier rows are numbered by owner: a row belongs to the rank owning most of the DOFs its A
+A relation is whole (every row on every rank) or built per rank (``Relation.ids``: a rigid
+obstacle's contact rows, each built by the rank owning its slave node, numbered by its place in
+the whole relation). The relation rows a rank holds are its per-rank relations' rows and every
+whole relation's; the vectors per relation row (``mult_of_row``, ``position``, the active
+set's masks, targets, gaps) run over those, and the ones per multiplier row (``rep_row``)
+over the multiplier rows those rows have (``mults_here``). Still of the multipliers' number on
+every rank: the compliance and the row and column scales.
+
+Multiplier rows are numbered by owner: a per-rank relation's rows belong to the rank that built
+them; a whole relation's row to the rank owning most of the DOFs its A
 row and D column name (ties: the lowest rank; a row with no entry: ranks in turn), so that the
 row of A and the column of D live, as far as they can, with the nodes they act on. A contact
 row on a rigid obstacle goes with its slave node; a row tying a slave node to a span of master
 nodes (finite sliding, mortar) with the master nodes, which are most of its entries; the
 rows of a group the active set decides together (a maximum relation's, a relation's
 ``groups``) with the owner of the group's first row. Rank r's rows come after those of the ranks before it, in stacking order (relation by
-relation); the DOF map is given each rank's count (``DofMap.set_multipliers``). On one rank
+relation; the per-rank relations' counts gathered); the DOF map is given each rank's count
+(``DofMap.set_multipliers``). On one rank
 this is the stacking order itself. Each rank keeps the entries of its own operator rows only
 (the A entries of the multiplier rows it owns, the D entries on the primal DOFs it owns) and
 holds, besides its own multipliers, the ghost rows whose D column has an entry on one of its
@@ -84,7 +94,7 @@ class RelationSet:
     def _stack(self) -> None:
         relations, dofmap = self.relations, self.dofmap
         new_dof = dofmap.input_new_dof
-        sizes = [r.nrows for r in relations]
+        sizes = [r.nrows for r in relations]        # the rows held here (``Relation.ids``)
         mult_sizes = [1 if r.collapsed else r.nrows for r in relations]
         self.row_first = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         first = np.concatenate([[0], np.cumsum(mult_sizes)]).astype(np.int64)
@@ -108,52 +118,88 @@ class RelationSet:
         self.a_cols, self.a_vals = _cat(ac, np.int64), _cat(av, float)
         self.d_rows, self.d_vals = _cat(dr, np.int64), _cat(dv, float)
         if self.position is None:   # the owners, once: restacking keeps them
-            self.position, self._counts = self._by_owner(stacked_a, stacked_d, int(first[-1]))
+            self.position, self._counts = self._by_owner(stacked_a, stacked_d, first)
         pos = self.position
         self.a_rows, self.d_cols = pos[stacked_a], pos[stacked_d]
         self.a_relrow = _cat(arel, np.int64)            # relation row of each A entry
         self._keep_own([len(a) for a in av], [len(d) for d in dv])
         self.mult_rows = [pos[first[k]:first[k + 1]] for k in range(len(relations))]
         self.mult_of_row = pos[_cat(mult, np.int64)]    # multiplier row of each relation row
-        self.rep_row = np.zeros(int(first[-1]), dtype=np.int64)   # row each multiplier enforces
-        self.rep_row[self.mult_of_row[::-1]] = np.arange(self.mult_of_row.size)[::-1]  # first
-        self.compliance = np.zeros(int(first[-1]))      # per multiplier row (Relation)
+        # the relation rows of whole relations (the same on every rank) and the others
+        whole = np.concatenate([np.full(r.nrows, r.whole) for r in relations]) \
+            if relations else np.zeros(0, dtype=bool)
+        self.whole_rows, self.own_rows = np.flatnonzero(whole), np.flatnonzero(~whole)
+        self.mults_here = np.unique(self.mult_of_row)  # multiplier rows with a row held here
+        nl = dofmap.nl
+        # per multiplier row held here (``mults_here``), the relation row it enforces
+        self.rep_row = np.zeros(self.mults_here.size, dtype=np.int64)
+        self.rep_row[self._here(self.mult_of_row[::-1])] = \
+            np.arange(self.mult_of_row.size)[::-1]    # (its first)
+        self.compliance = np.zeros(nl)                  # per multiplier row (Relation)
         self._copy_compliance()
         self._owned_entries: dict[int, tuple] = {}      # per relation: its owned A entries
         self._sums: _RowSums | None = None              # owned_primal's plan
 
-    def _by_owner(self, stacked_a: np.ndarray, stacked_d: np.ndarray, n: int) -> np.ndarray:
-        """The multiplier row of each stacked row, rows grouped by owner (see the module doc),
-        and each rank's count. Every rank computes the same."""
+    def _here(self, mults: np.ndarray) -> np.ndarray:
+        """Places in ``mults_here`` of multiplier rows held here."""
+        return np.searchsorted(self.mults_here, mults)
+
+    def _by_owner(self, stacked_a: np.ndarray, stacked_d: np.ndarray, first: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+        """The multiplier row of each stacked row held here, rows grouped by owner (see the
+        module doc), and each rank's count. A whole relation's rows: every rank computes the
+        same owners; a relation built per rank: its rows are this rank's. Rank r's rows are
+        numbered relation by relation, each relation's in row order, after the ranks before
+        it (one gather of the per-rank relations' counts)."""
         dofmap = self.dofmap
-        nranks = dofmap.q_ranges.size - 1
+        nranks, me = dofmap.q_ranges.size - 1, dofmap.rank
+        n, nrel = int(first[-1]), len(self.relations)
+        relation = np.repeat(np.arange(nrel), np.diff(first))
+        whole = np.array([r.whole for r in self.relations], dtype=bool)
+        is_whole = whole[relation] if nrel else np.zeros(0, dtype=bool)
+        wid = np.cumsum(is_whole) - 1                           # whole rows' common numbers
+        owner = np.full(n, me, dtype=np.int64)
+        owner[is_whole] = np.arange(int(is_whole.sum()), dtype=np.int64) % nranks  # no entry
         rows = np.concatenate([stacked_a, stacked_d])
         dof_owner = dofmap.owner_of_dofs(np.concatenate([self.a_cols, self.d_rows]))
-        owner = np.arange(n, dtype=np.int64) % nranks           # rows with no entry: in turn
-        keys, count = np.unique(rows * nranks + dof_owner, return_counts=True)
+        on = is_whole[rows]
+        keys, count = np.unique(wid[rows[on]] * nranks + dof_owner[on], return_counts=True)
         row, rank = np.divmod(keys, nranks)
         best = np.lexsort((rank, -count, row))                  # most entries, then lowest rank
-        first = np.flatnonzero(np.diff(np.concatenate([[-1], row[best]])) != 0)
-        owner[row[best[first]]] = rank[best[first]]
-        self._groups_together(owner)
-        order = np.argsort(owner, kind="stable")
-        position = np.empty(n, dtype=np.int64)
-        position[order] = np.arange(n)
-        return position, np.bincount(owner, minlength=nranks)
+        lead = np.flatnonzero(np.diff(np.concatenate([[-1], row[best]])) != 0)
+        at = np.flatnonzero(is_whole)
+        owner[at[row[best[lead]]]] = rank[best[lead]]
+        self._groups_together(owner, first)
+        # per relation and rank, its rows: whole relations' from the owners, the others'
+        # gathered
+        counts = np.zeros((nrel, nranks), dtype=np.int64)
+        np.add.at(counts, (relation, owner), 1)
+        mine = np.where(whole, 0, np.diff(first)).astype(np.int64)
+        if nranks > 1:
+            theirs = np.empty((nranks, nrel), dtype=np.int64)
+            dofmap.comm.Allgather(mine, theirs)
+            counts[~whole] = theirs.T[~whole]
+        starts = np.concatenate([[0], np.cumsum(counts.sum(axis=0))])[:-1]
+        before = np.cumsum(counts, axis=0) - counts              # rows of earlier relations
+        key = relation * nranks + owner
+        order = np.argsort(key, kind="stable")
+        group_start = np.searchsorted(key[order], key[order])
+        within = np.empty(n, dtype=np.int64)
+        within[order] = np.arange(n) - group_start
+        position = starts[owner] + before[relation, owner] + within
+        return position, counts.sum(axis=0)
 
-    def _groups_together(self, owner: np.ndarray) -> None:
+    def _groups_together(self, owner: np.ndarray, first: np.ndarray) -> None:
         """The rows of a group the active set decides together (a maximum relation's, a
         relation's ``groups``) go with the group's first row's owner, in place (a collapsed
-        group is one multiplier row already)."""
-        start = 0
-        for r in self.relations:
-            size = 1 if r.collapsed else r.nrows
+        group is one multiplier row already; a relation built per rank: its groups are
+        this rank's)."""
+        for k, r in enumerate(self.relations):
             ids = np.zeros(r.nrows, dtype=np.int64) if r.maximum else r.groups
-            if ids is not None and not r.collapsed and r.nrows:
+            if ids is not None and not r.collapsed and r.nrows and r.whole:
                 _, lead, inverse = np.unique(ids, return_index=True, return_inverse=True)
-                rows = start + np.arange(r.nrows)
+                rows = first[k] + np.arange(r.nrows)
                 owner[rows] = owner[rows[lead[inverse]]]
-            start += size
 
     def _keep_own(self, a_sizes: list[int], d_sizes: list[int]) -> None:
         """Keep the entries of this rank's operator rows only: A entries of the multiplier
@@ -181,7 +227,7 @@ class RelationSet:
     @property
     def nrows(self) -> int:
         """Multiplier rows."""
-        return int(self.rep_row.size)
+        return int(self.dofmap.nl)
 
     @property
     def nrelrows(self) -> int:
@@ -207,7 +253,7 @@ class RelationSet:
     @property
     def a_on(self) -> np.ndarray:
         """A entries of the rows enforced now (all but a collapsed group's other rows)."""
-        return self.rep_row[self.a_rows] == self.a_relrow
+        return self.rep_row[self._here(self.a_rows)] == self.a_relrow
 
     # ------------------------------------------------------------ values
 
@@ -215,9 +261,16 @@ class RelationSet:
         """Unscaled b(t) of every relation row."""
         return np.concatenate([r.rhs(t) for r in self.relations]) if self.relations else np.zeros(0)
 
+    def _per_mult(self, per_row: np.ndarray) -> np.ndarray:
+        """Per multiplier row, the value of the relation row it enforces (of the multiplier
+        rows with a relation row held here; 0 on the others)."""
+        out = np.zeros(self.nrows)
+        out[self.mults_here] = per_row[self.rep_row]
+        return out
+
     def rhs(self, t: float) -> np.ndarray:
-        """Scaled b(t) of every multiplier row."""
-        return self.targets(t)[self.rep_row] * self.row_scale
+        """Scaled b(t) of the multiplier rows (of those with a relation row held here)."""
+        return self._per_mult(self.targets(t)) * self.row_scale
 
     def _owned_part(self, r: Relation, q: np.ndarray) -> np.ndarray:
         key = id(r)
@@ -226,44 +279,53 @@ class RelationSet:
         sel, local = self._owned_entries[key]
         return self.dofmap.owned_part(sel, local, r.a_rows, r.a_vals, r.nrows, q)
 
+    def _parts(self, q: np.ndarray) -> np.ndarray:
+        return np.concatenate([self._owned_part(r, q) for r in self.relations])
+
     def primal_values(self, q: np.ndarray) -> np.ndarray:
-        """A q of every relation row (unscaled), q a local primal vector: one reduction.
-        Collective."""
+        """A q of every relation row held here (unscaled), q a local primal vector: a
+        relation built per rank on its own entries (on owned DOFs), the whole ones' in one
+        reduction. Collective."""
         if not self.relations:
             return np.zeros(0)
-        return self.dofmap.sum_ranks(np.concatenate([self._owned_part(r, q) for r in self.relations]))
+        parts = self._parts(q)
+        parts[self.whole_rows] = self.dofmap.sum_ranks(parts[self.whole_rows])
+        return parts
 
     def owned_primal(self, q: np.ndarray) -> np.ndarray:
         """A q of the relation rows whose multiplier this rank owns (``owned_relrows``; 0 on
-        the others), q a local primal vector: each entry taken on the rank owning its DOF
-        and its row's part sent to the row's owner (an exchange of the rows that cross the
-        ranks, planned once per stacking). Collective."""
+        the others), q a local primal vector: a relation built per rank on its own entries;
+        a whole relation's entries each taken on the rank owning its DOF and its row's part
+        sent to the row's owner (an exchange of the rows that cross the ranks, planned once
+        per stacking). Collective."""
         if not self.relations:
             return np.zeros(0)
-        parts = np.concatenate([self._owned_part(r, q) for r in self.relations])
+        parts = self._parts(q)
         if self.dofmap.comm.size == 1:
             return parts
         if self._sums is None:
-            self._sums = _RowSums(self, parts.size)
-        return self._sums.add(parts)
+            self._sums = _RowSums(self)
+        parts[self.whole_rows] = self._sums.add(parts[self.whole_rows])
+        return parts
 
     def relation_primal(self, r: Relation, q: np.ndarray) -> np.ndarray:
-        """A q of one relation's rows (any relation of the model). Collective."""
-        return self.dofmap.sum_ranks(self._owned_part(r, q))
+        """A q of one relation's rows held here (any relation of the model). Collective."""
+        part = self._owned_part(r, q)
+        return self.dofmap.sum_ranks(part) if r.whole else part
 
     def gap(self, t: float, q: np.ndarray) -> np.ndarray:
         """b(t) - A q of the multiplier rows, unscaled: this rank's owned rows' (the others:
         not computed). Collective (``owned_primal``)."""
         if not self.relations:
             return np.zeros(0)
-        return (self.targets(t) - self.owned_primal(q))[self.rep_row]
+        return self._per_mult(self.targets(t) - self.owned_primal(q))
 
     def scaled_residual(self, t: float, q: np.ndarray | None) -> np.ndarray:
         """Scaled b(t) - A q of the multiplier rows (b(t) alone without q): this rank's
         owned rows' (the others: not computed). Collective (``owned_primal``)."""
         target = self.rhs(t)
         if q is not None and self.nrows:
-            target = target - self.owned_primal(q)[self.rep_row] * self.row_scale
+            target = target - self._per_mult(self.owned_primal(q)) * self.row_scale
         return target
 
     def reactions(self, lam: np.ndarray) -> np.ndarray:
@@ -295,7 +357,7 @@ class RelationSet:
         _, _, l0, l1 = self.dofmap.owned()
         mult = self.mult_of_row[span]
         rows = np.arange(span.start, span.start + mult.size)
-        sel = (mult >= l0) & (mult < l1) & (self.rep_row[mult] == rows)
+        sel = (mult >= l0) & (mult < l1) & (self.rep_row[self._here(mult)] == rows)
         out = np.zeros(mult.size)
         out[sel] = lam[mult[sel] - l0]
         return out
@@ -306,20 +368,26 @@ class RelationSet:
         return self._owned_values(lam, slice(0, self.nrelrows))
 
     def relation_values(self, k: int, lam: np.ndarray) -> np.ndarray:
-        """Unscaled λ of relation k's rows (``row_values``) from this rank's owned
-        multipliers, each row's from its owner: one reduction of the relation's size.
-        Collective."""
-        return self.dofmap.sum_ranks(self._owned_values(lam, self.rows_of(k)))
+        """Unscaled λ of relation k's rows held here (``row_values``) from this rank's owned
+        multipliers, each row's from its owner: one reduction of a whole relation's size
+        (a relation built per rank: its own). Collective."""
+        part = self._owned_values(lam, self.rows_of(k))
+        return self.dofmap.sum_ranks(part) if self.relations[k].whole else part
 
     def every_row(self, lam: np.ndarray) -> np.ndarray:
-        """Per relation row, unscaled λ from this rank's owned multipliers, every row's on
-        every rank: one reduction of the relation rows' size. Collective. Not on the
-        Newton iteration's path (the failure analysis and the written steps' outputs)."""
-        return self.dofmap.sum_ranks(self.owned_row_values(lam)) if self.nrows else np.zeros(0)
+        """Per relation row held here, unscaled λ from this rank's owned multipliers, the
+        whole relations' rows' from their owners: one reduction of their size. Collective.
+        Not on the Newton iteration's path (the failure analysis and the written steps'
+        outputs)."""
+        if not self.nrows:
+            return np.zeros(0)
+        out = self.owned_row_values(lam)
+        out[self.whole_rows] = self.dofmap.sum_ranks(out[self.whole_rows])
+        return out
 
     def per_relation(self, lam: np.ndarray) -> dict[str, np.ndarray]:
-        """Unscaled λ of every relation row, by relation (a collapsed group: on its enforced
-        row, 0 on the others), from this rank's owned multipliers. Collective."""
+        """Unscaled λ of every relation row held here, by relation (a collapsed group: on
+        its enforced row, 0 on the others), from this rank's owned multipliers. Collective."""
         per_row = self.every_row(lam)
         return {r.name: per_row[self.rows_of(k)] for k, r in enumerate(self.relations)}
 
@@ -331,7 +399,8 @@ class RelationSet:
     def row_values(self, per_mult: np.ndarray) -> np.ndarray:
         """Per relation row: a multiplier row's value on the row it enforces, 0 on the others."""
         out = per_mult[self.mult_of_row]
-        return np.where(self.rep_row[self.mult_of_row] == np.arange(out.size), out, 0.0)
+        return np.where(self.rep_row[self._here(self.mult_of_row)] == np.arange(out.size), out,
+                        0.0)
 
     # ------------------------------------------------------------ updates in place
 
@@ -341,7 +410,7 @@ class RelationSet:
         on = np.zeros(self.nrows, dtype=bool)
         np.logical_or.at(on, self.mult_of_row, active_rows)
         rows = np.flatnonzero(active_rows)
-        self.rep_row[self.mult_of_row[rows]] = rows
+        self.rep_row[self._here(self.mult_of_row[rows])] = rows
         return on
 
     def refresh(self) -> None:
@@ -385,20 +454,24 @@ class RelationSet:
 
 
 class _RowSums:
-    """The plan of ``owned_primal``: the relation rows this rank has entries of (on its owned
-    DOFs), sent to their rows' owners, who add them (two ``Alltoallv`` to plan, one of
-    values per use)."""
+    """The plan of ``owned_primal`` for the whole relations' rows (numbered alike on every
+    rank: ``RelationSet.whole_rows``): those this rank has entries of (on its owned DOFs),
+    sent to their rows' owners, who add them (two ``Alltoallv`` to plan, one of values per
+    use)."""
 
-    def __init__(self, rset: RelationSet, nrows: int):
+    def __init__(self, rset: RelationSet):
         dofmap = rset.dofmap
         comm = self.comm = dofmap.comm
         touched = []
         for k, r in enumerate(rset.relations):
+            if not r.whole:
+                continue
             rset._owned_part(r, np.zeros(dofmap.n_local))   # (its owned entries, cached)
             sel, _ = rset._owned_entries[id(r)]
             touched.append(np.unique(r.a_rows[sel]) + rset.row_first[k])
-        rows = _cat(touched, np.int64)
-        owner = np.searchsorted(dofmap.l_ranges, rset.mult_of_row[rows], side="right") - 1
+        held = _cat(touched, np.int64)
+        rows = np.searchsorted(rset.whole_rows, held)            # the common numbers
+        owner = np.searchsorted(dofmap.l_ranges, rset.mult_of_row[held], side="right") - 1
         order = np.argsort(owner, kind="stable")
         self.send_rows = rows[order]
         self.send_counts = np.bincount(owner, minlength=comm.size).astype(np.int64)
@@ -407,11 +480,11 @@ class _RowSums:
         self.recv_rows = np.empty(int(self.recv_counts.sum()), dtype=np.int64)
         comm.Alltoallv([self.send_rows, self.send_counts, _displ(self.send_counts), MPI.INT64_T],
                        [self.recv_rows, self.recv_counts, _displ(self.recv_counts), MPI.INT64_T])
-        self.nrows = nrows
+        self.nrows = int(rset.whole_rows.size)
 
     def add(self, parts: np.ndarray) -> np.ndarray:
-        """The owned rows' sums of every rank's parts (``parts``: this rank's, per relation
-        row)."""
+        """The owned rows' sums of every rank's parts (``parts``: this rank's, per whole
+        relation row)."""
         got = np.empty(self.recv_rows.size)
         self.comm.Alltoallv([np.ascontiguousarray(parts[self.send_rows]), self.send_counts,
                              _displ(self.send_counts), MPI.DOUBLE],

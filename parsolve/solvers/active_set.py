@@ -41,6 +41,24 @@ LOCAL_TIE = 1e-12
 FORMING = 0.5
 
 
+class _Seen:
+    """The sets an update has been through (each rank its rows' part, added in the same
+    order on every rank): a set was seen when every rank's part was, at one same time.
+    Membership is collective."""
+
+    def __init__(self, comm: MPI.Comm, first: bytes | None = None):
+        self.comm, self.parts = comm, [] if first is None else [first]
+
+    def add(self, part: bytes) -> None:
+        self.parts.append(part)
+
+    def __contains__(self, part: bytes) -> bool:
+        here = np.array([p == part for p in self.parts], dtype=np.uint8)
+        if self.comm.size > 1:
+            self.comm.Allreduce(MPI.IN_PLACE, here, op=MPI.MIN)
+        return bool(here.any())
+
+
 class ActiveSet:
     """The set of the rows of ``relations`` (concatenated) enforced now. ``owned``: the rows
     whose multipliers this rank reads (default every row: one process); ``comm``: the ranks
@@ -74,6 +92,14 @@ class ActiveSet:
         self.maximum = np.concatenate([np.full(r.nrows, r.maximum) for r in relations]) \
             if relations else np.zeros(0, dtype=bool)
         self.names, self.first = [r.name for r in relations], first
+        # rows of whole relations (every rank holds them, alike) and each row's place in the
+        # relations' rows over every rank (relation, then global row): what ranks exchange
+        self.shared = np.concatenate([np.full(r.nrows, r.whole) for r in relations]) \
+            if relations else np.zeros(0, dtype=bool)
+        totals = np.concatenate([[0], np.cumsum([r.total for r in relations])]).astype(np.int64)
+        self.key = np.concatenate([totals[k] + r.row_ids() for k, r in enumerate(relations)]) \
+            if relations else np.zeros(0, dtype=np.int64)
+        self.whole_relation = np.array([r.whole for r in relations], dtype=bool)
         self.free = (self.sign != 0) & ~grouped   # rows decided one by one
         self.active = self.sign == 0              # equalities are always enforced
         self.active[self.group_rows[starts]] = True  # a group is always enforced somewhere
@@ -87,16 +113,20 @@ class ActiveSet:
         self.comm = MPI.COMM_SELF if comm is None else comm
         self.max_changes = max_changes
         self.changes = 0
-        self.seen: set[bytes] = set()
+        self.seen = _Seen(self.comm)
         self.held = self.active.copy()
+        self._unilateral = any(r.sign != 0 for r in relations)
+        self.forming_relations = [k for k, r in enumerate(relations) if r.forming]
 
     @property
     def unilateral(self) -> bool:
-        return bool(np.any(self.sign != 0))
+        """Whether some relation has unilateral rows (on any rank: a relation built per rank
+        may have none here)."""
+        return self._unilateral
 
     def start_step(self) -> None:
         self.changes = 0
-        self.seen = {self.active.tobytes()}
+        self.seen = _Seen(self.comm, self.active.tobytes())
         self.held = self.active.copy()  # rows enforced at some point of this step
 
     def update(self, gap: np.ndarray, lam: np.ndarray, tol_gap: float, tol_lam: float,
@@ -121,7 +151,7 @@ class ActiveSet:
             best, gain = self._groups(s[rows] * gap[rows], scale)
             self._no_way_back(rows[best & ~self.active[rows] & self.held[rows] & self.maximum[rows]])
             new[rows] = best
-        if np.array_equal(new, self.active):
+        if self._same(new):
             return False
         if new.tobytes() in self.seen:  # cycling: change only the worst row
             new = self._one_change(excess, pull, gain)
@@ -133,6 +163,11 @@ class ActiveSet:
         self.held |= new
         self.seen.add(new.tobytes())
         return True
+
+    def _same(self, new: np.ndarray) -> bool:
+        """Whether no rank's rows change. Collective."""
+        same = bool(np.array_equal(new, self.active))
+        return same if self.comm.size == 1 else self.comm.allreduce(same, op=MPI.LAND)
 
     def _groups(self, value: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
         """Each group's row to enforce (``pick_groups``, decided by the group's owner from its
@@ -154,16 +189,21 @@ class ActiveSet:
         nothing else. Collective."""
         if self.comm.size == 1:
             return mine, np.where(mine, score, -np.inf)
-        rows = np.flatnonzero(mine).astype(np.int64)
+        # a relation built per rank: its rows are this rank's alone, nothing to tell (the
+        # arrays: over every row, or over ``group_rows``)
+        shared = self.shared if mine.size == self.shared.size else self.shared[self.group_rows]
+        shared_rows = np.flatnonzero(shared)
+        found = mine & ~shared
+        out = np.where(found, score, -np.inf)
+        rows = np.searchsorted(shared_rows, np.flatnonzero(mine & shared)).astype(np.int64)
         counts = np.array(self.comm.allgather(rows.size), dtype=np.int64)
         every = np.empty(int(counts.sum()), dtype=np.int64)
         values = np.empty(every.size)
         self.comm.Allgatherv(rows, [every, counts])
-        self.comm.Allgatherv(np.ascontiguousarray(score[rows], dtype=float), [values, counts])
-        found = np.zeros(mine.size, dtype=bool)
-        found[every] = True
-        out = np.full(mine.size, -np.inf)
-        out[every] = values
+        self.comm.Allgatherv(np.ascontiguousarray(score[shared_rows[rows]], dtype=float),
+                             [values, counts])
+        found[shared_rows[every]] = True
+        out[shared_rows[every]] = values
         return found, out
 
     def _forming(self, violated: np.ndarray, excess: np.ndarray) -> np.ndarray:
@@ -177,19 +217,25 @@ class ActiveSet:
         if it must, by the plain rule (every violated row) from the next iteration on. Per
         forming relation, its violated rows' count and deepest excess are reduced over the
         ranks. Collective."""
-        spans = [slice(self.first[k], self.first[k + 1]) for k in range(len(self.names))]
-        spans = [rows for rows in spans if self.forming[rows].any()]
+        # (by relation: a relation built per rank may have no row here)
+        spans = [slice(self.first[k], self.first[k + 1]) for k in self.forming_relations]
         if not spans:
             return violated
         count = np.array([float(violated[rows].sum()) for rows in spans])
         deepest = np.array([float(excess[rows][violated[rows]].max(initial=-np.inf))
                             for rows in spans])
+        enforced = np.array([float(self.active[rows].sum()) for rows in spans])
         if self.comm.size > 1:
             self.comm.Allreduce(MPI.IN_PLACE, count, op=MPI.SUM)
             self.comm.Allreduce(MPI.IN_PLACE, deepest, op=MPI.MAX)
+            # a relation built per rank: its enforced rows on every rank
+            whole = self.whole_relation[self.forming_relations]
+            per_rank = np.where(whole, 0.0, enforced)
+            self.comm.Allreduce(MPI.IN_PLACE, per_rank, op=MPI.SUM)
+            enforced = np.where(whole, enforced, per_rank)
         out = violated.copy()
-        for rows, n, depth in zip(spans, count, deepest):
-            if n > int(self.active[rows].sum()):
+        for rows, n, depth, on in zip(spans, count, deepest, enforced):
+            if n > on:
                 out[rows] = violated[rows] & (excess[rows] >= FORMING * depth)
         return out
 
@@ -243,17 +289,35 @@ class ActiveSet:
         score_g = np.full(self.sign.size, -np.inf)
         if gain is not None:
             score_g[self.group_rows] = gain
-        tops = [score.max(initial=-np.inf), score_l.max(initial=-np.inf),
-                score_g.max(initial=-np.inf)]
-        kind = int(np.argmax(tops))
-        if not np.isfinite(tops[kind]):
+        kind, row = self._best([score, score_l, score_g])
+        if row < 0:
             return new
         if kind == 0:
-            new[int(np.argmax(score))] = True
+            new[row] = True
         elif kind == 1:
-            new[int(np.argmax(score_l))] = False
+            new[row] = False
         else:
-            row = int(np.argmax(score_g))
             new[self.group == self.group[row]] = False
             new[row] = True
         return new
+
+    def _best(self, scores: list[np.ndarray]) -> tuple[int, int]:
+        """The kind with the largest score over every rank (the first of equal ones) and its
+        row held here with that score, first in the relations' rows over every rank (``key``;
+        -1: not held here, or no finite score). Collective."""
+        tops = np.array([x.max(initial=-np.inf) for x in scores])
+        firsts = np.array([self.key[x == top].min(initial=np.iinfo(np.int64).max)
+                           for x, top in zip(scores, tops)])
+        if self.comm.size > 1:
+            every = self.comm.allgather((tops, firsts))
+            top_all = np.max([t for t, _ in every], axis=0)
+            kind = int(np.argmax(top_all))
+            first = min(f[kind] for t, f in every if t[kind] == top_all[kind])
+            top = top_all[kind]
+        else:
+            kind = int(np.argmax(tops))
+            top, first = tops[kind], firsts[kind]
+        if not np.isfinite(top):
+            return kind, -1
+        at = np.flatnonzero(self.key == first)
+        return kind, int(at[0]) if at.size else -1

@@ -85,6 +85,14 @@ def _controls(problem) -> list[Control]:
     return out
 
 
+def _every(e, x):
+    """A contact's sum (or any, of a decision) over its rows on every rank (rows built per
+    rank: ``Contact.sum_ranks``); else x."""
+    if not hasattr(e, "any_rank"):
+        return x
+    return e.any_rank(x) if isinstance(x, (bool, np.bool_)) else e.sum_ranks(x)
+
+
 def _sliding_contacts(effects) -> list:
     """Frictional contacts whose closed nodes all slide at the failed attempt's last iterate,
     having begun to slide at the last converged state (some closed node sliding there): the
@@ -97,7 +105,8 @@ def _sliding_contacts(effects) -> list:
         if state is None or committed is None or not getattr(e, "frictional", False):
             continue
         closed = state != fr.OPEN
-        if closed.any() and (state[closed] == fr.SLIP).all() and (committed[0] == fr.SLIP).any():
+        if _every(e, closed.any()) and not _every(e, (state == fr.STICK).any()) \
+                and _every(e, (committed[0] == fr.SLIP).any()):
             out.append(e)
     return out
 
@@ -393,8 +402,8 @@ def _beyond_friction_from_start(exc: SolverError, problem, t: float,
     more than μN along the surface: |Σ rt| ≤ Σ μ rn), and sliding as a whole the body takes
     no more: the target is out of reach from the start."""
     sliding = [e for e in _frictional(problem.ctx.effects)
-               if (e.node_state != fr.OPEN).any()
-               and (e.node_state[e.node_state != fr.OPEN] == fr.SLIP).all()]
+               if _every(e, (e.node_state != fr.OPEN).any())
+               and not _every(e, (e.node_state == fr.STICK).any())]
     if not sliding:
         return None
     rset, mult = problem.rset, problem.ctx.multiplied
@@ -425,7 +434,8 @@ def _beyond_friction_from_start(exc: SolverError, problem, t: float,
     lam = {rel.name: total[rset.rows_of(j)] for j, rel in enumerate(mult)}
     for e in sliding:
         rn, rt = e.forces(lam)
-        normal, tangential = float(rn.sum()), float(np.linalg.norm(rt.sum(axis=0)))
+        normal = float(_every(e, rn.sum()))
+        tangential = float(np.linalg.norm(_every(e, rt.sum(axis=0))))
         capacity = e.mu * normal
         if normal <= 0.0 or tangential <= capacity * (1 + 1e-9):
             continue
@@ -451,6 +461,7 @@ def _stuck_apart(exc: SolverError, problem, t: float, c: Control, contact, lam0:
     lo, low, hi, high = bounds
     rn, _ = contact.forces({rel.name: lam0[rset.rows_of(j)]
                             for j, rel in enumerate(problem.ctx.multiplied)})
+    normal = float(_every(contact, rn.sum()))
     target = rset.targets(t)[c.row]
     return NamedFailure(
         f"maximum control {c.name!r} cannot reach its value from the first step: {target:.6g} "
@@ -458,7 +469,7 @@ def _stuck_apart(exc: SolverError, problem, t: float, c: Control, contact, lam0:
         f"stays on its side of that value only for control loads of at least {low:.6g} and "
         f"its row {hi} only for at most {high:.6g} (the load that brings one there takes the "
         f"other beyond it), and sliding the contact carries no more than μN = "
-        f"{contact.mu * float(rn.sum()):.6g} (μ = {contact.mu:g}); raise the target or control "
+        f"{contact.mu * normal:.6g} (μ = {contact.mu:g}); raise the target or control "
         f"another quantity (the last attempt: {exc})")
 
 

@@ -23,6 +23,7 @@ import time
 from typing import Callable
 
 import numpy as np
+from mpi4py import MPI
 
 from parsolve.contact.dependent import dependent_rows
 from parsolve.errors import SolverError
@@ -63,7 +64,7 @@ def _branch_reach(rate: np.ndarray, room: np.ndarray, current: int) -> np.ndarra
     with r > 0 reach it at room / r. Past the enforced row's peak (rate < 0), its value grows
     only as the load falls, while the other rows unload: the rows with r < 0 reach it at
     room / -r. Rows that never reach it on that branch: +inf."""
-    tol = 1e-9 * max(float(np.abs(rate).max()), 1e-300)
+    tol = 1e-9 * max(float(np.abs(rate).max(initial=0.0)), 1e-300)
     side = -1.0 if rate[current] < -tol else 1.0
     r = side * rate
     return np.where(r > tol, room / np.where(r > tol, r, 1.0), np.inf)
@@ -151,7 +152,7 @@ class RelationPolicies:
         if self._rows is None:
             return False
         closing = self._rows[3] & ~self.active.active & ~self._empty_rows()
-        if not closing.any():
+        if not self.ctx.comm.allreduce(bool(closing.any()), op=MPI.LOR):   # (rows per rank)
             return False
         self.active.active[closing] = True
         self.active.held |= closing
@@ -161,21 +162,24 @@ class RelationPolicies:
     def check_left_out(self, t: float, q: np.ndarray) -> None:
         """A left-out row is decided by the rows it depends on: fail when they violate it (a
         node held inside the obstacle), rather than return a penetrating answer."""
-        if not self.left_out.any():
+        if not self.ctx.comm.allreduce(bool(self.left_out.any()), op=MPI.LOR):  # (rows per rank)
             return
         values = self.rset.primal_values(q)
         gap = values - self.rset.targets(t)
         # against the rows' values and the displacements (a row at rest on the plane has A q = 0)
-        scale = max(float(np.abs(values).max()), self.ctx.max_abs(q), 1e-300)
+        scale = max(self.ctx.max_abs(values), self.ctx.max_abs(q), 1e-300)
         bad = self.left_out & (self.active.sign * gap > 1e-9 * scale)
-        if bad.any():
-            row = int(np.flatnonzero(bad)[0])
-            k, local = self.rset.locate(row)
-            rel = self.ctx.multiplied[k]
-            node = int(rel.a_dofs[rel.a_rows == local][0]) // self.ctx.ncomp
-            raise SolverError(f"contact row {local} of {rel.name!r} (node {node}) depends on "
-                              "other relations (a held or tied node) that violate it by "
-                              f"{abs(float(gap[row])):.3g}: they push it into the obstacle")
+        if self.ctx.comm.allreduce(bool(bad.any()), op=MPI.LOR):
+            said = None
+            if bad.any():
+                row = int(np.flatnonzero(bad)[0])
+                k, local = self.rset.locate(row)
+                rel = self.ctx.multiplied[k]
+                node = int(rel.a_dofs[rel.a_rows == local][0]) // self.ctx.ncomp
+                said = (f"contact row {int(rel.row_ids()[local])} of {rel.name!r} (node {node}) "
+                        "depends on other relations (a held or tied node) that violate it by "
+                        f"{abs(float(gap[row])):.3g}: they push it into the obstacle")
+            raise SolverError(next(m for m in self.ctx.comm.allgather(said) if m))
 
     # ------------------------------------------------------------ active set
 
@@ -250,7 +254,7 @@ class RelationPolicies:
             # until it has some: it takes the sense of the relation's other rows, for good (the
             # sense is decided once; a contact's normal rows all have the sense +1)
             empty = r.empty_rows()
-            if np.any(~empty & (np.abs(rate) <= 1e-12 * max(float(np.abs(rate).max()), 1e-300))):
+            if np.any(~empty & (np.abs(rate) <= 1e-12 * max(float(np.abs(rate).max(initial=0.0)), 1e-300))):
                 raise SolverError(f"relation {r.name!r}: its dual does not move its primal value "
                                   "(A K⁻¹ D = 0), so the sense of its reaction is undefined")
             sense = -np.sign(rate)

@@ -227,7 +227,9 @@ def unstable_modes(problem, states: list, q: np.ndarray | None = None) -> int | 
     if problem.active.groups:
         _hold_maximum_rows(problem, held, q)
     negative = negative_pivots(problem.comm, held)
-    return None if negative is None else negative - int(system.op.active.sum())
+    _, _, l0, l1 = system.dofmap.owned()   # (enforced rows: each counted by its owner)
+    enforced = problem.comm.allreduce(int(system.op.active[l0:l1].sum()))
+    return None if negative is None else negative - enforced
 
 
 def at_maximum(problem, q: np.ndarray) -> np.ndarray:

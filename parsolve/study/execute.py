@@ -124,12 +124,12 @@ def _relation_problem(spec, model) -> str | None:
         labels = resultant_labels(model.fields, model.mesh.dim)
         return None if spec.sel in labels else \
             f"no resultant component {spec.sel!r} (known: {', '.join(labels)})"
-    if spec.sel in ("sum", "mean") or (not spec.sel and relation.nrows == 1):
+    if spec.sel in ("sum", "mean") or (not spec.sel and relation.total == 1):
         return None
-    if spec.sel.isdigit() and int(spec.sel) < relation.nrows:
+    if spec.sel.isdigit() and int(spec.sel) < relation.total:
         return None
-    return (f"relation {spec.name!r} has {relation.nrows} rows: add :sum, :mean or a row number "
-            f"0..{relation.nrows - 1}")
+    return (f"relation {spec.name!r} has {relation.total} rows: add :sum, :mean or a row number "
+            f"0..{relation.total - 1}")
 
 
 def spec_problem(spec, model) -> str | None:
