@@ -41,12 +41,14 @@ MAX_CORE = 4000
 
 def dependent_rows(rows: np.ndarray, dofs: np.ndarray, vals: np.ndarray, nrows: int,
                    enforced: np.ndarray, candidate: np.ndarray,
-                   fixed_dofs: np.ndarray, ncomp: int = 1) -> np.ndarray:
+                   fixed_dofs: np.ndarray, ncomp: int = 1,
+                   key: np.ndarray | None = None) -> np.ndarray:
     """Mask (nrows,) of the ``candidate`` rows among the ``enforced`` ones that depend on the
     enforced rows before them (non-candidates first, then candidates in row order).
 
     rows, dofs, vals: COO entries of every row (DOFs ``node * ncomp + component``); fixed_dofs:
-    DOFs whose columns are eliminated (their values known)."""
+    DOFs whose columns are eliminated (their values known); key: each row's place in the
+    order (default: its number), the same on every rank for rows held on several."""
     out = np.zeros(nrows, dtype=bool)
     keep = enforced[rows] & (vals != 0.0) & ~np.isin(dofs, fixed_dofs)
     norm = np.sqrt(np.bincount(rows, weights=vals ** 2, minlength=nrows))
@@ -67,6 +69,8 @@ def dependent_rows(rows: np.ndarray, dofs: np.ndarray, vals: np.ndarray, nrows: 
     core = np.flatnonzero(alive)
     if core.size == 0 or core.size > MAX_CORE:
         return out
+    if key is not None:
+        core = core[np.argsort(key[core], kind="stable")]
     order = np.concatenate([core[~candidate[core]], core[candidate[core]]])
     on = alive[r]
     cols, col = np.unique(d[on], return_inverse=True)

@@ -109,7 +109,14 @@ class RelationPolicies:
         for k, r in enumerate(mult):
             candidate[rset.rows_of(k)] = r.meta.get("type") == "contact"
         fixed = np.concatenate([r.a_dofs for r in self.ctx.eliminated] + [np.zeros(0, np.int64)])
-        return rows, dofs, [mult[k] for k in keep], candidate, np.unique(fixed)
+        # each row's place in the fixed order over every rank: relation, then its global row
+        first = np.concatenate([[0], np.cumsum([r.total for r in mult])])
+        key = np.zeros(rset.nrelrows, dtype=np.int64)
+        per_rank = np.zeros(rset.nrelrows, dtype=bool)
+        for k, r in enumerate(mult):
+            key[rset.rows_of(k)] = first[k] + r.row_ids()
+            per_rank[rset.rows_of(k)] = not r.whole
+        return rows, dofs, [mult[k] for k in keep], candidate, np.unique(fixed), key, per_rank
 
     def enforceable(self, active: np.ndarray) -> np.ndarray:
         """The active rows less the contact rows that depend on the others (a held, tied or
@@ -117,13 +124,46 @@ class RelationPolicies:
         multipliers zero): the same displacements, and no null pivot."""
         if self._rows is None:
             return active
-        rows, dofs, rels, candidate, fixed = self._rows
+        rows, dofs, rels, candidate, fixed, key, per_rank = self._rows
         vals = np.concatenate([r.a_vals for r in rels])   # current (friction turns them)
         # compliant rows constrain nothing (``Relation.compliance``): out of the analysis
         hard = active & ~(self.rset.compliance[self.rset.mult_of_row] > 0.0)
-        self.left_out = dependent_rows(rows, dofs, vals, active.size, hard, candidate, fixed,
-                                       self.ctx.ncomp)
+        n = active.size
+        f_rows, f_dofs, f_vals, f_key = self._foreign_rows(rows, dofs, vals, hard, key,
+                                                          per_rank, fixed)
+        m = f_key.size
+        out = dependent_rows(np.concatenate([rows, n + f_rows]), np.concatenate([dofs, f_dofs]),
+                             np.concatenate([vals, f_vals]), n + m,
+                             np.concatenate([hard, np.ones(m, dtype=bool)]),
+                             np.concatenate([candidate, np.ones(m, dtype=bool)]), fixed,
+                             self.ctx.ncomp, np.concatenate([key, f_key]))
+        self.left_out = out[:n]
         return active & ~self.left_out
+
+    def _foreign_rows(self, rows, dofs, vals, hard, key, per_rank, fixed) -> tuple:
+        """The enforced rows of relations built per rank that other ranks hold on nodes the
+        whole relations touch (a periodic tie between contact nodes of two ranks): what a
+        rank's analysis needs besides its own rows for every rank to decide alike. Rows on
+        other nodes cannot depend on rows of another rank (they share no DOF with them).
+        Returns their entries (rows numbered 0.. in key order), and each row's key."""
+        empty = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64))
+        comm, ncomp = self.ctx.comm, self.ctx.ncomp
+        if comm.size == 1 or not comm.allreduce(bool(per_rank.any()), op=MPI.LOR):
+            return empty
+        live = hard[rows] & (vals != 0.0) & ~np.isin(dofs, fixed)
+        whole_nodes = np.unique(dofs[live & ~per_rank[rows]] // ncomp)
+        mine = live & per_rank[rows]
+        touch = np.zeros(hard.size, dtype=bool)
+        touch[rows[mine & np.isin(dofs // ncomp, whole_nodes)]] = True
+        send = mine & touch[rows]
+        parts = comm.allgather((key[rows[send]], dofs[send], vals[send]))
+        others = [p for rank, p in enumerate(parts) if rank != comm.rank]
+        if not others or not sum(p[0].size for p in others):
+            return empty
+        f_entry_key = np.concatenate([p[0] for p in others])
+        f_key, f_rows = np.unique(f_entry_key, return_inverse=True)
+        return (f_rows.astype(np.int64), np.concatenate([p[1] for p in others]),
+                np.concatenate([p[2] for p in others]), f_key)
 
     @property
     def enforced(self) -> np.ndarray:
