@@ -286,14 +286,16 @@ master = "left"
 """
 
 
-def test_penalty_baseline_takes_rigid_obstacles_as_in_plane_models():
+def test_penalty_baseline_takes_obstacles_and_masters_as_in_plane_models():
     """The penalty baselines' areas are the rings' (2π r ds): accepted against a rigid obstacle
-    (their answers: tests/effects/test_contact_baselines.py), refused against a master region
-    for the reason a plane model gives (a deformable master), exit 2 naming the key."""
+    (their answers: tests/effects/test_contact_baselines.py) and against a master region as a
+    plane model takes it (tests/effects/test_contact_penalty_master.py); a master its slaves
+    do not face (the cylinder's outer face against its inner one) is exit 2 naming the key,
+    as for the multiplier contact."""
     with pytest.raises(InputError) as err:
         _model(cylinder(4, "quad") + CONTACT + 'formulation = "penalty"\n')
-    assert err.value.key == "contact[0].master" and err.value.source == "scene.toml"
-    assert "rigid obstacles only" in str(err.value)
+    assert err.value.key == "contact[0].slave" and err.value.source == "scene.toml"
+    assert "no slave node faces the master surface" in str(err.value)
     obstacle = CONTACT.replace('master = "left"',
                                'obstacle = { plane = { origin = [5.0, 0.0], normal = [-1.0, 0.0] } }')
     _model(cylinder(4, "quad") + obstacle + 'formulation = "penalty"\n')
