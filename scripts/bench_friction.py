@@ -8,8 +8,9 @@ Cases (the scenes of tests/effects/test_contact.py, from scripts/bench_scenes.py
   hertz   configs/contact_hertz_cylinder.toml (frictionless): Hertz's p0 and half-width
   box3d   the exact 3D sheared box (oblique shift, stick then slip), refined to 12×12×4 hex
   3D box  configs/contact_friction_3d.toml as shipped (no analytic field)
-  ironing configs/contact_ironing_2d.toml (finite sliding; the baselines take rigid obstacles
-          only: their input error is the table's answer)
+  ironing configs/contact_ironing_2d.toml (finite sliding; the penalty pairs again on the
+          displaced mesh, the augmented Lagrangian refuses finite sliding: its input error is
+          the table's answer)
 Per run: global (Newton) iterations per step, wall time of the run, penetration, cone
 violation, error against the analytic solution, failed (cut) steps; one line per case on the
 baselines (converged, or why not). Then, for the relations form:
