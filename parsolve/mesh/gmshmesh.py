@@ -23,7 +23,7 @@ from parsolve.collective import agree
 from parsolve.errors import InputError
 from parsolve.mesh.blocks import exchange
 from parsolve.mesh.gmsh import ROWS, Layout, scan
-from parsolve.mesh.mesh import CELL_INFO, Mesh
+from parsolve.mesh.mesh import Mesh, volume_type
 from parsolve.mesh.partition import block_starts
 from parsolve.mesh.topology import orient_cells
 
@@ -52,17 +52,9 @@ def plan_of(lay: Layout, key: str = _KEY) -> Plan:
         return InputError(message, lay.path, key)
 
     blocks = lay.element_blocks
-    if not blocks:
-        raise fail("the mesh has no cells")
     dims = {name: d for name, _, d in TYPES.values()}
-    vdim = max(dims[kind] for _, _, kind, _ in blocks)
-    vtypes = sorted({kind for _, _, kind, _ in blocks if dims[kind] == vdim})
-    if len(vtypes) > 1:
-        raise fail(f"mixed volume cell types {', '.join(vtypes)} (one type per mesh)")
-    vtype = vtypes[0]
-    if vtype not in CELL_INFO:
-        raise fail(f"unsupported cell type {vtype!r} (supported: {', '.join(CELL_INFO)})")
-    ftype = CELL_INFO[vtype][1]
+    kinds = [kind for _, _, kind, _ in blocks]
+    vtype, ftype, vdim = volume_type(kinds, [dims[k] for k in kinds], fail)
     role: dict[str, list[int]] = {"cell": [], "facet": [], "node": []}
     names: dict[str, set] = {"cell": set(), "facet": set(), "node": set()}
     for b, (_, _, kind, rows) in enumerate(blocks):

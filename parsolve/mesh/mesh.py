@@ -65,3 +65,18 @@ class Mesh:
     @property
     def num_cells(self) -> int:
         return self.cells.shape[0]
+
+
+def volume_type(kinds: list[str], dims: list, fail) -> tuple[str, str, int]:
+    """The volume cell type of a mesh's blocks (``kinds``, of dimension ``dims``: None for a
+    type parsolve does not know), its facet type and its dimension: one volume type per mesh,
+    one of ``CELL_INFO``; ``fail(message)`` makes the error raised otherwise."""
+    if not kinds or all(d is None for d in dims):
+        raise fail("the mesh has no cells")
+    vdim = max(d for d in dims if d is not None)
+    vtypes = sorted({t for t, d in zip(kinds, dims) if d == vdim})
+    if len(vtypes) > 1:
+        raise fail(f"mixed volume cell types {', '.join(vtypes)} (one type per mesh)")
+    if vtypes[0] not in CELL_INFO:
+        raise fail(f"unsupported cell type {vtypes[0]!r} (supported: {', '.join(CELL_INFO)})")
+    return vtypes[0], CELL_INFO[vtypes[0]][1], vdim

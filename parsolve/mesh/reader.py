@@ -22,7 +22,7 @@ import numpy as np
 
 from parsolve.errors import InputError
 from parsolve.mesh import gmsh
-from parsolve.mesh.mesh import CELL_INFO, Mesh
+from parsolve.mesh.mesh import CELL_INFO, Mesh, volume_type
 from parsolve.mesh.topology import orient_cells
 
 _KEY = "mesh.file"
@@ -77,16 +77,7 @@ def mesh_from_meshio(m, source: str | None = None) -> Mesh:
 
     blocks = [(b.type, np.asarray(b.data, dtype=np.int64)) for b in m.cells]
     dims = [_dim_of(t) for t, _ in blocks]
-    if not blocks or all(d is None for d in dims):
-        raise fail("the mesh has no cells")
-    vdim = max(d for d in dims if d is not None)
-    vtypes = sorted({t for (t, _), d in zip(blocks, dims) if d == vdim})
-    if len(vtypes) > 1:
-        raise fail(f"mixed volume cell types {', '.join(vtypes)} (one type per mesh)")
-    vtype = vtypes[0]
-    if vtype not in CELL_INFO:
-        raise fail(f"unsupported cell type {vtype!r} (supported: {', '.join(CELL_INFO)})")
-    ftype = CELL_INFO[vtype][1]
+    vtype, ftype, vdim = volume_type([t for t, _ in blocks], dims, fail)
 
     points = np.asarray(m.points, dtype=float)
     if points.ndim != 2 or points.shape[1] < vdim:

@@ -147,15 +147,7 @@ def _predictor(problem, kmat, f_int: np.ndarray, q0: np.ndarray, t: float
     rhs = system.rhs(t, f_int=f_int, q=q0, f_ext=problem.external(t))[0]
     ksp = PETSc.KSP().create(problem.comm)
     try:
-        ksp.setOperators(mat)
-        ksp.setType("preonly")
-        pc = ksp.getPC()
-        pc.setType("lu")
-        pc.setFactorSolverType("mumps")
-        pc.setFactorSetUpSolverType()
-        pc.getFactorMatrix().setMumpsIcntl(24, 1)   # (null pivots detected, INFOG(28))
-        pc.setUp()
-        if pc.getFactorMatrix().getMumpsInfog(28) > 0:
+        if _mumps_factor(ksp, mat, "lu").getMumpsInfog(28) > 0:
             return None
         x, b = mat.createVecs()
         b.array[:] = rhs
@@ -296,6 +288,20 @@ def _held_symmetric(system, mat: PETSc.Mat, shift: float) -> PETSc.Mat:
     return held
 
 
+def _mumps_factor(ksp: PETSc.KSP, mat: PETSc.Mat, kind: str) -> PETSc.Mat:
+    """MUMPS' ``kind`` ("lu", "cholesky") factor of ``mat`` by ``ksp``, set up with null
+    pivots detected (ICNTL(24): INFOG(28) counts them); returns the factor."""
+    ksp.setOperators(mat)
+    ksp.setType("preonly")
+    pc = ksp.getPC()
+    pc.setType(kind)
+    pc.setFactorSolverType("mumps")
+    pc.setFactorSetUpSolverType()
+    pc.getFactorMatrix().setMumpsIcntl(24, 1)
+    pc.setUp()
+    return pc.getFactorMatrix()
+
+
 def negative_pivots(comm: MPI.Comm, mat: PETSc.Mat) -> int | None:
     """Negative pivots of MUMPS' LDLᵀ of a symmetric matrix (INFOG(12)); None when it has
     null pivots (INFOG(28): dependent rows, a cell with no stiffness left) or fails, where
@@ -303,15 +309,7 @@ def negative_pivots(comm: MPI.Comm, mat: PETSc.Mat) -> int | None:
     mat.setOption(PETSc.Mat.Option.SYMMETRIC, True)
     ksp = PETSc.KSP().create(comm)
     try:
-        ksp.setOperators(mat)
-        ksp.setType("preonly")
-        pc = ksp.getPC()
-        pc.setType("cholesky")
-        pc.setFactorSolverType("mumps")
-        pc.setFactorSetUpSolverType()
-        pc.getFactorMatrix().setMumpsIcntl(24, 1)   # (null pivots detected, INFOG(28))
-        pc.setUp()
-        factor = pc.getFactorMatrix()
+        factor = _mumps_factor(ksp, mat, "cholesky")
         if factor.getMumpsInfog(28) > 0:
             return None
         return int(factor.getMumpsInfog(12))

@@ -40,16 +40,24 @@ def test_contact_baselines_get_the_parts(comm, shared_tmp, formulation):
 
 def test_relations_contact_gets_the_parts(comm):
     """Contact as relations (the paper's form) runs on the parts: the surfaces are gathered
-    once, the relations are whole on every rank in input numbering."""
+    once; a relation is whole on every rank, or built per rank (the rigid obstacle's rows, on
+    their slave node's owner), in input numbering: the one-process model's rows, DOFs and
+    values, each row on every rank or on exactly one."""
     scene = load_scene(CONFIGS / "contact_block_friction.toml")
     model = build_model(scene, comm)
     whole = build_model(load_scene(CONFIGS / "contact_block_friction.toml"))
     assert model.mesh.num_points < whole.mesh.num_points or comm.size == 1
     ours = {r.name: r for r in model.relations}
-    for r in whole.relations:   # the same rows, DOFs and values on every rank
-        assert np.array_equal(ours[r.name].a_dofs, r.a_dofs)
-        np.testing.assert_array_equal(ours[r.name].a_vals, r.a_vals)
-        np.testing.assert_array_equal(ours[r.name].values, r.values)
+    for r in whole.relations:
+        mine = ours[r.name]
+        ids = mine.row_ids()
+        here = np.isin(r.a_rows, ids)
+        assert np.array_equal(mine.a_dofs, r.a_dofs[here])
+        np.testing.assert_array_equal(mine.a_vals, r.a_vals[here])
+        np.testing.assert_array_equal(mine.values, r.values[ids])
+        held = comm.allreduce(np.bincount(ids, minlength=r.nrows))
+        assert np.all(held == (comm.size if mine.whole else 1)), (r.name, held)
+    assert not ours["base_normal"].whole
 
 
 def test_a_distributed_model_holds_its_part(comm):
