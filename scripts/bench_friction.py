@@ -59,7 +59,7 @@ from parsolve.contact.pairing import pair_nodes
 from parsolve.la.dofmap import DofMap
 from parsolve.contact.rows import friction_dual, normal_rows, tangent_rows
 from parsolve.driver import run
-from parsolve.effects.contact_penalty import PenaltyContact
+from parsolve.effects.contact_penalty import PenaltyContact, gap_gradients
 from parsolve.errors import InputError
 from parsolve.model import build_model
 from parsolve.scene import load_scene
@@ -266,6 +266,7 @@ def bare_penalty(pairing, mu: float, eps: float, dim: int, npoints: int) -> Pena
     eff.values = DofMap(MPI.COMM_SELF, part, dim)
     eff.eps_n = eff.eps_t = np.full(len(pairing), eps)
     eff.touch, eff.touching = 0.0, np.zeros(len(pairing), bool)   # the closed rule: none here
+    eff.bn, eff.bt = gap_gradients(pairing)   # the pairs' gap gradients (set with the tuples)
 
     class Spec:
         pass
