@@ -31,3 +31,25 @@ def test_a_signal_on_one_rank_stops_every_rank_at_the_check():
     assert err.value.exit_status == 143 and str(err.value) == "interrupted: SIGTERM"
     assert signal.getsignal(signal.SIGTERM) is before   # the previous handler is back
     interrupts.check(comm)                               # acted on once: nothing pending
+
+
+def test_a_late_relayed_signal_after_the_stop_does_not_kill_a_rank():
+    """mpirun relays SIGUSR2 to the ranks one after another: a rank stopped by another's mark
+    may get its copy after it has left the run. It must not die of it (exit 140 instead of
+    143)."""
+    comm = MPI.COMM_WORLD
+    before = signal.signal(signal.SIGUSR2, signal.SIG_DFL)
+    try:
+        with pytest.raises(Interrupted) as err:
+            with interrupts.interruptible(comm):
+                if comm.rank == 0:
+                    interrupts._pending = signal.SIGUSR2    # rank 0's copy came first
+                interrupts.check(comm)
+        assert str(err.value) == "interrupted: SIGTERM (sent as SIGUSR2)"
+        expected = signal.SIG_IGN if comm.size > 1 else signal.SIG_DFL
+        assert signal.getsignal(signal.SIGUSR2) == expected
+        if comm.size > 1:
+            os.kill(os.getpid(), signal.SIGUSR2)            # the late copy: ignored
+        comm.Barrier()
+    finally:
+        signal.signal(signal.SIGUSR2, before)
