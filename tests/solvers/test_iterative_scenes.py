@@ -171,12 +171,23 @@ def _augmented_expected(system, mat, gamma: float) -> tuple[np.ndarray, np.ndarr
     return T, TM, P
 
 
+def check_augmented_form(system, mat):
+    """The system's augmented form of ``mat`` against the dense products: its operator is T M
+    and its preconditioning matrix P, entry by entry. Returns (form, T, TM, P)."""
+    from parsolve.solvers.augmented import GAMMA
+
+    form = system.preconditioner(mat, GAMMA)
+    T, TM, P = _augmented_expected(system, mat, GAMMA)
+    scale = np.abs(TM).max()
+    assert np.abs(dense(form.operator, system.comm) - TM).max() <= 1e-12 * scale
+    assert np.abs(dense(form.pmat, system.comm) - P).max() <= 1e-12 * scale
+    return form, T, TM, P
+
+
 def test_augmented_form_entry_by_entry(comm):
     """The friction box after a solve with some rows inactive: the KSP's operator is T M (the
     operator plus γ/k Aₕᵀ Aₕ of the enforced hard rows, nothing else), its right-hand side
     T b, from dense products; the KSP's answer solves M x = b."""
-    from parsolve.solvers.augmented import GAMMA
-
     text = scene(shipped("contact_friction_3d.toml"), steps={"count": 1},
                  solver={"preset": "iterative"})
     system, solver, mat, rhs, x = solve_in_process(text, comm, options={})
@@ -184,11 +195,8 @@ def test_augmented_form_entry_by_entry(comm):
     active[::3] = False   # some rows switched off, as an active set does
     system.op.active = active
     mat = system.assemble()
-    form = system.preconditioner(mat, GAMMA)
-    T, TM, P = _augmented_expected(system, mat, GAMMA)
+    form, T, TM, _ = check_augmented_form(system, mat)
     scale = np.abs(TM).max()
-    assert np.abs(dense(form.operator, comm) - TM).max() <= 1e-12 * scale
-    assert np.abs(dense(form.pmat, comm) - P).max() <= 1e-12 * scale
     # the augmentation is there (not the operator alone)
     assert np.abs(TM - dense(mat, comm)).max() > 1e-3 * scale
     b = comm.allgather(rhs.array.copy())
