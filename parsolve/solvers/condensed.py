@@ -242,7 +242,7 @@ class CondensedPreconditioner:
         its storage reused from one update to the next), then its rows that couple to a
         condensed node taken out, transformed in place (G on the condensed nodes' rows, H on
         their columns, other ranks' nodes included, G (K_eff - K) H + k on their diagonal
-        blocks) and put back. No other matrix is made: S holds the only copy of K's values.
+        blocks) and put back: no matrix but S (and the near rows' small one) is made.
         0, or 7 (on every rank) when K's pattern is not made of whole nodal blocks there."""
         self.S = mat.createSubMatrix(self.is_q, self.is_q, submat=self.S)
         d = mat.getDiagonal()
