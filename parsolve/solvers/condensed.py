@@ -19,9 +19,11 @@ With exact solves the preconditioner is M⁻¹, built in three eliminations:
   H = Q Z, Z the free directions, block diagonal; the constrained slots of S hold k on the
   diagonal), then λ_h = E_c⁻¹ Q_cᵀ (r̂ - K_eff q).
 
-S has K's pattern, is symmetric when the relations are associated, and is an elastic
-stiffness with some nodal directions held: the AMG sees it with the rigid-body modes in the
-nodal frames (Hᵀ times them). Everything per node is batched numpy on (nodes, ncomp, ncomp)
+S is a copy of K whose condensed nodes' rows (G) and columns (H) are transformed in place,
+with no product of matrices: K's pattern, one copy of K's values and no temporary as large.
+It is symmetric when the relations are associated, and is an elastic stiffness with some
+nodal directions held: the AMG sees it with the rigid-body modes in the nodal frames (Hᵀ
+times them). Everything per node is batched numpy on (nodes, ncomp, ncomp)
 stacks (padded: a node with k hard rows has an identity beyond its k × k block); every row's
 node is owned by the rank that owns the row (checked: else the system is not condensable).
 """

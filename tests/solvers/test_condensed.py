@@ -146,3 +146,24 @@ def test_condensed_operator_is_the_nodal_transform(comm):
         reference = _nodal_transform(pre, dense(variant, comm), comm)
         assert np.abs(S - reference).max() <= 1e-13 * np.abs(reference).max()
         assert np.abs(pre.h - np.eye(3)).max() > 0.1   # (frames that move the columns)
+
+
+def test_stiffness_not_in_nodal_blocks_is_not_condensed(comm):
+    """A stiffness whose rows of a node have different column lists (here: each node's
+    entries (x, y) and (y, z) left out of the pattern) cannot be transformed node block by
+    node block: the reason, the same on every rank."""
+    system, solver, mat, rhs, x = _friction(comm)
+    nq = system.dofmap.owned()[1] - system.dofmap.owned()[0]
+    start = mat.getOwnershipRange()[0]
+    indptr, cols, vals = mat.getValuesCSR()
+    rows = np.repeat(np.arange(indptr.size - 1), np.diff(indptr))
+    keep = ~((rows < nq) & (rows % 3 < 2) & (cols == rows + start + 1))
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(rows[keep], minlength=indptr.size - 1))])
+    n = indptr.size - 1
+    holed = PETSc.Mat().createAIJ(size=((n, None), (n, None)),
+                                  csr=(indptr.astype(PETSc.IntType), cols[keep], vals[keep]),
+                                  comm=comm)
+    is_q, is_l = system.index_sets()
+    pre = CondensedPreconditioner(comm, 3, is_q, is_l, "holed_")
+    why = "the stiffness is not made of whole nodal blocks at a condensed node"
+    assert pre.update(holed) == why
