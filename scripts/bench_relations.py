@@ -477,6 +477,7 @@ def big_study(folder: Path, factor: int, ranks: int, steps: int, timeout: float 
     elasticity on request), and MUMPS' estimate of the direct preset's factorization at that
     size (``estimate_child``): the table's rows and the estimate in words."""
     end = None if timeout is None else time.monotonic() + timeout   # (the whole study's)
+    load0 = os.getloadavg()
     runs = [("friction", friction_scene(factor, steps))]
     if elasticity:
         runs.append(("elasticity", elastic_scene(factor, steps)))
@@ -494,7 +495,7 @@ def big_study(folder: Path, factor: int, ranks: int, steps: int, timeout: float 
                          f"{r['wall'] / max(r['iterations'], 1):.1f}", bh.mib(r["hwm_rank"]),
                          bh.mib(r["hwm"]), f"{r['hwm'] / r['dofs'] / 1e3:.1f}"])
         print(bh.text_table(BIG_HEAD, rows[-1:]), flush=True)
-        publish_big(rows, "(the MUMPS estimate not run yet)", factor, ranks, steps)
+        publish_big(rows, "(the MUMPS estimate not run yet)", factor, ranks, steps, load0)
     e = one_run(folder, f"big_friction_{factor}", friction_scene(factor, steps), "direct",
                 ranks=ranks, timeout=left(end), mode=ESTIMATE)
     if e.get("status") == "estimated":
@@ -508,7 +509,7 @@ def big_study(folder: Path, factor: int, ranks: int, steps: int, timeout: float 
     else:
         words = f"MUMPS' analysis did not finish: {e['status'][:120]}"
     print(words, flush=True)
-    publish_big(rows, words, factor, ranks, steps)
+    publish_big(rows, words, factor, ranks, steps, load0)
     return rows, words
 
 
@@ -517,12 +518,14 @@ def left(end: float | None) -> float | None:
     return None if end is None else max(end - time.monotonic(), 1.0)
 
 
-def publish_big(rows: list, mumps: str, factor: int, ranks: int, steps: int) -> None:
+def publish_big(rows: list, mumps: str, factor: int, ranks: int, steps: int,
+                load0: tuple) -> None:
     machine = bh.machine_info()
     text = "\n".join([
         "# Frictional contact at scale: the largest run", "",
         f"{machine['date']}, {machine['cpu']}, {machine['cpus']} CPUs, {ranks} ranks, the "
-        "machine shared (times noisy). The 3D friction box (`contact_friction_3d.toml`, its "
+        f"machine shared (times noisy: {bh.load_line(load0, os.getloadavg())}). The 3D "
+        "friction box (`contact_friction_3d.toml`, its "
         f"first {steps} step{'s' if steps > 1 else ''}) refined {factor}× per direction on "
         "the iterative preset (GMRES on the saddle system, the nodal rows condensed, one ML "
         "V-cycle on the condensed operator); Krylov iterations per linear solve; set-up: the "
