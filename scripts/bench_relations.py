@@ -23,6 +23,13 @@ mean, max; the iterative preset at its tolerance, rtol 2.5e-14), wall time, peak
         plain elasticity (its base clamped, CG + GAMG) on the same mesh: time per Newton
         iteration, Krylov iterations, peak memory summed over the ranks
         (scripts/results/bench_relations_scale.md)
+    nice -n 10 .venv/bin/python scripts/bench_relations.py --big 16 --ranks 2 [--timeout S]
+        → one large run (not in CI): the friction box refined f× per direction (16: 931k
+        DOFs, 21: 2.08M) on the iterative preset, its Newton and Krylov iterations, set-up
+        and solve times, peak memory per rank; beside it MUMPS' own estimate of its
+        factorization at that size (its analysis only: the factorization is never started),
+        and with --big-elasticity the clamped box's elasticity run on the same mesh
+        (scripts/results/bench_relations_big.md)
 """
 
 from __future__ import annotations
@@ -30,6 +37,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -39,6 +47,7 @@ import bench_harness as bh
 from bench_scenes import _dumps, _shipped
 
 CHILD = "--child"
+ESTIMATE = "--estimate"   # a child that runs MUMPS' analysis only (``estimate_child``)
 
 
 # ------------------------------------------------------------------------------ scenes
@@ -151,6 +160,46 @@ def child(scene_path: str, preset: str, out: str, options: str) -> None:
                           setup=setup, pieces=pieces, choices=choices)))
 
 
+def estimate_child(scene_path: str, preset: str, out: str, options: str) -> None:
+    """MUMPS' own estimate of the direct preset's factorization of the scene's first
+    operator: its analysis, then a factorization refused at once (ICNTL(23), the working
+    memory allowed, set to 1 MB: error -19 before any allocation); prints INFOG(16) (MiB, the
+    largest rank's) and INFOG(17) (all ranks') and the analysis' time."""
+    from mpi4py import MPI
+    from petsc4py import PETSc
+
+    from parsolve.model import build_model
+    from parsolve.scene import load_scene
+    from parsolve.solvers import options as opt
+    from parsolve.solvers.linear import preset_options
+    from parsolve.solvers.system import SaddleSystem
+
+    comm = MPI.COMM_WORLD
+    model = build_model(load_scene(Path(scene_path)), comm)
+    dofs = model.mesh.num_global_points * model.ncomp
+    mat = SaddleSystem(comm, model).assemble()
+    settings = {**preset_options("direct", symmetric=False, has_multipliers=True),
+                "mat_mumps_icntl_23": "1"}
+    settings.pop("ksp_error_if_not_converged")
+    ksp = PETSc.KSP().create(comm)
+    ksp.setOptionsPrefix("estimate_")
+    ksp.setOperators(mat)
+    t0 = time.perf_counter()
+    with opt.inserted("estimate_", settings, record=False):
+        ksp.setFromOptions()
+        try:
+            ksp.setUp()
+        except PETSc.Error:
+            pass   # (-19: the estimate is what was asked)
+    F = ksp.getPC().getFactorMatrix()
+    info = {k: int(F.getMumpsInfog(k)) for k in (1, 16, 17)}
+    if comm.rank == 0:
+        print(json.dumps(dict(status="estimated", dofs=dofs, infog=info,
+                              analysis=time.perf_counter() - t0, hwm=bh.proc_memory()["hwm"])))
+    else:
+        print(json.dumps(dict(rank=comm.rank, hwm=bh.proc_memory()["hwm"])))
+
+
 def matrix_pieces(solver) -> dict[str, float]:
     """MiB on this rank of each matrix the first set-up of ``solver`` holds: the Newton matrix
     M, the KSP's operator and preconditioning matrix (each counted once), the fieldsplit's
@@ -177,7 +226,6 @@ def matrix_pieces(solver) -> dict[str, float]:
     pc = ksp.getPC()
     if pc.getType() == "python" and solver.condensed is not None:   # (solvers.condensed)
         out["condensed S"] = size(solver.condensed.S)
-        out["condensed R, P"] = size(solver.condensed.R) + size(solver.condensed.P)
         mg = solver.condensed.amg
     elif pc.getType() == "fieldsplit":
         kq, kl = pc.getFieldSplitSubKSP()
@@ -209,18 +257,37 @@ def json_objects(text: str) -> list[dict]:
     return out
 
 
+def run_child(cmd: list[str], timeout: float | None) -> tuple[int, str, str]:
+    """(exit status, stdout, stderr) of a child run in its own process group, the whole group
+    stopped (SIGTERM, then SIGKILL) when it runs past ``timeout`` seconds (status None)."""
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=bh.child_env(), cwd=bh.ROOT, start_new_session=True)
+    try:
+        out, err = proc.communicate(timeout=timeout)
+        return proc.returncode, out, err
+    except subprocess.TimeoutExpired:
+        for sig, wait in ((signal.SIGTERM, 20), (signal.SIGKILL, None)):
+            try:
+                os.killpg(proc.pid, sig)
+                out, err = proc.communicate(timeout=wait)
+                break
+            except subprocess.TimeoutExpired:
+                continue
+        return None, out, f"stopped after {timeout:.0f} s (--timeout)"
+
+
 def one_run(folder: Path, name: str, text: str, preset: str, options: dict | None = None,
-            ranks: int = 1) -> dict:
+            ranks: int = 1, timeout: float | None = None, mode: str = CHILD) -> dict:
     scene = folder / f"{name}.toml"
     scene.write_text(text)
     out = folder / f"{name}_{preset}.h5"
-    args = [__file__, CHILD, str(scene), preset, str(out), json.dumps(options or {})]
+    args = [__file__, mode, str(scene), preset, str(out), json.dumps(options or {})]
     cmd = bh.mpirun(ranks, args) if ranks > 1 else [bh.VENV_PY, *args]
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=bh.child_env(), cwd=bh.ROOT)
-    lines = json_objects(proc.stdout)
+    code, stdout, stderr = run_child(cmd, timeout)
+    lines = json_objects(stdout)
     main_line = [ln for ln in lines if "status" in ln]
-    if proc.returncode or not main_line:
-        return dict(status=f"failed: {(proc.stderr or proc.stdout).strip()[-300:]}", out=str(out))
+    if code is None or code or not main_line:
+        return dict(status=f"failed: {(stderr or stdout).strip()[-300:]}", out=str(out))
     hwm = [ln["hwm"] for ln in lines]
     setup = [ln.get("setup", {}).get("mib", 0.0) for ln in lines]
     pieces: dict[str, float] = {}
@@ -317,7 +384,8 @@ def gamma_study(folder: Path) -> list[list[str]]:
 
 
 SCALE_HEAD = ["problem", "refinement", "DOFs", "ranks", "Newton its", "Krylov mean / max",
-              "s per Newton it", "peak MiB per rank", "peak MiB (all ranks)", "KB/DOF",
+              "s per Newton it", "set-up s per solve", "peak MiB per rank", "peak MiB (all ranks)",
+              "KB/DOF",
               "ratio to elasticity"]
 
 
@@ -336,7 +404,7 @@ def scale_study(folder: Path, factors: list[int], ranks: int,
         base = runs["elasticity"]
         for name, r in runs.items():
             if r.get("status") != "complete":
-                rows.append([name, f"{f}³×", "-", str(ranks), r["status"][:60], *["-"] * 6])
+                rows.append([name, f"{f}³×", "-", str(ranks), r["status"][:60], *["-"] * 7])
                 continue
             k = r["krylov"] or [0]
             per_it = r["wall"] / max(r["iterations"], 1)
@@ -346,6 +414,7 @@ def scale_study(folder: Path, factors: list[int], ranks: int,
                          f"memory {r['hwm'] / base['hwm']:.2f}×")
             rows.append([name, f"{f}³×", f"{r['dofs']:,}", str(ranks), str(r["iterations"]),
                          f"{sum(k) / len(k):.1f} / {max(k)}", f"{per_it:.2f}",
+                         f"{r['setup']['s'] / max(len(r['krylov']), 1):.2f}",
                          bh.mib(r.get("hwm_rank")), bh.mib(r["hwm"]),
                          f"{r['hwm'] / r['dofs'] / 1e3:.1f}", ratio])
         print(bh.text_table(SCALE_HEAD, rows[-2:]), flush=True)
@@ -355,9 +424,9 @@ def scale_study(folder: Path, factors: list[int], ranks: int,
 
 
 PIECES = ["M", "KSP operator", "KSP pmat", "fieldsplit q block", "Schur pmat", "condensed S",
-          "condensed R, P", "GAMG coarse operators", "GAMG interpolations", "RSS"]
+          "GAMG coarse operators", "GAMG interpolations", "RSS"]
 PIECES_HEAD = ["problem", "refinement", "Newton matrix M", "KSP operator", "KSP pmat (its own)",
-               "fieldsplit q block (its own)", "Schur pmat", "condensed S", "condensed R, P",
+               "fieldsplit q block (its own)", "Schur pmat", "condensed S",
                "AMG coarse operators", "AMG interpolations", "resident after the first solve",
                "peak"]
 
@@ -397,6 +466,74 @@ def gamg_study(folder: Path, factor: int) -> list[list[str]]:
     return rows
 
 
+BIG_HEAD = ["problem", "refinement", "DOFs", "ranks", "Newton its", "linear solves",
+            "Krylov min / mean / max", "set-up s per solve", "wall s", "s per Newton it",
+            "peak MiB per rank", "peak MiB (all ranks)", "KB/DOF"]
+
+
+def big_study(folder: Path, factor: int, ranks: int, steps: int, timeout: float | None,
+              elasticity: bool) -> tuple[list[list[str]], str]:
+    """One large run of the friction box on the iterative preset (and the clamped box's
+    elasticity on request), and MUMPS' estimate of the direct preset's factorization at that
+    size (``estimate_child``): the table's rows and the estimate in words."""
+    end = None if timeout is None else time.monotonic() + timeout   # (the whole study's)
+    load0 = os.getloadavg()
+    runs = [("friction", friction_scene(factor, steps))]
+    if elasticity:
+        runs.append(("elasticity", elastic_scene(factor, steps)))
+    rows = []
+    for name, text in runs:
+        r = one_run(folder, f"big_{name}_{factor}", text, "iterative", ranks=ranks,
+                    timeout=left(end))
+        if r.get("status") != "complete":
+            rows.append([name, f"{factor}³×", "-", str(ranks), r["status"][:80], *["-"] * 8])
+        else:
+            k = r["krylov"] or [0]
+            rows.append([name, f"{factor}³×", f"{r['dofs']:,}", str(ranks), str(r["iterations"]),
+                         str(len(r["krylov"])), " / ".join(krylov_cells(r)),
+                         f"{r['setup']['s'] / max(len(k), 1):.1f}", f"{r['wall']:.0f}",
+                         f"{r['wall'] / max(r['iterations'], 1):.1f}", bh.mib(r["hwm_rank"]),
+                         bh.mib(r["hwm"]), f"{r['hwm'] / r['dofs'] / 1e3:.1f}"])
+        print(bh.text_table(BIG_HEAD, rows[-1:]), flush=True)
+        publish_big(rows, "(the MUMPS estimate not run yet)", factor, ranks, steps, load0)
+    e = one_run(folder, f"big_friction_{factor}", friction_scene(factor, steps), "direct",
+                ranks=ranks, timeout=left(end), mode=ESTIMATE)
+    if e.get("status") == "estimated":
+        g = e["infog"]
+        words = (f"MUMPS (the direct preset's LU, QAMD), from its analysis of the same operator "
+                 f"on {ranks} ranks ({e['analysis']:.0f} s, peak {bh.mib(e['hwm_rank'])} MiB "
+                 f"per rank): {g['17']:,} MB for the factorization in core, "
+                 f"{g['16']:,} MB on the largest rank (INFOG(17), INFOG(16); its "
+                 f"factorization refused at once, INFOG(1) = {g['1']}; the machine has "
+                 f"{bh.machine_info()['mem_gib']} GiB)")
+    else:
+        words = f"MUMPS' analysis did not finish: {e['status'][:120]}"
+    print(words, flush=True)
+    publish_big(rows, words, factor, ranks, steps, load0)
+    return rows, words
+
+
+def left(end: float | None) -> float | None:
+    """Seconds to ``end`` (time.monotonic), at least one."""
+    return None if end is None else max(end - time.monotonic(), 1.0)
+
+
+def publish_big(rows: list, mumps: str, factor: int, ranks: int, steps: int,
+                load0: tuple) -> None:
+    machine = bh.machine_info()
+    text = "\n".join([
+        "# Frictional contact at scale: the largest run", "",
+        f"{machine['date']}, {machine['cpu']}, {machine['cpus']} CPUs, {ranks} ranks, the "
+        f"machine shared (times noisy: {bh.load_line(load0, os.getloadavg())}). The 3D "
+        "friction box (`contact_friction_3d.toml`, its "
+        f"first {steps} step{'s' if steps > 1 else ''}) refined {factor}× per direction on "
+        "the iterative preset (GMRES on the saddle system, the nodal rows condensed, one ML "
+        "V-cycle on the condensed operator); Krylov iterations per linear solve; set-up: the "
+        "condensation and the AMG's, per linear solve; peak memory: VmHWM.", "",
+        bh.md_table(BIG_HEAD, rows, first="---"), "", mumps + ".", ""])
+    bh.publish("bench_relations_big.md", text)
+
+
 def publish_gamg(rows: list, factor: int) -> None:
     machine = bh.machine_info()
     text = "\n".join([
@@ -428,7 +565,19 @@ def main() -> None:
     p.add_argument("--gamg", type=int, default=0,
                    help="the GAMG set-up table only: the clamped box refined f× on 1 and 2 "
                         "ranks, PETSc's PtAP algorithms (bench_relations_gamg.md)")
+    p.add_argument("--big", type=int, default=0,
+                   help="one large run only (not in CI): the friction box refined f× per "
+                        "direction on --ranks ranks, MUMPS' estimate beside it "
+                        "(bench_relations_big.md)")
+    p.add_argument("--big-elasticity", action="store_true",
+                   help="with --big: the clamped box's elasticity run too")
+    p.add_argument("--timeout", type=float, default=None,
+                   help="seconds after which the --big runs are stopped (their rows say so)")
     args = p.parse_args()
+    if args.big:
+        big_study(bh.scratch("relations_big"), args.big, args.ranks, args.steps, args.timeout,
+                  args.big_elasticity)
+        return
     if args.gamg:
         publish_gamg(gamg_study(bh.scratch("relations_gamg"), args.gamg), args.gamg)
         return
@@ -519,5 +668,7 @@ def report(rows: list, results: list, machine: dict, load0, gamma_rows: list | N
 if __name__ == "__main__":
     if len(sys.argv) > 1 and sys.argv[1] == CHILD:
         child(*sys.argv[2:6])
+    elif len(sys.argv) > 1 and sys.argv[1] == ESTIMATE:
+        estimate_child(*sys.argv[2:6])
     else:
         main()

@@ -19,9 +19,11 @@ With exact solves the preconditioner is M⁻¹, built in three eliminations:
   H = Q Z, Z the free directions, block diagonal; the constrained slots of S hold k on the
   diagonal), then λ_h = E_c⁻¹ Q_cᵀ (r̂ - K_eff q).
 
-S has K's pattern, is symmetric when the relations are associated, and is an elastic
-stiffness with some nodal directions held: the AMG sees it with the rigid-body modes in the
-nodal frames (Hᵀ times them). Everything per node is batched numpy on (nodes, ncomp, ncomp)
+S is a copy of K whose condensed nodes' rows (G) and columns (H) are transformed in place,
+with no product of matrices: K's pattern, one copy of K's values and no temporary as large.
+It is symmetric when the relations are associated, and is an elastic stiffness with some
+nodal directions held: the AMG sees it with the rigid-body modes in the nodal frames (Hᵀ
+times them). Everything per node is batched numpy on (nodes, ncomp, ncomp)
 stacks (padded: a node with k hard rows has an identity beyond its k × k block); every row's
 node is owned by the rank that owns the row (checked: else the system is not condensable).
 """
@@ -43,6 +45,7 @@ REASONS = {
     4: "dependent hard rows on a node",
     5: "a node's dual does not hold its hard rows",
     6: "a relation row ties several nodes",
+    7: "the stiffness is not made of whole nodal blocks at a condensed node",
 }
 #: a hard row's QR diagonal, relative to the node's largest entry, below which the rows are
 #: taken as dependent; E_c's condition number above which the dual does not hold them
@@ -75,9 +78,9 @@ class CondensedPreconditioner:
     why not, the same on every rank); ``apply`` is the PETSc python PC's application: M⁻¹
     with S⁻¹ replaced by one AMG V-cycle (options under ``<prefix>condensed_``).
 
-    No block of M is copied: S = R M P with R = [G, 0] and P = [H; 0] (block diagonal, of the
-    saddle layout's primal rows), and the application's products with K, A and B are products
-    with M of vectors zero in the other field."""
+    S is K's copy (a submatrix of M, its storage reused by the next updates) with the rows
+    and columns of the condensed nodes transformed in place; the application's products with
+    K, A and B are products with M of vectors zero in the other field."""
 
     def __init__(self, comm: MPI.Comm, ncomp: int, is_q: PETSc.IS, is_l: PETSc.IS,
                  prefix: str):
@@ -86,20 +89,23 @@ class CondensedPreconditioner:
             atexit.register(_clean_up)
         if all(c is not comm for c in _COMMS):
             _COMMS.append(comm)
-        self.is_q = is_q
+        self.is_q, self.is_l = is_q, is_l
         self.nq, self.nl = is_q.getLocalSize(), is_l.getLocalSize()
-        # each rank's first saddle row and its primal rows' count (comm-size arrays)
+        # each rank's first saddle row, primal rows' and multiplier rows' counts (comm-size)
         sizes = np.array(comm.allgather((self.nq, self.nl)), dtype=np.int64)
         self.starts = np.concatenate([[0], np.cumsum(sizes.sum(axis=1))])
         self.nqs = sizes[:, 0]
         self.start = int(self.starts[comm.rank])
         self.q_start = int(self.nqs[:comm.rank].sum())   # in the primal numbering (S's)
+        self.l_start = int(sizes[:comm.rank, 1].sum())    # in the multipliers' numbering
+        self.is_all = PETSc.IS().createStride(self.nq + self.nl, first=self.start, step=1,
+                                              comm=comm)
         self._handle = None
         self.amg: PETSc.PC | None = None
         self._reset()
 
     def _reset(self) -> None:
-        self.mat = self.S = self.R = self.P = self._work = None
+        self.mat = self.S = self._work = None
 
     # ------------------------------------------------------------------ set-up
 
@@ -113,31 +119,40 @@ class CondensedPreconditioner:
         if not code:
             code = self._node_blocks(*rows)
         code = self.comm.allreduce(code, op=MPI.MAX)
+        if not code:
+            code = self.comm.allreduce(self._condensed_operator(mat), op=MPI.MAX)
         if code:
             return REASONS[code]
         self.mat = mat
-        self._condensed_operator(mat)
+        self._near_null()
         self._set_up_amg()
         return None
 
     def _blocks(self, mat: PETSc.Mat):
-        """M's local entries as (row, column, value) of A (column: the local primal DOF),
-        B (row: the local primal DOF, column: the local multiplier row) and C (local rows),
-        those in this rank's columns; code 1 when an entry of A, B or C lies in another's.""" 
-        indptr, cols, vals = mat.getValuesCSR()
-        rows = np.repeat(np.arange(indptr.size - 1), np.diff(indptr))
+        """M's entries of A (row: the local multiplier row, column: the local primal DOF),
+        B (row: the local primal DOF, column: the local multiplier row) and C (local rows) as
+        (row, column, value), those in this rank's columns; code 1 when an entry of A, B or C
+        lies in another's. Read from two submatrices of M (its multiplier rows; its multiplier
+        columns), each as large as the relation rows, never from a copy of the whole of M."""
+        rows_l = mat.createSubMatrix(self.is_l, self.is_all)   # [A, C]: saddle columns
+        indptr, cols, vals = rows_l.getValuesCSR()
+        rows_l.destroy()
+        rows = np.repeat(np.arange(self.nl), np.diff(indptr))
         owner = np.searchsorted(self.starts, cols, side="right") - 1
+        local = cols - self.start
         on_l = cols - self.starts[owner] >= self.nqs[owner]     # a multiplier column
         mine = owner == self.comm.rank
-        local = cols - self.start
-        in_l = rows >= self.nq
-        across = int(np.any((in_l | on_l) & ~mine))
-        a = in_l & ~on_l & mine
-        b = ~in_l & on_l & mine
-        c = in_l & on_l & mine
-        nq = self.nq
-        return across, ((rows[a] - nq, local[a], vals[a]), (rows[b], local[b] - nq, vals[b]),
-                        (rows[c] - nq, local[c] - nq, vals[c]))
+        a, c = ~on_l & mine, on_l & mine
+        across = not np.all(mine)
+        cols_l = mat.createSubMatrix(self.is_all, self.is_l)   # [B; C]: multipliers' columns
+        indptr, cols, vals_b = cols_l.getValuesCSR()
+        cols_l.destroy()
+        rows_b = np.repeat(np.arange(indptr.size - 1), np.diff(indptr))
+        local_b = cols - self.l_start
+        b = (rows_b < self.nq) & (local_b >= 0) & (local_b < self.nl)
+        across |= bool(np.any((local_b < 0) | (local_b >= self.nl)))
+        return int(across), ((rows[a], local[a], vals[a]), (rows_b[b], local_b[b], vals_b[b]),
+                             (rows[c], local[c] - self.nq, vals[c]))
 
     def _nodal_rows(self, mat: PETSc.Mat):
         """(code, (node of each multiplier row or -1, C's diagonal, A, B)): code 0 when each
@@ -224,51 +239,128 @@ class CondensedPreconditioner:
         self.dual = zc @ eci @ zc @ qt                 # → λ_h = E_c⁻¹ Q_cᵀ (r̂ - K_eff q)
         return 0
 
-    def _embedding(self, blocks: np.ndarray, old: PETSc.Mat | None, rows: bool) -> PETSc.Mat:
-        """R = [G, 0] (``rows``: primal rows, saddle columns) or P = [H; 0] (saddle rows,
-        primal columns): ``blocks`` on the condensed nodes, identity on the other owned nodes
-        (the pattern the same every time: values rewritten in place)."""
-        nc, nq, n = self.nc, self.nq, self.nq // self.nc
-        full = np.broadcast_to(np.eye(nc), (n, nc, nc)).copy()
-        full[self.nodes] = blocks
-        lens = np.full(nq + (0 if rows else self.nl), 0, dtype=np.int64)
-        lens[:nq] = nc
-        indptr = np.concatenate([[0], np.cumsum(lens)]).astype(PETSc.IntType)
-        first = self.start if rows else self.q_start
-        indices = (first + np.repeat(np.arange(n) * nc, nc * nc)
-                   + np.tile(np.arange(nc), nq)).astype(PETSc.IntType)
-        values = full.reshape(-1)
-        if old is not None:
-            old.setValuesCSR(indptr, indices, values)
-            old.assemble()
-            return old
-        saddle = (nq + self.nl, None)
-        size = ((nq, None), saddle) if rows else (saddle, (nq, None))
-        return PETSc.Mat().createAIJ(size=size, csr=(indptr, indices, values), comm=self.comm)
-
-    def _condensed_operator(self, mat: PETSc.Mat) -> None:
-        """S = R M P = G K H, plus G (K_eff - K) H and k on the constrained slots' diagonal,
-        per node."""
-        self.R = self._embedding(self.g, self.R, rows=True)
-        self.P = self._embedding(self.h, self.P, rows=False)
-        self.S = self.R.matMatMult(mat, self.P, result=self.S)
+    def _condensed_operator(self, mat: PETSc.Mat) -> int:
+        """S = G K_eff H, k on the constrained slots' diagonal: K copied from M (a submatrix,
+        its storage reused from one update to the next), then its rows that couple to a
+        condensed node taken out, transformed in place (G on the condensed nodes' rows, H on
+        their columns, other ranks' nodes included, G (K_eff - K) H + k on their diagonal
+        blocks) and put back: no matrix but S (and the near rows' small one) is made.
+        0, or 7 (on every rank) when K's pattern is not made of whole nodal blocks there."""
+        self.S = mat.createSubMatrix(self.is_q, self.is_q, submat=self.S)
         d = mat.getDiagonal()
         total = self.comm.allreduce(float(np.abs(d.array[:self.nq]).sum()))
         self.kscale = total / max(int(self.nqs.sum()), 1)
         d.destroy()
-        nc = self.nc
-        extra = self.g @ self.dk @ self.h + self.kscale * self.keep[:, :, None] * np.eye(nc)
-        lens = np.zeros(self.nq // nc, dtype=np.int64)
-        lens[self.nodes] = nc
-        lens = np.repeat(lens, nc)
-        indptr = np.concatenate([[0], np.cumsum(lens)]).astype(PETSc.IntType)
-        indices = (self.q_start + np.repeat(self.nodes * nc, nc * nc)
-                   + np.tile(np.arange(nc), self.nodes.size * nc)).astype(PETSc.IntType)
-        self.S.setValuesCSR(indptr, indices, extra.reshape(-1), addv=PETSc.InsertMode.ADD_VALUES)
+        near = self._near_rows(mat)
+        rows = PETSc.IS().createGeneral((self.start + near).astype(PETSc.IntType),
+                                        comm=self.comm)
+        part = mat.createSubMatrix(rows, self.is_q)   # K's near rows, primal columns
+        indptr, cols, vals = part.getValuesCSR()
+        part.destroy()
+        rows.destroy()
+        ghosts, h_ghost = self._ghost_frames(cols)
+        code = self._transform(near, indptr, cols, vals, ghosts, h_ghost)
+        code = self.comm.allreduce(code, op=MPI.MAX)
+        if code:
+            return code
+        self.S.setValuesIJV(indptr, cols, vals,
+                            rowmap=(self.q_start + near).astype(PETSc.IntType))
         self.S.assemble()
-        if self.S.getBlockSize() != nc:
-            self.S.setBlockSize(nc)
-        self._near_null()
+        if self.S.getBlockSize() != self.nc:
+            self.S.setBlockSize(self.nc)
+        return 0
+
+    def _near_rows(self, mat: PETSc.Mat) -> np.ndarray:
+        """The local primal rows that S changes: the condensed nodes' own and those with an
+        entry in a condensed node's columns (any rank's), found as the nonzeros of K v, v
+        random positive on the condensed DOFs (a zero by cancellation has probability zero;
+        a block numerically zero S leaves zero): K's pattern is never copied."""
+        nc = self.nc
+        x, y = mat.createVecs()
+        x.set(0.0)
+        rng = np.random.default_rng(1 + self.comm.rank)   # (the same rows run after run)
+        own = (self.nodes[:, None] * nc + np.arange(nc)).reshape(-1)
+        x.array[own] = rng.uniform(1.0, 2.0, own.size)
+        mat.mult(x, y)
+        near = np.union1d(np.flatnonzero(y.array[:self.nq]), own)
+        x.destroy()
+        y.destroy()
+        return near
+
+    def _ghost_frames(self, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The nodes of other ranks among the primal columns ``cols`` (sorted) and their
+        frames H (the identity where not condensed), scattered from their owners."""
+        nc, nn = self.nc, self.nc * self.nc
+        frames = PETSc.Vec().createMPI((self.nq * nc, None), comm=self.comm)
+        blocks = frames.array.reshape(-1, nc, nc)
+        blocks[:] = np.eye(nc)
+        blocks[self.nodes] = self.h
+        node = cols // nc
+        lo, hi = self.q_start // nc, (self.q_start + self.nq) // nc
+        ghosts = np.unique(node[(node < lo) | (node >= hi)])
+        index = PETSc.IS().createGeneral(
+            (ghosts[:, None] * nn + np.arange(nn)).reshape(-1).astype(PETSc.IntType),
+            comm=self.comm)
+        out = PETSc.Vec().createSeq(ghosts.size * nn, comm=PETSc.COMM_SELF)
+        scatter = PETSc.Scatter().create(frames, index, out, None)
+        scatter.scatter(frames, out, addv=PETSc.InsertMode.INSERT_VALUES,
+                        mode=PETSc.ScatterMode.FORWARD)
+        h_ghost = out.array.reshape(-1, nc, nc).copy()
+        for obj in (scatter, out, index, frames):
+            obj.destroy()
+        return ghosts, h_ghost
+
+    def _transform(self, near: np.ndarray, indptr: np.ndarray, cols: np.ndarray,
+                   vals: np.ndarray, ghosts: np.ndarray, h_ghost: np.ndarray) -> int:
+        """K's ``near`` rows (CSR, primal columns) → S's, in place in ``vals``: a condensed
+        node's nc rows (one column list) ← G times them; then each column triple of a node
+        whose frame moves it ← it times H; then the diagonal blocks += G dk H + k on the
+        constrained slots. 7 when the pattern is not made of whole nodal blocks there."""
+        nc, m = self.nc, self.nodes.size
+        lengths = np.diff(indptr)
+        at = np.searchsorted(near, self.nodes * nc)[:, None] + np.arange(nc)   # (m, nc)
+        span = lengths[at]
+        if np.any(span != span[:, :1]):
+            return 7
+        span = span[:, 0]
+        offset = np.arange(span.sum()) - np.repeat(np.cumsum(span) - span, span)
+        pos = np.repeat(indptr[at], span, axis=0) + offset[:, None]   # (entries, its rows)
+        owner = np.repeat(np.arange(m), span)
+        col = cols[pos[:, 0]]
+        if np.any(cols[pos] != col[:, None]):
+            return 7
+        vals[pos] = np.einsum("kab,kb->ka", self.g[owner], vals[pos])
+        # the column triples of the nodes whose frame moves them, this rank's and others'
+        table = np.concatenate([self.h, h_ghost])
+        moves = ~np.all(table == np.eye(nc), axis=(1, 2))
+        node = cols // nc
+        here = node - self.q_start // nc
+        mine = (here >= 0) & (here < self.nq // nc)
+        which = np.full(cols.size, -1)
+        if m:
+            s = np.minimum(np.searchsorted(self.nodes, here[mine]), m - 1)
+            which[mine] = np.where(self.nodes[s] == here[mine], s, -1)
+        which[~mine] = m + np.searchsorted(ghosts, node[~mine])
+        hit = which >= 0
+        hit[hit] = moves[which[hit]]
+        first = np.flatnonzero(hit & (cols % nc == 0))
+        triple = np.minimum(first[:, None] + np.arange(nc), cols.size - 1)
+        row = np.repeat(np.arange(near.size), lengths)
+        if (np.count_nonzero(hit) != first.size * nc
+                or np.any(cols[triple] != cols[first, None] + np.arange(nc))
+                or np.any(row[triple] != row[first, None])):
+            return 7
+        vals[triple] = np.einsum("kb,kbc->kc", vals[triple], table[which[first]])
+        # the diagonal blocks: the entries of each node's own columns in its rows
+        j = np.flatnonzero(col == self.q_start + self.nodes[owner] * nc)
+        jj = np.minimum(j[:, None] + np.arange(nc), max(owner.size - 1, 0))
+        if (j.size != m or np.any(owner[j] != np.arange(m))
+                or np.any(col[jj] != col[j, None] + np.arange(nc))
+                or np.any(owner[jj] != owner[j, None])):
+            return 7
+        extra = self.g @ self.dk @ self.h + self.kscale * self.keep[:, :, None] * np.eye(nc)
+        vals[np.swapaxes(pos[jj], 1, 2)] += extra
+        return 0
 
     def _near_null(self) -> None:
         """The rigid-body modes (the primal index set's near-null space) in the nodal frames,

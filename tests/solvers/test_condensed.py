@@ -102,3 +102,68 @@ def test_turned_off_by_option(comm):
     """-condensed false: the augmented form on a system that could be condensed."""
     system, solver, mat, rhs, x = _friction(comm, {"condensed": "false"})
     assert solver.choice == "augmented: condensation turned off"
+
+
+def _nodal_transform(pre: CondensedPreconditioner, M: np.ndarray, comm) -> np.ndarray:
+    """G (K + dk) H + k on the constrained slots, from the dense M and the preconditioner's
+    per-node blocks (gathered): the condensed operator by dense products."""
+    nc = pre.nc
+    q = np.concatenate([pre.starts[r] + np.arange(pre.nqs[r]) for r in range(comm.size)])
+    K = M[np.ix_(q, q)]
+    n = K.shape[0] // nc
+    G, H, DK = (np.broadcast_to(np.eye(nc), (n, nc, nc)).copy() for _ in range(3))
+    DK[:] = 0.0
+    keep = np.zeros((n, nc))
+    first = pre.q_start // nc
+    for part in comm.allgather((pre.nodes + first, pre.g, pre.h, pre.dk, pre.keep)):
+        nodes, g, h, dk, kp = part
+        G[nodes], H[nodes], DK[nodes], keep[nodes] = g, h, dk, kp
+
+    def block_diagonal(blocks):
+        out = np.zeros_like(K)
+        for a in range(nc):
+            for b in range(nc):
+                out[np.arange(n) * nc + a, np.arange(n) * nc + b] = blocks[:, a, b]
+        return out
+
+    S = block_diagonal(G) @ (K + block_diagonal(DK)) @ block_diagonal(H)
+    return S + pre.kscale * np.diag(keep.reshape(-1))
+
+
+def test_condensed_operator_is_the_nodal_transform(comm):
+    """S, made by transforming K's rows and columns in place, equals G (K + dk) H + k on the
+    constrained slots by dense products, on the variant operator (hard, compliant and open
+    rows; a non-associated dual), and again after the operator's values changed (S's storage
+    reused)."""
+    system, solver, mat, rhs, x = _friction(comm)
+    variant = _variant(mat, system)
+    is_q, is_l = system.index_sets()
+    pre = CondensedPreconditioner(comm, 3, is_q, is_l, "transform_")
+    for scale in (1.0, 2.0):
+        variant.scale(scale)
+        assert pre.update(variant) is None
+        S = dense(pre.S, comm)
+        reference = _nodal_transform(pre, dense(variant, comm), comm)
+        assert np.abs(S - reference).max() <= 1e-13 * np.abs(reference).max()
+        assert np.abs(pre.h - np.eye(3)).max() > 0.1   # (frames that move the columns)
+
+
+def test_stiffness_not_in_nodal_blocks_is_not_condensed(comm):
+    """A stiffness whose rows of a node have different column lists (here: each node's
+    entries (x, y) and (y, z) left out of the pattern) cannot be transformed node block by
+    node block: the reason, the same on every rank."""
+    system, solver, mat, rhs, x = _friction(comm)
+    nq = system.dofmap.owned()[1] - system.dofmap.owned()[0]
+    start = mat.getOwnershipRange()[0]
+    indptr, cols, vals = mat.getValuesCSR()
+    rows = np.repeat(np.arange(indptr.size - 1), np.diff(indptr))
+    keep = ~((rows < nq) & (rows % 3 < 2) & (cols == rows + start + 1))
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(rows[keep], minlength=indptr.size - 1))])
+    n = indptr.size - 1
+    holed = PETSc.Mat().createAIJ(size=((n, None), (n, None)),
+                                  csr=(indptr.astype(PETSc.IntType), cols[keep], vals[keep]),
+                                  comm=comm)
+    is_q, is_l = system.index_sets()
+    pre = CondensedPreconditioner(comm, 3, is_q, is_l, "holed_")
+    why = "the stiffness is not made of whole nodal blocks at a condensed node"
+    assert pre.update(holed) == why
