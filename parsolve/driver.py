@@ -296,8 +296,8 @@ def _final_failure(exc: SolverError, problem, t: float, stability: bool, schedul
                    step: int) -> SolverError:
     """A step's failure for good (``problem`` back at the last converged state), named: a path
     that turns back just ahead (a checked run: ``solvers.stability``), a control out of reach
-    (``name_failure``); else what the last attempt failed on, with the cuts tried and the way
-    out. Collective."""
+    (``name_failure``), a maximum control's own path turning back (a checked run); else what
+    the last attempt failed on, with the cuts tried and the way out. Collective."""
     if isinstance(exc, DoesNotFit):
         return exc
     if stability and not problem.ctx.transient and not problem.active.groups and schedule.cuts \

@@ -26,7 +26,9 @@ A maximum control holds its other rows at the value one-sided; they are held her
 equalities too (``_hold_maximum_rows``), which can only hide instabilities, never invent one.
 Beyond the converged states: the path just ahead of one (``check_path``: a snap-back, where
 no nearby equilibrium carries the path on, named alike whether the step from there fails or
-jumps), and an arc-length run's bifurcations (``ArcWatch``).
+jumps), a maximum control's own path when a step fails for good (``control_path_failure``: the
+rows at the maximum held, a limit point of the controlled maximum), and an arc-length run's
+bifurcations (``ArcWatch``).
 """
 
 from __future__ import annotations

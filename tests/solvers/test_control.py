@@ -168,7 +168,8 @@ def test_arc_length_on_an_elastic_bar(run):
     np.testing.assert_allclose(np.linalg.norm(step.reshape(3, -1), axis=1), 1e-3, rtol=1e-10)
 
 
-MAZARS_AT = 'model = "mazars"\neps_d0 = {}\nAt = 1.0\nBt = 1e4\nAc = 1.2\nBc = 1500.0\nbeta = 1.06\n'
+MAZARS_AT = ('model = "mazars"\neps_d0 = {}\nAt = 1.0\nBt = 1e4\nAc = 1.2\nBc = 1500.0\n'
+             'beta = 1.06\n')
 
 
 def _controlled_bar(eps_d0: float) -> str:
