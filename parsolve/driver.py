@@ -30,8 +30,8 @@ from parsolve.solvers.linear import DoesNotFit
 from parsolve.solvers.newton import NewtonSolver
 from parsolve.solvers.problem import SaddleProblem
 from parsolve.solvers.setup import export_system, make_solver
-from parsolve.solvers.stability import check_path, check_stable, checked, modes_ahead, \
-    path_failure
+from parsolve.solvers.stability import check_path, check_stable, checked, \
+    control_path_failure, modes_ahead, path_failure
 from parsolve.solvers.system import SaddleSystem
 from parsolve.version import petsc_version
 
@@ -296,8 +296,8 @@ def _final_failure(exc: SolverError, problem, t: float, stability: bool, schedul
                    step: int) -> SolverError:
     """A step's failure for good (``problem`` back at the last converged state), named: a path
     that turns back just ahead (a checked run: ``solvers.stability``), a control out of reach
-    (``name_failure``); else what the last attempt failed on, with the cuts tried and the way
-    out. Collective."""
+    (``name_failure``), a maximum control's own path turning back (a checked run); else what
+    the last attempt failed on, with the cuts tried and the way out. Collective."""
     if isinstance(exc, DoesNotFit):
         return exc
     if stability and not problem.ctx.transient and not problem.active.groups and schedule.cuts \
@@ -305,6 +305,9 @@ def _final_failure(exc: SolverError, problem, t: float, stability: bool, schedul
         return path_failure(problem.t_prev)
     named = name_failure(exc, problem, t)
     if named is not exc or isinstance(exc, GoingBack):   # (the active set's words: named)
+        return named
+    named = control_path_failure(exc, problem, t) if stability and schedule.cuts else None
+    if named is not None:   # (a maximum control's own limit point)
         return named
     cuts = f"after {schedule.cuts} cut{'s' * (schedule.cuts != 1)}"
     if step == 0:

@@ -69,11 +69,14 @@ def interruptible(comm: MPI.Comm = MPI.COMM_WORLD):
 
 
 def _late_relays(previous: dict) -> dict:
-    """After a stop on several ranks, SIGUSR1 / SIGUSR2 left at their default (terminate) are
-    ignored. mpirun relays them to one rank after another: a rank stopped by the others' mark
-    may get its own copy only after it has left the run, and would die of it (mpirun then
-    exits 140, not 143; seen 1 CI run in 2). The copy means the same stop, already done."""
-    return {s: signal.SIG_IGN for s in STANDS_FOR if previous[s] == signal.SIG_DFL}
+    """After a stop on several ranks, the signals left at their default (terminate) are
+    ignored. mpirun relays SIGUSR1 / SIGUSR2 (scripts/mpirun.sh's) and, after its own SIGTERM,
+    SIGTERM to one rank after another: a rank stopped by the others' mark may get its own copy
+    only after it has left the run, and would die of it before it says why (SIGUSR2: mpirun
+    then exits 140, not 143; seen 1 CI run in 2). The copy means the same stop, already done.
+    (SIGINT's previous handler is Python's, not the default: a terminal's Ctrl-C reaches every
+    rank at once, and mpirun relays no SIGINT.)"""
+    return {s: signal.SIG_IGN for s in SIGNALS if previous[s] == signal.SIG_DFL}
 
 
 def _drop_progress() -> None:

@@ -160,6 +160,20 @@ def _named(exc: SolverError, problem, t: float) -> SolverError:
         f"that grows as the body slides, such as a displacement (the last attempt: {exc})")
 
 
+def short_control(problem, t: float) -> tuple | None:
+    """``_short_of`` over every control of ``problem``, with the enforced row's cell where the
+    relation measures cells row by row: (control, kind, reached, target, load, the enforced
+    row in its relation, its cell or None), or None. Collective."""
+    short = _short_of(problem, t, _controls(problem))
+    if short is None:
+        return None
+    k, local = problem.rset.locate(short[0].row)
+    rel = problem.ctx.multiplied[k]
+    cells = rel.meta.get("cells")
+    cell = int(cells[local]) if cells is not None and len(cells) == rel.nrows else None
+    return short + (local, cell)
+
+
 def _short_of(problem, t: float, controls: list[Control]) -> tuple | None:
     """The first control whose value at t lies beyond what the last converged state reached:
     (control, its kind in words, reached, target, control load), or None. Collective."""

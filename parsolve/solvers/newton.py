@@ -6,6 +6,10 @@ Unknowns per iteration: the increment Δq and the total multipliers λ,
     [ A     0 ] [λ ] = [b(t) - A q      ]      (inactive rows: λ = 0)
 
 so that a load intensity driven by a non-associated relation is an unknown like any other.
+Its first guess needs no separate predictor: the step's first solve, with the tangent at the
+converged state and the control row enforced, gives λ = (b - A q - A K⁻¹ r) / (A K⁻¹ G), the
+linear response (at the first step, from rest: the target over the load pattern's
+compliance; exact in one iteration for a linear model).
 The step has converged when the force residual F + D λ - f_int is small against the forces in
 play, the last increment is small, and the active set did not change.
 

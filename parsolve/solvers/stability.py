@@ -26,7 +26,9 @@ A maximum control holds its other rows at the value one-sided; they are held her
 equalities too (``_hold_maximum_rows``), which can only hide instabilities, never invent one.
 Beyond the converged states: the path just ahead of one (``check_path``: a snap-back, where
 no nearby equilibrium carries the path on, named alike whether the step from there fails or
-jumps), and an arc-length run's bifurcations (``ArcWatch``).
+jumps), a maximum control's own path when a step fails for good (``control_path_failure``: the
+rows at the maximum held, a limit point of the controlled maximum), and an arc-length run's
+bifurcations (``ArcWatch``).
 """
 
 from __future__ import annotations
@@ -36,7 +38,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from parsolve.solvers.active_set import GROUP_TOL
-from parsolve.solvers.diagnose import NamedFailure
+from parsolve.solvers.diagnose import NamedFailure, short_control
 
 SHIFT = 1e-8   # δ: eigenvalues above -δ k are taken as zero (round-off at a peak)
 # the points of a step's tangent predictor whose stability is checked, nearest first: a
@@ -103,6 +105,35 @@ def path_failure(t_prev: float) -> NamedFailure:
         "depending on round-off and so on the rank count. Control a quantity that keeps "
         "growing past the point (a maximum strain control, a crack opening), or trace the path "
         "with arc-length")
+
+
+def control_path_failure(exc: Exception, problem, t: float) -> NamedFailure | None:
+    """A step of a maximum control failed for good toward ``t`` (``problem`` back at the last
+    converged state, the control short of its value): NamedFailure when the path from that
+    state turns back just ahead with the group's rows at the maximum held (``modes_ahead``):
+    the controlled maximum itself has a limit point (damage spreading to cells beside the
+    controlled one, which a maximum of the cells' strains does not hold), and the secant
+    iteration only stalls on it. None otherwise. Collective."""
+    if problem.ctx.transient or not problem.active.groups:
+        return None
+    short = short_control(problem, t)
+    if short is None:
+        return None
+    modes = modes_ahead(problem, problem.q, problem.states, t)
+    if not modes:
+        return None
+    c, kind, reached, target, load, row, cell = short
+    where = f"its enforced row {row}" + (f", cell {cell}" if cell is not None else "")
+    return NamedFailure(
+        f"{kind} {c.name!r} can no longer follow its value: {target:.6g} at t = {t:.6g}, where "
+        f"it reached {reached:.6g} (t = {problem.t_prev:.6g}, control load {load:.6g}, "
+        f"{where}); the equilibrium path turns back just past t = {problem.t_prev:.6g}: with "
+        f"every row at the maximum held, the consistent tangent has {modes} negative "
+        "eigenvalue(s) along the step's tangent predictor (a limit point of the controlled "
+        "maximum, e.g. damage spreading to cells beside the controlled one), so no equilibrium "
+        "near that state carries the path on and the iteration stalls however small the step. "
+        "Control a quantity that keeps growing past the point (the mean strain or the opening "
+        f"of the damaged band), or trace the path with arc-length (the last attempt: {exc})")
 
 
 def modes_ahead(problem, q0: np.ndarray, states: list, t: float,

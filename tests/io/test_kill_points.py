@@ -1,4 +1,4 @@
-"""A hard kill at any point of a step's write, in both output modes, at 1 and 2 ranks: after
+"""A hard kill at any point of a step's write, in both output modes, at 1, 2 and 3 ranks: after
 ``post --recover`` every per-step dataset has the same length, the finished steps are the
 linear solution u(t) = t / t1 u(t1), and ``post --summary`` reads the file.
 
@@ -79,7 +79,7 @@ def check_whole(out, capsys) -> int:
     return n
 
 
-@pytest.mark.parametrize("ranks", [1, 2])
+@pytest.mark.parametrize("ranks", [1, 2, 3])
 @pytest.mark.parametrize("mode", ["swmr", "parallel"])
 def test_a_kill_anywhere_in_a_step_leaves_a_whole_file(mode, ranks, tmp_path, capsys):
     """A timed kill first (its recovered file also gives the number of write points), then

@@ -166,3 +166,61 @@ def test_arc_length_on_an_elastic_bar(run):
     step = np.diff(np.concatenate([np.zeros((1,) + res["fields/displacement"].shape[1:]),
                                    res["fields/displacement"]]), axis=0)
     np.testing.assert_allclose(np.linalg.norm(step.reshape(3, -1), axis=1), 1e-3, rtol=1e-10)
+
+
+MAZARS_AT = ('model = "mazars"\neps_d0 = {}\nAt = 1.0\nBt = 1e4\nAc = 1.2\nBc = 1500.0\n'
+             'beta = 1.06\n')
+
+
+def _controlled_bar(eps_d0: float) -> str:
+    """configs/controlled_bar.toml (mean end displacement 1e-4 t, its unit end load) with every
+    cell Mazars: Newton's path. Elastic while ε = 1e-4 t stays below eps_d0."""
+    text = (CONFIGS / "controlled_bar.toml").read_text()
+    return text.replace("E = 1e9\nnu = 0.0\n", "E = 1e9\nnu = 0.0\n" + MAZARS_AT.format(eps_d0))
+
+
+def _elastic_maximum() -> str:
+    """The localization bar without its damaging column: the maximum strain control of an
+    elastic bar (Newton's path for the unilateral rows)."""
+    return BAR[:BAR.index("[[materials]]\nregion")] + BAR[BAR.index("[[loads]]"):]
+
+
+# name: (scene, control, t of the first step, linear response λ = target / compliance,
+#        converged λ, iterations of the first step)
+FIRST_STEP = {
+    # δ = 1e-5 at t = 0.1; compliance of the unit end load L / (E H) = 1e-8
+    "linear": (lambda: _controlled_bar(1e-2), "control", 0.1, 1e3, 1e3, 1),
+    # ε = 1e-5 past εd0 = 2e-6 from the first step: homogeneous softening, At = 1 (ν = 0):
+    # σ = E ε exp(-Bt (ε - εd0)); the first iterate is the linear response all the same
+    "softening": (lambda: _controlled_bar(2e-6), "control", 0.1, 1e3,
+                  1e3 * np.exp(-1e4 * (1e-5 - 2e-6)), 2),
+    # ε = 1.2e-3 / 24 = 5e-5 in every cell: λ = E H ε; the maximum's predictor solve counts
+    "maximum": (_elastic_maximum, "max_strain", 1 / 24, 5e3, 5e3, 2),
+}
+
+
+@pytest.mark.parametrize("case", sorted(FIRST_STEP))
+def test_first_step_load_is_the_linear_response(case):
+    """The control load of the first step starts from the linear response, not from zero:
+    Newton's unknowns are the total multipliers, so its first solve (the tangent at the
+    unloaded state, the control row enforced) gives λ = (b - A q) / (A K⁻¹ G), the target over
+    the compliance of the load pattern, exactly. A linear bar converges on it in one
+    iteration; a bar softening from the first step goes on from it to its closed form."""
+    from helpers.control import newton_of
+
+    make, name, t, linear, converged, iterations = FIRST_STEP[case]
+    _, _, _, problem, newton = newton_of(make())
+    rows = problem.rset.rows_of([r.name for r in problem.ctx.multiplied].index(name))
+    loads, update = [], problem.update
+
+    def recorded(t, x):
+        out = update(t, x)
+        loads.append(problem.rset.every_row(problem.lam)[rows].sum())
+        return out
+
+    problem.update = recorded
+    result = newton.step(t)
+    assert loads[0] == pytest.approx(linear, rel=1e-12)
+    assert loads[-1] == pytest.approx(converged, rel=1e-9)
+    assert result.iterations == iterations
+    assert newton.residual_history[-1] < 1e-12

@@ -1,7 +1,7 @@
 """A factorization that does not fit in memory (MUMPS INFOG(1) = -13, made real here by an
 address-space limit and a workspace margin of 2·10⁶ %) stops at once with what MUMPS needs and
-what is available: no retry with a larger margin, no step cut (linear and Newton paths, 1 and
-2 ranks)."""
+what is available: no retry with a larger margin, no step cut (linear and Newton paths, 1, 2 and
+3 ranks)."""
 
 import os
 import re
@@ -29,7 +29,7 @@ def _limited():
     resource.setrlimit(resource.RLIMIT_AS, (LIMIT, LIMIT))
 
 
-@pytest.mark.parametrize("ranks", [1, 2])
+@pytest.mark.parametrize("ranks", [1, 2, 3])
 @pytest.mark.parametrize("scene", ["linear", "newton"])
 def test_factor_that_does_not_fit_stops_with_the_sizes(scene, ranks, tmp_path):
     (tmp_path / "scene.toml").write_text({"linear": LINEAR, "newton": NEWTON}[scene])
