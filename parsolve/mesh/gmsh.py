@@ -380,7 +380,7 @@ class _Format:
             return
         while n > 0:
             kind, count, ntags = (int(v) for v in self._ints(3, "<i4", fail))
-            if kind not in TYPES or count <= 0 or ntags < 0 or count > n:
+            if kind not in TYPES or count < 0 or ntags < 0 or count > n:
                 raise fail(f"malformed element block header ({kind} {count} {ntags})")
             cols = 1 + ntags + TYPES[kind][1]
             start = self.fh.tell()
