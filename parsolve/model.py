@@ -192,8 +192,8 @@ def _generator_key(exc: Exception) -> str:
 def _distributed_mesh(scene: Scene, comm) -> LocalMesh:
     """Every rank's part of the scene's mesh: from slices (a parallel mesh file, a generator;
     their quadratic cells and ``order = 2`` included: no rank holds the whole,
-    ``mesh.slices``, ``mesh.midside``; a Gmsh MSH 4.1 file: ``mesh.gmshmesh``), else built
-    whole on rank 0 (Gmsh 2.2 / 4.0 and other meshio files). The
+    ``mesh.slices``, ``mesh.midside``; a Gmsh MSH 4.1 or 2.2 file: ``mesh.gmshmesh``), else built
+    whole on rank 0 (Gmsh 4.0 and other meshio files). The
     solve's share of every rank is checked against the memory before anything is built when
     the mesh's size is known from a generator's parameters, else once the mesh is read."""
     counted = _generated_counts(scene)

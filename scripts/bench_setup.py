@@ -40,25 +40,29 @@ dense column and row).
 
 Section *mesh* (1, 2 and 4 ranks): the mesh stage alone (`model._distributed_mesh`: read or
 generate, check, partition, distribute, number the nodes) of a box of 6·n³ tetrahedra, three
-ways: a Gmsh file (`.msh`, read whole by rank 0), the same mesh converted to the parallel file
-(`.h5`, read by slices) and the generator (`box`, built by slices); and DOLFINx 0.5 in the same
+ways: a Gmsh file (`.msh`, MSH 2.2 binary, read by slices), the same mesh converted to the
+parallel file (`.h5`, read by slices) and the generator (`box`, built by slices); and DOLFINx 0.5 in the same
 run on the same mesh written once as XDMF + HDF5 (`dolfinx`: `XDMFFile.read_mesh` -- read by
 slices, PT-Scotch on the distributed graph, distribution, ghost cells sharing a facet -- then
 `VectorFunctionSpace(P1)`, the DOF numbering; FFCx's JIT warmed up on a one-cell mesh first).
 Wall seconds of the slowest rank and CPU seconds of the busiest (best of the repeats; ranks
 waiting in MPI yield their core: `mpi_yield_when_idle`), against the same way at 1 rank and
 against DOLFINx at the same number of ranks; each rank's peak resident memory (VmHWM, the
-process's whole life: Python, numpy, PETSc and MPI included), rank 0's against the mean of the
-others.
+process's whole life: Python, numpy, PETSc and MPI included; petsc4py is imported before the
+stage at every rank count, as every run does, since the partition alone imports it and only on
+several ranks), rank 0's against the mean of the others; the largest rank's peak against 1
+rank's (`peak vs 1 rank`), and the same net of the process before the stage (`net vs 1 rank`:
+the mesh stage's own memory, (peak − resident before) against 1 rank's).
 
-Section *gmsh* (a Gmsh MSH 4.1 file of the same box, binary, written once by meshio):
+Section *gmsh* (a Gmsh MSH 4.1 file of the same box, binary, written once by meshio, and the
+same as MSH 2.2):
 `parsolve mesh convert` of it to the parallel file, by meshio (the file read whole, then
 written; `gmsh`'s reader switched off) and by parsolve's reader (`mesh.gmshmesh.convert`:
 streamed by chunks), each in a fresh process: seconds, peak resident memory and its growth
 over the process before the conversion; then the mesh stage as in section *mesh* at 1, 2 and 4
 ranks from the .msh given directly: `msh41` read by slices (`mesh.gmshmesh.GmshSlices`: rank 0
-scans the block headers, every rank reads its rows), `meshio41` the same file read whole by
-meshio on rank 0, `h5` its converted file.
+scans the block headers, every rank reads its rows), `msh22` the MSH 2.2 file by slices,
+`meshio41` the 4.1 file read whole by meshio on rank 0, `h5` its converted file.
 
 Usage (from the repository root):
     .venv/bin/python scripts/bench_setup.py                 # everything
@@ -481,14 +485,16 @@ def gmsh_files(n: int) -> dict[str, str]:
     folder = MESH_FOLDER["path"]
     folder.mkdir(parents=True, exist_ok=True)
     msh, h5 = folder / f"box_tetra_{n}_41.msh", folder / f"box_tetra_{n}_41.h5"
-    if not msh.exists():
+    msh22 = folder / f"box_tetra_{n}_22.msh"
+    if not msh.exists() or not msh22.exists():
         whole = box(1.0, 1.0, 1.0, n, n, n, cell="tetra")
-        meshio.write(str(msh), meshio.Mesh(whole.points, [("tetra", whole.cells)]),
-                     file_format="gmsh", binary=True)
+        mesh = meshio.Mesh(whole.points, [("tetra", whole.cells)])
+        meshio.write(str(msh), mesh, file_format="gmsh", binary=True)
+        meshio.write(str(msh22), mesh, file_format="gmsh22", binary=True)
     if not h5.exists():
         convert(str(msh), str(h5))
     return {"msh": str(msh), "msh41": f'file = "{msh}"', "meshio41": f'file = "{msh}"',
-            "h5": f'file = "{h5}"'}
+            "msh22": f'file = "{msh22}"', "h5": f'file = "{h5}"'}
 
 
 def child_convert(way: str, msh: str, out: str) -> dict:
@@ -575,11 +581,15 @@ def child_mesh(way: str, n: int, mesh_lines: str, repeats: int) -> dict:
         from parsolve.mesh import gmsh
 
         gmsh.ours = lambda path: False
+    from petsc4py import PETSc  # noqa: F401 - every run's; the partition's on 2+ ranks only
+
     comm = MPI.COMM_WORLD
     text = (f"[mesh]\n{mesh_lines}\n[model]\nhypothesis = \"3d\"\n[[materials]]\n"
             "E = 1.0\nnu = 0.3\n[solver]\npreset = \"iterative\"\n")
     scene = parse_scene(tomllib.loads(text), "bench.toml")
     seconds, cpu = [], []
+    gc.collect()
+    before = comm.gather(bh.proc_memory()["rss"], root=0)
     for _ in range(repeats):
         part = None
         gc.collect()
@@ -591,7 +601,8 @@ def child_mesh(way: str, n: int, mesh_lines: str, repeats: int) -> dict:
     hwm = comm.gather(bh.proc_memory()["hwm"], root=0)
     return {"way": way, "n": n, "cells": part.num_global_cells,
             "points": part.num_global_points, "nranks": comm.size,
-            "seconds": min(seconds), "all_seconds": seconds, "cpu": min(cpu), "hwm": hwm}
+            "seconds": min(seconds), "all_seconds": seconds, "cpu": min(cpu), "hwm": hwm,
+            "before": before}
 
 
 def child_dolfinx_mesh(n: int, xdmf: str, repeats: int) -> dict:
@@ -626,7 +637,8 @@ def mesh_table(rows: list[dict]) -> str:
     """Wall seconds (CPU seconds of the busiest rank in brackets: on a shared machine the wall
     time counts the other jobs too; Open MPI polls while it waits, so CPU counts the waits)."""
     head = ["mesh", "cells", "ranks", "seconds (CPU)", "vs 1 rank", "vs DOLFINx",
-            "rank 0 peak MiB", "others' mean MiB", "rank 0 / others"]
+            "rank 0 peak MiB", "others' mean MiB", "rank 0 / others", "peak vs 1 rank",
+            "net vs 1 rank"]
 
     def both(a: dict, b: dict | None) -> str:
         if not b:
@@ -645,8 +657,21 @@ def mesh_table(rows: list[dict]) -> str:
         cpu = f" ({r['cpu']:.2f})" if "cpu" in r else ""
         out.append([r["way"], str(r["cells"]), str(r["nranks"]), f"{r['seconds']:.2f}{cpu}",
                     both(r, one), both(r, theirs), bh.mib(r["hwm"][0]),
-                    bh.mib(mean) if mean else "", f"{r['hwm'][0] / mean:.2f}" if mean else ""])
+                    bh.mib(mean) if mean else "", f"{r['hwm'][0] / mean:.2f}" if mean else "",
+                    *_peak_ratios(r, one)])
     return bh.md_table(head, out)
+
+
+def _peak_ratios(r: dict, one: dict | None) -> list[str]:
+    """The largest rank's peak against 1 rank's, raw and net of the process before the stage
+    (rows without "before": older runs, DOLFINx)."""
+    if not one:
+        return ["", ""]
+    raw = f"{max(r['hwm']) / one['hwm'][0]:.2f}"
+    if "before" not in r or "before" not in one:
+        return [raw, ""]
+    net = max(h - b for h, b in zip(r["hwm"], r["before"])) / (one["hwm"][0] - one["before"][0])
+    return [raw, f"{net:.2f}"]
 
 
 MODEL_RANKS, MODEL_DOFS = 1024, 1e9
@@ -965,7 +990,8 @@ def run_gmsh(results: dict, a, save) -> None:
                 save()
                 print(f"[gmsh] convert by {way}: {row['seconds']:.2f} s, peak "
                       f"{bh.mib(row['hwm'])} MiB", flush=True)
-        for way, nranks in ((w, r) for w in ("msh41", "meshio41", "h5") for r in a.mesh_ranks):
+        for way, nranks in ((w, r) for w in ("msh41", "msh22", "meshio41", "h5")
+                            for r in a.mesh_ranks):
             row = spawn(["mesh", way, str(n), files[way], str(a.mesh_repeats)], nranks=nranks)
             if row:
                 results["gmsh"].append(row)

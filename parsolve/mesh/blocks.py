@@ -184,23 +184,35 @@ def _match_across(comm, keys, order, counts, owner, forward):
     """One row per facet key of this block to the rank the key names: (key, cell * 2 +
     direction) for a facet single here, (key, -copies) for the others. There: the keys of
     more than two copies in all (``bad``, every rank's), and the pairs of two singles — cell
-    pairs across blocks — and their folded cells."""
+    pairs across blocks — and their folded cells. In rounds of at most ``ROUND_ROWS`` rows a
+    rank (a round: the keys of one residue of key // size, so a facet's copies meet in the
+    same round): a round's exchange and grouping, not the block's, is the transient."""
     first = order[np.r_[0, np.cumsum(counts)[:-1]]] if counts.size else order
     single = counts == 1
     rows = np.column_stack([keys[first], np.where(single, owner[first] * 2 + forward[first],
                                                   -counts)])
-    del first
+    del first, single
+    rounds = max(comm.allreduce(-(-rows.shape[0] // ROUND_ROWS), MPI.MAX), 1)
+    turn = (rows[:, 0] // comm.size) % rounds if rounds > 1 else None
+    found = [_match_round(comm, rows if turn is None else rows[turn == k])
+             for k in range(rounds)]
+    cells, fwd, bad = (np.concatenate(parts) for parts in zip(*found))
+    bad = np.concatenate(comm.allgather(bad)) if comm.allreduce(bad.shape[0]) else bad
+    return cells, cells[fwd != 1].ravel(), bad
+
+
+ROUND_ROWS = 1 << 17
+
+
+def _match_round(comm, rows):
+    """One round of ``_match_across``: (cell pairs, their directions' sum, bad keys)."""
     got, _ = exchange(comm, rows, rows[:, 0] % comm.size)
-    del rows
     o, g, c = sorted_row_groups(got[:, :-1])
     last = got[o, -1]
     copies = np.bincount(g, weights=np.where(last >= 0, 1, -last), minlength=c.size)
     bad = got[o[copies[g] > 2], :-1]
     two = (c[g] == 2) & (copies[g] == 2)
-    cells = (last[two] >> 1).reshape(-1, 2)
-    fwd = (last[two] & 1).reshape(-1, 2).sum(axis=1)
-    bad = np.concatenate(comm.allgather(bad)) if comm.allreduce(bad.shape[0]) else bad
-    return cells, cells[fwd != 1].ravel(), bad
+    return (last[two] >> 1).reshape(-1, 2), (last[two] & 1).reshape(-1, 2).sum(axis=1), bad
 
 
 def _owners_of_keys(keys, owner, bad) -> np.ndarray:

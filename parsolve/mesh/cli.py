@@ -1,5 +1,5 @@
-"""``parsolve mesh convert IN OUT.h5``: a Gmsh file (its physical groups; MSH 4.1 streamed by
-chunks, ``gmshmesh.convert``) or any mesh file meshio reads → the parallel mesh file
+"""``parsolve mesh convert IN OUT.h5``: a Gmsh file (its physical groups; MSH 4.1 and 2.2
+streamed by chunks, ``gmshmesh.convert``) or any mesh file meshio reads → the parallel mesh file
 (``mesh.h5mesh``), with exactly the regions reading IN gives.
 Exit 2 with one line naming the file and the key on bad input; the input is never overwritten."""
 

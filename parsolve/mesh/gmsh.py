@@ -1,11 +1,14 @@
-"""Gmsh MSH 4.1 files (ASCII and binary) read by block, never whole.
+"""Gmsh MSH 4.1 and 2.2 files (ASCII and binary) read by block, never whole.
 
 ``scan`` walks the file once and keeps its layout: the physical names, the entities' physical
 tags, and where each block of ``$Nodes`` and ``$Elements`` lies (binary: its byte offset; ASCII:
-the offsets of every ``MARK``-th line). Rows of the blocks are then read by ranges with numpy
-(``Layout.node_rows``, ``Layout.element_rows``): a rank reads its slice of the nodes and of the
-cells (``GmshSlices``, the slice path of ``mesh.slices``), ``parsolve mesh convert`` streams the
-file by chunks (``convert``). The regions are those meshio's reading gives (``reader``):
+the offsets of every ``MARK``-th line). MSH 2.2 has no entities: its elements' blocks are the
+runs of consecutive elements of one type, tag count and physical tag (the first tag), and the
+physical tag stands for the entity (``physical[(dim, tag)] = (tag,)``). Rows of the blocks
+are then read by ranges with numpy (``Layout.node_rows``, ``Layout.element_rows``): a rank
+reads its slice of the nodes and of the cells (``GmshSlices``, the slice path of
+``mesh.slices``), ``parsolve mesh convert`` streams the file by chunks (``convert``). The
+regions are those meshio's reading gives (``reader``):
 
 * a physical group named in ``$PhysicalNames`` takes the blocks of its dimension whose entity
   lists its tag; the entity's first physical tag, unnamed, gives a group named by its number;
@@ -14,7 +17,7 @@ file by chunks (``convert``). The regions are those meshio's reading gives (``re
 * points are in the file's order (node tags mapped to it), cells in the file's order of the
   volume blocks, facets of a group in the file's order of its blocks.
 
-Other versions (2.2, 4.0) and formats are read by meshio (``reader``).
+MSH 4.0 and other formats are read by meshio (``reader``).
 """
 
 from __future__ import annotations
@@ -55,23 +58,28 @@ def version_of(path: str) -> str | None:
     return words[0].decode(errors="replace") if words else ""
 
 
+MSH2 = ("2", "2.0", "2.1", "2.2")   # one layout (2.0 and 2.1 lack features 2.2 added)
+
+
 def ours(path: str) -> bool:
-    """A Gmsh file this module reads: MSH 4.1, or a version meshio does not read either (its
-    error then names the section)."""
+    """A Gmsh file this module reads: MSH 4.1 or 2.x, or a version meshio does not read either
+    (its error then names the section); 4.0 is meshio's."""
     version = version_of(path)
-    return version is not None and version not in ("2.2", "2", "2.0", "2.1", "4", "4.0")
+    return version is not None and version not in ("4", "4.0")
 
 
 @dataclass
 class Rows:
     """``n`` rows of ``cols`` numbers of a block: binary ones at byte ``offset``, or ASCII lines
-    whose every MARK-th one starts at ``marks[k]``."""
+    whose every MARK-th one starts at ``marks[k]``; an element's node tags follow its ``lead``
+    first numbers (its tag; MSH 2: tag, type, tag count and tags)."""
 
     n: int
     cols: int
-    dtype: str
+    dtype: str | np.dtype
     offset: int = 0
     marks: np.ndarray | None = None
+    lead: int = 1
 
     def read(self, fh, start: int, stop: int, fail) -> np.ndarray:
         count = max(stop - start, 0)
@@ -142,7 +150,7 @@ class Layout:
     path: str
     names: dict = field(default_factory=dict)       # (dim, tag) -> name
     physical: dict = field(default_factory=dict)    # (dim, entity) -> physical tags
-    node_blocks: list = field(default_factory=list)  # (tags Rows, coordinates Rows)
+    node_blocks: list = field(default_factory=list)  # (tags Rows, coordinates Rows | None)
     element_blocks: list = field(default_factory=list)   # (dim, entity, type name, Rows)
     num_nodes: int = 0
     tag_range: tuple = (1, 0)
@@ -158,9 +166,14 @@ class Layout:
         tags, xyz, first = [], [], 0
         for t, c in self.node_blocks:
             a, b = max(start - first, 0), min(stop - first, t.n)
-            if a < b:
+            if a < b and c is not None:
                 tags.append(t.read(fh, a, b, self.fail("$Nodes"))[:, 0])
                 xyz.append(c.read(fh, a, b, self.fail("$Nodes"))[:, :3])
+            elif a < b:   # MSH 2: "tag x y z" rows (binary: int32 and 3 doubles)
+                rows = t.read(fh, a, b, self.fail("$Nodes"))
+                binary = rows.dtype.names is not None
+                tags.append(rows["tag"][:, 0] if binary else rows[:, 0])
+                xyz.append(rows["xyz"][:, 0] if binary else rows[:, 1:4])
             first += t.n
         if not tags:
             return np.zeros(0, np.int64), np.zeros((0, 3))
@@ -174,13 +187,17 @@ class Layout:
             kind, rows = self.element_blocks[b][2], self.element_blocks[b][3]
             lo, hi = max(start - first, 0), min(stop - first, rows.n)
             if lo < hi:
-                data = rows.read(fh, lo, hi, self.fail("$Elements"))[:, 1:]
+                data = rows.read(fh, lo, hi, self.fail("$Elements"))[:, rows.lead:]
                 out.append(data[:, ORDER[kind]] if kind in ORDER else data)
             first += rows.n
         if not out:
-            cols = self.element_blocks[blocks[0]][3].cols - 1 if blocks else 0
+            cols = self.nodes_per_row(blocks[0]) if blocks else 0
             return np.zeros((0, cols), np.int64)
         return np.concatenate(out).astype(np.int64)
+
+    def nodes_per_row(self, b: int) -> int:
+        rows = self.element_blocks[b][3]
+        return rows.cols - rows.lead
 
     def block_names(self, b: int) -> list[str]:
         """The groups block ``b``'s elements are in (as meshio's reading gives them)."""
@@ -193,7 +210,7 @@ class Layout:
 
 
 def scan(path: str, key: str = "mesh.file") -> Layout:
-    """The layout of the MSH 4.1 file ``path`` (one pass, bounded memory); InputError naming
+    """The layout of the MSH 4.1 or 2.2 file ``path`` (one pass, bounded memory); InputError naming
     the file and the section otherwise."""
     path = os.fspath(path)
     if not os.path.isfile(path):
@@ -237,7 +254,7 @@ class _Format:
     """The sections' readers (methods named as the sections), ASCII or binary."""
 
     def __init__(self, fh, lay: Layout):
-        self.fh, self.lay, self.binary, self.size_t = fh, lay, False, "<u8"
+        self.fh, self.lay, self.binary, self.size_t, self.msh2 = fh, lay, False, "<u8", False
 
     def MeshFormat(self) -> None:
         fail = self.lay.fail("$MeshFormat")
@@ -245,9 +262,10 @@ class _Format:
         if len(words) != 3:
             raise fail("expected 'version file-type data-size'")
         version = words[0].decode(errors="replace")
-        if version != "4.1":
-            raise fail(f"unsupported MSH version {version} (read here: 4.1; 2.2 and 4.0 by meshio)")
-        self.binary = words[1] == b"1"
+        if version != "4.1" and version not in MSH2:
+            raise fail(f"unsupported MSH version {version} (read here: 4.1 and 2.2; 4.0 by "
+                       "meshio)")
+        self.binary, self.msh2 = words[1] == b"1", version in MSH2
         if words[2] not in (b"4", b"8"):
             raise fail(f"data size {words[2].decode(errors='replace')} (4 or 8 expected)")
         self.size_t = "<u8" if words[2] == b"8" else "<u4"
@@ -309,6 +327,8 @@ class _Format:
 
     def Nodes(self) -> None:
         fail = self.lay.fail("$Nodes")
+        if self.msh2:
+            return self._nodes2(fail)
         nblocks, total, low, high = (int(v) for v in self._ints(4, self.size_t, fail))
         self.lay.num_nodes, self.lay.tag_range = total, (low, high)
         for _ in range(nblocks):
@@ -325,6 +345,8 @@ class _Format:
 
     def Elements(self) -> None:
         fail = self.lay.fail("$Elements")
+        if self.msh2:
+            return self._elements2(fail)
         nblocks = int(self._ints(4, self.size_t, fail)[0])
         for _ in range(nblocks):
             dim, entity, kind, n = (int(v) for v in self._block_head(fail))
@@ -334,6 +356,50 @@ class _Format:
             rows = self._rows(n, 1 + nodes, self.size_t, fail)
             self.lay.element_blocks.append((dim, entity, name, rows))
 
+    def _nodes2(self, fail) -> None:
+        """MSH 2: a count line, then "tag x y z" rows (binary: int32 tag, 3 doubles)."""
+        n = self._count(fail)
+        if self.binary:
+            rows = self._rows(n, 1, np.dtype([("tag", "<i4"), ("xyz", "<f8", (3,))]), fail)
+        else:
+            rows = self._rows(n, 4, "<f8", fail)
+        self.lay.node_blocks.append((rows, None))
+        self.lay.num_nodes = n
+
+    def _elements2(self, fail) -> None:
+        """MSH 2: a count line, then "tag type ntags tags... nodes..." rows (binary: blocks
+        headed by type, count, ntags, of int32 rows "tag tags... nodes..."). Each run of
+        rows of one type, tag count and physical tag is a block."""
+        n = self._count(fail)
+        runs = _Runs(self.lay)
+        if not self.binary:
+            left = n
+            while left > 0:
+                left -= _ascii_chunk(self.fh, left, runs, fail)
+            runs.close()
+            return
+        while n > 0:
+            kind, count, ntags = (int(v) for v in self._ints(3, "<i4", fail))
+            if kind not in TYPES or count < 0 or ntags < 0 or count > n:
+                raise fail(f"malformed element block header ({kind} {count} {ntags})")
+            cols = 1 + ntags + TYPES[kind][1]
+            start = self.fh.tell()
+            self._rows(count, cols, "<i4", fail)   # past the block (checks the file's size)
+            self.fh.seek(start)
+            for a in range(0, count, ROWS):
+                b = min(a + ROWS, count)
+                data = np.frombuffer(self.fh.read((b - a) * cols * 4), "<i4").reshape(-1, cols)
+                phys = data[:, 1] if ntags else np.zeros(b - a, np.int64)
+                runs.add(kind, ntags, phys, offsets=start + np.arange(a, b) * cols * 4)
+            runs.close()
+            n -= count
+
+    def _count(self, fail) -> int:
+        try:
+            return int(self.fh.readline())
+        except ValueError:
+            raise fail("expected the number of rows") from None
+
     def _block_head(self, fail) -> np.ndarray:
         """entityDim entityTag (parametric | type) (int) count (size_t)."""
         if not self.binary:
@@ -341,7 +407,7 @@ class _Format:
         head = self._ints(3, "<i4", fail)
         return np.append(head.astype(np.int64), self._ints(1, self.size_t, fail).astype(np.int64))
 
-    def _rows(self, n: int, cols: int, dtype: str, fail) -> Rows:
+    def _rows(self, n: int, cols: int, dtype: str | np.dtype, fail) -> Rows:
         if self.binary:
             rows = Rows(n, cols, dtype, offset=self.fh.tell())
             self.fh.seek(rows.offset + n * cols * np.dtype(dtype).itemsize)
@@ -350,6 +416,84 @@ class _Format:
             return rows
         _, marks = _lines(self.fh, n, fail, every=MARK)
         return Rows(n, cols, "<f8" if dtype == "<f8" else "<i8", marks=marks)
+
+
+class _Runs:
+    """MSH 2 element rows, a chunk at a time, gathered into blocks: runs of consecutive rows
+    of one (type, tag count, physical tag). ASCII rows keep the offset of every MARK-th line,
+    binary ones their first row's offset (a run never spans two binary blocks)."""
+
+    def __init__(self, lay: Layout):
+        self.lay, self.key, self.n, self.marks = lay, None, 0, []
+
+    def add(self, kind: int, ntags: int | np.ndarray, phys: np.ndarray,
+            offsets: np.ndarray, ascii_rows: bool = False) -> None:
+        """Rows of types ``kind`` (one or per row), tag counts ``ntags``, physical tags
+        ``phys``, starting at byte ``offsets``."""
+        if phys.size == 0:
+            return
+        kinds = np.broadcast_to(kind, phys.shape)
+        ntags = np.broadcast_to(ntags, phys.shape)
+        change = np.flatnonzero((kinds[1:] != kinds[:-1]) | (ntags[1:] != ntags[:-1])
+                                | (phys[1:] != phys[:-1])) + 1
+        for a, b in zip(np.r_[0, change], np.r_[change, phys.size]):
+            key = (int(kinds[a]), int(ntags[a]), int(phys[a]), ascii_rows)
+            if key != self.key:
+                self.close()
+                self.key = key
+            if ascii_rows:   # the offsets of the run's rows MARK·k
+                self.marks.append(offsets[a + (-self.n) % MARK:b:MARK])
+            elif not self.n:
+                self.marks.append(offsets[a:a + 1])
+            self.n += int(b - a)
+
+    def close(self) -> None:
+        """The current run as a block."""
+        if self.key is None:
+            return
+        kind, ntags, phys, ascii_rows = self.key
+        name, nodes, dim = TYPES[kind]
+        marks = np.concatenate(self.marks)
+        lead = 3 + ntags if ascii_rows else 1 + ntags
+        rows = (Rows(self.n, lead + nodes, "<i8", marks=marks, lead=lead) if ascii_rows
+                else Rows(self.n, lead + nodes, "<i4", offset=int(marks[0]), lead=lead))
+        self.lay.element_blocks.append((dim, phys, name, rows))
+        self.lay.physical[(dim, phys)] = (phys,) if phys > 0 else ()
+        self.key, self.n, self.marks = None, 0, []
+
+
+_NODES = np.zeros(max(TYPES) + 1, np.int64)   # Gmsh type -> nodes (0: unknown)
+for _kind, (_, _count, _) in TYPES.items():
+    _NODES[_kind] = _count
+
+
+def _ascii_chunk(fh, left: int, runs: _Runs, fail) -> int:
+    """Parse the whole lines of a chunk from ``fh``'s position (at most ``left``) as MSH 2
+    ASCII element rows into ``runs``; ``fh`` is left after them. Returns the rows read."""
+    at = fh.tell()
+    chunk = fh.read(CHUNK)
+    data = np.frombuffer(chunk, dtype=np.uint8)
+    ends = np.flatnonzero(data == 10)[:left]
+    if ends.size == 0 or ends.size < left and len(chunk) < CHUNK:
+        raise fail("the file ends before the block does (truncated?)")
+    cut = int(ends[-1]) + 1
+    fh.seek(at + cut)
+    space = data[:cut] <= 32
+    word = np.flatnonzero(~space & np.r_[True, space[:-1]])   # each number's first byte
+    counts = np.bincount(np.searchsorted(ends, word), minlength=ends.size)
+    numbers = _numbers(chunk[:cut], "<i8")
+    first = np.cumsum(counts) - counts
+    if numbers.size != word.size or counts.min() < 3:
+        raise fail("malformed element row (expected 'tag type ntags tags... nodes...')")
+    kinds, ntags = numbers[first + 1], numbers[first + 2]
+    known = (kinds > 0) & (kinds < _NODES.size)
+    nodes = _NODES[np.where(known, kinds, 0)]
+    if (nodes == 0).any() or (counts != 3 + ntags + nodes).any():
+        bad = int(np.flatnonzero((nodes == 0) | (counts != 3 + ntags + nodes))[0])
+        raise fail(f"malformed element row of type {kinds[bad]} ({counts[bad]} numbers)")
+    phys = np.where(ntags > 0, numbers[np.minimum(first + 3, numbers.size - 1)], 0)
+    runs.add(kinds, ntags, phys, at + np.r_[0, ends[:-1] + 1], ascii_rows=True)
+    return int(ends.size)
 
 
 def _end(fh, name: str, fail) -> None:

@@ -1,4 +1,4 @@
-"""A Gmsh MSH 4.1 file as a mesh, never read whole by one rank (``gmsh.scan``'s layout):
+"""A Gmsh MSH 4.1 or 2.2 file as a mesh, never read whole by one rank (``gmsh.scan``'s layout):
 
 * ``GmshSlices``: every rank reads its slice of the nodes and of the cells (the rows
   ``partition.block_starts`` gives, as for the parallel mesh file) and its share of the group
@@ -278,7 +278,7 @@ def _facet_nodes(cell_type: str) -> tuple:
 
 
 def read_whole(path: str, key: str = _KEY) -> Mesh:
-    """The whole mesh of a MSH 4.1 file on this process."""
+    """The whole mesh of a MSH 4.1 or 2.2 file on this process."""
     src = GmshSlices(MPI.COMM_SELF, scan(path, key), key)
     cflags = src.cell_flags(0, src.num_cells)
     nflags = src.node_flags(0, src.num_points)
@@ -292,7 +292,7 @@ def read_whole(path: str, key: str = _KEY) -> Mesh:
 
 
 def convert(path: str, target: str, key: str = _KEY) -> tuple[str, int, int, int]:
-    """Write the parallel mesh file ``target`` from the MSH 4.1 file ``path`` by chunks of
+    """Write the parallel mesh file ``target`` from the MSH 4.1 or 2.2 file ``path`` by chunks of
     ``gmsh.ROWS`` rows: held whole are the points' coordinates (the cells' orientation looks
     them up), a byte per node and node group, and the tags' map when the tags are not 1..N in
     the file's order. Returns (cell type, cells, points, groups)."""
@@ -344,7 +344,7 @@ def _map(tags: np.ndarray, positions, n: int) -> np.ndarray:
 
 
 def _stream_cells(fh, lay, plan, g, points, positions, num_cells: int, key: str) -> None:
-    nodes = lay.element_blocks[plan.cells[0]][3].cols - 1
+    nodes = lay.nodes_per_row(plan.cells[0])
     out = g.create_group("cells").create_dataset(plan.cell_type, (num_cells, nodes), np.int64)
     for a in range(0, num_cells, ROWS):
         cells = _map(lay.element_rows(fh, plan.cells, a, min(a + ROWS, num_cells)), positions,

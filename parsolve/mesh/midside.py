@@ -49,8 +49,7 @@ class QuadraticSlices:
         n = src.num_points
         ps = block_starts(n, comm.size)
         cells, points, flags = agree(comm, _read, src, comm.rank, comm.size, source, key)
-        keys, inverse = np.unique(_edge_keys(cells, EDGES[src.cell_type], n),
-                                  return_inverse=True)
+        keys, inverse = _unique_inverse(_edge_keys(cells, EDGES[src.cell_type], n))
         owned = _owned_edges(comm, keys, ps * n)
         counts = np.array(comm.allgather(owned.size), dtype=np.int64)
         first = n + int(counts[:comm.rank].sum())
@@ -63,11 +62,10 @@ class QuadraticSlices:
                              key)
         self._cells = np.hstack([cells, numbers[:keys.size][inverse.reshape(cells.shape[0], -1)]])
         self._facets = _quadratic_facets(facets, numbers[keys.size:])
+        del cells, keys, inverse, numbers, facets   # (the peak is in the moves below)
         mid, mid_flags = _midsides(comm, src, owned, n, ps, points, flags, midside_groups)
         self._points, self._flags, self.point_starts = _to_slices(
-            comm, np.concatenate([np.arange(ps[comm.rank], ps[comm.rank + 1]),
-                                  np.arange(first, first + owned.size)]),
-            np.vstack([points, mid]), np.vstack([flags, mid_flags]), self.num_points)
+            comm, [(int(ps[comm.rank]), points, flags), (first, mid, mid_flags)], self.num_points)
 
     def cells(self, start: int, stop: int) -> np.ndarray:
         return self._cells
@@ -97,6 +95,23 @@ def _read(src, rank: int, size: int, source: str, key: str):
     points = src.points(int(ps[rank]), int(ps[rank + 1]))
     flags = src.node_flags(int(ps[rank]), int(ps[rank + 1]))
     return cells, points, flags
+
+
+def _unique_inverse(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(keys, return_inverse=True)`` with the inverse written over ``keys`` and the
+    running count over the sorted copy: three key-sized arrays at the peak, not np.unique's
+    five (the quadratic slices' peak)."""
+    flat = keys.reshape(-1)
+    order = np.argsort(flat)
+    ranked = flat[order]
+    new = np.empty(flat.size, dtype=bool)
+    new[:1] = True
+    np.not_equal(ranked[1:], ranked[:-1], out=new[1:])
+    unique = ranked[new]
+    np.cumsum(new, out=ranked)
+    ranked -= 1
+    flat[order] = ranked
+    return unique, flat
 
 
 def _edge_keys(cells: np.ndarray, pairs: np.ndarray, n: int) -> np.ndarray:
@@ -193,16 +208,23 @@ def _unbits(bits: np.ndarray, count: int) -> np.ndarray:
                          bitorder="little").astype(bool)
 
 
-def _to_slices(comm, ids: np.ndarray, points: np.ndarray, flags: np.ndarray,
-               total: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Rows (by node id) moved to the quadratic mesh's point slices: (points, flags, the
-    slices' starts)."""
+def _to_slices(comm, parts: list, total: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rows (node id, coordinates, flag bits) of ``parts`` — (first id, points, flags) of
+    consecutive ids, written into one array (no stacked copies) — moved to the quadratic
+    mesh's point slices: (points, flags, the slices' starts)."""
     starts = block_starts(total, comm.size)
-    dim = points.shape[1]
-    rows = np.column_stack([ids, np.ascontiguousarray(points).view(np.int64).reshape(-1, dim),
-                            _bits(flags)])
-    got, _ = exchange(comm, rows, np.searchsorted(starts, ids, side="right") - 1)
+    dim, count = parts[0][1].shape[1], parts[0][2].shape[1]
+    bits = [_bits(f) for _, _, f in parts]
+    rows = np.empty((sum(len(b) for b in bits), 1 + dim + bits[0].shape[1]), dtype=np.int64)
+    at = 0
+    for (first, points, _), b in zip(parts, bits):
+        rows[at:at + len(b), 0] = np.arange(first, first + len(b))
+        rows[at:at + len(b), 1:1 + dim] = np.ascontiguousarray(points).view(np.int64)
+        rows[at:at + len(b), 1 + dim:] = b
+        at += len(b)
+    del bits
+    got, _ = exchange(comm, rows, np.searchsorted(starts, rows[:, 0], side="right") - 1)
     del rows
     got = got[np.argsort(got[:, 0], kind="stable")]
     return (np.ascontiguousarray(got[:, 1:1 + dim]).view(float).reshape(-1, dim),
-            _unbits(got[:, 1 + dim:], flags.shape[1]), starts)
+            _unbits(got[:, 1 + dim:], count), starts)

@@ -41,7 +41,7 @@ def _dim_of(cell_type: str) -> int | None:
 
 
 def read_mesh(path: str) -> Mesh:
-    """Read a mesh file (Gmsh MSH 4.1 by ``gmshmesh``, any other format by meshio); errors
+    """Read a mesh file (Gmsh MSH 4.1 and 2.2 by ``gmshmesh``, any other format by meshio); errors
     are InputError with source=path."""
     path = os.fspath(path)
     if not os.path.exists(path):

@@ -29,8 +29,12 @@ def by_blocks(comm, mesh: Mesh):
     return blocks.check_cells(comm, mesh if comm.rank == 0 else None, "m.msh", "mesh.file")
 
 
+@pytest.mark.parametrize("round_rows", [None, 7])
 @pytest.mark.parametrize("name", sorted(MESHES))
-def test_the_dual_graph_by_blocks_is_one_blocks(name, comm):
+def test_the_dual_graph_by_blocks_is_one_blocks(name, round_rows, comm, monkeypatch):
+    """(``round_rows``: the facets matched across blocks in rounds of 7 rows a rank.)"""
+    if round_rows:
+        monkeypatch.setattr(blocks, "ROUND_ROWS", round_rows)
     mesh = MESHES[name]()
     ptr, idx = by_blocks(comm, mesh)
     indptr, indices = by_blocks(MPI.COMM_SELF, mesh)
@@ -90,8 +94,11 @@ BAD |= {"collapsed_tetra": lambda: _collapsed("tetra"), "many": _many, "folded":
         "three_on_a_facet": _three_on_a_facet}
 
 
+@pytest.mark.parametrize("round_rows", [None, 2])
 @pytest.mark.parametrize("name", sorted(BAD))
-def test_the_errors_are_one_blocks(name, comm):
+def test_the_errors_are_one_blocks(name, round_rows, comm, monkeypatch):
+    if round_rows:
+        monkeypatch.setattr(blocks, "ROUND_ROWS", round_rows)
     mesh = BAD[name]()
     with pytest.raises(InputError) as serial:
         by_blocks(MPI.COMM_SELF, mesh)
