@@ -50,7 +50,7 @@ from collections.abc import Mapping
 import numpy as np
 from mpi4py import MPI
 
-from parsolve.la.dofmap import DofMap
+from parsolve.la.dofmap import DofMap, _Exchange
 from parsolve.relations import Relation
 
 
@@ -115,6 +115,8 @@ class RelationSet:
             dc.append(np.asarray(rows, dtype=np.int64) + first[k])
             dv.append(np.asarray(vals, dtype=float))
         stacked_a, stacked_d = _cat(ar, np.int64), _cat(dc, np.int64)
+        self._d_per_rank = np.repeat([not r.whole for r in relations],
+                                     [len(d) for d in dv]).astype(bool)
         self.a_cols, self.a_vals = _cat(ac, np.int64), _cat(av, float)
         self.d_rows, self.d_vals = _cat(dr, np.int64), _cat(dv, float)
         if self.position is None:   # the owners, once: restacking keeps them
@@ -138,6 +140,7 @@ class RelationSet:
         self.compliance = np.zeros(nl)                  # per multiplier row (Relation)
         self._copy_compliance()
         self._owned_entries: dict[int, tuple] = {}      # per relation: its owned A entries
+        self._fetch: dict[int, _Fetch | None] = {}      # and the plan of its others'
         self._sums: _RowSums | None = None              # owned_primal's plan
 
     def _here(self, mults: np.ndarray) -> np.ndarray:
@@ -211,16 +214,45 @@ class RelationSet:
         dofmap.set_multipliers(self._counts)
         q0, q1, l0, l1 = dofmap.owned()
         keep_a = np.flatnonzero((self.a_rows >= l0) & (self.a_rows < l1))
-        keep_d = np.flatnonzero((self.d_rows >= q0) & (self.d_rows < q1))
+        mine = (self.d_rows >= q0) & (self.d_rows < q1)
+        keep_d = np.flatnonzero(mine)
+        sent = self._foreign_d(self._d_per_rank & ~mine)
         for name in ("a_rows", "a_cols", "a_vals", "a_relrow"):
             setattr(self, name, getattr(self, name)[keep_a])
-        for name in ("d_rows", "d_cols", "d_vals"):
-            setattr(self, name, getattr(self, name)[keep_d])
+        for name, got in zip(("d_rows", "d_cols", "d_vals"), sent):
+            setattr(self, name, np.concatenate([getattr(self, name)[keep_d], got]))
         refreshed = [bool(r.meta.get("refresh")) for r in self.relations]
         self._a_from = _segments(keep_a, a_sizes, refreshed)
         self._d_from = _segments(keep_d, d_sizes, refreshed)
         dofmap.set_multipliers(self._counts, self.d_cols)
         self._d_held = dofmap.held_index(self.d_cols)
+
+    def _foreign_d(self, out: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The D entries of this rank's rows built per rank on other ranks' DOFs (``out``: a
+        tie's u_b) sent to those DOFs' owners, who add them to their operator rows; returns
+        the entries received (rows, columns, values). Collective (nothing moves on one rank or
+        without such rows anywhere). Such a relation is not refreshed: ``refresh`` copies
+        the entries kept on the holding rank only."""
+        comm, dofmap = self.dofmap.comm, self.dofmap
+        none = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
+        self._crossing = comm.size > 1 and comm.allreduce(bool(out.any()), op=MPI.LOR)
+        if not self._crossing:
+            return none
+        at = np.flatnonzero(out)
+        owner = dofmap.owner_of_dofs(self.d_rows[at])
+        order = np.argsort(owner, kind="stable")
+        at = at[order]
+        counts = np.bincount(owner, minlength=comm.size).astype(np.int64)
+        got_counts = np.empty_like(counts)
+        comm.Alltoall(counts, got_counts)
+        got = []
+        for values, kind in ((self.d_rows, MPI.INT64_T), (self.d_cols, MPI.INT64_T),
+                             (self.d_vals, MPI.DOUBLE)):
+            buf = np.empty(int(got_counts.sum()), dtype=values.dtype)
+            comm.Alltoallv([np.ascontiguousarray(values[at]), counts, _displ(counts), kind],
+                           [buf, got_counts, _displ(got_counts), kind])
+            got.append(buf)
+        return tuple(got)
 
     # ------------------------------------------------------------ sizes and views
 
@@ -273,11 +305,17 @@ class RelationSet:
         return self._per_mult(self.targets(t)) * self.row_scale
 
     def _owned_part(self, r: Relation, q: np.ndarray) -> np.ndarray:
+        """This rank's part of A q of a relation's rows held here: its entries on owned DOFs;
+        a relation built per rank, its entries on other ranks' DOFs too (a tie's u_b,
+        fetched from their owners: ``_Fetch``). Collective for a relation built per rank."""
         key = id(r)
         if key not in self._owned_entries:
             self._owned_entries[key] = self.dofmap.owned_dof_entries(r.a_dofs)
+            self._fetch[key] = None if r.whole else _Fetch.plan(self.dofmap, r)
         sel, local = self._owned_entries[key]
-        return self.dofmap.owned_part(sel, local, r.a_rows, r.a_vals, r.nrows, q)
+        part = self.dofmap.owned_part(sel, local, r.a_rows, r.a_vals, r.nrows, q)
+        fetch = self._fetch[key]
+        return part if fetch is None else fetch.add(part, r, q)
 
     def _parts(self, q: np.ndarray) -> np.ndarray:
         return np.concatenate([self._owned_part(r, q) for r in self.relations])
@@ -411,6 +449,11 @@ class RelationSet:
         np.logical_or.at(on, self.mult_of_row, active_rows)
         rows = np.flatnonzero(active_rows)
         self.rep_row[self._here(self.mult_of_row[rows])] = rows
+        if self._crossing:   # ghost rows built per rank elsewhere: their owners' say
+            # (collective: a tie's D column on another rank's DOF, ``_foreign_d``)
+            _, _, l0, l1 = self.dofmap.owned()
+            held = self.dofmap.forward_multipliers(on[l0:l1].astype(float))
+            on[self.dofmap.l_ghosts] = held[l1 - l0:] > 0.5
         return on
 
     def refresh(self) -> None:
@@ -490,6 +533,32 @@ class _RowSums:
                              _displ(self.send_counts), MPI.DOUBLE],
                             [got, self.recv_counts, _displ(self.recv_counts), MPI.DOUBLE])
         return np.bincount(self.recv_rows, weights=got, minlength=self.nrows)
+
+
+class _Fetch:
+    """The plan of the values a relation built per rank reads on other ranks' DOFs (a tie's
+    u_b): the A entries on DOFs this rank does not own, their values fetched from the owners
+    (``DofMap``'s ghost exchange on those DOFs alone, planned once)."""
+
+    def __init__(self, dofmap: DofMap, at: np.ndarray, new_dofs: np.ndarray):
+        self.at, self.q0 = at, int(dofmap.q_ranges[dofmap.rank])
+        self.n_owned = dofmap.n_owned
+        self.exchange = _Exchange(dofmap.comm, new_dofs, dofmap.owner_of_dofs(new_dofs), self.q0)
+
+    @classmethod
+    def plan(cls, dofmap: DofMap, r: Relation) -> "_Fetch | None":
+        """None when no rank has such entries. Collective."""
+        sel, _ = dofmap.owned_dof_entries(r.a_dofs)
+        at = np.setdiff1d(np.arange(r.a_dofs.size), sel)
+        if dofmap.comm.size == 1 or not dofmap.comm.allreduce(bool(at.size), op=MPI.LOR):
+            return None
+        return cls(dofmap, at, dofmap.input_new_dof(r.a_dofs[at]))
+
+    def add(self, part: np.ndarray, r: Relation, q: np.ndarray) -> np.ndarray:
+        values = self.exchange.forward(np.asarray(q[:self.n_owned], dtype=float))
+        part += np.bincount(r.a_rows[self.at], weights=r.a_vals[self.at] * values,
+                            minlength=r.nrows)
+        return part
 
 
 def _displ(counts: np.ndarray) -> np.ndarray:
