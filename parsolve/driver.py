@@ -268,7 +268,7 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log,
             check_path(problem, snap[0], snap[3], t_prev, t)
         pivots = solver.negative_pivots()  # the saddle's: one per enforced multiplier row
         if pivots is not None:
-            pivots -= int(problem.active.active.sum())
+            pivots -= comm.allreduce(int(problem.active.active[problem.active.owned].sum()))
         warning = watch.check(ctx.norm(problem.q - snap[0]), pivots, t - t_prev)
         extra.update({"steps/cuts": schedule.cuts, "steps/branch_warning": int(warning is not None)})
         timings = solver.take_timings()

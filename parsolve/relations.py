@@ -234,6 +234,28 @@ def rows_here(relation: Relation, ids: np.ndarray, size: int) -> Relation:
     return relation
 
 
+def lead_dofs(relation: Relation) -> np.ndarray:
+    """Per row, the DOF it constrains: its first entry of positive coefficient (a Dirichlet
+    row's DOF, a tie's u_a of u_a − u_b), else its first entry; -1 for a row with none."""
+    out = np.full(relation.nrows, -1, dtype=np.int64)
+    n = relation.a_rows.size
+    order = np.lexsort((np.arange(n), relation.a_vals <= 0.0, relation.a_rows))
+    rows = relation.a_rows[order]
+    first = np.flatnonzero(np.concatenate([[True], rows[1:] != rows[:-1]])) if n else order
+    out[rows[first]] = relation.a_dofs[order[first]]
+    return out
+
+
+def own_rows(relation: Relation, owned: np.ndarray) -> Relation:
+    """The rows of a whole relation this rank holds when built per rank: those whose lead DOF
+    (``lead_dofs``) is in ``owned`` (a mask per row), numbered by their place in the whole
+    relation (``Relation.ids``)."""
+    out = keep_rows(relation, owned)
+    out.eliminate = False   # multiplied on every rank, whatever rows it holds here
+    out.compliance = None if relation.compliance is None else relation.compliance[owned]
+    return rows_here(out, np.flatnonzero(owned), relation.nrows)
+
+
 def keep_rows(relation: Relation, keep: np.ndarray) -> Relation:
     """The relation restricted to the rows ``keep`` (a mask), renumbered."""
     new = np.cumsum(keep) - 1

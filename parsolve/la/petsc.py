@@ -183,7 +183,7 @@ class SaddleOperator:
         self.rowptr_d, self.cols_d = rowptr_d.astype(itype), cols_d
         self.rowptr_o, self._cols_o = rowptr_o.astype(itype), cols_o
         self.data = np.zeros(nnz)
-        self.active = np.ones(layout.nl, dtype=bool)  # global multiplier rows enforced
+        self.active = np.ones(layout.n_held, dtype=bool)  # held multiplier rows enforced
         self._l0, self._l1 = l0, l1
         self.mat: PETSc.Mat | None = None
         # nothing eliminated until the system says so (set_eliminated); no pass over the CSR here
@@ -237,13 +237,13 @@ class SaddleOperator:
         """Write the scaled -D and A values into the CSR value array. An inactive row keeps its
         pattern: A row and D column zero, ``diag`` on its diagonal, so its λ solves to 0; an
         enforced compliant row (``Relation.compliance``) has −c (scaled) there."""
-        b, on = self.block, self.active.astype(float)
-        d_cols, a_rows = b.d_cols[self._d_sel], b.a_rows[self._a_sel]
+        b, on = self.block, self.active.astype(float)   # (per held multiplier row)
+        d_cols, a_rows = b.d_places[self._d_sel], b.a_rows[self._a_sel] - self._l0
         dv = -b.d_vals[self._d_sel] * b.col_scale[d_cols] * on[d_cols]
         av = b.a_vals[self._a_sel] * b.row_scale[a_rows] * on[a_rows] * b.a_on[self._a_sel]
         self.data[self.d_final] = np.bincount(self._d_inv, weights=dv, minlength=self.d_final.size)
         self.data[self.a_final] = np.bincount(self._a_inv, weights=av, minlength=self.a_final.size)
-        own = slice(self._l0, self._l1)
+        own = slice(0, self._l1 - self._l0)   # (owned rows first among the held)
         # a compliant enforced row: A Δq − c λ = ..., i.e. −c · row_scale · col_scale on the
         # scaled multiplier's diagonal (Relation.compliance)
         soft = b.compliance[own] * b.row_scale[own] * b.col_scale[own]

@@ -8,12 +8,16 @@ Relations are rescaled so that their rows and columns are commensurate with the 
 relation gets equal scales, which keeps the operator symmetric.
 
 A relation is whole (every row on every rank) or built per rank (``Relation.ids``: a rigid
-obstacle's contact rows, each built by the rank owning its slave node, numbered by its place in
-the whole relation). The relation rows a rank holds are its per-rank relations' rows and every
-whole relation's; the vectors per relation row (``mult_of_row``, ``position``, the active
-set's masks, targets, gaps) run over those, and the ones per multiplier row (``rep_row``)
-over the multiplier rows those rows have (``mults_here``). Still of the multipliers' number on
-every rank: the compliance and the row and column scales.
+obstacle's contact rows, each built by the rank owning its slave node; multiplied Dirichlet,
+equal and periodic rows, by the rank owning the DOF or node each constrains; numbered by
+their place in the whole relation). A tie's entries on another rank's DOF: its D entries go
+to that DOF's owner (``_foreign_d``), its A q reads the DOF's value from there (``_Fetch``).
+The relation rows a rank holds are its per-rank relations' rows and every whole relation's;
+the vectors per relation row (``mult_of_row``, ``position``, the active set's masks, targets,
+gaps) run over those, ``rep_row`` over the multiplier rows those rows have (``mults_here``),
+and the ones per multiplier row over the rank's held multiplier rows (owned, then ghosts: ``DofMap.l_held``): the compliance, the
+row and column scales, the operator's enforced rows; the right-hand side and gaps over its
+owned rows.
 
 Multiplier rows are numbered by owner: a per-rank relation's rows belong to the rank that built
 them; a whole relation's row to the rank owning most of the DOFs its A
@@ -50,7 +54,7 @@ from collections.abc import Mapping
 import numpy as np
 from mpi4py import MPI
 
-from parsolve.la.dofmap import DofMap
+from parsolve.la.dofmap import DofMap, _Exchange
 from parsolve.relations import Relation
 
 
@@ -90,6 +94,10 @@ class RelationSet:
         rep_row = self.rep_row
         self._stack()
         self.rep_row = rep_row
+        if self.scaled:   # (the ghost rows may have changed: their scales from the owners)
+            n = self.n_owned
+            self.row_scale = self.from_owned(self.row_scale[:n])
+            self.col_scale = self.from_owned(self.col_scale[:n])
 
     def _stack(self) -> None:
         relations, dofmap = self.relations, self.dofmap
@@ -115,6 +123,8 @@ class RelationSet:
             dc.append(np.asarray(rows, dtype=np.int64) + first[k])
             dv.append(np.asarray(vals, dtype=float))
         stacked_a, stacked_d = _cat(ar, np.int64), _cat(dc, np.int64)
+        self._d_per_rank = np.repeat([not r.whole for r in relations],
+                                     [len(d) for d in dv]).astype(bool)
         self.a_cols, self.a_vals = _cat(ac, np.int64), _cat(av, float)
         self.d_rows, self.d_vals = _cat(dr, np.int64), _cat(dv, float)
         if self.position is None:   # the owners, once: restacking keeps them
@@ -130,15 +140,46 @@ class RelationSet:
             if relations else np.zeros(0, dtype=bool)
         self.whole_rows, self.own_rows = np.flatnonzero(whole), np.flatnonzero(~whole)
         self.mults_here = np.unique(self.mult_of_row)  # multiplier rows with a row held here
-        nl = dofmap.nl
         # per multiplier row held here (``mults_here``), the relation row it enforces
         self.rep_row = np.zeros(self.mults_here.size, dtype=np.int64)
         self.rep_row[self._here(self.mult_of_row[::-1])] = \
             np.arange(self.mult_of_row.size)[::-1]    # (its first)
-        self.compliance = np.zeros(nl)                  # per multiplier row (Relation)
+        # where the multiplier rows of the relation rows held here are held (a whole
+        # relation's rows on other ranks are not)
+        self._mult_held = self._held_places(self.mult_of_row)
+        self.compliance = np.zeros(dofmap.n_held)       # per held multiplier row (Relation)
         self._copy_compliance()
         self._owned_entries: dict[int, tuple] = {}      # per relation: its owned A entries
+        self._fetch: dict[int, _Fetch | None] = {}      # and the plan of its others'
         self._sums: _RowSums | None = None              # owned_primal's plan
+
+    def _held_places(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(mask of the global multiplier rows this rank holds, their places among the held
+        ones: owned rows first, then ghosts; ``DofMap.l_held``)."""
+        dm = self.dofmap
+        _, _, l0, l1 = dm.owned()
+        rows = np.asarray(rows, dtype=np.int64)
+        own = (rows >= l0) & (rows < l1)
+        at = np.searchsorted(dm.l_ghosts, rows)
+        ghost = ~own & (dm.l_ghosts[np.minimum(at, dm.l_ghosts.size - 1)] == rows) \
+            if dm.l_ghosts.size else np.zeros(rows.shape, dtype=bool)
+        return own | ghost, np.where(own, rows - l0, l1 - l0 + at)
+
+    @property
+    def n_owned(self) -> int:
+        """Multiplier rows this rank owns (the first of those it holds)."""
+        _, _, l0, l1 = self.dofmap.owned()
+        return l1 - l0
+
+    @property
+    def d_places(self) -> np.ndarray:
+        """Place among the held multiplier rows of each kept D entry's column."""
+        return self._d_held
+
+    def from_owned(self, owned: np.ndarray) -> np.ndarray:
+        """A per held multiplier row vector from its owned rows' values, the ghosts' fetched
+        from their owners. Collective."""
+        return self.dofmap.forward_multipliers(owned)
 
     def _here(self, mults: np.ndarray) -> np.ndarray:
         """Places in ``mults_here`` of multiplier rows held here."""
@@ -211,16 +252,45 @@ class RelationSet:
         dofmap.set_multipliers(self._counts)
         q0, q1, l0, l1 = dofmap.owned()
         keep_a = np.flatnonzero((self.a_rows >= l0) & (self.a_rows < l1))
-        keep_d = np.flatnonzero((self.d_rows >= q0) & (self.d_rows < q1))
+        mine = (self.d_rows >= q0) & (self.d_rows < q1)
+        keep_d = np.flatnonzero(mine)
+        sent = self._foreign_d(self._d_per_rank & ~mine)
         for name in ("a_rows", "a_cols", "a_vals", "a_relrow"):
             setattr(self, name, getattr(self, name)[keep_a])
-        for name in ("d_rows", "d_cols", "d_vals"):
-            setattr(self, name, getattr(self, name)[keep_d])
+        for name, got in zip(("d_rows", "d_cols", "d_vals"), sent):
+            setattr(self, name, np.concatenate([getattr(self, name)[keep_d], got]))
         refreshed = [bool(r.meta.get("refresh")) for r in self.relations]
         self._a_from = _segments(keep_a, a_sizes, refreshed)
         self._d_from = _segments(keep_d, d_sizes, refreshed)
         dofmap.set_multipliers(self._counts, self.d_cols)
         self._d_held = dofmap.held_index(self.d_cols)
+
+    def _foreign_d(self, out: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The D entries of this rank's rows built per rank on other ranks' DOFs (``out``: a
+        tie's u_b) sent to those DOFs' owners, who add them to their operator rows; returns
+        the entries received (rows, columns, values). Collective (nothing moves on one rank or
+        without such rows anywhere). Such a relation is not refreshed: ``refresh`` copies
+        the entries kept on the holding rank only."""
+        comm, dofmap = self.dofmap.comm, self.dofmap
+        none = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
+        self._crossing = comm.size > 1 and comm.allreduce(bool(out.any()), op=MPI.LOR)
+        if not self._crossing:
+            return none
+        at = np.flatnonzero(out)
+        owner = dofmap.owner_of_dofs(self.d_rows[at])
+        order = np.argsort(owner, kind="stable")
+        at = at[order]
+        counts = np.bincount(owner, minlength=comm.size).astype(np.int64)
+        got_counts = np.empty_like(counts)
+        comm.Alltoall(counts, got_counts)
+        got = []
+        for values, kind in ((self.d_rows, MPI.INT64_T), (self.d_cols, MPI.INT64_T),
+                             (self.d_vals, MPI.DOUBLE)):
+            buf = np.empty(int(got_counts.sum()), dtype=values.dtype)
+            comm.Alltoallv([np.ascontiguousarray(values[at]), counts, _displ(counts), kind],
+                           [buf, got_counts, _displ(got_counts), kind])
+            got.append(buf)
+        return tuple(got)
 
     # ------------------------------------------------------------ sizes and views
 
@@ -262,22 +332,29 @@ class RelationSet:
         return np.concatenate([r.rhs(t) for r in self.relations]) if self.relations else np.zeros(0)
 
     def _per_mult(self, per_row: np.ndarray) -> np.ndarray:
-        """Per multiplier row, the value of the relation row it enforces (of the multiplier
-        rows with a relation row held here; 0 on the others)."""
-        out = np.zeros(self.nrows)
-        out[self.mults_here] = per_row[self.rep_row]
+        """Per multiplier row this rank owns, the value of the relation row it enforces."""
+        _, _, l0, l1 = self.dofmap.owned()
+        out = np.zeros(l1 - l0)
+        own = (self.mults_here >= l0) & (self.mults_here < l1)
+        out[self.mults_here[own] - l0] = per_row[self.rep_row[own]]
         return out
 
     def rhs(self, t: float) -> np.ndarray:
-        """Scaled b(t) of the multiplier rows (of those with a relation row held here)."""
-        return self._per_mult(self.targets(t)) * self.row_scale
+        """Scaled b(t) of the multiplier rows this rank owns."""
+        return self._per_mult(self.targets(t)) * self.row_scale[:self.n_owned]
 
     def _owned_part(self, r: Relation, q: np.ndarray) -> np.ndarray:
+        """This rank's part of A q of a relation's rows held here: its entries on owned DOFs;
+        a relation built per rank, its entries on other ranks' DOFs too (a tie's u_b,
+        fetched from their owners: ``_Fetch``). Collective for a relation built per rank."""
         key = id(r)
         if key not in self._owned_entries:
             self._owned_entries[key] = self.dofmap.owned_dof_entries(r.a_dofs)
+            self._fetch[key] = None if r.whole else _Fetch.plan(self.dofmap, r)
         sel, local = self._owned_entries[key]
-        return self.dofmap.owned_part(sel, local, r.a_rows, r.a_vals, r.nrows, q)
+        part = self.dofmap.owned_part(sel, local, r.a_rows, r.a_vals, r.nrows, q)
+        fetch = self._fetch[key]
+        return part if fetch is None else fetch.add(part, r, q)
 
     def _parts(self, q: np.ndarray) -> np.ndarray:
         return np.concatenate([self._owned_part(r, q) for r in self.relations])
@@ -314,18 +391,18 @@ class RelationSet:
         return self.dofmap.sum_ranks(part) if r.whole else part
 
     def gap(self, t: float, q: np.ndarray) -> np.ndarray:
-        """b(t) - A q of the multiplier rows, unscaled: this rank's owned rows' (the others:
-        not computed). Collective (``owned_primal``)."""
+        """b(t) - A q of the multiplier rows this rank owns, unscaled. Collective
+        (``owned_primal``)."""
         if not self.relations:
             return np.zeros(0)
         return self._per_mult(self.targets(t) - self.owned_primal(q))
 
     def scaled_residual(self, t: float, q: np.ndarray | None) -> np.ndarray:
-        """Scaled b(t) - A q of the multiplier rows (b(t) alone without q): this rank's
-        owned rows' (the others: not computed). Collective (``owned_primal``)."""
+        """Scaled b(t) - A q of the multiplier rows this rank owns (b(t) alone without q).
+        Collective (``owned_primal``)."""
         target = self.rhs(t)
         if q is not None and self.nrows:
-            target = target - self._per_mult(self.owned_primal(q)) * self.row_scale
+            target = target - self._per_mult(self.owned_primal(q)) * self.row_scale[:target.size]
         return target
 
     def reactions(self, lam: np.ndarray) -> np.ndarray:
@@ -341,8 +418,8 @@ class RelationSet:
     def multipliers(self, lam_scaled: np.ndarray) -> np.ndarray:
         """Unscaled λ of this rank's owned multiplier rows from the solved (scaled) held ones
         (owned rows first)."""
-        _, _, l0, l1 = self.dofmap.owned()
-        return lam_scaled[:l1 - l0] * self.col_scale[l0:l1] if self.nrows else np.zeros(0)
+        n = self.n_owned
+        return lam_scaled[:n] * self.col_scale[:n] if self.nrows else np.zeros(0)
 
     @property
     def owned_relrows(self) -> np.ndarray:
@@ -406,11 +483,15 @@ class RelationSet:
 
     def select(self, active_rows: np.ndarray) -> np.ndarray:
         """The enforced relation rows → which row each collapsed group carries, and the mask of
-        multiplier rows enforced."""
-        on = np.zeros(self.nrows, dtype=bool)
-        np.logical_or.at(on, self.mult_of_row, active_rows)
+        the held multiplier rows enforced (``DofMap.l_held``)."""
+        on = np.zeros(self.dofmap.n_held, dtype=bool)
+        held, at = self._mult_held
+        np.logical_or.at(on, at[held], np.asarray(active_rows, dtype=bool)[held])
         rows = np.flatnonzero(active_rows)
         self.rep_row[self._here(self.mult_of_row[rows])] = rows
+        if self._crossing:   # ghost rows built per rank elsewhere: their owners' say
+            # (collective: a tie's D column on another rank's DOF, ``_foreign_d``)
+            on = self.from_owned(on[:self.n_owned].astype(float)) > 0.5
         return on
 
     def refresh(self) -> None:
@@ -425,28 +506,54 @@ class RelationSet:
         self._copy_compliance()
 
     def _copy_compliance(self) -> None:
+        held, at = self._mult_held
         for k, r in enumerate(self.relations):
             if r.compliance is not None and not r.collapsed:
-                self.compliance[self.mult_rows[k]] = r.compliance
+                rows = self.rows_of(k)
+                self.compliance[at[rows][held[rows]]] = r.compliance[held[rows]]
+
+    def row_compliance(self) -> np.ndarray:
+        """Per relation row held here, its compliance (``Relation.compliance``; 0: none)."""
+        parts = [r.compliance if r.compliance is not None and not r.collapsed
+                 else np.zeros(r.nrows) for r in self.relations]
+        return np.concatenate(parts) if parts else np.zeros(0)
 
     def set_scales(self, kscale: float) -> None:
         """Scale each row of A and column of D to the size of the stiffness diagonal (the
-        largest |entry| of a row or column over the ranks holding its entries: one reduction
-        of the multipliers' number). Collective."""
-        n = self.nrows
-        amax = np.zeros((2, n))
-        np.maximum.at(amax[0], self.a_rows, np.abs(self.a_vals))
-        np.maximum.at(amax[1], self.d_cols, np.abs(self.d_vals))
-        self.dofmap.comm.Allreduce(MPI.IN_PLACE, amax, op=MPI.MAX)
-        amax, dmax = amax
+        largest |entry| of a row or column over the ranks holding its entries), per held
+        multiplier row: a row of A is whole on its owner; a column of D's entries on the ranks
+        owning their DOFs, whose largest go to the row's owner; the owners' scales then go to
+        the ghosts. Collective."""
+        _, _, l0, l1 = self.dofmap.owned()
+        amax = np.zeros(l1 - l0)
+        np.maximum.at(amax, self.a_rows - l0, np.abs(self.a_vals))
+        dmax = np.zeros(self.dofmap.n_held)
+        np.maximum.at(dmax, self._d_held, np.abs(self.d_vals))
+        dmax = self._owners_max(dmax)
         amax[amax == 0] = 1.0
         dmax[dmax == 0] = 1.0
-        self.row_scale = kscale / amax
-        self.col_scale = kscale / dmax
+        row, col = kscale / amax, kscale / dmax
+        held, at = self._mult_held
         for k, rel in enumerate(self.relations):
             if rel.associated:  # same scale on both sides keeps the operator symmetric
-                rows = self.mult_rows[k]
-                self.col_scale[rows] = self.row_scale[rows]
+                mine = at[self.rows_of(k)][held[self.rows_of(k)]]
+                mine = mine[mine < l1 - l0]
+                col[mine] = row[mine]
+        self.row_scale, self.col_scale = self.from_owned(row), self.from_owned(col)
+
+    def _owners_max(self, held: np.ndarray) -> np.ndarray:
+        """Per owned multiplier row, the largest of every rank's values of it (``held``: this
+        rank's, per held row; the ghosts' sent to their owners). Collective."""
+        dm = self.dofmap
+        _, _, l0, l1 = dm.owned()
+        out = held[:l1 - l0].copy()
+        if dm.comm.size == 1:
+            return out
+        owner = np.searchsorted(dm.l_ranges, dm.l_ghosts, side="right") - 1
+        plan = _Exchange(dm.comm, dm.l_ghosts, owner, l0)
+        got = plan._move(held[l1 - l0:][plan.order], plan.recv_counts, plan.send_counts)
+        np.maximum.at(out, plan.asked_of_me, got)
+        return out
 
     @property
     def scaled(self) -> bool:
@@ -490,6 +597,32 @@ class _RowSums:
                              _displ(self.send_counts), MPI.DOUBLE],
                             [got, self.recv_counts, _displ(self.recv_counts), MPI.DOUBLE])
         return np.bincount(self.recv_rows, weights=got, minlength=self.nrows)
+
+
+class _Fetch:
+    """The plan of the values a relation built per rank reads on other ranks' DOFs (a tie's
+    u_b): the A entries on DOFs this rank does not own, their values fetched from the owners
+    (``DofMap``'s ghost exchange on those DOFs alone, planned once)."""
+
+    def __init__(self, dofmap: DofMap, at: np.ndarray, new_dofs: np.ndarray):
+        self.at, self.q0 = at, int(dofmap.q_ranges[dofmap.rank])
+        self.n_owned = dofmap.n_owned
+        self.exchange = _Exchange(dofmap.comm, new_dofs, dofmap.owner_of_dofs(new_dofs), self.q0)
+
+    @classmethod
+    def plan(cls, dofmap: DofMap, r: Relation) -> "_Fetch | None":
+        """None when no rank has such entries. Collective."""
+        sel, _ = dofmap.owned_dof_entries(r.a_dofs)
+        at = np.setdiff1d(np.arange(r.a_dofs.size), sel)
+        if dofmap.comm.size == 1 or not dofmap.comm.allreduce(bool(at.size), op=MPI.LOR):
+            return None
+        return cls(dofmap, at, dofmap.input_new_dof(r.a_dofs[at]))
+
+    def add(self, part: np.ndarray, r: Relation, q: np.ndarray) -> np.ndarray:
+        values = self.exchange.forward(np.asarray(q[:self.n_owned], dtype=float))
+        part += np.bincount(r.a_rows[self.at], weights=r.a_vals[self.at] * values,
+                            minlength=r.nrows)
+        return part
 
 
 def _displ(counts: np.ndarray) -> np.ndarray:

@@ -41,6 +41,28 @@ def build_relations(specs: list, regions, evolutions: dict, patterns: dict, fiel
         what = f"relations {a!r} and {b!r} both fix" if a != b else f"relation {a!r} fixes twice"
         raise InputError(f"redundant relations: {what} {label} at node {node} "
                          f"({len(dups)} such DOFs); the system would be singular", source, "relations")
+    return _per_rank(out, regions.mesh, ncomp)
+
+
+def _per_rank(relations: list, mesh, ncomp: int) -> list:
+    """The multiplied relations of kinds whose rows each constrain one DOF or node (a
+    Dirichlet row, a tie's u_a): built per rank, each row held by the rank owning the DOF it
+    constrains (``rel.lead_dofs``), numbered by its place in the whole relation. The checks
+    above ran on the whole relations (the same answer on every rank); an eliminated relation
+    stays whole (its values lift every rank's columns), and so do rows sharing a load pattern,
+    a maximum or groups (decided together)."""
+    owned = np.sort(mesh.global_nodes[:mesh.n_owned].astype(np.int64))
+    out = []
+    for r in relations:
+        entry = RELATIONS.get(r.meta.get("type"))
+        if entry is None or not entry.per_rank or r.eliminable() or r.shared_dual is not None \
+                or r.maximum or r.groups is not None:
+            out.append(r)
+            continue
+        node = rel.lead_dofs(r) // ncomp
+        pos = np.minimum(np.searchsorted(owned, node), max(owned.size - 1, 0))
+        mine = owned[pos] == node if owned.size else np.zeros(r.nrows, dtype=bool)
+        out.append(rel.own_rows(r, mine & (node >= 0)))
     return out
 
 

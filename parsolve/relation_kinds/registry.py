@@ -23,14 +23,17 @@ class RelationEntry:
     regions: Callable = own_regions   # spec -> [(region, dotted key)], checked before the mesh
     holds: bool = False         # its rows hold single DOFs at given values (a reaction each)
     ties: bool = False          # its rows tie pairs of DOFs (u_a − u_b = 0)
+    per_rank: bool = False      # each row constrains one DOF or node: multiplied, it is built
+    #                             per rank, held by that DOF's owner (``build._per_rank``)
     description: str = ""
 
 
 RELATIONS: dict[str, RelationEntry] = {
     "dirichlet": RelationEntry(dirichlet.parse, dirichlet.build, (float, str), holds=True,
+                               per_rank=True,
                                description="a value per node and component (a number or an "
                                            "expression of x, y, z)"),
-    "equal": RelationEntry(ties.parse_equal, ties.build_equal, None,
+    "equal": RelationEntry(ties.parse_equal, ties.build_equal, None, per_rank=True,
                            description="equal values of a component over a region"),
     "mean": RelationEntry(ties.parse_mean, ties.build_combination, (float,),
                           description="the mean of a component over a region [minus "
@@ -41,7 +44,7 @@ RELATIONS: dict[str, RelationEntry] = {
     "strain": RelationEntry(strain.parse, strain.build, (float,),
                             description="the strain n·ε·n of a region (its mean) or of each "
                                         "of its cells"),
-    "periodic": RelationEntry(periodic.parse, periodic.build, None, ties=True,
+    "periodic": RelationEntry(periodic.parse, periodic.build, None, ties=True, per_rank=True,
                               description="each node of a region tied to its partner of a "
                                           "target at x + translation"),
 }

@@ -507,7 +507,7 @@ def _linear_solve(system, solver, mask: np.ndarray, f: np.ndarray, t: float | No
     mat = system.assemble()
     solver.set_operator(mat)
     x, b = mat.createVecs()
-    target = np.zeros(rset.nrows) if t is None else rset.rhs(t)
+    target = np.zeros(rset.n_owned) if t is None else rset.rhs(t)
     elim = np.zeros(system.n_eliminated) if t is None else system.elim_values(t)
     b.array[:] = system.rhs_from(f, target, elim)[0]
     solver.solve(b, x)

@@ -127,7 +127,7 @@ class RelationPolicies:
         rows, dofs, rels, candidate, fixed, key, per_rank = self._rows
         vals = np.concatenate([r.a_vals for r in rels])   # current (friction turns them)
         # compliant rows constrain nothing (``Relation.compliance``): out of the analysis
-        hard = active & ~(self.rset.compliance[self.rset.mult_of_row] > 0.0)
+        hard = active & ~(self.rset.row_compliance() > 0.0)
         n = active.size
         f_rows, f_dofs, f_vals, f_key = self._foreign_rows(rows, dofs, vals, hard, key,
                                                           per_rank, fixed)
@@ -142,7 +142,8 @@ class RelationPolicies:
 
     def _foreign_rows(self, rows, dofs, vals, hard, key, per_rank, fixed) -> tuple:
         """The enforced rows of relations built per rank that other ranks hold on nodes the
-        whole relations touch (a periodic tie between contact nodes of two ranks): what a
+        whole relations or the rows across ranks touch (a periodic tie between contact nodes
+        of two ranks, whole or built per rank): what a
         rank's analysis needs besides its own rows for every rank to decide alike. Rows on
         other nodes cannot depend on rows of another rank (they share no DOF with them).
         Returns their entries (rows numbered 0.. in key order), and each row's key."""
@@ -151,8 +152,14 @@ class RelationPolicies:
         if comm.size == 1 or not comm.allreduce(bool(per_rank.any()), op=MPI.LOR):
             return empty
         live = hard[rows] & (vals != 0.0) & ~np.isin(dofs, fixed)
-        whole_nodes = np.unique(dofs[live & ~per_rank[rows]] // ncomp)
         mine = live & per_rank[rows]
+        # and on the nodes of rows reaching other ranks' DOFs (a tie's u_b), every rank's
+        away = np.ones(dofs.size, dtype=bool)
+        away[self.ctx.dofs.owned_dof_entries(dofs)[0]] = False
+        cross = np.zeros(hard.size, dtype=bool)
+        cross[rows[mine & away]] = True
+        whole_nodes = np.union1d(np.unique(dofs[live & ~per_rank[rows]] // ncomp), np.concatenate(
+            comm.allgather(np.unique(dofs[mine & cross[rows]] // ncomp))))
         touch = np.zeros(hard.size, dtype=bool)
         touch[rows[mine & np.isin(dofs // ncomp, whole_nodes)]] = True
         send = mine & touch[rows]

@@ -75,7 +75,7 @@ def export_system(comm, directory: str, mat: PETSc.Mat, rhs: PETSc.Vec, system: 
     ctx = system.context
     q0, q1, l0, l1 = ctx.dofs.owned()
     if ctx.relations.nrows:
-        scale.array[q1 - q0:] = ctx.relations.col_scale[l0:l1]
+        scale.array[q1 - q0:] = ctx.relations.col_scale[:l1 - l0]
     viewer = PETSc.Viewer().createBinary(str(path / "system.dat"), "w", comm=comm)
     for obj in (mat, rhs, scale):
         obj.view(viewer)

@@ -251,7 +251,7 @@ def unstable_modes(problem, states: list, q: np.ndarray | None = None) -> int | 
         _hold_maximum_rows(problem, held, q)
     negative = negative_pivots(problem.comm, held)
     _, _, l0, l1 = system.dofmap.owned()   # (enforced rows: each counted by its owner)
-    enforced = problem.comm.allreduce(int(system.op.active[l0:l1].sum()))
+    enforced = problem.comm.allreduce(int(system.op.active[:l1 - l0].sum()))
     return None if negative is None else negative - enforced
 
 

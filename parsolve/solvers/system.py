@@ -145,9 +145,9 @@ class SaddleSystem:
             rank = self.comm.rank
             lo, hi = self.part.node_ranges[rank], self.part.node_ranges[rank + 1]
             self.pattern = self._pattern(lo, hi)
-        active = self.op.active
+        active = self.op.active[:self.relation_set.n_owned]   # (the ghosts may change)
         self.op = SaddleOperator(self.comm, self.dofmap, self.pattern, self.relation_set)
-        self.op.active = active
+        self.op.active = self.relation_set.from_owned(active.astype(float)) > 0.5
         self.op.set_eliminated(self.elim_saddle)
 
     def _terms_moved(self) -> bool:
@@ -250,7 +250,8 @@ class SaddleSystem:
         if self._augmented is None:
             self._augmented = AugmentedMatrix(self.comm, self.dofmap)
         _, _, l0, l1 = self.dofmap.owned()
-        hard = self.op.active[l0:l1].astype(bool) & (self.relation_set.compliance[l0:l1] <= 0.0)
+        own = slice(0, l1 - l0)   # (owned rows first among the held)
+        hard = self.op.active[own].astype(bool) & (self.relation_set.compliance[own] <= 0.0)
         return self._augmented.update(mat, hard, self.kscale, gamma)
 
     def _place_stiffness(self, ke) -> None:
@@ -282,7 +283,7 @@ class SaddleSystem:
             f_full = f_full - f_int
         target = self.relation_set.scaled_residual(t, q)
         # a compliant row's right-hand side is 0: a stiffness on the increment, not a target
-        target = np.where(self.relation_set.compliance > 0.0, 0.0, target)
+        target = np.where(self.relation_set.compliance[:target.size] > 0.0, 0.0, target)
         values = self.elim_values(t)
         if q is not None and self.elim_dofs.size:
             values = values - self.eliminated_values(q)
@@ -300,7 +301,7 @@ class SaddleSystem:
         every multiplied row, and values of the eliminated DOFs."""
         b = self.to_owned(f_full)
         q0, q1, l0, l1 = self.dofmap.owned()
-        b[q1 - q0:] = (target * self.op.active)[l0:l1]
+        b[q1 - q0:] = target * self.op.active[:l1 - l0]   # (owned rows first among the held)
         # the eliminated DOFs' values only, not a whole saddle vector
         x_e = HeldValues(held_keys(self.elim_saddle), np.asarray(elim_values, dtype=float),
                          np.zeros(0))
@@ -329,10 +330,9 @@ class SaddleSystem:
         enforced compliant rows are discarded (``Relation.compliance``: a device of the Newton
         matrix, not a force)."""
         held = self.dofmap.gather(x_owned)
-        rows = self.dofmap.l_held
-        soft = self.relation_set.compliance[rows] > 0.0
+        soft = self.relation_set.compliance > 0.0   # (per held multiplier row)
         if soft.any():
-            held.lam[soft & self.op.active[rows].astype(bool)] = 0.0
+            held.lam[soft & self.op.active.astype(bool)] = 0.0
         return held
 
     def with_primal(self, x_full: HeldValues, q: np.ndarray) -> HeldValues:

@@ -6,6 +6,9 @@ from mpi4py import MPI
 
 from conftest import dense, saddle_of_input_dofs, solve_in_process, whole_points
 from helpers.saddle import SCENE
+from helpers.scene import CONFIGS
+from helpers.scales import whole_scales
+from parsolve.outputs import every_row
 
 @pytest.mark.parametrize("preset, eliminate", [("direct", "true"), ("direct", "false"),
                                                ("iterative", "true"), ("iterative", "false")])
@@ -36,35 +39,66 @@ def test_operator_blocks_are_what_the_relations_say():
                              np.column_stack([-pts[:, 1], pts[:, 0]]).ravel()])
     assert np.abs(K @ rigid).max() <= 1e-11 * np.abs(K).max()
     blk = system.relation_set
-    for k, rel in enumerate(system.multiplied):
+    row_scale, col_scale = whole_scales(blk)
+    for k, rel in enumerate(system.multiplied):   # (a relation built per rank: its rows here)
+        if rel.nrows == 0:
+            continue
         rows = il[blk.mult_rows[k]]
         A = np.zeros((rel.nrows, len(iq)))
         np.add.at(A, (rel.a_rows, rel.a_dofs), rel.a_vals)
-        scale = blk.row_scale[blk.mult_rows[k]]
+        scale = row_scale[blk.mult_rows[k]]
         np.testing.assert_allclose(M[np.ix_(rows, iq)], A * scale[:, None], rtol=0, atol=1e-12 * scale.max())
         D = np.zeros((len(iq), rel.nrows))
         dofs, drows, dvals = rel.dual_coo()
         np.add.at(D, (dofs, drows), dvals)
-        cs = blk.col_scale[blk.mult_rows[k]]
+        cs = col_scale[blk.mult_rows[k]]
         np.testing.assert_allclose(M[np.ix_(iq, rows)], -D * cs[None, :], rtol=0, atol=1e-12 * cs.max())
 
 
-def test_operator_does_not_depend_on_rank_count():
-    """The same matrix, in input numbering, on this communicator and on one rank alone."""
-    text = SCENE.format(cell="quad", preset="direct", eliminate="false")
+#: the periodic laminate with its Dirichlet rows multiplied: ties across the ranks (a tie's
+#: D column and A row on another rank's DOF) and Dirichlet rows, each built on its rank
+PERIODIC = (CONFIGS / "periodic_shear_laminate.toml").read_text(encoding="utf-8") \
+    + "\n[solver]\neliminate = false\n"
+
+
+@pytest.mark.parametrize("scene", ["saddle", "periodic"])
+def test_operator_does_not_depend_on_rank_count(scene):
+    """The same matrix, in input numbering, on this communicator and on one rank alone; the
+    same solution."""
+    text = SCENE.format(cell="quad", preset="direct", eliminate="false") if scene == "saddle" \
+        else PERIODIC
     par = solve_in_process(text, MPI.COMM_WORLD)
     ser = solve_in_process(text, MPI.COMM_SELF)
 
     def in_input_order(system, mat, comm):
         M = dense(mat, comm)
         # multipliers in stacking order (their numbering follows their owners)
-        mult = system.dofmap.saddle_of_mult[system.relation_set.position]
+        mult = system.dofmap.saddle_of_mult[stacking_order(system.relation_set, comm)]
         order = np.concatenate([saddle_of_input_dofs(comm, system), mult])
         return M[np.ix_(order, order)]
 
     Mp = in_input_order(par[0], par[2], MPI.COMM_WORLD)
     Ms = in_input_order(ser[0], ser[2], MPI.COMM_SELF)
     assert np.abs(Mp - Ms).max() <= 1e-13 * np.abs(Ms).max()
+    # the multipliers by relation, every row from its rank: those of one rank alone
+    for k, r in enumerate(par[0].multiplied):
+        lam_p = par[0].relation_set.relation_values(k, par[0].multipliers(par[0].gather(
+            par[4].array)))
+        lam_p = every_row(MPI.COMM_WORLD, r, lam_p)
+        lam_s = ser[0].relation_set.relation_values(k, ser[0].multipliers(ser[0].gather(
+            ser[4].array)))
+        np.testing.assert_allclose(lam_p, lam_s, rtol=0, atol=1e-12 * np.abs(lam_s).max())
+
+
+def stacking_order(rs, comm) -> np.ndarray:
+    """Every multiplier row in stacking order (relation by relation, each relation's rows in
+    their order over every rank), each from its owner (a relation built per rank holds its
+    rows on their ranks). Collective."""
+    first = np.concatenate([[0], np.cumsum([r.total for r in rs.relations])])
+    key = np.concatenate([first[k] + r.row_ids() for k, r in enumerate(rs.relations)])
+    mine = rs.owned_relrows
+    pairs = np.concatenate(comm.allgather(np.column_stack([key[mine], rs.mult_of_row[mine]])))
+    return pairs[np.argsort(pairs[:, 0]), 1]
 
 
 def test_singular_system_is_an_error_not_garbage():

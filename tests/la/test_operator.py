@@ -18,6 +18,7 @@ from petsc4py import PETSc
 
 from conftest import saddle_of_input_dofs
 from helpers.saddle import SCENE
+from helpers.scales import whole_scales
 
 from parsolve.effects.compose import Composition
 from parsolve.fem.element_matrices import ElementMatrices, full_values
@@ -69,14 +70,17 @@ def brute_saddle(system: SaddleSystem, factor: float = 1.0) -> np.ndarray:
     S = np.zeros((system.dofmap.size, system.dofmap.size))
     S[np.ix_(iq, iq)] = brute_stiffness(system.whole, factor)
     blk = system.relation_set
+    row_scale, col_scale = whole_scales(blk)
+    per_rank = np.zeros_like(S)   # the rows of relations built per rank: each on its rank
     for k, rel in enumerate(system.multiplied):
         rows = il[blk.mult_rows[k]]
-        scale = blk.row_scale[blk.mult_rows[k]]
-        cscale = blk.col_scale[blk.mult_rows[k]]
-        np.add.at(S, (rows[rel.a_rows], iq[rel.a_dofs]), rel.a_vals * scale[rel.a_rows])
+        scale = row_scale[blk.mult_rows[k]]
+        cscale = col_scale[blk.mult_rows[k]]
+        into = S if rel.whole else per_rank
+        np.add.at(into, (rows[rel.a_rows], iq[rel.a_dofs]), rel.a_vals * scale[rel.a_rows])
         dofs, drows, dvals = rel.dual_coo()
-        np.add.at(S, (iq[dofs], rows[drows]), -dvals * cscale[drows])
-    return S
+        np.add.at(into, (iq[dofs], rows[drows]), -dvals * cscale[drows])
+    return S + COMM.allreduce(per_rank)
 
 
 def operator_entries(op) -> np.ndarray:
@@ -126,6 +130,7 @@ def structure(system: SaddleSystem) -> np.ndarray:
         out[rows[rel.a_rows], iq[rel.a_dofs]] = True
         dofs, drows, _ = rel.dual_coo()
         out[iq[dofs], rows[drows]] = True
+    out = COMM.allreduce(out.astype(np.int8)) > 0   # (a relation built per rank: on its ranks)
     out[il, il] = True
     return out
 

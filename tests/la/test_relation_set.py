@@ -14,6 +14,8 @@ from parsolve.mesh.generators import rectangle
 from parsolve.mesh.regions import allgather_rows
 from parsolve.relations import Relation
 
+from helpers.scales import whole_scales
+
 COMM = MPI.COMM_WORLD
 NC, NPTS = 2, 45
 
@@ -66,7 +68,7 @@ def test_primal_values_and_gaps(rset):
     np.testing.assert_allclose(rs.relation_primal(rs.relations[1], q), expected[3:5], rtol=1e-15)
     b = np.concatenate([r.rhs(0.5) for r in rs.relations])
     _, _, l0, l1 = rs.dofmap.owned()   # (gaps: of the owned rows)
-    np.testing.assert_allclose(rs.gap(0.5, q)[l0:l1], (b - expected)[rs.rep_row][l0:l1],
+    np.testing.assert_allclose(rs.gap(0.5, q), (b - expected)[rs.rep_row][l0:l1],
                                rtol=1e-15)
     # the enforced row of the group moves to its third row: its gap follows
     active = np.array([True] * 5 + [False, False, True])
@@ -75,7 +77,7 @@ def test_primal_values_and_gaps(rset):
     assert on.all() and rs.rep_row[pos[5]] == 7
     gap = rs.gap(0.5, q)   # (collective)
     if l0 <= pos[5] < l1:
-        np.testing.assert_allclose(gap[pos[5]], b[7] - expected[7], rtol=1e-15)
+        np.testing.assert_allclose(gap[pos[5] - l0], b[7] - expected[7], rtol=1e-15)
     lam = np.empty(6)
     lam[pos] = np.arange(6.0)   # the stacked rows' values, in multiplier numbering
     np.testing.assert_array_equal(rs.row_values(lam), [0, 1, 2, 3, 4, 0, 0, 5])
@@ -111,18 +113,22 @@ def test_scales_and_right_hand_side(rset):
     rs, q = rset
     rs.set_scales(10.0)
     pos = rs.position
-    np.testing.assert_allclose(rs.row_scale[pos], [10.0, 5.0, 10.0, 10.0, 10.0, 10.0])
+    row_scale, col_scale = whole_scales(rs)
+    np.testing.assert_allclose(row_scale[pos], [10.0, 5.0, 10.0, 10.0, 10.0, 10.0])
     # associated: the column scale is the row's; the others from |D|
-    np.testing.assert_allclose(rs.col_scale[pos], [10.0, 5.0, 10.0, 2.5, 5.0, 10.0])
+    np.testing.assert_allclose(col_scale[pos], [10.0, 5.0, 10.0, 2.5, 5.0, 10.0])
+    # per held multiplier row (owned, then ghosts): the owners' scales
+    np.testing.assert_array_equal(rs.row_scale, row_scale[rs.dofmap.l_held])
+    np.testing.assert_array_equal(rs.col_scale, col_scale[rs.dofmap.l_held])
+    _, _, l0, l1 = rs.dofmap.owned()   # the owned rows (the right-hand side, the residual)
     b = np.concatenate([r.rhs(1.0) for r in rs.relations])[rs.rep_row]
-    np.testing.assert_allclose(rs.rhs(1.0), b * rs.row_scale, rtol=1e-15)
+    np.testing.assert_allclose(rs.rhs(1.0), (b * row_scale)[l0:l1], rtol=1e-15)
     every = value(np.arange(NPTS * NC))
     aq = np.concatenate([r.primal(every) for r in rs.relations])[rs.rep_row]
-    _, _, l0, l1 = rs.dofmap.owned()   # the owned rows (the residual), from the held ones
-    np.testing.assert_allclose(rs.scaled_residual(1.0, q)[l0:l1],
-                               ((b - aq) * rs.row_scale)[l0:l1], rtol=1e-14)
+    np.testing.assert_allclose(rs.scaled_residual(1.0, q),
+                               ((b - aq) * row_scale)[l0:l1], rtol=1e-14)
     held = np.ones(rs.dofmap.n_held)
-    np.testing.assert_allclose(rs.multipliers(held), rs.col_scale[l0:l1])
+    np.testing.assert_allclose(rs.multipliers(held), col_scale[l0:l1])
 
 
 def test_refresh_in_place(rset):

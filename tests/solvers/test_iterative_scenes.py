@@ -153,8 +153,8 @@ def _augmented_expected(system, mat, gamma: float) -> tuple[np.ndarray, np.ndarr
                         for r in ranks])
     lam = np.setdiff1d(np.arange(M.shape[0]), q)
     active = system.op.active.astype(bool) & (system.relation_set.compliance <= 0.0)
-    # multiplier rows in saddle order are the relation rows in order (l ranges per rank)
-    hard = np.concatenate([active[dm.owned(r)[2]:dm.owned(r)[3]] for r in ranks])
+    # multiplier rows in saddle order: each rank's owned rows (first among those it holds)
+    hard = np.concatenate(comm.allgather(active[:system.relation_set.n_owned]))
     rows = M[np.ix_(lam, q)]
     # a row of one node (at most 3 entries) enters T at γ; one tying several nodes P alone
     nodal = np.count_nonzero(rows, axis=1) <= 3
@@ -191,8 +191,8 @@ def test_augmented_form_entry_by_entry(comm):
     text = scene(shipped("contact_friction_3d.toml"), steps={"count": 1},
                  solver={"preset": "iterative"})
     system, solver, mat, rhs, x = solve_in_process(text, comm, options={})
-    active = system.op.active.copy()
-    active[::3] = False   # some rows switched off, as an active set does
+    active = system.op.active.copy()   # (per held multiplier row: owned, then ghosts)
+    active[system.dofmap.l_held % 3 == 0] = False   # some rows switched off, as an active set does
     system.op.active = active
     mat = system.assemble()
     form, T, TM, _ = check_augmented_form(system, mat)
