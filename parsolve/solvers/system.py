@@ -74,8 +74,9 @@ class SaddleSystem:
         """The stiffness pattern of the effects' declared terms (``Effect.terms``): the local
         cells (the domain of the cell terms), then the node terms' tuples of m nodes, each
         padded into a pseudo-cell [a, b, b, ...] after the cells (a repeated node a diagonal
-        entry). The cells' reductions get the cells' slots; a node term, and a cell term on a
-        region, its own (``Term.slots``)."""
+        entry), or covered by several when wider than a cell (``_Cover``). The cells'
+        reductions get the cells' slots; a node term, and a cell term on a region, its own
+        (``Term.slots``)."""
         model = self.model
         cells = model.mesh.cells[self.local_cells]
         terms = [term for e in model.effects for term in e.terms() if not term.vector]
@@ -83,15 +84,14 @@ class SaddleSystem:
         nnodes = int(self.part.node_ranges[-1])
         nen = cells.shape[1]
         self._check_owners(tuples)
-        pseudo = [np.concatenate([g, np.repeat(g[:, -1:], nen - g.shape[1], axis=1)], axis=1)
-                  for g in map(self._global_nodes, tuples)]
+        covers = [_Cover(t.nodes.shape[1], nen) for t in tuples]
+        pseudo = [c.cells(g) for c, g in zip(covers, map(self._global_nodes, tuples))]
         pattern = node_pattern(np.concatenate([self.part.new_of_old[cells]] + pseudo), lo, hi,
                                model.ncomp, nnodes)
         start = len(cells)
-        for t in tuples:
-            k, m = t.nodes.shape
-            t.slots = np.ascontiguousarray(pattern.pair_slot[:m, :m, start:start + k])
-            start += k
+        for t, c, g in zip(tuples, covers, pseudo):
+            t.slots = c.slots(pattern.pair_slot, start, len(t.nodes))
+            start += len(g)
         # the node tuples the pattern holds (``restructure``: a term whose domain moved)
         self._domains = [(t, t.nodes.copy()) for t in tuples]
         if tuples:
@@ -379,3 +379,46 @@ def _rows(a: np.ndarray) -> np.ndarray:
     """The rows of a 2D integer array as single comparable items (for ``np.isin``)."""
     a = np.ascontiguousarray(a, dtype=np.int64)
     return a.view(np.dtype((np.void, a.dtype.itemsize * a.shape[1]))).ravel()
+
+
+class _Cover:
+    """Pseudo-cells of ``nen`` nodes that hold every node pair of tuples of m nodes: the tuple
+    itself padded (m ≤ nen: [a, b, b, ...]), or, wider, cut into chunks of h = nen // 2 nodes
+    (the last padded) and one pseudo-cell per pair of chunks i ≤ j, [chunk i, chunk j]: the
+    pattern of a tuple wider than a cell (a contact row's span) without widening the cells."""
+
+    def __init__(self, m: int, nen: int):
+        self.m, self.nen = m, nen
+        self.h = m if m <= nen else max(nen // 2, 1)
+        self.nch = -(-m // self.h)
+        self.i, self.j = np.triu_indices(self.nch)           # the chunk pairs, i ≤ j
+        self.per = self.i.size                               # pseudo-cells per tuple
+
+    def cells(self, g: np.ndarray) -> np.ndarray:
+        """(k · per, nen) pseudo-cells of the tuples g (k, m)."""
+        k, h = len(g), self.h
+        g = np.concatenate([g, np.repeat(g[:, -1:], self.nch * h - self.m, axis=1)], axis=1)
+        if self.per == 1:
+            out = g
+        else:
+            ch = g.reshape(k, self.nch, h)
+            out = np.concatenate([ch[:, self.i], ch[:, self.j]], axis=2).reshape(-1, 2 * h)
+        return np.concatenate([out, np.repeat(out[:, -1:], self.nen - out.shape[1], axis=1)],
+                              axis=1)
+
+    def slots(self, pair_slot: np.ndarray, start: int, k: int) -> np.ndarray:
+        """The (m, m, k) slots of the tuples' node pairs, their pseudo-cells from ``start``."""
+        m, h = self.m, self.h
+        if self.per == 1:
+            return np.ascontiguousarray(pair_slot[:m, :m, start:start + k])
+        a = np.arange(m)
+        ca, cb = np.meshgrid(a // h, a // h, indexing="ij")
+        pa, pb = np.meshgrid(a % h, a % h, indexing="ij")
+        lower = ca > cb                       # (a, b) in the pseudo-cell of chunks (cb, ca)
+        lo_c, hi_c = np.minimum(ca, cb), np.maximum(ca, cb)
+        # the pair's pseudo-cell among the tuple's: index of (lo_c, hi_c) in triu order
+        cell = lo_c * self.nch - lo_c * (lo_c - 1) // 2 + (hi_c - lo_c)
+        pa = np.where(lower, h + pa, pa)
+        pb = np.where(lower, pb, h + pb)
+        which = start + np.arange(k)[None, None, :] * self.per + cell[:, :, None]
+        return np.ascontiguousarray(pair_slot[pa[:, :, None], pb[:, :, None], which])
