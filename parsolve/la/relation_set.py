@@ -13,7 +13,7 @@ the whole relation). The relation rows a rank holds are its per-rank relations' 
 whole relation's; the vectors per relation row (``mult_of_row``, ``position``, the active
 set's masks, targets, gaps) run over those, and the ones per multiplier row (``rep_row``)
 over the multiplier rows those rows have (``mults_here``). Still of the multipliers' number on
-every rank: the compliance and the row and column scales.
+every rank: the row and column scales.
 
 Multiplier rows are numbered by owner: a per-rank relation's rows belong to the rank that built
 them; a whole relation's row to the rank owning most of the DOFs its A
@@ -37,8 +37,8 @@ multiplier row and one dual column, which carries the coefficients of the enforc
 (``select``); the other rows' A entries are kept in the pattern at zero.
 
 Relations refreshed between iterations (``meta["refresh"]``: friction turning its rows,
-contact pairings) keep their sparsity: ``refresh`` copies their current A and D values (and
-compliances, ``Relation.compliance``) into the stacked arrays in place. When a relation's
+contact pairings) keep their sparsity: ``refresh`` copies their current A and D values into the stacked
+arrays in place. When a relation's
 sparsity changes (finite sliding's spans made again) ``restack`` stacks them again, with the
 same rows, owners and scales.
 """
@@ -135,8 +135,6 @@ class RelationSet:
         self.rep_row = np.zeros(self.mults_here.size, dtype=np.int64)
         self.rep_row[self._here(self.mult_of_row[::-1])] = \
             np.arange(self.mult_of_row.size)[::-1]    # (its first)
-        self.compliance = np.zeros(nl)                  # per multiplier row (Relation)
-        self._copy_compliance()
         self._owned_entries: dict[int, tuple] = {}      # per relation: its owned A entries
         self._sums: _RowSums | None = None              # owned_primal's plan
 
@@ -422,12 +420,6 @@ class RelationSet:
                 self.d_vals[at] = np.asarray(r.dual_coo()[2])[src]
                 at, src = self._a_from[k]
                 self.a_vals[at] = r.a_vals[src]
-        self._copy_compliance()
-
-    def _copy_compliance(self) -> None:
-        for k, r in enumerate(self.relations):
-            if r.compliance is not None and not r.collapsed:
-                self.compliance[self.mult_rows[k]] = r.compliance
 
     def set_scales(self, kscale: float) -> None:
         """Scale each row of A and column of D to the size of the stiffness diagonal (the

@@ -126,8 +126,7 @@ class RelationPolicies:
             return active
         rows, dofs, rels, candidate, fixed, key, per_rank = self._rows
         vals = np.concatenate([r.a_vals for r in rels])   # current (friction turns them)
-        # compliant rows constrain nothing (``Relation.compliance``): out of the analysis
-        hard = active & ~(self.rset.compliance[self.rset.mult_of_row] > 0.0)
+        hard = active
         n = active.size
         f_rows, f_dofs, f_vals, f_key = self._foreign_rows(rows, dofs, vals, hard, key,
                                                           per_rank, fixed)

@@ -246,12 +246,11 @@ class SaddleSystem:
     def preconditioner(self, mat: PETSc.Mat, gamma: float) -> AugmentedMatrix:
         """The iterative preset's augmented Lagrangian form of the operator as last assembled
         (its operator T M, preconditioning matrix and right-hand side transform): γ/k Aᵀ A of
-        its enforced hard rows added to the stiffness block (``solvers.augmented``)."""
+        its enforced rows added to the stiffness block (``solvers.augmented``)."""
         if self._augmented is None:
             self._augmented = AugmentedMatrix(self.comm, self.dofmap)
         _, _, l0, l1 = self.dofmap.owned()
-        hard = self.op.active[l0:l1].astype(bool) & (self.relation_set.compliance[l0:l1] <= 0.0)
-        return self._augmented.update(mat, hard, self.kscale, gamma)
+        return self._augmented.update(mat, self.op.active[l0:l1].astype(bool), self.kscale, gamma)
 
     def _place_stiffness(self, ke) -> None:
         """Node-pair sums of the element matrices into the operator's stiffness slots: summed
@@ -281,8 +280,6 @@ class SaddleSystem:
         if f_int is not None:
             f_full = f_full - f_int
         target = self.relation_set.scaled_residual(t, q)
-        # a compliant row's right-hand side is 0: a stiffness on the increment, not a target
-        target = np.where(self.relation_set.compliance > 0.0, 0.0, target)
         values = self.elim_values(t)
         if q is not None and self.elim_dofs.size:
             values = values - self.eliminated_values(q)
@@ -325,15 +322,8 @@ class SaddleSystem:
 
     def gather(self, x_owned: np.ndarray) -> HeldValues:
         """What this rank holds of the saddle vector (its DOFs and multipliers, ghosts
-        included) from its owned rows (the DOF map's forward exchanges). The multipliers of
-        enforced compliant rows are discarded (``Relation.compliance``: a device of the Newton
-        matrix, not a force)."""
-        held = self.dofmap.gather(x_owned)
-        rows = self.dofmap.l_held
-        soft = self.relation_set.compliance[rows] > 0.0
-        if soft.any():
-            held.lam[soft & self.op.active[rows].astype(bool)] = 0.0
-        return held
+        included) from its owned rows (the DOF map's forward exchanges)."""
+        return self.dofmap.gather(x_owned)
 
     def with_primal(self, x_full: HeldValues, q: np.ndarray) -> HeldValues:
         """A copy of ``x_full`` with its primal part replaced by q."""

@@ -5,8 +5,7 @@ owner of its slave node), and each rank's share of the stacked entries, of the m
 holds (owned rows and ghosts), of the relations' own arrays and of the relation set's per-row
 vectors at most 0.35 of what one rank holds alone, at 4 ranks. Measured here at 1 / 2 / 3 / 4
 ranks: 52,552 / 30,544 / 23,208 / 17,968 B on the largest rank (0.342 of one rank's at 4
-ranks), of which 1,176 B (the compliances, per multiplier row) still whole on every rank;
-the row and column scales (2,352 B, not counted here) are whole too."""
+ranks); the row and column scales (2,352 B, not counted here) are whole on every rank."""
 
 import tomllib
 
@@ -32,22 +31,21 @@ def held_bytes(rs, dm) -> int:
     return sum(a.nbytes for a in arrays) + 8 * dm.n_held
 
 
-#: per-row vectors of the relation set (per relation row or multiplier row held here; the
-#: compliance per multiplier row of every rank)
-ROW_VECTORS = ("position", "mult_of_row", "rep_row", "compliance", "row_first", "mults_here",
-               "whole_rows", "own_rows")
+#: per-row vectors of the relation set (per relation row or multiplier row held here)
+ROW_VECTORS = ("position", "mult_of_row", "rep_row", "row_first", "mults_here", "whole_rows",
+               "own_rows")
 #: the relations' arrays and the per-row vectors on one rank alone
-ONE_RANK = 23_152
+ONE_RANK = 21_192
 
 
 def whole_bytes(rs) -> int:
-    """Bytes of the relations' arrays a rank holds (A's entries, values, duals, compliances,
-    groups) and of the relation set's per-row vectors."""
+    """Bytes of the relations' arrays a rank holds (A's entries, values, duals, groups) and
+    of the relation set's per-row vectors."""
     arrays = [getattr(rs, n) for n in ROW_VECTORS]
     for r in rs.relations:
         arrays += [r.a_rows, r.a_dofs, r.a_vals, r.values]
         arrays += list(r.dual or ()) + list(r.shared_dual or ())
-        arrays += [a for a in (r.compliance, r.groups) if a is not None]
+        arrays += [r.groups] if r.groups is not None else []
     return sum(np.asarray(a).nbytes for a in arrays)
 
 

@@ -152,7 +152,7 @@ def _augmented_expected(system, mat, gamma: float) -> tuple[np.ndarray, np.ndarr
     q = np.concatenate([np.arange(offsets[r], offsets[r] + dm.owned(r)[1] - dm.owned(r)[0])
                         for r in ranks])
     lam = np.setdiff1d(np.arange(M.shape[0]), q)
-    active = system.op.active.astype(bool) & (system.relation_set.compliance <= 0.0)
+    active = system.op.active.astype(bool)
     # multiplier rows in saddle order are the relation rows in order (l ranges per rank)
     hard = np.concatenate([active[dm.owned(r)[2]:dm.owned(r)[3]] for r in ranks])
     rows = M[np.ix_(lam, q)]
