@@ -126,14 +126,13 @@ class RelationPolicies:
             return active
         rows, dofs, rels, candidate, fixed, key, per_rank = self._rows
         vals = np.concatenate([r.a_vals for r in rels])   # current (friction turns them)
-        hard = active
         n = active.size
-        f_rows, f_dofs, f_vals, f_key = self._foreign_rows(rows, dofs, vals, hard, key,
+        f_rows, f_dofs, f_vals, f_key = self._foreign_rows(rows, dofs, vals, active, key,
                                                           per_rank, fixed)
         m = f_key.size
         out = dependent_rows(np.concatenate([rows, n + f_rows]), np.concatenate([dofs, f_dofs]),
                              np.concatenate([vals, f_vals]), n + m,
-                             np.concatenate([hard, np.ones(m, dtype=bool)]),
+                             np.concatenate([active, np.ones(m, dtype=bool)]),
                              np.concatenate([candidate, np.ones(m, dtype=bool)]), fixed,
                              self.ctx.ncomp, np.concatenate([key, f_key]))
         self.left_out = out[:n]
