@@ -623,6 +623,7 @@ class Contact(FiniteSliding, Effect):
         True when a state or a slip direction changed (the dual and the tangential switches
         are then updated in place)."""
         moved = self.span is not None and self._slide(q, start=False)
+        self.rows_moved = moved   # (the active set's history is of other rows)
         if self.geometric:
             self._lam_now = (lam[self.normal.name].copy(), lam[self.tangent.name].copy()
                              if self.frictional else self._lam_now[1])

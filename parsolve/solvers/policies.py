@@ -27,7 +27,7 @@ from mpi4py import MPI
 
 from parsolve.contact.dependent import dependent_rows
 from parsolve.errors import SolverError
-from parsolve.solvers.active_set import GROUP_TOL, ActiveSet
+from parsolve.solvers.active_set import GROUP_TOL, ActiveSet, _Seen
 
 #: (tangent, active rows, load) → δq = K⁻¹ f with those rows enforced at zero
 Respond = Callable[[object, np.ndarray, np.ndarray], np.ndarray]
@@ -388,6 +388,10 @@ class RelationPolicies:
         changed = False
         for e in self.hooks:
             changed = e.refresh(q, lam, active) or changed
+        if any(getattr(e, "rows_moved", False) for e in self.hooks):
+            # rows made again on the current geometry (finite sliding; every rank alike): the
+            # sets seen so far were sets of other rows, so coming back to one is no cycle
+            self.active.seen = _Seen(self.active.comm, self.active.active.tobytes())
         return changed
 
     def end_hooks(self) -> None:
