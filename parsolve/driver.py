@@ -51,9 +51,7 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
     state). Every finished step's state is saved for a later restart."""
     scene = model.scene
     system = SaddleSystem(comm, model)
-    # (a device of the Newton matrix, e.g. contact's geometric stiffness, is not a result)
-    relations_meta = {r.name: (r.total, r.sense != "=") for r in model.relations
-                      if not r.meta.get("device")}
+    relations_meta = {r.name: (r.total, r.sense != "=") for r in model.relations}
     unknowns = {"unknowns": " ".join(f.output for f in model.fields),
                 "dofs": model.mesh.num_global_points * model.ncomp,
                 "resultant_components": " ".join(resultant_labels(model.fields, model.mesh.dim))}

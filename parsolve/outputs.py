@@ -124,15 +124,14 @@ def step_outputs(comm: MPI.Comm, ctx, q: np.ndarray, multipliers: dict, newton=N
             cell_fields[name] = OwnedRows(value[keep])
     rel_out = {}
     active = newton.enforced if newton is not None else None
-    reported = [r for r in ctx.all_relations if not r.meta.get("device")]
-    for r in reported:   # (a relation built per rank: every row gathered, collective)
+    for r in ctx.all_relations:   # (a relation built per rank: every row gathered, collective)
         lam = multipliers[r.name]
         total = resultant(r, lam, ctx.fields, ctx.dofs.input_points)
         rel_out[r.name] = {"multiplier": every_row(comm, r, lam),
                            "primal": every_row(comm, r, ctx.relation_primal(r, q)),
                            "resultant": total if r.whole else comm.allreduce(total, op=MPI.SUM)}
     views = ctx.views(active) if active is not None else {}
-    for r in reported:
+    for r in ctx.all_relations:
         if r.sense != "=":
             rel_out[r.name]["active"] = every_row(comm, r, views[r.name]).astype(np.int8)
     if active is not None:  # switched relations' outputs: solubility states, contact

@@ -51,14 +51,6 @@ class Relation:
     # a zone of these rows may form from nothing (a contact): the active set closes the most
     # violated first (solvers/active_set.py, ``_forming``)
     forming: bool = False
-    # per row, c >= 0, in the Newton matrix only: an enforced row with c > 0 reads
-    # A Δq − c λ = 0 in the solve (a stiffness −D A / c, i.e. AᵀA / c when associated, once
-    # λ is eliminated) and its multiplier is discarded after the solve. It linearises a force
-    # the relation does not carry, between nodes outside the stiffness pattern (friction's
-    # cross stiffness across the slip direction; the geometric stiffness of finite sliding,
-    # ``contact.geometry``); None: all 0. A relation of such rows alone is marked
-    # ``meta["device"]``: not a result (not written)
-    compliance: np.ndarray | None = None
     # a relation built per rank (``rows_here``): the global number of each of its rows this
     # rank holds (increasing; all owned here), and ``size`` its rows over every rank. None: a
     # whole relation, every row on every rank (its row k is global row k)
@@ -252,7 +244,6 @@ def own_rows(relation: Relation, owned: np.ndarray) -> Relation:
     relation (``Relation.ids``)."""
     out = keep_rows(relation, owned)
     out.eliminate = False   # multiplied on every rank, whatever rows it holds here
-    out.compliance = None if relation.compliance is None else relation.compliance[owned]
     return rows_here(out, np.flatnonzero(owned), relation.nrows)
 
 

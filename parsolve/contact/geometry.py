@@ -14,9 +14,9 @@ and in 3D the same with the normal's two turns and ξ's two components), so
 G = ∂f/∂x has rank 2 (dim − 1). Finite sliding's re-pairing makes the rows exact at each
 iterate; G is the part of the Jacobian they leave out (the force's dependence on the
 geometry), whose absence makes a sliding step's iterations converge linearly (2D ironing:
-10–14 per step at a rate of ~0.08). The contact enters it in the Newton matrix as
-2 (dim − 1) compliant rows per slave (``Relation.compliance``): a row w with dual column u and
-c = 1 adds −u wᵀ to K, i.e. K − G, the tangent of f_int − D(q) λ.
+10–14 per step at a rate of ~0.08). The contact enters it in the Newton matrix as a term on
+each slave's node tuple (``effects.row_terms``): −Σ u wᵀ added to K, i.e. K − G, the tangent
+of f_int − D(q) λ.
 
 G is computed, for any facet type, by central differences of the forces on the facet's
 geometry (``facet_terms``; tests/contact/test_geometry.py checks it against the closed form

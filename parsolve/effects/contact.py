@@ -25,9 +25,10 @@ update of A, D and the stick values). With ``direction = "reaction"`` (the defau
 directions follow a generalised Newton step (``friction.SlipNewton``, docs/contact.md §4.1):
 a node that starts sliding is held (its row across s blocked) until it has a slip, then free
 (both rows released) with s along its slip and, in the Newton matrix only, the cross
-stiffness κ = mu Rn / γ that linearises the dual's dependence on s: its row across s enforced
-with the compliance 1/κ (``Relation.compliance``, its multiplier discarded), i.e. κ on the
-relative slip across s, slave and master nodes alike, in the rows' own pattern (4–13
+stiffness κ = mu Rn / γ that linearises the dual's dependence on s: κ (n × s)(n × s)ᵀ on the
+relative slip across s, slave and master nodes alike, a term on the tuple of the row across s
+(``row_terms``: what that row, enforced with compliance 1/κ and its multiplier discarded,
+would add to the stiffness; the row itself is released) (4–13
 iterations per step in the 3D tests, obstacles and master bodies, finite sliding and mortar;
 not growing with the surface; the same on any number of ranks). ``"displacement"``
 releases both rows and takes s along the slip increment (the plain update): it does not
@@ -105,6 +106,8 @@ from parsolve.contact.sliding import Spans, obstacle_spans
 from parsolve.contact.surfaces import Surfaces, canonical_facets
 from parsolve.effects.base import Effect, displacement_field
 from parsolve.effects.contact_sliding import FiniteSliding
+from parsolve.effects.row_terms import RowTerm
+from parsolve.fem.element_matrices import Term
 from parsolve.errors import InputError
 from parsolve.la.dofmap import DofMap
 from parsolve.evolution import CONSTANT
@@ -237,6 +240,11 @@ class Contact(FiniteSliding, Effect):
         # rows hold the slave alone)
         self.restructures = self.span is not None and spec.master is not None
         self.turning = fr.SlipNewton()
+        # the Newton matrix's terms (``row_terms``), laid on their rows' tuples by ``relations``
+        cross = self.frictional and mesh.dim == 3 and spec.direction == "reaction"
+        self.cross = RowTerm(self.u, symmetric=True) if cross else None
+        self.geo = RowTerm(self.u, symmetric=False) if self.geometric else None
+        self._kappa = self._geo_rows = None
         self._start_entries()
 
     def _start_entries(self) -> None:
@@ -502,8 +510,7 @@ class Contact(FiniteSliding, Effect):
             t = self.trows
             tangent = Relation(f"{name}_tangent", t.nrows, t.row, self.t_dofs,
                                self._tangent_coefs(), np.zeros(t.nrows), CONSTANT, "=", None,
-                               eliminate=False, forming=True,
-                               compliance=np.zeros(t.nrows) if self.mesh.dim == 3 else None)
+                               eliminate=False, forming=True)
             tangent.meta = {"type": "contact", "key": self.spec.key,
                             "refresh": self.mesh.dim == 3 or finite}
             self.tangent = tangent
@@ -512,9 +519,22 @@ class Contact(FiniteSliding, Effect):
                 dm1 = self.mesh.dim - 1
                 rows_here(tangent, (self.ids[:, None] * dm1 + np.arange(dm1)).ravel(),
                           self.entries * dm1)
-        if self.geometric:
-            out.append(self._geometry_relation())
+        self._lay_terms(self.pairing)
         return out
+
+    def _lay_terms(self, p, trows=None) -> None:
+        """The tuples of its Newton-matrix terms (``row_terms``) from their rows' layout (p:
+        the pairing, input ids; ``trows``: its tangential rows, if new): the cross stiffness's on the tangential rows (two per
+        slave), the geometric stiffness's on the geometric rows; declared where this rank
+        owns a node (rows per rank: every tuple its own slave). Collective unless the rows
+        are this rank's own."""
+        dim, whole = self.mesh.dim, self.ids is None
+        if self.cross is not None:
+            self.cross.lay(self.trows if trows is None else trows, 2, dim, self.values,
+                           self.mesh, whole)
+        if self.geometric:
+            self.geo.lay(self._geometry_layout(p), self.geometric_rank, dim, self.values,
+                         self.mesh, whole)
 
     def _set_dual(self) -> None:
         """The slip direction s into the normal row's dual and (3D) the tangential rows, in
@@ -527,12 +547,9 @@ class Contact(FiniteSliding, Effect):
     def _tangent_active(self, active: dict) -> None:
         """Tangential rows enforced where the node sticks; in 3D with the "reaction" mode a
         sliding node that is held (``SlipNewton.held``) keeps its row across s; a free one
-        releases both in the relations, and its row across s carries, in the Newton matrix
-        only, the cross stiffness κ (n × s)(n × s)ᵀ on the relative slip (the dual's
-        dependence on s, linearised): the row enforced with compliance 1/κ on the increment
-        (right-hand side 0), its multiplier discarded after the solve
-        (``Relation.compliance``). Through the row, κ couples the slave to the master nodes
-        its row holds, whose pairs the stiffness pattern does not have."""
+        releases both, and the cross term carries, in the Newton matrix only, the stiffness
+        κ (n × s)(n × s)ᵀ on the relative slip (the dual's dependence on s, linearised) over
+        the tuple of its row across s: the slave and the master nodes the row holds."""
         stick = self.node_state == fr.STICK
         if self.mesh.dim == 2:
             active[self.tangent.name][:] = stick
@@ -540,11 +557,9 @@ class Contact(FiniteSliding, Effect):
         sliding = (self.node_state == fr.SLIP) & (self.spec.direction == "reaction")
         kappa = self.turning.kappa
         free = sliding & ~self.turning.held & (kappa > 0.0)
-        across = stick | sliding & self.turning.held | free
+        across = stick | sliding & self.turning.held
         active[self.tangent.name][:] = np.stack([stick, across], axis=1).ravel()
-        soft = self.tangent.compliance.reshape(-1, 2)
-        soft[:] = 0.0
-        soft[free, 1] = 1.0 / kappa[free]
+        self._kappa = np.where(free, kappa, 0.0)
 
     # ------------------------------------------------------------------ Newton hooks
 
@@ -608,6 +623,7 @@ class Contact(FiniteSliding, Effect):
         True when a state or a slip direction changed (the dual and the tangential switches
         are then updated in place)."""
         moved = self.span is not None and self._slide(q, start=False)
+        self.rows_moved = moved   # (the active set's history is of other rows)
         if self.geometric:
             self._lam_now = (lam[self.normal.name].copy(), lam[self.tangent.name].copy()
                              if self.frictional else self._lam_now[1])
@@ -662,19 +678,31 @@ class Contact(FiniteSliding, Effect):
         return unsettled
 
     def evaluate(self, cells: np.ndarray, values: dict, state, secant: bool, at):
-        """No forces and no stiffness of its own: the contact acts through its relations."""
-        return {}, [], state, None
+        """No forces of its own (the contact acts through its relations); in the Newton
+        matrix, its terms: 3D friction's cross stiffness κ a aᵀ (a: the free nodes' rows
+        across s) and finite sliding's geometric stiffness −Σ u wᵀ (``row_terms``)."""
+        tangent = []
+        if self.cross is not None and self._kappa is not None:
+            a = self.cross.layout.dense(self.tangent.a_vals)[:, 1:]
+            tangent.append(self.cross.matrices(self._kappa[:, None, None, None] * a, a))
+        if self.geometric and self._geo_rows is not None:
+            u, w = (self.geo.layout.dense(c) for c in self._geo_rows)
+            tangent.append(self.geo.matrices(-u, w))
+        return {}, tangent, state, None
+
+    def terms(self) -> list[Term]:
+        return [t.term for t in (self.cross, self.geo) if t is not None]
 
     # what the model builds (not the state between steps a restart restores)
     _BUILT = ("spec", "mesh", "fields_", "source", "radial", "name", "values")
-    _ROW_VALUES = ("a_vals", "values", "compliance")   # a relation's values the hooks change
+    _ROW_VALUES = ("a_vals", "values")   # a relation's values the hooks change
 
     def restart_state(self) -> dict:
         """Everything but what the model builds: the committed node states and slip
         directions, the slip Newton's, the slip so far, finite sliding's pairing and spans;
         of its relations (shared with the system), the values the hooks change."""
         state = {k: v for k, v in vars(self).items()
-                 if k not in self._BUILT and not isinstance(v, Relation)}
+                 if k not in self._BUILT and not isinstance(v, (Relation, RowTerm))}
         state["relation_values"] = {
             k: ({a: getattr(r, a) for a in self._ROW_VALUES}, r.dual[2] if r.dual else None)
             for k, r in vars(self).items() if isinstance(r, Relation)}

@@ -95,6 +95,7 @@ from parsolve.la.dofmap import DofMap
 from parsolve.effects import contact
 from parsolve.effects.base import Effect
 from parsolve.effects.contact_sliding import KEEP_TOL
+from parsolve.effects.row_terms import global_tuples
 from parsolve.fem.element_matrices import NodeForces, Term, TermMatrices
 from parsolve.errors import InputError, SolverError
 from parsolve.fem import kernels
@@ -278,14 +279,8 @@ class PenaltyContact(Effect):
         come from the pairing's forces that every rank holds). The global numbers: one
         reduction of the pairing's size. Also (pair, place in its tuple, local node) of the
         tuple nodes this rank owns: where its forces go. The pairs' gradients ∂g, ∂g_T too."""
-        values, mesh = self.values, self.mesh
         ids = np.concatenate([p.slave[:, None], p.master], axis=1)          # (n, m) input ids
-        local = values.local_nodes(ids)
-        here = local >= 0
-        new = np.where(here, mesh.node_new[np.where(here, local, 0)], 0).astype(float)
-        tuples = values.node_sum(ids.ravel(), new.ravel()).astype(np.int64).reshape(ids.shape)
-        lo, hi = values.node_ranges[values.rank], values.node_ranges[values.rank + 1]
-        owned = (tuples >= lo) & (tuples < hi)
+        tuples, owned, local = global_tuples(self.values, self.mesh, ids)
         self.declared = np.flatnonzero(owned.any(axis=1))
         self.term.nodes = tuples[self.declared]
         self.tuples = tuples

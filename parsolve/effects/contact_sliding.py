@@ -38,8 +38,8 @@ the step's start.
 
 The geometric stiffness (``contact.geometry``, docs/contact.md §4.3): the force a slave passes
 to its facet (or receives from a curved obstacle) turns with the facet and slides along it;
-that dependence enters the Newton matrix through compliant rows (``<name>_geometry``, not a
-result), so that a sliding step converges quadratically.
+that dependence enters the Newton matrix as a term on each slave's tuple (its node and its
+span's: ``row_terms``), so that a sliding step converges quadratically.
 """
 
 from __future__ import annotations
@@ -51,8 +51,6 @@ from parsolve.contact.pairing import in_spans, pair_nodes, pair_on
 from parsolve.contact.rows import normal_values, repeated, rows_differ, span_combination
 from parsolve.contact.sliding import fit_mortar, frame_of, make_spans, merged, \
     mortar_waiting, near_edge, outside_spans, pad, reference_frame, respan
-from parsolve.evolution import CONSTANT
-from parsolve.relations import Relation
 
 # finite sliding: the rows' fixed point: their coefficients to TOL_ROWS, their gaps to TOL_GAP ×
 # the largest master facet (the span's radius would make the iterations depend on it)
@@ -335,39 +333,24 @@ class FiniteSliding:
         self.normal.set_entries(nrows.row, self.n_dofs, zero_dual)
         if self.frictional:
             self.tangent.set_entries(trows.row, self.t_dofs, False)
-        if self.geometric:
-            rows, dofs = self._geometry_entries(p)
-            self.geometry.set_entries(rows.row, dofs, True)
+        self._lay_terms(p, trows)   # (their tuples moved with the spans)
 
-    def _geometry_entries(self, p):
-        """The geometric rows' layout over the spans: (Rows, their DOFs), values zero."""
+    def _geometry_layout(self, p):
+        """The geometric rows' layout over the spans (``geometric_rank`` rows per slave, values
+        zero): the tuples of the geometric stiffness's term."""
         dim, m = self.mesh.dim, self.geometric_rank * len(p)
-        rows = span_combination(self._repeated(p), np.zeros((m, dim)),
+        return span_combination(self._repeated(p), np.zeros((m, dim)),
                                 np.zeros((m, p.master.shape[1], dim)), *self.span.ptr_for(m))
-        return rows, self._row_dofs(rows)
-
-    def _geometry_relation(self) -> Relation:
-        """``geometric_rank`` compliant rows per slave (``contact.geometry``), over the spans,
-        values set at each update (``_set_geometry``)."""
-        p = self.pairing
-        m = self.geometric_rank * len(p)
-        rows, dofs = self._geometry_entries(p)
-        geometry = Relation(f"{self.spec.name}_geometry", m, rows.row, dofs, rows.coef,
-                            np.zeros(m), CONSTANT, "=", (dofs, rows.row, rows.coef.copy()),
-                            eliminate=False, compliance=np.ones(m))
-        geometry.meta = {"type": "contact_geometry", "key": self.spec.key, "refresh": True,
-                         "device": True}
-        self.geometry = geometry
-        return geometry
 
     def _repeated(self, p):
         """p's entries each ``geometric_rank`` times (the geometric rows of a slave)."""
         return repeated(p, self.geometric_rank)
 
     def _set_geometry(self, active: dict) -> None:
-        """The geometric stiffness's rows at the current pairing, from the last iterate's
+        """The geometric stiffness −Σ u wᵀ at the current pairing, from the last iterate's
         multipliers (the force on the slave as a function of its facet's frame:
-        ``_force_of``), enforced where the normal row is."""
+        ``_force_of``), where the normal row is enforced; its rows' coefficients (w, u) in
+        the layout of the term's tuples (``evaluate`` makes the term's values)."""
         if not self.geometric:
             return
         x, slave, master = self._geo
@@ -388,9 +371,8 @@ class FiniteSliding:
         m = len(p) * r
         p_rows, ptr = self._repeated(p), self.span.ptr_for(m)
         w, u = w.reshape(m, 1 + k, dim), u.reshape(m, 1 + k, dim)
-        self.geometry.a_vals[:] = span_combination(p_rows, w[:, 0], w[:, 1:], *ptr).coef
-        self.geometry.dual[2][:] = span_combination(p_rows, u[:, 0], u[:, 1:], *ptr).coef
-        active[self.geometry.name][:] = np.repeat(active[self.normal.name], r)
+        self._geo_rows = (span_combination(p_rows, u[:, 0], u[:, 1:], *ptr).coef,
+                          span_combination(p_rows, w[:, 0], w[:, 1:], *ptr).coef)
 
     def _force_of(self, slaves: np.ndarray, active: dict):
         """v(n, tangents, entries): the force D λ on the slaves ``slaves[entries]`` (λ the

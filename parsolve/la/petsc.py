@@ -235,8 +235,7 @@ class SaddleOperator:
 
     def relation_values(self, diag: float = 1.0) -> None:
         """Write the scaled -D and A values into the CSR value array. An inactive row keeps its
-        pattern: A row and D column zero, ``diag`` on its diagonal, so its λ solves to 0; an
-        enforced compliant row (``Relation.compliance``) has −c (scaled) there."""
+        pattern: A row and D column zero, ``diag`` on its diagonal, so its λ solves to 0."""
         b, on = self.block, self.active.astype(float)   # (per held multiplier row)
         d_cols, a_rows = b.d_places[self._d_sel], b.a_rows[self._a_sel] - self._l0
         dv = -b.d_vals[self._d_sel] * b.col_scale[d_cols] * on[d_cols]
@@ -244,10 +243,7 @@ class SaddleOperator:
         self.data[self.d_final] = np.bincount(self._d_inv, weights=dv, minlength=self.d_final.size)
         self.data[self.a_final] = np.bincount(self._a_inv, weights=av, minlength=self.a_final.size)
         own = slice(0, self._l1 - self._l0)   # (owned rows first among the held)
-        # a compliant enforced row: A Δq − c λ = ..., i.e. −c · row_scale · col_scale on the
-        # scaled multiplier's diagonal (Relation.compliance)
-        soft = b.compliance[own] * b.row_scale[own] * b.col_scale[own]
-        self.data[self.l_diag] = diag * (1.0 - on[own]) - soft * on[own]
+        self.data[self.l_diag] = diag * (1.0 - on[own])
 
     def set_stiffness(self, blocks: np.ndarray) -> None:
         """Place node-pair blocks (ncomp², npairs) into the stiffness slots.

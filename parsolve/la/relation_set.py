@@ -15,9 +15,9 @@ to that DOF's owner (``_foreign_d``), its A q reads the DOF's value from there (
 The relation rows a rank holds are its per-rank relations' rows and every whole relation's;
 the vectors per relation row (``mult_of_row``, ``position``, the active set's masks, targets,
 gaps) run over those, ``rep_row`` over the multiplier rows those rows have (``mults_here``),
-and the ones per multiplier row over the rank's held multiplier rows (owned, then ghosts: ``DofMap.l_held``): the compliance, the
-row and column scales, the operator's enforced rows; the right-hand side and gaps over its
-owned rows.
+and the ones per multiplier row over the rank's held multiplier rows (owned, then ghosts:
+``DofMap.l_held``): the row and column scales, the operator's enforced rows; the right-hand
+side and gaps over its owned rows.
 
 Multiplier rows are numbered by owner: a per-rank relation's rows belong to the rank that built
 them; a whole relation's row to the rank owning most of the DOFs its A
@@ -41,8 +41,8 @@ multiplier row and one dual column, which carries the coefficients of the enforc
 (``select``); the other rows' A entries are kept in the pattern at zero.
 
 Relations refreshed between iterations (``meta["refresh"]``: friction turning its rows,
-contact pairings) keep their sparsity: ``refresh`` copies their current A and D values (and
-compliances, ``Relation.compliance``) into the stacked arrays in place. When a relation's
+contact pairings) keep their sparsity: ``refresh`` copies their current A and D values into the stacked
+arrays in place. When a relation's
 sparsity changes (finite sliding's spans made again) ``restack`` stacks them again, with the
 same rows, owners and scales.
 """
@@ -147,8 +147,6 @@ class RelationSet:
         # where the multiplier rows of the relation rows held here are held (a whole
         # relation's rows on other ranks are not)
         self._mult_held = self._held_places(self.mult_of_row)
-        self.compliance = np.zeros(dofmap.n_held)       # per held multiplier row (Relation)
-        self._copy_compliance()
         self._owned_entries: dict[int, tuple] = {}      # per relation: its owned A entries
         self._fetch: dict[int, _Fetch | None] = {}      # and the plan of its others'
         self._sums: _RowSums | None = None              # owned_primal's plan
@@ -503,20 +501,6 @@ class RelationSet:
                 self.d_vals[at] = np.asarray(r.dual_coo()[2])[src]
                 at, src = self._a_from[k]
                 self.a_vals[at] = r.a_vals[src]
-        self._copy_compliance()
-
-    def _copy_compliance(self) -> None:
-        held, at = self._mult_held
-        for k, r in enumerate(self.relations):
-            if r.compliance is not None and not r.collapsed:
-                rows = self.rows_of(k)
-                self.compliance[at[rows][held[rows]]] = r.compliance[held[rows]]
-
-    def row_compliance(self) -> np.ndarray:
-        """Per relation row held here, its compliance (``Relation.compliance``; 0: none)."""
-        parts = [r.compliance if r.compliance is not None and not r.collapsed
-                 else np.zeros(r.nrows) for r in self.relations]
-        return np.concatenate(parts) if parts else np.zeros(0)
 
     def set_scales(self, kscale: float) -> None:
         """Scale each row of A and column of D to the size of the stiffness diagonal (the

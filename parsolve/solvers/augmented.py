@@ -1,8 +1,8 @@
 """The augmented Lagrangian form of the saddle system for the iterative preset: the operator
 M = [[K, -D], [A, C]] and the right-hand side b multiplied on the left by
-T = [[I, γ/k Aₕᵀ Eₕ], [0, I]], Aₕ the rows of A that are enforced and hard (active, not
-compliant; Eₕ selects them): each hard row's equation A q + C λ = g, times γ/k Aₕᵀ, added to
-the force balance. Hard rows have no C (their compliance is 0), so
+T = [[I, γ/k Aₕᵀ Eₕ], [0, I]], Aₕ the rows of A that are enforced (Eₕ selects them): each
+enforced row's equation A q + C λ = g, times γ/k Aₕᵀ, added to the force balance. Enforced
+rows have no C (it is the inactive rows' placeholder diagonal), so
 
     T M = [[K + γ/k Aₕᵀ Aₕ, -D], [A, C]],     T b = [b_q + γ/k Aₕᵀ b_h, b_λ]
 
@@ -85,7 +85,7 @@ class AugmentedMatrix:
     def update(self, mat: PETSc.Mat, hard: np.ndarray, kscale: float,
                gamma: float = GAMMA) -> "AugmentedMatrix":
         """T M and P for the operator ``mat``; ``hard``: mask of this rank's multiplier rows
-        that are enforced and not compliant; k: the stiffness scale; γ: that of the rows of one
+        that are enforced; k: the stiffness scale; γ: that of the rows of one
         node (T's). A hard row that ties several nodes (more entries than NODAL_SPAN) stays out
         of T and enters P alone, at min(γ, GAMMA_COUPLED)."""
         # a new operator (a new pattern): start again, on every rank alike (the products

@@ -7,8 +7,8 @@ its answer is the direct preset's whatever the preconditioner's quality.
 
 With exact solves the preconditioner is M⁻¹, built in three eliminations:
 
-- A row with a diagonal C (a compliant row: friction's cross stiffness; an open row: C the
-  placeholder, A and B zero) gives λ = C⁻¹ (r_λ - A q): folded into the primal operator,
+- A row with a diagonal C (an open row: C the placeholder, A and B zero; any diagonal C
+  alike) gives λ = C⁻¹ (r_λ - A q): folded into the primal operator,
   K_eff = K - B C⁻¹ A (per node, a ncomp × ncomp block), r̂ = r_q - B C⁻¹ r_λ.
 - The hard rows of a node (C = 0) A_n = Rᵀ Q_cᵀ (a QR of A_nᵀ, Q = [Q_c, Q_f] orthonormal):
   the node's displacement in the frame Q, u = Q_c y_c + Q_f y_f, has y_c = R⁻ᵀ r_h. The
@@ -206,7 +206,7 @@ class CondensedPreconditioner:
         np.add.at(a, (arows[0], arows[1] % nc), arows[2])
         b = np.zeros((self.nl, nc))
         np.add.at(b, (bcols[1], bcols[0] % nc), bcols[2])
-        # compliant and open rows folded: K_eff = K - B C⁻¹ A, per node
+        # rows with a diagonal (open rows) folded: K_eff = K - B C⁻¹ A, per node
         soft = rows[~hard[rows]]
         self.w = np.where(hard, 0.0, 1.0 / np.where(hard, 1.0, diag))
         self.dk = np.zeros((m, nc, nc))

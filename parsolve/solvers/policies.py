@@ -27,7 +27,7 @@ from mpi4py import MPI
 
 from parsolve.contact.dependent import dependent_rows
 from parsolve.errors import SolverError
-from parsolve.solvers.active_set import GROUP_TOL, ActiveSet
+from parsolve.solvers.active_set import GROUP_TOL, ActiveSet, _Seen
 
 #: (tangent, active rows, load) → δq = K⁻¹ f with those rows enforced at zero
 Respond = Callable[[object, np.ndarray, np.ndarray], np.ndarray]
@@ -126,15 +126,13 @@ class RelationPolicies:
             return active
         rows, dofs, rels, candidate, fixed, key, per_rank = self._rows
         vals = np.concatenate([r.a_vals for r in rels])   # current (friction turns them)
-        # compliant rows constrain nothing (``Relation.compliance``): out of the analysis
-        hard = active & ~(self.rset.row_compliance() > 0.0)
         n = active.size
-        f_rows, f_dofs, f_vals, f_key = self._foreign_rows(rows, dofs, vals, hard, key,
+        f_rows, f_dofs, f_vals, f_key = self._foreign_rows(rows, dofs, vals, active, key,
                                                           per_rank, fixed)
         m = f_key.size
         out = dependent_rows(np.concatenate([rows, n + f_rows]), np.concatenate([dofs, f_dofs]),
                              np.concatenate([vals, f_vals]), n + m,
-                             np.concatenate([hard, np.ones(m, dtype=bool)]),
+                             np.concatenate([active, np.ones(m, dtype=bool)]),
                              np.concatenate([candidate, np.ones(m, dtype=bool)]), fixed,
                              self.ctx.ncomp, np.concatenate([key, f_key]))
         self.left_out = out[:n]
@@ -397,6 +395,10 @@ class RelationPolicies:
         changed = False
         for e in self.hooks:
             changed = e.refresh(q, lam, active) or changed
+        if any(getattr(e, "rows_moved", False) for e in self.hooks):
+            # rows made again on the current geometry (finite sliding; every rank alike): the
+            # sets seen so far were sets of other rows, so coming back to one is no cycle
+            self.active.seen = _Seen(self.active.comm, self.active.active.tobytes())
         return changed
 
     def end_hooks(self) -> None:

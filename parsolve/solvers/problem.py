@@ -268,7 +268,8 @@ class SaddleProblem:
             t0 = time.perf_counter()
             changed = pol.refresh_hooks(self.q, self.lam) or changed
             self.linear.add_time("contact", time.perf_counter() - t0)
-            # always: rows of the Newton matrix alone (compliant) change at every iterate
+            # always: refreshed rows' values (friction's directions, finite sliding's pairing)
+            # may change at an iterate that changes no state
             self._sync()
         return dq_norm, changed
 

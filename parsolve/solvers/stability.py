@@ -302,7 +302,7 @@ def _hold_maximum_rows(problem, held: PETSc.Mat, q: np.ndarray) -> None:
 def _held_symmetric(system, mat: PETSc.Mat, shift: float) -> PETSc.Mat:
     """2 S from the saddle operator [[K, -D], [A, C]] as assembled: N = [[K, 0], [A, C]] (the
     dual columns dropped), N + Nᵀ, and 2 shift on the primal diagonal (C: the inactive rows'
-    positive diagonal and the compliant rows' -c, both kept)."""
+    positive diagonal, kept)."""
     op = system.op
     dual = op.data[op.d_final].copy()
     op.data[op.d_final] = 0.0

@@ -74,8 +74,9 @@ class SaddleSystem:
         """The stiffness pattern of the effects' declared terms (``Effect.terms``): the local
         cells (the domain of the cell terms), then the node terms' tuples of m nodes, each
         padded into a pseudo-cell [a, b, b, ...] after the cells (a repeated node a diagonal
-        entry). The cells' reductions get the cells' slots; a node term, and a cell term on a
-        region, its own (``Term.slots``)."""
+        entry), or covered by several when wider than a cell (``_Cover``). The cells'
+        reductions get the cells' slots; a node term, and a cell term on a region, its own
+        (``Term.slots``)."""
         model = self.model
         cells = model.mesh.cells[self.local_cells]
         terms = [term for e in model.effects for term in e.terms() if not term.vector]
@@ -83,15 +84,14 @@ class SaddleSystem:
         nnodes = int(self.part.node_ranges[-1])
         nen = cells.shape[1]
         self._check_owners(tuples)
-        pseudo = [np.concatenate([g, np.repeat(g[:, -1:], nen - g.shape[1], axis=1)], axis=1)
-                  for g in map(self._global_nodes, tuples)]
+        covers = [_Cover(t.nodes.shape[1], nen) for t in tuples]
+        pseudo = [c.cells(g) for c, g in zip(covers, map(self._global_nodes, tuples))]
         pattern = node_pattern(np.concatenate([self.part.new_of_old[cells]] + pseudo), lo, hi,
                                model.ncomp, nnodes)
         start = len(cells)
-        for t in tuples:
-            k, m = t.nodes.shape
-            t.slots = np.ascontiguousarray(pattern.pair_slot[:m, :m, start:start + k])
-            start += k
+        for t, c, g in zip(tuples, covers, pseudo):
+            t.slots = c.slots(pattern.pair_slot, start, len(t.nodes))
+            start += len(g)
         # the node tuples the pattern holds (``restructure``: a term whose domain moved)
         self._domains = [(t, t.nodes.copy()) for t in tuples]
         if tuples:
@@ -246,13 +246,12 @@ class SaddleSystem:
     def preconditioner(self, mat: PETSc.Mat, gamma: float) -> AugmentedMatrix:
         """The iterative preset's augmented Lagrangian form of the operator as last assembled
         (its operator T M, preconditioning matrix and right-hand side transform): γ/k Aᵀ A of
-        its enforced hard rows added to the stiffness block (``solvers.augmented``)."""
+        its enforced rows added to the stiffness block (``solvers.augmented``)."""
         if self._augmented is None:
             self._augmented = AugmentedMatrix(self.comm, self.dofmap)
         _, _, l0, l1 = self.dofmap.owned()
         own = slice(0, l1 - l0)   # (owned rows first among the held)
-        hard = self.op.active[own].astype(bool) & (self.relation_set.compliance[own] <= 0.0)
-        return self._augmented.update(mat, hard, self.kscale, gamma)
+        return self._augmented.update(mat, self.op.active[own].astype(bool), self.kscale, gamma)
 
     def _place_stiffness(self, ke) -> None:
         """Node-pair sums of the element matrices into the operator's stiffness slots: summed
@@ -282,8 +281,6 @@ class SaddleSystem:
         if f_int is not None:
             f_full = f_full - f_int
         target = self.relation_set.scaled_residual(t, q)
-        # a compliant row's right-hand side is 0: a stiffness on the increment, not a target
-        target = np.where(self.relation_set.compliance[:target.size] > 0.0, 0.0, target)
         values = self.elim_values(t)
         if q is not None and self.elim_dofs.size:
             values = values - self.eliminated_values(q)
@@ -326,14 +323,8 @@ class SaddleSystem:
 
     def gather(self, x_owned: np.ndarray) -> HeldValues:
         """What this rank holds of the saddle vector (its DOFs and multipliers, ghosts
-        included) from its owned rows (the DOF map's forward exchanges). The multipliers of
-        enforced compliant rows are discarded (``Relation.compliance``: a device of the Newton
-        matrix, not a force)."""
-        held = self.dofmap.gather(x_owned)
-        soft = self.relation_set.compliance > 0.0   # (per held multiplier row)
-        if soft.any():
-            held.lam[soft & self.op.active.astype(bool)] = 0.0
-        return held
+        included) from its owned rows (the DOF map's forward exchanges)."""
+        return self.dofmap.gather(x_owned)
 
     def with_primal(self, x_full: HeldValues, q: np.ndarray) -> HeldValues:
         """A copy of ``x_full`` with its primal part replaced by q."""
@@ -379,3 +370,46 @@ def _rows(a: np.ndarray) -> np.ndarray:
     """The rows of a 2D integer array as single comparable items (for ``np.isin``)."""
     a = np.ascontiguousarray(a, dtype=np.int64)
     return a.view(np.dtype((np.void, a.dtype.itemsize * a.shape[1]))).ravel()
+
+
+class _Cover:
+    """Pseudo-cells of ``nen`` nodes that hold every node pair of tuples of m nodes: the tuple
+    itself padded (m ≤ nen: [a, b, b, ...]), or, wider, cut into chunks of h = nen // 2 nodes
+    (the last padded) and one pseudo-cell per pair of chunks i ≤ j, [chunk i, chunk j]: the
+    pattern of a tuple wider than a cell (a contact row's span) without widening the cells."""
+
+    def __init__(self, m: int, nen: int):
+        self.m, self.nen = m, nen
+        self.h = m if m <= nen else max(nen // 2, 1)
+        self.nch = -(-m // self.h)
+        self.i, self.j = np.triu_indices(self.nch)           # the chunk pairs, i ≤ j
+        self.per = self.i.size                               # pseudo-cells per tuple
+
+    def cells(self, g: np.ndarray) -> np.ndarray:
+        """(k · per, nen) pseudo-cells of the tuples g (k, m)."""
+        k, h = len(g), self.h
+        g = np.concatenate([g, np.repeat(g[:, -1:], self.nch * h - self.m, axis=1)], axis=1)
+        if self.per == 1:
+            out = g
+        else:
+            ch = g.reshape(k, self.nch, h)
+            out = np.concatenate([ch[:, self.i], ch[:, self.j]], axis=2).reshape(-1, 2 * h)
+        return np.concatenate([out, np.repeat(out[:, -1:], self.nen - out.shape[1], axis=1)],
+                              axis=1)
+
+    def slots(self, pair_slot: np.ndarray, start: int, k: int) -> np.ndarray:
+        """The (m, m, k) slots of the tuples' node pairs, their pseudo-cells from ``start``."""
+        m, h = self.m, self.h
+        if self.per == 1:
+            return np.ascontiguousarray(pair_slot[:m, :m, start:start + k])
+        a = np.arange(m)
+        ca, cb = np.meshgrid(a // h, a // h, indexing="ij")
+        pa, pb = np.meshgrid(a % h, a % h, indexing="ij")
+        lower = ca > cb                       # (a, b) in the pseudo-cell of chunks (cb, ca)
+        lo_c, hi_c = np.minimum(ca, cb), np.maximum(ca, cb)
+        # the pair's pseudo-cell among the tuple's: index of (lo_c, hi_c) in triu order
+        cell = lo_c * self.nch - lo_c * (lo_c - 1) // 2 + (hi_c - lo_c)
+        pa = np.where(lower, h + pa, pa)
+        pb = np.where(lower, pb, h + pb)
+        which = start + np.arange(k)[None, None, :] * self.per + cell[:, :, None]
+        return np.ascontiguousarray(pair_slot[pa[:, :, None], pb[:, :, None], which])

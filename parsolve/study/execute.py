@@ -136,7 +136,7 @@ def spec_problem(spec, model) -> str | None:
     """Why a run of ``model`` cannot give ``spec`` (a parsed post spec), or None."""
     from parsolve.post.locate import locate
 
-    names = {"relation": [r.name for r in model.relations if not r.meta.get("device")],
+    names = {"relation": [r.name for r in model.relations],
              "field": [f.output for f in model.fields] + [n for e in model.effects for n in e.output_names()],
              "cell_field": [n for e in model.effects for n in e.output_names()]}
     group = "field" if spec.kind in ("max", "maxabs", "norm") else spec.kind

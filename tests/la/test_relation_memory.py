@@ -4,10 +4,9 @@ stacked entry kept on exactly one rank, each relation row built and held by one 
 owner of its slave node), and each rank's share of the stacked entries, of the multipliers it
 holds (owned rows and ghosts), of the relations' own arrays and of the relation set's per-row
 vectors at most 0.35 of what one rank holds alone, at 4 ranks. Measured here at 1 / 2 / 3 / 4
-ranks: 52,552 / 30,040 / 22,536 / 17,176 B on the largest rank (0.327 of one rank's at 4
-ranks; 0.342 when the compliances were per multiplier row of every rank). The compliances
-and the row and column scales are per held multiplier row (owned rows and ghosts), like the
-multipliers (with the scales counted: 54,904 / 31,384 / 23,544 / 17,944 B, 0.327)."""
+ranks: 50,592 / 28,920 / 21,696 / 16,536 B on the largest rank (0.327 of one rank's at 4
+ranks). The row and column scales are per held multiplier row (owned rows and ghosts), like the
+multipliers (counted in the periodic test below)."""
 
 import tomllib
 
@@ -34,20 +33,20 @@ def held_bytes(rs, dm) -> int:
 
 
 #: per-row vectors of the relation set (per relation row or multiplier row held here)
-ROW_VECTORS = ("position", "mult_of_row", "rep_row", "compliance", "row_first", "mults_here",
-               "whole_rows", "own_rows")
+ROW_VECTORS = ("position", "mult_of_row", "rep_row", "row_first", "mults_here", "whole_rows",
+               "own_rows")
 #: the relations' arrays and the per-row vectors on one rank alone
-ONE_RANK = 23_152
+ONE_RANK = 21_192
 
 
 def whole_bytes(rs) -> int:
-    """Bytes of the relations' arrays a rank holds (A's entries, values, duals, compliances,
-    groups) and of the relation set's per-row vectors."""
+    """Bytes of the relations' arrays a rank holds (A's entries, values, duals, groups) and
+    of the relation set's per-row vectors."""
     arrays = [getattr(rs, n) for n in ROW_VECTORS]
     for r in rs.relations:
         arrays += [r.a_rows, r.a_dofs, r.a_vals, r.values]
         arrays += list(r.dual or ()) + list(r.shared_dual or ())
-        arrays += [a for a in (r.compliance, r.groups) if a is not None]
+        arrays += [r.groups] if r.groups is not None else []
     return sum(np.asarray(a).nbytes for a in arrays)
 
 
@@ -93,7 +92,7 @@ def test_each_rank_holds_its_share_of_the_relations():
 PERIODIC = (CONFIGS / "periodic_shear_laminate.toml").read_text(encoding="utf-8") \
     .replace("nx = 6", "nx = 24").replace("ny = 8", "ny = 24") + "\n[solver]\neliminate = false\n"
 #: the relations' arrays, the per-row vectors and the row and column scales on one rank alone
-ONE_RANK_PERIODIC = 15_160
+ONE_RANK_PERIODIC = 13_992
 
 
 def test_dirichlet_and_periodic_rows_split_across_the_ranks():
@@ -101,7 +100,7 @@ def test_dirichlet_and_periodic_rows_split_across_the_ranks():
     node it constrains: every row on one rank, numbered as on one rank; every stacked entry
     kept on one rank (a tie's D entry on its partner's rank); A q of a tie reading its partner
     on another rank; and the largest rank's share of the bytes at most 0.35 of one rank's at
-    4 ranks. Measured at 1 / 2 / 3 / 4 ranks: 28,616 / 14,584 / 15,720 / 9,448 B on the
+    4 ranks. Measured at 1 / 2 / 3 / 4 ranks: 27,448 / 13,992 / 15,096 / 9,064 B on the
     largest rank (0.330 of one rank's at 4 ranks; at 3 ranks the partition gives one rank 78
     of the 146 rows, most of two sides)."""
     model = build_model(parse_scene(tomllib.loads(PERIODIC), "periodic.toml", PERIODIC), COMM)

@@ -152,7 +152,7 @@ def _augmented_expected(system, mat, gamma: float) -> tuple[np.ndarray, np.ndarr
     q = np.concatenate([np.arange(offsets[r], offsets[r] + dm.owned(r)[1] - dm.owned(r)[0])
                         for r in ranks])
     lam = np.setdiff1d(np.arange(M.shape[0]), q)
-    active = system.op.active.astype(bool) & (system.relation_set.compliance <= 0.0)
+    active = system.op.active.astype(bool)
     # multiplier rows in saddle order: each rank's owned rows (first among those it holds)
     hard = np.concatenate(comm.allgather(active[:system.relation_set.n_owned]))
     rows = M[np.ix_(lam, q)]
