@@ -109,8 +109,8 @@ def test_flat_punch_2d_transmits_p_with_gap_p_over_penalty(run, shared_tmp):
     for eps in (1e4, 1e5, 1e6):
         res = run(scene_2d(mesh, f'formulation = "penalty"\npenalty = {eps:g}'),
                   name=f"punch_pen_{eps:g}")
-        if COMM.size > 1:   # the slaves and their master facets on different ranks
-            assert split_pairs(contact_effect(run)) == len(contact_effect(run).pairing)
+        if COMM.size > 1:   # slaves and their master facets on different ranks (how many:
+            assert split_pairs(contact_effect(run)) > 0   # the partition's choice)
         stress = res["fields/stress"][-1]
         np.testing.assert_allclose(stress[:, 1], -P, atol=1e-10 * P)
         np.testing.assert_allclose(stress[:, [0, 2]], 0.0, atol=1e-10 * P)
@@ -178,13 +178,13 @@ ROLLERS = "".join(f'[[relations]]\nname = "roll_{b}_{c}"\ntype = "dirichlet"\n'
 
 def test_flat_punch_3d_node_to_face(run, shared_tmp):
     """The same in 3D (quad faces, the slave side 4 × 4 on the master's 2 × 2): σzz = −p,
-    every slave gap −p/penalty, ΣRn = p × area, on 1, 2, 3 ranks (2: every pair split)."""
+    every slave gap −p/penalty, ΣRn = p × area, on 1, 2, 3 ranks (with pairs split over the
+    ranks: how many depends on the partition, which follows the mesh reader's slices)."""
     mesh = written(shared_tmp / f"punch3d_{COMM.size}.msh", punch_3d)
     eps = 1e5
     res = run(SCENE_3D.format(mesh=mesh, p=-P, eps=eps, rollers=ROLLERS), name="punch3d")
-    if COMM.size > 1:   # 2 ranks: every pair split; 3: some
-        split = split_pairs(contact_effect(run))
-        assert split == 25 if COMM.size == 2 else 0 < split < 25, split
+    if COMM.size > 1:   # the case this test is for: pairs whose nodes two ranks own
+        assert 0 < split_pairs(contact_effect(run)) <= 25
     stress = res["fields/stress"][-1]
     np.testing.assert_allclose(stress[:, 2], -P, atol=1e-10 * P)
     np.testing.assert_allclose(stress[:, [0, 1, 3, 4, 5]], 0.0, atol=1e-10 * P)
