@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import os
 import signal
+import time
 from contextlib import contextmanager
 
 from mpi4py import MPI
@@ -31,6 +32,8 @@ from parsolve.errors import Interrupted
 SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGUSR1, signal.SIGUSR2)
 STANDS_FOR = {signal.SIGUSR1: signal.SIGINT, signal.SIGUSR2: signal.SIGTERM}  # as mpirun forwards
 _pending = 0   # the last signal received and not yet acted on (several ranks)
+LATE_WINDOW = 10.0   # s after a stop on several ranks during which a relayed copy is ignored
+_stopped_at = float("-inf")   # when the last stop on several ranks happened (monotonic clock)
 
 
 def _interrupted(signum: int) -> Interrupted:
@@ -69,14 +72,27 @@ def interruptible(comm: MPI.Comm = MPI.COMM_WORLD):
 
 
 def _late_relays(previous: dict) -> dict:
-    """After a stop on several ranks, the signals left at their default (terminate) are
-    ignored. mpirun relays SIGUSR1 / SIGUSR2 (scripts/mpirun.sh's) and, after its own SIGTERM,
-    SIGTERM to one rank after another: a rank stopped by the others' mark may get its own copy
-    only after it has left the run, and would die of it before it says why (SIGUSR2: mpirun
-    then exits 140, not 143; seen 1 CI run in 2). The copy means the same stop, already done.
-    (SIGINT's previous handler is Python's, not the default: a terminal's Ctrl-C reaches every
-    rank at once, and mpirun relays no SIGINT.)"""
-    return {s: signal.SIG_IGN for s in SIGNALS if previous[s] == signal.SIG_DFL}
+    """After a stop on several ranks, the signals left at their default (terminate) ignore a
+    copy that comes within ``LATE_WINDOW`` seconds, and terminate again after it. mpirun
+    relays SIGUSR1 / SIGUSR2 (scripts/mpirun.sh's) and, after its own SIGTERM, SIGTERM to one
+    rank after another, within its ``odls_base_sigkill_timeout`` (1 s) of each other: a rank
+    stopped by the others' mark may get its own copy only after it has left the run, and would
+    die of it before it says why (SIGUSR2: mpirun then exits 140, not 143; seen 1 CI run in
+    2). The copy means the same stop, already done. A script that calls ``api.run``, catches
+    ``Interrupted`` and carries on is terminated by a later SIGTERM as before (by Python's
+    handler: once the C call it is in returns). (SIGINT's previous handler is Python's, not
+    the default: a terminal's Ctrl-C reaches every rank at once, and mpirun relays no SIGINT.)"""
+    global _stopped_at
+    _stopped_at = time.monotonic()
+    return {s: _late_copy for s in SIGNALS if previous[s] in (signal.SIG_DFL, _late_copy)}
+
+
+def _late_copy(signum: int, frame) -> None:
+    """A relayed copy of the last stop is ignored; after the window the signal's default."""
+    if time.monotonic() - _stopped_at < LATE_WINDOW:
+        return
+    signal.signal(signum, signal.SIG_DFL)
+    os.kill(os.getpid(), signum)
 
 
 def _drop_progress() -> None:

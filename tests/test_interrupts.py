@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import os
 import signal
+import subprocess
+import sys
 
 import pytest
 from mpi4py import MPI
@@ -49,10 +51,45 @@ def test_a_late_relayed_signal_after_the_stop_does_not_kill_a_rank(sig, name):
                     interrupts._pending = sig    # rank 0's copy came first
                 interrupts.check(comm)
         assert str(err.value) == f"interrupted: {name}"
-        expected = signal.SIG_IGN if comm.size > 1 else signal.SIG_DFL
+        expected = interrupts._late_copy if comm.size > 1 else signal.SIG_DFL
         assert signal.getsignal(sig) == expected
         if comm.size > 1:
             os.kill(os.getpid(), sig)            # the late copy: ignored
         comm.Barrier()
     finally:
         signal.signal(sig, before)
+
+
+AFTER_THE_WINDOW = """
+import os, signal, sys
+from parsolve import interrupts
+from parsolve.errors import Interrupted
+
+class TwoRanks:      # a stop on several ranks, seen from rank 0, without MPI
+    size, rank = 2, 0
+    def allreduce(self, value, op=None):
+        return value
+
+try:
+    with interrupts.interruptible(TwoRanks()):
+        interrupts._pending = signal.SIGTERM
+        interrupts.check(TwoRanks())
+except Interrupted:
+    pass
+os.kill(os.getpid(), signal.SIGTERM)           # the late copy, within the window: ignored
+print("alive", flush=True)
+interrupts._stopped_at -= interrupts.LATE_WINDOW   # the window is over
+os.kill(os.getpid(), signal.SIGTERM)           # a new SIGTERM: terminates, as by default
+print("not reached", flush=True)
+"""
+
+
+@pytest.mark.skipif(MPI.COMM_WORLD.rank != 0, reason="a subprocess of one rank")
+def test_sigterm_terminates_again_once_the_late_copies_window_is_over():
+    """The late copies of a stop are ignored for ``LATE_WINDOW`` seconds only: a script that
+    catches ``Interrupted`` and carries on is terminated by a later SIGTERM."""
+    run = subprocess.run([sys.executable, "-c", AFTER_THE_WINDOW], capture_output=True,
+                         text=True, timeout=60, env={k: v for k, v in os.environ.items()
+                                                  if not k.startswith(("OMPI_", "PMIX_", "OPAL_"))})
+    assert run.stdout.split() == ["alive"]
+    assert run.returncode == -signal.SIGTERM, run.stderr
