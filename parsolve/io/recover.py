@@ -67,12 +67,16 @@ def hint(path: str | Path) -> str:
 
 def recover(path: str | Path) -> tuple[int, str]:
     """(finished steps, message). Only a killed run's file is changed; a file HDF5 cannot read
-    (truncated, overwritten) is an InputError."""
+    (truncated, overwritten) or one a run is writing now is an InputError."""
     from parsolve.errors import InputError
 
     path = Path(path)
     if not path.is_file():
         raise InputError("no such result file", str(path), "--recover")
+    if being_written(path):   # (its per-step datasets may hold a step being written)
+        raise InputError(f"a run is writing it now (lock held on {lock_path(path)}): --recover "
+                         "mends a killed run's file; a live one reads as it is once the run "
+                         "has ended", str(path), "--recover")
     try:
         with h5py.File(path, "r", swmr=True):
             pass

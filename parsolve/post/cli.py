@@ -151,12 +151,12 @@ def run(args) -> None:
             problem = folder_problem(Path(getattr(args, key)).parent)
             if problem:
                 raise InputError(problem, getattr(args, key), f"--{key}")
+    if args.derive:   # (first: a swmr file being written does not open at all)
+        _derivable(args.results[0])
     for path in args.results:   # every input readable before anything is printed or written
         with Result(path) as res:
             if args.summary:    # a summary vouches for the whole file: every value read
                 res.verify()
-    if args.derive:
-        _derivable(args.results[0])
     if args.summary:
         from parsolve.post.summary import summary
 
