@@ -142,4 +142,6 @@ def test_a_load_friction_cannot_carry_is_named(run, degrees, fails):
         run(text, name="friction_impossible")
     message = str(err.value)
     assert "contact[0]: every closed node of 'base' slides" in message, message
-    assert "the tangential load exceeds the friction capacity μN (μ = 0.5)" in message, message
+    assert "the tangential load exceeds the friction capacity μN (μ = 0.5); hold it, lower the " \
+        "tangential load or raise the friction" in message, message   # the cause and the way out
+    assert message.startswith("no step converged: the first step failed down to t = "), message
