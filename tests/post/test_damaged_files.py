@@ -1,6 +1,6 @@
 """post on damaged result files: a truncated, overwritten, deleted or partly garbled file, or one
 holding a non-finite or out-of-scale value, under every command (curve, --summary, --derive,
---recover) is exit 2 with one line naming the file — never a traceback, never a number — and
+--line, --recover) is exit 2 with one line naming the file — never a traceback, never a number — and
 nothing is left behind (in-process command line, results of both output modes)."""
 
 import os
@@ -26,6 +26,8 @@ COMMANDS = {
     "curve": ["--x", "time", "--y", "field:displacement:x@1.5,0.5"],
     "summary": ["--summary"],
     "derive": ["--derive", "{dir}/derived.h5"],
+    "line": ["--line", "0,0.5", "2,0.5", "5", "--y", "field:displacement:x", "--y",
+             "field:displacement:y", "--step", "all"],
 }
 
 
