@@ -3,7 +3,8 @@
 
 Exit status: 0 every run complete (or submitted with --no-wait, or a dry run); 2 invalid job
 file or scene (one line naming the file and the key; nothing runs); 3 some run did not
-complete (see the manifest); 1 the executor could not start (no sbatch); 130 interrupted.
+complete (see the manifest); 4 the batch's own files could not be written (a full disk:
+one line); 1 the executor could not start (no sbatch); 130 interrupted.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from parsolve.errors import EXIT_INPUT, EXIT_SOLVER, InputError
+from parsolve.errors import EXIT_INPUT, EXIT_OUTPUT, EXIT_SOLVER, InputError
 
 USAGE = ("parsolve batch JOBS.toml [--executor local|slurm] [--parallel N] [--dry-run] "
          "[--collect] [--no-wait] [--rerun] [-o ROOT]")
@@ -70,6 +71,11 @@ def main(argv: list[str]) -> int:
     except (RuntimeError, ValueError) as exc:
         print(f"parsolve batch: {exc}", file=sys.stderr)
         return 1
+    except OSError as exc:   # the batch's own files (a full disk): one line, not a traceback
+        where = exc.filename or root
+        print(f"parsolve batch: {where}: cannot write ({exc.strerror or exc}); the runs' results "
+              "already written stay, run the batch again once there is room", file=sys.stderr)
+        return EXIT_OUTPUT
     counts = {}
     for o in outcomes:
         counts[o.status.split(":")[0]] = counts.get(o.status.split(":")[0], 0) + 1
