@@ -208,7 +208,8 @@ def main(argv: list[str]) -> int:
                 return 0
         run(args)
     except InputError as exc:
-        more = "" if "lock held" in exc.message else recover.hint(exc.source)
+        more = "" if "lock held" in exc.message or exc.key == "--recover" else \
+            recover.hint(exc.source)
         print(f"parsolve post: {exc.oneline()}{more}", file=sys.stderr)
         return 2
     except BrokenPipeError:  # | head

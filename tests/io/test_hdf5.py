@@ -273,6 +273,41 @@ def test_full_tmpfs(tmp_path):
         subprocess.run(["umount", str(mnt)], check=True)
 
 
+def test_recover_without_room_for_its_copy_says_so(tmp_path, capsys):
+    """A killed run's file on a disk with no room left: --recover cannot write its copy. It
+    says that (not "damaged", not "use --recover"), the file is unchanged and nothing is left
+    beside it; once there is room the same command recovers it."""
+    from parsolve.post.cli import main
+
+    mnt = tmp_path / "small"
+    mnt.mkdir()
+    proc = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(mnt)],
+                          capture_output=True, text=True)
+    if proc.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here: {proc.stderr.strip()}")
+    try:
+        out = mnt / "r.h5"
+        assert child(out, nsteps=3).returncode == 1
+        before = out.read_bytes()
+        listing = sorted(p.name for p in mnt.iterdir())
+        with pytest.raises(OSError):
+            with open(mnt / "fill", "wb") as fh:
+                fh.write(b"\0" * (512 << 10))
+        assert main([str(out), "--recover"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err == [f"parsolve post: {out}: --recover: cannot recover: no room for its copy "
+                       f"beside it (No space left on device); the file is unchanged: recovering "
+                       f"takes one copy of it ({len(before) / 1e6:.3g} MB), make room and "
+                       "recover again"], err
+        assert out.read_bytes() == before
+        assert sorted(p.name for p in mnt.iterdir()) == sorted(listing + ["fill"])
+        (mnt / "fill").unlink()
+        assert main([str(out), "--recover"]) == 0
+        assert capsys.readouterr().out.startswith(f"{out}: recovered 3 finished step(s)")
+    finally:
+        subprocess.run(["umount", str(mnt)], check=True)
+
+
 def test_exception_between_datasets_is_trimmed_at_close(tmp_path, monkeypatch):
     """Ctrl-C raised in the middle of a step (the signal handler's exception): close cuts the
     unfinished rows, so every per-step dataset has exactly the finished steps."""
