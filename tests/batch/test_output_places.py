@@ -10,6 +10,7 @@ from mpi4py import MPI
 
 from batch_helpers import BAR
 from conftest import CONFIGS, run_scene
+from helpers.disk import mounted
 from parsolve.batch.cli import main as batch
 from parsolve.post.cli import main as post
 from parsolve.study.cli import main as study
@@ -129,20 +130,9 @@ FULL_CASES = [
 
 @pytest.fixture
 def full_disk(tmp_path):
-    """A 64 kB tmpfs filled to the last byte, or a skip where mounting is not permitted."""
-    where = tmp_path / "full"
-    where.mkdir()
-    mount = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(where)],
-                           capture_output=True, text=True)
-    if mount.returncode != 0:
-        pytest.skip(f"cannot mount a small tmpfs here: {mount.stderr.strip()}")
-    try:
-        with open(where / "fill", "wb") as fh:
-            fh.write(b"\0" * (128 << 10))
-    except OSError:
-        pass
-    yield where
-    subprocess.run(["umount", "-l", str(where)], check=False)
+    """A 64 kB tmpfs filled to the last byte."""
+    with mounted(tmp_path / "full", "64k", full=True) as where:
+        yield where
 
 
 @pytest.mark.parametrize("command, args, status, head, fragment", FULL_CASES)
