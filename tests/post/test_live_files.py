@@ -7,8 +7,9 @@ between steps, the swmr file open for writing. Meanwhile every ``post`` command 
 - ``--derive`` and ``--recover`` are refused in both modes (exit 2, one line naming the lock),
   the file untouched, nothing written beside it;
 - curve and ``--summary`` read a parallel-output file's finished steps (the linear solution:
-  step 2 is twice step 1, after the rest); a swmr file is open for writing, and they say so in one line naming
-  the lock (exit 2).
+  step 2 is twice step 1, after the rest); a swmr file is open for writing, and they say so
+  in one line naming the lock and the way to follow it (exit 2; HDF5's words would say to
+  h5clear it, which would harm the run).
 
 Then the run goes on and completes (the reads harmed nothing: status complete, 4 steps), and
 the same commands read it. No signal, no timing: the pause is a file the test creates."""
@@ -103,8 +104,9 @@ def test_post_on_a_file_being_written(mode, ranks, tmp_path, capsys):
             for args in (["--summary"], CURVE):
                 code, printed, err = _post([str(out)] + args, capsys)
                 assert code == 2 and printed == "" and len(err) == 1, (args, err)
-                assert err[0].startswith(f"parsolve post: {out}: cannot open result file")
-                assert err[0].endswith(f"a run is writing it now ({lock})"), err[0]
+                assert err[0] == f"parsolve post: {out}: a run is writing it now ({lock}, the " \
+                    "file open for writing): post reads it once the run has ended; meanwhile " \
+                    "h5py.File(path, 'r', swmr=True) follows it", err[0]
         assert _digest(out) == before                                       # untouched
         assert sorted(p.name for p in tmp_path.iterdir()) == listing        # nothing beside it
         assert proc.poll() is None   # still waiting: every command above met a live run
