@@ -54,7 +54,10 @@ def main(argv: list[str]) -> int:
         if not (root / manifest.RUNS).exists():
             print(f"parsolve batch: {root} holds no batch (no {manifest.RUNS})", file=sys.stderr)
             return 1
-        rows = manifest.write(root, manifest.load_runs(root))
+        try:
+            rows = manifest.write(root, manifest.load_runs(root))
+        except OSError as exc:
+            return _cannot_write(exc, root)
         print(f"{root / manifest.MANIFEST}: {len(rows)} runs: {summary(rows)}")
         return 0 if all(r["status"] == "complete" for r in rows) else EXIT_SOLVER
     if args.dry_run:
@@ -71,11 +74,8 @@ def main(argv: list[str]) -> int:
     except (RuntimeError, ValueError) as exc:
         print(f"parsolve batch: {exc}", file=sys.stderr)
         return 1
-    except OSError as exc:   # the batch's own files (a full disk): one line, not a traceback
-        where = exc.filename or root
-        print(f"parsolve batch: {where}: cannot write ({exc.strerror or exc}); the runs' results "
-              "already written stay, run the batch again once there is room", file=sys.stderr)
-        return EXIT_OUTPUT
+    except OSError as exc:
+        return _cannot_write(exc, root)
     counts = {}
     for o in outcomes:
         counts[o.status.split(":")[0]] = counts.get(o.status.split(":")[0], 0) + 1
@@ -83,6 +83,14 @@ def main(argv: list[str]) -> int:
           + ", ".join(f"{n} {s}" for s, n in sorted(counts.items())))
     ok = ("complete", "submitted", "running elsewhere")
     return 0 if all(o.status in ok for o in outcomes) else EXIT_SOLVER
+
+
+def _cannot_write(exc: OSError, root: Path) -> int:
+    """The batch's own files (a full disk): one line naming the file, not a traceback."""
+    print(f"parsolve batch: {exc.filename or root}: cannot write ({exc.strerror or exc}); the "
+          "runs' results already written stay, run the batch again once there is room",
+          file=sys.stderr)
+    return EXIT_OUTPUT
 
 
 def _list(runs, root: Path) -> None:

@@ -10,7 +10,7 @@ from mpi4py import MPI
 
 from batch_helpers import BAR
 from conftest import CONFIGS, run_scene
-from helpers.disk import mounted
+from helpers.disk import fill, mounted
 from parsolve.batch.cli import main as batch
 from parsolve.post.cli import main as post
 from parsolve.study.cli import main as study
@@ -158,3 +158,23 @@ def test_a_full_disk_is_one_line_and_nothing_cut(command, args, status, head, fr
     assert len(err) == 1 and "Traceback" not in captured.err, captured.err
     assert err[0].startswith(f"{prog}: {fill(head)}{fragment}"), err[0]
     assert [p.name for p in full_disk.rglob("*") if not p.is_dir()] == ["fill"]   # nothing cut
+
+
+def test_collect_on_a_full_disk_is_one_line(tmp_path, capsys):
+    """--collect rewrites the manifest of a batch whose disk has filled since: one line naming
+    the manifest (exit 4), the old manifest kept whole."""
+    (tmp_path / "scene.toml").write_text(BAR.read_text())
+    (tmp_path / "jobs.toml").write_text('scene = "scene.toml"\noutput = "runs"\n[[runs]]\n'
+                                        '"steps.count" = 2\n')
+    with mounted(tmp_path / "disk", "64k") as disk:
+        root = disk / "runs"
+        root.mkdir()
+        (root / "runs.json").write_text('[{"name": "a", "ranks": 1, "params": {}}]')
+        (root / "manifest.csv").write_text("old\n")
+        fill(disk)
+        assert batch([str(tmp_path / "jobs.toml"), "--collect", "-o", str(root)]) == 4
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith(
+            f"parsolve batch: {root / 'manifest.csv'}: cannot write (No space left on device)"), err
+        assert (root / "manifest.csv").read_text() == "old\n"
+        assert sorted(p.name for p in root.iterdir()) == ["manifest.csv", "runs.json"]
