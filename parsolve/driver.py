@@ -78,7 +78,10 @@ def run(comm: MPI.Comm, model: Model, out: str, cli_options: dict[str, str],
         hints = _failure_hints(model)
         if "singular" in str(exc) or "inaccurate" in str(exc):
             hints += unsupported(model)
-        if hints and not isinstance(exc, NamedFailure):   # (its cause named already)
+        if hints and isinstance(exc, StepFailure):   # the effects' cause before the generic way out
+            exc = SolverError(f"{exc.head}; likely cause: {'; '.join(hints)}; otherwise, the way "
+                              f"out: {exc.way_out}")
+        elif hints and not isinstance(exc, NamedFailure):   # (its cause named already)
             exc = SolverError(f"{exc}; likely cause: {'; '.join(hints)}")
         status = f"failed: {exc}"
         raise exc from None
@@ -309,15 +312,24 @@ def _final_failure(exc: SolverError, problem, t: float, stability: bool, schedul
         return named
     cuts = f"after {schedule.cuts} cut{'s' * (schedule.cuts != 1)}"
     if step == 0:
-        return SolverError(
+        return StepFailure(
             f"no step converged: the first step failed down to t = {t:.6g} ({cuts}); the last "
-            f"attempt: {exc}; the way out: check that the supports hold the body and the loads' "
-            "sizes, then take smaller first steps ([steps] count, or automatic steps) or allow "
-            "more iterations ([nonlinear] max_iterations)")
-    return SolverError(
+            f"attempt: {exc}", "check that the supports hold the body and the loads' sizes, "
+            "then take smaller first steps ([steps] count, or automatic steps) or allow more "
+            "iterations ([nonlinear] max_iterations)")
+    return StepFailure(
         f"step {step + 1} from t = {problem.t_prev:.6g} failed down to t = {t:.6g} ({cuts}); "
-        f"the last attempt: {exc}; the way out: smaller steps ([steps] count, or automatic "
-        "steps), more iterations ([nonlinear] max_iterations), or the tangent matrix")
+        f"the last attempt: {exc}", "smaller steps ([steps] count, or automatic steps), more "
+        "iterations ([nonlinear] max_iterations), or the tangent matrix")
+
+
+class StepFailure(SolverError):
+    """A step failed for good on no cause the solver could name: where and on what (``head``),
+    and the generic way out (the effects' likely cause, when they give one, goes before it)."""
+
+    def __init__(self, head: str, way_out: str):
+        self.head, self.way_out = head, way_out
+        super().__init__(f"{head}; the way out: {way_out}")
 
 
 def _pass_notes(comm, solver, writer, log) -> None:

@@ -3,7 +3,8 @@ run`` exit 2 with one line naming the file and the key, within a time limit (a c
 raises on some ranks only would leave the others waiting in a collective call: a hang), with
 nothing written and no lock left behind. The families are the tables the other tests use
 (tests/test_cli.py, tests/effects/test_contact_bad_input.py, test_thermal_expansion.py,
-test_diffusion_effect.py, tests/solvers/test_control.py), plus checks that only some ranks'
+test_diffusion_effect.py, test_springs.py, test_periodic.py, tests/solvers/test_control.py,
+tests/loads/test_bad_input.py, tests/fem/test_axisymmetric.py), plus checks that only some ranks'
 parts can fail (an axisymmetric mesh with r < 0 on one part, a selector not finite on one part).
 
 All cases of a rank count run in one mpirun (tests/helpers/bad_input_runner.py: one process
@@ -80,7 +81,41 @@ def families() -> dict[str, tuple[str, str, str]]:
     for name, (text, key) in control.BAD.items():
         cases[f"control/{name}"] = (text, "scene.toml", key)
     cases["axisymmetric/r < 0 on some parts"] = (AXISYMMETRIC, "scene.toml", "mesh")
+    axisymmetric = _module("fem/test_axisymmetric.py")
+    for change, key in _table(axisymmetric.test_refused_inputs):
+        cases[f"axisymmetric/{key}"] = (axisymmetric.cylinder(4, "quad").replace(*change),
+                                        "scene.toml", key)
+    loads = _module("loads/test_bad_input.py")   # (a serial table: its runs are on 1 rank)
+    for name, (load, key, _) in loads.CASES.items():
+        cases[f"loads/{name}"] = (_load_scene(loads, name, load), "scene.toml", key)
+    springs = _module("effects/test_springs.py")
+    supports = (ROOT / "configs" / "springs_bar_supports.toml").read_text()
+    for k, (change, key, _) in enumerate(_table(springs.test_input_errors)):
+        cases[f"springs/{k} {key}"] = (supports.replace(*change, 1), "scene.toml", key)
+    periodic = _module("effects/test_periodic.py")
+    for name, (extra, _) in periodic.REPEATED_TIES.items():
+        relations = periodic.LAMINATE["relations"] + [extra]
+        cases[f"periodic/{name}"] = (periodic.scene(periodic.LAMINATE, relations=relations),
+                                     "scene.toml", "relations[4]")
     return cases
+
+
+def _table(test) -> list:
+    """The cases of a test's ``parametrize`` mark (a table written in its decorator)."""
+    (_, values), = [m.args for m in test.pytestmark if m.name == "parametrize"]
+    return values
+
+
+def _load_scene(loads, name: str, load: str) -> str:
+    """A case of tests/loads/test_bad_input.py as its test writes it."""
+    own = "region" in load or "gravity" in load   # gravity acts on "all" by default
+    text = loads.BASE.replace('region = "right"\n', "" if own else 'region = "right"\n')
+    text = text.format(load=load)
+    if name == "no density":
+        text = text.replace("density = 1.0\n", "")
+    if name == "bad density":
+        text = text.replace("density = 1.0", "density = -1.0")
+    return text + loads.CONTROL if name == "timed direction" else text
 
 
 CASES = families()

@@ -142,4 +142,9 @@ def test_a_load_friction_cannot_carry_is_named(run, degrees, fails):
         run(text, name="friction_impossible")
     message = str(err.value)
     assert "contact[0]: every closed node of 'base' slides" in message, message
-    assert "the tangential load exceeds the friction capacity μN (μ = 0.5)" in message, message
+    assert "the tangential load exceeds the friction capacity μN (μ = 0.5); hold it, lower the " \
+        "tangential load or raise the friction" in message, message   # the cause and the way out
+    assert message.startswith("no step converged: the first step failed down to t = "), message
+    # the cause before the generic advice (smaller steps cannot help: no equilibrium exists)
+    assert message.index("likely cause: ") < message.index("otherwise, the way out: check "
+                                                            "that the supports"), message

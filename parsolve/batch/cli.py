@@ -3,7 +3,8 @@
 
 Exit status: 0 every run complete (or submitted with --no-wait, or a dry run); 2 invalid job
 file or scene (one line naming the file and the key; nothing runs); 3 some run did not
-complete (see the manifest); 1 the executor could not start (no sbatch); 130 interrupted.
+complete (see the manifest); 4 the batch's own files could not be written (a full disk:
+one line); 1 the executor could not start (no sbatch); 130 interrupted.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from parsolve.errors import EXIT_INPUT, EXIT_SOLVER, InputError
+from parsolve.errors import EXIT_INPUT, EXIT_OUTPUT, EXIT_SOLVER, InputError
 
 USAGE = ("parsolve batch JOBS.toml [--executor local|slurm] [--parallel N] [--dry-run] "
          "[--collect] [--no-wait] [--rerun] [-o ROOT]")
@@ -53,7 +54,10 @@ def main(argv: list[str]) -> int:
         if not (root / manifest.RUNS).exists():
             print(f"parsolve batch: {root} holds no batch (no {manifest.RUNS})", file=sys.stderr)
             return 1
-        rows = manifest.write(root, manifest.load_runs(root))
+        try:
+            rows = manifest.write(root, manifest.load_runs(root))
+        except OSError as exc:
+            return _cannot_write(exc, root)
         print(f"{root / manifest.MANIFEST}: {len(rows)} runs: {summary(rows)}")
         return 0 if all(r["status"] == "complete" for r in rows) else EXIT_SOLVER
     if args.dry_run:
@@ -70,6 +74,8 @@ def main(argv: list[str]) -> int:
     except (RuntimeError, ValueError) as exc:
         print(f"parsolve batch: {exc}", file=sys.stderr)
         return 1
+    except OSError as exc:
+        return _cannot_write(exc, root)
     counts = {}
     for o in outcomes:
         counts[o.status.split(":")[0]] = counts.get(o.status.split(":")[0], 0) + 1
@@ -77,6 +83,14 @@ def main(argv: list[str]) -> int:
           + ", ".join(f"{n} {s}" for s, n in sorted(counts.items())))
     ok = ("complete", "submitted", "running elsewhere")
     return 0 if all(o.status in ok for o in outcomes) else EXIT_SOLVER
+
+
+def _cannot_write(exc: OSError, root: Path) -> int:
+    """The batch's own files (a full disk): one line naming the file, not a traceback."""
+    print(f"parsolve batch: {exc.filename or root}: cannot write ({exc.strerror or exc}); the "
+          "runs' results already written stay, run the batch again once there is room",
+          file=sys.stderr)
+    return EXIT_OUTPUT
 
 
 def _list(runs, root: Path) -> None:

@@ -11,12 +11,19 @@ import os
 from pathlib import Path
 
 from parsolve.batch.runner import RESULT, status_of
+from parsolve.io.whole import write_whole
 
 MANIFEST, RUNS = "manifest.csv", "runs.json"
 
 
 def save_runs(root: Path, runs: list[dict]) -> None:
-    (root / RUNS).write_text(json.dumps(runs, indent=1, default=str))
+    _replace(root / RUNS, json.dumps(runs, indent=1, default=str))
+
+
+def _replace(path: Path, text: str) -> None:
+    """``path`` written whole or not at all (a full disk leaves no empty or cut file:
+    ``--collect`` reads it; the SLURM collect job may write it too)."""
+    write_whole(path, lambda name: Path(name).write_text(text))
 
 
 def load_runs(root: Path) -> list[dict]:
@@ -44,9 +51,7 @@ def write(root: Path, runs: list[dict]) -> list[dict]:
                                               "seconds", "result"])
     writer.writeheader()
     writer.writerows(rows)
-    tmp = root / f"{MANIFEST}.{os.getpid()}.tmp"  # the SLURM collect job may write too
-    tmp.write_text(text.getvalue())
-    os.replace(tmp, root / MANIFEST)
+    _replace(root / MANIFEST, text.getvalue())
     return rows
 
 

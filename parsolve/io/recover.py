@@ -14,6 +14,7 @@ copy over the original (same name: the XDMF beside it keeps pointing at it). The
 
 from __future__ import annotations
 
+import errno
 import fcntl
 import os
 from pathlib import Path
@@ -24,6 +25,7 @@ from parsolve.io.hdf5 import COMMIT
 from parsolve.io.lock import lock_path
 
 RECOVERED = "interrupted: killed (recovered)"
+NO_ROOM = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM)
 
 
 def killed(path: str | Path) -> bool:
@@ -67,12 +69,16 @@ def hint(path: str | Path) -> str:
 
 def recover(path: str | Path) -> tuple[int, str]:
     """(finished steps, message). Only a killed run's file is changed; a file HDF5 cannot read
-    (truncated, overwritten) is an InputError."""
+    (truncated, overwritten) or one a run is writing now is an InputError."""
     from parsolve.errors import InputError
 
     path = Path(path)
     if not path.is_file():
         raise InputError("no such result file", str(path), "--recover")
+    if being_written(path):   # (its per-step datasets may hold a step being written)
+        raise InputError(f"a run is writing it now (lock held on {lock_path(path)}): --recover "
+                         "mends a killed run's file; a live one reads as it is once the run "
+                         "has ended", str(path), "--recover")
     try:
         with h5py.File(path, "r", swmr=True):
             pass
@@ -93,6 +99,11 @@ def recover(path: str | Path) -> tuple[int, str]:
             dst.attrs["status"] = RECOVERED
         tmp.replace(path)
     except (OSError, RuntimeError, KeyError) as exc:
+        if getattr(exc, "errno", None) in NO_ROOM:   # writing the copy, not reading the file
+            raise InputError(f"cannot recover: no room for its copy beside it "
+                             f"({os.strerror(exc.errno)}); the file is unchanged: recovering "
+                             f"takes one copy of it ({path.stat().st_size / 1e6:.3g} MB), make "
+                             "room and recover again", str(path), "--recover") from None
         raise InputError(f"cannot recover: the file is damaged ({_reason(exc)})", str(path),
                          "--recover") from None
     finally:

@@ -101,6 +101,7 @@ def _derivable(src: str) -> None:
 
 def _profiles(args) -> None:
     from parsolve.post import line
+    from parsolve.post.curves import write_whole
     from parsolve.post.result import Result
 
     p0, p1, n = line.parse_line(args.line, args.results[0])
@@ -113,9 +114,10 @@ def _profiles(args) -> None:
             profiles += [(f"{res.stem} {spec} step {k + 1}", s, v[i])
                          for spec, v in zip(args.y, values) for i, k in enumerate(steps)]
     if args.csv:
-        line.write_csv(args.csv, rows)
+        write_whole(args.csv, "--csv", lambda name: line.write_csv(name, rows))
     if args.png:
-        line.write_png(args.png, profiles, ", ".join(args.y))
+        write_whole(args.png, "--png",
+                    lambda name: line.write_png(name, profiles, ", ".join(args.y)))
     if not (args.csv or args.png):
         print("\t".join(rows[0]))
         for row in rows:
@@ -151,12 +153,12 @@ def run(args) -> None:
             problem = folder_problem(Path(getattr(args, key)).parent)
             if problem:
                 raise InputError(problem, getattr(args, key), f"--{key}")
+    if args.derive:   # (first: a swmr file being written does not open at all)
+        _derivable(args.results[0])
     for path in args.results:   # every input readable before anything is printed or written
         with Result(path) as res:
             if args.summary:    # a summary vouches for the whole file: every value read
                 res.verify()
-    if args.derive:
-        _derivable(args.results[0])
     if args.summary:
         from parsolve.post.summary import summary
 
@@ -166,13 +168,13 @@ def run(args) -> None:
                 texts.append(summary(res))
         print("\n".join(texts))
     if args.x:
-        from parsolve.post.curves import write_csv, write_png
+        from parsolve.post.curves import write_csv, write_png, write_whole
 
         curves = _curves(args)
         if args.csv:
-            write_csv(args.csv, args.x, args.y, curves)
+            write_whole(args.csv, "--csv", lambda name: write_csv(name, args.x, args.y, curves))
         if args.png:
-            write_png(args.png, args.x, args.y, curves)
+            write_whole(args.png, "--png", lambda name: write_png(name, args.x, args.y, curves))
         if not (args.csv or args.png):
             print("\t".join(["file", "step", args.x] + args.y))
             for label, x, ys, steps in curves:
@@ -206,7 +208,8 @@ def main(argv: list[str]) -> int:
                 return 0
         run(args)
     except InputError as exc:
-        more = "" if "lock held" in exc.message else recover.hint(exc.source)
+        more = "" if "lock held" in exc.message or exc.key == "--recover" else \
+            recover.hint(exc.source)
         print(f"parsolve post: {exc.oneline()}{more}", file=sys.stderr)
         return 2
     except BrokenPipeError:  # | head

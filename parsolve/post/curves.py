@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import os
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +33,18 @@ def check_output(path: str | None, key: str, inputs: list[str]) -> None:
         raise InputError(f"folder {parent} does not exist", path, key)
     if not os.access(parent, os.W_OK | os.X_OK):
         raise InputError(f"folder {parent} is read-only", path, key)
+
+
+def write_whole(path: str, key: str, write: Callable[[str], None]) -> None:
+    """``write(name)`` whole or not at all (parsolve.io.whole): a failure (a full disk) leaves
+    nothing, and is an InputError naming the output and its option."""
+    from parsolve.errors import InputError
+    from parsolve.io import whole
+
+    try:
+        whole.write_whole(path, write)
+    except OSError as exc:
+        raise InputError(f"cannot write ({exc.strerror}): nothing written", path, key) from None
 
 
 Curve = tuple[str, np.ndarray, list[np.ndarray], np.ndarray]   # label, x, ys, step numbers

@@ -97,6 +97,13 @@ class Result:
         try:
             self.h5 = h5py.File(self.path, "r")
         except (OSError, ValueError) as exc:
+            from parsolve.io.recover import being_written, lock_path
+
+            if being_written(self.path):   # (HDF5's own words would say to h5clear it)
+                raise InputError(f"a run is writing it now (lock held on {lock_path(self.path)}, "
+                                 "the file open for writing): post reads it once the run has "
+                                 "ended; meanwhile h5py.File(path, 'r', swmr=True) follows it",
+                                 self.path) from None
             raise InputError(f"cannot open result file ({_reason(exc)})", self.path) from None
         f = self.file = Group(self.h5, self.path)
         try:

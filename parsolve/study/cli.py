@@ -3,7 +3,8 @@
 
 Writes DIR/study.md, DIR/study.csv and DIR/study.png (and PREFIX.md/.csv/.png with --save),
 prints the table's answer. Exit 2 on bad input (one line naming the file and the key), 3 when
-a run failed (the table still lists it)."""
+a run failed (the table still lists it), 4 when its files cannot be written (a full disk: one
+line, no report file cut)."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ import sys
 import tomllib
 from pathlib import Path
 
-from parsolve.errors import EXIT_INPUT, EXIT_SOLVER, InputError
+from parsolve.errors import EXIT_INPUT, EXIT_OUTPUT, EXIT_SOLVER, InputError
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -34,6 +35,7 @@ def run(args) -> int:
     from parsolve.study.config import load_study
     from parsolve.study.execute import check_quantities, run_grid
     from parsolve.study.grid import expand
+    from parsolve.io.whole import write_whole
 
     parallel, target = _numbers(args)
     study = load_study(args.study, reduced=args.reduced)
@@ -49,13 +51,15 @@ def run(args) -> int:
     head, body = report.table(study, rows, a)
     text = report.markdown(study, rows, a, head, body, target)
     root.mkdir(parents=True, exist_ok=True)
-    (root / "study.md").write_text(text)
-    report.write_csv(root / "study.csv", head, body)
-    report.picture(root / "study.png", study, rows, a, target)
+    write_whole(root / "study.md", lambda name: Path(name).write_text(text))
+    write_whole(root / "study.csv", lambda name: report.write_csv(Path(name), head, body))
+    write_whole(root / "study.png",
+                lambda name: report.picture(Path(name), study, rows, a, target))
     if args.save:
         Path(args.save).parent.mkdir(parents=True, exist_ok=True)
         for ext in ("md", "csv", "png"):
-            shutil.copyfile(root / f"study.{ext}", f"{args.save}.{ext}")
+            write_whole(f"{args.save}.{ext}",
+                        lambda name, ext=ext: shutil.copyfile(root / f"study.{ext}", name))
     print(text)
     failed = [r.setting.name for r in rows if not r.ok]
     if failed:
@@ -115,3 +119,8 @@ def main(argv: list[str]) -> int:
     except InputError as exc:
         print(f"parsolve study: {exc.oneline()}", file=sys.stderr)
         return EXIT_INPUT
+    except OSError as exc:   # its runs' folder or its report (a full disk): one line
+        print(f"parsolve study: {exc.filename or args.out}: cannot write ({exc.strerror or exc}); "
+              "the runs already complete are kept: run the study again once there is room",
+              file=sys.stderr)
+        return EXIT_OUTPUT

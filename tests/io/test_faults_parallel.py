@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from conftest import ROOT
+from helpers.disk import mounted
 from helpers.scene import scene as build
 from helpers.xdmf import SCENE_2D
 
@@ -47,27 +48,18 @@ def launch(ranks: int, args: list[str], wait: bool = True, slow: bool = False):
     return subprocess.run(cmd, env=ENV, capture_output=True, text=True, timeout=600)
 
 
-def _mounted(where, size: str):
-    """A tmpfs of ``size`` at ``where`` (a new folder), unmounted afterwards."""
-    where.mkdir()
-    mount = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(where)],
-                           capture_output=True, text=True)
-    if mount.returncode != 0:
-        pytest.skip(f"cannot mount a small tmpfs here: {mount.stderr.strip()}")
-    yield where
-    subprocess.run(["umount", "-l", str(where)], check=False)
-
-
 @pytest.fixture
 def small_disk(tmp_path):
     """A 3 MB file system (tmpfs)."""
-    yield from _mounted(tmp_path / "disk", "3m")
+    with mounted(tmp_path / "disk", "3m") as where:
+        yield where
 
 
 @pytest.fixture
 def tiny_disk(tmp_path):
     """A 512 kB file system: less than the lock's 1 MiB reserve."""
-    yield from _mounted(tmp_path / "tiny", "512k")
+    with mounted(tmp_path / "tiny", "512k") as where:
+        yield where
 
 
 @pytest.mark.parametrize("ranks", [1, 2, 3])

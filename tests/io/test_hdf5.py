@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
+from helpers.disk import fill, mounted
 from parsolve.errors import OutputError
 from parsolve.io.hdf5 import ResultWriter, open_result
 from parsolve.io.recover import recover
@@ -245,13 +246,7 @@ def test_injected_enospc_in_xdmf(tmp_path, monkeypatch):
 
 def test_full_tmpfs(tmp_path):
     """A real full disk: a 1 MiB tmpfs filled by 40 kB steps."""
-    mnt = tmp_path / "small"
-    mnt.mkdir()
-    proc = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(mnt)],
-                          capture_output=True, text=True)
-    if proc.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs here: {proc.stderr.strip()}")
-    try:
+    with mounted(tmp_path / "small", "1m") as mnt:
         out = mnt / "r.h5"
         w = writer(out, n=50)          # 2601 points, 5000 cells: ~160 kB per step
         times = []
@@ -269,8 +264,31 @@ def test_full_tmpfs(tmp_path):
             t, point_data, _ = r.read_data(len(times) - 1)
             assert t == times[-1]
             np.testing.assert_array_equal(point_data["displacement"][:, :2], times[-1])
-    finally:
-        subprocess.run(["umount", str(mnt)], check=True)
+
+
+def test_recover_without_room_for_its_copy_says_so(tmp_path, capsys):
+    """A killed run's file on a disk with no room left: --recover cannot write its copy. It
+    says that (not "damaged", not "use --recover"), the file is unchanged and nothing is left
+    beside it; once there is room the same command recovers it."""
+    from parsolve.post.cli import main
+
+    with mounted(tmp_path / "small", "256k") as mnt:
+        out = mnt / "r.h5"
+        assert child(out, nsteps=3).returncode == 1
+        before = out.read_bytes()
+        listing = sorted(p.name for p in mnt.iterdir())
+        fill(mnt)
+        assert main([str(out), "--recover"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err == [f"parsolve post: {out}: --recover: cannot recover: no room for its copy "
+                       f"beside it (No space left on device); the file is unchanged: recovering "
+                       f"takes one copy of it ({len(before) / 1e6:.3g} MB), make room and "
+                       "recover again"], err
+        assert out.read_bytes() == before
+        assert sorted(p.name for p in mnt.iterdir()) == sorted(listing + ["fill"])
+        (mnt / "fill").unlink()
+        assert main([str(out), "--recover"]) == 0
+        assert capsys.readouterr().out.startswith(f"{out}: recovered 3 finished step(s)")
 
 
 def test_exception_between_datasets_is_trimmed_at_close(tmp_path, monkeypatch):

@@ -1,6 +1,6 @@
 """post on damaged result files: a truncated, overwritten, deleted or partly garbled file, or one
 holding a non-finite or out-of-scale value, under every command (curve, --summary, --derive,
---recover) is exit 2 with one line naming the file — never a traceback, never a number — and
+--line, --recover) is exit 2 with one line naming the file — never a traceback, never a number — and
 nothing is left behind (in-process command line, results of both output modes)."""
 
 import os
@@ -26,6 +26,8 @@ COMMANDS = {
     "curve": ["--x", "time", "--y", "field:displacement:x@1.5,0.5"],
     "summary": ["--summary"],
     "derive": ["--derive", "{dir}/derived.h5"],
+    "line": ["--line", "0,0.5", "2,0.5", "5", "--y", "field:displacement:x", "--y",
+             "field:displacement:y", "--step", "all"],
 }
 
 
@@ -158,17 +160,22 @@ def test_recover_of_a_damaged_file_says_so(result, damage, capsys, tmp_path):
     assert path.stat().st_size == size and sorted(tmp_path.iterdir()) == [path]
 
 
-def test_every_input_is_checked_before_anything_is_printed(result, capsys, tmp_path):
+@pytest.mark.parametrize("command", ["summary", "curve", "line"])
+def test_every_input_is_checked_before_anything_is_printed(result, command, capsys, tmp_path):
+    """A good file, then a missing one, then a damaged one: nothing printed for the first."""
     missing = tmp_path / "missing.h5"
-    assert main([str(result), str(missing), "--summary"]) == 2
+    assert main([str(result), str(missing)] + COMMANDS[command]) == 2
     captured = capsys.readouterr()
     assert captured.out == ""
     assert captured.err.startswith(f"parsolve post: {missing}: cannot open result file")
     damaged = tmp_path / "nan.h5"
     shutil.copyfile(result, damaged)
     nan(damaged)
-    assert main([str(result), str(damaged), "--summary"]) == 2
-    assert capsys.readouterr().out == ""
+    assert main([str(result), str(damaged)] + COMMANDS[command]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err.startswith(f"parsolve post: {damaged}: "), \
+        captured.err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["nan.h5"]
 
 
 def test_derive_refuses_a_file_being_written(result, capsys, tmp_path):
