@@ -108,6 +108,8 @@ class Effect:
             if m is not None:
                 if at is not None:
                     m.positions = at
+                if term.on_facets:
+                    m.nodes = term.facets
                 out.append((term, m))
         return out
 
@@ -197,10 +199,12 @@ class Effect:
 
 def term_forces(term: Term, m: Matrices, x: np.ndarray, nodes: np.ndarray):
     """K x of a term's values from node values x (npoints, d_trial): ``NodeForces`` at the
-    term's nodes (or a region's cells' nodes), or (nc, nen, d_test) element forces of every
+    term's nodes (or a region's cells', or a facet term's facets'), or (nc, nen, d_test) element forces of every
     cell (``nodes``: those cells' nodes)."""
     if isinstance(m, TermMatrices):
         return m.forces(x)
+    if m.nodes is not None:   # a facet term: its facets' nodes
+        return NodeForces(m.nodes, apply(m, x[m.nodes]))
     if m.positions is None:
         return apply(m, x[nodes])
     return NodeForces(nodes[m.positions], apply(m, x[nodes[m.positions]]))

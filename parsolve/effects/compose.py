@@ -57,9 +57,11 @@ class Composition:
         """The (row components, column components, matrices, factor) parts of a
         ``BlockMatrices`` from term values; ``factor``: a number, or a dict of the test
         field's factor."""
-        for t, m in values:   # a cell term on a region: its cells' own slots
+        for t, m in values:   # a cell term on a region, a facet term: their own slots
             if t.on_cells and t.cells is not None:
                 m.positions, m.slots = t.positions(self.cells), t.slots
+            elif t.on_facets:
+                m.nodes, m.slots = t.facets, t.slots
         return [(self.fields.columns(t.test), self.fields.columns(t.trial), m,
                  factor[t.test] if isinstance(factor, dict) else factor) for t, m in values]
 

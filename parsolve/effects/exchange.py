@@ -22,8 +22,8 @@ import numpy as np
 from parsolve.effects.base import Effect
 from parsolve.errors import InputError
 from parsolve.evolution import CONSTANT
-from parsolve.fem.element_matrices import Term, TermMatrices
-from parsolve.fem.integrals import facet_rule, mass
+from parsolve.fem.element_matrices import ElementMatrices, Term
+from parsolve.fem.integrals import facet_matrices, weighted_mass
 from parsolve.loads.base import (Instant, LoadPattern, LoadSpec, TimedPart, Where,
                                  need_facets, values_at)
 from parsolve.loads.traction import facet_forces
@@ -75,11 +75,8 @@ class Exchange(Effect):
                              spec.key, spec.field, "ambient")
         self.where = Where(mesh, region, fields, thickness, regions, scene)
         need_facets(self.load, self.where)
-        # h ∫ N Nᵀ ds on each of this rank's facets of the region: a term on the facets' nodes
-        rule = facet_rule(mesh.points[region.facets], mesh.facet_type, thickness)
-        values = spec.coefficient * mass(rule)                # (nf, nfn, nfn)
-        self.term = Term(spec.field, spec.field, region.facets)
-        self.matrices = TermMatrices(self.term, values.transpose(1, 2, 0)[None])
+        self.thickness = thickness
+        self.term = Term(spec.field, spec.field, facets=region.facets)   # h ∫ N Nᵀ ds
         first = self._ambient(Instant(scene.times[0] if scene.times else 0.0))   # errors now
         self.part = TimedPart(self._ambient) if self.load.timed else first
 
@@ -92,8 +89,10 @@ class Exchange(Effect):
     def terms(self) -> list[Term]:
         return [self.term]
 
-    def term_values(self, term: Term, cells: np.ndarray) -> TermMatrices:
-        return self.matrices
+    def term_values(self, term: Term, cells: np.ndarray) -> ElementMatrices:
+        h = self.spec.coefficient
+        return facet_matrices(self.mesh.points, term.facets, self.mesh.facet_type,
+                              self.thickness, lambda rule, _: weighted_mass(rule, h))
 
     def patterns(self) -> dict[str, LoadPattern]:
         return {self.spec.key: LoadPattern(self.spec.key, [(self.part, CONSTANT)])}

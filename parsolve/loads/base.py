@@ -16,9 +16,8 @@ from typing import Callable
 import numpy as np
 
 from parsolve.errors import InputError
+from parsolve.fem.integrals import FACET_BLOCK
 from parsolve.mesh import selectors
-
-FACET_BLOCK = 4096   # facets or cells integrated at once (bounded work arrays)
 
 
 @dataclass
