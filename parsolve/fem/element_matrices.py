@@ -483,8 +483,9 @@ class Term:
       nodes, whether or not a cell holds them together).
 
     ``rate``: a capacity term (M, weighed by 1/Δt in a transient step) rather than a
-    stiffness. ``trial`` None: a vector term, a load on the test field (values: element
-    forces, no slots; see ``loads.base.VectorTerm`` for the loads' own).
+    stiffness. ``trial`` None: a vector term, a load on the test field: its values are forces
+    (``NodeForces`` at its domain's nodes, from its declarer's ``vector_values`` at the step's
+    instant), it has no slots, and it belongs to a load pattern (``loads.base``).
 
     The system derives the stiffness pattern from the cells and the declared terms, and gives
     each term its slots there (``slots`` (m, m, k): node pair (i, j) of tuple, facet or cell
@@ -507,6 +508,11 @@ class Term:
     # the rank declares those with a node it owns, and gives their forces itself
     global_ids: bool = False
     facets: np.ndarray | None = None  # (k, nfn) local nodes of boundary facets: a facet term
+    # a vector term (a load): the pattern it belongs to (None: its declarer's), its factor in
+    # time (None: constant), and whether its values depend on t (assembled at every instant)
+    pattern: str | None = None
+    evolution: Callable | None = None
+    timed: bool = False
 
     def __post_init__(self) -> None:
         if self.facets is not None:

@@ -5,24 +5,22 @@ from __future__ import annotations
 
 import numpy as np
 
+from parsolve.fem.element_matrices import NodeForces
 from parsolve.fem.integrals import facet_rule, integrate
-from parsolve.loads.base import (Instant, LoadSpec, Where, blocks, field_dofs, need_facets,
-                                 scatter, values_at)
+from parsolve.loads.base import Instant, LoadSpec, Where, blocks, need_facets, values_at
 
 
-def facet_forces(spec: LoadSpec, where: Where, value) -> np.ndarray:
-    """Σ ∫ N_a v ds over the region's facets as a full vector; ``value(rule)`` gives the
-    force per unit area (nf, nq, ncomp) at the rule's points."""
+def facet_forces(where: Where, value) -> list[NodeForces]:
+    """∫ N_a v ds on the region's facets, facet block after facet block; ``value(rule)``
+    gives the force per unit area (nf, nq, ncomp) at the rule's points."""
     facets = where.region.facets
-    out = np.zeros(where.ndof)
+    out = []
     for sl in blocks(facets.shape[0]):
         rule = facet_rule(where.mesh.points[facets[sl]], where.mesh.facet_type, where.thickness)
-        fe = integrate(rule, value(rule))
-        out += scatter(where.ndof, field_dofs(where.fields, spec.field, facets[sl]),
-                       fe.reshape(fe.shape[0], -1))
+        out.append(NodeForces(facets[sl], integrate(rule, value(rule))))
     return out
 
 
-def assemble(spec: LoadSpec, where: Where, at: Instant) -> np.ndarray:
+def forces(spec: LoadSpec, where: Where, at: Instant) -> list[NodeForces]:
     need_facets(spec, where)
-    return facet_forces(spec, where, lambda rule: values_at(spec, rule.points, at, where.source))
+    return facet_forces(where, lambda rule: values_at(spec, rule.points, at, where.source))
