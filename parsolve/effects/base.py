@@ -17,6 +17,8 @@ declared the same way (``loads``).
 
 from __future__ import annotations
 
+from typing import Iterable
+
 import numpy as np
 
 from parsolve.fem.element_matrices import (ElementMatrices, NodeForces, Term, TermMatrices,
@@ -112,11 +114,12 @@ class Effect:
                 out.append((term, m))
         return out
 
-    def vector_values(self, term: Term, cells: np.ndarray, at: Instant) -> list[NodeForces]:
+    def vector_values(self, term: Term, cells: np.ndarray, at: Instant) -> Iterable[NodeForces]:
         """The forces of one of its vector terms at the step's instant ``at``, as
-        ``NodeForces`` (a list: block after block). By default constant: ``term_values`` of
-        the term's cells among ``cells`` (the composition's: element forces (nc, nen, d)) or
-        the ``NodeForces`` it gives; an effect whose loads vary in time overrides this."""
+        ``NodeForces`` block after block (a list, or a generator: one block at a time). By
+        default constant: ``term_values`` of the term's cells among ``cells`` (the
+        composition's: element forces (nc, nen, d)) or the ``NodeForces`` it gives; an effect
+        whose loads vary in time overrides this."""
         where = term.positions(cells) if term.on_cells else None
         chosen = cells if where is None else cells[where]
         f = self.term_values(term, chosen)
@@ -196,8 +199,8 @@ class Effect:
 
 def term_forces(term: Term, m: Matrices, x: np.ndarray, nodes: np.ndarray):
     """K x of a term's values from node values x (npoints, d_trial): ``NodeForces`` at the
-    term's nodes (or a region's cells', or a facet term's facets'), or (nc, nen, d_test) element forces of every
-    cell (``nodes``: those cells' nodes)."""
+    term's nodes (or a region's cells', or a facet term's facets'), or (nc, nen, d_test)
+    element forces of every cell (``nodes``: those cells' nodes)."""
     if isinstance(m, TermMatrices):
         return m.forces(x)
     if m.nodes is not None:   # a facet term: its facets' nodes

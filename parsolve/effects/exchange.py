@@ -16,6 +16,8 @@ Scene schema (one table per condition)::
 
 from __future__ import annotations
 
+from typing import Iterable
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -77,7 +79,9 @@ class Exchange(Effect):
         self.term = Term(spec.field, spec.field, facets=region.facets)   # h ∫ N Nᵀ ds
         self.ambient = Term(spec.field, None, facets=region.facets,      # h ∫ N T∞ ds
                             timed=self.load.timed)
-        self.vector_values(self.ambient, None, Instant(scene.times[0] if scene.times else 0.0))
+        first = Instant(scene.times[0] if scene.times else 0.0)
+        for _ in self.vector_values(self.ambient, None, first):   # the ambient's errors now
+            pass
 
     def terms(self) -> list[Term]:
         return [self.term, self.ambient]
@@ -87,7 +91,7 @@ class Exchange(Effect):
         return facet_matrices(self.mesh.points, term.facets, self.mesh.facet_type,
                               self.thickness, lambda rule, _: weighted_mass(rule, h))
 
-    def vector_values(self, term: Term, cells, at: Instant) -> list[NodeForces]:
+    def vector_values(self, term: Term, cells, at: Instant) -> Iterable[NodeForces]:
         """h ∫ N T∞ ds at an instant, facet block after facet block (input errors at the
         first: the ambient's expression)."""
         h = self.spec.coefficient

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import ast
 from dataclasses import dataclass, field
+from typing import Iterable
 
 import numpy as np
 
@@ -72,11 +73,13 @@ def uses_time(expr: str) -> bool:
     return any(isinstance(n, ast.Name) and n.id == "t" for n in ast.walk(tree))
 
 
-def scatter_forces(fields, ndof: int, name: str, forces: list[NodeForces]) -> np.ndarray:
+def scatter_forces(fields, ndof: int, name: str, forces: Iterable[NodeForces]) -> np.ndarray:
     """Forces at node tuples on the field ``name`` as a full vector (this mesh's DOFs), block
-    after block."""
+    after block (an iterable: a generator holds one block at a time)."""
     out = np.zeros(ndof)
     for f in forces:
+        if len(f.nodes) == 0:   # (a rank holding none of the domain)
+            continue
         out += scatter(ndof, field_dofs(fields, name, f.nodes), f.values.reshape(len(f.nodes), -1))
     return out
 

@@ -4,6 +4,8 @@ its registry entry's at the step's instant."""
 
 from __future__ import annotations
 
+from typing import Iterable
+
 import numpy as np
 
 from parsolve.fem.element_matrices import NodeForces, Term
@@ -34,6 +36,6 @@ class SceneLoads:
     def terms(self) -> list[Term]:
         return list(self.loads)
 
-    def vector_values(self, term: Term, cells: np.ndarray, at: Instant) -> list[NodeForces]:
+    def vector_values(self, term: Term, cells: np.ndarray, at: Instant) -> Iterable[NodeForces]:
         spec, where = self.loads[term]
         return LOADS[spec.kind].forces(spec, where, at)

@@ -4,6 +4,8 @@ entries override earlier ones on shared cells, as for the other parameters)."""
 
 from __future__ import annotations
 
+from typing import Iterable
+
 import numpy as np
 
 from parsolve.errors import InputError
@@ -21,7 +23,7 @@ def densities(spec: LoadSpec, where: Where) -> np.ndarray:
     return rho
 
 
-def forces(spec: LoadSpec, where: Where, at: Instant) -> list[NodeForces]:
+def forces(spec: LoadSpec, where: Where, at: Instant) -> Iterable[NodeForces]:
     need_cells(spec, where)
     rho = densities(spec, where)
     missing = where.regions.cell_count(where.region.cells[np.isnan(rho[where.region.cells])])

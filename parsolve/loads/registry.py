@@ -1,6 +1,7 @@
-"""The loads parsolve knows: each names its scene key, the values it takes, where it acts and
-the forces of its vector term (its module's ``forces``). A ``[[loads]]`` entry gives exactly one of these keys; adding
-a load kind is a module and one line here.
+"""The loads parsolve knows: each names its scene key, the values it takes, the domain of its
+vector term (facets, cells or nodes of its region) and its forces there (its module's
+``forces``). A ``[[loads]]`` entry gives exactly one of these keys; adding a load kind is a
+module and one line here.
 
 Every entry reads the same common keys (``name``, ``field``, ``region``, ``evolution``) and its
 own value: ``field`` values (one per component of the loaded field), ``one`` value (a pressure)
@@ -17,7 +18,7 @@ from parsolve.loads import body, gravity, nodal, pressure, total_force, traction
 
 @dataclass(frozen=True)
 class LoadEntry:
-    forces: Callable            # (LoadSpec, Where, Instant) -> list of NodeForces
+    forces: Callable            # (LoadSpec, Where, Instant) -> NodeForces block after block
     domain: str                 # its vector term's: "facets", "cells" or "nodes"
     values: str                 # "field", "one" or "dim"
     on: str                     # "vector" (a vector field), "scalar" (a scalar one) or "any"
@@ -45,7 +46,8 @@ LOADS: dict[str, LoadEntry] = {
                       "flux into the domain per unit area of a boundary region"),
     "source": LoadEntry(body.forces, "cells", "field", "scalar", True, "all", "body",
                         "source per unit volume on a region's cells"),
-    "total_flux": LoadEntry(total_force.forces, "facets", "field", "scalar", False, None, "total_force",
+    "total_flux": LoadEntry(total_force.forces, "facets", "field", "scalar", False, None,
+                            "total_force",
                             "total flux spread uniformly over a boundary region"),
 }
 

@@ -4,6 +4,8 @@ facets counted once)."""
 
 from __future__ import annotations
 
+from typing import Iterable
+
 import numpy as np
 
 from parsolve.fem.element_matrices import NodeForces
@@ -19,7 +21,7 @@ def measure(where: Where) -> float:
     return where.regions.facet_total(facets, rule.weights.sum(axis=1))
 
 
-def forces(spec: LoadSpec, where: Where, at: Instant) -> list[NodeForces]:
+def forces(spec: LoadSpec, where: Where, at: Instant) -> Iterable[NodeForces]:
     need_facets(spec, where)
     traction = np.asarray(spec.vector, dtype=float) / measure(where)
     return facet_forces(where, lambda rule: np.broadcast_to(
