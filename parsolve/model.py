@@ -17,8 +17,8 @@ from parsolve.effects.elasticity import Elasticity
 from parsolve.effects.registry import EFFECTS
 from parsolve.errors import InputError
 from parsolve.fields import FieldSet
-from parsolve.loads.base import Instant, LoadPattern
-from parsolve.loads.build import load_patterns
+from parsolve.loads.base import Instant, LoadPattern, load_patterns
+from parsolve.loads.build import SceneLoads
 from parsolve.mesh import blocks, gmsh, memory
 from parsolve.mesh.checks import check_mesh
 from parsolve.mesh.distribute import LocalMesh, distribute
@@ -305,12 +305,18 @@ def build_model(scene: Scene, comm=None) -> Model:
     # a check of a rank's part (cells without a material) fails there alone: every rank
     # raises it (the checks that decide for the whole mesh are collective)
     effects, fields = progress.timed("effects", agree, comm, build_effects, scene, mesh, regions)
-    patterns = agree(comm, load_patterns, mesh, scene, regions, fields)
+    # every load is a declared vector term: the scene's, then the effects' (their patterns
+    # named by their scene keys), assembled on the composition's local cells
+    cells = mesh.partition().local_cells(comm.rank, mesh.cells)
+    ndof = mesh.num_points * fields.ncomp
+    first = Instant(scene.times[0] if scene.times else 0.0)
+    patterns = agree(comm, lambda: load_patterns([SceneLoads(mesh, scene, regions, fields)],
+                                                 cells, fields, ndof, first))   # errors now
     relations = progress.timed("relations", agree, comm, build_relations, scene.relations,
                                regions, scene.evolutions, patterns, fields, scene.source,
                                scene.solver.eliminate, scene.thickness)
-    for e in effects:   # the effects' own patterns (their names are their scene keys)
-        patterns.update(e.patterns())
+    for name, pattern in load_patterns(effects, cells, fields, ndof).items():
+        patterns.setdefault(name, LoadPattern(name)).parts += pattern.parts
     names = {r.name for r in relations}
     for e in effects:
         for r in e.relations():

@@ -8,11 +8,16 @@ declares (``terms``: test field, trial field, domain -- cells of a region or tup
 -- and nature), whose values it gives as ``ElementMatrices`` over the domain's cells,
 cell-last, in bounded cell blocks, or ``TermMatrices`` on the node tuples: ``term_values``
 for a linear term (and a rate term's capacity), ``evaluate`` for the tangent of a nonlinear
-one. A term without a trial field is a vector term: a constant load on its test field, whose
-``term_values`` are element forces (nc, nen, d) of the domain's cells, or ``NodeForces``.
+one. A term without a trial field is a vector term: a load on its test field, on cells,
+facets or nodes, whose forces ``vector_values`` gives at the step's instant (constant ones:
+``term_values``, element forces (nc, nen, d) of the domain's cells, or ``NodeForces``); its
+pattern and evolution are declared with it, and the scene's ``[[loads]]`` are vector terms
+declared the same way (``loads``).
 """
 
 from __future__ import annotations
+
+from typing import Iterable
 
 import numpy as np
 
@@ -40,25 +45,21 @@ class Effect:
     def fields(self) -> list[Field]:
         return []
 
-    def patterns(self) -> dict:
-        """Load patterns of its own {name: ``loads.base.LoadPattern``} (parts may vary in
-        time: an exchange condition's h ∫ N T∞(t)), applied with the scene's; none by default."""
-        return {}
-
     def terms(self) -> list[Term]:
         """Every term it contributes to the operator, declared once (the same objects at
         every call): stiffness terms on cells (elasticity, conduction, a coupling), capacity
         terms (``rate``), terms on tuples of nodes (springs, a node's penalty block, a
-        boundary exchange) and vector terms (constant loads: thermal expansion's reference
-        state). The system derives its pattern from the matrix terms and gives each its slots;
-        the composition adds the vector terms to every step's known loads. None by default."""
+        boundary exchange: a facet term) and vector terms (loads: thermal expansion's
+        reference state, an exchange's h ∫ N T∞). The system derives its pattern from the
+        matrix terms and gives each its slots; the model makes load patterns of the vector
+        terms (``loads.base.load_patterns``), applied at every step. None by default."""
         return []
 
     def term_values(self, term: Term, cells: np.ndarray) -> Matrices | None:
         """The values of one of its declared terms on ``cells`` (the local cells of a cell
         term's domain): a linear term's, a nonlinear one's initial tangent, a rate term's
-        capacity, a vector term's forces. None: nothing until ``evaluate`` gives its
-        tangent."""
+        capacity (a vector term's constant forces: see ``vector_values``). None: nothing
+        until ``evaluate`` gives its tangent."""
         return None
 
     def couple(self, effects: list["Effect"]) -> None:
@@ -108,22 +109,23 @@ class Effect:
             if m is not None:
                 if at is not None:
                     m.positions = at
+                if term.on_facets:
+                    m.nodes = term.facets
                 out.append((term, m))
         return out
 
-    def load_values(self, cells: np.ndarray) -> dict[str, list]:
-        """The forces of its vector terms {test field: [element forces (nc, nen, d) of these
-        cells, or ``NodeForces``]} (a term on a region: ``NodeForces`` of its cells)."""
-        out: dict[str, list] = {}
-        for term in self.terms():
-            if not term.vector:
-                continue
-            at = term.positions(cells) if term.on_cells else None
-            f = self.term_values(term, cells if at is None else cells[at])
-            if at is not None:
-                f = NodeForces(self.cells_nodes(cells[at]), f)
-            out.setdefault(term.test, []).append(f)
-        return out
+    def vector_values(self, term: Term, cells: np.ndarray, at: Instant) -> Iterable[NodeForces]:
+        """The forces of one of its vector terms at the step's instant ``at``, as
+        ``NodeForces`` block after block (a list, or a generator: one block at a time). By
+        default constant: ``term_values`` of the term's cells among ``cells`` (the
+        composition's: element forces (nc, nen, d)) or the ``NodeForces`` it gives; an effect
+        whose loads vary in time overrides this."""
+        where = term.positions(cells) if term.on_cells else None
+        chosen = cells if where is None else cells[where]
+        f = self.term_values(term, chosen)
+        if term.on_cells:
+            f = NodeForces(self.cells_nodes(chosen), f)
+        return f if isinstance(f, list) else [f]
 
     def cells_nodes(self, cells: np.ndarray) -> np.ndarray:
         return self.mesh.cells[cells]
@@ -197,10 +199,12 @@ class Effect:
 
 def term_forces(term: Term, m: Matrices, x: np.ndarray, nodes: np.ndarray):
     """K x of a term's values from node values x (npoints, d_trial): ``NodeForces`` at the
-    term's nodes (or a region's cells' nodes), or (nc, nen, d_test) element forces of every
-    cell (``nodes``: those cells' nodes)."""
+    term's nodes (or a region's cells', or a facet term's facets'), or (nc, nen, d_test)
+    element forces of every cell (``nodes``: those cells' nodes)."""
     if isinstance(m, TermMatrices):
         return m.forces(x)
+    if m.nodes is not None:   # a facet term: its facets' nodes
+        return NodeForces(m.nodes, apply(m, x[m.nodes]))
     if m.positions is None:
         return apply(m, x[nodes])
     return NodeForces(nodes[m.positions], apply(m, x[nodes[m.positions]]))

@@ -39,7 +39,7 @@ class Composition:
         self.fields = model.fields
         self.nodes = model.mesh.cells[cells]                 # (nc, nen)
         self.npoints = model.mesh.num_points
-        self._mass, self._loads = None, None
+        self._mass = None
         self.now = Instant(0.0)   # the step's instant: every effect's evaluation reads it
         for e in model.effects:
             e.couple(model.effects)
@@ -57,9 +57,11 @@ class Composition:
         """The (row components, column components, matrices, factor) parts of a
         ``BlockMatrices`` from term values; ``factor``: a number, or a dict of the test
         field's factor."""
-        for t, m in values:   # a cell term on a region: its cells' own slots
+        for t, m in values:   # a cell term on a region, a facet term: their own slots
             if t.on_cells and t.cells is not None:
                 m.positions, m.slots = t.positions(self.cells), t.slots
+            elif t.on_facets:
+                m.nodes, m.slots = t.facets, t.slots
         return [(self.fields.columns(t.test), self.fields.columns(t.trial), m,
                  factor[t.test] if isinstance(factor, dict) else factor) for t, m in values]
 
@@ -89,26 +91,15 @@ class Composition:
         return self.now
 
     def known_loads(self, t: float, t_prev: float, theta: float | None) -> np.ndarray:
-        """The loads a step balances: F(t), or in a θ-scheme step θ F(t) + (1 - θ) F(t_n) on
-        the equations of fields with a capacity (F(t) elsewhere); plus the effects' vector
-        terms (constant loads)."""
+        """The loads a step balances, the model's load patterns (every declared vector term:
+        the scene's loads and the effects'): F(t), or in a θ-scheme step θ F(t) + (1 - θ)
+        F(t_n) on the equations of fields with a capacity (F(t) elsewhere)."""
         scheme = 1.0 if theta is None else theta
         f = self.model.external_load(Instant(t, t - t_prev, scheme))
         if scheme != 1.0:
             w = self.theta_dofs(theta)
             f = w * f + (1.0 - w) * self.model.external_load(Instant(t_prev, t - t_prev, scheme))
-        own = self.effect_loads()
-        return f if own is None else f + own
-
-    def effect_loads(self) -> np.ndarray | None:
-        """The effects' vector terms (``Term.vector``: constant loads) as a full vector,
-        built once (None: no effect declares any)."""
-        if self._loads is None:
-            parts = [p for e in self.model.effects if (p := e.load_values(self.cells))]
-            self._loads = np.zeros(self.ndof) if parts else False
-            for p in parts:
-                self._scatter(p, self._loads)
-        return None if self._loads is False else self._loads
+        return f
 
     def _scatter(self, forces: dict, out: np.ndarray, factor: float = 1.0) -> None:
         """Add forces {field: element forces (nc, nen, ncomp) of the cells, ``NodeForces`` of

@@ -1,8 +1,9 @@
 """An exchange (Robin, convection) condition on a scalar field: the flux leaving a boundary
 region is h (T − T∞), with h a constant coefficient and T∞ (the ambient value) a number or an
-expression of (x, y, z, t). It adds the facet term h ∫ N Nᵀ to the field's operator and the
-load h ∫ N T∞ (assembled again at each instant when T∞ names t); with the θ-scheme both are
-weighted as the field's other terms, and a steady run solves with them alike.
+expression of (x, y, z, t). It declares two facet terms on the region: h ∫ N Nᵀ on the field's
+operator and the vector term h ∫ N T∞ (its load pattern named by its scene key, assembled again
+at each instant when T∞ names t); with the θ-scheme both are weighted as the field's other
+terms, and a steady run solves with them alike.
 
 Scene schema (one table per condition)::
 
@@ -15,17 +16,17 @@ Scene schema (one table per condition)::
 
 from __future__ import annotations
 
+from typing import Iterable
+
 from dataclasses import dataclass
 
 import numpy as np
 
 from parsolve.effects.base import Effect
 from parsolve.errors import InputError
-from parsolve.evolution import CONSTANT
-from parsolve.fem.element_matrices import Term, TermMatrices
-from parsolve.fem.integrals import facet_rule, mass
-from parsolve.loads.base import (Instant, LoadPattern, LoadSpec, TimedPart, Where,
-                                 need_facets, values_at)
+from parsolve.fem.element_matrices import ElementMatrices, NodeForces, Term
+from parsolve.fem.integrals import facet_matrices, weighted_mass
+from parsolve.loads.base import Instant, LoadSpec, Where, need_facets, values_at
 from parsolve.loads.traction import facet_forces
 
 KEYS = {"field": ("string", "the scalar field exchanging"),
@@ -69,31 +70,30 @@ class Exchange(Effect):
         if spec.field not in fields or fields[spec.field].ncomp != 1:
             raise InputError(f"{spec.field!r} is not a scalar field of the scene", scene.source,
                              spec.key + ".field")
-        thickness = scene.thickness if mesh.dim == 2 else 1.0
+        self.thickness = scene.thickness if mesh.dim == 2 else 1.0
         region = regions(spec.region, spec.key + ".region")
-        self.load = LoadSpec("exchange", spec.region, "traction", [spec.ambient], "constant",
+        self.load = LoadSpec(spec.key, spec.region, "traction", [spec.ambient], "constant",
                              spec.key, spec.field, "ambient")
-        self.where = Where(mesh, region, fields, thickness, regions, scene)
+        self.where = Where(mesh, region, fields, self.thickness, regions, scene)
         need_facets(self.load, self.where)
-        # h ∫ N Nᵀ ds on each of this rank's facets of the region: a term on the facets' nodes
-        rule = facet_rule(mesh.points[region.facets], mesh.facet_type, thickness)
-        values = spec.coefficient * mass(rule)                # (nf, nfn, nfn)
-        self.term = Term(spec.field, spec.field, region.facets)
-        self.matrices = TermMatrices(self.term, values.transpose(1, 2, 0)[None])
-        first = self._ambient(Instant(scene.times[0] if scene.times else 0.0))   # errors now
-        self.part = TimedPart(self._ambient) if self.load.timed else first
-
-    def _ambient(self, at: Instant) -> np.ndarray:
-        """h ∫ N T∞ ds at an instant (a full vector)."""
-        h = self.spec.coefficient
-        return facet_forces(self.load, self.where, lambda rule: h * values_at(
-            self.load, rule.points, at, self.where.source))
+        self.term = Term(spec.field, spec.field, facets=region.facets)   # h ∫ N Nᵀ ds
+        self.ambient = Term(spec.field, None, facets=region.facets,      # h ∫ N T∞ ds
+                            timed=self.load.timed)
+        first = Instant(scene.times[0] if scene.times else 0.0)
+        for _ in self.vector_values(self.ambient, None, first):   # the ambient's errors now
+            pass
 
     def terms(self) -> list[Term]:
-        return [self.term]
+        return [self.term, self.ambient]
 
-    def term_values(self, term: Term, cells: np.ndarray) -> TermMatrices:
-        return self.matrices
+    def term_values(self, term: Term, cells: np.ndarray) -> ElementMatrices:
+        h = self.spec.coefficient
+        return facet_matrices(self.mesh.points, term.facets, self.mesh.facet_type,
+                              self.thickness, lambda rule, _: weighted_mass(rule, h))
 
-    def patterns(self) -> dict[str, LoadPattern]:
-        return {self.spec.key: LoadPattern(self.spec.key, [(self.part, CONSTANT)])}
+    def vector_values(self, term: Term, cells, at: Instant) -> Iterable[NodeForces]:
+        """h ∫ N T∞ ds at an instant, facet block after facet block (input errors at the
+        first: the ambient's expression)."""
+        h = self.spec.coefficient
+        return facet_forces(self.where, lambda rule: h * values_at(self.load, rule.points, at,
+                                                                   self.where.source))

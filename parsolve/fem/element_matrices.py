@@ -76,6 +76,8 @@ class ElementMatrices:
         # slots (``Term.slots``); None: every cell, whose slots the reductions are given
         self.positions: np.ndarray | None = None
         self.slots: np.ndarray | None = None
+        # a term on facets: its facets' nodes (k, nfn), its "cells" (None: cells)
+        self.nodes: np.ndarray | None = None
 
     @property
     def factored(self) -> bool:
@@ -436,7 +438,7 @@ class BlockMatrices:
         out = self.reduce(pair_slot, npairs)
         nc = self.ncomp
         for (ci, cj, m0, fac), (_, _, m1, _) in zip(self.parts, other.parts):
-            if not isinstance(m0, ElementMatrices) or cells.size == 0:
+            if not isinstance(m0, ElementMatrices) or m0.nodes is not None or cells.size == 0:
                 continue
             at = cells if m0.positions is None else np.flatnonzero(np.isin(m0.positions, cells))
             if at.size == 0:
@@ -469,23 +471,33 @@ def cell_values(m: ElementMatrices, cells: np.ndarray) -> np.ndarray:
 @dataclass(eq=False)   # a term is itself (hashable): equal values do not make two terms one
 class Term:
     """A term an effect declares once, at set-up: its test and trial fields, its domain and
-    its nature. The domain is either cells (``nodes`` None: the cells of a region, ``cells``
-    its mesh cell numbers, or every cell with ``cells`` None) or tuples of nodes (``nodes``:
-    k tuples of m local nodes, a node to the ground, a pair of nodes, a boundary facet's
-    nodes, whether or not a cell holds them together). ``rate``: a capacity term (M, weighed
-    by 1/Δt in a transient step) rather than a stiffness. ``trial`` None: a vector term, a
-    constant load on the test field (values: element forces, no slots).
+    its nature. The domain is one of
+
+    - cells (the default): every cell (``cells`` None) or the cells of a region (``cells``:
+      their mesh cell numbers);
+    - facets (``facets``: (k, nfn) local nodes of boundary facets of a region, outward as the
+      region gives them): a boundary integral, its element arrays (d², nfn, nfn, k) given in
+      facet blocks (``fem.integrals.facet_matrices``), its pattern the cells' own (a boundary
+      facet lies in one of this rank's cells);
+    - tuples of nodes (``nodes``: k tuples of m local nodes, a node to the ground, a pair of
+      nodes, whether or not a cell holds them together).
+
+    ``rate``: a capacity term (M, weighed by 1/Δt in a transient step) rather than a
+    stiffness. ``trial`` None: a vector term, a load on the test field: its values are forces
+    (``NodeForces`` at its domain's nodes, from its declarer's ``vector_values`` at the step's
+    instant), it has no slots, and it belongs to a load pattern (``loads.base``).
 
     The system derives the stiffness pattern from the cells and the declared terms, and gives
-    each term its slots there (``slots`` (m, m, k): node pair (i, j) of tuple or cell k; the
-    pattern's ``nnzb`` where another rank owns the row, which drops it; None for a term on
-    every cell, whose slots are the cells' own): each rank declares the terms on its local
+    each term its slots there (``slots`` (m, m, k): node pair (i, j) of tuple, facet or cell
+    k; the pattern's ``nnzb`` where another rank owns the row, which drops it; None for a term
+    on every cell, whose slots are the cells' own): each rank declares the terms on its local
     nodes, and a row's entries are its owner's. Its values come as ``ElementMatrices`` (cell
-    terms, in bounded cell blocks) or ``TermMatrices`` (node tuples), paired with the term."""
+    and facet terms, in bounded blocks) or ``TermMatrices`` (node tuples), paired with the
+    term."""
 
     test: str
     trial: str | None                 # None: a vector term (a load)
-    nodes: np.ndarray | None = None   # (k, m) local nodes; None: a cell term
+    nodes: np.ndarray | None = None   # (k, m) local nodes; None: a cell or facet term
     symmetric: bool = True
     linear: bool = True
     rate: bool = False
@@ -495,8 +507,16 @@ class Term:
     # need not be on this rank's part (a contact pair: a slave node and its master facet's);
     # the rank declares those with a node it owns, and gives their forces itself
     global_ids: bool = False
+    facets: np.ndarray | None = None  # (k, nfn) local nodes of boundary facets: a facet term
+    # a vector term (a load): the pattern it belongs to (None: its declarer's), its factor in
+    # time (None: constant), and whether its values depend on t (assembled at every instant)
+    pattern: str | None = None
+    evolution: Callable | None = None
+    timed: bool = False
 
     def __post_init__(self) -> None:
+        if self.facets is not None:
+            self.facets = np.asarray(self.facets, dtype=np.int64)
         if self.nodes is None:
             return
         nodes = np.asarray(self.nodes, dtype=np.int64)
@@ -504,7 +524,15 @@ class Term:
 
     @property
     def on_cells(self) -> bool:
-        return self.nodes is None
+        return self.nodes is None and self.facets is None
+
+    @property
+    def on_facets(self) -> bool:
+        return self.facets is not None
+
+    @property
+    def on_nodes(self) -> bool:
+        return self.nodes is not None
 
     @property
     def vector(self) -> bool:

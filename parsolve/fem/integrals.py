@@ -12,12 +12,17 @@ of the facet's own geometry (a six-node triangle or three-node line follows the 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
 from parsolve.fem.axisymmetric import is_axisymmetric, scale
+from parsolve.fem.element_matrices import CellKernel, ElementMatrices
 from parsolve.fem.elements import (default_degree, element, facet_measure_and_normal,
                                    physical_gradients, polynomial_order, quadrature)
+
+
+FACET_BLOCK = 4096   # facets or cells integrated at once (bounded work arrays)
 
 
 @dataclass
@@ -67,3 +72,34 @@ def integrate(rule: Rule, values: np.ndarray) -> np.ndarray:
 def mass(rule: Rule) -> np.ndarray:
     """∫ N_a N_b over each facet or cell: (n, nen, nen)."""
     return np.einsum("qa,qb,nq->nab", rule.N, rule.N, rule.weights)
+
+
+def facet_matrices(points: np.ndarray, facets: np.ndarray, facet_type: str, thickness,
+                   values: Callable[[Rule, slice], np.ndarray], rows: int = 1,
+                   block: int | None = None) -> ElementMatrices:
+    """A facet term's element arrays (rows, nfn, nfn, k) on ``facets`` (k, nfn), computed in
+    blocks of at most ``FACET_BLOCK`` facets when asked (assembly, products), never all at
+    once: ``values(rule, block)`` gives a block's arrays from its quadrature rule (e.g.
+    ``weighted_mass(rule, h)``)."""
+    nfn = facets.shape[1]
+
+    def compute(sl, out):
+        block = facets[sl]
+        rule = facet_rule(points[block], facet_type, thickness)
+        v = values(rule, sl)
+        if out is not None and out.shape == v.shape:
+            out[...] = v
+            return out
+        return v
+
+    m = ElementMatrices(kernel=CellKernel(compute, facets.shape[0], rows, nfn,
+                                          block=FACET_BLOCK if block is None else block))
+    m.nodes = facets
+    return m
+
+
+def weighted_mass(rule: Rule, c) -> np.ndarray:
+    """∫ c N_a N_b over each facet or cell, cell-last as a term's values (1, nen, nen, n);
+    ``c`` a number or (n, nq) values at the rule's points."""
+    w = rule.weights * c
+    return np.einsum("qa,qb,nq->abn", rule.N, rule.N, w)[None]

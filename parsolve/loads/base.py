@@ -1,24 +1,28 @@
-"""What every load kind shares: the scene's load entry (``LoadSpec``), the instant a load is
-evaluated at (``Instant``: t, Δt, θ), named patterns of parts, and values given as numbers or
-as expressions of (x, y, z, t) evaluated at quadrature points or nodes.
+"""What every load shares: the scene's load entry (``LoadSpec``), the instant a load is
+evaluated at (``Instant``: t, Δt, θ), values given as numbers or as expressions of (x, y, z, t)
+evaluated at quadrature points or nodes, and named patterns of vector terms.
 
-A part that does not depend on time is a vector assembled once and scaled by its evolution
-(as cheap as a constant load can be); a part whose expression names ``t`` is assembled again
-at each instant it is asked for (the last two instants are kept: a θ-step asks for t and t_n).
+Every load is a vector term (``Term`` without a trial field, on cells, facets or nodes)
+declared by its declarer -- an effect (an exchange's h ∫ N T∞, thermal expansion's reference
+state) or the scene's ``[[loads]]`` (``loads.build.SceneLoads``) -- with its pattern and
+evolution; its forces come from the declarer's ``vector_values(term, cells, at)`` at the step's
+instant. Patterns (the known loads, a control's dual, the arc-length's reference) are built
+from those declarations alone (``load_patterns``).
 """
 
 from __future__ import annotations
 
 import ast
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Iterable
 
 import numpy as np
 
 from parsolve.errors import InputError
+from parsolve.evolution import CONSTANT
+from parsolve.fem.element_matrices import NodeForces, Term
+from parsolve.fem.integrals import FACET_BLOCK
 from parsolve.mesh import selectors
-
-FACET_BLOCK = 4096   # facets or cells integrated at once (bounded work arrays)
 
 
 @dataclass
@@ -69,40 +73,90 @@ def uses_time(expr: str) -> bool:
     return any(isinstance(n, ast.Name) and n.id == "t" for n in ast.walk(tree))
 
 
-@dataclass
-class TimedPart:
-    """A part assembled at each instant (``assemble(at)``: a full vector)."""
+def scatter_forces(fields, ndof: int, name: str, forces: Iterable[NodeForces]) -> np.ndarray:
+    """Forces at node tuples on the field ``name`` as a full vector (this mesh's DOFs), block
+    after block (an iterable: a generator holds one block at a time)."""
+    out = np.zeros(ndof)
+    for f in forces:
+        if len(f.nodes) == 0:   # (a rank holding none of the domain)
+            continue
+        out += scatter(ndof, field_dofs(fields, name, f.nodes), f.values.reshape(len(f.nodes), -1))
+    return out
 
-    assemble: Callable[[Instant], np.ndarray]
+
+@dataclass(eq=False)
+class VectorPart:
+    """A declared vector term (``Term`` without a trial field) of a declarer (an effect, the
+    scene's loads: anything with ``vector_values(term, cells, at)``) as a full vector at an
+    instant: assembled once when its values do not depend on time (``Term.timed`` False: as
+    cheap as a constant load can be), else at each instant it is asked for (the last two kept:
+    a θ-step asks for t and t_n). ``cells``: the composition's local cells (a cell term's
+    domain when it names no region)."""
+
+    owner: object
+    term: Term
+    cells: np.ndarray
+    fields: object
+    ndof: int
     cache: dict = field(default_factory=dict)
 
     def __call__(self, at: Instant) -> np.ndarray:
-        if at not in self.cache:
+        key = at if self.term.timed else None
+        if key not in self.cache:
             if len(self.cache) >= 2:
                 self.cache.pop(next(iter(self.cache)))
-            self.cache[at] = self.assemble(at)
-        return self.cache[at]
+            self.cache[key] = scatter_forces(self.fields, self.ndof, self.term.test,
+                                             self.owner.vector_values(self.term, self.cells, at))
+        return self.cache[key]
 
 
 @dataclass
 class LoadPattern:
+    """A named set of vector terms, each with its evolution: applied as known loads, or used
+    as a relation's dual direction or the arc-length's reference load."""
+
     name: str
-    parts: list = field(default_factory=list)   # (vector or TimedPart, evolution)
+    parts: list = field(default_factory=list)   # (VectorPart, evolution)
 
     @property
     def timed(self) -> bool:
-        return any(isinstance(v, TimedPart) for v, _ in self.parts)
+        return any(p.term.timed for p, _ in self.parts)
 
     def vector(self) -> np.ndarray:
         """The pattern at unit intensity (evolutions ignored): a relation's dual direction
         (a pattern that varies in time is refused as one by the scene)."""
-        return np.sum([v for v, _ in self.parts], axis=0)
+        return np.sum([p(Instant(0.0)) for p, _ in self.parts], axis=0)
 
     def at(self, t) -> np.ndarray:
         """The pattern at an instant (a time or an ``Instant``)."""
         now = instant(t)
-        return np.sum([(v(now) if isinstance(v, TimedPart) else v) * evol(now.t)
-                       for v, evol in self.parts], axis=0)
+        return np.sum([p(now) * evol(now.t) for p, evol in self.parts], axis=0)
+
+
+def pattern_name(owner, term: Term) -> str:
+    """The pattern a vector term belongs to: its own, else its declarer's scene key (an
+    effect's loads: ``exchange[0]``), else the declarer's name."""
+    spec = getattr(owner, "spec", None)
+    return term.pattern or getattr(spec, "key", "") or owner.name
+
+
+def load_patterns(declarers, cells: np.ndarray, fields, ndof: int,
+                  first: Instant | None = None) -> dict[str, LoadPattern]:
+    """{pattern name: LoadPattern} of the vector terms the declarers declare (``terms()``),
+    in declaration order; ``first``: every part assembled at that instant now (its input
+    errors raised now, a constant part's vector kept)."""
+    patterns: dict[str, LoadPattern] = {}
+    for owner in declarers:
+        for term in owner.terms():
+            if not term.vector:
+                continue
+            part = VectorPart(owner, term, cells, fields, ndof)
+            if first is not None:
+                part(first)
+            evolution = CONSTANT if term.evolution is None else term.evolution
+            name = pattern_name(owner, term)
+            patterns.setdefault(name, LoadPattern(name)).parts.append((part, evolution))
+    return patterns
 
 
 @dataclass

@@ -3,28 +3,25 @@ numbers or expressions of (x, y, z, t), integrated at the cells' quadrature poin
 
 from __future__ import annotations
 
-import numpy as np
+from typing import Iterator
 
+from parsolve.fem.element_matrices import NodeForces
 from parsolve.fem.integrals import cell_rule, integrate
-from parsolve.loads.base import (Instant, LoadSpec, Where, blocks, field_dofs, need_cells,
-                                 scatter, values_at)
+from parsolve.loads.base import Instant, LoadSpec, Where, blocks, need_cells, values_at
 
 
-def cell_forces(spec: LoadSpec, where: Where, value) -> np.ndarray:
-    """Σ ∫ N_a v dV over the region's cells as a full vector; ``value(rule, cells)`` gives
-    the force per unit volume (nc, nq, ncomp) at the rule's points."""
+def cell_forces(where: Where, value) -> Iterator[NodeForces]:
+    """∫ N_a v dV on the region's cells, cell block after cell block (a generator: one
+    block's arrays at a time); ``value(rule, cells)`` gives the force per unit volume
+    (nc, nq, ncomp) at the rule's points."""
     cells = where.region.cells
-    out = np.zeros(where.ndof)
     for sl in blocks(cells.size):
         nodes = where.mesh.cells[cells[sl]]
         rule = cell_rule(where.mesh.points[nodes], where.mesh.cell_type, where.thickness)
-        fe = integrate(rule, value(rule, cells[sl]))
-        out += scatter(where.ndof, field_dofs(where.fields, spec.field, nodes),
-                       fe.reshape(fe.shape[0], -1))
-    return out
+        yield NodeForces(nodes, integrate(rule, value(rule, cells[sl])))
 
 
-def assemble(spec: LoadSpec, where: Where, at: Instant) -> np.ndarray:
+def forces(spec: LoadSpec, where: Where, at: Instant) -> Iterator[NodeForces]:
     need_cells(spec, where)
-    return cell_forces(spec, where, lambda rule, cells: values_at(spec, rule.points, at,
+    return cell_forces(where, lambda rule, cells: values_at(spec, rule.points, at,
                                                                   where.source))

@@ -1,25 +1,41 @@
-"""The scene's loads → named patterns on this rank's part of the mesh (collective: counts and
-measures are the whole mesh's)."""
+"""The scene's ``[[loads]]`` as vector terms: each load declares one, on its region's facets,
+cells or nodes, with its pattern and evolution, as an effect declares its own; its forces are
+its registry entry's at the step's instant."""
 
 from __future__ import annotations
 
-from parsolve.loads.base import Instant, LoadPattern, TimedPart, Where
+from typing import Iterable
+
+import numpy as np
+
+from parsolve.fem.element_matrices import NodeForces, Term
+from parsolve.loads.base import Instant, Where
 from parsolve.loads.registry import LOADS
 
 
-def load_patterns(mesh, scene, regions, fields) -> dict[str, LoadPattern]:
-    """{pattern name: LoadPattern} of ``scene.loads``: a load whose values name t is a part
-    assembled again at each instant; the others are assembled once (expressions of the
-    coordinates alone at t = 0)."""
-    thickness = scene.thickness if mesh.dim == 2 else 1.0
-    patterns: dict[str, LoadPattern] = {}
-    for spec in scene.loads:
-        region = regions(spec.region, spec.key + ".region")
-        where = Where(mesh, region, fields, thickness, regions, scene)
-        assemble = LOADS[spec.kind].assemble
-        first = assemble(spec, where, Instant(scene.times[0] if scene.times else 0.0))  # errors now
-        part = TimedPart(lambda at, s=spec, w=where, a=assemble: a(s, w, at)) if spec.timed \
-            else first
-        patterns.setdefault(spec.pattern, LoadPattern(spec.pattern)).parts.append(
-            (part, scene.evolutions[spec.evolution]))
-    return patterns
+class SceneLoads:
+    """The declarer of the scene's loads (``terms``, ``vector_values``: what an effect's
+    vector terms answer to) on this rank's part of the mesh."""
+
+    name = "loads"
+
+    def __init__(self, mesh, scene, regions, fields):
+        thickness = scene.thickness if mesh.dim == 2 else 1.0
+        self.loads: dict[Term, tuple] = {}   # term -> (spec, where)
+        for spec in scene.loads:
+            region = regions(spec.region, spec.key + ".region")
+            where = Where(mesh, region, fields, thickness, regions, scene)
+            domain = LOADS[spec.kind].domain
+            term = Term(spec.field, None, pattern=spec.pattern, timed=spec.timed,
+                        evolution=scene.evolutions[spec.evolution],
+                        **{"facets": {"facets": region.facets},
+                           "cells": {"cells": region.cells},
+                           "nodes": {"nodes": region.nodes}}[domain])
+            self.loads[term] = (spec, where)
+
+    def terms(self) -> list[Term]:
+        return list(self.loads)
+
+    def vector_values(self, term: Term, cells: np.ndarray, at: Instant) -> Iterable[NodeForces]:
+        spec, where = self.loads[term]
+        return LOADS[spec.kind].forces(spec, where, at)

@@ -4,9 +4,12 @@ entries override earlier ones on shared cells, as for the other parameters)."""
 
 from __future__ import annotations
 
+from typing import Iterable
+
 import numpy as np
 
 from parsolve.errors import InputError
+from parsolve.fem.element_matrices import NodeForces
 from parsolve.loads.base import Instant, LoadSpec, Where, need_cells
 from parsolve.loads.body import cell_forces
 
@@ -20,7 +23,7 @@ def densities(spec: LoadSpec, where: Where) -> np.ndarray:
     return rho
 
 
-def assemble(spec: LoadSpec, where: Where, at: Instant) -> np.ndarray:
+def forces(spec: LoadSpec, where: Where, at: Instant) -> Iterable[NodeForces]:
     need_cells(spec, where)
     rho = densities(spec, where)
     missing = where.regions.cell_count(where.region.cells[np.isnan(rho[where.region.cells])])
@@ -29,4 +32,4 @@ def assemble(spec: LoadSpec, where: Where, at: Instant) -> np.ndarray:
                          "'density' in their [[materials]] entry)", where.source,
                          spec.key + ".gravity")
     g = np.asarray(spec.vector, dtype=float)
-    return cell_forces(spec, where, lambda rule, cells: rho[cells][:, None, None] * g)
+    return cell_forces(where, lambda rule, cells: rho[cells][:, None, None] * g)

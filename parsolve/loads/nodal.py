@@ -3,12 +3,13 @@ numbers or expressions of (x, y, z, t) evaluated at the nodes."""
 
 from __future__ import annotations
 
-import numpy as np
+from typing import Iterable
 
-from parsolve.loads.base import Instant, LoadSpec, Where, field_dofs, scatter, values_at
+from parsolve.fem.element_matrices import NodeForces
+from parsolve.loads.base import Instant, LoadSpec, Where, values_at
 
 
-def assemble(spec: LoadSpec, where: Where, at: Instant) -> np.ndarray:
+def forces(spec: LoadSpec, where: Where, at: Instant) -> Iterable[NodeForces]:
     nodes = where.region.nodes
     values = values_at(spec, where.mesh.points[nodes], at, where.source)
-    return scatter(where.ndof, field_dofs(where.fields, spec.field, nodes[:, None]), values)
+    return [NodeForces(nodes[:, None], values[:, None, :])]

@@ -5,13 +5,14 @@ curved second-order face follows its curve). A number or an expression of (x, y,
 
 from __future__ import annotations
 
-import numpy as np
+from typing import Iterable
 
+from parsolve.fem.element_matrices import NodeForces
 from parsolve.loads.base import Instant, LoadSpec, Where, need_facets, values_at
 from parsolve.loads.traction import facet_forces
 
 
-def assemble(spec: LoadSpec, where: Where, at: Instant) -> np.ndarray:
+def forces(spec: LoadSpec, where: Where, at: Instant) -> Iterable[NodeForces]:
     need_facets(spec, where)
-    return facet_forces(spec, where, lambda rule: -values_at(spec, rule.points, at, where.source)
+    return facet_forces(where, lambda rule: -values_at(spec, rule.points, at, where.source)
                         * rule.normals)

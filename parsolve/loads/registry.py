@@ -1,6 +1,7 @@
-"""The loads parsolve knows: each names its scene key, the values it takes, where it acts and
-how it is assembled (its module). A ``[[loads]]`` entry gives exactly one of these keys; adding
-a load kind is a module and one line here.
+"""The loads parsolve knows: each names its scene key, the values it takes, the domain of its
+vector term (facets, cells or nodes of its region) and its forces there (its module's
+``forces``). A ``[[loads]]`` entry gives exactly one of these keys; adding a load kind is a
+module and one line here.
 
 Every entry reads the same common keys (``name``, ``field``, ``region``, ``evolution``) and its
 own value: ``field`` values (one per component of the loaded field), ``one`` value (a pressure)
@@ -17,7 +18,8 @@ from parsolve.loads import body, gravity, nodal, pressure, total_force, traction
 
 @dataclass(frozen=True)
 class LoadEntry:
-    assemble: Callable          # (LoadSpec, Where, t) -> full force vector
+    forces: Callable            # (LoadSpec, Where, Instant) -> NodeForces block after block
+    domain: str                 # its vector term's: "facets", "cells" or "nodes"
     values: str                 # "field", "one" or "dim"
     on: str                     # "vector" (a vector field), "scalar" (a scalar one) or "any"
     expressions: bool           # values may be expressions of (x, y, z, t)
@@ -27,24 +29,25 @@ class LoadEntry:
 
 
 LOADS: dict[str, LoadEntry] = {
-    "traction": LoadEntry(traction.assemble, "field", "vector", True, None,
+    "traction": LoadEntry(traction.forces, "facets", "field", "vector", True, None,
                           description="force per unit area on a boundary region"),
-    "total_force": LoadEntry(total_force.assemble, "field", "vector", False, None,
+    "total_force": LoadEntry(total_force.forces, "facets", "field", "vector", False, None,
                              description="resultant spread uniformly over a boundary region"),
-    "body": LoadEntry(body.assemble, "field", "vector", True, "all",
+    "body": LoadEntry(body.forces, "cells", "field", "vector", True, "all",
                       description="force per unit volume on a region's cells"),
-    "nodal": LoadEntry(nodal.assemble, "field", "any", True, None,
+    "nodal": LoadEntry(nodal.forces, "nodes", "field", "any", True, None,
                        description="force on each node of a region"),
-    "pressure": LoadEntry(pressure.assemble, "one", "vector", True, None,
+    "pressure": LoadEntry(pressure.forces, "facets", "one", "vector", True, None,
                           description="pressure against the outward normal of a boundary region"),
-    "gravity": LoadEntry(gravity.assemble, "dim", "vector", False, "all",
+    "gravity": LoadEntry(gravity.forces, "cells", "dim", "vector", False, "all",
                          description="acceleration: the body force ρ g, ρ the materials' density"),
     # a scalar field's loads under their own names
-    "flux": LoadEntry(traction.assemble, "field", "scalar", True, None, "traction",
+    "flux": LoadEntry(traction.forces, "facets", "field", "scalar", True, None, "traction",
                       "flux into the domain per unit area of a boundary region"),
-    "source": LoadEntry(body.assemble, "field", "scalar", True, "all", "body",
+    "source": LoadEntry(body.forces, "cells", "field", "scalar", True, "all", "body",
                         "source per unit volume on a region's cells"),
-    "total_flux": LoadEntry(total_force.assemble, "field", "scalar", False, None, "total_force",
+    "total_flux": LoadEntry(total_force.forces, "facets", "field", "scalar", False, None,
+                            "total_force",
                             "total flux spread uniformly over a boundary region"),
 }
 

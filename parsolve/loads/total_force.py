@@ -4,8 +4,11 @@ facets counted once)."""
 
 from __future__ import annotations
 
+from typing import Iterable
+
 import numpy as np
 
+from parsolve.fem.element_matrices import NodeForces
 from parsolve.fem.integrals import facet_rule
 from parsolve.loads.base import Instant, LoadSpec, Where, need_facets
 from parsolve.loads.traction import facet_forces
@@ -18,8 +21,8 @@ def measure(where: Where) -> float:
     return where.regions.facet_total(facets, rule.weights.sum(axis=1))
 
 
-def assemble(spec: LoadSpec, where: Where, at: Instant) -> np.ndarray:
+def forces(spec: LoadSpec, where: Where, at: Instant) -> Iterable[NodeForces]:
     need_facets(spec, where)
     traction = np.asarray(spec.vector, dtype=float) / measure(where)
-    return facet_forces(spec, where, lambda rule: np.broadcast_to(
+    return facet_forces(where, lambda rule: np.broadcast_to(
         traction, rule.weights.shape + traction.shape))

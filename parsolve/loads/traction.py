@@ -3,26 +3,25 @@ numbers or expressions of (x, y, z, t), integrated at the facets' quadrature poi
 
 from __future__ import annotations
 
+from typing import Iterator
+
 import numpy as np
 
+from parsolve.fem.element_matrices import NodeForces
 from parsolve.fem.integrals import facet_rule, integrate
-from parsolve.loads.base import (Instant, LoadSpec, Where, blocks, field_dofs, need_facets,
-                                 scatter, values_at)
+from parsolve.loads.base import Instant, LoadSpec, Where, blocks, need_facets, values_at
 
 
-def facet_forces(spec: LoadSpec, where: Where, value) -> np.ndarray:
-    """Σ ∫ N_a v ds over the region's facets as a full vector; ``value(rule)`` gives the
-    force per unit area (nf, nq, ncomp) at the rule's points."""
+def facet_forces(where: Where, value) -> Iterator[NodeForces]:
+    """∫ N_a v ds on the region's facets, facet block after facet block (a generator: one
+    block's arrays at a time); ``value(rule)`` gives the force per unit area (nf, nq, ncomp)
+    at the rule's points."""
     facets = where.region.facets
-    out = np.zeros(where.ndof)
     for sl in blocks(facets.shape[0]):
         rule = facet_rule(where.mesh.points[facets[sl]], where.mesh.facet_type, where.thickness)
-        fe = integrate(rule, value(rule))
-        out += scatter(where.ndof, field_dofs(where.fields, spec.field, facets[sl]),
-                       fe.reshape(fe.shape[0], -1))
-    return out
+        yield NodeForces(facets[sl], integrate(rule, value(rule)))
 
 
-def assemble(spec: LoadSpec, where: Where, at: Instant) -> np.ndarray:
+def forces(spec: LoadSpec, where: Where, at: Instant) -> Iterator[NodeForces]:
     need_facets(spec, where)
-    return facet_forces(spec, where, lambda rule: values_at(spec, rule.points, at, where.source))
+    return facet_forces(where, lambda rule: values_at(spec, rule.points, at, where.source))

@@ -22,6 +22,7 @@ from parsolve.la.pattern import node_pattern
 from parsolve.la.petsc import SaddleOperator
 from parsolve.la.relation_set import RelationSet
 from parsolve.mesh.regions import allgather_rows
+from parsolve.mesh.topology import match_facets
 from parsolve.model import Model
 from parsolve.solvers.augmented import AugmentedMatrix
 from parsolve.solvers.context import StepContext
@@ -80,7 +81,7 @@ class SaddleSystem:
         model = self.model
         cells = model.mesh.cells[self.local_cells]
         terms = [term for e in model.effects for term in e.terms() if not term.vector]
-        tuples = [t for t in terms if not t.on_cells]
+        tuples = [t for t in terms if t.on_nodes]
         nnodes = int(self.part.node_ranges[-1])
         nen = cells.shape[1]
         self._check_owners(tuples)
@@ -100,6 +101,8 @@ class SaddleSystem:
             at = t.positions(self.local_cells) if t.on_cells else None
             if at is not None:
                 t.slots = pattern.pair_slot[:, :, at].astype(np.intp)
+            if t.on_facets:
+                t.slots = facet_slots(model.mesh, self.local_cells, pattern.pair_slot, t.facets)
         return pattern
 
     def _global_nodes(self, term) -> np.ndarray:
@@ -154,7 +157,7 @@ class SaddleSystem:
         """Whether this rank's node terms are not those the pattern was derived from (a term
         added or gone, or its node tuples changed)."""
         terms = [t for e in self.model.effects for t in e.terms()
-                 if not t.on_cells and not t.vector]
+                 if t.on_nodes and not t.vector]
         if len(terms) != len(self._domains) or \
                 any(t is not held for t, (held, _) in zip(terms, self._domains)):
             return True
@@ -413,3 +416,21 @@ class _Cover:
         pb = np.where(lower, pb, h + pb)
         which = start + np.arange(k)[None, None, :] * self.per + cell[:, :, None]
         return np.ascontiguousarray(pair_slot[pa[:, :, None], pb[:, :, None], which])
+
+
+def facet_slots(mesh, local_cells: np.ndarray, pair_slot: np.ndarray,
+                facets: np.ndarray) -> np.ndarray:
+    """A facet term's slots (nfn, nfn, k), derived like a cell term's: each boundary facet's
+    node pairs are those of the local cell holding it (``pair_slot``'s, over ``local_cells``;
+    a region keeps the facets with a node this rank owns, whose cell is local here)."""
+    if facets.shape[0] == 0:
+        return np.zeros((facets.shape[1], facets.shape[1], 0), dtype=np.intp)
+    owner = match_facets(mesh, facets)[0]
+    at = np.searchsorted(local_cells, owner)
+    if np.any(at >= local_cells.size) or np.any(local_cells[np.minimum(at, local_cells.size - 1)]
+                                                 != owner):
+        raise RuntimeError("a facet term's facet lies in no cell this rank assembles")
+    # where each facet node sits in its cell (the facet's own node order kept)
+    place = np.argmax(mesh.cells[owner][:, None, :] == facets[:, :, None], axis=2)
+    slots = pair_slot[place[:, :, None], place[:, None, :], at[:, None, None]]
+    return np.ascontiguousarray(slots.transpose(1, 2, 0)).astype(np.intp)

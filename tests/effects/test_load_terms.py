@@ -1,5 +1,6 @@
 """Constant loads as vector terms (``Term`` without a trial field): on every cell, on a
-region's cells and on tuples of nodes, the composition adds their forces to the known loads;
+region's cells and on tuples of nodes, their load patterns (``loads.base.load_patterns``, the
+one path every load takes) are their forces;
 the owned rows of every rank together are the whole mesh's loads, assembled independently
 node by node, on 1, 2 and 3 ranks."""
 
@@ -13,7 +14,7 @@ from mpi4py import MPI
 from helpers.saddle import SCENE
 
 from parsolve.effects.base import Effect
-from parsolve.effects.compose import Composition
+from parsolve.loads.base import Instant, load_patterns
 from parsolve.fem.element_matrices import NodeForces, Term
 from parsolve.mesh.regions import allgather_rows
 from parsolve.model import build_model
@@ -73,9 +74,11 @@ def model(comm):
 
 def test_vector_terms_on_cells_a_region_and_nodes_are_the_known_loads():
     m = model(COMM)
-    m.effects.append(Loads(m.mesh))
+    effect = Loads(m.mesh)
     local = m.mesh.partition().local_cells(COMM.rank, m.mesh.cells)
-    loads = Composition(m, local).effect_loads().reshape(-1, 2)
+    patterns = load_patterns([effect], local, m.fields, m.mesh.num_points * 2)
+    assert list(patterns) == ["loads"]   # the declarer's name: none of its terms names one
+    loads = patterns["loads"].at(Instant(0.5)).reshape(-1, 2)
     owned = np.arange(m.mesh.n_owned)
     got = allgather_rows(COMM, np.column_stack([m.mesh.global_nodes[owned], loads[owned]]))
     got = got[np.argsort(got[:, 0])]

@@ -329,7 +329,7 @@ def test_bad_input_exit_2(case, tmp_path):
 
 
 def _assembled(text: str):
-    """(operator values, effect loads, cell stresses, nodal stress sums) of this rank, at a
+    """(operator values, known loads, cell stresses, nodal stress sums) of this rank, at a
     non-uniform u and T."""
     from parsolve.model import build_model
     from parsolve.scene import parse_scene
@@ -343,7 +343,7 @@ def _assembled(text: str):
     values = {"u": np.stack([np.sin(x[:, 0] + 2 * x[:, 1]), np.cos(3 * x[:, 0] * x[:, 1])], 1),
               "T": (T_REF + 30 * x[:, 0] ** 2 - 10 * x[:, 1])[:, None]}
     nodal, cell = mech.outputs(system.local_cells, values, None, system.local_cells)
-    return system.op.data.copy(), system.composition.effect_loads(), cell["stress"], \
+    return system.op.data.copy(), system.composition.known_loads(1.0, 1.0, None), cell["stress"], \
         nodal["stress"][0]
 
 
