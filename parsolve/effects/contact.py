@@ -104,7 +104,7 @@ from mpi4py import MPI
 from parsolve.contact import distributed as dist
 from parsolve.contact import friction as fr
 from parsolve.contact import obstacles
-from parsolve.contact.mortar import mortar_pairing
+from parsolve.contact.mortar import master_half, mortar_pairing
 from parsolve.contact.mortar3d import mortar_pairing_3d
 from parsolve.contact.pairing import check_surfaces, pair_nodes
 from parsolve.contact.rows import friction_dual, node_rows, normal_rows, normal_values, \
@@ -203,12 +203,12 @@ class Contact(FiniteSliding, Effect):
                  radial: bool = False, whole: bool = False):
         self.spec, self.mesh, self.fields_, self.source = spec, mesh, fields, source
         self.radial = radial    # axisymmetric: mortar integrals over the surface of revolution
-        # node-to-face rows built per rank (``_pair_here``) unless the whole pairing is asked
-        # for (the penalty baseline) or a term lies on the rows' tuples (3D friction's cross
-        # stiffness: ``row_terms`` needs every rank's tuples)
+        # rows on a master region (node-to-face, mortar) built per rank (``_pair_here``)
+        # unless the whole pairing is asked for (the penalty baseline) or a term lies on the
+        # rows' tuples (3D friction's cross stiffness: ``row_terms`` needs every rank's tuples)
         cross = spec.mu > 0.0 and mesh.dim == 3 and spec.direction == "reaction"
         self.here = (not whole and not cross and spec.master is not None
-                     and spec.discretization == "node_to_segment" and spec.sliding == "small")
+                     and spec.sliding == "small")
         self._fetches: dict = {}            # plans of the values read on other ranks' DOFs
         self.name = f"contact {spec.name}"
         key = spec.key
@@ -364,16 +364,15 @@ class Contact(FiniteSliding, Effect):
         return surf.to_input(p)
 
     def _pair_here(self, regions):
-        """The slave nodes this rank owns paired with the master facets near them (a bounded
-        exchange: ``contact.distributed``), in input ids; ``ids``: each entry's place in the
-        whole pairing (paired slaves in input-id order: the same on any partition). The
-        surfaces' checks are summed over the ranks: every rank agrees. Collective."""
+        """The rows of the slave nodes this rank owns against the master facets near them (a
+        bounded exchange: ``contact.distributed``), in input ids: node-to-face pairs or
+        mortar rows (from this rank's slave facets: every facet through an owned node is
+        here); ``ids``: each entry's place in the whole pairing (paired slaves in input-id
+        order: the same on any partition). The surfaces' checks are summed over the ranks:
+        every rank agrees. Collective."""
         spec, mesh, key, comm = self.spec, self.mesh, self.spec.key, self.values.comm
-        nfn = len(FACETS[mesh.cell_type][0])
-        local = np.asarray(regions(spec.master, f"{key}.master").facets,
-                           dtype=np.int64).reshape(-1, nfn)
-        mine, mine_pts = mesh.global_nodes[local].astype(np.int64), mesh.points[local]
-        if comm.allreduce(local.shape[0]) == 0:
+        mine, mine_pts = self._local_facets(regions(spec.master, f"{key}.master"))
+        if comm.allreduce(mine.shape[0]) == 0:
             raise InputError(f"the master region {spec.master!r} has no boundary facet",
                              self.source, f"{key}.master")
         nodes = regions(spec.slave, f"{key}.slave").nodes
@@ -381,24 +380,65 @@ class Contact(FiniteSliding, Effect):
         ids = mesh.global_nodes[nodes].astype(np.int64)
         order = np.argsort(ids)
         slave, slave_pts = ids[order], mesh.points[nodes[order]]
-        radius = dist.facet_extent(comm, mine_pts) if spec.search_radius is None \
-            else spec.search_radius
-        facets, facet_pts = dist.near_facets(comm, slave_pts, mine, mine_pts, radius)
-        # a slave node in a master facet lies in that facet's box: its rank has the facet
+        mortar = spec.discretization == "mortar"
+        if mortar:   # the rows integrate over the slave facets: their nodes span the box
+            sfacets, sfacet_pts = self._local_facets(regions(spec.slave, f"{key}.slave"))
+            reach = sfacet_pts.reshape(-1, mesh.dim)
+        else:
+            reach = slave_pts
+        radius = spec.search_radius
+        if radius is None:   # the whole surfaces' default (mortar: slave facets' too)
+            radius = dist.facet_extent(comm, np.concatenate([mine_pts, sfacet_pts])
+                                       if mortar else mine_pts)
+        facets, facet_pts = dist.near_facets(comm, reach, mine, mine_pts, radius)
+        self._check_shared(slave, facets)
+        if mortar:
+            p = self._mortar_here(facets, facet_pts, sfacets, sfacet_pts, mine_pts, radius)
+            p = p.subset(np.flatnonzero(np.isin(p.slave, slave)))   # its owned slaves' rows
+        else:
+            surf = Surfaces.of([(slave, slave_pts.reshape(-1, mesh.dim)),
+                                (facets, facet_pts.reshape(-1, mesh.dim))])
+            p = pair_nodes(surf.points, surf.compact(slave), surf.compact(facets),
+                           mesh.facet_type, radius)
+            p = surf.to_input(p.only_paired())
+        self.ids, self.entries = dist.global_positions(comm, p.slave)
+        return p
+
+    def _local_facets(self, region) -> tuple[np.ndarray, np.ndarray]:
+        """A region's boundary facets on this rank (those with an owned node): input ids and
+        coordinates, in the canonical order (``surfaces``: as the whole surface's)."""
+        nfn = len(FACETS[self.mesh.cell_type][0])
+        local = np.asarray(region.facets, dtype=np.int64).reshape(-1, nfn)
+        return canonical_facets(self.mesh.global_nodes[local].astype(np.int64),
+                                self.mesh.points[local])
+
+    def _check_shared(self, slave: np.ndarray, facets: np.ndarray) -> None:
+        """Slave nodes (this rank's) in master facets (those near them: a slave node in a
+        master facet lies in its box), counted over the ranks. Collective."""
+        comm = self.values.comm
         shared = np.intersect1d(slave, facets.ravel())
         count = comm.allreduce(shared.size)
         if count:
             first = comm.allreduce(int(shared[0]) if shared.size else np.iinfo(np.int64).max,
                                    op=MPI.MIN)
             raise InputError(f"master and slave surfaces share {count} node(s) (first: "
-                             f"{first})", self.source, f"{key}.master")
-        surf = Surfaces.of([(slave, slave_pts.reshape(-1, mesh.dim)),
-                            (facets, facet_pts.reshape(-1, mesh.dim))])
-        p = pair_nodes(surf.points, surf.compact(slave), surf.compact(facets), mesh.facet_type,
-                       radius)
-        p = surf.to_input(p.only_paired())
-        self.ids, self.entries = dist.global_positions(comm, p.slave)
-        return p
+                             f"{first})", self.source, f"{self.spec.key}.master")
+
+    def _mortar_here(self, facets, facet_pts, sfacets, sfacet_pts, mine_pts, radius: float):
+        """Mortar rows of this rank's slave facets against the master facets near them (the
+        whole master surface's largest half-extent: the same candidates), in input ids."""
+        comm, dim = self.values.comm, self.mesh.dim
+        half = np.empty(dim)
+        comm.Allreduce(master_half(mine_pts), half, op=MPI.MAX)
+        surf = Surfaces.of([(facets, facet_pts.reshape(-1, dim)),
+                            (sfacets, sfacet_pts.reshape(-1, dim))])
+        try:
+            mortar = self._mortar(surf.points, surf.compact(sfacets), surf.compact(facets),
+                                  radius, half)
+        except ValueError as exc:   # 3D faces that are not triangle, quad, triangle6
+            raise InputError(str(exc), self.source, f"{self.spec.key}.discretization") from None
+        self.side_nodes = np.unique(sfacets)
+        return surf.to_input(mortar.pairing.only_paired())
 
     def _read_rows(self, dofs: np.ndarray, rows: np.ndarray, coefs: np.ndarray, nrows: int,
                    q: np.ndarray) -> np.ndarray:
@@ -470,12 +510,17 @@ class Contact(FiniteSliding, Effect):
             return friction_dual(p, self.mu, self.direction).coef
         return self._rows(p.normal - self.mu * slip_vectors(p, self.direction)).coef
 
-    def _mortar(self, points: np.ndarray, slave_facets: np.ndarray, facets: np.ndarray):
-        """The mortar rows of the surfaces (compact numbering) on the configuration points."""
-        ft, radius = self.mesh.facet_type, self.spec.search_radius
+    def _mortar(self, points: np.ndarray, slave_facets: np.ndarray, facets: np.ndarray,
+                radius: float | None = None, half: np.ndarray | None = None):
+        """The mortar rows of the surfaces (compact numbering) on the configuration points
+        (``radius``, ``half``: the whole surfaces' search radius and largest master
+        half-extent when these are a rank's part; default: the scene's radius, theirs)."""
+        ft = self.mesh.facet_type
+        radius = self.spec.search_radius if radius is None else radius
         if self.mesh.dim == 3:
-            return mortar_pairing_3d(points, slave_facets, facets, ft, radius)
-        return mortar_pairing(points, slave_facets, facets, ft, radius, radial=self.radial)
+            return mortar_pairing_3d(points, slave_facets, facets, ft, radius, half=half)
+        return mortar_pairing(points, slave_facets, facets, ft, radius, radial=self.radial,
+                              half=half)
 
     def _check_facing(self, p, surf: Surfaces, regions, key: str) -> None:
         """Refuse an obstacle that no facet of the slave surface faces (outward normal of the

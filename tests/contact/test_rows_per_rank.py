@@ -1,5 +1,7 @@
-"""Node-to-face contact rows built per rank: on the shipped ironing scenes in small sliding (2D
-with friction; 3D with friction along the slip increment, and frictionless), each rank holds
+"""Contact rows on a master region built per rank: on the shipped ironing scenes in small
+sliding, node-to-face (2D with friction; 3D with friction along the slip increment, and
+frictionless) and mortar (2D with friction, 3D frictionless), and on the shipped mortar
+sphere (3D mortar, frictionless), each rank holds
 only the rows of the slave nodes it owns, the union over the ranks is the one-rank relation
 row by row (global ids, DOFs and coefficients, the dual's too), and so is its pairing. At 2
 and 3 ranks some row reaches a master DOF another rank owns (the
@@ -14,24 +16,27 @@ from mpi4py import MPI
 from parsolve.model import build_model
 from parsolve.scene import parse_scene
 from parsolve.solvers.system import SaddleSystem
+from tests.helpers.contact import FOUNDATION, write_mesh
 from tests.helpers.scene import CONFIGS
 
 COMM = MPI.COMM_WORLD
 
 
 def small_sliding(name: str, extra: str) -> str:
-    """A shipped ironing scene with its contact in small sliding (``extra``: more keys)."""
+    """A shipped scene with its contact in small sliding (``extra``: more keys)."""
     text = (CONFIGS / name).read_text(encoding="utf-8")
+    if "ironing" not in name:
+        return text
     assert 'sliding = "finite"\n' in text
     mesh = name.replace(".toml", ".msh")
     text = text.replace(f'file = "{mesh}"', f'file = "{CONFIGS / mesh}"')
     return text.replace('sliding = "finite"\n', extra)
 
 
-def contact_rows(text: str, name: str, comm) -> tuple[dict, object, object]:
+def contact_rows(text: str, source: str, comm) -> tuple[dict, object, object]:
     """Per contact relation: (global ids, per row its sorted (DOF, coefficient) entries, and
     its dual's), the contact effect and the system's DOF map."""
-    model = build_model(parse_scene(tomllib.loads(text), str(CONFIGS / name), text), comm)
+    model = build_model(parse_scene(tomllib.loads(text), source, text), comm)
     system = SaddleSystem(comm, model)
     out = {}
     for r in system.relation_set.relations:
@@ -45,17 +50,25 @@ def contact_rows(text: str, name: str, comm) -> tuple[dict, object, object]:
 
 
 def _per_row(rows, dofs, vals, n) -> list:
-    order = np.lexsort((dofs, rows))
-    split = np.cumsum(np.bincount(rows, minlength=n))[:-1]
-    return [np.column_stack([d, v]) for d, v in zip(np.split(dofs[order], split),
-                                                    np.split(vals[order], split))]
+    """Per row, its (DOF, coefficient) entries sorted by DOF, a DOF's entries summed (mortar
+    rows pad to their rank's widest row with zero weights on the row's first master node)."""
+    keys, inverse = np.unique(np.column_stack([rows, dofs]), axis=0, return_inverse=True)
+    summed = np.bincount(inverse.ravel(), weights=vals, minlength=keys.shape[0])
+    split = np.cumsum(np.bincount(keys[:, 0], minlength=n))[:-1]
+    return [np.column_stack([d, v]) for d, v in zip(np.split(keys[:, 1], split),
+                                                    np.split(summed, split))]
 
 
-#: (scene, keys added, whether its rows reach other ranks' DOFs at 2 and 3 ranks: the 2D
-#: die and its base part alike; the foundation scene of test_contact_distributed crosses)
+#: (scene, keys added, whether its rows reach other ranks' DOFs at 2 and 3 ranks: the sphere
+#: and the block mostly on different ranks; the ironing dies' contact and the base under
+#: them may share a rank, as they do on today's partitions)
+MORTAR = 'discretization = "mortar"\n'
 CASES = [("contact_ironing_2d.toml", "", False),
-         ("contact_ironing_3d.toml", 'direction = "displacement"\n', True),
-         ("contact_ironing_3d.toml", "friction = 0.0\n", True)]
+         ("contact_ironing_3d.toml", 'direction = "displacement"\n', False),
+         ("contact_ironing_3d.toml", "friction = 0.0\n", False),
+         ("contact_ironing_2d.toml", MORTAR, False),
+         ("contact_ironing_3d.toml", MORTAR + "friction = 0.0\n", False),
+         ("contact_mortar_sphere_3d.toml", "", True)]
 
 
 @pytest.mark.parametrize("name, extra, crosses", CASES)
@@ -63,11 +76,28 @@ def test_each_rank_holds_its_slave_rows_and_together_the_one_rank_rows(name, ext
     text = small_sliding(name, extra)
     if "friction = 0.0" in extra:
         text = text.replace("friction = 0.3\n", "")
-    here, effect, dofmap = contact_rows(text, name, COMM)
-    alone, whole_effect, _ = contact_rows(text, name, MPI.COMM_SELF)
+    frictional = "friction" not in extra and "sphere" not in name
+    check_rows(text, str(CONFIGS / name), frictional, crosses)
+
+
+@pytest.mark.parametrize("discretization", ["node_to_segment", "mortar"])
+def test_rows_across_ranks_on_a_meshed_foundation(shared_tmp, discretization):
+    """The block on a meshed rough foundation (test_contact_distributed): its slave and master
+    nodes split over the ranks, frictional rows reaching master DOFs of other ranks."""
+    mesh = shared_tmp / "foundation_rows.msh"
+    write_mesh(mesh, 5, 8, ny_up=4, seed=4)
+    text = FOUNDATION.format(mesh=mesh, discretization=discretization)
+    check_rows(text, str(shared_tmp / "foundation_rows.toml"), True, True)
+
+
+def check_rows(text: str, source: str, frictional: bool, crosses: bool) -> None:
+    """Each rank's contact rows are those of its own slave nodes, and together the one-rank
+    rows (ids, DOFs, coefficients of A and D), the pairing too."""
+    here, effect, dofmap = contact_rows(text, source, COMM)
+    alone, whole_effect, _ = contact_rows(text, source, MPI.COMM_SELF)
     assert effect.here and effect.ids is not None
-    assert set(here) == set(alone) == ({"ironing_normal", "ironing_tangent"}
-                                       if "friction = 0.0" not in extra else {"ironing_normal"})
+    assert set(here) == set(alone) == {f"{effect.spec.name}_{k}" for k in
+                                       (("normal", "tangent") if frictional else ("normal",))}
     # every slave node of the rows held here is owned here
     own, _ = dofmap.owned_nodes(effect.pairing.slave)
     assert own.all()
