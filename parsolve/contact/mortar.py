@@ -84,6 +84,7 @@ def mortar_pairing(
     search_radius: float | None = None,
     min_cover: float = 1e-6,
     radial: bool = False,
+    half: np.ndarray | None = None,
 ) -> Mortar:
     """Mortar rows of the slave facets against the master facets (2D: line or line3).
 
@@ -95,6 +96,8 @@ def mortar_pairing(
     radial                   axisymmetric (x = r): the integrals weighted by r, i.e. over
                              the surface of revolution (the 2π cancels in the normalised
                              rows), the dual basis biorthogonal for that measure
+    half          (2,)       the largest master half-extent per axis (default: these
+                             facets'; a rank pairing part of the surface gives the whole's)
     """
     points = np.asarray(points, dtype=float)
     sf = np.asarray(slave_facets, dtype=np.int64)
@@ -105,7 +108,7 @@ def mortar_pairing(
     xs_f, xm_f = points[sf], points[mf]                       # (ns, k, 2), (nm, k, 2)
     extent = max(_extent(xs_f), _extent(xm_f))
     radius = float(extent if search_radius is None else search_radius)
-    e, f = _candidates(xs_f, xm_f, radius)
+    e, f = _candidates(xs_f, xm_f, radius, half)
     lo, hi = _overlap(xs_f[e], xm_f[f], facet_type)
     keep = hi - lo > 1e-12
     e, f, lo, hi = e[keep], f[keep], lo[keep], hi[keep]
@@ -144,15 +147,23 @@ def mortar_rows(mortar: Mortar, integrated: bool = True) -> tuple[Rows, Rows, np
 # ----------------------------------------------------------------------------- geometry
 
 
+def master_half(coords: np.ndarray) -> np.ndarray:
+    """The largest half-extent per axis of facets (nf, k, dim) (zeros for none)."""
+    if coords.shape[0] == 0:
+        return np.zeros(coords.shape[-1])
+    return 0.5 * (coords.max(axis=1) - coords.min(axis=1)).max(axis=0)
+
+
 def _extent(coords: np.ndarray) -> float:
     return float(np.max(coords.max(axis=1) - coords.min(axis=1))) if coords.size else 0.0
 
 
-def _candidates(xs_f: np.ndarray, xm_f: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+def _candidates(xs_f: np.ndarray, xm_f: np.ndarray, radius: float,
+                half: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(slave facet, master facet) pairs whose boxes, inflated by the radius, may overlap:
     master facet centres against slave boxes inflated by the radius and the largest master
     half-extent (bucket grid of ``pairing.candidate_pairs``)."""
-    half = 0.5 * (xm_f.max(axis=1) - xm_f.min(axis=1)).max(axis=0)
+    half = master_half(xm_f) if half is None else half
     lo = xs_f.min(axis=1) - radius - half
     hi = xs_f.max(axis=1) + radius + half
     centres = 0.5 * (xm_f.min(axis=1) + xm_f.max(axis=1))

@@ -63,7 +63,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from parsolve.contact.mortar import Mortar
+from parsolve.contact.mortar import Mortar, master_half
 from parsolve.contact.pairing import Pairing, candidate_pairs, empty_pairing, facet_frame
 from parsolve.fem.elements import element
 
@@ -92,6 +92,7 @@ def mortar_pairing_3d(
     facet_type: str,
     search_radius: float | None = None,
     min_cover: float = 1e-6,
+    half: np.ndarray | None = None,
 ) -> Mortar:
     """Mortar rows of the slave faces against the master faces (3D: triangle or quad).
 
@@ -100,6 +101,8 @@ def mortar_pairing_3d(
     master_facets (nm, k)    master faces, outward orientation of the master body
     search_radius            largest |gap| paired (default: the largest face extent)
     min_cover                slave faces covered by less than this fraction are ignored
+    half          (3,)       the largest master half-extent per axis (default: these faces';
+                             a rank pairing part of the surface gives the whole's)
     """
     points = np.asarray(points, dtype=float)
     sf = np.asarray(slave_facets, dtype=np.int64)
@@ -112,7 +115,7 @@ def mortar_pairing_3d(
     xs_f, xm_f = points[sf], points[mf]
     extent = max(_extent(xs_f), _extent(xm_f))
     radius = float(extent if search_radius is None else search_radius)
-    e, f = _candidates(xs_f, xm_f, radius)
+    e, f = _candidates(xs_f, xm_f, radius, half)
     pieces = _segments(el, xs_f, xm_f, e, f)
     if pieces is None:
         return Mortar(empty_pairing(np.zeros(0, dtype=np.int64), 3, 0), np.zeros(0))
@@ -166,11 +169,12 @@ def _face_normal(coords: np.ndarray) -> np.ndarray:
     return n / np.linalg.norm(n, axis=1)[:, None]
 
 
-def _candidates(xs_f: np.ndarray, xm_f: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+def _candidates(xs_f: np.ndarray, xm_f: np.ndarray, radius: float,
+                half: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(slave face, master face) pairs whose boxes, inflated by the radius, may overlap (master
     centres against slave boxes inflated by the radius and the largest master half-extent),
     the master facing the slave (opposite normals); sorted by (slave, master)."""
-    half = 0.5 * (xm_f.max(axis=1) - xm_f.min(axis=1)).max(axis=0)
+    half = master_half(xm_f) if half is None else half
     lo = xs_f.min(axis=1) - radius - half
     hi = xs_f.max(axis=1) + radius + half
     centres = 0.5 * (xm_f.min(axis=1) + xm_f.max(axis=1))

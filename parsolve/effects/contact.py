@@ -36,14 +36,20 @@ converge in partial slip (kept for study).
 A node that closes while moving along the surface starts sliding that way (sticking it at
 the step's starting point would pull it back, open it again, and cycle).
 
-On a distributed mesh (each rank its part) the surfaces are gathered once (their nodes' input
-ids and coordinates: the surfaces' size), every rank pairs them as the replicated mesh does,
-and the rows stay in input DOFs. Against a rigid obstacle (small sliding) each rank then keeps
-the entries whose slave node it owns and builds their rows alone (``Relation.ids``: global
-row numbers, the same on any partition): node states, slip directions and decisions are
-its own, and only a change (any rank's) and the resultants cross the ranks. Otherwise every
-rank decides from the same row values (owned entries, one reduction of the rows' size) and λ
-(each relation's rows fetched from their owners): the ranks agree.
+On a distributed mesh (each rank its part) the rows stay in input DOFs. Node-to-face on a
+master region (small sliding): each rank pairs the slave nodes it owns with the master facets
+near them (``contact.distributed``: each rank's slave box gathered, the facets that meet it
+sent; never the whole surface) and builds their rows alone (``Relation.ids``: each entry's
+place among the paired slaves in input-id order, the same on any partition); a row's values
+on a master node another rank owns are fetched from it (``_read_rows``), its D entries there
+sent to it (``la.relation_set``). Against a rigid obstacle (small sliding) every rank pairs
+the gathered slave surface, then keeps the entries whose slave node it owns. Either way node
+states, slip directions and decisions are the rank's own, and only a change (any rank's) and
+the resultants cross the ranks. Otherwise (mortar, finite sliding, 3D friction's cross
+stiffness on a master, the penalty baseline's pairing) the surfaces are gathered once (their
+nodes' input ids and coordinates: the surfaces' size), every rank pairs them as the
+replicated mesh does, and decides from the same row values (owned entries, one reduction of
+the rows' size) and λ (each relation's rows fetched from their owners): the ranks agree.
 
 Held, tied and shared nodes: a contact node that a Dirichlet condition also holds, a periodic
 tie between contact nodes, a node in two surfaces along one normal make the enforced rows
@@ -95,9 +101,10 @@ from dataclasses import dataclass
 import numpy as np
 from mpi4py import MPI
 
+from parsolve.contact import distributed as dist
 from parsolve.contact import friction as fr
 from parsolve.contact import obstacles
-from parsolve.contact.mortar import mortar_pairing
+from parsolve.contact.mortar import master_half, mortar_pairing
 from parsolve.contact.mortar3d import mortar_pairing_3d
 from parsolve.contact.pairing import check_surfaces, pair_nodes
 from parsolve.contact.rows import friction_dual, node_rows, normal_rows, normal_values, \
@@ -109,7 +116,7 @@ from parsolve.effects.contact_sliding import FiniteSliding
 from parsolve.effects.row_terms import RowTerm
 from parsolve.fem.element_matrices import Term
 from parsolve.errors import InputError
-from parsolve.la.dofmap import DofMap
+from parsolve.la.dofmap import DofMap, _Exchange
 from parsolve.evolution import CONSTANT
 from parsolve.mesh.regions import gather_facets
 from parsolve.mesh.topology import FACETS, boundary_facets
@@ -193,9 +200,16 @@ class Contact(FiniteSliding, Effect):
     side_nodes = np.zeros(0, dtype=np.int64)
 
     def __init__(self, spec: ContactSpec, mesh, regions, fields, source: str,
-                 radial: bool = False):
+                 radial: bool = False, whole: bool = False):
         self.spec, self.mesh, self.fields_, self.source = spec, mesh, fields, source
         self.radial = radial    # axisymmetric: mortar integrals over the surface of revolution
+        # rows on a master region (node-to-face, mortar) built per rank (``_pair_here``)
+        # unless the whole pairing is asked for (the penalty baseline) or a term lies on the
+        # rows' tuples (3D friction's cross stiffness: ``row_terms`` needs every rank's tuples)
+        cross = spec.mu > 0.0 and mesh.dim == 3 and spec.direction == "reaction"
+        self.here = (not whole and not cross and spec.master is not None
+                     and spec.sliding == "small")
+        self._fetches: dict = {}            # plans of the values read on other ranks' DOFs
         self.name = f"contact {spec.name}"
         key = spec.key
         self.u = displacement_field(fields)
@@ -218,14 +232,15 @@ class Contact(FiniteSliding, Effect):
         self._left = self._last_return = None   # returns to a facet it left within the step
         self._repairings = 0
         self._check_slave(regions)
+        # rows built per rank (``_pair_here``; an obstacle's: ``relations``): the global number
+        # of each entry held here (``ids``) among ``entries``; None: the whole pairing
+        self.ids = None
         self.pairing = self._pair(regions)
         self._compact_committed = self._compact
         self._covered_committed = self._covered
-        if len(self.pairing) == 0:
+        if (len(self.pairing) if self.ids is None else self.entries) == 0:
             raise InputError("no slave node faces the master surface within the search radius",
                              source, f"{key}.slave")
-        # rows built per rank (``relations``): the whole pairing's entries of this rank
-        self.ids = None
         p = self.pairing
         # finite sliding against a deformable master's facets (node-to-segment / face) or a
         # curved obstacle: the force's dependence on the geometry in the Newton matrix
@@ -300,6 +315,8 @@ class Contact(FiniteSliding, Effect):
         """The paired slave nodes, in input ids. The pairing runs on the surfaces alone (every
         rank the same arrays: the same pairing on any partition and mesh distribution)."""
         spec, mesh, key = self.spec, self.mesh, self.spec.key
+        if self.here:
+            return self._pair_here(regions)
         slave, slave_pts = self._slave_nodes(regions)
         if spec.master is not None:
             master = regions(spec.master, f"{key}.master")
@@ -346,6 +363,109 @@ class Contact(FiniteSliding, Effect):
             self.span = obstacle_spans(surf, p, float(np.max(self.mesh.extent)))
         return surf.to_input(p)
 
+    def _pair_here(self, regions):
+        """The rows of the slave nodes this rank owns against the master facets near them (a
+        bounded exchange: ``contact.distributed``), in input ids: node-to-face pairs or
+        mortar rows (from this rank's slave facets: every facet through an owned node is
+        here); ``ids``: each entry's place in the whole pairing (paired slaves in input-id
+        order: the same on any partition). The surfaces' checks are summed over the ranks:
+        every rank agrees. Collective."""
+        spec, mesh, key, comm = self.spec, self.mesh, self.spec.key, self.values.comm
+        mine, mine_pts = self._local_facets(regions(spec.master, f"{key}.master"))
+        if comm.allreduce(mine.shape[0]) == 0:
+            raise InputError(f"the master region {spec.master!r} has no boundary facet",
+                             self.source, f"{key}.master")
+        nodes = regions(spec.slave, f"{key}.slave").nodes
+        nodes = nodes[nodes < mesh.n_owned]
+        ids = mesh.global_nodes[nodes].astype(np.int64)
+        order = np.argsort(ids)
+        slave, slave_pts = ids[order], mesh.points[nodes[order]]
+        mortar = spec.discretization == "mortar"
+        if mortar:   # the rows integrate over the slave facets: their nodes span the box
+            sfacets, sfacet_pts = self._local_facets(regions(spec.slave, f"{key}.slave"))
+            reach = sfacet_pts.reshape(-1, mesh.dim)
+        else:
+            reach = slave_pts
+        radius = spec.search_radius
+        if radius is None:   # the whole surfaces' default (mortar: slave facets' too)
+            radius = dist.facet_extent(comm, np.concatenate([mine_pts, sfacet_pts])
+                                       if mortar else mine_pts)
+        facets, facet_pts = dist.near_facets(comm, reach, mine, mine_pts, radius)
+        self._check_shared(slave, facets)
+        if mortar:
+            p = self._mortar_here(facets, facet_pts, sfacets, sfacet_pts, mine_pts, radius)
+            p = p.subset(np.flatnonzero(np.isin(p.slave, slave)))   # its owned slaves' rows
+        else:
+            surf = Surfaces.of([(slave, slave_pts.reshape(-1, mesh.dim)),
+                                (facets, facet_pts.reshape(-1, mesh.dim))])
+            p = pair_nodes(surf.points, surf.compact(slave), surf.compact(facets),
+                           mesh.facet_type, radius)
+            p = surf.to_input(p.only_paired())
+        self.ids, self.entries = dist.global_positions(comm, p.slave)
+        return p
+
+    def _local_facets(self, region) -> tuple[np.ndarray, np.ndarray]:
+        """A region's boundary facets on this rank (those with an owned node): input ids and
+        coordinates, in the canonical order (``surfaces``: as the whole surface's)."""
+        nfn = len(FACETS[self.mesh.cell_type][0])
+        local = np.asarray(region.facets, dtype=np.int64).reshape(-1, nfn)
+        return canonical_facets(self.mesh.global_nodes[local].astype(np.int64),
+                                self.mesh.points[local])
+
+    def _check_shared(self, slave: np.ndarray, facets: np.ndarray) -> None:
+        """Slave nodes (this rank's) in master facets (those near them: a slave node in a
+        master facet lies in its box), counted over the ranks. Collective."""
+        comm = self.values.comm
+        shared = np.intersect1d(slave, facets.ravel())
+        count = comm.allreduce(shared.size)
+        if count:
+            first = comm.allreduce(int(shared[0]) if shared.size else np.iinfo(np.int64).max,
+                                   op=MPI.MIN)
+            raise InputError(f"master and slave surfaces share {count} node(s) (first: "
+                             f"{first})", self.source, f"{self.spec.key}.master")
+
+    def _mortar_here(self, facets, facet_pts, sfacets, sfacet_pts, mine_pts, radius: float):
+        """Mortar rows of this rank's slave facets against the master facets near them (the
+        whole master surface's largest half-extent: the same candidates), in input ids."""
+        comm, dim = self.values.comm, self.mesh.dim
+        half = np.empty(dim)
+        comm.Allreduce(master_half(mine_pts), half, op=MPI.MAX)
+        surf = Surfaces.of([(facets, facet_pts.reshape(-1, dim)),
+                            (sfacets, sfacet_pts.reshape(-1, dim))])
+        try:
+            mortar = self._mortar(surf.points, surf.compact(sfacets), surf.compact(facets),
+                                  radius, half)
+        except ValueError as exc:   # 3D faces that are not triangle, quad, triangle6
+            raise InputError(str(exc), self.source, f"{self.spec.key}.discretization") from None
+        self.side_nodes = np.unique(sfacets)
+        return surf.to_input(mortar.pairing.only_paired())
+
+    def _read_rows(self, dofs: np.ndarray, rows: np.ndarray, coefs: np.ndarray, nrows: int,
+                   q: np.ndarray) -> np.ndarray:
+        """A q of rows over input DOFs: every rank's (the whole pairing's, one reduction), or
+        this rank's own (rows per rank), their entries on other ranks' DOFs (a master node)
+        fetched from the owners (planned once per DOF map). Collective."""
+        values = self.values
+        if self.ids is None:
+            return values.rows(dofs, rows, coefs, nrows, q)
+        sel, local = values.owned_dof_entries(dofs)
+        part = values.owned_part(sel, local, rows, coefs, nrows, q)
+        if values.comm.size == 1 or not self.here:   # (an obstacle's: the slave's alone)
+            return part
+        key = (id(values), id(dofs))
+        if key not in self._fetches:
+            at = np.setdiff1d(np.arange(dofs.size), sel)
+            new = values.input_new_dof(dofs[at])
+            self._fetches[key] = (at, _Exchange(values.comm, new, values.owner_of_dofs(new),
+                                                int(values.q_ranges[values.rank])))
+        at, plan = self._fetches[key]
+        got = plan.forward(np.asarray(q[:values.n_owned], dtype=float))
+        return part + np.bincount(rows[at], weights=coefs[at] * got, minlength=nrows)
+
+    def _relation_values(self, r: Relation, q: np.ndarray) -> np.ndarray:
+        """A q of a relation's rows held here (``_read_rows``). Collective."""
+        return self._read_rows(r.a_dofs, r.a_rows, r.a_vals, r.nrows, q)
+
     def _own_entries(self) -> None:
         """Keep the entries whose slave node this rank owns (their state and rows made
         again): a rigid obstacle's rows hold their slave alone, so each rank builds and holds
@@ -390,12 +510,17 @@ class Contact(FiniteSliding, Effect):
             return friction_dual(p, self.mu, self.direction).coef
         return self._rows(p.normal - self.mu * slip_vectors(p, self.direction)).coef
 
-    def _mortar(self, points: np.ndarray, slave_facets: np.ndarray, facets: np.ndarray):
-        """The mortar rows of the surfaces (compact numbering) on the configuration points."""
-        ft, radius = self.mesh.facet_type, self.spec.search_radius
+    def _mortar(self, points: np.ndarray, slave_facets: np.ndarray, facets: np.ndarray,
+                radius: float | None = None, half: np.ndarray | None = None):
+        """The mortar rows of the surfaces (compact numbering) on the configuration points
+        (``radius``, ``half``: the whole surfaces' search radius and largest master
+        half-extent when these are a rank's part; default: the scene's radius, theirs)."""
+        ft = self.mesh.facet_type
+        radius = self.spec.search_radius if radius is None else radius
         if self.mesh.dim == 3:
-            return mortar_pairing_3d(points, slave_facets, facets, ft, radius)
-        return mortar_pairing(points, slave_facets, facets, ft, radius, radial=self.radial)
+            return mortar_pairing_3d(points, slave_facets, facets, ft, radius, half=half)
+        return mortar_pairing(points, slave_facets, facets, ft, radius, radial=self.radial,
+                              half=half)
 
     def _check_facing(self, p, surf: Surfaces, regions, key: str) -> None:
         """Refuse an obstacle that no facet of the slave surface faces (outward normal of the
@@ -459,8 +584,7 @@ class Contact(FiniteSliding, Effect):
     def _slip(self, q: np.ndarray) -> np.ndarray:
         """Tangential displacement of the slave relative to the master (rows of ``trows``)."""
         t = self.trows
-        rows = self.values.rows if self.ids is None else self.values.rows_here
-        return rows(self.t_dofs, t.row, t.coef, t.nrows, q)
+        return self._read_rows(self.t_dofs, t.row, t.coef, t.nrows, q)
 
     @property
     def mu(self) -> float:
@@ -592,7 +716,7 @@ class Contact(FiniteSliding, Effect):
         self.u_start = self._slip(q)
         self._set_dual()
         if self.span is None:
-            self.tangent.values[:] = self.values.relation(self.tangent, q)
+            self.tangent.values[:] = self._relation_values(self.tangent, q)
         self._tangent_active(active)
         return True
 
@@ -694,7 +818,7 @@ class Contact(FiniteSliding, Effect):
         return [t.term for t in (self.cross, self.geo) if t is not None]
 
     # what the model builds (not the state between steps a restart restores)
-    _BUILT = ("spec", "mesh", "fields_", "source", "radial", "name", "values")
+    _BUILT = ("spec", "mesh", "fields_", "source", "radial", "name", "values", "_fetches")
     _ROW_VALUES = ("a_vals", "values")   # a relation's values the hooks change
 
     def restart_state(self) -> dict:
@@ -753,7 +877,7 @@ class Contact(FiniteSliding, Effect):
         # a row's slave share: 1, or 1 − 2α for a 3D mortar row of a triangle6 midside (its
         # row is scaled by it: its gap, its slip, its multiplier's share of the resultants)
         share = 1.0 - np.where(np.isin(p.master, self.side_nodes), p.weights, 0.0).sum(axis=1)
-        gap = np.where(closed, 0.0, (p.gap + self.values.relation(self.normal, q)) / share)
+        gap = np.where(closed, 0.0, (p.gap + self._relation_values(self.normal, q)) / share)
         if self._covered is not None:   # no facet has faced it yet: no gap
             gap[~self._covered] = np.inf
         slip = self._slip(q) if self.span is None else self.slip_base + self.du.ravel()

@@ -229,7 +229,7 @@ class PenaltyContact(Effect):
         # (finite sliding: its pairs at the start made as small sliding's, then again at each
         # step's start: ``SlidingPenalty``)
         geo = contact.Contact(dataclasses.replace(spec, sliding="small"), mesh, regions,
-                              fields, scene.source)
+                              fields, scene.source, whole=True)
         self.spec, self.mesh, self.fields_ = spec, mesh, fields
         self.u = geo.u
         self.name = f"contact {spec.name} ({spec.formulation})"

@@ -258,6 +258,11 @@ class RelationSet:
         for name, got in zip(("d_rows", "d_cols", "d_vals"), sent):
             setattr(self, name, np.concatenate([getattr(self, name)[keep_d], got]))
         refreshed = [bool(r.meta.get("refresh")) for r in self.relations]
+        # a refreshed relation's D entries sent to other ranks: sent again by ``refresh``
+        # (received after the kept ones)
+        self._resend = self._crossing and self.dofmap.comm.allreduce(bool(np.any(
+            np.repeat(refreshed, d_sizes).astype(bool)[self._sent[0]])), op=MPI.LOR)
+        self._got_from = keep_d.size
         self._a_from = _segments(keep_a, a_sizes, refreshed)
         self._d_from = _segments(keep_d, d_sizes, refreshed)
         dofmap.set_multipliers(self._counts, self.d_cols)
@@ -267,11 +272,11 @@ class RelationSet:
         """The D entries of this rank's rows built per rank on other ranks' DOFs (``out``: a
         tie's u_b) sent to those DOFs' owners, who add them to their operator rows; returns
         the entries received (rows, columns, values). Collective (nothing moves on one rank or
-        without such rows anywhere). Such a relation is not refreshed: ``refresh`` copies
-        the entries kept on the holding rank only."""
+        without such rows anywhere). A refreshed relation's are sent again by ``refresh``."""
         comm, dofmap = self.dofmap.comm, self.dofmap
         none = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
         self._crossing = comm.size > 1 and comm.allreduce(bool(out.any()), op=MPI.LOR)
+        self._sent = (np.zeros(0, np.int64), None, None)
         if not self._crossing:
             return none
         at = np.flatnonzero(out)
@@ -281,6 +286,7 @@ class RelationSet:
         counts = np.bincount(owner, minlength=comm.size).astype(np.int64)
         got_counts = np.empty_like(counts)
         comm.Alltoall(counts, got_counts)
+        self._sent = (at, counts, got_counts)   # (what ``refresh`` sends again)
         got = []
         for values, kind in ((self.d_rows, MPI.INT64_T), (self.d_cols, MPI.INT64_T),
                              (self.d_vals, MPI.DOUBLE)):
@@ -501,6 +507,14 @@ class RelationSet:
                 self.d_vals[at] = np.asarray(r.dual_coo()[2])[src]
                 at, src = self._a_from[k]
                 self.a_vals[at] = r.a_vals[src]
+        if self._resend:   # (collective) the entries on other ranks' DOFs to their owners
+            at, counts, got_counts = self._sent
+            vals = _cat([r.shared_dual[1] if r.collapsed else r.dual_coo()[2]
+                         for r in self.relations], float)[at]
+            comm = self.dofmap.comm
+            comm.Alltoallv([np.ascontiguousarray(vals), counts, _displ(counts), MPI.DOUBLE],
+                           [self.d_vals[self._got_from:], got_counts, _displ(got_counts),
+                            MPI.DOUBLE])
 
     def set_scales(self, kscale: float) -> None:
         """Scale each row of A and column of D to the size of the stiffness diagonal (the
