@@ -43,7 +43,8 @@ def _kind(r: rel.Relation, flag: str) -> bool:
 
 
 def _here(comm, r: rel.Relation) -> bool:
-    """Whether this rank looks at the relation's rows: its own rows, a whole relation's on rank 0."""
+    """Whether this rank looks at the relation's rows: its own, or a whole relation's on
+    rank 0."""
     return not r.whole or comm.rank == 0
 
 

@@ -21,7 +21,8 @@ def build(spec: RelationSpec, where: Where, evolution) -> rel.Relation:
     nodes, points = where.owned_nodes(spec.region, spec.key + ".region")
     value = spec.value
     ncomps = len(spec.components)
-    if isinstance(value, str):  # an expression of the coordinates, per node (the error: every rank's)
+    # a string: an expression of the coordinates, per node (its error raised on every rank)
+    if isinstance(value, str):
         per_node = agree(where.comm, selectors.evaluate_value, value, points, where.source,
                          spec.key + ".value")
         value = np.broadcast_to(np.asarray(per_node, dtype=float).reshape(-1, 1)

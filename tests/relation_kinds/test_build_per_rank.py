@@ -19,28 +19,24 @@ from parsolve.relation_kinds.spread import places
 from parsolve.relations import Relation, lead_dofs
 from parsolve.scene import parse_scene
 from tests.helpers.scene import CONFIGS
+from tests.relation_kinds.test_per_rank import EQUAL
 
 COMM = MPI.COMM_WORLD
 #: the laminate refined, its sides tied, its top and bottom held (the top's x by an
-#: expression), the upper half's y equal, and the lower left quarter's y held at 0 (its bottom
-#: row already held so by the bottom: those rows dropped from it, the others numbered again)
+#: expression), the upper half's y equal (and the lower half's mean x: one row, whole), and the
+#: lower left quarter's y held at 0 (its bottom row already held so by the bottom: those rows
+#: dropped from it, the others numbered again)
 SCENE = (CONFIGS / "periodic_shear_laminate.toml").read_text(encoding="utf-8") \
     .replace("[regions]", "[regions]\nquarter = { box = [[0.0, 0.0], [0.5, 0.5]] }") \
-    .replace("nx = 6", "nx = 12").replace("ny = 8", "ny = 10").replace(
-        'value = 0.01', 'value = "0.01 + 0.002 * x"') + """
-[[relations]]
-name = "top_even"
-type = "equal"
-region = "upper"
-component = "y"
-
+    .replace("nx = 6", "nx = 12").replace("ny = 8", "ny = 10") \
+    .replace('value = 0.01', 'value = "0.01 + 0.002 * x"') + EQUAL + """
 [[relations]]
 name = "quarter_y"
 type = "dirichlet"
 region = "quarter"
 components = ["y"]
 """
-
+#: the relations the per-rank kinds build (the mean is built whole, after "top_even")
 NAMES = ["bottom_held", "top_shear", "top_y", "cell", "top_even", "quarter_y"]
 
 
@@ -103,9 +99,10 @@ def test_the_relations_after_the_checks_keep_their_numbers(eliminate):
     text = SCENE + ("" if eliminate else "\n[solver]\neliminate = false\n")
     model = build_model(parse_scene(tomllib.loads(text), "t.toml", text), COMM)
     alone = build_model(parse_scene(tomllib.loads(text), "t.toml", text), MPI.COMM_SELF)
-    assert [r.name for r in model.relations] == NAMES
-    assert [r.total for r in model.relations] == [26, 13, 13, 18, 77, 35]
-    assert [r.whole for r in model.relations] == [eliminate] * 3 + [False, False, eliminate]
+    assert [r.name for r in model.relations] == NAMES[:5] + ["mean_x", "quarter_y"]
+    assert [r.total for r in model.relations] == [26, 13, 13, 18, 77, 1, 35]
+    assert [r.whole for r in model.relations] == [eliminate] * 3 + [False, False, True,
+                                                                    eliminate]
     for r, one in zip(model.relations, alone.relations):
         assert r.total == one.nrows
         if r.whole:
@@ -120,7 +117,8 @@ def test_places_are_the_sorted_positions():
     rng = np.random.default_rng(7 + COMM.rank)
     keys = np.unique(rng.integers(0, 1000, size=50 + 13 * COMM.rank)) * COMM.size + COMM.rank
     every = np.sort(np.concatenate(COMM.allgather(keys)))
-    np.testing.assert_array_equal(places(COMM, keys, 1000 * COMM.size), np.searchsorted(every, keys))
+    np.testing.assert_array_equal(places(COMM, keys, 1000 * COMM.size),
+                                  np.searchsorted(every, keys))
     empty = places(COMM, np.zeros(0, dtype=np.int64), 10)
     assert empty.shape == (0,)
 
