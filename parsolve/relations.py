@@ -238,15 +238,6 @@ def lead_dofs(relation: Relation) -> np.ndarray:
     return out
 
 
-def own_rows(relation: Relation, owned: np.ndarray) -> Relation:
-    """The rows of a whole relation this rank holds when built per rank: those whose lead DOF
-    (``lead_dofs``) is in ``owned`` (a mask per row), numbered by their place in the whole
-    relation (``Relation.ids``)."""
-    out = keep_rows(relation, owned)
-    out.eliminate = False   # multiplied on every rank, whatever rows it holds here
-    return rows_here(out, np.flatnonzero(owned), relation.nrows)
-
-
 def keep_rows(relation: Relation, keep: np.ndarray) -> Relation:
     """The relation restricted to the rows ``keep`` (a mask), renumbered."""
     new = np.cumsum(keep) - 1
@@ -263,64 +254,6 @@ def keep_rows(relation: Relation, keep: np.ndarray) -> Relation:
                    groups=None if relation.groups is None else relation.groups[keep])
     out.meta = relation.meta
     return out
-
-
-def drop_repeated_rows(relations: list[Relation]) -> list[Relation]:
-    """A DOF fixed twice to the same value (two Dirichlet conditions meeting at a corner, with
-    the same value and evolution) keeps the first relation's row only; the later relation
-    loses it (its reaction is reported by the first). Different values stay an error
-    (``duplicate_rows``)."""
-    evolutions: list = []
-    dof, rel, row, value, evol = [], [], [], [], []
-    for k, r in enumerate(relations):
-        if r.sense != "=" or not r.associated:
-            continue
-        counts = np.bincount(r.a_rows, minlength=r.nrows)
-        at = counts[r.a_rows] == 1
-        if r.evolution not in evolutions:
-            evolutions.append(r.evolution)
-        dof.append(r.a_dofs[at])
-        row.append(r.a_rows[at])
-        rel.append(np.full(at.sum(), k))
-        value.append(r.values[r.a_rows[at]] / r.a_vals[at])
-        evol.append(np.full(at.sum(), evolutions.index(r.evolution)))
-    if not dof:
-        return relations
-    dof, rel, row, value, evol = (np.concatenate(x) for x in (dof, rel, row, value, evol))
-    order = np.lexsort((rel, dof))
-    dof, rel, row, value, evol = (x[order] for x in (dof, rel, row, value, evol))
-    same = (dof[1:] == dof[:-1]) & (value[1:] == value[:-1]) & (evol[1:] == evol[:-1]) \
-        & (rel[1:] != rel[:-1])
-    out = list(relations)
-    for k in np.unique(rel[1:][same]):  # a loop over relations, not rows
-        keep = np.ones(out[k].nrows, dtype=bool)
-        keep[row[1:][same & (rel[1:] == k)]] = False
-        out[k] = keep_rows(out[k], keep)
-    return out
-
-
-def duplicate_rows(relations: list[Relation]) -> list[tuple[str, str, int]]:
-    """Single-DOF equality rows that constrain the same DOF twice: (name, name, dof) triples.
-
-    Two such rows make the saddle system singular; they are reported by name before any solve.
-    """
-    names, dofs = [], []
-    for rel in relations:
-        if rel.sense != "=":
-            continue
-        counts = np.bincount(rel.a_rows, minlength=rel.nrows)
-        single = np.flatnonzero(counts == 1)
-        mask = np.isin(rel.a_rows, single)
-        dofs.append(rel.a_dofs[mask])
-        names.append(np.full(mask.sum(), len(names)))
-    if not dofs:
-        return []
-    d, n = np.concatenate(dofs), np.concatenate(names)
-    order = np.lexsort((n, d))
-    d, n = d[order], n[order]
-    dup = np.flatnonzero(d[1:] == d[:-1])
-    rel_names = [r.name for r in relations if r.sense == "="]
-    return [(rel_names[n[i]], rel_names[n[i + 1]], int(d[i])) for i in dup]
 
 
 RelationBuilder = Callable[..., Relation]

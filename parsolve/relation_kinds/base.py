@@ -5,6 +5,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
+
+from parsolve import relations as rel
+from parsolve.relation_kinds.spread import places
 from parsolve.schema import Declared, Table, component, field_component
 
 
@@ -52,8 +56,35 @@ class Where:
     thickness: object = 1.0
 
     def nodes(self, region: str, key: str):
-        """The region's nodes as relations number them (input ids, the whole mesh's)."""
+        """The region's nodes as relations number them (input ids, the whole mesh's): the
+        whole region on every rank (a relation of one row over a region)."""
         return self.regions.relation_nodes(region, key)
+
+    @property
+    def comm(self):
+        return self.regions.comm
+
+    @property
+    def num_nodes(self) -> int:
+        """Nodes of the whole mesh."""
+        return int(self.regions.mesh.num_global_points)
+
+    def owned_nodes(self, region: str, key: str) -> tuple[np.ndarray, np.ndarray]:
+        """The region's nodes this rank owns, as input ids (sorted), with their coordinates:
+        what a kind whose rows each constrain one node builds its rows on."""
+        mesh = self.regions.mesh
+        nodes = self.regions(region, key).nodes
+        own = nodes[nodes < mesh.n_owned]
+        ids = mesh.global_nodes[own].astype(np.int64)
+        order = np.argsort(ids, kind="stable")
+        return ids[order], mesh.points[own[order]]
+
+    def numbered(self, relation: rel.Relation, keys: np.ndarray, space: int) -> rel.Relation:
+        """Rows built on this rank, held here (not eliminated), numbered by the place of their
+        key (of ``[0, space)``, increasing, in the whole relation's row order) among every
+        rank's: the same numbers at every rank count. Collective."""
+        return rel.rows_here(relation, places(self.comm, keys, space),
+                             self.comm.allreduce(relation.nrows))
 
 
 def components(t: Table, declared: Declared, field: str, every: bool = False) -> list[int]:

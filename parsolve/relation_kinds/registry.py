@@ -23,8 +23,8 @@ class RelationEntry:
     regions: Callable = own_regions   # spec -> [(region, dotted key)], checked before the mesh
     holds: bool = False         # its rows hold single DOFs at given values (a reaction each)
     ties: bool = False          # its rows tie pairs of DOFs (u_a − u_b = 0)
-    per_rank: bool = False      # each row constrains one DOF or node: multiplied, it is built
-    #                             per rank, held by that DOF's owner (``build._per_rank``)
+    per_rank: bool = False      # each row constrains one DOF or node: built per rank, each
+    #                             row by that node's owner (``build``; gathered when eliminated)
     description: str = ""
 
 

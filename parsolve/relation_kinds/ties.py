@@ -4,6 +4,9 @@ the sum or mean of a component over a region)."""
 
 from __future__ import annotations
 
+import numpy as np
+from mpi4py import MPI
+
 from parsolve import relations as rel
 from parsolve.errors import InputError
 from parsolve.relation_kinds.base import RelationSpec, TermSpec, Where
@@ -48,12 +51,19 @@ def _term(sub, spec: RelationSpec, declared, coefficient: float, mean: bool) -> 
 
 
 def build_equal(spec: RelationSpec, where: Where, evolution) -> rel.Relation:
-    nodes = where.nodes(spec.region, spec.key + ".region")
-    if len(nodes) < 2:
+    """u_c(n) − u_c(n_0) = 0 for each node n of the region but its lowest n_0 (by input id):
+    built per rank, the rows of the nodes this rank owns (a row's u_c(n_0) may be another
+    rank's DOF), in the order of their nodes."""
+    nodes, _ = where.owned_nodes(spec.region, spec.key + ".region")
+    comm = where.comm
+    if comm.allreduce(nodes.size) < 2:
         raise InputError(f"region {spec.region!r} has fewer than 2 nodes", where.source,
                          spec.key + ".region")
+    first = comm.allreduce(int(nodes[0]) if nodes.size else where.num_nodes, op=MPI.MIN)
+    rest = nodes[nodes != first]
     comp = where.fields.component(spec.field, spec.components[0])
-    return rel.equal(spec.name, nodes, comp, where.fields.ncomp)
+    r = rel.equal(spec.name, np.concatenate([[first], rest]), comp, where.fields.ncomp)
+    return where.numbered(r, rest, where.num_nodes)
 
 
 def build_combination(spec: RelationSpec, where: Where, evolution) -> rel.Relation:

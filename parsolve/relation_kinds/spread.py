@@ -1,0 +1,56 @@
+"""Relation rows spread over the ranks, numbered and checked without an array of the whole set
+on any rank: a key (a DOF, a node, a row number) is looked after by the rank of its block of
+the key space (``blocks``), which answers for it (``Directory``, ``ask``), and a row's place
+among every rank's rows is its key's place among every rank's keys (``places``)."""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+
+from parsolve.mesh.blocks import exchange, rank_order
+
+
+def blocks(keys: np.ndarray, space: int, size: int) -> np.ndarray:
+    """The rank looking after each key of ``[0, space)``: near-equal blocks of the space."""
+    return (np.asarray(keys, dtype=np.int64) * size // max(int(space), 1)).clip(0, size - 1)
+
+
+class Directory:
+    """Rows sent to the ranks ``dest`` (one ``exchange``): ``got`` is what this rank was sent
+    (in (source rank, row order)); ``reply`` sends an answer per row got back to its sender,
+    in the order the sender gave its rows."""
+
+    def __init__(self, comm, rows: np.ndarray, dest: np.ndarray):
+        self.comm, self.order = comm, rank_order(dest, comm.size)
+        self.got, self.counts = exchange(comm, rows, dest)
+
+    def reply(self, answers: np.ndarray) -> np.ndarray:
+        senders = np.repeat(np.arange(self.comm.size), self.counts)
+        back, _ = exchange(self.comm, np.asarray(answers), senders)
+        out = np.empty_like(back)
+        out[self.order] = back
+        return out
+
+
+def ask(comm, rows: np.ndarray, dest: np.ndarray,
+        answer: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """``answer`` (run on every rank, on the rows it was sent; collective calls allowed) of
+    each row, back where the row was asked, in its order."""
+    directory = Directory(comm, rows, dest)
+    return directory.reply(answer(directory.got))
+
+
+def places(comm, keys: np.ndarray, space: int) -> np.ndarray:
+    """Each key's place (from 0) among every rank's keys sorted (keys of ``[0, space)``; a
+    repeated key takes places in rank order). Collective; two exchanges and a scan."""
+    keys = np.asarray(keys, dtype=np.int64)
+
+    def answer(got: np.ndarray) -> np.ndarray:
+        start = comm.exscan(int(got.size)) if comm.size > 1 else 0
+        out = np.empty(got.size, dtype=np.int64)
+        out[np.argsort(got, kind="stable")] = (start or 0) + np.arange(got.size)
+        return out
+
+    return ask(comm, keys, blocks(keys, space, comm.size), answer)
