@@ -22,7 +22,8 @@ mean, max; the iterative preset at its tolerance, rtol 2.5e-14), wall time, peak
         → the scale runs only: the friction box refined f× per direction on 2 ranks against
         plain elasticity (its base clamped, CG + GAMG) on the same mesh: time per Newton
         iteration, Krylov iterations, peak memory summed over the ranks
-        (scripts/results/bench_relations_scale.md)
+        (scripts/results/bench_relations_scale.md; --translations F: at f = F the friction
+        box again, ML's near-null space the translations alone)
     nice -n 10 .venv/bin/python scripts/bench_relations.py --big 16 --ranks 2 [--timeout S]
         → one large run (not in CI): the friction box refined f× per direction (16: 931k
         DOFs, 21: 2.08M) on the iterative preset, its Newton and Krylov iterations, set-up
@@ -384,16 +385,23 @@ def gamma_study(folder: Path) -> list[list[str]]:
 
 
 SCALE_HEAD = ["problem", "refinement", "DOFs", "ranks", "Newton its", "Krylov mean / max",
-              "s per Newton it", "set-up s per solve", "peak MiB per rank", "peak MiB (all ranks)",
-              "KB/DOF",
+              "s per Newton it", "set-up s per solve", "set-up MiB per rank",
+              "peak MiB per rank", "peak MiB (all ranks)", "KB/DOF",
               "ratio to elasticity"]
 
 
-def scale_study(folder: Path, factors: list[int], ranks: int,
-                steps: int = 2) -> list[list[str]]:
+#: the condensed V-cycle with the translations alone as its near-null space (ML's ``block``:
+#: three columns per aggregate, not six): ML's set-up was 3.5× K's memory per rank with the
+#: rigid-body modes, the most of the friction run's excess over elasticity's (the scale table)
+TRANSLATIONS = {"condensed_pc_ml_nullspace": "block"}
+
+
+def scale_study(folder: Path, factors: list[int], ranks: int, steps: int = 2,
+                translations: int = 0) -> list[list[str]]:
     """The friction box (iterative preset) against plain elasticity (CG + GAMG) on the same
     mesh and ranks: time per Newton iteration, peak memory summed over the ranks; the matrices'
-    memory piece by piece (``matrix_pieces``)."""
+    memory piece by piece (``matrix_pieces``). At the refinement ``translations`` the friction
+    box again with ``TRANSLATIONS`` (the V-cycle's memory against its iterations)."""
     os.environ["BENCH_PIECES"] = "1"   # (the children inherit it)
     rows, pieces = [], []
     for f in factors:
@@ -401,23 +409,27 @@ def scale_study(folder: Path, factors: list[int], ranks: int,
                                     "iterative", ranks=ranks),
                 "elasticity": one_run(folder, f"scale_elastic_{f}", elastic_scene(f, steps),
                                       "iterative", ranks=ranks)}
+        if f == translations:
+            runs["friction, ML translations only"] = one_run(
+                folder, f"scale_friction_{f}", friction_scene(f, steps), "iterative",
+                TRANSLATIONS, ranks=ranks)
         base = runs["elasticity"]
         for name, r in runs.items():
             if r.get("status") != "complete":
-                rows.append([name, f"{f}³×", "-", str(ranks), r["status"][:60], *["-"] * 7])
+                rows.append([name, f"{f}³×", "-", str(ranks), r["status"][:60], *["-"] * 8])
                 continue
             k = r["krylov"] or [0]
             per_it = r["wall"] / max(r["iterations"], 1)
             ratio = "-"
-            if name == "friction" and base.get("status") == "complete":
+            if name.startswith("friction") and base.get("status") == "complete":
                 ratio = (f"time {per_it / (base['wall'] / max(base['iterations'], 1)):.2f}×, "
                          f"memory {r['hwm'] / base['hwm']:.2f}×")
             rows.append([name, f"{f}³×", f"{r['dofs']:,}", str(ranks), str(r["iterations"]),
                          f"{sum(k) / len(k):.1f} / {max(k)}", f"{per_it:.2f}",
                          f"{r['setup']['s'] / max(len(r['krylov']), 1):.2f}",
-                         bh.mib(r.get("hwm_rank")), bh.mib(r["hwm"]),
+                         f"{r['setup_rank']:.0f}", bh.mib(r.get("hwm_rank")), bh.mib(r["hwm"]),
                          f"{r['hwm'] / r['dofs'] / 1e3:.1f}", ratio])
-        print(bh.text_table(SCALE_HEAD, rows[-2:]), flush=True)
+        print(bh.text_table(SCALE_HEAD, rows[-len(runs):]), flush=True)
         pieces += [piece_row(name, f, r) for name, r in runs.items()]
         publish_scale(rows, pieces, ranks, steps)   # after every size: a stopped run keeps
     return rows                                     # its rows
@@ -556,6 +568,9 @@ def main() -> None:
                    help="the scale runs only: friction box refinements f (comma-separated) on "
                         "--ranks ranks, against plain elasticity with GAMG (scale table)")
     p.add_argument("--ranks", type=int, default=2, help="ranks of the scale runs")
+    p.add_argument("--translations", type=int, default=0,
+                   help="with --scale: at this refinement the friction box again with the "
+                        "condensed V-cycle's near-null space the translations alone")
     p.add_argument("--steps", type=int, default=2, help="load steps of the scale runs")
     p.add_argument("--cases", type=str, default="friction,ironing,mortar",
                    help="the series to run, or single sizes as case:factor (comma-separated: "
@@ -583,7 +598,8 @@ def main() -> None:
         return
     if args.scale or bh.SMOKE:
         factors = [1] if bh.SMOKE else [int(f) for f in args.scale.split(",")]
-        rows = scale_study(bh.scratch("relations_scale"), factors, args.ranks, args.steps)
+        rows = scale_study(bh.scratch("relations_scale"), factors, args.ranks, args.steps,
+                           1 if bh.SMOKE else args.translations)
         if args.scale:
             return
     folder = bh.scratch("relations")
@@ -625,7 +641,9 @@ def publish_scale(rows: list, pieces: list, ranks: int, steps: int) -> None:
         f"{machine['date']}, {machine['cpu']}, {machine['cpus']} CPUs, {ranks} ranks, the "
         "machine shared (times noisy). The 3D friction box (`contact_friction_3d.toml`, its "
         f"first {steps} step{'s' if steps > 1 else ''}) refined f× per direction on the iterative preset, against the same "
-        "box with its base clamped (CG + GAMG); peak memory: VmHWM summed over the ranks.", "",
+        "box with its base clamped (CG + GAMG); set-up MiB: the resident memory the largest "
+        "preconditioner set-up added on a rank (the condensation and ML's V-cycle; GAMG's for "
+        "elasticity); peak memory: VmHWM summed over the ranks.", "",
         bh.md_table(SCALE_HEAD, rows, first="---"), "",
         "The matrices piece by piece after the first linear solve (MiB summed over the ranks: "
         "allocated nonzeros × (value + column index) + row offsets; a matrix shared by two "

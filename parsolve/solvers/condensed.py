@@ -272,20 +272,18 @@ class CondensedPreconditioner:
 
     def _near_rows(self, mat: PETSc.Mat) -> np.ndarray:
         """The local primal rows that S changes: the condensed nodes' own and those with an
-        entry in a condensed node's columns (any rank's), found as the nonzeros of K v, v
-        random positive on the condensed DOFs (a zero by cancellation has probability zero;
-        a block numerically zero S leaves zero): K's pattern is never copied."""
+        entry of K's pattern in a condensed node's columns (any rank's), read from K's
+        submatrix on those columns (as large as the condensed nodes' couplings): exact
+        whatever the values (an entry that sums to zero is still in the pattern)."""
         nc = self.nc
-        x, y = mat.createVecs()
-        x.set(0.0)
-        rng = np.random.default_rng(1 + self.comm.rank)   # (the same rows run after run)
         own = (self.nodes[:, None] * nc + np.arange(nc)).reshape(-1)
-        x.array[own] = rng.uniform(1.0, 2.0, own.size)
-        mat.mult(x, y)
-        near = np.union1d(np.flatnonzero(y.array[:self.nq]), own)
-        x.destroy()
-        y.destroy()
-        return near
+        cols = PETSc.IS().createGeneral((self.start + own).astype(PETSc.IntType),
+                                        comm=self.comm)
+        part = mat.createSubMatrix(self.is_q, cols)   # K's columns of the condensed nodes
+        indptr = part.getValuesCSR()[0]
+        part.destroy()
+        cols.destroy()
+        return np.union1d(np.flatnonzero(np.diff(indptr)), own)
 
     def _ghost_frames(self, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The nodes of other ranks among the primal columns ``cols`` (sorted) and their

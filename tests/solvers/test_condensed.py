@@ -167,3 +167,32 @@ def test_stiffness_not_in_nodal_blocks_is_not_condensed(comm):
     pre = CondensedPreconditioner(comm, 3, is_q, is_l, "holed_")
     why = "the stiffness is not made of whole nodal blocks at a condensed node"
     assert pre.update(holed) == why
+
+
+def test_coupled_rows_read_from_the_pattern(comm):
+    """The rows S changes are found from K's pattern, not from K's values: with every entry of
+    the other nodes' rows in the condensed nodes' columns an exact zero (stored: a sum that
+    cancels at assembly), each such row is still found, and S is still the nodal transform."""
+    system, solver, mat, rhs, x = _friction(comm)
+    is_q, is_l = system.index_sets()
+    pre = CondensedPreconditioner(comm, 3, is_q, is_l, "pattern_")
+    assert pre.update(mat) is None
+    condensed = np.concatenate(comm.allgather(
+        pre.starts[comm.rank] + (pre.nodes[:, None] * 3 + np.arange(3)).reshape(-1)))
+    own = (pre.nodes[:, None] * 3 + np.arange(3)).reshape(-1)
+    indptr, cols, vals = mat.getValuesCSR()
+    vals = vals.copy()
+    rows = np.repeat(np.arange(indptr.size - 1), np.diff(indptr))
+    coupled = (rows < pre.nq) & np.isin(cols, condensed)
+    others = coupled & ~np.isin(rows, own)
+    vals[others] = 0.0   # (kept in the pattern)
+    assert comm.allreduce(int(others.sum())) > 0
+    n = indptr.size - 1
+    cancelled = PETSc.Mat().createAIJ(size=((n, None), (n, None)), csr=(indptr, cols, vals),
+                                      comm=comm)
+    assert np.array_equal(cancelled.getValuesCSR()[1], cols)   # (the zeros stored)
+    assert pre.update(cancelled) is None
+    assert np.array_equal(pre._near_rows(cancelled), np.unique(rows[coupled]))
+    S = dense(pre.S, comm)
+    reference = _nodal_transform(pre, dense(cancelled, comm), comm)
+    assert np.abs(S - reference).max() <= 1e-13 * np.abs(reference).max()
