@@ -147,25 +147,29 @@ def facet_groups(comm, block: CellBlock, source: str | None, key: str | None,
 
 
 def _sorted_runs(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(the order that sorts the rows of ``keys``, the lengths of the runs of equal rows in
-    it): ``topology.sorted_row_groups`` without its group of every row (the facets' largest
-    arrays are the keys, the order and one sorted column at a time)."""
+    """(the order that sorts the rows of ``keys``, int32 while it fits; the lengths of the
+    runs of equal rows in it): ``topology.sorted_row_groups`` without its group of every row,
+    the sorted keys compared by chunks (the facets' largest arrays are the keys and the
+    order)."""
     n = keys.shape[0]
     if n == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
     order = np.argsort(keys[:, 0]) if keys.shape[1] == 1 else np.lexsort(keys.T[::-1])
+    order = order.astype(np.int32 if n <= np.iinfo(np.int32).max else np.int64, copy=False)
     new = np.zeros(n, dtype=bool)
     new[0] = True
-    for col in range(keys.shape[1]):
-        column = keys[order, col]
-        new[1:] |= column[1:] != column[:-1]
-        del column
+    for start in range(0, n - 1, CHUNK):
+        ahead = keys[order[start:start + CHUNK + 1]]
+        new[start + 1:start + ahead.shape[0]] = (ahead[1:] != ahead[:-1]).any(axis=1)
     return order, np.diff(np.append(np.flatnonzero(new), n))
+
+
+CHUNK = 1 << 16   # rows of the facets' arrays at a time
 
 
 def _cell_of(block: CellBlock, rows: np.ndarray) -> np.ndarray:
     """The cell of each of the block's facets ``rows`` (facet-major: local facet, then cell)."""
-    return rows % max(block.cells.shape[0], 1) + block.start
+    return rows.astype(np.int64) % max(block.cells.shape[0], 1) + block.start
 
 
 def _facet_keys(comm, block: CellBlock) -> tuple[np.ndarray, np.ndarray]:
@@ -180,17 +184,15 @@ def _facet_keys(comm, block: CellBlock) -> tuple[np.ndarray, np.ndarray]:
     corners = sorted({int(i) for f in local for i in f[:nv]})
     top = int(block.cells[:, corners].max(initial=0)) if ncells else 0
     base = comm.allreduce(top) + 1   # the largest corner id of any facet
-    packed, forward = None, np.empty(ncells * len(local), dtype=bool)
+    width = _packed(np.zeros((1, nv), np.int64), base).shape[1]
+    packed = np.empty((ncells * len(local), width), dtype=np.int64)
+    forward = np.empty(ncells * len(local), dtype=bool)
     for k, f in enumerate(local):
-        nodes = block.cells[:, list(f[:nv])]
-        rows = slice(k * ncells, (k + 1) * ncells)
-        forward[rows] = checks.facet_direction(nodes)
-        keys = _packed(_sorted_vertex_keys(nodes, ftype), base)
-        if packed is None:
-            packed = np.empty((ncells * len(local), keys.shape[1]), dtype=np.int64)
-        packed[rows] = keys
-    if packed is None:   # (no local facets: not a supported cell)
-        packed = np.zeros((0, 1), np.int64)
+        for start in range(0, ncells, CHUNK):   # (the temporaries of a chunk only)
+            nodes = block.cells[start:start + CHUNK, list(f[:nv])]
+            rows = slice(k * ncells + start, k * ncells + start + nodes.shape[0])
+            forward[rows] = checks.facet_direction(nodes)
+            packed[rows] = _packed(_sorted_vertex_keys(nodes, ftype), base)
     return packed, forward
 
 
@@ -252,17 +254,21 @@ def _graph_rows(comm, block: CellBlock, pairs, cross) -> tuple[np.ndarray, np.nd
     folded mesh has)."""
     size = comm.size
     starts = block_starts(block.num_cells, size)
-    rows = [pairs, pairs[:, ::-1]]
+    n = max(block.num_cells, 1)
+    keys = [(pairs[:, 0] - block.start) * n + pairs[:, 1],   # (row, column) as one int64
+            (pairs[:, 1] - block.start) * n + pairs[:, 0]]
     if size > 1:   # each pair across blocks to both cells' blocks, that cell first
         both = np.concatenate([cross, cross[:, ::-1]])
-        rows.append(exchange(comm, both, np.searchsorted(starts, both[:, 0], side="right")
-                             - 1)[0])
-    rows = np.concatenate(rows)
-    n = max(block.num_cells, 1)
-    key = np.unique((rows[:, 0] - block.start) * n + rows[:, 1])
-    row, indices = key // n, key % n
-    indptr = np.concatenate([[0], np.cumsum(np.bincount(row, minlength=block.cells.shape[0]))])
-    return indptr.astype(np.int64), indices.astype(np.int64)
+        got = exchange(comm, both, np.searchsorted(starts, both[:, 0], side="right") - 1)[0]
+        keys.append((got[:, 0] - block.start) * n + got[:, 1])
+        del both, got
+    key = np.concatenate(keys)
+    del keys
+    key.sort()
+    key = key[np.r_[True, key[1:] != key[:-1]]] if key.size else key
+    indptr = np.searchsorted(key, np.arange(block.cells.shape[0] + 1, dtype=np.int64) * n)
+    key %= n
+    return indptr.astype(np.int64), key
 
 
 def _packed(keys: np.ndarray, base: int) -> np.ndarray:

@@ -79,6 +79,10 @@ def fetch(comm, ids: np.ndarray, starts: np.ndarray, table: np.ndarray) -> np.nd
     ``starts`` it falls in), in the order of ``ids``. Collective."""
     ids = np.asarray(ids, dtype=np.int64)
     home = np.searchsorted(starts, ids, side="right") - 1
+    if ids.size < 2 or np.all(home[1:] >= home[:-1]):   # in rank order (1 rank): no copies
+        asked, counts = exchange(comm, ids, home)
+        return exchange(comm, table[asked - starts[comm.rank]],
+                        np.repeat(np.arange(comm.size), counts))[0]
     order = blocks.rank_order(home, comm.size)
     asked, counts = exchange(comm, ids[order], home[order])
     reply = table[asked - starts[comm.rank]]
@@ -489,10 +493,13 @@ def _duplicate_warning(comm, points: np.ndarray, homes: _Homes, ps) -> list[str]
     for a in range(grid.shape[1]):
         mix = (mix ^ grid[:, a].astype(np.uint64)) * np.uint64(0x9E3779B97F4A7C15)
     dest = ((mix >> np.uint64(33)) % np.uint64(comm.size)).astype(np.int64)
-    rows = np.column_stack([grid, ids, pts.view(np.int64).reshape(ids.size, -1)])
-    got, _ = exchange(comm, rows, dest)
     dim = grid.shape[1]
-    got = got[np.argsort(got[:, dim], kind="stable")]   # by input id, as duplicate_points
+    rows = np.column_stack([grid, ids])   # (the coordinates: of the first pair's point only)
+    del pts, mix
+    got, _ = exchange(comm, rows, dest)
+    del rows, grid, dest
+    if got.shape[0] > 1 and not np.all(got[1:, dim] >= got[:-1, dim]):
+        got = got[np.argsort(got[:, dim], kind="stable")]   # by input id, as duplicate_points
     group, counts = topology._row_groups(got[:, :dim]) if got.size else (np.zeros(0, np.int64),
                                                                           np.zeros(0, np.int64))
     dup = np.flatnonzero(counts[group] > 1) if group.size else group
@@ -504,11 +511,11 @@ def _duplicate_warning(comm, points: np.ndarray, homes: _Homes, ps) -> list[str]
     if count == 0:
         return []
     mine = None
-    if pairs.size:   # this rank's first pair (lexicographic) and its first point's coordinates
-        k = np.lexsort(pairs.T[::-1])[0]
-        mine = (tuple(int(v) for v in pairs[k]),
-                got[first_of[group[others[k]]], dim + 1:].copy().view(float))
-    (a, b), at = min((c for c in comm.allgather(mine) if c is not None), key=lambda c: c[0])
+    if pairs.size:   # this rank's first pair (lexicographic)
+        mine = tuple(int(v) for v in pairs[np.lexsort(pairs.T[::-1])[0]])
+    a, b = min(c for c in comm.allgather(mine) if c is not None)
+    at = fetch(comm, np.array([a] if comm.rank == 0 else [], np.int64), ps, points)
+    at = comm.bcast(at[0] if comm.rank == 0 else None, root=0)
     where = ", ".join(f"{c:g}" for c in at)
     return [f"{count} point(s) duplicate another (first: points {a} and {b} at ({where})): "
             "the cells on either side are not connected there (a crack?)"]
