@@ -69,6 +69,8 @@ Usage (from the repository root):
     .venv/bin/python scripts/bench_setup.py --sections pattern first --quick
     .venv/bin/python scripts/bench_setup.py --sections mesh --mesh-n 56   # 1.05M tetrahedra
     .venv/bin/python scripts/bench_setup.py --sections gmsh --gmsh-n 56 --mesh-folder /tmp/m
+    .venv/bin/python scripts/bench_setup.py --sections gmsh --gmsh-n 80 --gmsh-ways convert \
+        msh41 meshio41 --mesh-ranks 1 4 --mesh-repeats 1   # 3.07M: the mesh dominates
     .venv/bin/python scripts/bench_setup.py --report      # table again from bench_results/setup.json
     .venv/bin/python scripts/bench_setup.py --sections compare --compare HEAD~3
     .venv/bin/python scripts/bench_setup.py --smoke      # CI: smallest sizes, files in a temp folder
