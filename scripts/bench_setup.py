@@ -69,6 +69,8 @@ Usage (from the repository root):
     .venv/bin/python scripts/bench_setup.py --sections pattern first --quick
     .venv/bin/python scripts/bench_setup.py --sections mesh --mesh-n 56   # 1.05M tetrahedra
     .venv/bin/python scripts/bench_setup.py --sections gmsh --gmsh-n 56 --mesh-folder /tmp/m
+    .venv/bin/python scripts/bench_setup.py --sections gmsh --gmsh-n 80 --gmsh-ways convert \
+        msh41 meshio41 --mesh-ranks 1 4 --mesh-repeats 1   # 3.07M: the mesh dominates
     .venv/bin/python scripts/bench_setup.py --report      # table again from bench_results/setup.json
     .venv/bin/python scripts/bench_setup.py --sections compare --compare HEAD~3
     .venv/bin/python scripts/bench_setup.py --smoke      # CI: smallest sizes, files in a temp folder
@@ -472,11 +474,13 @@ def child_mumps(dim: int, n: int, control: str) -> list[dict]:
 
 
 MESH_FOLDER = {"path": RESULTS / "meshes"}   # --mesh-folder
+GMSH_WAYS = ["convert", "msh41", "msh22", "meshio41", "h5"]   # section gmsh's
 
 
-def gmsh_files(n: int) -> dict[str, str]:
-    """A box of 6·n³ tetrahedra as a Gmsh MSH 4.1 binary file and its parallel file (made
-    once), and the scene [mesh] lines of section gmsh's ways."""
+def gmsh_files(n: int, ways: list[str] = GMSH_WAYS) -> dict[str, str]:
+    """A box of 6·n³ tetrahedra as a Gmsh MSH 4.1 binary file, as MSH 2.2 and its parallel
+    file (each made once, when a way needs it), and the scene [mesh] lines of section gmsh's
+    ways."""
     import meshio
 
     from parsolve.mesh.cli import convert
@@ -486,12 +490,13 @@ def gmsh_files(n: int) -> dict[str, str]:
     folder.mkdir(parents=True, exist_ok=True)
     msh, h5 = folder / f"box_tetra_{n}_41.msh", folder / f"box_tetra_{n}_41.h5"
     msh22 = folder / f"box_tetra_{n}_22.msh"
-    if not msh.exists() or not msh22.exists():
+    if not msh.exists() or "msh22" in ways and not msh22.exists():
         whole = box(1.0, 1.0, 1.0, n, n, n, cell="tetra")
         mesh = meshio.Mesh(whole.points, [("tetra", whole.cells)])
         meshio.write(str(msh), mesh, file_format="gmsh", binary=True)
-        meshio.write(str(msh22), mesh, file_format="gmsh22", binary=True)
-    if not h5.exists():
+        if "msh22" in ways:
+            meshio.write(str(msh22), mesh, file_format="gmsh22", binary=True)
+    if "h5" in ways and not h5.exists():
         convert(str(msh), str(h5))
     return {"msh": str(msh), "msh41": f'file = "{msh}"', "meshio41": f'file = "{msh}"',
             "msh22": f'file = "{msh22}"', "h5": f'file = "{h5}"'}
@@ -869,6 +874,8 @@ def main() -> None:
                    "(best of)")
     p.add_argument("--gmsh-n", type=int, nargs="+", default=[56],
                    help="hexes per side of section gmsh's box (56: 1.05M tetrahedra)")
+    p.add_argument("--gmsh-ways", nargs="+", default=GMSH_WAYS, choices=GMSH_WAYS,
+                   help="section gmsh's ways (convert: both conversions)")
     p.add_argument("--mesh-folder", default=None,
                    help="where the mesh sections' files are written once (default: "
                    "bench_results/meshes)")
@@ -980,8 +987,8 @@ def run_gmsh(results: dict, a, save) -> None:
     .msh read by slices, by meshio on rank 0, and from its .h5."""
     t0 = time.time()
     for n in sorted(a.gmsh_n):
-        files = gmsh_files(n)
-        for way in ("meshio", "parsolve"):
+        files = gmsh_files(n, a.gmsh_ways)
+        for way in ("meshio", "parsolve") if "convert" in a.gmsh_ways else ():
             out = Path(files["msh"]).with_name(f"convert_{way}.h5")
             row = spawn(["convert", way, files["msh"], str(out)])
             out.unlink(missing_ok=True)
@@ -990,7 +997,7 @@ def run_gmsh(results: dict, a, save) -> None:
                 save()
                 print(f"[gmsh] convert by {way}: {row['seconds']:.2f} s, peak "
                       f"{bh.mib(row['hwm'])} MiB", flush=True)
-        for way, nranks in ((w, r) for w in ("msh41", "msh22", "meshio41", "h5")
+        for way, nranks in ((w, r) for w in GMSH_WAYS[1:] if w in a.gmsh_ways
                             for r in a.mesh_ranks):
             row = spawn(["mesh", way, str(n), files[way], str(a.mesh_repeats)], nranks=nranks)
             if row:

@@ -118,21 +118,20 @@ def facet_groups(comm, block: CellBlock, source: str | None, key: str | None,
     at once. Only one row per facet key crosses ranks, to the rank the key names: a single
     facet (its cell and direction, to be matched with another block's) or a count (a facet
     matched here, which another block's copy would make a facet of three cells)."""
-    keys, owner, forward = _facet_keys(comm, block)
-    order, group, counts = sorted_row_groups(keys)   # (group: of the sorted facets)
-    # the facets of two copies here, pair by pair (masks of the groups' size: no
-    # facet-long array of counts)
-    two = order[(counts == 2)[group]]
-    many = order[(counts > 2)[group]]
-    del group
-    folded = _folded_here(two, owner, forward)
+    keys, forward = _facet_keys(comm, block)
+    order, counts = _sorted_runs(keys)
+    two = order[np.repeat(counts == 2, counts)]   # (masks of the facets' size: bytes)
+    many = order[np.repeat(counts > 2, counts)]
+    first = order[np.cumsum(counts) - counts] if comm.size > 1 else None   # a key's first
+    del order
+    folded = _cell_of(block, _folded_here(two, forward))
     if comm.size > 1:
-        cross, cross_folded, bad = _match_across(comm, keys, order, counts, owner, forward)
+        cross, cross_folded, bad = _match_across(comm, keys, first, counts, block, forward)
         folded = np.concatenate([folded, cross_folded])
     else:
         cross, bad = np.zeros((0, 2), np.int64), keys[many]
-    del forward, order, many
-    _raise_cells(comm, _owners_of_keys(keys, owner, bad), lambda cells: (
+    del forward, first, many
+    _raise_cells(comm, _cell_of(block, _rows_of_keys(keys, bad)), lambda cells: (
         f"a facet is shared by more than two cells (cells {checks._ids(cells)}): not a valid "
         "volume mesh"), source, key)
     del keys
@@ -141,16 +140,43 @@ def facet_groups(comm, block: CellBlock, source: str | None, key: str | None,
         f"cells {checks._ids(cells)}"), source, key)
     if not graph:
         return None
-    pairs = owner[two].reshape(-1, 2)
-    del two, counts, owner
+    pairs = _cell_of(block, two).reshape(-1, 2)
+    del two, counts
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]   # (a collapsed cell seeing itself twice)
     return _graph_rows(comm, block, pairs, cross)
 
 
-def _facet_keys(comm, block: CellBlock) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _sorted_runs(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(the order that sorts the rows of ``keys``, int32 while it fits; the lengths of the
+    runs of equal rows in it): ``topology.sorted_row_groups`` without its group of every row,
+    the sorted keys compared by chunks (the facets' largest arrays are the keys and the
+    order)."""
+    n = keys.shape[0]
+    if n == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    order = np.argsort(keys[:, 0]) if keys.shape[1] == 1 else np.lexsort(keys.T[::-1])
+    order = order.astype(np.int32 if n <= np.iinfo(np.int32).max else np.int64, copy=False)
+    new = np.zeros(n, dtype=bool)
+    new[0] = True
+    for start in range(0, n - 1, CHUNK):
+        ahead = keys[order[start:start + CHUNK + 1]]
+        new[start + 1:start + ahead.shape[0]] = (ahead[1:] != ahead[:-1]).any(axis=1)
+    return order, np.diff(np.append(np.flatnonzero(new), n))
+
+
+CHUNK = 1 << 16   # rows of the facets' arrays at a time
+
+
+def _cell_of(block: CellBlock, rows: np.ndarray) -> np.ndarray:
+    """The cell of each of the block's facets ``rows`` (facet-major: local facet, then cell)."""
+    return rows.astype(np.int64) % max(block.cells.shape[0], 1) + block.start
+
+
+def _facet_keys(comm, block: CellBlock) -> tuple[np.ndarray, np.ndarray]:
     """(every facet's sorted corners packed into as few int64 as fit, the same packing on
-    every rank; its cell; its direction), facet-major. Built one local facet at a time:
-    the corners of every facet at once (and their sorted copy) were the mesh stage's peak."""
+    every rank; its direction), facet-major (``_cell_of`` gives its cell). Built one local
+    facet at a time: the corners of every facet at once (and their sorted copy) were the mesh
+    stage's peak."""
     ftype = CELL_INFO[block.cell_type][1]
     nv = NUM_VERTICES[ftype]
     local = FACETS[block.cell_type]
@@ -158,40 +184,37 @@ def _facet_keys(comm, block: CellBlock) -> tuple[np.ndarray, np.ndarray, np.ndar
     corners = sorted({int(i) for f in local for i in f[:nv]})
     top = int(block.cells[:, corners].max(initial=0)) if ncells else 0
     base = comm.allreduce(top) + 1   # the largest corner id of any facet
-    packed, forward = None, np.empty(ncells * len(local), dtype=bool)
+    width = _packed(np.zeros((1, nv), np.int64), base).shape[1]
+    packed = np.empty((ncells * len(local), width), dtype=np.int64)
+    forward = np.empty(ncells * len(local), dtype=bool)
     for k, f in enumerate(local):
-        nodes = block.cells[:, list(f[:nv])]
-        rows = slice(k * ncells, (k + 1) * ncells)
-        forward[rows] = checks.facet_direction(nodes)
-        keys = _packed(_sorted_vertex_keys(nodes, ftype), base)
-        if packed is None:
-            packed = np.empty((ncells * len(local), keys.shape[1]), dtype=np.int64)
-        packed[rows] = keys
-    if packed is None:   # (no local facets: not a supported cell)
-        packed = np.zeros((0, 1), np.int64)
-    owner = np.tile(np.arange(ncells, dtype=np.int64) + block.start, len(local))
-    return packed, owner, forward
+        for start in range(0, ncells, CHUNK):   # (the temporaries of a chunk only)
+            nodes = block.cells[start:start + CHUNK, list(f[:nv])]
+            rows = slice(k * ncells + start, k * ncells + start + nodes.shape[0])
+            forward[rows] = checks.facet_direction(nodes)
+            packed[rows] = _packed(_sorted_vertex_keys(nodes, ftype), base)
+    return packed, forward
 
 
-def _folded_here(two, owner, forward) -> np.ndarray:
-    """The cells of this block's facets of exactly two copies here (``two``: their rows,
-    pair by pair) that run through them the same way (folded over each other)."""
+def _folded_here(two, forward) -> np.ndarray:
+    """The facets (rows) of this block's facets of exactly two copies here (``two``: their
+    rows, pair by pair) that run through them the same way (folded over each other)."""
     fwd = forward[two].reshape(-1, 2)
-    return owner[two.reshape(-1, 2)[fwd[:, 0] == fwd[:, 1]]].ravel()
+    return two.reshape(-1, 2)[fwd[:, 0] == fwd[:, 1]].ravel()
 
 
-def _match_across(comm, keys, order, counts, owner, forward):
+def _match_across(comm, keys, first, counts, block: CellBlock, forward):
     """One row per facet key of this block to the rank the key names: (key, cell * 2 +
-    direction) for a facet single here, (key, -copies) for the others. There: the keys of
-    more than two copies in all (``bad``, every rank's), and the pairs of two singles — cell
-    pairs across blocks — and their folded cells. In rounds of at most ``ROUND_ROWS`` rows a
-    rank (a round: the keys of one residue of key // size, so a facet's copies meet in the
-    same round): a round's exchange and grouping, not the block's, is the transient."""
-    first = order[np.r_[0, np.cumsum(counts)[:-1]]] if counts.size else order
+    direction) for a facet single here, (key, -copies) for the others (``first``: each key's
+    first facet, ``counts``: its copies). There: the keys of more than two copies in all
+    (``bad``, every rank's), and the pairs of two singles — cell pairs across blocks — and
+    their folded cells. In rounds of at most ``ROUND_ROWS`` rows a rank (a round: the keys of
+    one residue of key // size, so a facet's copies meet in the same round): a round's exchange
+    and grouping, not the block's, is the transient."""
     single = counts == 1
-    rows = np.column_stack([keys[first], np.where(single, owner[first] * 2 + forward[first],
-                                                  -counts)])
-    del first, single
+    rows = np.column_stack([keys[first], np.where(single, _cell_of(block, first) * 2
+                                                  + forward[first], -counts)])
+    del single
     rounds = max(comm.allreduce(-(-rows.shape[0] // ROUND_ROWS), MPI.MAX), 1)
     turn = (rows[:, 0] // comm.size) % rounds if rounds > 1 else None
     found = [_match_round(comm, rows if turn is None else rows[turn == k])
@@ -215,14 +238,14 @@ def _match_round(comm, rows):
     return (last[two] >> 1).reshape(-1, 2), (last[two] & 1).reshape(-1, 2).sum(axis=1), bad
 
 
-def _owners_of_keys(keys, owner, bad) -> np.ndarray:
-    """The cells of this block whose facet's key is one of ``bad`` (every rank's alike)."""
+def _rows_of_keys(keys, bad) -> np.ndarray:
+    """The facets (rows) of this block whose key is one of ``bad`` (every rank's alike)."""
     if bad.shape[0] == 0:
         return np.zeros(0, np.int64)
     g, _ = _row_groups(np.concatenate([keys, bad]))
     hit = np.zeros(g.max() + 1, dtype=bool)
     hit[g[keys.shape[0]:]] = True
-    return owner[hit[g[:keys.shape[0]]]]
+    return np.flatnonzero(hit[g[:keys.shape[0]]])
 
 
 def _graph_rows(comm, block: CellBlock, pairs, cross) -> tuple[np.ndarray, np.ndarray]:
@@ -231,17 +254,21 @@ def _graph_rows(comm, block: CellBlock, pairs, cross) -> tuple[np.ndarray, np.nd
     folded mesh has)."""
     size = comm.size
     starts = block_starts(block.num_cells, size)
-    rows = [pairs, pairs[:, ::-1]]
+    n = max(block.num_cells, 1)
+    keys = [(pairs[:, 0] - block.start) * n + pairs[:, 1],   # (row, column) as one int64
+            (pairs[:, 1] - block.start) * n + pairs[:, 0]]
     if size > 1:   # each pair across blocks to both cells' blocks, that cell first
         both = np.concatenate([cross, cross[:, ::-1]])
-        rows.append(exchange(comm, both, np.searchsorted(starts, both[:, 0], side="right")
-                             - 1)[0])
-    rows = np.concatenate(rows)
-    n = max(block.num_cells, 1)
-    key = np.unique((rows[:, 0] - block.start) * n + rows[:, 1])
-    row, indices = key // n, key % n
-    indptr = np.concatenate([[0], np.cumsum(np.bincount(row, minlength=block.cells.shape[0]))])
-    return indptr.astype(np.int64), indices.astype(np.int64)
+        got = exchange(comm, both, np.searchsorted(starts, both[:, 0], side="right") - 1)[0]
+        keys.append((got[:, 0] - block.start) * n + got[:, 1])
+        del both, got
+    key = np.concatenate(keys)
+    del keys
+    key.sort()
+    key = key[np.r_[True, key[1:] != key[:-1]]] if key.size else key
+    indptr = np.searchsorted(key, np.arange(block.cells.shape[0] + 1, dtype=np.int64) * n)
+    key %= n
+    return indptr.astype(np.int64), key
 
 
 def _packed(keys: np.ndarray, base: int) -> np.ndarray:
@@ -274,7 +301,8 @@ def exchange(comm, rows: np.ndarray, dest: np.ndarray) -> tuple[np.ndarray, np.n
     (source rank, row order), how many from each rank). Two Alltoallv calls."""
     size = comm.size
     rows = np.asarray(rows)
-    send = np.ascontiguousarray(rows[rank_order(dest, size)])
+    ordered = dest.size < 2 or bool(np.all(dest[1:] >= dest[:-1]))   # (1 rank: no copy)
+    send = np.ascontiguousarray(rows if ordered else rows[rank_order(dest, size)])
     width = send.dtype.itemsize * (int(np.prod(send.shape[1:])) if send.ndim > 1 else 1)
     counts = np.bincount(dest, minlength=size).astype(np.int64) if dest.size \
         else np.zeros(size, np.int64)

@@ -3,8 +3,11 @@
 ``scan`` walks the file once and keeps its layout: the physical names, the entities' physical
 tags, and where each block of ``$Nodes`` and ``$Elements`` lies (binary: its byte offset; ASCII:
 the offsets of every ``MARK``-th line). MSH 2.2 has no entities: its elements' blocks are the
-runs of consecutive elements of one type, tag count and physical tag (the first tag), and the
-physical tag stands for the entity (``physical[(dim, tag)] = (tag,)``). Rows of the blocks
+runs of consecutive elements of one type and tag count, and each row carries its physical tag
+(the first tag): the layout keeps how many rows of a block have each tag
+(``Layout.row_tags``), and a block of several tags has its rows' tags read with its rows
+(``Layout.in_group``), so a file whose elements alternate tags is a few blocks, not one per
+element. Rows of the blocks
 are then read by ranges with numpy (``Layout.node_rows``, ``Layout.element_rows``): a rank
 reads its slice of the nodes and of the cells (``GmshSlices``, the slice path of
 ``mesh.slices``), ``parsolve mesh convert`` streams the file by chunks (``convert``). The
@@ -80,6 +83,7 @@ class Rows:
     offset: int = 0
     marks: np.ndarray | None = None
     lead: int = 1
+    phys: int = -1     # MSH 2: the column of the rows' physical tag (-1: the entity's)
 
     def read(self, fh, start: int, stop: int, fail) -> np.ndarray:
         count = max(stop - start, 0)
@@ -152,6 +156,7 @@ class Layout:
     physical: dict = field(default_factory=dict)    # (dim, entity) -> physical tags
     node_blocks: list = field(default_factory=list)  # (tags Rows, coordinates Rows | None)
     element_blocks: list = field(default_factory=list)   # (dim, entity, type name, Rows)
+    row_tags: dict = field(default_factory=dict)    # MSH 2 block -> {physical tag: rows}
     num_nodes: int = 0
     tag_range: tuple = (1, 0)
 
@@ -193,7 +198,7 @@ class Layout:
         if not out:
             cols = self.nodes_per_row(blocks[0]) if blocks else 0
             return np.zeros((0, cols), np.int64)
-        return np.concatenate(out).astype(np.int64)
+        return np.concatenate(out, dtype=np.int64, casting="unsafe")   # (one copy)
 
     def nodes_per_row(self, b: int) -> int:
         rows = self.element_blocks[b][3]
@@ -202,11 +207,51 @@ class Layout:
     def block_names(self, b: int) -> list[str]:
         """The groups block ``b``'s elements are in (as meshio's reading gives them)."""
         dim, entity = self.element_blocks[b][0], self.element_blocks[b][1]
-        tags = self.physical.get((dim, entity), ())
+        if b in self.row_tags:
+            return sorted({n for t in self.row_tags[b] for n in self._names(dim, (t,))})
+        return self._names(dim, self.physical.get((dim, entity), ()))
+
+    def _names(self, dim: int, tags: tuple) -> list[str]:
+        """The groups of an element with physical ``tags``: the named ones, and the first
+        when unnamed (by its number)."""
         names = [self.names[(dim, t)] for t in tags if (dim, t) in self.names]
         if tags and tags[0] > 0 and (dim, tags[0]) not in self.names:
             names.append(str(tags[0]))
         return sorted(set(names))
+
+    def _tags_of(self, b: int, name: str) -> list[int]:
+        """The physical tags of block ``b``'s rows that are in group ``name`` (MSH 2)."""
+        dim = self.element_blocks[b][0]
+        return [t for t in self.row_tags[b] if name in self._names(dim, (t,))]
+
+    def group_count(self, blocks: list[int], name: str) -> int:
+        """The rows of ``blocks`` in group ``name``."""
+        total = 0
+        for b in blocks:
+            if b in self.row_tags:
+                total += sum(self.row_tags[b][t] for t in self._tags_of(b, name))
+            elif name in self.block_names(b):
+                total += self.element_blocks[b][3].n
+        return total
+
+    def in_group(self, fh, blocks: list[int], name: str, start: int, stop: int) -> np.ndarray:
+        """Whether each of rows ``start:stop`` of ``blocks`` (concatenated) is in group
+        ``name``: from the header, or the rows' own tags in a block of several (read)."""
+        out, first = np.zeros(max(stop - start, 0), dtype=bool), 0
+        for b in blocks:
+            rows, base = self.element_blocks[b][3], first
+            lo, hi = max(start - base, 0), min(stop - base, rows.n)
+            first += rows.n
+            if lo >= hi or name not in self.block_names(b):
+                continue
+            at = slice(base + lo - start, base + hi - start)
+            tags = self._tags_of(b, name) if b in self.row_tags else None
+            if tags is None or len(self.row_tags[b]) == 1:
+                out[at] = True
+            else:
+                phys = rows.read(fh, lo, hi, self.fail("$Elements"))[:, rows.phys]
+                out[at] = np.isin(phys, tags)
+        return out
 
 
 def scan(path: str, key: str = "mesh.file") -> Layout:
@@ -420,11 +465,12 @@ class _Format:
 
 class _Runs:
     """MSH 2 element rows, a chunk at a time, gathered into blocks: runs of consecutive rows
-    of one (type, tag count, physical tag). ASCII rows keep the offset of every MARK-th line,
-    binary ones their first row's offset (a run never spans two binary blocks)."""
+    of one (type, tag count), with how many rows have each physical tag. ASCII rows keep the
+    offset of every MARK-th line, binary ones their first row's offset (a run never spans two
+    binary blocks)."""
 
     def __init__(self, lay: Layout):
-        self.lay, self.key, self.n, self.marks = lay, None, 0, []
+        self.lay, self.key, self.n, self.marks, self.tags = lay, None, 0, [], {}
 
     def add(self, kind: int, ntags: int | np.ndarray, phys: np.ndarray,
             offsets: np.ndarray, ascii_rows: bool = False) -> None:
@@ -434,10 +480,9 @@ class _Runs:
             return
         kinds = np.broadcast_to(kind, phys.shape)
         ntags = np.broadcast_to(ntags, phys.shape)
-        change = np.flatnonzero((kinds[1:] != kinds[:-1]) | (ntags[1:] != ntags[:-1])
-                                | (phys[1:] != phys[:-1])) + 1
+        change = np.flatnonzero((kinds[1:] != kinds[:-1]) | (ntags[1:] != ntags[:-1])) + 1
         for a, b in zip(np.r_[0, change], np.r_[change, phys.size]):
-            key = (int(kinds[a]), int(ntags[a]), int(phys[a]), ascii_rows)
+            key = (int(kinds[a]), int(ntags[a]), ascii_rows)
             if key != self.key:
                 self.close()
                 self.key = key
@@ -445,21 +490,25 @@ class _Runs:
                 self.marks.append(offsets[a + (-self.n) % MARK:b:MARK])
             elif not self.n:
                 self.marks.append(offsets[a:a + 1])
+            for tag, count in zip(*np.unique(phys[a:b], return_counts=True)):
+                self.tags[int(tag)] = self.tags.get(int(tag), 0) + int(count)
             self.n += int(b - a)
 
     def close(self) -> None:
         """The current run as a block."""
         if self.key is None:
             return
-        kind, ntags, phys, ascii_rows = self.key
+        kind, ntags, ascii_rows = self.key
         name, nodes, dim = TYPES[kind]
         marks = np.concatenate(self.marks)
         lead = 3 + ntags if ascii_rows else 1 + ntags
-        rows = (Rows(self.n, lead + nodes, "<i8", marks=marks, lead=lead) if ascii_rows
-                else Rows(self.n, lead + nodes, "<i4", offset=int(marks[0]), lead=lead))
-        self.lay.element_blocks.append((dim, phys, name, rows))
-        self.lay.physical[(dim, phys)] = (phys,) if phys > 0 else ()
-        self.key, self.n, self.marks = None, 0, []
+        phys = (3 if ascii_rows else 1) if ntags else -1
+        rows = (Rows(self.n, lead + nodes, "<i8", marks=marks, lead=lead, phys=phys)
+                if ascii_rows else Rows(self.n, lead + nodes, "<i4", offset=int(marks[0]),
+                                        lead=lead, phys=phys))
+        self.lay.row_tags[len(self.lay.element_blocks)] = self.tags
+        self.lay.element_blocks.append((dim, 0, name, rows))
+        self.key, self.n, self.marks, self.tags = None, 0, [], {}
 
 
 _NODES = np.zeros(max(TYPES) + 1, np.int64)   # Gmsh type -> nodes (0: unknown)

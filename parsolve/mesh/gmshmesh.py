@@ -160,8 +160,9 @@ class GmshSlices:
         return self._mine(self._node_flags, self._ps, start, stop)
 
     def cell_flags(self, start: int, stop: int) -> np.ndarray:
-        """The cells' groups from the blocks' headers (any rows)."""
-        return cell_flags(self.layout, self.plan, start, stop)
+        """The cells' groups (any rows): from the blocks' headers, or their rows' tags."""
+        with self.layout.open() as fh:
+            return cell_flags(self.layout, self.plan, fh, start, stop)
 
     def facet_slice(self, name: str, rank: int, size: int) -> tuple[np.ndarray, np.ndarray]:
         return self._facets[name]
@@ -173,16 +174,11 @@ class GmshSlices:
         return array
 
 
-def cell_flags(lay: Layout, plan: Plan, start: int, stop: int) -> np.ndarray:
+def cell_flags(lay: Layout, plan: Plan, fh, start: int, stop: int) -> np.ndarray:
     """(stop - start, cell groups) bool: the groups of cells ``start:stop``."""
     out = np.zeros((max(stop - start, 0), len(plan.cell_groups)), dtype=bool)
-    first = 0
-    for b in plan.cells:
-        n = lay.element_blocks[b][3].n
-        lo, hi = max(start, first), min(stop, first + n)
-        for name in lay.block_names(b) if lo < hi else ():
-            out[lo - start:hi - start, plan.cell_groups.index(name)] = True
-        first += n
+    for k, name in enumerate(plan.cell_groups):
+        out[:, k] = lay.in_group(fh, plan.cells, name, start, stop)
     return out
 
 
@@ -206,15 +202,18 @@ def _in_range(ids: np.ndarray, message: str, path: str, key: str) -> None:
 
 def _oriented(comm, cells: np.ndarray, ps: np.ndarray, points: np.ndarray,
               cell_type: str) -> np.ndarray:
-    """``cells`` with the nodes of negatively oriented ones reordered (their coordinates
-    fetched from the nodes' homes)."""
-    from parsolve.mesh.slices import fetch
+    """``cells`` with the nodes of negatively oriented ones reordered in place (their
+    coordinates fetched from the nodes' homes), a chunk of cells at a time."""
+    from parsolve.mesh.slices import fetch, local_nodes
 
-    nodes, inverse = np.unique(cells, return_inverse=True)
+    nodes, inverse = local_nodes(cells)
     coords = fetch(comm, nodes, ps, points)
-    with np.errstate(invalid="ignore"):   # NaN coordinates: the slice path's checks say so
-        local, flipped = orient_cells(coords, cell_type, inverse.reshape(cells.shape))
-    return nodes[local] if flipped else cells
+    for start in range(0, cells.shape[0], ROWS):
+        with np.errstate(invalid="ignore"):   # NaN coordinates: the slice path's checks say so
+            local, flipped = orient_cells(coords, cell_type, inverse[start:start + ROWS])
+        if flipped:
+            cells[start:start + ROWS] = nodes[local]
+    return cells
 
 
 def _group_rows(lay: Layout, blocks: list[int], name: str) -> list[int]:
@@ -232,7 +231,8 @@ def _node_flags(comm, fh, lay: Layout, plan: Plan, index: _TagIndex, ps, key: st
         for k, name in enumerate(plan.node_groups):
             for b in _group_rows(lay, plan.nodes, name):
                 n = lay.element_blocks[b][3].n
-                tags = lay.element_rows(fh, [b], n * rank // size, n * (rank + 1) // size)
+                lo, hi = n * rank // size, n * (rank + 1) // size
+                tags = lay.element_rows(fh, [b], lo, hi)[lay.in_group(fh, [b], name, lo, hi)]
                 pairs.append(np.column_stack([tags.ravel(), np.full(tags.size, k)]))
         return np.concatenate(pairs)
 
@@ -246,29 +246,31 @@ def _node_flags(comm, fh, lay: Layout, plan: Plan, index: _TagIndex, ps, key: st
 
 
 def _facet_slices(comm, fh, lay: Layout, plan: Plan, index: _TagIndex, key: str) -> dict:
-    """Each facet group's rows of this rank (an even split of the group's rows) and their
-    row numbers in the group."""
+    """Each facet group's rows of this rank (an even split of the rows of the group's blocks,
+    those of the group kept) and their row numbers in the group."""
     rank, size = comm.rank, comm.size
 
-    def read() -> list[tuple[np.ndarray, np.ndarray]]:
+    def read() -> list[np.ndarray]:
         out = []
         for name in plan.facet_groups:
             blocks = _group_rows(lay, plan.facets, name)
             n = sum(lay.element_blocks[b][3].n for b in blocks)
             a, c = n * rank // size, n * (rank + 1) // size
-            out.append((lay.element_rows(fh, blocks, a, c), np.arange(a, c, dtype=np.int64)))
+            out.append(lay.element_rows(fh, blocks, a, c)[lay.in_group(fh, blocks, name, a, c)])
         return out
 
     parts = agree(comm, read)
-    counts = [len(f) for f, _ in parts]
+    counts = np.array([len(f) for f in parts], dtype=np.int64)
+    before = comm.exscan(counts)   # (collective; None on rank 0)
+    before = np.zeros_like(counts) if rank == 0 else before
     nfn = len(_facet_nodes(plan.cell_type))
-    tags = np.concatenate([f for f, _ in parts]) if parts else np.zeros((0, nfn), np.int64)
+    tags = np.concatenate(parts) if parts else np.zeros((0, nfn), np.int64)
     ids = index(tags)
     agree(comm, _in_range, ids, "a facet group refers to points that do not exist", lay.path,
           key)
     split = np.split(ids, np.cumsum(counts)[:-1]) if parts else []
-    return {name: (facets, order) for name, facets, (_, order)
-            in zip(plan.facet_groups, split, parts)}
+    return {name: (facets, np.arange(first, first + len(facets), dtype=np.int64))
+            for name, facets, first in zip(plan.facet_groups, split, before)}
 
 
 def _facet_nodes(cell_type: str) -> tuple:
@@ -355,18 +357,19 @@ def _stream_cells(fh, lay, plan, g, points, positions, num_cells: int, key: str)
 
 
 def _write_groups(fh, lay, plan, g, positions, num_cells: int, key: str) -> None:
-    for k, name in enumerate(plan.cell_groups):
+    for name in plan.cell_groups:
         mask = g.require_group("cell_groups").create_dataset(name, (num_cells,), np.uint8)
         for a in range(0, num_cells, ROWS):
             b = min(a + ROWS, num_cells)
-            mask[a:b] = cell_flags(lay, plan, a, b)[:, k]
+            mask[a:b] = lay.in_group(fh, plan.cells, name, a, b)
     for name in plan.node_groups:
         mask = np.zeros(lay.num_nodes, np.uint8)
         for b in _group_rows(lay, plan.nodes, name):
             n = lay.element_blocks[b][3].n
             for a in range(0, n, ROWS):
-                ids = _map(lay.element_rows(fh, [b], a, min(a + ROWS, n)), positions,
-                           lay.num_nodes)
+                c = min(a + ROWS, n)
+                ids = _map(lay.element_rows(fh, [b], a, c)[lay.in_group(fh, [b], name, a, c)],
+                           positions, lay.num_nodes)
                 _in_range(ids, "a node group refers to points that do not exist", lay.path, key)
                 mask[ids.ravel()] = 1
         g.require_group("node_groups").create_dataset(name, data=mask)
@@ -374,9 +377,13 @@ def _write_groups(fh, lay, plan, g, positions, num_cells: int, key: str) -> None
     for name in plan.facet_groups:
         blocks = _group_rows(lay, plan.facets, name)
         n = sum(lay.element_blocks[b][3].n for b in blocks)
-        out = g.require_group("facet_groups").create_dataset(name, (n, nfn), np.int64)
+        out = g.require_group("facet_groups").create_dataset(
+            name, (lay.group_count(blocks, name), nfn), np.int64)
+        at = 0
         for a in range(0, n, ROWS):
-            ids = _map(lay.element_rows(fh, blocks, a, min(a + ROWS, n)), positions,
-                       lay.num_nodes)
+            c = min(a + ROWS, n)
+            ids = _map(lay.element_rows(fh, blocks, a, c)[lay.in_group(fh, blocks, name, a, c)],
+                       positions, lay.num_nodes)
             _in_range(ids, "a facet group refers to points that do not exist", lay.path, key)
-            out[a:a + len(ids)] = ids
+            out[at:at + len(ids)] = ids
+            at += len(ids)

@@ -79,6 +79,10 @@ def fetch(comm, ids: np.ndarray, starts: np.ndarray, table: np.ndarray) -> np.nd
     ``starts`` it falls in), in the order of ``ids``. Collective."""
     ids = np.asarray(ids, dtype=np.int64)
     home = np.searchsorted(starts, ids, side="right") - 1
+    if ids.size < 2 or np.all(home[1:] >= home[:-1]):   # in rank order (1 rank): no copies
+        asked, counts = exchange(comm, ids, home)
+        return exchange(comm, table[asked - starts[comm.rank]],
+                        np.repeat(np.arange(comm.size), counts))[0]
     order = blocks.rank_order(home, comm.size)
     asked, counts = exchange(comm, ids[order], home[order])
     reply = table[asked - starts[comm.rank]]
@@ -242,18 +246,18 @@ def distribute_slices(comm, src: SliceSource, method: str, source: str, key: str
     with progress.phase("mesh read"):
         cells, points = agree(comm, _read_slice, src, cs, ps, rank, source, key)
         _note(cells, points)
-        nodes, inverse = np.unique(cells, return_inverse=True)
-        inverse = inverse.reshape(cells.shape)
+        nodes, inverse = local_nodes(cells)
         coords = CellCoords(fetch(comm, nodes, ps, points), inverse)
     block = blocks.CellBlock(cells, coords, int(cs[rank]), src.num_cells, src.cell_type, src.dim)
     progress.timed("checks", blocks.check_jacobians, comm, block, source, key)
-    centroids = coords.centroids()
-    block.coords = coords = None
     with progress.phase("partition"):
         graph = blocks.facet_groups(comm, block, source, key, graph=size > 1)
+        # (after the facets, whose arrays are the stage's largest; 1 rank: none needed)
+        centroids = coords.centroids() if size > 1 else None
+        block.coords = coords = None
         part, used = _cell_parts(comm, method, block, centroids, graph)
         del graph, centroids
-        homes = _homes(comm, src, cells, part, ps, points, rank)
+        homes = _homes(comm, src, nodes, inverse, part, ps, points, rank)
         mine = _cells_to_owners(comm, src, cells, nodes, inverse.ravel(), homes, cs[rank])
         del cells, part, nodes, inverse
         mesh = _local_mesh(comm, src, mine, homes, source, key)
@@ -262,6 +266,18 @@ def distribute_slices(comm, src: SliceSource, method: str, source: str, key: str
     warnings = _unused_warning(comm, homes.unused) + _duplicate_warning(comm, points, homes, ps)
     mesh.warnings = [f"{source}: {key}: {w}" for w in warnings]
     return mesh
+
+
+def local_nodes(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(the sorted distinct nodes of ``cells``, each entry's position among them: int32 while
+    it fits). A sort of a copy and a search, not ``np.unique``'s inverse (its permutation,
+    sorted copy and inverse: 3 more int64 per entry, the mesh read's peak)."""
+    nodes = np.unique(cells)
+    inverse = np.empty(cells.shape, dtype=index_dtype(nodes.size))
+    for start in range(0, cells.shape[0], checks.JACOBIAN_CHUNK):
+        stop = start + checks.JACOBIAN_CHUNK
+        inverse[start:stop] = np.searchsorted(nodes, cells[start:stop])
+    return nodes, inverse
 
 
 def _read_slice(src: SliceSource, cs, ps, rank: int, source: str, key: str):
@@ -282,13 +298,17 @@ def _read_slice(src: SliceSource, cs, ps, rank: int, source: str, key: str):
     return cells, points
 
 
-def _homes(comm, src: SliceSource, cells, part, ps, points, rank: int) -> _Homes:
+def _homes(comm, src: SliceSource, nodes, inverse, part, ps, points, rank: int) -> _Homes:
     """Owners (lowest part among a node's cells; nodes of no cell: the last rank) and global
-    numbers (owners' blocks, input order inside) of this rank's home nodes."""
+    numbers (owners' blocks, input order inside) of this rank's home nodes (``nodes``,
+    ``inverse``: the slice's, ``local_nodes``)."""
     size = comm.size
-    pairs = np.unique(cells.astype(np.int64) * size + np.repeat(part, cells.shape[1])
-                      .reshape(cells.shape)) if cells.size else np.zeros(0, np.int64)
-    node, owner_of = np.divmod(pairs, size)
+    kind = index_dtype(max(nodes.size, 1), size)   # (local node, part) keys in int32 if they fit
+    pairs = np.unique(inverse.astype(kind) * kind.type(size) + part.astype(kind)[:, None]) \
+        if inverse.size else np.zeros(0, kind)
+    local, owner_of = np.divmod(pairs.astype(np.int64), size)
+    node = nodes[local]
+    del pairs, local
     got, _ = exchange(comm, np.column_stack([node, owner_of]),
                       np.searchsorted(ps, node, side="right") - 1)
     nhome = int(ps[rank + 1] - ps[rank])
@@ -317,12 +337,15 @@ def _cells_to_owners(comm, src: SliceSource, cells, nodes, inverse, homes: _Home
     """The rows (input id, nodes, cell groups) of every cell of the ghost layer of this rank,
     received from the slices: each cell goes to every rank owning one of its nodes."""
     size = comm.size
-    owner = fetch(comm, nodes, homes.starts, homes.table[:, :1])[:, 0][inverse] \
-        .reshape(cells.shape)
+    owner = fetch(comm, nodes, homes.starts, homes.table[:, :1])[:, 0] \
+        .astype(index_dtype(size))[inverse].reshape(cells.shape)
     ncells = cells.shape[0]
-    pairs = np.unique(np.repeat(np.arange(ncells, dtype=np.int64), cells.shape[1]) * size
-                      + owner.ravel())
-    cell, dest = np.divmod(pairs, size)
+    owner.sort(axis=1)   # each cell's distinct owners: the first of each run of its row
+    first = np.ones(owner.shape, dtype=bool)
+    first[:, 1:] = owner[:, 1:] != owner[:, :-1]
+    cell, col = np.nonzero(first)   # (by cell, then rank)
+    dest = owner[cell, col]
+    del owner, first, col
     flags = src.cell_flags(start, start + ncells)
     # int32 while the ids fit: a cell of the ghost layer travels (and lands) in half the bytes
     kind = index_dtype(max(src.num_cells, src.num_points))
@@ -331,8 +354,11 @@ def _cells_to_owners(comm, src: SliceSource, cells, nodes, inverse, homes: _Home
     rows[:, 1:1 + cells.shape[1]] = cells[cell]
     rows[:, 1 + cells.shape[1]:] = flags[cell]
     _note(rows)
+    del cell
     got, _ = exchange(comm, rows, dest)
     _note(got)
+    if got.shape[0] < 2 or np.all(got[1:, 0] >= got[:-1, 0]):   # (1 rank: in order)
+        return got
     return got[np.argsort(got[:, 0], kind="stable")]
 
 
@@ -358,7 +384,10 @@ def _local_mesh(comm, src: SliceSource, mine: np.ndarray, homes: _Homes, source:
     flags = info[local, 2:2 + ngroups].astype(bool)
     points = np.ascontiguousarray(info[local, 2 + ngroups:]).view(float).reshape(-1, dim)
     global_nodes = ids[local]
-    cells = to_local[np.searchsorted(ids, gcells)]
+    cells = np.empty(gcells.shape, dtype=local_type)
+    for start in range(0, cells.shape[0], checks.JACOBIAN_CHUNK):   # (no int64 of them all)
+        stop = start + checks.JACOBIAN_CHUNK
+        cells[start:stop] = to_local[np.searchsorted(ids, gcells[start:stop])]
     _note(points, cells)
     cflags = mine[:, 1 + nen:].astype(bool)
     nlocal = mine.shape[0]
@@ -464,10 +493,13 @@ def _duplicate_warning(comm, points: np.ndarray, homes: _Homes, ps) -> list[str]
     for a in range(grid.shape[1]):
         mix = (mix ^ grid[:, a].astype(np.uint64)) * np.uint64(0x9E3779B97F4A7C15)
     dest = ((mix >> np.uint64(33)) % np.uint64(comm.size)).astype(np.int64)
-    rows = np.column_stack([grid, ids, pts.view(np.int64).reshape(ids.size, -1)])
-    got, _ = exchange(comm, rows, dest)
     dim = grid.shape[1]
-    got = got[np.argsort(got[:, dim], kind="stable")]   # by input id, as duplicate_points
+    rows = np.column_stack([grid, ids])   # (the coordinates: of the first pair's point only)
+    del pts, mix
+    got, _ = exchange(comm, rows, dest)
+    del rows, grid, dest
+    if got.shape[0] > 1 and not np.all(got[1:, dim] >= got[:-1, dim]):
+        got = got[np.argsort(got[:, dim], kind="stable")]   # by input id, as duplicate_points
     group, counts = topology._row_groups(got[:, :dim]) if got.size else (np.zeros(0, np.int64),
                                                                           np.zeros(0, np.int64))
     dup = np.flatnonzero(counts[group] > 1) if group.size else group
@@ -479,11 +511,11 @@ def _duplicate_warning(comm, points: np.ndarray, homes: _Homes, ps) -> list[str]
     if count == 0:
         return []
     mine = None
-    if pairs.size:   # this rank's first pair (lexicographic) and its first point's coordinates
-        k = np.lexsort(pairs.T[::-1])[0]
-        mine = (tuple(int(v) for v in pairs[k]),
-                got[first_of[group[others[k]]], dim + 1:].copy().view(float))
-    (a, b), at = min((c for c in comm.allgather(mine) if c is not None), key=lambda c: c[0])
+    if pairs.size:   # this rank's first pair (lexicographic)
+        mine = tuple(int(v) for v in pairs[np.lexsort(pairs.T[::-1])[0]])
+    a, b = min(c for c in comm.allgather(mine) if c is not None)
+    at = fetch(comm, np.array([a] if comm.rank == 0 else [], np.int64), ps, points)
+    at = comm.bcast(at[0] if comm.rank == 0 else None, root=0)
     where = ", ".join(f"{c:g}" for c in at)
     return [f"{count} point(s) duplicate another (first: points {a} and {b} at ({where})): "
             "the cells on either side are not connected there (a crack?)"]

@@ -287,7 +287,8 @@ def cell_measures(mesh: Mesh) -> np.ndarray:
     return jacobian_dets(mesh.points, mesh.cell_type, mesh.cells, xi) @ w
 
 
-ORIENT_BLOCK = 16384   # cells per block of orient_cells' Jacobians (~30 MB for tetra10)
+ORIENT_BLOCK = 4096    # cells per block of orient_cells' Jacobians (~8 MB for tetra10: a rank's
+#                        fixed transient, whatever its share of the mesh)
 
 
 def orient_cells(

@@ -140,8 +140,9 @@ def assert_cut(comm, path: Path, ref) -> None:
     for group in src.facet_groups:
         facets, rows = src.facet_slice(group, rank, size)
         whole = ref.facet_groups[group]
-        n = len(whole)
-        np.testing.assert_array_equal(rows, np.arange(n * rank // size, n * (rank + 1) // size))
+        # the ranks' rows, in rank order, number the group's rows once each in order
+        np.testing.assert_array_equal(np.concatenate(comm.allgather(rows)),
+                                      np.arange(len(whole)))
         np.testing.assert_array_equal(facets, whole[rows])
 
 
@@ -158,11 +159,67 @@ def test_the_meshes_have_what_is_tested(comm, shared_tmp):
     ref = meshio_mesh(written(comm, shared_tmp, "tets", True, False, "2.2"))
     assert sorted(ref.cell_groups) == ["5", "left"] and sorted(ref.facet_groups) == ["4", "xmin"]
     lay = gmsh.scan(written(comm, shared_tmp, "ironing_3d", True, False, "2.2"))
-    runs = [rows for *_, rows in lay.element_blocks]   # 2 binary blocks: hexahedra, quads
-    adjacent = [a.offset + a.n * a.cols * 4 == b.offset for a, b in zip(runs, runs[1:])]
-    assert len(runs) == 14 and sum(adjacent) == 12
+    # 2 binary blocks (hexahedra, quads) of 14 physical tags in all: a block each
+    assert [kind for _, _, kind, _ in lay.element_blocks] == ["hexahedron", "quad"]
+    assert sum(len(tags) for tags in lay.row_tags.values()) == 14
     lay = gmsh.scan(written(comm, shared_tmp, "tets", False, False, "2.2"))
     assert sorted({rows.lead for *_, rows in lay.element_blocks}) == [5, 6]   # 2 or 3 tags
+
+
+@pytest.mark.parametrize("binary", [False, True])
+@pytest.mark.parametrize("cell", ["tetra", "tetra10", "triangle", "triangle6"])
+def test_msh41_as_meshio_writes_it(cell, binary, comm, shared_tmp):
+    """MSH 4.1 (Gmsh's default format) written by meshio, linear and quadratic: the slices are
+    meshio's reading cut, the converted file is meshio's reading."""
+    path = shared_tmp / f"meshio41_{cell}_{int(binary)}.msh"
+    if comm.rank == 0:
+        m = (box(2.0, 1.0, 1.0, 3, 2, 2, cell) if cell.startswith("tetra")
+             else rectangle(2.0, 1.0, 4, 3, cell))
+        meshio.write(path, meshio.Mesh(m.points, [(cell, m.cells)]), file_format="gmsh",
+                     binary=binary)
+    comm.Barrier()
+    assert gmsh.version_of(str(path)) == "4.1"
+    ref = meshio_mesh(path)
+    assert_cut(comm, path, ref)
+    out = shared_tmp / f"{path.stem}.h5"
+    assert mesh_cli.main(["convert", str(path), str(out), "--force"]) == 0
+    assert_same_mesh(read_whole(str(out)), ref)
+
+
+def alternating(comm, tmp: Path, binary: bool) -> Path:
+    """MSH 2.2 as meshio writes it, every element's physical tag alternating: cells of "left"
+    (1) and "right" (2), facets of "xmin" (3) and of an unnamed tag (4)."""
+    path = tmp / f"alternating_{int(binary)}.msh"
+    if comm.rank == 0:
+        m = box(2.0, 1.0, 1.0, 3, 2, 2, "tetra10")
+        xmin = m.facet_groups["xmin"]
+        phys = [np.arange(m.num_cells) % 2 + 1, np.arange(len(xmin)) % 2 + 3]
+        meshio.write(path, meshio.Mesh(
+            m.points, [("tetra10", m.cells), ("triangle6", xmin)],
+            cell_data={"gmsh:physical": phys, "gmsh:geometrical": phys},
+            field_data={"left": np.array([1, 3]), "right": np.array([2, 3]),
+                        "xmin": np.array([3, 2])}), file_format="gmsh22", binary=binary)
+    comm.Barrier()
+    return path
+
+
+@pytest.mark.parametrize("binary", [False, True])
+def test_alternating_tags_are_few_blocks(binary, comm, shared_tmp):
+    """Elements alternating physical tags: a block per (type, tag count) with its rows' tags
+    counted, not a block per element; the slices, the whole mesh and the converted file are
+    meshio's reading (cells in the file's order, groups by tag)."""
+    path = alternating(comm, shared_tmp, binary)
+    lay = gmsh.scan(str(path))
+    assert [kind for _, _, kind, _ in lay.element_blocks] == ["tetra10", "triangle6"]
+    assert lay.row_tags == {0: {1: 36, 2: 36}, 1: {3: 4, 4: 4}}
+    ref = meshio_mesh(path)
+    np.testing.assert_array_equal(ref.cell_groups["left"], np.arange(0, 72, 2))
+    assert sorted(ref.facet_groups) == ["4", "xmin"] and len(ref.facet_groups["xmin"]) == 4
+    assert_cut(comm, path, ref)
+    assert_same_mesh(gmshmesh.read_whole(str(path)), ref)
+    out = shared_tmp / f"{path.stem}.h5"
+    assert mesh_cli.main(["convert", str(path), str(out), "--force"]) == 0
+    assert_same_mesh(read_whole(str(out)), ref)
 
 
 @pytest.mark.parametrize("version", ["4.1", "2.2"])
