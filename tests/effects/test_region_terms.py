@@ -12,9 +12,9 @@ from mpi4py import MPI
 
 from conftest import stiffness_block
 from helpers.saddle import SCENE
+from helpers.terms import check_products
 
 from parsolve.effects.base import Effect
-from parsolve.effects.compose import Composition
 from parsolve.fem import diffusion as kern
 from parsolve.fem.element_matrices import ElementMatrices, Term
 from parsolve.model import build_model
@@ -83,12 +83,4 @@ def test_a_cell_term_on_a_region(cell):
     assert term.slots.shape[2] == local
 
     # its products (the default evaluate, the composition's product) are K_bed q
-    whole.effects.append(Foundation(whole.mesh))
-    comp = Composition(whole, np.arange(whole.mesh.num_cells))
-    q = np.random.default_rng(5).normal(size=whole.mesh.num_points * 2)
-    bed = whole.effects[-1]
-    product = comp.product(bed.linear_values(comp.cells), q)
-    np.testing.assert_allclose(product, expected @ q, rtol=1e-13, atol=1e-13 * np.abs(q).max() * K)
-    forces = np.zeros_like(q)
-    comp._scatter(bed.evaluate(comp.cells, comp.values(q), None, False, comp.now)[0], forces)
-    np.testing.assert_allclose(forces, product, rtol=1e-14, atol=1e-14)
+    check_products(whole, Foundation(whole.mesh), expected, K)

@@ -13,9 +13,9 @@ from mpi4py import MPI
 
 from conftest import stiffness_block
 from helpers.saddle import SCENE
+from helpers.terms import check_products
 
 from parsolve.effects.base import Effect
-from parsolve.effects.compose import Composition
 from parsolve.fem.element_matrices import ElementMatrices, Term
 from parsolve.fem.integrals import facet_matrices, facet_rule, mass, weighted_mass
 from parsolve.model import build_model
@@ -96,15 +96,7 @@ def test_a_facet_term_on_a_boundary_region(cell, region):
     np.testing.assert_allclose(got[None], expected, rtol=0, atol=1e-12 * scale)
 
     # its products (the default evaluate, the composition's product) are K_support q
-    whole.effects.append(FaceSupport(whole, region, 3))
-    comp = Composition(whole, np.arange(whole.mesh.num_cells))
-    q = np.random.default_rng(5).normal(size=whole.mesh.num_points * 2)
-    support = whole.effects[-1]
-    product = comp.product(support.linear_values(comp.cells), q)
-    np.testing.assert_allclose(product, expected @ q, rtol=1e-13, atol=1e-13 * np.abs(q).max() * K)
-    forces = np.zeros_like(q)
-    comp._scatter(support.evaluate(comp.cells, comp.values(q), None, False, comp.now)[0], forces)
-    np.testing.assert_allclose(forces, product, rtol=1e-14, atol=1e-14)
+    check_products(whole, FaceSupport(whole, region, 3), expected, K)
 
 
 def test_weighted_mass_is_the_facets_mass():
