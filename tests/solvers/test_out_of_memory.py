@@ -46,6 +46,7 @@ def test_factor_that_does_not_fit_stops_with_the_sizes(scene, ranks, tmp_path):
     assert found, line
     need, available = map(float, found.groups())
     assert need > LIMIT / 1e9 > available > 0, line
+    assert line.endswith("more memory per process, more nodes, or the iterative preset"), line
     assert "retrying" not in proc.stdout and "margin raised" not in proc.stdout, proc.stdout
     with h5py.File(tmp_path / "out.h5", "r") as f:
         assert f.attrs["status"].startswith("failed: the factorization does not fit")
