@@ -98,7 +98,7 @@ from parsolve.effects.contact_sliding import KEEP_TOL
 from parsolve.effects.row_terms import global_tuples
 from parsolve.fem.element_matrices import NodeForces, Term, TermMatrices
 from parsolve.errors import InputError, SolverError
-from parsolve.fem import kernels
+from parsolve.fem.integrals import facet_rule
 from parsolve.mesh.topology import facets_from_nodes
 
 FORMULATIONS = ("relations", "penalty", "augmented_lagrangian")
@@ -182,8 +182,9 @@ def nodal_areas(mesh, nodes: np.ndarray, thickness) -> np.ndarray:
     facets = facets_from_nodes(mesh, mask)[0]
     area = np.zeros(mesh.num_points)
     if facets.size:
-        fe = kernels.facet_load(mesh.points[facets], mesh.facet_type, np.ones(1), thickness)
-        area = np.bincount(facets.ravel(), weights=fe.ravel(), minlength=mesh.num_points)
+        rule = facet_rule(mesh.points[facets], mesh.facet_type, thickness)
+        area = np.bincount(facets.ravel(), weights=(rule.weights @ rule.N).ravel(),
+                           minlength=mesh.num_points)
     return area[nodes]
 
 

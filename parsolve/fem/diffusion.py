@@ -24,8 +24,8 @@ from __future__ import annotations
 import numpy as np
 
 from parsolve.fem.element_matrices import CellKernel, ElementMatrices
-from parsolve.fem.elements import default_degree, element, facet_measure_and_normal, \
-    jacobians, polynomial_order, quadrature
+from parsolve.fem.elements import default_degree, element, jacobians, polynomial_order, \
+    quadrature
 from parsolve.fem import kernels
 from parsolve.fem.axisymmetric import is_axisymmetric, scale
 from parsolve.fem.kernels import geometric_part, gradients_cell_last
@@ -170,23 +170,6 @@ def source_vector(coords: np.ndarray, cell_type: str, f, thickness: float = 1.0,
     else:
         fq = _per_cell(f, nc, "source")[:, None]
     return (fq * wdet) @ N
-
-
-def facet_flux_vector(coords: np.ndarray, facet_type: str, q, thickness: float = 1.0) -> np.ndarray:
-    """Facet vectors (nf, nfn) of ∫_Γ q N_a, q the flux *into* the domain per unit area.
-
-    ``q``: a scalar, one value per facet (nf,) or node values (nf, nfn).
-    """
-    ref = element(facet_type)
-    xi, w = quadrature(facet_type, default_degree(facet_type, "mass"))
-    N = ref.shape(xi)
-    ds, _ = facet_measure_and_normal(coords, ref.grad_shape(xi))
-    r = coords[:, :, 0] @ N.T if is_axisymmetric(thickness) else None
-    wds = scale(ds * w[None, :], r, thickness)                 # (nf, nq)
-    q = np.asarray(q, dtype=float)
-    nf = coords.shape[0]
-    qq = q @ N.T if q.ndim == 2 else _per_cell(q, nf, "boundary flux")[:, None]
-    return (qq * wds) @ N
 
 
 def _flux_of(kt: np.ndarray, g: np.ndarray) -> np.ndarray:

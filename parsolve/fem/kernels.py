@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from parsolve.fem.axisymmetric import is_axisymmetric, scale
-from parsolve.fem.elements import default_degree, element, facet_measure_and_normal, \
-    physical_gradients, quadrature
+from parsolve.fem.elements import default_degree, element, physical_gradients, quadrature
 
 # ``thickness`` below is the out-of-plane measure of a 2D model: a float (plane) or an
 # ``Axisymmetric`` (2π r at each point, see fem/axisymmetric.py).
@@ -103,23 +102,6 @@ def voigt_strain(dNdx: np.ndarray, ue: np.ndarray) -> np.ndarray:
 def internal_forces(B: np.ndarray, wdet: np.ndarray, sigma: np.ndarray) -> np.ndarray:
     """fe = Σ_q w |J| Bᵀ σ, (nc, ndof)."""
     return np.einsum("cqvd,cqv->cd", B, sigma * wdet[:, :, None])
-
-
-def facet_load(coords: np.ndarray, facet_type: str, traction: np.ndarray,
-               thickness: float = 1.0) -> np.ndarray:
-    """Facet load vectors (nf, nfn*gdim) of a constant traction (force per unit area)."""
-    N = element(facet_type).shape(quadrature(facet_type, default_degree(facet_type, "load"))[0])
-    wn = facet_weights(coords, facet_type, thickness) @ N
-    return (wn[:, :, None] * traction[None, None, :]).reshape(len(coords), wn.shape[1] * len(traction))
-
-
-def facet_weights(coords: np.ndarray, facet_type: str, thickness: float = 1.0) -> np.ndarray:
-    """Quadrature weights ds·w × the out-of-plane measure (nf, nq) of the load rule on facets."""
-    ref = element(facet_type)
-    xi, w = quadrature(facet_type, default_degree(facet_type, "load"))
-    ds, _ = facet_measure_and_normal(coords, ref.grad_shape(xi))
-    r = coords[:, :, 0] @ ref.shape(xi).T if is_axisymmetric(thickness) else None
-    return scale(ds * w, r, thickness)
 
 
 def cell_dofs(cells: np.ndarray, ncomp: int) -> np.ndarray:

@@ -30,6 +30,7 @@ import numpy as np
 from petsc4py import PETSc
 
 from parsolve.fem import diffusion
+from parsolve.fem.integrals import facet_rule
 from parsolve.mesh.mesh import Mesh
 
 
@@ -85,8 +86,8 @@ class _Discretisation:
         out = np.zeros(self.mesh.num_points)
         for group, q in fluxes.items():
             facets = self.mesh.facet_groups[group]
-            fe = diffusion.facet_flux_vector(self.mesh.points[facets], self.mesh.facet_type,
-                                             _value(q, t), self.thickness)
+            rule = facet_rule(self.mesh.points[facets], self.mesh.facet_type, self.thickness)
+            fe = _value(q, t) * (rule.weights @ rule.N)   # ∫ q N_a over each facet
             out += np.bincount(facets.ravel(), weights=fe.ravel(), minlength=self.mesh.num_points)
         return out
 
