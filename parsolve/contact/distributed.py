@@ -21,24 +21,7 @@ import numpy as np
 from mpi4py import MPI
 
 from parsolve.contact.surfaces import canonical_facets
-
-
-def _displ(counts: np.ndarray) -> np.ndarray:
-    return np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
-
-
-def _alltoallv(comm, send: np.ndarray, counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rows of ``send`` (grouped by destination, ``counts`` per rank) to their ranks: (the rows
-    received, grouped by source; the counts received). Collective."""
-    send = np.ascontiguousarray(send)
-    width = int(np.prod(send.shape[1:], dtype=np.int64))
-    got_counts = np.empty_like(counts)
-    comm.Alltoall(counts, got_counts)
-    kind = MPI.INT64_T if send.dtype == np.int64 else MPI.DOUBLE
-    got = np.empty((int(got_counts.sum()),) + send.shape[1:], dtype=send.dtype)
-    comm.Alltoallv([send, counts * width, _displ(counts) * width, kind],
-                   [got, got_counts * width, _displ(got_counts) * width, kind])
-    return got, got_counts
+from parsolve.mesh.blocks import exchange
 
 
 def facet_extent(comm, facet_pts: np.ndarray) -> float:
@@ -64,9 +47,8 @@ def near_facets(comm, slave_pts: np.ndarray, facet_ids: np.ndarray, facet_pts: n
     meets = np.all((lo[:, None, :] <= boxes[None, :, dim:])
                    & (hi[:, None, :] >= boxes[None, :, :dim]), axis=2)   # (nf, ranks)
     rank, facet = np.nonzero(meets.T)            # grouped by destination rank
-    counts = np.bincount(rank, minlength=comm.size).astype(np.int64)
-    ids, _ = _alltoallv(comm, facet_ids[facet].astype(np.int64), counts)
-    pts, _ = _alltoallv(comm, facet_pts[facet].astype(float), counts)
+    ids, _ = exchange(comm, facet_ids[facet].astype(np.int64), rank)
+    pts, _ = exchange(comm, facet_pts[facet].astype(float), rank)
     return canonical_facets(ids.reshape(-1, facet_ids.shape[1]), pts)
 
 
@@ -77,12 +59,11 @@ def global_positions(comm, ids: np.ndarray) -> tuple[np.ndarray, int]:
     top = comm.allreduce(int(ids.max()) + 1 if ids.size else 0, op=MPI.MAX)
     width = max(-(-top // comm.size), 1)
     dest = ids // width                          # increasing: grouped by destination
-    counts = np.bincount(dest, minlength=comm.size).astype(np.int64)
-    got, got_counts = _alltoallv(comm, ids, counts)
+    got, got_counts = exchange(comm, ids, dest)
     order = np.argsort(got, kind="stable")
     place = np.empty(got.size, dtype=np.int64)
     place[order] = np.arange(got.size)
     first = comm.exscan(int(got.size)) or 0     # (rank 0: None)
     total = comm.allreduce(int(got.size))
-    back, _ = _alltoallv(comm, place + first, got_counts)
+    back, _ = exchange(comm, place + first, np.repeat(np.arange(comm.size), got_counts))
     return back, total
