@@ -257,3 +257,50 @@ def test_resultants_in_3d(cell):
         mine = model.patterns[name].vector().reshape(-1, 3)[:n].sum(axis=0)
         total = MPI.COMM_WORLD.allreduce(mine)
         np.testing.assert_allclose(total, expected, atol=1e-13 * 20)
+
+
+FIELDS = """
+[mesh]
+generator = "rectangle"
+lx = 2.0
+ly = 1.0
+nx = 4
+ny = 3
+cell = "{cell}"
+[model]
+hypothesis = "plane_stress"
+thickness = 0.1
+[[materials]]
+E = 1.0
+nu = 0.3
+[[loads]]
+name = "weight"
+body = ["3 * x * t", "2 + y"]
+[[loads]]
+name = "pins"
+region = "top"
+nodal = ["x * t", "-1 - y"]
+"""
+
+
+@pytest.mark.parametrize("cell", ["quad", "triangle", "triangle6"])
+def test_body_forces_and_nodal_loads_as_expressions(cell):
+    """body = (3 x t, 2 + y) per unit volume on a 2 × 1 plate 0.1 thick: ∫ f dV = (0.6 t, 0.5)
+    and ∫ x f_y dV = 0.5 at every t (the rule is exact on these polynomials); nodal = (x t,
+    -1 - y) at the top's nodes (y = 1): Σ = (t Σ x_i, -2 × their number), the pattern
+    assembled again at each t (evolution "constant": the expression carries the time)."""
+    from parsolve.loads.base import Instant
+
+    model = model_of(FIELDS.format(cell=cell))
+    mesh = model.mesh
+    n = mesh.n_owned
+    x = mesh.points[:n, 0]
+    top_x = np.linspace(0.0, 2.0, 5 if cell != "triangle6" else 9)
+    for t in (0.5, 2.0):
+        weight = model.patterns["weight"].at(Instant(t)).reshape(-1, 2)[:n]
+        pins = model.patterns["pins"].at(Instant(t)).reshape(-1, 2)[:n]
+        got = MPI.COMM_WORLD.allreduce(np.r_[weight.sum(axis=0), (x * weight[:, 1]).sum(),
+                                            pins.sum(axis=0)])
+        np.testing.assert_allclose(got, [0.6 * t, 0.5, 0.5, t * top_x.sum(), -2.0 * top_x.size],
+                                   rtol=1e-13, atol=1e-14)
+    assert [p.term.timed for p, _ in model.patterns["pins"].parts] == [True]
