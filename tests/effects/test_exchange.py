@@ -229,3 +229,18 @@ def test_bad_exchange_exits_2(name, tmp_path, capfd, monkeypatch):
     assert code == 2 and len(err) == 1, err
     assert f"scene.toml: {key}: " in err[0] and words in err[0], err[0]
     assert not list(tmp_path.glob("*.h5"))
+
+
+@pytest.mark.parametrize("theta", [0.5, 0.75, 1.0])
+def test_theta_scheme_with_a_flux_that_varies_in_time(theta, run):
+    """The same T = t + x²/2 with the ambient at 0 and the heat coming in by a prescribed
+    flux instead: -T_x(1) = h T(1) - q(t) holds for q(t) = 1 + h (t + 1/2), a flux linear in
+    t (a load re-assembled at t and t_n); exact to round-off only if the flux is weighted by θ
+    like the exchange's operator term."""
+    text = THETA.format(theta=theta).replace('ambient = "t + 0.5 + 1 / 4"', "ambient = 0.0")
+    text = text.replace("[steps]", '[[loads]]\nfield = "T"\nregion = "right"\n'
+                        'flux = "1 + 4 * (t + 0.5)"\n[steps]')
+    res = run(text)
+    x, t = res["mesh/points"][:, 0], res["steps/time"]
+    np.testing.assert_allclose(res["fields/T"][..., 0], t[:, None] + x[None, :] ** 2 / 2,
+                               atol=1e-11)
