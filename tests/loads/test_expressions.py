@@ -307,3 +307,42 @@ def test_body_forces_and_nodal_loads_as_expressions(cell):
         np.testing.assert_allclose(got, [0.6 * t, 0.5, 0.5, t * top_x.sum(), -2.0 * top_x.size],
                                    rtol=1e-13, atol=1e-14)
     assert [p.term.timed for p, _ in model.patterns["pins"].parts] == [True]
+
+
+AXISYMMETRIC_COLUMN = """
+[mesh]
+generator = "rectangle"
+lx = 0.5
+ly = 3.0
+nx = 2
+ny = 4
+cell = "triangle6"
+[model]
+hypothesis = "axisymmetric"
+[[materials]]
+E = 1000.0
+nu = 0.0
+density = 2.5
+[[loads]]
+gravity = [0.0, -9.81]
+[[relations]]
+name = "bottom"
+type = "dirichlet"
+region = "bottom"
+components = ["y"]
+"""
+
+
+def test_axisymmetric_column_under_self_weight(run):
+    """A solid cylinder (radius 0.5, height 3, ν = 0) standing on a sliding base: u_z = -ρ g
+    (H z - z²/2) / E, u_r = 0, quadratic, so exact at every node of six-node triangles; the
+    base carries the whole cylinder's weight ρ g π R² H (the body force integrated over the
+    revolved volume, 2π r)."""
+    res = run(AXISYMMETRIC_COLUMN)
+    pts, u = res["mesh/points"], res["fields/displacement"][-1]
+    z = pts[:, 1]
+    np.testing.assert_allclose(u[:, 1], -2.5 * 9.81 * (3.0 * z - z**2 / 2) / 1000.0,
+                               atol=1e-12)
+    np.testing.assert_allclose(u[:, 0], 0.0, atol=1e-12)
+    np.testing.assert_allclose(res["relations/bottom/resultant"][-1][:2],
+                               [0.0, 2.5 * 9.81 * np.pi * 0.25 * 3.0], rtol=1e-12, atol=1e-12)
