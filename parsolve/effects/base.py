@@ -46,11 +46,11 @@ class Effect:
         return []
 
     def terms(self) -> list[Term]:
-        """Every term it contributes to the operator, declared once (the same objects at
-        every call): stiffness terms on cells (elasticity, conduction, a coupling), capacity
-        terms (``rate``), terms on boundary facets (an exchange's h ∫ N Nᵀ), terms on
-        tuples of nodes (springs, a contact pair's penalty block) and vector terms (loads:
-        thermal expansion's reference state, an exchange's h ∫ N T∞). The system derives its pattern from the
+        """Every term it contributes to the operator, declared once (the same objects at every
+        call): stiffness terms on cells (elasticity, conduction, a coupling), capacity terms
+        (``rate``), terms on boundary facets (an exchange's h ∫ N Nᵀ), terms on tuples of nodes
+        (springs, a contact pair's penalty block) and vector terms (loads: thermal expansion's
+        reference state, an exchange's h ∫ N T∞). The system derives its pattern from the
         matrix terms and gives each its slots; the model makes load patterns of the vector
         terms (``loads.base.load_patterns``), applied at every step. None by default."""
         return []
