@@ -56,3 +56,24 @@ def test_only_the_registry_names_the_module():
     hits = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "parsolve").rglob("*.py")
                   if p.name != "exchange.py" and naming.search(p.read_text()))
     assert hits == ["parsolve/effects/registry.py"], hits
+
+
+def test_the_interface_the_section_names():
+    """The Term fields and the Effect methods the section names, with the instant ``at`` where
+    it says time reaches."""
+    import dataclasses
+    import inspect
+
+    from parsolve.effects.base import Effect
+    from parsolve.fem.element_matrices import Term
+
+    text = section()
+    fields = {f.name for f in dataclasses.fields(Term)}
+    for name in ("symmetric", "linear", "rate", "cells", "facets", "nodes"):
+        assert name in fields and re.search(rf"\b{name}\b", text), name
+    for method, at in (("terms", False), ("term_values", False), ("evaluate", True),
+                       ("vector_values", True), ("begin_step", True)):
+        assert f"`{method}" in text, method
+        params = list(inspect.signature(getattr(Effect, method)).parameters)
+        assert ("at" in params) == at, (method, params)
+    assert "`restructured`" in text and hasattr(Effect, "restructured")
