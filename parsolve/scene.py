@@ -18,8 +18,8 @@ from parsolve.schema import (MAX_MAGNITUDE, MIN_MAGNITUDE, NAME_PATTERN, Declare
                              Table, check_number, field_name, plain_name)
 from parsolve.evolution import CONSTANT, RAMP, Evolution
 from parsolve.fem.axisymmetric import Axisymmetric
-from parsolve.loads.base import LoadSpec, uses_time
-from parsolve.loads.registry import LOADS, names_for
+from parsolve.loads.base import LoadSpec
+from parsolve.loads.registry import parse as parse_load
 from parsolve.relation_kinds.base import RelationSpec
 from parsolve.relation_kinds.registry import RELATIONS
 
@@ -203,7 +203,7 @@ def parse_scene(data: dict, source: str, text: str = "", base: Path = Path("."))
             "materials")
     fields = _declared_fields(effect_specs, dim)
     declared = Declared(dim, fields, _primary_field(effect_specs, dim))
-    loads = [_load(t, declared) for t in top.tables("loads")]
+    loads = [parse_load(t, declared) for t in top.tables("loads")]
     relations = [_relation(t, declared) for t in top.tables("relations")]
     time_spec = _time(top.table("time", None))
     if time_spec is not None and not top.has("steps"):
@@ -285,43 +285,6 @@ def _evolutions(t: Table) -> dict[str, Evolution]:
         sub.done()
         evols[name] = Evolution(name, tuple(times), tuple(values))
     return evols
-
-
-def _load(t: Table, declared: Declared) -> LoadSpec:
-    """A [[loads]] entry: the common keys, then the value of the one load key it gives, read
-    as its registry entry says (``loads.registry``)."""
-    pattern = plain_name(t, "loads")
-    field = field_name(t, declared)
-    ncomp, dim = declared.fields[field], declared.dim
-    names = names_for(ncomp)
-    given = [k for k in names if t.has(k)]
-    if len(given) != 1:
-        raise t.error(names[0], f"give exactly one of {', '.join(names)}")
-    key = given[0]
-    entry = LOADS[key]
-    vector = _load_values(t, key, entry, {"field": ncomp, "one": 1, "dim": dim}[entry.values])
-    region = t.get("region", str, ... if entry.region is None else entry.region)
-    timed = any(isinstance(v, str) and uses_time(v) for v in vector)
-    evolution = t.get("evolution", str, "constant" if timed else "ramp")
-    t.done()
-    return LoadSpec(pattern, region, entry.kind or key, vector, evolution, t.path, field, key)
-
-
-def _load_values(t: Table, key: str, entry, count: int) -> list:
-    """``count`` values: numbers (one may be given bare when one is wanted) or, where the
-    entry takes them, expressions of (x, y, z, t)."""
-    raw = t.data[key]
-    number = isinstance(raw, (int, float)) and not isinstance(raw, bool)
-    if count == 1 and (number or entry.expressions and isinstance(raw, str)):
-        return [t.get(key, (float, str) if entry.expressions else float)]
-    if not entry.expressions or not isinstance(raw, list) or \
-            not any(isinstance(v, str) for v in raw):
-        return t.floats(key, count)
-    t.used.add(key)
-    if len(raw) != count:
-        raise t.error(key, f"expected {count} values, got {len(raw)}")
-    sub = Table({f"{key}[{i}]": v for i, v in enumerate(raw)}, t.path, t.source)
-    return [sub.get(k, (float, str)) for k in sub.data]
 
 
 def _relation(t: Table, declared: Declared) -> RelationSpec:

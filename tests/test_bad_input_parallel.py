@@ -3,9 +3,10 @@ run`` exit 2 with one line naming the file and the key, within a time limit (a c
 raises on some ranks only would leave the others waiting in a collective call: a hang), with
 nothing written and no lock left behind. The families are the tables the other tests use
 (tests/test_cli.py, tests/effects/test_contact_bad_input.py, test_thermal_expansion.py,
-test_diffusion_effect.py, test_springs.py, test_periodic.py, tests/solvers/test_control.py,
-tests/loads/test_bad_input.py, tests/fem/test_axisymmetric.py), plus checks that only some ranks'
-parts can fail (an axisymmetric mesh with r < 0 on one part, a selector not finite on one part).
+test_diffusion_effect.py, test_springs.py, test_periodic.py, test_exchange.py,
+tests/solvers/test_control.py, tests/loads/test_bad_input.py, tests/fem/test_axisymmetric.py),
+plus checks that only some ranks' parts can fail (an axisymmetric mesh with r < 0 on one part,
+a selector not finite on one part).
 
 All cases of a rank count run in one mpirun (tests/helpers/bad_input_runner.py: one process
 per rank, ``parsolve.cli.main`` per case), so the whole costs two start-ups."""
@@ -92,6 +93,9 @@ def families() -> dict[str, tuple[str, str, str]]:
     supports = (ROOT / "configs" / "springs_bar_supports.toml").read_text()
     for k, (change, key, _) in enumerate(_table(springs.test_input_errors)):
         cases[f"springs/{k} {key}"] = (supports.replace(*change, 1), "scene.toml", key)
+    exchange = _module("effects/test_exchange.py")
+    for name, (_, key, _) in exchange.BAD.items():
+        cases[f"exchange/{name}"] = (exchange.bad_scene(name), "scene.toml", key)
     periodic = _module("effects/test_periodic.py")
     for name, (extra, _) in periodic.REPEATED_TIES.items():
         relations = periodic.LAMINATE["relations"] + [extra]

@@ -3,15 +3,15 @@ contributes, and its nature (linear, symmetric, transient). The driver composes 
 scene lists and nothing else (see ``compose``); adding an effect is a class and a registry
 line (``registry``), nothing in the core.
 
-What an effect puts into the operator and the loads is one kind of thing: the terms it
-declares (``terms``: test field, trial field, domain -- cells of a region or tuples of nodes
--- and nature), whose values it gives as ``ElementMatrices`` over the domain's cells,
-cell-last, in bounded cell blocks, or ``TermMatrices`` on the node tuples: ``term_values``
-for a linear term (and a rate term's capacity), ``evaluate`` for the tangent of a nonlinear
-one. A term without a trial field is a vector term: a load on its test field, on cells,
-facets or nodes, whose forces ``vector_values`` gives at the step's instant (constant ones:
-``term_values``, element forces (nc, nen, d) of the domain's cells, or ``NodeForces``); its
-pattern and evolution are declared with it, and the scene's ``[[loads]]`` are vector terms
+What an effect puts into the operator and the loads is one kind of thing: the terms it declares
+(``terms``: test field, trial field, domain -- cells of a region, facets of a boundary region
+or tuples of nodes -- and nature), whose values it gives as ``ElementMatrices`` over the
+domain's cells or facets, cell-last, in bounded blocks, or ``TermMatrices`` on the node tuples:
+``term_values`` for a linear term (and a rate term's capacity), ``evaluate`` for the tangent of
+a nonlinear one. A term without a trial field is a vector term: a load on its test field, on
+cells, facets or nodes, whose forces ``vector_values`` gives at the step's instant (constant
+ones: ``term_values``, element forces (nc, nen, d) of the domain's cells, or ``NodeForces``);
+its pattern and evolution are declared with it, and the scene's ``[[loads]]`` are vector terms
 declared the same way (``loads``).
 """
 
@@ -46,10 +46,10 @@ class Effect:
         return []
 
     def terms(self) -> list[Term]:
-        """Every term it contributes to the operator, declared once (the same objects at
-        every call): stiffness terms on cells (elasticity, conduction, a coupling), capacity
-        terms (``rate``), terms on tuples of nodes (springs, a node's penalty block, a
-        boundary exchange: a facet term) and vector terms (loads: thermal expansion's
+        """Every term it contributes to the operator, declared once (the same objects at every
+        call): stiffness terms on cells (elasticity, conduction, a coupling), capacity terms
+        (``rate``), terms on boundary facets (an exchange's h ∫ N Nᵀ), terms on tuples of nodes
+        (springs, a contact pair's penalty block) and vector terms (loads: thermal expansion's
         reference state, an exchange's h ∫ N T∞). The system derives its pattern from the
         matrix terms and gives each its slots; the model makes load patterns of the vector
         terms (``loads.base.load_patterns``), applied at every step. None by default."""

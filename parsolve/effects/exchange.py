@@ -16,9 +16,8 @@ Scene schema (one table per condition)::
 
 from __future__ import annotations
 
-from typing import Iterable
-
 from dataclasses import dataclass
+from typing import Iterable
 
 import numpy as np
 
@@ -28,11 +27,6 @@ from parsolve.fem.element_matrices import ElementMatrices, NodeForces, Term
 from parsolve.fem.integrals import facet_matrices, weighted_mass
 from parsolve.loads.base import Instant, LoadSpec, Where, need_facets, values_at
 from parsolve.loads.traction import facet_forces
-
-KEYS = {"field": ("string", "the scalar field exchanging"),
-        "region": ("string", "the boundary region it exchanges through"),
-        "coefficient": ("number", "h, the exchange coefficient per unit area (> 0)"),
-        "ambient": ("number or string", "T∞, a number or an expression of x, y, z, t")}
 
 
 @dataclass

@@ -6,7 +6,8 @@ module and one line here.
 Every entry reads the same common keys (``name``, ``field``, ``region``, ``evolution``) and its
 own value: ``field`` values (one per component of the loaded field), ``one`` value (a pressure)
 or ``dim`` values (an acceleration); ``expressions``: whether a value may be an expression of
-(x, y, z, t) (a string) besides a number."""
+(x, y, z, t) (a string) besides a number. ``parse`` reads a ``[[loads]]`` entry so (the
+scene's reader hands it each entry, as it hands a relation to its kind's entry)."""
 
 from __future__ import annotations
 
@@ -14,6 +15,8 @@ from dataclasses import dataclass
 from typing import Callable
 
 from parsolve.loads import body, gravity, nodal, pressure, total_force, traction
+from parsolve.loads.base import LoadSpec, uses_time
+from parsolve.schema import Declared, Table, field_name, plain_name
 
 
 @dataclass(frozen=True)
@@ -69,3 +72,40 @@ def names_for(ncomp: int) -> tuple[str, ...]:
     own = [k for k, e in LOADS.items() if e.on == want]
     return tuple(own + [k for k, e in LOADS.items() if e.on == "any"]) if want == "scalar" \
         else tuple(k for k, e in LOADS.items() if e.on in (want, "any"))
+
+
+def parse(t: Table, declared: Declared) -> LoadSpec:
+    """A ``[[loads]]`` entry (a scene Table) → spec: the common keys, then the value of the one
+    load key it gives, read as its entry says."""
+    pattern = plain_name(t, "loads")
+    field = field_name(t, declared)
+    ncomp, dim = declared.fields[field], declared.dim
+    names = names_for(ncomp)
+    given = [k for k in names if t.has(k)]
+    if len(given) != 1:
+        raise t.error(names[0], f"give exactly one of {', '.join(names)}")
+    key = given[0]
+    entry = LOADS[key]
+    vector = _values(t, key, entry, {"field": ncomp, "one": 1, "dim": dim}[entry.values])
+    region = t.get("region", str, ... if entry.region is None else entry.region)
+    timed = any(isinstance(v, str) and uses_time(v) for v in vector)
+    evolution = t.get("evolution", str, "constant" if timed else "ramp")
+    t.done()
+    return LoadSpec(pattern, region, entry.kind or key, vector, evolution, t.path, field, key)
+
+
+def _values(t: Table, key: str, entry, count: int) -> list:
+    """``count`` values: numbers (one may be given bare when one is wanted) or, where the
+    entry takes them, expressions of (x, y, z, t)."""
+    raw = t.data[key]
+    number = isinstance(raw, (int, float)) and not isinstance(raw, bool)
+    if count == 1 and (number or entry.expressions and isinstance(raw, str)):
+        return [t.get(key, (float, str) if entry.expressions else float)]
+    if not entry.expressions or not isinstance(raw, list) or \
+            not any(isinstance(v, str) for v in raw):
+        return t.floats(key, count)
+    t.used.add(key)
+    if len(raw) != count:
+        raise t.error(key, f"expected {count} values, got {len(raw)}")
+    sub = Table({f"{key}[{i}]": v for i, v in enumerate(raw)}, t.path, t.source)
+    return [sub.get(k, (float, str)) for k in sub.data]

@@ -179,3 +179,68 @@ def test_theta_scheme_exact_for_a_solution_linear_in_time(theta, run):
     x, t = res["mesh/points"][:, 0], res["steps/time"]
     np.testing.assert_allclose(res["fields/T"][..., 0], t[:, None] + x[None, :] ** 2 / 2,
                                atol=1e-11)
+
+
+# bad [[exchange]] values: (the entry's lines replaced, the key named, words of the message)
+BAD = {
+    "zero coefficient": (("coefficient = 2.0", "coefficient = 0.0"), "exchange[0].coefficient",
+                         "must be positive"),
+    "coefficient a string": (("coefficient = 2.0", 'coefficient = "h"'),
+                             "exchange[0].coefficient", "expected float"),
+    "ambient syntax": (('ambient = "30 + 5 * t"', 'ambient = "30 +"'), "exchange[0].ambient",
+                       "syntax error"),
+    "ambient unknown name": (('ambient = "30 + 5 * t"', 'ambient = "30 + w"'),
+                             "exchange[0].ambient", "unknown name 'w'"),
+    "ambient not finite": (('ambient = "30 + 5 * t"', 'ambient = "1 / (x - 2)"'),
+                           "exchange[0].ambient", "not finite"),
+    "not a field": (('field = "T"\nregion = "right"', 'field = "q"\nregion = "right"'),
+                    "exchange[0].field", "not a scalar field"),
+    "no facet": (('region = "right"\ncoefficient', 'region = "dot"\ncoefficient'),
+                 "exchange[0].region", "no boundary facet"),
+    "unknown region": (('region = "right"\ncoefficient', 'region = "nowhere"\ncoefficient'),
+                       "exchange[0].region", "nowhere"),
+    "unknown key": (("coefficient = 2.0", "coefficient = 2.0\nambiant = 3.0"),
+                    "exchange[0].ambiant", "unknown key"),
+    "no coefficient": (("coefficient = 2.0\n", ""), "exchange[0].coefficient", "required"),
+}
+
+
+def bad_scene(name: str) -> str:
+    """The steady wall with one [[exchange]] value made bad (and a one-node region)."""
+    change, _, _ = BAD[name]
+    text = WALL.format(cell="quad").replace("[model]", '[regions]\ndot = { point = [0.0, 0.0] }'
+                                            "\n[model]")
+    assert change[0] in text, change
+    return text.replace(change[0], change[1], 1)
+
+
+@pytest.mark.serial   # the command line in this process (2, 3 ranks: test_bad_input_parallel)
+@pytest.mark.parametrize("name", sorted(BAD))
+def test_bad_exchange_exits_2(name, tmp_path, capfd, monkeypatch):
+    """Exit 2, one line naming the scene file and the key, nothing written."""
+    from parsolve.cli import main
+
+    _, key, words = BAD[name]
+    (tmp_path / "scene.toml").write_text(bad_scene(name))
+    monkeypatch.chdir(tmp_path)
+    capfd.readouterr()
+    code = main(["run", "scene.toml", "-o", "out.h5"])
+    err = capfd.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert f"scene.toml: {key}: " in err[0] and words in err[0], err[0]
+    assert not list(tmp_path.glob("*.h5"))
+
+
+@pytest.mark.parametrize("theta", [0.5, 0.75, 1.0])
+def test_theta_scheme_with_a_flux_that_varies_in_time(theta, run):
+    """The same T = t + x²/2 with the ambient at 0 and the heat coming in by a prescribed
+    flux instead: -T_x(1) = h T(1) - q(t) holds for q(t) = 1 + h (t + 1/2), a flux linear in
+    t (a load re-assembled at t and t_n); exact to round-off only if the flux is weighted by θ
+    like the exchange's operator term."""
+    text = THETA.format(theta=theta).replace('ambient = "t + 0.5 + 1 / 4"', "ambient = 0.0")
+    text = text.replace("[steps]", '[[loads]]\nfield = "T"\nregion = "right"\n'
+                        'flux = "1 + 4 * (t + 0.5)"\n[steps]')
+    res = run(text)
+    x, t = res["mesh/points"][:, 0], res["steps/time"]
+    np.testing.assert_allclose(res["fields/T"][..., 0], t[:, None] + x[None, :] ** 2 / 2,
+                               atol=1e-11)

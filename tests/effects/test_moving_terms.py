@@ -121,3 +121,31 @@ stiffness = [{STIFF}, {STIFF}]"""
                                    atol=1e-11 * scale)
     # the tie matters: the steps differ beyond the load's ramp
     assert np.abs(u[1] / 2.0 - u[0]).max() > 1e-3 * np.abs(u[0]).max()
+
+
+def test_the_moved_pattern_is_preallocated_exactly(moving_tie):
+    """The operator after a restructure is a new PETSc matrix on arrays laid out exactly for
+    the new pattern (a pattern derived again, not the old one grown): no entry inserted at
+    assembly (0 mallocs: never PETSc's slow insertion), its entries exactly those of the
+    operator's value array; on every rank."""
+    import tomllib
+
+    from petsc4py import PETSc
+
+    from parsolve.model import build_model
+    from parsolve.scene import parse_scene
+    from parsolve.solvers.system import SaddleSystem
+
+    text = BLOCK.format(regions="", extra="[moving_tie]", times="[1.0, 2.0]")
+    model = build_model(parse_scene(tomllib.loads(text), "t.toml", text), MPI.COMM_WORLD)
+    system = SaddleSystem(MPI.COMM_WORLD, model)
+    tie, = [e for e in model.effects if isinstance(e, MovingTie)]
+    first, pattern = system.assemble(), system.pattern
+    tie.begin_step(None, {}, Instant(2.0))
+    assert tie.restructured
+    system.restructure()
+    moved = system.assemble()
+    assert moved is not first
+    info = moved.getInfo(PETSc.Mat.InfoType.LOCAL)
+    assert info["mallocs"] == 0 and info["nz_used"] == system.op.data.size, info
+    assert system.pattern is not pattern
