@@ -54,10 +54,11 @@ COND_MAX = 1e12
 
 
 #: SOR sweeps (Richardson) on the finest level of the GAMG V-cycle on S, before and after the
-#: coarse correction. Krylov iterations per solve (mean / max) on the 3D friction box: at
-#: 16.9k DOFs (1 rank) 2, 4, 6, 8 sweeps took 10.2 / 16, 7.9 / 12, 6.8 / 10, 6.0 / 9, GAMG's
-#: Chebyshev 23.2 / 35, PETSc's ML (the V-cycle before) 7.1 / 10; at 122k DOFs (2 ranks) 6 and
-#: 8 sweeps 9.9 / 14 and 9.0 / 13, ML 9.1 / 13 for 1.2× the peak memory (docs/performance.md)
+#: coarse correction. Krylov iterations per solve (mean / max) on the 3D friction box at 16.9k
+#: DOFs, 1 rank: 6 and 8 sweeps 6.8 / 10 and 6.0 / 9, GAMG's Chebyshev 23.2 / 35, PETSc's ML
+#: (the V-cycle before) 7.1 / 10; at 122k DOFs, 2 ranks: 9.9 / 14 and 9.0 / 13, ML 9.1 / 13
+#: for 1.2x the peak memory (docs/performance.md). SOR on every level divided by a coarse
+#: operator's zero diagonal entry on 2 ranks.
 FINE_SWEEPS = 8
 
 
