@@ -270,3 +270,24 @@ def test_fine_level_smoothed_by_sor(comm):
         assert fine.getTolerances()[3] == sweeps
         coarse = amg.getMGSmoother(amg.getMGLevels() - 2)
         assert amg.getMGLevels() == 2 or coarse.getType() == "chebyshev"
+
+
+def test_galerkin_product_option_is_scoped(comm):
+    """The V-cycle's set-up puts -matptap_via allatonce in PETSc's options only while it runs
+    (on more than one rank), and leaves a value the user gave as it is."""
+    from parsolve.solvers.condensed import GALERKIN_PRODUCT, _galerkin_product
+
+    options = PETSc.Options()
+    with _galerkin_product(comm):
+        inside = options.getString("matptap_via", "")
+    assert inside == (GALERKIN_PRODUCT if comm.size > 1 else "")
+    assert not options.hasName("matptap_via")
+    options["matptap_via"] = "nonscalable"
+    try:
+        with _galerkin_product(comm):
+            assert options.getString("matptap_via") == "nonscalable"
+        assert options.getString("matptap_via") == "nonscalable"
+    finally:
+        options.delValue("matptap_via")
+    _friction(comm)
+    assert not options.hasName("matptap_via")
