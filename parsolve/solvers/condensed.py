@@ -95,7 +95,8 @@ def _galerkin_product(comm: MPI.Comm) -> Iterator[None]:
     solvers.options.UNPREFIXED); one rank has no distributed product. Its default keeps the
     product's intermediates (A P, Pᵀ's parts, P's remote rows) on every level for reuse: on the
     122k-DOF friction box on 2 ranks the set-up held 131 MiB per rank, 58 with "allatonce", the
-    same Krylov iterations (docs/performance.md)."""
+    same Krylov iterations, but took 22.5 s per solve against 3.3: memory chosen over time
+    (``-matptap_via nonscalable`` chooses time; docs/performance.md)."""
     options = PETSc.Options()
     add = comm.size > 1 and not options.hasName("matptap_via")
     if add:
