@@ -22,8 +22,13 @@ mean, max; the iterative preset at its tolerance, rtol 2.5e-14), wall time, peak
         → the scale runs only: the friction box refined f× per direction on 2 ranks against
         plain elasticity (its base clamped, CG + GAMG) on the same mesh: time per Newton
         iteration, Krylov iterations, peak memory summed over the ranks
-        (scripts/results/bench_relations_scale.md; --translations F: at f = F the friction
-        box again, ML's near-null space the translations alone)
+        (scripts/results/bench_relations_scale.md; --ml F: at f = F the friction box again
+        with ML as the condensed V-cycle, the one GAMG with SOR replaced)
+    nice -n 5 .venv/bin/python scripts/bench_relations.py --weak --steps 1
+        → weak scaling: the friction box and plain elasticity at about 16k DOFs per rank on
+        1, 2, 4 ranks (oversubscribed: iterations and memory only), the peak memory per rank
+        fitted as a + b·N + c·N/P and the Krylov iterations as α + β·log10 N, extrapolated to
+        1024 ranks × 10⁹ DOFs (scripts/results/bench_relations_weak.md)
     nice -n 10 .venv/bin/python scripts/bench_relations.py --big 16 --ranks 2 [--timeout S]
         → one large run (not in CI): the friction box refined f× per direction (16: 931k
         DOFs, 21: 2.08M) on the iterative preset, its Newton and Krylov iterations, set-up
@@ -37,6 +42,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import signal
 import subprocess
@@ -390,18 +396,18 @@ SCALE_HEAD = ["problem", "refinement", "DOFs", "ranks", "Newton its", "Krylov me
               "ratio to elasticity"]
 
 
-#: the condensed V-cycle with the translations alone as its near-null space (ML's ``block``:
-#: three columns per aggregate, not six): ML's set-up was 3.5× K's memory per rank with the
-#: rigid-body modes, the most of the friction run's excess over elasticity's (the scale table)
-TRANSLATIONS = {"condensed_pc_ml_nullspace": "block"}
+#: the condensed V-cycle as it was before GAMG with SOR on its finest level: PETSc's ML (MIS
+#: aggregation; its default "uncoupled" crashed after many set-ups in one process), the
+#: reference of the iterations and memory GAMG replaced (``--ml F``)
+ML = {"condensed_pc_type": "ml", "condensed_pc_ml_CoarsenScheme": "MIS"}
 
 
 def scale_study(folder: Path, factors: list[int], ranks: int, steps: int = 2,
-                translations: int = 0) -> list[list[str]]:
+                ml: int = 0) -> list[list[str]]:
     """The friction box (iterative preset) against plain elasticity (CG + GAMG) on the same
     mesh and ranks: time per Newton iteration, peak memory summed over the ranks; the matrices'
-    memory piece by piece (``matrix_pieces``). At the refinement ``translations`` the friction
-    box again with ``TRANSLATIONS`` (the V-cycle's memory against its iterations)."""
+    memory piece by piece (``matrix_pieces``). At the refinement ``ml`` the friction box again
+    with ``ML`` as the condensed V-cycle (the one GAMG replaced)."""
     os.environ["BENCH_PIECES"] = "1"   # (the children inherit it)
     rows, pieces = [], []
     for f in factors:
@@ -409,10 +415,10 @@ def scale_study(folder: Path, factors: list[int], ranks: int, steps: int = 2,
                                     "iterative", ranks=ranks),
                 "elasticity": one_run(folder, f"scale_elastic_{f}", elastic_scene(f, steps),
                                       "iterative", ranks=ranks)}
-        if f == translations:
-            runs["friction, ML translations only"] = one_run(
-                folder, f"scale_friction_{f}", friction_scene(f, steps), "iterative",
-                TRANSLATIONS, ranks=ranks)
+        if f == ml:
+            runs["friction, ML V-cycle"] = one_run(
+                folder, f"scale_friction_{f}", friction_scene(f, steps), "iterative", ML,
+                ranks=ranks)
         base = runs["elasticity"]
         for name, r in runs.items():
             if r.get("status") != "complete":
@@ -478,6 +484,121 @@ def gamg_study(folder: Path, factor: int) -> list[list[str]]:
     return rows
 
 
+#: the weak scaling runs: (ranks, refinement f of the friction box per direction) at about 16k
+#: DOFs per rank (f = 4, 5, 6: 16,875, 31,713, 53,391 DOFs), the 1-rank mesh on 2 and 4 ranks
+#: (the same N, more P: what separates the fit's b·N from its c·N/P), and 122,451 DOFs on 2
+#: ranks (61k per rank: a partition whose ghost layer is a smaller share)
+WEAK = [(1, 4), (2, 5), (4, 6), (2, 4), (4, 4), (2, 8)]
+WEAK_HEAD = ["problem", "ranks", "refinement", "DOFs", "DOFs per rank", "Newton its",
+             "Krylov mean / max", "peak MiB per rank (largest)", "peak MiB (all ranks)",
+             "KB/DOF (all ranks)", "ratio to elasticity"]
+#: the model's target: 1024 ranks, 10⁹ DOFs
+MODEL = (1024, 1.0e9)
+
+
+def fit_memory(points: list[tuple[int, int, float]]) -> tuple[float, float, float]:
+    """(a, b, c) of peak MiB per rank = a + b·N + c·N/P, least squares over (P, N, MiB)."""
+    import numpy as np
+
+    A = np.array([[1.0, n, n / p] for p, n, _ in points])
+    y = np.array([m for _, _, m in points])
+    return tuple(float(v) for v in np.linalg.lstsq(A, y, rcond=None)[0])
+
+
+def fit_surface(points: list[tuple[int, int, float]]) -> tuple[float, float, float]:
+    """(a, c, g) of peak MiB per rank = a + c·N/P + g·(N/P)^(2/3), least squares over
+    (P, N, MiB): no term growing with N on every rank, the ghost layer as the part's surface."""
+    import numpy as np
+
+    A = np.array([[1.0, n / p, (n / p) ** (2 / 3)] for p, n, _ in points])
+    y = np.array([m for _, _, m in points])
+    return tuple(float(v) for v in np.linalg.lstsq(A, y, rcond=None)[0])
+
+
+def fit_iterations(points: list[tuple[int, float]]) -> tuple[float, float]:
+    """(α, β) of Krylov iterations per solve = α + β·log10(N), least squares over (N, its)."""
+    import numpy as np
+
+    A = np.array([[1.0, np.log10(n)] for n, _ in points])
+    return tuple(float(v) for v in np.linalg.lstsq(A, np.array([k for _, k in points]),
+                                                   rcond=None)[0])
+
+
+def weak_study(folder: Path, steps: int) -> None:
+    """The friction box (iterative preset) and plain elasticity (CG + GAMG) at about 16k DOFs
+    per rank on 1, 2 and 4 ranks (oversubscribed: iterations and memory, not time), the 1-rank
+    mesh again on 2 and 4 ranks; the peak memory per rank fitted as a + b·N + c·N/P and the
+    mean Krylov iterations per solve as α + β·log10 N, extrapolated to ``MODEL``."""
+    rows, runs = [], {"friction": [], "elasticity": []}
+    for ranks, f in WEAK:
+        pair = {"friction": one_run(folder, f"weak_friction_{f}_{ranks}",
+                                    friction_scene(f, steps), "iterative", ranks=ranks),
+                "elasticity": one_run(folder, f"weak_elastic_{f}_{ranks}",
+                                      elastic_scene(f, steps), "iterative", ranks=ranks)}
+        for name, r in pair.items():
+            if r.get("status") != "complete":
+                rows.append([name, str(ranks), f"{f}³×", r["status"][:60], *["-"] * 7])
+                continue
+            runs[name].append((ranks, r))
+            k = r["krylov"] or [0]
+            base = pair["elasticity"]
+            ratio = (f"memory {r['hwm'] / base['hwm']:.2f}×" if name == "friction"
+                     and base.get("status") == "complete" else "-")
+            rows.append([name, str(ranks), f"{f}³×", f"{r['dofs']:,}",
+                         f"{r['dofs'] // ranks:,}", str(r["iterations"]),
+                         f"{sum(k) / len(k):.1f} / {max(k)}", bh.mib(r["hwm_rank"]),
+                         bh.mib(r["hwm"]), f"{r['hwm'] / r['dofs'] / 1e3:.1f}", ratio])
+        print(bh.text_table(WEAK_HEAD, rows[-2:]), flush=True)
+        publish_weak(rows, runs, steps)
+
+
+def model_lines(runs: dict) -> list[str]:
+    """The fitted memory and iteration models in words, at ``MODEL``."""
+    P, N = MODEL
+    lines = []
+    for name, got in runs.items():
+        if len(got) < 3:
+            lines.append(f"- {name}: fewer than 3 runs completed, no fit.")
+            continue
+        points = [(p, r["dofs"], r["hwm_rank"] / bh.MiB) for p, r in got]
+        a, b, c = fit_memory(points)
+        a2, c2, g2 = fit_surface(points)
+        surface = a2 + c2 * N / P + g2 * (N / P) ** (2 / 3)
+        its = [(r["dofs"], sum(r["krylov"]) / len(r["krylov"])) for _, r in got if r["krylov"]]
+        alpha, beta = fit_iterations(its)
+        per_rank = a + b * N + c * N / P
+        lines.append(
+            f"- {name}: peak MiB per rank = {a:.0f} + {b * 1e3:.4f}·N/1000 + "
+            f"{c * 1e3:.3f}·(N/P)/1000 (N DOFs, P ranks; least squares over {len(got)} runs); "
+            f"at {P} ranks × {N:.0e} DOFs ({N / P:,.0f} DOFs per rank): "
+            f"**{per_rank / 1024:.1f} GiB per rank** ({a / 1024:.2f} fixed, "
+            f"{b * N / 1024:.2f} growing with N on every rank, {c * N / P / 1024:.2f} "
+            f"distributed); fitted instead as a + c·N/P + g·(N/P)^(2/3) (nothing growing "
+            f"with N on every rank, the ghost layer as the part's surface): {a2:.0f} + "
+            f"{c2 * 1e3:.3f}·(N/P)/1000 + {g2:.3f}·(N/P)^(2/3): **{surface / 1024:.1f} GiB per "
+            f"rank** ({surface * P / 1024 ** 2:.1f} TiB in all); "
+            f"Krylov iterations per solve (mean) = {alpha:.1f} + "
+            f"{beta:.2f}·log10 N: **{alpha + beta * math.log10(N):.1f} at 10⁹ DOFs**.")
+    return lines
+
+
+def publish_weak(rows: list, runs: dict, steps: int) -> None:
+    machine = bh.machine_info()
+    text = "\n".join([
+        "# Weak scaling of the friction box: 1, 2, 4 ranks", "",
+        f"{machine['date']}, {machine['cpu']}, {machine['cpus']} CPUs (4 ranks oversubscribed: "
+        "iterations and memory only, no times). The 3D friction box "
+        f"(`contact_friction_3d.toml`, its first {steps} step{'s' if steps > 1 else ''}) "
+        "refined f× per direction on the iterative preset, and the same mesh with its base "
+        "clamped (plain elasticity, CG + GAMG); about 16k DOFs per rank, and the 1-rank mesh "
+        "again on 2 and 4 ranks; peak memory: VmHWM.", "",
+        bh.md_table(WEAK_HEAD, rows, first="---"), "",
+        "The model (a fit, not a measurement; memory per rank a + b·N + c·N/P as the "
+        "elasticity model of docs/performance.md; iterations α + β·log10 N):", "",
+        *model_lines(runs), ""])
+    bh.publish("bench_relations_weak.md", text)
+
+
 BIG_HEAD = ["problem", "refinement", "DOFs", "ranks", "Newton its", "linear solves",
             "Krylov min / mean / max", "set-up s per solve", "wall s", "s per Newton it",
             "peak MiB per rank", "peak MiB (all ranks)", "KB/DOF"]
@@ -539,7 +660,7 @@ def publish_big(rows: list, mumps: str, factor: int, ranks: int, steps: int,
         f"machine shared (times noisy: {bh.load_line(load0, os.getloadavg())}). The 3D "
         "friction box (`contact_friction_3d.toml`, its "
         f"first {steps} step{'s' if steps > 1 else ''}) refined {factor}× per direction on "
-        "the iterative preset (GMRES on the saddle system, the nodal rows condensed, one ML "
+        "the iterative preset (GMRES on the saddle system, the nodal rows condensed, one GAMG "
         "V-cycle on the condensed operator); Krylov iterations per linear solve; set-up: the "
         "condensation and the AMG's, per linear solve; peak memory: VmHWM.", "",
         bh.md_table(BIG_HEAD, rows, first="---"), "", mumps + ".", ""])
@@ -568,9 +689,13 @@ def main() -> None:
                    help="the scale runs only: friction box refinements f (comma-separated) on "
                         "--ranks ranks, against plain elasticity with GAMG (scale table)")
     p.add_argument("--ranks", type=int, default=2, help="ranks of the scale runs")
-    p.add_argument("--translations", type=int, default=0,
-                   help="with --scale: at this refinement the friction box again with the "
-                        "condensed V-cycle's near-null space the translations alone")
+    p.add_argument("--ml", type=int, default=0,
+                   help="with --scale: at this refinement the friction box again with ML as "
+                        "the condensed V-cycle (the one GAMG with SOR replaced)")
+    p.add_argument("--weak", action="store_true",
+                   help="the weak scaling runs only: the friction box and plain elasticity "
+                        "at about 16k DOFs per rank on 1, 2, 4 ranks (and the 1-rank mesh on "
+                        "2 and 4), the memory model fitted (bench_relations_weak.md)")
     p.add_argument("--steps", type=int, default=2, help="load steps of the scale runs")
     p.add_argument("--cases", type=str, default="friction,ironing,mortar",
                    help="the series to run, or single sizes as case:factor (comma-separated: "
@@ -593,13 +718,16 @@ def main() -> None:
         big_study(bh.scratch("relations_big"), args.big, args.ranks, args.steps, args.timeout,
                   args.big_elasticity)
         return
+    if args.weak:
+        weak_study(bh.scratch("relations_weak"), args.steps)
+        return
     if args.gamg:
         publish_gamg(gamg_study(bh.scratch("relations_gamg"), args.gamg), args.gamg)
         return
     if args.scale or bh.SMOKE:
         factors = [1] if bh.SMOKE else [int(f) for f in args.scale.split(",")]
         rows = scale_study(bh.scratch("relations_scale"), factors, args.ranks, args.steps,
-                           1 if bh.SMOKE else args.translations)
+                           1 if bh.SMOKE else args.ml)
         if args.scale:
             return
     folder = bh.scratch("relations")
@@ -642,7 +770,7 @@ def publish_scale(rows: list, pieces: list, ranks: int, steps: int) -> None:
         "machine shared (times noisy). The 3D friction box (`contact_friction_3d.toml`, its "
         f"first {steps} step{'s' if steps > 1 else ''}) refined f× per direction on the iterative preset, against the same "
         "box with its base clamped (CG + GAMG); set-up MiB: the resident memory the largest "
-        "preconditioner set-up added on a rank (the condensation and ML's V-cycle; GAMG's for "
+        "preconditioner set-up added on a rank (the condensation and its V-cycle; GAMG's for "
         "elasticity); peak memory: VmHWM summed over the ranks.", "",
         bh.md_table(SCALE_HEAD, rows, first="---"), "",
         "The matrices piece by piece after the first linear solve (MiB summed over the ranks: "
@@ -664,7 +792,8 @@ def report(rows: list, results: list, machine: dict, load0, gamma_rows: list | N
              "each run in its own process (peak memory: VmHWM); Krylov iterations per linear "
              "solve of the whole run. The preset chooses per operator: `condensed` when every "
              "relation row is nodal (GMRES on M itself, preconditioned by the rows condensed "
-             "node by node and one ML V-cycle on the condensed primal operator; "
+             "node by node and one GAMG V-cycle, SOR on its finest level, on the condensed "
+             "primal operator; "
              "`parsolve/solvers/condensed.py`), else `augmented` (GMRES on the augmented "
              "Lagrangian form T M x = T b, γ = 3 on the rows of one node, its Schur fieldsplit: "
              "one GAMG V-cycle, threshold 0, four Chebyshev steps per level, on "

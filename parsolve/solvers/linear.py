@@ -41,24 +41,6 @@ from parsolve.solvers.condensed import CondensedPreconditioner
 AMG = "gamg"
 
 
-def _condensed_amg() -> str:
-    """The V-cycle on the condensed operator (solvers.condensed): PETSc's ML where it is built
-    in, else GAMG. On the 3D friction box ML took 6.0 / 7.2 Krylov iterations per solve (mean,
-    MIS aggregation) at 8× / 64× the cells, GAMG 12.5 / 21.6 (threshold 0, its rigid-body
-    modes in the nodal frames), hypre's BoomerAMG 15.6 at 8× (docs/performance.md)."""
-    pc = PETSc.PC().create(PETSc.COMM_SELF)
-    try:
-        pc.setType("ml")
-        return "ml"
-    except PETSc.Error:
-        return "gamg"
-    finally:
-        pc.destroy()
-
-
-CONDENSED_AMG = _condensed_amg()
-
-
 class DoesNotFit(SolverError):
     """The factorization does not fit in memory: a smaller step or more workspace cannot
     help (the step is not cut)."""
@@ -126,13 +108,10 @@ def preset_options(preset: str, symmetric: bool, has_multipliers: bool,
         "fieldsplit_lambda_ksp_type": "preonly",
         "fieldsplit_lambda_pc_type": "jacobi",
         # the condensed preconditioner's V-cycle on S (solvers.condensed), when every relation
-        # row is nodal
-        "condensed_pc_type": CONDENSED_AMG,
-        # ML's MIS aggregation: its default (uncoupled) crashed inside ML's allocation after a
-        # few dozen set-ups in one process (the test suite); MIS took 6.0 / 7.2 Krylov
-        # iterations per solve at 8× / 64× against uncoupled's 4.9 / 6.2
-        **({"condensed_pc_ml_CoarsenScheme": "MIS"} if CONDENSED_AMG == "ml" else
-           {"condensed_pc_gamg_threshold": "0.0"}),
+        # row is nodal: GAMG, every connection kept, SOR on its finest level (set there); ML
+        # took as many iterations for 1.2x the peak memory (it copies S and P's transpose)
+        "condensed_pc_type": "gamg",
+        "condensed_pc_gamg_threshold": "0.0",
         "ksp_error_if_not_converged": "true",
     }
 

@@ -5,6 +5,7 @@ solve's answer; a scene with rows that tie several nodes (controls, periodic tie
 to the augmented form and says why."""
 
 import numpy as np
+from mpi4py import MPI
 import pytest
 from petsc4py import PETSc
 
@@ -196,3 +197,97 @@ def test_coupled_rows_read_from_the_pattern(comm):
     S = dense(pre.S, comm)
     reference = _nodal_transform(pre, dense(cancelled, comm), comm)
     assert np.abs(S - reference).max() <= 1e-13 * np.abs(reference).max()
+
+
+def _block_matrix(comm, shape, first_row: int, first_col: int, nc: int, n: int,
+                  nodes: np.ndarray, blocks: np.ndarray) -> PETSc.Mat:
+    """A distributed AIJ matrix of ``shape`` ((local, global) rows, (local, global) columns)
+    holding an nc × nc block on each of the n local primal nodes: ``blocks`` on ``nodes``
+    (local node numbers), the identity on the others; node i's row a at first_row + i nc + a,
+    its column b at first_col + i nc + b."""
+    full = np.broadcast_to(np.eye(nc), (n, nc, nc)).copy()
+    full[nodes] = blocks
+    mat = PETSc.Mat().createAIJ(size=shape, nnz=(nc, nc), comm=comm)
+    rows = first_row + np.arange(n)[:, None] * nc + np.arange(nc)
+    cols = (first_col + np.arange(n)[:, None] * nc + np.arange(nc)).reshape(-1)
+    for a in range(nc):   # (row a of every node's block)
+        mat.setValuesIJV(np.arange(n + 1, dtype=PETSc.IntType) * nc,
+                         cols.astype(PETSc.IntType), full[:, a, :].reshape(-1),
+                         rowmap=rows[:, a].astype(PETSc.IntType))
+    mat.assemble()
+    return mat
+
+
+def _product_operator(pre: CondensedPreconditioner, mat: PETSc.Mat) -> PETSc.Mat:
+    """The condensed operator as PETSc's products make it: R M P with R = [G, 0] (primal rows ×
+    saddle columns) and P = [H; 0], plus G dk H + k on the constrained slots (per node)."""
+    comm, nc, nq, nl = pre.comm, pre.nc, pre.nq, pre.nl
+    primal, saddle, n = (nq, int(pre.nqs.sum())), (nq + nl, int(pre.starts[-1])), nq // nc
+    R = _block_matrix(comm, (primal, saddle), pre.q_start, pre.start, nc, n, pre.nodes, pre.g)
+    P = _block_matrix(comm, (saddle, primal), pre.start, pre.q_start, nc, n, pre.nodes, pre.h)
+    S = R.matMult(mat.matMult(P))
+    extra = pre.g @ pre.dk @ pre.h + pre.kscale * pre.keep[:, :, None] * np.eye(nc)
+    E = _block_matrix(comm, (primal, primal), pre.q_start, pre.q_start, nc, n, pre.nodes, extra)
+    zero = np.ones(n, dtype=bool)
+    zero[pre.nodes] = False
+    E.zeroRows((pre.q_start + np.flatnonzero(zero)[:, None] * nc
+                + np.arange(nc)).reshape(-1).astype(PETSc.IntType), diag=0.0)
+    S.axpy(1.0, E, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+    return S
+
+
+def test_condensed_operator_equals_the_product(comm):
+    """S transformed in place equals R M P (PETSc's triple product, the way S was first made)
+    plus the folded rows and k on the constrained slots, entry by entry to 1e-14 of its
+    largest entry, on the variant operator (hard, compliant and open rows; a non-associated
+    dual) and on the friction box's own operator."""
+    system, solver, mat, rhs, x = _friction(comm)
+    is_q, is_l = system.index_sets()
+    for name, operator in (("variant", _variant(mat, system)), ("plain", mat)):
+        pre = CondensedPreconditioner(comm, 3, is_q, is_l, f"product_{name}_")
+        assert pre.update(operator) is None
+        reference = _product_operator(pre, operator)
+        largest = comm.allreduce(float(np.abs(reference.getValuesCSR()[2]).max()), op=MPI.MAX)
+        difference = pre.S.copy()
+        difference.axpy(-1.0, reference, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+        values = difference.getValuesCSR()[2]
+        worst = comm.allreduce(float(np.abs(values).max(initial=0.0)), op=MPI.MAX)
+        assert worst <= 1e-14 * largest
+        assert comm.allreduce(pre.nodes.size) > 0 and np.abs(pre.h - np.eye(3)).max() > 0.1
+
+
+def test_fine_level_smoothed_by_sor(comm):
+    """The V-cycle on S is GAMG whose finest level takes FINE_SWEEPS SOR sweeps (Richardson),
+    its coarser levels GAMG's Chebyshev; -condensed_fine_sweeps sets the sweeps."""
+    from parsolve.solvers.condensed import FINE_SWEEPS
+
+    for petsc, sweeps in (({}, FINE_SWEEPS), ({"condensed_fine_sweeps": "3"}, 3)):
+        system, solver, mat, rhs, x = _friction(comm, petsc)
+        amg = solver.condensed.amg
+        assert amg.getType() == "gamg" and amg.getMGLevels() >= 2
+        fine = amg.getMGSmoother(amg.getMGLevels() - 1)
+        assert (fine.getType(), fine.getPC().getType()) == ("richardson", "sor")
+        assert fine.getTolerances()[3] == sweeps
+        coarse = amg.getMGSmoother(amg.getMGLevels() - 2)
+        assert amg.getMGLevels() == 2 or coarse.getType() == "chebyshev"
+
+
+def test_galerkin_product_option_is_scoped(comm):
+    """The V-cycle's set-up puts -matptap_via allatonce in PETSc's options only while it runs
+    (on more than one rank), and leaves a value the user gave as it is."""
+    from parsolve.solvers.condensed import GALERKIN_PRODUCT, _galerkin_product
+
+    options = PETSc.Options()
+    with _galerkin_product(comm):
+        inside = options.getString("matptap_via", "")
+    assert inside == (GALERKIN_PRODUCT if comm.size > 1 else "")
+    assert not options.hasName("matptap_via")
+    options["matptap_via"] = "nonscalable"
+    try:
+        with _galerkin_product(comm):
+            assert options.getString("matptap_via") == "nonscalable"
+        assert options.getString("matptap_via") == "nonscalable"
+    finally:
+        options.delValue("matptap_via")
+    _friction(comm)
+    assert not options.hasName("matptap_via")
