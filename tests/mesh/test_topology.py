@@ -3,7 +3,9 @@
 import numpy as np
 import pytest
 
+from helpers.curved_q2 import ring_sector_mesh
 from parsolve.errors import InputError
+from parsolve.fem.elements import element
 from parsolve.mesh.generators import box, plate_with_hole, rectangle
 from parsolve.mesh.mesh import CELL_INFO, Mesh
 from parsolve.mesh.topology import (
@@ -20,7 +22,11 @@ FACET_NODES = {"line": 2, "line3": 3, "triangle": 3, "triangle6": 6, "quad": 4}
 
 
 def single_cell(cell_type):
-    """The first cell of a tiny generated mesh, as a one-cell mesh."""
+    """The first cell of a tiny generated mesh, as a one-cell mesh (Q2 quadrilaterals, which
+    no generator makes: the reference cell mapped onto the unit square)."""
+    if cell_type in ("quad9", "quad8"):
+        nodes = 0.5 * (element(cell_type).nodes + 1.0)
+        return Mesh(nodes, cell_type, np.arange(len(nodes))[None, :])
     if CELL_INFO[cell_type][0] == 2:
         m = rectangle(1.0, 1.0, 1, 1, cell=cell_type)
     else:
@@ -140,7 +146,9 @@ def test_match_facets_rejects_interior_facet():
 @pytest.mark.parametrize("cell_type", sorted(FACETS))
 def test_orient_cells_repairs_flipped_cells(cell_type):
     dim = CELL_INFO[cell_type][0]
-    if dim == 2:
+    if cell_type in ("quad9", "quad8"):
+        m = ring_sector_mesh(1.0, 2.0, 2, 2, cell=cell_type)[0]
+    elif dim == 2:
         m = rectangle(1.0, 1.0, 2, 2, cell=cell_type)
     else:
         m = box(1.0, 1.0, 1.0, 2, 1, 1, cell=cell_type)
