@@ -207,7 +207,8 @@ def _serendipity_parts(nodes: np.ndarray, xi: np.ndarray):
     lin = np.where(mid, 1.0, 1.0 + x * c)                       # (nq, nn, dim)
     dlin = np.where(mid, 0.0, c)
     corner = ~mid.any(axis=2)                                   # (1, nn)
-    s = np.where(corner, 0.25 * ((x * c).sum(axis=2) - 1.0), 0.5 * (1.0 - (x * x * mid).sum(axis=2)))
+    s = np.where(corner, 0.25 * ((x * c).sum(axis=2) - 1.0),
+                 0.5 * (1.0 - (x * x * mid).sum(axis=2)))
     ds = np.where(corner[..., None], 0.25 * c, -x * mid)        # (nq, nn, dim)
     return lin, dlin, s, ds
 

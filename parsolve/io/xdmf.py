@@ -27,7 +27,8 @@ import h5py
 import numpy as np
 
 TOPOLOGY = {"triangle": "Triangle", "triangle6": "Triangle_6", "quad": "Quadrilateral",
-            "quad8": "Quadrilateral_8", "quad9": "Quadrilateral_9", "tetra": "Tetrahedron", "tetra10": "Tetrahedron_10",
+            "quad8": "Quadrilateral_8", "quad9": "Quadrilateral_9", "tetra": "Tetrahedron",
+            "tetra10": "Tetrahedron_10",
             "hexahedron": "Hexahedron", "hexahedron20": "Hexahedron_20"}
 TAIL = b"</Grid></Domain></Xdmf>\n"
 
