@@ -20,23 +20,33 @@ def ring_sector_cells(nr: int, nt: int, cell: str = "quad9") -> tuple[np.ndarray
     return cells.reshape(-1, len(offsets)), np.unique(cells)
 
 
-def ring_sector_mesh(a: float, b: float, nr: int, nt: int, angle: float = np.pi / 2,
-                     cell: str = "quad9"):
-    """(mesh of the sector a ≤ r ≤ b, 0 ≤ θ ≤ angle: nr × nt cells ``cell``, quad9 or quad8,
-    counter-clockwise; its "inner" (r = a) and "outer" (r = b) line3 facets)."""
+def q2_grid(nr: int, nt: int, place, cell: str = "quad9"):
+    """(mesh of nr × nt cells ``cell``, quad9 or quad8, on the fine grid (u, v) ∈ [0, 1]²
+    placed at ``place(u, v)`` -> (x, y); its facets (line3) at u = 0, u = 1, v = 0, v = 1)."""
     from parsolve.mesh.mesh import Mesh
 
     cells, used = ring_sector_cells(nr, nt, cell)
     fine = np.arange((2 * nr + 1) * (2 * nt + 1))
-    r = a + (b - a) * (fine % (2 * nr + 1)) / (2 * nr)
-    theta = angle * (fine // (2 * nr + 1)) / (2 * nt)
+    x, y = place((fine % (2 * nr + 1)) / (2 * nr), (fine // (2 * nr + 1)) / (2 * nt))
     number = np.full(fine.size, -1)
     number[used] = np.arange(used.size)          # quad8: the centres are no nodes
     cells = number[cells]
-    inner = cells.reshape(nt, nr, -1)[:, 0][:, [3, 0, 7]]      # edge 3-0 of the first column
-    outer = cells.reshape(nt, nr, -1)[:, -1][:, [1, 2, 5]]     # edge 1-2 of the last column
-    points = np.column_stack([r * np.cos(theta), r * np.sin(theta)])[used]
-    return Mesh(points, cell, cells), inner, outer
+    grid = cells.reshape(nt, nr, -1)
+    sides = {"u0": grid[:, 0][:, [3, 0, 7]], "u1": grid[:, -1][:, [1, 2, 5]],
+             "v0": grid[0][:, [0, 1, 4]], "v1": grid[-1][:, [2, 3, 6]]}
+    return Mesh(np.column_stack([x, y])[used], cell, cells), sides
+
+
+def ring_sector_mesh(a: float, b: float, nr: int, nt: int, angle: float = np.pi / 2,
+                     cell: str = "quad9"):
+    """(mesh of the sector a ≤ r ≤ b, 0 ≤ θ ≤ angle: nr × nt cells ``cell``, quad9 or quad8,
+    counter-clockwise; its "inner" (r = a) and "outer" (r = b) line3 facets)."""
+    def polar(u, v):
+        r, theta = a + (b - a) * u, angle * v
+        return r * np.cos(theta), r * np.sin(theta)
+
+    mesh, sides = q2_grid(nr, nt, polar, cell)
+    return mesh, sides["u0"], sides["u1"]
 
 
 def ring_sector(path, a: float, b: float, nr: int, nt: int, angle: float = np.pi / 2,
