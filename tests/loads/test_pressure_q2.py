@@ -17,6 +17,7 @@ means of the stress too (≈ 11, between h³ and h⁴); six-node triangles on 8 
 
 import numpy as np
 import pytest
+from mpi4py import MPI
 
 from helpers.curved_q2 import ring_sector
 from loads.test_pressure import A, B, E, NU, P, SCENE, cylinder, radial, sphere, stress_error
@@ -56,6 +57,28 @@ def test_lame_internal_pressure_on_q2_cells(run, shared_tmp, cell, hypothesis, n
     (n0, l0, s0), (n1, l1, s1) = errors
     assert n1 < nodal and l1 < l2 and s1 < stress, errors
     assert l0 / l1 > 7.0 and n0 / n1 > 13.0 and s0 / s1 > 8.0, errors
+
+
+@pytest.mark.parametrize("binary", [False, True])
+def test_msh41_gives_the_msh22_answer(run, shared_tmp, binary):
+    """The same quad9 ring written as MSH 4.1 (read by slices on every rank) and as 2.2:
+    the same displacement to round-off."""
+    import meshio
+
+    from helpers.msh41 import blocks_of, write_msh41
+
+    v22, v41 = shared_tmp / "ring22.msh", shared_tmp / f"ring41_{binary}.msh"
+    ring_sector(v22, A, B, 3, 5)
+    if MPI.COMM_WORLD.rank == 0:
+        m = meshio.read(v22)
+        write_msh41(v41, m.points, blocks_of(m), {(2, 1): "ring", (1, 10): "inner",
+                                                   (1, 11): "outer"}, binary)
+    MPI.COMM_WORLD.Barrier()
+    a, b = (run(SCENE.format(mesh=m, hypothesis="plane_strain", E=E, NU=NU, pressure=P))
+            for m in (v22, v41))
+    np.testing.assert_array_equal(a["mesh/cells/quad9"], b["mesh/cells/quad9"])
+    np.testing.assert_allclose(b["fields/displacement"], a["fields/displacement"], rtol=0,
+                               atol=1e-12 * np.abs(a["fields/displacement"]).max())
 
 
 HALF = """
