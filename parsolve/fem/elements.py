@@ -10,8 +10,11 @@ Node ordering is meshio/VTK's. Reference cells:
   quad8 is the serendipity element (no centre node). Gmsh's and VTK's orders are the same.
 * ``tetra`` / ``tetra10``: (0,0,0), (1,0,0), (0,1,0), (0,0,1) (volume 1/6); P2 midside order
   m01, m12, m02, m03, m13, m23 (VTK).
-* ``hexahedron``: [-1, 1]^3 (volume 8), bottom face z=-1 counter-clockwise seen from above,
-  then the top face z=1 in the same order.
+* ``hexahedron`` / ``hexahedron27`` / ``hexahedron20``: [-1, 1]^3 (volume 8), bottom face z=-1
+  counter-clockwise seen from above, then the top face z=1 in the same order; Q2 midside order
+  (VTK) m01, m12, m23, m30, m45, m56, m67, m74, m04, m15, m26, m37, then (hexahedron27,
+  triquadratic Lagrange) the face centres x=-1, x=1, y=-1, y=1, z=-1, z=1 and the centre;
+  hexahedron20 is the serendipity element. Gmsh's order differs (``mesh.gmsh.ORDER``).
 
 Array conventions used throughout: ``xi`` (nq, dim), ``N`` (nq, num_nodes),
 ``dN`` (nq, num_nodes, dim), cell coordinates (ncells, num_nodes, gdim).
@@ -38,6 +41,8 @@ _CELLS: dict[str, tuple[str, int]] = {
     "tetra": ("tetra", 1),
     "tetra10": ("tetra", 2),
     "hexahedron": ("hexahedron", 1),
+    "hexahedron27": ("hexahedron", 2),
+    "hexahedron20": ("hexahedron", 2),
 }
 
 _DIM = {"line": 1, "triangle": 2, "quad": 2, "tetra": 3, "hexahedron": 3}
@@ -68,11 +73,18 @@ _EDGES: dict[str, list[tuple[int, int]]] = {
     "triangle": [(0, 1), (1, 2), (2, 0)],
     "tetra": [(0, 1), (1, 2), (2, 0), (0, 3), (1, 3), (2, 3)],
     "quad": [(0, 1), (1, 2), (2, 3), (3, 0)],
+    "hexahedron": [(0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4),
+                   (0, 4), (1, 5), (2, 6), (3, 7)],
 }
-# second-order cells with a node at the reference cell's centre (after the midside nodes)
-_CENTRE = ("quad9",)
-# second-order tensor cells without interior node: serendipity basis
-_SERENDIPITY = ("quad8",)
+# Lagrange Q2 cells' nodes after the midside ones: face centres (as their corners), then the
+# cell's centre (all the corners)
+_INTERIOR: dict[str, list[tuple[int, ...]]] = {
+    "quad9": [(0, 1, 2, 3)],
+    "hexahedron27": [(0, 3, 7, 4), (1, 2, 6, 5), (0, 1, 5, 4), (3, 2, 6, 7), (0, 1, 2, 3),
+                     (4, 5, 6, 7), tuple(range(8))],
+}
+# second-order tensor cells without interior nodes: serendipity basis
+_SERENDIPITY = ("quad8", "hexahedron20")
 
 _VERTICES: dict[str, np.ndarray] = {
     "line": np.array([[-1.0], [1.0]]),
@@ -200,16 +212,18 @@ def _lagrange2(nodes: np.ndarray, xi: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 
 def _serendipity_parts(nodes: np.ndarray, xi: np.ndarray):
-    # Serendipity Q2 (quad8): corner a: (1/4) Π(1 + ξ_k c_k) (Σ ξ_k c_k - 1); midside node with
-    # c_j = 0: (1/2) (1 - ξ_j²) Π_{k≠j}(1 + ξ_k c_k). Written as product P × factor S.
+    # Serendipity Q2 (quad8, hexahedron20) in dimension d: corner a: 2^-d Π(1 + ξ_k c_k)
+    # (Σ ξ_k c_k - (d - 1)); midside node with c_j = 0: 2^(1-d) (1 - ξ_j²) Π_{k≠j}(1 + ξ_k c_k).
+    # Written as a product P (nq, nn) of the linear factors times a factor S (nq, nn).
     x, c = xi[:, None, :], nodes[None, :, :]
+    d = nodes.shape[1]
     mid = c == 0.0
     lin = np.where(mid, 1.0, 1.0 + x * c)                       # (nq, nn, dim)
     dlin = np.where(mid, 0.0, c)
     corner = ~mid.any(axis=2)                                   # (1, nn)
-    s = np.where(corner, 0.25 * ((x * c).sum(axis=2) - 1.0),
-                 0.5 * (1.0 - (x * x * mid).sum(axis=2)))
-    ds = np.where(corner[..., None], 0.25 * c, -x * mid)        # (nq, nn, dim)
+    s = np.where(corner, 0.5 ** d * ((x * c).sum(axis=2) - (d - 1)),
+                 0.5 ** (d - 1) * (1.0 - (x * x * mid).sum(axis=2)))
+    ds = np.where(corner[..., None], 0.5 ** d * c, -2.0 * 0.5 ** (d - 1) * x * mid)
     return lin, dlin, s, ds
 
 
@@ -245,8 +259,8 @@ def element(cell_type: str) -> ReferenceElement:
     vertices = _VERTICES[ref]
     if order == 2:
         mids = [0.5 * (vertices[i] + vertices[j]) for i, j in _EDGES[ref]]
-        centre = [vertices.mean(axis=0)] if cell_type in _CENTRE else []
-        nodes = np.concatenate([vertices, np.array(mids + centre)], axis=0)
+        inner = [vertices[list(f)].mean(axis=0) for f in _INTERIOR.get(cell_type, [])]
+        nodes = np.concatenate([vertices, np.array(mids + inner)], axis=0)
     else:
         nodes = vertices
     return ReferenceElement(cell_type, _DIM[ref], nodes.shape[0], _readonly(nodes))
@@ -402,16 +416,16 @@ def default_degree(cell_type: str, purpose: str) -> int:
     """Quadrature degree for an integrand kind on affine cells.
 
     ``"stiffness"`` (B^T D B): 2*(order-1) for simplices (0, i.e. one point, for P1; 2 for P2),
-    2 for quad (2x2 Gauss), 4 for quad9/quad8 (3x3 Gauss: full integration, the serendipity
-    quad8's 2x2 has a spurious mode) and 3 for hexahedron (2x2x2 Gauss). ``"mass"``/``"load"``:
-    2*order.
+    2 for quad (2x2 Gauss), 3 for hexahedron (2x2x2 Gauss) and 4 for their Q2 cells (3 Gauss
+    points a direction: full integration, the serendipity cells' 2 have spurious modes).
+    ``"mass"``/``"load"``: 2*order.
     """
     ref, order = _check_cell_type(cell_type)
     if purpose == "stiffness":
         if ref == "quad":
             return 2 * order
         if ref == "hexahedron":
-            return 3
+            return 3 if order == 1 else 4
         return 2 * (order - 1)
     if purpose in ("mass", "load"):
         return 2 * order

@@ -17,9 +17,11 @@ CELL_INFO = {
     "tetra": (3, "triangle"),
     "tetra10": (3, "triangle6"),
     "hexahedron": (3, "quad"),
+    "hexahedron27": (3, "quad9"),
+    "hexahedron20": (3, "quad8"),
 }
 # the second-order cell types (read as they are; ``order = 2`` adds midside nodes to the others)
-SECOND_ORDER = ("triangle6", "quad9", "quad8", "tetra10")
+SECOND_ORDER = ("triangle6", "quad9", "quad8", "tetra10", "hexahedron27", "hexahedron20")
 
 
 @dataclass

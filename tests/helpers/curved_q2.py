@@ -1,23 +1,46 @@
 """Curved Q2 meshes written as Gmsh 2.2 files: a ring sector of nine-node (Lagrange) or
 eight-node (serendipity) quadrilaterals whose every node, midside ones included, lies on its
 exact circle (the corners, midside and centre nodes of cell (i, j) are the points (2i..2i+2,
-2j..2j+2) of a polar grid twice as fine)."""
+2j..2j+2) of a polar grid twice as fine), and a quarter tube of hexahedron27/hexahedron20
+cells on its exact cylinders."""
 
 from __future__ import annotations
 
 import numpy as np
 from mpi4py import MPI
 
-# a Q2 cell's nodes as (di, dj) offsets on the fine grid, in Gmsh's (= VTK's) order
-QUAD9 = [(0, 0), (2, 0), (2, 2), (0, 2), (1, 0), (2, 1), (1, 2), (0, 1), (1, 1)]
+def q2_cells(counts: tuple[int, ...], cell: str) -> tuple[np.ndarray, np.ndarray]:
+    """(cells of a structured grid of ``counts`` Q2 cells ``cell`` as ids of the fine grid
+    (2 n + 1 points a direction, the first direction fastest), fine-grid ids used): the
+    reference nodes (-1, 0, 1 a direction, in meshio's order) are the offsets 0, 1, 2."""
+    from parsolve.fem.elements import element
+
+    offsets = (element(cell).nodes + 1).astype(int)                  # (nen, dim)
+    sizes = np.array([2 * n + 1 for n in counts])
+    stride = np.concatenate([[1], np.cumprod(sizes[:-1])])
+    starts = np.meshgrid(*[2 * np.arange(n) for n in counts[::-1]], indexing="ij")[::-1]
+    first = sum(s.ravel() * k for s, k in zip(starts, stride))     # first direction fastest
+    cells = first[:, None] + offsets @ stride
+    return cells, np.unique(cells)
+
+
+def q2_mesh(counts: tuple[int, ...], cell: str, place=None):
+    """The Mesh of ``q2_cells`` on [0, 1]^d, its points moved by ``place(uvw (n, d))``."""
+    from parsolve.mesh.mesh import Mesh
+
+    cells, used = q2_cells(counts, cell)
+    sizes = [2 * n + 1 for n in counts]
+    grid = np.meshgrid(*[np.linspace(0.0, 1.0, k) for k in sizes[::-1]], indexing="ij")[::-1]
+    uvw = np.column_stack([g.ravel() for g in grid])
+    number = np.full(len(uvw), -1)
+    number[used] = np.arange(used.size)                 # serendipity: interior ids unused
+    points = uvw[used] if place is None else place(uvw[used])
+    return Mesh(points, cell, number[cells])
 
 
 def ring_sector_cells(nr: int, nt: int, cell: str = "quad9") -> tuple[np.ndarray, np.ndarray]:
-    """(cells (nr nt, 9 or 8) of fine-grid ids i + j (2 nr + 1), fine-grid ids used)."""
-    j, i = np.meshgrid(2 * np.arange(nt), 2 * np.arange(nr), indexing="ij")   # i fastest
-    offsets = QUAD9 if cell == "quad9" else QUAD9[:8]
-    cells = np.stack([(i + di) + (j + dj) * (2 * nr + 1) for di, dj in offsets], axis=-1)
-    return cells.reshape(-1, len(offsets)), np.unique(cells)
+    """``q2_cells`` of an nr × nt grid."""
+    return q2_cells((nr, nt), cell)
 
 
 def q2_grid(nr: int, nt: int, place, cell: str = "quad9"):
@@ -62,6 +85,35 @@ def ring_sector(path, a: float, b: float, nr: int, nt: int, angle: float = np.pi
         phys = [np.full(len(c), tag) for (_, c), tag in zip(blocks, [1, 10, 11])]
         field = {"ring": np.array([1, 2]), "inner": np.array([10, 1]), "outer": np.array([11, 1])}
         meshio.write(str(path), meshio.Mesh(points, blocks, cell_data={
+            "gmsh:physical": phys, "gmsh:geometrical": phys}, field_data=field),
+            file_format="gmsh22", binary=False)
+    MPI.COMM_WORLD.Barrier()
+
+
+def quarter_tube_q2(path, a: float, b: float, height: float, nr: int, nt: int, nz: int,
+                    cell: str = "hexahedron27") -> None:
+    """A quarter of a thick tube a ≤ r ≤ b, 0 ≤ z ≤ height of nr × nt × nz cells ``cell``
+    (hexahedron27 or hexahedron20) whose nodes lie on the exact cylinders, facet groups
+    "inner" and "outer" (quad9 or quad8 faces), as a Gmsh 2.2 file (meshio writes Gmsh's
+    node order); on rank 0, every rank waits."""
+    import meshio
+
+    from parsolve.mesh.topology import FACETS
+
+    def tube(uvw):
+        r, theta = a + (b - a) * uvw[:, 0], np.pi / 2 * uvw[:, 1]
+        return np.column_stack([r * np.cos(theta), r * np.sin(theta), height * uvw[:, 2]])
+
+    if MPI.COMM_WORLD.rank == 0:
+        mesh = q2_mesh((nr, nt, nz), cell, tube)
+        grid = mesh.cells.reshape(nz, nt, nr, -1)
+        inner = grid[:, :, 0].reshape(-1, grid.shape[-1])[:, FACETS[cell][5]]     # x = 0 face
+        outer = grid[:, :, -1].reshape(-1, grid.shape[-1])[:, FACETS[cell][3]]    # x = 1 face
+        face = "quad9" if cell == "hexahedron27" else "quad8"
+        blocks = [(cell, mesh.cells), (face, inner), (face, outer)]
+        phys = [np.full(len(c), tag) for (_, c), tag in zip(blocks, [1, 10, 11])]
+        field = {"tube": np.array([1, 3]), "inner": np.array([10, 2]), "outer": np.array([11, 2])}
+        meshio.write(str(path), meshio.Mesh(mesh.points, blocks, cell_data={
             "gmsh:physical": phys, "gmsh:geometrical": phys}, field_data=field),
             file_format="gmsh22", binary=False)
     MPI.COMM_WORLD.Barrier()
