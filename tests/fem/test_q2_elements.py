@@ -18,31 +18,69 @@ from parsolve.mesh.topology import FACETS, FLIP, boundary_facets, cell_measures,
 from parsolve.post.locate import interpolate, locate
 
 Q2 = ["quad9", "quad8"]
+Q2_3D = ["hexahedron27", "hexahedron20"]
 # the reference nodes in Gmsh's (= VTK's) order: corners, midsides m01 m12 m23 m30, centre
 NODES = [(-1, -1), (1, -1), (1, 1), (-1, 1), (0, -1), (1, 0), (0, 1), (-1, 0), (0, 0)]
+VTK_CELL = {"quad9": "vtkBiQuadraticQuad", "quad8": "vtkQuadraticQuad",
+            "hexahedron27": "vtkTriQuadraticHexahedron", "hexahedron20": "vtkQuadraticHexahedron"}
 
 
-def inside(n: int, seed: int = 0) -> np.ndarray:
-    return np.random.default_rng(seed).uniform(-0.95, 0.95, size=(n, 2))
+def inside(n: int, seed: int = 0, dim: int = 2) -> np.ndarray:
+    return np.random.default_rng(seed).uniform(-0.95, 0.95, size=(n, dim))
 
 
-@pytest.mark.parametrize("cell", Q2)
+@pytest.mark.parametrize("cell", Q2 + Q2_3D)
 def test_nodes_kronecker_and_partition_of_unity(cell):
     ref = element(cell)
-    assert (ref.dim, ref.num_nodes, polynomial_order(cell)) == (2, len(ref.nodes), 2)
-    np.testing.assert_array_equal(ref.nodes, NODES[:ref.num_nodes])
+    assert (ref.num_nodes, polynomial_order(cell)) == ({"quad9": 9, "quad8": 8,
+                                                        "hexahedron27": 27,
+                                                        "hexahedron20": 20}[cell], 2)
+    if ref.dim == 2:
+        np.testing.assert_array_equal(ref.nodes, NODES[:ref.num_nodes])
     np.testing.assert_allclose(ref.shape(ref.nodes), np.eye(ref.num_nodes), atol=1e-15)
-    xi = inside(50)
+    xi = inside(50, dim=ref.dim)
     np.testing.assert_allclose(ref.shape(xi).sum(axis=1), 1.0, atol=1e-14)
     np.testing.assert_allclose(ref.grad_shape(xi).sum(axis=1), 0.0, atol=1e-14)
 
 
-@pytest.mark.parametrize("cell", Q2)
+@pytest.mark.parametrize("cell", Q2 + Q2_3D)
 def test_gradients_by_finite_differences(cell):
-    ref, xi, h = element(cell), inside(20, 1), 1e-6
+    ref, h = element(cell), 1e-6
+    xi = inside(20, 1, ref.dim)
     fd = np.stack([(ref.shape(xi + h * e) - ref.shape(xi - h * e)) / (2 * h)
-                   for e in np.eye(2)], axis=-1)
+                   for e in np.eye(ref.dim)], axis=-1)
     np.testing.assert_allclose(ref.grad_shape(xi), fd, atol=1e-9)
+
+
+@pytest.mark.parametrize("cell", Q2 + Q2_3D)
+def test_nodes_and_shape_functions_are_vtks(cell):
+    """VTK's own element (its parametric coordinates on [0, 1]^d, its interpolation functions):
+    the same nodes in the same order, the same functions (an independent implementation)."""
+    vtk = pytest.importorskip("vtk")
+    ref, other = element(cell), getattr(vtk, VTK_CELL[cell])()
+    n, dim = other.GetNumberOfPoints(), ref.dim
+    p = other.GetParametricCoords()
+    nodes = np.array([p[k] for k in range(3 * n)]).reshape(n, 3)[:, :dim] * 2 - 1
+    np.testing.assert_array_equal(nodes, ref.nodes)
+    interpolate = getattr(other, "InterpolationFunctions", None) or other.InterpolateFunctions
+    xi = inside(10, 4, dim)
+    theirs = []
+    for q in xi:
+        out = [0.0] * n
+        interpolate(tuple((q + 1) / 2) + (0.0,) * (3 - dim), out)
+        theirs.append(out)
+    np.testing.assert_allclose(ref.shape(xi), theirs, atol=1e-14)
+
+
+@pytest.mark.parametrize("cell", sorted(FLIP))
+def test_flip_is_the_mirror_of_the_first_two_reference_coordinates(cell):
+    """``FLIP`` reorders the nodes as the reference cell mirrored by ξ <-> η (triangles and
+    tetrahedra: their vertex 1 <-> 2), so that flipped cells stay valid cells of their type."""
+    nodes = element(cell).nodes
+    if cell.startswith(("quad", "hexahedron")):
+        np.testing.assert_array_equal(nodes[FLIP[cell]], nodes[:, [1, 0, 2][:nodes.shape[1]]])
+    else:
+        np.testing.assert_array_equal(nodes[FLIP[cell]][:, [1, 0, 2][:nodes.shape[1]]], nodes)
 
 
 @pytest.mark.parametrize("cell, monomials", [
@@ -62,11 +100,12 @@ def test_reproduces_its_polynomial_space(cell, monomials):
 
 
 def test_stiffness_is_fully_integrated():
-    """3 × 3 Gauss (degree 4, exact to 5 in each variable): B^T D B of a straight Q2 cell is
-    of degree 4 in each variable (the quad8's 2 × 2 rule has a spurious mode)."""
-    for cell in Q2:
+    """3 Gauss points a direction (degree 4, exact to 5 in each variable): B^T D B of a
+    straight Q2 cell is of degree 4 in each variable (the serendipity cells' 2 points leave a
+    spurious mode)."""
+    for cell in Q2 + Q2_3D:
         assert default_degree(cell, "stiffness") == 4 and default_degree(cell, "mass") == 4
-        assert len(quadrature(cell, default_degree(cell, "stiffness"))[1]) == 9
+        assert len(quadrature(cell, 4)[1]) == 3 ** element(cell).dim
 
 
 def curved_cell(cell: str) -> np.ndarray:

@@ -19,8 +19,9 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from helpers.curved_q2 import ring_sector
-from loads.test_pressure import A, B, E, NU, P, SCENE, cylinder, radial, sphere, stress_error
+from helpers.curved_q2 import quarter_tube_q2, ring_sector
+from loads.test_pressure import (A, B, E, NU, P, SCENE, TUBE, cylinder, radial, sphere,
+                                 stress_error)
 from parsolve.fem.axisymmetric import Axisymmetric
 from parsolve.fem.integrals import cell_rule
 
@@ -142,3 +143,55 @@ def test_xdmf_of_a_q2_result_reads_in_vtk(run, shared_tmp, cell, vtk_type):
     np.testing.assert_array_equal(cell_nodes, res[f"mesh/cells/{cell}"])
     u = vtk_to_numpy(grid.GetPointData().GetArray("displacement"))
     np.testing.assert_array_equal(u[:, :2], res["fields/displacement"][-1])
+
+
+@pytest.mark.parametrize("cell, face, vtk_type", [("hexahedron27", "quad9", 29),
+                                                  ("hexahedron20", "quad8", 25)])
+def test_lame_tube_of_q2_hexahedra_is_the_plane_strain_answer(run, shared_tmp, cell, face,
+                                                                vtk_type):
+    """The quarter tube of one layer of Q2 hexahedra (u_z = 0 on both ends, the pressure on
+    its curved quad9/quad8 faces) is the plane-strain ring of the same Q2 quadrilaterals:
+    every node's displacement that of the 2D node at the same (x, y) to round-off (so the
+    errors and rates above hold: 6.6e-5 on 4 × 8 cells for quad9), u_z = 0; its XDMF reads in
+    VTK as triquadratic (29) / quadratic (25) hexahedra."""
+    tube, ring = shared_tmp / f"tube_{cell}.msh", shared_tmp / f"ring_{face}.msh"
+    quarter_tube_q2(tube, A, B, 0.25, 4, 8, 1, cell)
+    ring_sector(ring, A, B, 4, 8, cell=face)
+    res3 = run(TUBE.format(mesh=tube, E=E, NU=NU, P=P))
+    xdmf = run.last.with_suffix(".xdmf")
+    res2 = run(SCENE.format(mesh=ring, hypothesis="plane_strain", E=E, NU=NU, pressure=P))
+    p3, p2 = res3["mesh/points"], res2["mesh/points"]
+    u3, u2 = res3["fields/displacement"][-1], res2["fields/displacement"][-1]
+    # each 3D node's 2D node at the same (x, y) (the middle layer holds some of them)
+    index = {tuple(k): n for n, k in enumerate(np.round(p2, 9))}
+    match = np.array([index[tuple(k)] for k in np.round(p3[:, :2], 9)])
+    np.testing.assert_allclose(p3[:, :2], p2[match], atol=1e-14)
+    np.testing.assert_allclose(u3[:, :2], u2[match], atol=1e-11 * np.abs(u2).max())
+    np.testing.assert_allclose(u3[:, 2], 0.0, atol=1e-12 * np.abs(u2).max())
+    r, ur = radial(res3)
+    assert np.abs(ur - cylinder(r)).max() / cylinder(A) < 1e-4
+    vtk = pytest.importorskip("vtk")
+    reader = vtk.vtkXdmfReader()
+    reader.SetFileName(str(xdmf))
+    reader.Update()
+    grid = reader.GetOutputDataObject(0)
+    assert {grid.GetCellType(k) for k in range(grid.GetNumberOfCells())} == {vtk_type}
+    assert grid.GetNumberOfCells() == 32 and grid.GetNumberOfPoints() == len(p3)
+
+
+def test_contact_on_q2_hexahedra_is_refused(shared_tmp):
+    """Contact has no rows on quad9/quad8 faces in 3D: the scene is refused with its key."""
+    import tomllib
+
+    from parsolve.errors import InputError
+    from parsolve.model import build_model
+    from parsolve.scene import parse_scene
+
+    tube = shared_tmp / "tube_contact.msh"
+    quarter_tube_q2(tube, A, B, 0.25, 1, 2, 1)
+    text = TUBE.format(mesh=tube, E=E, NU=NU, P=P) + (
+        '[[contact]]\nname = "wall"\nslave = "outer"\n'
+        'obstacle = { plane = { origin = [0.0, 0.0, 0.0], normal = [1.0, 0.0, 0.0] } }\n')
+    with pytest.raises(InputError, match="contact is not available on hexahedron27") as info:
+        build_model(parse_scene(tomllib.loads(text), "s.toml", text), MPI.COMM_WORLD)
+    assert info.value.key == "contact[0]"
