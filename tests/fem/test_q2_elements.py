@@ -1,5 +1,6 @@
-"""Q2 quadrilaterals: the nine-node Lagrange (quad9) and eight-node serendipity (quad8)
-reference elements, their integration on curved cells, their facets and orientation, the
+"""Q2 cells: the nine-node Lagrange (quad9) and eight-node serendipity (quad8) quadrilaterals
+and their hexahedra (hexahedron27, hexahedron20) as reference elements (against VTK's), the
+quadrilaterals' integration on curved cells, their facets and orientation, the
 Jacobian checks and point location on a ring sector whose every node lies on its circle.
 Nothing here depends on the number of ranks (each rank checks the same numbers)."""
 
