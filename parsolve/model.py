@@ -26,7 +26,7 @@ from parsolve.mesh.generators import GENERATORS, SLICED, make_quadratic
 from parsolve.mesh.gmshmesh import open_gmsh
 from parsolve.mesh.midside import QuadraticSlices
 from parsolve.mesh.h5mesh import is_mesh_h5, open_mesh, read_whole
-from parsolve.mesh.mesh import CELL_INFO, Mesh
+from parsolve.mesh.mesh import CELL_INFO, SECOND_ORDER, Mesh
 from parsolve.mesh.reader import read_mesh
 from parsolve.mesh.regions import RegionResolver
 from parsolve.mesh.slices import distribute_slices
@@ -126,8 +126,11 @@ def build_mesh(scene: Scene) -> Mesh:
                              _generator_key(exc)) from None
     if spec.order == 2 and mesh.cell_type in ("triangle", "tetra"):
         mesh = make_quadratic(mesh)
-    elif spec.order == 2 and mesh.cell_type not in ("triangle6", "tetra10"):
-        raise InputError(f"order = 2 needs a simplex mesh, not {mesh.cell_type}", scene.source, "mesh.order")
+    elif spec.order == 2 and mesh.cell_type not in SECOND_ORDER:
+        raise InputError(f"order = 2 needs a simplex mesh, not {mesh.cell_type} (or one of "
+                         f"second-order cells: {', '.join(SECOND_ORDER)})", scene.source,
+                         "mesh.order")
+    _refuse_contact_on(scene, mesh.cell_type)
     if mesh.dim != scene.dim:
         raise InputError(f"a {mesh.dim}D mesh ({mesh.cell_type}) cannot carry hypothesis "
                          f"{scene.hypothesis!r}", scene.source, "model.hypothesis")
@@ -246,15 +249,29 @@ def _slice_source(scene: Scene, comm):
                          _generator_key(exc)) from None
 
 
+# Q2 hexahedra's faces (quad9, quad8) have no contact rows: node-to-face pairs no such face,
+# and the serendipity face's corners carry negative shares of a uniform pressure
+NO_CONTACT = ("hexahedron27", "hexahedron20")
+
+
+def _refuse_contact_on(scene: Scene, cell_type: str) -> None:
+    specs = scene.effect_specs.get("contact") or []
+    if cell_type in NO_CONTACT and specs:
+        raise InputError(f"contact is not available on {cell_type} cells (their quad9/quad8 "
+                         f"faces); mesh the bodies in contact with hexahedron, tetra or tetra10",
+                         scene.source, getattr(specs[0], "key", "contact"))
+
+
 def _quadratic(scene: Scene, comm, src):
     """``src`` with its midside nodes (``midside.QuadraticSlices``) for ``order = 2`` or a
     generator's quadratic cells, else ``src`` itself. Collective."""
+    _refuse_contact_on(scene, src.cell_type)
     cell = getattr(src, "cell", src.cell_type)   # a generator's cell: triangle6, tetra10
-    if src.cell_type in ("triangle6", "tetra10") or (cell == src.cell_type
-                                                        and scene.mesh.order == 1):
+    if src.cell_type in SECOND_ORDER or (cell == src.cell_type and scene.mesh.order == 1):
         return src
     if src.cell_type not in ("triangle", "tetra"):
-        raise InputError(f"order = 2 needs a simplex mesh, not {src.cell_type}", scene.source,
+        raise InputError(f"order = 2 needs a simplex mesh, not {src.cell_type} (or one of "
+                         f"second-order cells: {', '.join(SECOND_ORDER)})", scene.source,
                          "mesh.order")
     return QuadraticSlices(comm, src, *mesh_source(scene), midside_groups=cell != src.cell_type)
 

@@ -5,11 +5,16 @@ Node ordering is meshio/VTK's. Reference cells:
 * ``line`` / ``line3``: [-1, 1] (length 2), nodes -1, 1 (and 0 for the midside node of line3),
   so that line facets share the [-1, 1] convention of quadrilaterals and Gauss rules.
 * ``triangle`` / ``triangle6``: (0,0), (1,0), (0,1) (area 1/2); P2 midside order m01, m12, m20.
-* ``quad``: [-1, 1]^2 (area 4), nodes counter-clockwise from (-1,-1).
+* ``quad`` / ``quad9`` / ``quad8``: [-1, 1]^2 (area 4), corners counter-clockwise from (-1,-1);
+  Q2 midside order m01, m12, m23, m30, then (quad9, biquadratic Lagrange) the centre (0, 0);
+  quad8 is the serendipity element (no centre node). Gmsh's and VTK's orders are the same.
 * ``tetra`` / ``tetra10``: (0,0,0), (1,0,0), (0,1,0), (0,0,1) (volume 1/6); P2 midside order
   m01, m12, m02, m03, m13, m23 (VTK).
-* ``hexahedron``: [-1, 1]^3 (volume 8), bottom face z=-1 counter-clockwise seen from above,
-  then the top face z=1 in the same order.
+* ``hexahedron`` / ``hexahedron27`` / ``hexahedron20``: [-1, 1]^3 (volume 8), bottom face z=-1
+  counter-clockwise seen from above, then the top face z=1 in the same order; Q2 midside order
+  (VTK) m01, m12, m23, m30, m45, m56, m67, m74, m04, m15, m26, m37, then (hexahedron27,
+  triquadratic Lagrange) the face centres x=-1, x=1, y=-1, y=1, z=-1, z=1 and the centre;
+  hexahedron20 is the serendipity element. Gmsh's order differs (``mesh.gmsh.ORDER``).
 
 Array conventions used throughout: ``xi`` (nq, dim), ``N`` (nq, num_nodes),
 ``dN`` (nq, num_nodes, dim), cell coordinates (ncells, num_nodes, gdim).
@@ -31,9 +36,13 @@ _CELLS: dict[str, tuple[str, int]] = {
     "triangle": ("triangle", 1),
     "triangle6": ("triangle", 2),
     "quad": ("quad", 1),
+    "quad9": ("quad", 2),
+    "quad8": ("quad", 2),
     "tetra": ("tetra", 1),
     "tetra10": ("tetra", 2),
     "hexahedron": ("hexahedron", 1),
+    "hexahedron27": ("hexahedron", 2),
+    "hexahedron20": ("hexahedron", 2),
 }
 
 _DIM = {"line": 1, "triangle": 2, "quad": 2, "tetra": 3, "hexahedron": 3}
@@ -63,7 +72,19 @@ _EDGES: dict[str, list[tuple[int, int]]] = {
     "line": [(0, 1)],
     "triangle": [(0, 1), (1, 2), (2, 0)],
     "tetra": [(0, 1), (1, 2), (2, 0), (0, 3), (1, 3), (2, 3)],
+    "quad": [(0, 1), (1, 2), (2, 3), (3, 0)],
+    "hexahedron": [(0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4),
+                   (0, 4), (1, 5), (2, 6), (3, 7)],
 }
+# Lagrange Q2 cells' nodes after the midside ones: face centres (as their corners), then the
+# cell's centre (all the corners)
+_INTERIOR: dict[str, list[tuple[int, ...]]] = {
+    "quad9": [(0, 1, 2, 3)],
+    "hexahedron27": [(0, 3, 7, 4), (1, 2, 6, 5), (0, 1, 5, 4), (3, 2, 6, 7), (0, 1, 2, 3),
+                     (4, 5, 6, 7), tuple(range(8))],
+}
+# second-order tensor cells without interior nodes: serendipity basis
+_SERENDIPITY = ("quad8", "hexahedron20")
 
 _VERTICES: dict[str, np.ndarray] = {
     "line": np.array([[-1.0], [1.0]]),
@@ -125,6 +146,8 @@ class ReferenceElement:
         ref, order = _CELLS[self.cell_type]
         if ref in _BARY:
             return _simplex_shape(ref, order, xi)
+        if order == 2:
+            return _quadratic_shape(self.cell_type, self.nodes, xi)
         return _tensor_shape(self.nodes, xi)
 
     def grad_shape(self, xi: np.ndarray) -> np.ndarray:
@@ -133,6 +156,8 @@ class ReferenceElement:
         ref, order = _CELLS[self.cell_type]
         if ref in _BARY:
             return _simplex_grad(ref, order, xi)
+        if order == 2:
+            return _quadratic_grad(self.cell_type, self.nodes, xi)
         return _tensor_grad(self.nodes, xi)
 
 
@@ -176,14 +201,66 @@ def _tensor_grad(nodes: np.ndarray, xi: np.ndarray) -> np.ndarray:
     return grad
 
 
+def _lagrange2(nodes: np.ndarray, xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    # 1D quadratic Lagrange factors on the nodes -1, 0, 1 of each direction, and their
+    # derivatives: (nq, nn, dim) each. Node c = ±1: x (x + c) / 2; node c = 0: 1 - x².
+    x, c = xi[:, None, :], nodes[None, :, :]
+    mid = c == 0.0
+    value = np.where(mid, 1.0 - x * x, 0.5 * x * (x + c))
+    slope = np.where(mid, -2.0 * x, x + 0.5 * c)
+    return value, slope
+
+
+def _serendipity_parts(nodes: np.ndarray, xi: np.ndarray):
+    # Serendipity Q2 (quad8, hexahedron20) in dimension d: corner a: 2^-d Π(1 + ξ_k c_k)
+    # (Σ ξ_k c_k - (d - 1)); midside node with c_j = 0: 2^(1-d) (1 - ξ_j²) Π_{k≠j}(1 + ξ_k c_k).
+    # Written as a product P (nq, nn) of the linear factors times a factor S (nq, nn).
+    x, c = xi[:, None, :], nodes[None, :, :]
+    d = nodes.shape[1]
+    mid = c == 0.0
+    lin = np.where(mid, 1.0, 1.0 + x * c)                       # (nq, nn, dim)
+    dlin = np.where(mid, 0.0, c)
+    corner = ~mid.any(axis=2)                                   # (1, nn)
+    s = np.where(corner, 0.5 ** d * ((x * c).sum(axis=2) - (d - 1)),
+                 0.5 ** (d - 1) * (1.0 - (x * x * mid).sum(axis=2)))
+    ds = np.where(corner[..., None], 0.5 ** d * c, -2.0 * 0.5 ** (d - 1) * x * mid)
+    return lin, dlin, s, ds
+
+
+def _quadratic_shape(cell_type: str, nodes: np.ndarray, xi: np.ndarray) -> np.ndarray:
+    if cell_type in _SERENDIPITY:
+        lin, _, s, _ = _serendipity_parts(nodes, xi)
+        return np.prod(lin, axis=2) * s
+    return np.prod(_lagrange2(nodes, xi)[0], axis=2)
+
+
+def _quadratic_grad(cell_type: str, nodes: np.ndarray, xi: np.ndarray) -> np.ndarray:
+    dim = nodes.shape[1]
+    if cell_type in _SERENDIPITY:
+        lin, dlin, s, ds = _serendipity_parts(nodes, xi)
+        p = np.prod(lin, axis=2)
+        grad = ds * p[..., None]
+        for j in range(dim):  # d/dξ_j of the product: the other directions' factors
+            others = [k for k in range(dim) if k != j]
+            grad[:, :, j] += dlin[:, :, j] * np.prod(lin[:, :, others], axis=2) * s
+        return grad
+    value, slope = _lagrange2(nodes, xi)
+    grad = np.empty(value.shape)
+    for j in range(dim):
+        others = [k for k in range(dim) if k != j]
+        grad[:, :, j] = slope[:, :, j] * np.prod(value[:, :, others], axis=2)
+    return grad
+
+
 @lru_cache(maxsize=None)
 def element(cell_type: str) -> ReferenceElement:
     """The (cached) reference element for a meshio cell type."""
     ref, order = _check_cell_type(cell_type)
     vertices = _VERTICES[ref]
     if order == 2:
-        mids = np.array([0.5 * (vertices[i] + vertices[j]) for i, j in _EDGES[ref]])
-        nodes = np.concatenate([vertices, mids], axis=0)
+        mids = [0.5 * (vertices[i] + vertices[j]) for i, j in _EDGES[ref]]
+        inner = [vertices[list(f)].mean(axis=0) for f in _INTERIOR.get(cell_type, [])]
+        nodes = np.concatenate([vertices, np.array(mids + inner)], axis=0)
     else:
         nodes = vertices
     return ReferenceElement(cell_type, _DIM[ref], nodes.shape[0], _readonly(nodes))
@@ -339,14 +416,16 @@ def default_degree(cell_type: str, purpose: str) -> int:
     """Quadrature degree for an integrand kind on affine cells.
 
     ``"stiffness"`` (B^T D B): 2*(order-1) for simplices (0, i.e. one point, for P1; 2 for P2),
-    2 for quad (2x2 Gauss) and 3 for hexahedron (2x2x2 Gauss). ``"mass"``/``"load"``: 2*order.
+    2 for quad (2x2 Gauss), 3 for hexahedron (2x2x2 Gauss) and 4 for their Q2 cells (3 Gauss
+    points a direction: full integration, the serendipity cells' 2 have spurious modes).
+    ``"mass"``/``"load"``: 2*order.
     """
     ref, order = _check_cell_type(cell_type)
     if purpose == "stiffness":
         if ref == "quad":
-            return 2
+            return 2 * order
         if ref == "hexahedron":
-            return 3
+            return 3 if order == 1 else 4
         return 2 * (order - 1)
     if purpose in ("mass", "load"):
         return 2 * order

@@ -27,8 +27,10 @@ import h5py
 import numpy as np
 
 TOPOLOGY = {"triangle": "Triangle", "triangle6": "Triangle_6", "quad": "Quadrilateral",
-            "quad8": "Quadrilateral_8", "tetra": "Tetrahedron", "tetra10": "Tetrahedron_10",
-            "hexahedron": "Hexahedron", "hexahedron20": "Hexahedron_20"}
+            "quad8": "Quadrilateral_8", "quad9": "Quadrilateral_9", "tetra": "Tetrahedron",
+            "tetra10": "Tetrahedron_10",
+            "hexahedron": "Hexahedron", "hexahedron20": "Hexahedron_20",
+            "hexahedron27": "Hexahedron_27"}
 TAIL = b"</Grid></Domain></Xdmf>\n"
 
 # XDMF Tensor6 component k <- Voigt component (DESIGN §5); None: padded with 0

@@ -45,7 +45,10 @@ TYPES = {1: ("line", 2, 1), 2: ("triangle", 3, 2), 3: ("quad", 4, 2), 4: ("tetra
          15: ("vertex", 1, 0), 16: ("quad8", 8, 2), 17: ("hexahedron20", 20, 3),
          18: ("wedge15", 15, 3), 19: ("pyramid13", 13, 3)}
 # Gmsh's node order -> meshio's (VTK's), for the types whose orders differ (meshio's table)
-ORDER = {"tetra10": [0, 1, 2, 3, 4, 5, 6, 7, 9, 8]}
+ORDER = {"tetra10": [0, 1, 2, 3, 4, 5, 6, 7, 9, 8],
+         "hexahedron20": [0, 1, 2, 3, 4, 5, 6, 7, 8, 11, 13, 9, 16, 18, 19, 17, 10, 12, 14, 15],
+         "hexahedron27": [0, 1, 2, 3, 4, 5, 6, 7, 8, 11, 13, 9, 16, 18, 19, 17, 10, 12, 14, 15,
+                          22, 23, 21, 24, 20, 25, 26]}
 
 
 def version_of(path: str) -> str | None:

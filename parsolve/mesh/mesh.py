@@ -12,10 +12,16 @@ CELL_INFO = {
     "triangle": (2, "line"),
     "triangle6": (2, "line3"),
     "quad": (2, "line"),
+    "quad9": (2, "line3"),
+    "quad8": (2, "line3"),
     "tetra": (3, "triangle"),
     "tetra10": (3, "triangle6"),
     "hexahedron": (3, "quad"),
+    "hexahedron27": (3, "quad9"),
+    "hexahedron20": (3, "quad8"),
 }
+# the second-order cell types (read as they are; ``order = 2`` adds midside nodes to the others)
+SECOND_ORDER = ("triangle6", "quad9", "quad8", "tetra10", "hexahedron27", "hexahedron20")
 
 
 @dataclass

@@ -23,6 +23,8 @@ FACETS: dict[str, list[tuple[int, ...]]] = {
     "triangle": [(0, 1), (1, 2), (2, 0)],
     "triangle6": [(0, 1, 3), (1, 2, 4), (2, 0, 5)],
     "quad": [(0, 1), (1, 2), (2, 3), (3, 0)],
+    "quad9": [(0, 1, 4), (1, 2, 5), (2, 3, 6), (3, 0, 7)],
+    "quad8": [(0, 1, 4), (1, 2, 5), (2, 3, 6), (3, 0, 7)],
     "tetra": [(0, 2, 1), (0, 1, 3), (1, 2, 3), (0, 3, 2)],
     "tetra10": [
         (0, 2, 1, 6, 5, 4),
@@ -38,6 +40,24 @@ FACETS: dict[str, list[tuple[int, ...]]] = {
         (2, 3, 7, 6),  # y = 1
         (3, 0, 4, 7),  # x = 0
     ],
+    # the hexahedron's faces with their edges' midside nodes (quad8 order), hexahedron27's
+    # with their centres too (quad9)
+    "hexahedron20": [
+        (0, 3, 2, 1, 11, 10, 9, 8),
+        (4, 5, 6, 7, 12, 13, 14, 15),
+        (0, 1, 5, 4, 8, 17, 12, 16),
+        (1, 2, 6, 5, 9, 18, 13, 17),
+        (2, 3, 7, 6, 10, 19, 14, 18),
+        (3, 0, 4, 7, 11, 16, 15, 19),
+    ],
+    "hexahedron27": [
+        (0, 3, 2, 1, 11, 10, 9, 8, 24),
+        (4, 5, 6, 7, 12, 13, 14, 15, 25),
+        (0, 1, 5, 4, 8, 17, 12, 16, 22),
+        (1, 2, 6, 5, 9, 18, 13, 17, 21),
+        (2, 3, 7, 6, 10, 19, 14, 18, 23),
+        (3, 0, 4, 7, 11, 16, 15, 19, 20),
+    ],
 }
 
 # Number of corner (vertex) nodes of each facet/cell type; corners always come first in
@@ -48,9 +68,13 @@ NUM_VERTICES: dict[str, int] = {
     "triangle": 3,
     "triangle6": 3,
     "quad": 4,
+    "quad9": 4,
+    "quad8": 4,
     "tetra": 4,
     "tetra10": 4,
     "hexahedron": 8,
+    "hexahedron20": 8,
+    "hexahedron27": 8,
 }
 
 # Node permutation that reverses a cell's orientation (keeps meshio ordering valid).
@@ -58,9 +82,15 @@ FLIP: dict[str, list[int]] = {
     "triangle": [0, 2, 1],
     "triangle6": [0, 2, 1, 5, 4, 3],
     "quad": [0, 3, 2, 1],
+    "quad9": [0, 3, 2, 1, 7, 6, 5, 4, 8],
+    "quad8": [0, 3, 2, 1, 7, 6, 5, 4],
     "tetra": [0, 2, 1, 3],
     "tetra10": [0, 2, 1, 3, 6, 5, 4, 7, 9, 8],
     "hexahedron": [0, 3, 2, 1, 4, 7, 6, 5],
+    # (ξ, η swapped: the edges and faces follow their corners)
+    "hexahedron20": [0, 3, 2, 1, 4, 7, 6, 5, 11, 10, 9, 8, 15, 14, 13, 12, 16, 19, 18, 17],
+    "hexahedron27": [0, 3, 2, 1, 4, 7, 6, 5, 11, 10, 9, 8, 15, 14, 13, 12, 16, 19, 18, 17,
+                     22, 23, 20, 21, 24, 25, 26],
 }
 
 

@@ -2,7 +2,8 @@
 
 Candidates are the cells whose bounding box holds the point; for all of them at once the
 isoparametric map x(ξ) = Σ N_a(ξ) X_a is inverted by Newton's method (exact in one step for
-affine cells, a few steps for curved P2 cells and bilinear quadrilaterals / hexahedra)."""
+affine cells, a few steps for curved P2 cells, bilinear or curved Q2 quadrilaterals and
+hexahedra)."""
 
 from __future__ import annotations
 

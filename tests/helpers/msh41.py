@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 
 GMSH_TYPE = {"vertex": 15, "line": 1, "line3": 8, "triangle": 2, "triangle6": 9, "quad": 3,
-             "tetra": 4, "tetra10": 11, "hexahedron": 5}
+             "quad9": 10, "quad8": 16, "tetra": 4, "tetra10": 11, "hexahedron": 5}
 DIM = {"vertex": 0, "line": 1, "line3": 1, "triangle": 2, "triangle6": 2, "quad": 2,
-       "tetra": 3, "tetra10": 3, "hexahedron": 3}
+       "quad9": 2, "quad8": 2, "tetra": 3, "tetra10": 3, "hexahedron": 3}
 TO_GMSH = {"tetra10": [0, 1, 2, 3, 4, 5, 6, 7, 9, 8]}
 
 

@@ -3,9 +3,11 @@
 import numpy as np
 import pytest
 
+from helpers.curved_q2 import q2_mesh, ring_sector_mesh
 from parsolve.errors import InputError
+from parsolve.fem.elements import element
 from parsolve.mesh.generators import box, plate_with_hole, rectangle
-from parsolve.mesh.mesh import CELL_INFO, Mesh
+from parsolve.mesh.mesh import CELL_INFO, SECOND_ORDER, Mesh
 from parsolve.mesh.topology import (
     FACETS,
     FLIP,
@@ -16,11 +18,16 @@ from parsolve.mesh.topology import (
     orient_cells,
 )
 
-FACET_NODES = {"line": 2, "line3": 3, "triangle": 3, "triangle6": 6, "quad": 4}
+FACET_NODES = {"line": 2, "line3": 3, "triangle": 3, "triangle6": 6, "quad": 4, "quad9": 9,
+               "quad8": 8}
 
 
 def single_cell(cell_type):
-    """The first cell of a tiny generated mesh, as a one-cell mesh."""
+    """The first cell of a tiny generated mesh, as a one-cell mesh (Q2 quadrilaterals, which
+    no generator makes: the reference cell mapped onto the unit square)."""
+    if cell_type in SECOND_ORDER and cell_type not in ("triangle6", "tetra10"):
+        nodes = 0.5 * (element(cell_type).nodes + 1.0)
+        return Mesh(nodes, cell_type, np.arange(len(nodes))[None, :])
     if CELL_INFO[cell_type][0] == 2:
         m = rectangle(1.0, 1.0, 1, 1, cell=cell_type)
     else:
@@ -50,10 +57,14 @@ def test_facet_table_is_outward_and_well_ordered(cell_type):
     outward = centroid - m.points[m.cells[0]].mean(axis=0)
     assert np.all(np.einsum("ij,ij->i", vec, outward) > 0)
     # quadratic facets: midside nodes in meshio order (line3: v0, v1, m01)
-    mids = {"line3": [(0, 1, 2)], "triangle6": [(0, 1, 3), (1, 2, 4), (2, 0, 5)]}
+    quad = [(0, 1, 4), (1, 2, 5), (2, 3, 6), (3, 0, 7)]
+    mids = {"line3": [(0, 1, 2)], "triangle6": [(0, 1, 3), (1, 2, 4), (2, 0, 5)],
+            "quad8": quad, "quad9": quad}
+    p = m.points[facets]
     for a, b, mid in mids.get(ftype, []):
-        p = m.points[facets]
         assert np.allclose(p[:, mid], 0.5 * (p[:, a] + p[:, b]))
+    if ftype == "quad9":   # then the face's centre
+        assert np.allclose(p[:, 8], p[:, :4].mean(axis=1))
 
 
 MESHES = {
@@ -140,7 +151,11 @@ def test_match_facets_rejects_interior_facet():
 @pytest.mark.parametrize("cell_type", sorted(FACETS))
 def test_orient_cells_repairs_flipped_cells(cell_type):
     dim = CELL_INFO[cell_type][0]
-    if dim == 2:
+    if cell_type in ("quad9", "quad8"):
+        m = ring_sector_mesh(1.0, 2.0, 2, 2, cell=cell_type)[0]
+    elif cell_type in ("hexahedron27", "hexahedron20"):
+        m = q2_mesh((2, 1, 1), cell_type)
+    elif dim == 2:
         m = rectangle(1.0, 1.0, 2, 2, cell=cell_type)
     else:
         m = box(1.0, 1.0, 1.0, 2, 1, 1, cell=cell_type)
