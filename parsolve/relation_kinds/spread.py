@@ -54,3 +54,45 @@ def places(comm, keys: np.ndarray, space: int) -> np.ndarray:
         return out
 
     return ask(comm, keys, blocks(keys, space, comm.size), answer)
+
+
+# a relation entry on its way to the rank owning its DOF: its row, its input DOF, its
+# coefficient
+ENTRY = np.dtype([("row", np.int64), ("dof", np.int64), ("coef", np.float64)])
+
+
+def to_owners(comm, rows: np.ndarray, dofs: np.ndarray, coefs: np.ndarray,
+              owners: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Entries (row, input DOF, coefficient) sent to the ranks ``owners`` (each DOF's owner),
+    where those of one (row, DOF) add up: this rank's entries, by row then DOF, the zero sums
+    dropped (a spread relation's entries, ``Relation.spread``). Collective; one exchange."""
+    sent = np.empty(np.asarray(rows).size, dtype=ENTRY)
+    sent["row"], sent["dof"], sent["coef"] = rows, dofs, coefs
+    got, _ = exchange(comm, sent, np.asarray(owners, dtype=np.int64))
+    order = np.lexsort((got["dof"], got["row"]))
+    got = got[order]
+    start = np.flatnonzero(np.concatenate([[True], (got["row"][1:] != got["row"][:-1])
+                                           | (got["dof"][1:] != got["dof"][:-1])])) \
+        if got.size else np.zeros(0, dtype=np.int64)
+    coef = np.add.reduceat(got["coef"], start) if got.size else np.zeros(0)
+    keep = coef != 0.0
+    return got["row"][start][keep], got["dof"][start][keep], coef[keep]
+
+
+def node_owners(comm, nodes: np.ndarray, owned: np.ndarray, space: int) -> np.ndarray:
+    """The rank owning each input node of ``nodes`` (``owned``: this rank's owned input ids,
+    ``space``: the mesh's nodes), found where its block of ids is looked after: every rank's
+    owned ids registered there (its own ids' size, not the mesh's). Collective."""
+    owned = np.asarray(owned, dtype=np.int64)
+    directory = Directory(comm, owned, blocks(owned, space, comm.size))
+    ids = directory.got
+    rank = np.repeat(np.arange(comm.size, dtype=np.int64), directory.counts)
+    order = np.argsort(ids, kind="stable")
+    ids, rank = ids[order], rank[order]
+
+    def answer(got: np.ndarray) -> np.ndarray:
+        pos = np.minimum(np.searchsorted(ids, got), max(ids.size - 1, 0))
+        return rank[pos] if ids.size else np.zeros(got.size, dtype=np.int64)
+
+    nodes = np.asarray(nodes, dtype=np.int64)
+    return ask(comm, nodes, blocks(nodes, space, comm.size), answer)
