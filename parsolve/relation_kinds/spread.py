@@ -56,6 +56,9 @@ def places(comm, keys: np.ndarray, space: int) -> np.ndarray:
     return ask(comm, keys, blocks(keys, space, comm.size), answer)
 
 
+#: a sum of entries at most this fraction of its terms' size is round-off of a cancellation
+CANCELLED = 1e-12
+
 # a relation entry on its way to the rank owning its DOF: its row, its input DOF, its
 # coefficient
 ENTRY = np.dtype([("row", np.int64), ("dof", np.int64), ("coef", np.float64)])
@@ -64,8 +67,10 @@ ENTRY = np.dtype([("row", np.int64), ("dof", np.int64), ("coef", np.float64)])
 def to_owners(comm, rows: np.ndarray, dofs: np.ndarray, coefs: np.ndarray,
               owners: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Entries (row, input DOF, coefficient) sent to the ranks ``owners`` (each DOF's owner),
-    where those of one (row, DOF) add up: this rank's entries, by row then DOF, the zero sums
-    dropped (a spread relation's entries, ``Relation.spread``). Collective; one exchange."""
+    where those of one (row, DOF) add up: this rank's entries, by row then DOF (a spread
+    relation's entries, ``Relation.spread``). A sum that cancels to round-off of its terms (a
+    region's inner node in its mean strain) is dropped: whatever order the ranks add the
+    terms in, the same entries. Collective; one exchange."""
     sent = np.empty(np.asarray(rows).size, dtype=ENTRY)
     sent["row"], sent["dof"], sent["coef"] = rows, dofs, coefs
     got, _ = exchange(comm, sent, np.asarray(owners, dtype=np.int64))
@@ -75,7 +80,8 @@ def to_owners(comm, rows: np.ndarray, dofs: np.ndarray, coefs: np.ndarray,
                                            | (got["dof"][1:] != got["dof"][:-1])])) \
         if got.size else np.zeros(0, dtype=np.int64)
     coef = np.add.reduceat(got["coef"], start) if got.size else np.zeros(0)
-    keep = coef != 0.0
+    size = np.add.reduceat(np.abs(got["coef"]), start) if got.size else np.zeros(0)
+    keep = np.abs(coef) > CANCELLED * size
     return got["row"][start][keep], got["dof"][start][keep], coef[keep]
 
 
