@@ -185,13 +185,11 @@ def equal(name: str, nodes: np.ndarray, component: int, ncomp: int) -> Relation:
 
 
 def combination(name: str, terms: list[tuple], ncomp: int,
-                value: float = 0.0, evolution: Evolution = RAMP, sense: str = "=",
-                dual: np.ndarray | None = None) -> Relation:
+                value: float = 0.0, evolution: Evolution = RAMP, sense: str = "=") -> Relation:
     """One row: sum over terms of coefficient × (mean or sum of u_c over the term's nodes) = value.
 
     ``terms``: (nodes, component, coefficient, mean[, count]): ``count`` the term's nodes a
     mean divides by (default: those given; a spread row's part gives the whole region's).
-    ``dual``: a full primal vector D (one column) for a non-associated relation, or None.
     """
     dofs, coefs = [], []
     for nodes, comp, coef, mean, *count in terms:
@@ -205,12 +203,8 @@ def combination(name: str, terms: list[tuple], ncomp: int,
     ucoefs = np.bincount(inv, weights=coefs_all)
     keep = ucoefs != 0.0
     udofs, ucoefs = udofs[keep], ucoefs[keep]
-    dual_coo = None
-    if dual is not None:
-        nz = np.flatnonzero(dual)
-        dual_coo = (nz, np.zeros(nz.size, dtype=np.int64), dual[nz])
     return Relation(name, 1, np.zeros(udofs.size), udofs, ucoefs, np.array([value]), evolution,
-                    sense, dual_coo)
+                    sense)
 
 
 def rows(name: str, row_dofs: np.ndarray, row_coefs: np.ndarray, value: float = 0.0,
@@ -226,13 +220,6 @@ def rows(name: str, row_dofs: np.ndarray, row_coefs: np.ndarray, value: float = 
     urow, udof = r[first], dofs[first]
     keep = ucoef != 0.0
     return Relation(name, m, urow[keep], udof[keep], ucoef[keep], np.full(m, value), evolution, sense)
-
-
-def with_dual(relation: Relation, vector: np.ndarray) -> Relation:
-    """The same primal part with every row's reaction along one given vector (non-associated)."""
-    nz = np.flatnonzero(vector)
-    relation.shared_dual = (nz, vector[nz])
-    return relation
 
 
 def spread_rows(relation: Relation) -> Relation:
