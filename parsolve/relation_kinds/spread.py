@@ -1,7 +1,9 @@
 """Relation rows spread over the ranks, numbered and checked without an array of the whole set
 on any rank: a key (a DOF, a node, a row number) is looked after by the rank of its block of
 the key space (``blocks``), which answers for it (``Directory``, ``ask``), and a row's place
-among every rank's rows is its key's place among every rank's keys (``places``)."""
+among every rank's rows is its key's place among every rank's keys (``places``). A spread
+relation's entries go to the ranks owning their DOFs (``to_owners``; an input node's owner
+found where its id is looked after, ``node_owners``)."""
 
 from __future__ import annotations
 
