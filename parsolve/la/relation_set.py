@@ -249,19 +249,18 @@ class RelationSet:
         """The owners of the rows of whole relations whose entries are spread over the ranks
         (``Relation.complete`` false: a spread relation, a load pattern), in place: the rank
         owning most of their entries (then the lowest), from each rank's count of the entries
-        on its owned DOFs (one gather of the rows' size). Collective."""
+        on its owned DOFs (one reduction of the rows' size: the largest count, with the rank
+        in its low digits). Collective."""
         dofmap = self.dofmap
         nranks = dofmap.q_ranges.size - 1
         at = np.flatnonzero(is_loose)
         mine = is_loose[rows] & (dof_owner == dofmap.rank)
         count = np.bincount(np.searchsorted(at, rows[mine]), minlength=at.size).astype(np.int64)
-        every = np.empty((nranks, at.size), dtype=np.int64)
+        best = np.where(count > 0, count * nranks + (nranks - 1 - dofmap.rank), -1)
         if nranks > 1:
-            dofmap.comm.Allgather(count, every)
-        else:
-            every[0] = count
-        some = every.max(axis=0, initial=0) > 0
-        owner[at[some]] = np.argmax(every, axis=0)[some]
+            dofmap.comm.Allreduce(MPI.IN_PLACE, best, op=MPI.MAX)
+        some = best >= 0
+        owner[at[some]] = nranks - 1 - best[some] % nranks
 
     def _groups_together(self, owner: np.ndarray, first: np.ndarray) -> None:
         """The rows of a group the active set decides together (a maximum relation's, a
