@@ -129,7 +129,7 @@ def step_outputs(comm: MPI.Comm, ctx, q: np.ndarray, multipliers: dict, newton=N
         total = resultant(r, lam, ctx.fields, ctx.dofs.input_points)
         rel_out[r.name] = {"multiplier": every_row(comm, r, lam),
                            "primal": every_row(comm, r, ctx.relation_primal(r, q)),
-                           "resultant": total if r.whole else comm.allreduce(total, op=MPI.SUM)}
+                           "resultant": total if r.complete else comm.allreduce(total, op=MPI.SUM)}
     views = ctx.views(active) if active is not None else {}
     for r in ctx.all_relations:
         if r.sense != "=":
@@ -214,11 +214,11 @@ class Balance:
         for r in self.ctx.all_relations:
             dofs, force = r.reaction(multipliers[r.name])
             part = float(force[np.isin(dofs % self.ncomp, self.cols[name])].sum())
-            if r.whole:
+            if r.complete:
                 total += part
             else:
                 own += part
-        if any(not r.whole for r in self.ctx.all_relations):
+        if any(not r.complete for r in self.ctx.all_relations):
             total += self.comm.allreduce(own)
         return total
 

@@ -56,6 +56,11 @@ class Relation:
     # whole relation, every row on every rank (its row k is global row k)
     ids: np.ndarray | None = None
     size: int | None = None
+    # a whole relation whose entries are spread (``spread_rows``): every row on every rank,
+    # each A entry (and a load pattern's, ``shared_dual``) held by the rank owning its DOF
+    # alone, so that A q is the sum of every rank's part; its rows' A entries reach their
+    # multiplier row's owner in the stacking (``la.relation_set``)
+    spread: bool = False
 
     def __post_init__(self) -> None:
         if self.sense not in SENSES:
@@ -79,6 +84,13 @@ class Relation:
     def whole(self) -> bool:
         """Every row on every rank (else: this rank's rows only, ``ids``)."""
         return self.ids is None
+
+    @property
+    def complete(self) -> bool:
+        """Every row and every A and D entry on every rank (a whole relation neither spread
+        nor with a load pattern, which each rank holds its owned part of): sums over its
+        entries, such as its reactions' resultant, are then the same on every rank."""
+        return self.whole and not self.spread and self.shared_dual is None
 
     @property
     def total(self) -> int:
@@ -114,8 +126,10 @@ class Relation:
         return bool(np.all(counts == 1)) and bool(np.all(self.a_vals != 0.0))
 
     def eliminable(self) -> bool:
-        """Can be eliminated instead of multiplied: associated, equality, single-DOF rows."""
-        return self.associated and self.sense == "=" and self.single_dof() and self.eliminate is not False
+        """Can be eliminated instead of multiplied: associated, equality, single-DOF rows (a
+        spread relation never: its rows' entries are over the ranks)."""
+        return self.associated and self.sense == "=" and not self.spread and self.single_dof() \
+            and self.eliminate is not False
 
     @property
     def sign(self) -> int:
@@ -170,31 +184,27 @@ def equal(name: str, nodes: np.ndarray, component: int, ncomp: int) -> Relation:
     return Relation(name, m, rows, dofs, coefs, np.zeros(m), RAMP)
 
 
-def combination(name: str, terms: list[tuple[np.ndarray, int, float, bool]], ncomp: int,
-                value: float = 0.0, evolution: Evolution = RAMP, sense: str = "=",
-                dual: np.ndarray | None = None) -> Relation:
+def combination(name: str, terms: list[tuple], ncomp: int,
+                value: float = 0.0, evolution: Evolution = RAMP, sense: str = "=") -> Relation:
     """One row: sum over terms of coefficient × (mean or sum of u_c over the term's nodes) = value.
 
-    ``terms``: (nodes, component, coefficient, mean). ``dual``: a full primal vector D (one column)
-    for a non-associated relation, or None.
+    ``terms``: (nodes, component, coefficient, mean[, count]): ``count`` the term's nodes a
+    mean divides by (default: those given; a spread row's part gives the whole region's).
     """
     dofs, coefs = [], []
-    for nodes, comp, coef, mean in terms:
+    for nodes, comp, coef, mean, *count in terms:
         nodes = np.asarray(nodes, dtype=np.int64)
         dofs.append(nodes * ncomp + comp)
-        coefs.append(np.full(len(nodes), coef / len(nodes) if mean else coef))
+        n = count[0] if count else len(nodes)
+        coefs.append(np.full(len(nodes), coef / n if mean else coef))
     dofs_all, coefs_all = np.concatenate(dofs), np.concatenate(coefs)
     # a node listed in two terms is one coefficient: sum duplicates
     udofs, inv = np.unique(dofs_all, return_inverse=True)
     ucoefs = np.bincount(inv, weights=coefs_all)
     keep = ucoefs != 0.0
     udofs, ucoefs = udofs[keep], ucoefs[keep]
-    dual_coo = None
-    if dual is not None:
-        nz = np.flatnonzero(dual)
-        dual_coo = (nz, np.zeros(nz.size, dtype=np.int64), dual[nz])
     return Relation(name, 1, np.zeros(udofs.size), udofs, ucoefs, np.array([value]), evolution,
-                    sense, dual_coo)
+                    sense)
 
 
 def rows(name: str, row_dofs: np.ndarray, row_coefs: np.ndarray, value: float = 0.0,
@@ -212,10 +222,10 @@ def rows(name: str, row_dofs: np.ndarray, row_coefs: np.ndarray, value: float = 
     return Relation(name, m, urow[keep], udof[keep], ucoef[keep], np.full(m, value), evolution, sense)
 
 
-def with_dual(relation: Relation, vector: np.ndarray) -> Relation:
-    """The same primal part with every row's reaction along one given vector (non-associated)."""
-    nz = np.flatnonzero(vector)
-    relation.shared_dual = (nz, vector[nz])
+def spread_rows(relation: Relation) -> Relation:
+    """A whole relation whose entries this rank holds are those on the DOFs it owns
+    (``Relation.spread``)."""
+    relation.spread = True
     return relation
 
 
@@ -251,7 +261,8 @@ def keep_rows(relation: Relation, keep: np.ndarray) -> Relation:
                    relation.a_vals[on], relation.values[keep], relation.evolution,
                    relation.sense, dual, relation.eliminate, relation.maximum,
                    shared_dual=relation.shared_dual,
-                   groups=None if relation.groups is None else relation.groups[keep])
+                   groups=None if relation.groups is None else relation.groups[keep],
+                   spread=relation.spread)
     out.meta = relation.meta
     return out
 

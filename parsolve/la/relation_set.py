@@ -10,7 +10,10 @@ relation gets equal scales, which keeps the operator symmetric.
 A relation is whole (every row on every rank) or built per rank (``Relation.ids``: a rigid
 obstacle's contact rows, each built by the rank owning its slave node; multiplied Dirichlet,
 equal and periodic rows, by the rank owning the DOF or node each constrains; numbered by
-their place in the whole relation). A tie's entries on another rank's DOF: its D entries go
+their place in the whole relation). A whole relation may be spread (``Relation.spread``: a
+mean, linear or strain row, each rank holding the entries on its owned DOFs): its rows' A
+entries are sent to their multiplier row's owner (``_foreign_a``), whose operator row adds
+them, and its rows' owners are counted from every rank's entries (``_loose_owners``). A tie's entries on another rank's DOF: its D entries go
 to that DOF's owner (``_foreign_d``), its A q reads the DOF's value from there (``_Fetch``).
 The relation rows a rank holds are its per-rank relations' rows and every whole relation's;
 the vectors per relation row (``mult_of_row``, ``position``, the active set's masks, targets,
@@ -55,7 +58,14 @@ import numpy as np
 from mpi4py import MPI
 
 from parsolve.la.dofmap import DofMap, _Exchange
+from parsolve.mesh.blocks import exchange
 from parsolve.relations import Relation
+
+
+# a spread relation's A entry sent to its multiplier row's owner: the row, the column (new
+# primal DOF), the value, the relation and its row there
+_A_ENTRY = np.dtype([("row", np.int64), ("col", np.int64), ("val", np.float64),
+                     ("rel", np.int64), ("relrow", np.int64)])
 
 
 def _cat(parts, dtype) -> np.ndarray:
@@ -125,6 +135,8 @@ class RelationSet:
         stacked_a, stacked_d = _cat(ar, np.int64), _cat(dc, np.int64)
         self._d_per_rank = np.repeat([not r.whole for r in relations],
                                      [len(d) for d in dv]).astype(bool)
+        self._a_spread = np.repeat([r.spread for r in relations],
+                                   [len(a) for a in av]).astype(bool)
         self.a_cols, self.a_vals = _cat(ac, np.int64), _cat(av, float)
         self.d_rows, self.d_vals = _cat(dr, np.int64), _cat(dv, float)
         if self.position is None:   # the owners, once: restacking keeps them
@@ -201,13 +213,17 @@ class RelationSet:
         owner[is_whole] = np.arange(int(is_whole.sum()), dtype=np.int64) % nranks  # no entry
         rows = np.concatenate([stacked_a, stacked_d])
         dof_owner = dofmap.owner_of_dofs(np.concatenate([self.a_cols, self.d_rows]))
-        on = is_whole[rows]
+        loose = np.array([r.whole and not r.complete for r in self.relations], dtype=bool)
+        is_loose = loose[relation] if nrel else np.zeros(0, dtype=bool)
+        on = is_whole[rows] & ~is_loose[rows]
         keys, count = np.unique(wid[rows[on]] * nranks + dof_owner[on], return_counts=True)
         row, rank = np.divmod(keys, nranks)
         best = np.lexsort((rank, -count, row))                  # most entries, then lowest rank
         lead = np.flatnonzero(np.diff(np.concatenate([[-1], row[best]])) != 0)
         at = np.flatnonzero(is_whole)
         owner[at[row[best[lead]]]] = rank[best[lead]]
+        if loose.any():   # (the same relations on every rank)
+            self._loose_owners(owner, rows, dof_owner, is_loose)
         self._groups_together(owner, first)
         # per relation and rank, its rows: whole relations' from the owners, the others'
         # gathered
@@ -227,6 +243,24 @@ class RelationSet:
         within[order] = np.arange(n) - group_start
         position = starts[owner] + before[relation, owner] + within
         return position, counts.sum(axis=0)
+
+    def _loose_owners(self, owner: np.ndarray, rows: np.ndarray, dof_owner: np.ndarray,
+                      is_loose: np.ndarray) -> None:
+        """The owners of the rows of whole relations whose entries are spread over the ranks
+        (``Relation.complete`` false: a spread relation, a load pattern), in place: the rank
+        owning most of their entries (then the lowest), from each rank's count of the entries
+        on its owned DOFs (one reduction of the rows' size: the largest count, with the rank
+        in its low digits). Collective."""
+        dofmap = self.dofmap
+        nranks = dofmap.q_ranges.size - 1
+        at = np.flatnonzero(is_loose)
+        mine = is_loose[rows] & (dof_owner == dofmap.rank)
+        count = np.bincount(np.searchsorted(at, rows[mine]), minlength=at.size).astype(np.int64)
+        best = np.where(count > 0, count * nranks + (nranks - 1 - dofmap.rank), -1)
+        if nranks > 1:
+            dofmap.comm.Allreduce(MPI.IN_PLACE, best, op=MPI.MAX)
+        some = best >= 0
+        owner[at[some]] = nranks - 1 - best[some] % nranks
 
     def _groups_together(self, owner: np.ndarray, first: np.ndarray) -> None:
         """The rows of a group the active set decides together (a maximum relation's, a
@@ -249,12 +283,14 @@ class RelationSet:
         dofmap = self.dofmap
         dofmap.set_multipliers(self._counts)
         q0, q1, l0, l1 = dofmap.owned()
-        keep_a = np.flatnonzero((self.a_rows >= l0) & (self.a_rows < l1))
+        owned = (self.a_rows >= l0) & (self.a_rows < l1)
+        keep_a = np.flatnonzero(owned)
         mine = (self.d_rows >= q0) & (self.d_rows < q1)
         keep_d = np.flatnonzero(mine)
         sent = self._foreign_d(self._d_per_rank & ~mine)
-        for name in ("a_rows", "a_cols", "a_vals", "a_relrow"):
-            setattr(self, name, getattr(self, name)[keep_a])
+        got_a = self._foreign_a(self._a_spread & ~owned)
+        for name, got in zip(("a_rows", "a_cols", "a_vals", "a_relrow"), got_a):
+            setattr(self, name, np.concatenate([getattr(self, name)[keep_a], got]))
         for name, got in zip(("d_rows", "d_cols", "d_vals"), sent):
             setattr(self, name, np.concatenate([getattr(self, name)[keep_d], got]))
         refreshed = [bool(r.meta.get("refresh")) for r in self.relations]
@@ -267,6 +303,26 @@ class RelationSet:
         self._d_from = _segments(keep_d, d_sizes, refreshed)
         dofmap.set_multipliers(self._counts, self.d_cols)
         self._d_held = dofmap.held_index(self.d_cols)
+
+    def _foreign_a(self, out: np.ndarray) -> tuple:
+        """The A entries this rank holds of spread relations' rows owned elsewhere (``out``:
+        on its owned DOFs, ``Relation.spread``) sent to those rows' owners, who add them to
+        their operator rows; returns the entries received (multiplier rows, columns, values,
+        relation rows here). Collective (nothing moves on one rank or without a spread
+        relation anywhere: the same relations on every rank)."""
+        comm = self.dofmap.comm
+        if comm.size == 1 or not any(r.spread for r in self.relations):
+            return (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0),
+                    np.zeros(0, np.int64))
+        at = np.flatnonzero(out)
+        owner = np.searchsorted(self.dofmap.l_ranges, self.a_rows[at], side="right") - 1
+        k = np.searchsorted(self.row_first, self.a_relrow[at], side="right") - 1
+        sent = np.empty(at.size, dtype=_A_ENTRY)
+        sent["row"], sent["col"], sent["val"] = self.a_rows[at], self.a_cols[at], self.a_vals[at]
+        sent["rel"], sent["relrow"] = k, self.a_relrow[at] - self.row_first[k]
+        got, _ = exchange(comm, sent, owner)
+        # (a whole relation's row j is relation row row_first[k] + j on every rank)
+        return got["row"], got["col"], got["val"], self.row_first[got["rel"]] + got["relrow"]
 
     def _foreign_d(self, out: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The D entries of this rank's rows built per rank on other ranks' DOFs (``out``: a
@@ -393,6 +449,21 @@ class RelationSet:
         """A q of one relation's rows held here (any relation of the model). Collective."""
         part = self._owned_part(r, q)
         return self.dofmap.sum_ranks(part) if r.whole else part
+
+    def row_entries(self, r: Relation, row: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(input DOFs, coefficients, saddle indices) of one row of a whole relation, every
+        entry of it on every rank: a spread relation's gathered from the ranks holding them,
+        each indexed by its holder (a row's few entries: the maximum groups' enforced rows).
+        Collective for a spread relation."""
+        sel = r.a_rows == row
+        dofs, vals = r.a_dofs[sel], r.a_vals[sel]
+        saddle = self.dofmap.input_saddle(dofs)
+        if not r.spread or self.dofmap.comm.size == 1:
+            return dofs, vals, saddle
+        parts = self.dofmap.comm.allgather((dofs, vals, saddle))
+        dofs = np.concatenate([p[0] for p in parts])
+        order = np.argsort(dofs, kind="stable")
+        return tuple(np.concatenate([p[i] for p in parts])[order] for i in range(3))
 
     def gap(self, t: float, q: np.ndarray) -> np.ndarray:
         """b(t) - A q of the multiplier rows this rank owns, unscaled. Collective

@@ -8,8 +8,9 @@ error raised on one rank is raised on every rank. Boundary facets are kept only 
 an owned node: a facet of a ghost cell whose other side lives on another rank looks like a
 boundary facet here, but it has no owned node.
 
-Relations are built on the whole mesh's numbering (input ids): ``relation_nodes`` gathers a
-region's owned nodes from every rank (the region's size, not the mesh's).
+Relations are built on the whole mesh's numbering (input ids), each rank on the nodes and cells
+it owns; ``relation_nodes`` gathers a region's owned nodes from every rank (the region's size,
+not the mesh's) for the effects that still need a region whole (springs, contact surfaces).
 """
 
 from __future__ import annotations
@@ -182,19 +183,11 @@ class RegionResolver:
                 return pts[pos]
         raise KeyError("points_of: nodes of no gathered region")
 
-    def owned_cell_rows(self, cells: np.ndarray, ncomp: int, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
-        """Per-cell rows (``arrays``, cell-first, local DOFs in ``arrays[0]``) of the owned
-        ones among ``cells``, from every rank, in input cell order: (input cell ids, DOFs as
-        input DOFs, the other arrays)."""
-        m = self.mesh
-        own = self._reported(m.cells[cells])
-        dofs = arrays[0][own]
-        node, comp = np.divmod(dofs, ncomp)
-        gathered = [allgather_rows(self.comm, m.global_cells[cells[own]].astype(np.int64)),
-                    allgather_rows(self.comm, m.global_nodes[node].astype(np.int64) * ncomp + comp)]
-        gathered += [allgather_rows(self.comm, a[own]) for a in arrays[1:]]
-        order = np.argsort(gathered[0], kind="stable")
-        return tuple(g[order] for g in gathered)
+    def owned_cells(self, cells: np.ndarray) -> np.ndarray:
+        """Those of the local ``cells`` this rank counts (the rank of their lowest-owner node:
+        each cell of the mesh counted by one rank)."""
+        cells = np.asarray(cells, dtype=np.int64)
+        return cells[self._reported(self.mesh.cells[cells])]
 
     def cell_count(self, cells: np.ndarray) -> int:
         m = self.mesh
@@ -211,14 +204,14 @@ class RegionResolver:
         return self.comm.allreduce(float(np.sum(np.asarray(values)[own])))
 
     def relation_vector(self, vector: np.ndarray, ncomp: int) -> tuple[np.ndarray, np.ndarray]:
-        """The owned rows' nonzeros of every rank, as input DOFs (sorted)."""
+        """This rank's part of a load pattern as a relation's dual: the nonzeros of a local
+        primal vector on its owned DOFs, as input DOFs (sorted), each DOF on its owner alone
+        (``Relation.shared_dual``); no rank holds another's."""
         nz = np.flatnonzero(vector[:self.mesh.n_owned * ncomp])
         node, comp = np.divmod(nz, ncomp)
-        dofs = allgather_rows(self.comm, self.mesh.global_nodes[node].astype(np.int64) * ncomp
-                              + comp)
-        vals = allgather_rows(self.comm, np.ascontiguousarray(vector[nz], dtype=float))
+        dofs = self.mesh.global_nodes[node].astype(np.int64) * ncomp + comp
         order = np.argsort(dofs)
-        return dofs[order], vals[order]
+        return dofs[order], np.asarray(vector[nz], dtype=float)[order]
 
 
 def gather_facets(comm, mesh: LocalMesh, facets: np.ndarray, nfn: int) -> tuple[np.ndarray, np.ndarray]:

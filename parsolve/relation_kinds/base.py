@@ -55,11 +55,6 @@ class Where:
     source: str
     thickness: object = 1.0
 
-    def nodes(self, region: str, key: str):
-        """The region's nodes as relations number them (input ids, the whole mesh's): the
-        whole region on every rank (a relation of one row over a region)."""
-        return self.regions.relation_nodes(region, key)
-
     @property
     def comm(self):
         return self.regions.comm
@@ -71,7 +66,7 @@ class Where:
 
     def owned_nodes(self, region: str, key: str) -> tuple[np.ndarray, np.ndarray]:
         """The region's nodes this rank owns, as input ids (sorted), with their coordinates:
-        what a kind whose rows each constrain one node builds its rows on."""
+        what a kind builds its rows (one per node) or its part of a spread row on."""
         mesh = self.regions.mesh
         nodes = self.regions(region, key).nodes
         own = nodes[nodes < mesh.n_owned]

@@ -5,8 +5,11 @@ DOF fixed twice, a tie held at both ends, a control that would drive nothing).
 A kind whose rows each constrain one DOF or node (``RelationEntry.per_rank``: Dirichlet,
 equal, periodic) builds only the rows this rank holds, those of the nodes it owns, numbered by
 their place in the whole relation (``Relation.ids``). Such a relation is gathered whole when it
-must be: eliminated (its values lift every rank's columns), or sharing a load pattern or a
-maximum (its rows decided together)."""
+is eliminated (its values lift every rank's columns). A kind of rows over regions (mean,
+linear, strain) builds every row, each rank the entries of the nodes and cells it owns
+(``Relation.spread``); so does a per-rank relation whose rows share a load pattern (every row
+a column of it), its entries sent to their DOFs' owners. A load pattern as a relation's dual
+is each rank's part of it, on its owned DOFs (``RegionResolver.relation_vector``)."""
 
 from __future__ import annotations
 
@@ -20,6 +23,7 @@ from parsolve.mesh.regions import allgather_rows
 from parsolve.relation_kinds.base import Where
 from parsolve.relation_kinds.checks import check_set
 from parsolve.relation_kinds.registry import RELATIONS
+from parsolve.relation_kinds.spread import node_owners, to_owners
 
 
 def build_relations(specs: list, regions, evolutions: dict, patterns: dict, fields,
@@ -37,17 +41,34 @@ def build_relations(specs: list, regions, evolutions: dict, patterns: dict, fiel
             r.shared_dual = regions.relation_vector(patterns[spec.dual].vector(), ncomp)
         r.eliminate = spec.eliminate if spec.eliminate is not None else (eliminate and None)
         r.meta = {**r.meta, "type": spec.type, "key": spec.key, "dual": spec.dual}
-        if not r.whole:
+        if not r.whole and r.shared_dual is not None:
+            r = _spread(where, r)
+        elif not r.whole:
             r = _whole(regions.comm, r) if _kept_whole(regions.comm, r) else _held(r)
         out.append(r)
     return check_set(out, specs, fields, source, regions.comm, where.num_nodes * ncomp)
 
 
 def _kept_whole(comm, r: rel.Relation) -> bool:
-    """Whether a relation built per rank is held whole on every rank: eliminated, or sharing
-    a load pattern or a maximum (the same answer on every rank)."""
-    return r.shared_dual is not None or r.maximum or \
-        comm.allreduce(r.eliminable(), op=MPI.LAND)
+    """Whether a relation built per rank is held whole on every rank: eliminated (the same
+    answer on every rank)."""
+    return comm.allreduce(r.eliminable(), op=MPI.LAND)
+
+
+def _spread(where: Where, r: rel.Relation) -> rel.Relation:
+    """A relation built per rank whose rows share a load pattern, as a spread relation: every
+    row on every rank (its values summed over the ranks: the rows' size), each entry on the
+    rank owning its DOF (a tie's other end sent there)."""
+    comm, ncomp = where.comm, where.fields.ncomp
+    values = np.zeros(r.total)
+    values[r.ids] = r.values
+    comm.Allreduce(MPI.IN_PLACE, values, op=MPI.SUM)
+    mesh = where.regions.mesh
+    owned = np.sort(mesh.global_nodes[:mesh.n_owned].astype(np.int64))
+    owners = node_owners(comm, r.a_dofs // ncomp, owned, where.num_nodes)
+    rows, dofs, coefs = to_owners(comm, r.ids[r.a_rows], r.a_dofs, r.a_vals, owners)
+    return dataclasses.replace(r, nrows=r.total, a_rows=rows, a_dofs=dofs, a_vals=coefs,
+                               values=values, ids=None, size=None, spread=True)
 
 
 def _held(r: rel.Relation) -> rel.Relation:

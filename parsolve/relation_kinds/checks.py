@@ -1,7 +1,8 @@
 """The scene's relations checked as a set (a DOF fixed twice, a tie given twice or held at both
 ends, a control pattern acting only on held DOFs), collective over rows spread on the ranks: a
-row held per rank is looked at where it is held, a whole relation's rows (the same on every
-rank) on rank 0 alone, and the rows meet at the rank looking after their DOF
+row held per rank is looked at where it is held, a spread relation's entries where they are
+held (its rows' entry counts summed), a whole relation's rows (the same on every rank) on
+rank 0 alone, and the rows meet at the rank looking after their DOF
 (``spread.blocks``). Every decision is summed or gathered over the ranks before it raises (the
 same error on every rank) or drops rows (a per-rank relation's rows then numbered again)."""
 
@@ -43,9 +44,9 @@ def _kind(r: rel.Relation, flag: str) -> bool:
 
 
 def _here(comm, r: rel.Relation) -> bool:
-    """Whether this rank looks at the relation's rows: its own, or a whole relation's on
-    rank 0."""
-    return not r.whole or comm.rank == 0
+    """Whether this rank looks at the relation's rows: its own, a spread relation's entries
+    held here, or a whole relation's on rank 0."""
+    return not r.whole or r.spread or comm.rank == 0
 
 
 def _floats(column: np.ndarray) -> np.ndarray:
@@ -65,7 +66,10 @@ class Singles:
                 evolutions.append(r.evolution)
             if r.sense != "=" or not _here(comm, r):
                 continue
-            at = np.flatnonzero(np.bincount(r.a_rows, minlength=r.nrows)[r.a_rows] == 1)
+            counts = np.bincount(r.a_rows, minlength=r.nrows)
+            if r.spread:   # (its rows' entries over every rank: the same relations on each)
+                comm.Allreduce(MPI.IN_PLACE, counts)
+            at = np.flatnonzero(counts[r.a_rows] == 1)
             rows = np.empty(at.size, dtype=SINGLE)
             rows["dof"], rows["rel"], rows["evol"] = r.a_dofs[at], k, evolutions.index(r.evolution)
             with np.errstate(divide="ignore", invalid="ignore"):
@@ -166,11 +170,17 @@ def _drop(comm, relations: list, drop: dict[int, np.ndarray]) -> list:
     for k, mask in drop.items():
         counts[k] = np.count_nonzero(mask)
     comm.Allreduce(MPI.IN_PLACE, counts)
-    whole = comm.bcast({k: m for k, m in drop.items() if relations[k].whole}
+    whole = comm.bcast({k: m for k, m in drop.items()
+                        if relations[k].whole and not relations[k].spread}
                        if comm.rank == 0 else None, root=0)
     out = list(relations)
     for k in np.flatnonzero(counts):   # a loop over relations, not rows
         r = relations[k]
+        if r.spread:   # (each rank's mask on the rows of the entries it holds)
+            mask = drop.get(k, np.zeros(r.nrows, dtype=bool)).astype(np.uint8)
+            comm.Allreduce(MPI.IN_PLACE, mask, op=MPI.MAX)
+            out[k] = rel.keep_rows(r, mask == 0)
+            continue
         if r.whole:
             out[k] = rel.keep_rows(r, ~whole[k])
             continue
@@ -195,7 +205,7 @@ def _check_repeated_ties(comm, relations: list, fields, source: str, space: int)
     """The same pair of DOFs tied twice (one periodic relation given twice, or both ways:
     region and target swapped) makes the system singular: refused, naming both relations.
     The pairs meet at the rank looking after their lower DOF."""
-    ties = [k for k, r in enumerate(relations) if _kind(r, "ties")]
+    ties = [k for k, r in enumerate(relations) if _kind(r, "ties") and not r.spread]
     if not ties:
         return
     parts = [np.zeros((0, 3), dtype=np.int64)]
@@ -229,7 +239,7 @@ def _drop_held_ties(comm, relations: list, singles: Singles, source: str) -> lis
     whose top and bottom are held) would constrain nothing and make the system singular: it
     is dropped when the two held values agree (same value and evolution: the tie holds by
     itself), an input error when they do not. Each end asked where its DOF is looked after."""
-    ties = [k for k, r in enumerate(relations) if _kind(r, "ties")]
+    ties = [k for k, r in enumerate(relations) if _kind(r, "ties") and not r.spread]
     if not ties:
         return relations
     ends = {k: _tie_ends(relations[k]) if _here(comm, relations[k])
@@ -267,8 +277,8 @@ def _check_duals(comm, relations: list, specs: list, singles: Singles, source: s
     for r in relations:   # a loop over relations, not rows
         if r.shared_dual is None:
             continue
-        dofs, vals = r.shared_dual   # (the pattern's nonzeros, the same on every rank)
-        acting = dofs[vals != 0] if comm.rank == 0 else np.zeros(0, dtype=np.int64)
+        dofs, vals = r.shared_dual   # (this rank's part of the pattern: its owned DOFs)
+        acting = dofs[vals != 0]
         free, holders = singles.holders(acting)
         if comm.allreduce(int(acting.size)) and free == 0:
             names = sorted(relations[k].name for k in holders)

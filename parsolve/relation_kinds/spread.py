@@ -1,7 +1,9 @@
 """Relation rows spread over the ranks, numbered and checked without an array of the whole set
 on any rank: a key (a DOF, a node, a row number) is looked after by the rank of its block of
 the key space (``blocks``), which answers for it (``Directory``, ``ask``), and a row's place
-among every rank's rows is its key's place among every rank's keys (``places``)."""
+among every rank's rows is its key's place among every rank's keys (``places``). A spread
+relation's entries go to the ranks owning their DOFs (``to_owners``; an input node's owner
+found where its id is looked after, ``node_owners``)."""
 
 from __future__ import annotations
 
@@ -54,3 +56,51 @@ def places(comm, keys: np.ndarray, space: int) -> np.ndarray:
         return out
 
     return ask(comm, keys, blocks(keys, space, comm.size), answer)
+
+
+#: a sum of entries at most this fraction of its terms' size is round-off of a cancellation
+CANCELLED = 1e-12
+
+# a relation entry on its way to the rank owning its DOF: its row, its input DOF, its
+# coefficient
+ENTRY = np.dtype([("row", np.int64), ("dof", np.int64), ("coef", np.float64)])
+
+
+def to_owners(comm, rows: np.ndarray, dofs: np.ndarray, coefs: np.ndarray,
+              owners: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Entries (row, input DOF, coefficient) sent to the ranks ``owners`` (each DOF's owner),
+    where those of one (row, DOF) add up: this rank's entries, by row then DOF (a spread
+    relation's entries, ``Relation.spread``). A sum that cancels to round-off of its terms (a
+    region's inner node in its mean strain) is dropped: whatever order the ranks add the
+    terms in, the same entries. Collective; one exchange."""
+    sent = np.empty(np.asarray(rows).size, dtype=ENTRY)
+    sent["row"], sent["dof"], sent["coef"] = rows, dofs, coefs
+    got, _ = exchange(comm, sent, np.asarray(owners, dtype=np.int64))
+    order = np.lexsort((got["dof"], got["row"]))
+    got = got[order]
+    start = np.flatnonzero(np.concatenate([[True], (got["row"][1:] != got["row"][:-1])
+                                           | (got["dof"][1:] != got["dof"][:-1])])) \
+        if got.size else np.zeros(0, dtype=np.int64)
+    coef = np.add.reduceat(got["coef"], start) if got.size else np.zeros(0)
+    size = np.add.reduceat(np.abs(got["coef"]), start) if got.size else np.zeros(0)
+    keep = np.abs(coef) > CANCELLED * size
+    return got["row"][start][keep], got["dof"][start][keep], coef[keep]
+
+
+def node_owners(comm, nodes: np.ndarray, owned: np.ndarray, space: int) -> np.ndarray:
+    """The rank owning each input node of ``nodes`` (``owned``: this rank's owned input ids,
+    ``space``: the mesh's nodes), found where its block of ids is looked after: every rank's
+    owned ids registered there (its own ids' size, not the mesh's). Collective."""
+    owned = np.asarray(owned, dtype=np.int64)
+    directory = Directory(comm, owned, blocks(owned, space, comm.size))
+    ids = directory.got
+    rank = np.repeat(np.arange(comm.size, dtype=np.int64), directory.counts)
+    order = np.argsort(ids, kind="stable")
+    ids, rank = ids[order], rank[order]
+
+    def answer(got: np.ndarray) -> np.ndarray:
+        pos = np.minimum(np.searchsorted(ids, got), max(ids.size - 1, 0))
+        return rank[pos] if ids.size else np.zeros(got.size, dtype=np.int64)
+
+    nodes = np.asarray(nodes, dtype=np.int64)
+    return ask(comm, nodes, blocks(nodes, space, comm.size), answer)

@@ -8,7 +8,9 @@ import numpy as np
 from parsolve import relations as rel
 from parsolve.errors import InputError
 from parsolve.fem import kernels
+from parsolve.mesh.regions import allgather_rows
 from parsolve.relation_kinds.base import RelationSpec, Where
+from parsolve.relation_kinds.spread import places, to_owners
 
 STRAIN_COMPONENTS = {"xx": (0, 0), "yy": (1, 1), "zz": (2, 2), "xy": (0, 1), "yz": (1, 2),
                      "xz": (0, 2)}
@@ -69,19 +71,32 @@ def strain_rows(mesh, cells: np.ndarray, direction: np.ndarray, thickness: float
 
 
 def build(spec: RelationSpec, where: Where, evolution) -> rel.Relation:
-    regions, fields = where.regions, where.fields
+    """The rows of the cells this rank counts (``owned_cells``), their entries then sent to
+    the ranks owning their DOFs (``spread.to_owners``): a spread relation (``Relation.spread``),
+    its rows whole (one, or one per cell of the region, numbered by cell id), no rank holding
+    the region's entries."""
+    regions, fields, comm = where.regions, where.fields, where.comm
+    mesh = regions.mesh
     region = regions(spec.region, spec.key + ".region")
     if regions.cell_count(region.cells) == 0:
         raise InputError(f"region {spec.region!r} contains no cell (a strain needs cells)",
                          where.source, spec.key + ".region")
-    dofs, coefs, vol = strain_rows(regions.mesh, region.cells, spec.direction, where.thickness,
+    cells = regions.owned_cells(region.cells)
+    dofs, coefs, vol = strain_rows(mesh, cells, spec.direction, where.thickness,
                                    fields=fields, field=spec.field)
-    # (the owned cells' rows of every rank, in input ids)
-    cells, dofs, coefs, vol = regions.owned_cell_rows(region.cells, fields.ncomp, dofs, coefs,
-                                                      vol)
-    if not spec.per_cell:
-        coefs = (coefs * (vol / vol.sum())[:, None]).reshape(1, -1)
-        dofs = dofs.reshape(1, -1)
-    r = rel.rows(spec.name, dofs, coefs, spec.value, evolution, spec.sense)
-    r.meta["cells"] = cells   # the cells of the rows (input ids), for the failure's diagnosis
-    return r
+    ids = mesh.global_cells[cells].astype(np.int64)
+    if spec.per_cell:
+        rows = places(comm, ids, int(mesh.num_global_cells))
+        every = allgather_rows(comm, ids)   # (the rows' cells, for the failure's diagnosis)
+        nrows, cells_of = every.size, np.sort(every)
+    else:
+        coefs = coefs * (vol / comm.allreduce(float(vol.sum())))[:, None]
+        rows, nrows, cells_of = np.zeros(ids.size, dtype=np.int64), 1, ids
+    node, comp = np.divmod(dofs, fields.ncomp)   # local DOFs → input DOFs, their owners
+    inputs = mesh.global_nodes[node].astype(np.int64) * fields.ncomp + comp
+    a_rows, a_dofs, a_vals = to_owners(comm, np.repeat(rows, dofs.shape[1]), inputs.ravel(),
+                                       coefs.ravel(), mesh.owner_of(node).ravel())
+    r = rel.Relation(spec.name, nrows, a_rows, a_dofs, a_vals, np.full(nrows, spec.value),
+                     evolution, spec.sense)
+    r.meta["cells"] = cells_of   # the cells of the rows (input ids; a mean's: this rank's)
+    return rel.spread_rows(r)

@@ -67,11 +67,16 @@ def build_equal(spec: RelationSpec, where: Where, evolution) -> rel.Relation:
 
 
 def build_combination(spec: RelationSpec, where: Where, evolution) -> rel.Relation:
-    """One row: Σ coefficient × (mean or sum of a component over the term's nodes) = value."""
-    terms = [(where.nodes(term.region, term.key), where.fields.component(term.field, term.component),
-              term.coefficient, term.mean) for term in spec.terms]
+    """One row: Σ coefficient × (mean or sum of a component over the term's nodes) = value,
+    spread (``Relation.spread``): each rank the entries of the nodes it owns, a mean over the
+    whole term's count."""
+    comm, terms = where.comm, []
+    for term in spec.terms:
+        nodes, _ = where.owned_nodes(term.region, term.key)
+        terms.append((nodes, where.fields.component(term.field, term.component),
+                      term.coefficient, term.mean, comm.allreduce(nodes.size)))
     r = rel.combination(spec.name, terms, where.fields.ncomp, spec.value, evolution)
-    if r.a_dofs.size == 0:
+    if comm.allreduce(r.a_dofs.size) == 0:
         raise InputError("the relation's terms cancel out: it constrains nothing", where.source,
                          spec.key)
-    return r
+    return rel.spread_rows(r)

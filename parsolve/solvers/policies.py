@@ -102,7 +102,8 @@ class RelationPolicies:
         if not any(r.meta.get("type") == "contact" for r in mult):
             return None
         rset = self.rset
-        keep = [k for k, r in enumerate(mult) if not r.collapsed]
+        # (a row over a region, spread over the ranks, ties no contact node: left out)
+        keep = [k for k, r in enumerate(mult) if not r.collapsed and not r.spread]
         rows = np.concatenate([mult[k].a_rows + rset.rows_of(k).start for k in keep])
         dofs = np.concatenate([mult[k].a_dofs for k in keep])
         candidate = np.zeros(rset.nrelrows, dtype=bool)
@@ -314,9 +315,7 @@ class RelationPolicies:
         for g in self.active.groups:
             row = int(g[self.active.active[g]][0])
             k, local = self.rset.locate(row)
-            rel = self.ctx.multiplied[k]
-            sel = rel.a_rows == local
-            out.append((row, k, np.asarray(rel.a_dofs)[sel], np.asarray(rel.a_vals)[sel]))
+            out.append((row, k) + self.rset.row_entries(self.ctx.multiplied[k], local)[:2])
         return out
 
     def enforced_cells(self) -> np.ndarray:

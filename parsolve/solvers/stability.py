@@ -276,21 +276,21 @@ def _hold_maximum_rows(problem, held: PETSc.Mat, q: np.ndarray) -> None:
     reads a stable localization (one column damaging, its three cells at the maximum) as
     unstable; held both ways the count is at most the one-sided problem's (a quadratic form
     negative on a subspace of the admissible directions is negative on them), so an unstable
-    count is one for sure. Every rank holds the relations whole: rank 0 adds them."""
+    count is one for sure. Every rank holds the rows whole (a spread row's entries gathered):
+    rank 0 adds them."""
     rows = np.flatnonzero(at_maximum(problem, q))
     system = problem.system
     # (on every rank: logically collective, a reduction in a debugging PETSc)
     held.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+    entries = [problem.rset.row_entries(problem.ctx.multiplied[k], local) for k, local in
+               (problem.rset.locate(int(row)) for row in rows)]   # (collective)
     if problem.comm.rank == 0 and rows.size:
         keep = [], []
-        for row in rows:
-            k, local = problem.rset.locate(int(row))
-            rel = problem.ctx.multiplied[k]
-            sel = (rel.a_rows == local) & ~np.isin(rel.a_dofs, system.elim_dofs)
-            dofs, vals = np.asarray(rel.a_dofs)[sel], np.asarray(rel.a_vals, dtype=float)[sel]
-            if not dofs.size:
+        for dofs, vals, index in entries:
+            sel = ~np.isin(dofs, system.elim_dofs)
+            vals, index = np.asarray(vals, dtype=float)[sel], index[sel].astype(PETSc.IntType)
+            if not index.size:
                 continue
-            index = system.dofmap.input_saddle(dofs).astype(PETSc.IntType)
             gamma = 2.0 * PENALTY * system.kscale / float(vals @ vals)
             keep[0].append(index)
             keep[1].append(gamma * np.outer(vals, vals))

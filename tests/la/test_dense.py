@@ -44,12 +44,16 @@ def test_operator_blocks_are_what_the_relations_say():
         if rel.nrows == 0:
             continue
         rows = il[blk.mult_rows[k]]
+        a_entries, d_entries = (rel.a_rows, rel.a_dofs, rel.a_vals), rel.dual_coo()
+        if rel.spread:   # (its entries on their DOFs' owners: every rank's)
+            a_entries, d_entries = ([np.concatenate(MPI.COMM_WORLD.allgather(x)) for x in e]
+                                    for e in (a_entries, d_entries))
         A = np.zeros((rel.nrows, len(iq)))
-        np.add.at(A, (rel.a_rows, rel.a_dofs), rel.a_vals)
+        np.add.at(A, (a_entries[0], a_entries[1]), a_entries[2])
         scale = row_scale[blk.mult_rows[k]]
         np.testing.assert_allclose(M[np.ix_(rows, iq)], A * scale[:, None], rtol=0, atol=1e-12 * scale.max())
         D = np.zeros((len(iq), rel.nrows))
-        dofs, drows, dvals = rel.dual_coo()
+        dofs, drows, dvals = d_entries
         np.add.at(D, (dofs, drows), dvals)
         cs = col_scale[blk.mult_rows[k]]
         np.testing.assert_allclose(M[np.ix_(iq, rows)], -D * cs[None, :], rtol=0, atol=1e-12 * cs.max())

@@ -71,12 +71,12 @@ def brute_saddle(system: SaddleSystem, factor: float = 1.0) -> np.ndarray:
     S[np.ix_(iq, iq)] = brute_stiffness(system.whole, factor)
     blk = system.relation_set
     row_scale, col_scale = whole_scales(blk)
-    per_rank = np.zeros_like(S)   # the rows of relations built per rank: each on its rank
+    per_rank = np.zeros_like(S)   # relations built per rank or spread: each entry on one rank
     for k, rel in enumerate(system.multiplied):
         rows = il[blk.mult_rows[k]]
         scale = row_scale[blk.mult_rows[k]]
         cscale = col_scale[blk.mult_rows[k]]
-        into = S if rel.whole else per_rank
+        into = S if rel.complete else per_rank   # (a spread one: its entries per rank)
         np.add.at(into, (rows[rel.a_rows], iq[rel.a_dofs]), rel.a_vals * scale[rel.a_rows])
         dofs, drows, dvals = rel.dual_coo()
         np.add.at(into, (iq[dofs], rows[drows]), -dvals * cscale[drows])

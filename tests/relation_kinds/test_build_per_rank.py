@@ -65,6 +65,20 @@ def rows(r: Relation) -> list[tuple]:
     return out
 
 
+def entries(r: Relation) -> np.ndarray:
+    """(row, DOF, coefficient) of a whole relation's entries held here, by row then DOF."""
+    out = np.column_stack([r.a_rows, r.a_dofs, r.a_vals]).reshape(-1, 3)
+    return out[np.lexsort((out[:, 1], out[:, 0]))]
+
+
+def union(r: Relation, comm=COMM) -> np.ndarray:
+    """``entries`` of a spread relation over every rank, each (row, DOF) held once."""
+    out = np.concatenate(comm.allgather(entries(r)))
+    out = out[np.lexsort((out[:, 1], out[:, 0]))]
+    assert not np.any((np.diff(out[:, 0]) == 0) & (np.diff(out[:, 1]) == 0))
+    return out
+
+
 @pytest.mark.parametrize("eliminate", [True, False])
 def test_each_rank_builds_its_rows_only(eliminate, monkeypatch):
     text = SCENE + ("" if eliminate else "\n[solver]\neliminate = false\n")
@@ -105,6 +119,11 @@ def test_the_relations_after_the_checks_keep_their_numbers(eliminate):
                                                                     eliminate]
     for r, one in zip(model.relations, alone.relations):
         assert r.total == one.nrows
+        assert r.spread == (r.name == "mean_x")   # (its entries on their DOFs' owners)
+        if r.spread:
+            np.testing.assert_array_equal(r.values, one.values)
+            np.testing.assert_allclose(union(r), entries(one), rtol=1e-14, atol=0)
+            continue
         if r.whole:
             assert rows(r) == rows(one)
             continue

@@ -1,7 +1,8 @@
 """Multiplied Dirichlet, equal and periodic rows are built per rank: each row held by the rank
 owning the DOF or node it constrains (``relations.lead_dofs``), numbered by its place in the
 whole relation; gathered over the ranks, the rows are the one-process model's, entry for
-entry. An eliminated Dirichlet relation, and a mean (one row over a region), stay whole."""
+entry. An eliminated Dirichlet relation stays whole; a mean (one row over a region) is whole
+and spread, each rank holding the entries of its owned nodes."""
 
 import tomllib
 from pathlib import Path
@@ -69,6 +70,12 @@ def test_rows_per_rank_are_the_whole_relations(eliminate):
     for name, r in here.items():
         whole = alone[name]
         assert r.total == whole.nrows
+        if r.spread:   # the mean: every rank its owned nodes' entries of its one row
+            assert name == "mean_x" and r.whole
+            gathered = sorted(sum(COMM.allgather(rows(r)[0][1]), ()))
+            assert tuple(gathered) == rows(whole)[0][1]
+            assert COMM.allreduce(len(rows(r)[0][1])) == len(gathered)
+            continue
         if r.whole:
             assert rows(r) == rows(whole)
             continue

@@ -101,7 +101,7 @@ def test_an_entry_added_to_the_registry_is_read_and_built(monkeypatch):
     def build_twice(spec, where, evolution):
         from parsolve import relations as rel
 
-        nodes = where.nodes(spec.region, spec.key + ".region")
+        nodes, _ = where.owned_nodes(spec.region, spec.key + ".region")   # (one process)
         comp = where.fields.component(spec.field, spec.components[0])
         return rel.dirichlet(spec.name, nodes, [comp], where.fields.ncomp, 2 * spec.value,
                              evolution)

@@ -125,11 +125,12 @@ def _primal_row(problem, row: int, iq: np.ndarray) -> np.ndarray:
     """Relation row ``row``'s A on the primal block's columns (its held DOFs left out)."""
     k, local = problem.rset.locate(int(row))
     rel, system = problem.ctx.multiplied[k], problem.system
-    sel = (rel.a_rows == local) & ~np.isin(rel.a_dofs, system.elim_dofs)
+    dofs, vals, saddle = problem.rset.row_entries(rel, local)   # (a spread row's: gathered)
+    sel = ~np.isin(dofs, system.elim_dofs)
     order = np.argsort(iq)
-    where = order[np.searchsorted(iq, system.dofmap.input_saddle(rel.a_dofs[sel]), sorter=order)]
+    where = order[np.searchsorted(iq, saddle[sel], sorter=order)]
     out = np.zeros(iq.size)
-    np.add.at(out, where, rel.a_vals[sel])
+    np.add.at(out, where, vals[sel])
     return out[None, :]
 
 
