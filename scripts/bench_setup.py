@@ -52,7 +52,8 @@ process's whole life: Python, numpy, PETSc and MPI included; petsc4py is importe
 stage at every rank count, as every run does, since the partition alone imports it and only on
 several ranks), rank 0's against the mean of the others; the largest rank's peak against 1
 rank's (`peak vs 1 rank`), and the same net of the process before the stage (`net vs 1 rank`:
-the mesh stage's own memory, (peak − resident before) against 1 rank's).
+the mesh stage's own memory, (peak − resident before, after freed heap pages are returned:
+`mesh.memory.release`) against 1 rank's).
 
 Section *gmsh* (a Gmsh MSH 4.1 file of the same box, binary, written once by meshio, and the
 same as MSH 2.2):
@@ -576,6 +577,7 @@ def child_mesh(way: str, n: int, mesh_lines: str, repeats: int) -> dict:
     rank's peak memory."""
     from mpi4py import MPI
 
+    from parsolve.mesh import memory
     from parsolve.model import _distributed_mesh
     from parsolve.scene import parse_scene
     import tomllib
@@ -594,6 +596,7 @@ def child_mesh(way: str, n: int, mesh_lines: str, repeats: int) -> dict:
     scene = parse_scene(tomllib.loads(text), "bench.toml")
     seconds, cpu = [], []
     gc.collect()
+    memory.release()   # (the process's live memory: no freed heap pages of the imports)
     before = comm.gather(bh.proc_memory()["rss"], root=0)
     for _ in range(repeats):
         part = None

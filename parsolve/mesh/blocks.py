@@ -27,7 +27,7 @@ import numpy as np
 from mpi4py import MPI
 
 from parsolve.errors import InputError
-from parsolve.mesh import checks
+from parsolve.mesh import checks, memory
 from parsolve.mesh.mesh import CELL_INFO, Mesh
 from parsolve.mesh.partition import block_starts
 from parsolve.mesh.topology import (FACETS, NUM_VERTICES, _pack, _row_groups,
@@ -139,7 +139,9 @@ def facet_groups(comm, block: CellBlock, source: str | None, key: str | None,
     facet (its cell and direction, to be matched with another block's) or a count (a facet
     matched here, which another block's copy would make a facet of three cells)."""
     keys, forward = _facet_keys(comm, block)
+    memory.release()   # (each step's freed arrays back to the system before the next's)
     order, counts = _sorted_runs(keys)
+    memory.release()
     two = order[np.repeat(counts == 2, counts)]   # (masks of the facets' size: bytes)
     many = order[np.repeat(counts > 2, counts)]
     first = order[np.cumsum(counts) - counts] if comm.size > 1 else None   # a key's first
@@ -148,6 +150,7 @@ def facet_groups(comm, block: CellBlock, source: str | None, key: str | None,
     if comm.size > 1:
         cross, cross_folded, bad = _match_across(comm, keys, first, counts, block, forward,
                                                  vertices)
+        memory.release()
         folded = np.concatenate([folded, cross_folded])
     else:
         cross, bad = np.zeros((0, 2), np.int64), keys[many]
