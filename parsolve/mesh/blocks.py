@@ -128,9 +128,10 @@ def facet_groups(comm, block: CellBlock, source: str | None, key: str | None,
     """Check the facets of the whole mesh and return this block's rows of the dual graph as
     CSR (indptr, neighbour cell ids) (``graph`` False: the checks only, None returned: one
     rank partitions nothing; ``vertices``: the graph of these aggregates of cells instead,
-    this rank's rows of its block of them, built without the cells' graph). Two positively oriented cells sharing a facet run through it in
-    opposite directions; the same direction means one is folded over the other (an inverted
-    cell in a file whose node order was flipped on reading, or a cell given twice). A facet
+    this rank's rows of its block of them, built without the cells' graph). Two positively
+    oriented cells sharing a facet run through it in opposite directions; the same direction
+    means one is folded over the other (an inverted cell in a file whose node order was
+    flipped on reading, or a cell given twice). A facet
     of 3 cells or more is not a volume mesh. Collective.
 
     The block's facets are matched within the block first: most of a contiguous slice's
