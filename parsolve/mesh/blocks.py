@@ -149,6 +149,7 @@ def facet_groups(comm, block: CellBlock, source: str | None, key: str | None,
     del order
     folded = _cell_of(block, _folded_here(two, forward))
     if comm.size > 1:
+        memory.release()
         cross, cross_folded, bad = _match_across(comm, keys, first, counts, block, forward,
                                                  vertices)
         memory.release()

@@ -359,6 +359,10 @@ def _cells_to_owners(comm, src: SliceSource, cells, nodes, inverse, homes: _Home
     cell, col = np.nonzero(first)   # (by cell, then rank)
     dest = owner[cell, col]
     del owner, first, col
+    if size > 1:   # the rows built in rank order: the exchange sends them without a copy
+        by_rank = blocks.rank_order(dest, size)
+        cell, dest = cell[by_rank], dest[by_rank]
+        del by_rank
     flags = src.cell_flags(start, start + ncells)
     # int32 while the ids fit: a cell of the ghost layer travels (and lands) in half the bytes
     kind = index_dtype(max(src.num_cells, src.num_points))
@@ -369,6 +373,7 @@ def _cells_to_owners(comm, src: SliceSource, cells, nodes, inverse, homes: _Home
     _note(rows)
     del cell
     got, _ = exchange(comm, rows, dest)
+    del rows, dest
     _note(got)
     if got.shape[0] < 2 or np.all(got[1:, 0] >= got[:-1, 0]):   # (1 rank: in order)
         return got
@@ -381,8 +386,9 @@ def _local_mesh(comm, src: SliceSource, mine: np.ndarray, homes: _Homes, source:
     size, rank, dim = comm.size, comm.rank, src.dim
     nen = mine.shape[1] - 1 - len(src.cell_groups)
     gcells = mine[:, 1:1 + nen]
-    extra = homes.unused if rank == size - 1 else np.zeros(0, np.int64)  # nodes of no cell
-    ids = np.unique(np.concatenate([gcells.ravel(), extra]))
+    ids = np.unique(gcells)   # (in the rows' dtype: int32 while the ids fit)
+    if rank == size - 1 and homes.unused.size:   # nodes of no cell
+        ids = np.union1d(ids, homes.unused)
     info = fetch(comm, ids, homes.starts, homes.table)
     owner, new = info[:, 0], info[:, 1]
     owned = np.flatnonzero(owner == rank)
