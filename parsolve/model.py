@@ -30,6 +30,7 @@ from parsolve.mesh.mesh import CELL_INFO, SECOND_ORDER, Mesh
 from parsolve.mesh.reader import read_mesh
 from parsolve.mesh.regions import RegionResolver
 from parsolve.mesh.slices import distribute_slices
+from parsolve.mesh.xdmfmesh import is_xdmf, open_xdmf
 from parsolve.relations import Relation
 from parsolve.scene import Scene
 from parsolve.solvers.choice import choose
@@ -195,8 +196,8 @@ def _generator_key(exc: Exception) -> str:
 def _distributed_mesh(scene: Scene, comm) -> LocalMesh:
     """Every rank's part of the scene's mesh: from slices (a parallel mesh file, a generator;
     their quadratic cells and ``order = 2`` included: no rank holds the whole,
-    ``mesh.slices``, ``mesh.midside``; a Gmsh MSH 4.1 or 2.2 file: ``mesh.gmshmesh``), else built
-    whole on rank 0 (Gmsh 4.0 and other meshio files). The
+    ``mesh.slices``, ``mesh.midside``; a Gmsh MSH 4.1 or 2.2 file: ``mesh.gmshmesh``; XDMF +
+    HDF5: ``mesh.xdmfmesh``), else built whole on rank 0 (Gmsh 4.0 and other meshio files). The
     solve's share of every rank is checked against the memory before anything is built when
     the mesh's size is known from a generator's parameters, else once the mesh is read."""
     counted = _generated_counts(scene)
@@ -237,6 +238,8 @@ def _slice_source(scene: Scene, comm):
         path = mesh_source(scene)[0]
         if is_mesh_h5(spec.file):
             return agree(comm, open_mesh, path)
+        if is_xdmf(spec.file):
+            return open_xdmf(comm, path)
         return open_gmsh(comm, path) if agree(comm, gmsh.ours, path) else None
     slicer = SLICED.get(spec.generator)
     if slicer is None:

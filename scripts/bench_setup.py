@@ -41,7 +41,8 @@ dense column and row).
 Section *mesh* (1, 2 and 4 ranks): the mesh stage alone (`model._distributed_mesh`: read or
 generate, check, partition, distribute, number the nodes) of a box of 6·n³ tetrahedra, three
 ways: a Gmsh file (`.msh`, MSH 2.2 binary, read by slices), the same mesh converted to the
-parallel file (`.h5`, read by slices) and the generator (`box`, built by slices); and DOLFINx 0.5 in the same
+parallel file (`.h5`, read by slices), the generator (`box`, built by slices) and the XDMF +
+HDF5 file DOLFINx reads (`xdmf`, read by slices: `mesh.xdmfmesh`); and DOLFINx 0.5 in the same
 run on the same mesh written once as XDMF + HDF5 (`dolfinx`: `XDMFFile.read_mesh` -- read by
 slices, PT-Scotch on the distributed graph, distribution, ghost cells sharing a facet -- then
 `VectorFunctionSpace(P1)`, the DOF numbering; FFCx's JIT warmed up on a one-cell mesh first).
@@ -52,7 +53,8 @@ process's whole life: Python, numpy, PETSc and MPI included; petsc4py is importe
 stage at every rank count, as every run does, since the partition alone imports it and only on
 several ranks), rank 0's against the mean of the others; the largest rank's peak against 1
 rank's (`peak vs 1 rank`), and the same net of the process before the stage (`net vs 1 rank`:
-the mesh stage's own memory, (peak − resident before) against 1 rank's).
+the mesh stage's own memory, (peak − resident before, after freed heap pages are returned:
+`mesh.memory.release`) against 1 rank's).
 
 Section *gmsh* (a Gmsh MSH 4.1 file of the same box, binary, written once by meshio, and the
 same as MSH 2.2):
@@ -552,6 +554,7 @@ def mesh_files(n: int) -> dict[str, str]:
     if not h5.exists():
         convert(str(msh), str(h5))
     return {"msh": f'file = "{msh}"', "h5": f'file = "{h5}"', "dolfinx": str(xdmf),
+            "xdmf": f'file = "{xdmf}"',
             "box": f'generator = "box"\nlx = 1.0\nly = 1.0\nlz = 1.0\nnx = {n}\nny = {n}\n'
                    f'nz = {n}\ncell = "tetra"'}
 
@@ -576,6 +579,7 @@ def child_mesh(way: str, n: int, mesh_lines: str, repeats: int) -> dict:
     rank's peak memory."""
     from mpi4py import MPI
 
+    from parsolve.mesh import memory
     from parsolve.model import _distributed_mesh
     from parsolve.scene import parse_scene
     import tomllib
@@ -594,6 +598,7 @@ def child_mesh(way: str, n: int, mesh_lines: str, repeats: int) -> dict:
     scene = parse_scene(tomllib.loads(text), "bench.toml")
     seconds, cpu = [], []
     gc.collect()
+    memory.release()   # (the process's live memory: no freed heap pages of the imports)
     before = comm.gather(bh.proc_memory()["rss"], root=0)
     for _ in range(repeats):
         part = None
@@ -867,8 +872,9 @@ def main() -> None:
     p.add_argument("--mesh-n", type=int, nargs="+", default=[32, 44, 56],
                    help="hexes per side of the mesh section's boxes (6·n³ tetrahedra; 56: 1.05M); "
                    "the .msh (rank 0's path, minutes) at the largest only")
-    p.add_argument("--mesh-ways", nargs="+", default=["msh", "h5", "box", "dolfinx"],
-                   choices=["msh", "h5", "box", "dolfinx"], help="the mesh section's ways")
+    p.add_argument("--mesh-ways", nargs="+", default=["msh", "h5", "xdmf", "box", "dolfinx"],
+                   choices=["msh", "h5", "xdmf", "box", "dolfinx"],
+                   help="the mesh section's ways")
     p.add_argument("--mesh-ranks", type=int, nargs="+", default=[1, 2, 4])
     p.add_argument("--mesh-repeats", type=int, default=2, help="the mesh section's repeats "
                    "(best of)")

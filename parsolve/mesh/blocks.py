@@ -27,7 +27,7 @@ import numpy as np
 from mpi4py import MPI
 
 from parsolve.errors import InputError
-from parsolve.mesh import checks
+from parsolve.mesh import checks, memory
 from parsolve.mesh.mesh import CELL_INFO, Mesh
 from parsolve.mesh.partition import block_starts
 from parsolve.mesh.topology import (FACETS, NUM_VERTICES, _pack, _row_groups,
@@ -45,6 +45,24 @@ class CellBlock:
     num_cells: int        # of the whole mesh
     cell_type: str
     dim: int
+
+
+@dataclass
+class Vertices:
+    """The dual graph's vertices when they are not the cells but aggregates of them: each
+    block cell's vertex, numbered from 0 on every rank, and every rank's first (size + 1)."""
+
+    of_cell: np.ndarray
+    starts: np.ndarray
+
+
+def _vertex_of(block: CellBlock, vertices: Vertices | None, cells: np.ndarray,
+               rank: int) -> np.ndarray:
+    """The graph's vertex of each of the block's ``cells`` (global ids): the cell itself, or
+    its aggregate's global number."""
+    if vertices is None:
+        return cells
+    return vertices.of_cell[cells - block.start].astype(np.int64) + vertices.starts[rank]
 
 
 def scatter_blocks(comm, whole: Mesh | None) -> CellBlock:
@@ -105,12 +123,15 @@ def check_jacobians(comm, block: CellBlock, source: str | None, key: str | None)
 
 
 def facet_groups(comm, block: CellBlock, source: str | None, key: str | None,
-                 graph: bool = True) -> tuple[np.ndarray, np.ndarray] | None:
+                 graph: bool = True, vertices: Vertices | None = None
+                 ) -> tuple[np.ndarray, np.ndarray] | None:
     """Check the facets of the whole mesh and return this block's rows of the dual graph as
     CSR (indptr, neighbour cell ids) (``graph`` False: the checks only, None returned: one
-    rank partitions nothing). Two positively oriented cells sharing a facet run through it in
-    opposite directions; the same direction means one is folded over the other (an inverted
-    cell in a file whose node order was flipped on reading, or a cell given twice). A facet
+    rank partitions nothing; ``vertices``: the graph of these aggregates of cells instead,
+    this rank's rows of its block of them, built without the cells' graph). Two positively
+    oriented cells sharing a facet run through it in opposite directions; the same direction
+    means one is folded over the other (an inverted cell in a file whose node order was
+    flipped on reading, or a cell given twice). A facet
     of 3 cells or more is not a volume mesh. Collective.
 
     The block's facets are matched within the block first: most of a contiguous slice's
@@ -119,18 +140,23 @@ def facet_groups(comm, block: CellBlock, source: str | None, key: str | None,
     facet (its cell and direction, to be matched with another block's) or a count (a facet
     matched here, which another block's copy would make a facet of three cells)."""
     keys, forward = _facet_keys(comm, block)
+    memory.release()   # (each step's freed arrays back to the system before the next's)
     order, counts = _sorted_runs(keys)
+    memory.release()
     two = order[np.repeat(counts == 2, counts)]   # (masks of the facets' size: bytes)
     many = order[np.repeat(counts > 2, counts)]
     first = order[np.cumsum(counts) - counts] if comm.size > 1 else None   # a key's first
     del order
     folded = _cell_of(block, _folded_here(two, forward))
     if comm.size > 1:
-        cross, cross_folded, bad = _match_across(comm, keys, first, counts, block, forward)
+        memory.release()
+        cross, cross_folded, bad = _match_across(comm, keys, first, counts, block, forward,
+                                                 vertices)
+        memory.release()
         folded = np.concatenate([folded, cross_folded])
     else:
         cross, bad = np.zeros((0, 2), np.int64), keys[many]
-    del forward, first, many
+    del forward, first, many, counts
     _raise_cells(comm, _cell_of(block, _rows_of_keys(keys, bad)), lambda cells: (
         f"a facet is shared by more than two cells (cells {checks._ids(cells)}): not a valid "
         "volume mesh"), source, key)
@@ -140,10 +166,7 @@ def facet_groups(comm, block: CellBlock, source: str | None, key: str | None,
         f"cells {checks._ids(cells)}"), source, key)
     if not graph:
         return None
-    pairs = _cell_of(block, two).reshape(-1, 2)
-    del two, counts
-    pairs = pairs[pairs[:, 0] != pairs[:, 1]]   # (a collapsed cell seeing itself twice)
-    return _graph_rows(comm, block, pairs, cross)
+    return _graph_rows(comm, block, two, cross, vertices)
 
 
 def _sorted_runs(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -161,7 +184,7 @@ def _sorted_runs(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     for start in range(0, n - 1, CHUNK):
         ahead = keys[order[start:start + CHUNK + 1]]
         new[start + 1:start + ahead.shape[0]] = (ahead[1:] != ahead[:-1]).any(axis=1)
-    return order, np.diff(np.append(np.flatnonzero(new), n))
+    return order, np.diff(np.append(np.flatnonzero(new), n)).astype(order.dtype, copy=False)
 
 
 CHUNK = 1 << 16   # rows of the facets' arrays at a time
@@ -203,39 +226,60 @@ def _folded_here(two, forward) -> np.ndarray:
     return two.reshape(-1, 2)[fwd[:, 0] == fwd[:, 1]].ravel()
 
 
-def _match_across(comm, keys, first, counts, block: CellBlock, forward):
+def _match_across(comm, keys, first, counts, block: CellBlock, forward,
+                  vertices: Vertices | None):
     """One row per facet key of this block to the rank the key names: (key, cell * 2 +
-    direction) for a facet single here, (key, -copies) for the others (``first``: each key's
-    first facet, ``counts``: its copies). There: the keys of more than two copies in all
-    (``bad``, every rank's), and the pairs of two singles — cell pairs across blocks — and
-    their folded cells. In rounds of at most ``ROUND_ROWS`` rows a rank (a round: the keys of
-    one residue of key // size, so a facet's copies meet in the same round): a round's exchange
-    and grouping, not the block's, is the transient."""
-    single = counts == 1
-    rows = np.column_stack([keys[first], np.where(single, _cell_of(block, first) * 2
-                                                  + forward[first], -counts)])
-    del single
-    rounds = max(comm.allreduce(-(-rows.shape[0] // ROUND_ROWS), MPI.MAX), 1)
-    turn = (rows[:, 0] // comm.size) % rounds if rounds > 1 else None
-    found = [_match_round(comm, rows if turn is None else rows[turn == k])
-             for k in range(rounds)]
-    cells, fwd, bad = (np.concatenate(parts) for parts in zip(*found))
+    direction, [its vertex]) for a facet single here, (key, -copies) for the others
+    (``first``: each key's first facet, ``counts``: its copies). There: the keys of more than
+    two copies in all (``bad``, every rank's), and the pairs of two singles — vertex pairs
+    across blocks — and their folded cells. In rounds of at most ``ROUND_ROWS`` keys a rank (a
+    round: the keys of one residue of key // size, so a facet's copies meet in the same round),
+    each round's rows built when it comes: a round's rows, exchange and grouping, not the
+    block's, are the transient."""
+    size = comm.size
+    rounds = max(comm.allreduce(-(-first.size // ROUND_ROWS), MPI.MAX), 1)
+    turn = None
+    if rounds > 1:
+        turn = np.empty(first.size, dtype=np.int16 if rounds < 2**15 else np.int32)
+        for start in range(0, first.size, CHUNK):
+            turn[start:start + CHUNK] = keys[first[start:start + CHUNK], 0] // size % rounds
+    found = []
+    for k in range(rounds):
+        sel = slice(None) if turn is None else np.flatnonzero(turn == k)
+        rows = _round_rows(keys, first[sel], counts[sel], block, forward, vertices, comm.rank)
+        found.append(_match_round(comm, rows, keys.shape[1]))
+    del turn
+    pairs, cells, fwd, bad = (np.concatenate(parts) for parts in zip(*found))
     bad = np.concatenate(comm.allgather(bad)) if comm.allreduce(bad.shape[0]) else bad
-    return cells, cells[fwd != 1].ravel(), bad
+    return pairs, cells[fwd != 1].ravel(), bad
 
 
-ROUND_ROWS = 1 << 17
+ROUND_ROWS = 1 << 15
 
 
-def _match_round(comm, rows):
-    """One round of ``_match_across``: (cell pairs, their directions' sum, bad keys)."""
+def _round_rows(keys, first, counts, block: CellBlock, forward, vertices: Vertices | None,
+                rank: int) -> np.ndarray:
+    """A round's rows (``_match_across``): key columns, the code, and the vertex of a single's
+    cell when the graph's vertices are aggregates."""
+    cell = _cell_of(block, first)
+    cols = [keys[first], np.where(counts == 1, cell * 2 + forward[first], -counts)[:, None]]
+    if vertices is not None:
+        cols.append(_vertex_of(block, vertices, cell, rank)[:, None])
+    return np.hstack(cols)
+
+
+def _match_round(comm, rows, width: int):
+    """One round of ``_match_across``: (vertex pairs, cell pairs, their directions' sum, bad
+    keys)."""
     got, _ = exchange(comm, rows, rows[:, 0] % comm.size)
-    o, g, c = sorted_row_groups(got[:, :-1])
-    last = got[o, -1]
+    o, g, c = sorted_row_groups(got[:, :width])
+    last = got[o, width]
     copies = np.bincount(g, weights=np.where(last >= 0, 1, -last), minlength=c.size)
-    bad = got[o[copies[g] > 2], :-1]
+    bad = got[o[copies[g] > 2], :width]
     two = (c[g] == 2) & (copies[g] == 2)
-    return (last[two] >> 1).reshape(-1, 2), (last[two] & 1).reshape(-1, 2).sum(axis=1), bad
+    cells = (last[two] >> 1).reshape(-1, 2)
+    pairs = got[o[two], width + 1].reshape(-1, 2) if got.shape[1] > width + 1 else cells
+    return pairs, cells, (last[two] & 1).reshape(-1, 2).sum(axis=1), bad
 
 
 def _rows_of_keys(keys, bad) -> np.ndarray:
@@ -248,27 +292,41 @@ def _rows_of_keys(keys, bad) -> np.ndarray:
     return np.flatnonzero(hit[g[:keys.shape[0]]])
 
 
-def _graph_rows(comm, block: CellBlock, pairs, cross) -> tuple[np.ndarray, np.ndarray]:
-    """This block's CSR rows from the pairs found here and the pairs across blocks (sent to
-    both cells' blocks), sorted, without repeats (two cells sharing two facets, which only a
-    folded mesh has)."""
-    size = comm.size
-    starts = block_starts(block.num_cells, size)
-    n = max(block.num_cells, 1)
-    keys = [(pairs[:, 0] - block.start) * n + pairs[:, 1],   # (row, column) as one int64
-            (pairs[:, 1] - block.start) * n + pairs[:, 0]]
-    if size > 1:   # each pair across blocks to both cells' blocks, that cell first
+def _graph_rows(comm, block: CellBlock, two, cross, vertices: Vertices | None
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """This block's CSR rows from the pairs of facets matched here (``two``, pair by pair) and
+    the vertex pairs across blocks (``cross``, sent to both vertices' blocks), sorted, without
+    repeats (two cells sharing two facets, which only a folded mesh has; cells of one
+    aggregate) or self loops. Built a chunk of pairs at a time, each chunk's keys made distinct
+    at once: aggregates' rows repeat, and the cells' pairs as one array were the 4-rank
+    peak."""
+    size, rank = comm.size, comm.rank
+    starts = vertices.starts if vertices is not None else block_starts(block.num_cells, size)
+    n, first = max(int(starts[-1]), 1), int(starts[rank])
+    keys = []
+    for start in range(0, two.size, 2 * CHUNK):
+        pair = _vertex_of(block, vertices, _cell_of(block, two[start:start + 2 * CHUNK]),
+                          rank).reshape(-1, 2)
+        pair = pair[pair[:, 0] != pair[:, 1]]   # (a collapsed cell seeing itself twice)
+        keys.append(_distinct(np.concatenate([(pair[:, 0] - first) * n + pair[:, 1],
+                                              (pair[:, 1] - first) * n + pair[:, 0]])))
+    if size > 1:   # each pair across blocks to both vertices' blocks, that vertex first
         both = np.concatenate([cross, cross[:, ::-1]])
         got = exchange(comm, both, np.searchsorted(starts, both[:, 0], side="right") - 1)[0]
-        keys.append((got[:, 0] - block.start) * n + got[:, 1])
+        keys.append(_distinct((got[:, 0] - first) * n + got[:, 1]))
         del both, got
-    key = np.concatenate(keys)
+    key = _distinct(np.concatenate(keys)) if keys else np.zeros(0, np.int64)
     del keys
-    key.sort()
-    key = key[np.r_[True, key[1:] != key[:-1]]] if key.size else key
-    indptr = np.searchsorted(key, np.arange(block.cells.shape[0] + 1, dtype=np.int64) * n)
+    indptr = np.searchsorted(key, np.arange(int(starts[rank + 1]) - first + 1,
+                                            dtype=np.int64) * n)
     key %= n
     return indptr.astype(np.int64), key
+
+
+def _distinct(key: np.ndarray) -> np.ndarray:
+    """``key`` sorted in place, without repeats."""
+    key.sort()
+    return key[np.r_[True, key[1:] != key[:-1]]] if key.size else key
 
 
 def _packed(keys: np.ndarray, base: int) -> np.ndarray:

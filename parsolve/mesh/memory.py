@@ -25,6 +25,8 @@ share over the ranks; every machine's verdict, the worst for all).
 
 from __future__ import annotations
 
+import ctypes
+import functools
 from contextlib import contextmanager
 from typing import Iterator
 
@@ -187,3 +189,23 @@ def _max_op():
     from mpi4py import MPI
 
     return MPI.MAX
+
+
+@functools.lru_cache(maxsize=1)
+def _malloc_trim():
+    """glibc's ``malloc_trim`` (None elsewhere)."""
+    try:
+        return ctypes.CDLL(None).malloc_trim
+    except (OSError, AttributeError):
+        return None
+
+
+def release() -> None:
+    """Give the pages of freed arrays back to the system. numpy's arrays of a few MiB come
+    from malloc's heap (its mmap threshold rises to the largest array freed, up to 32 MiB),
+    which keeps them resident once freed: on 4 ranks of a 1.57M-tetrahedra box the mesh
+    stage's resident memory was 1.7× its live arrays' peak, each phase starting above the
+    last one's garbage. Called between the mesh stage's phases."""
+    trim = _malloc_trim()
+    if trim is not None:
+        trim(0)

@@ -10,7 +10,7 @@ generator building its slab (``generators.SLICED``), or either with midside node
    cells are checked and their block of the dual graph built as on the rank-0 path
    (``blocks.check_jacobians``, ``blocks.facet_groups``: the slice is the block);
 2. PT-Scotch partitions the distributed graph (``partition.scotch_block``; from 4096 cells per
-   part, the graph of aggregates of 16 cells: ``_scotch_parts``); without it, or on
+   part, the graph of aggregates of 16 cells: ``_vertices``); without it, or on
    request, the cells are cut along a space-filling curve (Morton order of the centroids, the
    cuts found by a distributed bisection of the keys: ``morton_parts``);
 3. each node's owner (the lowest part among its cells) and global number (owners' blocks, input
@@ -34,7 +34,7 @@ from mpi4py import MPI
 
 from parsolve.collective import agree
 from parsolve.errors import InputError
-from parsolve.mesh import blocks, checks, topology
+from parsolve.mesh import blocks, checks, memory, topology
 from parsolve.mesh.blocks import exchange
 from parsolve.mesh.distribute import COMPONENT_MARGIN, LocalMesh, index_dtype
 from parsolve import progress
@@ -42,7 +42,7 @@ from parsolve.mesh.partition import MIN_CELLS_PER_PART, PARTITIONERS, block_star
 
 # the largest mesh array this rank allocated on the slice path (bytes); tests reset it
 LARGEST = {"bytes": 0}
-# PT-Scotch partitions aggregates of this many cells (``_scotch_parts``) once a mesh has
+# PT-Scotch partitions aggregates of this many cells (``_vertices``) once a mesh has
 # COARSE_MIN cells per part or more
 AGGREGATE = 16
 COARSE_MIN = 256 * AGGREGATE
@@ -112,6 +112,22 @@ class CellCoords:
             out[start:stop] = self[start:stop].mean(axis=1)
         return out
 
+    def morton_order(self) -> np.ndarray:
+        """The order of the cells along the Morton curve of their centroids' box, the
+        centroids and their keys computed a chunk at a time (the centroids, their grid and
+        its spread bits at once were 7 doubles a cell)."""
+        chunks = range(0, self.shape[0], checks.JACOBIAN_CHUNK)
+        dim = self.shape[2]
+        lo, hi = np.full(dim, np.inf), np.full(dim, -np.inf)
+        for start in chunks:
+            c = self[start:start + checks.JACOBIAN_CHUNK].mean(axis=1)
+            lo, hi = np.minimum(lo, c.min(axis=0)), np.maximum(hi, c.max(axis=0))
+        key = np.empty(self.shape[0], dtype=np.uint64)
+        for start in chunks:
+            stop = start + checks.JACOBIAN_CHUNK
+            key[start:stop] = morton_keys(self[start:stop].mean(axis=1), lo, hi)
+        return np.argsort(key)
+
 
 # ------------------------------------------------------------------ partition
 
@@ -169,58 +185,48 @@ def morton_parts(comm, centroids: np.ndarray) -> np.ndarray:
     return np.searchsorted(cuts, key, side="right").astype(np.int64)
 
 
-def _cell_parts(comm, method: str, block: blocks.CellBlock, centroids: np.ndarray,
-                graph) -> tuple[np.ndarray, str]:
-    """(the part of each slice cell, the partitioner that ran)."""
+def _vertices(comm, method: str, block: blocks.CellBlock, coords: CellCoords
+              ) -> tuple[bool, blocks.Vertices | None]:
+    """(whether PT-Scotch gets a graph, the aggregates that are its vertices or None for the
+    cells). A mesh of at least ``COARSE_MIN`` cells per part is partitioned as the graph of its
+    aggregates: each slice's cells in runs of ``AGGREGATE`` along the Morton curve of the
+    slice (compact clumps of neighbours whatever the input order), two aggregates adjacent
+    when two of their cells are. PT-Scotch's time goes with the graph's size; the parts keep
+    within 1/AGGREGATE of a balanced cut (equal aggregates: uniform vertex weights stay right)
+    and the edge cut within ~10 % of the cells' graph's (a 1.05M-tetrahedra box at 2 ranks:
+    6825 facets against 6286, in 0.45 s of CPU against 1.1 s). The aggregates are decided
+    before the facets, so that the graph is built on them directly (``blocks.facet_groups``):
+    the cells' graph is never held."""
+    size = comm.size
+    if size == 1 or method != "scotch" or block.num_cells < MIN_CELLS_PER_PART * size:
+        return False, None
+    if block.num_cells < COARSE_MIN * size:
+        return True, None
+    order = coords.morton_order()
+    n = order.size
+    count = -(-n // AGGREGATE)
+    starts = np.concatenate([[0], np.cumsum(comm.allgather(count))]).astype(np.int64)
+    agg = np.empty(n, dtype=index_dtype(count))
+    agg[order] = np.arange(n) // AGGREGATE
+    return True, blocks.Vertices(agg, starts)
+
+
+def _cell_parts(comm, block: blocks.CellBlock, coords: CellCoords, graph,
+                vertices: blocks.Vertices | None) -> tuple[np.ndarray, str]:
+    """(the part of each slice cell, the partitioner that ran): PT-Scotch's on ``graph`` (the
+    rows of ``vertices``, or of the cells), else (no graph, no PT-Scotch, a part left empty)
+    the Morton cuts of the centroids."""
     if comm.size == 1:
         return np.zeros(block.cells.shape[0], dtype=np.int64), "none"
-    if method == "scotch" and block.num_cells >= MIN_CELLS_PER_PART * comm.size:
-        local = _scotch_parts(comm, block, centroids, graph)
-        ok = comm.allreduce(local is not None, MPI.LAND)
-        if ok:
+    if graph is not None:
+        total = block.num_cells if vertices is None else int(vertices.starts[-1])
+        local = scotch_block(comm, total, *graph)
+        if comm.allreduce(local is not None, MPI.LAND):
+            local = local if vertices is None else local[vertices.of_cell]
             filled = comm.allreduce(np.bincount(local, minlength=comm.size), MPI.SUM)
             if filled.min() > 0:
                 return local.astype(np.int64), "scotch"
-    return morton_parts(comm, centroids), "bisection"
-
-
-def _scotch_parts(comm, block: blocks.CellBlock, centroids: np.ndarray, graph):
-    """PT-Scotch's part of each slice cell (None without PT-Scotch). A mesh of at least
-    ``COARSE_MIN`` cells per part is partitioned as the graph of its aggregates: each slice's
-    cells in runs of ``AGGREGATE`` along the Morton curve of the slice (compact clumps of
-    neighbours whatever the input order), two aggregates adjacent when two of their cells
-    are. PT-Scotch's time goes with the graph's size; the parts keep within 1/AGGREGATE of a
-    balanced cut (equal aggregates: uniform vertex weights stay right) and the edge cut within
-    ~10 % of the cells' graph's (a 1.05M-tetrahedra box at 2 ranks: 6825 facets against
-    6286, in 0.45 s of CPU against 1.1 s)."""
-    if block.num_cells < COARSE_MIN * comm.size:
-        return scotch_block(comm, block.num_cells, *graph)
-    agg, total, coarse = _aggregate_graph(comm, block, centroids, graph)
-    parts = scotch_block(comm, total, *coarse)
-    return None if parts is None else parts[agg]
-
-
-def _aggregate_graph(comm, block: blocks.CellBlock, centroids: np.ndarray, graph):
-    """(each slice cell's aggregate among this rank's, the number of aggregates, this rank's
-    CSR rows of the aggregates' graph)."""
-    ptr, idx = graph
-    n = centroids.shape[0]
-    order = np.argsort(morton_keys(centroids, centroids.min(axis=0, initial=np.inf),
-                                   centroids.max(axis=0, initial=-np.inf)))
-    count = -(-n // AGGREGATE)
-    starts = np.concatenate([[0], np.cumsum(comm.allgather(count))]).astype(np.int64)
-    agg = np.empty(n, dtype=np.int64)
-    agg[order] = np.arange(n) // AGGREGATE + starts[comm.rank]
-    rows = np.repeat(agg - starts[comm.rank], np.diff(ptr))
-    here = (idx >= block.start) & (idx < block.start + n)
-    cols = np.empty_like(idx)
-    cols[here] = agg[idx[here] - block.start]
-    cols[~here] = fetch(comm, idx[~here], block_starts(block.num_cells, comm.size), agg)
-    apart = rows + starts[comm.rank] != cols
-    total = int(starts[-1])
-    key = np.unique(rows[apart] * total + cols[apart])
-    indptr = np.concatenate([[0], np.cumsum(np.bincount(key // total, minlength=count))])
-    return agg - starts[comm.rank], total, (indptr, key % total)
+    return morton_parts(comm, coords.centroids()), "bisection"
 
 
 # ------------------------------------------------------------------ the path
@@ -249,18 +255,25 @@ def distribute_slices(comm, src: SliceSource, method: str, source: str, key: str
         nodes, inverse = local_nodes(cells)
         coords = CellCoords(fetch(comm, nodes, ps, points), inverse)
     block = blocks.CellBlock(cells, coords, int(cs[rank]), src.num_cells, src.cell_type, src.dim)
+    # (memory.release between the phases: each phase's freed arrays back to the system)
     progress.timed("checks", blocks.check_jacobians, comm, block, source, key)
     with progress.phase("partition"):
-        graph = blocks.facet_groups(comm, block, source, key, graph=size > 1)
-        # (after the facets, whose arrays are the stage's largest; 1 rank: none needed)
-        centroids = coords.centroids() if size > 1 else None
+        memory.release()
+        scotch, vertices = _vertices(comm, method, block, coords)
+        memory.release()
+        graph = blocks.facet_groups(comm, block, source, key, graph=scotch, vertices=vertices)
+        memory.release()
+        part, used = _cell_parts(comm, block, coords, graph, vertices)
         block.coords = coords = None
-        part, used = _cell_parts(comm, method, block, centroids, graph)
-        del graph, centroids
+        del graph, vertices
         homes = _homes(comm, src, nodes, inverse, part, ps, points, rank)
+        memory.release()
         mine = _cells_to_owners(comm, src, cells, nodes, inverse.ravel(), homes, cs[rank])
         del cells, part, nodes, inverse
+        memory.release()
         mesh = _local_mesh(comm, src, mine, homes, source, key)
+        del mine
+        memory.release()
     mesh.partitioner = used
     mesh.extent = _extent(comm, points, src.dim)
     warnings = _unused_warning(comm, homes.unused) + _duplicate_warning(comm, points, homes, ps)
@@ -346,6 +359,10 @@ def _cells_to_owners(comm, src: SliceSource, cells, nodes, inverse, homes: _Home
     cell, col = np.nonzero(first)   # (by cell, then rank)
     dest = owner[cell, col]
     del owner, first, col
+    if size > 1:   # the rows built in rank order: the exchange sends them without a copy
+        by_rank = blocks.rank_order(dest, size)
+        cell, dest = cell[by_rank], dest[by_rank]
+        del by_rank
     flags = src.cell_flags(start, start + ncells)
     # int32 while the ids fit: a cell of the ghost layer travels (and lands) in half the bytes
     kind = index_dtype(max(src.num_cells, src.num_points))
@@ -356,6 +373,7 @@ def _cells_to_owners(comm, src: SliceSource, cells, nodes, inverse, homes: _Home
     _note(rows)
     del cell
     got, _ = exchange(comm, rows, dest)
+    del rows, dest
     _note(got)
     if got.shape[0] < 2 or np.all(got[1:, 0] >= got[:-1, 0]):   # (1 rank: in order)
         return got
@@ -368,8 +386,9 @@ def _local_mesh(comm, src: SliceSource, mine: np.ndarray, homes: _Homes, source:
     size, rank, dim = comm.size, comm.rank, src.dim
     nen = mine.shape[1] - 1 - len(src.cell_groups)
     gcells = mine[:, 1:1 + nen]
-    extra = homes.unused if rank == size - 1 else np.zeros(0, np.int64)  # nodes of no cell
-    ids = np.unique(np.concatenate([gcells.ravel(), extra]))
+    ids = np.unique(gcells)   # (in the rows' dtype: int32 while the ids fit)
+    if rank == size - 1 and homes.unused.size:   # nodes of no cell
+        ids = np.union1d(ids, homes.unused)
     info = fetch(comm, ids, homes.starts, homes.table)
     owner, new = info[:, 0], info[:, 1]
     owned = np.flatnonzero(owner == rank)

@@ -296,10 +296,12 @@ def test_morton_parts_of_cells_on_a_line(comm):
 
 def test_scotch_on_aggregates_gives_balanced_connected_parts(comm, monkeypatch):
     """Above ``COARSE_MIN`` cells per part PT-Scotch partitions aggregates of ``AGGREGATE``
-    cells: every cell in one part, each aggregate in one part, the parts within one aggregate
-    per rank of equal sizes, and the edge cut near the cells' graph's and well under a random
-    split's. A box of 6·12³ tetrahedra, aggregates of 8 from 64 cells per part: within 2× the
-    cells' graph's cut (1.69× at 3 ranks; the 1.05M box at 2 ranks, aggregates of 16: 1.09×)."""
+    cells, whose graph the facets build directly: it is the cells' graph with each cell
+    replaced by its aggregate (no self loops, no repeats); every cell in one part, each
+    aggregate in one part, the parts within one aggregate per rank of equal sizes, and the
+    edge cut near the cells' graph's and well under a random split's. A box of 6·12³
+    tetrahedra, aggregates of 8 from 64 cells per part: within 2× the cells' graph's cut
+    (1.69× at 3 ranks; the 1.05M box at 2 ranks, aggregates of 16: 1.09×)."""
     from parsolve.mesh import blocks
     from parsolve.mesh.partition import block_starts, edge_cut
 
@@ -309,29 +311,42 @@ def test_scotch_on_aggregates_gives_balanced_connected_parts(comm, monkeypatch):
     cells = src.cells(int(cs[comm.rank]), int(cs[comm.rank + 1]))
     block = blocks.CellBlock(cells, None, int(cs[comm.rank]), n, "tetra", 3)
     graph = blocks.facet_groups(comm, block, None, None)
-    centroids = src.points(0, src.num_points)[cells].mean(axis=1)
     idx = np.concatenate(comm.allgather(graph[1]))
     ptr = np.concatenate([[0], np.cumsum(np.concatenate(comm.allgather(np.diff(graph[0]))))])
     monkeypatch.setattr(slices, "AGGREGATE", 8)
     monkeypatch.setattr(slices, "COARSE_MIN", 64)
-    agg, total, _ = slices._aggregate_graph(comm, block, centroids, graph)
+    coords = slices.CellCoords(src.points(0, src.num_points), cells)
+    scotch, vertices = slices._vertices(comm, "scotch", block, coords)
+    assert scotch == (comm.size > 1)
+    if comm.size == 1:
+        return
+    agg = vertices.of_cell
     sizes = np.bincount(agg)
     assert (sizes[:-1] == 8).all() and 1 <= sizes[-1] <= 8
-    assert total == comm.allreduce(sizes.size)
-    parts = slices._scotch_parts(comm, block, centroids, graph)
-    if parts is None:
+    assert vertices.starts[-1] == comm.allreduce(sizes.size)
+    coarse = blocks.facet_groups(comm, block, None, None, vertices=vertices)
+    # the aggregates' graph from the cells' graph (every rank's whole, mapped)
+    of_cell = np.concatenate(comm.allgather(agg + vertices.starts[comm.rank]))
+    rows = of_cell[np.repeat(np.arange(n), np.diff(ptr))]
+    key = np.unique(rows * n + of_cell[idx])
+    key = key[key // n != key % n]
+    mine = (key // n >= vertices.starts[comm.rank]) & (key // n < vertices.starts[comm.rank + 1])
+    want_rows = key[mine] // n - vertices.starts[comm.rank]
+    assert np.array_equal(coarse[1], key[mine] % n)
+    assert np.array_equal(coarse[0], np.searchsorted(want_rows, np.arange(sizes.size + 1)))
+    parts, used = slices._cell_parts(comm, block, coords, coarse, vertices)
+    if used != "scotch":
         pytest.skip("PETSc without PT-Scotch")
     assert np.unique(agg * comm.size + parts).size == sizes.size   # one part per aggregate
     whole = np.concatenate(comm.allgather(parts))
     counts = np.bincount(whole, minlength=comm.size)
     assert counts.sum() == n and counts.min() > 0
-    if comm.size > 1:
-        assert counts.max() <= n / comm.size * 1.01 + 8 * comm.size
-        fine = slices.scotch_block(comm, n, *graph)
-        fine = np.concatenate(comm.allgather(fine))
-        assert edge_cut(ptr, idx, whole) <= 2.0 * edge_cut(ptr, idx, fine)
-        rng = np.random.default_rng(0)
-        assert edge_cut(ptr, idx, whole) < 0.2 * edge_cut(ptr, idx, rng.integers(0, comm.size, n))
+    assert counts.max() <= n / comm.size * 1.01 + 8 * comm.size
+    fine = slices.scotch_block(comm, n, *graph)
+    fine = np.concatenate(comm.allgather(fine))
+    assert edge_cut(ptr, idx, whole) <= 2.0 * edge_cut(ptr, idx, fine)
+    rng = np.random.default_rng(0)
+    assert edge_cut(ptr, idx, whole) < 0.2 * edge_cut(ptr, idx, rng.integers(0, comm.size, n))
 
 
 @pytest.mark.parametrize("dim", [1, 2, 3])
