@@ -354,7 +354,7 @@ class PenaltyContact(Effect):
             n, t, geo = self.nrows, self.trows, self.geo
             gn = geo._read_rows(geo.n_dofs, n.row, n.coef, n.nrows, q)
             gt = geo._read_rows(geo.t_dofs, t.row, t.coef, t.nrows, q)
-        return p.gap + gn, gt.reshape(len(p), -1)
+        return p.gap + gn, gt.reshape(len(p), self.mesh.dim - 1)
 
     def forces(self, u: np.ndarray, state: dict, lam_n: np.ndarray, lam_t: np.ndarray) -> dict:
         """Normal and friction forces at the displacement u (all nodes, every rank alike)."""
