@@ -29,11 +29,11 @@ def scene(mesh, discretization: str) -> str:
 
 
 def cross_tuples(text: str, comm) -> tuple[object, set]:
-    """(the contact effect, its cross term's declared tuples as sets of global numbers)."""
+    """(the contact effect, the tuples of its rows held here as sets of input node ids)."""
     model = build_model(parse_scene(tomllib.loads(text), "cross.toml", text), comm)
     SaddleSystem(comm, model)
     effect = next(e for e in model.effects if type(e).__name__ == "Contact")
-    return effect, {frozenset(t.tolist()) for t in effect.cross.term.nodes}
+    return effect, {frozenset(t.tolist()) for t in effect.cross.layout.nodes}
 
 
 @pytest.mark.parametrize("discretization", ["node_to_segment", "mortar"])
@@ -51,7 +51,7 @@ def test_cross_stiffness_per_rank_is_the_one_rank_run(run, shared_tmp, discretiz
     assert np.all(np.any((nodes >= lo) & (nodes < hi), axis=1))
     held = effect.cross.layout.nodes.shape[0]
     assert held == len(effect.pairing)
-    # together: the one-rank tuples (as node sets; a tuple split over ranks on each owner)
+    # together: the one-rank tuples (as input node sets)
     every = set().union(*COMM.allgather(mine))
     _, alone = cross_tuples(text, MPI.COMM_SELF)
     assert every == alone

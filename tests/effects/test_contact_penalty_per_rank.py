@@ -60,8 +60,9 @@ def test_each_rank_holds_its_pairs_and_together_the_one_rank_pairing(shared_tmp,
     lo, hi = here.values.node_ranges[COMM.rank], here.values.node_ranges[COMM.rank + 1]
     nodes = here.term.nodes
     assert np.all(np.any((nodes >= lo) & (nodes < hi), axis=1))
-    mine = {frozenset(t.tolist()) for t in nodes}
-    every = set().union(*COMM.allgather(mine))
-    assert every == {frozenset(t.tolist()) for t in alone.term.nodes}
+    def tuples(p):   # (as input node sets)
+        return {frozenset(t.tolist()) for t in np.column_stack([p.slave, p.master])}
+    every = set().union(*COMM.allgather(tuples(p)))
+    assert every == tuples(p1)
     if COMM.size > 1 and case == "punch":   # tuples sent to another owner of their nodes
         assert COMM.allreduce(nodes.shape[0] - len(p)) > 0
