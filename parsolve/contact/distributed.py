@@ -1,14 +1,17 @@
 """Contact pairing per rank: each rank pairs the slave nodes it owns against the master facets
 near them, and numbers its entries as the whole pairing would.
 
-* ``near_facets``: the master facets every rank needs, by a bounded exchange: each rank's
+* ``update_near``: the master facets every rank needs, by a bounded exchange: each rank's
   slave nodes span a box (grown by the search radius); the boxes are gathered (one per rank)
   and each rank sends its master facets to the ranks whose box meets the facet's. A rank
   receives the facets near its slaves only (and its own), not the whole master surface.
+  Finite sliding does it again on the current configuration, sending only the facets new
+  to a rank (none: no exchange).
+* ``SharedTuples``, ``Fetch``: a row's node tuple declared by its nodes' owners, and
+  nodal values fetched from theirs.
 * ``global_positions``: the place of each of a rank's entries among every rank's (entries
-  sorted by input id, each id on one rank): ids are sent to the rank of their id range, which
-  counts and sorts them, and the places come back. Its arrays are the rank's share of the
-  entries, never the whole pairing.
+  sorted by input id, each id on one rank): the relation rows' own numbering
+  (``relation_kinds.spread.places``), never the whole pairing on a rank.
 
 The facets received are put in the canonical order (``surfaces.canonical_facets``): a subset
 of the whole surface's canonical facets in the same relative order, so that the pairing's ties
@@ -17,11 +20,15 @@ of the whole surface's canonical facets in the same relative order, so that the 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from mpi4py import MPI
 
 from parsolve.contact.surfaces import canonical_facets
+from parsolve.la.dofmap import _Exchange
 from parsolve.mesh.blocks import exchange
+from parsolve.relation_kinds.spread import places
 
 
 def facet_extent(comm, facet_pts: np.ndarray) -> float:
@@ -30,40 +37,131 @@ def facet_extent(comm, facet_pts: np.ndarray) -> float:
     return comm.allreduce(mine, op=MPI.MAX)
 
 
-def near_facets(comm, slave_pts: np.ndarray, facet_ids: np.ndarray, facet_pts: np.ndarray,
-                radius: float) -> tuple[np.ndarray, np.ndarray]:
-    """The master facets (input ids (nf, k), coordinates (nf, k, dim)) whose box meets this
-    rank's slave box grown by ``radius``, from every rank's facets (``facet_ids``,
-    ``facet_pts``: this rank's), each once, in the canonical order. Collective."""
-    dim = facet_pts.shape[-1]
-    if slave_pts.shape[0]:
-        margin = radius * (1.0 + 1e-9) + 1e-12 * float(np.abs(slave_pts).max())
-        box = np.concatenate([slave_pts.min(axis=0) - margin, slave_pts.max(axis=0) + margin])
-    else:   # no slave here: a box that meets nothing
+def grown_boxes(comm, pts: np.ndarray, radius: float) -> np.ndarray:
+    """Every rank's box (lo, hi) of its points grown by ``radius`` (a rank with none: a box
+    that meets nothing), (ranks, 2 dim). Collective."""
+    dim = pts.shape[-1]
+    if pts.shape[0]:
+        margin = radius * (1.0 + 1e-9) + 1e-12 * float(np.abs(pts).max())
+        box = np.concatenate([pts.min(axis=0) - margin, pts.max(axis=0) + margin])
+    else:
         box = np.concatenate([np.full(dim, np.inf), np.full(dim, -np.inf)])
     boxes = np.empty((comm.size, 2 * dim))
     comm.Allgather(box, boxes)
+    return boxes
+
+
+def meeting(facet_pts: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+    """(nf, ranks): whether each facet's box meets each rank's box."""
+    dim = facet_pts.shape[-1]
     lo, hi = facet_pts.min(axis=1), facet_pts.max(axis=1)          # (nf, dim)
-    meets = np.all((lo[:, None, :] <= boxes[None, :, dim:])
-                   & (hi[:, None, :] >= boxes[None, :, :dim]), axis=2)   # (nf, ranks)
-    rank, facet = np.nonzero(meets.T)            # grouped by destination rank
-    ids, _ = exchange(comm, facet_ids[facet].astype(np.int64), rank)
-    pts, _ = exchange(comm, facet_pts[facet].astype(float), rank)
-    return canonical_facets(ids.reshape(-1, facet_ids.shape[1]), pts)
+    return np.all((lo[:, None, :] <= boxes[None, :, dim:])
+                  & (hi[:, None, :] >= boxes[None, :, :dim]), axis=2)
 
 
 def global_positions(comm, ids: np.ndarray) -> tuple[np.ndarray, int]:
-    """(The place of each of this rank's ids (increasing, each id on one rank only) among
-    every rank's ids sorted, their total). Collective."""
+    """(The place of each of this rank's ids (each id on one rank only) among every rank's
+    ids sorted, their total): ``relation_kinds.spread.places`` over the ids' range.
+    Collective."""
     ids = np.asarray(ids, dtype=np.int64)
-    top = comm.allreduce(int(ids.max()) + 1 if ids.size else 0, op=MPI.MAX)
-    width = max(-(-top // comm.size), 1)
-    dest = ids // width                          # increasing: grouped by destination
-    got, got_counts = exchange(comm, ids, dest)
-    order = np.argsort(got, kind="stable")
-    place = np.empty(got.size, dtype=np.int64)
-    place[order] = np.arange(got.size)
-    first = comm.exscan(int(got.size)) or 0     # (rank 0: None)
-    total = comm.allreduce(int(got.size))
-    back, _ = exchange(comm, place + first, np.repeat(np.arange(comm.size), got_counts))
-    return back, total
+    space = comm.allreduce(int(ids.max()) + 1 if ids.size else 0, op=MPI.MAX)
+    return places(comm, ids, space), comm.allreduce(int(ids.size))
+
+
+class SharedTuples:
+    """Node tuples (global node numbers, (n, m), the same width on every rank) built on one
+    rank (a row's: its slave node, owned there, and master nodes anywhere), declared also by
+    every other rank owning one of their nodes (each rank adds the rows it owns: a term's
+    tuple must be declared by each of its nodes' owners). ``nodes``: this rank's tuples,
+    then those sent to it; ``share`` sends per-tuple values alongside. Collective."""
+
+    def __init__(self, comm, tuples: np.ndarray, node_ranges: np.ndarray):
+        self.comm = comm
+        n, m = tuples.shape
+        owner = np.searchsorted(node_ranges, tuples, side="right") - 1
+        keys = np.unique(owner * max(n, 1) + np.arange(n)[:, None])    # (rank, tuple), sorted
+        rank, tup = np.divmod(keys, max(n, 1))
+        other = rank != comm.rank
+        self.dest, self.tuple = rank[other], tup[other]
+        got, _ = exchange(comm, tuples[self.tuple], self.dest)
+        self.nodes = np.concatenate([tuples, got.reshape(-1, m)]).astype(np.int64)
+
+    def share(self, values: np.ndarray) -> np.ndarray:
+        """Per-tuple values of this rank's tuples (n, ...) → those of ``nodes`` (own, then
+        received). Collective."""
+        got, _ = exchange(self.comm, np.ascontiguousarray(values[self.tuple]), self.dest)
+        return np.concatenate([values, got.reshape((-1,) + values.shape[1:])])
+
+
+class Fetch:
+    """A primal vector's values at DOFs given by their global numbers (``new_dofs``: node ·
+    ncomp + component, any rank's), from their owners: one plan, two ``Alltoallv`` a call."""
+
+    def __init__(self, comm, new_dofs: np.ndarray, node_ranges: np.ndarray, ncomp: int):
+        ranges = np.asarray(node_ranges, dtype=np.int64) * ncomp
+        new_dofs = np.asarray(new_dofs, dtype=np.int64)
+        owner = np.searchsorted(ranges, new_dofs, side="right") - 1
+        self.n_owned = int(ranges[comm.rank + 1] - ranges[comm.rank])
+        self.plan = _Exchange(comm, new_dofs, owner, int(ranges[comm.rank]))
+
+    def __call__(self, q: np.ndarray) -> np.ndarray:
+        """The values from this rank's vector q (its owned DOFs first). Collective."""
+        return self.plan.forward(np.asarray(q[:self.n_owned], dtype=float))
+
+
+@dataclass
+class NearFacets:
+    """The master facets near this rank's slaves as they move (finite sliding): ``ids``,
+    ``pts`` (reference coordinates) and ``new`` (global numbers), canonical; ``sent`` the
+    (rank · nf + facet) pairs of this rank's own facets already sent. Facets are added, never
+    dropped (a slave's state names them)."""
+
+    ids: np.ndarray
+    pts: np.ndarray
+    new: np.ndarray
+    sent: np.ndarray
+
+
+def start_near(nfn: int, dim: int) -> NearFacets:
+    """No facet yet."""
+    return NearFacets(np.zeros((0, nfn), np.int64), np.zeros((0, nfn, dim)),
+                      np.zeros((0, nfn), np.int64), np.zeros(0, np.int64))
+
+
+def update_near(comm, near: NearFacets, slave_x: np.ndarray, mine: tuple, mine_x: np.ndarray,
+                reach: float) -> tuple[NearFacets, bool]:
+    """The near facets with those of every rank's own (``mine``: ids, reference points, global
+    numbers; ``mine_x`` their current points) whose current box now meets a rank's current
+    slave box (``slave_x``) grown by ``reach`` and were not sent to it yet: (the facets, whether
+    any rank received some). One box per rank gathered; the exchange only when a facet is new
+    to a rank. Collective."""
+    ids, pts, new = mine
+    nf = ids.shape[0]
+    rank, facet = np.nonzero(meeting(mine_x, grown_boxes(comm, slave_x, reach)).T)
+    key = rank * max(nf, 1) + facet
+    fresh = ~np.isin(key, near.sent)
+    if not comm.allreduce(bool(fresh.any()), op=MPI.LOR):
+        return near, False
+    rank, facet = rank[fresh], facet[fresh]
+    got_ids, _ = exchange(comm, ids[facet].astype(np.int64), rank)
+    got_pts, _ = exchange(comm, pts[facet].astype(float), rank)
+    got_new, _ = exchange(comm, new[facet].astype(np.int64), rank)
+    k = ids.shape[1]
+    all_ids, all_pts, all_new = canonical_facets(
+        np.concatenate([near.ids, got_ids.reshape(-1, k)]),
+        np.concatenate([near.pts, got_pts.reshape((-1,) + pts.shape[1:])]),
+        np.concatenate([near.new, got_new.reshape(-1, k)]))
+    return NearFacets(all_ids, all_pts, all_new, np.union1d(near.sent, key[fresh])), True
+
+
+def facet_index(facets: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """The index in ``facets`` (canonical rows of input ids) of each row of ``rows`` (all
+    present)."""
+    if rows.shape[0] == 0:
+        return np.zeros(0, dtype=np.int64)
+    both = np.concatenate([facets, rows])
+    _, inverse = np.unique(both, axis=0, return_inverse=True)
+    inverse = inverse.ravel()
+    where = np.empty(inverse.max() + 1, dtype=np.int64)
+    where[inverse[:facets.shape[0]]] = np.arange(facets.shape[0])
+    return where[inverse[facets.shape[0]:]]

@@ -185,7 +185,7 @@ def span_combination(pairing: Pairing, slave: np.ndarray, master: np.ndarray, pt
     key = owner * big + nodes                        # increasing: owners, then node ids
     cur = (np.arange(n, dtype=np.int64)[:, None] * big + pairing.master).ravel()
     pos = np.minimum(np.searchsorted(key, cur), max(key.size - 1, 0))
-    if key.size == 0 or np.any(key[pos] != cur):
+    if cur.size and (key.size == 0 or np.any(key[pos] != cur)):   # (a rank may hold none)
         raise ValueError("a current master facet lies outside the entry's span")
     on_span = np.zeros((nodes.size, dim))
     np.add.at(on_span, pos, master.reshape(-1, dim))   # distinct nodes of one facet: no overlap

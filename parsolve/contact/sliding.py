@@ -23,7 +23,6 @@ import numpy as np
 
 from parsolve.contact.pairing import Pairing, contains, facet_spans, pair_on
 from parsolve.contact.surfaces import Surfaces
-from parsolve.errors import SolverError
 
 
 @dataclass
@@ -44,6 +43,7 @@ class Spans:
     # the length the rows' tolerances are relative to: the largest master facet (an
     # obstacle: the mesh's size), not the radius, so that the answer does not depend on it
     length: float = 1.0
+    slave_reach: float = 0.0   # mortar: the slave facets' largest extent (spans reach it)
     _repeated: dict = field(default_factory=dict)   # per repetition: the spans repeated
 
     def ptr_for(self, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -58,18 +58,18 @@ class Spans:
         return self._repeated[times]
 
 
-def make_spans(surf: Surfaces, p: Pairing, facets: np.ndarray, radius: float | None,
-               slave_facets: np.ndarray | None = None) -> Spans:
+def make_spans(surf: Surfaces, p: Pairing, facets: np.ndarray, radius: float, length: float,
+               slave_facets: np.ndarray | None = None, slave_reach: float = 0.0) -> Spans:
     """The spans of the paired slaves of p (compact numbering): the master facets within
-    ``radius`` (default: one facet extent, as the pairing's) of each slave's start; mortar
-    (``slave_facets`` given): within the radius plus the slave facets' extent, and the
-    nodes of the slave's initial row besides."""
-    radius, reach = span_reach(surf, facets, radius, slave_facets)
-    fptr, fids, nptr, nodes = facet_spans(surf.points, p.slave, facets, reach)
+    ``radius`` of each slave's start; mortar (``slave_facets`` given): within the radius plus
+    ``slave_reach`` (the slave facets' largest extent), and the nodes of the slave's initial
+    row besides. ``length``: the largest master facet (the rows' tolerances). The numbers are
+    the whole surfaces' (a rank holds a part of them)."""
+    fptr, fids, nptr, nodes = facet_spans(surf.points, p.slave, facets, radius + slave_reach)
     if slave_facets is not None:
         nptr, nodes = union_spans(nptr, nodes, p.master)
     return Spans(surf, p.slave.copy(), facets, radius, fptr, fids, nptr, surf.ids[nodes],
-                 _reference(p), slave_facets, extent(surf.points, facets))
+                 _reference(p), slave_facets, length, slave_reach)
 
 
 def respan(sp: Spans, x: np.ndarray, p: Pairing) -> Spans:
@@ -78,12 +78,11 @@ def respan(sp: Spans, x: np.ndarray, p: Pairing) -> Spans:
     plus the slave facets' reach) of each slave now, and the facet and master nodes of its
     current row besides (a slave farther than the radius from every facet keeps what it
     holds). The same slaves, radius and reference frame."""
-    _, reach = span_reach(sp.surf, sp.facets, sp.radius, sp.slave_facets)
-    fptr, fids, nptr, nodes = facet_spans(x, p.slave, sp.facets, reach)
+    fptr, fids, nptr, nodes = facet_spans(x, p.slave, sp.facets, sp.radius + sp.slave_reach)
     fptr, fids = union_spans(fptr, fids, p.facet[:, None])
     nptr, nodes = union_spans(nptr, nodes, p.master)
     return Spans(sp.surf, sp.slave, sp.facets, sp.radius, fptr, fids, nptr, sp.surf.ids[nodes],
-                 sp.reference, sp.slave_facets, sp.length)
+                 sp.reference, sp.slave_facets, sp.length, sp.slave_reach)
 
 
 def near_edge(sp: Spans, x: np.ndarray) -> bool:
@@ -93,8 +92,7 @@ def near_edge(sp: Spans, x: np.ndarray) -> bool:
     for empty spans (a rigid obstacle's: nothing to make again)."""
     if sp.nodes.size == 0:
         return False
-    _, reach = span_reach(sp.surf, sp.facets, 0.5 * sp.radius, sp.slave_facets)
-    fptr, fids, _, _ = facet_spans(x, sp.slave, sp.facets, reach)
+    fptr, fids, _, _ = facet_spans(x, sp.slave, sp.facets, 0.5 * sp.radius + sp.slave_reach)
     return not bool(np.all(contains(sp.facet_ptr, sp.facet_ids, fptr, fids)))
 
 
@@ -104,32 +102,20 @@ def _reference(p: Pairing) -> np.ndarray | None:
     return p.tangents[:, 0].copy() if p.dim == 3 else None
 
 
-def span_reach(surf: Surfaces, facets: np.ndarray, radius: float | None,
-               slave_facets: np.ndarray | None = None) -> tuple[float, float]:
-    """(the search radius, default one facet extent; the spans' reach: the radius, plus the
-    slave facets' extent for mortar rows)."""
-    if radius is None:
-        radius = extent(surf.points, facets)
-    reach = radius
-    if slave_facets is not None:
-        reach += extent(surf.points, slave_facets)
-    return radius, reach
-
-
 def extent(points: np.ndarray, facets: np.ndarray) -> float:
     """The largest extent of the facets (along any axis)."""
     coords = points[facets]
-    return float(np.max(coords.max(axis=1) - coords.min(axis=1)))
+    return float(np.max(coords.max(axis=1) - coords.min(axis=1))) if coords.size else 0.0
 
 
 def mortar_waiting(surf: Surfaces, p: Pairing, facets: np.ndarray, facet_type: str,
-                   radius: float | None, slave_facets: np.ndarray) -> Pairing:
-    """The slave-surface nodes that no mortar row holds at the start (p: the rows) but whose
-    span is not empty, as placeholder rows (compact numbering): one master node of their span
-    (weight 0), no normal, their point their own, the tangents of the first facet of their
-    span (what a 3D row's reference frame follows); sorted by slave like p."""
-    _, reach = span_reach(surf, facets, radius, slave_facets)
-    missing = np.setdiff1d(np.unique(slave_facets), p.slave)
+                   reach: float, slaves: np.ndarray) -> Pairing:
+    """The slave-surface nodes ``slaves`` that no mortar row holds at the start (p: the rows)
+    but whose span (the facets within ``reach``) is not empty, as placeholder rows (compact
+    numbering): one master node of their span (weight 0), no normal, their point their own,
+    the tangents of the first facet of their span (what a 3D row's reference frame follows);
+    sorted by slave like p."""
+    missing = np.setdiff1d(slaves, p.slave)
     fptr, fids, nptr, nodes = facet_spans(surf.points, missing, facets, reach)
     has = np.diff(nptr) > 0
     missing, first, facet = missing[has], nodes[nptr[:-1][has]], fids[fptr[:-1][has]]
@@ -193,12 +179,7 @@ def fit_mortar(new: Pairing, last: Pairing, x: np.ndarray) -> tuple[Pairing, np.
     facets uncovered: past the master's end) keeps its last row, its master combination and
     normal, with its point and gap measured on x (as a node-to-segment slave past the master's
     end stays on its last facet). Slaves the new rows hold beyond the set are left out.
-    Returns (the rows, which of them the new rows hold). No new row at all: the iterate
-    carried the whole slave surface off the master (a diverging Newton iterate, not a state
-    to measure gaps on): a SolverError, which fails the iteration and cuts the step."""
-    if len(new) == 0:
-        raise SolverError("no mortar row left: the Newton iterate carried every slave of the "
-                          "contact off the master (the iterates diverged)")
+    Returns (the rows, which of them the new rows hold)."""
     at = np.minimum(np.searchsorted(new.slave, last.slave), max(len(new) - 1, 0))
     found = (new.slave[at] == last.slave) if len(new) else np.zeros(len(last), dtype=bool)
     width = max(new.master.shape[1], last.master.shape[1])

@@ -22,13 +22,15 @@ import numpy as np
 from parsolve.contact.pairing import Pairing
 
 
-def canonical_facets(ids: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Facets (rows of input ids, (nf, k)) and their coordinates (nf, k, dim), each facet
-    once, in increasing order of their rows (duplicates: the same facet seen by two ranks)."""
+def canonical_facets(ids: np.ndarray, points: np.ndarray, *extra: np.ndarray
+                     ) -> tuple[np.ndarray, ...]:
+    """Facets (rows of input ids, (nf, k)) and their coordinates (nf, k, dim) (and any
+    ``extra`` per-facet arrays), each facet once, in increasing order of their rows
+    (duplicates: the same facet seen by two ranks)."""
     if ids.shape[0] == 0:
-        return ids, points
+        return (ids, points, *extra)
     rows, first = np.unique(ids, axis=0, return_index=True)
-    return rows, points[first]
+    return (rows, points[first], *(e[first] for e in extra))
 
 
 @dataclass

@@ -36,20 +36,19 @@ converge in partial slip (kept for study).
 A node that closes while moving along the surface starts sliding that way (sticking it at
 the step's starting point would pull it back, open it again, and cycle).
 
-On a distributed mesh (each rank its part) the rows stay in input DOFs. Node-to-face on a
-master region (small sliding): each rank pairs the slave nodes it owns with the master facets
-near them (``contact.distributed``: each rank's slave box gathered, the facets that meet it
-sent; never the whole surface) and builds their rows alone (``Relation.ids``: each entry's
-place among the paired slaves in input-id order, the same on any partition); a row's values
-on a master node another rank owns are fetched from it (``_read_rows``), its D entries there
-sent to it (``la.relation_set``). Against a rigid obstacle (small sliding) every rank pairs
-the gathered slave surface, then keeps the entries whose slave node it owns. Either way node
-states, slip directions and decisions are the rank's own, and only a change (any rank's) and
-the resultants cross the ranks. Otherwise (mortar, finite sliding, 3D friction's cross
-stiffness on a master, the penalty baseline's pairing) the surfaces are gathered once (their
-nodes' input ids and coordinates: the surfaces' size), every rank pairs them as the
-replicated mesh does, and decides from the same row values (owned entries, one reduction of
-the rows' size) and λ (each relation's rows fetched from their owners): the ranks agree.
+On a distributed mesh (each rank its part) the rows stay in input DOFs. Each rank pairs the
+slave nodes it owns and builds their rows alone (``Relation.ids``: each entry's place among
+the paired slaves in input-id order, the same on any partition). On a master region (node-to-
+face, mortar) against the master facets near its slaves (``contact.distributed``: each rank's
+slave box gathered, the facets that meet it sent; never the whole surface; finite sliding:
+again on the current configuration, the facets new to a rank sent as they come near); a
+row's values on a master node another rank owns are fetched from it (``_read_rows``), its D
+entries there sent to it (``la.relation_set``), and the Newton-matrix terms on its nodes (3D
+friction's cross stiffness, finite sliding's geometric stiffness) declared by each node's
+owner with their values sent along (``effects.contact_terms``). Against a rigid obstacle the
+rank projects its own slave nodes. Node states, slip directions and decisions are the rank's
+own; only a change (any rank's) and the resultants cross the ranks. The penalty baseline on
+a master region pairs the gathered surfaces (``whole``): every rank the whole pairing.
 
 Held, tied and shared nodes: a contact node that a Dirichlet condition also holds, a periodic
 tie between contact nodes, a node in two surfaces along one normal make the enforced rows
@@ -113,15 +112,17 @@ from parsolve.contact.sliding import Spans, obstacle_spans
 from parsolve.contact.surfaces import Surfaces, canonical_facets
 from parsolve.effects.base import Effect, displacement_field
 from parsolve.effects.contact_sliding import FiniteSliding
+from parsolve.effects.contact_terms import SharedRowTerm
 from parsolve.effects.row_terms import RowTerm
 from parsolve.fem.element_matrices import Term
 from parsolve.errors import InputError
-from parsolve.la.dofmap import DofMap, _Exchange
+from parsolve.la.dofmap import DofMap
 from parsolve.evolution import CONSTANT
 from parsolve.mesh.regions import gather_facets
 from parsolve.mesh.topology import FACETS, boundary_facets
 from parsolve.relations import Relation, rows_here
 from parsolve.schema import NAME_PATTERN
+from parsolve.collective import agree
 
 OBSTACLES = ("plane", "cylinder", "sphere")
 DISCRETIZATIONS = ("node_to_segment", "mortar")
@@ -204,11 +205,8 @@ class Contact(FiniteSliding, Effect):
         self.spec, self.mesh, self.fields_, self.source = spec, mesh, fields, source
         self.radial = radial    # axisymmetric: mortar integrals over the surface of revolution
         # rows on a master region (node-to-face, mortar) built per rank (``_pair_here``)
-        # unless the whole pairing is asked for (the penalty baseline) or a term lies on the
-        # rows' tuples (3D friction's cross stiffness: ``row_terms`` needs every rank's tuples)
-        cross = spec.mu > 0.0 and mesh.dim == 3 and spec.direction == "reaction"
-        self.here = (not whole and not cross and spec.master is not None
-                     and spec.sliding == "small")
+        # unless the whole pairing is asked for (the penalty baseline's finite sliding)
+        self.here = not whole and spec.master is not None
         self._fetches: dict = {}            # plans of the values read on other ranks' DOFs
         self.name = f"contact {spec.name}"
         key = spec.key
@@ -235,6 +233,7 @@ class Contact(FiniteSliding, Effect):
         # rows built per rank (``_pair_here``; an obstacle's: ``relations``): the global number
         # of each entry held here (``ids``) among ``entries``; None: the whole pairing
         self.ids = None
+        self._known = np.zeros((2, 0), dtype=np.int64)   # (master ids near, their numbers)
         self.pairing = self._pair(regions)
         self._compact_committed = self._compact
         self._covered_committed = self._covered
@@ -257,8 +256,8 @@ class Contact(FiniteSliding, Effect):
         self.turning = fr.SlipNewton()
         # the Newton matrix's terms (``row_terms``), laid on their rows' tuples by ``relations``
         cross = self.frictional and mesh.dim == 3 and spec.direction == "reaction"
-        self.cross = RowTerm(self.u, symmetric=True) if cross else None
-        self.geo = RowTerm(self.u, symmetric=False) if self.geometric else None
+        self.cross = SharedRowTerm(self.u, True, self._new_of) if cross else None
+        self.geo = SharedRowTerm(self.u, False, self._new_of) if self.geometric else None
         self._kappa = self._geo_rows = None
         self._start_entries()
 
@@ -312,105 +311,159 @@ class Contact(FiniteSliding, Effect):
         return canonical_facets(ids, pts)
 
     def _pair(self, regions):
-        """The paired slave nodes, in input ids. The pairing runs on the surfaces alone (every
-        rank the same arrays: the same pairing on any partition and mesh distribution)."""
+        """The paired slave nodes, in input ids: this rank's (``_pair_here``,
+        ``_pair_obstacle``) or, for the penalty baseline on a master region (``whole``), every
+        rank's, on gathered surfaces: the same arrays on every rank."""
         spec, mesh, key = self.spec, self.mesh, self.spec.key
         if self.here:
             return self._pair_here(regions)
+        if spec.obstacle is not None:
+            return self._pair_obstacle(regions)
         slave, slave_pts = self._slave_nodes(regions)
-        if spec.master is not None:
-            master = regions(spec.master, f"{key}.master")
-            facets, facet_pts = self._facets(master)
-            if facets.size == 0:
-                raise InputError(f"the master region {spec.master!r} has no boundary facet",
-                                 self.source, f"{key}.master")
-            check_surfaces(slave, facets, self.source, f"{key}.master")
-            if spec.discretization == "mortar":
-                # normalised mortar rows are a pairing (row i divided by ∫φ_i): the rows, the
-                # values, the friction dual and the outputs below stay as they are
-                sfacets, sfacet_pts = self._facets(regions(spec.slave, f"{key}.slave"))
-                surf = Surfaces.of([(facets, facet_pts), (sfacets, sfacet_pts)])
-                try:
-                    mortar = self._mortar(surf.points, surf.compact(sfacets),
-                                          surf.compact(facets))
-                except ValueError as exc:   # 3D faces that are not triangle, quad, triangle6
-                    raise InputError(str(exc), self.source, f"{key}.discretization") from None
-                self.side_nodes = np.unique(sfacets)
-                p = mortar.pairing.only_paired()
-                if spec.sliding == "finite":   # (with the slaves rows will hold later)
-                    p = self._mortar_with_uncovered(surf, p, surf.compact(facets),
-                                                    surf.compact(sfacets))
-                return surf.to_input(p)
-            surf = Surfaces.of([(slave, slave_pts), (facets, facet_pts)])
-            p = pair_nodes(surf.points, surf.compact(slave), surf.compact(facets),
-                           mesh.facet_type, spec.search_radius)
-            if spec.sliding == "finite":   # (with the slaves a facet will face later)
-                return surf.to_input(self._with_uncovered(surf, p, surf.compact(facets)))
-            return surf.to_input(p.only_paired())
+        facets, facet_pts = self._facets(regions(spec.master, f"{key}.master"))
+        if facets.size == 0:
+            raise InputError(f"the master region {spec.master!r} has no boundary facet",
+                             self.source, f"{key}.master")
+        check_surfaces(slave, facets, self.source, f"{key}.master")
+        surf = Surfaces.of([(slave, slave_pts), (facets, facet_pts)])
+        p = pair_nodes(surf.points, surf.compact(slave), surf.compact(facets),
+                       mesh.facet_type, spec.search_radius)
+        return surf.to_input(p.only_paired())
+
+    def _pair_obstacle(self, regions):
+        """The slave nodes this rank owns projected on the rigid obstacle, in input ids; their
+        rows are this rank's own (they hold the slave alone: ``ids``, each entry's place among
+        the paired slaves in input-id order). The checks are reductions: every rank agrees.
+        Collective."""
+        spec, comm = self.spec, self.values.comm
+        okey = f"{spec.key}.obstacle.{spec.obstacle[0]}"
+        slave, slave_pts = self._own_slaves(regions)
         surf = Surfaces.of([(slave, slave_pts)])
-        pts, nodes = surf.points, surf.compact(slave)
-        okey = f"{key}.obstacle.{spec.obstacle[0]}"
-        try:
-            p = self._project(pts, nodes)
-        except ValueError as exc:
-            raise InputError(str(exc), self.source, okey) from None
+
+        def project():
+            try:
+                return self._project(surf.points, np.arange(slave.size))
+            except ValueError as exc:
+                raise InputError(str(exc), self.source, okey) from None
+        p = agree(comm, project)
         self._check_reach(p, okey)
-        self._check_facing(p, surf, regions, okey)
+        self._check_facing(regions, okey)
         if spec.search_radius is not None:
             p.paired &= p.gap <= spec.search_radius
         p = p.only_paired()
         if spec.sliding == "finite":   # rows on the slave alone: the spans are empty
             self.span = obstacle_spans(surf, p, float(np.max(self.mesh.extent)))
-        return surf.to_input(p)
+        p = surf.to_input(p)
+        self.ids, self.entries = dist.global_positions(comm, p.slave)
+        return p
+
+    def _own_slaves(self, regions) -> tuple[np.ndarray, np.ndarray]:
+        """The slave nodes this rank owns: increasing input ids and their coordinates."""
+        nodes = regions(self.spec.slave, f"{self.spec.key}.slave").nodes
+        nodes = nodes[nodes < self.mesh.n_owned]
+        ids = self.mesh.global_nodes[nodes].astype(np.int64)
+        order = np.argsort(ids)
+        return ids[order], self.mesh.points[nodes[order]]
 
     def _pair_here(self, regions):
         """The rows of the slave nodes this rank owns against the master facets near them (a
         bounded exchange: ``contact.distributed``), in input ids: node-to-face pairs or
         mortar rows (from this rank's slave facets: every facet through an owned node is
-        here); ``ids``: each entry's place in the whole pairing (paired slaves in input-id
-        order: the same on any partition). The surfaces' checks are summed over the ranks:
-        every rank agrees. Collective."""
+        here); finite sliding: with the slaves a facet (a row) will hold later, and their
+        spans. ``ids``: each entry's place in the whole pairing (paired slaves in input-id
+        order: the same on any partition). The lengths (search radius, largest facets) are
+        the whole surfaces', the checks summed over the ranks: every rank agrees.
+        Collective."""
         spec, mesh, key, comm = self.spec, self.mesh, self.spec.key, self.values.comm
-        mine, mine_pts = self._local_facets(regions(spec.master, f"{key}.master"))
-        if comm.allreduce(mine.shape[0]) == 0:
+        mine = self._local_facets(regions(spec.master, f"{key}.master"))
+        if comm.allreduce(mine[0].shape[0]) == 0:
             raise InputError(f"the master region {spec.master!r} has no boundary facet",
                              self.source, f"{key}.master")
-        nodes = regions(spec.slave, f"{key}.slave").nodes
-        nodes = nodes[nodes < mesh.n_owned]
-        ids = mesh.global_nodes[nodes].astype(np.int64)
-        order = np.argsort(ids)
-        slave, slave_pts = ids[order], mesh.points[nodes[order]]
-        mortar = spec.discretization == "mortar"
+        slave, slave_pts = self._own_slaves(regions)
+        mortar, finite = spec.discretization == "mortar", spec.sliding == "finite"
+        sides = [(slave, slave_pts)]
+        length = dist.facet_extent(comm, mine[1])      # the largest master facet
+        radius = length if spec.search_radius is None else spec.search_radius
+        box, reach = slave_pts, radius
         if mortar:   # the rows integrate over the slave facets: their nodes span the box
-            sfacets, sfacet_pts = self._local_facets(regions(spec.slave, f"{key}.slave"))
-            reach = sfacet_pts.reshape(-1, mesh.dim)
-        else:
-            reach = slave_pts
-        radius = spec.search_radius
-        if radius is None:   # the whole surfaces' default (mortar: slave facets' too)
-            radius = dist.facet_extent(comm, np.concatenate([mine_pts, sfacet_pts])
-                                       if mortar else mine_pts)
-        facets, facet_pts = dist.near_facets(comm, reach, mine, mine_pts, radius)
+            sfacets, sfacet_pts, _ = self._local_facets(regions(spec.slave, f"{key}.slave"))
+            sides.append((sfacets, sfacet_pts))
+            slave_reach = dist.facet_extent(comm, sfacet_pts)
+            row_radius = max(length, slave_reach) if spec.search_radius is None else radius
+            box = sfacet_pts.reshape(-1, mesh.dim)
+            if finite:   # (spans: within the radius plus the slave facets' reach)
+                box, reach = slave_pts, radius + slave_reach
+            else:
+                reach = row_radius
+        self._mine, self._reach, self._radius, self._own_ids = mine, reach, radius, slave
+        self._near, _ = dist.update_near(comm, dist.start_near(*mine[0].shape[1:], mesh.dim),
+                                         box, mine, mine[1], reach)
+        self._learn(self._near)
+        facets = self._near.ids
         self._check_shared(slave, facets)
+        surf = Surfaces.of(sides + [(facets, self._near.pts)])
+        cf, own = surf.compact(facets), surf.compact(slave)
         if mortar:
-            p = self._mortar_here(facets, facet_pts, sfacets, sfacet_pts, mine_pts, radius)
-            p = p.subset(np.flatnonzero(np.isin(p.slave, slave)))   # its owned slaves' rows
+            half = self._master_half(mine[1])
+            try:
+                p = self._mortar(surf.points, surf.compact(sfacets), cf, row_radius, half)
+            except ValueError as exc:   # 3D faces that are not triangle, quad, triangle6
+                raise InputError(str(exc), self.source, f"{key}.discretization") from None
+            self.side_nodes = np.unique(sfacets)
+            p = p.pairing.only_paired()
+            p = p.subset(np.flatnonzero(np.isin(p.slave, own)))   # its owned slaves' rows
+            if finite:   # (with the slaves rows will hold later)
+                p = self._mortar_with_uncovered(surf, p, cf, surf.compact(sfacets), own,
+                                                slave_reach, length)
         else:
-            surf = Surfaces.of([(slave, slave_pts.reshape(-1, mesh.dim)),
-                                (facets, facet_pts.reshape(-1, mesh.dim))])
-            p = pair_nodes(surf.points, surf.compact(slave), surf.compact(facets),
-                           mesh.facet_type, radius)
-            p = surf.to_input(p.only_paired())
+            p = pair_nodes(surf.points, own, cf, mesh.facet_type, radius)
+            # (finite: with the slaves a facet will face later)
+            p = self._with_uncovered(surf, p, cf, length) if finite else p.only_paired()
+        p = surf.to_input(p)
         self.ids, self.entries = dist.global_positions(comm, p.slave)
         return p
 
-    def _local_facets(self, region) -> tuple[np.ndarray, np.ndarray]:
-        """A region's boundary facets on this rank (those with an owned node): input ids and
-        coordinates, in the canonical order (``surfaces``: as the whole surface's)."""
+    def _learn(self, near) -> None:
+        """The global numbers of the master nodes near (those of its rows' tuples)."""
+        self._known = np.unique(np.column_stack([near.ids.ravel(), near.new.ravel()]),
+                                axis=0).reshape(-1, 2).T
+
+    def _master_half(self, mine_pts: np.ndarray) -> np.ndarray:
+        """The whole master surface's largest half-extent per axis (mortar candidates), from
+        every rank's own facets (``mine_pts``: their points). Collective."""
+        half = np.empty(self.mesh.dim)
+        self.values.comm.Allreduce(master_half(mine_pts), half, op=MPI.MAX)
+        return half
+
+    def _local_facets(self, region) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """A region's boundary facets on this rank (those with an owned node): input ids,
+        coordinates and the nodes' global numbers, in the canonical order (``surfaces``: as
+        the whole surface's)."""
         nfn = len(FACETS[self.mesh.cell_type][0])
         local = np.asarray(region.facets, dtype=np.int64).reshape(-1, nfn)
         return canonical_facets(self.mesh.global_nodes[local].astype(np.int64),
-                                self.mesh.points[local])
+                                self.mesh.points[local],
+                                np.asarray(self.mesh.node_new)[local].astype(np.int64))
+
+    def _new_of(self, ids: np.ndarray) -> np.ndarray:
+        """The global numbers of input node ids: this rank's nodes' from its mesh, the master
+        nodes near its slaves' from their facets' exchange (``_pair_here``)."""
+        ids = np.asarray(ids, dtype=np.int64)
+        local = self.values.local_nodes(ids)
+        out = np.asarray(self.mesh.node_new)[np.maximum(local, 0)].astype(np.int64)
+        far = local < 0
+        if far.any():
+            known, new = self._known
+            out[far] = new[np.searchsorted(known, ids[far])]
+        return out
+
+    def _fetch(self, dofs: np.ndarray) -> dist.Fetch:
+        """The plan of q's values at input DOFs of nodes this rank knows (``_new_of``).
+        Collective."""
+        ncomp = self.fields_.ncomp
+        node, comp = np.divmod(np.asarray(dofs, dtype=np.int64), ncomp)
+        return dist.Fetch(self.values.comm, self._new_of(node) * ncomp + comp,
+                          self.values.node_ranges, ncomp)
 
     def _check_shared(self, slave: np.ndarray, facets: np.ndarray) -> None:
         """Slave nodes (this rank's) in master facets (those near them: a slave node in a
@@ -424,65 +477,35 @@ class Contact(FiniteSliding, Effect):
             raise InputError(f"master and slave surfaces share {count} node(s) (first: "
                              f"{first})", self.source, f"{self.spec.key}.master")
 
-    def _mortar_here(self, facets, facet_pts, sfacets, sfacet_pts, mine_pts, radius: float):
-        """Mortar rows of this rank's slave facets against the master facets near them (the
-        whole master surface's largest half-extent: the same candidates), in input ids."""
-        comm, dim = self.values.comm, self.mesh.dim
-        half = np.empty(dim)
-        comm.Allreduce(master_half(mine_pts), half, op=MPI.MAX)
-        surf = Surfaces.of([(facets, facet_pts.reshape(-1, dim)),
-                            (sfacets, sfacet_pts.reshape(-1, dim))])
-        try:
-            mortar = self._mortar(surf.points, surf.compact(sfacets), surf.compact(facets),
-                                  radius, half)
-        except ValueError as exc:   # 3D faces that are not triangle, quad, triangle6
-            raise InputError(str(exc), self.source, f"{self.spec.key}.discretization") from None
-        self.side_nodes = np.unique(sfacets)
-        return surf.to_input(mortar.pairing.only_paired())
-
     def _read_rows(self, dofs: np.ndarray, rows: np.ndarray, coefs: np.ndarray, nrows: int,
                    q: np.ndarray) -> np.ndarray:
-        """A q of rows over input DOFs: every rank's (the whole pairing's, one reduction), or
-        this rank's own (rows per rank), their entries on other ranks' DOFs (a master node)
-        fetched from the owners (planned once per DOF map). Collective."""
+        """A q of this rank's rows over input DOFs, their entries on other ranks' DOFs (a
+        master node) fetched from the owners (planned once per DOF array, until the rows'
+        entries change). Collective."""
         values = self.values
-        if self.ids is None:
-            return values.rows(dofs, rows, coefs, nrows, q)
         sel, local = values.owned_dof_entries(dofs)
         part = values.owned_part(sel, local, rows, coefs, nrows, q)
         if values.comm.size == 1 or not self.here:   # (an obstacle's: the slave's alone)
             return part
-        key = (id(values), id(dofs))
-        if key not in self._fetches:
+        key = id(dofs)
+        if key not in self._fetches:   # (the array kept: its id is not reused meanwhile)
             at = np.setdiff1d(np.arange(dofs.size), sel)
-            new = values.input_new_dof(dofs[at])
-            self._fetches[key] = (at, _Exchange(values.comm, new, values.owner_of_dofs(new),
-                                                int(values.q_ranges[values.rank])))
-        at, plan = self._fetches[key]
-        got = plan.forward(np.asarray(q[:values.n_owned], dtype=float))
+            self._fetches[key] = (at, self._fetch(dofs[at]), dofs)
+        at, plan, _ = self._fetches[key]
+        got = plan(q)
         return part + np.bincount(rows[at], weights=coefs[at] * got, minlength=nrows)
 
     def _relation_values(self, r: Relation, q: np.ndarray) -> np.ndarray:
         """A q of a relation's rows held here (``_read_rows``). Collective."""
         return self._read_rows(r.a_dofs, r.a_rows, r.a_vals, r.nrows, q)
 
-    def _own_entries(self) -> None:
-        """Keep the entries whose slave node this rank owns (their state and rows made
-        again): a rigid obstacle's rows hold their slave alone, so each rank builds and holds
-        its own rows (``Relation.ids``: the
-        entry's place in the whole pairing, the same on any partition)."""
-        own, _ = self.values.owned_nodes(self.pairing.slave)
-        self.ids, self.entries = np.flatnonzero(own), len(self.pairing)
-        self.pairing = self.pairing.subset(self.ids)
-        self._start_entries()
-
     def sum_ranks(self, x):
         """Σ over the ranks of a sum over this rank's rows (rows built per rank); else x."""
-        return x if self.ids is None else self.values.comm.allreduce(x, op=MPI.SUM)
+        return self.values.comm.allreduce(x, op=MPI.SUM)
 
     def any_rank(self, x: bool) -> bool:
         """The same, of a decision."""
-        return x if self.ids is None else self.values.comm.allreduce(bool(x), op=MPI.LOR)
+        return self.values.comm.allreduce(bool(x), op=MPI.LOR)
 
     def _project(self, points: np.ndarray, nodes: np.ndarray):
         """The nodes (compact ids) projected on the rigid obstacle (``contact.obstacles``)."""
@@ -522,21 +545,26 @@ class Contact(FiniteSliding, Effect):
         return mortar_pairing(points, slave_facets, facets, ft, radius, radial=self.radial,
                               half=half)
 
-    def _check_facing(self, p, surf: Surfaces, regions, key: str) -> None:
+    def _check_facing(self, regions, key: str) -> None:
         """Refuse an obstacle that no facet of the slave surface faces (outward normal of the
-        slave body against the obstacle's normal: n_s · n < 0 somewhere): its normal points
-        into the slave body, which would then be pushed through it."""
-        facets, pts = self._facets(regions(self.spec.slave, f"{self.spec.key}.slave"))
-        if facets.shape[0] == 0:
+        slave body against the obstacle's normal at the facet's first node: n_s · n < 0
+        somewhere): its normal points into the slave body, which would then be pushed through
+        it. Each rank's facets through an owned node; one reduction. Collective."""
+        comm = self.values.comm
+        facets, pts, _ = self._local_facets(regions(self.spec.slave, f"{self.spec.key}.slave"))
+        if comm.allreduce(facets.shape[0]) == 0:
             return
         if self.mesh.dim == 2:
             d = pts[:, 1] - pts[:, 0]
             normal = np.column_stack([d[:, 1], -d[:, 0]])   # outward (FACETS orientation)
         else:
             normal = np.cross(pts[:, 1] - pts[:, 0], pts[:, 2] - pts[:, 0])
-        at = np.searchsorted(p.slave, surf.compact(facets[:, 0]))
-        facing = np.einsum("fx,fx->f", normal, p.normal[at]) < -1e-6 * np.linalg.norm(normal, axis=1)
-        if not facing.any():
+        facing = False
+        if facets.shape[0]:   # (its first nodes are slave nodes: projected by their owner)
+            o = self._project(pts[:, 0], np.arange(facets.shape[0])).normal
+            facing = bool(np.any(np.einsum("fx,fx->f", normal, o)
+                                 < -1e-6 * np.linalg.norm(normal, axis=1)))
+        if not comm.allreduce(facing, op=MPI.LOR):
             raise InputError("no facet of the slave surface faces the obstacle (its normal "
                              "points into the slave body: is its sign right?)", self.source, key)
 
@@ -545,16 +573,20 @@ class Contact(FiniteSliding, Effect):
         surface (its normal points into the slave body, or the body starts inside it) is
         refused; an obstacle farther than the mesh's size from every slave node is legitimate
         (a body lowered onto it over the steps) but said in a warning: a misplaced origin
-        would otherwise give a run without contact and no message."""
+        would otherwise give a run without contact and no message. p: this rank's slaves
+        (the extreme gaps: reductions; collective)."""
+        comm = self.values.comm
         size = float(np.max(self.mesh.extent))   # the whole mesh's, on every rank
-        if np.all(p.gap < -1e-9 * size):
+        lo = comm.allreduce(float(p.gap.min(initial=np.inf)), op=MPI.MIN)
+        hi = comm.allreduce(float(p.gap.max(initial=-np.inf)), op=MPI.MAX)
+        if hi < -1e-9 * size:
             raise InputError(f"every slave node starts inside the obstacle (gaps from "
-                             f"{p.gap.min():.3g} to {p.gap.max():.3g}): does its normal point "
+                             f"{lo:.3g} to {hi:.3g}): does its normal point "
                              "into the slave body?", self.source, key)
-        if p.gap.min() > size and hasattr(self.mesh, "warnings"):
+        if lo > size and hasattr(self.mesh, "warnings"):
             self.mesh.warnings.append(
                 f"{self.source}: {key}: no slave node is within the mesh's size ({size:.3g}) of "
-                f"the obstacle (smallest gap {p.gap.min():.3g}): contact only if the body "
+                f"the obstacle (smallest gap {lo:.3g}): contact only if the body "
                 "travels that far")
 
     def _build_rows(self) -> None:
@@ -612,10 +644,7 @@ class Contact(FiniteSliding, Effect):
     # ------------------------------------------------------------------ relations
 
     def relations(self) -> list[Relation]:
-        """The relations form's relations: against a rigid obstacle (small sliding), this
-        rank's rows only (``_own_entries``; the penalty form reuses the whole pairing)."""
-        if self.ids is None and self.spec.obstacle is not None and self.span is None:
-            self._own_entries()
+        """The relations form's relations (this rank's rows when built per rank: ``ids``)."""
         p, name = self.pairing, self.spec.name
         r = self.nrows
         dual = None
@@ -627,8 +656,7 @@ class Contact(FiniteSliding, Effect):
         normal.meta = {"type": "contact", "key": self.spec.key,
                        "refresh": self.frictional or finite}
         self.normal = normal
-        if self.ids is not None:
-            rows_here(normal, self.ids, self.entries)
+        rows_here(normal, self.ids, self.entries)
         out = [normal]
         if self.frictional:
             t = self.trows
@@ -639,10 +667,9 @@ class Contact(FiniteSliding, Effect):
                             "refresh": self.mesh.dim == 3 or finite}
             self.tangent = tangent
             out.append(tangent)
-            if self.ids is not None:
-                dm1 = self.mesh.dim - 1
-                rows_here(tangent, (self.ids[:, None] * dm1 + np.arange(dm1)).ravel(),
-                          self.entries * dm1)
+            dm1 = self.mesh.dim - 1
+            rows_here(tangent, (self.ids[:, None] * dm1 + np.arange(dm1)).ravel(),
+                      self.entries * dm1)
         self._lay_terms(self.pairing)
         return out
 
@@ -652,13 +679,13 @@ class Contact(FiniteSliding, Effect):
         slave), the geometric stiffness's on the geometric rows; declared where this rank
         owns a node (rows per rank: every tuple its own slave). Collective unless the rows
         are this rank's own."""
-        dim, whole = self.mesh.dim, self.ids is None
+        dim = self.mesh.dim
         if self.cross is not None:
             self.cross.lay(self.trows if trows is None else trows, 2, dim, self.values,
-                           self.mesh, whole)
+                           self.mesh)
         if self.geometric:
             self.geo.lay(self._geometry_layout(p), self.geometric_rank, dim, self.values,
-                         self.mesh, whole)
+                         self.mesh)
 
     def _set_dual(self) -> None:
         """The slip direction s into the normal row's dual and (3D) the tangential rows, in
@@ -746,7 +773,8 @@ class Contact(FiniteSliding, Effect):
         """One friction update between iterations (``active``: the normal rows' new set);
         True when a state or a slip direction changed (the dual and the tangential switches
         are then updated in place)."""
-        moved = self.span is not None and self._slide(q, start=False)
+        # (rows per rank: any rank's rows moved, as on one rank)
+        moved = self.span is not None and self.any_rank(self._slide(q, start=False))
         self.rows_moved = moved   # (the active set's history is of other rows)
         if self.geometric:
             self._lam_now = (lam[self.normal.name].copy(), lam[self.tangent.name].copy()
@@ -763,7 +791,7 @@ class Contact(FiniteSliding, Effect):
         state, direction, changed = fr.friction_update(
             self.node_state, self.direction, closed, rn, rt, du, self.mu, self.spec.direction,
             tol_angle=np.inf if turning else fr.TOL_ANGLE,   # (turning: settled by _turn)
-            rn_max=None if self.ids is None else self.values.max_abs(rn))
+            rn_max=self.values.max_abs(rn))
         # a node that closes while it moves along the surface slides that way: sticking it
         # at the step's starting point would pull it back (and may open it again: a cycle)
         norm = np.linalg.norm(du, axis=1)
@@ -792,7 +820,7 @@ class Contact(FiniteSliding, Effect):
         # a slip below 1e-6 of the step's motion has no direction: such a node stays held
         s, residual, switched = self.turning.turn(
             sliding, self.direction, du, rt, murn, 1e-6 * motion,
-            None if self.ids is None else self.values.comm)
+            self.values.comm)
         starting = (self.node_state == fr.STICK) & (state == fr.SLIP)
         excess = np.linalg.norm(rt, axis=1) - murn
         self.turning.begin_slip(starting & (excess > 0.0), excess, murn)
@@ -836,7 +864,8 @@ class Contact(FiniteSliding, Effect):
         # spans made again since the start: the relations' entries and the operator anew
         # (the same spans: the operator as built, for the same round-off)
         state = dict(state)
-        respanned = self.restructures and not _equal(self.span, state["span"])
+        respanned = self.any_rank(self.restructures and not _equal(self.span, state["span"]))
+        self._fetches.clear()   # (plans of the surfaces and rows now held)
         for k, (values, dual) in state.pop("relation_values").items():
             r = getattr(self, k)
             for a, v in values.items():

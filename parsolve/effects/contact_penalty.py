@@ -59,16 +59,19 @@ penalty, again on the current configuration at each step's start and Newton iter
 (``sliding = "finite"``, ``SlidingPenalty``: a tuple that moved is given anew, the effect
 ``restructured``, the pattern derived again; the augmented Lagrangian refuses it).
 
-**On a distributed mesh** (each rank its part) the pairing is the relations form's, whole on
-every rank in input ids (the surfaces gathered once). The areas A_i come from each rank's
-facets through its owned slave nodes, summed over the ranks; the gaps g and g_T of every
-paired node from its owners' displacements, one reduction of the pairing's size per
-evaluation. The forces, the states and every decision of the augmented Lagrangian (settled,
-the augmentation's change and stop) are then computed from the same whole arrays on every
-rank: the ranks agree. A pair's tuple is declared on every rank that owns one of its nodes
-(a slave and its master facet may lie on different ranks' parts, the master's nodes on no part
-of the slave owner's): each adds the rows and forces of the nodes it owns, from the forces every
-rank holds, so nothing crosses ranks at assembly; outputs are each rank's owned rows.
+**On a distributed mesh** (each rank its part) each rank holds the pairs of the slave nodes
+it owns (the relations form's pairing per rank: against the master facets near them, or its
+own slaves projected on the obstacle): their areas A_i from its facets through them (a
+facet's ghost nodes' pairing fetched from their owners), their gaps g and g_T from its own
+and, for a master node of another rank, that owner's displacement. A pair's tuple is declared
+on every rank that owns one of its nodes: the pair's rank sends it once to those owners
+(``contact.distributed.SharedTuples``) and its stiffness and forces with it at each
+evaluation; each rank adds the rows of the nodes it owns. The augmented Lagrangian's
+decisions (settled, the augmentation's change and stop) are reductions: the ranks agree.
+Finite sliding against a master region (``SlidingPenalty``) pairs the gathered surfaces
+again at each iteration: there every rank holds the whole pairing (``whole``), the gaps one
+reduction of its size, and a pair's tuple is declared by each rank owning one of its nodes
+from the forces every rank holds; outputs are each rank's owned rows.
 
 Scene keys (besides those of ``parsolve.effects.contact``)::
 
@@ -86,7 +89,9 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
+from mpi4py import MPI
 
+from parsolve.contact.distributed import Fetch, SharedTuples
 from parsolve.contact.friction import OPEN, SLIP, STICK
 from parsolve.contact.pairing import pair_nodes, pair_on
 from parsolve.contact.rows import normal_rows, tangent_rows
@@ -161,16 +166,28 @@ def build(spec: BaselineSpec, mesh, regions, fields, scene) -> Effect:
     return cls(spec, mesh, regions, fields, scene)
 
 
-def slave_areas(values: DofMap, mesh, slave: np.ndarray, thickness) -> np.ndarray:
-    """``nodal_areas`` of the paired slave nodes (input ids), every rank the same. On a part
-    each rank computes them on its local facets and keeps its owned nodes' (every cell through
-    an owned node is local, so a boundary facet through it is one of the whole mesh and all of
-    them are here), summed over the ranks: one reduction of the pairing's size."""
+def slave_areas(values: DofMap, mesh, slave: np.ndarray, thickness, region_nodes: np.ndarray,
+                whole: bool) -> np.ndarray:
+    """``nodal_areas`` of the paired slave nodes (input ids): every cell through an owned node
+    is local, so a boundary facet through it is one of the whole mesh and all of them are
+    here; a facet counts when all its nodes are paired (its ghost nodes' pairing fetched from
+    their owners among ``region_nodes``, the slave region's local nodes). Rows per rank: this
+    rank's slaves (all owned); ``whole``: every rank's, each from its owner (one reduction of
+    the pairing's size). Collective."""
     local = values.local_nodes(slave)
-    here = local >= 0
-    area = np.zeros(len(slave))
-    area[here] = nodal_areas(mesh, local[here], thickness)
-    return values.node_sum(slave, area)
+    if whole:   # (every paired node known here)
+        flagged = local[local >= 0]
+    else:
+        paired = np.zeros(values.n_owned_nodes)
+        paired[local] = 1.0
+        ghosts = region_nodes[region_nodes >= values.n_owned_nodes]
+        got = Fetch(values.comm, np.asarray(mesh.node_new)[ghosts].astype(np.int64),
+                    values.node_ranges, 1)(paired)
+        flagged = np.concatenate([local, ghosts[got > 0.5]])
+    area = np.zeros(mesh.num_points)
+    area[flagged] = nodal_areas(mesh, flagged, thickness)
+    area = area[np.maximum(local, 0)]
+    return values.node_sum(slave, area) if whole else area
 
 
 def nodal_areas(mesh, nodes: np.ndarray, thickness) -> np.ndarray:
@@ -207,14 +224,12 @@ def gap_gradients(p) -> tuple[np.ndarray, np.ndarray]:
     (``contact.rows``: v on the slave, −N_a v on master node a; an obstacle's: v alone)."""
     n, dm1, dim = p.tangents.shape
     w = np.concatenate([np.ones((n, 1)), -p.weights], axis=1)               # (n, m)
-    bn = (w[:, :, None] * p.normal[:, None, :]).reshape(n, -1)
-    bt = (w[:, None, :, None] * p.tangents[:, :, None, :]).reshape(n, dm1, -1)
+    md = w.shape[1] * dim   # (a rank may hold no pair)
+    bn = (w[:, :, None] * p.normal[:, None, :]).reshape(n, md)
+    bt = (w[:, None, :, None] * p.tangents[:, :, None, :]).reshape(n, dm1, md)
     return bn, np.swapaxes(bt, 1, 2)
 
 
-def positive(area: np.ndarray) -> np.ndarray:
-    """Zero areas (a node no whole slave facet holds) replaced by the mean of the others."""
-    return np.where(area > 0, area, area[area > 0].mean() if np.any(area > 0) else 1.0)
 
 
 class PenaltyContact(Effect):
@@ -229,8 +244,12 @@ class PenaltyContact(Effect):
         # the relations form's set-up does the checks, the pairing and the rows: reused as is
         # (finite sliding: its pairs at the start made as small sliding's, then again at each
         # step's start: ``SlidingPenalty``)
+        # (rows per rank: each rank its own slaves' pairs; finite sliding against a master
+        # region pairs the gathered surfaces again: the whole pairing on every rank)
+        self.whole = self.restructures
         geo = contact.Contact(dataclasses.replace(spec, sliding="small"), mesh, regions,
-                              fields, scene.source, whole=True)
+                              fields, scene.source, whole=self.whole)
+        self.geo = geo
         self.spec, self.mesh, self.fields_ = spec, mesh, fields
         self.u = geo.u
         self.name = f"contact {spec.name} ({spec.formulation})"
@@ -240,10 +259,12 @@ class PenaltyContact(Effect):
         p = self.pairing
         dim = mesh.dim
         thickness = scene.thickness if dim == 2 else 1.0
-        area = positive(slave_areas(self.values, mesh, p.slave, thickness))
+        region = regions(spec.slave, f"{key}.slave").nodes
+        area = slave_areas(self.values, mesh, p.slave, thickness, region, self.whole)
+        area = self._positive(area)
         # the facets' size, from their plane measure (the axisymmetric areas are rings')
-        self.h = float(positive(slave_areas(self.values, mesh, p.slave, 1.0)).mean()
-                       ** (1.0 / (dim - 1)))
+        plane = self._positive(slave_areas(self.values, mesh, p.slave, 1.0, region, self.whole))
+        self.h = float(self._sum(plane.sum()) / max(self._sum(plane.size), 1)) ** (1.0 / (dim - 1))
         if spec.penalty is None:
             emax = max((m.params.get("E", 0.0) for m in scene.materials), default=0.0)
             if emax <= 0:
@@ -269,6 +290,17 @@ class PenaltyContact(Effect):
         self._declare(p)
         self._surfaces(geo, regions)
 
+    def _sum(self, x):
+        """Σ over the ranks of this rank's pairs' x (rows per rank); else x."""
+        return x if self.whole else self.values.comm.allreduce(x)
+
+    def _positive(self, area: np.ndarray) -> np.ndarray:
+        """Zero areas (a node no whole slave facet holds) replaced by the mean of the others
+        (every rank's). Collective."""
+        count = self._sum(int(np.count_nonzero(area > 0)))
+        mean = self._sum(float(area[area > 0].sum())) / count if count else 1.0
+        return np.where(area > 0, area, mean)
+
     def _surfaces(self, geo: contact.Contact, regions) -> None:
         """What it keeps of the relations form's surfaces (finite sliding's): nothing."""
 
@@ -276,18 +308,31 @@ class PenaltyContact(Effect):
         """The contact elements: one node tuple per pair (its slave node, then its master
         facet's nodes; an obstacle's pair is its slave alone), in the partition's global node
         numbers, declared on every rank that owns one of its nodes (each adds its owned rows:
-        a pair split over ranks is whole, no entry crosses ranks at assembly, and the values
-        come from the pairing's forces that every rank holds). The global numbers: one
-        reduction of the pairing's size. Also (pair, place in its tuple, local node) of the
-        tuple nodes this rank owns: where its forces go. The pairs' gradients ∂g, ∂g_T too."""
+        a pair split over ranks is whole, no entry crosses ranks at assembly). Rows per rank:
+        a rank's own pairs' tuples sent to the owners of their other nodes
+        (``dist.SharedTuples``), their values and forces with them at each evaluation;
+        ``whole``: every rank holds the pairing, the numbers from their owners (one reduction
+        of the pairing's size). Also (tuple, place in it, local node) of the tuple nodes this
+        rank owns: where its forces go. The pairs' gradients ∂g, ∂g_T too."""
         ids = np.concatenate([p.slave[:, None], p.master], axis=1)          # (n, m) input ids
-        tuples, owned, local = global_tuples(self.values, self.mesh, ids)
-        self.declared = np.flatnonzero(owned.any(axis=1))
-        self.term.nodes = tuples[self.declared]
-        self.tuples = tuples
-        pair, place = np.nonzero(owned)
-        self.force_at = (pair, place, local[pair, place])
         self.bn, self.bt = gap_gradients(p)
+        if self.whole:
+            tuples, owned, local = global_tuples(self.values, self.mesh, ids)
+            self.shared = None
+            self.declared = np.flatnonzero(owned.any(axis=1))
+            self.term.nodes = tuples[self.declared]
+            self.tuples = tuples
+            pair, place = np.nonzero(owned)
+            self.force_at = (pair, place, local[pair, place])
+            return
+        values = self.values
+        self.shared = SharedTuples(values.comm, self.geo._new_of(ids).reshape(ids.shape),
+                                   values.node_ranges)
+        nodes = self.term.nodes = self.shared.nodes
+        lo, hi = values.node_ranges[values.rank], values.node_ranges[values.rank + 1]
+        pair, place = np.nonzero((nodes >= lo) & (nodes < hi))
+        self.declared = np.arange(nodes.shape[0])
+        self.force_at = (pair, place, nodes[pair, place] - lo)   # (owned: new = lo + local)
 
     # ------------------------------------------------------------------ kinematics
 
@@ -296,11 +341,20 @@ class PenaltyContact(Effect):
 
     def gaps(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(g (n,), g_T (n, dim-1)): linearised gap g0 + Dn·q and tangential displacement at
-        every paired node, every rank alike (u: this rank's nodes; on a part each node's rows
-        from its owner, one reduction of the pairing's size: collective)."""
+        this rank's paired nodes (u: this rank's nodes; a master node's value fetched from its
+        owner); ``whole``: every paired node, every rank alike (each node's rows from its
+        owner, one reduction of the pairing's size). Collective."""
         p = self.pairing
-        gn, gt = self.values.node_rows([self.nrows, self.trows], u)
-        return p.gap + gn, gt.reshape(len(p), -1)
+        if self.whole:
+            gn, gt = self.values.node_rows([self.nrows, self.trows], u)
+        else:   # its own pairs' rows (a master node's value from its owner)
+            q = np.zeros((self.values.n_owned_nodes, self.fields_.ncomp))
+            q[:, self.fields_.columns(self.u)] = u[:self.values.n_owned_nodes]
+            q = q.ravel()
+            n, t, geo = self.nrows, self.trows, self.geo
+            gn = geo._read_rows(geo.n_dofs, n.row, n.coef, n.nrows, q)
+            gt = geo._read_rows(geo.t_dofs, t.row, t.coef, t.nrows, q)
+        return p.gap + gn, gt.reshape(len(p), self.mesh.dim - 1)
 
     def forces(self, u: np.ndarray, state: dict, lam_n: np.ndarray, lam_t: np.ndarray) -> dict:
         """Normal and friction forces at the displacement u (all nodes, every rank alike)."""
@@ -385,8 +439,11 @@ class PenaltyContact(Effect):
         self._last, self._state = f, state
         trial = {"pN": f["pN"], "t": f["t"], "gT": f["gT"]}
         pair, place, local = self.force_at
-        forces = NodeForces(local[:, None], self.tuple_forces(f)[pair, place][:, None, :])
-        k = self.node_tangents(f)[self.declared]
+        tuple_forces, k = self.tuple_forces(f), self.node_tangents(f)
+        if self.shared is not None:   # (with those of the tuples sent here)
+            tuple_forces, k = self.shared.share(tuple_forces), self.shared.share(k)
+        forces = NodeForces(local[:, None], tuple_forces[pair, place][:, None, :])
+        k = k[self.declared]
         # (n, m·d, m·d) → (d·d, m, m, n): entry (i, j) of node pair (a, b) at [i d + j, a, b]
         d = self.mesh.dim
         m = k.shape[1] // d
@@ -438,12 +495,20 @@ class AugmentedContact(PenaltyContact):
         u = q.reshape(self.mesh.num_points, -1)[:, self.fields_.columns(self.u)]
         f = self.forces(u, self._state, self.lam_n, self.lam_t)
         self._inner += 1
-        if not self._settled(f, self._last) and self._inner < INNER_LIMIT:
+        # (rows per rank: every rank's pairs settled, the largest change and force)
+        settled = self._settled(f, self._last)
+        if not self.whole:
+            settled = self.values.comm.allreduce(settled, op=MPI.LAND)
+        if not settled and self._inner < INNER_LIMIT:
             return True
         self._inner = 0
         change = max(float(np.abs(f["pN"] - self.lam_n).max(initial=0.0)),
                      float(np.abs(f["t"] - self.lam_t).max(initial=0.0)))
-        scale = max(float(f["pN"].max(initial=0.0)), 1e-300)
+        scale = float(f["pN"].max(initial=0.0))
+        if not self.whole:
+            change = self.values.comm.allreduce(change, op=MPI.MAX)
+            scale = self.values.comm.allreduce(scale, op=MPI.MAX)
+        scale = max(scale, 1e-300)
         if change <= self.spec.augmentation_tolerance * scale:
             return False
         if self.augmentations >= self.spec.max_augmentations:

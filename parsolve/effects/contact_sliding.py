@@ -44,13 +44,18 @@ span's: ``row_terms``), so that a sliding step converges quadratically.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
+from parsolve.contact.distributed import facet_extent, facet_index, update_near
 from parsolve.contact.geometry import facet_terms, local_terms
 from parsolve.contact.pairing import in_spans, pair_nodes, pair_on
 from parsolve.contact.rows import normal_values, repeated, rows_differ, span_combination
 from parsolve.contact.sliding import fit_mortar, frame_of, make_spans, merged, \
     mortar_waiting, near_edge, outside_spans, pad, reference_frame, respan
+from parsolve.contact.surfaces import Surfaces
+from parsolve.errors import SolverError
 
 # finite sliding: the rows' fixed point: their coefficients to TOL_ROWS, their gaps to TOL_GAP ×
 # the largest master facet (the span's radius would make the iterations depend on it)
@@ -74,13 +79,75 @@ class FiniteSliding:
     reads: ``span``, ``pairing``, the rows and relations, ``values``, ``fields_``)."""
 
     def _current_points(self, q: np.ndarray) -> np.ndarray:
-        """The surfaces' nodes in the current configuration X + u (every rank the same)."""
-        sp, f = self.span, self.fields_
-        dim = self.mesh.dim
-        m = sp.surf.ids.size
-        dofs = np.repeat(sp.surf.ids, dim) * f.ncomp + f.offset[self.u] + np.tile(np.arange(dim), m)
-        u = self.values.rows(dofs, np.arange(m * dim), np.ones(m * dim), m * dim, q)
-        return sp.surf.points + u.reshape(m, dim)
+        """This rank's surfaces (its slaves, the master facets near them) in the current
+        configuration X + u, made again first when master facets came near (``_follow``).
+        Collective."""
+        if self.spec.obstacle is None:
+            self._follow(q)
+        return self.span.surf.points + self._surface_u(q)
+
+    def _surface_u(self, q: np.ndarray) -> np.ndarray:
+        """u at this rank's surface nodes, from their owners (one plan per surface)."""
+        ids, f, dim = self.span.surf.ids, self.fields_, self.mesh.dim
+        if "surface" not in self._fetches:
+            dofs = (ids[:, None] * f.ncomp + f.offset[self.u] + np.arange(dim)).ravel()
+            self._fetches["surface"] = self._fetch(dofs)
+        return self._fetches["surface"](q).reshape(ids.size, dim)
+
+    def _follow(self, q: np.ndarray) -> None:
+        """The master facets that came within reach of this rank's slaves on the current
+        configuration sent to it (``dist.update_near``: every rank's box gathered, a facet
+        sent once to a rank), and the local surfaces made again with them (``_resurface``).
+        Collective."""
+        f, dim, ids, pts = self.fields_, self.mesh.dim, self._mine[0], self._mine[1]
+        if "mine" not in self._fetches:   # (this rank's own master facets)
+            dofs = (ids.reshape(-1, 1) * f.ncomp + f.offset[self.u] + np.arange(dim)).ravel()
+            self._fetches["mine"] = self._fetch(dofs)
+        self._mine_x = pts + self._fetches["mine"](q).reshape(pts.shape)
+        surf = self.span.surf
+        own = surf.compact(self._own_ids)
+        slave_x = surf.points[own] + self._surface_u(q)[own]
+        near, new = update_near(self.values.comm, self._near, slave_x, self._mine,
+                                self._mine_x, self._reach)
+        if new:
+            self._resurface(near)
+
+    def _resurface(self, near) -> None:
+        """This rank's surfaces made again with the master facets ``near`` (those it had and
+        more, in the canonical order): every compact node number and facet index of its state
+        renumbered (facets keep their relative order, nodes their input-id order)."""
+        sp, old = self.span, self.span.surf
+        parts = [(old.ids, old.points), (near.ids, near.pts)]
+        surf = Surfaces.of(parts)
+        old_facets = old.ids[sp.facets]
+
+        def node(c):
+            return None if c is None else _mapped(c, lambda v: surf.compact(old.ids[v]))
+
+        def facet(i):
+            return None if i is None else _mapped(i, lambda v: facet_index(near.ids,
+                                                                           old_facets[v]))
+
+        def pairing(p):
+            if p is None:
+                return None
+            p = p.subset(np.arange(len(p)))
+            p.slave, p.master, p.facet = node(p.slave), node(p.master), facet(p.facet)
+            return p
+        self.span = replace(sp, surf=surf, slave=node(sp.slave), facets=surf.compact(near.ids),
+                            facet_ids=facet(sp.facet_ids), slave_facets=node(sp.slave_facets),
+                            _repeated={})
+        self._facet_now, self._facet_committed = facet(self._facet_now), \
+            facet(self._facet_committed)
+        self._left = facet(self._left)
+        self._compact, self._compact_committed, self._hold = \
+            pairing(self._compact), pairing(self._compact_committed), pairing(self._hold)
+        if getattr(self, "_start_point", None) is not None:
+            master0, weights0, point0 = self._start_point
+            self._start_point = (node(master0), weights0, point0)
+        self._near = near
+        self._learn(near)
+        self._fetches.pop("surface", None)
 
     def _repair(self, q: np.ndarray, start: bool = False):
         """Finite sliding: the slaves paired on the current configuration X + u (compact
@@ -92,8 +159,8 @@ class FiniteSliding:
         clipped to the facet's end (as small sliding keeps its first pairing). The spans are
         made again when a slave leaves its span, or (``start``: a step's start) nears its edge
         (``_respan_if``)."""
+        x = self._current_points(q)   # (first: it may make the surfaces again)
         sp, ft = self.span, self.mesh.facet_type
-        x = self._current_points(q)
         if self.spec.obstacle is not None:   # projected again on the obstacle
             p = self._project(x, sp.slave)
             if sp.reference is not None:
@@ -126,33 +193,37 @@ class FiniteSliding:
         self._respan_if(x, p, outside, start)
         return p, x
 
-    def _with_uncovered(self, surf, p, facets: np.ndarray):
-        """Finite sliding, node-to-segment, at the start: p (every slave, compact) with the
-        slaves that no facet faces yet but that are within the search radius of one kept too,
-        *uncovered* (``_uncover``: no row until a facet faces them, e.g. a die's overhang
-        dragged onto the slab); the spans set (``make_spans``)."""
+    def _with_uncovered(self, surf, p, facets: np.ndarray, length: float):
+        """Finite sliding, node-to-segment, at the start: p (this rank's slaves, compact) with
+        the slaves that no facet faces yet but that are within the search radius of one kept
+        too, *uncovered* (``_uncover``: no row until a facet faces them, e.g. a die's overhang
+        dragged onto the slab); the spans set (``make_spans``; ``length``: the largest master
+        facet)."""
         near = pair_nodes(surf.points, p.slave, facets, self.mesh.facet_type,
-                          self.spec.search_radius, tol=np.inf)   # the nearest, clipped
+                          self._radius, tol=np.inf)   # the nearest, clipped
         keep = p.paired | near.paired
         p, near = p.subset(keep), near.subset(keep)
         self._covered = p.paired.copy()
         for name in p.__dataclass_fields__:
             getattr(p, name)[~self._covered] = getattr(near, name)[~self._covered]
         self._hold = p.subset(np.arange(len(p)))   # (a copy) where the uncovered wait
-        self.span = make_spans(surf, p, facets, self.spec.search_radius)
+        self.span = make_spans(surf, p, facets, self._radius, length)
         self._uncover(p)
         return p
 
-    def _mortar_with_uncovered(self, surf, p, facets: np.ndarray, slave_facets: np.ndarray):
-        """Finite sliding, mortar, at the start: the rows p (compact) and, uncovered, the slave
-        surface's nodes that no row holds yet but whose span is not empty
-        (``sliding.mortar_waiting``); the spans set."""
-        waiting = mortar_waiting(surf, p, facets, self.mesh.facet_type, self.spec.search_radius,
-                                 slave_facets)
+    def _mortar_with_uncovered(self, surf, p, facets: np.ndarray, slave_facets: np.ndarray,
+                               slaves: np.ndarray, slave_reach: float, length: float):
+        """Finite sliding, mortar, at the start: the rows p (compact) and, uncovered, the
+        nodes ``slaves`` (this rank's) that no row holds yet but whose span is not empty
+        (``sliding.mortar_waiting``); the spans set (the whole surfaces' ``slave_reach`` and
+        ``length``)."""
+        waiting = mortar_waiting(surf, p, facets, self.mesh.facet_type,
+                                 self._radius + slave_reach, slaves)
         p = merged(p, waiting)
         self._covered = ~np.isin(p.slave, waiting.slave)
         self._hold = p.subset(np.arange(len(p)))
-        self.span = make_spans(surf, p, facets, self.spec.search_radius, slave_facets)
+        self.span = make_spans(surf, p, facets, self._radius, length, slave_facets,
+                               slave_reach)
         self._uncover(p)
         self._compact = p
         return p
@@ -192,9 +263,16 @@ class FiniteSliding:
         """Finite sliding, mortar: the rows made again on the current configuration x, on the
         fixed set of slaves (``sliding.fit_mortar``: a slave no master facet covers any more
         keeps its last row)."""
-        sp = self.span
-        p, found = fit_mortar(self._mortar(x, sp.slave_facets, sp.facets).pairing,
-                              self._compact, x)
+        sp, comm = self.span, self.values.comm
+        radius = self.spec.search_radius
+        if radius is None:   # (the whole surfaces' largest facet on x)
+            radius = max(facet_extent(comm, self._mine_x), facet_extent(comm, x[sp.slave_facets]))
+        new = self._mortar(x, sp.slave_facets, sp.facets, radius,
+                           self._master_half(self._mine_x)).pairing
+        if comm.allreduce(len(new)) == 0:
+            raise SolverError("no mortar row left: the Newton iterate carried every slave of "
+                              "the contact off the master (the iterates diverged)")
+        p, found = fit_mortar(new, self._compact, x)
         if sp.reference is not None:
             reference_frame(p, sp.reference)
         self._cover(p, found)
@@ -227,15 +305,18 @@ class FiniteSliding:
         """The slaves that went back and forth between two master facets at least twice in
         the failed attempt and still did in its last ``RECENT`` re-pairings: node-to-segment
         holds each on one facet, and it slides off into the other at each solve."""
-        if self._returns is None:
+        if self.any_rank(self._returns is None):
             return []
         still = self._repairings - self._last_return <= RECENT
         cycling = np.flatnonzero((self._returns >= 2) & still)
-        if cycling.size == 0:
+        mine = np.column_stack([self.span.surf.ids[self.span.slave[cycling]],
+                                self._returns[cycling]])
+        every = np.concatenate(self.values.comm.allgather(mine))   # (a few nodes per rank)
+        if every.shape[0] == 0:
             return []
-        nodes = self.span.surf.ids[self.span.slave[cycling]]
-        listed = ", ".join(f"{int(n)} ({int(k)} times)" for n, k in
-                           zip(nodes[:5], self._returns[cycling][:5]))
+        every = every[np.argsort(every[:, 0], kind="stable")]
+        nodes = every[:, 0]
+        listed = ", ".join(f"{int(n)} ({int(k)} times)" for n, k in every[:5])
         listed += ", ..." * (nodes.size > 5)
         return [f"{self.source}: {self.spec.key}: slave node(s) {listed}"
                 " went back and forth between two master facets until the end, as at a "
@@ -250,7 +331,7 @@ class FiniteSliding:
         tells the solver."""
         if outside.any() or start and near_edge(self.span, x):
             self.span = respan(self.span, x, p)
-            self._restructuring = self.restructured = True
+            self._restructuring = True
 
     def _tangential_offset(self, x: np.ndarray, p) -> np.ndarray:
         """t_j · (x_s − x_m0): the slave's tangential distance, on the current configuration
@@ -275,19 +356,22 @@ class FiniteSliding:
         3D (node-to-face): two stick rows per slave, along the slip direction s and across
         it (``_tangent_coefs``, over the span), holding both components of the slip since
         the step's start (``_stick_values``)."""
-        sp = self.span
         p, x = self._repair(q, start)
+        sp = self.span
         if start:
             self._start_point = (p.master.copy(), p.weights.copy(), p.point.copy())
         self._count_returns(p.facet, start)
         self._facet_now = p.facet.copy()
         self.du = self._tangential_offset(x, p)
         self._geo = (x, p.slave.copy(), p.master.copy())   # compact ids (geometric stiffness)
-        p = sp.surf.to_input(p)
+        p = self.span.surf.to_input(p)
         nrows, trows = self._rows(p.normal, p), self._span_tangent_rows(p)
-        if self._restructuring:   # the rows' new entries (values: set below and by the hooks)
+        # the rows' new entries (values: set below and by the hooks), on every rank when
+        # one made its spans again (its relations and terms are laid out together)
+        if self.any_rank(self._restructuring):
+            self.restructured = True
             self._set_entries(p, nrows, trows)
-        p.gap = p.gap - self.values.rows(self.n_dofs, nrows.row, nrows.coef, nrows.nrows, q)
+        p.gap = p.gap - self._read_rows(self.n_dofs, nrows.row, nrows.coef, nrows.nrows, q)
         old = (self.nrows, self.pairing.gap, self.trows)
         self.pairing, self.nrows, self.trows = p, nrows, trows
         self.normal.a_vals[:] = nrows.coef
@@ -317,17 +401,19 @@ class FiniteSliding:
         on the geometry (``_tangential_offset``: du in (t1, t2), whose components along s and
         n × s are s·du and (−s₂, s₁)·du), so that a row linearised at q reads zero slip."""
         if self.span is None:
-            return self.values.relation(self.tangent, self.q_start)
+            return self._relation_values(self.tangent, self.q_start)
         s, du = self.direction, self.du
         slip = np.column_stack([np.einsum("mj,mj->m", s, du),
                                 s[:, 0] * du[:, 1] - s[:, 1] * du[:, 0]]).ravel()
-        return self.values.relation(self.tangent, self._q_slide) - slip
+        return self._relation_values(self.tangent, self._q_slide) - slip
 
     def _set_entries(self, p, nrows, trows) -> None:
         """The relations' entries (A's and D's rows and DOFs) over spans made again (p the
         current pairing, input ids; nrows, trows its normal and tangential rows over them);
         their values zero until ``_slide`` and the hooks set them."""
         self._restructuring = False
+        for key in [k for k in self._fetches if not isinstance(k, str)]:
+            del self._fetches[key]   # (the plans of the rows' old entries)
         self.n_dofs, self.t_dofs = self._row_dofs(nrows), self._row_dofs(trows)
         zero_dual = self.normal.dual is not None
         self.normal.set_entries(nrows.row, self.n_dofs, zero_dual)
@@ -400,3 +486,11 @@ class FiniteSliding:
                 return v + mu * ln * sv - lt * tangents[:, 0]
             return v + (mu * ln - lt[:, :1]) * sv - lt[:, 1:] * np.cross(normal, sv)
         return force_of
+
+
+def _mapped(values: np.ndarray, f) -> np.ndarray:
+    """values with f applied to its entries ≥ 0 (−1: none, kept)."""
+    out = np.array(values, dtype=np.int64, copy=True)
+    ok = out >= 0
+    out[ok] = f(out[ok])
+    return out

@@ -80,7 +80,7 @@ def test_spans_made_again_around_the_moved_slaves():
     master = np.setdiff1d(np.arange(points.shape[0]), slaves)
     surf = Surfaces(100 + np.arange(points.shape[0]), points)   # input ids ≠ compact
     p = pair_nodes(points, slaves, facets, "line", 0.6)
-    sp = make_spans(surf, p, facets, 0.6)
+    sp = make_spans(surf, p, facets, 0.6, 1.0)
     assert not near_edge(sp, points)
     for shift, moved, together in ((0.1, False, False), (0.4, True, False),
                                    (0.4, False, True)):

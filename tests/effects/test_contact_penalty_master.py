@@ -79,12 +79,11 @@ def written(path_of, writer, *args) -> str:
 
 
 def split_pairs(effect) -> int:
-    """Pairs whose slave node and some master node have different owners (every rank)."""
+    """Pairs whose slave node and some master node have different owners (each rank holds
+    the pairs of the slave nodes it owns; every rank the count)."""
     p, values = effect.pairing, effect.values
-    ids = np.concatenate([p.slave[:, None], p.master], axis=1)
-    own, _ = values.owned_nodes(ids.ravel())
-    owner = values.node_sum(ids.ravel(), np.where(own, float(COMM.rank), 0.0)).reshape(ids.shape)
-    return int(np.count_nonzero(np.any(owner[:, 1:] != owner[:, :1], axis=1)))
+    own, _ = values.owned_nodes(p.master.ravel())
+    return COMM.allreduce(int(np.count_nonzero(~own.reshape(p.master.shape).all(axis=1))))
 
 
 def contact_effect(run):

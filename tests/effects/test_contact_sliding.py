@@ -273,7 +273,8 @@ def test_spans_made_again_with_a_step_cut(run, monkeypatch):
     monkeypatch.setattr(sliding, "respan", lambda *a: respanned.add(attempt[0]) or respan(*a))
     res = run(ironing(0.1), name="cut_respan")
     assert ref["steps/cuts"].sum() >= 2 and np.all(ref["timings/pattern"] == 0.0)
-    assert failed & respanned            # spans made again in an attempt that failed
+    # spans made again in an attempt that failed (by the ranks holding the die's slaves)
+    assert MPI.COMM_WORLD.allreduce(bool(failed & respanned), op=MPI.LOR)
     for key in ("steps/cuts", "steps/time", "steps/iterations", "fields/ironing_state"):
         np.testing.assert_array_equal(res[key], ref[key])
     for key in ("displacement", "ironing_normal_reaction", "ironing_tangential_reaction"):
