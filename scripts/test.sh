@@ -23,13 +23,15 @@ for n in 2 3; do
   echo "== pytest, $n ranks (tests marked serial are skipped)"
   parallel "$n" tests "$@"
 done
-echo "== pytest, 4 ranks (oversubscribed): partition independence, distributed mesh, empty regions, relation owners"
+echo "== pytest, 4 ranks (oversubscribed): partition independence, distributed mesh, empty regions, relation owners, per-rank relation and contact counts"
 # every shipped scene at 4 ranks against 1 rank, on both partitioners; ranks holding none of
 # a load's or relation's region
 parallel 4 tests/solvers/test_rank_independence.py tests/mesh/test_distribute.py \
   tests/mesh/test_partition.py tests/mesh/test_empty_parts.py tests/effects/test_empty_regions.py \
   tests/mesh/test_slices.py tests/mesh/test_mesh_cli.py tests/la/test_relation_owners.py \
-  tests/la/test_relation_set.py tests/la/test_relation_memory.py "$@"
+  tests/la/test_relation_set.py tests/la/test_relation_memory.py \
+  tests/relation_kinds/test_global_rows.py tests/mesh/test_xdmfmesh.py \
+  tests/contact/test_sliding_per_rank.py tests/contact/test_obstacle_rows_per_rank.py "$@"
 echo "== docs: generated pages checked, mkdocs build --strict"
 bash scripts/docs.sh
 echo "== benchmarks, smoke (every scripts/bench_*.py at its smallest size)"

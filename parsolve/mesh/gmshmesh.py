@@ -30,6 +30,14 @@ from parsolve.mesh.topology import orient_cells
 _KEY = "mesh.file"
 
 
+def read_rows(array: np.ndarray, have: tuple[int, int], start: int, stop: int) -> np.ndarray:
+    """The rows ``start:stop`` a slice source read at its start (``have``): the slice path asks
+    for this rank's rows only, so any other range is a caller's error."""
+    if (start, stop) != have:
+        raise ValueError(f"rows {start}:{stop} asked, {have[0]}:{have[1]} read")
+    return array
+
+
 @dataclass
 class Plan:
     """Which blocks are cells, facets, lower-dimensional groups; the groups' names."""
@@ -167,11 +175,7 @@ class GmshSlices:
     def facet_slice(self, name: str, rank: int, size: int) -> tuple[np.ndarray, np.ndarray]:
         return self._facets[name]
 
-    @staticmethod
-    def _mine(array: np.ndarray, have: tuple[int, int], start: int, stop: int) -> np.ndarray:
-        if (start, stop) != have:   # the slice path asks for this rank's rows only
-            raise ValueError(f"rows {start}:{stop} asked, {have[0]}:{have[1]} read")
-        return array
+    _mine = staticmethod(read_rows)
 
 
 def cell_flags(lay: Layout, plan: Plan, fh, start: int, stop: int) -> np.ndarray:

@@ -28,7 +28,7 @@ import numpy as np
 from parsolve.collective import agree
 from parsolve.errors import InputError
 from parsolve.mesh.blocks import exchange
-from parsolve.mesh.gmshmesh import _oriented, _planar
+from parsolve.mesh.gmshmesh import _oriented, _planar, read_rows
 from parsolve.mesh.mesh import CELL_INFO
 from parsolve.mesh.partition import block_starts
 from parsolve.mesh.topology import NUM_VERTICES, sorted_row_groups
@@ -201,11 +201,7 @@ class XdmfSlices:
     def facet_slice(self, name: str, rank: int, size: int) -> tuple[np.ndarray, np.ndarray]:
         return self._facets[name]
 
-    @staticmethod
-    def _mine(array: np.ndarray, have: tuple[int, int], start: int, stop: int) -> np.ndarray:
-        if (start, stop) != have:   # the slice path asks for this rank's rows only
-            raise ValueError(f"rows {start}:{stop} asked, {have[0]}:{have[1]} read")
-        return array
+    _mine = staticmethod(read_rows)
 
 
 def _in_range(cells: np.ndarray, num_points: int, path: str, key: str) -> None:
