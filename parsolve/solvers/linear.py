@@ -123,11 +123,14 @@ def preset_options(preset: str, symmetric: bool, has_multipliers: bool,
         # four Chebyshev steps per level (PETSc's default: 2): 25 -> 20 Krylov iterations per
         # solve on the 3D friction box at 1x, fewer V-cycles for twice the smoothing
         "fieldsplit_q_mg_levels_ksp_max_it": "4",
-        # point-block Jacobi in them: K holds 3D friction's cross stiffness κ (n × s)(n × s)ᵀ
-        # (κ up to 1e4 times the surface's stiffness, on a mix of a node's x and y) and finite
-        # sliding's geometric stiffness, both within a node's block; scalar Jacobi leaves the
-        # mix unsmoothed (the 8× friction box: 208-210 per solve, 16-25 with node blocks)
-        "fieldsplit_q_mg_levels_pc_type": "pbjacobi",
+        # Jacobi on each row's largest entry: K holds 3D friction's cross stiffness
+        # κ (n × s)(n × s)ᵀ (κ up to 1e4 times the surface's stiffness, on a mix of a node's
+        # x and y) and finite sliding's geometric stiffness since they are terms; on the
+        # diagonal alone that mix was unsmoothed (the 8× friction box: 208-210 Krylov
+        # iterations per solve; rowmax: 16-30). Point-block Jacobi did better (16-20) but a
+        # coarse level's 6×6 blocks (an aggregate's rigid modes) were singular on the coarsened
+        # mortar sphere at 3 ranks
+        "fieldsplit_q_mg_levels_pc_jacobi_type": "rowmax",
         "fieldsplit_lambda_ksp_type": "preonly",
         "fieldsplit_lambda_pc_type": "jacobi",
         # the condensed preconditioner's V-cycle on S (solvers.condensed), when every relation

@@ -1,23 +1,22 @@
 """Krylov iterations of the augmented form (solvers.augmented) on the 3D friction box refined
 2× per direction (8× the cells, 2,535 DOFs), its first step, forced off the condensed
 preconditioner: every solve within a bound set from docs/performance.md's table (16 / 23.4 / 25
-per solve at 8×, here 16-20 at 1-3 ranks), and the answers the direct preset's.
+per solve at 8× then; 16-30 now), and the answers the direct preset's.
 
 The regression this guards: 3D friction's cross stiffness κ (n × s)(n × s)ᵀ (κ up to 1e4 times
 the surface's stiffness, on a mix of a node's x and y DOFs) sits in K since it became a term;
 the V-cycle's scalar Jacobi smoothing left that mix unsmoothed, and the solves of the nodes'
-first free slide took 208-210 iterations each. Point-block Jacobi (a node's 3×3 block) in the
+first free slide took 208-210 iterations each. Jacobi on each row's largest entry in the
 Chebyshev smoother takes it (solvers.linear's preset). Iteration counts do not depend on timing.
 """
-
-import pytest
 
 from helpers.scene import scene, shipped
 from parsolve.solvers import linear
 from solvers.test_iterative_scenes import assert_same_answers
 
-#: docs/performance.md: at most 25 per solve at 8× on the augmented form; the regression: 210
-BOUND = 30
+#: docs/performance.md: at most 25 per solve at 8× on the augmented form (30 measured now, at
+#: 1 rank); the regression: 210
+BOUND = 36
 
 
 def _box(refine: int = 2) -> str:
@@ -51,14 +50,10 @@ def test_friction_box_augmented_iterations_bounded(run, comm, monkeypatch):
     assert_same_answers(iterative, direct)
 
 
-@pytest.mark.parametrize("smoother, bound", [("jacobi", 150), ("pbjacobi", BOUND)])
-def test_the_smoother_is_what_takes_the_cross_stiffness(run, comm, monkeypatch, smoother,
-                                                        bound):
-    """The same solves with the V-cycle's smoother set explicitly: scalar Jacobi (the preset
-    before) takes over 150 iterations on some solve, point-block Jacobi (the preset) at most
-    BOUND: the test above would see the regression."""
+def test_the_diagonal_alone_is_the_regression(run, comm, monkeypatch):
+    """The same solves with the V-cycle's Jacobi on the diagonal (the preset before): over 150
+    iterations on some solve, so the test above sees the regression."""
     counts = _counted(monkeypatch)
     run(_box(), "smoother", comm, solver={"preset": "iterative"},
-        options={"condensed": "false", "fieldsplit_q_mg_levels_pc_type": smoother})
-    assert (max(counts) > bound) == (smoother == "jacobi"), counts
-    assert max(counts) <= 1000   # (GMRES converged: the preset's max_it)
+        options={"condensed": "false", "fieldsplit_q_mg_levels_pc_jacobi_type": "diagonal"})
+    assert 150 < max(counts) <= 1000, counts   # (GMRES converged: the preset's max_it)
