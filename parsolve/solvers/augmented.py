@@ -192,6 +192,41 @@ class AugmentedMatrix:
         return add
 
 
+#: the finest level's smoother option of the V-cycle on the stiffness block (its number: the
+#: hierarchy's levels less one), and any level's (set: the scene's or the command line's choice)
+FINEST = "fieldsplit_q_mg_levels_{}_pc_type"
+ANY_LEVEL = "fieldsplit_q_mg_levels_pc_type"
+
+
+def finest_smoother(pc: PETSc.PC, settings: dict[str, str]) -> dict[str, str] | None:
+    """The settings with point-block Jacobi (a node's block inverted) in the Chebyshev smoother
+    of the V-cycle's finest level, when the fieldsplit's GAMG hierarchy is set up without it;
+    None when it has it, or is no such V-cycle, or a level smoother is chosen in ``settings``.
+    Call with the options inserted (it sets the V-cycle up).
+
+    K holds 3D friction's cross stiffness κ (n × s)(n × s)ᵀ (κ up to 1e4 times the surface's
+    stiffness: ``contact.friction.KAPPA_MAX``) on a mix of a node's x and y, and finite sliding's
+    geometric stiffness, since both are terms (``effects.row_terms``): Jacobi on the diagonal
+    leaves that mix unsmoothed (the friction box at 8×: 208-210 Krylov iterations per solve;
+    at 64×: 214-240 with rowmax on every level). Only the finest level: a coarse level's blocks
+    are its aggregates' (six rigid modes), singular for an aggregate of one or two nodes (the
+    coarsened mortar sphere at 3 ranks failed); the level's number is known once GAMG has
+    coarsened."""
+    if pc.getType() != "fieldsplit" or ANY_LEVEL in settings:
+        return None
+    q = pc.getFieldSplitSubKSP()[0]
+    if q.getPC().getType() != "gamg":
+        return None
+    q.setUp()   # (the fieldsplit sets its blocks' solvers up at their first use)
+    key = FINEST.format(q.getPC().getMGLevels() - 1)
+    if settings.get(key) == "pbjacobi":
+        return None
+    stale = FINEST.format("")[:-len("_pc_type")]
+    kept = {k: v for k, v in settings.items()
+            if not (k.startswith(stale) and k.endswith("_pc_type") and v == "pbjacobi")}
+    return {**kept, key: "pbjacobi"}
+
+
 def _within(mat: PETSc.Mat, extra: PETSc.Mat) -> bool:
     """Whether every entry of ``extra`` (same layout) is in the pattern of ``mat``, on this
     rank: the rows of ``extra`` that have entries (a few, the constrained DOFs) taken out of
