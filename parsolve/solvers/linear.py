@@ -26,7 +26,7 @@ from parsolve import progress
 from parsolve.errors import SolverError
 from parsolve.solvers import factor_log
 from parsolve.solvers import options as opt
-from parsolve.solvers.augmented import GAMMA, finest_smoother
+from parsolve.solvers.augmented import GAMMA, level_smoothers
 from parsolve.solvers.condensed import CondensedPreconditioner
 
 
@@ -127,8 +127,8 @@ def preset_options(preset: str, symmetric: bool, has_multipliers: bool,
         # κ (n × s)(n × s)ᵀ (κ up to 1e4 times the surface's stiffness, on a mix of a node's
         # x and y) and finite sliding's geometric stiffness since they are terms; on the
         # diagonal alone that mix was unsmoothed (the 8× friction box: 208-210 Krylov
-        # iterations per solve); the finest level takes point-block Jacobi
-        # (solvers.augmented.finest_smoother)
+        # iterations per solve); levels whose node blocks are invertible take point-block
+        # Jacobi (solvers.augmented.level_smoothers)
         "fieldsplit_q_mg_levels_pc_jacobi_type": "rowmax",
         "fieldsplit_lambda_ksp_type": "preonly",
         "fieldsplit_lambda_pc_type": "jacobi",
@@ -265,7 +265,7 @@ class LinearSolver:
                     # KSPSetUp does not set the PC up again once it has solved: PCSetUp does,
                     # when the operator's values changed (the factorization, timed here)
                     self.ksp.getPC().setUp()
-                    smoother = finest_smoother(self.ksp.getPC(), self.settings)
+                    smoother = level_smoothers(self.ksp.getPC(), self.settings)
                 break
             except PETSc.Error as exc:
                 info = self._mumps_info()

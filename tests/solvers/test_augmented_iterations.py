@@ -63,18 +63,35 @@ def test_the_diagonal_alone_is_the_regression(run, comm, monkeypatch):
     assert 150 < max(counts) <= 1000, counts   # (GMRES converged: the preset's max_it)
 
 
-def test_point_blocks_on_the_finest_level_only(comm):
-    """The V-cycle smooths its finest level with point-block Jacobi on the stiffness block's
-    3×3 node blocks, its coarser levels with (rowmax) Jacobi: a coarse block, an aggregate's
-    six rigid modes, may be singular."""
+def test_point_blocks_on_the_levels_whose_blocks_are_invertible(comm):
+    """The V-cycle smooths with point-block Jacobi on every level of the friction box (its
+    finest on the stiffness block's 3×3 node blocks): no aggregate block is singular here."""
     text = scene(shipped("contact_friction_3d.toml"), steps={"count": 1},
                  solver={"preset": "iterative", "petsc": {"condensed": "false"}})
     _, solver, _, _, _ = solve_in_process(text, comm, options={})
     amg = solver.ksp.getPC().getFieldSplitSubKSP()[0].getPC()
     levels = amg.getMGLevels()
     assert levels >= 2
-    finest = amg.getMGSmoother(levels - 1)
-    assert finest.getPC().getType() == "pbjacobi"
-    assert finest.getOperators()[1].getBlockSize() == 3
-    assert all(amg.getMGSmoother(lv).getPC().getType() == "jacobi"
-               for lv in range(1, levels - 1))
+    assert amg.getMGSmoother(levels - 1).getOperators()[1].getBlockSize() == 3
+    assert all(amg.getMGSmoother(lv).getPC().getType() == "pbjacobi"
+               for lv in range(1, levels))
+
+
+def test_a_singular_block_keeps_scalar_jacobi(comm):
+    """_blocks_invertible: a 3×3 node block of rank 2 (a rank-one κ a aᵀ on a zero block) is
+    refused, the same block plus the identity taken."""
+    from petsc4py import PETSc
+    import numpy as np
+    from parsolve.solvers.augmented import _blocks_invertible
+
+    a = np.array([0.6, 0.8, 0.0])
+    block = 1e4 * np.outer(a, a)
+    out = []
+    for shift in (0.0, 1.0):
+        mat = PETSc.Mat().createBAIJ(((3, None), (3, None)), 3, comm=comm)
+        mat.setUp()
+        lo = mat.getOwnershipRange()[0]
+        mat.setValues(range(lo, lo + 3), range(lo, lo + 3), block + shift * np.eye(3))
+        mat.assemble()
+        out.append(_blocks_invertible(mat))
+    assert out == [False, True]
