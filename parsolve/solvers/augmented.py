@@ -192,6 +192,61 @@ class AugmentedMatrix:
         return add
 
 
+#: a level's smoother option of the V-cycle on the stiffness block (PCMG's numbers: 0 the
+#: coarsest), and any level's (set: the scene's or the command line's choice, kept)
+LEVEL = "fieldsplit_q_mg_levels_{}_pc_type"
+ANY_LEVEL = "fieldsplit_q_mg_levels_pc_type"
+#: a node (or aggregate) block this ill-conditioned is left to scalar Jacobi
+BLOCK_COND = 1e10
+
+
+def level_smoothers(pc: PETSc.PC, settings: dict[str, str]) -> dict[str, str] | None:
+    """The settings with point-block Jacobi (each node's, or coarse aggregate's, diagonal block
+    inverted) in the Chebyshev smoother of every level of the fieldsplit's GAMG V-cycle whose
+    blocks are all invertible, when the hierarchy is set up otherwise; None when it is so
+    already, or is no such V-cycle, or a level smoother is chosen in ``settings``. Call with
+    the options inserted (it sets the V-cycle up; collective).
+
+    K holds 3D friction's cross stiffness κ (n × s)(n × s)ᵀ (κ up to 1e4 times the surface's
+    stiffness: ``contact.friction.KAPPA_MAX``) on a mix of a node's x and y, and finite sliding's
+    geometric stiffness, since both are terms (``effects.row_terms``): Jacobi on the diagonal
+    leaves that mix unsmoothed (the friction box at 8×: 208-210 Krylov iterations per solve,
+    at 64× 206-210 with point blocks on the finest level alone). A coarse level's blocks are
+    its aggregates' (six rigid modes), singular for an aggregate of one or two nodes (the
+    coarsened mortar sphere at 3 ranks): such a level keeps the preset's (rowmax) Jacobi."""
+    if pc.getType() != "fieldsplit" or ANY_LEVEL in settings:
+        return None
+    q = pc.getFieldSplitSubKSP()[0]
+    if q.getPC().getType() != "gamg":
+        return None
+    q.setUp()   # (the fieldsplit sets its blocks' solvers up at their first use)
+    amg = q.getPC()
+    levels = range(1, amg.getMGLevels())
+    blocks = [lv for lv in levels if _blocks_invertible(amg.getMGSmoother(lv).getOperators()[1])]
+    kept = {k: v for k, v in settings.items()
+            if not (k.startswith(LEVEL.format("")[:-8]) and k.endswith("_pc_type"))
+            or k == ANY_LEVEL}
+    chosen = {**kept, **{LEVEL.format(lv): "pbjacobi" for lv in blocks}}
+    return None if chosen == settings else chosen
+
+
+def _blocks_invertible(mat: PETSc.Mat) -> bool:
+    """Whether every diagonal block (the matrix's block size) is well-conditioned, on every
+    rank (a block size of 1: no blocks to invert)."""
+    bs = mat.getBlockSize()
+    ok = bs > 1
+    if ok:
+        indptr, cols, vals = mat.getValuesCSR()
+        n = indptr.size - 1
+        r0 = mat.getOwnershipRange()[0]
+        rows = np.repeat(np.arange(n), np.diff(indptr))
+        inside = cols // bs == (rows + r0) // bs
+        blocks = np.zeros((n // bs, bs, bs))
+        blocks[rows[inside] // bs, rows[inside] % bs, cols[inside] % bs] = vals[inside]
+        ok = bool(n % bs == 0 and (np.linalg.cond(blocks) < BLOCK_COND).all())
+    return bool(mat.getComm().tompi4py().allreduce(ok, op=MPI.LAND))
+
+
 def _within(mat: PETSc.Mat, extra: PETSc.Mat) -> bool:
     """Whether every entry of ``extra`` (same layout) is in the pattern of ``mat``, on this
     rank: the rows of ``extra`` that have entries (a few, the constrained DOFs) taken out of

@@ -26,7 +26,7 @@ from parsolve import progress
 from parsolve.errors import SolverError
 from parsolve.solvers import factor_log
 from parsolve.solvers import options as opt
-from parsolve.solvers.augmented import GAMMA
+from parsolve.solvers.augmented import GAMMA, level_smoothers
 from parsolve.solvers.condensed import CondensedPreconditioner
 
 
@@ -105,6 +105,13 @@ def preset_options(preset: str, symmetric: bool, has_multipliers: bool,
         # four Chebyshev steps per level (PETSc's default: 2): 25 -> 20 Krylov iterations per
         # solve on the 3D friction box at 1x, fewer V-cycles for twice the smoothing
         "fieldsplit_q_mg_levels_ksp_max_it": "4",
+        # Jacobi on each row's largest entry: K holds 3D friction's cross stiffness
+        # κ (n × s)(n × s)ᵀ (κ up to 1e4 times the surface's stiffness, on a mix of a node's
+        # x and y) and finite sliding's geometric stiffness since they are terms; on the
+        # diagonal alone that mix was unsmoothed (the 8× friction box: 208-210 Krylov
+        # iterations per solve); levels whose node blocks are invertible take point-block
+        # Jacobi (solvers.augmented.level_smoothers)
+        "fieldsplit_q_mg_levels_pc_jacobi_type": "rowmax",
         "fieldsplit_lambda_ksp_type": "preonly",
         "fieldsplit_lambda_pc_type": "jacobi",
         # the condensed preconditioner's V-cycle on S (solvers.condensed), when every relation
@@ -237,6 +244,7 @@ class LinearSolver:
                     # KSPSetUp does not set the PC up again once it has solved: PCSetUp does,
                     # when the operator's values changed (the factorization, timed here)
                     self.ksp.getPC().setUp()
+                    smoother = level_smoothers(self.ksp.getPC(), self.settings)
                 break
             except PETSc.Error as exc:
                 info = self._mumps_info()
@@ -253,6 +261,10 @@ class LinearSolver:
                 self.settings = {**self.settings, "mat_mumps_icntl_14": str(margin)}
                 self.notes.append(f"MUMPS workspace too small: margin raised to {margin} %")
         self.timings["factorization"] += time.perf_counter() - t0
+        if smoother is not None:   # (once per V-cycle hierarchy: set up again with it)
+            self.settings = smoother
+            self._restart(mat)
+            return self._prepare()
         self._state = mat.stateGet()
 
     def _precondition(self, mat: PETSc.Mat) -> None:
