@@ -26,7 +26,7 @@ import numpy as np
 from mpi4py import MPI
 
 from parsolve.contact.surfaces import canonical_facets
-from parsolve.la.dofmap import _Exchange
+from parsolve.la.dofmap import GhostExchange
 from parsolve.mesh.blocks import exchange
 from parsolve.relation_kinds.spread import places
 
@@ -102,7 +102,7 @@ class Fetch:
         new_dofs = np.asarray(new_dofs, dtype=np.int64)
         owner = np.searchsorted(ranges, new_dofs, side="right") - 1
         self.n_owned = int(ranges[comm.rank + 1] - ranges[comm.rank])
-        self.plan = _Exchange(comm, new_dofs, owner, int(ranges[comm.rank]))
+        self.plan = GhostExchange(comm, new_dofs, owner, int(ranges[comm.rank]))
 
     def __call__(self, q: np.ndarray) -> np.ndarray:
         """The values from this rank's vector q (its owned DOFs first). Collective."""

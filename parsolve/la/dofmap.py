@@ -86,7 +86,7 @@ def held_keys(saddle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return order, keys[order]
 
 
-class _Exchange:
+class GhostExchange:
     """The plan of the ghost exchange: who sends this rank its ghost DOFs' values (two
     ``Alltoallv`` of buffers per exchange, no pickling)."""
 
@@ -136,7 +136,7 @@ class DofMap:
         self.n_local = n * self.ncomp                       # local primal DOFs (with ghosts)
         order = np.argsort(mesh.global_nodes, kind="stable")
         self._order, self._sorted = order, np.asarray(mesh.global_nodes)[order]
-        self._exchange: _Exchange | None = None
+        self._exchange: GhostExchange | None = None
         self._inputs: tuple | None = None
         self.set_multipliers(np.zeros(self.node_ranges.size - 1, dtype=np.int64))
 
@@ -158,7 +158,7 @@ class DofMap:
         self.l_held = np.concatenate([np.arange(l0, l1), self.l_ghosts])
         self._saddle = None
         self._held_keys = None
-        self._mult_exchange: _Exchange | None = None
+        self._mult_exchange: GhostExchange | None = None
 
     # ------------------------------------------------------------ sizes and ranges
 
@@ -371,12 +371,12 @@ class DofMap:
 
     # ------------------------------------------------------------ exchanges
 
-    def _plan(self) -> _Exchange:
+    def _plan(self) -> GhostExchange:
         if self._exchange is None:   # planned once, on first use (collective)
             nc, n0 = self.ncomp, self.n_owned
             ghosts = np.arange(n0, self.n_local)
             owner = np.repeat(self.ghost_owners(), nc)
-            self._exchange = _Exchange(self.comm, self.new_dof(ghosts), owner,
+            self._exchange = GhostExchange(self.comm, self.new_dof(ghosts), owner,
                                        int(self.q_ranges[self.rank]))
         return self._exchange
 
@@ -399,7 +399,7 @@ class DofMap:
         values fetched from their owners. Collective."""
         if self._mult_exchange is None:   # planned once, on first use (collective)
             owner = np.searchsorted(self.l_ranges, self.l_ghosts, side="right") - 1
-            self._mult_exchange = _Exchange(self.comm, self.l_ghosts, owner,
+            self._mult_exchange = GhostExchange(self.comm, self.l_ghosts, owner,
                                             int(self.l_ranges[self.rank]))
         owned = np.asarray(owned, dtype=float)
         return np.concatenate([owned, self._mult_exchange.forward(owned)])

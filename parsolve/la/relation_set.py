@@ -57,7 +57,7 @@ from collections.abc import Mapping
 import numpy as np
 from mpi4py import MPI
 
-from parsolve.la.dofmap import DofMap, _Exchange
+from parsolve.la.dofmap import DofMap, GhostExchange
 from parsolve.mesh.blocks import exchange
 from parsolve.relations import Relation
 
@@ -619,7 +619,7 @@ class RelationSet:
         if dm.comm.size == 1:
             return out
         owner = np.searchsorted(dm.l_ranges, dm.l_ghosts, side="right") - 1
-        plan = _Exchange(dm.comm, dm.l_ghosts, owner, l0)
+        plan = GhostExchange(dm.comm, dm.l_ghosts, owner, l0)
         got = plan._move(held[l1 - l0:][plan.order], plan.recv_counts, plan.send_counts)
         np.maximum.at(out, plan.asked_of_me, got)
         return out
@@ -676,7 +676,7 @@ class _Fetch:
     def __init__(self, dofmap: DofMap, at: np.ndarray, new_dofs: np.ndarray):
         self.at, self.q0 = at, int(dofmap.q_ranges[dofmap.rank])
         self.n_owned = dofmap.n_owned
-        self.exchange = _Exchange(dofmap.comm, new_dofs, dofmap.owner_of_dofs(new_dofs), self.q0)
+        self.exchange = GhostExchange(dofmap.comm, new_dofs, dofmap.owner_of_dofs(new_dofs), self.q0)
 
     @classmethod
     def plan(cls, dofmap: DofMap, r: Relation) -> "_Fetch | None":
