@@ -178,13 +178,22 @@ class RelationPolicies:
         step's outputs report as carrying nothing (state open), not as stuck."""
         return self.active.active & ~self.left_out
 
+    def _empty_of(self, r) -> np.ndarray:
+        """A relation's rows with no A entry. A spread relation's entries are over the ranks
+        (each holds those on its DOFs): a row is empty only if it is on every rank, else a
+        rank holding none of its entries would take it for empty. Collective for those."""
+        empty = r.empty_rows()
+        if r.spread and self.ctx.comm.size > 1:
+            self.ctx.comm.Allreduce(MPI.IN_PLACE, empty, op=MPI.LAND)
+        return empty
+
     def _empty_rows(self) -> np.ndarray:
         """Per relation row of the active set: no A entry (a finite-sliding slave that no facet
         faces yet): never enforced, whatever its value."""
         rset = self.rset
         empty = np.ones(rset.nrelrows, dtype=bool)
         for k, r in enumerate(self.ctx.multiplied):
-            empty[rset.rows_of(k)] = False if r.collapsed else r.empty_rows()
+            empty[rset.rows_of(k)] = False if r.collapsed else self._empty_of(r)
         return empty
 
     def close_contact(self) -> bool:
@@ -299,7 +308,7 @@ class RelationPolicies:
             # a row with no entry yet (a contact slave that no facet faces) is never enforced
             # until it has some: it takes the sense of the relation's other rows, for good (the
             # sense is decided once; a contact's normal rows all have the sense +1)
-            empty = r.empty_rows()
+            empty = self._empty_of(r)
             if np.any(~empty & (np.abs(rate) <= 1e-12 * max(float(np.abs(rate).max(initial=0.0)), 1e-300))):
                 raise SolverError(f"relation {r.name!r}: its dual does not move its primal value "
                                   "(A K⁻¹ D = 0), so the sense of its reaction is undefined")
