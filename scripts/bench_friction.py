@@ -264,6 +264,8 @@ def bare_penalty(pairing, mu: float, eps: float, dim: int, npoints: int) -> Pena
     part = SimpleNamespace(global_nodes=np.arange(npoints, dtype=np.int64), n_owned=npoints,
                            num_points=npoints)
     eff.values = DofMap(MPI.COMM_SELF, part, dim)
+    eff.whole = True   # the pairing whole on its one rank: the gaps read by node rows
+    eff.mesh = SimpleNamespace(dim=dim)
     eff.eps_n = eff.eps_t = np.full(len(pairing), eps)
     eff.touch, eff.touching = 0.0, np.zeros(len(pairing), bool)   # the closed rule: none here
     eff.bn, eff.bt = gap_gradients(pairing)   # the pairs' gap gradients (set with the tuples)
