@@ -26,7 +26,7 @@ from parsolve import progress
 from parsolve.errors import SolverError
 from parsolve.solvers import factor_log
 from parsolve.solvers import options as opt
-from parsolve.solvers.augmented import GAMMA, level_smoothers
+from parsolve.solvers.augmented import GAMMA, LEVEL, level_smoothers
 from parsolve.solvers.condensed import CondensedPreconditioner
 
 
@@ -244,7 +244,11 @@ class LinearSolver:
                     # KSPSetUp does not set the PC up again once it has solved: PCSetUp does,
                     # when the operator's values changed (the factorization, timed here)
                     self.ksp.getPC().setUp()
-                    smoother = level_smoothers(self.ksp.getPC(), self.settings)
+                    # the V-cycle's smoothers, chosen once per operator (a level's blocks
+                    # are checked on the first set-up, not at every Newton iteration)
+                    smoother = (None if not first and any(k.startswith(LEVEL.format("")[:-8])
+                                                          for k in self.settings)
+                                else level_smoothers(self.ksp.getPC(), self.settings))
                 break
             except PETSc.Error as exc:
                 info = self._mumps_info()
