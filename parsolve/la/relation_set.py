@@ -450,6 +450,15 @@ class RelationSet:
         part = self._owned_part(r, q)
         return self.dofmap.sum_ranks(part) if r.whole else part
 
+    def empty_rows(self, r: Relation) -> np.ndarray:
+        """A relation's rows with no A entry. A spread relation's entries are over the ranks
+        (each holds those on its DOFs): a row is empty only when it is so on every rank.
+        Collective for a spread relation."""
+        empty = r.empty_rows()
+        if r.spread and self.dofmap.comm.size > 1:
+            self.dofmap.comm.Allreduce(MPI.IN_PLACE, empty, op=MPI.LAND)
+        return empty
+
     def row_entries(self, r: Relation, row: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(input DOFs, coefficients, saddle indices) of one row of a whole relation, every
         entry of it on every rank: a spread relation's gathered from the ranks holding them,

@@ -178,22 +178,13 @@ class RelationPolicies:
         step's outputs report as carrying nothing (state open), not as stuck."""
         return self.active.active & ~self.left_out
 
-    def _empty_of(self, r) -> np.ndarray:
-        """A relation's rows with no A entry. A spread relation's entries are over the ranks
-        (each holds those on its DOFs): a row is empty only if it is on every rank, else a
-        rank holding none of its entries would take it for empty. Collective for those."""
-        empty = r.empty_rows()
-        if r.spread and self.ctx.comm.size > 1:
-            self.ctx.comm.Allreduce(MPI.IN_PLACE, empty, op=MPI.LAND)
-        return empty
-
     def _empty_rows(self) -> np.ndarray:
         """Per relation row of the active set: no A entry (a finite-sliding slave that no facet
         faces yet): never enforced, whatever its value."""
         rset = self.rset
         empty = np.ones(rset.nrelrows, dtype=bool)
         for k, r in enumerate(self.ctx.multiplied):
-            empty[rset.rows_of(k)] = False if r.collapsed else self._empty_of(r)
+            empty[rset.rows_of(k)] = False if r.collapsed else self.rset.empty_rows(r)
         return empty
 
     def close_contact(self) -> bool:
@@ -308,7 +299,7 @@ class RelationPolicies:
             # a row with no entry yet (a contact slave that no facet faces) is never enforced
             # until it has some: it takes the sense of the relation's other rows, for good (the
             # sense is decided once; a contact's normal rows all have the sense +1)
-            empty = self._empty_of(r)
+            empty = self.rset.empty_rows(r)
             if np.any(~empty & (np.abs(rate) <= 1e-12 * max(float(np.abs(rate).max(initial=0.0)), 1e-300))):
                 raise SolverError(f"relation {r.name!r}: its dual does not move its primal value "
                                   "(A K⁻¹ D = 0), so the sense of its reaction is undefined")
@@ -327,12 +318,13 @@ class RelationPolicies:
             out.append((row, k) + self.rset.row_entries(self.ctx.multiplied[k], local)[:2])
         return out
 
-    def enforced_cells(self) -> np.ndarray:
+    def enforced_cells(self, rows: list | None = None) -> np.ndarray:
         """Positions (in this rank's cells) of the cells measured by the enforced rows of the
-        maximum groups: the cells all of whose nodes carry an entry of such a row."""
+        maximum groups (``rows``: ``enforced_rows()``, if already read): the cells all of whose
+        nodes carry an entry of such a row."""
         ctx = self.ctx
         marked = np.zeros(ctx.mesh.num_points, dtype=bool)
-        for _, _, dofs, _ in self.enforced_rows():   # (input DOFs: this rank's nodes of them)
+        for _, _, dofs, _ in self.enforced_rows() if rows is None else rows:   # (input DOFs: this rank's nodes of them)
             marked |= ctx.local_vector(dofs, np.ones(dofs.size)).reshape(-1, ctx.ncomp).any(axis=1)
         return np.flatnonzero(marked[ctx.mesh.cells[ctx.cells]].all(axis=1))
 
@@ -350,14 +342,15 @@ class RelationPolicies:
         loading from unloading (and a perturbed cell would break a symmetric tie)."""
         ctx = self.ctx
         delta = np.zeros(ctx.ndof)
-        for row, k, dofs, a in self.enforced_rows():
+        rows = self.enforced_rows()   # (a spread row's entries gathered once)
+        for row, k, dofs, a in rows:
             rel, local = ctx.multiplied[k], self.rset.locate(row)[1]
             b = rel.rhs(t_prev)[local]
             value = ctx.relation_primal(rel, q)[local]   # A q of the row (collective)
             size = 1e-10 * max(abs(float(value)), abs(float(b)), 1e-300)
             delta += ctx.local_vector(dofs, self.active.sign[row] * a * size / max(float(a @ a), 1e-300))
         loading = ctx.composition.evaluate(q + delta, states, False, self.system.rate)[2]
-        return _CellReplaced(kmat, loading, self.enforced_cells())
+        return _CellReplaced(kmat, loading, self.enforced_cells(rows))
 
     def predict_maximum_rows(self, t: float, kmat, q: np.ndarray) -> None:
         """For each maximum relation, enforce the row that reaches its value first under the
