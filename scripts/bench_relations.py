@@ -796,8 +796,8 @@ def report(rows: list, results: list, machine: dict, load0, gamma_rows: list | N
              "primal operator; "
              "`parsolve/solvers/condensed.py`), else `augmented` (GMRES on the augmented "
              "Lagrangian form T M x = T b, γ = 3 on the rows of one node, its Schur fieldsplit: "
-             "one GAMG V-cycle, threshold 0, four Chebyshev steps per level (point-block Jacobi where the node "
-             "blocks are invertible), on "
+             "one GAMG V-cycle, threshold 0, four Chebyshev steps per level (point-block "
+             "Jacobi where the node blocks are invertible), on "
              "K + γ/k Aₕᵀ Aₕ, Jacobi on the sparse Schur approximation; "
              "`parsolve/solvers/augmented.py`). Where it condenses, the same run forced onto "
              "the augmented form (`-condensed false`) stands beside it.", "",

@@ -501,7 +501,8 @@ class Contact(FiniteSliding, Effect):
 
     def sum_ranks(self, x):
         """Σ over the ranks of a sum over this rank's rows (rows built per rank: the relations
-        form always; a whole pairing, the penalty baseline's, sums its own: ``PenaltyContact._sum``)."""
+        form always; a whole pairing, the penalty baseline's, sums its own:
+        ``PenaltyContact._sum``)."""
         return self.values.comm.allreduce(x, op=MPI.SUM)
 
     def any_rank(self, x: bool) -> bool:
