@@ -233,7 +233,7 @@ def matrix_pieces(solver) -> dict[str, float]:
     pc = ksp.getPC()
     if pc.getType() == "python" and solver.condensed is not None:   # (solvers.condensed)
         out["condensed S"] = size(solver.condensed.S)
-        mg = solver.condensed.amg
+        mg = solver.condensed.amg.pc
     elif pc.getType() == "fieldsplit":
         kq, kl = pc.getFieldSplitSubKSP()
         out["fieldsplit q block"] = size(kq.getOperators()[1])

@@ -31,12 +31,12 @@ node is owned by the rank that owns the row (checked: else the system is not con
 from __future__ import annotations
 
 import atexit
-from contextlib import contextmanager
-from typing import Iterator
 
 import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
+
+from parsolve.solvers.vcycle import VCycle
 
 #: why a system is not condensed, in words; the largest code over the ranks wins (a row that
 #: ties several nodes is the plainest reason, a row across ranks the least)
@@ -53,19 +53,6 @@ REASONS = {
 #: taken as dependent; E_c's condition number above which the dual does not hold them
 RANK_TOL = 1e-8
 COND_MAX = 1e12
-
-
-#: SOR sweeps (Richardson) on the finest level of the GAMG V-cycle on S, before and after the
-#: coarse correction. Krylov iterations per solve (mean / max) on the 3D friction box at 16.9k
-#: DOFs, 1 rank: 6 and 8 sweeps 6.8 / 10 and 6.0 / 9, GAMG's Chebyshev 23.2 / 35, PETSc's ML
-#: (the V-cycle before) 7.1 / 10; at 122k DOFs, 2 ranks: 9.9 / 14 and 9.0 / 13, ML 9.1 / 13
-#: for 1.2x the peak memory (docs/performance.md). SOR on every level divided by a coarse
-#: operator's zero diagonal entry on 2 ranks.
-FINE_SWEEPS = 8
-
-
-#: the distributed Galerkin product of the V-cycle's set-up (``_galerkin_product``)
-GALERKIN_PRODUCT = "allatonce"
 
 
 #: the communicators of the preconditioners made: their PETSc garbage is destroyed before
@@ -86,26 +73,6 @@ def _clean_up() -> None:
             PETSc.garbage_cleanup(comm)
         except Exception:   # (a communicator freed before the end)
             pass
-
-
-@contextmanager
-def _galerkin_product(comm: MPI.Comm) -> Iterator[None]:
-    """PETSc's distributed P^T A P "allatonce" (GALERKIN_PRODUCT) for the V-cycle's coarse
-    operators while it is set up, unless ``-matptap_via`` is given (read under no prefix:
-    solvers.options.UNPREFIXED); one rank has no distributed product. Its default keeps the
-    product's intermediates (A P, Pᵀ's parts, P's remote rows) on every level for reuse: on the
-    122k-DOF friction box on 2 ranks the set-up held 131 MiB per rank, 58 with "allatonce", the
-    same Krylov iterations, but took 22.5 s per solve against 3.3: memory chosen over time
-    (``-matptap_via nonscalable`` chooses time; docs/performance.md)."""
-    options = PETSc.Options()
-    add = comm.size > 1 and not options.hasName("matptap_via")
-    if add:
-        options["matptap_via"] = GALERKIN_PRODUCT
-    try:
-        yield
-    finally:
-        if add:
-            options.delValue("matptap_via")
 
 
 class CondensedPreconditioner:
@@ -136,7 +103,7 @@ class CondensedPreconditioner:
         self.is_all = PETSc.IS().createStride(self.nq + self.nl, first=self.start, step=1,
                                               comm=comm)
         self._handle = None
-        self.amg: PETSc.PC | None = None
+        self.amg: VCycle | None = None
         self._reset()
 
     def _reset(self) -> None:
@@ -415,38 +382,10 @@ class CondensedPreconditioner:
 
     def _set_up_amg(self) -> None:
         if self.amg is None:
-            # the solvers gone before this one (their KSPs, ML's hierarchies) destroyed now:
-            # PETSc defers their destruction to the end, and ML's set-up crashed (inside its
-            # aggregation) after a few dozen solvers in one process. Collective: every rank
-            # makes its first update here.
-            import gc
-
-            gc.collect()   # (solvers in reference cycles: freed, their objects deferred)
-            PETSc.garbage_cleanup(self.comm)
-            self.amg = PETSc.PC().create(self.comm)
-            self.amg.setOptionsPrefix(self.prefix + "condensed_")
-            self.amg.setOperators(self.S, self.S)
-            self.amg.setFromOptions()
-        else:
-            self.amg.setOperators(self.S, self.S)
-        with _galerkin_product(self.comm):
-            self.amg.setUp()
-        if self.amg.getType() == "gamg":
-            self._fine_sor()
+            self.amg = VCycle(self.comm, self.prefix + "condensed_")
+        self.amg.set_up(self.S)
         if self._work is None:   # (work vectors of the application, per pattern)
             self._work = [*self.mat.createVecs(), *self.S.createVecs()]
-
-    def _fine_sor(self) -> None:
-        """GAMG's finest level smoothed by FINE_SWEEPS SOR sweeps (Richardson) instead of its
-        Chebyshev (its coarser levels keep Chebyshev: their operators may hold a zero diagonal
-        entry on 2 ranks, which SOR divides by). Set again after every set-up, which may make
-        the levels anew. The sweeps: ``-condensed_fine_sweeps`` under the solver's prefix."""
-        sweeps = PETSc.Options(self.prefix).getInt("condensed_fine_sweeps", FINE_SWEEPS)
-        ksp = self.amg.getMGSmoother(self.amg.getMGLevels() - 1)
-        if ksp.getType() != "richardson" or ksp.getPC().getType() != "sor":
-            ksp.setType("richardson")
-            ksp.getPC().setType("sor")
-        ksp.setTolerances(max_it=sweeps)
 
     # ------------------------------------------------------------------ application
 

@@ -259,11 +259,11 @@ def test_condensed_operator_equals_the_product(comm):
 def test_fine_level_smoothed_by_sor(comm):
     """The V-cycle on S is GAMG whose finest level takes FINE_SWEEPS SOR sweeps (Richardson),
     its coarser levels GAMG's Chebyshev; -condensed_fine_sweeps sets the sweeps."""
-    from parsolve.solvers.condensed import FINE_SWEEPS
+    from parsolve.solvers.vcycle import FINE_SWEEPS
 
     for petsc, sweeps in (({}, FINE_SWEEPS), ({"condensed_fine_sweeps": "3"}, 3)):
         system, solver, mat, rhs, x = _friction(comm, petsc)
-        amg = solver.condensed.amg
+        amg = solver.condensed.amg.pc
         assert amg.getType() == "gamg" and amg.getMGLevels() >= 2
         fine = amg.getMGSmoother(amg.getMGLevels() - 1)
         assert (fine.getType(), fine.getPC().getType()) == ("richardson", "sor")
@@ -275,7 +275,7 @@ def test_fine_level_smoothed_by_sor(comm):
 def test_galerkin_product_option_is_scoped(comm):
     """The V-cycle's set-up puts -matptap_via allatonce in PETSc's options only while it runs
     (on more than one rank), and leaves a value the user gave as it is."""
-    from parsolve.solvers.condensed import GALERKIN_PRODUCT, _galerkin_product
+    from parsolve.solvers.vcycle import GALERKIN_PRODUCT, _galerkin_product
 
     options = PETSc.Options()
     with _galerkin_product(comm):

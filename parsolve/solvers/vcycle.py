@@ -1,0 +1,87 @@
+"""The algebraic multigrid V-cycle on the condensed primal operator S (solvers.condensed):
+GAMG, its finest level smoothed by SOR sweeps, its coarse operators made by the Galerkin
+product that holds the least memory on more than one rank."""
+
+from __future__ import annotations
+
+import gc
+from contextlib import contextmanager
+from typing import Iterator
+
+from mpi4py import MPI
+from petsc4py import PETSc
+
+#: SOR sweeps (Richardson) on the finest level of the GAMG V-cycle on S, before and after the
+#: coarse correction. Krylov iterations per solve (mean / max) on the 3D friction box at 16.9k
+#: DOFs, 1 rank: 6 and 8 sweeps 6.8 / 10 and 6.0 / 9, GAMG's Chebyshev 23.2 / 35, PETSc's ML
+#: (the V-cycle before) 7.1 / 10; at 122k DOFs, 2 ranks: 9.9 / 14 and 9.0 / 13, ML 9.1 / 13
+#: for 1.2x the peak memory (docs/performance.md). SOR on every level divided by a coarse
+#: operator's zero diagonal entry on 2 ranks.
+FINE_SWEEPS = 8
+
+
+#: the distributed Galerkin product of the V-cycle's set-up (``_galerkin_product``)
+GALERKIN_PRODUCT = "allatonce"
+
+
+@contextmanager
+def _galerkin_product(comm: MPI.Comm) -> Iterator[None]:
+    """PETSc's distributed P^T A P "allatonce" (GALERKIN_PRODUCT) for the V-cycle's coarse
+    operators while it is set up, unless ``-matptap_via`` is given (read under no prefix:
+    solvers.options.UNPREFIXED); one rank has no distributed product. Its default keeps the
+    product's intermediates (A P, Pᵀ's parts, P's remote rows) on every level for reuse: on the
+    122k-DOF friction box on 2 ranks the set-up held 131 MiB per rank, 58 with "allatonce", the
+    same Krylov iterations, but took 22.5 s per solve against 3.3: memory chosen over time
+    (``-matptap_via nonscalable`` chooses time; docs/performance.md)."""
+    options = PETSc.Options()
+    add = comm.size > 1 and not options.hasName("matptap_via")
+    if add:
+        options["matptap_via"] = GALERKIN_PRODUCT
+    try:
+        yield
+    finally:
+        if add:
+            options.delValue("matptap_via")
+
+
+class VCycle:
+    """One AMG V-cycle on a matrix, its options under ``prefix`` (``<solver>condensed_``):
+    ``set_up(S)`` after each change of S's values, then ``apply(f, y)``: y ≈ S⁻¹ f."""
+
+    def __init__(self, comm: MPI.Comm, prefix: str):
+        # the solvers gone before this one (their KSPs, ML's hierarchies) destroyed now:
+        # PETSc defers their destruction to the end, and ML's set-up crashed (inside its
+        # aggregation) after a few dozen solvers in one process. Collective: every rank
+        # makes its first V-cycle here.
+        gc.collect()   # (solvers in reference cycles: freed, their objects deferred)
+        PETSc.garbage_cleanup(comm)
+        self.comm, self.prefix = comm, prefix
+        self.pc = PETSc.PC().create(comm)
+        self.pc.setOptionsPrefix(prefix)
+        self._configured = False
+
+    def set_up(self, mat: PETSc.Mat) -> None:
+        """The hierarchy made (or remade) for ``mat``'s values."""
+        self.pc.setOperators(mat, mat)
+        if not self._configured:
+            self.pc.setFromOptions()
+            self._configured = True
+        with _galerkin_product(self.comm):
+            self.pc.setUp()
+        if self.pc.getType() == "gamg":
+            self._fine_sor()
+
+    def apply(self, f: PETSc.Vec, y: PETSc.Vec) -> None:
+        self.pc.apply(f, y)
+
+    def _fine_sor(self) -> None:
+        """GAMG's finest level smoothed by FINE_SWEEPS SOR sweeps (Richardson) instead of its
+        Chebyshev (its coarser levels keep Chebyshev: their operators may hold a zero diagonal
+        entry on 2 ranks, which SOR divides by). Set again after every set-up, which may make
+        the levels anew. The sweeps: ``-<prefix>fine_sweeps``."""
+        sweeps = PETSc.Options(self.prefix).getInt("fine_sweeps", FINE_SWEEPS)
+        ksp = self.pc.getMGSmoother(self.pc.getMGLevels() - 1)
+        if ksp.getType() != "richardson" or ksp.getPC().getType() != "sor":
+            ksp.setType("richardson")
+            ksp.getPC().setType("sor")
+        ksp.setTolerances(max_it=sweeps)
