@@ -190,10 +190,10 @@ class SaddleSystem:
     def _elimination_setup(self) -> None:
         """The eliminated DOFs this rank reads: first its own (the rows of the eliminated
         relations it holds, each on a DOF it owns, relation by relation in row order, then its
-        unused points'), then the others' its operator rows name (its ghosts', and the
-        columns of the relation rows it owns), each found at its owner with its value, its
-        coefficient and its relation (one plan, made again with the relation set's columns;
-        q there fetched by ``eliminated_values``). Collective."""
+        unused points'), then the others' its operator rows name (its ghosts', its node
+        terms' and the columns of the relation rows it owns), each found at its owner with its
+        value, its coefficient and its relation (one plan, made again with the operator; q
+        there fetched by ``eliminated_values``). Collective."""
         dm = self.dofmap
         dofs, coefs, refs, which = [np.zeros(0, np.int64)], [np.zeros(0)], [np.zeros(0)], []
         for k, r in enumerate(self.eliminated):
@@ -203,7 +203,6 @@ class SaddleSystem:
             refs.append(r.values)
             which.append(np.full(r.nrows, k, dtype=np.int64))
         unused = np.setdiff1d(self.unused, np.concatenate(dofs))
-        self.n_unused = unused.size
         own = np.concatenate(dofs + [unused])
         n_own = own.size
         coefs = np.concatenate(coefs + [np.ones(unused.size)])
@@ -215,9 +214,12 @@ class SaddleSystem:
         table[0, at], table[1, at], table[2, at] = coefs, refs, which
         table[3] = (dm.mesh.global_nodes[:dm.n_owned_nodes].astype(np.int64)[:, None] * dm.ncomp
                     + np.arange(dm.ncomp)).ravel()
+        # the other ranks' DOFs its operator rows name: its ghosts', its node terms' and its
+        # relation rows' columns (the off-process block's primal columns)
+        op = self.op
+        new, primal = dm.saddle_to_new(op.global_columns(np.arange(op.nnz_d, op.data.size)))
         q0, q1, _, _ = dm.owned()
-        seen = np.union1d(dm.new_dof(np.arange(dm.n_owned, dm.n_local)),
-                          self.relation_set.a_cols)
+        seen = np.union1d(dm.new_dof(np.arange(dm.n_owned, dm.n_local)), new[primal])
         seen = seen[(seen < q0) | (seen >= q1)]
         fetch = Fetch.of(dm, seen)
         got = np.array([fetch(column) for column in table])
