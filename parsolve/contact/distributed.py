@@ -7,8 +7,8 @@ near them, and numbers its entries as the whole pairing would.
   receives the facets near its slaves only (and its own), not the whole master surface.
   Finite sliding does it again on the current configuration, sending only the facets new
   to a rank (none: no exchange).
-* ``SharedTuples``, ``Fetch``: a row's node tuple declared by its nodes' owners, and
-  nodal values fetched from theirs.
+* ``SharedTuples``: a row's node tuple declared by its nodes' owners (nodal values fetched
+  from theirs: ``la.fetch.Fetch``).
 * ``global_positions``: the place of each of a rank's entries among every rank's (entries
   sorted by input id, each id on one rank): the relation rows' own numbering
   (``relation_kinds.spread.places``), never the whole pairing on a rank.
@@ -26,7 +26,7 @@ import numpy as np
 from mpi4py import MPI
 
 from parsolve.contact.surfaces import canonical_facets
-from parsolve.la.dofmap import GhostExchange
+from parsolve.la.fetch import Fetch  # noqa: F401 (re-exported until its importers move)
 from parsolve.mesh.blocks import exchange
 from parsolve.relation_kinds.spread import places
 
@@ -91,22 +91,6 @@ class SharedTuples:
         received). Collective."""
         got, _ = exchange(self.comm, np.ascontiguousarray(values[self.tuple]), self.dest)
         return np.concatenate([values, got.reshape((-1,) + values.shape[1:])])
-
-
-class Fetch:
-    """A primal vector's values at DOFs given by their global numbers (``new_dofs``: node ·
-    ncomp + component, any rank's), from their owners: one plan, two ``Alltoallv`` a call."""
-
-    def __init__(self, comm, new_dofs: np.ndarray, node_ranges: np.ndarray, ncomp: int):
-        ranges = np.asarray(node_ranges, dtype=np.int64) * ncomp
-        new_dofs = np.asarray(new_dofs, dtype=np.int64)
-        owner = np.searchsorted(ranges, new_dofs, side="right") - 1
-        self.n_owned = int(ranges[comm.rank + 1] - ranges[comm.rank])
-        self.plan = GhostExchange(comm, new_dofs, owner, int(ranges[comm.rank]))
-
-    def __call__(self, q: np.ndarray) -> np.ndarray:
-        """The values from this rank's vector q (its owned DOFs first). Collective."""
-        return self.plan.forward(np.asarray(q[:self.n_owned], dtype=float))
 
 
 @dataclass

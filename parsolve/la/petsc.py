@@ -300,9 +300,8 @@ class SaddleOperator:
     def set_eliminated(self, rows: np.ndarray) -> None:
         """Saddle indices (global) of the DOFs to eliminate: their rows and columns are zeroed and
         their diagonal set by ``eliminate``, in the value array itself (no PETSc pass)."""
-        is_elim = np.zeros(self.size + 1, dtype=bool)
-        is_elim[rows] = True
-        local = np.unique(rows[(rows >= self.offset) & (rows < self.offset + self.nrows)]) - self.offset
+        rows = np.unique(rows)   # (those this rank reads: no array of the global size)
+        local = rows[(rows >= self.offset) & (rows < self.offset + self.nrows)] - self.offset
         self.elim_rows = local + self.offset
         # entries of the eliminated rows, in the order of their row then column (stiffness
         # before relation columns), as the products below sum them
@@ -320,12 +319,10 @@ class SaddleOperator:
         nc, lay = self.layout.ncomp, self.layout
         # nodes with an eliminated DOF (new numbering), then the node pairs in their columns
         new_dof, prim_rows = lay.saddle_to_new(rows)
-        node_flag = np.zeros(lay.node_ranges[-1] + 1, dtype=bool)
-        node_flag[new_dof[prim_rows] // nc] = True
-        node_elim = node_flag[self.pattern.ucol]
+        node_elim = np.isin(self.pattern.ucol, new_dof[prim_rows] // nc)
         first = self.block_start[:, None, node_elim].astype(np.int64)
         cand = np.concatenate([(first + np.arange(nc)[None, :, None]).ravel(), self.a_final])
-        cand = cand[is_elim[self.global_columns(cand)]]
+        cand = cand[np.isin(self.global_columns(cand), rows)]
         crow, ccol = self.row_of(cand), self.global_columns(cand)
         order = np.lexsort((ccol, crow))
         self._col_entries, self._row_of_col_entries = cand[order], crow[order]

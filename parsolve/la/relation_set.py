@@ -13,8 +13,9 @@ equal and periodic rows, by the rank owning the DOF or node each constrains; num
 their place in the whole relation). A whole relation may be spread (``Relation.spread``: a
 mean, linear or strain row, each rank holding the entries on its owned DOFs): its rows' A
 entries are sent to their multiplier row's owner (``_foreign_a``), whose operator row adds
-them, and its rows' owners are counted from every rank's entries (``_loose_owners``). A tie's entries on another rank's DOF: its D entries go
-to that DOF's owner (``_foreign_d``), its A q reads the DOF's value from there (``_Fetch``).
+them, and its rows' owners are counted from every rank's entries (``_loose_owners``). A tie's
+entries on another rank's DOF: its D entries go to that DOF's owner (``_foreign_d``), its A q
+reads the DOF's value from there (``la.fetch.Fetch``).
 The relation rows a rank holds are its per-rank relations' rows and every whole relation's;
 the vectors per relation row (``mult_of_row``, ``position``, the active set's masks, targets,
 gaps) run over those, ``rep_row`` over the multiplier rows those rows have (``mults_here``),
@@ -58,6 +59,7 @@ import numpy as np
 from mpi4py import MPI
 
 from parsolve.la.dofmap import DofMap, GhostExchange
+from parsolve.la.fetch import Fetch
 from parsolve.mesh.blocks import exchange
 from parsolve.relations import Relation
 
@@ -160,7 +162,7 @@ class RelationSet:
         # relation's rows on other ranks are not)
         self._mult_held = self._held_places(self.mult_of_row)
         self._owned_entries: dict[int, tuple] = {}      # per relation: its owned A entries
-        self._fetch: dict[int, _Fetch | None] = {}      # and the plan of its others'
+        self._fetch: dict[int, _Fetched | None] = {}      # and the plan of its others'
         self._sums: _RowSums | None = None              # owned_primal's plan
 
     def _held_places(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -406,11 +408,11 @@ class RelationSet:
     def _owned_part(self, r: Relation, q: np.ndarray) -> np.ndarray:
         """This rank's part of A q of a relation's rows held here: its entries on owned DOFs;
         a relation built per rank, its entries on other ranks' DOFs too (a tie's u_b,
-        fetched from their owners: ``_Fetch``). Collective for a relation built per rank."""
+        fetched from their owners: ``la.fetch.Fetch``). Collective for a relation built per rank."""
         key = id(r)
         if key not in self._owned_entries:
             self._owned_entries[key] = self.dofmap.owned_dof_entries(r.a_dofs)
-            self._fetch[key] = None if r.whole else _Fetch.plan(self.dofmap, r)
+            self._fetch[key] = None if r.whole else _Fetched.plan(self.dofmap, r)
         sel, local = self._owned_entries[key]
         part = self.dofmap.owned_part(sel, local, r.a_rows, r.a_vals, r.nrows, q)
         fetch = self._fetch[key]
@@ -677,28 +679,24 @@ class _RowSums:
         return np.bincount(self.recv_rows, weights=got, minlength=self.nrows)
 
 
-class _Fetch:
-    """The plan of the values a relation built per rank reads on other ranks' DOFs (a tie's
-    u_b): the A entries on DOFs this rank does not own, their values fetched from the owners
-    (``DofMap``'s ghost exchange on those DOFs alone, planned once)."""
+class _Fetched:
+    """The A entries of a relation built per rank on DOFs this rank does not own (a tie's
+    u_b): their places and the plan of their values (``Fetch``)."""
 
-    def __init__(self, dofmap: DofMap, at: np.ndarray, new_dofs: np.ndarray):
-        self.at, self.q0 = at, int(dofmap.q_ranges[dofmap.rank])
-        self.n_owned = dofmap.n_owned
-        self.exchange = GhostExchange(dofmap.comm, new_dofs, dofmap.owner_of_dofs(new_dofs), self.q0)
+    def __init__(self, at: np.ndarray, fetch: Fetch):
+        self.at, self.fetch = at, fetch
 
     @classmethod
-    def plan(cls, dofmap: DofMap, r: Relation) -> "_Fetch | None":
+    def plan(cls, dofmap: DofMap, r: Relation) -> "_Fetched | None":
         """None when no rank has such entries. Collective."""
         sel, _ = dofmap.owned_dof_entries(r.a_dofs)
         at = np.setdiff1d(np.arange(r.a_dofs.size), sel)
         if dofmap.comm.size == 1 or not dofmap.comm.allreduce(bool(at.size), op=MPI.LOR):
             return None
-        return cls(dofmap, at, dofmap.input_new_dof(r.a_dofs[at]))
+        return cls(at, Fetch.of(dofmap, dofmap.input_new_dof(r.a_dofs[at])))
 
     def add(self, part: np.ndarray, r: Relation, q: np.ndarray) -> np.ndarray:
-        values = self.exchange.forward(np.asarray(q[:self.n_owned], dtype=float))
-        part += np.bincount(r.a_rows[self.at], weights=r.a_vals[self.at] * values,
+        part += np.bincount(r.a_rows[self.at], weights=r.a_vals[self.at] * self.fetch(q),
                             minlength=r.nrows)
         return part
 

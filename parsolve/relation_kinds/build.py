@@ -4,8 +4,9 @@ DOF fixed twice, a tie held at both ends, a control that would drive nothing).
 
 A kind whose rows each constrain one DOF or node (``RelationEntry.per_rank``: Dirichlet,
 equal, periodic) builds only the rows this rank holds, those of the nodes it owns, numbered by
-their place in the whole relation (``Relation.ids``). Such a relation is gathered whole when it
-is eliminated (its values lift every rank's columns). A kind of rows over regions (mean,
+their place in the whole relation (``Relation.ids``), eliminated or multiplied alike (an
+eliminated row lifts its owner's columns; the others read its value from there:
+``SaddleSystem``). A kind of rows over regions (mean,
 linear, strain) builds every row, each rank the entries of the nodes and cells it owns
 (``Relation.spread``); so does a per-rank relation whose rows share a load pattern (every row
 a column of it), its entries sent to their DOFs' owners. A load pattern as a relation's dual
@@ -19,7 +20,6 @@ import numpy as np
 from mpi4py import MPI
 
 from parsolve import relations as rel
-from parsolve.mesh.regions import allgather_rows
 from parsolve.relation_kinds.base import Where
 from parsolve.relation_kinds.checks import check_set
 from parsolve.relation_kinds.registry import RELATIONS
@@ -43,16 +43,10 @@ def build_relations(specs: list, regions, evolutions: dict, patterns: dict, fiel
         r.meta = {**r.meta, "type": spec.type, "key": spec.key, "dual": spec.dual}
         if not r.whole and r.shared_dual is not None:
             r = _spread(where, r)
-        elif not r.whole:
-            r = _whole(regions.comm, r) if _kept_whole(regions.comm, r) else _held(r)
+        elif not r.whole and not regions.comm.allreduce(r.eliminable(), op=MPI.LAND):
+            r = _held(r)
         out.append(r)
     return check_set(out, specs, fields, source, regions.comm, where.num_nodes * ncomp)
-
-
-def _kept_whole(comm, r: rel.Relation) -> bool:
-    """Whether a relation built per rank is held whole on every rank: eliminated (the same
-    answer on every rank)."""
-    return comm.allreduce(r.eliminable(), op=MPI.LAND)
 
 
 def _spread(where: Where, r: rel.Relation) -> rel.Relation:
@@ -72,17 +66,7 @@ def _spread(where: Where, r: rel.Relation) -> rel.Relation:
 
 
 def _held(r: rel.Relation) -> rel.Relation:
-    r.eliminate = False   # multiplied on every rank, whatever rows it holds here
+    """A relation built per rank that some rank cannot eliminate: multiplied on every rank,
+    whatever rows it holds here (the ranks split the relations alike)."""
+    r.eliminate = False
     return r
-
-
-def _whole(comm, r: rel.Relation) -> rel.Relation:
-    """A relation built per rank, gathered whole on every rank (its rows in their order)."""
-    ids = allgather_rows(comm, r.ids)
-    values = np.empty(r.total)
-    values[ids] = allgather_rows(comm, r.values)
-    rows = allgather_rows(comm, r.ids[r.a_rows])
-    order = np.argsort(rows, kind="stable")   # (a row's entries all from one rank, in order)
-    dofs, coefs = allgather_rows(comm, r.a_dofs)[order], allgather_rows(comm, r.a_vals)[order]
-    return dataclasses.replace(r, nrows=r.total, a_rows=rows[order], a_dofs=dofs, a_vals=coefs,
-                               values=values, ids=None, size=None)

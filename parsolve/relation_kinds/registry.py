@@ -24,7 +24,7 @@ class RelationEntry:
     holds: bool = False         # its rows hold single DOFs at given values (a reaction each)
     ties: bool = False          # its rows tie pairs of DOFs (u_a − u_b = 0)
     per_rank: bool = False      # each row constrains one DOF or node: built per rank, each
-    #                             row by that node's owner (``build``; gathered when eliminated)
+    #                             row by that node's owner (``build``), eliminated or not
     description: str = ""
 
 

@@ -4,11 +4,11 @@ row per cell (``per_cell``), n a unit direction or a named normal component."""
 from __future__ import annotations
 
 import numpy as np
+from mpi4py import MPI
 
 from parsolve import relations as rel
 from parsolve.errors import InputError
 from parsolve.fem import kernels
-from parsolve.mesh.regions import allgather_rows
 from parsolve.relation_kinds.base import RelationSpec, Where
 from parsolve.relation_kinds.spread import places, to_owners
 
@@ -74,7 +74,7 @@ def build(spec: RelationSpec, where: Where, evolution) -> rel.Relation:
     """The rows of the cells this rank counts (``owned_cells``), their entries then sent to
     the ranks owning their DOFs (``spread.to_owners``): a spread relation (``Relation.spread``),
     its rows whole (one, or one per cell of the region, numbered by cell id), no rank holding
-    the region's entries."""
+    the region's entries or cells (each the cells it counts: ``row_cell``)."""
     regions, fields, comm = where.regions, where.fields, where.comm
     mesh = regions.mesh
     region = regions(spec.region, spec.key + ".region")
@@ -85,18 +85,27 @@ def build(spec: RelationSpec, where: Where, evolution) -> rel.Relation:
     dofs, coefs, vol = strain_rows(mesh, cells, spec.direction, where.thickness,
                                    fields=fields, field=spec.field)
     ids = mesh.global_cells[cells].astype(np.int64)
-    if spec.per_cell:
-        rows = places(comm, ids, int(mesh.num_global_cells))
-        every = allgather_rows(comm, ids)   # (the rows' cells, for the failure's diagnosis)
-        nrows, cells_of = every.size, np.sort(every)
+    if spec.per_cell:   # (row j: the region's j-th cell by input id)
+        rows, nrows = places(comm, ids, int(mesh.num_global_cells)), comm.allreduce(ids.size)
     else:
         coefs = coefs * (vol / comm.allreduce(float(vol.sum())))[:, None]
-        rows, nrows, cells_of = np.zeros(ids.size, dtype=np.int64), 1, ids
+        rows, nrows = np.zeros(ids.size, dtype=np.int64), 1
     node, comp = np.divmod(dofs, fields.ncomp)   # local DOFs → input DOFs, their owners
     inputs = mesh.global_nodes[node].astype(np.int64) * fields.ncomp + comp
     a_rows, a_dofs, a_vals = to_owners(comm, np.repeat(rows, dofs.shape[1]), inputs.ravel(),
                                        coefs.ravel(), mesh.owner_of(node).ravel())
     r = rel.Relation(spec.name, nrows, a_rows, a_dofs, a_vals, np.full(nrows, spec.value),
                      evolution, spec.sense)
-    r.meta["cells"] = cells_of   # the cells of the rows (input ids; a mean's: this rank's)
+    # the cells this rank counts (input ids) and, one row per cell, their rows
+    r.meta["cells"], r.meta["cell_rows"] = ids, (rows if spec.per_cell else None)
     return rel.spread_rows(r)
+
+
+def row_cell(comm, r: rel.Relation, row: int) -> int | None:
+    """The input id of the cell of a per-cell strain row (None for another relation), from
+    the rank counting it. Collective."""
+    rows = r.meta.get("cell_rows")
+    if rows is None:
+        return None
+    mine = r.meta["cells"][rows == row]
+    return comm.allreduce(int(mine[0]) if mine.size else -1, op=MPI.MAX)

@@ -38,6 +38,7 @@ from parsolve.contact import friction as fr
 from parsolve.errors import SolverError
 from parsolve.fem.materials.mazars import Mazars
 from parsolve.fem.materials.von_mises import VonMises
+from parsolve.relation_kinds.strain import row_cell
 from parsolve.solvers.linear import DoesNotFit
 
 # a control's rate under its own load below this fraction of what the load's displacements
@@ -168,10 +169,7 @@ def short_control(problem, t: float) -> tuple | None:
     if short is None:
         return None
     k, local = problem.rset.locate(short[0].row)
-    rel = problem.ctx.multiplied[k]
-    cells = rel.meta.get("cells")
-    cell = int(cells[local]) if cells is not None and len(cells) == rel.nrows else None
-    return short + (local, cell)
+    return short + (local, row_cell(problem.comm, problem.ctx.multiplied[k], local))
 
 
 def _short_of(problem, t: float, controls: list[Control]) -> tuple | None:
@@ -508,7 +506,7 @@ def _linear_solve(system, solver, mask: np.ndarray, f: np.ndarray, t: float | No
     solver.set_operator(mat)
     x, b = mat.createVecs()
     target = np.zeros(rset.n_owned) if t is None else rset.rhs(t)
-    elim = np.zeros(system.n_eliminated) if t is None else system.elim_values(t)
+    elim = np.zeros(system.elim_dofs.size) if t is None else system.elim_values(t)
     b.array[:] = system.rhs_from(f, target, elim)[0]
     solver.solve(b, x)
     return system.gather(x.array).q

@@ -27,6 +27,7 @@ from mpi4py import MPI
 
 from parsolve.contact.dependent import dependent_rows
 from parsolve.errors import SolverError
+from parsolve.la.fetch import Fetch
 from parsolve.solvers.active_set import GROUP_TOL, ActiveSet, _Seen
 
 #: (tangent, active rows, load) → δq = K⁻¹ f with those rows enforced at zero
@@ -109,7 +110,7 @@ class RelationPolicies:
         candidate = np.zeros(rset.nrelrows, dtype=bool)
         for k, r in enumerate(mult):
             candidate[rset.rows_of(k)] = r.meta.get("type") == "contact"
-        fixed = np.concatenate([r.a_dofs for r in self.ctx.eliminated] + [np.zeros(0, np.int64)])
+        fixed = self._fixed(np.unique(dofs))
         # each row's place in the fixed order over every rank: relation, then its global row
         first = np.concatenate([[0], np.cumsum([r.total for r in mult])])
         key = np.zeros(rset.nrelrows, dtype=np.int64)
@@ -117,7 +118,17 @@ class RelationPolicies:
         for k, r in enumerate(mult):
             key[rset.rows_of(k)] = first[k] + r.row_ids()
             per_rank[rset.rows_of(k)] = not r.whole
-        return rows, dofs, [mult[k] for k in keep], candidate, np.unique(fixed), key, per_rank
+        return rows, dofs, [mult[k] for k in keep], candidate, fixed, key, per_rank
+
+    def _fixed(self, dofs: np.ndarray) -> np.ndarray:
+        """The input DOFs of ``dofs`` (sorted, of nodes the DOF map knows) that an eliminated
+        relation holds, each told by its owner (each rank holds the eliminated rows on its
+        own DOFs: ``Relation.ids``). Collective."""
+        dm = self.ctx.dofs
+        held = np.zeros(dm.n_owned)
+        for r in self.ctx.eliminated:
+            held[dm.local_dofs(r.a_dofs)] = 1.0
+        return dofs[Fetch.of(dm, dm.input_new_dof(dofs))(held) > 0.5]
 
     def enforceable(self, active: np.ndarray) -> np.ndarray:
         """The active rows less the contact rows that depend on the others (a held, tied or
@@ -310,22 +321,27 @@ class RelationPolicies:
 
     def enforced_rows(self) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
         """Per maximum group, its enforced row: (row, its relation, A's DOFs and coefficients
-        on that row)."""
+        on that row this rank's owned DOFs carry: each entry on one rank, no row gathered)."""
         out = []
         for g in self.active.groups:
             row = int(g[self.active.active[g]][0])
             k, local = self.rset.locate(row)
-            out.append((row, k) + self.rset.row_entries(self.ctx.multiplied[k], local)[:2])
+            r = self.ctx.multiplied[k]
+            sel = self.ctx.dofs.owned_dof_entries(r.a_dofs)[0]
+            sel = sel[r.a_rows[sel] == local]
+            out.append((row, k, r.a_dofs[sel], r.a_vals[sel]))
         return out
 
     def enforced_cells(self, rows: list | None = None) -> np.ndarray:
         """Positions (in this rank's cells) of the cells measured by the enforced rows of the
         maximum groups (``rows``: ``enforced_rows()``, if already read): the cells all of whose
-        nodes carry an entry of such a row."""
+        nodes carry an entry of such a row (its owned nodes' marks sent to their ghosts).
+        Collective."""
         ctx = self.ctx
-        marked = np.zeros(ctx.mesh.num_points, dtype=bool)
-        for _, _, dofs, _ in self.enforced_rows() if rows is None else rows:   # (input DOFs: this rank's nodes of them)
-            marked |= ctx.local_vector(dofs, np.ones(dofs.size)).reshape(-1, ctx.ncomp).any(axis=1)
+        marked = np.zeros(ctx.ndof)
+        for _, _, dofs, _ in self.enforced_rows() if rows is None else rows:
+            marked += ctx.local_vector(dofs, np.ones(dofs.size))
+        marked = ctx.dofs.forward(marked).reshape(-1, ctx.ncomp).any(axis=1)
         return np.flatnonzero(marked[ctx.mesh.cells[ctx.cells]].all(axis=1))
 
     def loading_tangent(self, kmat, q: np.ndarray, states: list, t_prev: float):
@@ -342,13 +358,15 @@ class RelationPolicies:
         loading from unloading (and a perturbed cell would break a symmetric tie)."""
         ctx = self.ctx
         delta = np.zeros(ctx.ndof)
-        rows = self.enforced_rows()   # (a spread row's entries gathered once)
+        rows = self.enforced_rows()   # (each rank its owned DOFs' entries of the rows)
         for row, k, dofs, a in rows:
             rel, local = ctx.multiplied[k], self.rset.locate(row)[1]
             b = rel.rhs(t_prev)[local]
             value = ctx.relation_primal(rel, q)[local]   # A q of the row (collective)
             size = 1e-10 * max(abs(float(value)), abs(float(b)), 1e-300)
-            delta += ctx.local_vector(dofs, self.active.sign[row] * a * size / max(float(a @ a), 1e-300))
+            norm2 = ctx.comm.allreduce(float(a @ a))
+            delta += ctx.local_vector(dofs, self.active.sign[row] * a * size / max(norm2, 1e-300))
+        delta = ctx.dofs.forward(delta)   # (its ghosts from their owners)
         loading = ctx.composition.evaluate(q + delta, states, False, self.system.rate)[2]
         return _CellReplaced(kmat, loading, self.enforced_cells(rows))
 

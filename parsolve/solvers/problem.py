@@ -219,7 +219,7 @@ class SaddleProblem:
         """The right-hand side of a force vector with the relations' and eliminated DOFs'
         gaps at t of the current state (arc-length's bordering), or homogeneous (no t)."""
         system, rset = self.system, self.rset
-        target, elim = np.zeros(rset.n_owned), np.zeros(system.n_eliminated)
+        target, elim = np.zeros(rset.n_owned), np.zeros(system.elim_dofs.size)
         if t is not None:
             if rset.nrows:
                 target = rset.gap(t, self.q) * rset.row_scale[:rset.n_owned]

@@ -284,10 +284,11 @@ def _hold_maximum_rows(problem, held: PETSc.Mat, q: np.ndarray) -> None:
     held.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
     entries = [problem.rset.row_entries(problem.ctx.multiplied[k], local) for k, local in
                (problem.rset.locate(int(row)) for row in rows)]   # (collective)
+    fixed_at = [system.eliminated_at(dofs) for dofs, _, _ in entries]   # (collective)
     if problem.comm.rank == 0 and rows.size:
         keep = [], []
-        for dofs, vals, index in entries:
-            sel = ~np.isin(dofs, system.elim_dofs)
+        for (dofs, vals, index), fixed in zip(entries, fixed_at):
+            sel = ~fixed
             vals, index = np.asarray(vals, dtype=float)[sel], index[sel].astype(PETSc.IntType)
             if not index.size:
                 continue

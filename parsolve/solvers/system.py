@@ -18,10 +18,10 @@ from parsolve import progress
 from parsolve.effects.compose import Composition, Rate
 from parsolve.fem.element_matrices import BlockMatrices, ElementMatrices, StiffnessTarget
 from parsolve.la.dofmap import DofMap, HeldValues, held_keys
+from parsolve.la.fetch import Fetch
 from parsolve.la.pattern import node_pattern
 from parsolve.la.petsc import SaddleOperator
 from parsolve.la.relation_set import RelationSet
-from parsolve.mesh.regions import allgather_rows
 from parsolve.mesh.topology import match_facets
 from parsolve.model import Model
 from parsolve.solvers.augmented import AugmentedMatrix
@@ -151,7 +151,7 @@ class SaddleSystem:
         active = self.op.active[:self.relation_set.n_owned]   # (the ghosts may change)
         self.op = SaddleOperator(self.comm, self.dofmap, self.pattern, self.relation_set)
         self.op.active = self.relation_set.from_owned(active.astype(float)) > 0.5
-        self.op.set_eliminated(self.elim_saddle)
+        self._elimination_setup()   # (the relation rows' columns may have changed)
 
     def _terms_moved(self) -> bool:
         """Whether this rank's node terms are not those the pattern was derived from (a term
@@ -167,13 +167,13 @@ class SaddleSystem:
 
     def unused_dofs(self) -> np.ndarray:
         """DOFs of the points no cell uses (Gmsh writes such points): held at zero, out of
-        the system's way, instead of making it singular. Input DOFs (every rank's)."""
+        the system's way, instead of making it singular. Input DOFs of those this rank owns
+        (a point of no cell is no rank's ghost)."""
         mesh = self.model.mesh
         used = np.zeros(mesh.num_points, dtype=bool)
         used[mesh.cells.ravel()] = True
         nodes = np.flatnonzero(~used)
-        # owned ones (a ghost is a node of a cell), from every rank
-        nodes = np.sort(allgather_rows(self.comm, mesh.global_nodes[nodes[nodes < mesh.n_owned]]))
+        nodes = np.sort(mesh.global_nodes[nodes[nodes < mesh.n_owned]].astype(np.int64))
         return (nodes[:, None] * self.model.ncomp + np.arange(self.model.ncomp)).ravel()
 
     def _relation_dofs(self) -> list[np.ndarray]:
@@ -188,44 +188,67 @@ class SaddleSystem:
         return out
 
     def _elimination_setup(self) -> None:
-        dofs, coefs = [], []
-        for r in self.eliminated:
-            order = np.argsort(r.a_rows)
+        """The eliminated DOFs this rank reads: first its own (the rows of the eliminated
+        relations it holds, each on a DOF it owns, relation by relation in row order, then its
+        unused points'), then the others' its operator rows name (its ghosts', its node
+        terms' and the columns of the relation rows it owns), each found at its owner with its
+        value, its coefficient and its relation (one plan, made again with the operator; q
+        there fetched by ``eliminated_values``). Collective."""
+        dm = self.dofmap
+        dofs, coefs, refs, which = [np.zeros(0, np.int64)], [np.zeros(0)], [np.zeros(0)], []
+        for k, r in enumerate(self.eliminated):
+            order = np.argsort(r.a_rows)   # (one entry per row)
             dofs.append(r.a_dofs[order])
             coefs.append(r.a_vals[order])
-        self.n_unused = 0
-        unused = self.unused
-        if unused.size:
-            taken = np.concatenate(dofs) if dofs else np.zeros(0, dtype=np.int64)
-            unused = np.setdiff1d(unused, taken)
-            self.n_unused = unused.size
-            dofs.append(unused)
-            coefs.append(np.ones(unused.size))
-        self.elim_dofs = np.concatenate(dofs) if dofs else np.zeros(0, dtype=np.int64)
-        self.elim_coefs = np.concatenate(coefs) if coefs else np.zeros(0)
-        self.elim_local = self.dofmap.local_dofs(self.elim_dofs)   # -1: not on this rank
-        self.elim_saddle = sad = self.dofmap.input_saddle(self.elim_dofs)
-        n = self.op.nrows
-        own = (sad >= self.offset) & (sad < self.offset + n)
-        self.elim_own = own
-        self.op.set_eliminated(sad)
+            refs.append(r.values)
+            which.append(np.full(r.nrows, k, dtype=np.int64))
+        unused = np.setdiff1d(self.unused, np.concatenate(dofs))
+        own = np.concatenate(dofs + [unused])
+        n_own = own.size
+        coefs = np.concatenate(coefs + [np.ones(unused.size)])
+        refs = np.concatenate(refs + [np.zeros(unused.size)])
+        which = np.concatenate(which + [np.full(unused.size, -1, dtype=np.int64)])
+        # per owned DOF: its coefficient (0: not eliminated), value, relation and input id
+        at = dm.local_dofs(own)
+        table = np.zeros((4, dm.n_owned))
+        table[0, at], table[1, at], table[2, at] = coefs, refs, which
+        table[3] = (dm.mesh.global_nodes[:dm.n_owned_nodes].astype(np.int64)[:, None] * dm.ncomp
+                    + np.arange(dm.ncomp)).ravel()
+        # the other ranks' DOFs its operator rows name: its ghosts', its node terms' and its
+        # relation rows' columns (the off-process block's primal columns)
+        op = self.op
+        new, primal = dm.saddle_to_new(op.global_columns(np.arange(op.nnz_d, op.data.size)))
+        q0, q1, _, _ = dm.owned()
+        seen = np.union1d(dm.new_dof(np.arange(dm.n_owned, dm.n_local)), new[primal])
+        seen = seen[(seen < q0) | (seen >= q1)]
+        fetch = Fetch.of(dm, seen)
+        got = np.array([fetch(column) for column in table])
+        on = got[0] != 0.0
+        self._elim_fetch = Fetch.of(dm, seen[on])   # (q at the others, at each use)
+        self.elim_dofs = np.concatenate([own, got[3, on].astype(np.int64)])
+        self.elim_coefs = np.concatenate([coefs, got[0, on]])
+        self._elim_refs = np.concatenate([refs, got[1, on]])
+        self._elim_which = np.concatenate([which, got[2, on].astype(np.int64)])
+        self.elim_local = dm.local_dofs(self.elim_dofs)   # -1: not on this rank
+        self.elim_saddle = np.concatenate([dm.input_saddle(own), dm.q_index(seen[on])])
+        self.elim_own = np.arange(self.elim_dofs.size) < n_own
+        self._n_eliminated = self.comm.allreduce(n_own)
+        self.op.set_eliminated(self.elim_saddle)
 
     @property
     def n_eliminated(self) -> int:
-        """Eliminated DOFs (every rank's)."""
-        return int(self.elim_dofs.size)
+        """Eliminated DOFs (every rank's: the same number on all)."""
+        return self._n_eliminated
 
     def index_sets(self):
         """The PETSc index sets of the primal and multiplier fields."""
         return self.op.index_sets()
 
     def elim_values(self, t: float) -> np.ndarray:
-        """Prescribed values of the eliminated DOFs at t (A q = b with one coefficient per row)."""
-        if self.elim_dofs.size == 0:
-            return np.zeros(0)
-        # each row holds one entry and dofs were sorted by row: values line up with rhs rows
-        values = [r.rhs(t) for r in self.eliminated] + [np.zeros(self.n_unused)]
-        return np.concatenate(values) / self.elim_coefs
+        """Prescribed values of the eliminated DOFs this rank reads (``elim_dofs``) at t
+        (A q = b with one coefficient per row)."""
+        evolution = np.array([r.evolution(t) for r in self.eliminated] + [0.0])
+        return self._elim_refs * evolution[self._elim_which] / self.elim_coefs
 
     # ------------------------------------------------------------ assembly
 
@@ -285,15 +308,16 @@ class SaddleSystem:
             f_full = f_full - f_int
         target = self.relation_set.scaled_residual(t, q)
         values = self.elim_values(t)
-        if q is not None and self.elim_dofs.size:
+        if q is not None and self.n_eliminated:
             values = values - self.eliminated_values(q)
         return self.rhs_from(f_full, target, values)
 
     def eliminated_values(self, q: np.ndarray) -> np.ndarray:
-        """q at every eliminated DOF, from their owners (one reduction of their number): a
-        relation row owned here may name an eliminated DOF of a node this rank does not hold,
-        whose value its lifting needs."""
-        return self.dofmap.at_inputs(self.elim_dofs, q)
+        """q at the eliminated DOFs this rank reads (``elim_dofs``): its own from q, the
+        others' from their owners (a relation row owned here may name an eliminated DOF of
+        a node this rank does not hold, whose value its lifting needs). Collective."""
+        n = int(self.elim_own.sum())
+        return np.concatenate([q[self.elim_local[:n]], self._elim_fetch(q)])
 
     def rhs_from(self, f_full: np.ndarray, target: np.ndarray, elim_values: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray]:
@@ -357,16 +381,22 @@ class SaddleSystem:
             row_vals = self.op.eliminated_rows(x_full)
         else:  # x_full holds λ; the primal part of the row is the internal force
             row_vals = self.to_owned(f_int) - self.relation_set.reactions(self.multipliers(x_full))
-        sad = self.elim_saddle
-        lam = np.zeros(self.elim_dofs.size)
         own = self.elim_own
-        lam[own] = (f_full[self.elim_local[own]] - row_vals[sad[own] - self.offset]) / self.elim_coefs[own]
-        self.dofmap.sum_ranks(lam)
+        sad, local = self.elim_saddle[own], self.elim_local[own]
+        lam = (f_full[local] - row_vals[sad - self.offset]) / self.elim_coefs[own]
         out, start = {}, 0
-        for r in self.eliminated:
+        for r in self.eliminated:   # (each rank its own rows: ``Relation.ids``)
             out[r.name] = lam[start:start + r.nrows]
             start += r.nrows
         return out
+
+    def eliminated_at(self, dofs: np.ndarray) -> np.ndarray:
+        """Mask of the input DOFs (the same on every rank) that are eliminated, each told by
+        its owner (one reduction of their number). Collective."""
+        sel, local = self.dofmap.owned_dof_entries(dofs)
+        out = np.zeros(np.asarray(dofs).size)
+        out[sel] = np.isin(local, self.elim_local[self.elim_own])
+        return self.dofmap.sum_ranks(out) > 0.5
 
 
 def _rows(a: np.ndarray) -> np.ndarray:

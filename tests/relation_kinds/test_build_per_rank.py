@@ -109,14 +109,16 @@ def test_each_rank_builds_its_rows_only(eliminate, monkeypatch):
 def test_the_relations_after_the_checks_keep_their_numbers(eliminate):
     """After the checks (the quarter's 7 bottom rows dropped: the bottom holds them at the
     same value) the rows held per rank are numbered from 0 in the whole relation's order on
-    every rank count, each the one-process model's; an eliminated relation whole."""
+    every rank count, each the one-process model's; eliminated or not, held per rank (no
+    rank gathers an eliminated relation's rows)."""
     text = SCENE + ("" if eliminate else "\n[solver]\neliminate = false\n")
     model = build_model(parse_scene(tomllib.loads(text), "t.toml", text), COMM)
     alone = build_model(parse_scene(tomllib.loads(text), "t.toml", text), MPI.COMM_SELF)
     assert [r.name for r in model.relations] == NAMES[:5] + ["mean_x", "quarter_y"]
     assert [r.total for r in model.relations] == [26, 13, 13, 18, 77, 1, 35]
-    assert [r.whole for r in model.relations] == [eliminate] * 3 + [False, False, True,
-                                                                    eliminate]
+    assert [r.whole for r in model.relations] == [False] * 5 + [True, False]
+    assert [r.eliminable() for r in model.relations] == [eliminate] * 3 + [False] * 3 \
+        + [eliminate]
     for r, one in zip(model.relations, alone.relations):
         assert r.total == one.nrows
         assert r.spread == (r.name == "mean_x")   # (its entries on their DOFs' owners)

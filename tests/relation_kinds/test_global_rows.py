@@ -14,6 +14,7 @@ import pytest
 from mpi4py import MPI
 
 from parsolve.model import build_model
+from parsolve.relation_kinds.strain import row_cell
 from parsolve.relations import Relation
 from parsolve.scene import parse_scene
 from parsolve.solvers.system import SaddleSystem
@@ -145,8 +146,17 @@ def test_the_ranks_entries_are_the_one_process_build():
     top = np.isclose(alone.mesh.points[one["general"].a_dofs // 2, 1], 1.0)
     np.testing.assert_allclose(one["general"].a_vals, np.where(top, 1 / 25 - 2.0, -2.0),
                                rtol=1e-14)
-    assert np.all(np.diff(one["cells"].meta["cells"]) > 0)
-    np.testing.assert_array_equal(here["cells"].meta["cells"], one["cells"].meta["cells"])
+    # the cells' rows: each rank the cells it counts, with their rows; over the ranks the
+    # one-process cells in row order (by cell id), every cell once, told by ``row_cell``
+    cells, rows = here["cells"].meta["cells"], here["cells"].meta["cell_rows"]
+    assert cells.size == rows.size and COMM.allreduce(cells.size) == 72
+    every = np.zeros(72, dtype=np.int64)
+    every[rows] = cells
+    every = COMM.allreduce(every)
+    assert np.all(np.diff(every) > 0)
+    np.testing.assert_array_equal(every[one["cells"].meta["cell_rows"]], one["cells"].meta["cells"])
+    assert [row_cell(COMM, here["cells"], j) for j in (0, 71)] == [every[0], every[71]]
+    assert row_cell(COMM, here["mean_strain"], 0) is None
 
 
 def test_a_rows_entries_meet_at_its_owner():

@@ -64,9 +64,8 @@ def test_rows_per_rank_are_the_whole_relations(eliminate):
     owned, here = relations_of(text, COMM)
     _, alone = relations_of(text, MPI.COMM_SELF)
     assert list(here) == list(alone)
-    per_rank = {"cell", "top_even"} | (set() if eliminate else {"bottom_held", "top_shear",
-                                                                  "top_y"})
-    assert {n for n, r in here.items() if not r.whole} == per_rank
+    held = {"bottom_held", "top_shear", "top_y"}   # (eliminated or not: held per rank)
+    assert {n for n, r in here.items() if not r.whole} == {"cell", "top_even"} | held
     for name, r in here.items():
         whole = alone[name]
         assert r.total == whole.nrows
@@ -79,7 +78,7 @@ def test_rows_per_rank_are_the_whole_relations(eliminate):
         if r.whole:
             assert rows(r) == rows(whole)
             continue
-        assert r.eliminate is False and not r.eliminable()
+        assert r.eliminable() == (eliminate and name in held)
         # each row on one rank, the rank owning its constrained node
         gathered = sorted(sum(COMM.allgather(rows(r)), []))
         assert gathered == rows(whole)

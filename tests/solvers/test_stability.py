@@ -126,7 +126,7 @@ def _primal_row(problem, row: int, iq: np.ndarray) -> np.ndarray:
     k, local = problem.rset.locate(int(row))
     rel, system = problem.ctx.multiplied[k], problem.system
     dofs, vals, saddle = problem.rset.row_entries(rel, local)   # (a spread row's: gathered)
-    sel = ~np.isin(dofs, system.elim_dofs)
+    sel = ~system.eliminated_at(dofs)   # (each told by its owner: collective)
     order = np.argsort(iq)
     where = order[np.searchsorted(iq, saddle[sel], sorter=order)]
     out = np.zeros(iq.size)
