@@ -10,6 +10,7 @@ import numpy as np
 from mpi4py import MPI
 
 from parsolve.contact import friction as fr
+from parsolve.evolution import Evolution
 
 
 def bodies(cells: np.ndarray, npoints: int) -> np.ndarray:
@@ -131,7 +132,8 @@ def loads_held(model, t0: float, t1: float) -> bool:
     if any(vector.term.timed for vector, _ in parts):
         return False
     evolutions = [evol for _, evol in parts] + [r.evolution for r in model.relations]
-    return all(e.constant_over(t0, t1) for e in evolutions)
+    # (an evolution that is a plain function of t, not an ``Evolution``: not known constant)
+    return all(isinstance(e, Evolution) and e.constant_over(t0, t1) for e in evolutions)
 
 
 def beyond_friction(comm, effects) -> list[str]:
