@@ -1,11 +1,16 @@
 """What a singular system most likely means, said in the model's terms: a body (a connected
 set of cells) that no relation holds, for a field whose operator has a kernel without one
-(a displacement field: rigid-body motions; a steady scalar field: a constant)."""
+(a displacement field: rigid-body motions; a steady scalar field: a constant). And what no
+smaller step can cure (``no_equilibrium``): a failed attempt whose loads a smaller step would
+not change, on a cause that says no state carries them."""
 
 from __future__ import annotations
 
 import numpy as np
 from mpi4py import MPI
+
+from parsolve.contact import friction as fr
+from parsolve.evolution import Evolution
 
 
 def bodies(cells: np.ndarray, npoints: int) -> np.ndarray:
@@ -100,3 +105,47 @@ def unsupported(model) -> list[str]:
 def _sentence(field: str, nbodies: int, ncells: int, first: int, last: int) -> str:
     which = f"body of {ncells} cells (cells {first}..{last})" if nbodies > 1 else "the body"
     return f"no relation holds field {field!r} on {which}"
+
+
+def no_equilibrium(model, t0: float, t1: float) -> tuple[str, ...]:
+    """What says, after an attempt from the converged state at ``t0`` to ``t1`` failed, that
+    no smaller step can succeed (empty if nothing): every smaller step poses the same
+    equations from the same state (``loads_held``) and a frictional contact's closed nodes
+    all slide at the last iterate (the tangential load beyond μN: no state carries it).
+    Collective (every rank the same answer)."""
+    if not loads_held(model, t0, t1):
+        return ()
+    return tuple(f"every closed node of {name!r} slides"
+                 for name in beyond_friction(model.comm, model.effects))
+
+
+def loads_held(model, t0: float, t1: float) -> bool:
+    """Whether a step from ``t0`` to any t in (t0, t1] poses the same equations: a model
+    without rates (a transient step depends on its size), every known load's and relation's
+    evolution constant over [t0, t1], and no load that names the time. (Read from the scene's
+    declarations: the same on every rank.)"""
+    if model.transient:
+        return False
+    duals = {r.meta.get("dual") for r in model.relations} | set(model.reference_patterns)
+    parts = [part for name, pattern in model.patterns.items() if name not in duals
+             for part in pattern.parts]
+    if any(vector.term.timed for vector, _ in parts):
+        return False
+    evolutions = [evol for _, evol in parts] + [r.evolution for r in model.relations]
+    # (an evolution that is a plain function of t, not an ``Evolution``: not known constant)
+    return all(isinstance(e, Evolution) and e.constant_over(t0, t1) for e in evolutions)
+
+
+def beyond_friction(comm, effects) -> list[str]:
+    """The frictional contacts some of whose nodes are closed and none sticks at the last
+    iterate (over every rank: a contact built per rank holds its own nodes' states)."""
+    out = []
+    for e in effects:
+        state = getattr(e, "node_state", None)
+        if state is None or not getattr(e, "frictional", False):
+            continue
+        closed = comm.allreduce(bool((state != fr.OPEN).any()), op=MPI.LOR)
+        sticking = comm.allreduce(bool((state == fr.STICK).any()), op=MPI.LOR)
+        if closed and not sticking:
+            out.append(getattr(getattr(e, "spec", None), "name", type(e).__name__))
+    return out

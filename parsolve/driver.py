@@ -10,7 +10,7 @@ import time
 import numpy as np
 from mpi4py import MPI
 
-from parsolve.diagnostics import unsupported
+from parsolve.diagnostics import no_equilibrium, unsupported
 from parsolve.effects.base import Effect
 from parsolve.effects.compose import Rate
 from parsolve import interrupts
@@ -251,7 +251,8 @@ def _run_newton(comm, system: SaddleSystem, cli_options, writer, log,
             result = newton.step(t)
         except SolverError as exc:
             problem.restore(snap)
-            if isinstance(exc, DoesNotFit) or not schedule.cut(t):
+            if isinstance(exc, DoesNotFit) or \
+                    not schedule.cut(t, no_equilibrium(system.model, problem.t_prev, t)):
                 raise _final_failure(exc, problem, t, stability, schedule, step) from None
             if comm.rank == 0:
                 log(f"step to t={t:.6g} failed ({exc}); retrying with half the step")
@@ -311,6 +312,8 @@ def _final_failure(exc: SolverError, problem, t: float, stability: bool, schedul
     if named is not None:   # (a maximum control's own limit point)
         return named
     cuts = f"after {schedule.cuts} cut{'s' * (schedule.cuts != 1)}"
+    if schedule.hopeless:
+        return _hopeless(exc, problem, t, schedule, step, cuts)
     if step == 0:
         return StepFailure(
             f"no step converged: the first step failed down to t = {t:.6g} ({cuts}); the last "
@@ -321,6 +324,19 @@ def _final_failure(exc: SolverError, problem, t: float, stability: bool, schedul
         f"step {step + 1} from t = {problem.t_prev:.6g} failed down to t = {t:.6g} ({cuts}); "
         f"the last attempt: {exc}", "smaller steps ([steps] count, or automatic steps), more "
         "iterations ([nonlinear] max_iterations), or the tangent matrix")
+
+
+def _hopeless(exc: SolverError, problem, t: float, schedule, step: int,
+              cuts: str) -> SolverError:
+    """A step whose cuts stopped on a cause no smaller step removes (``StepSchedule.cut``):
+    where, the cause, and a way out without smaller steps."""
+    where = ("no step converged: the first step failed" if step == 0 else
+             f"step {step + 1} from t = {problem.t_prev:.6g} failed")
+    return StepFailure(
+        f"{where} down to t = {t:.6g} ({cuts}, then no more: every smaller step takes the same "
+        f"loads, and at the last two sizes {'; '.join(schedule.hopeless)}); the last attempt: "
+        f"{exc}", "check that the supports hold the body and the loads' sizes (smaller steps "
+        "cannot help: no state carries these loads)")
 
 
 class StepFailure(SolverError):
@@ -388,7 +404,8 @@ class BranchWatch:
 class StepSchedule:
     """The scene's steps, or automatic steps that keep the largest strain increment near a
     target (Cast3M's AUTOMATIQUE): the next step is scaled by target / achieved, within
-    [1/2, 2]. A failed step is retried with half its size, up to MAX_CUTS times in a row; with
+    [1/2, 2]. A failed step is retried with half its size, up to MAX_CUTS times in a row, or
+    until the same cause that no smaller step can remove held at two sizes (``cut``); with
     fixed steps the intermediate points are computed (and saved) on the way to the scene's."""
 
     MAX_CUTS = 6         # in a row
@@ -401,6 +418,10 @@ class StepSchedule:
         self.pending: float | None = None  # a cut fixed step: the intermediate time
         self.step_cuts = 0
         self.extra = 0  # intermediate steps saved so far
+        # the no-equilibrium cause of this step's last failed attempt, and the one that
+        # stopped the cuts (``cut``)
+        self.cause: tuple[str, ...] = ()
+        self.hopeless: tuple[str, ...] = ()
 
     @property
     def total(self):
@@ -417,7 +438,7 @@ class StepSchedule:
         return min(self.t + self.dt, self.spec.end)
 
     def done(self, t: float, max_strain_increment: float) -> None:
-        self.cuts = 0
+        self.cuts, self.cause = 0, ()
         if not self.spec.automatic:
             if self.pending is not None and t < self.times[self.count]:
                 self.t, self.pending = t, None  # the scene's step is still ahead
@@ -432,8 +453,17 @@ class StepSchedule:
         if max_strain_increment > 0:
             self.dt *= min(2.0, max(0.5, self.spec.strain_increment / max_strain_increment))
 
-    def cut(self, t: float) -> bool:
-        """Halve the step that failed at t; False after too many cuts."""
+    def cut(self, t: float, cause: tuple[str, ...] = ()) -> bool:
+        """Halve the step that failed at t; False after too many cuts, or when the attempt
+        failed on a cause no smaller step can remove (``diagnostics.no_equilibrium``: the
+        same equations at every smaller step, no state that carries them) that the attempt
+        twice its size failed on too (then ``hopeless`` names it). One sighting is not
+        enough: the cause is read at a failed iterate, which a converging attempt may pass
+        through; at two sizes of the same equations it is the equations'."""
+        if cause and cause == self.cause:
+            self.hopeless = cause
+            return False
+        self.cause = cause
         if self.cuts >= self.MAX_CUTS or self.step_cuts >= self.MAX_STEP_CUTS:
             return False
         self.cuts += 1

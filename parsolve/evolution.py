@@ -18,6 +18,12 @@ class Evolution:
     def __call__(self, t: float) -> float:
         return float(np.interp(t, self.times, self.values))
 
+    def constant_over(self, a: float, b: float) -> bool:
+        """Whether f is the same at every t in [a, b]: piecewise linear, it is when f(a),
+        f(b) and f at every point of the evolution between them are equal."""
+        inside = [t for t in self.times if a < t < b]
+        return all(self(t) == self(a) for t in [b, *inside])
+
 
 RAMP = Evolution("ramp", (0.0, 1.0), (0.0, 1.0))
 CONSTANT = Evolution("constant", (0.0, 1.0), (1.0, 1.0))

@@ -112,7 +112,7 @@ nu = 0.3
 name = "push"
 region = "top"
 traction = [{tx}, {ty}]
-evolution = "constant"
+evolution = "{evolution}"
 [[contact]]
 name = "base"
 slave = "bottom"
@@ -124,27 +124,68 @@ count = 2
 
 
 @pytest.mark.parametrize("degrees, fails", [(30.0, True), (20.0, False)])
-def test_a_load_friction_cannot_carry_is_named(run, degrees, fails):
-    """A block on a rough plane (μ = 0.5) under a uniform load at an angle from the normal:
-    at 30° (tan 30° = 0.577 > μ) no equilibrium exists, the step is cut to its limit and the
-    failure names the friction capacity; at 20° (0.364 < μ) the block sticks, its friction
-    force the load's tangential part."""
+def test_a_load_friction_cannot_carry_is_named(run, degrees, fails, monkeypatch):
+    """A block on a rough plane (μ = 0.5) under a uniform load at an angle from the normal,
+    constant in t: at 30° (tan 30° = 0.577 > μ) no equilibrium exists: the first attempt and
+    its half (the same load: the same equations) both end with every closed node sliding, so
+    the step is cut once, not 6 times (7 attempts before, 2 now), and the failure names the
+    friction capacity; at 20° (0.364 < μ) the block sticks, its friction force the load's
+    tangential part."""
     from parsolve.errors import SolverError
+    from parsolve.solvers.newton import NewtonSolver
 
+    attempts, step = [], NewtonSolver.step
+
+    def counted(self, t):
+        attempts.append(t)
+        return step(self, t)
+
+    monkeypatch.setattr(NewtonSolver, "step", counted)
     a = np.radians(degrees)
-    text = BLOCK_ON_PLANE.format(tx=10 * np.sin(a), ty=-10 * np.cos(a))
+    text = BLOCK_ON_PLANE.format(tx=10 * np.sin(a), ty=-10 * np.cos(a), evolution="constant")
     if not fails:
         res = run(text, name="friction_ok")
         force = res["relations/base_normal/tangential_force"][-1, 0]
         assert abs(force) == pytest.approx(10 * np.sin(a), rel=1e-10)
+        assert attempts == [0.5, 1.0] and not res["steps/cuts"].any()
         return
     with pytest.raises(SolverError) as err:
         run(text, name="friction_impossible")
     message = str(err.value)
+    assert attempts == [0.5, 0.25]
     assert "contact[0]: every closed node of 'base' slides" in message, message
     assert "the tangential load exceeds the friction capacity μN (μ = 0.5); hold it, lower the " \
         "tangential load or raise the friction" in message, message   # the cause and the way out
-    assert message.startswith("no step converged: the first step failed down to t = "), message
-    # the cause before the generic advice (smaller steps cannot help: no equilibrium exists)
+    assert message.startswith(
+        "no step converged: the first step failed down to t = 0.25 (after 1 cut, then no more: "
+        "every smaller step takes the same loads, and at the last two sizes every closed node of "
+        "'base' slides); "), message
+    # the cause before the generic advice, which no longer offers smaller steps
     assert message.index("likely cause: ") < message.index("otherwise, the way out: check "
                                                             "that the supports"), message
+    assert message.endswith("(smaller steps cannot help: no state carries these loads)"), message
+
+
+def test_a_growing_load_beyond_friction_is_cut_as_before(run, monkeypatch):
+    """The same block at 30° with the load growing from 0 (a ramp): a smaller step takes a
+    smaller load, so nothing proves that smaller steps fail (though here they do, the load's
+    angle and not its size being beyond μ): the step is cut its 6 times, as before."""
+    from parsolve.errors import SolverError
+    from parsolve.solvers.newton import NewtonSolver
+
+    attempts, step = [], NewtonSolver.step
+
+    def counted(self, t):
+        attempts.append(t)
+        return step(self, t)
+
+    monkeypatch.setattr(NewtonSolver, "step", counted)
+    a = np.radians(30.0)
+    text = BLOCK_ON_PLANE.format(tx=10 * np.sin(a), ty=-10 * np.cos(a), evolution="ramp")
+    with pytest.raises(SolverError) as err:
+        run(text, name="friction_ramp")
+    message = str(err.value)
+    np.testing.assert_allclose(attempts, 0.5 ** np.arange(1, 8), rtol=0, atol=0)
+    assert message.startswith(f"no step converged: the first step failed down to t = "
+                              f"{0.5 ** 7:.6g} (after 6 cuts); the last attempt: "), message
+    assert "every closed node of 'base' slides at the last iterate" in message, message

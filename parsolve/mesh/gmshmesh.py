@@ -199,8 +199,10 @@ def _planar(comm, xyz: np.ndarray, dim: int, path: str, key: str) -> np.ndarray:
     return np.ascontiguousarray(xyz[:, :dim])
 
 
-def _in_range(ids: np.ndarray, message: str, path: str, key: str) -> None:
-    if ids.size and ids.min() < 0:
+def _in_range(ids: np.ndarray, message: str, path: str, key: str, n: int | None = None) -> None:
+    """InputError unless every id is a point: none below 0 (a Gmsh tag no node has maps to
+    -1) and, given the number of points ``n``, none at n or above (ids read as they are)."""
+    if ids.size and (ids.min() < 0 or (n is not None and ids.max() >= n)):
         raise InputError(message, path, key)
 
 

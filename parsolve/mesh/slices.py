@@ -492,6 +492,16 @@ def _unused_warning(comm, unused: np.ndarray) -> list[str]:
             "of the system"]
 
 
+def hash_ranks(keys: np.ndarray, size: int) -> np.ndarray:
+    """The rank where each row of integer ``keys`` meets the rows equal to it: a
+    multiplicative hash of its columns, its high bits (a structured grid's rounded coordinates,
+    or its node ids, are all multiples of one spacing, which low bits would send to one rank)."""
+    mix = np.zeros(keys.shape[0], dtype=np.uint64)
+    for a in range(keys.shape[1]):
+        mix = (mix ^ keys[:, a].astype(np.uint64)) * np.uint64(0x9E3779B97F4A7C15)
+    return ((mix >> np.uint64(33)) % np.uint64(size)).astype(np.int64)
+
+
 def _duplicate_warning(comm, points: np.ndarray, homes: _Homes, ps) -> list[str]:
     """``checks.duplicate_warning``'s message: the used points rounded onto the same grid
     (``checks.duplicate_points``' spacing), each grid cell's points met on the rank its hash
@@ -505,16 +515,10 @@ def _duplicate_warning(comm, points: np.ndarray, homes: _Homes, ps) -> list[str]
         return []
     extent = max(float((hi - lo).max()), 1e-300)
     grid = np.rint((pts - lo) / (1e-10 * extent)).astype(np.int64)
-    # a multiplicative hash, its high bits: a structured grid's rounded coordinates are all
-    # multiples of one spacing (of 4 for a 40-cell side), which their low bits would send to
-    # one rank
-    mix = np.zeros(ids.size, dtype=np.uint64)
-    for a in range(grid.shape[1]):
-        mix = (mix ^ grid[:, a].astype(np.uint64)) * np.uint64(0x9E3779B97F4A7C15)
-    dest = ((mix >> np.uint64(33)) % np.uint64(comm.size)).astype(np.int64)
+    dest = hash_ranks(grid, comm.size)
     dim = grid.shape[1]
     rows = np.column_stack([grid, ids])   # (the coordinates: of the first pair's point only)
-    del pts, mix
+    del pts
     got, _ = exchange(comm, rows, dest)
     del rows, grid, dest
     if got.shape[0] > 1 and not np.all(got[1:, dim] >= got[:-1, dim]):

@@ -28,9 +28,10 @@ import numpy as np
 from parsolve.collective import agree
 from parsolve.errors import InputError
 from parsolve.mesh.blocks import exchange
-from parsolve.mesh.gmshmesh import _oriented, _planar, read_rows
+from parsolve.mesh.gmshmesh import _in_range, _oriented, _planar, read_rows
 from parsolve.mesh.mesh import CELL_INFO
 from parsolve.mesh.partition import block_starts
+from parsolve.mesh.slices import hash_ranks
 from parsolve.mesh.topology import NUM_VERTICES, sorted_row_groups
 
 _KEY = "mesh.file"
@@ -159,7 +160,8 @@ class XdmfSlices:
             cells = np.asarray(top[slice(*self._cs)], dtype=np.int64)
             self._points = _planar(comm, np.asarray(geo[slice(*self._ps)], dtype=float), self.dim,
                                    lay.path, key)
-            agree(comm, _in_range, cells, self.num_points, lay.path, key)
+            agree(comm, _in_range, cells, "cells refer to points that do not exist", lay.path,
+                  key, self.num_points)
             self._cells = _oriented(comm, cells, ps, self._points, lay.cell_type)
             values = [] if lay.cell_tags is None else [
                 np.asarray(files(lay.cell_tags)[slice(*self._cs)], dtype=np.int64).ravel()]
@@ -204,11 +206,6 @@ class XdmfSlices:
     _mine = staticmethod(read_rows)
 
 
-def _in_range(cells: np.ndarray, num_points: int, path: str, key: str) -> None:
-    if cells.size and (cells.min() < 0 or cells.max() >= num_points):
-        raise InputError("cells refer to points that do not exist", path, key)
-
-
 def _names(comm, values: list[np.ndarray]) -> tuple[str, ...]:
     """The tag values > 0 of every rank, as group names in increasing value."""
     mine = np.unique(np.concatenate(values)) if values else np.zeros(0, np.int64)
@@ -227,7 +224,6 @@ def _cell_values(comm, cells: np.ndarray, tagged: np.ndarray, values: np.ndarray
     """Each slice cell's tag among DOLFINx's tagged cells (given by their nodes; 0: none):
     cells and tagged cells meet by their sorted corner nodes at the rank a hash of them names,
     and the tags go back to the cells' slices."""
-    size = comm.size
     corners = slice(0, NUM_VERTICES[cell_type])
     here = np.arange(cells.shape[0], dtype=np.int64)
     rank_col = np.full(cells.shape[0], comm.rank, np.int64)
@@ -236,12 +232,10 @@ def _cell_values(comm, cells: np.ndarray, tagged: np.ndarray, values: np.ndarray
         key = np.sort(nodes[:, corners], axis=1)
         return np.column_stack([key, a, b])
 
-    mix = lambda key: ((key * np.uint64(0x9E3779B97F4A7C15)).sum(axis=1)  # noqa: E731
-                       >> np.uint64(33)) % np.uint64(size)
     mine = rows(cells, here, rank_col)
     tags = rows(tagged, values, np.full(values.size, -1, np.int64))
     both = np.concatenate([mine, tags])
-    got, _ = exchange(comm, both, mix(both[:, :-2].astype(np.uint64)).astype(np.int64))
+    got, _ = exchange(comm, both, hash_ranks(both[:, :-2], comm.size))
     o, g, _ = sorted_row_groups(got[:, :-2])
     got, g = got[o], g
     is_tag = got[:, -1] < 0

@@ -173,6 +173,26 @@ def test_files_the_slices_cannot_read_go_to_rank_0(comm, shared_tmp):
         open_xdmf(comm, str(lost))
 
 
+@pytest.mark.parametrize("bad", [-1, 27])
+def test_cells_beyond_the_points_are_an_input_error(comm, shared_tmp, bad):
+    """A cell naming a point the geometry does not have (the 2 × 2 × 2 box has 27: id 27, or
+    -1) is an input error on every rank, raised before any rank asks for its coordinates."""
+    import h5py
+    import meshio
+
+    whole = box(1.0, 1.0, 1.0, 2, 2, 2, cell="tetra")
+    path = shared_tmp / f"beyond{bad}.xdmf"
+    if comm.rank == 0:
+        meshio.write(str(path), meshio.Mesh(whole.points, [("tetra", whole.cells)]))
+        with h5py.File(path.with_suffix(".h5"), "r+") as f:
+            topology = [k for k in f if f[k].ndim == 2 and f[k].dtype.kind in "iu"]
+            assert len(topology) == 1 and whole.num_points == 27
+            f[topology[0]][whole.num_cells - 1, 2] = bad   # (the last rank's slice)
+    comm.Barrier()
+    with pytest.raises(InputError, match="cells refer to points that do not exist"):
+        open_xdmf(comm, str(path))
+
+
 SCENE = """
 [mesh]
 file = "{file}"
