@@ -1416,10 +1416,31 @@ GAMG_SIZES = [50, 80]      # 397,953 and 1,594,323 DOFs
 GAMG_SMOKE = [4]
 GAMG_TARGET = 1.3          # summed peak at 2 ranks ≤ 1.3× the peak at 1 rank
 GAMG_MEANINGFUL = 100_000  # DOFs below which each rank's process base (~90 MiB) decides it
-#: option sets measured against the preset (given as on parsolve's command line, over it)
+#: option sets measured against the preset (given as on parsolve's command line, over it):
+#: the candidate causes of the 2-rank set-up's growth, one at a time
 GAMG_VARIANTS = {
     "preset": {},
+    # the preset before its products were freed (solvers.options.AMG_PRODUCTS)
+    "productskept": {"mat_product_clear": "false"},
+    # the distributed P^T A P without its stored intermediates (A P, P's transposed parts)
+    "allatonce": {"matptap_via": "allatonce"},
+    "allatoncekept": {"matptap_via": "allatonce", "mat_product_clear": "false"},
+    "allatoncemergedkept": {"matptap_via": "allatonce_merged", "mat_product_clear": "false"},
+    # no aggressive (MIS-2) coarsening on the first level (3.18's -pc_gamg_square_graph)
+    "no_aggressive": {"pc_gamg_square_graph": "0"},
+    # coarse grids repartitioned
+    "repartition": {"pc_gamg_repartition": "true"},
 }
+
+
+def one_rank_twin(name: str) -> str:
+    """The variant whose 1-rank run is this one's: its options without a distributed P^T A P
+    algorithm (parsolve leaves that out on one rank)."""
+    from parsolve.solvers.options import DISTRIBUTED_PTAP
+
+    options = {k: v for k, v in GAMG_VARIANTS[name].items()
+               if not (k == "matptap_via" and v in DISTRIBUTED_PTAP)}
+    return next((v for v, o in GAMG_VARIANTS.items() if o == options), name)
 
 
 def gamg_runs(args) -> dict:
@@ -1432,6 +1453,8 @@ def gamg_runs(args) -> dict:
     for n in sizes:
         for name in names:
             for p in (1, 2):
+                if p == 1 and one_rank_twin(name) != name and one_rank_twin(name) in names:
+                    continue   # (its 1-rank run is another variant's)
                 r = launch("parsolve", GAMG_CASE, n, p, False, args.timeout, "post",
                            petsc=GAMG_VARIANTS[name],
                            tag=f"gamg_{name}_{n}_np{p}".replace(" ", "_"))
@@ -1439,8 +1462,47 @@ def gamg_runs(args) -> dict:
                 rows.append(r)
                 print(progress_line(r), name, flush=True)
     info["loadavg_end"] = os.getloadavg()
-    return dict(machine=info, elapsed=time.perf_counter() - t0, rows=rows, sizes=sizes,
-                variants=names)
+    out = dict(machine=info, elapsed=time.perf_counter() - t0, rows=rows, sizes=sizes,
+               variants=names)
+    return out if args.smoke or not args.gamg_add else _merged(out)
+
+
+def gamg_collect() -> dict:
+    """The table from every --gamg run's JSON in the scratch folder (runs made by several
+    invocations, e.g. sizes run side by side)."""
+    rows, stamps = [], []
+    for name, options in GAMG_VARIANTS.items():
+        for js in sorted(SCRATCH.glob(f"gamg_{name}_*_np*.json")):
+            n, p = js.stem.removeprefix(f"gamg_{name}_").split("_np")
+            if not n.isdigit():
+                continue   # (another variant whose name starts alike)
+            r = json.loads(js.read_text())
+            r.update(code="parsolve", variant=name, options=options)
+            rows.append(r)
+            stamps.append(js.stat().st_mtime)
+    info = machine_info()
+    info["loadavg_end"] = os.getloadavg()
+    return dict(machine=info, elapsed=(max(stamps) - min(stamps)) if stamps else 0.0,
+                rows=rows, sizes=sorted({r["n"] for r in rows}),
+                variants=[v for v in GAMG_VARIANTS if any(r["variant"] == v for r in rows)],
+                collected=True)
+
+
+def _merged(out: dict) -> dict:
+    """The new runs over the published JSON's (--gamg-add: a variant or size added without
+    running the others again); each run keeps its own machine line."""
+    path = RESULTS / "bench_scale_gamg.json"
+    if not path.exists():
+        return out
+    old = json.loads(path.read_text())
+    new = {(r["variant"], r["n"], r["nranks"]) for r in out["rows"]}
+    for r in out["rows"]:
+        r["machine"] = out["machine"]
+    rows = [r for r in old["rows"] if (r["variant"], r["n"], r["nranks"]) not in new]
+    return dict(machine=old["machine"], elapsed=old["elapsed"] + out["elapsed"],
+                rows=rows + out["rows"], sizes=sorted(set(old["sizes"]) | set(out["sizes"])),
+                variants=[v for v in GAMG_VARIANTS if v in old["variants"] + out["variants"]],
+                added=old.get("added", []) + [out["machine"]])
 
 
 def summed_peak(r: dict) -> float:
@@ -1472,6 +1534,11 @@ def gamg_table(out: dict) -> tuple[str, list[str]]:
         ref = by.get(("preset", n, 1))
         for name in out["variants"]:
             r1, r2 = by.get((name, n, 1)), by.get((name, n, 2))
+            twin = by.get((one_rank_twin(name), n, 1)) if name in GAMG_VARIANTS else None
+            if r1 is None and twin is not None:
+                r1 = {**twin, "options": GAMG_VARIANTS[name]}
+            if r2 is None:
+                continue   # (a variant not run at this size)
             if not _ok(r1) or not _ok(r2):
                 why = (r1 or r2 or {}).get("failed", "not run")
                 body.append([name, _options_text(GAMG_VARIANTS.get(name, {})),
@@ -1586,6 +1653,8 @@ def main(argv=None) -> int:
                         + ", ".join(map(str, GAMG_SIZES)) + ")")
     p.add_argument("--gamg-variants", nargs="+", choices=list(GAMG_VARIANTS), default=[],
                    help="with --gamg: the option sets (default: all)")
+    p.add_argument("--gamg-add", action="store_true",
+                   help="with --gamg: keep the published runs of other variants and sizes")
     p.add_argument("--mesh-file", help=argparse.SUPPRESS)
     p.add_argument("--options", help=argparse.SUPPRESS)
     bh.add_smoke(p)
@@ -1604,6 +1673,8 @@ def main(argv=None) -> int:
                            tuple(args.quadrature))
         return 0
     if args.gamg:
+        if args.collect:
+            return gamg_report(gamg_collect())
         if args.report:
             return gamg_report(json.loads((RESULTS / "bench_scale_gamg.json").read_text()))
         return gamg_report(gamg_runs(args))
