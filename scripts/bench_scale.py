@@ -1412,7 +1412,8 @@ def post_report(out: dict) -> int:
 
 
 GAMG_CASE = "3d-iterative"
-GAMG_SIZES = [50, 80]      # 397,953 and 1,594,323 DOFs
+# 397,953 and 823,875 DOFs (80: 1.59M, about 6 GiB summed at 2 ranks, on a machine to itself)
+GAMG_SIZES = [50, 64]
 GAMG_SMOKE = [4]
 GAMG_TARGET = 1.3          # summed peak at 2 ranks ≤ 1.3× the peak at 1 rank
 GAMG_MEANINGFUL = 100_000  # DOFs below which each rank's process base (~90 MiB) decides it
@@ -1579,8 +1580,8 @@ def gamg_table(out: dict) -> tuple[str, list[str]]:
 GAMG_NOTES = """Peaks: VmHWM (/proc/self/status) of each rank at the end of the step (set-up,
 assembly, GAMG's set-up, CG's solve, the post-processing; no result file), summed over the
 ranks; the target: the sum at 2 ranks ≤ 1.3× the peak at 1 rank. Variants: options over the
-preset, one candidate cause at a time ("kept": the products' intermediates kept, as the
-preset did before; a distributed P^T A P algorithm does nothing on one rank, where the run
+preset, one candidate cause at a time ("kept": each product's intermediates kept,
+-mat_product_clear false; a distributed P^T A P algorithm does nothing on one rank, where the run
 without it stands in). *GAMG set-up*: how much GAMG's PCSetUp
 raised the resident peak over the assembly's (at 1 rank partly hidden under the assembly's own
 earlier peak, whose temporaries were freed). CPU seconds, max over ranks (the machine is
@@ -1592,16 +1593,20 @@ each rank's process base (Python, numpy, PETSc, MPI: ~90 MiB) decides the ratio.
 def gamg_markdown(out: dict) -> str:
     table, verdicts = gamg_table(out)
     m = out["machine"]
+    when = (f"runs of several invocations (side by side, under the load of their time), "
+            f"collected {m['date']}, the last {out['elapsed'] / 60:.1f} min after the first; "
+            f"load average at collection {m['loadavg']:.1f}" if out.get("collected") else
+            f"{bh.load_line(m['loadavg_start'], m['loadavg_end'])}; run started {m['date']}, "
+            f"{out['elapsed'] / 60:.1f} min")
     return "\n".join([
         "# 3D GAMG at 1 and 2 ranks: the summed peak, option by option", "",
         f"{GAMG_CASE} (parsolve's iterative preset: CG + GAMG with the rigid-body modes) on the "
         "clamped unit cube under an end traction, N³ Q1 hexahedra, one linear step. Machine: "
-        f"{m['cpus']} cores, {m['mem_gib']} GiB, shared with other jobs, "
-        f"{bh.load_line(m['loadavg_start'], m['loadavg_end'])}; run started {m['date']}, "
-        f"{out['elapsed'] / 60:.1f} min.", "",
+        f"{m['cpus']} cores, {m['mem_gib']} GiB, shared with other jobs; {when}.", "",
         table, "", GAMG_NOTES, "",
-        "Rerun: `.venv/bin/python scripts/bench_scale.py --gamg` (`--gamg-sizes 50 80`, "
-        "`--gamg-variants preset ...`, `--gamg --report`).",
+        "Rerun: `.venv/bin/python scripts/bench_scale.py --gamg` (`--gamg-sizes 50 64`, "
+        "`--gamg-variants preset ...`; `--gamg --collect`: the table from every run's JSON in "
+        "the scratch folder; `--gamg --report`: again from the published JSON).",
     ]) + "\n"
 
 
