@@ -327,7 +327,8 @@ def instrument(drv, rec: Recorder, output: bool = True) -> dict:
     def outputs(comm, system, q, multipliers, *args, **kwargs):
         out = step_outputs(comm, system, q, multipliers, *args, **kwargs)
         held["q"] = q
-        rec.snap("post", lambda: parsolve_categories(system, (q, multipliers, out)))
+        # (the driver passes its step context: the categories walk the system caught above)
+        rec.snap("post", lambda: parsolve_categories(held["system"], (q, multipliers, out)))
         return out
 
     drv.step_outputs = outputs
@@ -358,7 +359,9 @@ def _mumps(solver) -> dict:
 
 
 def parsolve_worker(case: str, n: int, h5: str, json_out: str, trace: bool,
-                    phases: str = "all") -> None:
+                    phases: str = "all", petsc: dict | None = None) -> None:
+    """One parsolve run, measured; ``petsc``: solver options as given on parsolve's command
+    line (over the preset's; --gamg's variants)."""
     if trace:
         import tracemalloc
 
@@ -388,7 +391,7 @@ def parsolve_worker(case: str, n: int, h5: str, json_out: str, trace: bool,
     model = rec.timed("setup", model_of)()
     rec.snap("model")
     lines: list[str] = []
-    status = drv.run(comm, model, h5, {}, log=lines.append)
+    status = drv.run(comm, model, h5, dict(petsc or {}), log=lines.append)
     share = (cpu_seconds() - cpu) / (time.perf_counter() - t_wall)  # this rank's
     t_wall = comm.allreduce(time.perf_counter() - t_wall, op=MPI.MAX)
     share = comm.allreduce(share, op=MPI.MIN)
@@ -513,17 +516,19 @@ def solver_options(case: str) -> dict:
 
 def launch(code: str, case: str, n: int, nranks: int, trace: bool, timeout: float,
            phases: str = "all", baseline: str | None = None,
-           quadrature: tuple[int, ...] = ()) -> dict:
+           quadrature: tuple[int, ...] = (), petsc: dict | None = None,
+           tag: str | None = None) -> dict:
     """One run in a fresh process. ``code``: parsolve, dolfinx, or baseline (parsolve's worker
     on the package found in the folder ``baseline``, e.g. an unchanged copy of main)."""
-    tag = tag_of(code, case, n, nranks)
+    tag = tag or tag_of(code, case, n, nranks)
     js = SCRATCH / f"{tag}.json"
     js.unlink(missing_ok=True)
     env = child_env()
     if code in PARSOLVE_CODES + ("baseline",):
         args = [VENV_PY, __file__, "--worker", "parsolve", case, str(n), "--h5",
                 str(SCRATCH / f"{tag}.h5"), "--json", str(js), "--phases", phases] \
-            + (["--trace"] if trace else [])
+            + (["--trace"] if trace else []) \
+            + (["--options", json.dumps(petsc)] if petsc else [])
         if code == "baseline":
             env["PYTHONPATH"] = str(Path(baseline).resolve())
     else:
@@ -1403,6 +1408,218 @@ def post_report(out: dict) -> int:
 
 
 # ------------------------------------------------------------------------------------------------
+# --gamg: 3D GAMG at 1 and 2 ranks, the summed peak's ratio, option by option
+
+
+GAMG_CASE = "3d-iterative"
+# 397,953 and 823,875 DOFs (80: 1.59M, about 6 GiB summed at 2 ranks, on a machine to itself)
+GAMG_SIZES = [50, 64]
+GAMG_SMOKE = [4]
+GAMG_TARGET = 1.3          # summed peak at 2 ranks ≤ 1.3× the peak at 1 rank
+GAMG_MEANINGFUL = 100_000  # DOFs below which each rank's process base (~90 MiB) decides it
+#: option sets measured against the preset (given as on parsolve's command line, over it):
+#: the candidate causes of the 2-rank set-up's growth, one at a time
+GAMG_VARIANTS = {
+    "preset": {},
+    # the preset before its products were freed (solvers.options.AMG_PRODUCTS)
+    "productskept": {"mat_product_clear": "false"},
+    # the distributed P^T A P without its stored intermediates (A P, P's transposed parts)
+    "allatonce": {"matptap_via": "allatonce"},
+    "allatoncekept": {"matptap_via": "allatonce", "mat_product_clear": "false"},
+    "allatoncemergedkept": {"matptap_via": "allatonce_merged", "mat_product_clear": "false"},
+    # the distributed product's other algorithm that stores A P
+    "scalable": {"matptap_via": "scalable"},
+    # no aggressive (MIS-2) coarsening on the first level (3.18's -pc_gamg_square_graph)
+    "no_aggressive": {"pc_gamg_square_graph": "0"},
+    # coarse grids repartitioned, or gathered on one rank
+    "repartition": {"pc_gamg_repartition": "true"},
+    "one_rank_coarse": {"pc_gamg_process_eq_limit": "1000000"},
+}
+
+
+def one_rank_twin(name: str) -> str:
+    """The variant whose 1-rank run is this one's: its options without a distributed P^T A P
+    algorithm (parsolve leaves that out on one rank)."""
+    from parsolve.solvers.options import DISTRIBUTED_PTAP
+
+    options = {k: v for k, v in GAMG_VARIANTS[name].items()
+               if not (k == "matptap_via" and v in DISTRIBUTED_PTAP)}
+    return next((v for v, o in GAMG_VARIANTS.items() if o == options), name)
+
+
+def gamg_runs(args) -> dict:
+    """Every variant on every size at 1 and 2 ranks (parsolve only, one solve, no output)."""
+    SCRATCH.mkdir(parents=True, exist_ok=True)
+    info = machine_info()
+    sizes = GAMG_SMOKE if args.smoke else args.gamg_sizes or GAMG_SIZES
+    names = ["preset"] if args.smoke else args.gamg_variants or list(GAMG_VARIANTS)
+    rows, t0 = [], time.perf_counter()
+    for n in sizes:
+        for name in names:
+            for p in (1, 2):
+                if p == 1 and one_rank_twin(name) != name and one_rank_twin(name) in names:
+                    continue   # (its 1-rank run is another variant's)
+                r = launch("parsolve", GAMG_CASE, n, p, False, args.timeout, "post",
+                           petsc=GAMG_VARIANTS[name],
+                           tag=f"gamg_{name}_{n}_np{p}".replace(" ", "_"))
+                r.update(variant=name, options=GAMG_VARIANTS[name])
+                rows.append(r)
+                print(progress_line(r), name, flush=True)
+    info["loadavg_end"] = os.getloadavg()
+    out = dict(machine=info, elapsed=time.perf_counter() - t0, rows=rows, sizes=sizes,
+               variants=names)
+    return out if args.smoke or not args.gamg_add else _merged(out)
+
+
+def gamg_collect() -> dict:
+    """The table from every --gamg run's JSON in the scratch folder (runs made by several
+    invocations, e.g. sizes run side by side)."""
+    rows, stamps = [], []
+    for name, options in GAMG_VARIANTS.items():
+        for js in sorted(SCRATCH.glob(f"gamg_{name}_*_np*.json")):
+            n, p = js.stem.removeprefix(f"gamg_{name}_").split("_np")
+            if not n.isdigit():
+                continue   # (another variant whose name starts alike)
+            r = json.loads(js.read_text())
+            r.update(code="parsolve", variant=name, options=options)
+            rows.append(r)
+            stamps.append(js.stat().st_mtime)
+    info = machine_info()
+    info["loadavg_end"] = os.getloadavg()
+    return dict(machine=info, elapsed=(max(stamps) - min(stamps)) if stamps else 0.0,
+                rows=rows, sizes=sorted({r["n"] for r in rows}),
+                variants=[v for v in GAMG_VARIANTS if any(r["variant"] == v for r in rows)],
+                collected=True)
+
+
+def _merged(out: dict) -> dict:
+    """The new runs over the published JSON's (--gamg-add: a variant or size added without
+    running the others again); each run keeps its own machine line."""
+    path = RESULTS / "bench_scale_gamg.json"
+    if not path.exists():
+        return out
+    old = json.loads(path.read_text())
+    new = {(r["variant"], r["n"], r["nranks"]) for r in out["rows"]}
+    for r in out["rows"]:
+        r["machine"] = out["machine"]
+    rows = [r for r in old["rows"] if (r["variant"], r["n"], r["nranks"]) not in new]
+    return dict(machine=old["machine"], elapsed=old["elapsed"] + out["elapsed"],
+                rows=rows + out["rows"], sizes=sorted(set(old["sizes"]) | set(out["sizes"])),
+                variants=[v for v in GAMG_VARIANTS if v in old["variants"] + out["variants"]],
+                added=old.get("added", []) + [out["machine"]])
+
+
+def summed_peak(r: dict) -> float:
+    """The run's peak resident memory summed over its ranks (each rank's VmHWM at the end of
+    the step: set-up, assembly, GAMG's set-up, solve, post-processing), bytes."""
+    return r["memory"]["end"]["hwm_mean"] * r["nranks"]
+
+
+def gamg_growth(r: dict) -> float:
+    """How much GAMG's set-up raised the resident peak, max over ranks, bytes."""
+    m = r["memory"]
+    return m["factorization"]["hwm_max"] - m["assembly"]["hwm_max"]
+
+
+def _options_text(options: dict) -> str:
+    return " ".join(f"-{k}" + (f" {v}" if v != "" else "") for k, v in options.items()) or "–"
+
+
+def gamg_table(out: dict) -> tuple[str, list[str]]:
+    """One row per variant and size: both runs' peaks, the ratio, GAMG's share, the Krylov
+    iterations, the CPU seconds and u against the preset's on 1 rank."""
+    head = ["variant", "options (over the preset)", "DOFs", "peak 1 rank MiB",
+            "peak per rank, 2 ranks MiB", "summed 2 ranks MiB", "ratio 2 / 1", "KB/DOF 1 / 2",
+            "GAMG set-up +MiB 1 / per rank 2", "its 1 / 2", "set-up CPU s 1 / 2",
+            "solve CPU s 1 / 2", "max rel. Δu vs preset", "verdict"]
+    by = {(r["variant"], r["n"], r["nranks"]): r for r in out["rows"]}
+    body, verdicts = [], []
+    for n in out["sizes"]:
+        ref = by.get(("preset", n, 1))
+        for name in out["variants"]:
+            r1, r2 = by.get((name, n, 1)), by.get((name, n, 2))
+            twin = by.get((one_rank_twin(name), n, 1)) if name in GAMG_VARIANTS else None
+            if r1 is None and twin is not None:
+                r1 = {**twin, "options": GAMG_VARIANTS[name]}
+            if r2 is None:
+                continue   # (a variant not run at this size)
+            if _ok(r2) and r1 is None:   # (a 2-rank run alone: GAMG's growth per rank)
+                body.append([name, _options_text(r2["options"]), f"{r2['dofs']:,}", "–",
+                             mib(r2["memory"]["end"]["hwm_max"]), mib(summed_peak(r2)), "–",
+                             f"– / {summed_peak(r2) / r2['dofs'] / 1e3:.2f}",
+                             f"– / {mib(gamg_growth(r2))}", f"– / {r2['iterations']}",
+                             f"– / {r2['cpu']['factorization']:.1f}",
+                             f"– / {r2['cpu']['solve']:.1f}",
+                             f"{abs(r2['unorm'] / ref['unorm'] - 1.0):.1e}" if _ok(ref) else "–",
+                             "(2 ranks only)"])
+                continue
+            if not _ok(r1) or not _ok(r2):
+                why = (r1 or r2 or {}).get("failed", "not run")
+                body.append([name, _options_text(GAMG_VARIANTS.get(name, {})),
+                             f"{dofs_of(GAMG_CASE, n):,}", "FAILED: " + str(why)[:80]]
+                            + [""] * (len(head) - 4))
+                continue
+            p1, p2 = summed_peak(r1), summed_peak(r2)
+            ratio = p2 / p1
+            du = max(abs(r["unorm"] / ref["unorm"] - 1.0) for r in (r1, r2)) if _ok(ref) else None
+            verdict = ("met" if ratio <= GAMG_TARGET else "**MISSED**") \
+                if r1["dofs"] >= GAMG_MEANINGFUL else "(process base)"
+            verdicts.append(verdict)
+            dofs = r1["dofs"]
+            body.append([name, _options_text(r1["options"]), f"{dofs:,}", mib(p1),
+                         mib(r2["memory"]["end"]["hwm_max"]), mib(p2), fmt(ratio),
+                         f"{p1 / dofs / 1e3:.2f} / {p2 / dofs / 1e3:.2f}",
+                         f"{mib(gamg_growth(r1))} / {mib(gamg_growth(r2))}",
+                         f"{r1['iterations']} / {r2['iterations']}",
+                         f"{r1['cpu']['factorization']:.1f} / {r2['cpu']['factorization']:.1f}",
+                         f"{r1['cpu']['solve']:.1f} / {r2['cpu']['solve']:.1f}",
+                         "–" if du is None else f"{du:.1e}", verdict])
+    return md_table(head, body), verdicts
+
+
+GAMG_NOTES = """Peaks: VmHWM (/proc/self/status) of each rank at the end of the step (set-up,
+assembly, GAMG's set-up, CG's solve, the post-processing; no result file), summed over the
+ranks; the target: the sum at 2 ranks ≤ 1.3× the peak at 1 rank. Variants: options over the
+preset, one candidate cause at a time ("kept": each product's intermediates kept,
+-mat_product_clear false; a distributed P^T A P algorithm does nothing on one rank, where the run
+without it stands in). *GAMG set-up*: how much GAMG's PCSetUp
+raised the resident peak over the assembly's (at 1 rank partly hidden under the assembly's own
+earlier peak, whose temporaries were freed). CPU seconds, max over ranks (the machine is
+shared; 2 ranks share its 2 cores with the other jobs). Δu: ‖u‖₂ against the preset's on 1
+rank (the solver's tolerance: rtol 1e-10 on the true residual). Below 100k DOFs no verdict:
+each rank's process base (Python, numpy, PETSc, MPI: ~90 MiB) decides the ratio."""
+
+
+def gamg_markdown(out: dict) -> str:
+    table, verdicts = gamg_table(out)
+    m = out["machine"]
+    when = (f"runs of several invocations (side by side, under the load of their time), "
+            f"collected {m['date']}, the last {out['elapsed'] / 60:.1f} min after the first; "
+            f"load average at collection {m['loadavg']:.1f}" if out.get("collected") else
+            f"{bh.load_line(m['loadavg_start'], m['loadavg_end'])}; run started {m['date']}, "
+            f"{out['elapsed'] / 60:.1f} min")
+    return "\n".join([
+        "# 3D GAMG at 1 and 2 ranks: the summed peak, option by option", "",
+        f"{GAMG_CASE} (parsolve's iterative preset: CG + GAMG with the rigid-body modes) on the "
+        "clamped unit cube under an end traction, N³ Q1 hexahedra, one linear step. Machine: "
+        f"{m['cpus']} cores, {m['mem_gib']} GiB, shared with other jobs; {when}.", "",
+        table, "", GAMG_NOTES, "",
+        "Rerun: `.venv/bin/python scripts/bench_scale.py --gamg` (`--gamg-sizes 50 64`, "
+        "`--gamg-variants preset ...`; `--gamg --collect`: the table from every run's JSON in "
+        "the scratch folder; `--gamg --report`: again from the published JSON).",
+    ]) + "\n"
+
+
+def gamg_report(out: dict) -> int:
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    (RESULTS / "bench_scale_gamg.json").write_text(json.dumps(out, indent=1))
+    text = gamg_markdown(out)
+    print(text)
+    (RESULTS / "bench_scale_gamg.md").write_text(text)
+    return 0
+
+
+# ------------------------------------------------------------------------------------------------
 # command line
 
 
@@ -1449,6 +1666,16 @@ def main(argv=None) -> int:
                    help="DOLFINx on hexahedra: also assemble the stiffness at these quadrature "
                         "degrees (first and again; default 2 = parsolve's 2×2×2 Gauss points; "
                         "UFL's own estimate, 4 = 27 points, is the run's)")
+    p.add_argument("--gamg", action="store_true",
+                   help="3D GAMG only, at 1 and 2 ranks: the summed peak's ratio per option set "
+                        "(scripts/results/bench_scale_gamg.md)")
+    p.add_argument("--gamg-sizes", nargs="+", type=int, default=[],
+                   help="with --gamg: cells per side (default: "
+                        + ", ".join(map(str, GAMG_SIZES)) + ")")
+    p.add_argument("--gamg-variants", nargs="+", choices=list(GAMG_VARIANTS), default=[],
+                   help="with --gamg: the option sets (default: all)")
+    p.add_argument("--gamg-add", action="store_true",
+                   help="with --gamg: keep the published runs of other variants and sizes")
     p.add_argument("--mesh-file", help=argparse.SUPPRESS)
     p.add_argument("--options", help=argparse.SUPPRESS)
     bh.add_smoke(p)
@@ -1460,11 +1687,18 @@ def main(argv=None) -> int:
     if args.worker:
         code, case, n = args.worker
         if code == "parsolve":
-            parsolve_worker(case, int(n), args.h5, args.json, args.trace, args.phases)
+            parsolve_worker(case, int(n), args.h5, args.json, args.trace, args.phases,
+                            json.loads(args.options) if args.options else None)
         else:
             dolfinx_worker(case, int(n), args.mesh_file, args.options, args.h5, args.json,
                            tuple(args.quadrature))
         return 0
+    if args.gamg:
+        if args.collect:
+            return gamg_report(gamg_collect())
+        if args.report:
+            return gamg_report(json.loads((RESULTS / "bench_scale_gamg.json").read_text()))
+        return gamg_report(gamg_runs(args))
     if args.collect:
         args.sizes = parse_sizes(args.sizes)
         return post_report(collect(args))
@@ -1474,7 +1708,10 @@ def main(argv=None) -> int:
         return report(json.loads((RESULTS / "bench_scale.json").read_text()))
     args.sizes = parse_sizes(args.sizes)
     out = run_all(args)
-    return post_report(out) if args.phases == "post" else report(out)
+    code = post_report(out) if args.phases == "post" else report(out)
+    if args.smoke:   # the 1- vs 2-rank GAMG table at its smallest size too
+        code = code or gamg_report(gamg_runs(args))
+    return code
 
 
 if __name__ == "__main__":

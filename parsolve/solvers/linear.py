@@ -78,7 +78,7 @@ def preset_options(preset: str, symmetric: bool, has_multipliers: bool,
         rtol = "1e-10" if symmetric else "1e-13"
         return {"ksp_type": krylov, "pc_type": "gamg", "ksp_rtol": rtol,
                 "ksp_norm_type": "unpreconditioned", **side,
-                "ksp_error_if_not_converged": "true"}
+                "ksp_error_if_not_converged": "true", **opt.AMG_PRODUCTS}
     # the augmented Lagrangian form T M x = T b (solvers.augmented; the answers are the direct
     # preset's), preconditioned by its block upper triangle: one AMG V-cycle on
     # K + γ/k Aₕᵀ Aₕ, Jacobi on the sparse Schur approximation A₁₁ - A diag(K + γ Aₕᵀ Aₕ)⁻¹ (-D);

@@ -66,6 +66,19 @@ UNPREFIXED = ("matptap_via", "matmatmult_via", "mattransposematmult_via", "mat_p
 DISTRIBUTED_PTAP = ("allatonce", "allatonce_merged", "nonscalable", "backend")
 
 
+#: The plain AMG's Galerkin products (the iterative preset without multipliers): each coarse
+#: operator's P^T A P intermediates freed once it is computed. GAMG makes its hierarchy anew at
+#: every set-up (it does not reuse the products), so they were only held. On several ranks the
+#: distributed product's default stores A P, P's local and remote rows and its transposed parts
+#: on every level: on the 3D box at 398k DOFs on 2 ranks GAMG's set-up grew the peak by 362 MiB
+#: per rank with them kept, 314 freed (the summed peak 1.83x -> 1.68x the 1-rank one; the same
+#: hierarchy, iterations and answers; scripts/results/bench_scale_gamg.md). The rest is those
+#: intermediates while each product is formed: "-matptap_via allatonce" forms none (81 MiB per
+#: rank, the summed peak 1.20x) but took 6x the set-up's CPU time (3.4 -> 20.6 s per rank, 3.3x
+#: the whole 1-rank set-up): memory is chosen over time on the command line or in the scene.
+AMG_PRODUCTS = {"mat_product_clear": ""}
+
+
 def _applies(key: str, value: str) -> bool:
     return not (key == "matptap_via" and PETSc.COMM_WORLD.getSize() == 1
                 and str(value) in DISTRIBUTED_PTAP)

@@ -1,6 +1,7 @@
 """PETSc options validation: unknown types, missing values, bad numbers, in the scene or on
 the command line, found before anything is solved; options no object used. Any rank count."""
 
+import numpy as np
 import pytest
 from mpi4py import MPI
 
@@ -162,3 +163,43 @@ def test_a_distributed_product_option_on_one_rank_is_left_out():
     unused = "-ptaptest3_matptap_via" in opt.unused_options("ptaptest3_", settings)
     assert unused == (comm.size == 1)
 
+
+
+def _laplacian_solution(comm, prefix: str, settings: dict, scale: float = 1.0):
+    """x of scale · A x = 1 (the 1D Laplacian) with ``settings`` inserted under ``prefix``, set
+    up once on A and again after its values change (a Newton iteration's new tangent)."""
+    with opt.inserted(prefix, settings):
+        ksp, A = _laplacian_ksp(comm, prefix)
+        ksp.setFromOptions()
+        b, x = A.createVecs()
+        b.set(1.0)
+        ksp.solve(b, x)
+        first = x.copy()
+        A.scale(scale)   # the same pattern, new values: GAMG's hierarchy made again
+        ksp.setOperators(A)
+        ksp.solve(b, x)
+        reasons = (ksp.getConvergedReason(), ksp.getIterationNumber())
+    out = first.getArray().copy(), x.getArray().copy(), reasons
+    ksp.destroy()
+    A.destroy()
+    return out
+
+
+def test_plain_amg_preset_frees_its_galerkin_products():
+    """The iterative preset without multipliers frees each coarse operator's P^T A P
+    intermediates once it is computed (-mat_product_clear, read under no prefix): the AMG is
+    set up, then set up again on new values (its hierarchy made anew, not reused from the
+    cleared product), and both solves give what the same options without it give, to
+    round-off, in as many iterations."""
+    comm = MPI.COMM_WORLD
+    preset = preset_options("iterative", True, False)
+    assert preset["mat_product_clear"] == "" and "mat_product_clear" in opt.UNPREFIXED
+    settings = {**preset, "pc_gamg_coarse_eq_limit": "10"}   # (coarse levels on 400 rows/rank)
+    kept = {k: v for k, v in settings.items() if k != "mat_product_clear"}
+    x1, x2, (reason, its) = _laplacian_solution(comm, "cleartest_", settings, scale=4.0)
+    y1, y2, (reason_kept, its_kept) = _laplacian_solution(comm, "keeptest_", kept, scale=4.0)
+    assert reason > 0 and (reason, its) == (reason_kept, its_kept)
+    np.testing.assert_allclose(x1, y1, rtol=1e-12, atol=1e-12 * np.abs(y1).max())
+    # 4 A x = b: a quarter of the first answer, to the solver's tolerance
+    np.testing.assert_allclose(x2, x1 / 4, atol=1e-8 * np.abs(x1).max())
+    assert "-cleartest_mat_product_clear" not in opt.unused_options("cleartest_", settings)
