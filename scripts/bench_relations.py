@@ -123,9 +123,19 @@ def child(scene_path: str, preset: str, out: str, options: str) -> None:
 
     choices: list[str] = []   # the iterative preset's preconditioner, as chosen per operator
 
+    progress = Progress(os.environ.get("BENCH_LOG") if MPI.COMM_WORLD.rank == 0 else None)
+    vcycle = {"made": 0, "kept": 0}   # the condensed V-cycle's hierarchy: made, kept
+
     def counted(self, rhs, x):
         its = solve(self, rhs, x)
         krylov.append(int(its))
+        amg = self.condensed.amg if self.condensed is not None else None
+        if amg is not None:
+            vcycle.update(made=amg.made, kept=amg.kept)
+        progress(f"linear solve {len(krylov)}: {its} Krylov iterations, set-up "
+                 f"{setup['s']:.1f} s so far, V-cycle made {vcycle['made']} / kept "
+                 f"{vcycle['kept']}, resident {bh.proc_memory()['rss'] / bh.MiB:.0f} MiB "
+                 "(rank 0)")
         if self.choice and self.choice not in choices:
             choices.append(self.choice)
         if os.environ.get("BENCH_PIECES") and not pieces:
@@ -148,7 +158,9 @@ def child(scene_path: str, preset: str, out: str, options: str) -> None:
     t0 = time.perf_counter()
     model = build_model(scene, MPI.COMM_WORLD)
     dofs = model.mesh.num_global_points * model.ncomp   # (collective: before the run)
-    status = run(MPI.COMM_WORLD, model, out, json.loads(options), log=lambda *a: None)
+    progress(f"{dofs:,} DOFs, {MPI.COMM_WORLD.size} ranks, model built")
+    status = run(MPI.COMM_WORLD, model, out, json.loads(options), log=progress)
+    progress(f"run {status}")
     wall = time.perf_counter() - t0
     import h5py
 
@@ -164,7 +176,21 @@ def child(scene_path: str, preset: str, out: str, options: str) -> None:
         dofs = int(f.attrs.get("dofs", dofs))
     print(json.dumps(dict(status=status, dofs=dofs, iterations=iterations, krylov=krylov,
                           wall=wall, hwm=bh.proc_memory()["hwm"], ranks=MPI.COMM_WORLD.size,
-                          setup=setup, pieces=pieces, choices=choices)))
+                          setup=setup, pieces=pieces, choices=choices, vcycle=vcycle)))
+
+
+class Progress:
+    """Progress lines of a child (``BENCH_LOG``: the file they are appended to, with the UTC
+    time and the seconds since the child started; None: dropped)."""
+
+    def __init__(self, path: str | None):
+        self.path, self.t0 = path, time.perf_counter()
+
+    def __call__(self, *words) -> None:
+        if self.path:
+            with open(self.path, "a") as f:
+                print(f"{bh.utc_now()} {time.perf_counter() - self.t0:8.1f} s",
+                      " ".join(str(w) for w in words), file=f, flush=True)
 
 
 def estimate_child(scene_path: str, preset: str, out: str, options: str) -> None:
@@ -403,7 +429,7 @@ ML = {"condensed_pc_type": "ml", "condensed_pc_ml_CoarsenScheme": "MIS"}
 
 
 def scale_study(folder: Path, factors: list[int], ranks: int, steps: int = 2,
-                ml: int = 0) -> list[list[str]]:
+                ml: int = 0, petsc: dict | None = None) -> list[list[str]]:
     """The friction box (iterative preset) against plain elasticity (CG + GAMG) on the same
     mesh and ranks: time per Newton iteration, peak memory summed over the ranks; the matrices'
     memory piece by piece (``matrix_pieces``). At the refinement ``ml`` the friction box again
@@ -412,7 +438,7 @@ def scale_study(folder: Path, factors: list[int], ranks: int, steps: int = 2,
     rows, pieces = [], []
     for f in factors:
         runs = {"friction": one_run(folder, f"scale_friction_{f}", friction_scene(f, steps),
-                                    "iterative", ranks=ranks),
+                                    "iterative", petsc, ranks=ranks),
                 "elasticity": one_run(folder, f"scale_elastic_{f}", elastic_scene(f, steps),
                                       "iterative", ranks=ranks)}
         if f == ml:
@@ -605,18 +631,18 @@ BIG_HEAD = ["problem", "refinement", "DOFs", "ranks", "Newton its", "linear solv
 
 
 def big_study(folder: Path, factor: int, ranks: int, steps: int, timeout: float | None,
-              elasticity: bool) -> tuple[list[list[str]], str]:
-    """One large run of the friction box on the iterative preset (and the clamped box's
-    elasticity on request), and MUMPS' estimate of the direct preset's factorization at that
-    size (``estimate_child``): the table's rows and the estimate in words."""
+              elasticity: bool, petsc: dict | None = None) -> tuple[list[list[str]], str]:
+    """One large run of the friction box on the iterative preset (``petsc``: its options), and
+    before it on request the clamped box's elasticity (short: the reference is there even if
+    the friction run is stopped), then MUMPS' estimate of the direct preset's factorization at
+    that size (``estimate_child``): the table's rows and the estimate in words."""
     end = None if timeout is None else time.monotonic() + timeout   # (the whole study's)
     load0 = os.getloadavg()
-    runs = [("friction", friction_scene(factor, steps))]
-    if elasticity:
-        runs.append(("elasticity", elastic_scene(factor, steps)))
+    runs = [("elasticity", elastic_scene(factor, steps), {})] if elasticity else []
+    runs.append(("friction", friction_scene(factor, steps), petsc or {}))
     rows = []
-    for name, text in runs:
-        r = one_run(folder, f"big_{name}_{factor}", text, "iterative", ranks=ranks,
+    for name, text, options in runs:
+        r = one_run(folder, f"big_{name}_{factor}", text, "iterative", options, ranks=ranks,
                     timeout=left(end))
         if r.get("status") != "complete":
             rows.append([name, f"{factor}³×", "-", str(ranks), r["status"][:80], *["-"] * 8])
@@ -713,10 +739,18 @@ def main() -> None:
                    help="with --big: the clamped box's elasticity run too")
     p.add_argument("--timeout", type=float, default=None,
                    help="seconds after which the --big runs are stopped (their rows say so)")
+    p.add_argument("--petsc", type=str, default="{}",
+                   help="PETSc options of the friction runs of --big and --scale (JSON, "
+                        "under the solver's prefix as a scene's)")
+    p.add_argument("--log", type=str, default="",
+                   help="file the runs append their progress to (each linear solve)")
     args = p.parse_args()
+    if args.log:
+        os.environ["BENCH_LOG"] = str(Path(args.log).resolve())   # (the children inherit it)
+    petsc = json.loads(args.petsc)
     if args.big:
         big_study(bh.scratch("relations_big"), args.big, args.ranks, args.steps, args.timeout,
-                  args.big_elasticity)
+                  args.big_elasticity, petsc)
         return
     if args.weak:
         weak_study(bh.scratch("relations_weak"), args.steps)
@@ -727,7 +761,7 @@ def main() -> None:
     if args.scale or bh.SMOKE:
         factors = [1] if bh.SMOKE else [int(f) for f in args.scale.split(",")]
         rows = scale_study(bh.scratch("relations_scale"), factors, args.ranks, args.steps,
-                           1 if bh.SMOKE else args.ml)
+                           1 if bh.SMOKE else args.ml, petsc)
         if args.scale:
             return
     folder = bh.scratch("relations")
