@@ -1,6 +1,7 @@
 """The algebraic multigrid V-cycle on the condensed primal operator S (solvers.condensed):
 GAMG, its finest level smoothed by SOR sweeps, its coarse operators made by the Galerkin
-product that holds the least memory on more than one rank."""
+product that holds the least memory on more than one rank, its coarse hierarchy kept across
+set-ups while it serves."""
 
 from __future__ import annotations
 
@@ -31,8 +32,12 @@ def _galerkin_product(comm: MPI.Comm) -> Iterator[None]:
     solvers.options.UNPREFIXED); one rank has no distributed product. Its default keeps the
     product's intermediates (A P, Pᵀ's parts, P's remote rows) on every level for reuse: on the
     122k-DOF friction box on 2 ranks the set-up held 131 MiB per rank, 58 with "allatonce", the
-    same Krylov iterations, but took 22.5 s per solve against 3.3: memory chosen over time
-    (``-matptap_via nonscalable`` chooses time; docs/performance.md)."""
+    same Krylov iterations. "allatonce" is the slower (22.5 s per set-up against 3.3 there),
+    which the hierarchy kept across the Newton iterations (VCycle) pays once per run instead
+    of once per solve: over the first step's 8 solves at 122k, 2 ranks, CPU time per Newton
+    iteration 1.54x plain elasticity's, peak memory 1.28x; made at every set-up 2.22x, 1.30x;
+    kept with the default product 1.41x, 1.49x (``-matptap_via nonscalable``;
+    docs/performance.md)."""
     options = PETSc.Options()
     add = comm.size > 1 and not options.hasName("matptap_via")
     if add:
