@@ -22,8 +22,8 @@ mean, max; the iterative preset at its tolerance, rtol 2.5e-14), wall time, peak
         → the scale runs only: the friction box refined f× per direction on 2 ranks against
         plain elasticity (its base clamped, CG + GAMG) on the same mesh: time per Newton
         iteration, Krylov iterations, peak memory summed over the ranks
-        (scripts/results/bench_relations_scale.md; --ml F: at f = F the friction box again
-        with ML as the condensed V-cycle, the one GAMG with SOR replaced)
+        (scripts/results/bench_relations_scale.md; --variants F: at f = F the friction box
+        again with each of VARIANTS, the condensed V-cycle's alternatives, in the same run)
     nice -n 5 .venv/bin/python scripts/bench_relations.py --weak --steps 1
         → weak scaling: the friction box and plain elasticity at about 16k DOFs per rank on
         1, 2, 4 ranks (oversubscribed: iterations and memory only), the peak memory per rank
@@ -123,9 +123,19 @@ def child(scene_path: str, preset: str, out: str, options: str) -> None:
 
     choices: list[str] = []   # the iterative preset's preconditioner, as chosen per operator
 
+    progress = Progress(os.environ.get("BENCH_LOG") if MPI.COMM_WORLD.rank == 0 else None)
+    vcycle = {"made": 0, "kept": 0}   # the condensed V-cycle's hierarchy: made, kept
+
     def counted(self, rhs, x):
         its = solve(self, rhs, x)
         krylov.append(int(its))
+        amg = self.condensed.amg if self.condensed is not None else None
+        if amg is not None:
+            vcycle.update(made=amg.made, kept=amg.kept)
+        progress(f"linear solve {len(krylov)}: {its} Krylov iterations, set-up "
+                 f"{setup['s']:.1f} s so far, V-cycle made {vcycle['made']} / kept "
+                 f"{vcycle['kept']}, resident {bh.proc_memory()['rss'] / bh.MiB:.0f} MiB "
+                 "(rank 0)")
         if self.choice and self.choice not in choices:
             choices.append(self.choice)
         if os.environ.get("BENCH_PIECES") and not pieces:
@@ -145,11 +155,13 @@ def child(scene_path: str, preset: str, out: str, options: str) -> None:
     linear.LinearSolver._prepare = measured
     scene = load_scene(Path(scene_path))
     scene.solver.preset = preset
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), bh.cpu_seconds()
     model = build_model(scene, MPI.COMM_WORLD)
     dofs = model.mesh.num_global_points * model.ncomp   # (collective: before the run)
-    status = run(MPI.COMM_WORLD, model, out, json.loads(options), log=lambda *a: None)
-    wall = time.perf_counter() - t0
+    progress(f"{dofs:,} DOFs, {MPI.COMM_WORLD.size} ranks, model built")
+    status = run(MPI.COMM_WORLD, model, out, json.loads(options), log=progress)
+    progress(f"run {status}")
+    wall, cpu = time.perf_counter() - t0, bh.cpu_seconds() - cpu0
     import h5py
 
     # no collective after the run: petsc4py's garbage cleanup (collective) may run on one rank
@@ -157,14 +169,29 @@ def child(scene_path: str, preset: str, out: str, options: str) -> None:
     # own peak memory; rank 0 the rest; the parent sums.
     if MPI.COMM_WORLD.rank:
         print(json.dumps(dict(rank=MPI.COMM_WORLD.rank, hwm=bh.proc_memory()["hwm"],
-                              setup=setup, pieces=pieces)))
+                              setup=setup, pieces=pieces, cpu=cpu)))
         return
     with h5py.File(out, "r") as f:
         iterations = int(f["steps/iterations"][()].sum())
         dofs = int(f.attrs.get("dofs", dofs))
     print(json.dumps(dict(status=status, dofs=dofs, iterations=iterations, krylov=krylov,
                           wall=wall, hwm=bh.proc_memory()["hwm"], ranks=MPI.COMM_WORLD.size,
-                          setup=setup, pieces=pieces, choices=choices)))
+                          setup=setup, pieces=pieces, choices=choices, vcycle=vcycle,
+                          cpu=cpu)))
+
+
+class Progress:
+    """Progress lines of a child (``BENCH_LOG``: the file they are appended to, with the UTC
+    time and the seconds since the child started; None: dropped)."""
+
+    def __init__(self, path: str | None):
+        self.path, self.t0 = path, time.perf_counter()
+
+    def __call__(self, *words) -> None:
+        if self.path:
+            with open(self.path, "a") as f:
+                print(f"{bh.utc_now()} {time.perf_counter() - self.t0:8.1f} s",
+                      " ".join(str(w) for w in words), file=f, flush=True)
 
 
 def estimate_child(scene_path: str, preset: str, out: str, options: str) -> None:
@@ -301,7 +328,9 @@ def one_run(folder: Path, name: str, text: str, preset: str, options: dict | Non
     for ln in lines:
         for key, mib in ln.get("pieces", {}).items():
             pieces[key] = pieces.get(key, 0.0) + mib
+    cpu = [ln.get("cpu", 0.0) for ln in lines]
     return {**main_line[-1], "hwm": sum(hwm), "hwm_rank": max(hwm), "setup_rank": max(setup),
+            "cpu_rank": max(cpu),
             "setup_sum": sum(setup), "out": str(out), "pieces": pieces}
 
 
@@ -391,54 +420,71 @@ def gamma_study(folder: Path) -> list[list[str]]:
 
 
 SCALE_HEAD = ["problem", "refinement", "DOFs", "ranks", "Newton its", "Krylov mean / max",
-              "s per Newton it", "set-up s per solve", "set-up MiB per rank",
+              "V-cycle made / kept", "s per Newton it", "CPU s per Newton it",
+              "set-up s per solve",
+              "set-up MiB per rank",
               "peak MiB per rank", "peak MiB (all ranks)", "KB/DOF",
               "ratio to elasticity"]
 
 
-#: the condensed V-cycle as it was before GAMG with SOR on its finest level: PETSc's ML (MIS
-#: aggregation; its default "uncoupled" crashed after many set-ups in one process), the
-#: reference of the iterations and memory GAMG replaced (``--ml F``)
-ML = {"condensed_pc_type": "ml", "condensed_pc_ml_CoarsenScheme": "MIS"}
+#: the condensed V-cycle's alternatives (``--variants F``), each a friction run beside the preset's
+#: (its hierarchy kept across the Newton iterations while it serves, "allatonce" products)
+VARIANTS = {
+    "made at every set-up (before)": {"condensed_reuse_growth": "0"},
+    "made at every set-up, GAMG's interpolation reused": {
+        "condensed_reuse_growth": "0", "condensed_pc_gamg_reuse_interpolation": "true"},
+    "kept, PETSc's default product": {"matptap_via": "nonscalable"},
+    "kept, unsmoothed aggregation": {"condensed_pc_gamg_agg_nsmooths": "0"},
+}
 
 
 def scale_study(folder: Path, factors: list[int], ranks: int, steps: int = 2,
-                ml: int = 0) -> list[list[str]]:
+                variants: int = 0, petsc: dict | None = None) -> list[list[str]]:
     """The friction box (iterative preset) against plain elasticity (CG + GAMG) on the same
     mesh and ranks: time per Newton iteration, peak memory summed over the ranks; the matrices'
-    memory piece by piece (``matrix_pieces``). At the refinement ``ml`` the friction box again
-    with ``ML`` as the condensed V-cycle (the one GAMG replaced)."""
+    memory piece by piece (``matrix_pieces``). At the refinement ``variants`` the friction box
+    again with each of VARIANTS (``petsc``: the options of every friction run)."""
     os.environ["BENCH_PIECES"] = "1"   # (the children inherit it)
-    rows, pieces = [], []
+    rows, pieces, load0 = [], [], os.getloadavg()
     for f in factors:
         runs = {"friction": one_run(folder, f"scale_friction_{f}", friction_scene(f, steps),
-                                    "iterative", ranks=ranks),
+                                    "iterative", petsc, ranks=ranks),
                 "elasticity": one_run(folder, f"scale_elastic_{f}", elastic_scene(f, steps),
                                       "iterative", ranks=ranks)}
-        if f == ml:
-            runs["friction, ML V-cycle"] = one_run(
-                folder, f"scale_friction_{f}", friction_scene(f, steps), "iterative", ML,
-                ranks=ranks)
+        for name, options in (VARIANTS.items() if f == variants else ()):
+            runs[f"friction, {name}"] = one_run(
+                folder, f"scale_friction_{f}", friction_scene(f, steps), "iterative",
+                {**(petsc or {}), **options}, ranks=ranks)
         base = runs["elasticity"]
         for name, r in runs.items():
             if r.get("status") != "complete":
-                rows.append([name, f"{f}³×", "-", str(ranks), r["status"][:60], *["-"] * 8])
+                rows.append([name, f"{f}³×", "-", str(ranks), r["status"][:60], *["-"] * 10])
                 continue
             k = r["krylov"] or [0]
             per_it = r["wall"] / max(r["iterations"], 1)
+            cpu_it = r["cpu_rank"] / max(r["iterations"], 1)
             ratio = "-"
             if name.startswith("friction") and base.get("status") == "complete":
-                ratio = (f"time {per_it / (base['wall'] / max(base['iterations'], 1)):.2f}×, "
+                its = max(base["iterations"], 1)
+                ratio = (f"time {per_it / (base['wall'] / its):.2f}× "
+                         f"(CPU {cpu_it / (base['cpu_rank'] / its):.2f}×), "
                          f"memory {r['hwm'] / base['hwm']:.2f}×")
             rows.append([name, f"{f}³×", f"{r['dofs']:,}", str(ranks), str(r["iterations"]),
-                         f"{sum(k) / len(k):.1f} / {max(k)}", f"{per_it:.2f}",
+                         f"{sum(k) / len(k):.1f} / {max(k)}", made_kept(r), f"{per_it:.2f}",
+                         f"{cpu_it:.2f}",
                          f"{r['setup']['s'] / max(len(r['krylov']), 1):.2f}",
                          f"{r['setup_rank']:.0f}", bh.mib(r.get("hwm_rank")), bh.mib(r["hwm"]),
                          f"{r['hwm'] / r['dofs'] / 1e3:.1f}", ratio])
         print(bh.text_table(SCALE_HEAD, rows[-len(runs):]), flush=True)
         pieces += [piece_row(name, f, r) for name, r in runs.items()]
-        publish_scale(rows, pieces, ranks, steps)   # after every size: a stopped run keeps
-    return rows                                     # its rows
+        publish_scale(rows, pieces, ranks, steps, load0)   # after every size: a stopped run
+    return rows                                            # keeps its rows
+
+
+def made_kept(r: dict) -> str:
+    """The condensed V-cycle's set-ups that made its hierarchy / kept it ("-": none)."""
+    v = r.get("vcycle") or {}
+    return f"{v['made']} / {v['kept']}" if v.get("made") else "-"
 
 
 PIECES = ["M", "KSP operator", "KSP pmat", "fieldsplit q block", "Schur pmat", "condensed S",
@@ -605,18 +651,18 @@ BIG_HEAD = ["problem", "refinement", "DOFs", "ranks", "Newton its", "linear solv
 
 
 def big_study(folder: Path, factor: int, ranks: int, steps: int, timeout: float | None,
-              elasticity: bool) -> tuple[list[list[str]], str]:
-    """One large run of the friction box on the iterative preset (and the clamped box's
-    elasticity on request), and MUMPS' estimate of the direct preset's factorization at that
-    size (``estimate_child``): the table's rows and the estimate in words."""
+              elasticity: bool, petsc: dict | None = None) -> tuple[list[list[str]], str]:
+    """One large run of the friction box on the iterative preset (``petsc``: its options), and
+    before it on request the clamped box's elasticity (short: the reference is there even if
+    the friction run is stopped), then MUMPS' estimate of the direct preset's factorization at
+    that size (``estimate_child``): the table's rows and the estimate in words."""
     end = None if timeout is None else time.monotonic() + timeout   # (the whole study's)
     load0 = os.getloadavg()
-    runs = [("friction", friction_scene(factor, steps))]
-    if elasticity:
-        runs.append(("elasticity", elastic_scene(factor, steps)))
+    runs = [("elasticity", elastic_scene(factor, steps), {})] if elasticity else []
+    runs.append(("friction", friction_scene(factor, steps), petsc or {}))
     rows = []
-    for name, text in runs:
-        r = one_run(folder, f"big_{name}_{factor}", text, "iterative", ranks=ranks,
+    for name, text, options in runs:
+        r = one_run(folder, f"big_{name}_{factor}", text, "iterative", options, ranks=ranks,
                     timeout=left(end))
         if r.get("status") != "complete":
             rows.append([name, f"{factor}³×", "-", str(ranks), r["status"][:80], *["-"] * 8])
@@ -689,9 +735,9 @@ def main() -> None:
                    help="the scale runs only: friction box refinements f (comma-separated) on "
                         "--ranks ranks, against plain elasticity with GAMG (scale table)")
     p.add_argument("--ranks", type=int, default=2, help="ranks of the scale runs")
-    p.add_argument("--ml", type=int, default=0,
-                   help="with --scale: at this refinement the friction box again with ML as "
-                        "the condensed V-cycle (the one GAMG with SOR replaced)")
+    p.add_argument("--variants", type=int, default=0,
+                   help="with --scale: at this refinement the friction box again with each "
+                        "of the condensed V-cycle's alternatives (VARIANTS)")
     p.add_argument("--weak", action="store_true",
                    help="the weak scaling runs only: the friction box and plain elasticity "
                         "at about 16k DOFs per rank on 1, 2, 4 ranks (and the 1-rank mesh on "
@@ -713,10 +759,18 @@ def main() -> None:
                    help="with --big: the clamped box's elasticity run too")
     p.add_argument("--timeout", type=float, default=None,
                    help="seconds after which the --big runs are stopped (their rows say so)")
+    p.add_argument("--petsc", type=str, default="{}",
+                   help="PETSc options of the friction runs of --big and --scale (JSON, "
+                        "under the solver's prefix as a scene's)")
+    p.add_argument("--log", type=str, default="",
+                   help="file the runs append their progress to (each linear solve)")
     args = p.parse_args()
+    if args.log:
+        os.environ["BENCH_LOG"] = str(Path(args.log).resolve())   # (the children inherit it)
+    petsc = json.loads(args.petsc)
     if args.big:
         big_study(bh.scratch("relations_big"), args.big, args.ranks, args.steps, args.timeout,
-                  args.big_elasticity)
+                  args.big_elasticity, petsc)
         return
     if args.weak:
         weak_study(bh.scratch("relations_weak"), args.steps)
@@ -727,7 +781,7 @@ def main() -> None:
     if args.scale or bh.SMOKE:
         factors = [1] if bh.SMOKE else [int(f) for f in args.scale.split(",")]
         rows = scale_study(bh.scratch("relations_scale"), factors, args.ranks, args.steps,
-                           1 if bh.SMOKE else args.ml)
+                           1 if bh.SMOKE else args.variants, petsc)
         if args.scale:
             return
     folder = bh.scratch("relations")
@@ -762,17 +816,23 @@ def main() -> None:
     print(text)
 
 
-def publish_scale(rows: list, pieces: list, ranks: int, steps: int) -> None:
+def publish_scale(rows: list, pieces: list, ranks: int, steps: int, load0: tuple) -> None:
     machine = bh.machine_info()
     text = "\n".join([
         "# Relations at scale: the friction box against plain elasticity", "",
         f"{machine['date']}, {machine['cpu']}, {machine['cpus']} CPUs, {ranks} ranks, the "
         "machine shared (times noisy). The 3D friction box (`contact_friction_3d.toml`, its "
         f"first {steps} step{'s' if steps > 1 else ''}) refined f× per direction on the iterative preset, against the same "
-        "box with its base clamped (CG + GAMG); set-up MiB: the resident memory the largest "
+        "box with its base clamped (CG + GAMG); time per Newton iteration: the run's wall "
+        "time, and the CPU time of its busiest rank (less disturbed by the machine's load), "
+        "over its Newton iterations; V-cycle made / kept: the condensed V-cycle's set-ups "
+        "that made its hierarchy, that kept it; set-up MiB: the resident memory the largest "
         "preconditioner set-up added on a rank (the condensation and its V-cycle; GAMG's for "
-        "elasticity); peak memory: VmHWM summed over the ranks.", "",
+        "elasticity); peak memory: VmHWM summed over the ranks. "
+        + bh.load_line(load0, os.getloadavg()) + ".", "",
         bh.md_table(SCALE_HEAD, rows, first="---"), "",
+        "The friction rows after the first: the condensed V-cycle's alternatives "
+        "(`VARIANTS`), each the preset with its options.", "",
         "The matrices piece by piece after the first linear solve (MiB summed over the ranks: "
         "allocated nonzeros × (value + column index) + row offsets; a matrix shared by two "
         "roles counted once, at its first; M is the Newton matrix, on the saddle operator's own "

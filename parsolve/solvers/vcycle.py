@@ -1,6 +1,7 @@
 """The algebraic multigrid V-cycle on the condensed primal operator S (solvers.condensed):
 GAMG, its finest level smoothed by SOR sweeps, its coarse operators made by the Galerkin
-product that holds the least memory on more than one rank."""
+product that holds the least memory on more than one rank, its coarse hierarchy kept across
+set-ups while it serves."""
 
 from __future__ import annotations
 
@@ -31,8 +32,12 @@ def _galerkin_product(comm: MPI.Comm) -> Iterator[None]:
     solvers.options.UNPREFIXED); one rank has no distributed product. Its default keeps the
     product's intermediates (A P, Pᵀ's parts, P's remote rows) on every level for reuse: on the
     122k-DOF friction box on 2 ranks the set-up held 131 MiB per rank, 58 with "allatonce", the
-    same Krylov iterations, but took 22.5 s per solve against 3.3: memory chosen over time
-    (``-matptap_via nonscalable`` chooses time; docs/performance.md)."""
+    same Krylov iterations. "allatonce" is the slower (22.5 s per set-up against 3.3 there),
+    which the hierarchy kept across the Newton iterations (VCycle) pays once per run instead
+    of once per solve: over the first step's 8 solves at 122k, 2 ranks, CPU time per Newton
+    iteration 1.54x plain elasticity's, peak memory 1.28x; made at every set-up 2.22x, 1.30x;
+    kept with the default product 1.41x, 1.49x (``-matptap_via nonscalable``;
+    docs/performance.md)."""
     options = PETSc.Options()
     add = comm.size > 1 and not options.hasName("matptap_via")
     if add:
@@ -44,9 +49,23 @@ def _galerkin_product(comm: MPI.Comm) -> Iterator[None]:
             options.delValue("matptap_via")
 
 
+#: the coarse hierarchy kept across set-ups (``VCycle.set_up``) while the last solve on it took
+#: at most this many times the Krylov iterations of the worst solve on a hierarchy just made
+#: (``-<prefix>reuse_growth``; 0: made anew at every set-up)
+REUSE_GROWTH = 1.25
+
+
 class VCycle:
     """One AMG V-cycle on a matrix, its options under ``prefix`` (``<solver>condensed_``):
-    ``set_up(S)`` after each change of S's values, then ``apply(f, y)``: y ≈ S⁻¹ f."""
+    ``set_up(S)`` after each change of S's values, then ``apply(f, y)``: y ≈ S⁻¹ f.
+
+    The coarse hierarchy (aggregates, interpolations, Galerkin coarse operators) is made at
+    the first set-up and kept by the next ones while it serves: S's values change in place
+    (the same matrix), so the finest level's smoothing and residuals see them at once; only
+    the coarse corrections are those of an earlier S. It is made anew when S is another
+    matrix, or when the last solve took more than REUSE_GROWTH times the applications
+    (Krylov iterations) of the worst solve on a fresh hierarchy. GMRES runs on M itself: the
+    answer is the same, only the iterations can change."""
 
     def __init__(self, comm: MPI.Comm, prefix: str):
         # the solvers gone before this one (their KSPs, ML's hierarchies) destroyed now:
@@ -59,9 +78,23 @@ class VCycle:
         self.pc = PETSc.PC().create(comm)
         self.pc.setOptionsPrefix(prefix)
         self._configured = False
+        self._made_for = None     # the handle of the matrix the hierarchy was made for
+        self.applies = 0          # applications since the last set-up (its solve's iterations)
+        self._fresh = 0           # the most applications of a solve on a fresh hierarchy
+        self._on_fresh = False    # the applications since the last set-up are on a fresh one
+        self.made = self.kept = 0   # set-ups that made the hierarchy, that kept it
 
     def set_up(self, mat: PETSc.Mat) -> None:
-        """The hierarchy made (or remade) for ``mat``'s values."""
+        """The V-cycle for ``mat``'s values: its hierarchy made anew, or kept (class doc)."""
+        if self._on_fresh:
+            self._fresh = max(self._fresh, self.applies)
+        keep = self._keeps(mat)
+        self.applies = 0
+        self._on_fresh = not keep
+        if keep:
+            self.kept += 1
+            return
+        self.pc.setReusePreconditioner(False)
         self.pc.setOperators(mat, mat)
         if not self._configured:
             self.pc.setFromOptions()
@@ -70,8 +103,21 @@ class VCycle:
             self.pc.setUp()
         if self.pc.getType() == "gamg":
             self._fine_sor()
+        # (kept until set_up says otherwise: PCApply would remake it when S's values change)
+        self.pc.setReusePreconditioner(True)
+        self._made_for = mat.handle
+        self.made += 1
+
+    def _keeps(self, mat: PETSc.Mat) -> bool:
+        """The hierarchy kept for ``mat``: the same matrix, and the last solve within
+        REUSE_GROWTH of the worst fresh one (the same answer on every rank)."""
+        growth = PETSc.Options(self.prefix).getReal("reuse_growth", REUSE_GROWTH)
+        keep = (growth > 0 and mat.handle == self._made_for
+                and self.applies <= growth * self._fresh)
+        return bool(self.comm.allreduce(int(keep), op=MPI.MIN))
 
     def apply(self, f: PETSc.Vec, y: PETSc.Vec) -> None:
+        self.applies += 1
         self.pc.apply(f, y)
 
     def _fine_sor(self) -> None:

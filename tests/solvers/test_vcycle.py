@@ -1,0 +1,170 @@
+"""The condensed preconditioner's AMG V-cycle (solvers.vcycle): GAMG with SOR on its finest
+level, its Galerkin product scoped to its set-up, and its coarse hierarchy kept across
+set-ups while it serves — the finest level on the matrix's current values, the coarse
+operators those of the set-up that made them."""
+
+import numpy as np
+from petsc4py import PETSc
+
+from conftest import run_scene, solve_in_process
+from helpers.scene import scene, shipped
+from solvers.test_iterative_scenes import assert_same_answers
+from parsolve.solvers import options as opt
+from parsolve.solvers.vcycle import (FINE_SWEEPS, GALERKIN_PRODUCT, REUSE_GROWTH, VCycle,
+                                     _galerkin_product)
+
+
+def _friction(comm, petsc: dict | None = None):
+    text = scene(shipped("contact_friction_3d.toml"), steps={"count": 1},
+                 solver={"preset": "iterative", "petsc": petsc or {}})
+    return solve_in_process(text, comm, options={})
+
+
+def _laplacian(comm, n: int = 12) -> PETSc.Mat:
+    """The 7-point Laplacian on an n³ grid (Dirichlet), rows split over the ranks."""
+    N = n ** 3
+    A = PETSc.Mat().createAIJ(size=((PETSc.DECIDE, N), (PETSc.DECIDE, N)), nnz=(7, 6),
+                              comm=comm)
+    r0, r1 = A.getOwnershipRange()
+    rows = np.arange(r0, r1, dtype=np.int32)
+    i, j, k = rows % n, (rows // n) % n, rows // n ** 2
+    cols, vals = [rows], [np.full(rows.size, 6.0)]
+    for d, (c, step) in enumerate(((i, 1), (j, n), (k, n * n))):
+        for s in (-1, 1):
+            ok = (c + s >= 0) & (c + s < n)
+            cols.append(np.where(ok, rows + s * step, -1))
+            vals.append(np.full(rows.size, -1.0))
+    cols, vals = np.stack(cols, axis=1), np.stack(vals, axis=1)
+    indptr = np.arange(0, 7 * rows.size + 1, 7, dtype=np.int32)
+    A.setValuesCSR(indptr, cols.ravel().astype(np.int32), vals.ravel(), addv=False)
+    A.assemble()
+    return A
+
+
+def _coarse(vc: VCycle) -> np.ndarray:
+    """The next-to-finest level's operator (the first Galerkin product), dense on every rank."""
+    pc = vc.pc
+    C = pc.getMGSmoother(pc.getMGLevels() - 2).getOperators()[0]
+    from conftest import dense
+    return dense(C, C.getComm().tompi4py())
+
+
+def _solve_with(vc: VCycle, A: PETSc.Mat, b: PETSc.Vec, its: int) -> None:
+    """``its`` applications of the V-cycle (as a Krylov solve of ``its`` iterations would)."""
+    y = b.duplicate()
+    for _ in range(its):
+        vc.apply(b, y)
+
+
+def test_hierarchy_kept_while_it_serves(comm):
+    """Kept: the same matrix, its values changed in place (S scaled by 2), the last solve
+    within REUSE_GROWTH of the worst fresh one — the coarse operator stays the first set-up's
+    to the bit. Made anew: after a solve of more iterations, the coarse operator is the
+    Galerkin product of 2 S: twice the first (GAMG's aggregation and smoothed interpolation
+    are invariant to S's scale)."""
+    A = _laplacian(comm)
+    b = A.createVecLeft()
+    b.set(1.0)
+    with opt.inserted("vc_", {"pc_type": "gamg", "pc_gamg_threshold": "0"}, record=False):
+        vc = VCycle(comm, "vc_")
+        vc.set_up(A)
+        assert vc.pc.getMGLevels() >= 2 and (vc.made, vc.kept) == (1, 0)
+        C0 = _coarse(vc)
+        _solve_with(vc, A, b, 8)
+        A.scale(2.0)
+        vc.set_up(A)                                   # 8 applications ≤ 1.25 × 8: kept
+        assert (vc.made, vc.kept) == (1, 1)
+        assert np.array_equal(_coarse(vc), C0)
+        _solve_with(vc, A, b, int(REUSE_GROWTH * 8))   # 10 ≤ 1.25 × 8: kept
+        vc.set_up(A)
+        assert (vc.made, vc.kept) == (1, 2)
+        _solve_with(vc, A, b, int(REUSE_GROWTH * 8) + 1)   # 11 > 10: made anew
+        vc.set_up(A)
+        assert (vc.made, vc.kept) == (2, 2)
+        assert np.abs(_coarse(vc) - 2 * C0).max() <= 1e-13 * np.abs(C0).max()
+        fine = vc.pc.getMGSmoother(vc.pc.getMGLevels() - 1)
+        assert fine.getOperators()[0].handle == A.handle   # (S's own values at every apply)
+
+
+def test_hierarchy_made_anew_for_another_matrix_or_without_reuse(comm):
+    """Another matrix (a new handle) makes the hierarchy anew; so does every set-up with
+    -<prefix>reuse_growth 0. A kept hierarchy on unchanged values applies as a fresh one."""
+    A = _laplacian(comm)
+    b, y0, y1 = A.createVecLeft(), A.createVecLeft(), A.createVecLeft()
+    b.setRandom()
+    with opt.inserted("vc_", {"pc_type": "gamg", "pc_gamg_threshold": "0"}, record=False):
+        vc = VCycle(comm, "vc_")
+        vc.set_up(A)
+        vc.apply(b, y0)
+        vc.set_up(A)
+        assert (vc.made, vc.kept) == (1, 1)
+        vc.apply(b, y1)
+        assert np.array_equal(y0.array, y1.array)
+        vc.set_up(A.copy())
+        assert (vc.made, vc.kept) == (2, 1)
+    with opt.inserted("vc_", {"pc_type": "gamg", "reuse_growth": "0"}, record=False):
+        vc = VCycle(comm, "vc_")
+        for _ in range(3):
+            vc.set_up(A)
+            vc.apply(b, y0)
+        assert (vc.made, vc.kept) == (3, 0)
+
+
+def test_kept_hierarchy_gives_the_same_newton_run(comm, shared_tmp, monkeypatch):
+    """The friction box's first two steps on the iterative preset: the V-cycle made at the
+    first set-up and kept through the Newton iterations gives the run with the hierarchy made
+    at every set-up (-condensed_reuse_growth 0): the same Newton iterations and active rows,
+    the same answers to 1e-10 of their scale (GMRES runs on M itself)."""
+    made: list[VCycle] = []
+    init = VCycle.__init__
+
+    def recorded(self, *args, **kwargs):
+        init(self, *args, **kwargs)
+        made.append(self)
+
+    monkeypatch.setattr(VCycle, "__init__", recorded)
+    text = scene(shipped("contact_friction_3d.toml"), steps={"count": 2, "end": 0.25})
+    runs = {}
+    for name, petsc in (("kept", {}), ("fresh", {"condensed_reuse_growth": "0"})):
+        made.clear()
+        runs[name] = run_scene(text, shared_tmp / f"{name}.h5", comm, options=petsc,
+                               solver={"preset": "iterative"})
+        counts = (sum(v.made for v in made), sum(v.kept for v in made))
+        runs[name + " counts"] = counts
+    solves = sum(runs["fresh counts"])
+    assert runs["fresh counts"][1] == 0 and solves >= 10
+    assert runs["kept counts"][0] < solves / 2 and sum(runs["kept counts"]) == solves
+    assert_same_answers(runs["kept"], runs["fresh"], tol=1e-10)
+
+
+def test_fine_level_smoothed_by_sor(comm):
+    """The V-cycle on S is GAMG whose finest level takes FINE_SWEEPS SOR sweeps (Richardson),
+    its coarser levels GAMG's Chebyshev; -condensed_fine_sweeps sets the sweeps."""
+    for petsc, sweeps in (({}, FINE_SWEEPS), ({"condensed_fine_sweeps": "3"}, 3)):
+        system, solver, mat, rhs, x = _friction(comm, petsc)
+        amg = solver.condensed.amg.pc
+        assert amg.getType() == "gamg" and amg.getMGLevels() >= 2
+        fine = amg.getMGSmoother(amg.getMGLevels() - 1)
+        assert (fine.getType(), fine.getPC().getType()) == ("richardson", "sor")
+        assert fine.getTolerances()[3] == sweeps
+        coarse = amg.getMGSmoother(amg.getMGLevels() - 2)
+        assert amg.getMGLevels() == 2 or coarse.getType() == "chebyshev"
+
+
+def test_galerkin_product_option_is_scoped(comm):
+    """The V-cycle's set-up puts -matptap_via allatonce in PETSc's options only while it runs
+    (on more than one rank), and leaves a value the user gave as it is."""
+    options = PETSc.Options()
+    with _galerkin_product(comm):
+        inside = options.getString("matptap_via", "")
+    assert inside == (GALERKIN_PRODUCT if comm.size > 1 else "")
+    assert not options.hasName("matptap_via")
+    options["matptap_via"] = "nonscalable"
+    try:
+        with _galerkin_product(comm):
+            assert options.getString("matptap_via") == "nonscalable"
+        assert options.getString("matptap_via") == "nonscalable"
+    finally:
+        options.delValue("matptap_via")
+    _friction(comm)
+    assert not options.hasName("matptap_via")
