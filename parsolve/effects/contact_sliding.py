@@ -47,9 +47,11 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+from mpi4py import MPI
 
-from parsolve.contact.distributed import facet_extent, facet_index, update_near
+from parsolve.contact.distributed import facet_index, update_near
 from parsolve.contact.geometry import facet_terms, local_terms
+from parsolve.contact.mortar import master_half
 from parsolve.contact.pairing import in_spans, pair_nodes, pair_on
 from parsolve.contact.rows import normal_values, repeated, rows_differ, span_combination
 from parsolve.contact.sliding import fit_mortar, frame_of, make_spans, merged, \
@@ -78,6 +80,8 @@ class FiniteSliding:
     """The finite-sliding part of a contact effect (mixed into ``Contact``, whose state it
     reads: ``span``, ``pairing``, the rows and relations, ``values``, ``fields_``)."""
 
+    _rows_left = True   # mortar: the last re-pairing made a row on this rank
+
     def _current_points(self, q: np.ndarray) -> np.ndarray:
         """This rank's surfaces (its slaves, the master facets near them) in the current
         configuration X + u, made again first when master facets came near (``_follow``).
@@ -104,9 +108,11 @@ class FiniteSliding:
             dofs = (ids.reshape(-1, 1) * f.ncomp + f.offset[self.u] + np.arange(dim)).ravel()
             self._fetches["mine"] = self._fetch(dofs)
         self._mine_x = pts + self._fetches["mine"](q).reshape(pts.shape)
-        surf = self.span.surf
-        own = surf.compact(self._own_ids)
-        slave_x = surf.points[own] + self._surface_u(q)[own]
+        # its own slaves' u from its own rows of q (the surface's fetch is ``_current_points``')
+        at = f.offset[self.u] + np.arange(dim)
+        own = self.values.local_nodes(self._own_ids)
+        slave_x = (self.span.surf.points[self.span.surf.compact(self._own_ids)]
+                   + q.reshape(-1, f.ncomp)[own[:, None], at])
         near, new = update_near(self.values.comm, self._near, slave_x, self._mine,
                                 self._mine_x, self._reach)
         if new:
@@ -263,15 +269,18 @@ class FiniteSliding:
         """Finite sliding, mortar: the rows made again on the current configuration x, on the
         fixed set of slaves (``sliding.fit_mortar``: a slave no master facet covers any more
         keeps its last row)."""
-        sp, comm = self.span, self.values.comm
-        radius = self.spec.search_radius
-        if radius is None:   # (the whole surfaces' largest facet on x)
-            radius = max(facet_extent(comm, self._mine_x), facet_extent(comm, x[sp.slave_facets]))
-        new = self._mortar(x, sp.slave_facets, sp.facets, radius,
-                           self._master_half(self._mine_x)).pairing
-        if comm.allreduce(len(new)) == 0:
-            raise SolverError("no mortar row left: the Newton iterate carried every slave of "
-                              "the contact off the master (the iterates diverged)")
+        sp = self.span
+        # the whole surfaces' largest master half-extent per axis and slave facet extent on x
+        # (one reduction): the candidates' bounds and the default search radius
+        slave_facets = x[sp.slave_facets]
+        reach = np.append(master_half(self._mine_x),
+                          np.max(np.ptp(slave_facets, axis=1), initial=0.0))
+        self.values.comm.Allreduce(MPI.IN_PLACE, reach, op=MPI.MAX)
+        half, radius = reach[:-1], self.spec.search_radius
+        if radius is None:   # (the largest facet: a master's extent is twice its half)
+            radius = max(2.0 * half.max(), reach[-1])
+        new = self._mortar(x, sp.slave_facets, sp.facets, radius, half).pairing
+        self._rows_left = len(new) > 0   # (agreed with the spans' decision: ``_slide``)
         p, found = fit_mortar(new, self._compact, x)
         if sp.reference is not None:
             reference_frame(p, sp.reference)
@@ -367,8 +376,14 @@ class FiniteSliding:
         p = self.span.surf.to_input(p)
         nrows, trows = self._rows(p.normal, p), self._span_tangent_rows(p)
         # the rows' new entries (values: set below and by the hooks), on every rank when
-        # one made its spans again (its relations and terms are laid out together)
-        if self.any_rank(self._restructuring):
+        # one made its spans again (its relations and terms are laid out together); mortar:
+        # no row left on any rank fails (one reduction of both)
+        agreed = np.array([self._restructuring, self._rows_left], dtype=float)
+        self.values.comm.Allreduce(MPI.IN_PLACE, agreed, op=MPI.MAX)
+        if not agreed[1]:
+            raise SolverError("no mortar row left: the Newton iterate carried every slave of "
+                              "the contact off the master (the iterates diverged)")
+        if agreed[0]:
             self.restructured = True
             self._set_entries(p, nrows, trows)
         p.gap = p.gap - self._read_rows(self.n_dofs, nrows.row, nrows.coef, nrows.nrows, q)

@@ -99,3 +99,38 @@ def test_at_four_ranks_each_holds_at_most_035_of_the_sliding_entries(shared_tmp,
     assert most <= 0.35 * held_entries(alone), (most, held_entries(alone))
     nodes = COMM.allreduce(effect.span.surf.ids.size, op=MPI.MAX)
     assert nodes <= 0.4 * whole.span.surf.ids.size, (nodes, whole.span.surf.ids.size)
+
+
+@pytest.mark.skipif(COMM.size != 4, reason="the count at 4 ranks")
+def test_at_four_ranks_the_sliding_penalty_holds_at_most_035_of_the_pairs(shared_tmp):
+    """The penalty baseline in finite sliding (``SlidingPenalty``) on the same block, split
+    over 4 ranks, paired again at a step's start: each rank's pairs, the entries of the
+    tuples it declares (its own and those sent to it) and its surface nodes are ≤ 0.35× those
+    of one rank (no rank holds the whole pairing or the whole surfaces)."""
+    from parsolve.model import build_model
+    from parsolve.scene import parse_scene
+    import tomllib
+
+    mesh = shared_tmp / "sliding_penalty_count.msh"
+    write_mesh(mesh, 8, 64, ny_low=1, ny_up=1, seed=4)
+    text = FOUNDATION.format(mesh=mesh, discretization="node_to_segment").replace(
+        "friction = 0.3\n", 'friction = 0.3\nsliding = "finite"\nformulation = "penalty"\n'
+                            "penalty = 1e5\n")
+
+    def held(comm) -> np.ndarray:
+        model = build_model(parse_scene(tomllib.loads(text), "count.toml", text), comm)
+        effect = next(e for e in model.effects if type(e).__name__ == "SlidingPenalty")
+        q = np.zeros(model.mesh.num_points * effect.fields_.ncomp)
+        effect.begin_step(q, {}, None)   # (paired again on the current configuration)
+        nodes = effect.term.nodes
+        counts = np.array([len(effect.pairing), nodes.size * nodes.shape[1] * model.mesh.dim ** 2,
+                           effect.surf.ids.size], dtype=float)
+        return counts
+
+    alone = held(MPI.COMM_SELF)
+    most = held(COMM)
+    COMM.Allreduce(MPI.IN_PLACE, most, op=MPI.MAX)
+    assert alone[0] == 65 and np.all(alone > 0)
+    share = most / alone
+    print("pairs, tuple entries, surface nodes: largest rank's share", share)
+    assert np.all(share <= 0.35), share
