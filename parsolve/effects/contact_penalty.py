@@ -341,7 +341,8 @@ class PenaltyContact(Effect):
         return values[self.u]
 
     def rows_at(self, us: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(∂g·u (n,), ∂g_Tᵀ u (n, dim-1)): the pairs' rows at the surface nodes' u ``us``."""
+        """(∂g·u (n,), ∂g_Tᵀ u (n, dim-1)): the pairs' rows at the surface nodes' u ``us``
+        (m, dim)."""
         ut = us[self.tuple_at].reshape(self.bn.shape)               # (n, m·dim)
         return (np.einsum("nk,nk->n", self.bn, ut), np.einsum("nkj,nk->nj", self.bt, ut))
 
@@ -353,7 +354,7 @@ class PenaltyContact(Effect):
         return self.pairing.gap + gn, gt
 
     def forces(self, u: np.ndarray, state: dict, lam_n: np.ndarray, lam_t: np.ndarray) -> dict:
-        """Normal and friction forces at the displacement u (all nodes, every rank alike)."""
+        """Normal and friction forces at the displacement u (this rank's pairs)."""
         g, gT = self.gaps(u)
         trial = lam_n - self.eps_n * g
         pN = np.maximum(trial, 0.0)
@@ -370,8 +371,8 @@ class PenaltyContact(Effect):
         # tie goes to stick, the elastic predictor: started sliding, a 2D node without its
         # tangential stiffness can overshoot and flip its slip sense at every iteration (the
         # block's trailing corner did). The margin is far above round-off and far below any
-        # accuracy asked of a baseline (a cone violation of CONE_TIE at most). Decided on the
-        # whole arrays that every rank computes alike from the owners' values (``gaps``)
+        # accuracy asked of a baseline (a cone violation of CONE_TIE at most). Decided by the
+        # pair's rank alone
         slip = closed & (norm > mu * pN * (1.0 + CONE_TIE)) & (mu > 0)
         scale = np.where(slip, mu * pN / np.maximum(norm, 1e-300), 1.0)
         t = np.where(closed[:, None] & (mu > 0), t_tr * scale[:, None], 0.0)
@@ -414,7 +415,7 @@ class PenaltyContact(Effect):
                                         "state")]
 
     def init_state(self, cells: np.ndarray) -> dict:
-        """Per slave node (all of them, the same on every rank): the normal force, the friction
+        """Per paired slave node (this rank's): the normal force, the friction
         force and the tangential displacement of the last converged step."""
         n, dm1 = len(self.pairing), self.mesh.dim - 1
         return {"pN": np.zeros(n), "t": np.zeros((n, dm1)), "gT": np.zeros((n, dm1))}
