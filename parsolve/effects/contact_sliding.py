@@ -80,8 +80,6 @@ class FiniteSliding:
     """The finite-sliding part of a contact effect (mixed into ``Contact``, whose state it
     reads: ``span``, ``pairing``, the rows and relations, ``values``, ``fields_``)."""
 
-    _rows_left = True   # mortar: the last re-pairing made a row on this rank
-
     def _current_points(self, q: np.ndarray) -> np.ndarray:
         """This rank's surfaces (its slaves, the master facets near them) in the current
         configuration X + u, made again first when master facets came near (``_follow``).
@@ -280,7 +278,9 @@ class FiniteSliding:
         if radius is None:   # (the largest facet: a master's extent is twice its half)
             radius = max(2.0 * half.max(), reach[-1])
         new = self._mortar(x, sp.slave_facets, sp.facets, radius, half).pairing
-        self._rows_left = len(new) > 0   # (agreed with the spans' decision: ``_slide``)
+        if self.values.comm.allreduce(len(new)) == 0:
+            raise SolverError("no mortar row left: the Newton iterate carried every slave of "
+                              "the contact off the master (the iterates diverged)")
         p, found = fit_mortar(new, self._compact, x)
         if sp.reference is not None:
             reference_frame(p, sp.reference)
@@ -376,14 +376,8 @@ class FiniteSliding:
         p = self.span.surf.to_input(p)
         nrows, trows = self._rows(p.normal, p), self._span_tangent_rows(p)
         # the rows' new entries (values: set below and by the hooks), on every rank when
-        # one made its spans again (its relations and terms are laid out together); mortar:
-        # no row left on any rank fails (one reduction of both)
-        agreed = np.array([self._restructuring, self._rows_left], dtype=float)
-        self.values.comm.Allreduce(MPI.IN_PLACE, agreed, op=MPI.MAX)
-        if not agreed[1]:
-            raise SolverError("no mortar row left: the Newton iterate carried every slave of "
-                              "the contact off the master (the iterates diverged)")
-        if agreed[0]:
+        # one made its spans again (its relations and terms are laid out together)
+        if self.any_rank(self._restructuring):
             self.restructured = True
             self._set_entries(p, nrows, trows)
         p.gap = p.gap - self._read_rows(self.n_dofs, nrows.row, nrows.coef, nrows.nrows, q)
