@@ -56,10 +56,9 @@ from bench_scenes import (G, LAM, friction_3d_scene, hertz_scene, ironing_2d_sce
 from parsolve.contact import friction as fr
 from parsolve.contact import references
 from parsolve.contact.pairing import pair_nodes
-from parsolve.la.dofmap import DofMap
 from parsolve.contact.rows import friction_dual, normal_rows, tangent_rows
 from parsolve.driver import run
-from parsolve.effects.contact_penalty import PenaltyContact, gap_gradients
+from parsolve.effects.contact_penalty import PenaltyContact
 from parsolve.errors import InputError
 from parsolve.model import build_model
 from parsolve.scene import load_scene
@@ -256,19 +255,14 @@ def baselines_summary(records: list[dict]) -> list[str]:
 
 def bare_penalty(pairing, mu: float, eps: float, dim: int, npoints: int) -> PenaltyContact:
     """The penalty effect's force and tangent kernels on a bare pairing (no mesh, no scene):
-    the attributes PenaltyContact.forces and .node_tangents read, set by hand (``values``:
-    the DofMap of a one-rank part holding all ``npoints`` nodes, owned, input order —
-    what build_model gives at 1 rank)."""
+    the attributes PenaltyContact.forces and .node_tangents read, set by hand (one rank: its
+    surface every node, its ``fetch`` of u the identity)."""
     eff = object.__new__(PenaltyContact)
-    eff.pairing, eff.nrows, eff.trows = pairing, normal_rows(pairing), tangent_rows(pairing)
-    part = SimpleNamespace(global_nodes=np.arange(npoints, dtype=np.int64), n_owned=npoints,
-                           num_points=npoints)
-    eff.values = DofMap(MPI.COMM_SELF, part, dim)
-    eff.whole = True   # the pairing whole on its one rank: the gaps read by node rows
-    eff.mesh = SimpleNamespace(dim=dim)
+    eff.pairing, eff.mesh = pairing, SimpleNamespace(dim=dim)
+    eff.surface, eff.fetch = np.arange(npoints), np.ravel
+    eff.gradients(pairing)   # the pairs' gap gradients and their tuples' places
     eff.eps_n = eff.eps_t = np.full(len(pairing), eps)
     eff.touch, eff.touching = 0.0, np.zeros(len(pairing), bool)   # the closed rule: none here
-    eff.bn, eff.bt = gap_gradients(pairing)   # the pairs' gap gradients (set with the tuples)
 
     class Spec:
         pass

@@ -45,10 +45,9 @@ again on the current configuration, the facets new to a rank sent as they come n
 row's values on a master node another rank owns are fetched from it (``_read_rows``), its D
 entries there sent to it (``la.relation_set``), and the Newton-matrix terms on its nodes (3D
 friction's cross stiffness, finite sliding's geometric stiffness) declared by each node's
-owner with their values sent along (``effects.contact_terms``). Against a rigid obstacle the
+owner with their values sent along (``effects.row_terms``). Against a rigid obstacle the
 rank projects its own slave nodes. Node states, slip directions and decisions are the rank's
-own; only a change (any rank's) and the resultants cross the ranks. The penalty baseline on
-a master region pairs the gathered surfaces (``whole``): every rank the whole pairing.
+own; only a change (any rank's) and the resultants cross the ranks.
 
 Held, tied and shared nodes: a contact node that a Dirichlet condition also holds, a periodic
 tie between contact nodes, a node in two surfaces along one normal make the enforced rows
@@ -105,20 +104,18 @@ from parsolve.contact import friction as fr
 from parsolve.contact import obstacles
 from parsolve.contact.mortar import master_half, mortar_pairing
 from parsolve.contact.mortar3d import mortar_pairing_3d
-from parsolve.contact.pairing import check_surfaces, pair_nodes
+from parsolve.contact.pairing import pair_nodes
 from parsolve.contact.rows import friction_dual, node_rows, normal_rows, normal_values, \
     repeated, slip_vectors, span_rows, tangent_rows
 from parsolve.contact.sliding import Spans, obstacle_spans
 from parsolve.contact.surfaces import Surfaces, canonical_facets
 from parsolve.effects.base import Effect, displacement_field
 from parsolve.effects.contact_sliding import FiniteSliding
-from parsolve.effects.contact_terms import SharedRowTerm
 from parsolve.effects.row_terms import RowTerm
 from parsolve.fem.element_matrices import Term
 from parsolve.errors import InputError
 from parsolve.la.dofmap import DofMap
 from parsolve.evolution import CONSTANT
-from parsolve.mesh.regions import gather_facets
 from parsolve.mesh.topology import FACETS, boundary_facets
 from parsolve.relations import Relation, rows_here
 from parsolve.schema import NAME_PATTERN
@@ -201,12 +198,11 @@ class Contact(FiniteSliding, Effect):
     side_nodes = np.zeros(0, dtype=np.int64)
 
     def __init__(self, spec: ContactSpec, mesh, regions, fields, source: str,
-                 radial: bool = False, whole: bool = False):
+                 radial: bool = False):
         self.spec, self.mesh, self.fields_, self.source = spec, mesh, fields, source
         self.radial = radial    # axisymmetric: mortar integrals over the surface of revolution
         # rows on a master region (node-to-face, mortar) built per rank (``_pair_here``)
-        # unless the whole pairing is asked for (the penalty baseline's finite sliding)
-        self.here = not whole and spec.master is not None
+        self.here = spec.master is not None
         self._fetches: dict = {}            # plans of the values read on other ranks' DOFs
         self.name = f"contact {spec.name}"
         key = spec.key
@@ -230,14 +226,13 @@ class Contact(FiniteSliding, Effect):
         self._left = self._last_return = None   # returns to a facet it left within the step
         self._repairings = 0
         self._check_slave(regions)
-        # rows built per rank (``_pair_here``; an obstacle's: ``relations``): the global number
-        # of each entry held here (``ids``) among ``entries``; None: the whole pairing
-        self.ids = None
+        # rows built per rank (``_pair_here``, ``_pair_obstacle``): the global number of each
+        # entry held here (``ids``) among ``entries``
         self._known = np.zeros((2, 0), dtype=np.int64)   # (master ids near, their numbers)
         self.pairing = self._pair(regions)
         self._compact_committed = self._compact
         self._covered_committed = self._covered
-        if (len(self.pairing) if self.ids is None else self.entries) == 0:
+        if self.entries == 0:
             raise InputError("no slave node faces the master surface within the search radius",
                              source, f"{key}.slave")
         p = self.pairing
@@ -256,8 +251,8 @@ class Contact(FiniteSliding, Effect):
         self.turning = fr.SlipNewton()
         # the Newton matrix's terms (``row_terms``), laid on their rows' tuples by ``relations``
         cross = self.frictional and mesh.dim == 3 and spec.direction == "reaction"
-        self.cross = SharedRowTerm(self.u, True, self._new_of) if cross else None
-        self.geo = SharedRowTerm(self.u, False, self._new_of) if self.geometric else None
+        self.cross = RowTerm(self.u, True, self._new_of) if cross else None
+        self.geo = RowTerm(self.u, False, self._new_of) if self.geometric else None
         self._kappa = self._geo_rows = None
         self._start_entries()
 
@@ -296,39 +291,10 @@ class Contact(FiniteSliding, Effect):
                              f"({off} of its {total} nodes are inside the mesh)",
                              self.source, f"{key}.slave")
 
-    def _slave_nodes(self, regions) -> tuple[np.ndarray, np.ndarray]:
-        """The whole slave region: sorted input ids and their coordinates."""
-        key = f"{self.spec.key}.slave"
-        ids = regions.relation_nodes(self.spec.slave, key)
-        return ids, regions.points_of(ids)
-
-    def _facets(self, region) -> tuple[np.ndarray, np.ndarray]:
-        """A region's boundary facets on the whole mesh: input ids and coordinates, each facet
-        once, in the canonical order (``surfaces``)."""
-        nfn = len(FACETS[self.mesh.cell_type][0])
-        facets = np.asarray(region.facets, dtype=np.int64).reshape(-1, nfn)
-        ids, pts = gather_facets(self.values.comm, self.mesh, facets, nfn)
-        return canonical_facets(ids, pts)
-
     def _pair(self, regions):
-        """The paired slave nodes, in input ids: this rank's (``_pair_here``,
-        ``_pair_obstacle``) or, for the penalty baseline on a master region (``whole``), every
-        rank's, on gathered surfaces: the same arrays on every rank."""
-        spec, mesh, key = self.spec, self.mesh, self.spec.key
-        if self.here:
-            return self._pair_here(regions)
-        if spec.obstacle is not None:
-            return self._pair_obstacle(regions)
-        slave, slave_pts = self._slave_nodes(regions)
-        facets, facet_pts = self._facets(regions(spec.master, f"{key}.master"))
-        if facets.size == 0:
-            raise InputError(f"the master region {spec.master!r} has no boundary facet",
-                             self.source, f"{key}.master")
-        check_surfaces(slave, facets, self.source, f"{key}.master")
-        surf = Surfaces.of([(slave, slave_pts), (facets, facet_pts)])
-        p = pair_nodes(surf.points, surf.compact(slave), surf.compact(facets),
-                       mesh.facet_type, spec.search_radius)
-        return surf.to_input(p.only_paired())
+        """The paired slave nodes this rank owns, in input ids (``_pair_here``,
+        ``_pair_obstacle``)."""
+        return self._pair_here(regions) if self.here else self._pair_obstacle(regions)
 
     def _pair_obstacle(self, regions):
         """The slave nodes this rank owns projected on the rigid obstacle, in input ids; their
@@ -500,9 +466,7 @@ class Contact(FiniteSliding, Effect):
         return self._read_rows(r.a_dofs, r.a_rows, r.a_vals, r.nrows, q)
 
     def sum_ranks(self, x):
-        """Σ over the ranks of a sum over this rank's rows (rows built per rank: the relations
-        form always; a whole pairing, the penalty baseline's, sums its own:
-        ``PenaltyContact._sum``)."""
+        """Σ over the ranks of a sum over this rank's rows (rows built per rank)."""
         return self.values.comm.allreduce(x, op=MPI.SUM)
 
     def any_rank(self, x: bool) -> bool:
@@ -683,11 +647,9 @@ class Contact(FiniteSliding, Effect):
         are this rank's own."""
         dim = self.mesh.dim
         if self.cross is not None:
-            self.cross.lay(self.trows if trows is None else trows, 2, dim, self.values,
-                           self.mesh)
+            self.cross.lay(self.trows if trows is None else trows, 2, dim, self.values)
         if self.geometric:
-            self.geo.lay(self._geometry_layout(p), self.geometric_rank, dim, self.values,
-                         self.mesh)
+            self.geo.lay(self._geometry_layout(p), self.geometric_rank, dim, self.values)
 
     def _set_dual(self) -> None:
         """The slip direction s into the normal row's dual and (3D) the tangential rows, in

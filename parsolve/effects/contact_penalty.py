@@ -62,16 +62,16 @@ penalty, again on the current configuration at each step's start and Newton iter
 **On a distributed mesh** (each rank its part) each rank holds the pairs of the slave nodes
 it owns (the relations form's pairing per rank: against the master facets near them, or its
 own slaves projected on the obstacle): their areas A_i from its facets through them (a
-facet's ghost nodes' pairing fetched from their owners), their gaps g and g_T from its own
-and, for a master node of another rank, that owner's displacement. A pair's tuple is declared
-on every rank that owns one of its nodes: the pair's rank sends it once to those owners
-(``contact.distributed.SharedTuples``) and its stiffness and forces with it at each
-evaluation; each rank adds the rows of the nodes it owns. The augmented Lagrangian's
-decisions (settled, the augmentation's change and stop) are reductions: the ranks agree.
-Finite sliding against a master region (``SlidingPenalty``) pairs the gathered surfaces
-again at each iteration: there every rank holds the whole pairing (``whole``), the gaps one
-reduction of its size, and a pair's tuple is declared by each rank owning one of its nodes
-from the forces every rank holds; outputs are each rank's owned rows.
+facet's ghost nodes' pairing fetched from their owners), their gaps g and g_T from the
+displacement of its pairs' nodes, each fetched from its owner (one plan). A pair's tuple is
+declared on every rank that owns one of its nodes: the pair's rank sends it once to those
+owners (``contact.distributed.SharedTuples``) and its stiffness and forces with it at each
+evaluation (one exchange); each rank adds the rows of the nodes it owns. Finite sliding
+against a master region (``SlidingPenalty``) pairs each rank's slaves again against the
+master facets near them on the current configuration, those that came near sent to it
+(``contact.distributed.update_near``, as the relations form's finite sliding). The
+augmented Lagrangian's decisions (settled, the augmentation's change and stop) are one
+reduction: the ranks agree. Outputs are each rank's owned rows.
 
 Scene keys (besides those of ``parsolve.effects.contact``)::
 
@@ -91,16 +91,15 @@ from dataclasses import dataclass
 import numpy as np
 from mpi4py import MPI
 
-from parsolve.contact.distributed import Fetch, SharedTuples
+from parsolve.contact.distributed import Fetch, SharedTuples, facet_extent, facet_index, \
+    update_near
 from parsolve.contact.friction import OPEN, SLIP, STICK
 from parsolve.contact.pairing import pair_nodes, pair_on
-from parsolve.contact.rows import normal_rows, tangent_rows
 from parsolve.contact.surfaces import Surfaces
 from parsolve.la.dofmap import DofMap
 from parsolve.effects import contact
 from parsolve.effects.base import Effect
 from parsolve.effects.contact_sliding import KEEP_TOL
-from parsolve.effects.row_terms import global_tuples
 from parsolve.fem.element_matrices import NodeForces, Term, TermMatrices
 from parsolve.errors import InputError, SolverError
 from parsolve.fem.integrals import facet_rule
@@ -166,28 +165,23 @@ def build(spec: BaselineSpec, mesh, regions, fields, scene) -> Effect:
     return cls(spec, mesh, regions, fields, scene)
 
 
-def slave_areas(values: DofMap, mesh, slave: np.ndarray, thickness, region_nodes: np.ndarray,
-                whole: bool) -> np.ndarray:
-    """``nodal_areas`` of the paired slave nodes (input ids): every cell through an owned node
-    is local, so a boundary facet through it is one of the whole mesh and all of them are
-    here; a facet counts when all its nodes are paired (its ghost nodes' pairing fetched from
-    their owners among ``region_nodes``, the slave region's local nodes). Rows per rank: this
-    rank's slaves (all owned); ``whole``: every rank's, each from its owner (one reduction of
-    the pairing's size). Collective."""
+def slave_areas(values: DofMap, mesh, slave: np.ndarray, thickness,
+                region_nodes: np.ndarray) -> np.ndarray:
+    """``nodal_areas`` of this rank's paired slave nodes (input ids, all owned): every cell
+    through an owned node is local, so a boundary facet through it is one of the whole mesh
+    and all of them are here; a facet counts when all its nodes are paired (its ghost nodes'
+    pairing fetched from their owners among ``region_nodes``, the slave region's local
+    nodes). Collective."""
     local = values.local_nodes(slave)
-    if whole:   # (every paired node known here)
-        flagged = local[local >= 0]
-    else:
-        paired = np.zeros(values.n_owned_nodes)
-        paired[local] = 1.0
-        ghosts = region_nodes[region_nodes >= values.n_owned_nodes]
-        got = Fetch(values.comm, np.asarray(mesh.node_new)[ghosts].astype(np.int64),
-                    values.node_ranges, 1)(paired)
-        flagged = np.concatenate([local, ghosts[got > 0.5]])
+    paired = np.zeros(values.n_owned_nodes)
+    paired[local] = 1.0
+    ghosts = region_nodes[region_nodes >= values.n_owned_nodes]
+    got = Fetch(values.comm, np.asarray(mesh.node_new)[ghosts].astype(np.int64),
+                values.node_ranges, 1)(paired)
+    flagged = np.concatenate([local, ghosts[got > 0.5]])
     area = np.zeros(mesh.num_points)
     area[flagged] = nodal_areas(mesh, flagged, thickness)
-    area = area[np.maximum(local, 0)]
-    return values.node_sum(slave, area) if whole else area
+    return area[local]
 
 
 def nodal_areas(mesh, nodes: np.ndarray, thickness) -> np.ndarray:
@@ -241,30 +235,27 @@ class PenaltyContact(Effect):
         key = spec.key
         if spec.master is not None:
             check_master(spec, scene.source)
-        # the relations form's set-up does the checks, the pairing and the rows: reused as is
-        # (finite sliding: its pairs at the start made as small sliding's, then again at each
-        # step's start: ``SlidingPenalty``)
-        # (rows per rank: each rank its own slaves' pairs; finite sliding against a master
-        # region pairs the gathered surfaces again: the whole pairing on every rank)
-        self.whole = self.restructures
+        # the relations form's set-up does the checks, the pairing and the rows, per rank:
+        # reused as is (finite sliding: its pairs at the start made as small sliding's, then
+        # again at each step's start and iteration: ``SlidingPenalty``)
         geo = contact.Contact(dataclasses.replace(spec, sliding="small"), mesh, regions,
-                              fields, scene.source, whole=self.whole)
+                              fields, scene.source)
         self.geo = geo
         self.spec, self.mesh, self.fields_ = spec, mesh, fields
         self.u = geo.u
         self.name = f"contact {spec.name} ({spec.formulation})"
-        self.pairing, self.nrows, self.trows = geo.pairing, geo.nrows, geo.trows
+        self.pairing = geo.pairing
         self.values = geo.values
         self.symmetric = spec.mu == 0.0
         p = self.pairing
         dim = mesh.dim
         thickness = scene.thickness if dim == 2 else 1.0
         region = regions(spec.slave, f"{key}.slave").nodes
-        area = slave_areas(self.values, mesh, p.slave, thickness, region, self.whole)
-        area = self._positive(area)
+        area = self._positive(slave_areas(self.values, mesh, p.slave, thickness, region))
         # the facets' size, from their plane measure (the axisymmetric areas are rings')
-        plane = self._positive(slave_areas(self.values, mesh, p.slave, 1.0, region, self.whole))
-        self.h = float(self._sum(plane.sum()) / max(self._sum(plane.size), 1)) ** (1.0 / (dim - 1))
+        plane = self._positive(slave_areas(self.values, mesh, p.slave, 1.0, region))
+        total, count = geo.sum_ranks(np.array([plane.sum(), plane.size]))
+        self.h = float(total / max(count, 1)) ** (1.0 / (dim - 1))
         if spec.penalty is None:
             emax = max((m.params.get("E", 0.0) for m in scene.materials), default=0.0)
             if emax <= 0:
@@ -287,77 +278,83 @@ class PenaltyContact(Effect):
         self._last = None
         self.term = Term(self.u, self.u, np.zeros((0, 1), dtype=np.int64),
                          symmetric=self.symmetric, linear=False, global_ids=True)
+        self._surfaces(geo)
         self._declare(p)
-        self._surfaces(geo, regions)
-
-    def _sum(self, x):
-        """Σ over the ranks of this rank's pairs' x (rows per rank); else x."""
-        return x if self.whole else self.values.comm.allreduce(x)
 
     def _positive(self, area: np.ndarray) -> np.ndarray:
         """Zero areas (a node no whole slave facet holds) replaced by the mean of the others
         (every rank's). Collective."""
-        count = self._sum(int(np.count_nonzero(area > 0)))
-        mean = self._sum(float(area[area > 0].sum())) / count if count else 1.0
+        count, total = self.geo.sum_ranks(np.array([np.count_nonzero(area > 0),
+                                                    area[area > 0].sum()]))
+        mean = total / count if count else 1.0
         return np.where(area > 0, area, mean)
 
-    def _surfaces(self, geo: contact.Contact, regions) -> None:
-        """What it keeps of the relations form's surfaces (finite sliding's): nothing."""
+    def _surfaces(self, geo: contact.Contact) -> None:
+        """The nodes whose displacement the gaps read: its pairs' tuples' (fixed)."""
+        p = self.pairing
+        self._plan(np.unique(np.concatenate([p.slave, p.master.ravel()])))
+
+    def _plan(self, surface: np.ndarray) -> None:
+        """The plan of u (this rank's nodes, (n, dim)) at the input node ids ``surface`` (this
+        rank's slaves and the master nodes their pairs may hold), from their owners: one
+        ``Fetch`` a surface. Collective."""
+        dim = self.mesh.dim
+        new = self.geo._new_of(surface)
+        self.surface = surface
+        self.fetch = Fetch(self.values.comm, (new[:, None] * dim + np.arange(dim)).ravel(),
+                           self.values.node_ranges, dim)
+
+    def surface_u(self, u: np.ndarray) -> np.ndarray:
+        """u at the surface nodes (m, dim) from this rank's u (its nodes, owned first).
+        Collective."""
+        return self.fetch(np.ascontiguousarray(u).ravel()).reshape(-1, self.mesh.dim)
 
     def _declare(self, p) -> None:
         """The contact elements: one node tuple per pair (its slave node, then its master
         facet's nodes; an obstacle's pair is its slave alone), in the partition's global node
         numbers, declared on every rank that owns one of its nodes (each adds its owned rows:
-        a pair split over ranks is whole, no entry crosses ranks at assembly). Rows per rank:
-        a rank's own pairs' tuples sent to the owners of their other nodes
-        (``dist.SharedTuples``), their values and forces with them at each evaluation;
-        ``whole``: every rank holds the pairing, the numbers from their owners (one reduction
-        of the pairing's size). Also (tuple, place in it, local node) of the tuple nodes this
-        rank owns: where its forces go. The pairs' gradients ∂g, ∂g_T too."""
+        a pair split over ranks is whole, no entry crosses ranks at assembly): a rank's own
+        pairs' tuples sent to the owners of their other nodes (``dist.SharedTuples``), their
+        values and forces with them at each evaluation. Also (tuple, place in it, local node)
+        of the tuple nodes this rank owns: where its forces go; and the pairs' gradients ∂g,
+        ∂g_T and their tuples' places among the surface nodes. Collective."""
         ids = np.concatenate([p.slave[:, None], p.master], axis=1)          # (n, m) input ids
-        self.bn, self.bt = gap_gradients(p)
-        if self.whole:
-            tuples, owned, local = global_tuples(self.values, self.mesh, ids)
-            self.shared = None
-            self.declared = np.flatnonzero(owned.any(axis=1))
-            self.term.nodes = tuples[self.declared]
-            self.tuples = tuples
-            pair, place = np.nonzero(owned)
-            self.force_at = (pair, place, local[pair, place])
-            return
+        self.gradients(p)
         values = self.values
+        self.tuple_ids = ids
         self.shared = SharedTuples(values.comm, self.geo._new_of(ids).reshape(ids.shape),
                                    values.node_ranges)
         nodes = self.term.nodes = self.shared.nodes
         lo, hi = values.node_ranges[values.rank], values.node_ranges[values.rank + 1]
         pair, place = np.nonzero((nodes >= lo) & (nodes < hi))
-        self.declared = np.arange(nodes.shape[0])
         self.force_at = (pair, place, nodes[pair, place] - lo)   # (owned: new = lo + local)
+
+    def gradients(self, p) -> None:
+        """The pairs' ∂g, ∂g_T and their tuples' places among the surface nodes."""
+        self.bn, self.bt = gap_gradients(p)
+        ids = np.concatenate([p.slave[:, None], p.master], axis=1)
+        self.tuple_at = np.searchsorted(self.surface, ids)
 
     # ------------------------------------------------------------------ kinematics
 
     def _u(self, values: dict) -> np.ndarray:
         return values[self.u]
 
+    def rows_at(self, us: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(∂g·u (n,), ∂g_Tᵀ u (n, dim-1)): the pairs' rows at the surface nodes' u ``us``
+        (m, dim)."""
+        ut = us[self.tuple_at].reshape(self.bn.shape)               # (n, m·dim)
+        return (np.einsum("nk,nk->n", self.bn, ut), np.einsum("nkj,nk->nj", self.bt, ut))
+
     def gaps(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(g (n,), g_T (n, dim-1)): linearised gap g0 + Dn·q and tangential displacement at
         this rank's paired nodes (u: this rank's nodes; a master node's value fetched from its
-        owner); ``whole``: every paired node, every rank alike (each node's rows from its
-        owner, one reduction of the pairing's size). Collective."""
-        p = self.pairing
-        if self.whole:
-            gn, gt = self.values.node_rows([self.nrows, self.trows], u)
-        else:   # its own pairs' rows (a master node's value from its owner)
-            q = np.zeros((self.values.n_owned_nodes, self.fields_.ncomp))
-            q[:, self.fields_.columns(self.u)] = u[:self.values.n_owned_nodes]
-            q = q.ravel()
-            n, t, geo = self.nrows, self.trows, self.geo
-            gn = geo._read_rows(geo.n_dofs, n.row, n.coef, n.nrows, q)
-            gt = geo._read_rows(geo.t_dofs, t.row, t.coef, t.nrows, q)
-        return p.gap + gn, gt.reshape(len(p), self.mesh.dim - 1)
+        owner: one plan). Collective."""
+        gn, gt = self.rows_at(self.surface_u(u))
+        return self.pairing.gap + gn, gt
 
     def forces(self, u: np.ndarray, state: dict, lam_n: np.ndarray, lam_t: np.ndarray) -> dict:
-        """Normal and friction forces at the displacement u (all nodes, every rank alike)."""
+        """Normal and friction forces at the displacement u (this rank's pairs)."""
         g, gT = self.gaps(u)
         trial = lam_n - self.eps_n * g
         pN = np.maximum(trial, 0.0)
@@ -374,8 +371,8 @@ class PenaltyContact(Effect):
         # tie goes to stick, the elastic predictor: started sliding, a 2D node without its
         # tangential stiffness can overshoot and flip its slip sense at every iteration (the
         # block's trailing corner did). The margin is far above round-off and far below any
-        # accuracy asked of a baseline (a cone violation of CONE_TIE at most). Decided on the
-        # whole arrays that every rank computes alike from the owners' values (``gaps``)
+        # accuracy asked of a baseline (a cone violation of CONE_TIE at most). Decided by the
+        # pair's rank alone
         slip = closed & (norm > mu * pN * (1.0 + CONE_TIE)) & (mu > 0)
         scale = np.where(slip, mu * pN / np.maximum(norm, 1e-300), 1.0)
         t = np.where(closed[:, None] & (mu > 0), t_tr * scale[:, None], 0.0)
@@ -418,7 +415,7 @@ class PenaltyContact(Effect):
                                         "state")]
 
     def init_state(self, cells: np.ndarray) -> dict:
-        """Per slave node (all of them, the same on every rank): the normal force, the friction
+        """Per paired slave node (this rank's): the normal force, the friction
         force and the tangential displacement of the last converged step."""
         n, dm1 = len(self.pairing), self.mesh.dim - 1
         return {"pN": np.zeros(n), "t": np.zeros((n, dm1)), "gT": np.zeros((n, dm1))}
@@ -440,13 +437,14 @@ class PenaltyContact(Effect):
         trial = {"pN": f["pN"], "t": f["t"], "gT": f["gT"]}
         pair, place, local = self.force_at
         tuple_forces, k = self.tuple_forces(f), self.node_tangents(f)
-        if self.shared is not None:   # (with those of the tuples sent here)
-            tuple_forces, k = self.shared.share(tuple_forces), self.shared.share(k)
+        n, m, d = tuple_forces.shape
+        # (with those of the tuples sent here: one exchange of both)
+        both = self.shared.share(np.concatenate([tuple_forces.reshape(n, m * d),
+                                                 k.reshape(n, (m * d) ** 2)], axis=1))
+        tuple_forces = both[:, :m * d].reshape(-1, m, d)
+        k = both[:, m * d:].reshape(-1, m * d, m * d)
         forces = NodeForces(local[:, None], tuple_forces[pair, place][:, None, :])
-        k = k[self.declared]
         # (n, m·d, m·d) → (d·d, m, m, n): entry (i, j) of node pair (a, b) at [i d + j, a, b]
-        d = self.mesh.dim
-        m = k.shape[1] // d
         blocks = k.reshape(len(k), m, d, m, d).transpose(2, 4, 1, 3, 0).reshape(d * d, m, m, -1)
         return {self.u: forces}, [(self.term, TermMatrices(self.term, blocks))], trial, None
 
@@ -495,20 +493,17 @@ class AugmentedContact(PenaltyContact):
         u = q.reshape(self.mesh.num_points, -1)[:, self.fields_.columns(self.u)]
         f = self.forces(u, self._state, self.lam_n, self.lam_t)
         self._inner += 1
-        # (rows per rank: every rank's pairs settled, the largest change and force)
-        settled = self._settled(f, self._last)
-        if not self.whole:
-            settled = self.values.comm.allreduce(settled, op=MPI.LAND)
-        if not settled and self._inner < INNER_LIMIT:
+        # every rank's pairs settled, the largest change and force: one reduction
+        local = np.array([not self._settled(f, self._last),
+                          np.abs(f["pN"] - self.lam_n).max(initial=0.0),
+                          np.abs(f["t"] - self.lam_t).max(initial=0.0),
+                          f["pN"].max(initial=0.0)])
+        self.values.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.MAX)
+        unsettled, change_n, change_t, scale = local
+        if unsettled and self._inner < INNER_LIMIT:
             return True
         self._inner = 0
-        change = max(float(np.abs(f["pN"] - self.lam_n).max(initial=0.0)),
-                     float(np.abs(f["t"] - self.lam_t).max(initial=0.0)))
-        scale = float(f["pN"].max(initial=0.0))
-        if not self.whole:
-            change = self.values.comm.allreduce(change, op=MPI.MAX)
-            scale = self.values.comm.allreduce(scale, op=MPI.MAX)
-        scale = max(scale, 1e-300)
+        change, scale = max(change_n, change_t), max(scale, 1e-300)
         if change <= self.spec.augmentation_tolerance * scale:
             return False
         if self.augmentations >= self.spec.max_augmentations:
@@ -535,16 +530,18 @@ class AugmentedContact(PenaltyContact):
 
 
 class SlidingPenalty(PenaltyContact):
-    """The penalty against a master region with finite sliding: the slaves are paired again
-    with the master's facets on the current configuration X + u at each step's start and
-    after each Newton iteration (a slave keeps its facet while it stays in it and as close,
-    or when no facet faces it, as the relations form's finite sliding), their rows
-    linearised there (``g = g(x) + Dn·(q − q(x))``: at convergence the gap is the actual
-    one), the committed friction force turned onto the new tangents and the tangential
-    displacement counted from the step's start q_n on the new rows. When a tuple changed
-    (a slave onto another facet) the term's nodes are given anew and the effect
-    ``restructured``: the system derives its pattern again; the iteration does not count as
-    converged. No geometric stiffness (the relations form's finite sliding has it)."""
+    """The penalty against a master region with finite sliding: each rank's slaves paired
+    again with the master's facets near them on the current configuration X + u at each
+    step's start and after each Newton iteration (the facets that came within the search
+    radius of its slaves sent to it: ``dist.update_near``, as the relations form's finite
+    sliding; a slave keeps its facet while it stays in it and as close, or when no facet
+    faces it), their rows linearised there (``g = g(x) + Dn·(q − q(x))``: at convergence the
+    gap is the actual one), the committed friction force turned onto the new tangents and
+    the tangential displacement counted from the step's start q_n on the new rows. When a
+    tuple changed on some rank (a slave onto another facet) the tuples are given anew and
+    the effect ``restructured``: the system derives its pattern again; the iteration does
+    not count as converged. No geometric stiffness (the relations form's finite sliding has
+    it)."""
 
     restructures = True
 
@@ -553,36 +550,67 @@ class SlidingPenalty(PenaltyContact):
         self.reference = None   # (tangential displacement at q_n, committed → new tangents)
         self.committed_tangents = self.pairing.tangents
         self.q_start = None
+        self._start_u = None    # the surface nodes' u at q_start (until the surface changes)
         self.repairs = 0        # pairings that moved a tuple (each a new pattern)
 
-    def _surfaces(self, geo: contact.Contact, regions) -> None:
-        """The paired slaves and the master's facets, their nodes compact (gathered once)."""
-        p, spec = self.pairing, self.spec
-        ids, pts = geo._slave_nodes(regions)
-        facets, facet_pts = geo._facets(regions(spec.master, f"{spec.key}.master"))
-        at = np.searchsorted(ids, p.slave)
-        self.surf = Surfaces.of([(p.slave, pts[at]), (facets, facet_pts)])
-        self.compact = (self.surf.compact(p.slave), self.surf.compact(facets))
-        # the largest master facet: the closeness tolerance's length
-        self.length = float(np.linalg.norm(np.ptp(facet_pts, axis=1), axis=1).max())
+    def _surfaces(self, geo: contact.Contact) -> None:
+        """This rank's surfaces: its paired slaves and the master facets near them (the
+        relations form's exchange: ``geo._near``); the plan of its own master facets' u; the
+        largest master facet (every rank's own: the whole surface's), the closeness
+        tolerance's length. Collective."""
+        p, dim, comm = self.pairing, self.mesh.dim, self.values.comm
+        local = self.values.local_nodes(p.slave)           # (its own: owned)
+        self.slaves = (local, self.mesh.points[local])
+        _, pts, new = geo._mine
+        self.mine = Fetch(comm, (new.reshape(-1, 1) * dim + np.arange(dim)).ravel(),
+                          self.values.node_ranges, dim)
+        size = float(np.linalg.norm(np.ptp(pts, axis=1), axis=1).max(initial=0.0))
+        self.length = comm.allreduce(size, op=MPI.MAX)
+        self._resurface(geo._near)
 
-    def _points(self, q: np.ndarray) -> np.ndarray:
-        """The surfaces' nodes at X + u (every rank the same; one reduction)."""
-        surf, f, dim = self.surf, self.fields_, self.mesh.dim
-        m = surf.ids.size
-        dofs = (np.repeat(surf.ids, dim) * f.ncomp + f.offset[self.u]
-                + np.tile(np.arange(dim), m))
-        u = self.values.rows(dofs, np.arange(m * dim), np.ones(m * dim), m * dim, q)
-        return surf.points + u.reshape(m, dim)
+    def _resurface(self, near) -> None:
+        """The surfaces made again with the master facets ``near`` (the relations form's
+        numbers learnt) and the plan of their u. Collective."""
+        self.geo._near = near
+        self.geo._learn(near)
+        self.surf = Surfaces.of([(self.pairing.slave, self.slaves[1]), (near.ids, near.pts)])
+        self._plan(self.surf.ids)
+        self._start_u = None
+
+    def _follow(self, u: np.ndarray) -> float:
+        """The master facets that came within the search radius of this rank's slaves on the
+        current configuration sent to it (``update_near``) and its surfaces made again with
+        them (the pairs' facets renumbered); the search radius: the scene's, or the largest
+        master facet's extent on the current configuration (``pair_nodes``' default on the
+        whole master). Collective."""
+        geo, dim = self.geo, self.mesh.dim
+        _, pts, _ = geo._mine
+        mine_x = pts + self.mine(np.ascontiguousarray(u).ravel()).reshape(pts.shape)
+        radius = self.spec.search_radius
+        if radius is None:
+            radius = facet_extent(self.values.comm, mine_x)
+        local, slave_pts = self.slaves
+        near, new = update_near(self.values.comm, geo._near, slave_pts + u[local, :dim],
+                                geo._mine, mine_x, radius)
+        if new:   # (facets keep their relative order: the pairs' facets renumbered)
+            p = self.pairing.subset(np.arange(len(self.pairing)))
+            p.facet = facet_index(near.ids, geo._near.ids[p.facet])
+            self.pairing = p
+            self._resurface(near)
+        return radius
 
     def _displacement(self, q: np.ndarray) -> np.ndarray:
         return q.reshape(self.mesh.num_points, -1)[:, self.fields_.columns(self.u)]
 
     def _repair(self, q: np.ndarray, start: bool = False) -> bool:
-        """Pairs made again at q (collective, every rank alike); True when a tuple moved."""
-        slave, facets = self.compact
-        ft, x = self.mesh.facet_type, self._points(q)
-        new = pair_nodes(x, slave, facets, ft, self.spec.search_radius)
+        """Pairs made again at q (collective); True when some rank's tuple moved."""
+        u = self._displacement(q)
+        radius = self._follow(u)   # (first: it may make the surfaces again)
+        us = self.surface_u(u)
+        surf, ft = self.surf, self.mesh.facet_type
+        x = surf.points + us
+        slave, facets = surf.compact(self.pairing.slave), surf.compact(self.geo._near.ids)
+        new = pair_nodes(x, slave, facets, ft, radius)
         # a slave keeps its facet while its projection stays in it and is as close (on a kink
         # of the master it would flip between two facets from one iteration to the next), and
         # when no facet faces it (past the master's end: clipped to its facet), as the
@@ -592,24 +620,26 @@ class SlidingPenalty(PenaltyContact):
         keep = inside & (np.abs(cur.gap) <= best + 1e-9 * self.length) | ~new.paired
         for name in new.__dataclass_fields__:
             getattr(new, name)[keep] = getattr(cur, name)[keep]
-        new = self.surf.to_input(new)
-        self.nrows, self.trows = normal_rows(new), tangent_rows(new)
-        gap, _ = self.values.node_rows([self.nrows, self.trows], self._displacement(q))
-        actual = new.gap   # at x; the rows' offset: g = actual + Dn·(q' − q)
-        new.gap = actual - gap
-        if start:
-            self.touching = actual <= self.touch
-        _, gT = self.values.node_rows([self.nrows, self.trows],
-                                      self._displacement(self.q_start))
-        turn = np.einsum("mkx,mjx->mjk", self.committed_tangents, new.tangents)
-        self.reference = (gT.reshape(len(new), -1), turn)
+        new = surf.to_input(new)
+        ids = np.concatenate([new.slave[:, None], new.master], axis=1)
+        moved = self.geo.any_rank(not np.array_equal(ids, self.tuple_ids))
         self.pairing = new
-        tuples = self.tuples
-        self._declare(new)
-        moved = not np.array_equal(tuples, self.tuples)
         if moved:
+            self._declare(new)
             self.restructured = True
             self.repairs += 1
+        else:
+            self.gradients(new)
+        actual = new.gap   # at x; the rows' offset: g = actual + Dn·(q' − q)
+        new.gap = actual - self.rows_at(us)[0]
+        if start:
+            self.touching = actual <= self.touch
+            self._start_u = us
+        if self._start_u is None:   # (the surface made again since the step's start)
+            self._start_u = self.surface_u(self._displacement(self.q_start))
+        gT = self.rows_at(self._start_u)[1]
+        turn = np.einsum("mkx,mjx->mjk", self.committed_tangents, new.tangents)
+        self.reference = (gT, turn)
         return moved
 
     def begin_step(self, q: np.ndarray, active: dict, at) -> bool:
@@ -633,10 +663,14 @@ class SlidingPenalty(PenaltyContact):
 
     def restart_state(self) -> dict:
         """The pairs of the last converged step and their tangents (those of a slave no facet
-        faces any more, and the committed friction force's basis)."""
-        return {"pairing": self.pairing, "committed_tangents": self.committed_tangents}
+        faces any more, and the committed friction force's basis), the master facets near
+        (the pairs' facets index them)."""
+        return {"pairing": self.pairing, "committed_tangents": self.committed_tangents,
+                "near": self.geo._near}
 
     def load_restart_state(self, state: dict) -> None:
         # the tuples stay the pattern's: the next step's pairing moves them (restructured)
         self.pairing = state["pairing"]
         self.committed_tangents = state["committed_tangents"]
+        self._resurface(state["near"])
+        self.gradients(self.pairing)

@@ -47,9 +47,11 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+from mpi4py import MPI
 
-from parsolve.contact.distributed import facet_extent, facet_index, update_near
+from parsolve.contact.distributed import facet_index, update_near
 from parsolve.contact.geometry import facet_terms, local_terms
+from parsolve.contact.mortar import master_half
 from parsolve.contact.pairing import in_spans, pair_nodes, pair_on
 from parsolve.contact.rows import normal_values, repeated, rows_differ, span_combination
 from parsolve.contact.sliding import fit_mortar, frame_of, make_spans, merged, \
@@ -104,9 +106,11 @@ class FiniteSliding:
             dofs = (ids.reshape(-1, 1) * f.ncomp + f.offset[self.u] + np.arange(dim)).ravel()
             self._fetches["mine"] = self._fetch(dofs)
         self._mine_x = pts + self._fetches["mine"](q).reshape(pts.shape)
-        surf = self.span.surf
-        own = surf.compact(self._own_ids)
-        slave_x = surf.points[own] + self._surface_u(q)[own]
+        # its own slaves' u from its own rows of q (the surface's fetch is ``_current_points``')
+        at = f.offset[self.u] + np.arange(dim)
+        own = self.values.local_nodes(self._own_ids)
+        slave_x = (self.span.surf.points[self.span.surf.compact(self._own_ids)]
+                   + q.reshape(-1, f.ncomp)[own[:, None], at])
         near, new = update_near(self.values.comm, self._near, slave_x, self._mine,
                                 self._mine_x, self._reach)
         if new:
@@ -263,13 +267,18 @@ class FiniteSliding:
         """Finite sliding, mortar: the rows made again on the current configuration x, on the
         fixed set of slaves (``sliding.fit_mortar``: a slave no master facet covers any more
         keeps its last row)."""
-        sp, comm = self.span, self.values.comm
-        radius = self.spec.search_radius
-        if radius is None:   # (the whole surfaces' largest facet on x)
-            radius = max(facet_extent(comm, self._mine_x), facet_extent(comm, x[sp.slave_facets]))
-        new = self._mortar(x, sp.slave_facets, sp.facets, radius,
-                           self._master_half(self._mine_x)).pairing
-        if comm.allreduce(len(new)) == 0:
+        sp = self.span
+        # the whole surfaces' largest master half-extent per axis and slave facet extent on x
+        # (one reduction): the candidates' bounds and the default search radius
+        slave_facets = x[sp.slave_facets]
+        reach = np.append(master_half(self._mine_x),
+                          np.max(np.ptp(slave_facets, axis=1), initial=0.0))
+        self.values.comm.Allreduce(MPI.IN_PLACE, reach, op=MPI.MAX)
+        half, radius = reach[:-1], self.spec.search_radius
+        if radius is None:   # (the largest facet: a master's extent is twice its half)
+            radius = max(2.0 * half.max(), reach[-1])
+        new = self._mortar(x, sp.slave_facets, sp.facets, radius, half).pairing
+        if self.values.comm.allreduce(len(new)) == 0:
             raise SolverError("no mortar row left: the Newton iterate carried every slave of "
                               "the contact off the master (the iterates diverged)")
         p, found = fit_mortar(new, self._compact, x)

@@ -18,8 +18,12 @@ friction force) and a term while it slides free.
 
 from __future__ import annotations
 
-import numpy as np
+from typing import Callable
 
+import numpy as np
+from mpi4py import MPI
+
+from parsolve.contact.distributed import SharedTuples
 from parsolve.contact.rows import Rows
 from parsolve.fem.element_matrices import Term, TermMatrices
 
@@ -59,45 +63,38 @@ def outer_blocks(u: np.ndarray, w: np.ndarray) -> np.ndarray:
     return np.einsum("krai,krbj->ijabk", u, w).reshape(d * d, m, m, k)
 
 
-def global_tuples(values, mesh, ids: np.ndarray, whole: bool = True
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Tuples of input node ids (n, m) in the partition's global node numbers, with the mask
-    of the nodes this rank owns and their local nodes (−1 off this rank). ``whole``: every
-    rank gives the same tuples, and each node's number comes from its owner (one reduction of
-    the tuples' size: collective); else each rank's own tuples, every node owned here."""
-    local = values.local_nodes(ids)
-    here = local >= 0
-    new = np.where(here, mesh.node_new[np.where(here, local, 0)], 0)
-    if whole:
-        new = values.node_sum(ids.ravel(), new.ravel().astype(float)).astype(np.int64)
-    tuples = new.reshape(ids.shape).astype(np.int64)
-    lo, hi = values.node_ranges[values.rank], values.node_ranges[values.rank + 1]
-    return tuples, (tuples >= lo) & (tuples < hi), local
-
-
 class RowTerm:
-    """A term on the tuples of rows (``RowTuples``) in the partition's global node numbers,
-    declared where this rank owns one of a tuple's nodes (each rank adds its owned rows: a
-    tuple split over ranks is whole, no entry crosses ranks at assembly). Its values come
+    """A term on the tuples of this rank's own rows (``RowTuples``; a slave's rows live on its
+    owner, their master nodes on any rank) in the partition's global node numbers: each tuple
+    sent once to the owners of its other nodes (``contact.distributed.SharedTuples``), which
+    declare it too (each rank adds its owned rows: a tuple split over ranks is whole, no entry
+    crosses ranks at assembly), its values following it at each evaluation. Its values come
     with the effect's tangent (``evaluate``), set by its hooks between iterations as its
     relations' are; it is ``linear`` in the model's sense (no internal force: the model is as
-    nonlinear as its forces, and the hooks run the Newton loop)."""
+    nonlinear as its forces, and the hooks run the Newton loop). ``new_of`` gives input node
+    ids' global numbers (this rank's rows' nodes)."""
 
-    def __init__(self, field: str, symmetric: bool):
+    def __init__(self, field: str, symmetric: bool, new_of: Callable[[np.ndarray], np.ndarray]):
         self.term = Term(field, field, np.zeros((0, 1), dtype=np.int64), symmetric=symmetric,
                          global_ids=True)
+        self.new_of = new_of
         self.layout: RowTuples | None = None
-        self.declared = np.zeros(0, dtype=np.int64)
+        self.shared: SharedTuples | None = None
 
-    def lay(self, rows: Rows, per: int, dim: int, values, mesh, whole: bool) -> None:
-        """Its tuples from the rows' layout (``whole``: every rank the same rows, collective)."""
+    def lay(self, rows: Rows, per: int, dim: int, values) -> None:
+        """Its tuples from the rows' layout (this rank's rows). Collective."""
         self.layout = RowTuples(rows, per, dim)
-        tuples, owned, _ = global_tuples(values, mesh, self.layout.nodes, whole)
-        self.declared = np.flatnonzero(owned.any(axis=1))
-        self.term.nodes = tuples[self.declared]
+        nodes = self.layout.nodes
+        width = values.comm.allreduce(nodes.shape[1], op=MPI.MAX)
+        if width > nodes.shape[1]:   # (the same width everywhere: first nodes repeated)
+            pad = np.repeat(nodes[:, :1], width - nodes.shape[1], axis=1)
+            self.layout.nodes = nodes = np.concatenate([nodes, pad], axis=1)
+        self.shared = SharedTuples(values.comm, self.new_of(nodes).reshape(nodes.shape),
+                                   values.node_ranges)
+        self.term.nodes = self.shared.nodes
 
     def matrices(self, u: np.ndarray, w: np.ndarray) -> tuple[Term, TermMatrices]:
-        """(the term, Σ_r u_r w_rᵀ on its declared tuples) from (k, r, m, d) arrays over every
-        tuple."""
-        return self.term, TermMatrices(self.term, outer_blocks(u[self.declared],
-                                                               w[self.declared]))
+        """(the term, Σ_r u_r w_rᵀ) from (k, r, m, d) arrays over this rank's tuples, with
+        the values of the tuples sent to it. Collective."""
+        blocks = np.moveaxis(outer_blocks(u, w), -1, 0)
+        return self.term, TermMatrices(self.term, np.moveaxis(self.shared.share(blocks), 0, -1))

@@ -1,7 +1,7 @@
 """3D friction with ``direction = "reaction"`` on a master region, rows built per rank: the
 cross stiffness (``row_terms``) lies on each sliding row's tuple (its slave node, owned by the
 row's rank, and master nodes anywhere); the tuple is declared by its nodes' owners, its values
-sent to them at each evaluation (``effects.contact_terms``). A block pushed on a meshed rough
+sent to them at each evaluation (``effects.row_terms``). A block pushed on a meshed rough
 foundation (node-to-face and mortar): each rank holds its own slaves' rows and the tuples of
 its nodes only, together the one-rank tuples; the run equals the one-rank run (1e-10, states,
 active rows and iterations exactly)."""

@@ -46,7 +46,7 @@ def case_path(shared_tmp, case: str):
 def test_each_rank_holds_its_pairs_and_together_the_one_rank_pairing(shared_tmp, case):
     path = case_path(shared_tmp, case)
     here, alone = penalty(path, COMM), penalty(path, MPI.COMM_SELF)
-    assert not here.whole and here.geo.ids is not None
+    assert here.geo.ids is not None
     p, p1 = here.pairing, alone.pairing
     own, _ = here.values.owned_nodes(p.slave)
     assert own.all()                                    # its own slave nodes only
