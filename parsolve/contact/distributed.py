@@ -26,7 +26,6 @@ import numpy as np
 from mpi4py import MPI
 
 from parsolve.contact.surfaces import canonical_facets
-from parsolve.la.fetch import Fetch  # noqa: F401 (re-exported until its importers move)
 from parsolve.mesh.blocks import exchange
 from parsolve.relation_kinds.spread import places
 

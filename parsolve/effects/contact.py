@@ -115,6 +115,7 @@ from parsolve.effects.row_terms import RowTerm
 from parsolve.fem.element_matrices import Term
 from parsolve.errors import InputError
 from parsolve.la.dofmap import DofMap
+from parsolve.la.fetch import Fetch
 from parsolve.evolution import CONSTANT
 from parsolve.mesh.topology import FACETS, boundary_facets
 from parsolve.relations import Relation, rows_here
@@ -423,12 +424,12 @@ class Contact(FiniteSliding, Effect):
             out[far] = new[np.searchsorted(known, ids[far])]
         return out
 
-    def _fetch(self, dofs: np.ndarray) -> dist.Fetch:
+    def _fetch(self, dofs: np.ndarray) -> Fetch:
         """The plan of q's values at input DOFs of nodes this rank knows (``_new_of``).
         Collective."""
         ncomp = self.fields_.ncomp
         node, comp = np.divmod(np.asarray(dofs, dtype=np.int64), ncomp)
-        return dist.Fetch(self.values.comm, self._new_of(node) * ncomp + comp,
+        return Fetch(self.values.comm, self._new_of(node) * ncomp + comp,
                           self.values.node_ranges, ncomp)
 
     def _check_shared(self, slave: np.ndarray, facets: np.ndarray) -> None:

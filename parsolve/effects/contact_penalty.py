@@ -91,12 +91,12 @@ from dataclasses import dataclass
 import numpy as np
 from mpi4py import MPI
 
-from parsolve.contact.distributed import Fetch, SharedTuples, facet_extent, facet_index, \
-    update_near
+from parsolve.contact.distributed import SharedTuples, facet_extent, facet_index, update_near
 from parsolve.contact.friction import OPEN, SLIP, STICK
 from parsolve.contact.pairing import pair_nodes, pair_on
 from parsolve.contact.surfaces import Surfaces
 from parsolve.la.dofmap import DofMap
+from parsolve.la.fetch import Fetch
 from parsolve.effects import contact
 from parsolve.effects.base import Effect
 from parsolve.effects.contact_sliding import KEEP_TOL

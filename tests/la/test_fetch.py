@@ -1,11 +1,9 @@
 """``Fetch``: a primal vector's values at DOFs any rank owns, from their owners, the same plan
-for the relation set (a tie's other end) and contact (master nodes); and
-``contact.distributed.Fetch`` is that class. Run at 1, 2, 3 ranks."""
+for the relation set (a tie's other end) and contact (master nodes). Run at 1, 2, 3 ranks."""
 
 import numpy as np
 from mpi4py import MPI
 
-from parsolve.contact import distributed
 from parsolve.la.fetch import Fetch
 
 COMM = MPI.COMM_WORLD
@@ -29,7 +27,3 @@ def test_values_at_any_ranks_dofs_come_from_their_owners():
     np.testing.assert_array_equal(got, 1000.0 * node + comp)
     none = Fetch(COMM, np.zeros(0, dtype=np.int64), ranges, ncomp)(q)
     assert none.shape == (0,)
-
-
-def test_contact_reads_the_same_class():
-    assert distributed.Fetch is Fetch
