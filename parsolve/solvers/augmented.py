@@ -203,9 +203,12 @@ BLOCK_COND = 1e10
 def level_smoothers(pc: PETSc.PC, settings: dict[str, str]) -> dict[str, str] | None:
     """The settings with point-block Jacobi (each node's, or coarse aggregate's, diagonal block
     inverted) in the Chebyshev smoother of every level of the fieldsplit's GAMG V-cycle whose
-    blocks are all invertible, when the hierarchy is set up otherwise; None when it is so
-    already, or is no such V-cycle, or a level smoother is chosen in ``settings``. Call with
-    the options inserted (it sets the V-cycle up; collective).
+    blocks are all invertible and which the settings leave alone, when the hierarchy is set
+    up otherwise; None when it is so already, or is no such V-cycle, or every level's smoother
+    is chosen in ``settings`` (``-fieldsplit_q_mg_levels_pc_type``). A level with any option
+    of its own in the settings (``-fieldsplit_q_mg_levels_1_ksp_type``, ``..._1_pc_type``:
+    the scene's or the command line's) keeps it and is not touched; no setting is dropped.
+    Call with the options inserted (it sets the V-cycle up; collective).
 
     K holds 3D friction's cross stiffness κ (n × s)(n × s)ᵀ (κ up to 1e4 times the surface's
     stiffness: ``contact.friction.KAPPA_MAX``) on a mix of a node's x and y, and finite sliding's
@@ -221,12 +224,10 @@ def level_smoothers(pc: PETSc.PC, settings: dict[str, str]) -> dict[str, str] | 
         return None
     q.setUp()   # (the fieldsplit sets its blocks' solvers up at their first use)
     amg = q.getPC()
-    levels = range(1, amg.getMGLevels())
-    blocks = [lv for lv in levels if _blocks_invertible(amg.getMGSmoother(lv).getOperators()[1])]
-    kept = {k: v for k, v in settings.items()
-            if not (k.startswith(LEVEL.format("")[:-8]) and k.endswith("_pc_type"))
-            or k == ANY_LEVEL}
-    chosen = {**kept, **{LEVEL.format(lv): "pbjacobi" for lv in blocks}}
+    own = [lv for lv in range(1, amg.getMGLevels())
+           if not any(k.startswith(LEVEL.format(lv)[:-7]) for k in settings)]
+    blocks = [lv for lv in own if _blocks_invertible(amg.getMGSmoother(lv).getOperators()[1])]
+    chosen = {**settings, **{LEVEL.format(lv): "pbjacobi" for lv in blocks}}
     return None if chosen == settings else chosen
 
 

@@ -36,6 +36,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from parsolve.solvers import tied
 from parsolve.solvers.vcycle import VCycle
 
 #: why a system is not condensed, in words; the largest code over the ranks wins (a row that
@@ -48,6 +49,9 @@ REASONS = {
     5: "a node's dual does not hold its hard rows",
     6: "a relation row ties several nodes",
     7: "the stiffness is not made of whole nodal blocks at a condensed node",
+    8: "a compliant relation row ties several nodes",
+    9: "a relation row's master node holds hard rows of its own (a chain, or a row over "
+       "several slave nodes)",
 }
 #: a hard row's QR diagonal, relative to the node's largest entry, below which the rows are
 #: taken as dependent; E_c's condition number above which the dual does not hold them
@@ -108,6 +112,8 @@ class CondensedPreconditioner:
 
     def _reset(self) -> None:
         self.mat = self.S = self._work = None
+        # the tied rows' frames (solvers.tied; None: every row nodal) and K's copy
+        self.G = self.H = self.X = self._k = None
 
     # ------------------------------------------------------------------ set-up
 
@@ -118,11 +124,20 @@ class CondensedPreconditioner:
             self._handle = mat.handle
             self._reset()
         code, rows = self._nodal_rows(mat)
+        # rows tying several nodes, or reaching another rank's DOFs (on the pattern: the same
+        # for the operator's life): condensed on their slave nodes, S by a triple product
+        # (solvers.tied)
+        multi = bool(self.comm.allreduce(int(code in (1, 6)), op=MPI.MAX))
+        if multi:
+            code, rows = tied.tied_rows(self, mat)
         if not code:
             code = self._node_blocks(*rows)
         code = self.comm.allreduce(code, op=MPI.MAX)
+        if not code and multi:
+            code = 9 if tied.chain(self) else 0
         if not code:
-            code = self.comm.allreduce(self._condensed_operator(mat), op=MPI.MAX)
+            operator = self._tied_operator if multi else self._condensed_operator
+            code = self.comm.allreduce(operator(mat), op=MPI.MAX)
         if code:
             return REASONS[code]
         self.mat = mat
@@ -249,10 +264,7 @@ class CondensedPreconditioner:
         blocks) and put back: no matrix but S (and the near rows' small one) is made.
         0, or 7 (on every rank) when K's pattern is not made of whole nodal blocks there."""
         self.S = mat.createSubMatrix(self.is_q, self.is_q, submat=self.S)
-        d = mat.getDiagonal()
-        total = self.comm.allreduce(float(np.abs(d.array[:self.nq]).sum()))
-        self.kscale = total / max(int(self.nqs.sum()), 1)
-        d.destroy()
+        self.kscale = self._stiffness_scale(mat)
         near = self._near_rows(mat)
         rows = PETSc.IS().createGeneral((self.start + near).astype(PETSc.IntType),
                                         comm=self.comm)
@@ -271,6 +283,47 @@ class CondensedPreconditioner:
         if self.S.getBlockSize() != self.nc:
             self.S.setBlockSize(self.nc)
         return 0
+
+    def _tied_operator(self, mat: PETSc.Mat) -> int:
+        """S = G K_eff H + k on the constrained slots (solvers.tied): K copied from M (its
+        storage reused), the folded rows' blocks added on the nodes' diagonal blocks, then
+        PETSc's triple product (made anew: G and H change their pattern with the active set)."""
+        self._k = mat.createSubMatrix(self.is_q, self.is_q, submat=self._k)
+        self.kscale = self._stiffness_scale(mat)
+        nc = self.nc
+        dofs = self.q_start + self.nodes[:, None] * nc + np.arange(nc)
+        folded = np.flatnonzero(np.abs(self.dk).max(axis=(1, 2), initial=0.0) > 0)
+        if folded.size:   # (nodes with a compliant row: none in the tied scenes)
+            rows = dofs[folded].reshape(-1)
+            self._k.setValuesIJV(np.arange(rows.size + 1, dtype=PETSc.IntType) * nc,
+                                 np.repeat(dofs[folded], nc, axis=0).reshape(-1)
+                                 .astype(PETSc.IntType), self.dk[folded].reshape(-1),
+                                 rowmap=rows.astype(PETSc.IntType),
+                                 addv=PETSc.InsertMode.ADD_VALUES)
+        self._k.assemble()
+        for m in (self.G, self.H, self.X, self.S):
+            if m is not None:
+                m.destroy()
+        self.G, self.H, self.X = tied.frames(self)
+        self.S = self.G.matMatMult(self._k, self.H)
+        slots = dofs[self.keep]
+        self.S.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        self.S.setValuesIJV(np.arange(slots.size + 1, dtype=PETSc.IntType),
+                            slots.astype(PETSc.IntType), np.full(slots.size, self.kscale),
+                            rowmap=slots.astype(PETSc.IntType),
+                            addv=PETSc.InsertMode.ADD_VALUES)
+        self.S.assemble()
+        if self.S.getBlockSize() != nc:
+            self.S.setBlockSize(nc)
+        self._work = None
+        return 0
+
+    def _stiffness_scale(self, mat: PETSc.Mat) -> float:
+        """k: the mean |diagonal| of K."""
+        d = mat.getDiagonal()
+        total = self.comm.allreduce(float(np.abs(d.array[:self.nq]).sum()))
+        d.destroy()
+        return total / max(int(self.nqs.sum()), 1)
 
     def _near_rows(self, mat: PETSc.Mat) -> np.ndarray:
         """The local primal rows that S changes: the condensed nodes' own and those with an
@@ -371,7 +424,10 @@ class CondensedPreconditioner:
         vecs = []
         for v in modes.getVecs():
             y = v.copy()
-            self._frame_t(y.array)
+            if self.H is None:
+                self._frame_t(y.array)
+            else:
+                self.H.multTranspose(v, y)
             for u in vecs:
                 y.axpy(-y.dot(u), u)
             y.scale(1.0 / y.norm())
@@ -385,7 +441,7 @@ class CondensedPreconditioner:
             self.amg = VCycle(self.comm, self.prefix + "condensed_")
         self.amg.set_up(self.S)
         if self._work is None:   # (work vectors of the application, per pattern)
-            self._work = [*self.mat.createVecs(), *self.S.createVecs()]
+            self._work = [*self.mat.createVecs(), *self.S.createVecs(), self.S.createVecLeft()]
 
     # ------------------------------------------------------------------ application
 
@@ -424,14 +480,26 @@ class CondensedPreconditioner:
         padded[self.hard_at, self.hard_pos] = r_l[self.hard]
         qc = np.zeros(nq)
         qc.reshape(-1, nc)[self.nodes] = np.einsum("nij,nj->ni", self.lift, padded)
+        f, yf, work = self._work[2], self._work[3], self._work[4]
+        if self.X is not None:                                  # tied rows: (I + X) c
+            work.array[:] = qc
+            self.X.mult(work, f)
+            qc = qc + f.array
         t = rhat - self._product(qc, None)[0]
-        f, yf = self._work[2], self._work[3]
         fa = f.array
-        fa[:] = t                                               # G (r̂ - K_eff q_c)
-        fa.reshape(-1, nc)[self.nodes] = self._nodal(self.g, t)
+        if self.G is None:
+            fa[:] = t                                           # G (r̂ - K_eff q_c)
+            fa.reshape(-1, nc)[self.nodes] = self._nodal(self.g, t)
+        else:
+            work.array[:] = t
+            self.G.mult(work, f)
         self.amg.apply(f, yf)                                   # y_f ≈ S⁻¹ f
-        q = yf.array.copy()
-        q.reshape(-1, nc)[self.nodes] = self._nodal(self.h, q)  # q_f = H y_f
+        if self.H is None:
+            q = yf.array.copy()
+            q.reshape(-1, nc)[self.nodes] = self._nodal(self.h, q)  # q_f = H y_f
+        else:
+            self.H.mult(yf, work)
+            q = work.array.copy()
         q += qc
         kq, aq = self._product(q, None)
         lam = np.zeros(self.nl)

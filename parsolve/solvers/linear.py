@@ -4,8 +4,10 @@
 with the QAMD ordering (PORD, the fallback here, is catastrophic with a dense control column)
 and null-pivot detection, so a singular system is an error instead of inf or NaN.
 ``iterative``: GMRES on the saddle system. When every relation row is nodal (rigid-obstacle
-contact and friction, Dirichlet-type rows) it is preconditioned by the rows condensed node by
-node and one AMG V-cycle on the condensed primal operator (``solvers.condensed``); else on its
+contact and friction, Dirichlet-type rows) or ties one slave node to master nodes
+(node-to-face, dual mortar, controls, periodic ties: ``solvers.tied``) it is preconditioned by
+the rows condensed on their (slave) nodes and one AMG V-cycle on the condensed primal operator
+(``solvers.condensed``); else (a chain of slaves, a compliant row over several nodes) on its
 augmented Lagrangian form (``solvers.augmented``: γ/k Aₕᵀ times the hard rows added to the
 force balance; the same answer), preconditioned by a Schur fieldsplit (one GAMG V-cycle on
 K + γ/k Aₕᵀ Aₕ, Jacobi on the sparse Schur approximation). Both work when K alone is singular

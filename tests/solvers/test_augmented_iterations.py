@@ -95,3 +95,20 @@ def test_a_singular_block_keeps_scalar_jacobi(comm):
         mat.assemble()
         out.append(_blocks_invertible(mat))
     assert out == [False, True]
+
+
+def test_a_level_given_its_own_options_keeps_them(comm):
+    """A level with an option of its own (here level 1's Krylov method, as the command line
+    gives it) keeps the user's smoother whole (its Jacobi not replaced); the other levels
+    take point blocks; no setting is dropped."""
+    given = {"condensed": "false", "fieldsplit_q_mg_levels_1_ksp_type": "richardson"}
+    text = scene(shipped("contact_friction_3d.toml"), mesh={"nx": 12, "ny": 12, "nz": 4},
+                 steps={"count": 1}, solver={"preset": "iterative"})
+    _, solver, _, _, _ = solve_in_process(text, comm, options=given)
+    amg = solver.ksp.getPC().getFieldSplitSubKSP()[0].getPC()
+    levels = amg.getMGLevels()
+    assert levels >= 3
+    one = amg.getMGSmoother(1)
+    assert (one.getType(), one.getPC().getType()) == ("richardson", "jacobi")
+    assert all(amg.getMGSmoother(lv).getPC().getType() == "pbjacobi" for lv in range(2, levels))
+    assert solver.settings["fieldsplit_q_mg_levels_1_ksp_type"] == "richardson"
