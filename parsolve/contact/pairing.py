@@ -27,7 +27,6 @@ from functools import lru_cache
 
 import numpy as np
 
-from parsolve.errors import InputError
 from parsolve.fem.elements import element
 
 FACET_DIM = {"line": 1, "line3": 1, "triangle": 2, "triangle6": 2, "quad": 2}
@@ -368,16 +367,6 @@ def empty_pairing(slave_nodes: np.ndarray, dim: int, k: int) -> Pairing:
         tangents=np.zeros((n, dim - 1, dim)),
         gap=np.full(n, np.inf),
     )
-
-
-def check_surfaces(slave_nodes: np.ndarray, master_facets: np.ndarray,
-                   source: str | None = None, key: str | None = None) -> None:
-    """InputError when the slave and master surfaces share nodes (a node cannot be in contact
-    with itself; usually the same region was named twice)."""
-    shared = np.intersect1d(np.asarray(slave_nodes), np.asarray(master_facets).ravel())
-    if shared.size:
-        raise InputError(f"master and slave surfaces share {shared.size} node(s) "
-                         f"(first: {int(shared[0])})", source, key)
 
 
 def facet_spans(points: np.ndarray, slave_nodes: np.ndarray, master_facets: np.ndarray,

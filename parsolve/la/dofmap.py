@@ -462,34 +462,6 @@ class DofMap:
         rows = self.rows if r.whole else self.rows_here
         return rows(r.a_dofs, r.a_rows, r.a_vals, r.nrows, q)
 
-    def at_inputs(self, dofs: np.ndarray, q: np.ndarray) -> np.ndarray:
-        """q at input DOFs, each from its owner (the same on every rank). Collective."""
-        sel, local = self.owned_dof_entries(dofs)
-        out = np.zeros(np.asarray(dofs).size)
-        out[sel] = q[local]
-        return self.sum_ranks(out)
-
-    def node_rows(self, rows: list, u: np.ndarray) -> list[np.ndarray]:
-        """Values of ``Rows`` (``parsolve.contact.rows``, nodes as input ids) for a nodal field
-        u (npoints, k) of this rank's nodes, every rank the same: the entries on owned nodes,
-        summed over the ranks in one reduction of the rows' total size. Collective."""
-        parts = []
-        for r in rows:
-            own, local = self.owned_nodes(r.node)
-            parts.append(np.bincount(r.row[own], weights=r.coef[own] * u[local, r.comp[own]],
-                                     minlength=r.nrows).astype(float, copy=False))
-        out = self.sum_ranks(np.concatenate(parts) if parts else np.zeros(0))
-        return np.split(out, np.cumsum([r.nrows for r in rows])[:-1])
-
-    def node_sum(self, nodes: np.ndarray, values: np.ndarray) -> np.ndarray:
-        """Per input node of ``nodes``, ``values`` (computed on this rank's nodes) taken where
-        the node is owned and summed over the ranks: each node's value from its owner, the
-        same on every rank. Collective."""
-        values = np.asarray(values, dtype=float)
-        own, _ = self.owned_nodes(nodes)
-        out = np.where(own.reshape(own.shape + (1,) * (values.ndim - 1)), values, 0.0)
-        return self.sum_ranks(out)
-
     def nodal(self, nodes: np.ndarray, values: np.ndarray, fill: float = 0.0) -> OwnedRows:
         """A nodal output (k columns) with ``values`` at input ``nodes`` and ``fill``
         elsewhere: this rank's owned rows (owned nodes come first, in increasing input id)."""

@@ -212,14 +212,3 @@ class RegionResolver:
         dofs = self.mesh.global_nodes[node].astype(np.int64) * ncomp + comp
         order = np.argsort(dofs)
         return dofs[order], np.asarray(vector[nz], dtype=float)[order]
-
-
-def gather_facets(comm, mesh: LocalMesh, facets: np.ndarray, nfn: int) -> tuple[np.ndarray, np.ndarray]:
-    """Every rank's facets (rows of ``nfn`` local node ids) as input node ids (nf, nfn) with
-    their coordinates (nf, nfn, dim), concatenated in rank order (a facet with owned nodes on
-    several ranks comes once from each: the caller keeps one). The surface's size, not the
-    mesh's."""
-    facets = np.asarray(facets, dtype=np.int64).reshape(-1, nfn)
-    ids = allgather_rows(comm, mesh.global_nodes[facets])
-    pts = allgather_rows(comm, np.ascontiguousarray(mesh.points[facets], dtype=float))
-    return ids, pts

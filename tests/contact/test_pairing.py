@@ -293,14 +293,3 @@ def test_convex_corner_dead_zone_needs_a_tolerance():
     h = np.pi / nt / 2
     assert np.isclose(loose.gap[0], (rr - radius) * np.cos(h), atol=1e-15)
     assert np.isclose(abs(loose.xi[0, 0]), 1.0)
-
-
-def test_shared_nodes_are_refused():
-    from parsolve.contact.pairing import check_surfaces
-    from parsolve.errors import InputError
-    m = rectangle(1.0, 1.0, 3, 3, "quad")
-    _, _, top = match_facets(m, m.facet_groups["top"])
-    check_surfaces(m.node_groups["bottom"], top)  # distinct: fine
-    with pytest.raises(InputError) as e:
-        check_surfaces(m.node_groups["top"], top, "scene.toml", "contact.slave")
-    assert "share 4 node(s)" in str(e.value) and "contact.slave" in str(e.value)

@@ -500,3 +500,16 @@ def test_spans_made_again_as_the_slaves_leave_them(run, mesh, discretization, ra
     np.testing.assert_array_equal(res["steps/iterations"], ref["steps/iterations"])
 
 
+
+
+def test_shared_surfaces_are_refused(run, shared_tmp):
+    """A slave region whose nodes lie in the master's facets (the same region named twice) is
+    an input error naming the contact's master key, on every rank whichever owns them."""
+    base = shipped(IRONING.name)
+    text = build(base, mesh={"file": str(IRONING.with_suffix(".msh"))},
+                 contact=[base["contact"][0] | {"slave": "base_top"}])
+    with pytest.raises(InputError) as err:
+        run(text, name="shared_surfaces")
+    message = str(err.value)
+    assert re.search(r"master and slave surfaces share \d+ node\(s\) \(first: \d+\)", message)
+    assert "contact[0].master" in message, message
