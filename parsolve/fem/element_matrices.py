@@ -403,7 +403,8 @@ class BlockMatrices:
         npairs) array beside them: the parts in turn, each component pair assigned by the
         first part on it and added to by the next; those no part reaches zeroed."""
         nc = self.ncomp
-        pair_slot = pair_slot.astype(np.intp, copy=False)
+        # (not widened whole: each form widens the block of slots it reads, a cell's 64
+        # int32 slots as intp being another 0.5 KB per cell beside the assembly)
         written = np.zeros((nc, nc), dtype=bool)
         for ci, cj, m, fac in self.parts:
             ci, cj = np.asarray(ci), np.asarray(cj)
