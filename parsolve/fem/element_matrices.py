@@ -403,7 +403,8 @@ class BlockMatrices:
         npairs) array beside them: the parts in turn, each component pair assigned by the
         first part on it and added to by the next; those no part reaches zeroed."""
         nc = self.ncomp
-        pair_slot = pair_slot.astype(np.intp, copy=False)
+        # (not widened whole: each form widens the block of slots it reads, a cell's 64
+        # int32 slots as intp being another 0.5 KB per cell beside the assembly)
         written = np.zeros((nc, nc), dtype=bool)
         for ci, cj, m, fac in self.parts:
             ci, cj = np.asarray(ci), np.asarray(cj)
@@ -561,6 +562,25 @@ class TermMatrices:
             return np.zeros((len(self.values), npairs))
         return _bincount_rows(slots.astype(np.intp).ravel(),
                               self.values.reshape(len(self.values), -1), npairs)
+
+    def reduce_into(self, pair_slot: np.ndarray, npairs: int, target: StiffnessTarget,
+                    ci: np.ndarray, cj: np.ndarray, fac: float = 1.0,
+                    first: np.ndarray | None = None) -> None:
+        """``reduce`` added into the target's values (``ElementMatrices.reduce_into``) at the
+        pairs the term's slots reach only: a term on a few nodes (contact rows' blocks) made a
+        (rows, npairs) array as large as the stiffness at every assembly (0.6 KB per DOF)."""
+        ci, cj = np.asarray(ci), np.asarray(cj)
+        rows = _Rows(target, ci, cj, np.zeros(len(ci) * len(cj), dtype=bool)
+                     if first is None else first)
+        slots = self.term.slots
+        if slots is not None and self.values.shape[-1]:
+            keys, inv = np.unique(slots.astype(np.intp).ravel(), return_inverse=True)
+            keep = keys < npairs   # (the dump slot: rows owned by another rank)
+            values = self.values.reshape(len(self.values), -1)
+            sums = np.stack([np.bincount(inv, weights=v, minlength=keys.size)[keep]
+                             for v in values])
+            rows.add(keys[keep], fac * sums)
+        rows.finish(npairs)
 
     def forces(self, x: np.ndarray) -> "NodeForces":
         """K x at the term's nodes from node values x (npoints, d_trial)."""

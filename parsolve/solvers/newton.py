@@ -74,6 +74,9 @@ class NewtonSolver:
             if it == spec.max_iterations:
                 break
             dq_norm, changed = problem.update(t, self._solve(t, it, lin, f_known))
+            # this iterate's tangent and states go before the next are formed: held through
+            # ``form`` they were a second tangent at its peak (about 1 KB per DOF)
+            lin = None
         history = ", ".join(f"{r:.1e}" for r in self.residual_history[-6:])
         trend = "diverged" if len(self.residual_history) > 2 and \
             self.residual_history[-1] > self.residual_history[1] else "did not converge"
