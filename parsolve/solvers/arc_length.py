@@ -111,6 +111,8 @@ class ArcLength:
             self.mu += dmu
             problem.lam = lam_r + dmu * lam_p
             problem.x_full = self._combined(x_r, x_p, dmu)
+            # this iterate's tangent goes before the next is formed (as in Newton)
+            mat = lin = None
         raise SolverError(f"arc-length: no convergence at step (load factor {self.mu:.6g}) after "
                           f"{spec.max_iterations} iterations (relative residual {residual:.1e})")
 
