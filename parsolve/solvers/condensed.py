@@ -70,7 +70,14 @@ def _clean_up() -> None:
     calls into a finished interpreter (a segmentation fault at exit). Collective, as
     PetscFinalize's own clean-up is."""
     import gc
+    import sys
 
+    # an uncaught exception's traceback (kept as sys.last_* once printed, before the exit
+    # handlers run) holds the frames that hold the solvers: dropped, so that they are freed
+    # here, not in the interpreter's teardown (the python PC's destroy then segfaulted)
+    for name in ("last_type", "last_value", "last_traceback", "last_exc"):
+        if hasattr(sys, name):
+            setattr(sys, name, None)
     gc.collect()   # (solvers in reference cycles: freed now, their KSPs deferred)
     for comm in _COMMS:
         try:
