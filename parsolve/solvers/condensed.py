@@ -66,17 +66,34 @@ _COMMS: list = []
 
 def _clean_up() -> None:
     """Destroy the deferred PETSc objects (the KSPs whose Python objects are gone) while
-    Python runs: PetscFinalize does it after Python's end, and the python PC's reset then
-    calls into a finished interpreter (a segmentation fault at exit). Collective, as
+    Python runs, and take the condensed python PCs still alive (a solver held by a module's
+    global, or by an uncaught exception's traceback: Python keeps it as sys.last_* past the
+    exit handlers) off their context: PetscFinalize and the interpreter's teardown destroy
+    them after Python's end, and the python PC's destroy then calls into a finished
+    interpreter (a segmentation fault at exit, hiding the run's own error). Collective, as
     PetscFinalize's own clean-up is."""
     import gc
+    import sys
 
+    for name in ("last_type", "last_value", "last_traceback", "last_exc"):
+        if hasattr(sys, name):
+            setattr(sys, name, None)
     gc.collect()   # (solvers in reference cycles: freed now, their KSPs deferred)
     for comm in _COMMS:
         try:
             PETSc.garbage_cleanup(comm)
         except Exception:   # (a communicator freed before the end)
             pass
+    for obj in gc.get_objects():
+        if isinstance(obj, (PETSc.KSP, PETSc.PC)) and obj.handle:
+            _detach(obj.getPC() if isinstance(obj, PETSc.KSP) else obj)
+
+
+def _detach(pc: PETSc.PC) -> None:
+    """A python PC whose context is a CondensedPreconditioner made a plain one (its context
+    released while Python runs)."""
+    if pc.getType() == "python" and isinstance(pc.getPythonContext(), CondensedPreconditioner):
+        pc.setType("none")
 
 
 class CondensedPreconditioner:
