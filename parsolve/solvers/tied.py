@@ -29,6 +29,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+
 def tied_rows(pre, mat: PETSc.Mat):
     """(code, rows): the multiplier rows of ``mat`` read for the condensation of tied rows.
     rows = (slave node of each row (local) or -1, C's diagonal, A's and B's entries on the
@@ -42,8 +43,9 @@ def tied_rows(pre, mat: PETSc.Mat):
     rows = np.repeat(np.arange(pre.nl), np.diff(indptr))
     glob, on_l = _primal(pre, cols)
     c = on_l
-    if np.any(cols[c] != pre.start + pre.nq + rows[c]):
-        return 2, None
+    # (a C off its diagonal is refused after the second submatrix: both are collective, and
+    # only the rank holding such an entry sees it)
+    coupled = bool(np.any(cols[c] != pre.start + pre.nq + rows[c]))
     diag = np.zeros(pre.nl)
     diag[rows[c]] = vals[c]
     ar, ag, av = rows[~on_l], glob[~on_l], _clean(pre.nl, rows[~on_l], vals[~on_l])
@@ -52,6 +54,8 @@ def tied_rows(pre, mat: PETSc.Mat):
     sub.destroy()
     indptr, cols, vals = bt.getValuesCSR()
     bt.destroy()
+    if coupled:
+        return 2, None
     brow = np.repeat(np.arange(pre.nl), np.diff(indptr))
     bglob, b_on_l = _primal(pre, cols)
     br, bg, bv = brow[~b_on_l], bglob[~b_on_l], _clean(pre.nl, brow[~b_on_l], vals[~b_on_l])
@@ -104,6 +108,8 @@ def _primal(pre, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 TIE = 1e-9
 #: an entry of a tied row below this times the row's largest is taken as round-off (0)
 NEGLIGIBLE = 1e-10
+
+
 def _slaves(pre, rows: np.ndarray, nodes: np.ndarray, vals: np.ndarray) -> np.ndarray:
     """Each multiplier row's slave node (global; -1: a row with no nonzero entry): of its
     nodes on this rank, that of the largest block of A (of tied ones, the one in the fewest of
