@@ -2,7 +2,10 @@
 node-pair array of ``reduce`` copied there, to 1e-14 of their scale: held and blocked,
 factored (one and two materials) and full, several parts with factors on overlapping
 components, and the dump slot (rows owned elsewhere) dropped. Synthetic element matrices and
-a value layout with padding between blocks, so a stray write shows up."""
+a value layout with padding between blocks, so a stray write shows up. A declared term's
+values (``TermMatrices``: node tuples, e.g. contact rows' blocks) written at its own pairs
+likewise: the term alone, after and before a cell part on overlapping components, with a
+factor, the dump slot dropped; with no tuples on this rank, its component pairs zeroed."""
 
 from __future__ import annotations
 
@@ -10,9 +13,10 @@ import numpy as np
 import pytest
 
 from parsolve.fem.element_matrices import (BlockMatrices, CellKernel, ElementMatrices,
-                                           StiffnessTarget)
+                                           StiffnessTarget, Term, TermMatrices)
 
 NC, NEN, NCELLS, NPAIRS = 3, 4, 50, 37
+M, K = 2, 6   # a declared term's tuple size and count
 
 
 def _layout(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -93,3 +97,28 @@ def test_wide_slot_range_is_compressed() -> None:
     expected = _copied(data, starts, bm.reduce(slot, npairs))
     bm.reduce_into(slot, npairs, StiffnessTarget(data, starts))
     assert np.abs(data - expected).max() <= 1e-14 * np.abs(expected).max()
+
+
+def _term(rng, d: int, k: int = K) -> TermMatrices:
+    term = Term("u", "u", nodes=np.zeros((k, M), dtype=np.int64))
+    # a few pairs, repeated across tuples, the dump slot NPAIRS among them
+    term.slots = rng.choice([3, 4, 9, 20, 21, NPAIRS], size=(M, M, k)).astype(np.int32)
+    return TermMatrices(term, rng.normal(size=(d * d, M, M, k)))
+
+
+@pytest.mark.parametrize("tuples", [K, 0])
+def test_term_reduce_into_equals_reduce(tuples: int) -> None:
+    rng = np.random.default_rng(7)
+    slot = rng.integers(0, NPAIRS + 1, (NEN, NEN, NCELLS)).astype(np.int32)
+    cell = ElementMatrices(values=rng.normal(size=(NC * NC, NEN, NEN, NCELLS)))
+    cell_part = (np.arange(NC), np.arange(NC), cell, 1.0)
+    term_part = (np.array([0, 2]), np.array([1, 2]), _term(rng, 2, tuples), -0.7)
+    alone = (np.array([1]), np.array([1]), _term(rng, 1, tuples), 2.5)
+    for use in ([term_part], [alone, term_part], [cell_part, term_part, alone],
+                [term_part, cell_part]):
+        bm = BlockMatrices(NC, use)
+        data, starts = _layout(rng)
+        expected = _copied(data, starts, bm.reduce(slot, NPAIRS))
+        bm.reduce_into(slot, NPAIRS, StiffnessTarget(data, starts))
+        scale = np.abs(expected).max()
+        assert np.abs(data - expected).max() <= 1e-14 * scale
