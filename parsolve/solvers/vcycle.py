@@ -35,9 +35,9 @@ def _galerkin_product(comm: MPI.Comm) -> Iterator[None]:
     same Krylov iterations. "allatonce" is the slower (22.5 s per set-up against 3.3 there),
     which the hierarchy kept across the Newton iterations (VCycle) pays once per run instead
     of once per solve: over the first step's 8 solves at 122k, 2 ranks, CPU time per Newton
-    iteration 1.54x plain elasticity's, peak memory 1.28x; made at every set-up 2.22x, 1.30x;
-    kept with the default product 1.41x, 1.49x (``-matptap_via nonscalable``;
-    docs/performance.md)."""
+    iteration 1.72x plain elasticity's, peak memory 1.10x; made at every set-up 2.49x, 1.10x;
+    kept with the default product 1.45x, 1.31x (``-matptap_via nonscalable``;
+    scripts/results/bench_relations_scale.md)."""
     options = PETSc.Options()
     add = comm.size > 1 and not options.hasName("matptap_via")
     if add:
