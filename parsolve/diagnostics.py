@@ -144,8 +144,9 @@ def beyond_friction(comm, effects) -> list[str]:
         state = getattr(e, "node_state", None)
         if state is None or not getattr(e, "frictional", False):
             continue
-        closed = comm.allreduce(bool((state != fr.OPEN).any()), op=MPI.LOR)
-        sticking = comm.allreduce(bool((state == fr.STICK).any()), op=MPI.LOR)
+        closed, sticking = comm.allreduce(
+            np.array([(state != fr.OPEN).any(), (state == fr.STICK).any()], dtype=np.int8),
+            op=MPI.MAX)
         if closed and not sticking:
             out.append(getattr(getattr(e, "spec", None), "name", type(e).__name__))
     return out
