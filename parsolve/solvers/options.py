@@ -214,9 +214,11 @@ def validate(comm, prefix: str, preset: dict[str, str], scene: dict[str, str],
 
 
 # options that always take a number (PETSc reads some only in some configurations, e.g. no
-# tolerance with preonly: check them by name as well)
-_INTEGER = re.compile(r".*(_max_it|_restart|_icntl_\d+|_levels|_lag|_max_levels)$")
-_REAL = re.compile(r".*(_rtol|_atol|_divtol|_dtol|_cntl_\d+|_threshold|_shift_amount)$")
+# tolerance with preonly: check them by name as well; parsolve's own, which the probe's KSP
+# never reads: the condensed V-cycle's sweeps and reuse, the augmented form's γ)
+_INTEGER = re.compile(r".*(_max_it|_restart|_icntl_\d+|_levels|_lag|_max_levels|_fine_sweeps)$")
+_REAL = re.compile(r".*(_rtol|_atol|_divtol|_dtol|_cntl_\d+|_threshold|_shift_amount"
+                   r"|_reuse_growth|augmented_gamma)$")
 
 
 def _number_problem(key: str, value: str) -> str | None:

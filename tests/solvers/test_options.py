@@ -33,6 +33,12 @@ def test_presets_and_good_options_pass(preset):
     ({"ksp_max_it": "1.5"}, {}, "s.toml", "solver.petsc.ksp_max_it", "not a valid integer"),
     ({"ksp_rtol": "1e-6"}, {"ksp_rtol": "nan"}, "command line", "-ksp_rtol", "must be finite"),
     ({"pc_type": "nosuch"}, {"ksp_type": "foo"}, "s.toml", "solver.petsc.pc_type", "unknown type"),
+    # parsolve's own options, which no PETSc object of the probe reads
+    ({"condensed_fine_sweeps": "abc"}, {}, "s.toml", "solver.petsc.condensed_fine_sweeps",
+     "not a valid integer ('abc')"),
+    ({"condensed_reuse_growth": "x"}, {}, "s.toml", "solver.petsc.condensed_reuse_growth",
+     "not a valid number ('x')"),
+    ({}, {"augmented_gamma": "inf"}, "command line", "-augmented_gamma", "must be finite"),
 ])
 def test_bad_options_name_option_and_origin(preset, scene, cli, source, key, words):
     with pytest.raises(InputError) as info:
