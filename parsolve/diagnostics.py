@@ -144,9 +144,11 @@ def beyond_friction(comm, effects) -> list[str]:
         state = getattr(e, "node_state", None)
         if state is None or not getattr(e, "frictional", False):
             continue
-        closed, sticking = comm.allreduce(
-            np.array([(state != fr.OPEN).any(), (state == fr.STICK).any()], dtype=np.int8),
-            op=MPI.MAX)
+        # a buffer reduction: the pickled ``allreduce`` applies Python's max to arrays, which
+        # raises on the reducing rank only and leaves the others waiting
+        flags = np.array([(state != fr.OPEN).any(), (state == fr.STICK).any()], dtype=np.int8)
+        comm.Allreduce(MPI.IN_PLACE, flags, op=MPI.MAX)
+        closed, sticking = flags
         if closed and not sticking:
             out.append(getattr(getattr(e, "spec", None), "name", type(e).__name__))
     return out
