@@ -252,8 +252,8 @@ class Contact(FiniteSliding, Effect):
         self.turning = fr.SlipNewton()
         # the Newton matrix's terms (``row_terms``), laid on their rows' tuples by ``relations``
         cross = self.frictional and mesh.dim == 3 and spec.direction == "reaction"
-        self.cross = RowTerm(self.u, True, self._new_of) if cross else None
-        self.geo = RowTerm(self.u, False, self._new_of) if self.geometric else None
+        self.cross = RowTerm(self.u, True, self.new_of) if cross else None
+        self.geo = RowTerm(self.u, False, self.new_of) if self.geometric else None
         self._kappa = self._geo_rows = None
         self._start_entries()
 
@@ -363,9 +363,9 @@ class Contact(FiniteSliding, Effect):
             else:
                 reach = row_radius
         self._mine, self._reach, self._radius, self._own_ids = mine, reach, radius, slave
-        self._near, _ = dist.update_near(comm, dist.start_near(*mine[0].shape[1:], mesh.dim),
-                                         box, mine, mine[1], reach)
-        self._learn(self._near)
+        near, _ = dist.update_near(comm, dist.start_near(*mine[0].shape[1:], mesh.dim), box,
+                                   mine, mine[1], reach)
+        self.set_near(near)
         facets = self._near.ids
         self._check_shared(slave, facets)
         surf = Surfaces.of(sides + [(facets, self._near.pts)])
@@ -390,8 +390,20 @@ class Contact(FiniteSliding, Effect):
         self.ids, self.entries = dist.global_positions(comm, p.slave)
         return p
 
-    def _learn(self, near) -> None:
-        """The global numbers of the master nodes near (those of its rows' tuples)."""
+    @property
+    def master_facets(self) -> tuple:
+        """This rank's own master facets (input ids, points, global numbers): ``_pair_here``."""
+        return self._mine
+
+    @property
+    def near(self):
+        """The master facets near this rank's slaves (``dist.NearFacets``)."""
+        return self._near
+
+    def set_near(self, near) -> None:
+        """Hold the master facets ``near`` and learn the global numbers of their nodes (those
+        of its rows' tuples: ``new_of``)."""
+        self._near = near
         self._known = np.unique(np.column_stack([near.ids.ravel(), near.new.ravel()]),
                                 axis=0).reshape(-1, 2).T
 
@@ -412,7 +424,7 @@ class Contact(FiniteSliding, Effect):
                                 self.mesh.points[local],
                                 np.asarray(self.mesh.node_new)[local].astype(np.int64))
 
-    def _new_of(self, ids: np.ndarray) -> np.ndarray:
+    def new_of(self, ids: np.ndarray) -> np.ndarray:
         """The global numbers of input node ids: this rank's nodes' from its mesh, the master
         nodes near its slaves' from their facets' exchange (``_pair_here``)."""
         ids = np.asarray(ids, dtype=np.int64)
@@ -425,11 +437,11 @@ class Contact(FiniteSliding, Effect):
         return out
 
     def _fetch(self, dofs: np.ndarray) -> Fetch:
-        """The plan of q's values at input DOFs of nodes this rank knows (``_new_of``).
+        """The plan of q's values at input DOFs of nodes this rank knows (``new_of``).
         Collective."""
         ncomp = self.fields_.ncomp
         node, comp = np.divmod(np.asarray(dofs, dtype=np.int64), ncomp)
-        return Fetch(self.values.comm, self._new_of(node) * ncomp + comp,
+        return Fetch(self.values.comm, self.new_of(node) * ncomp + comp,
                           self.values.node_ranges, ncomp)
 
     def _check_shared(self, slave: np.ndarray, facets: np.ndarray) -> None:

@@ -299,7 +299,7 @@ class PenaltyContact(Effect):
         rank's slaves and the master nodes their pairs may hold), from their owners: one
         ``Fetch`` a surface. Collective."""
         dim = self.mesh.dim
-        new = self.geo._new_of(surface)
+        new = self.geo.new_of(surface)
         self.surface = surface
         self.fetch = Fetch(self.values.comm, (new[:, None] * dim + np.arange(dim)).ravel(),
                            self.values.node_ranges, dim)
@@ -322,7 +322,7 @@ class PenaltyContact(Effect):
         self.gradients(p)
         values = self.values
         self.tuple_ids = ids
-        self.shared = SharedTuples(values.comm, self.geo._new_of(ids).reshape(ids.shape),
+        self.shared = SharedTuples(values.comm, self.geo.new_of(ids).reshape(ids.shape),
                                    values.node_ranges)
         nodes = self.term.nodes = self.shared.nodes
         lo, hi = values.node_ranges[values.rank], values.node_ranges[values.rank + 1]
@@ -555,24 +555,23 @@ class SlidingPenalty(PenaltyContact):
 
     def _surfaces(self, geo: contact.Contact) -> None:
         """This rank's surfaces: its paired slaves and the master facets near them (the
-        relations form's exchange: ``geo._near``); the plan of its own master facets' u; the
+        relations form's exchange: ``geo.near``); the plan of its own master facets' u; the
         largest master facet (every rank's own: the whole surface's), the closeness
         tolerance's length. Collective."""
         p, dim, comm = self.pairing, self.mesh.dim, self.values.comm
         local = self.values.local_nodes(p.slave)           # (its own: owned)
         self.slaves = (local, self.mesh.points[local])
-        _, pts, new = geo._mine
+        _, pts, new = geo.master_facets
         self.mine = Fetch(comm, (new.reshape(-1, 1) * dim + np.arange(dim)).ravel(),
                           self.values.node_ranges, dim)
         size = float(np.linalg.norm(np.ptp(pts, axis=1), axis=1).max(initial=0.0))
         self.length = comm.allreduce(size, op=MPI.MAX)
-        self._resurface(geo._near)
+        self._resurface(geo.near)
 
     def _resurface(self, near) -> None:
         """The surfaces made again with the master facets ``near`` (the relations form's
         numbers learnt) and the plan of their u. Collective."""
-        self.geo._near = near
-        self.geo._learn(near)
+        self.geo.set_near(near)
         self.surf = Surfaces.of([(self.pairing.slave, self.slaves[1]), (near.ids, near.pts)])
         self._plan(self.surf.ids)
         self._start_u = None
@@ -584,17 +583,17 @@ class SlidingPenalty(PenaltyContact):
         master facet's extent on the current configuration (``pair_nodes``' default on the
         whole master). Collective."""
         geo, dim = self.geo, self.mesh.dim
-        _, pts, _ = geo._mine
+        _, pts, _ = geo.master_facets
         mine_x = pts + self.mine(np.ascontiguousarray(u).ravel()).reshape(pts.shape)
         radius = self.spec.search_radius
         if radius is None:
             radius = facet_extent(self.values.comm, mine_x)
         local, slave_pts = self.slaves
-        near, new = update_near(self.values.comm, geo._near, slave_pts + u[local, :dim],
-                                geo._mine, mine_x, radius)
+        near, new = update_near(self.values.comm, geo.near, slave_pts + u[local, :dim],
+                                geo.master_facets, mine_x, radius)
         if new:   # (facets keep their relative order: the pairs' facets renumbered)
             p = self.pairing.subset(np.arange(len(self.pairing)))
-            p.facet = facet_index(near.ids, geo._near.ids[p.facet])
+            p.facet = facet_index(near.ids, geo.near.ids[p.facet])
             self.pairing = p
             self._resurface(near)
         return radius
@@ -609,7 +608,7 @@ class SlidingPenalty(PenaltyContact):
         us = self.surface_u(u)
         surf, ft = self.surf, self.mesh.facet_type
         x = surf.points + us
-        slave, facets = surf.compact(self.pairing.slave), surf.compact(self.geo._near.ids)
+        slave, facets = surf.compact(self.pairing.slave), surf.compact(self.geo.near.ids)
         new = pair_nodes(x, slave, facets, ft, radius)
         # a slave keeps its facet while its projection stays in it and is as close (on a kink
         # of the master it would flip between two facets from one iteration to the next), and
@@ -666,7 +665,7 @@ class SlidingPenalty(PenaltyContact):
         faces any more, and the committed friction force's basis), the master facets near
         (the pairs' facets index them)."""
         return {"pairing": self.pairing, "committed_tangents": self.committed_tangents,
-                "near": self.geo._near}
+                "near": self.geo.near}
 
     def load_restart_state(self, state: dict) -> None:
         # the tuples stay the pattern's: the next step's pairing moves them (restructured)

@@ -149,8 +149,7 @@ class FiniteSliding:
         if getattr(self, "_start_point", None) is not None:
             master0, weights0, point0 = self._start_point
             self._start_point = (node(master0), weights0, point0)
-        self._near = near
-        self._learn(near)
+        self.set_near(near)
         self._fetches.pop("surface", None)
 
     def _repair(self, q: np.ndarray, start: bool = False):

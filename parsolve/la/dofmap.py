@@ -294,11 +294,20 @@ class DofMap:
         own = (local >= 0) & (local < self.n_owned_nodes)
         return own, local[own]
 
-    def local_dofs(self, dofs: np.ndarray) -> np.ndarray:
-        """Local DOF of each input DOF, -1 where its node is not on this rank."""
-        node, comp = np.divmod(np.asarray(dofs, dtype=np.int64), self.ncomp)
+    def local_dofs(self, dofs: np.ndarray, owned: str | None = None) -> np.ndarray:
+        """Local DOF of each input DOF, -1 where its node is not on this rank (mask it before
+        indexing: a -1 reads or writes the last entry silently). ``owned``: what the DOFs are,
+        each owned here, else a RuntimeError naming it."""
+        dofs = np.asarray(dofs, dtype=np.int64)
+        node, comp = np.divmod(dofs, self.ncomp)
         ln = self.local_nodes(node)
-        return np.where(ln >= 0, ln * self.ncomp + comp, -1)
+        local = np.where(ln >= 0, ln * self.ncomp + comp, -1)
+        if owned is not None:
+            away = (local < 0) | (local >= self.n_owned)
+            if away.any():
+                raise RuntimeError(f"{owned}: {np.count_nonzero(away)} input DOFs not owned "
+                                   f"by rank {self.rank} (the first: {dofs[away][0]})")
+        return local
 
     def owned_dof_entries(self, dofs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(positions of the input DOFs owned here, their local DOFs)."""

@@ -127,7 +127,7 @@ class RelationPolicies:
         dm = self.ctx.dofs
         held = np.zeros(dm.n_owned)
         for r in self.ctx.eliminated:
-            held[dm.local_dofs(r.a_dofs)] = 1.0
+            held[dm.local_dofs(r.a_dofs, owned=f"relation {r.name!r} (eliminated)")] = 1.0
         return dofs[Fetch.of(dm, dm.input_new_dof(dofs))(held) > 0.5]
 
     def enforceable(self, active: np.ndarray) -> np.ndarray:

@@ -209,11 +209,11 @@ class SaddleSystem:
         refs = np.concatenate(refs + [np.zeros(unused.size)])
         which = np.concatenate(which + [np.full(unused.size, -1, dtype=np.int64)])
         # per owned DOF: its coefficient (0: not eliminated), value, relation and input id
-        at = dm.local_dofs(own)
-        table = np.zeros((4, dm.n_owned))
-        table[0, at], table[1, at], table[2, at] = coefs, refs, which
-        table[3] = (dm.mesh.global_nodes[:dm.n_owned_nodes].astype(np.int64)[:, None] * dm.ncomp
-                    + np.arange(dm.ncomp)).ravel()
+        at = dm.local_dofs(own, owned="the eliminated and unused DOFs of this rank")
+        table = np.zeros((dm.n_owned, 4))
+        table[at, 0], table[at, 1], table[at, 2] = coefs, refs, which
+        table[:, 3] = (dm.mesh.global_nodes[:dm.n_owned_nodes].astype(np.int64)[:, None]
+                       * dm.ncomp + np.arange(dm.ncomp)).ravel()
         # the other ranks' DOFs its operator rows name: its ghosts', its node terms' and its
         # relation rows' columns (the off-process block's primal columns)
         op = self.op
@@ -221,15 +221,15 @@ class SaddleSystem:
         q0, q1, _, _ = dm.owned()
         seen = np.union1d(dm.new_dof(np.arange(dm.n_owned, dm.n_local)), new[primal])
         seen = seen[(seen < q0) | (seen >= q1)]
-        fetch = Fetch.of(dm, seen)
-        got = np.array([fetch(column) for column in table])
+        got = Fetch.of(dm, seen, width=4)(table).T   # (the four columns: one exchange)
         on = got[0] != 0.0
         self._elim_fetch = Fetch.of(dm, seen[on])   # (q at the others, at each use)
         self.elim_dofs = np.concatenate([own, got[3, on].astype(np.int64)])
         self.elim_coefs = np.concatenate([coefs, got[0, on]])
         self._elim_refs = np.concatenate([refs, got[1, on]])
         self._elim_which = np.concatenate([which, got[2, on].astype(np.int64)])
-        self.elim_local = dm.local_dofs(self.elim_dofs)   # -1: not on this rank
+        # (the others': -1 where not on this rank; only the own part, elim_own, indexes)
+        self.elim_local = np.concatenate([at, dm.local_dofs(self.elim_dofs[n_own:])])
         self.elim_saddle = np.concatenate([dm.input_saddle(own), dm.q_index(seen[on])])
         self.elim_own = np.arange(self.elim_dofs.size) < n_own
         self._n_eliminated = self.comm.allreduce(n_own)

@@ -126,7 +126,7 @@ def test_at_four_ranks_the_sliding_penalty_holds_at_most_035_of_the_pairs(shared
         q = np.zeros(model.mesh.num_points * effect.fields_.ncomp)
         effect.begin_step(q, {}, None)   # (paired again on the current configuration)
         assert np.array_equal(effect.term.nodes[:len(effect.pairing)],
-                              effect.geo._new_of(effect.tuple_ids))   # its own tuples first
+                              effect.geo.new_of(effect.tuple_ids))   # its own tuples first
         return np.array([len(effect.pairing), effect.surf.ids.size], dtype=float)
 
     alone = held(MPI.COMM_SELF)

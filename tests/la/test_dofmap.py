@@ -134,3 +134,24 @@ def test_field_sets(parts):
     np.testing.assert_array_equal(rows, dm.saddle_of_local[np.arange(0, dm.n_owned, NC)])
     total = COMM.allreduce(rows.size)
     assert total == 45
+
+
+def test_local_dofs_of_dofs_not_owned_here(parts):
+    """This rank's owned DOFs are its first local DOFs; a DOF of no rank's node gives -1, and
+    with ``owned`` (what they are) any DOF not owned here, a ghost's included, is refused
+    naming it: a -1 would index the last entry silently."""
+    whole, local, dm = parts
+    mine = input_dofs(local)
+    owned = mine[:dm.n_owned]
+    np.testing.assert_array_equal(dm.local_dofs(owned, owned="mine"), np.arange(dm.n_owned))
+    nowhere = 45 * NC + 1
+    np.testing.assert_array_equal(dm.local_dofs([owned[3], nowhere]), [3, -1])
+    with pytest.raises(RuntimeError, match=rf"the far ones: 1 input DOFs not owned by rank "
+                                           rf"{COMM.rank} \(the first: {nowhere}\)"):
+        dm.local_dofs([owned[3], nowhere], owned="the far ones")
+    ghosts = mine[dm.n_owned:]
+    assert (ghosts.size > 0) == (COMM.size > 1)
+    if ghosts.size:
+        np.testing.assert_array_equal(dm.local_dofs(ghosts), np.arange(dm.n_owned, dm.n_local))
+        with pytest.raises(RuntimeError, match=f"ghosts: {ghosts.size} input DOFs not owned"):
+            dm.local_dofs(ghosts, owned="ghosts")

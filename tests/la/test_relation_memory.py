@@ -16,7 +16,8 @@ from mpi4py import MPI
 from parsolve.model import build_model
 from parsolve.scene import parse_scene
 from parsolve.solvers.system import SaddleSystem
-from tests.helpers.scene import CONFIGS
+from tests.helpers.plate import PLATE, dirichlet, mean
+from tests.helpers.scene import CONFIGS, scene
 
 COMM = MPI.COMM_WORLD
 #: int64 or float64 arrays per stacked A entry (rows, columns, values, relation row) and per
@@ -141,98 +142,15 @@ def test_dirichlet_and_periodic_rows_split_across_the_ranks():
 #: rows: its left corner is left_x's); spread rows: the mean x of the right side controlled by
 #: a load there, the mean x of each quarter (at 4 ranks each quarter mostly one rank's) and the
 #: mean strain of every cell (its entries on the boundary's nodes, the inner ones cancelling)
-COVERED = """
-[mesh]
-generator = "rectangle"
-lx = 2.0
-ly = 1.0
-nx = 48
-ny = 24
-cell = "quad"
-
-[model]
-hypothesis = "plane_stress"
-
-[[materials]]
-E = 1e9
-nu = 0.25
-
-[[loads]]
-name = "pull"
-region = "right"
-total_force = [1.0, 0.0]
-
-[[relations]]
-name = "held_y"
-type = "dirichlet"
-region = "all"
-components = ["y"]
-
-[[relations]]
-name = "left_x"
-type = "dirichlet"
-region = "left"
-components = ["x"]
-
-[[relations]]
-name = "top_x"
-type = "dirichlet"
-region = "top"
-components = ["x"]
-eliminate = false
-
-[regions]
-a = { box = [[0.0, 0.0], [1.0, 0.5]] }
-b = { box = [[1.0, 0.0], [2.0, 0.5]] }
-c = { box = [[0.0, 0.5], [1.0, 1.0]] }
-d = { box = [[1.0, 0.5], [2.0, 1.0]] }
-
-[[relations]]
-name = "mean_x"
-type = "mean"
-region = "right"
-component = "x"
-value = 1e-4
-dual = "pull"
-
-[[relations]]
-name = "mean_a"
-type = "mean"
-region = "a"
-component = "x"
-value = 0.0
-eliminate = false
-
-[[relations]]
-name = "mean_b"
-type = "mean"
-region = "b"
-component = "x"
-value = 0.0
-eliminate = false
-
-[[relations]]
-name = "mean_c"
-type = "mean"
-region = "c"
-component = "x"
-value = 0.0
-eliminate = false
-
-[[relations]]
-name = "mean_d"
-type = "mean"
-region = "d"
-component = "x"
-value = 0.0
-eliminate = false
-
-[[relations]]
-name = "mean_strain"
-type = "strain"
-region = "all"
-component = "xx"
-"""
+COVERED = scene(
+    PLATE, mesh={"nx": 48, "ny": 24},
+    regions={q: {"box": [[x, y], [x + 1.0, y + 0.5]]}
+             for q, (x, y) in zip("abcd", [(0.0, 0.0), (1.0, 0.0), (0.0, 0.5), (1.0, 0.5)])},
+    relations=[dirichlet("held_y", "all", "y"), dirichlet("left_x", "left", "x"),
+               dirichlet("top_x", "top", "x", eliminate=False),
+               mean("mean_x", "right", 1e-4, dual="pull")]
+    + [mean(f"mean_{q}", q, 0.0, eliminate=False) for q in "abcd"]
+    + [{"name": "mean_strain", "type": "strain", "region": "all", "component": "xx"}])
 #: what one rank alone holds of them (relations, stacking, per-row vectors, scales, held
 #: multipliers, the eliminated DOFs' arrays)
 ONE_RANK_COVERED = 240_042

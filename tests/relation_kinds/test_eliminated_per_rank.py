@@ -9,55 +9,15 @@ control load)."""
 import numpy as np
 from mpi4py import MPI
 
+from helpers.plate import PLATE, dirichlet, mean
+from helpers.scene import scene
+
 COMM = MPI.COMM_WORLD
-SCENE = """
-[mesh]
-generator = "rectangle"
-lx = 2.0
-ly = 1.0
-nx = 16
-ny = 8
-cell = "quad"
-
-[model]
-hypothesis = "plane_stress"
-
-[regions]
-corner = { point = [0.0, 0.0] }
-
-[[materials]]
-E = 1e9
-nu = 0.3
-
-[[loads]]
-name = "pull"
-region = "right"
-total_force = [1.0, 0.0]
-
-[[relations]]
-name = "left_x"
-type = "dirichlet"
-region = "left"
-components = ["x"]
-value = "1e-5 * y"
-
-[[relations]]
-name = "corner_y"
-type = "dirichlet"
-region = "corner"
-components = ["y"]
-
-[[relations]]
-name = "control"
-type = "mean"
-region = "all"
-component = "x"
-value = 2e-4
-dual = "pull"
-
-[steps]
-count = 3
-"""
+SCENE = scene(PLATE, mesh={"nx": 16, "ny": 8}, regions={"corner": {"point": [0.0, 0.0]}},
+              materials=[{"E": 1e9, "nu": 0.3}], steps={"count": 3},
+              relations=[dirichlet("left_x", "left", "x", value="1e-5 * y"),
+                         dirichlet("corner_y", "corner", "y"),
+                         mean("control", "all", 2e-4, dual="pull")])
 
 
 def test_the_held_rows_per_rank_answer_as_one_rank(run):

@@ -18,78 +18,28 @@ from parsolve.relation_kinds.strain import row_cell
 from parsolve.relations import Relation
 from parsolve.scene import parse_scene
 from parsolve.solvers.system import SaddleSystem
-from tests.helpers.scene import CONFIGS
+from tests.helpers.plate import PLATE, dirichlet, mean
+from tests.helpers.scene import CONFIGS, scene, scene_data
 
 COMM = MPI.COMM_WORLD
 BAR = (CONFIGS / "controlled_bar.toml").read_text(encoding="utf-8")
 #: a 2 × 1 plate of 24 × 12 quads: a mean controlled by a load pattern, a linear relation of
 #: overlapping terms (a node in both: one coefficient), a region's mean strain, and a maximum
 #: of the strains of a box's cells controlled by the same pattern
-PLATE = """
-[mesh]
-generator = "rectangle"
-lx = 2.0
-ly = 1.0
-nx = 24
-ny = 12
-cell = "quad"
-
-[model]
-hypothesis = "plane_stress"
-
-[regions]
-corner = { point = [0.0, 0.0] }
-upper = { box = [[0.0, 0.5], [2.0, 1.0]] }
-mid = { box = [[0.5, 0.25], [1.5, 0.75]] }
-
-[[materials]]
-E = 1e9
-nu = 0.25
-
-[[loads]]
-name = "pull"
-region = "right"
-total_force = [1.0, 0.5]
-
-[[relations]]
-name = "left_x"
-type = "dirichlet"
-region = "left"
-components = ["x"]
-
-[[relations]]
-name = "opening"
-type = "mean"
-region = "right"
-component = "x"
-value = 1e-4
-dual = "pull"
-
-[[relations]]
-name = "general"
-type = "linear"
-terms = [{ region = "top", component = "y", coefficient = 1.0, mean = true },
-         { region = "upper", component = "y", coefficient = -2.0 }]
-value = 0.0
-eliminate = false
-
-[[relations]]
-name = "mean_strain"
-type = "strain"
-region = "mid"
-direction = [1.0, 1.0]
-
-[[relations]]
-name = "cells"
-type = "strain"
-region = "mid"
-component = "xx"
-per_cell = true
-maximum = true
-sense = "<="
-value = 1.2e-3
-dual = "pull"
-"""
+PLATE_DATA = scene_data(
+    PLATE, loads=[{**PLATE["loads"][0], "total_force": [1.0, 0.5]}],
+    regions={"corner": {"point": [0.0, 0.0]}, "upper": {"box": [[0.0, 0.5], [2.0, 1.0]]},
+             "mid": {"box": [[0.5, 0.25], [1.5, 0.75]]}},
+    relations=[dirichlet("left_x", "left", "x"), mean("opening", "right", 1e-4, dual="pull"),
+               {"name": "general", "type": "linear", "value": 0.0, "eliminate": False,
+                "terms": [{"region": "top", "component": "y", "coefficient": 1.0, "mean": True},
+                          {"region": "upper", "component": "y", "coefficient": -2.0}]},
+               {"name": "mean_strain", "type": "strain", "region": "mid",
+                "direction": [1.0, 1.0]},
+               {"name": "cells", "type": "strain", "region": "mid", "component": "xx",
+                "per_cell": True, "maximum": True, "sense": "<=", "value": 1.2e-3,
+                "dual": "pull"}])
+PLATE_TEXT = scene(PLATE_DATA)
 SPREAD = ["opening", "general", "mean_strain", "cells"]
 
 
@@ -112,7 +62,7 @@ def model_of(text: str, comm):
 
 
 def test_the_ranks_entries_are_the_one_process_build():
-    model, alone = model_of(PLATE, COMM), model_of(PLATE, MPI.COMM_SELF)
+    model, alone = model_of(PLATE_TEXT, COMM), model_of(PLATE_TEXT, MPI.COMM_SELF)
     here = {r.name: r for r in model.relations}
     one = {r.name: r for r in alone.relations}
     mesh = model.mesh
@@ -163,7 +113,7 @@ def test_a_rows_entries_meet_at_its_owner():
     """In the stacking, each spread row's A entries reach the rank owning its multiplier row:
     every entry kept once, all of a row's on one rank; A q of the rows is the one-process
     value."""
-    model = model_of(PLATE, COMM)
+    model = model_of(PLATE_TEXT, COMM)
     system = SaddleSystem(COMM, model)
     rs, dm = system.relation_set, system.dofmap
     _, _, l0, l1 = dm.owned()
@@ -182,7 +132,7 @@ def test_a_rows_entries_meet_at_its_owner():
     local = dm.mesh
     q = ((local.global_nodes.astype(np.int64)[:, None] * dm.ncomp + np.arange(dm.ncomp))
          .ravel().astype(float))
-    alone = {r.name: r for r in model_of(PLATE, MPI.COMM_SELF).relations}
+    alone = {r.name: r for r in model_of(PLATE_TEXT, MPI.COMM_SELF).relations}
     every = np.arange(local.num_global_points * dm.ncomp, dtype=float)
     values = rs.primal_values(q)
     for name in SPREAD:
@@ -193,13 +143,10 @@ def test_a_rows_entries_meet_at_its_owner():
 
 #: the plate's rows over the whole mesh (the mean of x, the mean strain, every cell's strain
 #: under a maximum), the pattern a load over the top: what the ranks share evenly
-EVERYWHERE = PLATE.replace('region = "right"\ncomponent = "x"\nvalue = 1e-4',
-                           'region = "all"\ncomponent = "x"\nvalue = 1e-4') \
-    .replace('name = "mean_strain"\ntype = "strain"\nregion = "mid"',
-             'name = "mean_strain"\ntype = "strain"\nregion = "all"') \
-    .replace('per_cell = true', 'per_cell = true\nregion = "all"').replace(
-        'name = "cells"\ntype = "strain"\nregion = "mid"\n', 'name = "cells"\ntype = "strain"\n') \
-    .replace('region = "right"\ntotal_force', 'region = "top"\ntotal_force')
+EVERYWHERE = scene(
+    PLATE_DATA, loads=[{**PLATE_DATA["loads"][0], "region": "top"}],
+    relations=[{**r, "region": "all"} if r["name"] in ("opening", "mean_strain", "cells") else r
+               for r in PLATE_DATA["relations"]])
 
 
 #: the entries on one rank alone: the mean's 325 nodes, the linear row's 175, the mean strain's

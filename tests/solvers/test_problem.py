@@ -5,6 +5,7 @@ clamped on the left and pulled by a traction p on the right (u = p x / E, exact 
 
 from __future__ import annotations
 
+import dataclasses
 import numpy as np
 import pytest
 from mpi4py import MPI
@@ -136,6 +137,26 @@ def test_a_block_held_only_by_contact_starts_closed():
     np.testing.assert_allclose(reaction, [-0.25, -0.5, -0.5, -0.5, -0.25], rtol=1e-10)
     gap = problem.rset.primal_values(problem.q) - problem.rset.targets(1.0)
     assert np.abs(gap).max(initial=0.0) <= 1e-12   # (a rank may hold none of the rows)
+
+
+def test_fixed_dofs_are_told_by_their_owners():
+    """``_fixed``: of the input DOFs of every node this rank holds (ghosts included), those an
+    eliminated relation holds are the x DOFs of the left edge (hold_x), each told by its
+    node's owner. An eliminated DOF not owned here (a broken ownership) is refused naming the
+    relation, where a -1 used to write the last entry."""
+    _, _, problem = problem_of(BLOCK)
+    policies, mesh = problem.policies, problem.ctx.mesh
+    nodes = mesh.global_nodes.astype(np.int64)
+    dofs = np.sort((nodes[:, None] * 2 + np.arange(2)).ravel())
+    problem.ctx.dofs.index_inputs([dofs])   # (collective: the DOF map learns them all)
+    expected = np.sort(nodes[mesh.points[:, 0] == 0.0] * 2)
+    np.testing.assert_array_equal(policies._fixed(dofs), expected)
+    hold = problem.ctx.eliminated[0]
+    far = np.append(hold.a_dofs, 2 * 15)   # (node 15: the 4 × 2 mesh has 0..14)
+    problem.ctx.eliminated[0] = dataclasses.replace(hold, a_dofs=far)
+    with pytest.raises(RuntimeError, match=f"relation 'hold_x' \\(eliminated\\): 1 input DOFs "
+                                           f"not owned by rank {MPI.COMM_WORLD.rank}"):
+        policies._fixed(dofs)
 
 
 def test_arc_length_over_the_problem_follows_the_softening_bar():
