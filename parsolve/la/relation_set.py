@@ -461,21 +461,6 @@ class RelationSet:
             self.dofmap.comm.Allreduce(MPI.IN_PLACE, empty, op=MPI.LAND)
         return empty
 
-    def row_entries(self, r: Relation, row: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(input DOFs, coefficients, saddle indices) of one row of a whole relation, every
-        entry of it on every rank: a spread relation's gathered from the ranks holding them,
-        each indexed by its holder (a row's few entries: the maximum groups' enforced rows).
-        Collective for a spread relation."""
-        sel = r.a_rows == row
-        dofs, vals = r.a_dofs[sel], r.a_vals[sel]
-        saddle = self.dofmap.input_saddle(dofs)
-        if not r.spread or self.dofmap.comm.size == 1:
-            return dofs, vals, saddle
-        parts = self.dofmap.comm.allgather((dofs, vals, saddle))
-        dofs = np.concatenate([p[0] for p in parts])
-        order = np.argsort(dofs, kind="stable")
-        return tuple(np.concatenate([p[i] for p in parts])[order] for i in range(3))
-
     def gap(self, t: float, q: np.ndarray) -> np.ndarray:
         """b(t) - A q of the multiplier rows this rank owns, unscaled. Collective
         (``owned_primal``)."""
