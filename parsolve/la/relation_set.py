@@ -12,11 +12,11 @@ obstacle's contact rows, each built by the rank owning its slave node; multiplie
 equal and periodic rows, by the rank owning the DOF or node each constrains; solubility's two
 rows of a node, by the node's owner; a per-cell strain row outside a maximum, by the rank
 counting the cell; numbered by their place in the whole relation). A whole relation may be
-spread (``Relation.spread``: a mean, linear or strain row, each rank holding the entries on
-its owned DOFs): its rows' A entries are sent to their multiplier row's owner (``_foreign_a``), whose operator row adds
-them, and its rows' owners are counted from every rank's entries (``_loose_owners``). A tie's
-entries on another rank's DOF: its D entries go to that DOF's owner (``_foreign_d``), its A q
-reads the DOF's value from there (``la.fetch.Fetch``).
+spread (``Relation.spread``: a mean, linear or strain row, each rank holding the entries on its
+owned DOFs): its rows' A entries are sent to their multiplier row's owner (``_foreign_a``),
+whose operator row adds them, and its rows' owners are counted from every rank's entries
+(``_loose_owners``). A tie's entries on another rank's DOF: its D entries go to that DOF's
+owner (``_foreign_d``), its A q reads the DOF's value from there (``la.fetch.Fetch``).
 The relation rows a rank holds are its per-rank relations' rows and every whole relation's;
 the vectors per relation row (``mult_of_row``, ``position``, the active set's masks, targets,
 gaps) run over those, ``rep_row`` over the multiplier rows those rows have (``mults_here``),
