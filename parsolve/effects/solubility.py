@@ -39,8 +39,8 @@ from parsolve.effects.base import Effect
 from parsolve.errors import InputError
 from parsolve.io.slabs import OwnedRows
 from parsolve.mesh import selectors
-from parsolve.mesh.regions import allgather_rows
-from parsolve.relations import Relation
+from parsolve.relation_kinds.spread import places
+from parsolve.relations import Relation, rows_here
 
 
 @dataclass
@@ -74,9 +74,10 @@ def _saturation(t) -> float | str:
 
 
 class Solubility(Effect):
-    """Each rank (its ``LocalMesh``) knows c_sat on its owned nodes only;
-    the relation is whole on every rank (the size of its region: every node with a c_sat),
-    in input numbering, gathered from the ranks' owned nodes in input order."""
+    """Each rank (its ``LocalMesh``) knows c_sat on its owned nodes only and builds those
+    nodes' rows alone (``Relation.ids``): a node's two rows are rows 2p and 2p + 1 of the
+    whole relation, p its place among every node with a c_sat in input order, so that
+    outputs and answers keep the one-rank order; its group and dual are the rank's own."""
 
     name = "solubility"
     symmetric = False
@@ -117,13 +118,11 @@ class Solubility(Effect):
         return c_sat
 
     def _relation_nodes(self) -> tuple[np.ndarray, np.ndarray]:
-        """(input ids of the nodes with a c_sat, increasing; their c_sat): on a part, every
-        rank's owned ones, gathered (a collective of the region's size)."""
+        """(input ids of this rank's owned nodes with a c_sat, increasing; their c_sat)."""
         has = np.flatnonzero(np.isfinite(self.c_sat))
-        ids = allgather_rows(self.comm, self.mesh.global_nodes[has])
-        values = allgather_rows(self.comm, self.c_sat[has])
+        ids = self.mesh.global_nodes[has].astype(np.int64)
         order = np.argsort(ids)
-        return ids[order], values[order]
+        return ids[order], self.c_sat[has][order]
 
     def relations(self) -> list[Relation]:
         nodes = self.nodes
@@ -143,14 +142,18 @@ class Solubility(Effect):
                        (d_dofs, d_rows, d_vals), eliminate=False)
         rel.groups = np.repeat(np.arange(n), 2)
         rel.meta = {"type": "solubility", "key": self.spec.key, "dual": None, "nodes": nodes}
-        return [rel]
+        # the node's place among every rank's (one exchange): its rows' global numbers
+        place = places(self.comm, nodes, int(self.mesh.num_global_points))
+        total = self.comm.allreduce(n) if self.comm.size > 1 else n
+        return [rows_here(rel, (2 * place[:, None] + np.arange(2)).ravel(), 2 * total)]
 
     def output_names(self) -> list[str]:
         return ["solubility_state"]
 
     def step_outputs(self, q: np.ndarray, lam: dict, active: dict) -> tuple[dict, dict]:
         """/fields/solubility_state per node: 0 dissolved, 1 saturated (no c_sat: -1). On a
-        part: its owned nodes' rows (in increasing input id), for the writer to place."""
+        part: its owned nodes' rows (its relation rows, in increasing input id), for the
+        writer to place."""
         out = np.full(self.n_nodes, -1, dtype=np.int8)
         has = np.flatnonzero(np.isfinite(self.c_sat))
         saturated = active["solubility"].reshape(-1, 2)[:, 1]   # per relation node

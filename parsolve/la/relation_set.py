@@ -9,13 +9,14 @@ relation gets equal scales, which keeps the operator symmetric.
 
 A relation is whole (every row on every rank) or built per rank (``Relation.ids``: a rigid
 obstacle's contact rows, each built by the rank owning its slave node; multiplied Dirichlet,
-equal and periodic rows, by the rank owning the DOF or node each constrains; numbered by
-their place in the whole relation). A whole relation may be spread (``Relation.spread``: a
-mean, linear or strain row, each rank holding the entries on its owned DOFs): its rows' A
-entries are sent to their multiplier row's owner (``_foreign_a``), whose operator row adds
-them, and its rows' owners are counted from every rank's entries (``_loose_owners``). A tie's
-entries on another rank's DOF: its D entries go to that DOF's owner (``_foreign_d``), its A q
-reads the DOF's value from there (``la.fetch.Fetch``).
+equal and periodic rows, by the rank owning the DOF or node each constrains; solubility's two
+rows of a node, by the node's owner; a per-cell strain row outside a maximum, by the rank
+counting the cell; numbered by their place in the whole relation). A whole relation may be
+spread (``Relation.spread``: a mean, linear or strain row, each rank holding the entries on its
+owned DOFs): its rows' A entries are sent to their multiplier row's owner (``_foreign_a``),
+whose operator row adds them, and its rows' owners are counted from every rank's entries
+(``_loose_owners``). A tie's entries on another rank's DOF: its D entries go to that DOF's
+owner (``_foreign_d``), its A q reads the DOF's value from there (``la.fetch.Fetch``).
 The relation rows a rank holds are its per-rank relations' rows and every whole relation's;
 the vectors per relation row (``mult_of_row``, ``position``, the active set's masks, targets,
 gaps) run over those, ``rep_row`` over the multiplier rows those rows have (``mults_here``),
@@ -460,21 +461,6 @@ class RelationSet:
         if r.spread and self.dofmap.comm.size > 1:
             self.dofmap.comm.Allreduce(MPI.IN_PLACE, empty, op=MPI.LAND)
         return empty
-
-    def row_entries(self, r: Relation, row: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(input DOFs, coefficients, saddle indices) of one row of a whole relation, every
-        entry of it on every rank: a spread relation's gathered from the ranks holding them,
-        each indexed by its holder (a row's few entries: the maximum groups' enforced rows).
-        Collective for a spread relation."""
-        sel = r.a_rows == row
-        dofs, vals = r.a_dofs[sel], r.a_vals[sel]
-        saddle = self.dofmap.input_saddle(dofs)
-        if not r.spread or self.dofmap.comm.size == 1:
-            return dofs, vals, saddle
-        parts = self.dofmap.comm.allgather((dofs, vals, saddle))
-        dofs = np.concatenate([p[0] for p in parts])
-        order = np.argsort(dofs, kind="stable")
-        return tuple(np.concatenate([p[i] for p in parts])[order] for i in range(3))
 
     def gap(self, t: float, q: np.ndarray) -> np.ndarray:
         """b(t) - A q of the multiplier rows this rank owns, unscaled. Collective

@@ -71,10 +71,13 @@ def strain_rows(mesh, cells: np.ndarray, direction: np.ndarray, thickness: float
 
 
 def build(spec: RelationSpec, where: Where, evolution) -> rel.Relation:
-    """The rows of the cells this rank counts (``owned_cells``), their entries then sent to
-    the ranks owning their DOFs (``spread.to_owners``): a spread relation (``Relation.spread``),
-    its rows whole (one, or one per cell of the region, numbered by cell id), no rank holding
-    the region's entries or cells (each the cells it counts: ``row_cell``)."""
+    """The rows of the cells this rank counts (``owned_cells``). One row per cell without a
+    maximum: each cell's row built and held by the rank counting it (``Relation.ids``: row j
+    the region's j-th cell by input id; its entries on other ranks' nodes reach them in the
+    stacking, as a tie's). A mean, or rows under a maximum (a group spanning the ranks): a
+    spread relation (``Relation.spread``), its rows whole, the entries sent to the ranks
+    owning their DOFs (``spread.to_owners``). No rank holds the region's entries or cells
+    (each the cells it counts: ``row_cell``)."""
     regions, fields, comm = where.regions, where.fields, where.comm
     mesh = regions.mesh
     region = regions(spec.region, spec.key + ".region")
@@ -82,6 +85,9 @@ def build(spec: RelationSpec, where: Where, evolution) -> rel.Relation:
         raise InputError(f"region {spec.region!r} contains no cell (a strain needs cells)",
                          where.source, spec.key + ".region")
     cells = regions.owned_cells(region.cells)
+    per_rank = spec.per_cell and not spec.maximum
+    if per_rank:   # (its rows held in increasing number: the cells by input id)
+        cells = cells[np.argsort(mesh.global_cells[cells], kind="stable")]
     dofs, coefs, vol = strain_rows(mesh, cells, spec.direction, where.thickness,
                                    fields=fields, field=spec.field)
     ids = mesh.global_cells[cells].astype(np.int64)
@@ -92,18 +98,31 @@ def build(spec: RelationSpec, where: Where, evolution) -> rel.Relation:
         rows, nrows = np.zeros(ids.size, dtype=np.int64), 1
     node, comp = np.divmod(dofs, fields.ncomp)   # local DOFs → input DOFs, their owners
     inputs = mesh.global_nodes[node].astype(np.int64) * fields.ncomp + comp
-    a_rows, a_dofs, a_vals = to_owners(comm, np.repeat(rows, dofs.shape[1]), inputs.ravel(),
-                                       coefs.ravel(), mesh.owner_of(node).ravel())
-    r = rel.Relation(spec.name, nrows, a_rows, a_dofs, a_vals, np.full(nrows, spec.value),
+    a_rows, a_dofs, a_vals = _cell_entries(rows, inputs, coefs) if per_rank else \
+        to_owners(comm, np.repeat(rows, dofs.shape[1]), inputs.ravel(), coefs.ravel(),
+                  mesh.owner_of(node).ravel())
+    here = ids.size if per_rank else nrows
+    r = rel.Relation(spec.name, here, a_rows, a_dofs, a_vals, np.full(here, spec.value),
                      evolution, spec.sense)
     # the cells this rank counts (input ids) and, one row per cell, their rows
     r.meta["cells"], r.meta["cell_rows"] = ids, (rows if spec.per_cell else None)
-    return rel.spread_rows(r)
+    return rel.rows_here(r, rows, nrows) if per_rank else rel.spread_rows(r)
+
+
+def _cell_entries(rows: np.ndarray, inputs: np.ndarray, coefs: np.ndarray) -> tuple:
+    """A per-rank relation's entries of its cells' rows (local rows, input DOFs,
+    coefficients), by row then DOF, the zero coefficients left out (as ``to_owners``
+    does): one row per cell, its DOFs each once."""
+    local = np.repeat(np.arange(rows.size), inputs.shape[1])
+    dofs, vals = inputs.ravel(), coefs.ravel()
+    keep = vals != 0.0
+    order = np.lexsort((dofs[keep], local[keep]))
+    return local[keep][order], dofs[keep][order], vals[keep][order]
 
 
 def row_cell(comm, r: rel.Relation, row: int) -> int | None:
-    """The input id of the cell of a per-cell strain row (None for another relation), from
-    the rank counting it. Collective."""
+    """The input id of the cell of a per-cell strain row (its number in the whole relation;
+    None for another relation), from the rank counting it. Collective."""
     rows = r.meta.get("cell_rows")
     if rows is None:
         return None

@@ -20,7 +20,9 @@ reads the multipliers of the rows it owns only (``owned``: those whose multiplie
 owns). What a multiplier decides — a row whose reaction pulls — is decided by the row's owner,
 and the rows so found (few: the changes) are exchanged, with their scores; the rest (violated
 rows, groups, cycling, the bound) is decided from the gaps, alike on every rank. A group is
-decided from gaps alone, so its rows need not share an owner.
+decided from gaps alone, so its rows need not share an owner. A relation built per rank
+(``Relation.ids``: solubility's nodes) has its groups on the rank building them, each whole
+there: that rank alone decides them.
 """
 
 from __future__ import annotations
@@ -87,6 +89,9 @@ class ActiveSet:
         self.group_rows = np.flatnonzero(grouped)
         starts = np.flatnonzero(np.diff(np.concatenate([[-1], group[grouped]])) != 0)
         self.group_starts = starts                       # into group_rows
+        # whether some relation has groups (on any rank: a relation built per rank may have
+        # none here, and deciding them is collective)
+        self._grouped = any(r.maximum or r.groups is not None for r in relations)
         # the control groups (a maximum relation), for the per-step predictor
         self.groups = [np.arange(first[k], first[k + 1]) for k, r in enumerate(relations) if r.maximum]
         self.maximum = np.concatenate([np.full(r.nrows, r.maximum) for r in relations]) \
@@ -146,7 +151,7 @@ class ActiveSet:
         new[violated] = True
         new[wrong_sign] = False
         gain = None
-        if self.group_rows.size:
+        if self._grouped:
             rows = self.group_rows
             best, gain = self._groups(s[rows] * gap[rows], scale)
             self._no_way_back(rows[best & ~self.active[rows] & self.held[rows] & self.maximum[rows]])

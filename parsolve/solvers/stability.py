@@ -37,6 +37,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from parsolve.mesh.blocks import exchange
 from parsolve.solvers.active_set import GROUP_TOL
 from parsolve.solvers.diagnose import NamedFailure, short_control
 
@@ -276,28 +277,51 @@ def _hold_maximum_rows(problem, held: PETSc.Mat, q: np.ndarray) -> None:
     reads a stable localization (one column damaging, its three cells at the maximum) as
     unstable; held both ways the count is at most the one-sided problem's (a quadratic form
     negative on a subspace of the admissible directions is negative on them), so an unstable
-    count is one for sure. Every rank holds the rows whole (a spread row's entries gathered):
-    rank 0 adds them."""
+    count is one for sure. Each row's entries (a spread row's: on their DOFs' owners) are
+    sent to the owner of its multiplier row, which adds its γ a aᵀ: one exchange of those
+    rows' entries, no rank gathers the others'. Collective."""
+    rset = problem.rset
     rows = np.flatnonzero(at_maximum(problem, q))
-    system = problem.system
     # (on every rank: logically collective, a reduction in a debugging PETSc)
     held.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
-    entries = [problem.rset.row_entries(problem.ctx.multiplied[k], local) for k, local in
-               (problem.rset.locate(int(row)) for row in rows)]   # (collective)
-    fixed_at = [system.eliminated_at(dofs) for dofs, _, _ in entries]   # (collective)
-    if problem.comm.rank == 0 and rows.size:
-        keep = [], []
-        for (dofs, vals, index), fixed in zip(entries, fixed_at):
-            sel = ~fixed
-            vals, index = np.asarray(vals, dtype=float)[sel], index[sel].astype(PETSc.IntType)
-            if not index.size:
-                continue
-            gamma = 2.0 * PENALTY * system.kscale / float(vals @ vals)
-            keep[0].append(index)
-            keep[1].append(gamma * np.outer(vals, vals))
-        for index, block in zip(*keep):
-            held.setValues(index, index, block, addv=PETSc.InsertMode.ADD_VALUES)
+    entries = owned_row_entries(problem, rows)
+    owner = np.searchsorted(rset.dofmap.l_ranges, rset.mult_of_row[rows], side="right") - 1
+    got, _ = exchange(problem.comm, entries, owner[entries["row"]].astype(np.int64))
+    got = got[np.lexsort((got["dof"], got["row"]))]    # (rows in order, each by input DOF)
+    starts = np.flatnonzero(np.diff(got["row"], prepend=-1))
+    gamma_k = 2.0 * PENALTY * problem.system.kscale
+    for row in np.split(got, starts[1:]):
+        if row.size:
+            vals, index = row["val"], row["saddle"].astype(PETSc.IntType)
+            held.setValues(index, index, gamma_k / float(vals @ vals) * np.outer(vals, vals),
+                           addv=PETSc.InsertMode.ADD_VALUES)
     held.assemble()
+
+
+# an entry of a relation row on its way to the row's holder: the row (its place in the rows
+# asked for), its input DOF, its saddle index, its coefficient
+ROW_ENTRY = np.dtype([("row", np.int64), ("dof", np.int64), ("saddle", np.int64),
+                      ("val", np.float64)])
+
+
+def owned_row_entries(problem, rows: np.ndarray) -> np.ndarray:
+    """The entries (``ROW_ENTRY``) of the relation rows ``rows`` of whole relations (a
+    maximum group's: held alike on every rank) on the primal DOFs this rank owns and has not
+    eliminated: each entry of a row on one rank (a spread row's where it is held)."""
+    rset, system = problem.rset, problem.system
+    eliminated = system.elim_local[system.elim_own]
+    parts = [np.zeros(0, ROW_ENTRY)]
+    for place, row in enumerate(rows):
+        k, local = rset.locate(int(row))
+        r = problem.ctx.multiplied[k]
+        sel = np.flatnonzero(r.a_rows == local)
+        at, dofs = rset.dofmap.owned_dof_entries(r.a_dofs[sel])
+        sel = sel[at[~np.isin(dofs, eliminated)]]
+        part = np.empty(sel.size, ROW_ENTRY)
+        part["row"], part["dof"], part["val"] = place, r.a_dofs[sel], r.a_vals[sel]
+        part["saddle"] = rset.dofmap.input_saddle(r.a_dofs[sel])
+        parts.append(part)
+    return np.concatenate(parts)
 
 
 def _held_symmetric(system, mat: PETSc.Mat, shift: float) -> PETSc.Mat:

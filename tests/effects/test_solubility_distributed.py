@@ -12,6 +12,7 @@ from conftest import assert_same_results, run_scene
 from helpers.scene import scene
 from parsolve.errors import InputError
 from parsolve.model import build_model
+from parsolve.relations import keep_rows
 from parsolve.scene import parse_scene
 
 N, SOURCE, FILL_END, DT = 12, 3.0, 0.5, 0.05
@@ -51,29 +52,41 @@ def solubility(model):
     return next(e for e in model.effects if e.name == "solubility")
 
 
-def test_the_part_builds_the_one_rank_relation(comm):
-    """The relation is whole on every rank, in input numbering: rows, DOFs, values, dual and
-    groups equal to one rank's, from c_sat known on the owned nodes only."""
+def test_each_rank_builds_its_nodes_rows_of_the_one_rank_relation(comm):
+    """Each rank holds the rows of its owned nodes alone (``Relation.ids``), numbered by the
+    node's place in input order: rows, DOFs, values, dual and groups equal to one rank's
+    rows at those numbers, from c_sat known on the owned nodes only; the ranks' rows are
+    the whole relation's once each, and no rank holds them all when the square splits."""
     text = square()
     whole = model_of(text, MPI.COMM_SELF)
     parts = model_of(text, comm)
     a = next(r for r in whole.relations if r.name == "solubility")
     b = next(r for r in parts.relations if r.name == "solubility")
-    assert a.nrows == b.nrows == 2 * (N + 1) ** 2
-    for name in ("a_rows", "a_dofs", "a_vals", "values", "groups"):
-        assert np.array_equal(getattr(a, name), getattr(b, name)), name
-    for x, y in zip(a.dual, b.dual):
+    assert a.nrows == b.total == 2 * (N + 1) ** 2
+    every = np.sort(np.concatenate(comm.allgather(b.ids)))
+    assert np.array_equal(every, np.arange(b.total))            # each row on one rank
+    assert comm.allreduce(b.nrows) == b.total
+    if comm.size > 1:
+        assert b.nrows < b.total                               # (2, 3 ranks: none holds all)
+    assert np.array_equal(b.ids[::2] + 1, b.ids[1::2]) and np.all(b.ids[::2] % 2 == 0)
+    keep = np.zeros(a.nrows, dtype=bool)
+    keep[b.ids] = True
+    mine = keep_rows(a, keep)
+    for name in ("a_rows", "a_dofs", "a_vals", "values"):
+        assert np.array_equal(getattr(mine, name), getattr(b, name)), name
+    for x, y in zip(mine.dual, b.dual):
         assert np.array_equal(x, y)
-    assert np.array_equal(a.meta["nodes"], b.meta["nodes"])
+    assert np.array_equal(b.groups, np.repeat(np.arange(b.nrows // 2), 2))   # its own groups
+    assert np.array_equal(a.groups[b.ids], b.ids // 2)
+    assert np.array_equal(b.meta["nodes"], a.meta["nodes"][b.ids[::2] // 2])
     # the known levels: the core's nodes at 0.3, the others at 0.6 + 0.8 x
     x, y = whole.mesh.points[:, 0], whole.mesh.points[:, 1]
     core = (x >= 0.3 - 1e-9) & (x <= 0.6 + 1e-9) & (y >= 0.3 - 1e-9) & (y <= 0.7 + 1e-9)
-    np.testing.assert_allclose(b.values[1::2], np.where(core, 0.3, 0.6 + 0.8 * x), rtol=1e-15)
-    assert np.all(b.values[::2] == 0.0)
-    mesh = parts.mesh   # c_sat on the owned nodes only
+    np.testing.assert_allclose(a.values[1::2], np.where(core, 0.3, 0.6 + 0.8 * x), rtol=1e-15)
+    assert np.all(a.values[::2] == 0.0)
+    mesh = parts.mesh   # c_sat on the owned nodes only, the rows on the owned nodes only
     assert solubility(parts).c_sat.shape == (mesh.n_owned,)
-    mine = np.isin(b.meta["nodes"], mesh.global_nodes[:mesh.n_owned])
-    assert comm.allreduce(int(mine.sum())) == (N + 1) ** 2
+    assert np.all(np.isin(b.meta["nodes"], mesh.global_nodes[:mesh.n_owned]))
 
 
 @pytest.mark.parametrize("drain, mode", [(False, "swmr"), (True, "parallel")],

@@ -25,7 +25,8 @@ from helpers.control import BAR, E, H, L, newton_of
 from helpers.scene import DROP, scene, shipped
 
 from parsolve.errors import SolverError
-from parsolve.solvers.stability import SHIFT, at_maximum, negative_pivots, unstable_modes
+from parsolve.solvers.stability import SHIFT, at_maximum, negative_pivots, owned_row_entries, \
+    unstable_modes
 
 STEPS, PEAK = 24, 10            # ε = 1e-5 a step: εd0 = 1e-4 at step 10
 MAZARS = {"model": "mazars", "E": E, "nu": 0.0, "eps_d0": 1e-4, "At": 1.0, "Bt": 1e4,
@@ -122,15 +123,13 @@ def _dense_count(problem, states, extra=()) -> int:
 
 
 def _primal_row(problem, row: int, iq: np.ndarray) -> np.ndarray:
-    """Relation row ``row``'s A on the primal block's columns (its held DOFs left out)."""
-    k, local = problem.rset.locate(int(row))
-    rel, system = problem.ctx.multiplied[k], problem.system
-    dofs, vals, saddle = problem.rset.row_entries(rel, local)   # (a spread row's: gathered)
-    sel = ~system.eliminated_at(dofs)   # (each told by its owner: collective)
+    """Relation row ``row``'s A on the primal block's columns (its held DOFs left out; each
+    entry from the rank owning its DOF, gathered here for the dense check)."""
+    got = np.concatenate(MPI.COMM_WORLD.allgather(owned_row_entries(problem, np.array([row]))))
     order = np.argsort(iq)
-    where = order[np.searchsorted(iq, saddle[sel], sorter=order)]
+    where = order[np.searchsorted(iq, got["saddle"], sorter=order)]
     out = np.zeros(iq.size)
-    np.add.at(out, where, vals[sel])
+    np.add.at(out, where, got["val"])
     return out[None, :]
 
 
