@@ -7,8 +7,6 @@ near them, and numbers its entries as the whole pairing would.
   receives the facets near its slaves only (and its own), not the whole master surface.
   Finite sliding does it again on the current configuration, sending only the facets new
   to a rank (none: no exchange).
-* ``SharedTuples``: a row's node tuple declared by its nodes' owners (nodal values fetched
-  from theirs: ``la.fetch.Fetch``).
 * ``global_positions``: the place of each of a rank's entries among every rank's (entries
   sorted by input id, each id on one rank): the relation rows' own numbering
   (``relation_kinds.spread.places``), never the whole pairing on a rank.
@@ -65,31 +63,6 @@ def global_positions(comm, ids: np.ndarray) -> tuple[np.ndarray, int]:
     ids = np.asarray(ids, dtype=np.int64)
     space = comm.allreduce(int(ids.max()) + 1 if ids.size else 0, op=MPI.MAX)
     return places(comm, ids, space), comm.allreduce(int(ids.size))
-
-
-class SharedTuples:
-    """Node tuples (global node numbers, (n, m), the same width on every rank) built on one
-    rank (a row's: its slave node, owned there, and master nodes anywhere), declared also by
-    every other rank owning one of their nodes (each rank adds the rows it owns: a term's
-    tuple must be declared by each of its nodes' owners). ``nodes``: this rank's tuples,
-    then those sent to it; ``share`` sends per-tuple values alongside. Collective."""
-
-    def __init__(self, comm, tuples: np.ndarray, node_ranges: np.ndarray):
-        self.comm = comm
-        n, m = tuples.shape
-        owner = np.searchsorted(node_ranges, tuples, side="right") - 1
-        keys = np.unique(owner * max(n, 1) + np.arange(n)[:, None])    # (rank, tuple), sorted
-        rank, tup = np.divmod(keys, max(n, 1))
-        other = rank != comm.rank
-        self.dest, self.tuple = rank[other], tup[other]
-        got, _ = exchange(comm, tuples[self.tuple], self.dest)
-        self.nodes = np.concatenate([tuples, got.reshape(-1, m)]).astype(np.int64)
-
-    def share(self, values: np.ndarray) -> np.ndarray:
-        """Per-tuple values of this rank's tuples (n, ...) → those of ``nodes`` (own, then
-        received). Collective."""
-        got, _ = exchange(self.comm, np.ascontiguousarray(values[self.tuple]), self.dest)
-        return np.concatenate([values, got.reshape((-1,) + values.shape[1:])])
 
 
 @dataclass

@@ -44,10 +44,11 @@ slave box gathered, the facets that meet it sent; never the whole surface; finit
 again on the current configuration, the facets new to a rank sent as they come near); a
 row's values on a master node another rank owns are fetched from it (``_read_rows``), its D
 entries there sent to it (``la.relation_set``), and the Newton-matrix terms on its nodes (3D
-friction's cross stiffness, finite sliding's geometric stiffness) declared by each node's
-owner with their values sent along (``effects.row_terms``). Against a rigid obstacle the
-rank projects its own slave nodes. Node states, slip directions and decisions are the rank's
-own; only a change (any rank's) and the resultants cross the ranks.
+friction's cross stiffness, finite sliding's geometric stiffness) declared by the rank alone,
+their entries in rows another rank owns sent there (``effects.row_terms``, ``la.tuple_rows``).
+Against a rigid obstacle the rank projects its own slave nodes. Node states, slip directions
+and decisions are the rank's own; only a change (any rank's) and the resultants cross the
+ranks.
 
 Held, tied and shared nodes: a contact node that a Dirichlet condition also holds, a periodic
 tie between contact nodes, a node in two surfaces along one normal make the enforced rows

@@ -64,9 +64,10 @@ it owns (the relations form's pairing per rank: against the master facets near t
 own slaves projected on the obstacle): their areas A_i from its facets through them (a
 facet's ghost nodes' pairing fetched from their owners), their gaps g and g_T from the
 displacement of its pairs' nodes, each fetched from its owner (one plan). A pair's tuple is
-declared on every rank that owns one of its nodes: the pair's rank sends it once to those
-owners (``contact.distributed.SharedTuples``) and its stiffness and forces with it at each
-evaluation (one exchange); each rank adds the rows of the nodes it owns. Finite sliding
+declared by the pair's rank alone: the system sends the entries of its rows another rank
+owns to that owner, summed per (row, column) over the rank's pairs (``la.tuple_rows``), and
+the pair's rank sends the forces on those nodes (one exchange an evaluation). A rank owning
+the whole master surface then declares its own slaves' pairs only. Finite sliding
 against a master region (``SlidingPenalty``) pairs each rank's slaves again against the
 master facets near them on the current configuration, those that came near sent to it
 (``contact.distributed.update_near``, as the relations form's finite sliding). The
@@ -91,12 +92,13 @@ from dataclasses import dataclass
 import numpy as np
 from mpi4py import MPI
 
-from parsolve.contact.distributed import SharedTuples, facet_extent, facet_index, update_near
+from parsolve.contact.distributed import facet_extent, facet_index, update_near
 from parsolve.contact.friction import OPEN, SLIP, STICK
 from parsolve.contact.pairing import pair_nodes, pair_on
 from parsolve.contact.surfaces import Surfaces
 from parsolve.la.dofmap import DofMap
 from parsolve.la.fetch import Fetch
+from parsolve.mesh.blocks import exchange
 from parsolve.effects import contact
 from parsolve.effects.base import Effect
 from parsolve.effects.contact_sliding import KEEP_TOL
@@ -312,22 +314,26 @@ class PenaltyContact(Effect):
     def _declare(self, p) -> None:
         """The contact elements: one node tuple per pair (its slave node, then its master
         facet's nodes; an obstacle's pair is its slave alone), in the partition's global node
-        numbers, declared on every rank that owns one of its nodes (each adds its owned rows:
-        a pair split over ranks is whole, no entry crosses ranks at assembly): a rank's own
-        pairs' tuples sent to the owners of their other nodes (``dist.SharedTuples``), their
-        values and forces with them at each evaluation. Also (tuple, place in it, local node)
-        of the tuple nodes this rank owns: where its forces go; and the pairs' gradients ∂g,
-        ∂g_T and their tuples' places among the surface nodes. Collective."""
+        numbers, declared by this rank alone, the rank of its slave node (the system sends the
+        entries of the rows another rank owns there: ``la.tuple_rows``). Also (tuple, place
+        in it, local node) of the tuple nodes this rank owns, where its forces go, and the
+        plan of the forces on the others, sent to their owners; the pairs' gradients ∂g, ∂g_T
+        and their tuples' places among the surface nodes. Collective."""
         ids = np.concatenate([p.slave[:, None], p.master], axis=1)          # (n, m) input ids
         self.gradients(p)
         values = self.values
         self.tuple_ids = ids
-        self.shared = SharedTuples(values.comm, self.geo.new_of(ids).reshape(ids.shape),
-                                   values.node_ranges)
-        nodes = self.term.nodes = self.shared.nodes
+        nodes = self.term.nodes = self.geo.new_of(ids).reshape(ids.shape).astype(np.int64)
         lo, hi = values.node_ranges[values.rank], values.node_ranges[values.rank + 1]
-        pair, place = np.nonzero((nodes >= lo) & (nodes < hi))
+        mine = (nodes >= lo) & (nodes < hi)
+        pair, place = np.nonzero(mine)
         self.force_at = (pair, place, nodes[pair, place] - lo)   # (owned: new = lo + local)
+        pair, place = np.nonzero(~mine)
+        owner = np.searchsorted(values.node_ranges, nodes[pair, place], side="right") - 1
+        order = np.argsort(owner, kind="stable")
+        self.away = (pair[order], place[order], owner[order])
+        got, _ = exchange(values.comm, nodes[pair, place][order], owner[order])
+        self.away_local = got - lo
 
     def gradients(self, p) -> None:
         """The pairs' ∂g, ∂g_T and their tuples' places among the surface nodes."""
@@ -437,13 +443,13 @@ class PenaltyContact(Effect):
         trial = {"pN": f["pN"], "t": f["t"], "gT": f["gT"]}
         pair, place, local = self.force_at
         tuple_forces, k = self.tuple_forces(f), self.node_tangents(f)
-        n, m, d = tuple_forces.shape
-        # (with those of the tuples sent here: one exchange of both)
-        both = self.shared.share(np.concatenate([tuple_forces.reshape(n, m * d),
-                                                 k.reshape(n, (m * d) ** 2)], axis=1))
-        tuple_forces = both[:, :m * d].reshape(-1, m, d)
-        k = both[:, m * d:].reshape(-1, m * d, m * d)
-        forces = NodeForces(local[:, None], tuple_forces[pair, place][:, None, :])
+        m, d = tuple_forces.shape[1:]
+        # the forces on nodes another rank owns sent there (one exchange)
+        away, _, owner = self.away
+        got, _ = exchange(self.values.comm, tuple_forces[away, self.away[1]], owner)
+        forces = NodeForces(np.concatenate([local, self.away_local])[:, None],
+                            np.concatenate([tuple_forces[pair, place],
+                                            got.reshape(-1, d)])[:, None, :])
         # (n, m·d, m·d) → (d·d, m, m, n): entry (i, j) of node pair (a, b) at [i d + j, a, b]
         blocks = k.reshape(len(k), m, d, m, d).transpose(2, 4, 1, 3, 0).reshape(d * d, m, m, -1)
         return {self.u: forces}, [(self.term, TermMatrices(self.term, blocks))], trial, None

@@ -23,7 +23,6 @@ from typing import Callable
 import numpy as np
 from mpi4py import MPI
 
-from parsolve.contact.distributed import SharedTuples
 from parsolve.contact.rows import Rows
 from parsolve.fem.element_matrices import Term, TermMatrices
 
@@ -65,10 +64,9 @@ def outer_blocks(u: np.ndarray, w: np.ndarray) -> np.ndarray:
 
 class RowTerm:
     """A term on the tuples of this rank's own rows (``RowTuples``; a slave's rows live on its
-    owner, their master nodes on any rank) in the partition's global node numbers: each tuple
-    sent once to the owners of its other nodes (``contact.distributed.SharedTuples``), which
-    declare it too (each rank adds its owned rows: a tuple split over ranks is whole, no entry
-    crosses ranks at assembly), its values following it at each evaluation. Its values come
+    owner, their master nodes on any rank) in the partition's global node numbers, declared
+    by this rank alone (the system sends the entries of the rows another rank owns there:
+    ``la.tuple_rows``). Its values come
     with the effect's tangent (``evaluate``), set by its hooks between iterations as its
     relations' are; it is ``linear`` in the model's sense (no internal force: the model is as
     nonlinear as its forces, and the hooks run the Newton loop). ``new_of`` gives input node
@@ -79,7 +77,6 @@ class RowTerm:
                          global_ids=True)
         self.new_of = new_of
         self.layout: RowTuples | None = None
-        self.shared: SharedTuples | None = None
 
     def lay(self, rows: Rows, per: int, dim: int, values) -> None:
         """Its tuples from the rows' layout (this rank's rows). Collective."""
@@ -89,12 +86,8 @@ class RowTerm:
         if width > nodes.shape[1]:   # (the same width everywhere: first nodes repeated)
             pad = np.repeat(nodes[:, :1], width - nodes.shape[1], axis=1)
             self.layout.nodes = nodes = np.concatenate([nodes, pad], axis=1)
-        self.shared = SharedTuples(values.comm, self.new_of(nodes).reshape(nodes.shape),
-                                   values.node_ranges)
-        self.term.nodes = self.shared.nodes
+        self.term.nodes = self.new_of(nodes).reshape(nodes.shape).astype(np.int64)
 
     def matrices(self, u: np.ndarray, w: np.ndarray) -> tuple[Term, TermMatrices]:
-        """(the term, Σ_r u_r w_rᵀ) from (k, r, m, d) arrays over this rank's tuples, with
-        the values of the tuples sent to it. Collective."""
-        blocks = np.moveaxis(outer_blocks(u, w), -1, 0)
-        return self.term, TermMatrices(self.term, np.moveaxis(self.shared.share(blocks), 0, -1))
+        """(the term, Σ_r u_r w_rᵀ) from (k, r, m, d) arrays over this rank's tuples."""
+        return self.term, TermMatrices(self.term, outer_blocks(u, w))

@@ -505,8 +505,9 @@ class Term:
     cells: np.ndarray | None = None   # a cell term's region (mesh cells); None: every cell
     slots: np.ndarray | None = None   # (m, m, k), set by the system
     # ``nodes`` are the partition's global node numbers, not local ones: tuples whose nodes
-    # need not be on this rank's part (a contact pair: a slave node and its master facet's);
-    # the rank declares those with a node it owns, and gives their forces itself
+    # need not be on this rank's part (a contact pair: a slave node and its master facet's),
+    # each declared by one rank (the entries of rows another rank owns are sent there:
+    # ``la.tuple_rows``), which gives their forces itself
     global_ids: bool = False
     facets: np.ndarray | None = None  # (k, nfn) local nodes of boundary facets: a facet term
     # a vector term (a load): the pattern it belongs to (None: its declarer's), its factor in

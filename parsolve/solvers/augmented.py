@@ -201,11 +201,12 @@ BLOCK_COND = 1e10
 
 
 def level_smoothers(pc: PETSc.PC, settings: dict[str, str]) -> dict[str, str] | None:
-    """The settings with point-block Jacobi (each node's, or coarse aggregate's, diagonal block
-    inverted) in the Chebyshev smoother of every level of the fieldsplit's GAMG V-cycle whose
-    blocks are all invertible and which the settings leave alone, when the hierarchy is set
-    up otherwise; None when it is so already, or is no such V-cycle, or every level's smoother
-    is chosen in ``settings`` (``-fieldsplit_q_mg_levels_pc_type``). A level with any option
+    """Point-block Jacobi (each node's, or coarse aggregate's, diagonal block inverted) put in
+    the Chebyshev smoother of every level of the fieldsplit's GAMG V-cycle whose blocks are
+    all invertible and which the settings leave alone, on the V-cycle as set up (once): the
+    settings with those levels' choice (for its later set-ups); None when no level changes,
+    or there is no such V-cycle, or every level's smoother is chosen in ``settings``
+    (``-fieldsplit_q_mg_levels_pc_type``). A level with any option
     of its own in the settings (``-fieldsplit_q_mg_levels_1_ksp_type``, ``..._1_pc_type``:
     the scene's or the command line's) keeps it and is not touched; no setting is dropped.
     Call with the options inserted (it sets the V-cycle up; collective).
@@ -228,7 +229,23 @@ def level_smoothers(pc: PETSc.PC, settings: dict[str, str]) -> dict[str, str] | 
            if not any(k.startswith(LEVEL.format(lv)[:-7]) for k in settings)]
     blocks = [lv for lv in own if _blocks_invertible(amg.getMGSmoother(lv).getOperators()[1])]
     chosen = {**settings, **{LEVEL.format(lv): "pbjacobi" for lv in blocks}}
-    return None if chosen == settings else chosen
+    if chosen == settings:
+        return None
+    # the hierarchy kept (it does not depend on the smoothers), the chosen levels' smoothers
+    # changed in place: no second set-up. GAMG gave a Chebyshev on point Jacobi its smoothed
+    # aggregation's bounds of D⁻¹A and turned its own estimate off; those are not point
+    # blocks' bounds: the Chebyshev made anew (its type set again, its options read again)
+    # estimates them at its first smoothing, as when the setting is there at the set-up (the
+    # same iterations and answers, bit for bit at 1 and 2 ranks)
+    for lv in blocks:
+        smoother = amg.getMGSmoother(lv)
+        if smoother.getType() == "chebyshev":
+            smoother.setType("richardson")
+            smoother.setType("chebyshev")
+        smoother.getPC().setType("pbjacobi")
+        smoother.setFromOptions()
+        smoother.setUp()
+    return chosen
 
 
 def _blocks_invertible(mat: PETSc.Mat) -> bool:

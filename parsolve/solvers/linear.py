@@ -267,10 +267,8 @@ class LinearSolver:
                 self.settings = {**self.settings, "mat_mumps_icntl_14": str(margin)}
                 self.notes.append(f"MUMPS workspace too small: margin raised to {margin} %")
         self.timings["factorization"] += time.perf_counter() - t0
-        if smoother is not None:   # (once per V-cycle hierarchy: set up again with it)
+        if smoother is not None:   # (set on the V-cycle already; its later set-ups too)
             self.settings = smoother
-            self._restart(mat)
-            return self._prepare()
         self._state = mat.stateGet()
 
     def _precondition(self, mat: PETSc.Mat) -> None:

@@ -22,6 +22,7 @@ from parsolve.la.fetch import Fetch
 from parsolve.la.pattern import node_pattern
 from parsolve.la.petsc import SaddleOperator
 from parsolve.la.relation_set import RelationSet
+from parsolve.la.tuple_rows import TupleRows
 from parsolve.mesh.topology import match_facets
 from parsolve.model import Model
 from parsolve.solvers.augmented import AugmentedMatrix
@@ -75,24 +76,36 @@ class SaddleSystem:
         """The stiffness pattern of the effects' declared terms (``Effect.terms``): the local
         cells (the domain of the cell terms), then the node terms' tuples of m nodes, each
         padded into a pseudo-cell [a, b, b, ...] after the cells (a repeated node a diagonal
-        entry), or covered by several when wider than a cell (``_Cover``). The cells'
-        reductions get the cells' slots; a node term, and a cell term on a region, its own
-        (``Term.slots``)."""
+        entry), or covered by several when wider than a cell (``_Cover``), then the entries
+        other ranks' terms in global numbers send to this rank's rows (``la.tuple_rows``:
+        [row, column, column, ...]). The cells' reductions get the cells' slots; a node term,
+        and a cell term on a region, its own (``Term.slots``); the received entries theirs."""
         model = self.model
         cells = model.mesh.cells[self.local_cells]
         terms = [term for e in model.effects for term in e.terms() if not term.vector]
         tuples = [t for t in terms if t.on_nodes]
         nnodes = int(self.part.node_ranges[-1])
         nen = cells.shape[1]
-        self._check_owners(tuples)
+        self._check_owners([t for t in tuples if not t.global_ids])
         covers = [_Cover(t.nodes.shape[1], nen) for t in tuples]
         pseudo = [c.cells(g) for c, g in zip(covers, map(self._global_nodes, tuples))]
-        pattern = node_pattern(np.concatenate([self.part.new_of_old[cells]] + pseudo), lo, hi,
-                               model.ncomp, nnodes)
+        # a term in global numbers is declared by one rank: its rows owned elsewhere travel
+        self._away = [(t, TupleRows(self.comm, t.nodes, self.part.node_ranges))
+                      for t in tuples if t.global_ids]
+        received = [rows.cells(nen) for _, rows in self._away]
+        pattern = node_pattern(np.concatenate([self.part.new_of_old[cells]] + pseudo + received),
+                               lo, hi, model.ncomp, nnodes)
         start = len(cells)
         for t, c, g in zip(tuples, covers, pseudo):
             t.slots = c.slots(pattern.pair_slot, start, len(t.nodes))
             start += len(g)
+        self._away_slots = []   # (the received entries' slots: (row, column), a diagonal's)
+        for _, rows in self._away:
+            at = slice(start, start + len(rows.received))
+            diagonal = rows.received[:, 0] == rows.received[:, 1]
+            self._away_slots.append(np.where(diagonal, pattern.pair_slot[0, 0, at],
+                                             pattern.pair_slot[0, 1, at]).astype(np.intp))
+            start = at.stop
         # the node tuples the pattern holds (``restructure``: a term whose domain moved)
         self._domains = [(t, t.nodes.copy()) for t in tuples]
         if tuples:
@@ -105,17 +118,36 @@ class SaddleSystem:
                 t.slots = facet_slots(model.mesh, self.local_cells, pattern.pair_slot, t.facets)
         return pattern
 
+    def _received(self, ke) -> list:
+        """The entries of this rank's rows in the global-number terms other ranks declared
+        (``la.tuple_rows``): (row components, column components, slots, values (n, width)),
+        the slots unique. Collective (an exchange a term)."""
+        parts = getattr(ke, "parts", None) or getattr(getattr(ke, "base", None), "parts", [])
+        fields, out = self.model.fields, []
+        for (t, rows), slots in zip(self._away, self._away_slots):
+            ci, cj = fields.columns(t.test), fields.columns(t.trial)
+            part = next(((m, fac) for _, _, m, fac in parts if getattr(m, "term", None) is t),
+                        None)
+            got = rows.send(None, len(ci) * len(cj)) if part is None else \
+                rows.send(part[0].values, len(ci) * len(cj), part[1])
+            keys, inv = np.unique(slots, return_inverse=True)
+            sums = np.stack([np.bincount(inv.ravel(), weights=v, minlength=keys.size)
+                             for v in got.T], axis=1) if keys.size else got[:0]
+            out.append((ci, cj, keys, sums))
+        return out
+
     def _global_nodes(self, term) -> np.ndarray:
         """A node term's tuples in the partition's global node numbers (``Term.global_ids``:
         given so, nodes that may lie on no part of this rank's)."""
         return term.nodes if term.global_ids else self.part.new_of_old[term.nodes]
 
     def _check_owners(self, tuples: list) -> None:
-        """Each rank adds the rows it owns of the node tuples it declares: a tuple is whole
-        only if the owner of each of its nodes declares it too. A tuple some owner does not
-        declare (its nodes share no cell and lie on different ranks' parts) would lose that
-        node's rows silently, and leave the operator's pattern unsymmetric: refused on every
-        rank alike. Collective (one exchange of the tuples with their nodes' owners)."""
+        """Tuples in local numbers: each rank adds the rows it owns of those it declares, so
+        a tuple is whole only if the owner of each of its nodes declares it too (one some
+        owner does not declare: its nodes share no cell and lie on different ranks' parts)
+        would lose that node's rows silently, and leave the operator's pattern unsymmetric:
+        refused on every rank alike. Collective (one exchange of the tuples with their nodes'
+        owners)."""
         comm, ranges = self.comm, self.part.node_ranges
         mine, out = [], [[] for _ in range(comm.size)]
         for i, t in enumerate(tuples):   # (every rank declares the same terms, in one order)
@@ -284,13 +316,22 @@ class SaddleSystem:
         there directly (no node-pair array beside the matrix) when the form can, else reduced
         and copied (a tangent with a few cells replaced)."""
         slot, npairs = self.pattern.pair_slot, self.pattern.nnzb
+        received = self._received(ke)
+        nc = self.dofmap.ncomp
         if isinstance(ke, ElementMatrices):
-            nc = self.dofmap.ncomp
             ke = BlockMatrices(nc, [(np.arange(nc), np.arange(nc), ke, 1.0)])
         if isinstance(ke, BlockMatrices):
-            ke.reduce_into(slot, npairs, StiffnessTarget(self.op.data, self.op.block_start))
+            target = StiffnessTarget(self.op.data, self.op.block_start)
+            ke.reduce_into(slot, npairs, target)
+            for ci, cj, keys, sums in received:
+                for k, (i, j) in enumerate((i, j) for i in ci for j in cj):
+                    target.data[target.starts[i, keys] + j] += sums[:, k]
         else:
-            self.op.set_stiffness(ke.reduce(slot, npairs))
+            blocks = ke.reduce(slot, npairs)
+            for ci, cj, keys, sums in received:
+                for k, (i, j) in enumerate((i, j) for i in ci for j in cj):
+                    blocks[i * nc + j, keys] += sums[:, k]
+            self.op.set_stiffness(blocks)
 
     def to_owned(self, full: np.ndarray) -> np.ndarray:
         """A primal vector of this mesh's DOFs → this rank's rows (multiplier rows zero)."""

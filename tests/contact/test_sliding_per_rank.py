@@ -112,8 +112,8 @@ def test_at_four_ranks_the_sliding_penalty_holds_at_most_035_of_the_pairs(shared
     ranks, paired again at a step's start: each rank's pairs (and so the entries of their
     tuples, computed there) and its surface nodes (its slaves, the master facets near them)
     are ≤ 0.35× those of one rank (measured: 0.28, 0.34): no rank holds the whole pairing
-    or the whole surfaces. (The tuples sent to a rank owning their master nodes are declared
-    there too: the one rank owning the foundation declares all of them.)"""
+    or the whole surfaces. (A pair's tuple is declared by its rank alone: the one rank owning
+    the foundation declares its own slaves' only, test_contact_penalty_per_rank.py.)"""
     mesh = shared_tmp / "sliding_penalty_count.msh"
     write_mesh(mesh, 8, 64, ny_low=1, ny_up=1, seed=4)
     text = FOUNDATION.format(mesh=mesh, discretization="node_to_segment").replace(

@@ -1,6 +1,6 @@
 """The penalty contact against a deformable master (parsolve/effects/contact_penalty.py): its
 force and tangent are node-tuple terms (each slave node with its master facet's nodes), in
-the partition's global node numbers, declared by every rank owning one of the tuple's nodes.
+the partition's global node numbers, declared by the rank of the slave node alone.
 
 - A flat punch whose slave side refines its master (2D node-to-segment, 3D node-to-face): the
   uniform pressure p is transmitted exactly, every slave's gap is −p/penalty to round-off

@@ -15,6 +15,7 @@ depend on timing.
 from conftest import solve_in_process
 from helpers.scene import scene, shipped
 from parsolve.solvers import linear
+from parsolve.solvers.augmented import LEVEL
 from solvers.test_iterative_scenes import assert_same_answers
 
 #: docs/performance.md: at most 25 per solve at 8× on the augmented form; the regression: 210
@@ -112,3 +113,36 @@ def test_a_level_given_its_own_options_keeps_them(comm):
     assert (one.getType(), one.getPC().getType()) == ("richardson", "jacobi")
     assert all(amg.getMGSmoother(lv).getPC().getType() == "pbjacobi" for lv in range(2, levels))
     assert solver.settings["fieldsplit_q_mg_levels_1_ksp_type"] == "richardson"
+
+
+def test_the_v_cycle_set_up_once_its_point_blocks_estimating_their_bounds(comm, monkeypatch,
+                                                                          shared_tmp):
+    """level_smoothers puts point blocks on the V-cycle as set up: the solver is not set up a
+    second time (no restart), and each point-block level's Chebyshev estimates its own
+    eigenvalue bounds (GAMG's, of point Jacobi's D⁻¹A, left behind), as a set-up with the
+    setting given does: the same Krylov iterations on the friction box's first solve."""
+    from petsc4py import PETSc
+
+    restarts = []
+    restart = linear.LinearSolver._restart
+    monkeypatch.setattr(linear.LinearSolver, "_restart",
+                        lambda self, mat: restarts.append(1) or restart(self, mat))
+    text = scene(shipped("contact_friction_3d.toml"), steps={"count": 1},
+                 solver={"preset": "iterative", "petsc": {"condensed": "false"}})
+    _, solver, _, _, _ = solve_in_process(text, comm, options={})
+    assert restarts == []
+    its = solver.ksp.getIterationNumber()
+    amg = solver.ksp.getPC().getFieldSplitSubKSP()[0].getPC()
+    views = []
+    for lv in range(1, amg.getMGLevels()):
+        path = shared_tmp / f"smoother_{lv}_{comm.size}.txt"
+        viewer = PETSc.Viewer().createASCII(str(path), comm=comm)
+        amg.getMGSmoother(lv).view(viewer)
+        viewer.destroy()
+        views.append(path.read_text())
+    blocks = [v for v in views if "type: pbjacobi" in v]
+    assert blocks and all("eigenvalues estimated via gmres" in v for v in blocks), views
+    # the settings given from the start (the levels' smoothers chosen, nothing to change)
+    given = {k: v for k, v in solver.settings.items() if k.startswith(LEVEL.format("")[:-8])}
+    _, again, _, _, _ = solve_in_process(text, comm, options=given)
+    assert again.ksp.getIterationNumber() == its
