@@ -31,7 +31,9 @@ parallel 4 tests/solvers/test_rank_independence.py tests/mesh/test_distribute.py
   tests/mesh/test_slices.py tests/mesh/test_mesh_cli.py tests/la/test_relation_owners.py \
   tests/la/test_relation_set.py tests/la/test_relation_memory.py \
   tests/relation_kinds/test_global_rows.py tests/mesh/test_xdmfmesh.py \
-  tests/contact/test_sliding_per_rank.py tests/contact/test_obstacle_rows_per_rank.py "$@"
+  tests/contact/test_sliding_per_rank.py tests/contact/test_obstacle_rows_per_rank.py \
+  tests/effects/test_contact_penalty_per_rank.py tests/relation_kinds/test_strain_per_rank.py \
+  tests/effects/test_solubility_distributed.py "$@"
 echo "== docs: generated pages checked, mkdocs build --strict"
 bash scripts/docs.sh
 echo "== benchmarks, smoke (every scripts/bench_*.py at its smallest size)"

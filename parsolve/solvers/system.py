@@ -431,14 +431,6 @@ class SaddleSystem:
             start += r.nrows
         return out
 
-    def eliminated_at(self, dofs: np.ndarray) -> np.ndarray:
-        """Mask of the input DOFs (the same on every rank) that are eliminated, each told by
-        its owner (one reduction of their number). Collective."""
-        sel, local = self.dofmap.owned_dof_entries(dofs)
-        out = np.zeros(np.asarray(dofs).size)
-        out[sel] = np.isin(local, self.elim_local[self.elim_own])
-        return self.dofmap.sum_ranks(out) > 0.5
-
 
 def _rows(a: np.ndarray) -> np.ndarray:
     """The rows of a 2D integer array as single comparable items (for ``np.isin``)."""
