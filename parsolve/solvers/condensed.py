@@ -103,7 +103,8 @@ class CondensedPreconditioner:
 
     S is K's copy (a submatrix of M, its storage reused by the next updates) with the rows
     and columns of the condensed nodes transformed in place; the application's products with
-    K, A and B are products with M of vectors zero in the other field."""
+    K and A are products with M of vectors zero in the multipliers (B's only on the rows with
+    a diagonal C, per node)."""
 
     def __init__(self, comm: MPI.Comm, ncomp: int, is_q: PETSc.IS, is_l: PETSc.IS,
                  prefix: str):
@@ -245,6 +246,7 @@ class CondensedPreconditioner:
         self.w = np.where(hard, 0.0, 1.0 / np.where(hard, 1.0, diag))
         self.dk = np.zeros((m, nc, nc))
         np.add.at(self.dk, at[soft], -self.w[soft, None, None] * b[soft, :, None] * a[soft, None, :])
+        self.soft, self.soft_at, self.soft_b = soft, at[soft], b[soft]   # (B on their nodes)
         # the hard rows: A_nᵀ (columns padded with zeros) = Q R
         an = np.zeros((m, nc, nc))
         bn = np.zeros((m, nc, nc))
@@ -470,18 +472,24 @@ class CondensedPreconditioner:
     def _nodal(self, blocks: np.ndarray, v: np.ndarray) -> np.ndarray:
         return np.einsum("nij,nj->ni", blocks, v.reshape(-1, self.nc)[self.nodes])
 
-    def _product(self, q: np.ndarray | None, lam: np.ndarray | None) -> tuple[np.ndarray,
-                                                                            np.ndarray]:
-        """M [q; λ] (either zero when None) as (primal rows, multiplier rows), with K_eff in
-        place of K (the folded rows' - B C⁻¹ A, per node) when q is given."""
+    def _folded_dual(self, r_l: np.ndarray) -> np.ndarray:
+        """B C⁻¹ r_λ on the condensed nodes (m, ncomp): the rows with a diagonal C only, whose
+        dual lies on their own node (checked: ``_nodal_rows``, ``tied.tied_rows``), summed per
+        node from their B columns (no product with M)."""
+        out = np.zeros((self.nodes.size, self.nc))
+        np.add.at(out, self.soft_at, self.soft_b * (self.w[self.soft] * r_l[self.soft])[:, None])
+        return out
+
+    def _product(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """M [q; 0] as (primal rows, multiplier rows), with K_eff in place of K (the folded
+        rows' - B C⁻¹ A, per node)."""
         u, v = self._work[0], self._work[1]
         ua = u.array
-        ua[:self.nq] = 0.0 if q is None else q
-        ua[self.nq:] = 0.0 if lam is None else lam
+        ua[:self.nq] = q
+        ua[self.nq:] = 0.0
         self.mat.mult(u, v)
         out_q, out_l = v.array[:self.nq].copy(), v.array[self.nq:].copy()
-        if q is not None:
-            out_q.reshape(-1, self.nc)[self.nodes] += self._nodal(self.dk, q)
+        out_q.reshape(-1, self.nc)[self.nodes] += self._nodal(self.dk, q)
         return out_q, out_l
 
     def setUp(self, pc: PETSc.PC) -> None:
@@ -492,7 +500,8 @@ class CondensedPreconditioner:
         nq, nc = self.nq, self.nc
         xa = x.getArray(readonly=True)
         r_q, r_l = xa[:nq], xa[nq:]
-        rhat = r_q - self._product(None, self.w * r_l)[0]        # r̂ = r_q - B C⁻¹ r_λ
+        rhat = r_q.copy()                                       # r̂ = r_q - B C⁻¹ r_λ
+        rhat.reshape(-1, nc)[self.nodes] -= self._folded_dual(r_l)
         padded = np.zeros((self.nodes.size, nc))
         padded[self.hard_at, self.hard_pos] = r_l[self.hard]
         qc = np.zeros(nq)
@@ -502,7 +511,7 @@ class CondensedPreconditioner:
             work.array[:] = qc
             self.X.mult(work, f)
             qc = qc + f.array
-        t = rhat - self._product(qc, None)[0]
+        t = rhat - self._product(qc)[0]
         fa = f.array
         if self.G is None:
             fa[:] = t                                           # G (r̂ - K_eff q_c)
@@ -518,7 +527,7 @@ class CondensedPreconditioner:
             self.H.mult(yf, work)
             q = work.array.copy()
         q += qc
-        kq, aq = self._product(q, None)
+        kq, aq = self._product(q)
         lam = np.zeros(self.nl)
         lam[self.hard] = self._nodal(self.dual, rhat - kq)[self.hard_at, self.hard_pos]
         lam += self.w * (r_l - aq)

@@ -1,7 +1,7 @@
 """The algebraic multigrid V-cycle on the condensed primal operator S (solvers.condensed):
-GAMG, its finest level smoothed by SOR sweeps, its coarse operators made by the Galerkin
-product that holds the least memory on more than one rank, its coarse hierarchy kept across
-set-ups while it serves."""
+GAMG, its finest level smoothed by SOR sweeps, its coarse operators made by PETSc's Galerkin
+product with its intermediates freed, its coarse hierarchy kept across set-ups while it
+serves."""
 
 from __future__ import annotations
 
@@ -21,32 +21,28 @@ from petsc4py import PETSc
 FINE_SWEEPS = 8
 
 
-#: the distributed Galerkin product of the V-cycle's set-up (``_galerkin_product``)
-GALERKIN_PRODUCT = "allatonce"
-
-
 @contextmanager
-def _galerkin_product(comm: MPI.Comm) -> Iterator[None]:
-    """PETSc's distributed P^T A P "allatonce" (GALERKIN_PRODUCT) for the V-cycle's coarse
-    operators while it is set up, unless ``-matptap_via`` is given (read under no prefix:
-    solvers.options.UNPREFIXED); one rank has no distributed product. Its default keeps the
-    product's intermediates (A P, Pᵀ's parts, P's remote rows) on every level for reuse: on the
-    122k-DOF friction box on 2 ranks the set-up held 131 MiB per rank, 58 with "allatonce", the
-    same Krylov iterations. "allatonce" is the slower (22.5 s per set-up against 3.3 there),
-    which the hierarchy kept across the Newton iterations (VCycle) pays once per run instead
-    of once per solve: over the first step's 8 solves at 122k, 2 ranks, CPU time per Newton
-    iteration 1.72x plain elasticity's, peak memory 1.10x; made at every set-up 2.49x, 1.10x;
-    kept with the default product 1.45x, 1.31x (``-matptap_via nonscalable``;
-    scripts/results/bench_relations_scale.md)."""
+def _products_freed() -> Iterator[None]:
+    """The intermediates of the V-cycle's Galerkin products P^T A P freed once each coarse
+    operator is made (``-mat_product_clear``, in PETSc's options while it is set up, unless
+    given: read under no prefix, solvers.options.UNPREFIXED). PETSc's distributed product
+    keeps them (A P, Pᵀ's parts, P's remote rows, on every level) for a later product of the
+    same pattern, but the hierarchy is kept wholesale (VCycle) or made anew, never recomputed
+    in place: they were only held. On the 122k-DOF friction box on 2 ranks (its first step's
+    8 Newton iterations, the hierarchy made once and kept; scripts/results/
+    bench_relations_scale.md), CPU time per Newton iteration and peak memory against plain
+    elasticity's: PETSc's default product (``-matptap_via nonscalable``) freed 1.40x, 1.19x
+    (its set-up +106 MiB per rank); kept 1.45x, 1.31x (+121 MiB); "allatonce" (the least
+    memory, +48 MiB, but 22.5 s per set-up against 3.3) 1.72x, 1.10x."""
     options = PETSc.Options()
-    add = comm.size > 1 and not options.hasName("matptap_via")
+    add = not options.hasName("mat_product_clear")
     if add:
-        options["matptap_via"] = GALERKIN_PRODUCT
+        options["mat_product_clear"] = "true"
     try:
         yield
     finally:
         if add:
-            options.delValue("matptap_via")
+            options.delValue("mat_product_clear")
 
 
 #: the coarse hierarchy kept across set-ups (``VCycle.set_up``) while the last solve on it took
@@ -99,7 +95,7 @@ class VCycle:
         if not self._configured:
             self.pc.setFromOptions()
             self._configured = True
-        with _galerkin_product(self.comm):
+        with _products_freed():
             self.pc.setUp()
         if self.pc.getType() == "gamg":
             self._fine_sor()
@@ -126,6 +122,8 @@ class VCycle:
         entry on 2 ranks, which SOR divides by). Set again after every set-up, which may make
         the levels anew. The sweeps: ``-<prefix>fine_sweeps``."""
         sweeps = PETSc.Options(self.prefix).getInt("fine_sweeps", FINE_SWEEPS)
+        if sweeps <= 0:   # (GAMG's own smoother, as its options say)
+            return
         ksp = self.pc.getMGSmoother(self.pc.getMGLevels() - 1)
         if ksp.getType() != "richardson" or ksp.getPC().getType() != "sor":
             ksp.setType("richardson")
