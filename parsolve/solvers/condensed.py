@@ -37,7 +37,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from parsolve.solvers import tied
-from parsolve.solvers.vcycle import VCycle
+from parsolve.solvers.vcycle import FINE_SWEEPS, TIED_SWEEPS, VCycle
 
 #: why a system is not condensed, in words; the largest code over the ranks wins (a row that
 #: ties several nodes is the plainest reason, a row across ranks the least)
@@ -458,7 +458,7 @@ class CondensedPreconditioner:
     def _set_up_amg(self) -> None:
         if self.amg is None:
             self.amg = VCycle(self.comm, self.prefix + "condensed_")
-        self.amg.set_up(self.S)
+        self.amg.set_up(self.S, TIED_SWEEPS if self.G is not None else FINE_SWEEPS)
         if self._work is None:   # (work vectors of the application, per pattern)
             self._work = [*self.mat.createVecs(), *self.S.createVecs(), self.S.createVecLeft()]
 

@@ -19,6 +19,10 @@ from petsc4py import PETSc
 #: for 1.2x the peak memory (docs/performance.md). SOR on every level divided by a coarse
 #: operator's zero diagonal entry on 2 ranks.
 FINE_SWEEPS = 8
+#: the same when S holds tied rows (solvers.tied: S = G K_eff H): on the mortar sphere
+#: (16.7k DOFs, 1 rank) Krylov iterations per solve (mean / max) 31.7 / 34 with 8 sweeps, 24.0 /
+#: 26 with 16, 22.3 / 24 with 20, 20.3 / 22 with 24 (the flops of a solve 1.6x 8 sweeps' at 20)
+TIED_SWEEPS = 20
 
 
 @contextmanager
@@ -80,8 +84,9 @@ class VCycle:
         self._on_fresh = False    # the applications since the last set-up are on a fresh one
         self.made = self.kept = 0   # set-ups that made the hierarchy, that kept it
 
-    def set_up(self, mat: PETSc.Mat) -> None:
-        """The V-cycle for ``mat``'s values: its hierarchy made anew, or kept (class doc)."""
+    def set_up(self, mat: PETSc.Mat, sweeps: int = FINE_SWEEPS) -> None:
+        """The V-cycle for ``mat``'s values: its hierarchy made anew, or kept (class doc);
+        ``sweeps``: its finest level's SOR sweeps unless ``-<prefix>fine_sweeps`` is given."""
         if self._on_fresh:
             self._fresh = max(self._fresh, self.applies)
         keep = self._keeps(mat)
@@ -98,7 +103,7 @@ class VCycle:
         with _products_freed():
             self.pc.setUp()
         if self.pc.getType() == "gamg":
-            self._fine_sor()
+            self._fine_sor(sweeps)
         # (kept until set_up says otherwise: PCApply would remake it when S's values change)
         self.pc.setReusePreconditioner(True)
         self._made_for = mat.handle
@@ -116,14 +121,12 @@ class VCycle:
         self.applies += 1
         self.pc.apply(f, y)
 
-    def _fine_sor(self) -> None:
-        """GAMG's finest level smoothed by FINE_SWEEPS SOR sweeps (Richardson) instead of its
+    def _fine_sor(self, sweeps: int) -> None:
+        """GAMG's finest level smoothed by ``sweeps`` SOR sweeps (Richardson) instead of its
         Chebyshev (its coarser levels keep Chebyshev: their operators may hold a zero diagonal
         entry on 2 ranks, which SOR divides by). Set again after every set-up, which may make
         the levels anew. The sweeps: ``-<prefix>fine_sweeps``."""
-        sweeps = PETSc.Options(self.prefix).getInt("fine_sweeps", FINE_SWEEPS)
-        if sweeps <= 0:   # (GAMG's own smoother, as its options say)
-            return
+        sweeps = PETSc.Options(self.prefix).getInt("fine_sweeps", sweeps)
         ksp = self.pc.getMGSmoother(self.pc.getMGLevels() - 1)
         if ksp.getType() != "richardson" or ksp.getPC().getType() != "sor":
             ksp.setType("richardson")

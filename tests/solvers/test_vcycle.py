@@ -10,7 +10,8 @@ from conftest import run_scene, solve_in_process
 from helpers.scene import scene, shipped
 from solvers.test_iterative_scenes import assert_same_answers
 from parsolve.solvers import options as opt
-from parsolve.solvers.vcycle import FINE_SWEEPS, REUSE_GROWTH, VCycle, _products_freed
+from parsolve.solvers.vcycle import (FINE_SWEEPS, REUSE_GROWTH, TIED_SWEEPS, VCycle,
+                                     _products_freed)
 
 
 def _friction(comm, petsc: dict | None = None):
@@ -148,6 +149,29 @@ def test_fine_level_smoothed_by_sor(comm):
         assert fine.getTolerances()[3] == sweeps
         coarse = amg.getMGSmoother(amg.getMGLevels() - 2)
         assert amg.getMGLevels() == 2 or coarse.getType() == "chebyshev"
+
+
+def test_tied_rows_take_more_fine_sweeps(comm):
+    """S with tied rows (the coarsened mortar sphere's dual mortar rows: S = G K H) takes
+    TIED_SWEEPS on its finest level, the nodal friction box FINE_SWEEPS;
+    -condensed_fine_sweeps sets both."""
+    assert TIED_SWEEPS > FINE_SWEEPS
+    for petsc, tied, nodal in (({}, TIED_SWEEPS, FINE_SWEEPS),
+                               ({"condensed_fine_sweeps": "5"}, 5, 5)):
+        mortar = scene(shipped("contact_mortar_sphere_3d.toml"),
+                       solver={"preset": "iterative", "petsc": petsc},
+                       mesh={"n_fine": 4, "n_coarse": 2, "n_depth": 3})
+        found = {}
+        for name in ("tied", "nodal"):
+            if name == "nodal":
+                solver = _friction(comm, petsc)[1]
+            else:
+                solver = solve_in_process(mortar, comm, options={})[1]
+            pre = solver.condensed
+            assert solver.choice == "condensed" and (pre.G is not None) == (name == "tied")
+            amg = pre.amg.pc
+            found[name] = amg.getMGSmoother(amg.getMGLevels() - 1).getTolerances()[3]
+        assert found == {"tied": tied, "nodal": nodal}
 
 
 def test_galerkin_products_freed_in_scope(comm):
