@@ -306,7 +306,9 @@ class CondensedPreconditioner:
     def _tied_operator(self, mat: PETSc.Mat) -> int:
         """S = G K_eff H + k on the constrained slots (solvers.tied): K copied from M (its
         storage reused), the folded rows' blocks added on the nodes' diagonal blocks, then
-        PETSc's triple product (made anew: G and H change their pattern with the active set)."""
+        PETSc's triple product: reused (its values recomputed in place, S the same matrix, its
+        V-cycle's hierarchy kept while it serves) while G's and H's patterns stay, else made
+        anew (the active set changed)."""
         self._k = mat.createSubMatrix(self.is_q, self.is_q, submat=self._k)
         self.kscale = self._stiffness_scale(mat)
         nc = self.nc
@@ -320,11 +322,16 @@ class CondensedPreconditioner:
                                  rowmap=rows.astype(PETSc.IntType),
                                  addv=PETSc.InsertMode.ADD_VALUES)
         self._k.assemble()
-        for m in (self.G, self.H, self.X, self.S):
-            if m is not None:
-                m.destroy()
-        self.G, self.H, self.X = tied.frames(self)
-        self.S = self.G.matMatMult(self._k, self.H)
+        frames = tied.frames(self)
+        if frames[0] is self.G:   # (the same pattern: the product's symbolic part reused)
+            self.S = self.G.matMatMult(self._k, self.H, result=self.S)
+        else:
+            for m in (self.G, self.H, self.X, self.S):
+                if m is not None:
+                    m.destroy()
+            self.G, self.H, self.X = frames
+            self.S = self.G.matMatMult(self._k, self.H)
+            self._work = None
         slots = dofs[self.keep]
         self.S.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         self.S.setValuesIJV(np.arange(slots.size + 1, dtype=PETSc.IntType),
@@ -334,7 +341,6 @@ class CondensedPreconditioner:
         self.S.assemble()
         if self.S.getBlockSize() != nc:
             self.S.setBlockSize(nc)
-        self._work = None
         return 0
 
     def _stiffness_scale(self, mat: PETSc.Mat) -> float:
