@@ -17,7 +17,11 @@ from petsc4py import PETSc
 #: DOFs, 1 rank: 6 and 8 sweeps 6.8 / 10 and 6.0 / 9, GAMG's Chebyshev 23.2 / 35, PETSc's ML
 #: (the V-cycle before) 7.1 / 10; at 122k DOFs, 2 ranks: 9.9 / 14 and 9.0 / 13, ML 9.1 / 13
 #: for 1.2x the peak memory (docs/performance.md). SOR on every level divided by a coarse
-#: operator's zero diagonal entry on 2 ranks.
+#: operator's zero diagonal entry on 2 ranks. The sweeps are most of a solve's flops (79 % at
+#: 122k): there 6 and 4 sweeps took 9.9 / 14 and 11.1 / 15 iterations for CPU time per
+#: Newton iteration 1.37x and 1.09x plain elasticity's, against 1.40x with 8 (each against
+#: the elasticity of its own bench run); 2 sweeps 13.5 / 18. Fewer sweeps trade time for
+#: iterations that grow with the mesh: 8 stay, the time target (≤ 1.5x) met with them.
 FINE_SWEEPS = 8
 #: the same when S holds tied rows (solvers.tied: S = G K_eff H): on the mortar sphere
 #: (16.7k DOFs, 1 rank) Krylov iterations per solve (mean / max) 31.7 / 34 with 8 sweeps, 24.0 /
@@ -35,9 +39,10 @@ def _products_freed() -> Iterator[None]:
     in place: they were only held. On the 122k-DOF friction box on 2 ranks (its first step's
     8 Newton iterations, the hierarchy made once and kept; scripts/results/
     bench_relations_scale.md), CPU time per Newton iteration and peak memory against plain
-    elasticity's: PETSc's default product (``-matptap_via nonscalable``) freed 1.40x, 1.19x
-    (its set-up +106 MiB per rank); kept 1.45x, 1.31x (+121 MiB); "allatonce" (the least
-    memory, +48 MiB, but 22.5 s per set-up against 3.3) 1.72x, 1.10x."""
+    elasticity's: PETSc's default product (``-matptap_via nonscalable``) freed 1.30x, 1.19x
+    (1.34x, 1.19x in the same run's second such row; its set-up +106 MiB per rank); kept
+    1.45x, 1.31x (+121 MiB); "allatonce" (the least memory, +48 MiB, but 22.5 s per set-up
+    against 3.3) 1.72x, 1.10x (the last two in an earlier run)."""
     options = PETSc.Options()
     add = not options.hasName("mat_product_clear")
     if add:
