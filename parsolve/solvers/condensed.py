@@ -37,7 +37,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from parsolve.solvers import tied
-from parsolve.solvers.vcycle import VCycle
+from parsolve.solvers.vcycle import FINE_SWEEPS, TIED_SWEEPS, VCycle
 
 #: why a system is not condensed, in words; the largest code over the ranks wins (a row that
 #: ties several nodes is the plainest reason, a row across ranks the least)
@@ -103,7 +103,8 @@ class CondensedPreconditioner:
 
     S is K's copy (a submatrix of M, its storage reused by the next updates) with the rows
     and columns of the condensed nodes transformed in place; the application's products with
-    K, A and B are products with M of vectors zero in the other field."""
+    K and A are products with M of vectors zero in the multipliers (B's only on the rows with
+    a diagonal C, per node)."""
 
     def __init__(self, comm: MPI.Comm, ncomp: int, is_q: PETSc.IS, is_l: PETSc.IS,
                  prefix: str):
@@ -245,6 +246,7 @@ class CondensedPreconditioner:
         self.w = np.where(hard, 0.0, 1.0 / np.where(hard, 1.0, diag))
         self.dk = np.zeros((m, nc, nc))
         np.add.at(self.dk, at[soft], -self.w[soft, None, None] * b[soft, :, None] * a[soft, None, :])
+        self.soft, self.soft_at, self.soft_b = soft, at[soft], b[soft]   # (B on their nodes)
         # the hard rows: A_nᵀ (columns padded with zeros) = Q R
         an = np.zeros((m, nc, nc))
         bn = np.zeros((m, nc, nc))
@@ -304,7 +306,9 @@ class CondensedPreconditioner:
     def _tied_operator(self, mat: PETSc.Mat) -> int:
         """S = G K_eff H + k on the constrained slots (solvers.tied): K copied from M (its
         storage reused), the folded rows' blocks added on the nodes' diagonal blocks, then
-        PETSc's triple product (made anew: G and H change their pattern with the active set)."""
+        PETSc's triple product: reused (its values recomputed in place, S the same matrix, its
+        V-cycle's hierarchy kept while it serves) while G's and H's patterns stay, else made
+        anew (the active set changed)."""
         self._k = mat.createSubMatrix(self.is_q, self.is_q, submat=self._k)
         self.kscale = self._stiffness_scale(mat)
         nc = self.nc
@@ -318,11 +322,16 @@ class CondensedPreconditioner:
                                  rowmap=rows.astype(PETSc.IntType),
                                  addv=PETSc.InsertMode.ADD_VALUES)
         self._k.assemble()
-        for m in (self.G, self.H, self.X, self.S):
-            if m is not None:
-                m.destroy()
-        self.G, self.H, self.X = tied.frames(self)
-        self.S = self.G.matMatMult(self._k, self.H)
+        frames = tied.frames(self)
+        if frames[0] is self.G:   # (the same pattern: the product's symbolic part reused)
+            self.S = self.G.matMatMult(self._k, self.H, result=self.S)
+        else:
+            for m in (self.G, self.H, self.X, self.S):
+                if m is not None:
+                    m.destroy()
+            self.G, self.H, self.X = frames
+            self.S = self.G.matMatMult(self._k, self.H)
+            self._work = None
         slots = dofs[self.keep]
         self.S.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         self.S.setValuesIJV(np.arange(slots.size + 1, dtype=PETSc.IntType),
@@ -332,7 +341,6 @@ class CondensedPreconditioner:
         self.S.assemble()
         if self.S.getBlockSize() != nc:
             self.S.setBlockSize(nc)
-        self._work = None
         return 0
 
     def _stiffness_scale(self, mat: PETSc.Mat) -> float:
@@ -456,7 +464,7 @@ class CondensedPreconditioner:
     def _set_up_amg(self) -> None:
         if self.amg is None:
             self.amg = VCycle(self.comm, self.prefix + "condensed_")
-        self.amg.set_up(self.S)
+        self.amg.set_up(self.S, TIED_SWEEPS if self.G is not None else FINE_SWEEPS)
         if self._work is None:   # (work vectors of the application, per pattern)
             self._work = [*self.mat.createVecs(), *self.S.createVecs(), self.S.createVecLeft()]
 
@@ -470,18 +478,24 @@ class CondensedPreconditioner:
     def _nodal(self, blocks: np.ndarray, v: np.ndarray) -> np.ndarray:
         return np.einsum("nij,nj->ni", blocks, v.reshape(-1, self.nc)[self.nodes])
 
-    def _product(self, q: np.ndarray | None, lam: np.ndarray | None) -> tuple[np.ndarray,
-                                                                            np.ndarray]:
-        """M [q; λ] (either zero when None) as (primal rows, multiplier rows), with K_eff in
-        place of K (the folded rows' - B C⁻¹ A, per node) when q is given."""
+    def _folded_dual(self, r_l: np.ndarray) -> np.ndarray:
+        """B C⁻¹ r_λ on the condensed nodes (m, ncomp): the rows with a diagonal C only, whose
+        dual lies on their own node (checked: ``_nodal_rows``, ``tied.tied_rows``), summed per
+        node from their B columns (no product with M)."""
+        out = np.zeros((self.nodes.size, self.nc))
+        np.add.at(out, self.soft_at, self.soft_b * (self.w[self.soft] * r_l[self.soft])[:, None])
+        return out
+
+    def _product(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """M [q; 0] as (primal rows, multiplier rows), with K_eff in place of K (the folded
+        rows' - B C⁻¹ A, per node)."""
         u, v = self._work[0], self._work[1]
         ua = u.array
-        ua[:self.nq] = 0.0 if q is None else q
-        ua[self.nq:] = 0.0 if lam is None else lam
+        ua[:self.nq] = q
+        ua[self.nq:] = 0.0
         self.mat.mult(u, v)
         out_q, out_l = v.array[:self.nq].copy(), v.array[self.nq:].copy()
-        if q is not None:
-            out_q.reshape(-1, self.nc)[self.nodes] += self._nodal(self.dk, q)
+        out_q.reshape(-1, self.nc)[self.nodes] += self._nodal(self.dk, q)
         return out_q, out_l
 
     def setUp(self, pc: PETSc.PC) -> None:
@@ -492,7 +506,8 @@ class CondensedPreconditioner:
         nq, nc = self.nq, self.nc
         xa = x.getArray(readonly=True)
         r_q, r_l = xa[:nq], xa[nq:]
-        rhat = r_q - self._product(None, self.w * r_l)[0]        # r̂ = r_q - B C⁻¹ r_λ
+        rhat = r_q.copy()                                       # r̂ = r_q - B C⁻¹ r_λ
+        rhat.reshape(-1, nc)[self.nodes] -= self._folded_dual(r_l)
         padded = np.zeros((self.nodes.size, nc))
         padded[self.hard_at, self.hard_pos] = r_l[self.hard]
         qc = np.zeros(nq)
@@ -502,7 +517,7 @@ class CondensedPreconditioner:
             work.array[:] = qc
             self.X.mult(work, f)
             qc = qc + f.array
-        t = rhat - self._product(qc, None)[0]
+        t = rhat - self._product(qc)[0]
         fa = f.array
         if self.G is None:
             fa[:] = t                                           # G (r̂ - K_eff q_c)
@@ -518,7 +533,7 @@ class CondensedPreconditioner:
             self.H.mult(yf, work)
             q = work.array.copy()
         q += qc
-        kq, aq = self._product(q, None)
+        kq, aq = self._product(q)
         lam = np.zeros(self.nl)
         lam[self.hard] = self._nodal(self.dual, rhat - kq)[self.hard_at, self.hard_pos]
         lam += self.w * (r_l - aq)

@@ -11,7 +11,8 @@ on s through B_s and on its masters through B_m; s's constrained equations give
 λ_s = E_c⁻¹ Q_cᵀ (r̂ − K_eff u)_s, and a master's equation, less B_m times that, holds no
 multiplier: G = G_n + Y, Y = −B_m E_c⁻¹ Q_cᵀ (rows: the masters' DOFs, columns: the slave's).
 For an associated relation (B = −Aᵀ) Y = Xᵀ and G = Hᵀ. S = G K_eff H is no longer in K's
-pattern: PETSc's triple product of the sparse G, K_eff, H (``MatMatMatMult``).
+pattern: PETSc's triple product of the sparse G, K_eff, H (``MatMatMatMult``), reused while
+the active rows (G's and H's patterns) stay.
 
 The slave of a row is, of its nodes on this rank whose block of A is at least half its largest
 (a small block would put large weights in X), the one in the fewest of the rank's rows (a
@@ -173,7 +174,29 @@ def gather_nodes(comm, vec: PETSc.Vec, index: np.ndarray) -> np.ndarray:
 
 def frames(pre) -> tuple[PETSc.Mat, PETSc.Mat, PETSc.Mat]:
     """(G, H, X) of the module docstring, distributed AIJ on the primal layout: the nodal
-    frames (the identity off the condensed nodes) plus the tied rows' Y and X."""
+    frames (the identity off the condensed nodes) plus the tied rows' Y and X. Their values
+    put in place into ``pre``'s (pre.G, pre.H, pre.X, returned) when their pattern is the last
+    call's on every rank (the same active rows: S's product is then reused, solvers.condensed);
+    else new matrices (pre.G is None: made anew). Collective."""
+    triplets = [_sorted(*t) for t in _triplets(pre)]
+    pattern = [(r, c) for r, c, _ in triplets]
+    old = getattr(pre, "frame_pattern", None)
+    same = (pre.G is not None and old is not None
+            and all(a.shape == r.shape and b.shape == c.shape and np.array_equal(a, r)
+                    and np.array_equal(b, c) for (a, b), (r, c) in zip(old, pattern)))
+    same = bool(pre.comm.allreduce(int(same), op=MPI.MIN))
+    pre.frame_pattern = pattern
+    if not same:
+        return tuple(_aij(pre, *t) for t in triplets)
+    mats = (pre.G, pre.H, pre.X)
+    for mat, (rows, cols, vals) in zip(mats, triplets):
+        mat.zeroEntries()
+        _set(mat, rows, cols, vals)
+    return mats
+
+
+def _triplets(pre):
+    """G's, H's and X's entries (global (row, column, value), unsorted, duplicates to sum)."""
     nc, q0 = pre.nc, pre.q_start
     at, pos = np.full(pre.nl, -1), np.full(pre.nl, -1)
     at[pre.hard], pos[pre.hard] = pre.hard_at, pre.hard_pos
@@ -184,12 +207,12 @@ def frames(pre) -> tuple[PETSc.Mat, PETSc.Mat, PETSc.Mat]:
     i, j, v = pre.tie_b                                              # Y: masters × slave DOFs
     y = (np.repeat(j, nc), dofs[at[i]].reshape(-1),
          -(pre.dual[at[i], pos[i], :] * v[:, None]).reshape(-1))
-    mats = []
+    out = []
     for blocks, extra in ((pre.g, y), (pre.h, x)):
         nodal = _nodal_entries(pre, blocks)
-        mats.append(_aij(pre, *(np.concatenate([a, b]) for a, b in zip(nodal, extra))))
-    mats.append(_aij(pre, *x))
-    return mats[0], mats[1], mats[2]
+        out.append(tuple(np.concatenate([a, b]) for a, b in zip(nodal, extra)))
+    out.append(x)
+    return out
 
 
 def _nodal_entries(pre, blocks: np.ndarray):
@@ -206,12 +229,15 @@ def _nodal_entries(pre, blocks: np.ndarray):
             np.concatenate([blocks.reshape(-1), np.ones(free.size)]))
 
 
-def _aij(pre, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray) -> PETSc.Mat:
-    """A distributed AIJ matrix (primal × primal) of the triplets (duplicates summed; rows of
-    other ranks sent to them at assembly)."""
-    n = int(pre.nqs.sum())
+def _sorted(rows: np.ndarray, cols: np.ndarray, vals: np.ndarray):
     order = np.lexsort((cols, rows))
-    rows, cols, vals = rows[order], cols[order], vals[order]
+    return rows[order], cols[order], vals[order]
+
+
+def _aij(pre, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray) -> PETSc.Mat:
+    """A distributed AIJ matrix (primal × primal) of the triplets (sorted by row, then column;
+    duplicates summed; rows of other ranks sent to them at assembly)."""
+    n = int(pre.nqs.sum())
     mine = (rows >= pre.q_start) & (rows < pre.q_start + pre.nq)
     count = np.bincount(rows[mine] - pre.q_start, minlength=pre.nq)
     inside = (cols[mine] >= pre.q_start) & (cols[mine] < pre.q_start + pre.nq)
@@ -220,10 +246,15 @@ def _aij(pre, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray) -> PETSc.Mat
                                 nnz=(np.minimum(diag, pre.nq).astype(PETSc.IntType),
                                      (count - diag).astype(PETSc.IntType)), comm=pre.comm)
     mat.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+    _set(mat, rows, cols, vals)
+    return mat
+
+
+def _set(mat: PETSc.Mat, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray) -> None:
+    """The sorted triplets added into ``mat``, then assembled."""
     starts = np.flatnonzero(np.r_[True, rows[1:] != rows[:-1]])[:rows.size]
     indptr = np.append(starts, rows.size).astype(PETSc.IntType)
     mat.setValuesIJV(indptr, cols.astype(PETSc.IntType), vals,
                      rowmap=rows[starts].astype(PETSc.IntType),
                      addv=PETSc.InsertMode.ADD_VALUES)
     mat.assemble()
-    return mat

@@ -1,7 +1,7 @@
 """The algebraic multigrid V-cycle on the condensed primal operator S (solvers.condensed):
-GAMG, its finest level smoothed by SOR sweeps, its coarse operators made by the Galerkin
-product that holds the least memory on more than one rank, its coarse hierarchy kept across
-set-ups while it serves."""
+GAMG, its finest level smoothed by SOR sweeps, its coarse operators made by PETSc's Galerkin
+product with its intermediates freed, its coarse hierarchy kept across set-ups while it
+serves."""
 
 from __future__ import annotations
 
@@ -17,36 +17,41 @@ from petsc4py import PETSc
 #: DOFs, 1 rank: 6 and 8 sweeps 6.8 / 10 and 6.0 / 9, GAMG's Chebyshev 23.2 / 35, PETSc's ML
 #: (the V-cycle before) 7.1 / 10; at 122k DOFs, 2 ranks: 9.9 / 14 and 9.0 / 13, ML 9.1 / 13
 #: for 1.2x the peak memory (docs/performance.md). SOR on every level divided by a coarse
-#: operator's zero diagonal entry on 2 ranks.
+#: operator's zero diagonal entry on 2 ranks. The sweeps are most of a solve's flops (79 % at
+#: 122k): there 6 and 4 sweeps took 9.9 / 14 and 11.1 / 15 iterations for CPU time per
+#: Newton iteration 1.37x and 1.09x plain elasticity's, against 1.40x with 8 (each against
+#: the elasticity of its own bench run); 2 sweeps 13.5 / 18. Fewer sweeps trade time for
+#: iterations that grow with the mesh: 8 stay, the time target (≤ 1.5x) met with them.
 FINE_SWEEPS = 8
-
-
-#: the distributed Galerkin product of the V-cycle's set-up (``_galerkin_product``)
-GALERKIN_PRODUCT = "allatonce"
+#: the same when S holds tied rows (solvers.tied: S = G K_eff H): on the mortar sphere
+#: (16.7k DOFs, 1 rank) Krylov iterations per solve (mean / max) 31.7 / 34 with 8 sweeps, 24.0 /
+#: 26 with 16, 22.3 / 24 with 20, 20.3 / 22 with 24 (the flops of a solve 1.6x 8 sweeps' at 20)
+TIED_SWEEPS = 20
 
 
 @contextmanager
-def _galerkin_product(comm: MPI.Comm) -> Iterator[None]:
-    """PETSc's distributed P^T A P "allatonce" (GALERKIN_PRODUCT) for the V-cycle's coarse
-    operators while it is set up, unless ``-matptap_via`` is given (read under no prefix:
-    solvers.options.UNPREFIXED); one rank has no distributed product. Its default keeps the
-    product's intermediates (A P, Pᵀ's parts, P's remote rows) on every level for reuse: on the
-    122k-DOF friction box on 2 ranks the set-up held 131 MiB per rank, 58 with "allatonce", the
-    same Krylov iterations. "allatonce" is the slower (22.5 s per set-up against 3.3 there),
-    which the hierarchy kept across the Newton iterations (VCycle) pays once per run instead
-    of once per solve: over the first step's 8 solves at 122k, 2 ranks, CPU time per Newton
-    iteration 1.72x plain elasticity's, peak memory 1.10x; made at every set-up 2.49x, 1.10x;
-    kept with the default product 1.45x, 1.31x (``-matptap_via nonscalable``;
-    scripts/results/bench_relations_scale.md)."""
+def _products_freed() -> Iterator[None]:
+    """The intermediates of the V-cycle's Galerkin products P^T A P freed once each coarse
+    operator is made (``-mat_product_clear``, in PETSc's options while it is set up, unless
+    given: read under no prefix, solvers.options.UNPREFIXED). PETSc's distributed product
+    keeps them (A P, Pᵀ's parts, P's remote rows, on every level) for a later product of the
+    same pattern, but the hierarchy is kept wholesale (VCycle) or made anew, never recomputed
+    in place: they were only held. On the 122k-DOF friction box on 2 ranks (its first step's
+    8 Newton iterations, the hierarchy made once and kept; scripts/results/
+    bench_relations_scale.md), CPU time per Newton iteration and peak memory against plain
+    elasticity's: PETSc's default product (``-matptap_via nonscalable``) freed 1.30x, 1.19x
+    (1.34x, 1.19x in the same run's second such row; its set-up +106 MiB per rank); kept
+    1.45x, 1.31x (+121 MiB); "allatonce" (the least memory, +48 MiB, but 22.5 s per set-up
+    against 3.3) 1.72x, 1.10x (the last two in an earlier run)."""
     options = PETSc.Options()
-    add = comm.size > 1 and not options.hasName("matptap_via")
+    add = not options.hasName("mat_product_clear")
     if add:
-        options["matptap_via"] = GALERKIN_PRODUCT
+        options["mat_product_clear"] = "true"
     try:
         yield
     finally:
         if add:
-            options.delValue("matptap_via")
+            options.delValue("mat_product_clear")
 
 
 #: the coarse hierarchy kept across set-ups (``VCycle.set_up``) while the last solve on it took
@@ -84,8 +89,9 @@ class VCycle:
         self._on_fresh = False    # the applications since the last set-up are on a fresh one
         self.made = self.kept = 0   # set-ups that made the hierarchy, that kept it
 
-    def set_up(self, mat: PETSc.Mat) -> None:
-        """The V-cycle for ``mat``'s values: its hierarchy made anew, or kept (class doc)."""
+    def set_up(self, mat: PETSc.Mat, sweeps: int = FINE_SWEEPS) -> None:
+        """The V-cycle for ``mat``'s values: its hierarchy made anew, or kept (class doc);
+        ``sweeps``: its finest level's SOR sweeps unless ``-<prefix>fine_sweeps`` is given."""
         if self._on_fresh:
             self._fresh = max(self._fresh, self.applies)
         keep = self._keeps(mat)
@@ -99,10 +105,10 @@ class VCycle:
         if not self._configured:
             self.pc.setFromOptions()
             self._configured = True
-        with _galerkin_product(self.comm):
+        with _products_freed():
             self.pc.setUp()
         if self.pc.getType() == "gamg":
-            self._fine_sor()
+            self._fine_sor(sweeps)
         # (kept until set_up says otherwise: PCApply would remake it when S's values change)
         self.pc.setReusePreconditioner(True)
         self._made_for = mat.handle
@@ -120,12 +126,12 @@ class VCycle:
         self.applies += 1
         self.pc.apply(f, y)
 
-    def _fine_sor(self) -> None:
-        """GAMG's finest level smoothed by FINE_SWEEPS SOR sweeps (Richardson) instead of its
+    def _fine_sor(self, sweeps: int) -> None:
+        """GAMG's finest level smoothed by ``sweeps`` SOR sweeps (Richardson) instead of its
         Chebyshev (its coarser levels keep Chebyshev: their operators may hold a zero diagonal
         entry on 2 ranks, which SOR divides by). Set again after every set-up, which may make
         the levels anew. The sweeps: ``-<prefix>fine_sweeps``."""
-        sweeps = PETSc.Options(self.prefix).getInt("fine_sweeps", FINE_SWEEPS)
+        sweeps = PETSc.Options(self.prefix).getInt("fine_sweeps", sweeps)
         ksp = self.pc.getMGSmoother(self.pc.getMGLevels() - 1)
         if ksp.getType() != "richardson" or ksp.getPC().getType() != "sor":
             ksp.setType("richardson")

@@ -153,3 +153,39 @@ def test_a_master_with_hard_rows_is_a_chain(comm):
     is_q, is_l = system.index_sets()
     chained = CondensedPreconditioner(comm, 3, is_q, is_l, "chain_")
     assert chained.update(tied) == REASONS[9]
+
+
+@pytest.mark.parametrize("name", sorted(SCENES))
+def test_operator_reused_while_the_pattern_stays(comm, name):
+    """A second update on new values in the same pattern (K's diagonal raised, every tied
+    row's master entries × 1.1: X, hence H, changes) fills G, H and X in place and reuses S's
+    triple product (the same matrices); S then equals G K H + k of the new M, made densely, to
+    1e-13 of its largest entry."""
+    system, solver, mat, rhs, x = solve_in_process(SCENES[name](), comm, options={})
+    pre = _exact(comm, system, mat, f"reuse_{name}_")
+    handles = [m.handle for m in (pre.G, pre.H, pre.X, pre.S)]
+    H0 = dense(pre.H, comm)
+    mat = mat.copy()
+    lo = mat.getOwnershipRange()[0]
+    rows = (lo + np.arange(pre.nq)).astype(PETSc.IntType)
+    for i, row in enumerate(rows):
+        mat.setValue(row, row, (0.1 + 0.05 * (i % 3)) * pre.kscale, addv=True)
+    mat.assemble()
+    r, g, v = pre.tie_a
+    owner = np.searchsorted(np.cumsum(pre.nqs), g, side="right")
+    cols = pre.starts[owner] + g - np.concatenate([[0], np.cumsum(pre.nqs)])[owner]
+    for row, col, value in zip(pre.start + pre.nq + r, cols, v):
+        mat.setValue(int(row), int(col), 1.1 * value)
+    mat.assemble()
+    with opt.inserted(f"reuse_{name}_", {"condensed_pc_type": "lu",
+                                         "condensed_pc_factor_mat_solver_type": "mumps"}):
+        pre._handle = mat.handle   # (the operator's copy stands for the same operator)
+        assert pre.update(mat) is None
+    assert [m.handle for m in (pre.G, pre.H, pre.X, pre.S)] == handles
+    M = dense(mat, comm)
+    G, H, keep = _frames(pre, comm, M)
+    q = _primal(pre, comm)
+    reference = G @ M[np.ix_(q, q)] @ H + pre.kscale * np.diag(keep)
+    assert np.abs(dense(pre.S, comm) - reference).max() <= 1e-13 * np.abs(reference).max()
+    assert np.abs(dense(pre.H, comm) - H).max() <= 1e-13 * np.abs(H).max()
+    assert comm.allreduce(v.size) == 0 or np.abs(H - H0).max() > 1e-3 * np.abs(H0).max()

@@ -10,8 +10,8 @@ from conftest import run_scene, solve_in_process
 from helpers.scene import scene, shipped
 from solvers.test_iterative_scenes import assert_same_answers
 from parsolve.solvers import options as opt
-from parsolve.solvers.vcycle import (FINE_SWEEPS, GALERKIN_PRODUCT, REUSE_GROWTH, VCycle,
-                                     _galerkin_product)
+from parsolve.solvers.vcycle import (FINE_SWEEPS, REUSE_GROWTH, TIED_SWEEPS, VCycle,
+                                     _products_freed)
 
 
 def _friction(comm, petsc: dict | None = None):
@@ -151,20 +151,76 @@ def test_fine_level_smoothed_by_sor(comm):
         assert amg.getMGLevels() == 2 or coarse.getType() == "chebyshev"
 
 
-def test_galerkin_product_option_is_scoped(comm):
-    """The V-cycle's set-up puts -matptap_via allatonce in PETSc's options only while it runs
-    (on more than one rank), and leaves a value the user gave as it is."""
+def test_tied_rows_take_more_fine_sweeps(comm):
+    """S with tied rows (the coarsened mortar sphere's dual mortar rows: S = G K H) takes
+    TIED_SWEEPS on its finest level, the nodal friction box FINE_SWEEPS;
+    -condensed_fine_sweeps sets both."""
+    assert TIED_SWEEPS > FINE_SWEEPS
+    for petsc, tied, nodal in (({}, TIED_SWEEPS, FINE_SWEEPS),
+                               ({"condensed_fine_sweeps": "5"}, 5, 5)):
+        mortar = scene(shipped("contact_mortar_sphere_3d.toml"),
+                       solver={"preset": "iterative", "petsc": petsc},
+                       mesh={"n_fine": 4, "n_coarse": 2, "n_depth": 3})
+        found = {}
+        for name in ("tied", "nodal"):
+            if name == "nodal":
+                solver = _friction(comm, petsc)[1]
+            else:
+                solver = solve_in_process(mortar, comm, options={})[1]
+            pre = solver.condensed
+            assert solver.choice == "condensed" and (pre.G is not None) == (name == "tied")
+            amg = pre.amg.pc
+            found[name] = amg.getMGSmoother(amg.getMGLevels() - 1).getTolerances()[3]
+        assert found == {"tied": tied, "nodal": nodal}
+
+
+def test_galerkin_products_freed_in_scope(comm):
+    """The V-cycle's set-up puts -mat_product_clear in PETSc's options only while it runs,
+    and leaves a value the user gave as it is; the friction box's solve leaves none behind."""
     options = PETSc.Options()
-    with _galerkin_product(comm):
-        inside = options.getString("matptap_via", "")
-    assert inside == (GALERKIN_PRODUCT if comm.size > 1 else "")
-    assert not options.hasName("matptap_via")
-    options["matptap_via"] = "nonscalable"
+    with _products_freed():
+        assert options.getBool("mat_product_clear", False)
+    assert not options.hasName("mat_product_clear")
+    options["mat_product_clear"] = "false"
     try:
-        with _galerkin_product(comm):
-            assert options.getString("matptap_via") == "nonscalable"
-        assert options.getString("matptap_via") == "nonscalable"
+        with _products_freed():
+            assert options.getString("mat_product_clear") == "false"
+        assert options.getString("mat_product_clear") == "false"
     finally:
-        options.delValue("matptap_via")
+        options.delValue("mat_product_clear")
     _friction(comm)
-    assert not options.hasName("matptap_via")
+    assert not options.hasName("mat_product_clear")
+
+
+def test_freed_products_give_the_same_hierarchy(comm):
+    """The coarse operators made with the products' intermediates freed equal those made
+    with them kept (-mat_product_clear false) and Pᵀ A P computed apart (dense), to
+    round-off; so do the V-cycle's applications, on the first set-up and on one made anew on
+    new values (S scaled by 3: a new product, not the freed one's reuse)."""
+    from conftest import dense
+    A = _laplacian(comm)
+    b = A.createVecLeft()
+    b.setRandom()
+    out = {}
+    for name, extra in (("freed", {}), ("kept", {"mat_product_clear": "false"})):
+        B = A.copy()
+        with opt.inserted(name + "_", {"pc_type": "gamg", "pc_gamg_threshold": "0",
+                                       "reuse_growth": "0", **extra}, record=False):
+            vc = VCycle(comm, name + "_")
+            ys = []
+            for scale in (1.0, 3.0):
+                B.scale(scale)
+                vc.set_up(B)
+                y = b.duplicate()
+                vc.apply(b, y)
+                ys.append(y.array.copy())
+            P = vc.pc.getMGInterpolation(vc.pc.getMGLevels() - 1)
+            out[name] = (_coarse(vc), dense(P, comm), dense(B, comm), ys)
+    C, P, B, ys = out["freed"]
+    # (to round-off, not to the bit: on 3 ranks the product's sums of other ranks' parts
+    # follow the messages' arrival, 1e-16 apart between two runs of the same options)
+    scale = np.abs(C).max()
+    np.testing.assert_allclose(C, out["kept"][0], rtol=0, atol=1e-14 * scale)
+    for a, k in zip(ys, out["kept"][3]):
+        np.testing.assert_allclose(a, k, rtol=0, atol=1e-13 * np.abs(k).max())
+    np.testing.assert_allclose(C, P.T @ B @ P, rtol=0, atol=1e-12 * np.abs(C).max())
