@@ -670,6 +670,7 @@ def big_study(folder: Path, factor: int, ranks: int, steps: int, timeout: float 
 
     def save() -> None:
         study["load1"] = os.getloadavg()
+        big_timings(study)
         bh.write_json(bh.PUBLISHED / BIG_JSON, study)
         publish_big(study)
 
@@ -730,6 +731,36 @@ def big_ratios(runs: dict) -> str:
             "whole run's over its Newton iterations, the model's build and the output included)")
 
 
+def big_timings(study: dict) -> bool:
+    """Each completed run's own timings (s, all steps; its result file's ``timings`` group:
+    set-up in "factorization", Krylov in "solve"), added where missing; True if any was."""
+    import h5py
+
+    added = False
+    for r in study["runs"].values():
+        if r.get("status") == "complete" and "timings" not in r and Path(r["out"]).exists():
+            with h5py.File(r["out"], "r") as f:
+                r["timings"] = {k: float(f[f"timings/{k}"][()].sum()) for k in f["timings"]}
+            added = True
+    return added
+
+
+def time_words(runs: dict) -> str:
+    """Where each run's time went (its own timings)."""
+    names = [("factorization", "set-up"), ("solve", "Krylov"), ("assembly", "assembly"),
+             ("contact", "contact"), ("output", "output")]
+    parts = []
+    for name, r in runs.items():
+        t = r.get("timings")
+        if t:
+            its = max(r["iterations"], 1)
+            parts.append(f"{name} {t.get('total', 0):.0f} s in its steps: " + ", ".join(
+                f"{word} {t[k]:.0f} s ({t[k] / its:.1f} per Newton iteration)"
+                for k, word in names if k in t))
+    return ("Where the time goes (rank 0's wall time, the runs' own timings): "
+            + "; ".join(parts)) if parts else ""
+
+
 def mumps_words(e: dict | None, ranks: int) -> str:
     if e is None:
         return "(the MUMPS estimate not run yet)"
@@ -762,6 +793,7 @@ def publish_big(study: dict) -> None:
         "the whole run's wall time, and its CPU time summed over the ranks, over its Newton "
         "iterations; peak memory: VmHWM. The measurements: `" + BIG_JSON + "`.", "",
         bh.md_table(BIG_HEAD, rows, first="---"), "", big_ratios(study["runs"]) + ".", "",
+        *([time_words(study["runs"]) + ".", ""] if time_words(study["runs"]) else []),
         mumps_words(study["mumps"], ranks) + ".", ""])
     bh.publish("bench_relations_big.md", text)
 
@@ -825,7 +857,10 @@ def main() -> None:
         os.environ["BENCH_LOG"] = str(Path(args.log).resolve())   # (the children inherit it)
     petsc = json.loads(args.petsc)
     if args.big_publish:
-        publish_big(bh.read_json(bh.PUBLISHED / BIG_JSON))
+        study = bh.read_json(bh.PUBLISHED / BIG_JSON)
+        if big_timings(study):   # (a study measured before its timings were recorded)
+            bh.write_json(bh.PUBLISHED / BIG_JSON, study)
+        publish_big(study)
         return
     if args.big:
         big_study(bh.scratch("relations_big"), args.big, args.ranks, args.steps, args.timeout,
