@@ -34,8 +34,11 @@ mean, max; the iterative preset at its tolerance, rtol 2.5e-14), wall time, peak
         DOFs, 21: 2.08M) on the iterative preset, its Newton and Krylov iterations, set-up
         and solve times, peak memory per rank; beside it MUMPS' own estimate of its
         factorization at that size (its analysis only: the factorization is never started),
-        and with --big-elasticity the clamped box's elasticity run on the same mesh
-        (scripts/results/bench_relations_big.md)
+        and with --big-elasticity the clamped box's elasticity run on the same mesh, the
+        ratios of peak memory and time per Newton iteration (wall, and CPU summed over the
+        ranks) friction over elasticity (scripts/results/bench_relations_big.md, the
+        measurements in bench_relations_big.json; --big-publish renders the table again
+        from that file without running anything)
 """
 
 from __future__ import annotations
@@ -330,7 +333,7 @@ def one_run(folder: Path, name: str, text: str, preset: str, options: dict | Non
             pieces[key] = pieces.get(key, 0.0) + mib
     cpu = [ln.get("cpu", 0.0) for ln in lines]
     return {**main_line[-1], "hwm": sum(hwm), "hwm_rank": max(hwm), "setup_rank": max(setup),
-            "cpu_rank": max(cpu),
+            "cpu_rank": max(cpu), "cpu_sum": sum(cpu),
             "setup_sum": sum(setup), "out": str(out), "pieces": pieces}
 
 
@@ -646,50 +649,42 @@ def publish_weak(rows: list, runs: dict, steps: int) -> None:
 
 
 BIG_HEAD = ["problem", "refinement", "DOFs", "ranks", "Newton its", "linear solves",
-            "Krylov min / mean / max", "set-up s per solve", "wall s", "s per Newton it",
-            "peak MiB per rank", "peak MiB (all ranks)", "KB/DOF"]
+            "Krylov min / mean / max", "set-up s per solve", "wall s", "wall s per Newton it",
+            "CPU s per Newton it (all ranks)", "peak MiB per rank", "peak MiB (all ranks)",
+            "KB/DOF"]
+BIG_JSON = "bench_relations_big.json"   # the big study's measurements (``--big-publish``)
 
 
 def big_study(folder: Path, factor: int, ranks: int, steps: int, timeout: float | None,
-              elasticity: bool, petsc: dict | None = None) -> tuple[list[list[str]], str]:
+              elasticity: bool, petsc: dict | None = None) -> dict:
     """One large run of the friction box on the iterative preset (``petsc``: its options), and
     before it on request the clamped box's elasticity (short: the reference is there even if
     the friction run is stopped), then MUMPS' estimate of the direct preset's factorization at
-    that size (``estimate_child``): the table's rows and the estimate in words."""
+    that size (``estimate_child``). The measurements are written (BIG_JSON) and the table
+    rendered from them after every run: a study stopped halfway leaves what it measured."""
     end = None if timeout is None else time.monotonic() + timeout   # (the whole study's)
-    load0 = os.getloadavg()
+    study = dict(machine=bh.machine_info(), factor=factor, ranks=ranks, steps=steps,
+                 petsc=petsc or {}, load0=os.getloadavg(), runs={}, mumps=None)
     runs = [("elasticity", elastic_scene(factor, steps), {})] if elasticity else []
     runs.append(("friction", friction_scene(factor, steps), petsc or {}))
-    rows = []
+
+    def save() -> None:
+        study["load1"] = os.getloadavg()
+        big_timings(study)
+        bh.write_json(bh.PUBLISHED / BIG_JSON, study)
+        publish_big(study)
+
     for name, text, options in runs:
         r = one_run(folder, f"big_{name}_{factor}", text, "iterative", options, ranks=ranks,
                     timeout=left(end))
-        if r.get("status") != "complete":
-            rows.append([name, f"{factor}³×", "-", str(ranks), r["status"][:80], *["-"] * 8])
-        else:
-            k = r["krylov"] or [0]
-            rows.append([name, f"{factor}³×", f"{r['dofs']:,}", str(ranks), str(r["iterations"]),
-                         str(len(r["krylov"])), " / ".join(krylov_cells(r)),
-                         f"{r['setup']['s'] / max(len(k), 1):.1f}", f"{r['wall']:.0f}",
-                         f"{r['wall'] / max(r['iterations'], 1):.1f}", bh.mib(r["hwm_rank"]),
-                         bh.mib(r["hwm"]), f"{r['hwm'] / r['dofs'] / 1e3:.1f}"])
-        print(bh.text_table(BIG_HEAD, rows[-1:]), flush=True)
-        publish_big(rows, "(the MUMPS estimate not run yet)", factor, ranks, steps, load0)
-    e = one_run(folder, f"big_friction_{factor}", friction_scene(factor, steps), "direct",
-                ranks=ranks, timeout=left(end), mode=ESTIMATE)
-    if e.get("status") == "estimated":
-        g = e["infog"]
-        words = (f"MUMPS (the direct preset's LU, QAMD), from its analysis of the same operator "
-                 f"on {ranks} ranks ({e['analysis']:.0f} s, peak {bh.mib(e['hwm_rank'])} MiB "
-                 f"per rank): {g['17']:,} MB for the factorization in core, "
-                 f"{g['16']:,} MB on the largest rank (INFOG(17), INFOG(16); its "
-                 f"factorization refused at once, INFOG(1) = {g['1']}; the machine has "
-                 f"{bh.machine_info()['mem_gib']} GiB)")
-    else:
-        words = f"MUMPS' analysis did not finish: {e['status'][:120]}"
-    print(words, flush=True)
-    publish_big(rows, words, factor, ranks, steps, load0)
-    return rows, words
+        study["runs"][name] = r
+        print(bh.text_table(BIG_HEAD, [big_row(name, factor, ranks, r)]), flush=True)
+        save()
+    study["mumps"] = one_run(folder, f"big_friction_{factor}", friction_scene(factor, steps),
+                             "direct", ranks=ranks, timeout=left(end), mode=ESTIMATE)
+    print(mumps_words(study["mumps"], ranks), flush=True)
+    save()
+    return study
 
 
 def left(end: float | None) -> float | None:
@@ -697,19 +692,109 @@ def left(end: float | None) -> float | None:
     return None if end is None else max(end - time.monotonic(), 1.0)
 
 
-def publish_big(rows: list, mumps: str, factor: int, ranks: int, steps: int,
-                load0: tuple) -> None:
-    machine = bh.machine_info()
+def per_newton(r: dict) -> tuple[float, float]:
+    """(wall s, CPU s summed over the ranks) per Newton iteration of a completed run: the
+    whole run's (model built, every step, output) over its Newton iterations."""
+    its = max(r["iterations"], 1)
+    return r["wall"] / its, r.get("cpu_sum", 0.0) / its
+
+
+def big_row(name: str, factor: int, ranks: int, r: dict) -> list[str]:
+    if r.get("status") != "complete":
+        return [name, f"{factor}³×", "-", str(ranks), r["status"][:80], *["-"] * 9]
+    k = r["krylov"] or [0]
+    wall_it, cpu_it = per_newton(r)
+    return [name, f"{factor}³×", f"{r['dofs']:,}", str(ranks), str(r["iterations"]),
+            str(len(r["krylov"])), " / ".join(krylov_cells(r)),
+            f"{r['setup']['s'] / max(len(k), 1):.1f}", f"{r['wall']:.0f}", f"{wall_it:.1f}",
+            f"{cpu_it:.1f}", bh.mib(r["hwm_rank"]), bh.mib(r["hwm"]),
+            f"{r['hwm'] / r['dofs'] / 1e3:.1f}"]
+
+
+def big_ratios(runs: dict) -> str:
+    """Friction over elasticity on the same mesh and ranks, against the targets (peak memory
+    ≤ 1.3×, time per Newton iteration ≤ 1.5×), or why there is no ratio."""
+    f, e = runs.get("friction"), runs.get("elasticity")
+    if not (f and e and f.get("status") == e.get("status") == "complete"):
+        return "No ratio: the friction run and the elasticity run did not both complete"
+    (fw, fc), (ew, ec) = per_newton(f), per_newton(e)
+    mem, rank, wall = f["hwm"] / e["hwm"], f["hwm_rank"] / e["hwm_rank"], fw / ew
+    cpu = fc / ec if ec else float("nan")
+
+    def met(x: float, limit: float) -> str:
+        return f"{x:.2f}× ({'met' if x <= limit else 'missed'}: ≤ {limit}×)"
+
+    return (f"Friction over elasticity on the same mesh and ranks: peak memory summed over the "
+            f"ranks {met(mem, 1.3)}, of the largest rank {rank:.2f}×; time per Newton "
+            f"iteration, CPU summed over the ranks {met(cpu, 1.5)}, wall {met(wall, 1.5)} "
+            "(the CPU time is the less disturbed by the machine's other jobs; both are the "
+            "whole run's over its Newton iterations, the model's build and the output included)")
+
+
+def big_timings(study: dict) -> bool:
+    """Each completed run's own timings (s, all steps; its result file's ``timings`` group:
+    set-up in "factorization", Krylov in "solve"), added where missing; True if any was."""
+    import h5py
+
+    added = False
+    for r in study["runs"].values():
+        if r.get("status") == "complete" and "timings" not in r and Path(r["out"]).exists():
+            with h5py.File(r["out"], "r") as f:
+                r["timings"] = {k: float(f[f"timings/{k}"][()].sum()) for k in f["timings"]}
+            added = True
+    return added
+
+
+def time_words(runs: dict) -> str:
+    """Where each run's time went (its own timings)."""
+    names = [("factorization", "set-up"), ("solve", "Krylov"), ("assembly", "assembly"),
+             ("contact", "contact"), ("output", "output")]
+    parts = []
+    for name, r in runs.items():
+        t = r.get("timings")
+        if t:
+            its = max(r["iterations"], 1)
+            parts.append(f"{name} {t.get('total', 0):.0f} s in its steps: " + ", ".join(
+                f"{word} {t[k]:.0f} s ({t[k] / its:.1f} per Newton iteration)"
+                for k, word in names if k in t))
+    return ("Where the time goes (rank 0's wall time, the runs' own timings): "
+            + "; ".join(parts)) if parts else ""
+
+
+def mumps_words(e: dict | None, ranks: int) -> str:
+    if e is None:
+        return "(the MUMPS estimate not run yet)"
+    if e.get("status") != "estimated":
+        return f"MUMPS' analysis did not finish: {e['status'][:120]}"
+    g = e["infog"]
+    return (f"MUMPS (the direct preset's LU, QAMD), from its analysis of the same operator "
+            f"on {ranks} ranks ({e['analysis']:.0f} s, peak {bh.mib(e['hwm_rank'])} MiB "
+            f"per rank): {g['17']:,} MB for the factorization in core, "
+            f"{g['16']:,} MB on the largest rank (INFOG(17), INFOG(16); its "
+            f"factorization refused at once, INFOG(1) = {g['1']}; the machine has "
+            f"{bh.machine_info()['mem_gib']} GiB)")
+
+
+def publish_big(study: dict) -> None:
+    """bench_relations_big.md rendered from the big study's measurements (``big_study``'s, or
+    BIG_JSON read back by ``--big-publish``)."""
+    machine, steps, ranks = study["machine"], study["steps"], study["ranks"]
+    rows = [big_row(name, study["factor"], ranks, r) for name, r in study["runs"].items()]
     text = "\n".join([
         "# Frictional contact at scale: the largest run", "",
         f"{machine['date']}, {machine['cpu']}, {machine['cpus']} CPUs, {ranks} ranks, the "
-        f"machine shared (times noisy: {bh.load_line(load0, os.getloadavg())}). The 3D "
+        f"machine shared (times noisy: {bh.load_line(study['load0'], study['load1'])}). The 3D "
         "friction box (`contact_friction_3d.toml`, its "
-        f"first {steps} step{'s' if steps > 1 else ''}) refined {factor}× per direction on "
-        "the iterative preset (GMRES on the saddle system, the nodal rows condensed, one GAMG "
-        "V-cycle on the condensed operator); Krylov iterations per linear solve; set-up: the "
-        "condensation and the AMG's, per linear solve; peak memory: VmHWM.", "",
-        bh.md_table(BIG_HEAD, rows, first="---"), "", mumps + ".", ""])
+        f"first {steps} step{'s' if steps > 1 else ''}) refined {study['factor']}× per "
+        "direction on the iterative preset (GMRES on the saddle system, the nodal rows "
+        "condensed, one GAMG V-cycle on the condensed operator), beside the same box with its "
+        "base clamped (plain elasticity, CG + GAMG); Krylov iterations per linear solve; "
+        "set-up: the condensation and the AMG's, per linear solve; time per Newton iteration: "
+        "the whole run's wall time, and its CPU time summed over the ranks, over its Newton "
+        "iterations; peak memory: VmHWM. The measurements: `" + BIG_JSON + "`.", "",
+        bh.md_table(BIG_HEAD, rows, first="---"), "", big_ratios(study["runs"]) + ".", "",
+        *([time_words(study["runs"]) + ".", ""] if time_words(study["runs"]) else []),
+        mumps_words(study["mumps"], ranks) + ".", ""])
     bh.publish("bench_relations_big.md", text)
 
 
@@ -757,6 +842,9 @@ def main() -> None:
                         "(bench_relations_big.md)")
     p.add_argument("--big-elasticity", action="store_true",
                    help="with --big: the clamped box's elasticity run too")
+    p.add_argument("--big-publish", action="store_true",
+                   help="bench_relations_big.md rendered again from the measurements of the "
+                        "last --big run (bench_relations_big.json), nothing run")
     p.add_argument("--timeout", type=float, default=None,
                    help="seconds after which the --big runs are stopped (their rows say so)")
     p.add_argument("--petsc", type=str, default="{}",
@@ -768,6 +856,12 @@ def main() -> None:
     if args.log:
         os.environ["BENCH_LOG"] = str(Path(args.log).resolve())   # (the children inherit it)
     petsc = json.loads(args.petsc)
+    if args.big_publish:
+        study = bh.read_json(bh.PUBLISHED / BIG_JSON)
+        if big_timings(study):   # (a study measured before its timings were recorded)
+            bh.write_json(bh.PUBLISHED / BIG_JSON, study)
+        publish_big(study)
+        return
     if args.big:
         big_study(bh.scratch("relations_big"), args.big, args.ranks, args.steps, args.timeout,
                   args.big_elasticity, petsc)
