@@ -323,10 +323,13 @@ class CondensedPreconditioner:
                                  addv=PETSc.InsertMode.ADD_VALUES)
         self._k.assemble()
         frames = tied.frames(self)
-        if frames[0] is self.G:   # (the same pattern: the product's symbolic part reused)
+        same = frames[0] is self.G   # (the same pattern: G, H, X filled in place)
+        # the product's symbolic part reused, unless the user's -mat_product_clear freed it
+        # (PETSc aborts on a reuse of a cleared product)
+        if same and not PETSc.Options().getBool("mat_product_clear", False):
             self.S = self.G.matMatMult(self._k, self.H, result=self.S)
         else:
-            for m in (self.G, self.H, self.X, self.S):
+            for m in ((self.S,) if same else (self.G, self.H, self.X, self.S)):
                 if m is not None:
                     m.destroy()
             self.G, self.H, self.X = frames

@@ -26,6 +26,8 @@ mortar) makes another row's slave its master: a chain, refused with its reason.
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
@@ -179,11 +181,8 @@ def frames(pre) -> tuple[PETSc.Mat, PETSc.Mat, PETSc.Mat]:
     call's on every rank (the same active rows: S's product is then reused, solvers.condensed);
     else new matrices (pre.G is None: made anew). Collective."""
     triplets = [_sorted(*t) for t in _triplets(pre)]
-    pattern = [(r, c) for r, c, _ in triplets]
-    old = getattr(pre, "frame_pattern", None)
-    same = (pre.G is not None and old is not None
-            and all(a.shape == r.shape and b.shape == c.shape and np.array_equal(a, r)
-                    and np.array_equal(b, c) for (a, b), (r, c) in zip(old, pattern)))
+    pattern = _digest(triplets)
+    same = pre.G is not None and getattr(pre, "frame_pattern", None) == pattern
     same = bool(pre.comm.allreduce(int(same), op=MPI.MIN))
     pre.frame_pattern = pattern
     if not same:
@@ -193,6 +192,17 @@ def frames(pre) -> tuple[PETSc.Mat, PETSc.Mat, PETSc.Mat]:
         mat.zeroEntries()
         _set(mat, rows, cols, vals)
     return mats
+
+
+def _digest(triplets) -> bytes:
+    """The pattern of the triplets (their rows and columns) as a digest: kept between calls
+    instead of the arrays themselves (two int64 per entry beside the matrices)."""
+    h = hashlib.blake2b(digest_size=32)
+    for rows, cols, _ in triplets:
+        h.update(np.int64(rows.size).tobytes())
+        h.update(np.ascontiguousarray(rows, dtype=np.int64).tobytes())
+        h.update(np.ascontiguousarray(cols, dtype=np.int64).tobytes())
+    return h.digest()
 
 
 def _triplets(pre):

@@ -21,7 +21,8 @@ from petsc4py import PETSc
 #: 122k): there 6 and 4 sweeps took 9.9 / 14 and 11.1 / 15 iterations for CPU time per
 #: Newton iteration 1.37x and 1.09x plain elasticity's, against 1.40x with 8 (each against
 #: the elasticity of its own bench run); 2 sweeps 13.5 / 18. Fewer sweeps trade time for
-#: iterations that grow with the mesh: 8 stay, the time target (≤ 1.5x) met with them.
+#: iterations that grow with the mesh: 8 stay, the time target (≤ 1.5x) met with them at
+#: 122k (1.30x); at 2M DOFs on 2 ranks, on the "allatonce" products, 1.83x CPU (missed).
 FINE_SWEEPS = 8
 #: the same when S holds tied rows (solvers.tied: S = G K_eff H): on the mortar sphere
 #: (16.7k DOFs, 1 rank) Krylov iterations per solve (mean / max) 31.7 / 34 with 8 sweeps, 24.0 /

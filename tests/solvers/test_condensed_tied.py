@@ -155,15 +155,29 @@ def test_a_master_with_hard_rows_is_a_chain(comm):
     assert chained.update(tied) == REASONS[9]
 
 
+@pytest.mark.parametrize("cleared", [False, True], ids=["kept", "cleared"])
 @pytest.mark.parametrize("name", sorted(SCENES))
-def test_operator_reused_while_the_pattern_stays(comm, name):
+def test_operator_reused_while_the_pattern_stays(comm, name, cleared):
     """A second update on new values in the same pattern (K's diagonal raised, every tied
     row's master entries × 1.1: X, hence H, changes) fills G, H and X in place and reuses S's
     triple product (the same matrices); S then equals G K H + k of the new M, made densely, to
-    1e-13 of its largest entry."""
+    1e-13 of its largest entry. With the user's ``-mat_product_clear`` (the product's data
+    freed, which PETSc cannot reuse: it aborted) S is made anew instead, equal alike."""
+    options = PETSc.Options()
+    if cleared:
+        options["mat_product_clear"] = "true"
+    try:
+        _reused(comm, name, cleared)
+    finally:
+        if cleared:
+            options.delValue("mat_product_clear")
+
+
+def _reused(comm, name: str, cleared: bool) -> None:
     system, solver, mat, rhs, x = solve_in_process(SCENES[name](), comm, options={})
     pre = _exact(comm, system, mat, f"reuse_{name}_")
-    handles = [m.handle for m in (pre.G, pre.H, pre.X, pre.S)]
+    handles = [m.handle for m in (pre.G, pre.H, pre.X)]
+    S = pre.S   # (held: a new S cannot take its Python identity, as it could its address)
     H0 = dense(pre.H, comm)
     mat = mat.copy()
     lo = mat.getOwnershipRange()[0]
@@ -181,7 +195,8 @@ def test_operator_reused_while_the_pattern_stays(comm, name):
                                          "condensed_pc_factor_mat_solver_type": "mumps"}):
         pre._handle = mat.handle   # (the operator's copy stands for the same operator)
         assert pre.update(mat) is None
-    assert [m.handle for m in (pre.G, pre.H, pre.X, pre.S)] == handles
+    assert [m.handle for m in (pre.G, pre.H, pre.X)] == handles
+    assert (pre.S is not S) == cleared
     M = dense(mat, comm)
     G, H, keep = _frames(pre, comm, M)
     q = _primal(pre, comm)
