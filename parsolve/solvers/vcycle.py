@@ -22,7 +22,7 @@ from petsc4py import PETSc
 #: Newton iteration 1.37x and 1.09x plain elasticity's, against 1.40x with 8 (each against
 #: the elasticity of its own bench run); 2 sweeps 13.5 / 18. Fewer sweeps trade time for
 #: iterations that grow with the mesh: 8 stay, the time target (≤ 1.5x) met with them at
-#: 122k (1.30x); at 2M DOFs on 2 ranks, on the "allatonce" products, 1.83x CPU (missed).
+#: 122k (1.30x), missed at 2M DOFs on 2 ranks (1.83-1.87x CPU: the sweeps' cost).
 FINE_SWEEPS = 8
 #: the same when S holds tied rows (solvers.tied: S = G K_eff H): on the mortar sphere
 #: (16.7k DOFs, 1 rank) Krylov iterations per solve (mean / max) 31.7 / 34 with 8 sweeps, 24.0 /
@@ -43,7 +43,10 @@ def _products_freed() -> Iterator[None]:
     elasticity's: PETSc's default product (``-matptap_via nonscalable``) freed 1.30x, 1.19x
     (1.34x, 1.19x in the same run's second such row; its set-up +106 MiB per rank); kept
     1.45x, 1.31x (+121 MiB); "allatonce" (the least memory, +48 MiB, but 22.5 s per set-up
-    against 3.3) 1.72x, 1.10x (the last two in an earlier run)."""
+    against 3.3) 1.72x, 1.10x (the last two in an earlier run). At 2M DOFs on 2 ranks the
+    trade turns (scripts/results/bench_relations_big.md, docs/performance.md): freed 1.87x,
+    1.40x; "allatonce" 1.83x, 1.28x (its set-up a small share of a long run): near the
+    machine's memory, ``-matptap_via allatonce``."""
     options = PETSc.Options()
     add = not options.hasName("mat_product_clear")
     if add:
