@@ -130,8 +130,9 @@ class CondensedPreconditioner:
 
     def _reset(self) -> None:
         self.mat = self.S = self._work = None
-        # the tied rows' frames (solvers.tied; None: every row nodal) and K's copy
-        self.G = self.H = self.X = self._k = None
+        # the tied rows' frames (solvers.tied; None: every row nodal), their pattern's digest
+        # and K's copy
+        self.G = self.H = self.X = self._k = self.frame_pattern = None
 
     # ------------------------------------------------------------------ set-up
 

@@ -182,7 +182,7 @@ def frames(pre) -> tuple[PETSc.Mat, PETSc.Mat, PETSc.Mat]:
     else new matrices (pre.G is None: made anew). Collective."""
     triplets = [_sorted(*t) for t in _triplets(pre)]
     pattern = _digest(triplets)
-    same = pre.G is not None and getattr(pre, "frame_pattern", None) == pattern
+    same = pre.G is not None and pre.frame_pattern == pattern
     same = bool(pre.comm.allreduce(int(same), op=MPI.MIN))
     pre.frame_pattern = pattern
     if not same:
