@@ -156,7 +156,7 @@ def test_the_relation_set_passes_the_enforced_row_between_holder_and_owner():
                               np.full(ids.size, 9.0), sense="<=", maximum=True,
                               shared_dual=(pattern[own], np.ones(int(own.sum())))), ids, 3)
     peak.comm = COMM
-    dm.index_inputs([dofs, pattern])
+    dm.index_inputs([np.array([3, 33, 63]), pattern])   # (every rank: the check below)
     rs = RelationSet([peak], dm)
     assert rs.nrows == 1 and rs.nrelrows == ids.size   # one multiplier, each rank its rows
     _, _, l0, l1 = dm.owned()
