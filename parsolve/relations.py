@@ -61,6 +61,8 @@ class Relation:
     # alone, so that A q is the sum of every rank's part; its rows' A entries reach their
     # multiplier row's owner in the stacking (``la.relation_set``)
     spread: bool = False
+    # the ranks a relation built per rank spans (its rows' sums over them: ``reaction``)
+    comm: object = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.sense not in SENSES:
@@ -147,11 +149,15 @@ class Relation:
         return self.dual
 
     def reaction(self, lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The reaction D λ as (dof, force) entries (a shared dual: one vector times Σ λ, no
-        copy per row)."""
+        """The reaction D λ as (dof, force) entries (a shared dual: one vector, this rank's
+        part, times Σ λ over every row: a relation built per rank sums its rows' over the
+        ranks, collective)."""
         if self.shared_dual is not None:
             dofs, vals = self.shared_dual
-            return dofs, vals * lam.sum()
+            total = float(lam.sum())
+            if not self.whole and self.comm is not None and self.comm.size > 1:
+                total = self.comm.allreduce(total)
+            return dofs, vals * total
         dofs, rows, vals = self.dual_coo()
         return dofs, vals * lam[rows]
 
@@ -263,7 +269,7 @@ def keep_rows(relation: Relation, keep: np.ndarray) -> Relation:
                    shared_dual=relation.shared_dual,
                    groups=None if relation.groups is None else relation.groups[keep],
                    spread=relation.spread)
-    out.meta = relation.meta
+    out.meta, out.comm = relation.meta, relation.comm
     return out
 
 

@@ -33,7 +33,7 @@ parallel 4 tests/solvers/test_rank_independence.py tests/mesh/test_distribute.py
   tests/relation_kinds/test_global_rows.py tests/mesh/test_xdmfmesh.py \
   tests/contact/test_sliding_per_rank.py tests/contact/test_obstacle_rows_per_rank.py \
   tests/effects/test_contact_penalty_per_rank.py tests/relation_kinds/test_strain_per_rank.py \
-  tests/effects/test_solubility_distributed.py "$@"
+  tests/effects/test_solubility_distributed.py tests/relation_kinds/test_maximum_per_rank.py "$@"
 echo "== docs: generated pages checked, mkdocs build --strict"
 bash scripts/docs.sh
 echo "== benchmarks, smoke (every scripts/bench_*.py at its smallest size)"

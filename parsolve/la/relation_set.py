@@ -10,8 +10,8 @@ relation gets equal scales, which keeps the operator symmetric.
 A relation is whole (every row on every rank) or built per rank (``Relation.ids``: a rigid
 obstacle's contact rows, each built by the rank owning its slave node; multiplied Dirichlet,
 equal and periodic rows, by the rank owning the DOF or node each constrains; solubility's two
-rows of a node, by the node's owner; a per-cell strain row outside a maximum, by the rank
-counting the cell; numbered by their place in the whole relation). A whole relation may be
+rows of a node, by the node's owner; a per-cell strain row, by the rank counting the cell, under
+a maximum too; numbered by their place in the whole relation). A whole relation may be
 spread (``Relation.spread``: a mean, linear or strain row, each rank holding the entries on its
 owned DOFs): its rows' A entries are sent to their multiplier row's owner (``_foreign_a``),
 whose operator row adds them, and its rows' owners are counted from every rank's entries
@@ -43,7 +43,13 @@ stacking).
 A relation's rows ("relation rows", what the active set decides) map to multiplier rows one to
 one, except for a collapsed maximum group (``Relation.collapsed``): all its rows share one
 multiplier row and one dual column, which carries the coefficients of the enforced row
-(``select``); the other rows' A entries are kept in the pattern at zero.
+(``select``); the other rows' A entries are kept in the pattern at zero. Its rows are built
+per rank, its one multiplier row numbered alike on every rank (owned by the rank owning most
+of its entries, as a spread row's): each rank holds its own rows, sends their A entries to the
+multiplier row's owner (known there by their row numbers, ``a_gid``), and the enforced row's
+number, its value and its multiplier pass between the row's holder and the multiplier row's
+owner by one reduction of the groups' number (``select``, ``_per_mult``,
+``_group_multipliers``).
 
 Relations refreshed between iterations (``meta["refresh"]``: friction turning its rows,
 contact pairings) keep their sparsity: ``refresh`` copies their current A and D values into the stacked
@@ -68,7 +74,13 @@ from parsolve.relations import Relation
 # a spread relation's A entry sent to its multiplier row's owner: the row, the column (new
 # primal DOF), the value, the relation and its row there
 _A_ENTRY = np.dtype([("row", np.int64), ("col", np.int64), ("val", np.float64),
-                     ("rel", np.int64), ("relrow", np.int64)])
+                     ("rel", np.int64), ("relrow", np.int64), ("gid", np.int64)])
+
+
+def _per_rank_group(r: Relation) -> bool:
+    """A maximum group built per rank with one multiplier row (``Relation.collapsed``): its
+    rows on the ranks building them, the row numbered alike on every rank and owned by one."""
+    return r.collapsed and not r.whole
 
 
 def _cat(parts, dtype) -> np.ndarray:
@@ -95,6 +107,9 @@ class RelationSet:
         self.relations, self.dofmap = relations, dofmap
         self.position: np.ndarray | None = None   # multiplier row of each stacked row
         self._stack()
+        # per maximum group built per rank (``_groups``): the number of its enforced row
+        # (its first until ``select`` says), told by the row's holder
+        self._enforced = np.zeros(len(self._groups), dtype=np.int64)
         self.row_scale: np.ndarray | None = None
         self.col_scale: np.ndarray | None = None
 
@@ -119,12 +134,19 @@ class RelationSet:
         mult_sizes = [1 if r.collapsed else r.nrows for r in relations]
         self.row_first = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         first = np.concatenate([[0], np.cumsum(mult_sizes)]).astype(np.int64)
-        ar, ac, av, dr, dc, dv, arel, mult = [], [], [], [], [], [], [], []
+        ar, ac, av, dr, dc, dv, arel, mult, gid = [], [], [], [], [], [], [], [], []
+        # maximum groups built per rank with one multiplier row (their A entries found by
+        # their rows' numbers, ``a_gid``: the enforced one's on, ``a_on``)
+        self._groups = [k for k, r in enumerate(relations) if _per_rank_group(r)]
         for k, rel in enumerate(relations):
             local = np.zeros(rel.nrows, dtype=np.int64) if rel.collapsed else np.arange(rel.nrows)
             mult.append(local + first[k])
             ar.append(local[rel.a_rows] + first[k])
-            arel.append(rel.a_rows + self.row_first[k])
+            grouped = _per_rank_group(rel)
+            arel.append(np.full(rel.a_rows.size, -1, dtype=np.int64) if grouped
+                        else rel.a_rows + self.row_first[k])
+            gid.append(rel.ids[rel.a_rows] if grouped
+                       else np.full(rel.a_rows.size, -1, dtype=np.int64))
             ac.append(new_dof(rel.a_dofs))
             av.append(rel.a_vals)
             if rel.collapsed:  # one copy of the shared vector
@@ -138,8 +160,8 @@ class RelationSet:
         stacked_a, stacked_d = _cat(ar, np.int64), _cat(dc, np.int64)
         self._d_per_rank = np.repeat([not r.whole for r in relations],
                                      [len(d) for d in dv]).astype(bool)
-        self._a_spread = np.repeat([r.spread for r in relations],
-                                   [len(a) for a in av]).astype(bool)
+        self._a_sent = np.repeat([r.spread or _per_rank_group(r) for r in relations],
+                                 [len(a) for a in av]).astype(bool)
         self.a_cols, self.a_vals = _cat(ac, np.int64), _cat(av, float)
         self.d_rows, self.d_vals = _cat(dr, np.int64), _cat(dv, float)
         if self.position is None:   # the owners, once: restacking keeps them
@@ -147,8 +169,10 @@ class RelationSet:
         pos = self.position
         self.a_rows, self.d_cols = pos[stacked_a], pos[stacked_d]
         self.a_relrow = _cat(arel, np.int64)            # relation row of each A entry
+        self.a_gid = _cat(gid, np.int64)   # its row's number in a per-rank group, else -1
         self._keep_own([len(a) for a in av], [len(d) for d in dv])
         self.mult_rows = [pos[first[k]:first[k + 1]] for k in range(len(relations))]
+        self._group_mult = np.array([pos[first[k]] for k in self._groups], dtype=np.int64)
         self.mult_of_row = pos[_cat(mult, np.int64)]    # multiplier row of each relation row
         # the relation rows of whole relations (the same on every rank) and the others
         whole = np.concatenate([np.full(r.nrows, r.whole) for r in relations]) \
@@ -209,14 +233,15 @@ class RelationSet:
         nranks, me = dofmap.q_ranges.size - 1, dofmap.rank
         n, nrel = int(first[-1]), len(self.relations)
         relation = np.repeat(np.arange(nrel), np.diff(first))
-        whole = np.array([r.whole for r in self.relations], dtype=bool)
+        # rows numbered alike on every rank: a whole relation's, a per-rank group's one row
+        whole = np.array([r.whole or r.collapsed for r in self.relations], dtype=bool)
         is_whole = whole[relation] if nrel else np.zeros(0, dtype=bool)
         wid = np.cumsum(is_whole) - 1                           # whole rows' common numbers
         owner = np.full(n, me, dtype=np.int64)
         owner[is_whole] = np.arange(int(is_whole.sum()), dtype=np.int64) % nranks  # no entry
         rows = np.concatenate([stacked_a, stacked_d])
         dof_owner = dofmap.owner_of_dofs(np.concatenate([self.a_cols, self.d_rows]))
-        loose = np.array([r.whole and not r.complete for r in self.relations], dtype=bool)
+        loose = whole & np.array([not r.complete for r in self.relations], dtype=bool)
         is_loose = loose[relation] if nrel else np.zeros(0, dtype=bool)
         on = is_whole[rows] & ~is_loose[rows]
         keys, count = np.unique(wid[rows[on]] * nranks + dof_owner[on], return_counts=True)
@@ -266,13 +291,13 @@ class RelationSet:
         owner[at[some]] = nranks - 1 - best[some] % nranks
 
     def _groups_together(self, owner: np.ndarray, first: np.ndarray) -> None:
-        """The rows of a group the active set decides together (a maximum relation's, a
-        relation's ``groups``) go with the group's first row's owner, in place (a collapsed
-        group is one multiplier row already; a relation built per rank: its groups are
-        this rank's)."""
+        """The rows of a whole relation's ``groups`` (decided together by the active set) go
+        with the group's first row's owner, in place (a relation built per rank: its groups
+        are this rank's; a maximum group's rows are decided by reductions, wherever they
+        are)."""
         for k, r in enumerate(self.relations):
-            ids = np.zeros(r.nrows, dtype=np.int64) if r.maximum else r.groups
-            if ids is not None and not r.collapsed and r.nrows and r.whole:
+            ids = r.groups
+            if ids is not None and r.nrows and r.whole:
                 _, lead, inverse = np.unique(ids, return_index=True, return_inverse=True)
                 rows = first[k] + np.arange(r.nrows)
                 owner[rows] = owner[rows[lead[inverse]]]
@@ -291,8 +316,8 @@ class RelationSet:
         mine = (self.d_rows >= q0) & (self.d_rows < q1)
         keep_d = np.flatnonzero(mine)
         sent = self._foreign_d(self._d_per_rank & ~mine)
-        got_a = self._foreign_a(self._a_spread & ~owned)
-        for name, got in zip(("a_rows", "a_cols", "a_vals", "a_relrow"), got_a):
+        got_a = self._foreign_a(self._a_sent & ~owned)
+        for name, got in zip(("a_rows", "a_cols", "a_vals", "a_relrow", "a_gid"), got_a):
             setattr(self, name, np.concatenate([getattr(self, name)[keep_a], got]))
         for name, got in zip(("d_rows", "d_cols", "d_vals"), sent):
             setattr(self, name, np.concatenate([getattr(self, name)[keep_d], got]))
@@ -309,23 +334,27 @@ class RelationSet:
 
     def _foreign_a(self, out: np.ndarray) -> tuple:
         """The A entries this rank holds of spread relations' rows owned elsewhere (``out``:
-        on its owned DOFs, ``Relation.spread``) sent to those rows' owners, who add them to
+        on its owned DOFs, ``Relation.spread``) and of per-rank maximum groups' rows whose
+        one multiplier row another rank owns, sent to those rows' owners, who add them to
         their operator rows; returns the entries received (multiplier rows, columns, values,
-        relation rows here). Collective (nothing moves on one rank or without a spread
-        relation anywhere: the same relations on every rank)."""
+        relation rows here, group row numbers). Collective (nothing moves on one rank or
+        without such a relation anywhere: the same relations on every rank)."""
         comm = self.dofmap.comm
-        if comm.size == 1 or not any(r.spread for r in self.relations):
+        if comm.size == 1 or not any(r.spread or _per_rank_group(r) for r in self.relations):
             return (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0),
-                    np.zeros(0, np.int64))
+                    np.zeros(0, np.int64), np.zeros(0, np.int64))
         at = np.flatnonzero(out)
         owner = np.searchsorted(self.dofmap.l_ranges, self.a_rows[at], side="right") - 1
-        k = np.searchsorted(self.row_first, self.a_relrow[at], side="right") - 1
+        k = np.searchsorted(self.row_first, np.maximum(self.a_relrow[at], 0), side="right") - 1
         sent = np.empty(at.size, dtype=_A_ENTRY)
         sent["row"], sent["col"], sent["val"] = self.a_rows[at], self.a_cols[at], self.a_vals[at]
         sent["rel"], sent["relrow"] = k, self.a_relrow[at] - self.row_first[k]
+        sent["gid"] = self.a_gid[at]
         got, _ = exchange(comm, sent, owner)
-        # (a whole relation's row j is relation row row_first[k] + j on every rank)
-        return got["row"], got["col"], got["val"], self.row_first[got["rel"]] + got["relrow"]
+        # (a whole relation's row j is relation row row_first[k] + j on every rank; a
+        # group's entries are known by their row's number alone)
+        relrow = np.where(got["gid"] >= 0, -1, self.row_first[got["rel"]] + got["relrow"])
+        return got["row"], got["col"], got["val"], relrow, got["gid"]
 
     def _foreign_d(self, out: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The D entries of this rank's rows built per rank on other ranks' DOFs (``out``: a
@@ -385,8 +414,17 @@ class RelationSet:
 
     @property
     def a_on(self) -> np.ndarray:
-        """A entries of the rows enforced now (all but a collapsed group's other rows)."""
-        return self.rep_row[self._here(self.a_rows)] == self.a_relrow
+        """A entries of the rows enforced now (all but a collapsed group's other rows; a
+        per-rank group's: those of its enforced row's number)."""
+        grouped = self.a_gid >= 0
+        on = np.zeros(self.a_rows.size, dtype=bool)
+        if self.rep_row.size:
+            at = np.minimum(self._here(self.a_rows[~grouped]), self.rep_row.size - 1)
+            on[~grouped] = self.rep_row[at] == self.a_relrow[~grouped]
+        for j, mult in enumerate(self._group_mult):   # (a loop over groups, not rows)
+            at = grouped & (self.a_rows == mult)
+            on[at] = self.a_gid[at] == self._enforced[j]
+        return on
 
     # ------------------------------------------------------------ values
 
@@ -400,7 +438,36 @@ class RelationSet:
         out = np.zeros(l1 - l0)
         own = (self.mults_here >= l0) & (self.mults_here < l1)
         out[self.mults_here[own] - l0] = per_row[self.rep_row[own]]
+        if self._groups:   # (collective) a per-rank group's: its enforced row's holder's
+            mine = (self._group_mult >= l0) & (self._group_mult < l1)
+            out[self._group_mult[mine] - l0] = self._group_values(per_row)[mine]
         return out
+
+    def _group_values(self, per_row: np.ndarray) -> np.ndarray:
+        """Per per-rank maximum group, the value (of ``per_row``, per relation row held here)
+        of its enforced row, from the rank holding it: one reduction of the groups' number.
+        Collective."""
+        out = np.zeros(len(self._groups))
+        for j, k in enumerate(self._groups):
+            at = np.flatnonzero(self.relations[k].ids == self._enforced[j])
+            out[j] = per_row[self.row_first[k] + at[0]] if at.size else 0.0
+        return self.dofmap.sum_ranks(out)
+
+    def _group_multipliers(self, lam: np.ndarray, out: np.ndarray, start: int) -> None:
+        """A per-rank group's λ (``lam``: this rank's owned multipliers) on its enforced row
+        where held, 0 on its other rows, in ``out`` (per relation row from ``start``), in
+        place: one reduction of the groups' number. Collective."""
+        _, _, l0, l1 = self.dofmap.owned()
+        mine = (self._group_mult >= l0) & (self._group_mult < l1)
+        values = np.zeros(len(self._groups))
+        values[mine] = lam[self._group_mult[mine] - l0]
+        self.dofmap.sum_ranks(values)
+        for j, k in enumerate(self._groups):
+            span = self.rows_of(k)
+            if span.start < start or span.stop > start + out.size:
+                continue
+            rows = out[span.start - start:span.stop - start]
+            rows[:] = np.where(self.relations[k].ids == self._enforced[j], values[j], 0.0)
 
     def rhs(self, t: float) -> np.ndarray:
         """Scaled b(t) of the multiplier rows this rank owns."""
@@ -495,10 +562,14 @@ class RelationSet:
 
     @property
     def owned_relrows(self) -> np.ndarray:
-        """Mask of the relation rows whose multiplier row this rank owns (a collapsed group's
-        rows, and the rows of a group the active set decides together, all on one rank)."""
+        """Mask of the relation rows this rank decides: those whose multiplier row it owns,
+        and a per-rank maximum group's rows it holds (the group decided by reductions, its
+        one multiplier row owned by one rank)."""
         _, _, l0, l1 = self.dofmap.owned()
-        return (self.mult_of_row >= l0) & (self.mult_of_row < l1)
+        out = (self.mult_of_row >= l0) & (self.mult_of_row < l1)
+        for k in self._groups:
+            out[self.rows_of(k)] = True
+        return out
 
     def _owned_values(self, lam: np.ndarray, span: slice) -> np.ndarray:
         """``row_values`` of the relation rows ``span`` from this rank's owned multipliers:
@@ -520,7 +591,10 @@ class RelationSet:
         """Unscaled λ of relation k's rows held here (``row_values``) from this rank's owned
         multipliers, each row's from its owner: one reduction of a whole relation's size
         (a relation built per rank: its own). Collective."""
-        part = self._owned_values(lam, self.rows_of(k))
+        span = self.rows_of(k)
+        part = self._owned_values(lam, span)
+        if self._groups:   # (the same relations on every rank)
+            self._group_multipliers(lam, part, span.start)
         return self.dofmap.sum_ranks(part) if self.relations[k].whole else part
 
     def every_row(self, lam: np.ndarray) -> np.ndarray:
@@ -532,6 +606,8 @@ class RelationSet:
             return np.zeros(0)
         out = self.owned_row_values(lam)
         out[self.whole_rows] = self.dofmap.sum_ranks(out[self.whole_rows])
+        if self._groups:
+            self._group_multipliers(lam, out, 0)
         return out
 
     def per_relation(self, lam: np.ndarray) -> dict[str, np.ndarray]:
@@ -561,10 +637,26 @@ class RelationSet:
         np.logical_or.at(on, at[held], np.asarray(active_rows, dtype=bool)[held])
         rows = np.flatnonzero(active_rows)
         self.rep_row[self._here(self.mult_of_row[rows])] = rows
+        if self._groups:   # (collective) a per-rank group's row: its holder's say
+            self._select_groups(np.asarray(active_rows, dtype=bool), on)
         if self._crossing:   # ghost rows built per rank elsewhere: their owners' say
             # (collective: a tie's D column on another rank's DOF, ``_foreign_d``)
             on = self.from_owned(on[:self.n_owned].astype(float)) > 0.5
         return on
+
+    def _select_groups(self, active_rows: np.ndarray, on: np.ndarray) -> None:
+        """Each per-rank maximum group's enforced row (its number, -1: none) from the rank
+        holding it, and its multiplier row's mask where held here, in place: one reduction
+        of the groups' number."""
+        found = np.full(len(self._groups), -1, dtype=np.int64)
+        for j, k in enumerate(self._groups):
+            at = np.flatnonzero(active_rows[self.rows_of(k)])
+            found[j] = self.relations[k].ids[at[0]] if at.size else -1
+        if self.dofmap.comm.size > 1:
+            self.dofmap.comm.Allreduce(MPI.IN_PLACE, found, op=MPI.MAX)
+        self._enforced = found
+        held, at = self._held_places(self._group_mult)
+        on[at[held]] = found[held] >= 0
 
     def refresh(self) -> None:
         """Copy the current A and D values of the relations marked ``meta["refresh"]`` into

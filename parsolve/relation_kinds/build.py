@@ -9,7 +9,8 @@ eliminated row lifts its owner's columns; the others read its value from there:
 ``SaddleSystem``). A kind of rows over regions (mean,
 linear, strain) builds every row, each rank the entries of the nodes and cells it owns
 (``Relation.spread``); so does a per-rank relation whose rows share a load pattern (every row
-a column of it), its entries sent to their DOFs' owners. A load pattern as a relation's dual
+a column of it), its entries sent to their DOFs' owners, unless it is a maximum group (one
+column, its rows per rank: ``Relation.collapsed``). A load pattern as a relation's dual
 is each rank's part of it, on its owned DOFs (``RegionResolver.relation_vector``)."""
 
 from __future__ import annotations
@@ -41,7 +42,8 @@ def build_relations(specs: list, regions, evolutions: dict, patterns: dict, fiel
             r.shared_dual = regions.relation_vector(patterns[spec.dual].vector(), ncomp)
         r.eliminate = spec.eliminate if spec.eliminate is not None else (eliminate and None)
         r.meta = {**r.meta, "type": spec.type, "key": spec.key, "dual": spec.dual}
-        if not r.whole and r.shared_dual is not None:
+        r.comm = regions.comm
+        if not r.whole and r.shared_dual is not None and not r.maximum:
             r = _spread(where, r)
         elif not r.whole and not regions.comm.allreduce(r.eliminable(), op=MPI.LAND):
             r = _held(r)

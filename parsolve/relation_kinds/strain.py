@@ -71,13 +71,13 @@ def strain_rows(mesh, cells: np.ndarray, direction: np.ndarray, thickness: float
 
 
 def build(spec: RelationSpec, where: Where, evolution) -> rel.Relation:
-    """The rows of the cells this rank counts (``owned_cells``). One row per cell without a
-    maximum: each cell's row built and held by the rank counting it (``Relation.ids``: row j
-    the region's j-th cell by input id; its entries on other ranks' nodes reach them in the
-    stacking, as a tie's). A mean, or rows under a maximum (a group spanning the ranks): a
-    spread relation (``Relation.spread``), its rows whole, the entries sent to the ranks
-    owning their DOFs (``spread.to_owners``). No rank holds the region's entries or cells
-    (each the cells it counts: ``row_cell``)."""
+    """The rows of the cells this rank counts (``owned_cells``). One row per cell: each
+    cell's row built and held by the rank counting it (``Relation.ids``: row j the region's
+    j-th cell by input id; its entries on other ranks' nodes reach them in the stacking, as
+    a tie's), under a maximum too (the group spans the ranks: the active set decides it by
+    reductions). A mean: a spread relation (``Relation.spread``), its one row whole, the
+    entries sent to the ranks owning their DOFs (``spread.to_owners``). No rank holds the
+    region's entries or cells (each the cells it counts: ``row_cell``)."""
     regions, fields, comm = where.regions, where.fields, where.comm
     mesh = regions.mesh
     region = regions(spec.region, spec.key + ".region")
@@ -85,7 +85,7 @@ def build(spec: RelationSpec, where: Where, evolution) -> rel.Relation:
         raise InputError(f"region {spec.region!r} contains no cell (a strain needs cells)",
                          where.source, spec.key + ".region")
     cells = regions.owned_cells(region.cells)
-    per_rank = spec.per_cell and not spec.maximum
+    per_rank = spec.per_cell
     if per_rank:   # (its rows held in increasing number: the cells by input id)
         cells = cells[np.argsort(mesh.global_cells[cells], kind="stable")]
     dofs, coefs, vol = strain_rows(mesh, cells, spec.direction, where.thickness,

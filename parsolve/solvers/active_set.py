@@ -15,14 +15,17 @@ that reason, and the stepper cuts it. Any other set that comes back after having
 cycling: the update then changes one row (or one group's row) at a time, the most violated,
 and gives up after a bounded number of changes.
 
-Across ranks, every rank holds the set (a mask of the relation rows) and the rows' gaps, and
-reads the multipliers of the rows it owns only (``owned``: those whose multiplier row it
-owns). What a multiplier decides — a row whose reaction pulls — is decided by the row's owner,
-and the rows so found (few: the changes) are exchanged, with their scores; the rest (violated
-rows, groups, cycling, the bound) is decided from the gaps, alike on every rank. A group is
-decided from gaps alone, so its rows need not share an owner. A relation built per rank
-(``Relation.ids``: solubility's nodes) has its groups on the rank building them, each whole
-there: that rank alone decides them.
+Across ranks, every rank holds the set's part on the rows it holds (a mask of the relation
+rows) and decides the rows it owns (``owned``: those whose multiplier row it owns, and the
+rows of a maximum group it holds). What a multiplier decides — a row whose reaction pulls —
+is decided by the row's owner, and the rows so found (few: the changes) are exchanged, with
+their scores; the rest (violated rows, cycling, the bound) is decided from the gaps, alike
+on every rank. A relation built per rank (``Relation.ids``: solubility's nodes) has its
+local groups on the rank building them, each whole there: that rank alone decides them. A
+maximum group spans the ranks (a per-cell strain: each cell's row on the rank counting it):
+it is decided by reductions of the groups' number (``choose``: each rank its rows' best
+score, the largest over the ranks; the rows tied with it, the enforced one kept if among
+them, else the lowest row number of them), no rank holding another's rows.
 """
 
 from __future__ import annotations
@@ -72,30 +75,29 @@ class ActiveSet:
         self.sign = np.concatenate([np.full(r.nrows, r.sign) for r in relations]) \
             if relations else np.zeros(0, dtype=np.int64)
         first = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-        # groups: contiguous runs of rows; a whole maximum relation is one group
+        # local groups (a relation's ``groups``: contiguous runs of rows on one rank), with a
+        # round-off wide tie (solubility: a node exactly at saturation)
         group = np.full(self.sign.size, -1, dtype=np.int64)
-        # ties: wide for a control group (its rows differ by a solve's round-off, amplified past
-        # a peak), round-off wide for local groups (solubility: a node exactly at saturation)
-        self.tie = np.zeros(self.sign.size)
         count = 0
         for k, r in enumerate(relations):
-            ids = np.zeros(r.nrows, dtype=np.int64) if r.maximum else r.groups
-            if ids is not None:
-                group[first[k]:first[k + 1]] = count + np.asarray(ids, dtype=np.int64)
-                self.tie[first[k]:first[k + 1]] = GROUP_TOL if r.maximum else LOCAL_TIE
-                count += int(np.max(ids)) + 1 if r.nrows else 0
+            if r.groups is not None and not r.maximum:
+                group[first[k]:first[k + 1]] = count + np.asarray(r.groups, dtype=np.int64)
+                count += int(np.max(r.groups)) + 1 if r.nrows else 0
         self.group = group
-        grouped = group >= 0
-        self.group_rows = np.flatnonzero(grouped)
-        starts = np.flatnonzero(np.diff(np.concatenate([[-1], group[grouped]])) != 0)
-        self.group_starts = starts                       # into group_rows
-        # whether some relation has groups (on any rank: a relation built per rank may have
-        # none here, and deciding them is collective)
-        self._grouped = any(r.maximum or r.groups is not None for r in relations)
-        # the control groups (a maximum relation), for the per-step predictor
-        self.groups = [np.arange(first[k], first[k + 1]) for k, r in enumerate(relations) if r.maximum]
+        self.local_rows = np.flatnonzero(group >= 0)
+        self.local_starts = np.flatnonzero(np.diff(np.concatenate([[-1], group[group >= 0]])))
+        # whether some relation has local groups (on any rank: a relation built per rank may
+        # have none here, and deciding them is collective)
+        self._grouped = any(r.groups is not None and not r.maximum for r in relations)
+        # the maximum groups (one per maximum relation, over the ranks): their relations, the
+        # rows held here (for the per-step predictor), those rows' numbers in the relation
+        self.group_relations = [k for k, r in enumerate(relations) if r.maximum]
+        self.groups = [np.arange(first[k], first[k + 1]) for k in self.group_relations]
+        self.group_ids = [relations[k].row_ids() for k in self.group_relations]
         self.maximum = np.concatenate([np.full(r.nrows, r.maximum) for r in relations]) \
             if relations else np.zeros(0, dtype=bool)
+        grouped = (group >= 0) | self.maximum
+        self.group_rows = np.flatnonzero(grouped)   # rows of any group held here
         self.names, self.first = [r.name for r in relations], first
         # rows of whole relations (every rank holds them, alike) and each row's place in the
         # relations' rows over every rank (relation, then global row): what ranks exchange
@@ -104,10 +106,14 @@ class ActiveSet:
         totals = np.concatenate([[0], np.cumsum([r.total for r in relations])]).astype(np.int64)
         self.key = np.concatenate([totals[k] + r.row_ids() for k, r in enumerate(relations)]) \
             if relations else np.zeros(0, dtype=np.int64)
+        self.totals = totals
         self.whole_relation = np.array([r.whole for r in relations], dtype=bool)
         self.free = (self.sign != 0) & ~grouped   # rows decided one by one
         self.active = self.sign == 0              # equalities are always enforced
-        self.active[self.group_rows[starts]] = True  # a group is always enforced somewhere
+        # a group is always enforced somewhere: its first row
+        self.active[self.local_rows[self.local_starts]] = True
+        for g, ids in zip(self.groups, self.group_ids):
+            self.active[g[ids == 0]] = True
         # +1 where a positive s·λ pushes the row back to its admissible side (associated rows);
         # non-associated rows get theirs from their own response (``RelationPolicies.orient``)
         self.orient = np.ones(self.sign.size)
@@ -150,12 +156,13 @@ class ActiveSet:
         wrong_sign, pull = self._everywhere(mine & self.free & self.active & (pull > tol_lam), pull)
         new[violated] = True
         new[wrong_sign] = False
-        gain = None
+        gain = np.full(self.sign.size, -np.inf)
         if self._grouped:
-            rows = self.group_rows
-            best, gain = self._groups(s[rows] * gap[rows], scale)
-            self._no_way_back(rows[best & ~self.active[rows] & self.held[rows] & self.maximum[rows]])
+            rows = self.local_rows
+            best, gain[rows] = self._groups(s[rows] * gap[rows], LOCAL_TIE * scale)
             new[rows] = best
+        if self.groups:
+            self._maxima(new, gain, s * gap, GROUP_TOL * scale)
         if self._same(new):
             return False
         if new.tobytes() in self.seen:  # cycling: change only the worst row
@@ -174,13 +181,57 @@ class ActiveSet:
         same = bool(np.array_equal(new, self.active))
         return same if self.comm.size == 1 else self.comm.allreduce(same, op=MPI.LAND)
 
-    def _groups(self, value: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
-        """Each group's row to enforce (``pick_groups``, decided by the group's owner from its
-        rows' values s (A q - b)) and, on the rows it moves to, how far they exceed the row
-        enforced now (-inf elsewhere), over ``group_rows``, on every rank. Collective."""
-        rows, starts = self.group_rows, self.group_starts
+    def _maxima(self, new: np.ndarray, gain: np.ndarray, value: np.ndarray, tol: float) -> None:
+        """The maximum groups' rows to enforce (``choose`` on their values s (A q - b)) into
+        ``new``, and, on the rows they move to, how far those exceed the row enforced now
+        (``gain``), in place; a group going back to a row it left in this step fails it
+        (``_no_way_back``). Collective."""
+        mine = [self.owned[g] for g in self.groups]
+        scores = [np.where(m, value[g], -np.inf) for g, m in zip(self.groups, mine)]
+        current = np.array([s[self.active[g]].max(initial=-np.inf)
+                            for g, s in zip(self.groups, scores)])
+        if self.comm.size > 1:
+            self.comm.Allreduce(MPI.IN_PLACE, current, op=MPI.MAX)
+        chosen = self.choose(scores, np.full(len(self.groups), tol))
+        back = []
+        for g, m, s, c, best in zip(self.groups, mine, scores, current, chosen):
+            moved = m & best & ~self.active[g]
+            gain[g[moved]] = s[moved] - c
+            back.append(g[moved & self.held[g]])
+            new[g] = best
+        self._no_way_back(np.concatenate(back) if back else np.zeros(0, dtype=np.int64))
+
+    def choose(self, scores: list[np.ndarray], tols: np.ndarray) -> list[np.ndarray]:
+        """Per maximum group, the mask of its rows held here to enforce: the best (largest)
+        finite score over every rank (``scores``: per group, its rows' here, -inf on the rows
+        not decided here), rows within ``tols`` of it tied (tied rows of a symmetric problem
+        differ by the solution's round-off, which grows with the tangent's conditioning past a
+        peak and changes with the partition); among them the enforced row stays, otherwise
+        the lowest row number is taken: a rule that round-off cannot change. Two reductions
+        of the groups' number. Collective."""
+        n = len(self.groups)
+        top = np.array([s[np.isfinite(s)].max(initial=-np.inf) for s in scores])
+        if self.comm.size > 1:
+            self.comm.Allreduce(MPI.IN_PLACE, top, op=MPI.MAX)
+        tied = [np.isfinite(s) & (s >= t - tol) for s, t, tol in zip(scores, top, tols)]
+        # (-1 where the enforced row is tied, then the lowest tied row's number: one minimum)
+        keep_low = np.full(2 * n, np.iinfo(np.int64).max, dtype=np.int64)
+        for j, (g, ids, t) in enumerate(zip(self.groups, self.group_ids, tied)):
+            keep_low[j] = -1 if (t & self.active[g]).any() else 0
+            keep_low[n + j] = ids[t].min(initial=np.iinfo(np.int64).max)
+        if self.comm.size > 1:
+            self.comm.Allreduce(MPI.IN_PLACE, keep_low, op=MPI.MIN)
+        return [self.active[g].copy() if keep_low[j] < 0 else ids == keep_low[n + j]
+                for j, (g, ids) in enumerate(zip(self.groups, self.group_ids))]
+
+    def _groups(self, value: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
+        """Each local group's row to enforce (``pick_groups``, decided by the group's owner
+        from its rows' values s (A q - b)) and, on the rows it moves to, how far they exceed
+        the row enforced now (-inf elsewhere), over ``local_rows``, on every rank.
+        Collective."""
+        rows, starts = self.local_rows, self.local_starts
         mine = self.owned[rows]
-        best = self.pick_groups(value, self.active[rows], self.tie[rows] * scale)
+        best = self.pick_groups(value, self.active[rows], tol)
         sizes = np.diff(np.concatenate([starts, [rows.size]]))
         enforced = np.where(self.active[rows], value, -np.inf)
         current = np.repeat(np.maximum.reduceat(enforced, starts), sizes)
@@ -195,8 +246,8 @@ class ActiveSet:
         if self.comm.size == 1:
             return mine, np.where(mine, score, -np.inf)
         # a relation built per rank: its rows are this rank's alone, nothing to tell (the
-        # arrays: over every row, or over ``group_rows``)
-        shared = self.shared if mine.size == self.shared.size else self.shared[self.group_rows]
+        # arrays: over every row, or over ``local_rows``)
+        shared = self.shared if mine.size == self.shared.size else self.shared[self.local_rows]
         shared_rows = np.flatnonzero(shared)
         found = mine & ~shared
         out = np.where(found, score, -np.inf)
@@ -245,33 +296,41 @@ class ActiveSet:
         return out
 
     def _no_way_back(self, back: np.ndarray) -> None:
-        """Fail the step when a maximum group would return to a row it left in this step."""
-        if back.size == 0:
+        """Fail the step when a maximum group would return to a row it left in this step
+        (``back``: such rows held here, of any group): the first group with one, its lowest
+        such row and its enforced row, by row numbers over every rank. Collective."""
+        n, big = len(self.groups), np.iinfo(np.int64).max
+        found = np.full(2 * n, big, dtype=np.int64)   # per group: the row left, the enforced
+        for j, (g, ids) in enumerate(zip(self.groups, self.group_ids)):
+            found[j] = ids[np.isin(g, back)].min(initial=big)
+            found[n + j] = -ids[self.active[g] & self.owned[g]].max(initial=-big)
+        if self.comm.size > 1:
+            self.comm.Allreduce(MPI.IN_PLACE, found, op=MPI.MIN)
+        hit = np.flatnonzero(found[:n] < big)
+        if hit.size == 0:
             return
-        row = int(back[0])
-        k = int(np.searchsorted(self.first, row, side="right") - 1)
-        now = int(np.flatnonzero(self.active & (self.group == self.group[row]))[0])
-        raise GoingBack(f"maximum relation {self.names[k]!r}: the enforced row would go back "
-                        f"from row {now - self.first[k]} to row {row - self.first[k]}, which it "
+        j = int(hit[0])
+        name, row, now = self.names[self.group_relations[j]], int(found[j]), int(-found[n + j])
+        raise GoingBack(f"maximum relation {name!r}: the enforced row would go back "
+                        f"from row {now} to row {row}, which it "
                         "left during this step (the most loaded element changes back and "
                         "forth where damage localizes: the step is too large to follow it)",
-                        self.names[k], (now - self.first[k], row - self.first[k]))
+                        name, (now, row))
 
-    @staticmethod
-    def pick(group: np.ndarray, score: np.ndarray, current: int, largest: bool, tol: float) -> int:
-        """The row of a maximum group to enforce: the best score, ties broken by a rule that
-        round-off cannot change. Rows whose score is within ``tol`` of the best are tied (tied rows of a symmetric problem differ by the solution's round-off, which
-        grows with the tangent's conditioning past a peak and changes with the partition);
-        among them the current row stays enforced, otherwise the lowest row is taken."""
-        score = score if largest else -score
-        finite = np.isfinite(score)
-        tied = group[finite & (score >= score[finite].max() - tol)]
-        return int(current) if current in tied else int(tied.min())
+    def enforced_ids(self) -> np.ndarray:
+        """Per maximum group, its enforced row's number in its relation (-1: none), from
+        the rank holding it: one reduction of the groups' number. Collective."""
+        out = np.array([ids[self.active[g] & self.owned[g]].max(initial=-1)
+                        for g, ids in zip(self.groups, self.group_ids)], dtype=np.int64)
+        if self.comm.size > 1:
+            self.comm.Allreduce(MPI.IN_PLACE, out, op=MPI.MAX)
+        return out
 
     def pick_groups(self, score: np.ndarray, active: np.ndarray, tol) -> np.ndarray:
-        """``pick`` for every group at once (score and active over ``group_rows``): the new
-        active mask of those rows."""
-        starts = self.group_starts
+        """The row of each local group to enforce (score and active over ``local_rows``):
+        the best score, rows within ``tol`` of it tied; among them the enforced row stays,
+        otherwise the lowest is taken. The new active mask of those rows."""
+        starts = self.local_starts
         n = score.size
         sizes = np.diff(np.concatenate([starts, [n]]))
         top = np.repeat(np.maximum.reduceat(score, starts), sizes)
@@ -282,19 +341,20 @@ class ActiveSet:
         return np.where(keep, active & tied, np.arange(n) == lowest)
 
     def _one_change(self, score: np.ndarray, score_l: np.ndarray,
-                    gain: np.ndarray | None) -> np.ndarray:
+                    gain: np.ndarray) -> np.ndarray:
         """The single most needed change: a violated row on (``score``: s (A q - b) of the
         violated rows, -inf elsewhere), a wrong-sign row off (``score_l``: -s o λ of those
-        rows), or a group's enforced row moved to its best row (``gain``, over
-        ``group_rows``: how far the best row exceeds the enforced one). Groups must be
+        rows), or a group's enforced row moved to its best row (``gain``: how far the best
+        row exceeds the enforced one, -inf elsewhere). Groups must be
         candidates: a fallback that cannot move them would report a change at every
         iteration without making one, until the bound of changes fails the step whatever its
         residual. Every rank the same (the scores are exchanged)."""
         new = self.active.copy()
-        score_g = np.full(self.sign.size, -np.inf)
-        if gain is not None:
-            score_g[self.group_rows] = gain
-        kind, row = self._best([score, score_l, score_g])
+        kind, row, key = self._best([score, score_l, gain])
+        if kind == 2 and key is not None:   # a maximum group: its rows on every rank
+            k = int(np.searchsorted(self.totals, key, side="right") - 1)
+            if k in self.group_relations:
+                new[self.groups[self.group_relations.index(k)]] = False
         if row < 0:
             return new
         if kind == 0:
@@ -302,14 +362,16 @@ class ActiveSet:
         elif kind == 1:
             new[row] = False
         else:
-            new[self.group == self.group[row]] = False
+            if self.group[row] >= 0:
+                new[self.group == self.group[row]] = False
             new[row] = True
         return new
 
-    def _best(self, scores: list[np.ndarray]) -> tuple[int, int]:
-        """The kind with the largest score over every rank (the first of equal ones) and its
-        row held here with that score, first in the relations' rows over every rank (``key``;
-        -1: not held here, or no finite score). Collective."""
+    def _best(self, scores: list[np.ndarray]) -> tuple[int, int, int | None]:
+        """The kind with the largest score over every rank (the first of equal ones), its
+        row held here with that score, first in the relations' rows over every rank (-1: not
+        held here, or no finite score) and that row's ``key`` (None: no finite score).
+        Collective."""
         tops = np.array([x.max(initial=-np.inf) for x in scores])
         firsts = np.array([self.key[x == top].min(initial=np.iinfo(np.int64).max)
                            for x, top in zip(scores, tops)])
@@ -323,6 +385,6 @@ class ActiveSet:
             kind = int(np.argmax(tops))
             top, first = tops[kind], firsts[kind]
         if not np.isfinite(top):
-            return kind, -1
+            return kind, -1, None
         at = np.flatnonzero(self.key == first)
-        return kind, int(at[0]) if at.size else -1
+        return kind, int(at[0]) if at.size else -1, int(first)

@@ -64,26 +64,44 @@ class GoingBack(SolverError):
 class Control:
     name: str
     maximum: bool
-    row: int          # the enforced row (relation rows of the stacked set)
+    row: int          # the enforced row (relation rows of the stacked set; -1: on another rank)
     sign: int         # +1 for "<=" and "=", -1 for ">="
+    k: int = 0        # its relation (of the multiplied ones)
+    number: int = 0   # the enforced row's number in its relation (the same on every rank)
 
 
 def _controls(problem) -> list[Control]:
-    """The control relations with a load as their dual: per maximum group its enforced row,
-    per single-row equality its row."""
+    """The control relations with a load as their dual: per maximum group its enforced row
+    (held by one rank, the others knowing its number), per single-row equality its row.
+    Collective."""
     rset, active = problem.rset, problem.active
+    numbers = active.enforced_ids() if active.groups else np.zeros(0, dtype=np.int64)
     out = []
     for k, rel in enumerate(problem.ctx.multiplied):
         if not rel.meta.get("dual"):
             continue
         rows = np.arange(rset.rows_of(k).start, rset.rows_of(k).stop)
         if rel.maximum:
-            enforced = rows[active.active[rows]]
-            if enforced.size:
-                out.append(Control(rel.name, True, int(enforced[0]), int(active.sign[enforced[0]])))
+            number = int(numbers[active.group_relations.index(k)])
+            if number >= 0:
+                at = rows[rel.row_ids() == number]
+                out.append(Control(rel.name, True, int(at[0]) if at.size else -1, rel.sign, k,
+                                   number))
         elif rel.sense == "=" and rows.size == 1:
-            out.append(Control(rel.name, False, int(rows[0]), 1))
+            out.append(Control(rel.name, False, int(rows[0]), 1, k, 0))
     return out
+
+
+def _at_rows(problem, values: np.ndarray, controls: list[Control]) -> np.ndarray:
+    """Per control, ``values`` (per relation row held here) at its row: a maximum group's
+    from the rank holding its enforced row (one reduction of the controls' number).
+    Collective."""
+    out = np.array([values[c.row] if c.row >= 0 else 0.0 for c in controls])
+    grouped = np.array([c.maximum for c in controls], dtype=bool)
+    summed = np.where(grouped, out, 0.0)
+    if problem.comm.size > 1:
+        problem.comm.Allreduce(MPI.IN_PLACE, summed, op=MPI.SUM)
+    return np.where(grouped, summed, out)
 
 
 def _every(e, x):
@@ -168,23 +186,24 @@ def short_control(problem, t: float) -> tuple | None:
     short = _short_of(problem, t, _controls(problem))
     if short is None:
         return None
-    k, local = problem.rset.locate(short[0].row)
-    return short + (local, row_cell(problem.comm, problem.ctx.multiplied[k], local))
+    c = short[0]
+    return short + (c.number, row_cell(problem.comm, problem.ctx.multiplied[c.k], c.number))
 
 
 def _short_of(problem, t: float, controls: list[Control]) -> tuple | None:
     """The first control whose value at t lies beyond what the last converged state reached:
     (control, its kind in words, reached, target, control load), or None. Collective."""
     rset = problem.rset
-    values = rset.primal_values(problem.q)
-    targets = rset.targets(t)
-    loads = rset.every_row(problem.lam)
-    short = [c for c in controls if c.sign * (targets[c.row] - values[c.row]) > 0]
+    values = _at_rows(problem, rset.primal_values(problem.q), controls)
+    targets = _at_rows(problem, rset.targets(t), controls)
+    loads = _at_rows(problem, rset.every_row(problem.lam), controls)
+    short = [j for j, c in enumerate(controls) if c.sign * (targets[j] - values[j]) > 0]
     if not short:
         return None
-    c = short[0]
+    j = short[0]
+    c = controls[j]
     kind = "maximum control" if c.maximum else "control"
-    return c, kind, values[c.row], targets[c.row], loads[c.row]
+    return c, kind, values[j], targets[j], loads[j]
 
 
 def _softens(effects) -> bool:
@@ -203,8 +222,8 @@ def _no_turn_back(exc: GoingBack, problem, t: float, controls: list[Control]) ->
     if c is None:
         return exc
     rset = problem.rset
-    reached = rset.primal_values(problem.q)[c.row]
-    target = rset.targets(t)[c.row]
+    reached = float(_at_rows(problem, rset.primal_values(problem.q), [c])[0])
+    target = float(_at_rows(problem, rset.targets(t), [c])[0])
     a, b = exc.rows
     return NamedFailure(
         f"maximum control {c.name!r} can no longer reach its value: {target:.6g} at t = {t:.6g} "
@@ -236,7 +255,7 @@ def _at_limit_load(exc: SolverError, problem, t: float, controls: list[Control]
     lin = problem.form()
     mask = problem.active.active
     try:
-        _response(problem, lin.kmat, mask, c)   # (the converged state holds the body)
+        _released(problem, lin.kmat, mask, c)   # (the converged state holds the body)
         problem.system.set_active(problem.policies.enforceable(mask))   # (the rhs's rows)
         dq, _ = _stuck_solve(problem, lin.kmat, mask,
                              problem.rhs(t, lin.f_int, problem.external(t)))
@@ -245,7 +264,7 @@ def _at_limit_load(exc: SolverError, problem, t: float, controls: list[Control]
     system = problem.system
     kmat = system.composition.evaluate(problem.q + dq, problem.states, False, system.rate)[2]
     try:
-        _response(problem, kmat, mask, c)
+        _released(problem, kmat, mask, c)
         return None   # (the target's load leaves the body a stiffness: no mechanism)
     except SolverError:
         pass
@@ -280,11 +299,10 @@ def _past_capacity(exc: SolverError, problem, t: float, controls: list[Control])
     measured strain grows only with the load, and the load cannot pass the peak the softening
     cells set (past it they take the deformation and the measured cells unload), so a target
     beyond the strain at the peak has no solution."""
-    ctx, rset = problem.ctx, problem.rset
-    measured = [c for c in controls
-                if ctx.multiplied[rset.locate(c.row)[0]].meta.get("cells") is not None]
+    ctx = problem.ctx
+    measured = [c for c in controls if ctx.multiplied[c.k].meta.get("cells") is not None]
     elastic = [c for c in measured if not _measures_softening(
-        ctx, np.asarray(ctx.multiplied[rset.locate(c.row)[0]].meta["cells"], dtype=np.int64))]
+        ctx, np.asarray(ctx.multiplied[c.k].meta["cells"], dtype=np.int64))]
     if not elastic:
         return exc
     short = _short_of(problem, t, elastic)
@@ -313,16 +331,21 @@ def _probe_rows(problem, first: bool) -> np.ndarray:
     return active
 
 
-def _response(problem, kmat, mask: np.ndarray, c: Control) -> tuple[float, float, float]:
-    """How the controlled quantity answers a unit of its own load, the control released and
-    the rows ``mask`` enforced at zero: ``_rate``'s. Collective."""
-    rset, pol = problem.rset, problem.policies
-    k, local = rset.locate(c.row)
-    rel = problem.ctx.multiplied[k]
+def _released(problem, kmat, mask: np.ndarray, c: Control) -> np.ndarray:
+    """δq under a unit of the control's own load, the control released and the rows
+    ``mask`` enforced at zero. Collective."""
+    pol = problem.policies
     mask = mask.copy()
-    mask[c.row] = False
-    dq = problem.respond(kmat, pol.enforceable(mask), pol.dual_column(k, local))
-    return _rate(problem.ctx, rel, local, dq)
+    if c.row >= 0:
+        mask[c.row] = False
+    return problem.respond(kmat, pol.enforceable(mask), pol.dual_column(c.k, c.number))
+
+
+def _response(problem, kmat, mask: np.ndarray, c: Control) -> tuple[float, float, float]:
+    """How a single-row control's quantity answers a unit of its own load, the control
+    released and the rows ``mask`` enforced at zero: ``_rate``'s. Collective."""
+    dq = _released(problem, kmat, mask, c)
+    return _rate(problem.ctx, problem.ctx.multiplied[c.k], 0, dq)
 
 
 def _rate(ctx, rel, local: int, dq: np.ndarray) -> tuple[float, float, float]:
@@ -367,7 +390,7 @@ def _unmoved(exc: SolverError, problem, t: float, controls: list[Control]) -> So
         rset = problem.rset
         reached = rset.primal_values(problem.q)[c.row]
         target = rset.targets(t)[c.row]
-        dual = problem.ctx.multiplied[rset.locate(c.row)[0]].meta["dual"]
+        dual = problem.ctx.multiplied[c.k].meta["dual"]
         where = f"t = {problem.t_prev:.6g}" + (", the contact closed and stuck" if stuck else "")
         return NamedFailure(
             f"control {c.name!r} is not moved by its load {dual!r} at the step's start ({where}): "
@@ -387,20 +410,33 @@ def _stuck_solve(problem, kmat, mask: np.ndarray, rhs: np.ndarray) -> tuple:
     return x.q, problem.rset.every_row(problem.unscaled(x))
 
 
-def _stuck_bounds(values: np.ndarray, rates: np.ndarray, targets: np.ndarray,
-                  sign: np.ndarray) -> tuple[int, float, int, float]:
+def _stuck_bounds(comm, values: np.ndarray, rates: np.ndarray, targets: np.ndarray,
+                  sign: np.ndarray, ids: np.ndarray) -> tuple[int, float, int, float]:
     """The control loads that keep every row of a maximum group on its side of the value,
-    the rows being values + load · rates: (the row setting the lowest, the lowest, the row
-    setting the highest, the highest); -1 and ±inf where no row bounds that end."""
+    the rows being values + load · rates (each rank its rows, numbered ``ids``): (the row
+    setting the lowest, the lowest, the row setting the highest, the highest; the lowest
+    row number among equal ends); -1 and ±inf where no row bounds that end. Collective."""
     room, slope = sign * (targets - values), sign * rates   # slope · load ≤ room, every row
     with np.errstate(divide="ignore", invalid="ignore"):
         ends = room / slope
-    up, down = np.flatnonzero(slope > 0), np.flatnonzero(slope < 0)
-    hi = int(up[np.argmin(ends[up])]) if up.size else -1
-    lo = int(down[np.argmax(ends[down])]) if down.size else -1
-    if ((slope == 0) & (room < 0)).any():   # a row beyond the value that no load moves
+    up, down = slope > 0, slope < 0
+    big = int(np.iinfo(np.int64).max)
+    # per rank: the lowest end of the rising rows, the highest of the falling ones, with
+    # their rows' numbers, and whether a row beyond the value no load moves
+    hi_end = ends[up].min(initial=np.inf)
+    lo_end = ends[down].max(initial=-np.inf)
+    mine = (float(hi_end), int(ids[up & (ends == hi_end)].min(initial=big)),
+            float(lo_end), int(ids[down & (ends == lo_end)].min(initial=big)),
+            bool(((slope == 0) & (room < 0)).any()))
+    every = comm.allgather(mine) if comm.size > 1 else [mine]
+    hi_end = min(e[0] for e in every)
+    hi = min((e[1] for e in every if e[0] == hi_end and e[1] < big), default=-1)
+    lo_end = max(e[2] for e in every)
+    lo = min((e[3] for e in every if e[2] == lo_end and e[3] < big), default=-1)
+    lo, hi = int(lo), int(hi)
+    if any(e[4] for e in every):   # a row beyond the value that no load moves
         return lo, np.inf, hi, -np.inf
-    return lo, (ends[lo] if lo >= 0 else -np.inf), hi, (ends[hi] if hi >= 0 else np.inf)
+    return lo, (lo_end if lo >= 0 else -np.inf), hi, (hi_end if hi >= 0 else np.inf)
 
 
 def _beyond_friction_from_start(exc: SolverError, problem, t: float,
@@ -420,21 +456,22 @@ def _beyond_friction_from_start(exc: SolverError, problem, t: float,
         return None
     rset, mult = problem.rset, problem.ctx.multiplied
     c = controls[0]
-    k, local = rset.locate(c.row)
+    k = c.k
     rows = np.arange(rset.rows_of(k).start, rset.rows_of(k).stop) if c.maximum \
         else np.array([c.row])
     mask = _probe_rows(problem, True)
     mask[rows] = False
     lin = problem.form()
     dq1, lam1 = _stuck_solve(problem, lin.kmat, mask,
-                             problem.rhs_of(problem.policies.dual_column(k, local)))
+                             problem.rhs_of(problem.policies.dual_column(k, c.number)))
     dq0, lam0 = _stuck_solve(problem, lin.kmat, mask,
                              problem.rhs(t, lin.f_int, problem.external(t)))
     values = rset.primal_values(problem.q + dq0)[rows]
     rates = rset.primal_values(dq1)[rows]
     targets, sign = rset.targets(t)[rows], problem.active.sign[rows]
     if c.maximum:
-        lo, low, hi, high = _stuck_bounds(values, rates, targets, sign)
+        lo, low, hi, high = _stuck_bounds(problem.comm, values, rates, targets, sign,
+                                          mult[k].row_ids())
         if low > high:
             return _stuck_apart(exc, problem, t, c, sliding[0], lam0, (lo, low, hi, high))
         load = float(high if abs(high) < abs(low) else low)
@@ -451,8 +488,10 @@ def _beyond_friction_from_start(exc: SolverError, problem, t: float,
         capacity = e.mu * normal
         if normal <= 0.0 or tangential <= capacity * (1 + 1e-9):
             continue
-        target = rset.targets(t)[c.row]
+        target = float(_at_rows(problem, rset.targets(t), [c])[0])
         kind = "maximum control" if c.maximum else "control"
+        nearer = values[0] if not c.maximum else problem.comm.allreduce(
+            float(values.max(initial=-np.inf)), op=MPI.MAX)
         return NamedFailure(
             f"{kind} {c.name!r} cannot reach its value from the first step: {target:.6g} at "
             f"t = {t:.6g}; with contact {e.spec.name!r} closed and stuck, that value takes a "
@@ -460,7 +499,7 @@ def _beyond_friction_from_start(exc: SolverError, problem, t: float,
             f"beyond the friction capacity μN = {capacity:.6g} (μ = {e.mu:g}, N = "
             f"{normal:.6g}): every closed node slides and the body slides as a whole, which "
             f"the control load cannot pass, so the value lies beyond what the load gives; "
-            f"bring the target nearer {values[0] if not c.maximum else values.max():.6g} (the "
+            f"bring the target nearer {nearer:.6g} (the "
             f"other loads alone) or raise the friction (the last attempt: {exc})")
     return None
 
@@ -474,7 +513,7 @@ def _stuck_apart(exc: SolverError, problem, t: float, c: Control, contact, lam0:
     rn, _ = contact.forces({rel.name: lam0[rset.rows_of(j)]
                             for j, rel in enumerate(problem.ctx.multiplied)})
     normal = float(_every(contact, rn.sum()))
-    target = rset.targets(t)[c.row]
+    target = float(_at_rows(problem, rset.targets(t), [c])[0])
     return NamedFailure(
         f"maximum control {c.name!r} cannot reach its value from the first step: {target:.6g} "
         f"at t = {t:.6g}; with contact {contact.spec.name!r} closed and stuck, its row {lo} "

@@ -28,7 +28,11 @@ from mpi4py import MPI
 from parsolve.contact.dependent import dependent_rows
 from parsolve.errors import SolverError
 from parsolve.la.fetch import Fetch
+from parsolve.mesh.blocks import exchange
 from parsolve.solvers.active_set import GROUP_TOL, ActiveSet, _Seen
+
+# an entry of a maximum group's enforced row on its way to its DOF's owner
+_ENTRY = np.dtype([("group", np.int64), ("dof", np.int64), ("val", np.float64)])
 
 #: (tangent, active rows, load) → δq = K⁻¹ f with those rows enforced at zero
 Respond = Callable[[object, np.ndarray, np.ndarray], np.ndarray]
@@ -58,15 +62,17 @@ class _CellReplaced:
         return self.base.reduce_replaced(self.other, self.cells, pair_slot, npairs)
 
 
-def _branch_reach(rate: np.ndarray, room: np.ndarray, current: int) -> np.ndarray:
+def _branch_reach(rate: np.ndarray, room: np.ndarray, current: float, largest: float
+                  ) -> np.ndarray:
     """Control load at which each row of a maximum group reaches its value, along the branch
-    the enforced row ``current`` follows (rate: d(s A q)/dλ with the enforced row loading;
-    room: s (b - A q)). Rising branch (the enforced row's rate > 0, before its peak): rows
-    with r > 0 reach it at room / r. Past the enforced row's peak (rate < 0), its value grows
-    only as the load falls, while the other rows unload: the rows with r < 0 reach it at
-    room / -r. Rows that never reach it on that branch: +inf."""
-    tol = 1e-9 * max(float(np.abs(rate).max(initial=0.0)), 1e-300)
-    side = -1.0 if rate[current] < -tol else 1.0
+    the enforced row follows (rate: d(s A q)/dλ with the enforced row loading, ``current``
+    the enforced row's, ``largest`` the largest |rate| of the group; room: s (b - A q)).
+    Rising branch (the enforced row's rate > 0, before its peak): rows with r > 0 reach it
+    at room / r. Past the enforced row's peak (rate < 0), its value grows only as the load
+    falls, while the other rows unload: the rows with r < 0 reach it at room / -r. Rows that
+    never reach it on that branch: +inf."""
+    tol = 1e-9 * max(largest, 1e-300)
+    side = -1.0 if current < -tol else 1.0
     r = side * rate
     return np.where(r > tol, room / np.where(r > tol, r, 1.0), np.inf)
 
@@ -320,17 +326,26 @@ class RelationPolicies:
             self.active.orient[rows] = sense
 
     def enforced_rows(self) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
-        """Per maximum group, its enforced row: (row, its relation, A's DOFs and coefficients
-        on that row this rank's owned DOFs carry: each entry on one rank, no row gathered)."""
-        out = []
-        for g in self.active.groups:
-            row = int(g[self.active.active[g]][0])
-            k, local = self.rset.locate(row)
+        """Per maximum group, its enforced row: (its place among the relation rows held here,
+        -1 where another rank holds it; its relation; A's DOFs and coefficients on that row
+        that this rank's owned DOFs carry: the holder sends each entry to its DOF's owner,
+        no row gathered). Collective."""
+        out, sent = [], []
+        for j, (g, k) in enumerate(zip(self.active.groups, self.active.group_relations)):
+            held = g[self.active.active[g]]
+            row = int(held[0]) if held.size else -1
             r = self.ctx.multiplied[k]
-            sel = self.ctx.dofs.owned_dof_entries(r.a_dofs)[0]
-            sel = sel[r.a_rows[sel] == local]
-            out.append((row, k, r.a_dofs[sel], r.a_vals[sel]))
-        return out
+            sel = np.flatnonzero(r.a_rows == row - self.rset.rows_of(k).start) if held.size \
+                else np.zeros(0, dtype=np.int64)
+            part = np.empty(sel.size, _ENTRY)
+            part["group"], part["dof"], part["val"] = j, r.a_dofs[sel], r.a_vals[sel]
+            sent.append(part)
+            out.append((row, k))
+        dm = self.ctx.dofs
+        sent = np.concatenate(sent) if sent else np.zeros(0, _ENTRY)
+        got, _ = exchange(self.ctx.comm, sent, dm.owner_of_dofs(dm.input_new_dof(sent["dof"])))
+        return [(row, k, got["dof"][got["group"] == j], got["val"][got["group"] == j])
+                for j, (row, k) in enumerate(out)]
 
     def enforced_cells(self, rows: list | None = None) -> np.ndarray:
         """Positions (in this rank's cells) of the cells measured by the enforced rows of the
@@ -360,12 +375,18 @@ class RelationPolicies:
         delta = np.zeros(ctx.ndof)
         rows = self.enforced_rows()   # (each rank its owned DOFs' entries of the rows)
         for row, k, dofs, a in rows:
-            rel, local = ctx.multiplied[k], self.rset.locate(row)[1]
-            b = rel.rhs(t_prev)[local]
-            value = ctx.relation_primal(rel, q)[local]   # A q of the row (collective)
+            rel = ctx.multiplied[k]
+            value = ctx.relation_primal(rel, q)   # A q of its rows held here (collective)
+            # the row's value and target, and |a|², from the ranks holding them
+            here = np.array([0.0, 0.0, float(a @ a)])
+            if row >= 0:
+                local = row - self.rset.rows_of(k).start
+                here[:2] = value[local], rel.rhs(t_prev)[local]
+            if ctx.comm.size > 1:
+                ctx.comm.Allreduce(MPI.IN_PLACE, here, op=MPI.SUM)
+            value, b, norm2 = here
             size = 1e-10 * max(abs(float(value)), abs(float(b)), 1e-300)
-            norm2 = ctx.comm.allreduce(float(a @ a))
-            delta += ctx.local_vector(dofs, self.active.sign[row] * a * size / max(norm2, 1e-300))
+            delta += ctx.local_vector(dofs, rel.sign * a * size / max(norm2, 1e-300))
         delta = ctx.dofs.forward(delta)   # (its ghosts from their owners)
         loading = ctx.composition.evaluate(q + delta, states, False, self.system.rate)[2]
         return _CellReplaced(kmat, loading, self.enforced_cells(rows))
@@ -375,23 +396,38 @@ class RelationPolicies:
         relation's own control load: one solve with the tangent (``loading_tangent``) and a
         unit control load, rates r = A δq, then the smallest (b - A q) / |r| along the branch
         the enforced row follows (``_branch_reach``)."""
-        groups = np.concatenate(self.active.groups)
+        active = self.active
+        groups = np.concatenate(active.groups)
         f = np.zeros(self.ctx.ndof)
-        for g in self.active.groups:  # the control load of each group at unit intensity
-            f += self.dual_column(self.rset.locate(int(g[0]))[0])
+        for k in active.group_relations:  # the control load of each group at unit intensity
+            f += self.dual_column(k)
         dq = self.unit_response(kmat, groups, f)
         rates = self.rset.primal_values(dq)
         gap = self.rset.targets(t) - self.rset.primal_values(q)
-        for g in self.active.groups:
-            s = self.active.sign[g]
-            current = g[self.active.active[g]][0]
-            reach = _branch_reach(s * rates[g], s * gap[g], int(current - g[0]))
-            if np.isfinite(reach).any():
-                tol = GROUP_TOL * float(np.abs(reach[np.isfinite(reach)]).min())
-                best = self.active.pick(g, reach, current, False, tol)
-                self.active.active[g] = False
-                self.active.active[best] = True
-        self.active.start_step()
+        # per group over the ranks: the enforced row's rate, the largest |rate| (one maximum)
+        n = len(active.groups)
+        top = np.full(2 * n, -np.inf)
+        for j, g in enumerate(active.groups):
+            s = active.sign[g] * rates[g]
+            top[j] = s[active.active[g]].max(initial=-np.inf)
+            top[n + j] = np.abs(s).max(initial=0.0)
+        self._max(top)
+        reach = [_branch_reach(active.sign[g] * rates[g], active.sign[g] * gap[g], top[j],
+                               top[n + j]) for j, g in enumerate(active.groups)]
+        # the nearest finite reach of each group (-inf: none), for its ties
+        near = self._max(np.array([(-np.abs(x[np.isfinite(x)])).max(initial=-np.inf)
+                                   for x in reach]))
+        chosen = active.choose([-x for x in reach], GROUP_TOL * -near)
+        for g, best, some in zip(active.groups, chosen, np.isfinite(near)):
+            if some:   # (a group no row of which reaches its value keeps its row)
+                active.active[g] = best
+        active.start_step()
+
+    def _max(self, values: np.ndarray) -> np.ndarray:
+        """The largest of every rank's values, in place. Collective."""
+        if self.ctx.comm.size > 1:
+            self.ctx.comm.Allreduce(MPI.IN_PLACE, values, op=MPI.MAX)
+        return values
 
     # ------------------------------------------------------------ effects' hooks
 

@@ -37,7 +37,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from parsolve.mesh.blocks import exchange
+from parsolve.la.fetch import Fetch
 from parsolve.solvers.active_set import GROUP_TOL
 from parsolve.solvers.diagnose import NamedFailure, short_control
 
@@ -257,15 +257,18 @@ def unstable_modes(problem, states: list, q: np.ndarray | None = None) -> int | 
 
 
 def at_maximum(problem, q: np.ndarray) -> np.ndarray:
-    """The rows of the maximum groups that are at their value at ``q`` (tied with the largest,
-    the active set's GROUP_TOL) but not enforced. Every rank alike."""
+    """The rows of the maximum groups held here that are at their value at ``q`` (tied with
+    the largest, the active set's GROUP_TOL) but not enforced. Collective (a group's largest
+    target: one reduction of the groups' number)."""
     rset, active = problem.rset, problem.active
     values, targets = rset.primal_values(q), rset.targets(problem.t_prev)
     out = np.zeros(values.size, dtype=bool)
-    for g in active.groups:
-        scale = max(float(np.abs(targets[g]).max()), 1e-300)
+    scale = np.array([np.abs(targets[g]).max(initial=0.0) for g in active.groups])
+    if problem.comm.size > 1:
+        problem.comm.Allreduce(MPI.IN_PLACE, scale, op=MPI.MAX)
+    for g, top in zip(active.groups, scale):
         sign = active.sign[g]
-        out[g] = sign * (targets[g] - values[g]) <= GROUP_TOL * scale
+        out[g] = sign * (targets[g] - values[g]) <= GROUP_TOL * max(float(top), 1e-300)
     return out & ~active.active
 
 
@@ -277,16 +280,13 @@ def _hold_maximum_rows(problem, held: PETSc.Mat, q: np.ndarray) -> None:
     reads a stable localization (one column damaging, its three cells at the maximum) as
     unstable; held both ways the count is at most the one-sided problem's (a quadratic form
     negative on a subspace of the admissible directions is negative on them), so an unstable
-    count is one for sure. Each row's entries (a spread row's: on their DOFs' owners) are
-    sent to the owner of its multiplier row, which adds its γ a aᵀ: one exchange of those
-    rows' entries, no rank gathers the others'. Collective."""
-    rset = problem.rset
+    count is one for sure. Each row is held by the rank building it (a per-cell strain's: the
+    rank counting the cell), which adds its γ a aᵀ: no rank gathers the others' rows.
+    Collective."""
     rows = np.flatnonzero(at_maximum(problem, q))
     # (on every rank: logically collective, a reduction in a debugging PETSc)
     held.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
-    entries = owned_row_entries(problem, rows)
-    owner = np.searchsorted(rset.dofmap.l_ranges, rset.mult_of_row[rows], side="right") - 1
-    got, _ = exchange(problem.comm, entries, owner[entries["row"]].astype(np.int64))
+    got = owned_row_entries(problem, rows)
     got = got[np.lexsort((got["dof"], got["row"]))]    # (rows in order, each by input DOF)
     starts = np.flatnonzero(np.diff(got["row"], prepend=-1))
     gamma_k = 2.0 * PENALTY * problem.system.kscale
@@ -298,30 +298,30 @@ def _hold_maximum_rows(problem, held: PETSc.Mat, q: np.ndarray) -> None:
     held.assemble()
 
 
-# an entry of a relation row on its way to the row's holder: the row (its place in the rows
-# asked for), its input DOF, its saddle index, its coefficient
+# an entry of a relation row: the row (its place in the rows asked for), its input DOF, its
+# saddle index, its coefficient
 ROW_ENTRY = np.dtype([("row", np.int64), ("dof", np.int64), ("saddle", np.int64),
                       ("val", np.float64)])
 
 
 def owned_row_entries(problem, rows: np.ndarray) -> np.ndarray:
-    """The entries (``ROW_ENTRY``) of the relation rows ``rows`` of whole relations (a
-    maximum group's: held alike on every rank) on the primal DOFs this rank owns and has not
-    eliminated: each entry of a row on one rank (a spread row's where it is held)."""
-    rset, system = problem.rset, problem.system
-    eliminated = system.elim_local[system.elim_own]
+    """The entries (``ROW_ENTRY``) of the relation rows ``rows`` held here (a maximum
+    group's, built per rank: every entry of a row on the rank holding it) on the primal DOFs
+    that are not eliminated (each asked of its owner). Collective."""
+    rset, system, dm = problem.rset, problem.system, problem.rset.dofmap
     parts = [np.zeros(0, ROW_ENTRY)]
     for place, row in enumerate(rows):
         k, local = rset.locate(int(row))
         r = problem.ctx.multiplied[k]
         sel = np.flatnonzero(r.a_rows == local)
-        at, dofs = rset.dofmap.owned_dof_entries(r.a_dofs[sel])
-        sel = sel[at[~np.isin(dofs, eliminated)]]
         part = np.empty(sel.size, ROW_ENTRY)
         part["row"], part["dof"], part["val"] = place, r.a_dofs[sel], r.a_vals[sel]
-        part["saddle"] = rset.dofmap.input_saddle(r.a_dofs[sel])
+        part["saddle"] = dm.input_saddle(r.a_dofs[sel])
         parts.append(part)
-    return np.concatenate(parts)
+    out = np.concatenate(parts)
+    held = np.zeros(dm.n_owned)   # (the eliminated DOFs, each told by its owner)
+    held[system.elim_local[system.elim_own]] = 1.0
+    return out[Fetch.of(dm, dm.input_new_dof(out["dof"]))(held) < 0.5]
 
 
 def _held_symmetric(system, mat: PETSc.Mat, shift: float) -> PETSc.Mat:

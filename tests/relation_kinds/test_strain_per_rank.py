@@ -2,8 +2,8 @@
 counting the cell (``Relation.ids``: row j the region's j-th cell by input id), no rank
 holding another's rows; over the ranks the rows are the one-process build's, entry by entry,
 and A q of the stacked rows is the one-process value. Under a maximum (a group spanning the
-ranks) the rows stay whole (``tests/relation_kinds/test_global_rows.py``). Run at 1, 2 and 3
-ranks."""
+ranks) the rows are per rank too (``tests/relation_kinds/test_maximum_per_rank.py``). Run at
+1, 2 and 3 ranks."""
 
 import tomllib
 

@@ -44,10 +44,10 @@ def test_the_one_change_is_the_first_best_row_over_the_ranks():
     # rows 1 and 3 tie for the best score: the first (row 1) is taken, on its rank alone
     value = np.array([0.0, 3.0, 1.0, 3.0, 2.0, -np.inf, 0.5])[rel.ids]
     none = np.full(rel.nrows, -np.inf)
-    kind, row = aset._best([value, none, none])
+    kind, row, key = aset._best([value, none, none])
     assert kind == 0
     taken = COMM.allgather(int(aset.key[row]) if row >= 0 else -1)
-    assert sorted(taken) == [-1] * (COMM.size - 1) + [1]
+    assert sorted(taken) == [-1] * (COMM.size - 1) + [1] and key == 1
     # no finite score anywhere: no row
     assert aset._best([none, none, none])[1] == -1
 

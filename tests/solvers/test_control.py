@@ -210,12 +210,14 @@ def test_first_step_load_is_the_linear_response(case):
 
     make, name, t, linear, converged, iterations = FIRST_STEP[case]
     _, _, _, problem, newton = newton_of(make())
-    rows = problem.rset.rows_of([r.name for r in problem.ctx.multiplied].index(name))
+    from parsolve.outputs import every_row
+    k = [r.name for r in problem.ctx.multiplied].index(name)
+    rows, rel = problem.rset.rows_of(k), problem.ctx.multiplied[k]
     loads, update = [], problem.update
 
-    def recorded(t, x):
+    def recorded(t, x):   # (a maximum's rows: each on its rank, gathered)
         out = update(t, x)
-        loads.append(problem.rset.every_row(problem.lam)[rows].sum())
+        loads.append(every_row(problem.comm, rel, problem.rset.every_row(problem.lam)[rows]).sum())
         return out
 
     problem.update = recorded

@@ -25,10 +25,10 @@ def test_branch_reach_rising_and_past_the_peak():
     room = np.array([0.0, 1.0, 2.0, 4.0])   # s (b - A q): the enforced row 0 is at its value
     rate = np.array([2.0, 4.0, -1.0, 0.5])
     # the enforced row still rising: rows with r > 0 reach b at room / r
-    np.testing.assert_array_equal(_branch_reach(rate, room, 0), [0.0, 0.25, np.inf, 8.0])
+    np.testing.assert_array_equal(_branch_reach(rate, room, 2.0, 4.0), [0.0, 0.25, np.inf, 8.0])
     # past its peak (r < 0): only rows whose value grows as the load falls reach b
     rate = np.array([-2.0, 4.0, -1.0, 0.5])
-    np.testing.assert_array_equal(_branch_reach(rate, room, 0), [0.0, np.inf, 2.0, np.inf])
+    np.testing.assert_array_equal(_branch_reach(rate, room, -2.0, 4.0), [0.0, np.inf, 2.0, np.inf])
 
 
 def test_cell_replaced_reduces_like_the_mixed_element_matrices():
@@ -70,16 +70,24 @@ def test_plate_full_steps_through_the_peak():
     scene, model, system, newton, rel, free = plate_newton(2, 10)
     problem, policies = newton.problem, newton.problem.policies
     mine = system.dofmap.owned_dofs[free[system.dofmap.owned_dofs]]
+    group, ids = problem.active.groups[0], problem.active.group_ids[0]
+
+    def at(values: np.ndarray, row: int = 368) -> float:
+        """A group row's value (``values``: per relation row held here) from its holder."""
+        here = values[group][ids == row]
+        return comm.allreduce(float(here[0]) if here.size else 0.0)
+
     lams, iterations = [], []
     for t in scene.times:
         states = problem.states
         iterations.append(newton.step(t).iterations)
         b = 1.2e-3 * t
-        values = system.context.relation_primal(rel, problem.q)
-        assert np.flatnonzero(problem.active.active).tolist() == [368]
-        np.testing.assert_allclose(values[368], b, rtol=1e-9)
-        assert values.max() <= b * (1 + 1e-7)
-        lam = float(problem.rset.per_relation(problem.lam)[rel.name].sum())   # (enforced row)
+        values = system.context.relation_primal(rel, problem.q)   # (the rows held here)
+        enforced = np.concatenate(comm.allgather(ids[problem.active.active[group]]))
+        assert enforced.tolist() == [368]
+        np.testing.assert_allclose(at(problem.rset.primal_values(problem.q)), b, rtol=1e-9)
+        assert comm.allreduce(float(values.max(initial=-np.inf)), op=MPI.MAX) <= b * (1 + 1e-7)
+        lam = comm.allreduce(float(problem.rset.per_relation(problem.lam)[rel.name].sum()))
         f_int = system.composition.evaluate(problem.q, states, False)[1]
         dofs, pattern = rel.shared_dual
         force = model.external_load(t)
@@ -96,11 +104,11 @@ def test_plate_full_steps_through_the_peak():
 
     # the branch past the peak: the enforced row's rate with either first tangent
     kmat = problem.form().kmat
-    group = problem.active.groups[0]
     f = policies.dual_column(0)
-    unloading = system.context.relations.primal_values(policies.unit_response(kmat, group, f))[368]
-    loading = system.context.relations.primal_values(policies.unit_response(policies.loading_tangent(kmat, problem.q, problem.states, problem.t_prev),
-                                                         group, f))[368]
+    rset = system.context.relations
+    unloading = at(rset.primal_values(policies.unit_response(kmat, group, f)))
+    loading_tangent = policies.loading_tangent(kmat, problem.q, problem.states, problem.t_prev)
+    loading = at(rset.primal_values(policies.unit_response(loading_tangent, group, f)))
     assert unloading > 0 > loading
     input_cells = model.mesh.global_cells[system.local_cells]
     np.testing.assert_array_equal(policies.enforced_cells(), np.flatnonzero(input_cells == 368))

@@ -82,8 +82,8 @@ def test_a_maximum_control_holds_every_row_at_its_value():
     for step in range(1, 5):
         states = problem.snapshot()[3]
         newton.step(step / STEPS)
-        extra = np.flatnonzero(at_maximum(problem, problem.q))
-        counts.append((extra.size, unstable_modes(problem, states),
+        extra = np.flatnonzero(at_maximum(problem, problem.q))   # (the rows held here)
+        counts.append((MPI.COMM_WORLD.allreduce(extra.size), unstable_modes(problem, states),
                        _dense_count(problem, states, extra), _dense_count(problem, states)))
     assert counts[2:] == [(2, 0, 0, 1), (2, 0, 0, 1)]
 
@@ -115,22 +115,26 @@ def _dense_count(problem, states, extra=()) -> int:
     il = np.concatenate(comm.allgather(is_l.getIndices()))
     k, a = whole[np.ix_(iq, iq)], whole[np.ix_(il, iq)]
     a = a[np.abs(a).sum(axis=1) > 0]                    # the enforced rows
-    a = np.vstack([a] + [_primal_row(problem, row, iq) for row in extra])
+    a = np.vstack([a, _primal_rows(problem, np.asarray(extra, dtype=np.int64), iq)])
     _, sv, vt = np.linalg.svd(a)
     z = vt[np.count_nonzero(sv > 1e-12 * sv.max()):].T
     ev = np.linalg.eigvalsh(z.T @ (0.5 * (k + k.T)) @ z)
     return int(np.count_nonzero(ev < -SHIFT * system.kscale))
 
 
-def _primal_row(problem, row: int, iq: np.ndarray) -> np.ndarray:
-    """Relation row ``row``'s A on the primal block's columns (its held DOFs left out; each
-    entry from the rank owning its DOF, gathered here for the dense check)."""
-    got = np.concatenate(MPI.COMM_WORLD.allgather(owned_row_entries(problem, np.array([row]))))
+def _primal_rows(problem, rows: np.ndarray, iq: np.ndarray) -> np.ndarray:
+    """The relation rows ``rows`` (held here; each rank its own) as A on the primal block's
+    columns (their held DOFs left out; every rank's rows gathered here for the dense
+    check)."""
     order = np.argsort(iq)
-    where = order[np.searchsorted(iq, got["saddle"], sorter=order)]
-    out = np.zeros(iq.size)
-    np.add.at(out, where, got["val"])
-    return out[None, :]
+    out = []
+    for got in MPI.COMM_WORLD.allgather(owned_row_entries(problem, rows)):
+        for place in np.unique(got["row"]):
+            row = got[got["row"] == place]
+            where = order[np.searchsorted(iq, row["saddle"], sorter=order)]
+            out.append(np.zeros(iq.size))
+            np.add.at(out[-1], where, row["val"])
+    return np.array(out).reshape(-1, iq.size)
 
 
 @pytest.mark.parametrize("diagonal, count", [([1.0, -1.0, -2.0, 3.0], 2),
