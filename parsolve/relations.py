@@ -155,7 +155,10 @@ class Relation:
         if self.shared_dual is not None:
             dofs, vals = self.shared_dual
             total = float(lam.sum())
-            if not self.whole and self.comm is not None and self.comm.size > 1:
+            if not self.whole:   # (its rows' λ are over the ranks: a partial sum is wrong)
+                if self.comm is None:
+                    raise ValueError(f"relation {self.name!r} is built per rank: its "
+                                     "communicator is needed to sum its rows' reactions")
                 total = self.comm.allreduce(total)
             return dofs, vals * total
         dofs, rows, vals = self.dual_coo()

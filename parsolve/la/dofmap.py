@@ -117,6 +117,12 @@ class GhostExchange:
         out[self.order] = got
         return out
 
+    def reverse(self, ghosts: np.ndarray, n_owned: int) -> np.ndarray:
+        """Values on the ghost DOFs (their local order) added up on their owners' rows: the
+        transpose of ``forward``."""
+        got = self._move(ghosts[self.order], self.recv_counts, self.send_counts)
+        return np.bincount(self.asked_of_me, weights=got, minlength=n_owned)
+
 
 class DofMap:
     """The saddle numbering of a rank and everything that depends on it (see the module doc).
@@ -377,6 +383,16 @@ class DofMap:
         on = local >= 0
         return np.bincount(local[on], weights=np.asarray(values, dtype=float)[on],
                            minlength=self.n_local).astype(float, copy=False)
+
+    def owned_sum(self, full: np.ndarray) -> np.ndarray:
+        """A local primal vector whose ghost entries are parts of their owners' (a row built
+        on this rank's cells) → the same with each ghost part added on its owner, ghosts 0.
+        Collective."""
+        out = np.zeros(self.n_local)
+        out[:self.n_owned] = full[:self.n_owned]
+        if self.comm is not None and self.comm.size > 1:
+            out[:self.n_owned] += self._plan().reverse(full[self.n_owned:], self.n_owned)
+        return out
 
     # ------------------------------------------------------------ exchanges
 

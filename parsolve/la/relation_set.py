@@ -30,8 +30,9 @@ row and D column name (ties: the lowest rank; a row with no entry: ranks in turn
 row of A and the column of D live, as far as they can, with the nodes they act on. A contact
 row on a rigid obstacle goes with its slave node; a row tying a slave node to a span of master
 nodes (finite sliding, mortar) with the master nodes, which are most of its entries; the
-rows of a group the active set decides together (a maximum relation's, a relation's
-``groups``) with the owner of the group's first row. Rank r's rows come after those of the ranks before it, in stacking order (relation by
+rows of a whole relation's ``groups``, which the active set decides together, with the owner
+of the group's first row; a maximum relation's rows stay with the ranks building them (the
+group decided by reductions), its one multiplier row owned by one rank. Rank r's rows come after those of the ranks before it, in stacking order (relation by
 relation; the per-rank relations' counts gathered); the DOF map is given each rank's count
 (``DofMap.set_multipliers``). On one rank
 this is the stacking order itself. Each rank keeps the entries of its own operator rows only
@@ -648,12 +649,15 @@ class RelationSet:
         """Each per-rank maximum group's enforced row (its number, -1: none) from the rank
         holding it, and its multiplier row's mask where held here, in place: one reduction
         of the groups' number."""
-        found = np.full(len(self._groups), -1, dtype=np.int64)
+        none = np.iinfo(np.int64).max   # (the lowest enforced row over the ranks, as on one)
+        found = np.full(len(self._groups), none, dtype=np.int64)
         for j, k in enumerate(self._groups):
             at = np.flatnonzero(active_rows[self.rows_of(k)])
-            found[j] = self.relations[k].ids[at[0]] if at.size else -1
+            if at.size:
+                found[j] = self.relations[k].ids[at].min()
         if self.dofmap.comm.size > 1:
-            self.dofmap.comm.Allreduce(MPI.IN_PLACE, found, op=MPI.MAX)
+            self.dofmap.comm.Allreduce(MPI.IN_PLACE, found, op=MPI.MIN)
+        found[found == none] = -1
         self._enforced = found
         held, at = self._held_places(self._group_mult)
         on[at[held]] = found[held] >= 0

@@ -38,7 +38,7 @@ from parsolve.relations import Relation
 from parsolve.solvers.diagnose import GoingBack
 
 
-#: Relative tolerance within which rows of a maximum group are tied (see ``ActiveSet.pick``).
+#: Relative tolerance within which rows of a maximum group are tied (see ``ActiveSet.choose``).
 GROUP_TOL = 1e-7
 #: The same for groups of a few local rows (solubility's two states of a node).
 LOCAL_TIE = 1e-12

@@ -80,8 +80,9 @@ def _branch_reach(rate: np.ndarray, room: np.ndarray, current: float, largest: f
 class RelationPolicies:
     """Active set, orientation, dependent rows, contact closing, maximum-control predictor and
     the effects' refresh hooks of a system's multiplied relations. Every rank holds the same
-    relations; the active set decides each row on the rank owning its multiplier and
-    exchanges the changes (``ActiveSet``), the rest is decided alike on every rank."""
+    relations (or its own rows of those built per rank); the active set decides each row on
+    the rank owning its multiplier, a maximum group's by reductions over the ranks holding its
+    rows, and exchanges the changes (``ActiveSet``); the rest is decided alike on every rank."""
 
     def __init__(self, system, max_changes: int, respond: Respond):
         self.system = system   # its rate (a transient step) and its restructure
@@ -290,13 +291,16 @@ class RelationPolicies:
         return self.respond(kmat, self.enforceable(active), f)
 
     def dual_column(self, k: int, row: int | None = None) -> np.ndarray:
-        """Column of D of relation k (its first row when every row shares one vector)."""
+        """Column of D of relation k for its row numbered ``row`` (default 0; every row's
+        when they share one vector). A relation built per rank: the row on the rank holding
+        it, its entries on ghost DOFs added on their owners (collective)."""
         rel = self.ctx.multiplied[k]
         if rel.shared_dual is not None:
             return self.ctx.local_vector(*rel.shared_dual)
         dofs, rows, vals = rel.dual_coo()
-        sel = rows == (0 if row is None else row)
-        return self.ctx.local_vector(dofs[sel], vals[sel])
+        sel = rel.row_ids()[rows] == (0 if row is None else row)
+        column = self.ctx.local_vector(dofs[sel], vals[sel])
+        return column if rel.whole else self.ctx.dofs.owned_sum(column)
 
     def orient(self, kmat) -> None:
         """o = -sign(A K⁻¹ D) of every free unilateral non-associated row, from the first

@@ -179,3 +179,38 @@ def test_the_relation_set_passes_the_enforced_row_between_holder_and_owner():
         np.testing.assert_array_equal(force, np.full(int(own.sum()), 4.0))
     rs.select(np.zeros(ids.size, dtype=bool))   # released: the multiplier row is off
     assert rs._enforced.tolist() == [-1] and not rs.a_on.any()
+
+
+def unit_load(comm, rows: tuple[int, ...]) -> dict[int, float]:
+    """The unit load of an associated maximum group's rows (no ``dual``: D = -Aᵀ, the row's
+    own reaction pattern; ``Policies.dual_column``) as {input DOF: value}, gathered.
+    Collective."""
+    from tests.helpers.control import newton_of
+    text = MAXIMUM.replace('"dual" = "pull"', "").replace('dual = "pull"', "")
+    assert "pull" in text and "dual" not in text.split("[[relations]]")[-1]
+    _, model, _, problem, _ = newton_of(text, comm)
+    pol, mesh = problem.policies, model.mesh
+    k = [r.name for r in problem.ctx.multiplied].index("cells")
+    nc, own = problem.ctx.ncomp, mesh.n_owned * problem.ctx.ncomp
+    inputs = (mesh.global_nodes.astype(np.int64)[:, None] * nc + np.arange(nc)).ravel()[:own]
+    out = {}
+    for row in rows:
+        v = pol.dual_column(k, row)
+        assert np.abs(v[own:]).max(initial=0.0) == 0.0   # (ghost parts moved to their owners)
+        nz = np.flatnonzero(v[:own])
+        for part in comm.allgather(list(zip(inputs[nz].tolist(), v[nz].tolist()))):
+            for dof, val in part:
+                out[(row, dof)] = out.get((row, dof), 0.0) + val
+    return out
+
+
+def test_an_associated_groups_unit_load_is_its_rows_reaction_on_every_partition():
+    """Without a load pattern a maximum's unit load is its row's own -Aᵀ, the cell's entries
+    on the ranks owning its nodes (a row built on its cell's rank, its ghost parts added on
+    their owners): the one-process column wherever the cell is (before, each rank took its
+    own first row)."""
+    rows = (0, 137, CELLS - 1)
+    world, alone = unit_load(COMM, rows), unit_load(MPI.COMM_SELF, rows)
+    assert world.keys() == alone.keys() and len(alone) == 3 * 4   # (εxx: a quad's 4 x DOFs)
+    for key, val in alone.items():
+        assert abs(world[key] - val) <= 1e-12 * abs(val), key
