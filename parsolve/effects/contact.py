@@ -126,6 +126,9 @@ from parsolve.collective import agree
 OBSTACLES = ("plane", "cylinder", "sphere")
 DISCRETIZATIONS = ("node_to_segment", "mortar")
 SLIDINGS = ("small", "finite")
+# finite sliding: the round-off of a slip measured on the geometry, × ε × the largest coordinate
+# (``Contact._angle_tolerance``)
+SLIP_ROUNDOFF = 16.0
 
 
 @dataclass
@@ -227,6 +230,7 @@ class Contact(FiniteSliding, Effect):
         self._returns = None                # node-to-segment finite sliding: per slave, its
         self._left = self._last_return = None   # returns to a facet it left within the step
         self._repairings = 0
+        self._x_reach = None                # finite sliding: the surfaces' largest coordinate
         self._check_slave(regions)
         # rows built per rank (``_pair_here``, ``_pair_obstacle``): the global number of each
         # entry held here (``ids``) among ``entries``
@@ -802,10 +806,29 @@ class Contact(FiniteSliding, Effect):
         starting = (self.node_state == fr.STICK) & (state == fr.SLIP)
         excess = np.linalg.norm(rt, axis=1) - murn
         self.turning.begin_slip(starting & (excess > 0.0), excess, murn)
-        unsettled = self.any_rank(bool(np.any(residual > fr.TOL_ANGLE) or np.any(switched)))
+        free = sliding & ~self.turning.held   # (the nodes whose s is their slip's)
+        unsettled = residual > self._angle_tolerance(np.linalg.norm(du, axis=1), free)
+        unsettled = self.any_rank(bool(np.any(unsettled) or np.any(switched)))
         if unsettled:
             direction[sliding] = s[sliding]
         return unsettled
+
+    def _angle_tolerance(self, gamma: np.ndarray, free: np.ndarray) -> np.ndarray:
+        """Per node, the slip direction's settled angle: ``fr.TOL_ANGLE``, or under finite
+        sliding, for a node whose s is its slip's (``free``), the angle the slip's round-off
+        gives: measured on the geometry, t · (x_s − x_m0), the slip γ carries an error of a
+        few ε |x| (|x| the surfaces' largest coordinate), so its direction is known to
+        ``SLIP_ROUNDOFF`` ε |x| / γ at best (a node of a refined die slipping 4e-8 in a press
+        step: 1e-9 rad, which TOL_ANGLE never reached: Newton went on at its residual's
+        floor). Collective the first time (the coordinates' largest over the ranks)."""
+        tol = np.full(gamma.shape, fr.TOL_ANGLE)
+        if self.span is None:   # (small sliding: the slip from q alone, no coordinates in it)
+            return tol
+        if self._x_reach is None:
+            self._x_reach = max(self.values.max_abs(self.span.surf.points), 1e-300)
+        floor = SLIP_ROUNDOFF * np.finfo(float).eps * self._x_reach
+        tol[free] = np.maximum(fr.TOL_ANGLE, floor / np.maximum(gamma[free], 1e-300))
+        return tol
 
     def evaluate(self, cells: np.ndarray, values: dict, state, secant: bool, at):
         """No forces of its own (the contact acts through its relations); in the Newton

@@ -25,7 +25,10 @@ hold both components of the slip since the step's start; the tangent basis (t1, 
 is not the facet's own but the initial t1 projected on the current tangent plane, so that the
 slip direction, written in it, does not jump when a slave crosses to a facet numbered from
 another corner (``reference_frame``). A 3D slave that passed its facet's edge into a concave
-crease of the deformed master (and so entered the next facet) goes to that facet. Mortar
+crease of the deformed master (and so entered the next facet) goes to that facet; one that
+went back and forth between the crease's two facets twice in the step (a slave on the crease
+itself, e.g. on a line of master face edges, which its own force presses into a crease) is held
+there with the two facets' mean normal (``_hold_at_creases``). Mortar
 rows (``contact.sliding``): integrated again on the current configuration, on the slaves
 paired at the start, each over the master nodes within the search radius plus its slave
 facets' reach (a slave no facet covers any more keeps its last row). Limits: in 2D a
@@ -71,6 +74,9 @@ KEEP_TOL = 1e-2
 # zero, so any positive value keeps it open; not a large one, which would widen the active
 # set's gap tolerance, scaled to the largest |A q − b|)
 UNCOVERED_GAP = 1.0
+# 3D node-to-face: a slave held at a concave crease (``_hold_at_creases``) once it went back this
+# many times within the step to the facet it left
+CREASE_RETURNS = 2
 # a node-to-segment slave named in a failure: it went back to the facet it left within this
 # many re-pairings of the failed attempt's end (``failure_hints``)
 RECENT = 3
@@ -189,12 +195,40 @@ class FiniteSliding:
             keep = inside & (dist <= best + 1e-9 * sp.length) & ~(past & entered) | ~p.paired
             for name in p.__dataclass_fields__:
                 getattr(p, name)[keep] = getattr(cur, name)[keep]
+            self._hold_at_creases(x, p, cur, inside)
         if sp.reference is not None:
             reference_frame(p, sp.reference)
         self._cover(p, facing)   # (after the frame: an uncovered slave's tangents stay zero)
         outside = ~in_spans(p.facet, sp.facet_ptr, sp.facet_ids) & (p.facet >= 0)
         self._respan_if(x, p, outside, start)
         return p, x
+
+    def _hold_at_creases(self, x: np.ndarray, p, cur, inside: np.ndarray) -> None:
+        """3D node-to-face: a slave that went back to the facet it left ``CREASE_RETURNS``
+        times in the step (``_count_returns``) and lies in both facets (within ``KEEP_TOL``)
+        sits on a concave crease of the master: held by one facet, the force along that
+        facet's normal pushes it over the crease into the other, whose normal pushes it back,
+        at every solve (a slave on a line of master nodes, pressed: Newton never converges).
+        Such a slave is held on its facet now (``cur``), its row's normal the mean of the two
+        facets' (the bisector, to which the two facets' reactions sum on a symmetric crease),
+        set in p in place; it stays there for the rest of the step."""
+        if self.mesh.dim != 3 or self._returns is None or self._returns.size != len(p):
+            return
+        sp = self.span
+        other = self._left
+        maybe = np.flatnonzero((self._returns >= CREASE_RETURNS) & (other >= 0) & inside
+                               & (other != cur.facet))
+        if maybe.size == 0:   # (local: no collective)
+            return
+        two, in_two = pair_on(x, sp.slave[maybe], sp.facets, other[maybe],
+                              self.mesh.facet_type, KEEP_TOL)
+        at = maybe[in_two]
+        normal = cur.normal[at] + two.normal[in_two]
+        normal /= np.linalg.norm(normal, axis=1)[:, None]
+        for name in p.__dataclass_fields__:
+            getattr(p, name)[at] = getattr(cur, name)[at]
+        p.normal[at] = normal
+        p.gap[at] = np.einsum("mx,mx->m", normal, x[sp.slave[at]] - cur.point[at])
 
     def _with_uncovered(self, surf, p, facets: np.ndarray, length: float):
         """Finite sliding, node-to-segment, at the start: p (this rank's slaves, compact) with
