@@ -23,7 +23,7 @@ for n in 2 3; do
   echo "== pytest, $n ranks (tests marked serial are skipped)"
   parallel "$n" tests "$@"
 done
-echo "== pytest, 4 ranks (oversubscribed): partition independence, distributed mesh, empty regions, relation owners, per-rank relation and contact counts"
+echo "== pytest, 4 ranks (oversubscribed): partition independence, distributed mesh, empty regions, relation owners, per-rank relation and contact counts, contact on the iterative preset"
 # every shipped scene at 4 ranks against 1 rank, on both partitioners; ranks holding none of
 # a load's or relation's region
 parallel 4 tests/solvers/test_rank_independence.py tests/mesh/test_distribute.py \
@@ -33,7 +33,11 @@ parallel 4 tests/solvers/test_rank_independence.py tests/mesh/test_distribute.py
   tests/relation_kinds/test_global_rows.py tests/mesh/test_xdmfmesh.py \
   tests/contact/test_sliding_per_rank.py tests/contact/test_obstacle_rows_per_rank.py \
   tests/effects/test_contact_penalty_per_rank.py tests/relation_kinds/test_strain_per_rank.py \
-  tests/effects/test_solubility_distributed.py tests/relation_kinds/test_maximum_per_rank.py "$@"
+  tests/effects/test_solubility_distributed.py tests/relation_kinds/test_maximum_per_rank.py \
+  "tests/solvers/test_iterative_scenes.py::test_iterative_preset_gives_the_direct_answers[contact_friction_3d]" \
+  "tests/solvers/test_iterative_scenes.py::test_iterative_preset_gives_the_direct_answers[contact_block_friction]" \
+  "tests/solvers/test_iterative_scenes.py::test_iterative_preset_gives_the_direct_answers[contact_mortar_sphere_3d]" \
+  "$@"
 echo "== docs: generated pages checked, mkdocs build --strict"
 bash scripts/docs.sh
 echo "== benchmarks, smoke (every scripts/bench_*.py at its smallest size)"
