@@ -431,13 +431,13 @@ SCALE_HEAD = ["problem", "refinement", "DOFs", "ranks", "Newton its", "Krylov me
 
 
 #: the condensed V-cycle's alternatives (``--variants F``), each a friction run beside the preset's
-#: (its hierarchy kept across the Newton iterations while it serves, "allatonce" products)
+#: (FINE_SWEEPS on its finest level; its hierarchy kept across the Newton iterations while it
+#: serves; its Galerkin products freed, "allatonce" from ALLATONCE_ROWS on several ranks)
 VARIANTS = {
-    "made at every set-up (before)": {"condensed_reuse_growth": "0"},
-    "made at every set-up, GAMG's interpolation reused": {
-        "condensed_reuse_growth": "0", "condensed_pc_gamg_reuse_interpolation": "true"},
-    "kept, PETSc's default product": {"matptap_via": "nonscalable"},
-    "kept, unsmoothed aggregation": {"condensed_pc_gamg_agg_nsmooths": "0"},
+    "8 fine sweeps (before)": {"condensed_fine_sweeps": "8"},
+    "6 fine sweeps": {"condensed_fine_sweeps": "6"},
+    "3 fine sweeps": {"condensed_fine_sweeps": "3"},
+    "allatonce products": {"matptap_via": "allatonce"},
 }
 
 

@@ -12,6 +12,9 @@ from typing import Iterator
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from parsolve import progress
+from parsolve.solvers.options import product_clear
+
 #: SOR sweeps (Richardson) on the finest level of the GAMG V-cycle on S, before and after the
 #: coarse correction. Krylov iterations per solve (mean / max) on the 3D friction box at 16.9k
 #: DOFs, 1 rank: 6 and 8 sweeps 6.8 / 10 and 6.0 / 9, GAMG's Chebyshev 23.2 / 35, PETSc's ML
@@ -23,15 +26,21 @@ from petsc4py import PETSc
 #: the elasticity of its own bench run); 2 sweeps 13.5 / 18. Fewer sweeps trade time for
 #: iterations that grow with the mesh: 8 stay, the time target (≤ 1.5x) met with them at
 #: 122k (1.30x), missed at 2M DOFs on 2 ranks (1.83-1.87x CPU: the sweeps' cost).
-FINE_SWEEPS = 8
+FINE_SWEEPS = 4
 #: the same when S holds tied rows (solvers.tied: S = G K_eff H): on the mortar sphere
 #: (16.7k DOFs, 1 rank) Krylov iterations per solve (mean / max) 31.7 / 34 with 8 sweeps, 24.0 /
 #: 26 with 16, 22.3 / 24 with 20, 20.3 / 22 with 24 (the flops of a solve 1.6x 8 sweeps' at 20)
 TIED_SWEEPS = 20
 
 
+#: S's global rows from which, on several ranks, the V-cycle's Galerkin products take PETSc's
+#: "allatonce" algorithm (``-matptap_via allatonce`` while it is set up, unless the user gave
+#: -matptap_via): no intermediate products, the least memory, a slower set-up (_products_freed)
+ALLATONCE_ROWS = 500_000
+
+
 @contextmanager
-def _products_freed() -> Iterator[None]:
+def _products_freed(allatonce: bool = False) -> Iterator[None]:
     """The intermediates of the V-cycle's Galerkin products P^T A P freed once each coarse
     operator is made (``-mat_product_clear``, in PETSc's options while it is set up, unless
     given: read under no prefix, solvers.options.UNPREFIXED). PETSc's distributed product
@@ -45,17 +54,23 @@ def _products_freed() -> Iterator[None]:
     1.45x, 1.31x (+121 MiB); "allatonce" (the least memory, +48 MiB, but 22.5 s per set-up
     against 3.3) 1.72x, 1.10x (the last two in an earlier run). At 2M DOFs on 2 ranks the
     trade turns (scripts/results/bench_relations_big.md, docs/performance.md): freed 1.87x,
-    1.40x; "allatonce" 1.83x, 1.28x (its set-up a small share of a long run): near the
-    machine's memory, ``-matptap_via allatonce``."""
+    1.40x; "allatonce" 1.83x, 1.28x (its set-up a small share of a long run). The memory
+    ratio of the freed products, log-linear in the DOFs between those two sizes, reaches the
+    target's 1.3x near 540k: ``allatonce`` (``-matptap_via allatonce`` added, unless given)
+    from ALLATONCE_ROWS."""
     options = PETSc.Options()
-    add = not options.hasName("mat_product_clear")
-    if add:
-        options["mat_product_clear"] = "true"
+    added = {}
+    if product_clear() is None:
+        added["mat_product_clear"] = "true"
+    if allatonce and not options.hasName("matptap_via"):
+        added["matptap_via"] = "allatonce"
+    for key, value in added.items():
+        options[key] = value
     try:
         yield
     finally:
-        if add:
-            options.delValue("mat_product_clear")
+        for key in added:
+            options.delValue(key)
 
 
 #: the coarse hierarchy kept across set-ups (``VCycle.set_up``) while the last solve on it took
@@ -109,7 +124,7 @@ class VCycle:
         if not self._configured:
             self.pc.setFromOptions()
             self._configured = True
-        with _products_freed():
+        with _products_freed(self._allatonce(mat)):
             self.pc.setUp()
         if self.pc.getType() == "gamg":
             self._fine_sor(sweeps)
@@ -117,6 +132,17 @@ class VCycle:
         self.pc.setReusePreconditioner(True)
         self._made_for = mat.handle
         self.made += 1
+
+    def _allatonce(self, mat: PETSc.Mat) -> bool:
+        """The "allatonce" Galerkin products for ``mat`` (ALLATONCE_ROWS, several ranks): said
+        in the run's log when first chosen."""
+        rows = mat.getSize()[0]
+        chosen = (self.comm.size > 1 and rows >= ALLATONCE_ROWS
+                  and not PETSc.Options().hasName("matptap_via"))
+        if chosen and not self.made:
+            progress.say(f"condensed V-cycle: S of {rows:,} rows >= {ALLATONCE_ROWS:,} on "
+                         f"{self.comm.size} ranks: Galerkin products allatonce (less memory)")
+        return chosen
 
     def _keeps(self, mat: PETSc.Mat) -> bool:
         """The hierarchy kept for ``mat``: the same matrix, and the last solve within
