@@ -17,15 +17,17 @@ from parsolve.solvers.options import product_clear
 
 #: SOR sweeps (Richardson) on the finest level of the GAMG V-cycle on S, before and after the
 #: coarse correction. Krylov iterations per solve (mean / max) on the 3D friction box at 16.9k
-#: DOFs, 1 rank: 6 and 8 sweeps 6.8 / 10 and 6.0 / 9, GAMG's Chebyshev 23.2 / 35, PETSc's ML
-#: (the V-cycle before) 7.1 / 10; at 122k DOFs, 2 ranks: 9.9 / 14 and 9.0 / 13, ML 9.1 / 13
-#: for 1.2x the peak memory (docs/performance.md). SOR on every level divided by a coarse
-#: operator's zero diagonal entry on 2 ranks. The sweeps are most of a solve's flops (79 % at
-#: 122k): there 6 and 4 sweeps took 9.9 / 14 and 11.1 / 15 iterations for CPU time per
-#: Newton iteration 1.37x and 1.09x plain elasticity's, against 1.40x with 8 (each against
-#: the elasticity of its own bench run); 2 sweeps 13.5 / 18. Fewer sweeps trade time for
-#: iterations that grow with the mesh: 8 stay, the time target (≤ 1.5x) met with them at
-#: 122k (1.30x), missed at 2M DOFs on 2 ranks (1.83-1.87x CPU: the sweeps' cost).
+#: DOFs, 1 rank: 4, 6 and 8 sweeps 8.1 / 12 (2 steps), 6.8 / 10 and 6.0 / 9, GAMG's Chebyshev
+#: 23.2 / 35, PETSc's ML (the V-cycle before) 7.1 / 10. SOR on every level divided by a
+#: coarse operator's zero diagonal entry on 2 ranks. The sweeps are most of a solve's flops
+#: (79 % with 8 at 122k), so fewer of them pay while the iterations grow little: at 122k DOFs
+#: on 2 ranks (one bench run, load 2-3; CPU time per Newton iteration against plain
+#: elasticity's) 8 sweeps 9.0 / 13 for 1.30x, 6 9.9 / 14 for 1.20x, 4 11.1 / 15 for 1.01x,
+#: 3 11.9 / 16 for 0.98x (2: 13.5 / 18); 5 10.6 / 15. Per flop nothing else did better:
+#: forward sweeps before the coarse correction and backward ones after (8 of them: the flops
+#: of 4 symmetric ones) took 4's iterations to the solve (11.0 / 15), 6 of them 3's (11.9 /
+#: 16); SOR's ω = 1.2 made the iterations irregular (4 sweeps: 15.2 / 22). 4: at 2M DOFs the
+#: iterations grow 1.5x from 122k (8 sweeps: 13.5 / 20), 3 would come near 25.
 FINE_SWEEPS = 4
 #: the same when S holds tied rows (solvers.tied: S = G K_eff H): on the mortar sphere
 #: (16.7k DOFs, 1 rank) Krylov iterations per solve (mean / max) 31.7 / 34 with 8 sweeps, 24.0 /
