@@ -26,8 +26,9 @@ from parsolve.solvers.options import product_clear
 #: 3 11.9 / 16 for 0.98x (2: 13.5 / 18); 5 10.6 / 15. Per flop nothing else did better:
 #: forward sweeps before the coarse correction and backward ones after (8 of them: the flops
 #: of 4 symmetric ones) took 4's iterations to the solve (11.0 / 15), 6 of them 3's (11.9 /
-#: 16); SOR's ω = 1.2 made the iterations irregular (4 sweeps: 15.2 / 22). 4: at 2M DOFs the
-#: iterations grow 1.5x from 122k (8 sweeps: 13.5 / 20), 3 would come near 25.
+#: 16); SOR's ω = 1.2 made the iterations irregular (4 sweeps: 15.2 / 22). At 2.08M DOFs on
+#: 2 ranks (bench_relations_big.md) 4 sweeps took 16.0 / 24 (8: 13.5 / 20), the Krylov flops
+#: of the run ~0.7x 8's; 3 would pass 25 there.
 FINE_SWEEPS = 4
 #: the same when S holds tied rows (solvers.tied: S = G K_eff H): on the mortar sphere
 #: (16.7k DOFs, 1 rank) Krylov iterations per solve (mean / max) 31.7 / 34 with 8 sweeps, 24.0 /
@@ -56,10 +57,14 @@ def _products_freed(allatonce: bool = False) -> Iterator[None]:
     1.45x, 1.31x (+121 MiB); "allatonce" (the least memory, +48 MiB, but 22.5 s per set-up
     against 3.3) 1.72x, 1.10x (the last two in an earlier run). At 2M DOFs on 2 ranks the
     trade turns (scripts/results/bench_relations_big.md, docs/performance.md): freed 1.87x,
-    1.40x; "allatonce" 1.83x, 1.28x (its set-up a small share of a long run). The memory
-    ratio of the freed products, log-linear in the DOFs between those two sizes, reaches the
-    target's 1.3x near 540k: ``allatonce`` (``-matptap_via allatonce`` added, unless given)
-    from ALLATONCE_ROWS."""
+    1.40x; "allatonce" 1.83x, 1.28x (8 sweeps then; its set-up 600 s of a 3,100 s run on a
+    loaded machine). The memory ratio of the freed products, log-linear in the DOFs between
+    those two sizes, reaches the target's 1.3x near 540k: ``allatonce`` (``-matptap_via
+    allatonce`` added, unless given) from ALLATONCE_ROWS. The preset so (4 sweeps, allatonce
+    by size) at 2.08M: peak 9,482 MiB, 1.29x elasticity's; CPU per Newton iteration 157.7 s
+    summed, 1.24x and 1.36x the elasticity runs before and after it (machine loads ~10 and ~5,
+    the friction run's 9-17: loaded CPU time grows with the load, an idle elasticity took
+    84.3 s)."""
     options = PETSc.Options()
     added = {}
     if product_clear() is None:
