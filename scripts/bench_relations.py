@@ -38,7 +38,8 @@ mean, max; the iterative preset at its tolerance, rtol 2.5e-14), wall time, peak
         ratios of peak memory and time per Newton iteration (wall, and CPU summed over the
         ranks) friction over elasticity (scripts/results/bench_relations_big.md, the
         measurements in bench_relations_big.json; --big-publish renders the table again
-        from that file without running anything)
+        from that file without running anything; --big-after runs the elasticity again after
+        the friction run and gives the ratios against both: the load changes over a long run)
 """
 
 from __future__ import annotations
@@ -431,13 +432,13 @@ SCALE_HEAD = ["problem", "refinement", "DOFs", "ranks", "Newton its", "Krylov me
 
 
 #: the condensed V-cycle's alternatives (``--variants F``), each a friction run beside the preset's
-#: (its hierarchy kept across the Newton iterations while it serves, "allatonce" products)
+#: (FINE_SWEEPS on its finest level; its hierarchy kept across the Newton iterations while it
+#: serves; its Galerkin products freed, "allatonce" from ALLATONCE_ROWS on several ranks)
 VARIANTS = {
-    "made at every set-up (before)": {"condensed_reuse_growth": "0"},
-    "made at every set-up, GAMG's interpolation reused": {
-        "condensed_reuse_growth": "0", "condensed_pc_gamg_reuse_interpolation": "true"},
-    "kept, PETSc's default product": {"matptap_via": "nonscalable"},
-    "kept, unsmoothed aggregation": {"condensed_pc_gamg_agg_nsmooths": "0"},
+    "8 fine sweeps (before)": {"condensed_fine_sweeps": "8"},
+    "6 fine sweeps": {"condensed_fine_sweeps": "6"},
+    "3 fine sweeps": {"condensed_fine_sweeps": "3"},
+    "allatonce products": {"matptap_via": "allatonce"},
 }
 
 
@@ -687,6 +688,24 @@ def big_study(folder: Path, factor: int, ranks: int, steps: int, timeout: float 
     return study
 
 
+def big_after(folder: Path) -> dict:
+    """The elasticity run of the last big study (BIG_JSON) again, after its friction run, on
+    the same mesh and ranks ("elasticity, after"): over a long friction run the machine's
+    load changes, and the CPU time of a loaded machine's run grows with the load (its shared
+    caches and memory bandwidth): the ratios are given against both elasticity runs."""
+    study = bh.read_json(bh.PUBLISHED / BIG_JSON)
+    factor, ranks, steps = study["factor"], study["ranks"], study["steps"]
+    r = one_run(folder, f"big_elasticity_{factor}", elastic_scene(factor, steps), "iterative",
+                ranks=ranks)
+    study["runs"]["elasticity, after"] = r
+    print(bh.text_table(BIG_HEAD, [big_row("elasticity, after", factor, ranks, r)]), flush=True)
+    study["load1"] = os.getloadavg()
+    big_timings(study)
+    bh.write_json(bh.PUBLISHED / BIG_JSON, study)
+    publish_big(study)
+    return study
+
+
 def left(end: float | None) -> float | None:
     """Seconds to ``end`` (time.monotonic), at least one."""
     return None if end is None else max(end - time.monotonic(), 1.0)
@@ -713,10 +732,17 @@ def big_row(name: str, factor: int, ranks: int, r: dict) -> list[str]:
 
 def big_ratios(runs: dict) -> str:
     """Friction over elasticity on the same mesh and ranks, against the targets (peak memory
-    ≤ 1.3×, time per Newton iteration ≤ 1.5×), or why there is no ratio."""
-    f, e = runs.get("friction"), runs.get("elasticity")
-    if not (f and e and f.get("status") == e.get("status") == "complete"):
+    ≤ 1.3×, time per Newton iteration ≤ 1.5×), or why there is no ratio: against each
+    elasticity run (the one before the friction run, and ``--big-after``'s after it)."""
+    f = runs.get("friction")
+    refs = {name: r for name, r in runs.items() if name.startswith("elasticity")
+            and r.get("status") == "complete"}
+    if not (f and f.get("status") == "complete" and refs):
         return "No ratio: the friction run and the elasticity run did not both complete"
+    return " ".join(_ratio_words(f, name, e) for name, e in refs.items())
+
+
+def _ratio_words(f: dict, name: str, e: dict) -> str:
     (fw, fc), (ew, ec) = per_newton(f), per_newton(e)
     mem, rank, wall = f["hwm"] / e["hwm"], f["hwm_rank"] / e["hwm_rank"], fw / ew
     cpu = fc / ec if ec else float("nan")
@@ -724,11 +750,13 @@ def big_ratios(runs: dict) -> str:
     def met(x: float, limit: float) -> str:
         return f"{x:.2f}× ({'met' if x <= limit else 'missed'}: ≤ {limit}×)"
 
-    return (f"Friction over elasticity on the same mesh and ranks: peak memory summed over the "
+    which = "the elasticity run after it" if "after" in name else "the elasticity run before it"
+    return (f"Friction over {which} (same mesh and ranks): peak memory summed over the "
             f"ranks {met(mem, 1.3)}, of the largest rank {rank:.2f}×; time per Newton "
             f"iteration, CPU summed over the ranks {met(cpu, 1.5)}, wall {met(wall, 1.5)} "
             "(the CPU time is the less disturbed by the machine's other jobs; both are the "
-            "whole run's over its Newton iterations, the model's build and the output included)")
+            "whole run's over its Newton iterations, the model's build and the output "
+            "included).")
 
 
 def big_timings(study: dict) -> bool:
@@ -792,7 +820,7 @@ def publish_big(study: dict) -> None:
         "set-up: the condensation and the AMG's, per linear solve; time per Newton iteration: "
         "the whole run's wall time, and its CPU time summed over the ranks, over its Newton "
         "iterations; peak memory: VmHWM. The measurements: `" + BIG_JSON + "`.", "",
-        bh.md_table(BIG_HEAD, rows, first="---"), "", big_ratios(study["runs"]) + ".", "",
+        bh.md_table(BIG_HEAD, rows, first="---"), "", big_ratios(study["runs"]), "",
         *([time_words(study["runs"]) + ".", ""] if time_words(study["runs"]) else []),
         mumps_words(study["mumps"], ranks) + ".", ""])
     bh.publish("bench_relations_big.md", text)
@@ -842,6 +870,9 @@ def main() -> None:
                         "(bench_relations_big.md)")
     p.add_argument("--big-elasticity", action="store_true",
                    help="with --big: the clamped box's elasticity run too")
+    p.add_argument("--big-after", action="store_true",
+                   help="the elasticity run of the last --big study again, after its friction "
+                        "run (bench_relations_big.json): the ratios against both")
     p.add_argument("--big-publish", action="store_true",
                    help="bench_relations_big.md rendered again from the measurements of the "
                         "last --big run (bench_relations_big.json), nothing run")
@@ -856,6 +887,9 @@ def main() -> None:
     if args.log:
         os.environ["BENCH_LOG"] = str(Path(args.log).resolve())   # (the children inherit it)
     petsc = json.loads(args.petsc)
+    if args.big_after:
+        big_after(bh.scratch("relations_big"))
+        return
     if args.big_publish:
         study = bh.read_json(bh.PUBLISHED / BIG_JSON)
         if big_timings(study):   # (a study measured before its timings were recorded)

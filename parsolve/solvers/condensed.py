@@ -37,6 +37,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from parsolve.solvers import tied
+from parsolve.solvers.options import product_clear
 from parsolve.solvers.vcycle import FINE_SWEEPS, TIED_SWEEPS, VCycle
 
 #: why a system is not condensed, in words; the largest code over the ranks wins (a row that
@@ -327,7 +328,7 @@ class CondensedPreconditioner:
         same = frames[0] is self.G   # (the same pattern: G, H, X filled in place)
         # the product's symbolic part reused, unless the user's -mat_product_clear freed it
         # (PETSc aborts on a reuse of a cleared product)
-        if same and not PETSc.Options().getBool("mat_product_clear", False):
+        if same and not product_clear():
             self.S = self.G.matMatMult(self._k, self.H, result=self.S)
         else:
             for m in ((self.S,) if same else (self.G, self.H, self.X, self.S)):

@@ -79,6 +79,14 @@ DISTRIBUTED_PTAP = ("allatonce", "allatonce_merged", "nonscalable", "backend")
 AMG_PRODUCTS = {"mat_product_clear": ""}
 
 
+def product_clear() -> bool | None:
+    """``-mat_product_clear`` as PETSc's options hold it now (under no prefix: UNPREFIXED),
+    None when absent: the condensed V-cycle's set-up adds it only then, and a tied S reuses
+    its product's symbolic part only when it is not true (PETSc aborts on a cleared one)."""
+    db = PETSc.Options()
+    return db.getBool("mat_product_clear") if db.hasName("mat_product_clear") else None
+
+
 def _applies(key: str, value: str) -> bool:
     return not (key == "matptap_via" and PETSc.COMM_WORLD.getSize() == 1
                 and str(value) in DISTRIBUTED_PTAP)

@@ -12,26 +12,38 @@ from typing import Iterator
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from parsolve import progress
+from parsolve.solvers.options import product_clear
+
 #: SOR sweeps (Richardson) on the finest level of the GAMG V-cycle on S, before and after the
 #: coarse correction. Krylov iterations per solve (mean / max) on the 3D friction box at 16.9k
-#: DOFs, 1 rank: 6 and 8 sweeps 6.8 / 10 and 6.0 / 9, GAMG's Chebyshev 23.2 / 35, PETSc's ML
-#: (the V-cycle before) 7.1 / 10; at 122k DOFs, 2 ranks: 9.9 / 14 and 9.0 / 13, ML 9.1 / 13
-#: for 1.2x the peak memory (docs/performance.md). SOR on every level divided by a coarse
-#: operator's zero diagonal entry on 2 ranks. The sweeps are most of a solve's flops (79 % at
-#: 122k): there 6 and 4 sweeps took 9.9 / 14 and 11.1 / 15 iterations for CPU time per
-#: Newton iteration 1.37x and 1.09x plain elasticity's, against 1.40x with 8 (each against
-#: the elasticity of its own bench run); 2 sweeps 13.5 / 18. Fewer sweeps trade time for
-#: iterations that grow with the mesh: 8 stay, the time target (≤ 1.5x) met with them at
-#: 122k (1.30x), missed at 2M DOFs on 2 ranks (1.83-1.87x CPU: the sweeps' cost).
-FINE_SWEEPS = 8
+#: DOFs, 1 rank: 4, 6 and 8 sweeps 8.1 / 12 (2 steps), 6.8 / 10 and 6.0 / 9, GAMG's Chebyshev
+#: 23.2 / 35, PETSc's ML (the V-cycle before) 7.1 / 10. SOR on every level divided by a
+#: coarse operator's zero diagonal entry on 2 ranks. The sweeps are most of a solve's flops
+#: (79 % with 8 at 122k), so fewer of them pay while the iterations grow little: at 122k DOFs
+#: on 2 ranks (one bench run, load 2-3; CPU time per Newton iteration against plain
+#: elasticity's) 8 sweeps 9.0 / 13 for 1.30x, 6 9.9 / 14 for 1.20x, 4 11.1 / 15 for 1.01x,
+#: 3 11.9 / 16 for 0.98x (2: 13.5 / 18); 5 10.6 / 15. Per flop nothing else did better:
+#: forward sweeps before the coarse correction and backward ones after (8 of them: the flops
+#: of 4 symmetric ones) took 4's iterations to the solve (11.0 / 15), 6 of them 3's (11.9 /
+#: 16); SOR's ω = 1.2 made the iterations irregular (4 sweeps: 15.2 / 22). At 2.08M DOFs on
+#: 2 ranks (bench_relations_big.md) 4 sweeps took 16.0 / 24 (8: 13.5 / 20), the Krylov flops
+#: of the run ~0.7x 8's; 3 would pass 25 there.
+FINE_SWEEPS = 4
 #: the same when S holds tied rows (solvers.tied: S = G K_eff H): on the mortar sphere
 #: (16.7k DOFs, 1 rank) Krylov iterations per solve (mean / max) 31.7 / 34 with 8 sweeps, 24.0 /
 #: 26 with 16, 22.3 / 24 with 20, 20.3 / 22 with 24 (the flops of a solve 1.6x 8 sweeps' at 20)
 TIED_SWEEPS = 20
 
 
+#: S's global rows from which, on several ranks, the V-cycle's Galerkin products take PETSc's
+#: "allatonce" algorithm (``-matptap_via allatonce`` while it is set up, unless the user gave
+#: -matptap_via): no intermediate products, the least memory, a slower set-up (_products_freed)
+ALLATONCE_ROWS = 500_000
+
+
 @contextmanager
-def _products_freed() -> Iterator[None]:
+def _products_freed(allatonce: bool = False) -> Iterator[None]:
     """The intermediates of the V-cycle's Galerkin products P^T A P freed once each coarse
     operator is made (``-mat_product_clear``, in PETSc's options while it is set up, unless
     given: read under no prefix, solvers.options.UNPREFIXED). PETSc's distributed product
@@ -45,17 +57,27 @@ def _products_freed() -> Iterator[None]:
     1.45x, 1.31x (+121 MiB); "allatonce" (the least memory, +48 MiB, but 22.5 s per set-up
     against 3.3) 1.72x, 1.10x (the last two in an earlier run). At 2M DOFs on 2 ranks the
     trade turns (scripts/results/bench_relations_big.md, docs/performance.md): freed 1.87x,
-    1.40x; "allatonce" 1.83x, 1.28x (its set-up a small share of a long run): near the
-    machine's memory, ``-matptap_via allatonce``."""
+    1.40x; "allatonce" 1.83x, 1.28x (8 sweeps then; its set-up 600 s of a 3,100 s run on a
+    loaded machine). The memory ratio of the freed products, log-linear in the DOFs between
+    those two sizes, reaches the target's 1.3x near 540k: ``allatonce`` (``-matptap_via
+    allatonce`` added, unless given) from ALLATONCE_ROWS. The preset so (4 sweeps, allatonce
+    by size) at 2.08M, the machine at load 3-6: peak 9,466 MiB, 1.26x elasticity's; CPU per
+    Newton iteration 161.7 s summed, 1.35x (elasticity at a like load, 119.9 s; idle it took
+    84.3 s: loaded CPU time grows with the load). An earlier run at load 9-17: 1.29x, 1.24x
+    and 1.36x against elasticity runs at loads ~10 and ~5."""
     options = PETSc.Options()
-    add = not options.hasName("mat_product_clear")
-    if add:
-        options["mat_product_clear"] = "true"
+    added = {}
+    if product_clear() is None:
+        added["mat_product_clear"] = "true"
+    if allatonce and not options.hasName("matptap_via"):
+        added["matptap_via"] = "allatonce"
+    for key, value in added.items():
+        options[key] = value
     try:
         yield
     finally:
-        if add:
-            options.delValue("mat_product_clear")
+        for key in added:
+            options.delValue(key)
 
 
 #: the coarse hierarchy kept across set-ups (``VCycle.set_up``) while the last solve on it took
@@ -109,7 +131,7 @@ class VCycle:
         if not self._configured:
             self.pc.setFromOptions()
             self._configured = True
-        with _products_freed():
+        with _products_freed(self._allatonce(mat)):
             self.pc.setUp()
         if self.pc.getType() == "gamg":
             self._fine_sor(sweeps)
@@ -117,6 +139,17 @@ class VCycle:
         self.pc.setReusePreconditioner(True)
         self._made_for = mat.handle
         self.made += 1
+
+    def _allatonce(self, mat: PETSc.Mat) -> bool:
+        """The "allatonce" Galerkin products for ``mat`` (ALLATONCE_ROWS, several ranks): said
+        in the run's log when first chosen."""
+        rows = mat.getSize()[0]
+        chosen = (self.comm.size > 1 and rows >= ALLATONCE_ROWS
+                  and not PETSc.Options().hasName("matptap_via"))
+        if chosen and not self.made:
+            progress.say(f"condensed V-cycle: S of {rows:,} rows >= {ALLATONCE_ROWS:,} on "
+                         f"{self.comm.size} ranks: Galerkin products allatonce (less memory)")
+        return chosen
 
     def _keeps(self, mat: PETSc.Mat) -> bool:
         """The hierarchy kept for ``mat``: the same matrix, and the last solve within

@@ -3,6 +3,8 @@ level, its Galerkin product scoped to its set-up, and its coarse hierarchy kept 
 set-ups while it serves — the finest level on the matrix's current values, the coarse
 operators those of the set-up that made them."""
 
+from contextlib import contextmanager
+
 import numpy as np
 from petsc4py import PETSc
 
@@ -10,6 +12,7 @@ from conftest import run_scene, solve_in_process
 from helpers.scene import scene, shipped
 from solvers.test_iterative_scenes import assert_same_answers
 from parsolve.solvers import options as opt
+from parsolve.solvers import vcycle
 from parsolve.solvers.vcycle import (FINE_SWEEPS, REUSE_GROWTH, TIED_SWEEPS, VCycle,
                                      _products_freed)
 
@@ -151,6 +154,19 @@ def test_fine_level_smoothed_by_sor(comm):
         assert amg.getMGLevels() == 2 or coarse.getType() == "chebyshev"
 
 
+def test_preset_sweeps_give_the_direct_answers(comm, shared_tmp):
+    """The friction box's first two steps on the iterative preset (FINE_SWEEPS on the finest
+    level) and with twice the sweeps: the direct preset's Newton iterations and answers (1e-8
+    of their scale): GMRES runs on M itself, the smoother changes its iterations only."""
+    text = scene(shipped("contact_friction_3d.toml"), steps={"count": 2, "end": 0.25})
+    direct = run_scene(text, shared_tmp / "direct.h5", comm, solver={"preset": "direct"})
+    for sweeps in (FINE_SWEEPS, 2 * FINE_SWEEPS):
+        run = run_scene(text, shared_tmp / f"sweeps{sweeps}.h5", comm,
+                        options={"condensed_fine_sweeps": str(sweeps)},
+                        solver={"preset": "iterative"})
+        assert_same_answers(run, direct, tol=1e-8)
+
+
 def test_tied_rows_take_more_fine_sweeps(comm):
     """S with tied rows (the coarsened mortar sphere's dual mortar rows: S = G K H) takes
     TIED_SWEEPS on its finest level, the nodal friction box FINE_SWEEPS;
@@ -175,21 +191,61 @@ def test_tied_rows_take_more_fine_sweeps(comm):
 
 
 def test_galerkin_products_freed_in_scope(comm):
-    """The V-cycle's set-up puts -mat_product_clear in PETSc's options only while it runs,
-    and leaves a value the user gave as it is; the friction box's solve leaves none behind."""
+    """The V-cycle's set-up puts -mat_product_clear (and -matptap_via allatonce when asked)
+    in PETSc's options only while it runs, and leaves a value the user gave as it is; the
+    friction box's solve leaves none behind."""
     options = PETSc.Options()
-    with _products_freed():
+    with _products_freed(allatonce=True):
         assert options.getBool("mat_product_clear", False)
-    assert not options.hasName("mat_product_clear")
+        assert options.getString("matptap_via") == "allatonce"
+    assert not options.hasName("mat_product_clear") and not options.hasName("matptap_via")
     options["mat_product_clear"] = "false"
+    options["matptap_via"] = "nonscalable"
     try:
-        with _products_freed():
+        with _products_freed(allatonce=True):
             assert options.getString("mat_product_clear") == "false"
+            assert options.getString("matptap_via") == "nonscalable"
         assert options.getString("mat_product_clear") == "false"
+        assert opt.product_clear() is False
     finally:
         options.delValue("mat_product_clear")
+        options.delValue("matptap_via")
+    assert opt.product_clear() is None
     _friction(comm)
-    assert not options.hasName("mat_product_clear")
+    assert not options.hasName("mat_product_clear") and not options.hasName("matptap_via")
+
+
+def test_allatonce_products_from_a_size_reach_petsc(comm, monkeypatch):
+    """From ALLATONCE_ROWS rows of S on several ranks, the set-up's Galerkin products are
+    asked for "allatonce", and PETSc reads that option (PetscOptionsUsed while it is in);
+    below, or on one rank, not. The hierarchy's V-cycle is the default product's to
+    round-off."""
+    A = _laplacian(comm)
+    b = A.createVecLeft()
+    b.setRandom()
+    read: list[bool] = []
+    freed = vcycle._products_freed
+
+    @contextmanager
+    def watched(allatonce: bool = False):
+        with freed(allatonce):
+            yield
+            read.append(PETSc.Options().hasName("matptap_via") and opt._was_used("matptap_via"))
+
+    monkeypatch.setattr(vcycle, "_products_freed", watched)
+    ys = {}
+    for name, rows in (("default", A.getSize()[0] + 1), ("allatonce", A.getSize()[0])):
+        monkeypatch.setattr(vcycle, "ALLATONCE_ROWS", rows)
+        with opt.inserted(name + "_", {"pc_type": "gamg", "pc_gamg_threshold": "0"},
+                          record=False):
+            vc = VCycle(comm, name + "_")
+            vc.set_up(A)
+            y = b.duplicate()
+            vc.apply(b, y)
+            ys[name] = y.array.copy()
+    assert read == [False, comm.size > 1]
+    np.testing.assert_allclose(ys["allatonce"], ys["default"], rtol=0,
+                               atol=1e-12 * np.abs(ys["default"]).max())
 
 
 def test_freed_products_give_the_same_hierarchy(comm):
