@@ -230,7 +230,7 @@ class Contact(FiniteSliding, Effect):
         self._returns = None                # node-to-segment finite sliding: per slave, its
         self._left = self._last_return = None   # returns to a facet it left within the step
         self._repairings = 0
-        self._x_reach = None                # finite sliding: the surfaces' largest coordinate
+        self._x_reach = None                # finite sliding: the mesh's largest coordinate
         self._check_slave(regions)
         # rows built per rank (``_pair_here``, ``_pair_obstacle``): the global number of each
         # entry held here (``ids``) among ``entries``
@@ -817,15 +817,17 @@ class Contact(FiniteSliding, Effect):
         """Per node, the slip direction's settled angle: ``fr.TOL_ANGLE``, or under finite
         sliding, for a node whose s is its slip's (``free``), the angle the slip's round-off
         gives: measured on the geometry, t · (x_s − x_m0), the slip γ carries an error of a
-        few ε |x| (|x| the surfaces' largest coordinate), so its direction is known to
+        few ε |x| (|x| the mesh's largest coordinate), so its direction is known to
         ``SLIP_ROUNDOFF`` ε |x| / γ at best (a node of a refined die slipping 4e-8 in a press
         step: 1e-9 rad, which TOL_ANGLE never reached: Newton went on at its residual's
         floor). Collective the first time (the coordinates' largest over the ranks)."""
         tol = np.full(gamma.shape, fr.TOL_ANGLE)
         if self.span is None:   # (small sliding: the slip from q alone, no coordinates in it)
             return tol
-        if self._x_reach is None:
-            self._x_reach = max(self.values.max_abs(self.span.surf.points), 1e-300)
+        if self._x_reach is None:   # (the mesh's owned nodes: the same on any partition,
+            # where a rank's surfaces, its slaves and the master facets near them, are not)
+            owned = self.mesh.points[:self.mesh.n_owned]
+            self._x_reach = max(self.values.max_abs(owned), 1e-300)
         floor = SLIP_ROUNDOFF * np.finfo(float).eps * self._x_reach
         tol[free] = np.maximum(fr.TOL_ANGLE, floor / np.maximum(gamma[free], 1e-300))
         return tol

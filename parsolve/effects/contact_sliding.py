@@ -195,7 +195,8 @@ class FiniteSliding:
             keep = inside & (dist <= best + 1e-9 * sp.length) & ~(past & entered) | ~p.paired
             for name in p.__dataclass_fields__:
                 getattr(p, name)[keep] = getattr(cur, name)[keep]
-            self._hold_at_creases(x, p, cur, inside)
+            if not start:   # (the counts are the last step's until _count_returns resets them)
+                self._hold_at_creases(x, p, cur, inside)
         if sp.reference is not None:
             reference_frame(p, sp.reference)
         self._cover(p, facing)   # (after the frame: an uncovered slave's tangents stay zero)
