@@ -180,9 +180,15 @@ class SaddleSystem:
             rank = self.comm.rank
             lo, hi = self.part.node_ranges[rank], self.part.node_ranges[rank + 1]
             self.pattern = self._pattern(lo, hi)
-        active = self.op.active[:self.relation_set.n_owned]   # (the ghosts may change)
+        self._operator_anew(self.op.active)
+
+    def _operator_anew(self, active: np.ndarray) -> None:
+        """The operator's CSR built anew on the relations as stacked now, enforcing the owned
+        multiplier rows of ``active`` (per held row before the stacking: the ghosts may
+        change). The next assembly makes a new PETSc matrix. Collective."""
+        owned = active[:self.relation_set.n_owned]
         self.op = SaddleOperator(self.comm, self.dofmap, self.pattern, self.relation_set)
-        self.op.active = self.relation_set.from_owned(active.astype(float)) > 0.5
+        self.op.active = self.relation_set.from_owned(owned.astype(float)) > 0.5
         self._elimination_setup()   # (the relation rows' columns may have changed)
 
     def _terms_moved(self) -> bool:
@@ -376,8 +382,17 @@ class SaddleSystem:
         return b, x_e
 
     def set_active(self, active_rows: np.ndarray) -> None:
-        """Enforce these relation rows (a collapsed group carries its enforced row)."""
-        self.op.active = self.relation_set.select(active_rows)
+        """Enforce these relation rows (a collapsed group carries its enforced row). A
+        per-rank maximum group enforcing another row than its operator row holds: the
+        relations were stacked again with that row's entries (``RelationSet.select``), and
+        the operator is built anew (the next assembly makes a new PETSc matrix). Collective."""
+        rset = self.relation_set
+        active = rset.select(active_rows)
+        if rset.restacked:   # (the same on every rank: the groups' rows are reduced)
+            rset.restacked = False
+            self._operator_anew(active)
+        else:
+            self.op.active = active
 
     def free_rows(self) -> np.ndarray:
         """Mask of this rank's primal rows that are not eliminated."""

@@ -121,8 +121,9 @@ def test_the_ranks_entries_are_the_one_process_build():
 
 def test_a_rows_entries_meet_at_its_owner():
     """In the stacking, each spread row's A entries reach the rank owning its multiplier row:
-    every entry kept once, all of a row's on one rank; A q of the rows is the one-process
-    value."""
+    every entry kept once, all of a row's on one rank (a maximum group's: those of the one row
+    its multiplier row carries, its first until another is enforced); A q of the rows is the
+    one-process value."""
     model = model_of(PLATE_TEXT, COMM)
     system = SaddleSystem(COMM, model)
     rs, dm = system.relation_set, system.dofmap
@@ -134,7 +135,8 @@ def test_a_rows_entries_meet_at_its_owner():
         mult = np.unique(rs.mult_rows[k])
         here = np.isin(rs.a_rows, mult)
         assert np.all((rs.a_rows[here] >= l0) & (rs.a_rows[here] < l1))
-        assert COMM.allreduce(int(here.sum())) == COMM.allreduce(r.a_vals.size)
+        carried = np.ones(r.a_vals.size, dtype=bool) if r.whole else r.ids[r.a_rows] == 0
+        assert COMM.allreduce(int(here.sum())) == COMM.allreduce(int(carried.sum())) > 0
         owners = COMM.allgather(np.unique(rs.a_rows[here]))
         every = np.concatenate(owners)
         assert every.size == np.unique(every).size   # a row's entries on one rank
@@ -186,14 +188,23 @@ def test_each_rank_holds_its_share_of_the_entries():
         assert most <= 0.35 * total, (most, total)
 
 
-@pytest.mark.parametrize("kind", ["mean", "strain"])
+#: the controlled bar's control relation's kind, region and component keys
+CONTROL = 'report = true\ntype = "mean"\nregion = "right"\ncomponent = "x"'
+#: the bar's control by one node's x (a Dirichlet row at the lower right corner: built per
+#: rank, made one global row)
+POINT = BAR.replace("[regions]", "[regions]\nend = { point = [1.0, 0.0] }").replace(
+    CONTROL, 'type = "dirichlet"\nregion = "end"\ncomponents = ["x"]')
+
+
+@pytest.mark.parametrize("kind", ["mean", "strain", "point"])
 def test_a_controlled_bar_answers_its_closed_form(kind, run):
-    """The controlled bar by its right end's mean displacement or by its mean strain: the
-    multiplier is the end force E H δ / L = E H ε = 1e4 N at the last step, δ = 1e-4 (1e-4 × t
-    at each step), at every rank count."""
-    text = BAR if kind == "mean" else BAR.replace(
-        'report = true\ntype = "mean"\nregion = "right"\ncomponent = "x"',
-        'type = "strain"\nregion = "all"\ncomponent = "xx"')
+    """The controlled bar by its right end's mean displacement, by its mean strain or by one
+    node's displacement (ν = 0: the same): the multiplier is the end force E H δ / L = E H ε =
+    1e4 N at the last step, δ = 1e-4 (1e-4 × t at each step), at every rank count."""
+    text = {"mean": BAR, "point": POINT,
+            "strain": BAR.replace(CONTROL, 'type = "strain"\nregion = "all"\ncomponent = "xx"')
+            }[kind]
+    assert text != BAR or kind == "mean"
     res = run(text, name=f"bar_{kind}")
     assert res["attrs"]["status"] == "complete"
     t = res["steps/time"]
@@ -203,3 +214,28 @@ def test_a_controlled_bar_answers_its_closed_form(kind, run):
     pts = res["mesh/points"]
     np.testing.assert_allclose(res["fields/displacement"][:, :, 0],
                                1e-4 * t[:, None] * pts[None, :, 0], rtol=0, atol=1e-12)
+
+
+def test_a_point_control_is_one_row_on_every_rank():
+    """A Dirichlet row controlled by a load pattern, built by the rank owning its node, is
+    one global row: every rank holds that one row (its value from the holder), no more."""
+    (r,) = [r for r in model_of(POINT, COMM).relations if r.name == "control"]
+    assert r.whole and r.spread and r.nrows == 1 and r.values.tolist() == [1e-4]
+    assert COMM.allreduce(r.a_rows.size) == 1   # (the node's owner holds its one entry)
+
+
+@pytest.mark.parametrize("kind", ["dirichlet", "strain"])
+def test_several_rows_sharing_one_load_are_refused(kind):
+    """Several rows sharing one load pattern, without a maximum (the right end's x node by
+    node, or each cell's strain), would leave all but their multipliers' sum undetermined: the
+    scene is refused before any solve, on every rank, naming the file and the key."""
+    from parsolve.errors import InputError
+
+    rows = {"dirichlet": 'type = "dirichlet"\nregion = "right"\ncomponents = ["x"]',
+            "strain": 'type = "strain"\nregion = "all"\ncomponent = "xx"\nper_cell = true'}
+    text = BAR.replace(CONTROL, rows[kind])
+    with pytest.raises(InputError) as caught:
+        model_of(text, COMM)
+    n = 4 if kind == "dirichlet" else 29 * 3
+    assert caught.value.source == "t.toml" and caught.value.key == "relations[2].dual"
+    assert f"'control' has {n} rows sharing the load pattern 'pull'" in str(caught.value)

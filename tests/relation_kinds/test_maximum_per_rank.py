@@ -214,3 +214,63 @@ def test_an_associated_groups_unit_load_is_its_rows_reaction_on_every_partition(
     assert world.keys() == alone.keys() and len(alone) == 3 * 4   # (εxx: a quad's 4 x DOFs)
     for key, val in alone.items():
         assert abs(world[key] - val) <= 1e-12 * abs(val), key
+
+
+
+def group_row(system: SaddleSystem) -> dict[int, float]:
+    """The maximum group's multiplier row of the assembled operator, from its owner:
+    {saddle column: unscaled value} of its nonzero entries off the diagonal (a released row's
+    placeholder). Collective."""
+    rset, dm = system.relation_set, system.dofmap
+    mat = system.assemble()
+    (mult,) = rset._group_mult
+    q0, q1, l0, l1 = dm.owned()
+    mine = {}
+    if l0 <= mult < l1:
+        at = system.op.offset + q1 - q0 + int(mult - l0)
+        cols, vals = mat.getRow(at)
+        scale = rset.row_scale[mult - l0]
+        mine = {int(c): float(v) / scale for c, v in zip(cols, vals) if v != 0.0 and c != at}
+    parts = COMM.allgather(mine)
+    assert sum(bool(p) for p in parts) <= 1   # (one rank's row)
+    return {c: v for p in parts for c, v in p.items()}
+
+
+def cell_row(system: SaddleSystem, r: Relation, row: int) -> dict[int, float]:
+    """Row ``row`` of the group, from the rank holding it: {saddle column: coefficient}.
+    Collective."""
+    at = r.ids[r.a_rows] == row
+    mine = dict(zip(system.dofmap.input_saddle(r.a_dofs[at]).tolist(), r.a_vals[at].tolist()))
+    return {c: v for p in COMM.allgather(mine) for c, v in p.items()}
+
+
+def test_the_operator_row_holds_the_enforced_rows_entries_alone():
+    """The group's one multiplier row holds the A entries of one row of the group, on the
+    rank owning it: its first at the start (no rank holds the others'), then the enforced
+    row's, the operator built anew when the group enforces another row (a cell on another
+    rank), kept while the group is released and enforces the same row again."""
+    text = MAXIMUM
+    model = build_model(parse_scene(tomllib.loads(text), "t.toml", text), COMM)
+    system = SaddleSystem(COMM, model)
+    rset = system.relation_set
+    k = [r.name for r in rset.relations].index("cells")
+    r = rset.relations[k]
+    grouped = rset.a_gid >= 0
+    assert COMM.allreduce(int(grouped.sum())) == 4   # (row 0: its cell's 4 x DOFs)
+    assert not np.any(rset.a_gid[grouped] != 0)
+    mask = np.ones(rset.nrelrows, dtype=bool)
+    ops = [system.op]
+    for row in (137, -1, 137, CELLS - 1):   # (-1: the group released)
+        mask[rset.rows_of(k)] = r.ids == row
+        system.set_active(mask)
+        ops.append(system.op)
+        carried = 137 if row == -1 else row
+        grouped = rset.a_gid >= 0
+        assert COMM.allreduce(int(grouped.sum())) == 4
+        assert np.all(rset.a_gid[grouped] == carried)
+        expected = cell_row(system, r, carried) if row >= 0 else {}
+        got = group_row(system)
+        assert got.keys() == expected.keys()
+        for c, v in expected.items():
+            assert abs(got[c] - v) <= 1e-12 * abs(v)
+    assert [a is b for a, b in zip(ops, ops[1:])] == [False, True, True, False]

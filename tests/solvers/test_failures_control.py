@@ -219,13 +219,15 @@ def test_maximum_control_of_cells_that_do_not_soften_past_the_peak(shared_tmp):
 def test_two_symmetric_columns_past_the_controlled_maximums_limit_point(shared_tmp):
     """The localization bar with two damaging columns, the 8th and the 22nd of 29 (symmetric
     about the middle), under its maximum strain control (secant matrix). Both soften alike up
-    to step 8 (the closed form of one column: the six cells at the maximum), then the 22nd
-    column takes the damage, from its top cell down. At t = 0.739909 the path of the controlled
-    maximum turns back (the consistent tangent with the rows at the maximum held has a negative
-    eigenvalue along the step's predictor): the secant iteration only stalls there, cut after
-    cut down to t = 0.740067, which said nothing but "Newton did not converge". The run now
-    names the control, the value it could not follow, where (the enforced row's cell), and why,
-    the same at every rank count."""
+    to step 7 (the closed form of one column: the six cells at the maximum), then one column
+    takes the damage, from one cell: which one, a symmetric choice, is decided by round-off
+    (the 22nd's top or bottom cell at step 8 or 9, by the rank count and the operator's
+    pattern). Near t = 0.739 (0.7385 to 0.7399 as the step cuts fall) the path of the
+    controlled maximum turns back (the consistent tangent with the rows at the maximum held has
+    a negative eigenvalue along the step's predictor): the secant iteration only stalls there,
+    cut after cut, which said nothing but "Newton did not converge". The run now names the
+    control, the value it could not follow, where (the enforced row's cell), and why, at every
+    rank count."""
     from helpers.control import closed_form
 
     base = shipped("localization_bar.toml")
@@ -251,21 +253,21 @@ def test_two_symmetric_columns_past_the_controlled_maximums_limit_point(shared_t
     assert "Newton did not converge" in status   # (the last attempt, kept)
     # where: the last converged step, its load, its enforced row in the 22nd column
     assert t_prev == t_back == pytest.approx(times[-1], rel=1e-5)
-    assert t_prev == pytest.approx(0.739909, rel=1e-5) and t == pytest.approx(0.740067, rel=1e-5)
+    assert 0.738 < t_prev < t < 0.741 and t - t_prev < 2e-3
     assert target == pytest.approx(1.2e-3 * t, rel=1e-5)
     assert reached == pytest.approx(largest[-1], rel=1e-5)
     assert reached == pytest.approx(1.2e-3 * t_prev, rel=1e-5)
     assert load == pytest.approx(loads[-1], rel=1e-5)
     assert row == cell and active[-1, row] and active[-1].sum() == 1
-    assert centre[cell] == pytest.approx(21.5 / 29, rel=1e-12)
-    # up to step 8 the closed form of one damaging column, both columns alike
-    eps = 1.2e-3 * times[:8]
-    np.testing.assert_allclose(times[:8], np.arange(1, 9) / 24, rtol=1e-12)
-    np.testing.assert_allclose(loads[:8], closed_form(eps)[1], rtol=1e-6)
+    assert min(abs(centre[cell] - c) for c in (7.5 / 29, 21.5 / 29)) < 1e-12
+    # up to step 7 the closed form of one damaging column, both columns alike
+    eps = 1.2e-3 * times[:7]
+    np.testing.assert_allclose(times[:7], np.arange(1, 8) / 24, rtol=1e-12)
+    np.testing.assert_allclose(loads[:7], closed_form(eps)[1], rtol=1e-6)
     damaged = np.abs(centre - 7.5 / 29) < 1e-9, np.abs(centre - 21.5 / 29) < 1e-9
     expected = 1 - np.exp(-1e4 * (np.maximum(eps, 1e-4) - 1e-4))
     for column in damaged:
         assert column.sum() == 3
-        np.testing.assert_allclose(damage[:8][:, column], np.repeat(expected[:, None], 3, axis=1),
+        np.testing.assert_allclose(damage[:7][:, column], np.repeat(expected[:, None], 3, axis=1),
                                    rtol=1e-6, atol=1e-12)
     assert np.abs(damage[:, ~(damaged[0] | damaged[1])]).max() == 0.0
