@@ -20,6 +20,7 @@ States (int8, the values saved per node): OPEN = 0 (lift-off), STICK = 1, SLIP =
 from __future__ import annotations
 
 import numpy as np
+from mpi4py import MPI
 
 from parsolve.errors import InputError
 
@@ -267,13 +268,9 @@ class SlipNewton:
         measured = switched & (self.excess > 0.0)
         if self.k is None:
             # the held solve slid them by γ under the force their stick reaction had beyond
-            # the cone: k ≈ excess / γ (a median: one number for the surface, robust; the
-            # surface's nodes gathered from the ranks sharing them)
-            ratios = self.excess[measured] / gamma[measured]
-            if comm is not None and comm.size > 1:
-                ratios = np.concatenate(comm.allgather(ratios))
-            if ratios.size:
-                self.k = float(np.median(ratios))
+            # the cone: k ≈ excess / γ (a median: one number for the surface, robust; over
+            # the ranks sharing the surface, by reductions)
+            self.k = median(comm, self.excess[measured] / gamma[measured])
         self.held = ~free
         self.kappa = np.where(free, murn / np.where(free, gamma, 1.0), 0.0)
         self.excess[:] = 0.0
@@ -292,3 +289,34 @@ class SlipNewton:
         free = starting & (murn <= KAPPA_MAX * excess)
         self.held[starting] = ~free[starting]
         self.kappa[free] = murn[free] * self.k / excess[free]
+
+
+def median(comm, values: np.ndarray) -> float | None:
+    """``np.median`` of every rank's values together (None when there are none), by
+    reductions alone: each middle value found by bisection on the order of the floats' bits
+    (64 reductions of a count), no rank holding another's values. Collective (``comm`` None:
+    this rank's alone)."""
+    values = np.asarray(values, dtype=float)
+    if comm is None or comm.size == 1:
+        return float(np.median(values)) if values.size else None
+    n = comm.allreduce(int(values.size))
+    if n == 0:
+        return None
+    bits = values.view(np.int64)
+    keys = np.where(bits >= 0, bits, -(bits & np.int64(0x7FFFFFFFFFFFFFFF)))   # (float order)
+    middle = [_kth(comm, keys, values, k) for k in sorted({(n - 1) // 2, n // 2})]
+    return float(np.mean(middle))
+
+
+def _kth(comm, keys: np.ndarray, values: np.ndarray, k: int) -> float:
+    """The k-th smallest (from 0) of every rank's values, ``keys`` their order: the least key
+    with more than k keys at or below it, by bisection. Collective."""
+    lo, hi = -(2 ** 63) + 1, 2 ** 63 - 1
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if comm.allreduce(int(np.count_nonzero(keys <= mid))) > k:
+            hi = mid
+        else:
+            lo = mid + 1
+    here = values[keys == lo]
+    return comm.allreduce(float(here[0]) if here.size else -np.inf, op=MPI.MAX)

@@ -33,6 +33,7 @@ import numpy as np
 from mpi4py import MPI
 
 from parsolve.io.slabs import OwnedRows
+from parsolve.relation_kinds.spread import NodeOwners, ask
 
 
 def _displacements(counts: np.ndarray) -> np.ndarray:
@@ -144,6 +145,7 @@ class DofMap:
         self._order, self._sorted = order, np.asarray(mesh.global_nodes)[order]
         self._exchange: GhostExchange | None = None
         self._inputs: tuple | None = None
+        self._node_owners: NodeOwners | None = None   # (made at the first ask)
         self.set_multipliers(np.zeros(self.node_ranges.size - 1, dtype=np.int64))
 
     def set_multipliers(self, counts: np.ndarray, ghosts: np.ndarray | None = None) -> None:
@@ -323,8 +325,9 @@ class DofMap:
 
     def index_inputs(self, dofs: list[np.ndarray]) -> None:
         """Global numbers and coordinates of the nodes of these input DOFs: this rank's nodes
-        (owned and ghosts) from its mesh; the others (a whole relation's nodes on other
-        ranks) from their owners, in one reduction of their number over the ranks. Each rank
+        (owned and ghosts) from its mesh; the others (a tie's other end, a master node on
+        another rank) asked of their owners (found through a directory of the owned ids by
+        blocks, made once: ``NodeOwners``), no rank holding another's asked nodes. Each rank
         may ask for different nodes (relations built per rank). Collective."""
         nc = self.ncomp
         nodes = np.unique(np.concatenate([np.asarray(d, dtype=np.int64) // nc for d in dofs])
@@ -337,19 +340,21 @@ class DofMap:
         packed[here, 0] = mesh.node_new[local[here]]
         packed[here, 1:] = mesh.points[local[here]]
         asked = nodes[~here]
+        packed[~here, 0] = -1   # (a node no rank owns)
         if self.comm.size > 1:
-            counts = np.array(self.comm.allgather(asked.size), dtype=np.int64)
-            every = np.empty(int(counts.sum()), dtype=np.int64)
-            self.comm.Allgatherv(asked, [every, counts])
-            own, at = self.owned_nodes(every)
-            answer = np.zeros((every.size, 1 + dim))
-            answer[own, 0] = mesh.node_new[at] + 1
-            answer[own, 1:] = mesh.points[at]
-            self.comm.Allreduce(MPI.IN_PLACE, answer, op=MPI.SUM)
-            start = int(counts[:self.rank].sum())
-            mine = answer[start:start + asked.size]
-            packed[~here, 0] = mine[:, 0] - 1
-            packed[~here, 1:] = mine[:, 1:]
+            if self._node_owners is None:
+                owned = np.asarray(mesh.global_nodes[:self.n_owned_nodes], dtype=np.int64)
+                space = self.comm.allreduce(int(owned.max(initial=-1)) + 1, op=MPI.MAX)
+                self._node_owners = NodeOwners(self.comm, owned, space)
+
+            def answer(got: np.ndarray) -> np.ndarray:
+                own, at = self.owned_nodes(got)
+                out = np.zeros((got.size, 1 + dim))
+                out[:, 0] = -1
+                out[own, 0], out[own, 1:] = mesh.node_new[at], mesh.points[at]
+                return out
+
+            packed[~here] = ask(self.comm, asked, self._node_owners(asked), answer)
         self._inputs = (nodes, packed[:, 0].astype(np.int64), packed[:, 1:])
 
     def input_new_dof(self, dofs: np.ndarray) -> np.ndarray:

@@ -586,8 +586,9 @@ class RelationSet:
         return out
 
     def _owned_values(self, lam: np.ndarray, span: slice) -> np.ndarray:
-        """``row_values`` of the relation rows ``span`` from this rank's owned multipliers:
-        the rows whose multiplier it owns, 0 on the others."""
+        """Per relation row of ``span``, unscaled λ of its multiplier row (this rank's owned
+        ones) on the row it enforces, 0 on the others and on the rows whose multiplier another
+        rank owns."""
         _, _, l0, l1 = self.dofmap.owned()
         mult = self.mult_of_row[span]
         rows = np.arange(span.start, span.start + mult.size)
@@ -597,12 +598,12 @@ class RelationSet:
         return out
 
     def owned_row_values(self, lam: np.ndarray) -> np.ndarray:
-        """Per relation row, unscaled λ (``row_values``) of the rows whose multiplier this
+        """Per relation row, unscaled λ (``_owned_values``) of the rows whose multiplier this
         rank owns (``owned_relrows``), 0 on the others: what it decides on. No exchange."""
         return self._owned_values(lam, slice(0, self.nrelrows))
 
     def relation_values(self, k: int, lam: np.ndarray) -> np.ndarray:
-        """Unscaled λ of relation k's rows held here (``row_values``) from this rank's owned
+        """Unscaled λ of relation k's rows held here (``_owned_values``) from this rank's owned
         multipliers, each row's from its owner: one reduction of a whole relation's size
         (a relation built per rank: its own). Collective."""
         span = self.rows_of(k)
@@ -634,12 +635,6 @@ class RelationSet:
         """Per relation name, unscaled λ of its rows, each relation's fetched from the owners
         when first read (``relation_values``)."""
         return RelationMultipliers(self, lam)
-
-    def row_values(self, per_mult: np.ndarray) -> np.ndarray:
-        """Per relation row: a multiplier row's value on the row it enforces, 0 on the others."""
-        out = per_mult[self.mult_of_row]
-        return np.where(self.rep_row[self._here(self.mult_of_row)] == np.arange(out.size), out,
-                        0.0)
 
     # ------------------------------------------------------------ updates in place
 

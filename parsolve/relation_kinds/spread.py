@@ -87,20 +87,29 @@ def to_owners(comm, rows: np.ndarray, dofs: np.ndarray, coefs: np.ndarray,
     return got["row"][start][keep], got["dof"][start][keep], coef[keep]
 
 
+class NodeOwners:
+    """The rank owning each input node, found where its block of ids is looked after: every
+    rank's owned ids registered there once (its own ids' size, not the mesh's), each lookup
+    one ``ask``. Collective to make and to use."""
+
+    def __init__(self, comm, owned: np.ndarray, space: int):
+        owned = np.asarray(owned, dtype=np.int64)
+        directory = Directory(comm, owned, blocks(owned, space, comm.size))
+        rank = np.repeat(np.arange(comm.size, dtype=np.int64), directory.counts)
+        order = np.argsort(directory.got, kind="stable")
+        self.ids, self.rank = directory.got[order], rank[order]
+        self.comm, self.space = comm, int(space)
+
+    def __call__(self, nodes: np.ndarray) -> np.ndarray:
+        nodes = np.asarray(nodes, dtype=np.int64)
+        return ask(self.comm, nodes, blocks(nodes, self.space, self.comm.size), self._answer)
+
+    def _answer(self, got: np.ndarray) -> np.ndarray:
+        pos = np.minimum(np.searchsorted(self.ids, got), max(self.ids.size - 1, 0))
+        return self.rank[pos] if self.ids.size else np.zeros(got.size, dtype=np.int64)
+
+
 def node_owners(comm, nodes: np.ndarray, owned: np.ndarray, space: int) -> np.ndarray:
     """The rank owning each input node of ``nodes`` (``owned``: this rank's owned input ids,
-    ``space``: the mesh's nodes), found where its block of ids is looked after: every rank's
-    owned ids registered there (its own ids' size, not the mesh's). Collective."""
-    owned = np.asarray(owned, dtype=np.int64)
-    directory = Directory(comm, owned, blocks(owned, space, comm.size))
-    ids = directory.got
-    rank = np.repeat(np.arange(comm.size, dtype=np.int64), directory.counts)
-    order = np.argsort(ids, kind="stable")
-    ids, rank = ids[order], rank[order]
-
-    def answer(got: np.ndarray) -> np.ndarray:
-        pos = np.minimum(np.searchsorted(ids, got), max(ids.size - 1, 0))
-        return rank[pos] if ids.size else np.zeros(got.size, dtype=np.int64)
-
-    nodes = np.asarray(nodes, dtype=np.int64)
-    return ask(comm, nodes, blocks(nodes, space, comm.size), answer)
+    ``space``: the mesh's nodes). Collective."""
+    return NodeOwners(comm, owned, space)(nodes)

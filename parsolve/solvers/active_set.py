@@ -96,8 +96,6 @@ class ActiveSet:
         self.group_ids = [relations[k].row_ids() for k in self.group_relations]
         self.maximum = np.concatenate([np.full(r.nrows, r.maximum) for r in relations]) \
             if relations else np.zeros(0, dtype=bool)
-        grouped = (group >= 0) | self.maximum
-        self.group_rows = np.flatnonzero(grouped)   # rows of any group held here
         self.names, self.first = [r.name for r in relations], first
         # rows of whole relations (every rank holds them, alike) and each row's place in the
         # relations' rows over every rank (relation, then global row): what ranks exchange
@@ -108,7 +106,7 @@ class ActiveSet:
             if relations else np.zeros(0, dtype=np.int64)
         self.totals = totals
         self.whole_relation = np.array([r.whole for r in relations], dtype=bool)
-        self.free = (self.sign != 0) & ~grouped   # rows decided one by one
+        self.free = (self.sign != 0) & (group < 0) & ~self.maximum   # rows decided one by one
         self.active = self.sign == 0              # equalities are always enforced
         # a group is always enforced somewhere: its first row
         self.active[self.local_rows[self.local_starts]] = True

@@ -566,7 +566,8 @@ def _linear_unmoved(exc: SolverError, system, solver, t: float) -> SolverError |
         row = rset.rows_of(k).start
         mask = np.ones(rset.nrelrows, dtype=bool)
         mask[row] = False
-        dq = _linear_solve(system, solver, mask, _dual_column(ctx, rel), None)
+        # (its load pattern: one row, spread when built per rank, ``relation_kinds.build``)
+        dq = _linear_solve(system, solver, mask, ctx.local_vector(*rel.shared_dual), None)
         rate, largest, reach = _rate(ctx, rel, 0, dq)
         if abs(rate) > UNMOVED * reach:
             continue
@@ -582,11 +583,3 @@ def _linear_unmoved(exc: SolverError, system, solver, t: float) -> SolverError |
             f"{dual!r} moves, or drive this one with a load that moves it (the control's "
             f"'dual') (the solve: {exc})")
     return None
-
-
-def _dual_column(ctx, rel) -> np.ndarray:
-    """The load pattern of a single-row control: its dual column as a local primal vector."""
-    if rel.shared_dual is not None:
-        return ctx.local_vector(*rel.shared_dual)
-    dofs, rows, vals = rel.dual_coo()
-    return ctx.local_vector(dofs[rows == 0], vals[rows == 0])

@@ -109,3 +109,25 @@ def test_signed_angles():
     np.testing.assert_allclose(signed_angle(a, b), [np.pi / 2, -np.pi / 2, np.pi])
 
 
+
+
+@pytest.mark.parametrize("total", [0, 1, 2, 7, 40])
+def test_the_surface_median_over_the_ranks_is_numpys(total):
+    """The surface stiffness' median over the ranks sharing the surface (by reductions, no
+    rank holding another's values) is ``np.median`` of every rank's values together, whatever
+    their split (a rank holding none, ties, signed zeros, both parities); None without any.
+    Run at 1, 2 and 3 ranks."""
+    from mpi4py import MPI
+
+    from parsolve.contact.friction import median
+
+    comm = MPI.COMM_WORLD
+    values = np.random.default_rng(total).normal(size=total) * 10.0 ** np.arange(total) % 7
+    values[: total // 3] = values[total // 2] if total else 0.0   # (ties)
+    if total > 4:
+        values[:2] = [0.0, -0.0]
+    cut = np.sort(np.random.default_rng(1).integers(0, total + 1, size=comm.size - 1))
+    mine = np.split(values, cut)[comm.rank]
+    got = median(comm, mine)
+    assert got is None if total == 0 else got == np.median(values)
+    assert median(None, values) == (np.median(values) if total else None)

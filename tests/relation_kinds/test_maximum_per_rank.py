@@ -45,7 +45,7 @@ def held(comm) -> int:
     aset = ActiveSet(system.multiplied, owned=rset.owned_relrows, comm=comm)
     arrays = [r.values, r.row_ids(), r.a_vals, r.meta["cells"], r.meta["cell_rows"],
               rset.mult_of_row, rset.position, aset.active, aset.sign, aset.orient, aset.key,
-              aset.owned, aset.free, aset.held, aset.group_rows]
+              aset.owned, aset.free, aset.held, aset.maximum]
     assert comm.allreduce(r.nrows) == CELLS and r.total == CELLS and not r.whole
     return sum(a.size for a in arrays)
 

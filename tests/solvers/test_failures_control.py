@@ -162,8 +162,9 @@ def test_turning_back_names_localization_only_where_damage_is(shared_tmp, monkey
 
     def turning(self, *args, **kw):
         calls["n"] += 1
-        if calls["n"] > 6 and self.group_rows.size:
-            left = self.group_rows[~self.active[self.group_rows]][0]
+        rows = np.flatnonzero(self.maximum)   # (the bar's one group: its rows held here)
+        if calls["n"] > 6 and rows.size:
+            left = rows[~self.active[rows]][0]
             self._no_way_back(np.array([left]))
         return update(self, *args, **kw)
 
