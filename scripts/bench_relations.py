@@ -149,8 +149,8 @@ def child(scene_path: str, preset: str, out: str, options: str) -> None:
         amg = self.condensed.amg if self.condensed is not None else None
         if amg is not None:
             vcycle.update(made=amg.made, kept=amg.kept)
-            if "levels" not in vcycle:
-                vcycle["levels"] = hierarchy(amg.pc)
+        if "levels" not in vcycle:   # (the condensed V-cycle's, else the KSP's own AMG's)
+            vcycle["levels"] = hierarchy(amg.pc if amg is not None else self.ksp.getPC())
         progress(f"linear solve {len(krylov)}: {its} Krylov iterations, set-up "
                  f"{setup['s']:.1f} s so far, V-cycle made {vcycle['made']} / kept "
                  f"{vcycle['kept']}, resident {bh.proc_memory()['rss'] / bh.MiB:.0f} MiB "
@@ -203,7 +203,7 @@ def hierarchy(pc) -> list[int]:
     """The global rows of each level of a multigrid PC, finest first (one level: not a
     multigrid, its operator's rows)."""
     if pc.getType() not in ("gamg", "ml", "mg"):
-        return [pc.getOperators()[0].getSize()[0]]
+        return [pc.getOperators()[0].getSize()[0]] if pc.getType() != "python" else []
     return [pc.getMGSmoother(lv).getOperators()[0].getSize()[0]
             for lv in reversed(range(pc.getMGLevels()))]
 
@@ -680,9 +680,17 @@ EXACT_S = {"condensed_pc_type": "lu", "condensed_pc_factor_mat_solver_type": "mu
            "condensed_reuse_growth": "0"}
 #: the largest DOFs at which the growth study solves S exactly (MUMPS' fill of a 3D S)
 EXACT_MAX_DOFS = 40_000
-GROWTH_HEAD = ["problem", "S solved by", "refinement", "DOFs", "V-cycle levels (rows)",
+GROWTH_HEAD = ["problem", "S solved by", "refinement", "DOFs", "AMG levels (rows)",
                "Newton its", "solves", "Krylov mean / max", "mean / max without 1-its",
-               "growth from 1× (mean / max)"]
+               "growth from 1× (mean / max)", "residual reduction per iteration"]
+#: the Krylov relative tolerance of the iterative preset (solvers.linear.preset_options): GMRES
+#: on a saddle system, CG on a stiffness alone; a solve of k iterations reduced the residual
+#: by about rtol^(1/k) per iteration
+RTOL = 2.5e-14
+CG_RTOL = 1e-10
+#: the elasticity reference of the iterative preset's own (CG + GAMG with its Chebyshev
+#: smoothing, no multiplier), beside the condensed V-cycle's
+CLAMPED = "elasticity, base clamped"
 
 
 #: the V-cycle's alternatives of the growth study (friction box): what its growth comes from
@@ -693,19 +701,32 @@ GROWTH_VARIANTS = {
     # the first coarsening not aggressive (GAMG squares the graph on the first level: about
     # 35x fewer rows; without, about 5x)
     "V-cycle, graph not squared": {"condensed_pc_gamg_square_graph": "0"},
+    # the best ratio found (the growth 1x to 64x; none met 1.5x): a full multigrid cycle on
+    # the unsquared hierarchy (each level's V-cycle started from the coarser one's answer)
+    "full cycle, graph not squared": {"condensed_pc_gamg_square_graph": "0",
+                                      "condensed_pc_mg_type": "full"},
 }
+
+
+#: the refinement per direction up to which every growth series runs; above it (122k DOFs at
+#: 8) the preset's friction and the held elasticity only
+GROWTH_ALL_TO = 4
 
 
 def growth_series(folder: Path, factors: list[int], ironing: bool, steps: int) -> list:
     """(problem, S's solve, refinement, scene, options) of each growth run, series by series:
     the friction box on the preset, with S solved exactly and with GROWTH_VARIANTS; the
-    clamped box's elasticity (its base held by condensed rows) under the same V-cycle; the
-    ironing on the preset and exact (1×, 8×)."""
+    clamped box's elasticity (its base held by condensed rows) under the same V-cycle, and
+    on the preset's CG + GAMG (its base eliminated); the ironing on the preset and exact (1×,
+    8×). Above GROWTH_ALL_TO the preset's series only."""
     friction = [("V-cycle (preset)", {}), ("exact (LU)", EXACT_S), *GROWTH_VARIANTS.items()]
     runs = [("friction", solve, f, friction_scene(f, steps), options)
-            for solve, options in friction for f in factors]
+            for solve, options in friction for f in factors
+            if f <= GROWTH_ALL_TO or not options]
     runs += [("elasticity, base held", "V-cycle (preset)", f,
               elastic_scene(f, steps, held=True), {}) for f in factors]
+    runs += [(CLAMPED, "(no S: CG + GAMG, Chebyshev)", f, elastic_scene(f, steps), {})
+             for f in factors if f <= GROWTH_ALL_TO]
     if ironing:
         texts = {f: ironing_scene(folder, f) for f in (1, 2)}
         runs += [("ironing", solve, f, texts[f], options)
@@ -714,13 +735,17 @@ def growth_series(folder: Path, factors: list[int], ironing: bool, steps: int) -
     return runs
 
 
-def growth_cells(k: list[int]) -> tuple[float, int, str]:
+def growth_cells(k: list[int], rtol: float = RTOL) -> tuple[float, int, str, str]:
     """(mean, max, "mean / max" of the solves that took more than one iteration: a solve
     whose right-hand side GMRES meets at once, e.g. a converged Newton's last, says nothing
-    of the preconditioner)."""
+    of the preconditioner; the residual's reduction per iteration of their mean, about
+    rtol^(1/mean): how near the preconditioner is to S⁻¹)."""
     more = [n for n in k if n > 1]
-    return (sum(k) / len(k), max(k),
-            f"{sum(more) / len(more):.1f} / {max(more)}" if more else "-")
+    if not more:
+        return sum(k) / len(k), max(k), "-", "-"
+    mean = sum(more) / len(more)
+    return (sum(k) / len(k), max(k), f"{mean:.1f} / {max(more)}",
+            f"{rtol ** (1.0 / mean):.1e}")
 
 
 def growth_study(folder: Path, factors: list[int], ironing: bool, steps: int,
@@ -741,15 +766,16 @@ def growth_study(folder: Path, factors: list[int], ironing: bool, steps: int,
         r = one_run(folder, name, text, "iterative", {**petsc, **options})
         results.append(dict(r, problem=problem, solve=solve, factor=f))
         if r.get("status") != "complete" or not r.get("krylov"):
-            rows.append([problem, solve, f"{f ** 3}×", str(r.get("status"))[:60], *["-"] * 6])
+            rows.append([problem, solve, f"{f ** 3}×", str(r.get("status"))[:60], *["-"] * 7])
             continue
-        mean, top, more = growth_cells(r["krylov"])
+        mean, top, more, factor = growth_cells(r["krylov"],
+                                               CG_RTOL if problem == CLAMPED else RTOL)
         base = first.setdefault((problem, solve), (mean, top))
         levels = (r.get("vcycle") or {}).get("levels") or []
         rows.append([problem, solve, f"{f ** 3}×", f"{r['dofs']:,}",
                      " / ".join(f"{n:,}" for n in levels) if len(levels) > 1 else "-",
                      str(r["iterations"]), str(len(r["krylov"])), f"{mean:.1f} / {top}", more,
-                     f"{mean / base[0]:.2f}× / {top / base[1]:.2f}×"])
+                     f"{mean / base[0]:.2f}× / {top / base[1]:.2f}×", factor])
         print(bh.text_table(GROWTH_HEAD, rows[-1:]), flush=True)
         publish_growth(rows, results, steps, load0, petsc)
 
@@ -762,7 +788,7 @@ def publish_growth(rows: list, results: list, steps: int, load0: tuple, petsc: d
                if (r["problem"], r["solve"]) == key and r.get("krylov")]
         if len(its) >= 2:
             alpha, beta = fit_iterations(its)
-            fits.append(f"- {key[0]}, S by {key[1]}: mean Krylov iterations per solve = "
+            fits.append(f"- {key[0]}, {key[1]}: mean Krylov iterations per solve = "
                         f"{alpha:.1f} + {beta:.2f}·log10 N ({len(its)} sizes)")
     text = "\n".join([
         "# Growth of the Krylov iterations with the mesh: what grows", "",
@@ -774,11 +800,18 @@ def publish_growth(rows: list, results: list, steps: int, load0: tuple, petsc: d
         "first 4), the iterative preset's condensed preconditioner with S solved by its "
         "V-cycle (GAMG, threshold 0, SOR on the finest level: `parsolve/solvers/vcycle.py`) "
         "or exactly (MUMPS' LU on S: `-condensed_pc_type lu`; what grows beside it is the "
-        "V-cycle's); the clamped box (`elastic_scene`) with its base rows multiplied, which "
-        "the preset condenses like the contact rows: plain elasticity under the same V-cycle. "
-        "V-cycle levels: the rows of each level's operator at the first solve, finest first "
+        "V-cycle's) or by the V-cycle's alternatives (`GROWTH_VARIANTS`: the first coarse "
+        "operator solved by LU, a two-level cycle; GAMG's first coarsening without its "
+        "squared graph; that with a full multigrid cycle); the clamped box (`elastic_scene`) "
+        "with its base rows multiplied, which "
+        "the preset condenses like the contact rows: plain elasticity under the same V-cycle; "
+        "the same box clamped (its base rows eliminated): the preset's CG + GAMG with "
+        f"GAMG's own Chebyshev smoothing, rtol {CG_RTOL:g}, no S. "
+        "AMG levels: the rows of each level's operator at the first solve, finest first "
         "(the coarsest solved by LU). Solves of one iteration (a right-hand side GMRES meets "
-        "at once) are left out of the second mean / max.", "",
+        "at once) are left out of the second mean / max; the residual's reduction per "
+        f"iteration is that mean's, about rtol^(1 / mean) (the preset's rtol, {RTOL:g} on "
+        f"the saddle systems). Above {GROWTH_ALL_TO ** 3}× the preset's series only.", "",
         bh.md_table(GROWTH_HEAD, rows, first="---"), "",
         "Fitted (least squares over the sizes, as the weak-scaling table's):", "", *fits, ""])
     name = "bench_relations_growth"
