@@ -789,7 +789,8 @@ def publish_growth(rows: list, results: list, steps: int, load0: tuple, petsc: d
         if len(its) >= 2:
             alpha, beta = fit_iterations(its)
             fits.append(f"- {key[0]}, {key[1]}: mean Krylov iterations per solve = "
-                        f"{alpha:.1f} + {beta:.2f}·log10 N ({len(its)} sizes)")
+                        f"{alpha:.1f} {'−' if beta < -0.005 else '+'} {abs(beta):.2f}·log10 N "
+                        f"({len(its)} sizes)")
     text = "\n".join([
         "# Growth of the Krylov iterations with the mesh: what grows", "",
         f"{machine['date']}, {machine['cpu']}, {machine['cpus']} CPUs, one rank; "
