@@ -24,6 +24,15 @@ mean, max; the iterative preset at its tolerance, rtol 2.5e-14), wall time, peak
         iteration, Krylov iterations, peak memory summed over the ranks
         (scripts/results/bench_relations_scale.md; --variants F: at f = F the friction box
         again with each of VARIANTS, the condensed V-cycle's alternatives, in the same run)
+    nice -n 5 .venv/bin/python scripts/bench_relations.py --growth [--max-factor 8]
+        → what the Krylov iterations' growth with the mesh comes from: the friction box
+        refined 1×, 8×, 64× (512× with --max-factor 8) with S solved by the preset's V-cycle,
+        exactly (LU: to 40k DOFs) and by the V-cycle's alternatives (GROWTH_VARIANTS), the
+        clamped box's elasticity under the same V-cycle, the ironing 1× and 8× (--cases
+        friction leaves it out); the hierarchy's levels at each size
+        (scripts/results/bench_relations_growth.md; --petsc: options added to every run, the
+        table then in the scratch folder; --smoke, and the plain --smoke run: the 1× box,
+        one step)
     nice -n 5 .venv/bin/python scripts/bench_relations.py --weak --steps 1
         → weak scaling: the friction box and plain elasticity at about 16k DOFs per rank on
         1, 2, 4 ranks (oversubscribed: iterations and memory only), the peak memory per rank
@@ -72,15 +81,19 @@ def friction_scene(factor: int, steps: int = 2) -> str:
     return _dumps(scene)
 
 
-def elastic_scene(factor: int, steps: int = 2) -> str:
+def elastic_scene(factor: int, steps: int = 2, held: bool = False) -> str:
     """The friction box's mesh and load, plain elasticity: its base clamped instead of in
-    contact (CG + GAMG on the stiffness alone: the reference of the scale runs)."""
+    contact (CG + GAMG on the stiffness alone: the reference of the scale runs). ``held``:
+    the base rows multiplied instead of eliminated, which the iterative preset condenses
+    (Dirichlet-type nodal rows): its V-cycle is then the friction box's own (GAMG, threshold
+    0, the finest level's SOR sweeps) on S = K with the base held (``--growth``)."""
     scene = _shipped("contact_friction_3d.toml")
     for key in ("nx", "ny", "nz"):
         scene["mesh"][key] *= factor
     scene.pop("contact")
     scene["relations"] += [{"name": f"base_{c}", "type": "dirichlet", "region": "zmin",
-                            "component": c} for c in "xyz"]
+                            "component": c, **({"eliminate": False} if held else {})}
+                           for c in "xyz"]
     scene["steps"]["count"] = steps
     scene["steps"]["end"] = 0.125 * steps
     return _dumps(scene)
@@ -136,6 +149,8 @@ def child(scene_path: str, preset: str, out: str, options: str) -> None:
         amg = self.condensed.amg if self.condensed is not None else None
         if amg is not None:
             vcycle.update(made=amg.made, kept=amg.kept)
+        if "levels" not in vcycle:   # (the condensed V-cycle's, else the KSP's own AMG's)
+            vcycle["levels"] = hierarchy(amg.pc if amg is not None else self.ksp.getPC())
         progress(f"linear solve {len(krylov)}: {its} Krylov iterations, set-up "
                  f"{setup['s']:.1f} s so far, V-cycle made {vcycle['made']} / kept "
                  f"{vcycle['kept']}, resident {bh.proc_memory()['rss'] / bh.MiB:.0f} MiB "
@@ -182,6 +197,15 @@ def child(scene_path: str, preset: str, out: str, options: str) -> None:
                           wall=wall, hwm=bh.proc_memory()["hwm"], ranks=MPI.COMM_WORLD.size,
                           setup=setup, pieces=pieces, choices=choices, vcycle=vcycle,
                           cpu=cpu)))
+
+
+def hierarchy(pc) -> list[int]:
+    """The global rows of each level of a multigrid PC, finest first (one level: not a
+    multigrid, its operator's rows)."""
+    if pc.getType() not in ("gamg", "ml", "mg"):
+        return [pc.getOperators()[0].getSize()[0]] if pc.getType() != "python" else []
+    return [pc.getMGSmoother(lv).getOperators()[0].getSize()[0]
+            for lv in reversed(range(pc.getMGLevels()))]
 
 
 class Progress:
@@ -649,6 +673,158 @@ def publish_weak(rows: list, runs: dict, steps: int) -> None:
     bh.publish("bench_relations_weak.md", text)
 
 
+#: the exact solve of S in place of the V-cycle (``--growth``): MUMPS' LU under the condensed
+#: preconditioner's prefix, factored anew at every set-up (a kept factorization would be an
+#: earlier S's); GMRES then converges in the iterations of M⁻¹ applied exactly
+EXACT_S = {"condensed_pc_type": "lu", "condensed_pc_factor_mat_solver_type": "mumps",
+           "condensed_reuse_growth": "0"}
+#: the largest DOFs at which the growth study solves S exactly (MUMPS' fill of a 3D S)
+EXACT_MAX_DOFS = 40_000
+GROWTH_HEAD = ["problem", "S solved by", "refinement", "DOFs", "AMG levels (rows)",
+               "Newton its", "solves", "Krylov mean / max", "mean / max without 1-its",
+               "growth from 1× (mean / max)", "residual reduction per iteration"]
+#: the Krylov relative tolerance of the iterative preset (solvers.linear.preset_options): GMRES
+#: on a saddle system, CG on a stiffness alone; a solve of k iterations reduced the residual
+#: by about rtol^(1/k) per iteration
+RTOL = 2.5e-14
+CG_RTOL = 1e-10
+#: the elasticity reference of the iterative preset's own (CG + GAMG with its Chebyshev
+#: smoothing, no multiplier), beside the condensed V-cycle's
+CLAMPED = "elasticity, base clamped"
+
+
+#: the V-cycle's alternatives of the growth study (friction box): what its growth comes from
+GROWTH_VARIANTS = {
+    # the levels below the first coarse one out of the question: that coarse operator solved
+    # by LU (GAMG stops coarsening below this many rows)
+    "V-cycle, two levels (first coarse LU)": {"condensed_pc_gamg_coarse_eq_limit": "5000"},
+    # the first coarsening not aggressive (GAMG squares the graph on the first level: about
+    # 35x fewer rows; without, about 5x)
+    "V-cycle, graph not squared": {"condensed_pc_gamg_square_graph": "0"},
+    # the best ratio found (the growth 1x to 64x; none met 1.5x): a full multigrid cycle on
+    # the unsquared hierarchy (each level's V-cycle started from the coarser one's answer)
+    "full cycle, graph not squared": {"condensed_pc_gamg_square_graph": "0",
+                                      "condensed_pc_mg_type": "full"},
+}
+
+
+#: the refinement per direction up to which every growth series runs; above it (122k DOFs at
+#: 8) the preset's friction and the held elasticity only
+GROWTH_ALL_TO = 4
+
+
+def growth_series(folder: Path, factors: list[int], ironing: bool, steps: int) -> list:
+    """(problem, S's solve, refinement, scene, options) of each growth run, series by series:
+    the friction box on the preset, with S solved exactly and with GROWTH_VARIANTS; the
+    clamped box's elasticity (its base held by condensed rows) under the same V-cycle, and
+    on the preset's CG + GAMG (its base eliminated); the ironing on the preset and exact (1×,
+    8×). Above GROWTH_ALL_TO the preset's series only."""
+    friction = [("V-cycle (preset)", {}), ("exact (LU)", EXACT_S), *GROWTH_VARIANTS.items()]
+    runs = [("friction", solve, f, friction_scene(f, steps), options)
+            for solve, options in friction for f in factors
+            if f <= GROWTH_ALL_TO or not options]
+    runs += [("elasticity, base held", "V-cycle (preset)", f,
+              elastic_scene(f, steps, held=True), {}) for f in factors]
+    runs += [(CLAMPED, "(no S: CG + GAMG, Chebyshev)", f, elastic_scene(f, steps), {})
+             for f in factors if f <= GROWTH_ALL_TO]
+    if ironing:
+        texts = {f: ironing_scene(folder, f) for f in (1, 2)}
+        runs += [("ironing", solve, f, texts[f], options)
+                 for solve, options in (("V-cycle (preset)", {}), ("exact (LU)", EXACT_S))
+                 for f in (1, 2)]
+    return runs
+
+
+def growth_cells(k: list[int], rtol: float = RTOL) -> tuple[float, int, str, str]:
+    """(mean, max, "mean / max" of the solves that took more than one iteration: a solve
+    whose right-hand side GMRES meets at once, e.g. a converged Newton's last, says nothing
+    of the preconditioner; the residual's reduction per iteration of their mean, about
+    rtol^(1/mean): how near the preconditioner is to S⁻¹)."""
+    more = [n for n in k if n > 1]
+    if not more:
+        return sum(k) / len(k), max(k), "-", "-"
+    mean = sum(more) / len(more)
+    return (sum(k) / len(k), max(k), f"{mean:.1f} / {max(more)}",
+            f"{rtol ** (1.0 / mean):.1e}")
+
+
+def growth_study(folder: Path, factors: list[int], ironing: bool, steps: int,
+                 petsc: dict) -> None:
+    """Krylov iterations per solve as the mesh is refined (1×, 8×, 64×, ...): the preset's
+    V-cycle against an exact solve of S (what is left is the V-cycle's) and against the
+    same V-cycle on plain elasticity of the same meshes (the V-cycle's own growth on this
+    mesh family); the hierarchy's levels at each size. ``petsc``: options added to every
+    run (an experiment: the table then goes to the scratch folder, not the published one)."""
+    rows, results, load0 = [], [], os.getloadavg()
+    first: dict[tuple, tuple] = {}
+    for problem, solve, f, text, options in growth_series(folder, factors, ironing, steps):
+        if options is EXACT_S and results and any(
+                r["problem"] == problem and r["factor"] == f and r.get("dofs", 0) > EXACT_MAX_DOFS
+                for r in results):
+            continue
+        name = f"growth_{problem.split(',')[0]}_{f}"
+        r = one_run(folder, name, text, "iterative", {**petsc, **options})
+        results.append(dict(r, problem=problem, solve=solve, factor=f))
+        if r.get("status") != "complete" or not r.get("krylov"):
+            rows.append([problem, solve, f"{f ** 3}×", str(r.get("status"))[:60], *["-"] * 7])
+            continue
+        mean, top, more, factor = growth_cells(r["krylov"],
+                                               CG_RTOL if problem == CLAMPED else RTOL)
+        base = first.setdefault((problem, solve), (mean, top))
+        levels = (r.get("vcycle") or {}).get("levels") or []
+        rows.append([problem, solve, f"{f ** 3}×", f"{r['dofs']:,}",
+                     " / ".join(f"{n:,}" for n in levels) if len(levels) > 1 else "-",
+                     str(r["iterations"]), str(len(r["krylov"])), f"{mean:.1f} / {top}", more,
+                     f"{mean / base[0]:.2f}× / {top / base[1]:.2f}×", factor])
+        print(bh.text_table(GROWTH_HEAD, rows[-1:]), flush=True)
+        publish_growth(rows, results, steps, load0, petsc)
+
+
+def publish_growth(rows: list, results: list, steps: int, load0: tuple, petsc: dict) -> None:
+    machine = bh.machine_info()
+    fits = []
+    for key in dict.fromkeys((r["problem"], r["solve"]) for r in results):
+        its = [(r["dofs"], sum(r["krylov"]) / len(r["krylov"])) for r in results
+               if (r["problem"], r["solve"]) == key and r.get("krylov")]
+        if len(its) >= 2:
+            alpha, beta = fit_iterations(its)
+            fits.append(f"- {key[0]}, {key[1]}: mean Krylov iterations per solve = "
+                        f"{alpha:.1f} {'−' if beta < -0.005 else '+'} {abs(beta):.2f}·log10 N "
+                        f"({len(its)} sizes)")
+    text = "\n".join([
+        "# Growth of the Krylov iterations with the mesh: what grows", "",
+        f"{machine['date']}, {machine['cpu']}, {machine['cpus']} CPUs, one rank; "
+        + bh.load_line(load0, os.getloadavg()) + " (iterations are not affected by the load)."
+        + (f" Options added to every run: `{json.dumps(petsc)}`." if petsc else ""), "",
+        "Krylov (GMRES on the saddle system, rtol 2.5e-14) iterations per linear solve of "
+        f"the whole run (friction box and elasticity: the first {steps} steps; ironing: the "
+        "first 4), the iterative preset's condensed preconditioner with S solved by its "
+        "V-cycle (GAMG, threshold 0, SOR on the finest level: `parsolve/solvers/vcycle.py`) "
+        "or exactly (MUMPS' LU on S: `-condensed_pc_type lu`; what grows beside it is the "
+        "V-cycle's) or by the V-cycle's alternatives (`GROWTH_VARIANTS`: the first coarse "
+        "operator solved by LU, a two-level cycle; GAMG's first coarsening without its "
+        "squared graph; that with a full multigrid cycle); the clamped box (`elastic_scene`) "
+        "with its base rows multiplied, which "
+        "the preset condenses like the contact rows: plain elasticity under the same V-cycle; "
+        "the same box clamped (its base rows eliminated): the preset's CG + GAMG with "
+        f"GAMG's own Chebyshev smoothing, rtol {CG_RTOL:g}, no S. "
+        "AMG levels: the rows of each level's operator at the first solve, finest first "
+        "(the coarsest solved by LU). Solves of one iteration (a right-hand side GMRES meets "
+        "at once) are left out of the second mean / max; the residual's reduction per "
+        f"iteration is that mean's, about rtol^(1 / mean) (the preset's rtol, {RTOL:g} on "
+        f"the saddle systems). Above {GROWTH_ALL_TO ** 3}× the preset's series only.", "",
+        bh.md_table(GROWTH_HEAD, rows, first="---"), "",
+        "Fitted (least squares over the sizes, as the weak-scaling table's):", "", *fits, ""])
+    name = "bench_relations_growth"
+    if petsc:   # (an experiment: never over the published table)
+        bh.scratch("relations_growth").joinpath(name + ".md").write_text(text)
+        bh.write_json(bh.scratch("relations_growth") / (name + ".json"),
+                      dict(machine=machine, petsc=petsc, results=results))
+        return
+    bh.publish(name + ".md", text)
+    bh.write_json(bh.PUBLISHED / (name + ".json"), dict(machine=machine, results=results))
+
+
 BIG_HEAD = ["problem", "refinement", "DOFs", "ranks", "Newton its", "linear solves",
             "Krylov min / mean / max", "set-up s per solve", "wall s", "wall s per Newton it",
             "CPU s per Newton it (all ranks)", "peak MiB per rank", "peak MiB (all ranks)",
@@ -855,6 +1031,12 @@ def main() -> None:
                    help="the weak scaling runs only: the friction box and plain elasticity "
                         "at about 16k DOFs per rank on 1, 2, 4 ranks (and the 1-rank mesh on "
                         "2 and 4), the memory model fitted (bench_relations_weak.md)")
+    p.add_argument("--growth", action="store_true",
+                   help="the growth runs only: Krylov iterations per solve of the friction box "
+                        "refined 1×, 8×, ... (to --max-factor per direction) with S solved by "
+                        "the V-cycle and exactly, the clamped box's elasticity under the same "
+                        "V-cycle, the ironing 1× and 8× (unless --cases leaves it out): "
+                        "bench_relations_growth.md; with --smoke the 1× box, one step")
     p.add_argument("--steps", type=int, default=2, help="load steps of the scale runs")
     p.add_argument("--cases", type=str, default="friction,ironing,mortar",
                    help="the series to run, or single sizes as case:factor (comma-separated: "
@@ -879,7 +1061,8 @@ def main() -> None:
     p.add_argument("--timeout", type=float, default=None,
                    help="seconds after which the --big runs are stopped (their rows say so)")
     p.add_argument("--petsc", type=str, default="{}",
-                   help="PETSc options of the friction runs of --big and --scale (JSON, "
+                   help="PETSc options of the friction runs of --big and --scale, of every "
+                        "run of --growth (its table then in the scratch folder) (JSON, "
                         "under the solver's prefix as a scene's)")
     p.add_argument("--log", type=str, default="",
                    help="file the runs append their progress to (each linear solve)")
@@ -902,6 +1085,12 @@ def main() -> None:
         return
     if args.weak:
         weak_study(bh.scratch("relations_weak"), args.steps)
+        return
+    if args.growth:
+        factors = [1] if bh.SMOKE else [2 ** i for i in range(int(math.log2(args.max_factor)) + 1)]
+        growth_study(bh.scratch("relations_growth"), factors,
+                     "ironing" in args.cases.split(",") and not bh.SMOKE,
+                     1 if bh.SMOKE else args.steps, petsc)
         return
     if args.gamg:
         publish_gamg(gamg_study(bh.scratch("relations_gamg"), args.gamg), args.gamg)
@@ -942,6 +1131,8 @@ def main() -> None:
         grows = gamma_study(folder)
         text = report(rows, results, machine, load0, grows)
     print(text)
+    if bh.SMOKE:   # (CI's smoke stage runs --smoke alone: the growth mode at its smoke size)
+        growth_study(bh.scratch("relations_growth"), [1], False, 1, {})
 
 
 def publish_scale(rows: list, pieces: list, ranks: int, steps: int, load0: tuple) -> None:
