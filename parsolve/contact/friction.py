@@ -292,16 +292,18 @@ class SlipNewton:
 
 
 def median(comm, values: np.ndarray) -> float | None:
-    """``np.median`` of every rank's values together (None when there are none), by
-    reductions alone: each middle value found by bisection on the order of the floats' bits
-    (64 reductions of a count), no rank holding another's values. Collective (``comm`` None:
-    this rank's alone)."""
+    """``np.median`` of every rank's values together (None when there are none; NaN when
+    one is NaN), by reductions alone: each middle value found by bisection on the order of
+    the floats' bits (64 reductions of a count), no rank holding another's values.
+    Collective (``comm`` None: this rank's alone)."""
     values = np.asarray(values, dtype=float)
     if comm is None or comm.size == 1:
         return float(np.median(values)) if values.size else None
     n = comm.allreduce(int(values.size))
     if n == 0:
         return None
+    if comm.allreduce(bool(np.isnan(values).any()), op=MPI.LOR):
+        return float("nan")   # (as np.median: NaN has no place in the order)
     bits = values.view(np.int64)
     keys = np.where(bits >= 0, bits, -(bits & np.int64(0x7FFFFFFFFFFFFFFF)))   # (float order)
     middle = [_kth(comm, keys, values, k) for k in sorted({(n - 1) // 2, n // 2})]

@@ -31,6 +31,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from typing import Callable
+
 import numpy as np
 from mpi4py import MPI
 
@@ -256,9 +258,8 @@ def _at_limit_load(exc: SolverError, problem, t: float, controls: list[Control]
     mask = problem.active.active
     try:
         _released(problem, lin.kmat, mask, c)   # (the converged state holds the body)
-        problem.system.set_active(problem.policies.enforceable(mask))   # (the rhs's rows)
         dq, _ = _stuck_solve(problem, lin.kmat, mask,
-                             problem.rhs(t, lin.f_int, problem.external(t)))
+                             lambda: problem.rhs(t, lin.f_int, problem.external(t)))
     except SolverError:
         return None
     system = problem.system
@@ -401,12 +402,15 @@ def _unmoved(exc: SolverError, problem, t: float, controls: list[Control]) -> So
     return None
 
 
-def _stuck_solve(problem, kmat, mask: np.ndarray, rhs: np.ndarray) -> tuple:
+def _stuck_solve(problem, kmat, mask: np.ndarray, rhs: Callable[[], np.ndarray]) -> tuple:
     """(Δq, λ per relation row) of one linear solve of the operator with the rows ``mask``
-    enforced, from the last converged state. Collective."""
+    enforced, from the last converged state; ``rhs`` made once the operator is assembled
+    with those rows (its enforced rows and its lifting of the eliminated DOFs: an operator
+    built anew, a maximum group moved, has none before). Collective."""
     system = problem.system
     system.set_active(problem.policies.enforceable(mask))
-    x = problem.solve(system.assemble(kmat), rhs, export=False)
+    mat = system.assemble(kmat)
+    x = problem.solve(mat, rhs(), export=False)
     return x.q, problem.rset.every_row(problem.unscaled(x))
 
 
@@ -462,10 +466,10 @@ def _beyond_friction_from_start(exc: SolverError, problem, t: float,
     mask = _probe_rows(problem, True)
     mask[rows] = False
     lin = problem.form()
-    dq1, lam1 = _stuck_solve(problem, lin.kmat, mask,
-                             problem.rhs_of(problem.policies.dual_column(k, c.number)))
+    unit = problem.policies.dual_column(k, c.number)
+    dq1, lam1 = _stuck_solve(problem, lin.kmat, mask, lambda: problem.rhs_of(unit))
     dq0, lam0 = _stuck_solve(problem, lin.kmat, mask,
-                             problem.rhs(t, lin.f_int, problem.external(t)))
+                             lambda: problem.rhs(t, lin.f_int, problem.external(t)))
     values = rset.primal_values(problem.q + dq0)[rows]
     rates = rset.primal_values(dq1)[rows]
     targets, sign = rset.targets(t)[rows], problem.active.sign[rows]

@@ -208,10 +208,9 @@ class ArcWatch:
         ``states``) crossed a bifurcation. Collective."""
         problem = self.problem
         if problem.comm.allreduce(changed(states, problem.states), op=MPI.LOR):
-            op = problem.system.op
-            rows = op.active   # (the arc keeps the rows the system has: put back)
-            count = unstable_modes(problem, states)
-            op.active = rows
+            rows = problem.system.op.active   # (the arc keeps the rows the system has: put
+            count = unstable_modes(problem, states)   # back on its operator, built anew if a
+            problem.system.op.active = rows           # maximum group moved)
         else:
             count = 0   # (no point left its elastic range: the secant, positive)
         if count is not None and self.count is not None and abs(count - self.count) > 1:

@@ -70,6 +70,7 @@ class SaddleSystem:
             e.attach(self.context)
         self.timings["setup"] = time.perf_counter() - t0
         self.assembled = False
+        self._unassembled = False   # the operator built anew since the last assembly
         self._augmented: AugmentedMatrix | None = None
 
     def _pattern(self, lo: int, hi: int):
@@ -190,6 +191,7 @@ class SaddleSystem:
         self.op = SaddleOperator(self.comm, self.dofmap, self.pattern, self.relation_set)
         self.op.active = self.relation_set.from_owned(owned.astype(float)) > 0.5
         self._elimination_setup()   # (the relation rows' columns may have changed)
+        self._unassembled = True    # (no lifting before its first assembly: ``rhs_from``)
 
     def _terms_moved(self) -> bool:
         """Whether this rank's node terms are not those the pattern was derived from (a term
@@ -302,7 +304,7 @@ class SaddleSystem:
         self.op.relation_values(self.kscale)
         self.op.eliminate(self.kscale)
         mat = self.op.petsc_matrix()
-        self.assembled = True
+        self.assembled, self._unassembled = True, False
         # summed over a step's assemblies (one per Newton iteration); the driver takes it per step
         self.timings["assembly"] = self.timings.get("assembly", 0.0) + time.perf_counter() - t0
         return mat
@@ -370,6 +372,9 @@ class SaddleSystem:
                  ) -> tuple[np.ndarray, np.ndarray]:
         """Right-hand side from a force vector (this mesh's DOFs), scaled relation values of
         every multiplied row, and values of the eliminated DOFs."""
+        if self._unassembled and self._n_eliminated:   # (every rank alike: both collective)
+            raise RuntimeError("a right-hand side of an operator built anew and not yet "
+                               "assembled (its lifting of the eliminated DOFs is not known)")
         b = self.to_owned(f_full)
         q0, q1, l0, l1 = self.dofmap.owned()
         b[q1 - q0:] = target * self.op.active[:l1 - l0]   # (owned rows first among the held)

@@ -131,3 +131,6 @@ def test_the_surface_median_over_the_ranks_is_numpys(total):
     got = median(comm, mine)
     assert got is None if total == 0 else got == np.median(values)
     assert median(None, values) == (np.median(values) if total else None)
+    if total:   # a NaN on one rank: NaN on every rank, as np.median
+        mine = np.append(mine, np.nan) if comm.rank == comm.size - 1 else mine
+        assert np.isnan(median(comm, mine))
