@@ -14,14 +14,24 @@ For an associated relation (B = −Aᵀ) Y = Xᵀ and G = Hᵀ. S = G K_eff H is
 pattern: PETSc's triple product of the sparse G, K_eff, H (``MatMatMatMult``), reused while
 the active rows (G's and H's patterns) stay.
 
-The slave of a row is, of its nodes on this rank whose block of A is at least half its largest
-(a small block would put large weights in X), the one in the fewest of the rank's rows (a
-slave lies in its own rows only, a master in those of every slave near it), then of the
-largest block (a node-to-face row: the slave's coefficient is the normal, a master's the
-normal times a shape function ≤ 1; dual mortar's weights M_ia / w_i may exceed 1, and a slave
-on a master node ties). Any node whose block has full rank would do: the elimination is exact
-whichever it is (the choice only shapes S). A row spread over several slave nodes (standard
-mortar) makes another row's slave its master: a chain, refused with its reason.
+The slave of a row is, of its nodes on this rank, that of the largest block of A (a
+node-to-face row: the slave's coefficient is the normal, a master's the normal times a shape
+function ≤ 1; of blocks within TIE of the largest, the node in the fewest of the rank's rows:
+a slave lies in its own rows only, a master in those of every slave near it); where that node
+lies in another row too (a master there: dual mortar's weights M_ia / w_i exceed 1 where a
+slave's facets are barely covered), the row's node in the fewest rows, then of the largest
+block. Any node whose block has full rank would do: the elimination is exact whichever it is
+(the choice only shapes S). A row spread over several slave nodes (standard mortar) makes
+another row's slave its master: a chain, refused with its reason.
+
+Measured on the mortar sphere (configs/contact_mortar_sphere_3d.toml) at 1x and 8x (16,659
+and 118,830 DOFs, 1 rank): the condensation is exact (LU on S: GMRES on M takes 1 iteration
+per solve at both sizes, against 20-24 and 30-38 with the V-cycle); X's weights stay <= 1
+(its rows' |.|-sums <= 1.23; the larger weights are the coarsened test meshes'), and the
+V-cycle on the tied S needs the Krylov iterations of the same V-cycle on K alone (GMRES to
+2.5e-14 on a random right-hand side: 28 and 28 at 1x, 48 and 48 at 8x). What grows with the
+mesh is the V-cycle on this graded, stretched grid's stiffness, not the tied rows
+(docs/performance.md, the mortar paragraph).
 """
 
 from __future__ import annotations
