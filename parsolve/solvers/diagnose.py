@@ -30,7 +30,6 @@ Two causes hold from the start, each probed with linear solves of the last conve
 from __future__ import annotations
 
 from dataclasses import dataclass
-
 from typing import Callable
 
 import numpy as np

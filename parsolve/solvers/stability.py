@@ -208,9 +208,11 @@ class ArcWatch:
         ``states``) crossed a bifurcation. Collective."""
         problem = self.problem
         if problem.comm.allreduce(changed(states, problem.states), op=MPI.LOR):
-            rows = problem.system.op.active   # (the arc keeps the rows the system has: put
-            count = unstable_modes(problem, states)   # back on its operator, built anew if a
-            problem.system.op.active = rows           # maximum group moved)
+            # the arc keeps the rows the system has: put back on its operator as it is after
+            # (built anew if a maximum group moved)
+            rows = problem.system.op.active
+            count = unstable_modes(problem, states)
+            problem.system.op.active = rows
         else:
             count = 0   # (no point left its elastic range: the secant, positive)
         if count is not None and self.count is not None and abs(count - self.count) > 1:

@@ -69,8 +69,7 @@ class SaddleSystem:
         for e in model.effects:   # once: the reductions their hooks need (Effect.attach)
             e.attach(self.context)
         self.timings["setup"] = time.perf_counter() - t0
-        self.assembled = False
-        self._unassembled = False   # the operator built anew since the last assembly
+        self.assembled = False   # the operator as it is now assembled (its lifting known)
         self._augmented: AugmentedMatrix | None = None
 
     def _pattern(self, lo: int, hi: int):
@@ -191,7 +190,7 @@ class SaddleSystem:
         self.op = SaddleOperator(self.comm, self.dofmap, self.pattern, self.relation_set)
         self.op.active = self.relation_set.from_owned(owned.astype(float)) > 0.5
         self._elimination_setup()   # (the relation rows' columns may have changed)
-        self._unassembled = True    # (no lifting before its first assembly: ``rhs_from``)
+        self.assembled = False   # (no lifting before its first assembly: ``rhs_from``)
 
     def _terms_moved(self) -> bool:
         """Whether this rank's node terms are not those the pattern was derived from (a term
@@ -304,7 +303,7 @@ class SaddleSystem:
         self.op.relation_values(self.kscale)
         self.op.eliminate(self.kscale)
         mat = self.op.petsc_matrix()
-        self.assembled, self._unassembled = True, False
+        self.assembled = True
         # summed over a step's assemblies (one per Newton iteration); the driver takes it per step
         self.timings["assembly"] = self.timings.get("assembly", 0.0) + time.perf_counter() - t0
         return mat
@@ -372,7 +371,7 @@ class SaddleSystem:
                  ) -> tuple[np.ndarray, np.ndarray]:
         """Right-hand side from a force vector (this mesh's DOFs), scaled relation values of
         every multiplied row, and values of the eliminated DOFs."""
-        if self._unassembled and self._n_eliminated:   # (every rank alike: both collective)
+        if not self.assembled and self._n_eliminated:   # (every rank alike: both collective)
             raise RuntimeError("a right-hand side of an operator built anew and not yet "
                                "assembled (its lifting of the eliminated DOFs is not known)")
         b = self.to_owned(f_full)
