@@ -35,8 +35,9 @@ CELLS = 24 * 12
 
 def held(comm) -> int:
     """The maximum relation's rows and row-sized arrays a rank holds: its rows' values,
-    numbers, cells and A entries, the relation set's multiplier row of each row, the active
-    set's masks and keys over them. Collective."""
+    numbers, cells and A entries, the relation set's multiplier row of each row and its
+    stacked A entries (the group's multiplier row's: of its carried row alone), the
+    operator's relation entries, the active set's masks and keys over them. Collective."""
     text = MAXIMUM
     model = build_model(parse_scene(tomllib.loads(text), "t.toml", text), comm)
     system = SaddleSystem(comm, model)
@@ -44,7 +45,8 @@ def held(comm) -> int:
     rset = system.relation_set
     aset = ActiveSet(system.multiplied, owned=rset.owned_relrows, comm=comm)
     arrays = [r.values, r.row_ids(), r.a_vals, r.meta["cells"], r.meta["cell_rows"],
-              rset.mult_of_row, rset.position, aset.active, aset.sign, aset.orient, aset.key,
+              rset.mult_of_row, rset.position, rset.a_vals, rset.a_cols, rset.a_rows,
+              system.op.a_final, aset.active, aset.sign, aset.orient, aset.key,
               aset.owned, aset.free, aset.held, aset.maximum]
     assert comm.allreduce(r.nrows) == CELLS and r.total == CELLS and not r.whole
     return sum(a.size for a in arrays)
