@@ -44,13 +44,16 @@ stacking).
 A relation's rows ("relation rows", what the active set decides) map to multiplier rows one to
 one, except for a collapsed maximum group (``Relation.collapsed``): all its rows share one
 multiplier row and one dual column, which carries the coefficients of the enforced row
-(``select``); the other rows' A entries are kept in the pattern at zero. Its rows are built
-per rank, its one multiplier row numbered alike on every rank (owned by the rank owning most
-of its entries, as a spread row's): each rank holds its own rows, sends their A entries to the
-multiplier row's owner (known there by their row numbers, ``a_gid``), and the enforced row's
-number, its value and its multiplier pass between the row's holder and the multiplier row's
-owner by one reduction of the groups' number (``select``, ``_per_mult``,
-``_group_multipliers``).
+(``select``). Its rows are built per rank, its one multiplier row numbered alike on every
+rank (owned by the rank owning most of its rows' entries, as a spread row's): each rank holds
+its own rows; the operator's row holds the A entries of one row of the group alone, the one it
+carries (``_carried``: its first, then the last enforced), sent by the row's holder to the
+multiplier row's owner (known there by the row's number, ``a_gid``), and when the group
+enforces another row the relations are stacked again with that row's entries (``select``
+says so: ``restacked``; the system builds its operator anew), so no rank holds the group's
+other rows' entries. The enforced row's number, its value and its multiplier pass between the
+row's holder and the multiplier row's owner by one reduction of the groups' number
+(``select``, ``_per_mult``, ``_group_multipliers``).
 
 Relations refreshed between iterations (``meta["refresh"]``: friction turning its rows,
 contact pairings) keep their sparsity: ``refresh`` copies their current A and D values into the stacked
@@ -107,10 +110,14 @@ class RelationSet:
     def __init__(self, relations: list[Relation], dofmap: DofMap):
         self.relations, self.dofmap = relations, dofmap
         self.position: np.ndarray | None = None   # multiplier row of each stacked row
-        self._stack()
         # per maximum group built per rank (``_groups``): the number of its enforced row
-        # (its first until ``select`` says), told by the row's holder
-        self._enforced = np.zeros(len(self._groups), dtype=np.int64)
+        # (its first until ``select`` says, -1: none), told by the row's holder, and of the
+        # row whose A entries its operator row holds (the last enforced)
+        ngroups = sum(_per_rank_group(r) for r in relations)
+        self._enforced = np.zeros(ngroups, dtype=np.int64)
+        self._carried = np.zeros(ngroups, dtype=np.int64)
+        self.restacked = False   # ``select`` stacked the relations again (a group moved)
+        self._stack()
         self.row_scale: np.ndarray | None = None
         self.col_scale: np.ndarray | None = None
 
@@ -158,15 +165,21 @@ class RelationSet:
             dr.append(new_dof(dofs))
             dc.append(np.asarray(rows, dtype=np.int64) + first[k])
             dv.append(np.asarray(vals, dtype=float))
-        stacked_a, stacked_d = _cat(ar, np.int64), _cat(dc, np.int64)
+        stacked_d = _cat(dc, np.int64)
+        self.d_rows, self.d_vals = _cat(dr, np.int64), _cat(dv, float)
+        if self.position is None:   # the owners, once (from every row's entries): restacking
+            self.a_cols = _cat(ac, np.int64)   # keeps them
+            self.position, self._counts = self._by_owner(_cat(ar, np.int64), stacked_d, first)
+        for j, k in enumerate(self._groups):   # a group's carried row's entries alone
+            keep = gid[k] == self._carried[j]
+            ar[k], ac[k], av[k], arel[k], gid[k] = (x[keep] for x in
+                                                    (ar[k], ac[k], av[k], arel[k], gid[k]))
+        stacked_a = _cat(ar, np.int64)
         self._d_per_rank = np.repeat([not r.whole for r in relations],
                                      [len(d) for d in dv]).astype(bool)
         self._a_sent = np.repeat([r.spread or _per_rank_group(r) for r in relations],
                                  [len(a) for a in av]).astype(bool)
         self.a_cols, self.a_vals = _cat(ac, np.int64), _cat(av, float)
-        self.d_rows, self.d_vals = _cat(dr, np.int64), _cat(dv, float)
-        if self.position is None:   # the owners, once: restacking keeps them
-            self.position, self._counts = self._by_owner(stacked_a, stacked_d, first)
         pos = self.position
         self.a_rows, self.d_cols = pos[stacked_a], pos[stacked_d]
         self.a_relrow = _cat(arel, np.int64)            # relation row of each A entry
@@ -573,8 +586,9 @@ class RelationSet:
         return out
 
     def _owned_values(self, lam: np.ndarray, span: slice) -> np.ndarray:
-        """``row_values`` of the relation rows ``span`` from this rank's owned multipliers:
-        the rows whose multiplier it owns, 0 on the others."""
+        """Per relation row of ``span``, unscaled λ of its multiplier row (this rank's owned
+        ones) on the row it enforces, 0 on the others and on the rows whose multiplier another
+        rank owns."""
         _, _, l0, l1 = self.dofmap.owned()
         mult = self.mult_of_row[span]
         rows = np.arange(span.start, span.start + mult.size)
@@ -584,12 +598,12 @@ class RelationSet:
         return out
 
     def owned_row_values(self, lam: np.ndarray) -> np.ndarray:
-        """Per relation row, unscaled λ (``row_values``) of the rows whose multiplier this
+        """Per relation row, unscaled λ (``_owned_values``) of the rows whose multiplier this
         rank owns (``owned_relrows``), 0 on the others: what it decides on. No exchange."""
         return self._owned_values(lam, slice(0, self.nrelrows))
 
     def relation_values(self, k: int, lam: np.ndarray) -> np.ndarray:
-        """Unscaled λ of relation k's rows held here (``row_values``) from this rank's owned
+        """Unscaled λ of relation k's rows held here (``_owned_values``) from this rank's owned
         multipliers, each row's from its owner: one reduction of a whole relation's size
         (a relation built per rank: its own). Collective."""
         span = self.rows_of(k)
@@ -622,33 +636,34 @@ class RelationSet:
         when first read (``relation_values``)."""
         return RelationMultipliers(self, lam)
 
-    def row_values(self, per_mult: np.ndarray) -> np.ndarray:
-        """Per relation row: a multiplier row's value on the row it enforces, 0 on the others."""
-        out = per_mult[self.mult_of_row]
-        return np.where(self.rep_row[self._here(self.mult_of_row)] == np.arange(out.size), out,
-                        0.0)
-
     # ------------------------------------------------------------ updates in place
 
     def select(self, active_rows: np.ndarray) -> np.ndarray:
         """The enforced relation rows → which row each collapsed group carries, and the mask of
-        the held multiplier rows enforced (``DofMap.l_held``)."""
+        the held multiplier rows enforced (``DofMap.l_held``). A per-rank group enforcing a
+        row other than the one its operator row holds: the relations are stacked again with
+        that row's entries (``restacked`` set: the operator must be built anew)."""
+        active_rows = np.asarray(active_rows, dtype=bool)
+        if self._groups and self._select_groups(active_rows):   # (collective)
+            self.restack()
+            self.restacked = True
         on = np.zeros(self.dofmap.n_held, dtype=bool)
         held, at = self._mult_held
-        np.logical_or.at(on, at[held], np.asarray(active_rows, dtype=bool)[held])
+        np.logical_or.at(on, at[held], active_rows[held])
         rows = np.flatnonzero(active_rows)
         self.rep_row[self._here(self.mult_of_row[rows])] = rows
-        if self._groups:   # (collective) a per-rank group's row: its holder's say
-            self._select_groups(np.asarray(active_rows, dtype=bool), on)
+        if self._groups:   # a per-rank group's multiplier row: on when it enforces a row
+            held, at = self._held_places(self._group_mult)
+            on[at[held]] = self._enforced[held] >= 0
         if self._crossing:   # ghost rows built per rank elsewhere: their owners' say
             # (collective: a tie's D column on another rank's DOF, ``_foreign_d``)
             on = self.from_owned(on[:self.n_owned].astype(float)) > 0.5
         return on
 
-    def _select_groups(self, active_rows: np.ndarray, on: np.ndarray) -> None:
+    def _select_groups(self, active_rows: np.ndarray) -> bool:
         """Each per-rank maximum group's enforced row (its number, -1: none) from the rank
-        holding it, and its multiplier row's mask where held here, in place: one reduction
-        of the groups' number."""
+        holding it: one reduction of the groups' number. Returns whether a group enforces a
+        row other than the one its operator row holds (then carried from now on)."""
         none = np.iinfo(np.int64).max   # (the lowest enforced row over the ranks, as on one)
         found = np.full(len(self._groups), none, dtype=np.int64)
         for j, k in enumerate(self._groups):
@@ -659,8 +674,9 @@ class RelationSet:
             self.dofmap.comm.Allreduce(MPI.IN_PLACE, found, op=MPI.MIN)
         found[found == none] = -1
         self._enforced = found
-        held, at = self._held_places(self._group_mult)
-        on[at[held]] = found[held] >= 0
+        moved = (found >= 0) & (found != self._carried)
+        self._carried[moved] = found[moved]
+        return bool(moved.any())
 
     def refresh(self) -> None:
         """Copy the current A and D values of the relations marked ``meta["refresh"]`` into
@@ -682,13 +698,20 @@ class RelationSet:
 
     def set_scales(self, kscale: float) -> None:
         """Scale each row of A and column of D to the size of the stiffness diagonal (the
-        largest |entry| of a row or column over the ranks holding its entries), per held
+        largest |entry| of a row or column over the ranks holding its entries; a per-rank
+        group's row: of all its rows, whichever it carries), per held
         multiplier row: a row of A is whole on its owner; a column of D's entries on the ranks
         owning their DOFs, whose largest go to the row's owner; the owners' scales then go to
         the ghosts. Collective."""
         _, _, l0, l1 = self.dofmap.owned()
         amax = np.zeros(l1 - l0)
         np.maximum.at(amax, self.a_rows - l0, np.abs(self.a_vals))
+        if self._groups:   # (the same relations on every rank) a group's over all its rows
+            amax_groups = np.array([np.abs(self.relations[k].a_vals).max(initial=0.0)
+                                    for k in self._groups])
+            self.dofmap.comm.Allreduce(MPI.IN_PLACE, amax_groups, op=MPI.MAX)
+            mine = (self._group_mult >= l0) & (self._group_mult < l1)
+            amax[self._group_mult[mine] - l0] = amax_groups[mine]
         dmax = np.zeros(self.dofmap.n_held)
         np.maximum.at(dmax, self._d_held, np.abs(self.d_vals))
         dmax = self._owners_max(dmax)

@@ -386,8 +386,17 @@ class SaddleSystem:
         return b, x_e
 
     def set_active(self, active_rows: np.ndarray) -> None:
-        """Enforce these relation rows (a collapsed group carries its enforced row)."""
-        self.op.active = self.relation_set.select(active_rows)
+        """Enforce these relation rows (a collapsed group carries its enforced row). A
+        per-rank maximum group enforcing another row than its operator row holds: the
+        relations were stacked again with that row's entries (``RelationSet.select``), and
+        the operator is built anew (the next assembly makes a new PETSc matrix). Collective."""
+        rset = self.relation_set
+        active = rset.select(active_rows)
+        if rset.restacked:   # (the same on every rank: the groups' rows are reduced)
+            rset.restacked = False
+            self._operator_anew(active)
+        else:
+            self.op.active = active
 
     def free_rows(self) -> np.ndarray:
         """Mask of this rank's primal rows that are not eliminated."""

@@ -13,7 +13,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from parsolve import progress
-from parsolve.solvers.options import product_clear
+from parsolve.solvers.options import inserted, product_clear
 
 #: SOR sweeps (Richardson) on the finest level of the GAMG V-cycle on S, before and after the
 #: coarse correction. Krylov iterations per solve (mean / max) on the 3D friction box at 16.9k
@@ -65,19 +65,13 @@ def _products_freed(allatonce: bool = False) -> Iterator[None]:
     Newton iteration 161.7 s summed, 1.35x (elasticity at a like load, 119.9 s; idle it took
     84.3 s: loaded CPU time grows with the load). An earlier run at load 9-17: 1.29x, 1.24x
     and 1.36x against elasticity runs at loads ~10 and ~5."""
-    options = PETSc.Options()
     added = {}
     if product_clear() is None:
         added["mat_product_clear"] = "true"
-    if allatonce and not options.hasName("matptap_via"):
+    if allatonce and not PETSc.Options().hasName("matptap_via"):
         added["matptap_via"] = "allatonce"
-    for key, value in added.items():
-        options[key] = value
-    try:
+    with inserted("", added, record=False):   # (unprefixed: UNPREFIXED)
         yield
-    finally:
-        for key in added:
-            options.delValue(key)
 
 
 #: the coarse hierarchy kept across set-ups (``VCycle.set_up``) while the last solve on it took

@@ -35,8 +35,9 @@ CELLS = 24 * 12
 
 def held(comm) -> int:
     """The maximum relation's rows and row-sized arrays a rank holds: its rows' values,
-    numbers, cells and A entries, the relation set's multiplier row of each row, the active
-    set's masks and keys over them. Collective."""
+    numbers, cells and A entries, the relation set's multiplier row of each row and its
+    stacked A entries (the group's multiplier row's: of its carried row alone), the
+    operator's relation entries, the active set's masks and keys over them. Collective."""
     text = MAXIMUM
     model = build_model(parse_scene(tomllib.loads(text), "t.toml", text), comm)
     system = SaddleSystem(comm, model)
@@ -44,7 +45,8 @@ def held(comm) -> int:
     rset = system.relation_set
     aset = ActiveSet(system.multiplied, owned=rset.owned_relrows, comm=comm)
     arrays = [r.values, r.row_ids(), r.a_vals, r.meta["cells"], r.meta["cell_rows"],
-              rset.mult_of_row, rset.position, aset.active, aset.sign, aset.orient, aset.key,
+              rset.mult_of_row, rset.position, rset.a_vals, rset.a_cols, rset.a_rows,
+              system.op.a_final, aset.active, aset.sign, aset.orient, aset.key,
               aset.owned, aset.free, aset.held, aset.maximum]
     assert comm.allreduce(r.nrows) == CELLS and r.total == CELLS and not r.whole
     return sum(a.size for a in arrays)
@@ -214,3 +216,93 @@ def test_an_associated_groups_unit_load_is_its_rows_reaction_on_every_partition(
     assert world.keys() == alone.keys() and len(alone) == 3 * 4   # (εxx: a quad's 4 x DOFs)
     for key, val in alone.items():
         assert abs(world[key] - val) <= 1e-12 * abs(val), key
+
+
+
+def group_row(system: SaddleSystem) -> dict[int, float]:
+    """The maximum group's multiplier row of the assembled operator, from its owner:
+    {saddle column: unscaled value} of its nonzero entries off the diagonal (a released row's
+    placeholder). Collective."""
+    rset, dm = system.relation_set, system.dofmap
+    mat = system.assemble()
+    (mult,) = rset._group_mult
+    q0, q1, l0, l1 = dm.owned()
+    mine = {}
+    if l0 <= mult < l1:
+        at = system.op.offset + q1 - q0 + int(mult - l0)
+        cols, vals = mat.getRow(at)
+        scale = rset.row_scale[mult - l0]
+        mine = {int(c): float(v) / scale for c, v in zip(cols, vals) if v != 0.0 and c != at}
+    parts = COMM.allgather(mine)
+    assert sum(bool(p) for p in parts) <= 1   # (one rank's row)
+    return {c: v for p in parts for c, v in p.items()}
+
+
+def cell_row(system: SaddleSystem, r: Relation, row: int) -> dict[int, float]:
+    """Row ``row`` of the group, from the rank holding it: {saddle column: coefficient}.
+    Collective."""
+    at = r.ids[r.a_rows] == row
+    mine = dict(zip(system.dofmap.input_saddle(r.a_dofs[at]).tolist(), r.a_vals[at].tolist()))
+    return {c: v for p in COMM.allgather(mine) for c, v in p.items()}
+
+
+def test_the_operator_row_holds_the_enforced_rows_entries_alone():
+    """The group's one multiplier row holds the A entries of one row of the group, on the
+    rank owning it: its first at the start (no rank holds the others'), then the enforced
+    row's, the operator built anew when the group enforces another row (a cell on another
+    rank), kept while the group is released and enforces the same row again."""
+    text = MAXIMUM
+    model = build_model(parse_scene(tomllib.loads(text), "t.toml", text), COMM)
+    system = SaddleSystem(COMM, model)
+    rset = system.relation_set
+    k = [r.name for r in rset.relations].index("cells")
+    r = rset.relations[k]
+    grouped = rset.a_gid >= 0
+    assert COMM.allreduce(int(grouped.sum())) == 4   # (row 0: its cell's 4 x DOFs)
+    assert not np.any(rset.a_gid[grouped] != 0)
+    mask = np.ones(rset.nrelrows, dtype=bool)
+    ops = [system.op]
+    for row in (137, -1, 137, CELLS - 1):   # (-1: the group released)
+        mask[rset.rows_of(k)] = r.ids == row
+        system.set_active(mask)
+        ops.append(system.op)
+        carried = 137 if row == -1 else row
+        grouped = rset.a_gid >= 0
+        assert COMM.allreduce(int(grouped.sum())) == 4
+        assert np.all(rset.a_gid[grouped] == carried)
+        expected = cell_row(system, r, carried) if row >= 0 else {}
+        got = group_row(system)
+        assert got.keys() == expected.keys()
+        for c, v in expected.items():
+            assert abs(got[c] - v) <= 1e-12 * abs(v)
+    assert [a is b for a, b in zip(ops, ops[1:])] == [False, True, True, False]
+
+
+def test_a_moved_group_asks_for_an_assembly_before_a_right_hand_side():
+    """The operator built anew when the group moves has no lifting of the eliminated DOFs
+    until assembled: a right-hand side asked before raises on every rank alike (before, the
+    ranks holding eliminated DOFs raised and the others went on: a hang), and after the
+    assembly it is that of a system whose group was on that row from its first assembly."""
+    text = MAXIMUM
+    rhs = []
+    for moved_after_assembly in (True, False):
+        model = build_model(parse_scene(tomllib.loads(text), "t.toml", text), COMM)
+        system = SaddleSystem(COMM, model)
+        rset = system.relation_set
+        k = [r.name for r in rset.relations].index("cells")
+        ids = rset.relations[k].ids
+        q = np.random.default_rng(3).random(system.dofmap.n_local) * 1e-4
+        mask = np.ones(rset.nrelrows, dtype=bool)
+        if moved_after_assembly:
+            mask[rset.rows_of(k)] = ids == 0
+            system.set_active(mask)
+            system.assemble()
+        mask[rset.rows_of(k)] = ids == 137
+        system.set_active(mask)
+        assert COMM.allreduce(system.n_eliminated) > 0
+        if moved_after_assembly:
+            with pytest.raises(RuntimeError, match="not yet assembled"):
+                system.rhs(0.5, f_int=np.zeros_like(q), q=q)
+        system.assemble()
+        rhs.append(system.rhs(0.5, f_int=np.zeros_like(q), q=q)[0])
+    np.testing.assert_allclose(rhs[0], rhs[1], rtol=0, atol=1e-12 * np.abs(rhs[1]).max())
