@@ -110,6 +110,12 @@ class RelationSet:
     def __init__(self, relations: list[Relation], dofmap: DofMap):
         self.relations, self.dofmap = relations, dofmap
         self.position: np.ndarray | None = None   # multiplier row of each stacked row
+        for r in relations:   # (the same relations on every rank: raised on all alike)
+            if r.meta.get("refresh") and (r.spread or _per_rank_group(r)):
+                # ``refresh`` copies the entries kept here, not those sent to a row's owner
+                raise ValueError(f"relation '{r.name}': values refreshed between iterations "
+                                 "are not supported on a row whose entries are sent to its "
+                                 "owner (a spread row, a maximum group)")
         # per maximum group built per rank (``_groups``): the number of its enforced row
         # (its first until ``select`` says, -1: none), told by the row's holder, and of the
         # row whose A entries its operator row holds (the last enforced)
@@ -677,6 +683,23 @@ class RelationSet:
         moved = (found >= 0) & (found != self._carried)
         self._carried[moved] = found[moved]
         return bool(moved.any())
+
+    @property
+    def carried(self) -> np.ndarray:
+        """Per maximum group built per rank, the number of the row whose A entries its
+        operator row holds (the same on every rank): state a restart carries over."""
+        return self._carried.copy()
+
+    def carry(self, rows: np.ndarray) -> bool:
+        """Hold these rows' entries in the groups' operator rows (``carried`` of a run
+        continued here); stacked again when that changes them. Returns whether it did (the
+        operator must then be built anew)."""
+        rows = np.asarray(rows, dtype=np.int64)
+        if np.array_equal(rows, self._carried):
+            return False
+        self._carried[:] = rows
+        self.restack()
+        return True
 
     def refresh(self) -> None:
         """Copy the current A and D values of the relations marked ``meta["refresh"]`` into

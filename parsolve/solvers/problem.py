@@ -103,12 +103,17 @@ class SaddleProblem:
 
     def save_state(self) -> dict:
         """The converged state a restart continues from (``parsolve.io.restart``): the
-        snapshot, the active set's senses, and the hooks' effects' own state."""
-        return {"snapshot": self.snapshot(), "f_ext": self.f_ext, **self.policies.save_state()}
+        snapshot, the active set's senses, the row each maximum group's operator row holds
+        (its pattern: a released group keeps its last row's), and the hooks' effects' own
+        state."""
+        return {"snapshot": self.snapshot(), "f_ext": self.f_ext,
+                "carried": self.rset.carried, **self.policies.save_state()}
 
     def load_state(self, state: dict) -> None:
         """The state ``save_state`` gave, in a new problem of the same model and ranks."""
         self.restore(state["snapshot"])
+        if state.get("carried") is not None:   # (a state saved before it was kept: none)
+            self.system.carry(state["carried"])
         if state["f_ext"] is not None:
             self.f_ext = state["f_ext"]
         self.policies.load_state(state)

@@ -398,6 +398,13 @@ class SaddleSystem:
         else:
             self.op.active = active
 
+    def carry(self, rows: np.ndarray) -> None:
+        """The maximum groups' operator rows hold these rows' entries (``RelationSet.carried``
+        of the run a restart continues), the operator built anew when that changes them.
+        Collective."""
+        if self.relation_set.carry(rows):   # (the same on every rank)
+            self._operator_anew(self.op.active)
+
     def free_rows(self) -> np.ndarray:
         """Mask of this rank's primal rows that are not eliminated."""
         q0, q1, _, _ = self.dofmap.owned()

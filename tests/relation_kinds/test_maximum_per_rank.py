@@ -306,3 +306,45 @@ def test_a_moved_group_asks_for_an_assembly_before_a_right_hand_side():
         system.assemble()
         rhs.append(system.rhs(0.5, f_int=np.zeros_like(q), q=q)[0])
     np.testing.assert_allclose(rhs[0], rhs[1], rtol=0, atol=1e-12 * np.abs(rhs[1]).max())
+
+
+def test_a_restart_carries_the_groups_operator_row():
+    """The row a group's operator row holds is state (``RelationSet.carried``): a released
+    group keeps its last row's entries, and a run continued from it (``SaddleSystem.carry``)
+    builds the same operator row, on every rank alike; carrying the rows it holds already
+    builds nothing."""
+    text = MAXIMUM
+    systems = []
+    for _ in range(2):
+        model = build_model(parse_scene(tomllib.loads(text), "t.toml", text), COMM)
+        systems.append(SaddleSystem(COMM, model))
+    first, later = systems
+    rset = first.relation_set
+    k = [r.name for r in rset.relations].index("cells")
+    ids = rset.relations[k].ids
+    mask = np.ones(rset.nrelrows, dtype=bool)
+    for row in (137, -1):   # enforced, then released: its entries kept
+        mask[rset.rows_of(k)] = ids == row
+        first.set_active(mask)
+    assert rset.carried.tolist() == [137]
+    op = later.op
+    later.carry(rset.carried)
+    assert later.relation_set.carried.tolist() == [137] and later.op is not op
+    mask[later.relation_set.rows_of(k)] = later.relation_set.relations[k].ids == 137
+    later.set_active(mask)
+    first.set_active(mask)
+    assert group_row(later) == group_row(first) != {}
+    op = later.op
+    later.carry(np.array([137]))
+    assert later.op is op
+
+
+def test_refreshed_values_on_a_group_are_refused():
+    """``refresh`` copies the entries each rank keeps, not those sent to a row's owner: a
+    maximum group marked refreshed is refused on every rank alike."""
+    text = MAXIMUM
+    model = build_model(parse_scene(tomllib.loads(text), "t.toml", text), COMM)
+    (r,) = [r for r in model.relations if r.maximum]
+    r.meta["refresh"] = True
+    with pytest.raises(ValueError, match="refreshed between iterations"):
+        SaddleSystem(COMM, model)
