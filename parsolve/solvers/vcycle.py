@@ -61,10 +61,9 @@ def _products_freed(allatonce: bool = False) -> Iterator[None]:
     loaded machine). The memory ratio of the freed products, log-linear in the DOFs between
     those two sizes, reaches the target's 1.3x near 540k: ``allatonce`` (``-matptap_via
     allatonce`` added, unless given) from ALLATONCE_ROWS. The preset so (4 sweeps, allatonce
-    by size) at 2.08M, the machine at load 3-6: peak 9,466 MiB, 1.26x elasticity's; CPU per
-    Newton iteration 161.7 s summed, 1.35x (elasticity at a like load, 119.9 s; idle it took
-    84.3 s: loaded CPU time grows with the load). An earlier run at load 9-17: 1.29x, 1.24x
-    and 1.36x against elasticity runs at loads ~10 and ~5."""
+    by size) at 2.08M on an idle machine: peak 9,482 MiB, 1.27x elasticity's; time per Newton
+    iteration 1.30x (CPU 143.1 s summed against 110.4; wall 72.0 s against 55.6). Loaded
+    (3-6): 1.26x, 1.35x CPU against elasticity at a like load."""
     added = {}
     if product_clear() is None:
         added["mat_product_clear"] = "true"
